@@ -1,0 +1,1 @@
+"""sensornet package."""
