@@ -31,9 +31,11 @@ def ospa(X: np.ndarray, Y: np.ndarray, c: float = 200.0, p: float = 2.0) -> floa
 
 def gospa(X: np.ndarray, Y: np.ndarray, c: float = 200.0, p: float = 2.0,
           alpha: float = 2.0) -> float:
-    """GOSPA (Rahmathullah, García-Fernández & Svensson 2017), unnormalised, ``alpha = 2``.
+    """GOSPA (Rahmathullah, García-Fernández & Svensson 2017), unnormalised, ``0 < alpha <= 2``.
 
-    ``(min_pi sum_i min(c, d)^p + c^p / alpha (n + m - 2 |assigned|))^(1/p)``.
+    Definition (for ``n <= m``): ``(min_pi sum_i min(c, d)^p + c^p / alpha (m - n))^(1/p)``.
+    With ``alpha = 2`` (the default) this equals the assignment form
+    ``min_gamma sum_assigned d^p + c^p / 2 (n + m - 2 |gamma|)``.
     """
     X, Y = np.atleast_2d(X), np.atleast_2d(Y)
     n, m = X.shape[0] if X.size else 0, Y.shape[0] if Y.size else 0
@@ -41,11 +43,12 @@ def gospa(X: np.ndarray, Y: np.ndarray, c: float = 200.0, p: float = 2.0,
         return 0.0
     if n == 0 or m == 0:
         return float((c**p / alpha * (n + m)) ** (1.0 / p))
-    # Pairs farther than c are better left unassigned: cost c^p/alpha each side = c^p (alpha=2).
-    C = np.minimum(np.linalg.norm(X[:, None, :] - Y[None, :, :], axis=-1), c) ** p
+    # Every point of the smaller set is assigned at the cut-off distance min(c, d); only the
+    # cardinality difference pays c^p / alpha. (For alpha = 2 a pair cut at c costs c^p, the
+    # same as leaving both points unassigned; for alpha < 2 it must not cost 2 c^p / alpha.)
+    C = _cost(X, Y, c, p)
     r, k = linear_sum_assignment(C)
-    assigned = C[r, k] < c**p
-    total = C[r, k][assigned].sum() + c**p / alpha * (n + m - 2 * assigned.sum())
+    total = C[r, k].sum() + c**p / alpha * abs(m - n)
     return float(total ** (1.0 / p))
 
 

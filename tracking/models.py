@@ -39,8 +39,10 @@ class ConstantVelocity:
 
     def sample(self, states: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Propagate true states ``(n, 4)`` one scan with process noise."""
-        noise = rng.multivariate_normal(np.zeros(4), self.Q, size=len(states), method="cholesky")
-        return states @ self.F.T + noise
+        T = self.T
+        G = np.array([[T * T / 2, 0], [T, 0], [0, T * T / 2], [0, T]])
+        accel = rng.normal(0.0, self.sigma_w, size=(len(states), 2))  # Q = sigma_w^2 G G^T
+        return states @ self.F.T + accel @ G.T
 
 
 @lru_cache(maxsize=256)

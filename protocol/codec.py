@@ -1,0 +1,272 @@
+"""Versioned msgpack codec with validation of everything decoded.
+
+A message is a msgpack array ``[version, type, fields...]`` (positional, to keep the
+per-message overhead near 25 bytes). Arrays travel as raw little-endian float64 bytes; their
+row count follows from the byte length and the declared width. A Gaussian mixture is one
+``(n, 1 + d + d(d+1)/2)`` block: weight, mean, and the upper triangle of the covariance
+(symmetric by construction), so a 4-D component is 15 numbers, the raw tuple count of
+ALGORITHMS.md §9.
+
+``decode`` never trusts its input: any problem raises :class:`Rejected` with a short
+``reason`` code (counted by the receiver) and a human-readable detail.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import msgpack
+import numpy as np
+
+from protocol.messages import Control, Estimate, Message, Scan, Tracks, Truth
+from tracking.mixture import GaussianMixture
+
+VERSION = 1
+_F8 = np.dtype("<f8")
+_I8 = np.dtype("<i8")
+
+REASONS = (
+    "malformed",  # not msgpack, truncated, or not a map
+    "version",  # unknown protocol version
+    "type",  # unknown message type
+    "field",  # missing field or wrong field type
+    "shape",  # array bytes do not match the declared shape
+    "nonfinite",  # NaN or infinity
+    "weight",  # negative weight
+    "not-psd",  # covariance not positive definite
+    "too-many",  # more components / measurements / dimensions than allowed
+    "too-large",  # message larger than allowed
+)
+
+
+class Rejected(ValueError):
+    """A decoded message failed validation; ``reason`` is one of :data:`REASONS`."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What a receiver accepts; anything larger is rejected before it costs memory."""
+
+    max_bytes: int = 1 << 20
+    max_components: int = 2000
+    max_measurements: int = 20000
+    max_dim: int = 6
+    max_name: int = 64
+
+
+DEFAULT_LIMITS = Limits()
+
+
+# -- encoding -------------------------------------------------------------------------------
+def _tri_index(d: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(d)
+
+
+def pack_mixture(mix: GaussianMixture) -> bytes:
+    """``(n, 1 + d + d(d+1)/2)`` float64 rows: weight, mean, upper triangle of covariance."""
+    iu = _tri_index(mix.dim)
+    rows = np.concatenate(
+        [mix.weights[:, None], mix.means, mix.covs[:, iu[0], iu[1]]], axis=1
+    )
+    return np.ascontiguousarray(rows, dtype=_F8).tobytes()
+
+
+def _array(a: np.ndarray) -> bytes:
+    return np.ascontiguousarray(a, dtype=_F8).tobytes()
+
+
+_KINDS = ("posterior", "prediction")
+_FIELDS = {
+    # type letter: field names after [version, type], in wire order
+    "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "x"),
+    "S": ("s", "k", "q", "ts", "x"),
+    "K": ("s", "k", "q", "ts", "d", "x"),
+    "T": ("k", "ts", "d", "x", "i"),
+    "C": ("c", "id", "pa", "ts"),
+}
+
+
+def encode(msg: Message) -> bytes:
+    """Serialise a message: a msgpack array ``[version, type, fields...]`` (see ``_FIELDS``)."""
+    if isinstance(msg, Estimate):
+        t, body = "E", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
+                        "q": int(msg.seq), "ts": float(msg.send_time), "p": int(msg.pruning),
+                        "o": _KINDS.index(msg.kind), "d": msg.mixture.dim,
+                        "x": pack_mixture(msg.mixture)}
+    elif isinstance(msg, Scan):
+        z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+        t, body = "S", {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq),
+                        "ts": float(msg.send_time), "x": _array(z)}
+    elif isinstance(msg, Tracks):
+        x = np.asarray(msg.states, dtype=float)
+        x = x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
+        t, body = "K", {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq),
+                        "ts": float(msg.send_time), "d": x.shape[1], "x": _array(x)}
+    elif isinstance(msg, Truth):
+        x = np.asarray(msg.states, dtype=float)
+        x = x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
+        ids = np.ascontiguousarray(msg.ids, dtype=_I8)
+        t, body = "T", {"k": int(msg.k), "ts": float(msg.send_time), "d": x.shape[1],
+                        "x": _array(x), "i": ids.tobytes()}
+    elif isinstance(msg, Control):
+        t, body = "C", {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
+                        "ts": float(msg.send_time)}
+    else:
+        raise TypeError(f"cannot encode {type(msg).__name__}")
+    return msgpack.packb([VERSION, t, *(body[f] for f in _FIELDS[t])], use_bin_type=True)
+
+
+def _rows(blob: bytes, width: int, limit: int, what: str) -> int:
+    """Number of rows of ``width`` float64 in ``blob``, checked against ``limit``."""
+    if width <= 0 or len(blob) % (8 * width):
+        raise Rejected("shape", f"{len(blob)} bytes is not a whole number of {what}")
+    n = len(blob) // (8 * width)
+    if n > limit:
+        raise Rejected("too-many", f"{n} {what} > {limit}")
+    return n
+
+
+# -- decoding -------------------------------------------------------------------------------
+def _get(body: dict, key: str, kind: type | tuple[type, ...]):
+    if key not in body:
+        raise Rejected("field", f"missing field {key!r}")
+    value = body[key]
+    if isinstance(value, bool) and kind is not bool:
+        raise Rejected("field", f"field {key!r} has type bool")
+    if not isinstance(value, kind):
+        raise Rejected("field", f"field {key!r} has type {type(value).__name__}")
+    return value
+
+
+def _name(body: dict, key: str, limits: Limits) -> str:
+    s = _get(body, key, str)
+    if not s or len(s) > limits.max_name:
+        raise Rejected("field", f"field {key!r} must be a name of 1-{limits.max_name} characters")
+    return s
+
+
+def _index(body: dict, key: str) -> int:
+    v = _get(body, key, int)
+    if not 0 <= v < 1 << 53:
+        raise Rejected("field", f"field {key!r}={v} is not a valid index")
+    return v
+
+
+def _time(body: dict) -> float:
+    v = float(_get(body, "ts", (float, int)))
+    if not np.isfinite(v):
+        raise Rejected("nonfinite", "send time is not finite")
+    return v
+
+
+def _count(body: dict, key: str, limit: int) -> int:
+    n = _get(body, key, int)
+    if n < 0 or n > limit:
+        raise Rejected("too-many", f"{key}={n} outside [0, {limit}]")
+    return n
+
+
+def _floats(blob: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    expected = int(np.prod(shape)) * 8
+    if len(blob) != expected:
+        raise Rejected("shape", f"{len(blob)} bytes for shape {shape} ({expected} expected)")
+    a = np.frombuffer(blob, dtype=_F8).reshape(shape).astype(float)
+    if not np.all(np.isfinite(a)):
+        raise Rejected("nonfinite", "array holds NaN or infinity")
+    return a
+
+
+def unpack_mixture(blob: bytes, n: int, d: int) -> GaussianMixture:
+    """Inverse of :func:`pack_mixture`, validating weights and covariances."""
+    t = d * (d + 1) // 2
+    rows = _floats(blob, (n, 1 + d + t))
+    w, m, tri = rows[:, 0], rows[:, 1:1 + d], rows[:, 1 + d:]
+    if np.any(w < 0):
+        raise Rejected("weight", "negative component weight")
+    iu = _tri_index(d)
+    P = np.zeros((n, d, d))
+    P[:, iu[0], iu[1]] = tri
+    P[:, iu[1], iu[0]] = tri
+    if n:
+        try:
+            np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            raise Rejected("not-psd", "a covariance is not positive definite") from None
+    return GaussianMixture(w, m, P)
+
+
+def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
+    """Parse and validate bytes into a message, or raise :class:`Rejected`."""
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise Rejected("malformed", f"payload of type {type(data).__name__}")
+    if len(data) > limits.max_bytes:
+        raise Rejected("too-large", f"{len(data)} bytes > {limits.max_bytes}")
+    try:
+        body = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True,
+                               max_bin_len=limits.max_bytes, max_str_len=4096,
+                               max_array_len=1024, max_map_len=64)
+    except Exception as exc:  # msgpack raises several unrelated types on bad input
+        raise Rejected("malformed", f"not a msgpack message ({type(exc).__name__})") from None
+    if not isinstance(body, list) or len(body) < 2:
+        raise Rejected("malformed", f"top level is {type(body).__name__}, not a message array")
+    if body[0] != VERSION or isinstance(body[0], bool):
+        raise Rejected("version", f"protocol version {body[0]!r}, expected {VERSION}")
+    kind = body[1]
+    if not isinstance(kind, str) or kind not in _FIELDS:
+        raise Rejected("type", f"unknown message type {kind!r}")
+    names = _FIELDS[kind]
+    if len(body) != 2 + len(names):
+        raise Rejected("field", f"{len(body) - 2} fields for type {kind}, {len(names)} expected")
+    body = dict(zip(names, body[2:], strict=True))
+    try:
+        if kind == "E":
+            d = _count(body, "d", limits.max_dim)
+            if d < 1:
+                raise Rejected("field", "dimension must be at least 1")
+            blob = _get(body, "x", bytes)
+            n = _rows(blob, 1 + d + d * (d + 1) // 2, limits.max_components, "components")
+            mix = unpack_mixture(blob, n, d)
+            pruning = _get(body, "p", int)
+            kind_i = _get(body, "o", int)
+            if not 0 <= kind_i < len(_KINDS):
+                raise Rejected("field", f"unknown estimate kind {kind_i!r}")
+            return Estimate(sender=_name(body, "s", limits), k=_index(body, "k"),
+                            mixture=mix, round=_index(body, "r"), seq=_index(body, "q"),
+                            send_time=_time(body), pruning=pruning, kind=_KINDS[kind_i])
+        if kind == "S":
+            blob = _get(body, "x", bytes)
+            n = _rows(blob, 2, limits.max_measurements, "measurements")
+            return Scan(sensor=_name(body, "s", limits), k=_index(body, "k"),
+                        z=_floats(blob, (n, 2)), seq=_index(body, "q"), send_time=_time(body))
+        if kind == "K":
+            d = _count(body, "d", limits.max_dim)
+            blob = _get(body, "x", bytes)
+            n = _rows(blob, d, limits.max_components, "tracks") if d else 0
+            return Tracks(sender=_name(body, "s", limits), k=_index(body, "k"),
+                          states=_floats(blob, (n, d)), seq=_index(body, "q"),
+                          send_time=_time(body))
+        if kind == "T":
+            d = _count(body, "d", limits.max_dim)
+            blob = _get(body, "x", bytes)
+            n = _rows(blob, d, limits.max_components, "targets") if d else 0
+            x = _floats(blob, (n, d))
+            ib = _get(body, "i", bytes)
+            if len(ib) != 8 * n:
+                raise Rejected("shape", f"{len(ib)} id bytes for {n} targets")
+            ids = np.frombuffer(ib, dtype=_I8).astype(np.int64)
+            return Truth(k=_index(body, "k"), ids=ids, states=x, send_time=_time(body))
+        params = _get(body, "pa", dict)
+        for key, value in params.items():
+            if not isinstance(key, str) or not isinstance(value, str | int | float | bool):
+                raise Rejected("field", "control parameters must map names to scalars")
+        return Control(command=_get(body, "c", str), run_id=_get(body, "id", str),
+                       params=params, send_time=_time(body))
+    except Rejected:
+        raise
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise Rejected("field", f"{type(exc).__name__}: {exc}") from None

@@ -1,0 +1,74 @@
+"""Wire message types: plain dataclasses of the things peers, the world and tools exchange.
+
+Times: ``k`` is the scan index (simulated time ``k T``); ``send_time`` is the sender's wall
+clock (``time.time()``) at publication, for latency and age measurements.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.mixture import GaussianMixture
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One sensor's measurements at scan ``k``: ``z (m, 2)``."""
+
+    sensor: str
+    k: int
+    z: np.ndarray
+    seq: int = 0
+    send_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A peer's Gaussian-mixture estimate at scan ``k`` and consensus round ``round``."""
+
+    sender: str
+    k: int
+    mixture: GaussianMixture
+    round: int = 0
+    seq: int = 0
+    send_time: float = 0.0
+    pruning: int = 1
+    """Pruning level applied before publishing: 1 (filter reduction only) or 2 (``w > W0``)."""
+    kind: str = "posterior"
+    """``"posterior"`` or ``"prediction"`` (single-target particle fusion needs both)."""
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """A peer's extracted (fused) target states at scan ``k``: ``states (n, d)``."""
+
+    sender: str
+    k: int
+    states: np.ndarray
+    seq: int = 0
+    send_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class Truth:
+    """True target states at scan ``k`` (from the world): ``ids (n,)``, ``states (n, d)``."""
+
+    k: int
+    ids: np.ndarray
+    states: np.ndarray
+    send_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class Control:
+    """Run control: ``command`` is ``"start"``, ``"stop"`` or ``"end"``, with parameters."""
+
+    command: str
+    run_id: str = ""
+    params: dict[str, str | int | float | bool] = field(default_factory=dict)
+    send_time: float = 0.0
+
+
+Message = Scan | Estimate | Tracks | Truth | Control

@@ -1,0 +1,138 @@
+"""From a :class:`~sim.scenario.Scenario` to the estimation core's objects.
+
+The one place where scenario settings become ``tracking`` models, sensor parameters, birth
+intensities, reducers and filters, so the world, the peers and the experiments build them the
+same way. The measurement-space box of a sensor lives here too: clutter is drawn uniformly over
+it (``sim.world``) and the filter's clutter intensity is ``lambda_c / V`` over the same box.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from sim.scenario import Scenario, ScenarioError, SensorSpec
+from tracking.gmphd import GMPHDFilter, SensorParams
+from tracking.mixture import GaussianMixture
+from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from tracking.reduction import Reducer
+
+
+def motion_model(scn: Scenario) -> ConstantVelocity:
+    """The filters' motion model (``"cv"``: ``F``, ``Q = sigma_w^2 G G^T``, §1)."""
+    return ConstantVelocity(T=scn.scan_period, sigma_w=scn.sigma_w)
+
+
+def sensor_model(spec: SensorSpec) -> LinearPosition | RangeBearing:
+    """The measurement model of one sensor (``tracking.models``)."""
+    if spec.kind == "linear":
+        return LinearPosition(sigma_r=spec.sigma_r, position=spec.position)
+    if spec.kind == "range-bearing":
+        return RangeBearing(sigma_r=spec.sigma_r, sigma_theta=spec.sigma_theta,
+                            position=spec.position)
+    raise ValueError(f"unknown sensor kind {spec.kind!r}")  # validated on load: a bug here
+
+
+def measurement_box(scn: Scenario, spec: SensorSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners ``(2,), (2,)`` of the sensor's clutter box in measurement space.
+
+    Linear sensors: the surveillance region ``[xmin, xmax) x [ymin, ymax)``. Range-bearing:
+    ``[0, r_max) x [-pi, pi)``, ``r_max`` the distance from the radar to the farthest region
+    corner (so every clutter return the region could produce is covered).
+    """
+    (x0, x1), (y0, y1) = scn.region
+    if spec.kind == "linear":
+        return np.array([x0, y0]), np.array([x1, y1])
+    sx, sy = spec.position
+    r_max = max(math.hypot(x - sx, y - sy) for x in (x0, x1) for y in (y0, y1))
+    return np.array([0.0, -math.pi]), np.array([r_max, math.pi])
+
+
+def clutter_intensity(scn: Scenario, sensor: SensorSpec | str) -> float:
+    """``kappa = lambda_c / V``: clutter per unit measurement volume (m^2, or m * rad)."""
+    spec = scn.sensor(sensor) if isinstance(sensor, str) else sensor
+    low, high = measurement_box(scn, spec)
+    return spec.clutter_rate / float(np.prod(high - low))
+
+
+def sensor_params(scn: Scenario, name: str) -> SensorParams:
+    """What a GM-PHD update needs about sensor ``name``: model, ``Pd``, ``kappa``."""
+    spec = scn.sensor(name)
+    return SensorParams(
+        model=sensor_model(spec),
+        detection_probability=spec.detection_probability,
+        clutter_intensity=clutter_intensity(scn, spec),
+    )
+
+
+def birth_mixture(scn: Scenario) -> GaussianMixture:
+    """The birth intensity per ``scn.birth.model`` (§10).
+
+    ``"paper"``: the listed components. ``"truth"``: one component per target at its true start
+    position with zero velocity, weight ``birth.truth_weight``, covariance ``birth.truth_cov``.
+    """
+    b = scn.birth
+    if b.model == "paper":
+        if not b.paper:
+            return GaussianMixture.empty(4)
+        return GaussianMixture(
+            np.array([c.weight for c in b.paper]),
+            np.array([c.mean for c in b.paper]),
+            np.array([c.cov for c in b.paper]),
+        )
+    if b.model == "truth":
+        n = len(scn.targets)
+        if n == 0:
+            return GaussianMixture.empty(4)
+        means = np.zeros((n, 4))
+        means[:, [0, 2]] = [t.start for t in scn.targets]
+        return GaussianMixture(
+            np.full(n, b.truth_weight), means, np.tile(np.array(b.truth_cov), (n, 1, 1))
+        )
+    raise ValueError(f"unknown birth model {b.model!r}")  # validated on load: a bug here
+
+
+def make_reducer(scn: Scenario) -> Reducer:
+    """The level-1 reducer from ``[filter]`` (prune, merge, cap, optional ISE re-fit)."""
+    f = scn.filter
+    return Reducer(
+        prune_threshold=f.prune_threshold,
+        merge_threshold=f.merge_threshold,
+        max_components=f.max_components,
+        merge_rule=f.merge_rule,
+        refit=f.refit,
+    )
+
+
+def make_filter(scn: Scenario, sensor_names: Sequence[str]) -> GMPHDFilter:
+    """A GM-PHD filter over ``sensor_names``: one name gives a local filter, several the
+    iterated-corrector centralized filter (corrects with each sensor's scan in the given order).
+    """
+    if isinstance(sensor_names, str):
+        sensor_names = [sensor_names]
+    if not sensor_names:
+        raise ScenarioError(f"{scn.name}: a filter needs at least one sensor")
+    return GMPHDFilter(
+        motion=motion_model(scn),
+        sensors=[sensor_params(scn, s) for s in sensor_names],
+        birth=birth_mixture(scn),
+        survival_probability=scn.survival_probability,
+        reducer=make_reducer(scn),
+        extraction_threshold=scn.filter.extraction_threshold,
+        extraction=scn.filter.extraction,
+        gate=scn.filter.gate,
+    )
+
+
+__all__ = [
+    "birth_mixture",
+    "clutter_intensity",
+    "make_filter",
+    "make_reducer",
+    "measurement_box",
+    "motion_model",
+    "sensor_model",
+    "sensor_params",
+]
