@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from peers.session import SessionError  # noqa: E402
 from sim.scenario import (
     ScenarioError,
     builtin_scenarios,
@@ -55,12 +56,104 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load(args: argparse.Namespace, source: str):
+    return load_scenario(source, overrides=parse_overrides(getattr(args, "set", None) or []))
+
+
+def cmd_peer(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from peers.runtime import PeerRuntime
+    from sim.build import make_peer
+
+    scn = _load(args, args.scenario)
+    if args.name not in scn.sensor_names:
+        raise UserError(f"no sensor named {args.name!r} in {scn.name} "
+                        f"(sensors: {', '.join(scn.sensor_names)})")
+    if args.filter != "gmphd":
+        raise UserError(f"filter {args.filter!r} is not available yet; use 'gmphd'")
+    net = scn.network
+    scn = replace(scn, network=replace(
+        net, rounds=args.rounds or net.rounds, omega=args.omega or net.omega,
+        policy=args.policy or net.policy), fusion=replace(
+        scn.fusion, rule=args.fusion or scn.fusion.rule,
+        level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
+    speed = args.speed or scn.network.speed
+    out = Path(args.out) if args.out else None
+    runtime = PeerRuntime(
+        make_peer(scn, args.name), args.network, scn.scan_period / speed,
+        scn.network.deadline, listen=args.listen or [], connect=args.connect or [],
+        config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
+        viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout)
+    print(f"peer {args.name}: network {args.network}, neighbours "
+          f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
+    code = runtime.run()
+    s = runtime.summary()
+    print(f"peer {args.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
+          f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
+          f"rejected {s['rejected_total']}", flush=True)
+    return code
+
+
+def cmd_world(args: argparse.Namespace) -> int:
+    from sim.world_process import WorldError, run_world
+
+    scn = _load(args, args.scenario)
+    peers = [p for p in (args.peers or "").split(",") if p]
+    unknown = [p for p in peers if p not in scn.sensor_names]
+    if unknown:
+        raise UserError(f"--peers names unknown sensors {unknown} "
+                        f"(sensors: {', '.join(scn.sensor_names)})")
+    out = Path(args.out) if args.out else None
+    try:
+        sent = run_world(scn, args.network, run=args.run, listen=args.listen or [],
+                         connect=args.connect or [], config_file=args.config, wait_for=peers,
+                         wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
+                         viewer=args.viewer, speed=args.speed)
+    except WorldError as exc:
+        raise UserError(str(exc)) from None
+    print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
+          f"({sent['bytes'] / 1e3:.1f} kB)", flush=True)
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from sim.launcher import format_summary, merge_recordings, read_summaries, start_run, wait_run
+
+    scn = _load(args, args.scenario)
+    out = _run_folder(args.out, "run")
+    speed = args.speed or scn.network.speed
+    expected = scn.num_scans * scn.scan_period / speed
+    print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
+          f"127.0.0.1, {scn.num_scans} scans at {speed:g}x (about {expected:.0f} s); "
+          f"output in {out}", flush=True)
+    handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
+                       viewer=args.viewer, run=args.run, speed=args.speed)
+    try:
+        codes = wait_run(handle, timeout=expected + args.timeout)
+    except KeyboardInterrupt:
+        handle.stop_all()
+        raise
+    summaries = read_summaries(out, scn.sensor_names)
+    print(format_summary(summaries))
+    rec = merge_recordings(out)
+    shown = rec or out / "rerun" / "*.rrd"
+    print(f"recording: {shown}  (view it with: rerun {shown})")
+    bad = {n: c for n, c in codes.items() if c != 0}
+    if bad or len(summaries) != len(scn.sensors):
+        for n, c in bad.items():
+            print(f"{n} exited with code {c}; see {handle.logs[n]}", file=sys.stderr)
+        missing = sorted(set(scn.sensor_names) - set(summaries))
+        if missing:
+            print(f"no summary from {missing}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     args.scenario = "seed000"
-    args.birth = "both"
-    args.fusion = None
-    args.set = []
-    return cmd_experiment(args)
+    args.set = list(args.set or []) + ["birth.model=truth"]
+    return cmd_run(args)
 
 
 def cmd_scenario(args: argparse.Namespace) -> int:
@@ -101,8 +194,60 @@ def build_parser() -> argparse.ArgumentParser:
     add_mc_flags(e, 50)
     e.set_defaults(func=cmd_experiment)
 
-    d = sub.add_parser("demo", help="the seed-000 experiment with both birth models")
-    add_mc_flags(d, 20)
+    def add_net_flags(sp: argparse.ArgumentParser, network_required: bool) -> None:
+        sp.add_argument("--network", required=network_required,
+                        help="network name: the key-space of this run (runs apart by name)")
+        sp.add_argument("--listen", action="append", metavar="ENDPOINT",
+                        help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447")
+        sp.add_argument("--connect", action="append", metavar="ENDPOINT",
+                        help="Zenoh endpoint to connect to (repeatable)")
+        sp.add_argument("--config", help="a Zenoh JSON5 config file (flags apply on top)")
+        sp.add_argument("--out", help="folder for the summary and the .rrd file")
+        sp.add_argument("--run-id", help="Rerun recording id shared by the run's processes")
+        sp.add_argument("--viewer", help="'spawn' a Rerun viewer or a rerun+http:// URL")
+        sp.add_argument("--speed", type=float, help="wall-clock speed factor (default: "
+                        "the scenario's network.speed)")
+        sp.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scenario value (repeatable)")
+
+    pe = sub.add_parser("peer", help="run one sensor peer (a process) over Zenoh")
+    pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
+    pe.add_argument("--scenario", default="seed000", help="scenario file or built-in name")
+    add_net_flags(pe, network_required=True)
+    pe.add_argument("--filter", default="gmphd", help="local filter (gmphd)")
+    pe.add_argument("--fusion", choices=["gci", "aa", "none"])
+    pe.add_argument("--rounds", type=int, help="consensus rounds per scan")
+    pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
+    pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
+    pe.add_argument("--level2", dest="level2", action="store_true", default=None,
+                    help="level-2 pruning before publishing")
+    pe.add_argument("--no-level2", dest="level2", action="store_false")
+    pe.add_argument("--lease-ms", type=int, help="Zenoh lease (how fast a frozen peer is seen)")
+    pe.add_argument("--color", type=int, default=0, help=argparse.SUPPRESS)
+    pe.add_argument("--idle-timeout", type=float, default=30.0,
+                    help="stop after this many seconds without input (default 30)")
+    pe.set_defaults(func=cmd_peer)
+
+    w = sub.add_parser("world", help="play a scenario's truth and scans over Zenoh")
+    w.add_argument("scenario", nargs="?", default="seed000")
+    add_net_flags(w, network_required=True)
+    w.add_argument("--peers", help="comma-separated peers to wait for before starting")
+    w.add_argument("--wait", type=float, default=30.0, help="seconds to wait for the peers")
+    w.add_argument("--run", type=int, default=0, help="Monte Carlo run index (random draws)")
+    w.set_defaults(func=cmd_world)
+
+    r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")
+    r.add_argument("scenario", nargs="?", default="seed000")
+    add_net_flags(r, network_required=False)
+    r.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
+    r.add_argument("--timeout", type=float, default=60.0,
+                   help="extra seconds allowed beyond the run's own length")
+    r.set_defaults(func=cmd_run)
+
+    d = sub.add_parser("demo", help="seed-000: world + 3 peers over Zenoh, live Rerun, summary")
+    add_net_flags(d, network_required=False)
+    d.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
+    d.add_argument("--timeout", type=float, default=60.0, help=argparse.SUPPRESS)
     d.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
@@ -117,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ScenarioError, UserError) as exc:
+    except (ScenarioError, UserError, SessionError) as exc:
         print(f"sensornet: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from peers.logic import PeerLogic, PeerOptions
 from sim.scenario import Scenario, ScenarioError, SensorSpec
 from tracking.gmphd import GMPHDFilter, SensorParams
 from tracking.mixture import GaussianMixture
@@ -136,3 +137,63 @@ __all__ = [
     "sensor_model",
     "sensor_params",
 ]
+
+
+def adjacency(scn: Scenario) -> tuple[list[str], np.ndarray]:
+    """Peer names (one per sensor) and the symmetric boolean adjacency ``(n, n)`` of the graph."""
+    names = scn.sensor_names
+    n = len(names)
+    A = np.zeros((n, n), dtype=bool)
+    topo = scn.network.topology
+    if topo == "full":
+        A[:] = True
+    elif topo == "ring":
+        for i in range(n):
+            A[i, (i + 1) % n] = A[(i + 1) % n, i] = n > 1
+    elif topo == "line":
+        for i in range(n - 1):
+            A[i, i + 1] = A[i + 1, i] = True
+    elif topo == "star":
+        hub = names.index(scn.fusion.fusing_sensor)
+        A[hub, :] = A[:, hub] = True
+    else:
+        for a, b in scn.network.edges:
+            A[names.index(a), names.index(b)] = A[names.index(b), names.index(a)] = True
+    np.fill_diagonal(A, False)
+    return names, A
+
+
+def peer_options(scn: Scenario, name: str, **changes) -> PeerOptions:
+    """The options of the peer that filters sensor ``name``, from the scenario's network."""
+    names, A = adjacency(scn)
+    if name not in names:
+        raise ScenarioError(f"{scn.name}: no sensor named {name!r} "
+                            f"(sensors: {', '.join(names)})")
+    i = names.index(name)
+    neighbours = tuple(names[j] for j in np.flatnonzero(A[i]))
+    deg = A.sum(axis=1)
+    net = scn.network
+    opts = dict(
+        name=name,
+        sensor=name,
+        neighbours=neighbours,
+        degrees=tuple((names[j], int(deg[j])) for j in [i, *np.flatnonzero(A[i])]),
+        fusion=scn.fusion.rule,
+        rounds=net.rounds,
+        omega=net.omega,
+        level2=scn.fusion.level2_pruning,
+        level2_threshold=scn.fusion.level2_threshold,
+        cardinality=scn.fusion.cardinality,
+        max_age=net.max_age,
+        policy=net.policy,
+        feedback=net.feedback,
+        ospa_cutoff=scn.metrics.ospa_cutoff,
+        ospa_order=scn.metrics.ospa_order,
+    )
+    opts.update(changes)
+    return PeerOptions(**opts)
+
+
+def make_peer(scn: Scenario, name: str, **changes) -> PeerLogic:
+    """A peer state machine for sensor ``name`` with its local filter."""
+    return PeerLogic(peer_options(scn, name, **changes), make_filter(scn, [name]))

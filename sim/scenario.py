@@ -42,6 +42,9 @@ FUSION_RULES = ("gci", "aa", "none")
 OMEGA_RULES = ("uniform", "metropolis", "det", "chernoff")
 CARDINALITY_RULES = ("emd", "separate")
 EXTRACTION_RULES = ("round", "cardinality")
+TOPOLOGIES = ("full", "ring", "star", "line", "custom")
+NETWORK_OMEGA_RULES = ("metropolis", "uniform", "det", "chernoff")
+OOS_POLICIES = ("nale", "drop-late", "as-is")
 
 Matrix = tuple[tuple[float, ...], ...]
 
@@ -161,6 +164,30 @@ class FusionSpec:
 
 
 @dataclass(frozen=True)
+class NetworkSpec:
+    """The peer network: one peer per sensor (same name), its graph, consensus and pacing."""
+
+    topology: str = "full"
+    """``"full"``, ``"ring"``, ``"star"`` (hub: the fusing sensor), ``"line"`` or ``"custom"``."""
+    edges: tuple[tuple[str, str], ...] = ()
+    """Undirected edges between sensor names (``topology = "custom"`` only)."""
+    rounds: int = 1
+    """Consensus rounds ``L`` per scan."""
+    omega: str = "metropolis"
+    """Fusion weights in the network: ``"metropolis"``, ``"uniform"``, ``"det"``, ``"chernoff"``."""
+    max_age: int = 5
+    """Neighbour estimates older than this many scans are not fused."""
+    policy: str = "nale"
+    """Out-of-sequence policy: ``"nale"``, ``"drop-late"`` or ``"as-is"``."""
+    feedback: bool = False
+    """Peers use their fused density as the prior of the next scan."""
+    speed: float = 10.0
+    """Wall-clock speed factor: a scan every ``scan_period / speed`` seconds."""
+    deadline: float = 0.5
+    """Fusion deadline after a scan, as a fraction of the (wall-clock) scan interval."""
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Error metric settings (§11)."""
 
@@ -206,6 +233,8 @@ class Scenario:
     """Fusion settings."""
     metrics: MetricsSpec = MetricsSpec()
     """Metric settings."""
+    network: NetworkSpec = NetworkSpec()
+    """Peer network settings."""
     source: str = ""
     """Where the scenario was read from (a path or ``builtin:<name>``); informational."""
 
@@ -545,7 +574,7 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
-                                 "fusion", "metrics"])
+                                 "fusion", "metrics", "network"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -579,6 +608,9 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             "cardinality"]), names),
         metrics=_metrics(_Table(top.raw("metrics", {}), "metrics", ctx,
                                 ["ospa_cutoff", "ospa_order"])),
+        network=_network(_Table(top.raw("network", {}), "network", ctx, [
+            "topology", "edges", "rounds", "omega", "max_age", "policy", "feedback", "speed",
+            "deadline"]), names),
         source=origin,
     )
 
@@ -694,6 +726,42 @@ def _fusion(f: _Table, sensor_names: list[str]) -> FusionSpec:
     )
 
 
+def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
+    topology = t.choice("topology", TOPOLOGIES, "full")
+    edges: list[tuple[str, str]] = []
+    raw = t.raw("edges", [])
+    if not isinstance(raw, list):
+        raise t.fail("edges", f"must be a list of [name, name] pairs, got {_short(raw)}")
+    for i, e in enumerate(raw):
+        if (not isinstance(e, list) or len(e) != 2 or not all(isinstance(x, str) for x in e)
+                or e[0] == e[1]):
+            raise t.fail("edges", f"entry {i} must be a pair of two different sensor names, "
+                                  f"got {_short(e)}")
+        for x in e:
+            if x not in sensor_names:
+                raise t.fail("edges", f"entry {i} names unknown sensor {x!r} "
+                                      f"(sensors: {', '.join(sensor_names)})")
+        edges.append((e[0], e[1]))
+    if topology == "custom" and not edges:
+        raise t.fail("edges", "topology 'custom' needs at least one edge")
+    if topology != "custom" and edges:
+        raise t.fail("edges", f"only used with topology 'custom' (topology is {topology!r})")
+    deadline = t.number("deadline", 0.5, positive=True)
+    if deadline > 1.0:
+        raise t.fail("deadline", f"must be in (0, 1] of a scan interval, got {deadline:g}")
+    return NetworkSpec(
+        topology=topology,
+        edges=tuple(edges),
+        rounds=t.integer("rounds", 1, minimum=1),
+        omega=t.choice("omega", NETWORK_OMEGA_RULES, "metropolis"),
+        max_age=t.integer("max_age", 5, minimum=0),
+        policy=t.choice("policy", OOS_POLICIES, "nale"),
+        feedback=t.flag("feedback", False),
+        speed=t.number("speed", 10.0, positive=True),
+        deadline=deadline,
+    )
+
+
 def _metrics(m: _Table) -> MetricsSpec:
     order = m.number("ospa_order", 2.0)
     if order < 1:
@@ -711,6 +779,7 @@ __all__ = [
     "FilterSpec",
     "FusionSpec",
     "MetricsSpec",
+    "NetworkSpec",
     "Scenario",
     "ScenarioError",
     "SensorSpec",

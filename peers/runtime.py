@@ -1,0 +1,294 @@
+"""The peer process: a thin Zenoh + Rerun runtime around :class:`peers.logic.PeerLogic`.
+
+Zenoh callbacks only put raw payloads on a queue (calling Zenoh from a callback can deadlock,
+and a slow callback holds up receiving); the main thread decodes, validates and feeds the
+state machine, publishes what it returns, fires fusion deadlines, and logs to Rerun.
+A bad message is counted by reason and dropped; nothing a neighbour sends stops the peer.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import signal
+import statistics
+import time
+from collections import Counter, deque
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from peers.logic import PeerLogic
+from peers.rerun_sink import RerunSink, color_of
+from peers.session import open_session
+from protocol.codec import Rejected, decode, encode
+from protocol.keys import Keys
+from protocol.messages import Control, Estimate, Scan, Tracks, Truth
+
+
+class PeerRuntime:
+    """Runs one peer until the world says the run ended, or SIGINT/SIGTERM."""
+
+    def __init__(self, logic: PeerLogic, network: str, interval: float, deadline: float,
+                 listen=(), connect=(), config_file: str | None = None,
+                 lease_ms: int | None = None, out_dir: Path | None = None,
+                 run_id: str | None = None, viewer: str | None = None, color_index: int = 0,
+                 idle_timeout: float = 30.0) -> None:
+        self.logic = logic
+        self.name = logic.o.name
+        self.keys = Keys(network)
+        self.interval = interval
+        self.deadline_frac = deadline
+        self.session_args = (list(listen), list(connect), config_file, lease_ms)
+        self.out_dir = out_dir
+        self.run_id = run_id or network
+        self.viewer = viewer
+        self.color = color_of(color_index)
+        self.idle_timeout = idle_timeout
+        self.q: queue.Queue = queue.Queue()
+        self.sink = RerunSink()
+        self.rejected: Counter = Counter()
+        self.sent = Counter()
+        self.sent_bytes = Counter()
+        self.received = Counter()
+        self.received_bytes = Counter()
+        self.latency_ms: deque = deque(maxlen=100_000)
+        self.compute_ms = {"filter": 0.0, "fusion": 0.0}
+        self.ages: deque = deque(maxlen=100_000)
+        self.deadlines: dict[int, float] = {}
+        self.scan_sent: dict[int, float] = {}
+        self.tails: deque = deque(maxlen=20)
+        self.stop_reason = ""
+        self._stop = False
+        self._last_input = time.monotonic()
+
+    # -- zenoh plumbing ---------------------------------------------------------------------
+    def _put(self, tag: str):
+        def callback(sample) -> None:
+            self.q.put((tag, str(sample.key_expr), sample.payload.to_bytes()))
+        return callback
+
+    def _live(self, sample) -> None:
+        self.q.put(("live", str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+
+    def _signal(self, signum, frame) -> None:
+        self.stop_reason = signal.Signals(signum).name
+        self._stop = True
+        self.q.put(("stop", "", b""))
+
+    def _publish(self, messages: list, now_wall: float) -> None:
+        for msg in messages:
+            data = encode(msg)
+            if isinstance(msg, Estimate):
+                self.est_pub.put(data)
+                kind = "estimate"
+            elif isinstance(msg, Tracks):
+                self.tracks_pub.put(data)
+                kind = "tracks"
+                self._on_tracks(msg, now_wall)
+            else:
+                continue
+            self.sent[kind] += 1
+            self.sent_bytes[kind] += len(data)
+
+    # -- main loop --------------------------------------------------------------------------
+    def run(self) -> int:
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, self._signal)
+        if self.out_dir is not None:
+            self.sink.open(self.run_id, self.out_dir / "rerun" / f"peer-{self.name}.rrd",
+                           self.viewer)
+        session = open_session(*self.session_args)
+        try:
+            self.est_pub = session.declare_publisher(
+                self.keys.estimate(self.name), congestion_control=zenoh.CongestionControl.BLOCK)
+            self.tracks_pub = session.declare_publisher(
+                self.keys.tracks(self.name), congestion_control=zenoh.CongestionControl.BLOCK)
+            subs = [
+                session.declare_subscriber(self.keys.scan(self.logic.o.sensor), self._put("scan")),
+                session.declare_subscriber(self.keys.estimate("*"), self._put("estimate")),
+                session.declare_subscriber(self.keys.truth(), self._put("truth")),
+                session.declare_subscriber(self.keys.ctl(), self._put("ctl")),
+                session.liveliness().declare_subscriber(self.keys.alive("*"), self._live,
+                                                        history=True),
+            ]
+            token = session.liveliness().declare_token(self.keys.alive(self.name))
+            try:
+                self._loop()
+            finally:
+                self._finish()
+                token.undeclare()
+                for s in subs:
+                    s.undeclare()
+        finally:
+            session.close()
+            self.sink.close()
+        return 0
+
+    def _loop(self) -> None:
+        while not self._stop:
+            now = time.monotonic()
+            due = min(self.deadlines.values(), default=now + 0.25)
+            try:
+                item = self.q.get(timeout=max(0.0, min(due - now, 0.25)))
+            except queue.Empty:
+                item = None
+            if item is not None:
+                self._handle(*item)
+            self._fire_deadlines()
+            self._drain_records()
+            if time.monotonic() - self._last_input > self.idle_timeout:
+                self.stop_reason = f"no input for {self.idle_timeout:g} s"
+                break
+
+    def _handle(self, tag: str, key: str, payload) -> None:
+        if tag == "stop":
+            return
+        wall = time.time()
+        if tag == "live":
+            peer = Keys.last(key)
+            if peer == self.name:
+                return
+            self.sink.text(f"peers/{self.name}/events", f"{peer} {'joined' if payload else 'left'}")
+            if payload:
+                self.logic.on_peer_joined(peer, wall)
+            else:
+                self.logic.on_peer_left(peer)
+            return
+        if tag == "estimate" and Keys.last(key) == self.name:
+            return  # our own publication
+        self._last_input = time.monotonic()
+        self.received[tag] += 1
+        self.received_bytes[tag] += len(payload)
+        try:
+            msg = decode(payload)
+        except Rejected as exc:
+            self.rejected[exc.reason] += 1
+            self.sink.scalar(f"metrics/rejected/{self.name}", sum(self.rejected.values()))
+            return
+        expected = {"scan": Scan, "estimate": Estimate, "truth": Truth, "ctl": Control}[tag]
+        if not isinstance(msg, expected):
+            self.rejected["wrong-key"] += 1
+            return
+        if isinstance(msg, Estimate) and msg.sender != Keys.last(key):
+            self.rejected["spoofed"] += 1
+            return
+        t0 = time.perf_counter()
+        if isinstance(msg, Scan):
+            self.scan_sent[msg.k] = msg.send_time
+            self.sink.time(msg.k, msg.k * self.interval)
+            out = self.logic.on_scan(msg, wall)
+            self.compute_ms["filter"] += (time.perf_counter() - t0) * 1e3
+            self.deadlines[msg.k] = time.monotonic() + self.deadline_frac * self.interval
+            self._publish(out, time.time())
+            self._log_local(msg.k)
+        elif isinstance(msg, Estimate):
+            out = self.logic.on_estimate(msg, wall)
+            self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
+            self._publish(out, time.time())
+        elif isinstance(msg, Truth):
+            self.logic.on_truth(msg.k, msg.states)
+        elif isinstance(msg, Control) and msg.command == "end":
+            self.stop_reason = "end of run"
+            self._stop = True
+
+    def _fire_deadlines(self) -> None:
+        now = time.monotonic()
+        for k in [k for k, t in self.deadlines.items() if t <= now]:
+            del self.deadlines[k]
+            t0 = time.perf_counter()
+            out = self.logic.on_deadline(k, time.time())
+            self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
+            self._publish(out, time.time())
+
+    def _finish(self) -> None:
+        """Fuse what is pending, then write the summary (also on SIGINT/SIGTERM)."""
+        for k in sorted(self.deadlines):
+            self._publish(self.logic.on_deadline(k, time.time()), time.time())
+        self.deadlines.clear()
+        self._drain_records()
+        self.write_summary()
+
+    # -- records, Rerun, summary ------------------------------------------------------------
+    def _on_tracks(self, msg: Tracks, now_wall: float) -> None:
+        sent = self.scan_sent.pop(msg.k, None)
+        if sent:
+            lat = (now_wall - sent) * 1e3
+            self.latency_ms.append(lat)
+            self.sink.scalar(f"metrics/latency_ms/{self.name}", lat)
+        for old in [k for k in self.scan_sent if k < msg.k - 10]:
+            del self.scan_sent[old]
+        self.sink.time(msg.k, msg.k * self.interval)
+        xy = msg.states[:, [0, 2]] if len(msg.states) else np.zeros((0, 2))
+        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=8.0)
+        self.tails.append(xy)
+        if self.sink.enabled:
+            self.sink.points(f"peers/{self.name}/tail", np.concatenate(list(self.tails)),
+                             self.color, radius=2.0)
+        self.sink.scalar(f"metrics/cardinality/{self.name}/fused", len(msg.states))
+
+    def _log_local(self, k: int) -> None:
+        if not self.sink.enabled:
+            return
+        mix = self.logic.mix
+        self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
+        self.sink.scalar(f"metrics/compute_ms/{self.name}/filter_total", self.compute_ms["filter"])
+
+    def _drain_records(self) -> None:
+        for r in self.logic.drain_records():
+            kind = r["kind"]
+            if kind == "fusion":
+                for age in r["ages"].values():
+                    self.ages.append(age)
+                if self.sink.enabled:
+                    self.sink.time(r["k"], r["k"] * self.interval)
+                    self.sink.scalar(f"metrics/components/{self.name}/fused", r["n_fused"])
+                    if r["ages"]:
+                        self.sink.scalar(f"metrics/age/{self.name}", max(r["ages"].values()))
+                    fused = self.logic.current_fused()
+                    if fused is not None:
+                        self.sink.mixture(f"peers/{self.name}/fused", fused, self.color)
+            elif kind == "local" and self.sink.enabled:
+                self.sink.scalar(f"metrics/components/{self.name}/before_level2",
+                                 r["n_components"])
+                self.sink.scalar(f"metrics/components/{self.name}/after_level2",
+                                 r["n_published"])
+            elif kind == "ospa" and self.sink.enabled:
+                self.sink.time(r["k"], r["k"] * self.interval)
+                self.sink.scalar(f"metrics/ospa/{self.name}/{r['which']}", r["value"])
+
+    def summary(self) -> dict:
+        lat = sorted(self.latency_ms)
+        stats = asdict(self.logic.stats)
+        return {
+            "peer": self.name,
+            "stop_reason": self.stop_reason,
+            "scans": self.logic.stats.scans,
+            "mean_ospa_local": self.logic.mean_ospa("local"),
+            "mean_ospa_fused": self.logic.mean_ospa("fused"),
+            "messages_sent": sum(self.sent.values()),
+            "bytes_sent": sum(self.sent_bytes.values()),
+            "messages_received": sum(self.received.values()),
+            "bytes_received": sum(self.received_bytes.values()),
+            "received_by_kind": dict(self.received),
+            "rejected": dict(self.rejected),
+            "rejected_total": sum(self.rejected.values()),
+            "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
+            "latency_ms_median": statistics.median(lat) if lat else None,
+            "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "compute_ms": self.compute_ms,
+            "nale": asdict(self.logic.nale.counts),
+            "stats": stats,
+            "pid": os.getpid(),
+        }
+
+    def write_summary(self) -> None:
+        if self.out_dir is None:
+            return
+        path = self.out_dir / f"peer-{self.name}.json"
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.summary(), indent=2, default=float))
+        tmp.replace(path)

@@ -1,0 +1,67 @@
+"""The one way every process (peer, world, tools) builds its Zenoh session from flags.
+
+Peer mode with explicit TCP endpoints on loopback by default: multicast scouting does not
+work on every host network, so it is off unless a user's own config file turns it on.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+
+class SessionError(Exception):
+    """The Zenoh session could not be configured or opened (reported in one line)."""
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free right now on ``host`` (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def endpoint(port: int, host: str = "127.0.0.1") -> str:
+    return f"tcp/{host}:{port}"
+
+
+def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
+                 config_file: str | None = None, lease_ms: int | None = None) -> zenoh.Config:
+    """A peer-mode config: the user's JSON5 file if given, then the flags on top of it."""
+    if config_file:
+        path = Path(config_file)
+        if not path.is_file():
+            raise SessionError(f"Zenoh config file {config_file!r} not found")
+        try:
+            conf = zenoh.Config.from_file(str(path))
+        except Exception as exc:
+            raise SessionError(f"Zenoh config file {config_file!r}: {exc}") from None
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    try:
+        if listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        if connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        if lease_ms:
+            conf.insert_json5("transport/link/tx/lease", str(int(lease_ms)))
+    except Exception as exc:
+        raise SessionError(f"bad Zenoh endpoint or setting: {exc}") from None
+    return conf
+
+
+def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
+                 config_file: str | None = None, lease_ms: int | None = None) -> zenoh.Session:
+    """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
+    conf = zenoh_config(listen, connect, config_file, lease_ms)
+    try:
+        return zenoh.open(conf)
+    except Exception as exc:
+        raise SessionError(f"cannot open Zenoh session (listen {list(listen)}, connect "
+                           f"{list(connect)}): {exc}") from None

@@ -1,0 +1,150 @@
+"""Start a whole network run as separate OS processes: the world and one peer per sensor.
+
+Every process is ``python -m sensornet world|peer ...`` with explicit loopback endpoints on
+free ports, its log in ``<run>/logs/``, its summary and ``.rrd`` in the run folder. Whatever
+happens (an error, Ctrl-C, a timeout), every child is stopped before this returns.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from peers.session import endpoint, free_port
+from sim.scenario import Scenario
+
+
+@dataclass
+class RunHandle:
+    """The processes of one run and where they write."""
+
+    out: Path
+    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    logs: dict[str, Path] = field(default_factory=dict)
+
+    def stop_all(self, grace: float = 5.0) -> None:
+        """SIGTERM every child still running, then SIGKILL after ``grace`` seconds."""
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        end = time.monotonic() + grace
+        for p in self.procs.values():
+            try:
+                p.wait(timeout=max(0.0, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+def _cli() -> list[str]:
+    return [sys.executable, "-m", "sensornet"]
+
+
+def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
+              overrides: list[str] | None = None, viewer: str | None = None,
+              run: int = 0, speed: float | None = None, peer_args: dict | None = None,
+              lease_ms: int | None = None) -> RunHandle:
+    """Start the world and the peers; returns at once (see :func:`wait_run`)."""
+    network = network or f"run-{uuid.uuid4().hex[:8]}"
+    run_id = f"{network}-{uuid.uuid4().hex[:6]}"
+    names = scn.sensor_names
+    ports = {n: free_port() for n in ["world", *names]}
+    eps = {n: endpoint(p) for n, p in ports.items()}
+    sets = [a for item in (overrides or []) for a in ("--set", item)]
+    common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
+    if viewer:
+        common += ["--viewer", viewer]
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    handle = RunHandle(out=out)
+    cmds = {"world": [*_cli(), "world", source, *common, "--listen", eps["world"],
+                      "--peers", ",".join(names), "--run", str(run)]
+            + (["--speed", str(speed)] if speed else [])}
+    for i, n in enumerate(names):
+        connect = [eps["world"], *(eps[m] for m in names[:i])]
+        extra = (peer_args or {}).get(n, [])
+        cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common, "--listen", eps[n],
+                   "--color", str(i), *[a for c in connect for a in ("--connect", c)],
+                   *(["--lease-ms", str(lease_ms)] if lease_ms else []), *extra] \
+            + (["--speed", str(speed)] if speed else [])
+    try:
+        for name, cmd in cmds.items():
+            log = out / "logs" / f"{name}.log"
+            handle.logs[name] = log
+            with log.open("w") as fh:
+                handle.procs[name] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
+                                                      stdin=subprocess.DEVNULL)
+    except BaseException:
+        handle.stop_all(grace=1.0)
+        raise
+    return handle
+
+
+def wait_run(handle: RunHandle, timeout: float) -> dict[str, int]:
+    """Wait for the world to finish and the peers to exit; stop everything on timeout."""
+    end = time.monotonic() + timeout
+    codes: dict[str, int] = {}
+    try:
+        world = handle.procs["world"]
+        world.wait(timeout=max(0.1, end - time.monotonic()))
+        for p in handle.procs.values():
+            p.wait(timeout=max(0.1, min(15.0, end - time.monotonic())))
+    except subprocess.TimeoutExpired:
+        pass
+    finally:
+        handle.stop_all()
+    for name, p in handle.procs.items():
+        codes[name] = p.returncode
+    return codes
+
+
+def read_summaries(out: Path, names: list[str]) -> dict[str, dict]:
+    found = {}
+    for n in names:
+        path = out / f"peer-{n}.json"
+        if path.is_file():
+            found[n] = json.loads(path.read_text())
+    return found
+
+
+def merge_recordings(out: Path) -> Path | None:
+    """Merge the per-process ``.rrd`` files into ``<out>/recording.rrd`` with the Rerun CLI."""
+    parts = sorted((out / "rerun").glob("*.rrd"))
+    if not parts:
+        return None
+    exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+    target = out / "recording.rrd"
+    try:
+        with target.open("wb") as fh:
+            subprocess.run([exe, "rrd", "merge", *map(str, parts)], stdout=fh,
+                           stderr=subprocess.DEVNULL, timeout=120, check=True,
+                           env={**__import__("os").environ, "RERUN_ANALYTICS": "0"})
+    except (OSError, subprocess.SubprocessError):
+        target.unlink(missing_ok=True)
+        return None
+    return target
+
+
+def format_summary(summaries: dict[str, dict]) -> str:
+    """The end-of-run table: per peer OSPA local vs fused, traffic, rejections, age, latency."""
+    def f(v, fmt="{:.1f}"):
+        return "-" if v is None else fmt.format(v)
+
+    head = ("| peer | scans | OSPA local | OSPA fused | msgs sent | msgs recv | kB sent | "
+            "kB recv | rejected | mean age (scans) | latency median / p99 (ms) |\n"
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    rows = [head]
+    for n, s in summaries.items():
+        rows.append(
+            f"| {n} | {s['scans']} | {f(s['mean_ospa_local'])} | {f(s['mean_ospa_fused'])} | "
+            f"{s['messages_sent']} | {s['messages_received']} | {s['bytes_sent'] / 1e3:.1f} | "
+            f"{s['bytes_received'] / 1e3:.1f} | {s['rejected_total']} | "
+            f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "
+            f"{f(s['latency_ms_p99'], '{:.2f}')} |")
+    return "\n".join(rows)

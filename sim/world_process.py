@@ -1,0 +1,130 @@
+"""The world process: plays a scenario over Zenoh, publishing truth and every sensor's scans.
+
+It waits until the expected peers are alive (liveliness), then publishes scan ``k`` of every
+sensor and the truth every ``scan_period / speed`` seconds, and a ``Control("end")`` after the
+last scan's fusion deadline. Truth and scans are logged to the run's Rerun recording.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from peers.rerun_sink import RerunSink, color_of
+from peers.session import open_session
+from protocol.codec import encode
+from protocol.keys import Keys
+from protocol.messages import Control, Scan, Truth
+from sim.scenario import Scenario
+from sim.world import generate_run
+
+
+class WorldError(Exception):
+    """The world could not start the run (reported in one line)."""
+
+
+def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
+              config_file: str | None = None, wait_for: list[str] | None = None,
+              wait_timeout: float = 30.0, out_dir: Path | None = None,
+              run_id: str | None = None, viewer: str | None = None,
+              speed: float | None = None, progress=None) -> dict:
+    """Play run ``run`` of the scenario; returns what was published."""
+    keys = Keys(network)
+    speed = speed or scn.network.speed
+    interval = scn.scan_period / speed
+    truth, scans = generate_run(scn, run)
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        stop.set()
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, on_signal)
+    sink = RerunSink()
+    if out_dir is not None or viewer:
+        sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir else None,
+                  viewer, peers=list(wait_for or []))
+    session = open_session(listen, connect, config_file)
+    alive: set[str] = set()
+    cond = threading.Condition()
+
+    def on_live(sample):
+        with cond:
+            name = Keys.last(str(sample.key_expr))
+            if sample.kind == zenoh.SampleKind.PUT:
+                alive.add(name)
+            else:
+                alive.discard(name)
+            cond.notify_all()
+
+    sent = {"scans": 0, "bytes": 0, "scans_published": 0}
+    try:
+        live_sub = session.liveliness().declare_subscriber(keys.alive("*"), on_live,
+                                                           history=True)
+        block = zenoh.CongestionControl.BLOCK
+        pubs = {n: session.declare_publisher(keys.scan(n), congestion_control=block)
+                for n in scn.sensor_names}
+        truth_pub = session.declare_publisher(keys.truth(), congestion_control=block)
+        ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
+        token = session.liveliness().declare_token(keys.alive("world"))
+        if wait_for:
+            deadline = time.monotonic() + wait_timeout
+            with cond:
+                while not set(wait_for) <= alive:
+                    left = deadline - time.monotonic()
+                    if left <= 0 or stop.is_set():
+                        missing = sorted(set(wait_for) - alive)
+                        raise WorldError(f"peers {missing} did not come up within "
+                                         f"{wait_timeout:g} s")
+                    cond.wait(timeout=min(left, 0.2))
+            time.sleep(0.2)  # let the peers' subscriptions settle on every link
+        ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
+                                   send_time=time.time())))
+        sensors = scn.sensors
+        sink.time(0, 0.0)
+        sink.points("world/sensors", np.array([s.position for s in sensors]),
+                    [color_of(i) for i in range(len(sensors))], radius=15.0,
+                    labels=[s.name for s in sensors])
+        start = time.monotonic()
+        for k in range(1, scn.num_scans + 1):
+            if stop.is_set():
+                break
+            due = start + (k - 1) * interval
+            pause = due - time.monotonic()
+            if pause > 0:
+                stop.wait(pause)
+            now = time.time()
+            X = truth.states[k - 1]
+            data = encode(Truth(k, truth.ids[k - 1], X, send_time=now))
+            truth_pub.put(data)
+            for i, s in enumerate(sensors):
+                z = scans[i][k - 1]
+                data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
+                pubs[s.name].put(data)
+                sent["scans"] += 1
+                sent["bytes"] += len(data)
+            sent["scans_published"] = k
+            sink.time(k, k * scn.scan_period)
+            sink.points("world/truth", X[:, [0, 2]], (255, 255, 255), radius=7.0,
+                        labels=[str(i) for i in truth.ids[k - 1]])
+            for i, s in enumerate(sensors):
+                z = scans[i][k - 1]
+                if s.kind == "linear":
+                    sink.points(f"world/scans/{s.name}", z, color_of(i), radius=3.0)
+            if progress is not None:
+                progress(k)
+        if not stop.is_set():
+            stop.wait(scn.network.deadline * interval + 0.1)
+        ctl_pub.put(encode(Control("end", run_id or network, {}, send_time=time.time())))
+        time.sleep(0.2)
+        token.undeclare()
+        live_sub.undeclare()
+    finally:
+        session.close()
+        sink.close()
+    return sent

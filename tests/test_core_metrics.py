@@ -1,0 +1,146 @@
+"""OSPA / GOSPA / cardinality error (tracking.metrics) against brute-force definitions."""
+
+from __future__ import annotations
+
+from itertools import combinations, permutations
+
+import numpy as np
+import pytest
+
+from tracking.metrics import cardinality_error, gospa, ospa, rmse
+
+
+def random_set(rng, max_size=5, box=10.0, d=2):
+    return rng.uniform(0, box, size=(int(rng.integers(0, max_size + 1)), d))
+
+
+def brute_ospa(X, Y, c, p):
+    """Schuhmacher, Vo & Vo 2008, by trying every injection of the smaller set."""
+    n, m = len(X), len(Y)
+    if n == 0 and m == 0:
+        return 0.0
+    if n > m:
+        X, Y, n, m = Y, X, m, n
+    best = np.inf
+    for perm in permutations(range(m), n):
+        s = sum(min(c, float(np.linalg.norm(X[i] - Y[j]))) ** p for i, j in enumerate(perm))
+        best = min(best, s)
+    return float(((best + c**p * (m - n)) / m) ** (1 / p))
+
+
+def brute_gospa_assignment(X, Y, c, p):
+    """GOSPA with alpha = 2 in assignment form (Rahmathullah et al. 2017, Prop. 1): minimum over
+    all partial matchings of sum d^p over matched pairs + c^p / 2 per unmatched point."""
+    n, m = len(X), len(Y)
+    best = c**p / 2 * (n + m)  # nothing matched
+    for k in range(1, min(n, m) + 1):
+        for xs in combinations(range(n), k):
+            for ys in permutations(range(m), k):
+                s = sum(float(np.linalg.norm(X[i] - Y[j])) ** p for i, j in zip(xs, ys,
+                                                                              strict=True))
+                best = min(best, s + c**p / 2 * (n + m - 2 * k))
+    return float(best ** (1 / p))
+
+
+def brute_gospa_definition(X, Y, c, p, alpha):
+    """GOSPA by its definition (Rahmathullah et al. 2017, eq. 1), any 0 < alpha <= 2:
+    for |X| <= |Y|, min over injections of sum min(c, d)^p + c^p / alpha (|Y| - |X|)."""
+    n, m = len(X), len(Y)
+    if n > m:
+        X, Y, n, m = Y, X, m, n
+    best = 0.0 if n == 0 else np.inf
+    for perm in permutations(range(m), n):
+        s = sum(min(c, float(np.linalg.norm(X[i] - Y[j]))) ** p for i, j in enumerate(perm))
+        best = min(best, s)
+    return float((best + c**p / alpha * (m - n)) ** (1 / p))
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0, 3.0])
+def test_ospa_equals_brute_force(p):
+    rng = np.random.default_rng(int(p))
+    for _ in range(120):
+        X, Y = random_set(rng), random_set(rng)
+        c = float(rng.choice([1.0, 3.0, 20.0]))
+        assert ospa(X, Y, c=c, p=p) == pytest.approx(brute_ospa(X, Y, c, p), rel=1e-12, abs=1e-12)
+
+
+def test_ospa_special_cases():
+    X = np.array([[0.0, 0.0], [3.0, 4.0]])
+    assert ospa(np.zeros((0, 2)), np.zeros((0, 2)), c=10) == 0.0
+    assert ospa(X, np.zeros((0, 2)), c=10) == 10.0
+    assert ospa(np.zeros((0, 2)), X, c=10) == 10.0
+    assert ospa(X, X, c=10) == 0.0
+    # one point at distance 5, one missing: ((5^2 + 10^2) / 2)^(1/2)
+    assert ospa(X[:1] + [3.0, 4.0], X, c=10.0, p=2.0) == pytest.approx(
+        np.sqrt((0.0 + 100.0) / 2)
+    )
+    assert ospa(X[:1], X[1:], c=10.0, p=2.0) == pytest.approx(5.0)
+    assert ospa(X[:1], X[1:], c=2.0, p=2.0) == pytest.approx(2.0)  # cut off
+
+
+@pytest.mark.parametrize("metric", ["ospa", "gospa"])
+@pytest.mark.parametrize("p", [1.0, 2.0])
+def test_metric_axioms(metric, p):
+    fn = ospa if metric == "ospa" else gospa
+    rng = np.random.default_rng(7 + int(p))
+    for _ in range(150):
+        X, Y, Z = random_set(rng), random_set(rng), random_set(rng)
+        c = float(rng.choice([2.0, 5.0]))
+        dxy, dyx = fn(X, Y, c=c, p=p), fn(Y, X, c=c, p=p)
+        assert dxy == pytest.approx(dyx, rel=1e-12, abs=1e-12)
+        assert fn(X, X, c=c, p=p) == 0.0
+        if len(X) != len(Y) or len(X) and not np.allclose(np.sort(X, 0), np.sort(Y, 0)):
+            assert dxy > 0
+        assert dxy <= fn(X, Z, c=c, p=p) + fn(Z, Y, c=c, p=p) + 1e-9
+        assert dxy >= 0
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0, 3.0])
+def test_gospa_alpha2_equals_brute_force(p):
+    rng = np.random.default_rng(30 + int(p))
+    for _ in range(80):
+        X, Y = random_set(rng), random_set(rng)
+        c = float(rng.choice([1.0, 3.0, 20.0]))
+        ref = brute_gospa_assignment(X, Y, c, p)
+        assert gospa(X, Y, c=c, p=p, alpha=2.0) == pytest.approx(ref, rel=1e-12, abs=1e-12)
+        # the definition with alpha = 2 agrees with the assignment form
+        assert brute_gospa_definition(X, Y, c, p, 2.0) == pytest.approx(ref, rel=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [1.0, 1.5])
+def test_gospa_other_alpha_equals_definition(alpha):
+    rng = np.random.default_rng(int(alpha * 10))
+    for _ in range(80):
+        X, Y = random_set(rng), random_set(rng)
+        c = float(rng.choice([1.0, 3.0]))
+        ref = brute_gospa_definition(X, Y, c, 2.0, alpha)
+        assert gospa(X, Y, c=c, p=2.0, alpha=alpha) == pytest.approx(ref, rel=1e-12, abs=1e-12)
+
+
+def test_gospa_special_cases():
+    X = np.array([[0.0, 0.0], [3.0, 4.0]])
+    assert gospa(np.zeros((0, 2)), np.zeros((0, 2))) == 0.0
+    # two missed targets: (2 c^p / 2)^(1/p)
+    assert gospa(X, np.zeros((0, 2)), c=10.0, p=2.0) == pytest.approx(10.0)
+    # one pair at distance 5 (kept: 25 < 100), one false target: (25 + 50)^(1/2)
+    assert gospa(X[:1] + [3.0, 4.0], X, c=10.0, p=2.0) == pytest.approx(np.sqrt(0.0 + 50.0))
+    assert gospa(X[:1], X[1:], c=10.0, p=2.0) == pytest.approx(5.0)
+    # beyond the cut-off: one missed + one false = c^p
+    assert gospa(X[:1], X[1:], c=2.0, p=2.0) == pytest.approx(2.0)
+
+
+def test_cardinality_error():
+    X = np.ones((3, 2))
+    assert cardinality_error(X, np.ones((1, 2))) == 2
+    assert cardinality_error(np.ones((1, 2)), X) == 2
+    assert cardinality_error(X, X) == 0
+    assert cardinality_error(np.zeros((0, 2)), X) == 3
+    assert cardinality_error(X, np.zeros((0,))) == 3
+    assert cardinality_error(np.zeros((0, 4)), np.zeros((0, 2))) == 0
+    assert cardinality_error(np.array([1.0, 2.0]), np.zeros((0, 2))) == 1  # a single point
+
+
+def test_rmse():
+    e = np.array([[1.0, -2.0], [3.0, 2.0], [-1.0, 0.0]])
+    np.testing.assert_allclose(rmse(e), np.sqrt([(1 + 9 + 1) / 3, (4 + 4) / 3]))
+    np.testing.assert_allclose(rmse(e, axis=1), np.sqrt([2.5, 6.5, 0.5]))
