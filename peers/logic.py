@@ -83,6 +83,8 @@ class PeerStats:
     stale_scans: int = 0
     estimates_in: int = 0
     estimates_out: int = 0
+    tuples_out: int = 0
+    """Numbers published in estimates (15 per 4-D component: ALGORITHMS.md §9)."""
     not_neighbour: int = 0
     old_round_estimates: int = 0
     fusions: int = 0
@@ -127,6 +129,7 @@ class PeerLogic:
         self.ospa_sums = {"local": 0.0, "fused": 0.0}
         self.ospa_counts = {"local": 0, "fused": 0}
         self._scored: set[tuple[str, int]] = set()
+        self._unscored: list[int] = []
 
     # -- helpers --------------------------------------------------------------------------
     def _next_seq(self) -> int:
@@ -138,7 +141,10 @@ class PeerLogic:
 
     def _estimate(self, k: int, rnd: int, mix: GaussianMixture, now: float) -> Estimate:
         self.stats.estimates_out += 1
-        return Estimate(self.o.name, k, self._publishable(mix), round=rnd,
+        mix = self._publishable(mix)
+        d = mix.dim
+        self.stats.tuples_out += len(mix) * (1 + d + d * (d + 1) // 2)
+        return Estimate(self.o.name, k, mix, round=rnd,
                         seq=self._next_seq(), send_time=now, pruning=2 if self.o.level2 else 1)
 
     def _weights(self, senders: list[str]) -> list[float]:
@@ -171,16 +177,31 @@ class PeerLogic:
         self.mix = self.filter.correct(self.filter.predict(self.mix, steps), [scan.z])
         self.last_k = scan.k
         self.stats.scans += 1
-        self._local_est[scan.k] = self.filter.extract(self.mix)
-        self._score(scan.k)
         self._scan = _ScanState(scan.k, 0, self.mix)
-        self._record(scan.k, "local", n_components=len(self.mix),
-                     n_published=len(self._publishable(self.mix)))
+        self._unscored.append(scan.k)
         if self.o.fusion != "none" and self.o.neighbours:
-            out.append(self._estimate(scan.k, 0, self.mix, now))
+            est = self._estimate(scan.k, 0, self.mix, now)
+            out.append(est)
+            self._record(scan.k, "local", n_components=len(self.mix),
+                         n_published=len(est.mixture))
+        else:
+            self._record(scan.k, "local", n_components=len(self.mix),
+                         n_published=len(self._publishable(self.mix)))
         out += self._advance(now)
         self._drop_old(scan.k)
         return out
+
+    def score_local(self) -> None:
+        """Extract and score the local estimates not yet scored.
+
+        Kept off the critical path: drivers call it after publishing what ``on_scan`` returned,
+        while the estimate travels to the neighbours (it also runs before any fusion).
+        """
+        while self._unscored:
+            k = self._unscored.pop()
+            if k == self.last_k:
+                self._local_est[k] = self.filter.extract(self.mix)
+                self._score(k)
 
     def on_estimate(self, est: Estimate, now: float) -> list:
         """Store a neighbour's estimate (round 0 through NALE); fuse if a round is complete."""
@@ -231,6 +252,8 @@ class PeerLogic:
         return dict(self._inbox.get((k, rnd), {}))
 
     def _ready(self, k: int, rnd: int) -> bool:
+        if self.o.fusion == "none" or not self.o.neighbours:
+            return True
         have = self._inbox.get((k, rnd), {})
         return all(n in have for n in self.alive)
 
@@ -282,6 +305,7 @@ class PeerLogic:
         return self._tracks(st.k, fused, now)
 
     def _tracks(self, k: int, fused: GaussianMixture, now: float) -> list:
+        self.score_local()
         states = self.filter.extract(fused)
         self._fused_est[k] = states
         self._score(k)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import resource
 import signal
 import statistics
 import time
@@ -36,7 +37,7 @@ class PeerRuntime:
                  listen=(), connect=(), config_file: str | None = None,
                  lease_ms: int | None = None, out_dir: Path | None = None,
                  run_id: str | None = None, viewer: str | None = None, color_index: int = 0,
-                 idle_timeout: float = 30.0) -> None:
+                 idle_timeout: float = 30.0, rerun: bool = True) -> None:
         self.logic = logic
         self.name = logic.o.name
         self.keys = Keys(network)
@@ -48,6 +49,7 @@ class PeerRuntime:
         self.viewer = viewer
         self.color = color_of(color_index)
         self.idle_timeout = idle_timeout
+        self.rerun = rerun
         self.q: queue.Queue = queue.Queue()
         self.sink = RerunSink()
         self.rejected: Counter = Counter()
@@ -60,6 +62,10 @@ class PeerRuntime:
         self.ages: deque = deque(maxlen=100_000)
         self.deadlines: dict[int, float] = {}
         self.scan_sent: dict[int, float] = {}
+        # latency breakdown per scan (wall seconds): scan received, local estimate out
+        self.stage: dict[int, tuple[float, float]] = {}
+        self.breakdown: dict[str, deque] = {n: deque(maxlen=100_000)
+                                            for n in ("transit", "local", "fusion_wait")}
         self.tails: deque = deque(maxlen=20)
         self.stop_reason = ""
         self._stop = False
@@ -98,15 +104,17 @@ class PeerRuntime:
     def run(self) -> int:
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, self._signal)
-        if self.out_dir is not None:
-            self.sink.open(self.run_id, self.out_dir / "rerun" / f"peer-{self.name}.rrd",
-                           self.viewer)
+        if self.out_dir is not None and self.rerun or self.viewer:
+            rrd = self.out_dir / "rerun" / f"peer-{self.name}.rrd" if self.out_dir else None
+            self.sink.open(self.run_id, rrd if self.rerun else None, self.viewer)
         session = open_session(*self.session_args)
         try:
+            # BLOCK: nothing is dropped under load; express: no batching delay
+            block = zenoh.CongestionControl.BLOCK
             self.est_pub = session.declare_publisher(
-                self.keys.estimate(self.name), congestion_control=zenoh.CongestionControl.BLOCK)
+                self.keys.estimate(self.name), congestion_control=block, express=True)
             self.tracks_pub = session.declare_publisher(
-                self.keys.tracks(self.name), congestion_control=zenoh.CongestionControl.BLOCK)
+                self.keys.tracks(self.name), congestion_control=block, express=True)
             subs = [
                 session.declare_subscriber(self.keys.scan(self.logic.o.sensor), self._put("scan")),
                 session.declare_subscriber(self.keys.estimate("*"), self._put("estimate")),
@@ -179,11 +187,16 @@ class PeerRuntime:
         t0 = time.perf_counter()
         if isinstance(msg, Scan):
             self.scan_sent[msg.k] = msg.send_time
+            self.breakdown["transit"].append((wall - msg.send_time) * 1e3)
             self.sink.time(msg.k, msg.k * self.interval)
             out = self.logic.on_scan(msg, wall)
             self.compute_ms["filter"] += (time.perf_counter() - t0) * 1e3
             self.deadlines[msg.k] = time.monotonic() + self.deadline_frac * self.interval
-            self._publish(out, time.time())
+            local_done = time.time()
+            self.stage[msg.k] = (wall, local_done)
+            self.breakdown["local"].append((local_done - wall) * 1e3)
+            self._publish(out, local_done)
+            self.logic.score_local()
             self._log_local(msg.k)
         elif isinstance(msg, Estimate):
             out = self.logic.on_estimate(msg, wall)
@@ -215,6 +228,11 @@ class PeerRuntime:
     # -- records, Rerun, summary ------------------------------------------------------------
     def _on_tracks(self, msg: Tracks, now_wall: float) -> None:
         sent = self.scan_sent.pop(msg.k, None)
+        stage = self.stage.pop(msg.k, None)
+        if stage is not None:
+            self.breakdown["fusion_wait"].append((now_wall - stage[1]) * 1e3)
+        for old in [k for k in self.stage if k < msg.k - 10]:
+            del self.stage[old]
         if sent:
             lat = (now_wall - sent) * 1e3
             self.latency_ms.append(lat)
@@ -280,8 +298,13 @@ class PeerRuntime:
             "latency_ms_median": statistics.median(lat) if lat else None,
             "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
             "compute_ms": self.compute_ms,
+            "latency_breakdown_ms_median": {
+                n: statistics.median(v) if v else None for n, v in self.breakdown.items()},
             "nale": asdict(self.logic.nale.counts),
             "stats": stats,
+            "estimate_bytes_sent": self.sent_bytes["estimate"],
+            "estimates_sent": self.sent["estimate"],
+            "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "pid": os.getpid(),
         }
 

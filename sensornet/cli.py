@@ -84,7 +84,8 @@ def cmd_peer(args: argparse.Namespace) -> int:
         make_peer(scn, args.name), args.network, scn.scan_period / speed,
         scn.network.deadline, listen=args.listen or [], connect=args.connect or [],
         config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
-        viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout)
+        viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
+        rerun=not args.no_rerun)
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
     code = runtime.run()
@@ -109,7 +110,7 @@ def cmd_world(args: argparse.Namespace) -> int:
         sent = run_world(scn, args.network, run=args.run, listen=args.listen or [],
                          connect=args.connect or [], config_file=args.config, wait_for=peers,
                          wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
-                         viewer=args.viewer, speed=args.speed)
+                         viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun)
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
@@ -128,7 +129,8 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x (about {expected:.0f} s); "
           f"output in {out}", flush=True)
     handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
-                       viewer=args.viewer, run=args.run, speed=args.speed)
+                       viewer=args.viewer, run=args.run, speed=args.speed,
+                       rerun=not args.no_rerun)
     try:
         codes = wait_run(handle, timeout=expected + args.timeout)
     except KeyboardInterrupt:
@@ -209,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "the scenario's network.speed)")
         sp.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="override a scenario value (repeatable)")
+        sp.add_argument("--no-rerun", action="store_true",
+                        help="do not write .rrd files (benchmarks)")
 
     pe = sub.add_parser("peer", help="run one sensor peer (a process) over Zenoh")
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")

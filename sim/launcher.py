@@ -28,6 +28,8 @@ class RunHandle:
     out: Path
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
     logs: dict[str, Path] = field(default_factory=dict)
+    endpoints: dict[str, str] = field(default_factory=dict)
+    network: str = ""
 
     def stop_all(self, grace: float = 5.0) -> None:
         """SIGTERM every child still running, then SIGKILL after ``grace`` seconds."""
@@ -50,7 +52,7 @@ def _cli() -> list[str]:
 def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               overrides: list[str] | None = None, viewer: str | None = None,
               run: int = 0, speed: float | None = None, peer_args: dict | None = None,
-              lease_ms: int | None = None) -> RunHandle:
+              lease_ms: int | None = None, rerun: bool = True) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`)."""
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = f"{network}-{uuid.uuid4().hex[:6]}"
@@ -61,8 +63,10 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
     if viewer:
         common += ["--viewer", viewer]
+    if not rerun:
+        common += ["--no-rerun"]
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    handle = RunHandle(out=out)
+    handle = RunHandle(out=out, endpoints=eps, network=network)
     cmds = {"world": [*_cli(), "world", source, *common, "--listen", eps["world"],
                       "--peers", ",".join(names), "--run", str(run)]
             + (["--speed", str(speed)] if speed else [])}

@@ -79,6 +79,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay = no_delay,
             k, z, x = payload
             peer.on_truth(k, x)
             emit(t, target, peer.on_scan(Scan(target, k, z), t))
+            peer.score_local()
         elif kind == "estimate":
             emit(t, target, peer.on_estimate(payload, t))
         else:

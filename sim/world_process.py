@@ -32,7 +32,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               config_file: str | None = None, wait_for: list[str] | None = None,
               wait_timeout: float = 30.0, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
-              speed: float | None = None, progress=None) -> dict:
+              speed: float | None = None, progress=None, rerun: bool = True) -> dict:
     """Play run ``run`` of the scenario; returns what was published."""
     keys = Keys(network)
     speed = speed or scn.network.speed
@@ -46,8 +46,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, on_signal)
     sink = RerunSink()
-    if out_dir is not None or viewer:
-        sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir else None,
+    if out_dir is not None and rerun or viewer:
+        sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
+                  else None,
                   viewer, peers=list(wait_for or []))
     session = open_session(listen, connect, config_file)
     alive: set[str] = set()
@@ -67,9 +68,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         live_sub = session.liveliness().declare_subscriber(keys.alive("*"), on_live,
                                                            history=True)
         block = zenoh.CongestionControl.BLOCK
-        pubs = {n: session.declare_publisher(keys.scan(n), congestion_control=block)
+        pubs = {n: session.declare_publisher(keys.scan(n), congestion_control=block,
+                                              express=True)
                 for n in scn.sensor_names}
-        truth_pub = session.declare_publisher(keys.truth(), congestion_control=block)
+        truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
+                                        express=True)
         ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
         token = session.liveliness().declare_token(keys.alive("world"))
         if wait_for:
@@ -100,14 +103,13 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 stop.wait(pause)
             now = time.time()
             X = truth.states[k - 1]
-            data = encode(Truth(k, truth.ids[k - 1], X, send_time=now))
-            truth_pub.put(data)
-            for i, s in enumerate(sensors):
+            for i, s in enumerate(sensors):  # scans first: they are on the critical path
                 z = scans[i][k - 1]
                 data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
                 pubs[s.name].put(data)
                 sent["scans"] += 1
                 sent["bytes"] += len(data)
+            truth_pub.put(encode(Truth(k, truth.ids[k - 1], X, send_time=now)))
             sent["scans_published"] = k
             sink.time(k, k * scn.scan_period)
             sink.points("world/truth", X[:, [0, 2]], (255, 255, 255), radius=7.0,

@@ -1,0 +1,173 @@
+"""Network benchmark: real peer processes over Zenoh on loopback, measured in one run.
+
+Prints, against the targets of the peers issue:
+
+1. the time from a scan's publication (the world's clock) to the peer's fused tracks (median
+   and p99 over every scan of every peer), seed-000 with 3 peers at 10 scans/s, no Rerun;
+2. wire bytes per estimate against the raw tuple count (15 numbers per 4-D component, 8 bytes
+   each: ALGORITHMS.md §9);
+3. the largest number of peers that keeps real time at 10 scans/s with 2 consensus rounds, on
+   a ring (degree 2) and on circulant meshes of degree 3 and 4, and the peak resident memory
+   of one peer process.
+
+"Keeps real time": every peer processed every scan, at most 5 % of its fusions waited for the
+deadline (half a scan interval), and the p99 scan-to-track latency stays under one scan
+interval (100 ms).
+
+    python benchmarks/bench_network.py            # full (several minutes)
+    python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.scenario import load_scenario
+
+TARGETS = {"latency_median_ms": 5.0, "wire_ratio": 1.1, "peers": 20, "rss_mb": 200.0}
+
+
+def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float) -> str:
+    """A seed-000-like scenario with ``n`` linear sensors on a circulant graph of ``degree``."""
+    base = load_scenario("seed000")
+    lines = [
+        "[scenario]", f'name = "scale{n}d{degree}"', "seed = 0", "scan_period = 1.0",
+        f"num_scans = {scans}", "region = [[-1000.0, 1000.0], [-1000.0, 1000.0]]",
+        "[motion]", "sigma_w = 2.0", "survival_probability = 0.99",
+    ]
+    for t in base.targets:
+        lines += ["[[targets]]", f"birth_scan = {t.birth_scan}", f"death_scan = {t.death_scan}",
+                  f"start = {list(t.start)}", f"end = {list(t.end)}"]
+    names = [f"p{i:02d}" for i in range(n)]
+    for i, name in enumerate(names):
+        pos = base.sensors[i % len(base.sensors)].position
+        lines += ["[[sensors]]", f'name = "{name}"', 'kind = "linear"', f"position = {list(pos)}",
+                  "sigma_r = 20.0", "detection_probability = 0.99", "clutter_rate = 10"]
+    edges = set()
+    for i in range(n):
+        for step in range(1, degree // 2 + 1):
+            edges.add(tuple(sorted((i, (i + step) % n))))
+        if degree % 2 == 1 and n % 2 == 0:
+            edges.add(tuple(sorted((i, (i + n // 2) % n))))
+    edge_text = ", ".join(f'["{names[a]}", "{names[b]}"]' for a, b in sorted(edges))
+    lines += ['[birth]', 'model = "truth"', "[fusion]", 'rule = "gci"',
+              f'fusing_sensor = "{names[0]}"',
+              "[network]", 'topology = "custom"', f"edges = [{edge_text}]", f"rounds = {rounds}",
+              f"speed = {speed}", "deadline = 0.5"]
+    return "\n".join(lines) + "\n"
+
+
+def run_network(source: str, out: Path, overrides: list[str], timeout: float) -> dict:
+    scn = load_scenario(source, overrides=None)
+    from sim.scenario import parse_overrides
+
+    scn = load_scenario(source, overrides=parse_overrides(overrides))
+    handle = start_run(scn, source, out, overrides=overrides, rerun=False)
+    try:
+        codes = wait_run(handle, timeout=timeout)
+    finally:
+        handle.stop_all()
+    return {"codes": codes, "summaries": read_summaries(out, scn.sensor_names), "scn": scn}
+
+
+def part_latency(tmp: Path, scans: int) -> list[str]:
+    res = run_network("seed000", tmp / "lat", ["birth.model=truth", f"scenario.num_scans={scans}",
+                                               "network.speed=10"], timeout=scans / 10 + 90)
+    s = res["summaries"]
+    if len(s) != 3:
+        return [f"latency run failed: exit codes {res['codes']}"]
+    # every peer's per-scan latencies are summarised in its summary; pool the medians and p99s
+    med = statistics.median(v["latency_ms_median"] for v in s.values())
+    p99 = max(v["latency_ms_p99"] for v in s.values())
+    wire = sum(v["estimate_bytes_sent"] for v in s.values())
+    tuples = sum(v["stats"]["tuples_out"] for v in s.values())
+    n_est = sum(v["estimates_sent"] for v in s.values())
+    ratio = wire / (8 * tuples) if tuples else float("nan")
+    ok_lat = med < TARGETS["latency_median_ms"]
+    ok_wire = ratio <= TARGETS["wire_ratio"]
+    return [
+        "| measure | value | target | |",
+        "|---|---:|---:|---|",
+        f"| scan -> fused tracks, median (ms) | {med:.2f} | < {TARGETS['latency_median_ms']} | "
+        f"{'PASS' if ok_lat else 'FAIL'} |",
+        f"| scan -> fused tracks, p99 (ms) | {p99:.2f} | | |",
+        f"| wire bytes per estimate | {wire / n_est:.0f} | | |",
+        f"| raw tuples x 8 bytes per estimate | {8 * tuples / n_est:.0f} | | |",
+        f"| wire / raw | {ratio:.3f} | <= {TARGETS['wire_ratio']} | "
+        f"{'PASS' if ok_wire else 'FAIL'} |",
+    ]
+
+
+def real_time(res: dict) -> tuple[bool, str, float]:
+    scn, s = res["scn"], res["summaries"]
+    if len(s) != len(scn.sensors) or any(c != 0 for c in res["codes"].values()):
+        bad = {k: v for k, v in res["codes"].items() if v != 0}
+        return False, f"{len(s)}/{len(scn.sensors)} summaries, bad exits {bad}", float("nan")
+    interval_ms = 1e3 * scn.scan_period / scn.network.speed
+    worst_deadline = max(v["stats"]["deadline_fusions"] / max(1, v["scans"]) for v in s.values())
+    p99 = max(v["latency_ms_p99"] or 1e9 for v in s.values())
+    scans_ok = all(v["scans"] == scn.num_scans for v in s.values())
+    rss = max(v["max_rss_mb"] for v in s.values())
+    ok = scans_ok and worst_deadline <= 0.05 and p99 < interval_ms
+    why = (f"scans {'all' if scans_ok else 'MISSING'}, deadline fusions <= "
+           f"{100 * worst_deadline:.0f} %, p99 {p99:.1f} ms, max RSS {rss:.0f} MB")
+    return ok, why, rss
+
+
+def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int) -> list[str]:
+    rows = ["| graph | peers | real time | detail |", "|---|---:|---|---|"]
+    best: dict[int, int] = {}
+    peak_rss = 0.0
+    for degree in degrees:
+        for n in sizes:
+            path = tmp / f"scale-{n}-{degree}.toml"
+            path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0))
+            t0 = time.monotonic()
+            res = run_network(str(path), tmp / f"scale-{n}-{degree}", [],
+                              timeout=scans / 10 + 60 + 3 * n)
+            ok, why, rss = real_time(res)
+            peak_rss = max(peak_rss, rss if rss == rss else 0.0)
+            graph = "ring" if degree == 2 else f"mesh degree {degree}"
+            rows.append(f"| {graph} | {n} | {'yes' if ok else 'NO'} | {why} "
+                        f"({time.monotonic() - t0:.0f} s wall) |")
+            print(rows[-1], flush=True)
+            if not ok:
+                break
+            best[degree] = n
+    rows.append("")
+    for degree in degrees:
+        n = best.get(degree, 0)
+        rows.append(f"largest real-time network, degree {degree}: {n} peers "
+                    f"(target >= {TARGETS['peers']}: {'PASS' if n >= TARGETS['peers'] else 'FAIL'})")
+    rows.append(f"peak resident memory of one peer: {peak_rss:.0f} MB (target < "
+                f"{TARGETS['rss_mb']:.0f}: {'PASS' if peak_rss < TARGETS['rss_mb'] else 'FAIL'})")
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help="short runs, one small scaling step")
+    p.add_argument("--sizes", default="10,20,30,40", help="peer counts to try (ascending)")
+    p.add_argument("--degrees", default="2,3,4", help="graph degrees to try")
+    p.add_argument("--scans", type=int, default=100, help="scans per run")
+    args = p.parse_args(argv)
+    sizes = [6] if args.quick else [int(x) for x in args.sizes.split(",")]
+    degrees = [2] if args.quick else [int(x) for x in args.degrees.split(",")]
+    scans = 30 if args.quick else args.scans
+    with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
+        tmp = Path(tmp)
+        print("## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun)\n", flush=True)
+        print("\n".join(part_latency(tmp, scans)), flush=True)
+        print("\n## peers in real time at 10 scans/s, 2 consensus rounds\n", flush=True)
+        print("\n".join(part_scaling(tmp, sizes, degrees, min(scans, 50))), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

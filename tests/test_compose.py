@@ -1,0 +1,49 @@
+"""docker-compose.yml: it parses, and every service runs a valid `sensornet` invocation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sensornet.cli import build_parser
+from sim.scenario import load_scenario, parse_overrides
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def compose():
+    return yaml.safe_load((ROOT / "docker-compose.yml").read_text())
+
+
+def test_services_are_the_world_and_three_peers(compose):
+    assert set(compose["services"]) == {"world", "s1", "s2", "s3"}
+    images = {s["image"] for s in compose["services"].values()}
+    assert images == {"sensornet:latest"}  # one image for all
+    assert (ROOT / "Dockerfile").is_file()
+
+
+def test_every_command_is_a_valid_cli_invocation(compose):
+    parser = build_parser()
+    networks, run_ids = set(), set()
+    for name, service in compose["services"].items():
+        args = parser.parse_args(service["command"])  # argparse exits on an invalid command
+        assert args.command == ("world" if name == "world" else "peer")
+        networks.add(args.network)
+        run_ids.add(args.run_id)
+        scn = load_scenario(getattr(args, "scenario", "seed000"),
+                            overrides=parse_overrides(args.set or []))
+        if name != "world":
+            assert args.name == name and args.name in scn.sensor_names
+            assert "tcp/world:7447" in args.connect
+        else:
+            assert sorted(args.peers.split(",")) == ["s1", "s2", "s3"]
+        assert args.out.startswith("/runs")
+    assert len(networks) == 1 and len(run_ids) == 1  # one key space, one Rerun recording
+
+
+def test_invalid_command_would_be_caught():
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["peer", "s1", "--no-such-flag"])
