@@ -143,8 +143,9 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int) ->
     rows.append("")
     for degree in degrees:
         n = best.get(degree, 0)
+        verdict = "PASS" if n >= TARGETS["peers"] else "FAIL"
         rows.append(f"largest real-time network, degree {degree}: {n} peers "
-                    f"(target >= {TARGETS['peers']}: {'PASS' if n >= TARGETS['peers'] else 'FAIL'})")
+                    f"(target >= {TARGETS['peers']}: {verdict})")
     rows.append(f"peak resident memory of one peer: {peak_rss:.0f} MB (target < "
                 f"{TARGETS['rss_mb']:.0f}: {'PASS' if peak_rss < TARGETS['rss_mb'] else 'FAIL'})")
     return rows

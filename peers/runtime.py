@@ -117,7 +117,9 @@ class PeerRuntime:
                 self.keys.tracks(self.name), congestion_control=block, express=True)
             subs = [
                 session.declare_subscriber(self.keys.scan(self.logic.o.sensor), self._put("scan")),
-                session.declare_subscriber(self.keys.estimate("*"), self._put("estimate")),
+                # only the neighbours' estimates: routing does the filtering, not decoding
+                *(session.declare_subscriber(self.keys.estimate(n), self._put("estimate"))
+                  for n in self.logic.o.neighbours),
                 session.declare_subscriber(self.keys.truth(), self._put("truth")),
                 session.declare_subscriber(self.keys.ctl(), self._put("ctl")),
                 session.liveliness().declare_subscriber(self.keys.alive("*"), self._live,

@@ -16,6 +16,7 @@ single array computation.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -24,9 +25,9 @@ from scipy.optimize import minimize_scalar
 from tracking.gaussian import (
     LOG_2PI,
     SYM4_INDEX,
+    SYM4_WORK,
     inv_det_spd,
-    sym4_assemble,
-    sym4_inverse_entries,
+    sym4_inverse_into,
     symmetrise,
 )
 from tracking.mixture import GaussianMixture
@@ -61,41 +62,138 @@ def gci_pair(Di: GaussianMixture, Dj: GaussianMixture, omega: float) -> Gaussian
     ma, mb = Di.means, Dj.means
     ha = np.einsum("aij,aj->ai", Ya, ma)  # (na, d)
     hb = np.einsum("bij,bj->bi", Yb, mb)  # (nb, d)
-    # u = Y_a (m_b - m_a), v = Y_b (m_b - m_a), each (d, na, nb), via two small GEMMs
-    u = (Ya.reshape(na * d, d) @ mb.T).reshape(na, d, nb).transpose(1, 0, 2) - ha.T[:, :, None]
-    v = hb.T[:, None, :] - (Yb.reshape(nb * d, d) @ ma.T).reshape(nb, d, na).transpose(1, 2, 0)
-    info = (1.0 - omega) * ha.T[:, :, None] + omega * hb.T[:, None, :]  # (d, na, nb)
-    Ya_t = np.moveaxis(Ya, 0, -1)[..., :, None]  # (d, d, na, 1)
-    Yb_t = np.moveaxis(Yb, 0, -1)[..., None, :]  # (d, d, 1, nb)
-    if d == 4:
-        entries, det_y = sym4_inverse_entries(
-            *((1.0 - omega) * Ya_t[i, j] + omega * Yb_t[i, j] for i, j in SYM4_INDEX)
-        )
-        P = {}
-        for (i, j), e in zip(SYM4_INDEX, entries, strict=True):
-            P[i, j] = P[j, i] = e
-        means_t = np.stack([sum(P[i, j] * info[j] for j in range(4)) for i in range(4)])
-        quad = sum(v[i] * sum(P[i, j] * u[j] for j in range(4)) for i in range(4))
-        covs = sym4_assemble(entries, (na, nb)).reshape(na * nb, 4, 4)
+    # u = Y_a (m_b - m_a) = Y_a m_b - h_a, v = Y_b (m_b - m_a) = h_b - Y_b m_a: two small GEMMs
+    Ya_mb = (Ya.reshape(na * d, d) @ mb.T).reshape(na, d, nb)
+    Yb_ma = (Yb.reshape(nb * d, d) @ ma.T).reshape(nb, d, na)
+    with np.errstate(divide="ignore"):  # a zero weight gives zero-weight pairs
+        log_wa = (1.0 - omega) * np.log(Di.weights)
+        log_wb = omega * np.log(Dj.weights)
+    n_blocks = -(-na * nb // _GCI_BLOCK)
+    terms = _GCITerms(omega, ha, hb, Ya, Yb, Ya_mb, Yb_ma, log_wa, log_wb, np.log(det_a),
+                      np.log(det_b), rows=-(-na // n_blocks))
+    weights = np.empty((na, nb))
+    if d == 4:  # entry-major slabs, (4, n) means and (16, n) covariances, returned transposed:
+        # the memory layout this function always had (NumPy's reductions follow the layout)
+        means, covs = np.empty((d, na, nb)), np.empty((d, d, na, nb))
     else:
-        Y = np.moveaxis((1.0 - omega) * Ya_t + omega * Yb_t, (0, 1), (-2, -1))  # (na, nb, d, d)
-        Pab, det_y = inv_det_spd(Y)
-        means_t = np.einsum("abij,jab->iab", Pab, info)
-        quad = np.einsum("iab,abij,jab->ab", v, Pab, u)
-        covs = symmetrise(Pab).reshape(na * nb, d, d)
-    oo = omega * (1.0 - omega)
-    log_det_c = np.log(det_y) + np.log(det_a)[:, None] + np.log(det_b)[None, :]
-    log_n = -0.5 * (oo * quad + log_det_c - d * np.log(oo) + d * LOG_2PI)
-    with np.errstate(divide="ignore"):
+        means, covs = np.empty((na, nb, d)), np.empty((na, nb, d, d))
+    for a0 in range(0, na, terms.rows):
+        rows = slice(a0, min(a0 + terms.rows, na))
+        terms.block(rows, weights[rows], means, covs)
+    if d == 4:
+        means, covs = means.reshape(d, -1).T, covs.reshape(d * d, -1).T.reshape(-1, d, d)
+    return GaussianMixture(weights.reshape(-1), means.reshape(na * nb, d),
+                           covs.reshape(na * nb, d, d))
+
+
+_GCI_BLOCK = 8192
+"""At most this many pairs per block of :func:`gci_pair` (its scratch stays a few MB)."""
+
+
+class _GCITerms:
+    """The per-component terms of :func:`gci_pair`, and its pairs one block of rows at a time.
+
+    A block is the components ``a`` in ``rows`` of ``D_i`` against every ``b`` of ``D_j``. Each
+    pair's numbers depend on its own inputs only, so blocking changes no result; it keeps the
+    temporaries small and, for ``d = 4``, in one reused scratch array (no page faults).
+    """
+
+    def __init__(self, omega, ha, hb, Ya, Yb, Ya_mb, Yb_ma, log_wa, log_wb, log_det_a, log_det_b,
+                 rows):
+        d = ha.shape[1]
+        self.d, self.rows = d, rows
+        # one row, or one (na, nb) slab, per state entry
+        self.ha_t, self.hb_t = ha.T, hb.T
+        self.Ya_mb_t = Ya_mb.transpose(1, 0, 2)  # (d, na, nb)
+        self.Yb_ma_t = Yb_ma.transpose(1, 2, 0)  # (d, na, nb)
+        self.cha_t, self.chb_t = ((1.0 - omega) * ha).T, (omega * hb).T
+        cYa, cYb = (1.0 - omega) * Ya, omega * Yb
+        if d == 4:
+            self.cYa10 = cYa[:, _SYM4_I, _SYM4_J].T  # (10, na): the SYM4_INDEX entries
+            self.cYb10 = cYb[:, _SYM4_I, _SYM4_J].T  # (10, nb)
+        else:
+            self.cYa, self.cYb = cYa, cYb
+        # the pair-independent parts of log w_ab
+        self.log_wa, self.log_wb = log_wa, log_wb
+        self.log_det_a, self.log_det_b = log_det_a, log_det_b
+        self.log_kappa_a = log_kappa(1.0 - omega, log_det_a, d)
+        self.log_kappa_b = log_kappa(omega, log_det_b, d)
+        self.oo = omega * (1.0 - omega)
+        self.log_oo, self.log_2pi = d * np.log(self.oo), d * LOG_2PI
+
+    def block(self, rows: slice, weights: np.ndarray, means: np.ndarray,
+              covs: np.ndarray) -> None:
+        """Fill ``weights (r, nb)`` and the block's part of ``means``, ``covs``: for ``d = 4``
+        the slabs ``(4, na, nb)``, ``(4, 4, na, nb)``, else ``(na, nb, d)``, ``(na, nb, d, d)``.
+        """
+        r, nb = weights.shape
+        if self.d == 4:
+            work = _scratch(_GCI_PLANES * r * nb).reshape(_GCI_PLANES, r, nb)
+            quad, log_det_y = self._block_sym4(rows, work, means[:, rows], covs[:, :, rows])
+        else:
+            u = self.Ya_mb_t[:, rows] - self.ha_t[:, rows, None]  # (d, r, nb)
+            v = self.hb_t[:, None, :] - self.Yb_ma_t[:, rows]
+            info = self.cha_t[:, rows, None] + self.chb_t[:, None, :]
+            Pab, det_y = inv_det_spd(self.cYa[rows, None] + self.cYb[None, :])  # (r, nb, d, d)
+            means[rows] = np.moveaxis(np.einsum("abij,jab->iab", Pab, info), 0, -1)
+            quad = np.einsum("iab,abij,jab->ab", v, Pab, u)
+            covs[rows] = symmetrise(Pab)
+            log_det_y = np.log(det_y)
+        log_det_c = log_det_y + self.log_det_a[rows, None] + self.log_det_b[None, :]
+        log_n = -0.5 * (self.oo * quad + log_det_c - self.log_oo + self.log_2pi)
         log_w = (
-            (1.0 - omega) * np.log(Di.weights)[:, None]
-            + omega * np.log(Dj.weights)[None, :]
-            + log_kappa(1.0 - omega, np.log(det_a), d)[:, None]
-            + log_kappa(omega, np.log(det_b), d)[None, :]
+            self.log_wa[rows, None]
+            + self.log_wb[None, :]
+            + self.log_kappa_a[rows, None]
+            + self.log_kappa_b[None, :]
             + log_n
         )
-    means = np.moveaxis(means_t, 0, -1).reshape(na * nb, d)
-    return GaussianMixture(np.exp(log_w).reshape(-1), means, covs)
+        np.exp(log_w, out=weights)
+
+    def _block_sym4(self, rows: slice, W: np.ndarray, means: np.ndarray, covs: np.ndarray):
+        """``d = 4``: fill ``means (4, r, nb)``, ``covs (4, 4, r, nb)``; return ``quad``,
+        ``log det Y_ab``. All in the ``(r, nb)`` planes of the scratch ``W``.
+        """
+        mul, add = np.multiply, np.add
+        Y = W[0:10]  # upper entries of Y_ab = (1-omega) Y_a + omega Y_b
+        add(self.cYa10[:, rows, None], self.cYb10[:, None, :], out=Y)
+        det = W[10]
+        sym4_inverse_into(Y, covs, det, W[11:11 + SYM4_WORK])  # P_ab, det Y_ab
+        P = covs
+        log_det_y = np.log(det, out=det)
+        # m_i = sum_j P_ij info_j, quad = sum_i v_i sum_j P_ij u_j (Y no longer needed)
+        info, u, v = W[0:4], W[4:8], W[11:15]
+        np.add(self.cha_t[:, rows, None], self.chb_t[:, None, :], out=info)
+        np.subtract(self.Ya_mb_t[:, rows], self.ha_t[:, rows, None], out=u)
+        np.subtract(self.hb_t[:, None, :], self.Yb_ma_t[:, rows], out=v)
+        Pu, tmp, quad = W[15:19], W[19:23], W[8]
+        mul(P[:, 0], info[0], out=means)
+        mul(P[:, 0], u[0], out=Pu)
+        for j in range(1, 4):
+            mul(P[:, j], info[j], out=tmp)
+            add(means, tmp, out=means)
+            mul(P[:, j], u[j], out=tmp)
+            add(Pu, tmp, out=Pu)
+        mul(v, Pu, out=Pu)
+        add(Pu[0], Pu[1], out=quad)
+        add(quad, Pu[2], out=quad)
+        add(quad, Pu[3], out=quad)
+        return quad, log_det_y
+
+
+_SYM4_I, _SYM4_J = (np.array(ix) for ix in zip(*SYM4_INDEX, strict=True))
+_GCI_PLANES = 11 + SYM4_WORK
+"""``(r, nb)`` planes of scratch for one ``d = 4`` block."""
+
+_LOCAL = threading.local()
+
+
+def _scratch(size: int) -> np.ndarray:
+    """A float array of ``size``, reused across calls (one per thread)."""
+    buf = getattr(_LOCAL, "scratch", None)
+    if buf is None or buf.size < size:
+        buf = _LOCAL.scratch = np.empty(size)
+    return buf[:size]
 
 
 CARDINALITY_RULES = ("emd", "separate")
@@ -240,3 +338,4 @@ def gci_fuse_optimised(
         if reduce is not None:
             acc = reduce(acc)
     return acc
+

@@ -34,39 +34,96 @@ def sym4_inverse_entries(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
     """Inverse and determinant of symmetric 4x4 matrices given as their 10 upper entries.
 
     Each argument is an array (any shape, broadcast together). Blocks ``[[A, B], [B^T, D]]`` of
-    size 2: ``S = D - B^T A^-1 B`` (Schur complement), ``det = det A det S``, block inverse.
-    Returns ``(i00, i01, i02, i03, i11, i12, i13, i22, i23, i33), det``.
+    size 2: ``S = D - B^T A^-1 B`` (Schur complement), ``det = det A det S``, block inverse
+    (:func:`sym4_inverse_into`). Returns ``(i00, i01, i02, i03, i11, i12, i13, i22, i23, i33),
+    det``.
     """
-    detA = a00 * a11 - a01 * a01
-    rA = 1.0 / detA
-    i00, i01, i11 = a11 * rA, -a01 * rA, a00 * rA  # A^-1
-    # X = A^-1 B with B = [[a02, a03], [a12, a13]]
-    x00 = i00 * a02 + i01 * a12
-    x01 = i00 * a03 + i01 * a13
-    x10 = i01 * a02 + i11 * a12
-    x11 = i01 * a03 + i11 * a13
-    s00 = a22 - (a02 * x00 + a12 * x10)
-    s01 = a23 - (a02 * x01 + a12 * x11)
-    s11 = a33 - (a03 * x01 + a13 * x11)
-    detS = s00 * s11 - s01 * s01
-    rS = 1.0 / detS
-    t00, t01, t11 = s11 * rS, -s01 * rS, s00 * rS  # S^-1
-    u00 = -(x00 * t00 + x01 * t01)  # upper-right block -X S^-1
-    u01 = -(x00 * t01 + x01 * t11)
-    u10 = -(x10 * t00 + x11 * t01)
-    u11 = -(x10 * t01 + x11 * t11)
-    return (
-        i00 - (u00 * x00 + u01 * x01),
-        i01 - (u00 * x10 + u01 * x11),
-        u00,
-        u01,
-        i11 - (u10 * x10 + u11 * x11),
-        u10,
-        u11,
-        t00,
-        t01,
-        t11,
-    ), detA * detS
+    args = (a00, a01, a02, a03, a11, a12, a13, a22, a23, a33)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+    dtype = np.result_type(*args, 1.0)
+    A = np.empty((10, *(shape or (1,))), dtype)
+    for k, a in enumerate(args):
+        A[k] = a
+    P, det = _sym4_inverse(A)
+    if not shape:  # scalars in, scalars out
+        return tuple(P[i, j, 0] for i, j in SYM4_INDEX), det[0]
+    return tuple(P[i, j] for i, j in SYM4_INDEX), det
+
+
+def _sym4_inverse(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sym4_inverse_into` with new output and scratch arrays."""
+    P = np.empty((4, 4, *A.shape[1:]), A.dtype)
+    det = np.empty(A.shape[1:], A.dtype)
+    sym4_inverse_into(A, P, det, np.empty((SYM4_WORK, *A.shape[1:]), A.dtype))
+    return P, det
+
+
+SYM4_WORK = 23
+"""Scratch planes :func:`sym4_inverse_into` needs."""
+
+
+def sym4_inverse_into(A: np.ndarray, P: np.ndarray, det: np.ndarray, work: np.ndarray) -> None:
+    """The closed-form inverse of :func:`sym4_inverse_entries`, written into given arrays.
+
+    ``A (10, ...)``: the upper entries in :data:`SYM4_INDEX` order (read only). Fills the full
+    inverse ``P (4, 4, ...)`` (exactly symmetric) and ``det (...)``; ``work (SYM4_WORK, ...)``
+    is scratch. The same shape ``...`` (at least one axis) after the first axes; several
+    entries per NumPy call, no temporaries. With ``A^-1 = [[a11, -a01], [-a01, a00]] / det A``,
+    ``X = A^-1 B``, ``S = D - B^T X``: ``P = [[A^-1 - U X^T, U], [U^T, S^-1]]``,
+    ``U = -X S^-1``, and ``det = det A det S``.
+    """
+    mul, add, sub, neg = np.multiply, np.add, np.subtract, np.negative
+    a00, a01, a02, a03, a11, a12, a13, _, _, a33 = A
+    Ai, X, T, T2 = (work[k:k + 4].reshape(2, 2, *work.shape[1:]) for k in (0, 4, 8, 12))
+    t1, t2, det_a, r_a, s11, det_s, r_s = work[16:23]
+    mul(a00, a11, out=t1)
+    mul(a01, a01, out=t2)
+    sub(t1, t2, out=det_a)
+    np.divide(1.0, det_a, out=r_a)
+    mul(a11, r_a, out=Ai[0, 0])
+    neg(a01, out=t1)
+    mul(t1, r_a, out=Ai[0, 1])
+    mul(a00, r_a, out=Ai[1, 1])
+    Ai[1, 0] = Ai[0, 1]
+    # X = A^-1 B: x_rc = Ai_r0 a_0(2+c) + Ai_r1 a_1(2+c)
+    mul(Ai[:, 0, None], A[None, 2:4], out=X)
+    mul(Ai[:, 1, None], A[None, 5:7], out=T)
+    add(X, T, out=X)
+    # S: [s00, s01] = [a22, a23] - (a02 [x00, x01] + a12 [x10, x11]); s11 likewise
+    s0 = T2[0]
+    mul(a02, X[0], out=T[0])
+    mul(a12, X[1], out=T[1])
+    add(T[0], T[1], out=T[0])
+    sub(A[7:9], T[0], out=s0)
+    s00, s01 = s0
+    mul(a03, X[0, 1], out=t1)
+    mul(a13, X[1, 1], out=t2)
+    add(t1, t2, out=t1)
+    sub(a33, t1, out=s11)
+    mul(s00, s11, out=t1)
+    mul(s01, s01, out=t2)
+    sub(t1, t2, out=det_s)
+    np.divide(1.0, det_s, out=r_s)
+    # S^-1 = [[s11, -s01], [-s01, s00]] / det S
+    mul(s11, r_s, out=P[2, 2])
+    neg(s01, out=t1)
+    mul(t1, r_s, out=P[2, 3])
+    mul(s00, r_s, out=P[3, 3])
+    P[3, 2] = P[2, 3]
+    # U = -X S^-1: u_rc = -(x_r0 t_0c + x_r1 t_1c)
+    U = P[0:2, 2:4]
+    mul(X[:, 0, None], P[None, 2, 2:4], out=U)
+    mul(X[:, 1, None], P[None, 3, 2:4], out=T)
+    add(U, T, out=U)
+    neg(U, out=U)
+    # A^-1 - U X^T: e_rc = Ai_rc - (u_r0 x_c0 + u_r1 x_c1), then e10 := e01
+    mul(U[:, 0, None], X[None, :, 0], out=T)
+    mul(U[:, 1, None], X[None, :, 1], out=T2)
+    add(T, T2, out=T)
+    sub(Ai, T, out=P[0:2, 0:2])
+    P[1, 0] = P[0, 1]
+    P[2:4, 0:2] = U.swapaxes(0, 1)
+    mul(det_a, det_s, out=det)
 
 
 SYM4_INDEX = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
@@ -89,22 +146,40 @@ def sym4_assemble(entries, shape: tuple[int, ...]) -> np.ndarray:
 
 def inv_det_sym4(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse and determinant of a stack of symmetric 4x4 matrices ``C (..., 4, 4)``."""
-    Ct = np.moveaxis(C, (-2, -1), (0, 1))  # entries as contiguous-ish slabs
-    entries, det = sym4_inverse_entries(*(Ct[i, j] for i, j in SYM4_INDEX))
-    return sym4_assemble(entries, C.shape[:-2]), det
+    shape = C.shape[:-2]
+    A = np.empty((10, *(shape or (1,))), np.result_type(C, 1.0))
+    for k, (i, j) in enumerate(SYM4_INDEX):
+        A[k] = C[..., i, j]
+    P, det = _sym4_inverse(A)
+    if not shape:  # one matrix
+        return P[:, :, 0], det[0]
+    return np.moveaxis(P, (0, 1), (-2, -1)), det
 
 
 def inv_det_spd(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse and determinant of a stack of SPD matrices ``P (..., d, d)``, any ``d``."""
+    if _generic_inverse(P):
+        return inv_spd(P), np.linalg.det(P)
     d = P.shape[-1]
     if d == 2:
         return inv_det_2x2(P)
-    if d == 4 and (P.ndim > 3 or P.shape[0] > 200):
+    if d == 4:
         return inv_det_sym4(P)
-    if d == 1:
-        return 1.0 / P, P[..., 0, 0]
-    inv = np.linalg.inv(P)
-    return 0.5 * (inv + np.swapaxes(inv, -1, -2)), np.linalg.det(P)
+    return 1.0 / P, P[..., 0, 0]
+
+
+def inv_spd(P: np.ndarray) -> np.ndarray:
+    """The inverse part of :func:`inv_det_spd` (the same numbers), without the determinant."""
+    if _generic_inverse(P):
+        inv = np.linalg.inv(P)
+        return 0.5 * (inv + np.swapaxes(inv, -1, -2))
+    return inv_det_spd(P)[0]
+
+
+def _generic_inverse(P: np.ndarray) -> bool:
+    """Whether :func:`inv_det_spd` uses LAPACK (else a closed form: 1x1, 2x2, large 4x4 stacks)."""
+    d = P.shape[-1]
+    return d not in (1, 2) and not (d == 4 and (P.ndim > 3 or P.shape[0] > 200))
 
 
 def quad_form(diff: np.ndarray, inv: np.ndarray) -> np.ndarray:

@@ -41,17 +41,17 @@ def predict(
 ) -> GaussianMixture:
     """Survivors ``Ps^steps w, F m, F P F^T + Q`` (multi-step form, §1) plus the births once."""
     if steps == 0:
-        pred = mix
+        w, m, P = mix.weights, mix.means, mix.covs
     else:
         F, Q = motion.transition(steps)
-        pred = GaussianMixture(
-            mix.weights * survival_probability**steps,
-            mix.means @ F.T,
-            F @ mix.covs @ F.T + Q,
-        )
+        w, m, P = mix.weights * survival_probability**steps, mix.means @ F.T, F @ mix.covs @ F.T + Q
     if birth is not None and len(birth):
-        pred = GaussianMixture.concatenate([pred, birth])
-    return pred
+        w = np.concatenate((w, birth.weights))
+        m = np.concatenate((m, birth.means))
+        P = np.concatenate((P, birth.covs))
+    elif steps == 0:
+        return mix
+    return GaussianMixture(w, m, P)
 
 
 def update(
@@ -69,32 +69,60 @@ def update(
     pruning them afterwards; keeps heavy clutter cheap).
     """
     Pd = sensor.detection_probability
-    missed = mix.scaled(1.0 - Pd)
+    w, mean, P = mix.weights, mix.means, mix.covs
+    missed_w = w * (1.0 - Pd)
     scan = np.asarray(scan, dtype=float).reshape(-1, sensor.model.dim)
     n, m = len(mix), len(scan)
     if n == 0 or m == 0:
-        return missed
-    P = mix.covs
-    zhat, H = sensor.model.predict(mix.means)  # (n, 2), (n, 2, d)
-    PHt = P @ np.swapaxes(H, 1, 2)  # (n, d, 2)
-    S = H @ PHt + sensor.model.R  # (n, 2, 2)
+        return GaussianMixture(missed_w, mean, P)
+    cols = _selected_columns(sensor.model)
+    if cols is not None:  # H picks state entries: H P H^T and P H^T are sub-blocks of P
+        zhat = mean[:, cols]  # (n, 2)
+        PHt = P[:, :, cols]  # (n, d, 2)
+        S = PHt[:, cols, :] + sensor.model.R  # (n, 2, 2)
+    else:
+        zhat, H = sensor.model.predict(mean)  # (n, 2), (n, 2, d)
+        PHt = P @ np.swapaxes(H, 1, 2)  # (n, d, 2)
+        S = H @ PHt + sensor.model.R  # (n, 2, 2)
     S_inv, S_det = (inv_det_2x2(S) if S.shape[-1] == 2 else inv_det_spd(S))
     K = PHt @ S_inv  # (n, d, 2)
     P_upd = symmetrise(P - K @ np.swapaxes(PHt, 1, 2))  # (n, d, d)
     nu = sensor.model.residual(scan[:, None, :], zhat[None, :, :])  # (m, n, 2)
     d2 = quad_form(nu, S_inv[None])  # (m, n)
     logq = -0.5 * (d2 + np.log(S_det)[None] + S.shape[-1] * np.log(2 * np.pi))
-    num = Pd * mix.weights[None, :] * np.exp(logq)  # (m, n)
+    num = Pd * w[None, :] * np.exp(logq)  # (m, n)
     if gate is not None:
         num = np.where(d2 <= gate, num, 0.0)
     w_upd = num / (sensor.clutter_intensity + num.sum(axis=1, keepdims=True))
     zi, ji = np.nonzero(w_upd > min_weight) if min_weight > 0 else np.nonzero(w_upd >= 0)
-    means_upd = mix.means[ji] + np.einsum("kij,kj->ki", K[ji], nu[zi, ji])
-    detected = GaussianMixture(w_upd[zi, ji], means_upd, P_upd[ji])
-    return GaussianMixture.concatenate([missed, detected])
+    means_upd = mean[ji] + np.einsum("kij,kj->ki", K[ji], nu[zi, ji])
+    return GaussianMixture(
+        np.concatenate((missed_w, w_upd[zi, ji])),
+        np.concatenate((mean, means_upd)),
+        np.concatenate((P, P_upd[ji])),
+    )
+
+
+def _selected_columns(model: SensorModel) -> np.ndarray | None:
+    """The state entries a linear model's ``H`` picks (rows of a 0/1 identity), else ``None``.
+
+    Then ``H P H^T`` and ``P H^T`` are exact sub-blocks of ``P`` (products with 0 and 1 only).
+    """
+    H = getattr(model, "H_MATRIX", None)
+    if not isinstance(H, np.ndarray):
+        return None
+    key = (H.shape, H.tobytes())
+    if key not in _SELECTIONS:
+        rows_ok = H.ndim == 2 and np.all((H == 0) | (H == 1)) and np.all(H.sum(axis=1) == 1)
+        _SELECTIONS[key] = np.argmax(H, axis=1) if rows_ok else None
+    return _SELECTIONS[key]
+
+
+_SELECTIONS: dict[tuple, np.ndarray | None] = {}
 
 
 EXTRACTION_RULES = ("round", "cardinality")
+"""Extraction rules accepted by :func:`extract`."""
 
 
 def extract(mix: GaussianMixture, threshold: float = 0.5, rule: str = "round") -> np.ndarray:
@@ -165,3 +193,4 @@ class GMPHDFilter:
 
 
 __all__ = ["GMPHDFilter", "SensorParams", "extract", "predict", "update"]
+

@@ -9,18 +9,20 @@ into it by moment matching, repeat):
   ``d^2 = (w_i w_j / (w_i + w_j)) (m_i - m_j)^T P_j^-1 (m_i - m_j) < eta``, ``P_j`` the
   heaviest component's covariance (our reading).
 
-Each sweep step is one array computation over all remaining components; the Python loop runs
-once per *output* component.
+The sweep is computed in a few array operations (:func:`merge`): the close pairs at once (with
+a cheap exact bound first when there are many components), then the groups in sweep order by
+a Python loop over the close pairs only, then the moment matching of all small groups at once.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
 
-from tracking.gaussian import inv_det_spd, log_gaussian, symmetrise
+from tracking.gaussian import inv_det_spd, inv_spd, log_gaussian, symmetrise
 from tracking.mixture import GaussianMixture
 
 MERGE_RULES = ("vo-ma", "weighted")
@@ -60,10 +62,11 @@ def moment_match(weights: np.ndarray, means: np.ndarray, covs: np.ndarray):
 def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> GaussianMixture:
     """Greedy merge around the heaviest remaining component (rule ``"vo-ma"`` or ``"weighted"``).
 
-    Output order: the merged components in the order their centres were taken (decreasing
-    weight). A cheap exact bound finds the pairs that *can* merge, so the sweep only visits
-    components with a possible partner; every other component is its own group (see
-    :func:`_merge_candidates`). Groups and results are those of the plain sweep.
+    The sweep of the module docstring, with no NumPy call per component: the pairs within the
+    merge distance are found at once (:func:`_close_pairs`), the greedy groups follow from them
+    in order of decreasing weight (:func:`_greedy_groups`), and the groups are moment-matched
+    together (:func:`_moment_match_groups`). Output: one component per group, in the order the
+    sweep takes their heaviest members; the same numbers as the plain sweep.
     """
     if rule not in MERGE_RULES:
         raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
@@ -72,61 +75,140 @@ def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> Gaussi
         return mix
     order = np.argsort(-mix.weights, kind="stable")
     w, m, P = mix.weights[order], mix.means[order], mix.covs[order]  # heaviest first
-    cand = _merge_candidates(w, m, P, threshold, rule)  # (n, n): i may merge into centre j
-    active = np.flatnonzero(cand.any(axis=0) | cand.any(axis=1))
-    if active.size == 0:
+    ci, cj = _close_pairs(w, m, P, threshold, rule)
+    if ci.size == 0:
         return GaussianMixture(w, m, P)
-    inv_active, _ = inv_det_spd(P[active])
-    inv = np.empty_like(P)
-    inv[active] = inv_active
+    centres, members = _greedy_groups(ci, cj)
     out_w, out_m, out_P = w.copy(), m.copy(), P.copy()
+    _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P)
     keep = np.ones(n, dtype=bool)
-    remaining = active  # sweep positions, heaviest first
-    while remaining.size:
-        j = remaining[0]
-        rest = remaining[1:]
-        others = rest[cand[rest, j]]
-        if others.size:
-            diff = m[others] - m[j]
-            if rule == "vo-ma":
-                d2 = np.einsum("gi,gij,gj->g", diff, inv[others], diff)
-                others = others[d2 <= threshold]
-            else:
-                wr = w[others]
-                d2 = (wr * w[j] / (wr + w[j])) * np.einsum("gi,ij,gj->g", diff, inv[j], diff)
-                others = others[d2 < threshold]
-        if others.size:
-            group = np.concatenate(([j], others))
-            out_w[j], out_m[j], out_P[j] = moment_match(w[group], m[group], P[group])
-            keep[others] = False
-            remaining = np.setdiff1d(rest, others, assume_unique=True)
-        else:
-            remaining = rest
+    keep[[i for g in members for i in g]] = False
     return GaussianMixture(out_w[keep], out_m[keep], out_P[keep])
 
 
-def _merge_candidates(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
-                      rule: str) -> np.ndarray:
-    """``(n, n)`` mask, ``True`` where component ``i`` may be merged into centre ``j``.
+def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
+                 rule: str) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs ``(i, j)``, ``i > j`` (``w`` sorted decreasing), where ``i`` merges into centre ``j``.
 
-    A superset of the pairs within the merge distance, from ``x^T P^-1 x >= |x|^2 / tr P`` (the
-    largest eigenvalue of an SPD ``P`` is at most its trace): vo-ma needs
-    ``|m_i - m_j|^2 <= U tr P_i``; the weighted rule ``|m_i - m_j|^2 (w_i w_j / (w_i + w_j))
-    <= eta tr P_j``. Squared distances come from one Gram product; the bound is widened by a
-    margin far above its round-off, so no mergeable pair is missed. The diagonal is False.
+    Returned sorted by ``(j, i)``. Up to :data:`_ALL_PAIRS_UP_TO` components every pair is
+    tested; above, candidates come first from a bound: the quadratic form over the full state
+    is at least the one over one coordinate's marginal, ``x^T P^-1 x >= x_k^2 / P_kk``. So
+    vo-ma needs ``(m_i - m_j)_k^2 <= U (P_i)_kk`` and the weighted rule ``(m_i - m_j)_k^2
+    w_i w_j <= eta (P_j)_kk (w_i + w_j)`` on every coordinate ``k``; the two positions are
+    tested, with the bound widened by 0.1 % (far above round-off), so no close pair is lost.
+    The exact test uses the sweep's own inverses (:func:`inv_spd` of the whole stack).
     """
-    mc = m - m.mean(axis=0)
-    sq = np.einsum("ij,ij->i", mc, mc)
-    scale = sq[:, None] + sq[None, :]
-    dist2 = scale - 2.0 * (mc @ mc.T)
-    tr = np.einsum("nii->n", P)
-    if rule == "vo-ma":
-        bound = threshold * tr[:, None]
+    n = len(w)
+    if n <= _ALL_PAIRS_UP_TO:
+        cj, ci = _upper_pairs(n)
     else:
-        bound = threshold * tr[None, :] * (w[:, None] + w[None, :]) / (w[:, None] * w[None, :])
-    cand = dist2 <= bound * (1.0 + 1e-9) + 1e-9 * scale + 1e-300
-    np.fill_diagonal(cand, False)
-    return cand
+        ci, cj = _candidate_pairs(w, m, P, threshold * (1.0 + 1e-3), rule)
+        if ci.size == 0:
+            return ci, cj
+    inv = inv_spd(P)
+    diff = m[ci] - m[cj]
+    if rule == "vo-ma":
+        close = np.einsum("gi,gij,gj->g", diff, inv[ci], diff) <= threshold
+    else:
+        d2 = np.einsum("gi,gij,gj->g", diff, inv[cj], diff)
+        close = (w[ci] * w[cj] / (w[ci] + w[cj])) * d2 < threshold
+    ci, cj = ci[close], cj[close]
+    if n <= _ALL_PAIRS_UP_TO:
+        return ci, cj
+    by_centre = np.lexsort((ci, cj))
+    return ci[by_centre], cj[by_centre]
+
+
+def _candidate_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, lim: float,
+                     rule: str) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs ``(i, j)``, ``i > j``, passing the marginal bound of :func:`_close_pairs`."""
+    n = len(w)
+    ky = min(2, m.shape[1] - 1)  # px and py in [px, vx, py, vy]
+    x, y = m[:, 0], m[:, ky]
+    if rule == "vo-ma":
+        # member i against every centre within x_i +- sqrt(lim (P_i)_xx), from a sort on x
+        r = np.sqrt(max(lim, 0.0) * P[:, 0, 0])
+        by_x = np.argsort(x, kind="stable")
+        xs = x[by_x]
+        lo = np.searchsorted(xs, x - r, "left")
+        count = np.searchsorted(xs, x + r, "right") - lo
+        ci = np.repeat(np.arange(n), count)
+        cj = by_x[np.arange(ci.size) - np.repeat(np.cumsum(count) - count - lo, count)]
+        ok = (cj < ci) & (np.square(y[ci] - y[cj]) <= lim * P[ci, ky, ky])
+    else:
+        ww = w[:, None] * w
+        ws = w[:, None] + w
+        near = (np.square(x[:, None] - x) * ww <= (lim * P[:, 0, 0]) * ws) & (
+            np.square(y[:, None] - y) * ww <= (lim * P[:, ky, ky]) * ws)  # [i, j]
+        ci, cj = np.nonzero(near)
+        ok = cj < ci
+    return ci[ok], cj[ok]
+
+
+_ALL_PAIRS_UP_TO = 48
+"""Up to this many components, :func:`_close_pairs` tests every pair exactly."""
+
+
+@lru_cache(maxsize=_ALL_PAIRS_UP_TO + 1)
+def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(j, i)`` for all ``j < i < n``, sorted by ``(j, i)`` (read-only, cached)."""
+    j, i = np.triu_indices(n, 1)
+    j.setflags(write=False)
+    i.setflags(write=False)
+    return j, i
+
+
+def _greedy_groups(ci: np.ndarray, cj: np.ndarray) -> tuple[list[int], list[list[int]]]:
+    """The sweep's groups from the close pairs sorted by ``(j, i)``.
+
+    Taking centres in order of decreasing weight, a centre ``j`` not yet absorbed takes every
+    ``i`` close to it that no earlier centre took. Returns the centres with at least one member
+    and, for each, its members in sweep order.
+    """
+    taken: set[int] = set()
+    groups: dict[int, list[int]] = {}
+    for i, j in zip(ci.tolist(), cj.tolist(), strict=True):
+        if j in taken or i in taken:
+            continue
+        groups.setdefault(j, []).append(i)
+        taken.add(i)
+    return list(groups), list(groups.values())
+
+
+def _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P) -> None:
+    """Write :func:`moment_match` of each group ``[centre, *members]`` into row ``centre``.
+
+    Groups of two and three are done together (a group of two padded with a zero-weight copy
+    of its centre, which adds exact zeros), with :func:`moment_match`'s own operations in its
+    order of summation, so the results agree with it to the last bit where NumPy sums short
+    vectors in order; larger groups call it directly.
+    """
+    small = []
+    vectorise = m.shape[1] > 1  # NumPy reduces 1-D einsums in another order
+    for c, g in zip(centres, members, strict=True):
+        if len(g) <= 2 and vectorise:
+            small.append((c, g[0], g[1] if len(g) == 2 else c))
+        else:
+            group = [c, *g]
+            out_w[c], out_m[c], out_P[c] = moment_match(w[group], m[group], P[group])
+    if not small:
+        return
+    n, d = m.shape
+    idx = np.array(small).T  # (3, k): member t of each of k groups
+    gw = w[idx]
+    gw[2, idx[2] == idx[0]] = 0.0  # the padding of groups of two
+    X = np.concatenate((m, P.reshape(n, d * d)), axis=1)[idx]  # (3, k, d + d*d)
+    wX = gw[:, :, None] * X
+    tw = (gw[0] + gw[1]) + gw[2]
+    tX = (wX[0] + wX[1]) + wX[2]  # sum w m | sum w P
+    mean = tX[:, :d] / tw[:, None]
+    diff = X[:, :, :d] - mean  # (3, k, d)
+    outer = (gw[:, :, None] * diff)[:, :, :, None] * diff[:, :, None, :]
+    cov = (tX[:, d:].reshape(-1, d, d) + ((outer[0] + outer[1]) + outer[2])) / tw[:, None, None]
+    c = idx[0]
+    out_w[c] = tw
+    out_m[c] = mean
+    out_P[c] = 0.5 * (cov + np.swapaxes(cov, 1, 2))
 
 
 def ise_refit(original: GaussianMixture, reduced: GaussianMixture) -> GaussianMixture:
