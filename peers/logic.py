@@ -136,16 +136,23 @@ class PeerLogic:
         self._seq += 1
         return self._seq
 
-    def _publishable(self, mix: GaussianMixture) -> GaussianMixture:
-        return keep_above(mix, self.o.level2_threshold) if self.o.level2 else mix
+    def _publishable(self, mix: GaussianMixture, rnd: int = 0) -> GaussianMixture:
+        """Level-2 pruning of the local (round-0) estimate before it is fused (seed 000).
+
+        Intermediate consensus densities (rounds >= 1) go out level-1 reduced only: pruning
+        them at ``w > 0.5`` drops targets whose fused mass is split over several components
+        (measured: 2 rounds on seed 000 went from 25 to 45 m mean OSPA with it).
+        """
+        return keep_above(mix, self.o.level2_threshold) if self.o.level2 and rnd == 0 else mix
 
     def _estimate(self, k: int, rnd: int, mix: GaussianMixture, now: float) -> Estimate:
         self.stats.estimates_out += 1
-        mix = self._publishable(mix)
+        mix = self._publishable(mix, rnd)
         d = mix.dim
         self.stats.tuples_out += len(mix) * (1 + d + d * (d + 1) // 2)
         return Estimate(self.o.name, k, mix, round=rnd,
-                        seq=self._next_seq(), send_time=now, pruning=2 if self.o.level2 else 1)
+                        seq=self._next_seq(), send_time=now,
+                        pruning=2 if self.o.level2 and rnd == 0 else 1)
 
     def _weights(self, senders: list[str]) -> list[float]:
         """Fusion weights for [self] + senders (Metropolis on the configured degrees).
@@ -281,7 +288,7 @@ class PeerLogic:
             return self._tracks(st.k, st.current, now)
         inputs = self._inputs(st.k, st.round)
         senders = sorted(inputs)
-        own = self._publishable(st.current)
+        own = self._publishable(st.current, st.round)
         densities = [own] + [inputs[s] for s in senders]
         self.stats.fusions += 1
         self.stats.fused_inputs += len(senders)

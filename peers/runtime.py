@@ -14,7 +14,9 @@ import queue
 import resource
 import signal
 import statistics
+import sys
 import time
+import traceback
 from collections import Counter, deque
 from dataclasses import asdict
 from pathlib import Path
@@ -53,6 +55,7 @@ class PeerRuntime:
         self.q: queue.Queue = queue.Queue()
         self.sink = RerunSink()
         self.rejected: Counter = Counter()
+        self.errors: Counter = Counter()
         self.sent = Counter()
         self.sent_bytes = Counter()
         self.received = Counter()
@@ -127,7 +130,15 @@ class PeerRuntime:
             ]
             token = session.liveliness().declare_token(self.keys.alive(self.name))
             try:
-                self._loop()
+                profile_dir = os.environ.get("SENSORNET_PROFILE")
+                if profile_dir:  # cProfile of the main loop, for finding hot spots
+                    import cProfile
+
+                    prof = cProfile.Profile(time.process_time)  # CPU time, not wall
+                    prof.runctx("self._loop()", globals(), {"self": self})
+                    prof.dump_stats(str(Path(profile_dir) / f"peer-{self.name}.prof"))
+                else:
+                    self._loop()
             finally:
                 self._finish()
                 token.undeclare()
@@ -139,6 +150,7 @@ class PeerRuntime:
         return 0
 
     def _loop(self) -> None:
+        self._cpu_at_start = time.process_time()
         while not self._stop:
             now = time.monotonic()
             due = min(self.deadlines.values(), default=now + 0.25)
@@ -146,10 +158,13 @@ class PeerRuntime:
                 item = self.q.get(timeout=max(0.0, min(due - now, 0.25)))
             except queue.Empty:
                 item = None
-            if item is not None:
-                self._handle(*item)
-            self._fire_deadlines()
-            self._drain_records()
+            try:
+                if item is not None:
+                    self._handle(*item)
+                self._fire_deadlines()
+                self._drain_records()
+            except Exception as exc:  # a bug must not take the peer (and the run) down
+                self._internal_error(exc)
             if time.monotonic() - self._last_input > self.idle_timeout:
                 self.stop_reason = f"no input for {self.idle_timeout:g} s"
                 break
@@ -209,6 +224,16 @@ class PeerRuntime:
         elif isinstance(msg, Control) and msg.command == "end":
             self.stop_reason = "end of run"
             self._stop = True
+
+    def _internal_error(self, exc: Exception) -> None:
+        """Count an unexpected error; print its traceback the first few times (to the log)."""
+        name = type(exc).__name__
+        self.errors[name] += 1
+        if sum(self.errors.values()) <= 5:
+            print(f"peer {self.name}: internal error {name}: {exc}", file=sys.stderr)
+            traceback.print_exc()
+        if self.logic._scan is not None:  # do not retry the scan that failed
+            self.logic._scan.done = True
 
     def _fire_deadlines(self) -> None:
         now = time.monotonic()
@@ -296,6 +321,7 @@ class PeerRuntime:
             "received_by_kind": dict(self.received),
             "rejected": dict(self.rejected),
             "rejected_total": sum(self.rejected.values()),
+            "internal_errors": dict(self.errors),
             "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
             "latency_ms_median": statistics.median(lat) if lat else None,
             "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
@@ -307,6 +333,8 @@ class PeerRuntime:
             "estimate_bytes_sent": self.sent_bytes["estimate"],
             "estimates_sent": self.sent["estimate"],
             "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            "cpu_s": time.process_time(),
+            "cpu_s_running": time.process_time() - getattr(self, "_cpu_at_start", 0.0),
             "pid": os.getpid(),
         }
 

@@ -14,6 +14,7 @@ ALGORITHMS.md §9.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import msgpack
 import numpy as np
@@ -63,7 +64,9 @@ DEFAULT_LIMITS = Limits()
 
 
 # -- encoding -------------------------------------------------------------------------------
+@lru_cache(maxsize=16)
 def _tri_index(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column indices of the upper triangle of a ``d x d`` matrix (cached)."""
     return np.triu_indices(d)
 
 

@@ -158,6 +158,27 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return cmd_run(args)
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from sim.sweep import format_summary, summarise, sweep, write_outputs
+
+    values = list(parse_overrides([f"v={v}" for v in args.values.split(";")]).values()) \
+        if ";" in args.values else [parse_overrides([f"v={v}"])["v"]
+                                    for v in args.values.split(",")]
+    policies = [p for p in args.policies.split(",") if p]
+    bad = [p for p in policies if p not in ("nale", "drop-late", "as-is")]
+    if bad:
+        raise UserError(f"unknown policies {bad}; use nale, drop-late, as-is")
+    if args.runs < 1:
+        raise UserError(f"--runs must be at least 1, got {args.runs}")
+    rows = sweep(args.scenario, args.param, values, policies, args.runs,
+                 base=parse_overrides(args.set or []), real=args.real, jobs=args.jobs,
+                 progress=not args.quiet)
+    print(format_summary(args.param, summarise(rows)))
+    for path in write_outputs(rows, args.param, _run_folder(args.out, "sweep")):
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_scenario(args: argparse.Namespace) -> int:
     if args.action == "list":
         for name in builtin_scenarios():
@@ -253,6 +274,21 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
     d.add_argument("--timeout", type=float, default=60.0, help=argparse.SUPPRESS)
     d.set_defaults(func=cmd_demo)
+
+    sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
+                        "over Monte Carlo runs (twin by default): CSV and plot")
+    sw.add_argument("scenario", nargs="?", default="seed000")
+    sw.add_argument("--param", required=True,
+                    help="scenario key to sweep, e.g. faults.default.delay.high")
+    sw.add_argument("--values", required=True,
+                    help="comma-separated values (TOML literals), or ';'-separated")
+    sw.add_argument("--policies", default="nale,drop-late,as-is")
+    sw.add_argument("--real", action="store_true",
+                    help="real processes over Zenoh instead of the twin (slow)")
+    sw.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="base scenario overrides (repeatable)")
+    add_mc_flags(sw, 50)
+    sw.set_defaults(func=cmd_sweep)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])

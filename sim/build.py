@@ -8,11 +8,13 @@ it (``sim.world``) and the filter's clutter intensity is ``lambda_c / V`` over t
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from peers.faults import FaultInjector, FaultPlan
 from peers.logic import PeerLogic, PeerOptions
 from sim.scenario import Scenario, ScenarioError, SensorSpec
 from tracking.gmphd import GMPHDFilter, SensorParams
@@ -197,3 +199,17 @@ def peer_options(scn: Scenario, name: str, **changes) -> PeerOptions:
 def make_peer(scn: Scenario, name: str, **changes) -> PeerLogic:
     """A peer state machine for sensor ``name`` with its local filter."""
     return PeerLogic(peer_options(scn, name, **changes), make_filter(scn, [name]))
+
+
+def fault_injector(scn: Scenario, run: int = 0) -> FaultInjector | None:
+    """The scenario's link faults for run ``run`` (``None`` without a ``[faults]`` table).
+
+    Seeded from ``(scenario.seed, run)``, so the twin and the real processes of the same run
+    draw the same per-link decisions.
+    """
+    if not scn.faults:
+        return None
+    plan = FaultPlan.from_spec(json.loads(scn.faults), scn.scan_period / scn.network.speed,
+                               scn.sensor_names, path="faults")
+    seed = int(np.random.SeedSequence([scn.seed, run, 0xFA17]).generate_state(1)[0])
+    return FaultInjector(plan, seed)

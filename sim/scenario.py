@@ -19,6 +19,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
+import json
 import math
 import re
 import tomllib
@@ -235,6 +236,8 @@ class Scenario:
     """Metric settings."""
     network: NetworkSpec = NetworkSpec()
     """Peer network settings."""
+    faults: str = ""
+    """The ``[faults]`` table as JSON (validated on load; see :mod:`peers.faults`)."""
     source: str = ""
     """Where the scenario was read from (a path or ``builtin:<name>``); informational."""
 
@@ -574,7 +577,7 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
-                                 "fusion", "metrics", "network"])
+                                 "fusion", "metrics", "network", "faults"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -586,7 +589,7 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
     )
     sensors = _sensors(top, ctx)
     names = [s.name for s in sensors]
-    return Scenario(
+    scn = Scenario(
         name=sc.text("name", default_name),
         seed=sc.integer("seed", 0, minimum=0),
         scan_period=sc.number("scan_period", 1.0, positive=True),
@@ -613,6 +616,17 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             "deadline"]), names),
         source=origin,
     )
+    raw_faults = top.raw("faults", {})
+    if raw_faults:
+        from peers.faults import FaultPlan
+
+        try:
+            FaultPlan.from_spec(raw_faults, scn.scan_period / scn.network.speed, names,
+                                path="faults")
+        except ValueError as exc:
+            raise ctx.fail("faults", str(exc)) from None
+        scn = dataclasses.replace(scn, faults=json.dumps(raw_faults, sort_keys=True))
+    return scn
 
 
 def _region(sc: _Table) -> tuple[tuple[float, float], tuple[float, float]]:

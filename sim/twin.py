@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from peers.faults import FaultInjector
 from peers.logic import PeerLogic
 from protocol.messages import Estimate, Scan, Tracks
-from sim.build import make_peer
+from sim.build import fault_injector, make_peer
 from sim.scenario import Scenario
 from sim.world import generate_run
 
@@ -37,19 +38,32 @@ class TwinResult:
     peers: dict[str, PeerLogic]
     tracks: dict[str, dict[int, np.ndarray]] = field(default_factory=dict)
     """``tracks[peer][k]``: the fused states ``(n, 4)`` the peer published for scan ``k``."""
+    faults: FaultInjector | None = None
+    """The fault injector used (its ``log`` says what was done to each message)."""
 
     def mean_ospa(self, peer: str, kind: str = "fused") -> float:
         return self.peers[peer].mean_ospa(kind)
 
 
-def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay = no_delay,
-             peers: dict[str, PeerLogic] | None = None) -> TwinResult:
-    """One run of the scenario's network on the virtual clock."""
+def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
+             peers: dict[str, PeerLogic] | None = None,
+             faults: FaultInjector | None = None) -> TwinResult:
+    """One run of the scenario's network on the virtual clock.
+
+    Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
+    duplication, reordering, partitions) if given, else ``delay`` if given, else the
+    scenario's ``[faults]`` table, else instant delivery.
+    """
     truth, scans = generate_run(scn, run)
     names = scn.sensor_names
     peers = peers if peers is not None else {n: make_peer(scn, n) for n in names}
+    if faults is None and delay is None:
+        faults = fault_injector(scn, run)
+    link_delay = delay or no_delay
+    # like the runtime, a peer subscribes to its neighbours' estimate keys only
+    listeners = {n: [m for m in names if n in peers[m].o.neighbours] for n in names}
     interval = scn.scan_period / scn.network.speed
-    result = TwinResult(peers=peers, tracks={n: {} for n in names})
+    result = TwinResult(peers=peers, tracks={n: {} for n in names}, faults=None)
     queue: list = []
     order = itertools.count()
 
@@ -61,9 +75,12 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay = no_delay,
             if isinstance(msg, Tracks):
                 result.tracks[sender][msg.k] = msg.states
             elif isinstance(msg, Estimate):
-                for other in names:
-                    if other != sender:
-                        d = delay(sender, other, msg)
+                for other in listeners[sender]:
+                    if faults is not None:
+                        for d in faults.deliveries(sender, other, t, msg):
+                            push(t + d, "estimate", other, msg)
+                    else:
+                        d = link_delay(sender, other, msg)
                         if d is not None:
                             push(t + d, "estimate", other, msg)
 
@@ -72,6 +89,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay = no_delay,
         for i, n in enumerate(names):
             push(t, "scan", n, (k, scans[i][k - 1], truth.states[k - 1]))
             push(t + scn.network.deadline * interval, "deadline", n, k)
+    result.faults = faults
     while queue:
         t, _, kind, target, payload = heapq.heappop(queue)
         peer = peers[target]

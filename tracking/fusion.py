@@ -197,6 +197,8 @@ def _scratch(size: int) -> np.ndarray:
 
 
 CARDINALITY_RULES = ("emd", "separate")
+MIN_OVERLAP = 1e-12
+"""Below this ``int p_i^(1-omega) p_j^omega`` the location densities are taken as disjoint."""
 
 
 def gci_combine(Di: GaussianMixture, Dj: GaussianMixture, omega: float,
@@ -221,7 +223,7 @@ def gci_combine(Di: GaussianMixture, Dj: GaussianMixture, omega: float,
         return GaussianMixture.empty(Di.dim)
     fused = gci_pair(Di.scaled(1.0 / Ni), Dj.scaled(1.0 / Nj), omega)
     c = fused.mass
-    if not c > 0:
+    if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
         return GaussianMixture.empty(Di.dim)
     return fused.scaled(Ni ** (1.0 - omega) * Nj**omega / c)
 
