@@ -93,6 +93,8 @@ class PeerStats:
     tracks_out: int = 0
     peers_left: list[tuple[str, int]] = field(default_factory=list)
     peers_joined: list[tuple[str, int]] = field(default_factory=list)
+    last_fused_from: dict[str, int] = field(default_factory=dict)
+    """The last scan at which each neighbour's estimate was fused here."""
 
 
 @dataclass
@@ -292,6 +294,8 @@ class PeerLogic:
         densities = [own] + [inputs[s] for s in senders]
         self.stats.fusions += 1
         self.stats.fused_inputs += len(senders)
+        for sender in senders:
+            self.stats.last_fused_from[sender] = st.k
         ages = self.nale.ages(st.k) if st.round == 0 else {}
         if self.o.fusion == "aa":
             fused = aa_fuse(densities, self._weights(senders), self.reduce)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
+from peers.faults import FaultInjector, HoldQueue
 from peers.logic import PeerLogic
 from peers.rerun_sink import RerunSink, color_of
 from peers.session import open_session
@@ -39,7 +40,8 @@ class PeerRuntime:
                  listen=(), connect=(), config_file: str | None = None,
                  lease_ms: int | None = None, out_dir: Path | None = None,
                  run_id: str | None = None, viewer: str | None = None, color_index: int = 0,
-                 idle_timeout: float = 30.0, rerun: bool = True) -> None:
+                 idle_timeout: float = 30.0, rerun: bool = True,
+                 faults: FaultInjector | None = None, save_tracks: bool = False) -> None:
         self.logic = logic
         self.name = logic.o.name
         self.keys = Keys(network)
@@ -51,11 +53,17 @@ class PeerRuntime:
         self.viewer = viewer
         self.color = color_of(color_index)
         self.idle_timeout = idle_timeout
+        self.faults = faults
+        self.saved_tracks: dict[int, np.ndarray] | None = {} if save_tracks else None
+        self.held = HoldQueue()
+        self.t0: float | None = None  # wall time of the run's start (the world's Control)
         self.rerun = rerun
         self.q: queue.Queue = queue.Queue()
         self.sink = RerunSink()
         self.rejected: Counter = Counter()
         self.errors: Counter = Counter()
+        self.live_events: list[tuple[str, str, float, int]] = []
+        """Liveliness changes seen: (peer, "joined"/"left", wall time, last scan)."""
         self.sent = Counter()
         self.sent_bytes = Counter()
         self.received = Counter()
@@ -154,6 +162,9 @@ class PeerRuntime:
         while not self._stop:
             now = time.monotonic()
             due = min(self.deadlines.values(), default=now + 0.25)
+            held_due = self.held.next_due()
+            if held_due is not None:
+                due = min(due, held_due)
             try:
                 item = self.q.get(timeout=max(0.0, min(due - now, 0.25)))
             except queue.Empty:
@@ -161,6 +172,7 @@ class PeerRuntime:
             try:
                 if item is not None:
                     self._handle(*item)
+                self._release_held()
                 self._fire_deadlines()
                 self._drain_records()
             except Exception as exc:  # a bug must not take the peer (and the run) down
@@ -177,7 +189,10 @@ class PeerRuntime:
             peer = Keys.last(key)
             if peer == self.name:
                 return
-            self.sink.text(f"peers/{self.name}/events", f"{peer} {'joined' if payload else 'left'}")
+            what = "joined" if payload else "left"
+            self.sink.text(f"peers/{self.name}/events", f"{peer} {what}")
+            if peer != "world":
+                self.live_events.append((peer, what, wall, self.logic.last_k))
             if payload:
                 self.logic.on_peer_joined(peer, wall)
             else:
@@ -216,14 +231,40 @@ class PeerRuntime:
             self.logic.score_local()
             self._log_local(msg.k)
         elif isinstance(msg, Estimate):
+            if self.faults is not None and self._hold(msg, wall):
+                return
             out = self.logic.on_estimate(msg, wall)
             self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
             self._publish(out, time.time())
         elif isinstance(msg, Truth):
             self.logic.on_truth(msg.k, msg.states)
+        elif isinstance(msg, Control) and msg.command == "start":
+            self.t0 = msg.send_time
         elif isinstance(msg, Control) and msg.command == "end":
             self.stop_reason = "end of run"
             self._stop = True
+
+    def _run_time(self, wall: float) -> float:
+        """Seconds on the run clock (scan ``k`` at ``k * interval``, as in the twin)."""
+        t0 = self.t0 if self.t0 is not None else wall - self.logic.last_k * self.interval
+        return wall - t0 + self.interval
+
+    def _hold(self, msg: Estimate, wall: float) -> bool:
+        """Injected link faults on the link ``sender -> self``: hold, duplicate or drop."""
+        delays = self.faults.deliveries(msg.sender, self.name, self._run_time(msg.send_time),
+                                        msg)
+        transit = max(0.0, wall - msg.send_time)
+        now = time.monotonic()
+        for d in delays:
+            self.held.push(now + max(0.0, d - transit), msg)
+        return True
+
+    def _release_held(self) -> None:
+        for msg in self.held.pop_due(time.monotonic()):
+            t0 = time.perf_counter()
+            out = self.logic.on_estimate(msg, time.time())
+            self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
+            self._publish(out, time.time())
 
     def _internal_error(self, exc: Exception) -> None:
         """Count an unexpected error; print its traceback the first few times (to the log)."""
@@ -246,6 +287,22 @@ class PeerRuntime:
 
     def _finish(self) -> None:
         """Fuse what is pending, then write the summary (also on SIGINT/SIGTERM)."""
+        if self.stop_reason == "end of run":  # handle what already arrived, then stop
+            while True:
+                try:
+                    item = self.q.get_nowait()
+                except queue.Empty:
+                    break
+                try:
+                    self._handle(*item)
+                except Exception as exc:
+                    self._internal_error(exc)
+            self._release_held()
+        if self.faults is not None and self.out_dir is not None:
+            self.faults.write_log(self.out_dir / f"faults-into-{self.name}.csv")
+        if self.saved_tracks is not None and self.out_dir is not None:
+            np.savez(self.out_dir / f"tracks-{self.name}.npz",
+                     **{f"k{k}": v for k, v in self.saved_tracks.items()})
         for k in sorted(self.deadlines):
             self._publish(self.logic.on_deadline(k, time.time()), time.time())
         self.deadlines.clear()
@@ -254,6 +311,8 @@ class PeerRuntime:
 
     # -- records, Rerun, summary ------------------------------------------------------------
     def _on_tracks(self, msg: Tracks, now_wall: float) -> None:
+        if self.saved_tracks is not None:
+            self.saved_tracks[msg.k] = msg.states
         sent = self.scan_sent.pop(msg.k, None)
         stage = self.stage.pop(msg.k, None)
         if stage is not None:
@@ -322,6 +381,8 @@ class PeerRuntime:
             "rejected": dict(self.rejected),
             "rejected_total": sum(self.rejected.values()),
             "internal_errors": dict(self.errors),
+            "peer_events": self.live_events[-1000:],
+            "injected_faults": self.faults.counts() if self.faults is not None else {},
             "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
             "latency_ms_median": statistics.median(lat) if lat else None,
             "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,

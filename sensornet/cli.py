@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -64,7 +66,7 @@ def cmd_peer(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from peers.runtime import PeerRuntime
-    from sim.build import make_peer
+    from sim.build import fault_injector, make_peer
 
     scn = _load(args, args.scenario)
     if args.name not in scn.sensor_names:
@@ -85,7 +87,8 @@ def cmd_peer(args: argparse.Namespace) -> int:
         scn.network.deadline, listen=args.listen or [], connect=args.connect or [],
         config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
         viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
-        rerun=not args.no_rerun)
+        rerun=not args.no_rerun, faults=fault_injector(scn, args.run),
+        save_tracks=args.save_tracks)
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
     code = runtime.run()
@@ -119,9 +122,25 @@ def cmd_world(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sim.launcher import format_summary, merge_recordings, read_summaries, start_run, wait_run
+    from sim.launcher import (
+        ProcessFault,
+        format_summary,
+        inject_process_faults,
+        merge_recordings,
+        read_summaries,
+        start_run,
+        wait_run,
+    )
 
     scn = _load(args, args.scenario)
+    try:
+        pfaults = [ProcessFault.parse(f) for f in args.fault or []]
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    unknown = sorted({f.peer for f in pfaults} - set(scn.sensor_names))
+    if unknown:
+        raise UserError(f"--fault names unknown peers {unknown} "
+                        f"(peers: {', '.join(scn.sensor_names)})")
     out = _run_folder(args.out, "run")
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
@@ -130,18 +149,34 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"output in {out}", flush=True)
     handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
                        viewer=args.viewer, run=args.run, speed=args.speed,
-                       rerun=not args.no_rerun)
+                       rerun=not args.no_rerun, lease_ms=args.lease_ms)
+    stop = threading.Event()
+    injector = None
+    if pfaults:
+        injector = threading.Thread(target=inject_process_faults, daemon=True,
+                                    args=(handle, pfaults, scn.sensor_names[0], stop))
+        injector.start()
     try:
         codes = wait_run(handle, timeout=expected + args.timeout)
     except KeyboardInterrupt:
         handle.stop_all()
         raise
+    finally:
+        stop.set()
+        if injector is not None:
+            injector.join(timeout=5)
     summaries = read_summaries(out, scn.sensor_names)
     print(format_summary(summaries))
+    faults_file = out / "process-faults.json"
+    if pfaults and faults_file.is_file():
+        from sim.launcher import fault_report
+
+        print(fault_report(json.loads(faults_file.read_text()), summaries))
     rec = merge_recordings(out)
     shown = rec or out / "rerun" / "*.rrd"
     print(f"recording: {shown}  (view it with: rerun {shown})")
-    bad = {n: c for n, c in codes.items() if c != 0}
+    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart")}
+    bad = {n: c for n, c in codes.items() if c != 0 and n not in killed}
     if bad or len(summaries) != len(scn.sensors):
         for n, c in bad.items():
             print(f"{n} exited with code {c}; see {handle.logs[n]}", file=sys.stderr)
@@ -155,6 +190,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     args.scenario = "seed000"
     args.set = list(args.set or []) + ["birth.model=truth"]
+    args.fault = []
+    args.lease_ms = None
     return cmd_run(args)
 
 
@@ -249,6 +286,10 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("--no-level2", dest="level2", action="store_false")
     pe.add_argument("--lease-ms", type=int, help="Zenoh lease (how fast a frozen peer is seen)")
     pe.add_argument("--color", type=int, default=0, help=argparse.SUPPRESS)
+    pe.add_argument("--save-tracks", action="store_true",
+                    help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
+    pe.add_argument("--run", type=int, default=0,
+                    help="Monte Carlo run index (seeds the injected link faults)")
     pe.add_argument("--idle-timeout", type=float, default=30.0,
                     help="stop after this many seconds without input (default 30)")
     pe.set_defaults(func=cmd_peer)
@@ -265,6 +306,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scenario", nargs="?", default="seed000")
     add_net_flags(r, network_required=False)
     r.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
+    r.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
+                   help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
+                        "(repeatable)")
+    r.add_argument("--lease-ms", type=int,
+                   help="Zenoh lease of every process: a frozen peer is noticed after about "
+                        "this long (Zenoh's default is 10000)")
     r.add_argument("--timeout", type=float, default=60.0,
                    help="extra seconds allowed beyond the run's own length")
     r.set_defaults(func=cmd_run)

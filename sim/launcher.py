@@ -12,6 +12,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -30,11 +31,30 @@ class RunHandle:
     logs: dict[str, Path] = field(default_factory=dict)
     endpoints: dict[str, str] = field(default_factory=dict)
     network: str = ""
+    commands: dict[str, list[str]] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)
+
+    def restart(self, name: str) -> subprocess.Popen:
+        """Start peer ``name`` again (same command, a fresh listening port)."""
+        old = self.procs[name]
+        if old.poll() is None:
+            old.kill()
+            old.wait()
+        cmd = list(self.commands[name])
+        i = cmd.index("--listen")
+        cmd[i + 1] = endpoint(free_port())
+        self.restarts[name] = self.restarts.get(name, 0) + 1
+        log = self.out / "logs" / f"{name}.restart{self.restarts[name]}.log"
+        with log.open("w") as fh:
+            self.procs[name] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
+                                                stdin=subprocess.DEVNULL)
+        return self.procs[name]
 
     def stop_all(self, grace: float = 5.0) -> None:
         """SIGTERM every child still running, then SIGKILL after ``grace`` seconds."""
         for p in self.procs.values():
             if p.poll() is None:
+                p.send_signal(signal.SIGCONT)  # a stopped process cannot handle SIGTERM
                 p.send_signal(signal.SIGTERM)
         end = time.monotonic() + grace
         for p in self.procs.values():
@@ -74,9 +94,11 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         connect = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common, "--listen", eps[n],
-                   "--color", str(i), *[a for c in connect for a in ("--connect", c)],
+                   "--color", str(i), "--run", str(run),
+                   *[a for c in connect for a in ("--connect", c)],
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []), *extra] \
             + (["--speed", str(speed)] if speed else [])
+    handle.commands = cmds
     try:
         for name, cmd in cmds.items():
             log = out / "logs" / f"{name}.log"
@@ -152,3 +174,101 @@ def format_summary(summaries: dict[str, dict]) -> str:
             f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "
             f"{f(s['latency_ms_p99'], '{:.2f}')} |")
     return "\n".join(rows)
+
+
+PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term")
+
+
+@dataclass(frozen=True)
+class ProcessFault:
+    """``action`` on peer ``peer`` when the world publishes scan ``scan``."""
+
+    action: str
+    peer: str
+    scan: int
+
+    @classmethod
+    def parse(cls, text: str) -> ProcessFault:
+        """``ACTION:PEER@SCAN``, e.g. ``kill:s2@30`` (SIGKILL), ``stop:s3@20`` (SIGSTOP),
+        ``cont:s3@40`` (SIGCONT), ``restart:s2@50``, ``term:s1@60`` (SIGTERM)."""
+        try:
+            head, scan = text.rsplit("@", 1)
+            action, peer = head.split(":", 1)
+            fault = cls(action.strip(), peer.strip(), int(scan))
+        except ValueError:
+            raise ValueError(f"bad process fault {text!r}: use ACTION:PEER@SCAN, "
+                             f"e.g. kill:s2@30") from None
+        if fault.action not in PROCESS_ACTIONS:
+            raise ValueError(f"bad process fault {text!r}: action must be one of "
+                             f"{', '.join(PROCESS_ACTIONS)}")
+        if fault.scan < 1:
+            raise ValueError(f"bad process fault {text!r}: scan must be >= 1")
+        return fault
+
+
+def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor: str,
+                          stop: threading.Event) -> list[dict]:
+    """Watch the run's scans (a Zenoh subscriber) and apply each fault at its scan.
+
+    Runs until every fault is applied or ``stop`` is set; returns what was done, with wall
+    times (also written to ``<out>/process-faults.json``).
+    """
+    from peers.session import open_session
+    from protocol.codec import Rejected, decode
+    from protocol.keys import Keys
+
+    pending = sorted(faults, key=lambda f: f.scan)
+    done: list[dict] = []
+    current = {"k": 0}
+    cond = threading.Condition()
+
+    def on_scan(sample) -> None:
+        try:
+            k = decode(sample.payload.to_bytes()).k
+        except (Rejected, AttributeError):
+            return
+        with cond:
+            current["k"] = max(current["k"], k)
+            cond.notify_all()
+
+    session = open_session(connect=[handle.endpoints["world"]])
+    try:
+        sub = session.declare_subscriber(Keys(handle.network).scan(sensor), on_scan)
+        while pending and not stop.is_set():
+            with cond:
+                cond.wait(timeout=0.05)
+                k = current["k"]
+            while pending and pending[0].scan <= k:
+                f = pending.pop(0)
+                proc = handle.procs[f.peer]
+                sig = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "cont": signal.SIGCONT,
+                       "term": signal.SIGTERM}.get(f.action)
+                if f.action == "restart":
+                    proc = handle.restart(f.peer)
+                elif proc.poll() is None:
+                    proc.send_signal(sig)
+                done.append({"action": f.action, "peer": f.peer, "scan": f.scan, "at_scan": k,
+                             "wall": time.time(), "pid": proc.pid})
+        sub.undeclare()
+    finally:
+        session.close()
+    (handle.out / "process-faults.json").write_text(json.dumps(done, indent=2))
+    return done
+
+
+def fault_report(done: list[dict], summaries: dict[str, dict]) -> str:
+    """When each peer saw each killed, stopped or restarted peer leave or come back."""
+    lines = []
+    for f in done:
+        seen = []
+        for name, s in summaries.items():
+            if name == f["peer"]:
+                continue
+            want = "joined" if f["action"] in ("restart", "cont") else "left"
+            times = [w for (peer, what, w, _k) in s.get("peer_events", [])
+                     if peer == f["peer"] and what == want and w >= f["wall"] - 0.01]
+            seen.append(f"{name} +{min(times) - f['wall']:.2f} s" if times else f"{name} never")
+        verb = "rejoined" if f["action"] in ("restart", "cont") else "left"
+        lines.append(f"{f['action']} {f['peer']} at scan {f['at_scan']}: seen {verb} by "
+                     + ", ".join(seen))
+    return "\n".join(lines)
