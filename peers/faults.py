@@ -583,6 +583,7 @@ class FaultInjector:
         self.seed = int(seed)
         self.msg_id = msg_id
         self.log: list[FaultRecord] = []
+        self._counts: Counter = Counter()
         self._rngs: dict[tuple[str, str], np.random.Generator] = {}
 
     def _rng(self, sender: str, receiver: str) -> np.random.Generator:
@@ -618,6 +619,7 @@ class FaultInjector:
                 action = "reorder" if reordered else "deliver"
         self.log.append(FaultRecord(float(t), sender, receiver, str(msg_id), action,
                                     tuple(delays), reordered and bool(delays)))
+        self._counts[action] += 1
         return delays
 
     def deliveries(self, sender: str, receiver: str, t: float, msg: Any) -> list[float]:
@@ -645,17 +647,25 @@ class FaultInjector:
 
     def counts(self) -> dict[str, int]:
         """How many decisions took each action (every action present, zeros included)."""
-        c = Counter(r.action for r in self.log)
-        return {a: c.get(a, 0) for a in ACTIONS}
+        return {a: self._counts.get(a, 0) for a in ACTIONS}
 
-    def write_log(self, path: str | Path) -> None:
-        """The log as CSV: a header, then one line per decision; ``delays`` joined by ``;``."""
-        with open(path, "w", newline="", encoding="utf-8") as f:
+    def write_log(self, path: str | Path, append: bool = False) -> None:
+        """The log as CSV: a header, then one line per decision; ``delays`` joined by ``;``.
+
+        ``append``: add the records to an existing file (header only if it is new) and clear
+        the in-memory log, so a long run's memory stays flat (:meth:`counts` is kept apart).
+        """
+        new = not append or not Path(path).exists()
+        with open(path, "a" if append else "w", newline="", encoding="utf-8") as f:
             w = csv.writer(f)
-            w.writerow(["t", "sender", "receiver", "msg_id", "action", "reordered", "delays"])
+            if new:
+                w.writerow(["t", "sender", "receiver", "msg_id", "action", "reordered",
+                            "delays"])
             for r in self.log:
                 w.writerow([repr(r.t), r.sender, r.receiver, r.msg_id, r.action,
                             int(r.reordered), ";".join(repr(d) for d in r.delays)])
+        if append:
+            self.log.clear()
 
 
 class HoldQueue:

@@ -33,6 +33,15 @@ from protocol.keys import Keys
 from protocol.messages import Control, Estimate, Scan, Tracks, Truth
 
 
+def current_rss_mb() -> float:
+    """This process's resident memory now (MB), from /proc (0 where there is none)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
 class PeerRuntime:
     """Runs one peer until the world says the run ended, or SIGINT/SIGTERM."""
 
@@ -62,6 +71,8 @@ class PeerRuntime:
         self.sink = RerunSink()
         self.rejected: Counter = Counter()
         self.errors: Counter = Counter()
+        self.rss_samples: list[tuple[int, float]] = []
+        """Resident memory (MB) after scan 1 and every 1000th scan (leak checks)."""
         self.live_events: list[tuple[str, str, float, int]] = []
         """Liveliness changes seen: (peer, "joined"/"left", wall time, last scan)."""
         self.sent = Counter()
@@ -229,6 +240,9 @@ class PeerRuntime:
             self.breakdown["local"].append((local_done - wall) * 1e3)
             self._publish(out, local_done)
             self.logic.score_local()
+            if msg.k == 1 or msg.k % 1000 == 0:
+                self.rss_samples.append((msg.k, current_rss_mb()))
+                self._flush_fault_log()
             self._log_local(msg.k)
         elif isinstance(msg, Estimate):
             if self.faults is not None and self._hold(msg, wall):
@@ -243,6 +257,11 @@ class PeerRuntime:
         elif isinstance(msg, Control) and msg.command == "end":
             self.stop_reason = "end of run"
             self._stop = True
+
+    def _flush_fault_log(self) -> None:
+        """Move the injected-fault records to ``faults-into-<peer>.csv`` (memory stays flat)."""
+        if self.faults is not None and self.out_dir is not None:
+            self.faults.write_log(self.out_dir / f"faults-into-{self.name}.csv", append=True)
 
     def _run_time(self, wall: float) -> float:
         """Seconds on the run clock (scan ``k`` at ``k * interval``, as in the twin)."""
@@ -298,8 +317,7 @@ class PeerRuntime:
                 except Exception as exc:
                     self._internal_error(exc)
             self._release_held()
-        if self.faults is not None and self.out_dir is not None:
-            self.faults.write_log(self.out_dir / f"faults-into-{self.name}.csv")
+        self._flush_fault_log()
         if self.saved_tracks is not None and self.out_dir is not None:
             np.savez(self.out_dir / f"tracks-{self.name}.npz",
                      **{f"k{k}": v for k, v in self.saved_tracks.items()})
@@ -382,6 +400,7 @@ class PeerRuntime:
             "rejected_total": sum(self.rejected.values()),
             "internal_errors": dict(self.errors),
             "peer_events": self.live_events[-1000:],
+            "rss_mb_samples": self.rss_samples[-100:] + [(self.logic.last_k, current_rss_mb())],
             "injected_faults": self.faults.counts() if self.faults is not None else {},
             "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
             "latency_ms_median": statistics.median(lat) if lat else None,
