@@ -49,6 +49,8 @@ def default_blueprint(peers: list[str]):
                 rrb.TimeSeriesView(name="components", origin="metrics/components"),
                 rrb.Tabs(
                     rrb.TimeSeriesView(name="estimate age (scans)", origin="metrics/age"),
+                    rrb.TimeSeriesView(name="late / redundant / too old",
+                                       origin="metrics/out_of_sequence"),
                     rrb.TimeSeriesView(name="rejected messages", origin="metrics/rejected"),
                     rrb.TimeSeriesView(name="compute (ms)", origin="metrics/compute_ms"),
                     rrb.TimeSeriesView(name="latency (ms)", origin="metrics/latency_ms"),

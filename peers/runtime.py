@@ -79,14 +79,14 @@ class PeerRuntime:
         self.sent_bytes = Counter()
         self.received = Counter()
         self.received_bytes = Counter()
-        self.latency_ms: deque = deque(maxlen=100_000)
+        self.latency_ms: deque = deque(maxlen=4096)
         self.compute_ms = {"filter": 0.0, "fusion": 0.0}
-        self.ages: deque = deque(maxlen=100_000)
+        self.ages: deque = deque(maxlen=4096)
         self.deadlines: dict[int, float] = {}
         self.scan_sent: dict[int, float] = {}
         # latency breakdown per scan (wall seconds): scan received, local estimate out
         self.stage: dict[int, tuple[float, float]] = {}
-        self.breakdown: dict[str, deque] = {n: deque(maxlen=100_000)
+        self.breakdown: dict[str, deque] = {n: deque(maxlen=4096)
                                             for n in ("transit", "local", "fusion_wait")}
         self.tails: deque = deque(maxlen=20)
         self.stop_reason = ""
@@ -370,6 +370,10 @@ class PeerRuntime:
                     self.sink.scalar(f"metrics/components/{self.name}/fused", r["n_fused"])
                     if r["ages"]:
                         self.sink.scalar(f"metrics/age/{self.name}", max(r["ages"].values()))
+                    c = self.logic.nale.counts
+                    for what in ("late", "redundant", "too_old", "dropped_late"):
+                        self.sink.scalar(f"metrics/out_of_sequence/{self.name}/{what}",
+                                         getattr(c, what))
                     fused = self.logic.current_fused()
                     if fused is not None:
                         self.sink.mixture(f"peers/{self.name}/fused", fused, self.color)

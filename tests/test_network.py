@@ -110,5 +110,6 @@ def test_recording_holds_truth_scans_estimates_and_time_series(network_run):
             f"/peers/{p}/{what}" for p in ("s1", "s2", "s3")
             for what in ("local/means", "local/ellipses", "fused/means", "tracks")] + [
             f"/metrics/{m}/{p}" for p in ("s1", "s2", "s3")
-            for m in ("ospa", "components", "latency_ms", "cardinality")]:
+            for m in ("ospa", "components", "latency_ms", "cardinality")] + [
+            f"/metrics/out_of_sequence/s1/{c}" for c in ("late", "redundant", "too_old")]:
         assert entity in text, entity
