@@ -141,6 +141,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
+    if args.sim:
+        return _run_twin(scn, args)
     out = _run_folder(args.out, "run")
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
@@ -187,11 +189,44 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_twin(scn, args: argparse.Namespace) -> int:
+    """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
+    from sim.launcher import format_summary
+    from sim.twin import run_twin
+
+    if args.fault:
+        raise UserError("--fault (process faults) needs real processes; drop --sim")
+    t0 = time.perf_counter()
+    result = run_twin(scn, args.run)
+    summaries = {}
+    for name, peer in result.peers.items():
+        ages = [a for r in peer.records if r["kind"] == "fusion" for a in r["ages"].values()]
+        summaries[name] = {
+            "scans": peer.stats.scans, "mean_ospa_local": peer.mean_ospa("local"),
+            "mean_ospa_fused": peer.mean_ospa("fused"),
+            "messages_sent": peer.stats.estimates_out + peer.stats.tracks_out,
+            "messages_received": peer.stats.estimates_in,
+            "bytes_sent": 8 * peer.stats.tuples_out, "bytes_received": 0, "rejected_total": 0,
+            "mean_estimate_age": sum(ages) / len(ages) if ages else None,
+            "latency_ms_median": None, "latency_ms_p99": None}
+    print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
+          f"scans in {time.perf_counter() - t0:.1f} s (kB sent: raw tuples x 8 bytes)")
+    print(format_summary(summaries))
+    if result.faults is not None:
+        print(f"injected link faults: {result.faults.counts()}")
+        if args.out:
+            out = _run_folder(args.out, "run")
+            result.faults.write_log(out / "faults.csv")
+            print(f"fault log: {out / 'faults.csv'}")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     args.scenario = "seed000"
     args.set = list(args.set or []) + ["birth.model=truth"]
     args.fault = []
     args.lease_ms = None
+    args.sim = False
     return cmd_run(args)
 
 
@@ -309,6 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                    help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
                         "(repeatable)")
+    r.add_argument("--sim", action="store_true",
+                   help="run the discrete-event twin instead of processes (fast, no network)")
     r.add_argument("--lease-ms", type=int,
                    help="Zenoh lease of every process: a frozen peer is noticed after about "
                         "this long (Zenoh's default is 10000)")

@@ -1,0 +1,56 @@
+"""The command line: user errors are one line with exit code 2; quick commands work."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from sensornet.cli import main
+from sim.scenario import scenario_text
+
+
+def _cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sensornet", *args], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda t: t.replace("merge_threshold = 5.0", "merge_treshold = 5.0"), "merge_treshold"),
+    (lambda t: t.replace("sigma_r = 20.0", "sigma_r = -20.0", 1), "sigma_r"),
+    (lambda t: t.replace("cov_diag = [100.0, 2500.0, 100.0, 2500.0]",
+                         "cov = [[1.0, 2.0, 0.0, 0.0], [2.0, 1.0, 0.0, 0.0], "
+                         "[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]"), "birth"),
+])
+def test_bad_scenario_file_is_one_line_exit_2(tmp_path, edit, needle):
+    text = edit(scenario_text("seed000"))
+    assert text != scenario_text("seed000"), "the edit did not apply"
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    for command in (["experiment", str(path), "--runs", "1", "--quiet"],
+                    ["run", str(path), "--sim"]):
+        proc = _cli(*command)
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and needle in lines[0], proc.stderr
+        assert "Traceback" not in proc.stderr
+
+
+def test_unknown_override_and_missing_file_are_user_errors(tmp_path, capsys):
+    assert main(["run", "--sim", "--set", "network.topolgy=ring"]) == 2
+    assert "network.topolgy" in capsys.readouterr().err
+    assert main(["experiment", str(tmp_path / "nope.toml"), "--runs", "1"]) == 2
+    assert main(["run", "--sim", "--fault", "kill:s1@3"]) == 2
+
+
+def test_run_sim_prints_the_summary(capsys):
+    assert main(["run", "--sim", "--set", "birth.model=truth",
+                 "--set", "scenario.num_scans=30"]) == 0
+    out = capsys.readouterr().out
+    assert "| s1 | 30 |" in out and "| s3 | 30 |" in out
+
+
+def test_scenario_show_round_trips(capsys):
+    assert main(["scenario", "show", "seed000"]) == 0
+    assert capsys.readouterr().out == scenario_text("seed000")
