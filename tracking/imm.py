@@ -1,0 +1,248 @@
+"""Interacting multiple models on the 6-D kinematic state, and the IMM-EKF (ALGORITHMS.md §6).
+
+State ``x = [px, vx, ax, py, vy, ay]`` (m, m/s, m/s^2). Two models (seed 001 §2):
+
+* CV: per axis ``F = [[1, T, 0], [0, 1, 0], [0, 0, 0]]`` (the acceleration is zeroed),
+  ``Q = sigma_a^2 g g^T`` with ``g = [T^2/2, T, 0]``;
+* CA: per axis ``F = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]``, ``Q = sigma_j^2 g g^T`` with
+  ``g = [T^3/6, T^2/2, T]`` (discrete white jerk, our reading of "CA model").
+
+Markov switching ``p_ij = P(model j at k | model i at k-1)``. The IMM cycle (Blom &
+Bar-Shalom 1988; seed 001 eq. 5-12): mixing probabilities ``mu_(i|j) = p_ij mu_i / c_j``,
+``c_j = sum_i p_ij mu_i``; mixed initial conditions; model-matched filtering; model
+probabilities ``mu_j ∝ Lambda_j c_j``; output ``x = sum_j mu_j x_j``.
+
+This module also holds the range-bearing measurement on the 6-D state (positions at indices
+0 and 3), shared by the IMM-EKF and the IMM particle filter (``tracking.particles``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
+from tracking.mixture import GaussianMixture
+from tracking.models import RangeBearing
+
+POS = (0, 3)
+"""Indices of (px, py) in the 6-D state."""
+VEL = (1, 4)
+"""Indices of (vx, vy)."""
+ACC = (2, 5)
+"""Indices of (ax, ay)."""
+STATE_DIM = 6
+
+
+@dataclass(frozen=True)
+class KinematicModel:
+    """A linear Gaussian motion model ``x_k = F x_(k-1) + G w``, ``w ~ N(0, sigma^2 I_2)``."""
+
+    name: str
+    """Model name ("CV", "CA")."""
+    F: np.ndarray
+    """(6, 6) transition matrix."""
+    G: np.ndarray
+    """(6, 2) noise gain (one column per axis)."""
+    sigma: float
+    """Noise standard deviation (m/s^2 for CV, m/s^3 for CA)."""
+
+    @property
+    def Q(self) -> np.ndarray:
+        """(6, 6) process noise covariance ``sigma^2 G G^T``."""
+        return self.sigma**2 * self.G @ self.G.T
+
+
+def _per_axis(F3: np.ndarray, g3: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Block-diagonal (x axis, y axis) 6-D ``F`` and ``G`` from one axis' 3-D parts."""
+    return np.kron(np.eye(2), F3), np.kron(np.eye(2), g3.reshape(3, 1))
+
+
+def constant_velocity(T: float = 1.0, sigma_a: float = 0.2) -> KinematicModel:
+    """CV on the 6-D state: acceleration zeroed, white acceleration noise ``sigma_a``."""
+    F, G = _per_axis(np.array([[1.0, T, 0], [0, 1, 0], [0, 0, 0]]), np.array([T * T / 2, T, 0]))
+    return KinematicModel("CV", F, G, sigma_a)
+
+
+def constant_acceleration(T: float = 1.0, sigma_j: float = 0.1) -> KinematicModel:
+    """CA (Wiener-process acceleration): white jerk noise ``sigma_j`` per axis."""
+    F3 = np.array([[1.0, T, T * T / 2], [0, 1, T], [0, 0, 1]])
+    F, G = _per_axis(F3, np.array([T**3 / 6, T * T / 2, T]))
+    return KinematicModel("CA", F, G, sigma_j)
+
+
+@dataclass(frozen=True)
+class IMMParams:
+    """The IMM configuration shared by the IMM-EKF and the IMM-PF (seed 001 §4)."""
+
+    T: float = 1.0
+    """Scan period in s."""
+    sigma_cv: float = 0.2
+    """CV white-acceleration noise in m/s^2 (our reading)."""
+    sigma_ca: float = 0.1
+    """CA white-jerk noise in m/s^3 (our reading)."""
+    transition: tuple[tuple[float, ...], ...] = ((0.98, 0.02), (0.02, 0.98))
+    """Markov matrix ``p_ij`` = P(model j now | model i before)."""
+    initial_probs: tuple[float, ...] = (0.5, 0.5)
+    """Model probabilities at initialisation (CV, CA)."""
+    model_names: tuple[str, ...] = ("CV", "CA")
+    """Which models, in order ("CV", "CA"); one entry gives a single-model filter."""
+
+    def __post_init__(self) -> None:
+        M = len(self.model_names)
+        if self.P.shape != (M, M) or len(self.initial_probs) != M:
+            raise ValueError(f"IMMParams: {M} models need an {M}x{M} transition matrix and "
+                             f"{M} initial probabilities")
+
+    def models(self) -> tuple[KinematicModel, ...]:
+        """The models named in ``model_names``, with this configuration's noises."""
+        make = {"CV": lambda: constant_velocity(self.T, self.sigma_cv),
+                "CA": lambda: constant_acceleration(self.T, self.sigma_ca)}
+        return tuple(make[name]() for name in self.model_names)
+
+    @property
+    def P(self) -> np.ndarray:
+        """(M, M) transition matrix."""
+        return np.asarray(self.transition, dtype=float)
+
+
+def mixing(probs: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """IMM interaction: predicted model probabilities ``c (M,)`` and ``mu_(i|j) (M_i, M_j)``.
+
+    ``c_j = sum_i p_ij mu_i``, ``mu_(i|j) = p_ij mu_i / c_j`` (seed 001 eq. 5-6).
+    """
+    joint = P * probs[:, None]  # (i, j)
+    c = joint.sum(axis=0)
+    return c, joint / c[None, :]
+
+
+def combine(probs: np.ndarray, means: np.ndarray,
+            covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """IMM output combination ``x = sum_j mu_j x_j`` and its covariance (seed 001 eq. 12)."""
+    return GaussianMixture(probs, means, covs).moments()
+
+
+# -- range-bearing radar on the 6-D state -------------------------------------------------------
+
+
+def radar_h(sensor: RangeBearing, X: np.ndarray) -> np.ndarray:
+    """``h(x) = [range, bearing]`` for states ``X (..., 6)``: returns ``(..., 2)`` (§1)."""
+    dx = X[..., 0] - sensor.position[0]
+    dy = X[..., 3] - sensor.position[1]
+    return np.stack([np.hypot(dx, dy), np.arctan2(dy, dx)], axis=-1)
+
+
+def radar_jacobian(sensor: RangeBearing, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``h(x) (n, 2)`` and its Jacobian ``(n, 2, 6)`` at ``X (n, 6)`` (EKF linearisation)."""
+    dx = X[:, 0] - sensor.position[0]
+    dy = X[:, 3] - sensor.position[1]
+    r2 = np.maximum(dx * dx + dy * dy, 1e-12)
+    r = np.sqrt(r2)
+    H = np.zeros((len(X), 2, STATE_DIM))
+    H[:, 0, 0], H[:, 0, 3] = dx / r, dy / r
+    H[:, 1, 0], H[:, 1, 3] = -dy / r2, dx / r2
+    return np.stack([r, np.arctan2(dy, dx)], axis=1), H
+
+
+def radar_log_likelihood(sensor: RangeBearing, z: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``log N(z; h(x), R)`` at states ``X (..., 6)``: returns ``(...)``. Bearing wrapped."""
+    nu = sensor.residual(z, radar_h(sensor, X))
+    sr, st = sensor.sigma_r, sensor.sigma_theta
+    return (-0.5 * ((nu[..., 0] / sr) ** 2 + (nu[..., 1] / st) ** 2)
+            - np.log(sr * st) - LOG_2PI)
+
+
+def polar_to_cartesian(sensor: RangeBearing, z: np.ndarray) -> np.ndarray:
+    """Position ``(2,)`` of a measurement ``z = [r, theta]`` (initialisation)."""
+    return np.asarray(sensor.position) + z[0] * np.array([np.cos(z[1]), np.sin(z[1])])
+
+
+# -- IMM-EKF ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class IMMGaussianState:
+    """Per-model Gaussians of an IMM-EKF (or of a fused IMM summary)."""
+
+    probs: np.ndarray
+    """(M,) model probabilities."""
+    means: np.ndarray
+    """(M, 6) model-conditioned means."""
+    covs: np.ndarray
+    """(M, 6, 6) model-conditioned covariances."""
+    log_likelihoods: np.ndarray | None = None
+    """(M,) ``log Lambda_j`` of the last update (None after a prediction)."""
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Combined mean ``(6,)``: ``sum_j mu_j x_j``."""
+        return self.probs @ self.means
+
+    def summary(self) -> GaussianMixture:
+        """The one-component-per-model Gaussian mixture a peer publishes (weights = probs)."""
+        return GaussianMixture(self.probs, self.means, self.covs)
+
+
+@dataclass(frozen=True)
+class IMMEKF:
+    """The IMM extended Kalman filter (baseline of seed 001 Table 1), batched over models."""
+
+    params: IMMParams = field(default_factory=IMMParams)
+    """Models, Markov matrix and initial probabilities."""
+
+    def initialise(self, mean: np.ndarray, cov: np.ndarray) -> IMMGaussianState:
+        """Every model starts at ``N(mean, cov)`` with the initial model probabilities."""
+        M = len(self.params.initial_probs)
+        return IMMGaussianState(np.asarray(self.params.initial_probs, float),
+                                np.tile(mean, (M, 1)), np.tile(cov, (M, 1, 1)))
+
+    def predict(self, state: IMMGaussianState) -> IMMGaussianState:
+        """Interaction (mixing) and model-matched prediction; ``probs`` become ``c_j``.
+
+        ``m0_j = sum_i mu_(i|j) m_i``, ``P0_j = sum_i mu_(i|j) [P_i + (m_i - m0_j)(.)^T]``,
+        then ``m_j = F_j m0_j``, ``P_j = F_j P0_j F_j^T + Q_j``.
+        """
+        models = self.params.models()
+        c, mu = mixing(state.probs, self.params.P)
+        m0 = mu.T @ state.means  # (j, d)
+        diff = state.means[None, :, :] - m0[:, None, :]  # (j, i, d)
+        P0 = np.einsum("ij,iab->jab", mu, state.covs) + np.einsum(
+            "ij,jia,jib->jab", mu, diff, diff)
+        F = np.stack([m.F for m in models])
+        Q = np.stack([m.Q for m in models])
+        means = np.einsum("jab,jb->ja", F, m0)
+        covs = symmetrise(F @ P0 @ np.swapaxes(F, 1, 2) + Q)
+        return IMMGaussianState(c, means, covs)
+
+    def update(self, pred: IMMGaussianState, z: np.ndarray,
+               sensor: RangeBearing) -> IMMGaussianState:
+        """EKF update per model and model-probability update ``mu_j ∝ Lambda_j c_j``.
+
+        ``S = H P H^T + R``, ``K = P H^T S^-1``, ``nu = z - h(m)`` (bearing wrapped),
+        Joseph-form covariance, ``Lambda_j = N(nu_j; 0, S_j)`` (seed 001 eq. 9-11).
+        """
+        zhat, H = radar_jacobian(sensor, pred.means)
+        nu = sensor.residual(z, zhat)  # (M, 2)
+        PHt = pred.covs @ np.swapaxes(H, 1, 2)  # (M, 6, 2)
+        S = H @ PHt + sensor.R
+        Sinv, detS = inv_det_2x2(S)
+        K = PHt @ Sinv  # (M, 6, 2)
+        means = pred.means + np.einsum("jab,jb->ja", K, nu)
+        IKH = np.eye(STATE_DIM) - K @ H
+        covs = symmetrise(IKH @ pred.covs @ np.swapaxes(IKH, 1, 2)
+                          + K @ sensor.R @ np.swapaxes(K, 1, 2))
+        log_lik = -0.5 * (np.einsum("ja,jab,jb->j", nu, Sinv, nu) + np.log(detS) + 2 * LOG_2PI)
+        return IMMGaussianState(model_posterior(pred.probs, log_lik), means, covs, log_lik)
+
+    def step(self, state: IMMGaussianState, z: np.ndarray,
+             sensor: RangeBearing) -> IMMGaussianState:
+        """One scan: :meth:`predict` then :meth:`update`."""
+        return self.update(self.predict(state), z, sensor)
+
+
+def model_posterior(c: np.ndarray, log_lik: np.ndarray) -> np.ndarray:
+    """``mu_j = c_j Lambda_j / sum_i c_i Lambda_i`` from ``log Lambda (M,)`` (seed 001 eq. 11)."""
+    a = np.log(np.maximum(c, 1e-300)) + log_lik
+    a = np.exp(a - a.max())
+    return a / a.sum()

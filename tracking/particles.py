@@ -1,0 +1,453 @@
+"""The IMM particle filter, its Gaussian-mixture summaries, and fusion for single-target peers.
+
+Seed 001 (ALGORITHMS.md §6). Particles of all models live in one array ``X (M, N, 6)``
+(M models, N particles per model); every step is array code over particles and models, with no
+Python loop over particles.
+
+Cycle per scan (seed 001 eq. 13-18, our reading of the interaction step for particles):
+
+1. interaction: model ``j`` draws its N particles from ``sum_i mu_(i|j) p_i(x)`` (systematic
+   sampling over the M*N equally weighted particles with weights ``mu_(i|j) / N``);
+2. model-matched prediction ``x = F_j x + G_j w`` and weighting ``w ∝ p(z | x)`` (prior as
+   proposal, bootstrap);
+3. model probabilities ``mu_j ∝ c_j Lambda_j``, ``Lambda_j = (1/N) sum_n p(z | x_j^n)``;
+4. residual resampling per model;
+5. output ``x = sum_j mu_j x_j`` (from the weighted particles, before resampling);
+6. regularisation (ALGORITHMS.md §6): after resampling each model's particles are jittered by
+   ``h`` times that model's posterior spread, either added (``"add"``: covariance grows by
+   ``h^2``, like extra process noise) or with Liu & West (2001) shrinkage (``"shrink"``:
+   ``x -> a x + (1-a) mean + h L e``, ``a = sqrt(1-h^2)``, mean and covariance kept).
+
+An external log-likelihood (the particle fusion rule's ratio, eq. 19-21) can be added to the
+sensor's own before step 3 (:meth:`IMMParticleFilter.update`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from tracking.fusion import gci_fuse, optimal_omega
+from tracking.gaussian import symmetrise
+from tracking.imm import POS, STATE_DIM, IMMParams, mixing, model_posterior
+from tracking.mixture import GaussianMixture
+
+# -- resampling ---------------------------------------------------------------------------------
+
+
+def systematic_counts(weights: np.ndarray, n: np.ndarray | int, u: np.ndarray) -> np.ndarray:
+    """Systematic-sampling counts per row: ``weights (R, K)`` normalised rows, ``n`` draws per
+    row (scalar or ``(R,)``), offsets ``u (R,)`` in [0, 1). Returns integer ``(R, K)``.
+
+    Points ``(k + u) / n``, ``k < n``; the count in ``(C_(i-1), C_i]`` is
+    ``floor(n C_i - u) - floor(n C_(i-1) - u)`` with ``C`` the cumulative weights.
+    """
+    R, K = weights.shape
+    C = np.empty((R, K + 1))
+    C[:, 0] = 0.0
+    np.cumsum(weights, axis=1, out=C[:, 1:])
+    C[:, 1:] /= C[:, -1:]
+    C[:, -1] = 1.0
+    n = np.asarray(n, dtype=float).reshape(-1, 1) if np.ndim(n) else float(n)
+    f = np.floor(C * n - u[:, None])
+    return np.diff(f, axis=1).astype(np.int64)
+
+
+def residual_counts(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Residual resampling counts (Liu & Chen 1998) per row of ``weights (R, K)``: ``(R, K)``.
+
+    Deterministic part ``floor(n w_i)`` exactly; the ``n - sum floor(n w)`` remaining draws are
+    systematic over the residual weights ``n w_i - floor(n w_i)``.
+    """
+    w = weights / weights.sum(axis=1, keepdims=True)
+    nw = n * w
+    base = np.floor(nw)
+    rest = nw - base
+    left = n - base.sum(axis=1)  # (R,) integer-valued
+    total = rest.sum(axis=1, keepdims=True)
+    rest = np.where(total > 0, rest, 1.0)
+    extra = systematic_counts(rest, left, rng.random(len(w)))
+    return base.astype(np.int64) + extra
+
+
+def counts_to_indices(counts: np.ndarray) -> np.ndarray:
+    """Column indices ``(R, n)`` from per-row counts ``(R, K)`` that each sum to ``n``."""
+    R, K = counts.shape
+    return np.repeat(np.tile(np.arange(K), R), counts.reshape(-1)).reshape(R, -1)
+
+
+# -- the filter -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ParticleParams:
+    """Particle-filter settings of the IMM-PF (seed 001 §4 and ALGORITHMS.md §6)."""
+
+    n_particles: int = 800
+    """Particles per model ``N``."""
+    jitter: float = 0.3
+    """Regularisation ``h``: jitter spread as a fraction of the model's posterior spread."""
+    jitter_kind: str = "add"
+    """``"add"`` (covariance grows by h^2) or ``"shrink"`` (Liu-West, moments kept)."""
+    cov_floor: float = 1e-9
+    """Added to covariance diagonals before Cholesky (the CV acceleration has zero spread)."""
+
+
+@dataclass
+class ParticlePrediction:
+    """Predicted particles of every model (equal weights within a model)."""
+
+    particles: np.ndarray
+    """(M, N, 6) predicted particles."""
+    probs: np.ndarray
+    """(M,) predicted model probabilities ``c_j``."""
+
+    @cached_property
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-model mean ``(M, 6)`` and covariance ``(M, 6, 6)`` of the predicted particles."""
+        N = self.particles.shape[1]
+        return weighted_moments(self.particles, np.full(self.particles.shape[:2], 1.0 / N))
+
+    def summary(self) -> GaussianMixture:
+        """Predicted-density summary: one moment-matched component per model (weights ``c``)."""
+        return GaussianMixture(self.probs, *self.moments)
+
+
+@dataclass(frozen=True)
+class ParticleState:
+    """The IMM-PF posterior after one scan."""
+
+    particles: np.ndarray
+    """(M, N, 6) resampled (and jittered) particles, equal weights."""
+    probs: np.ndarray
+    """(M,) model probabilities ``mu_j``."""
+    means: np.ndarray
+    """(M, 6) model-conditioned posterior means (weighted particles, before resampling)."""
+    covs: np.ndarray
+    """(M, 6, 6) model-conditioned posterior covariances (same)."""
+    log_likelihoods: np.ndarray | None = None
+    """(M,) ``log Lambda_j`` of the last update."""
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Output combination ``(6,)``: ``sum_j mu_j x_j`` (seed 001 eq. 18)."""
+        return self.probs @ self.means
+
+    def summary(self) -> GaussianMixture:
+        """Posterior summary: one moment-matched component per model (weights ``mu``)."""
+        return GaussianMixture(self.probs, self.means, self.covs)
+
+
+def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean ``(..., d)`` and covariance ``(..., d, d)`` of particles ``X (..., N, d)`` with
+    normalised weights ``w (..., N)``."""
+    mean = np.einsum("...n,...nd->...d", w, X)
+    D = X - mean[..., None, :]
+    cov = np.einsum("...na,...nb->...ab", D * w[..., None], D)
+    return mean, symmetrise(cov)
+
+
+@dataclass(frozen=True)
+class IMMParticleFilter:
+    """IMM particle filter (seed 001), vectorised over particles and models."""
+
+    params: IMMParams = field(default_factory=IMMParams)
+    """Models, Markov matrix and initial probabilities."""
+    particle: ParticleParams = field(default_factory=ParticleParams)
+    """Particle count and regularisation."""
+
+    @cached_property
+    def _F_t(self) -> np.ndarray:
+        return np.stack([m.F.T for m in self.params.models()])  # (M, 6, 6)
+
+    @cached_property
+    def _G_t(self) -> np.ndarray:
+        return np.stack([(m.sigma * m.G).T for m in self.params.models()])  # (M, 2, 6)
+
+    def initialise(self, mean: np.ndarray, cov: np.ndarray,
+                   rng: np.random.Generator) -> ParticleState:
+        """N particles per model from ``N(mean, cov)``, initial model probabilities."""
+        M, N = len(self.params.initial_probs), self.particle.n_particles
+        L = np.linalg.cholesky(cov + self.particle.cov_floor * np.eye(len(mean)))
+        X = mean + rng.standard_normal((M, N, len(mean))) @ L.T
+        probs = np.asarray(self.params.initial_probs, float)
+        means, covs = weighted_moments(X, np.full((M, N), 1.0 / N))
+        return ParticleState(X, probs, means, covs)
+
+    def from_gaussians(self, probs: np.ndarray, means: np.ndarray, covs: np.ndarray,
+                       rng: np.random.Generator) -> ParticleState:
+        """A state whose model ``j`` particles are drawn from ``N(means_j, covs_j)`` (used when
+        a fused Gaussian summary replaces the posterior, e.g. after GCI)."""
+        M, N = means.shape[0], self.particle.n_particles
+        L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(means.shape[1]))
+        X = means[:, None, :] + rng.standard_normal((M, N, means.shape[1])) @ np.swapaxes(L, 1, 2)
+        return ParticleState(X, np.asarray(probs, float), means, covs)
+
+    def predict(self, state: ParticleState, rng: np.random.Generator) -> ParticlePrediction:
+        """Interaction (mixing) and model-matched propagation (steps 1-2)."""
+        X = state.particles
+        M, N, d = X.shape
+        c, mu = mixing(state.probs, self.params.P)  # mu[i, j] = mu_(i|j)
+        # model j samples the M*N particles with weight mu_(i|j)/N (particles equal-weighted)
+        q = np.repeat(mu.T, N, axis=1)  # (j, i*N)
+        idx = counts_to_indices(systematic_counts(q, N, rng.random(M)))  # (M, N) into M*N
+        X0 = X.reshape(M * N, d)[idx]
+        Xp = X0 @ self._F_t + rng.standard_normal((M, N, 2)) @ self._G_t
+        return ParticlePrediction(Xp, c)
+
+    def update(self, pred: ParticlePrediction, log_lik: np.ndarray,
+               rng: np.random.Generator) -> ParticleState:
+        """Weighting, model probabilities, output, residual resampling, jitter (steps 2-6).
+
+        ``log_lik (M, N)``: ``log p(z | x)`` at the predicted particles, plus any fusion
+        log-ratio (eq. 19-21). ``log Lambda_j = log mean_n exp(log_lik_jn)``.
+        """
+        X = pred.particles
+        M, N, d = X.shape
+        top = log_lik.max(axis=1, keepdims=True)
+        lik = np.exp(log_lik - top)
+        s = lik.sum(axis=1)
+        log_Lambda = np.log(s) + top[:, 0] - np.log(N)
+        probs = model_posterior(pred.probs, log_Lambda)
+        w = lik / s[:, None]
+        means, covs = weighted_moments(X, w)
+        idx = counts_to_indices(residual_counts(w, N, rng)) + self._row_offsets(M, N)
+        Xr = X.reshape(M * N, d)[idx]
+        Xr = self._regularise(Xr, means, covs, rng)
+        return ParticleState(Xr, probs, means, covs, log_Lambda)
+
+    @staticmethod
+    def _row_offsets(M: int, N: int) -> np.ndarray:
+        return (np.arange(M) * N)[:, None]
+
+    def _regularise(self, X: np.ndarray, means: np.ndarray, covs: np.ndarray,
+                    rng: np.random.Generator) -> np.ndarray:
+        """Jitter the resampled particles ``X (M, N, d)`` (step 6)."""
+        h = self.particle.jitter
+        if h <= 0.0:
+            return X
+        d = X.shape[-1]
+        L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(d))
+        E = h * (rng.standard_normal(X.shape) @ np.swapaxes(L, 1, 2))
+        if self.particle.jitter_kind == "add":
+            return X + E
+        if self.particle.jitter_kind == "shrink":
+            a = np.sqrt(1.0 - h * h)
+            return a * X + (1.0 - a) * means[:, None, :] + E
+        raise ValueError(f"unknown jitter_kind {self.particle.jitter_kind!r}; "
+                         "expected 'add' or 'shrink'")
+
+    def step(self, state: ParticleState, log_lik_fn, rng: np.random.Generator,
+             extra_log_lik=None) -> tuple[ParticleState, ParticlePrediction]:
+        """One scan. ``log_lik_fn(X (M, N, 6)) -> (M, N)``; ``extra_log_lik`` likewise
+        (e.g. the particle fusion rule's ratio) or None. Returns posterior and prediction."""
+        pred = self.predict(state, rng)
+        ll = log_lik_fn(pred.particles)
+        if extra_log_lik is not None:
+            ll = ll + extra_log_lik(pred.particles)
+        return self.update(pred, ll, rng), pred
+
+
+# -- mixture summaries of a particle posterior ------------------------------------------------
+
+
+def moment_summary(X: np.ndarray, w: np.ndarray, probs: np.ndarray) -> GaussianMixture:
+    """One moment-matched component per model: ``X (M, N, d)``, ``w (M, N)`` rows normalised,
+    ``probs (M,)``. Mean and covariance of the whole weighted particle set are kept exactly
+    (law of total covariance)."""
+    return GaussianMixture(probs, *weighted_moments(X, w))
+
+
+def kmeans_summary(X: np.ndarray, w: np.ndarray, k: int, rng: np.random.Generator,
+                   iterations: int = 5, dims: tuple[int, ...] = POS) -> GaussianMixture:
+    """A K-component summary of weighted particles ``X (n, d)``, ``w (n,)``: a few weighted
+    k-means iterations on the ``dims`` coordinates (scaled to unit spread), then each cluster
+    moment-matched (hard assignment, so the mixture's overall moments equal the particles').
+    Empty clusters are dropped."""
+    X = X.reshape(-1, X.shape[-1])
+    w = (w / w.sum()).reshape(-1)
+    Y = X[:, list(dims)]
+    Y = (Y - w @ Y) / np.sqrt(np.maximum(w @ (Y - w @ Y) ** 2, 1e-12))
+    centres = Y[rng.choice(len(Y), size=k, replace=False, p=w if np.all(w > 0) else None)]
+    for _ in range(iterations):
+        lab = np.argmin(((Y[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+        R = np.zeros((len(Y), k))
+        R[np.arange(len(Y)), lab] = w
+        mass = R.sum(0)
+        centres = np.where(mass[:, None] > 0, (R.T @ Y) / np.maximum(mass, 1e-300)[:, None],
+                           centres)
+    lab = np.argmin(((Y[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+    R = np.zeros((len(Y), k))
+    R[np.arange(len(Y)), lab] = w
+    mass = R.sum(0)
+    keep = mass > 0
+    R, mass = R[:, keep], mass[keep]
+    means = (R.T @ X) / mass[:, None]
+    D = X[None, :, :] - means[:, None, :]  # (k, n, d)
+    covs = np.einsum("kn,kna,knb->kab", R.T, D, D) / mass[:, None, None]
+    return GaussianMixture(mass, means, symmetrise(covs))
+
+
+def marginal(mix: GaussianMixture, dims: tuple[int, ...]) -> GaussianMixture:
+    """The mixture's marginal on the state entries ``dims``."""
+    ix = list(dims)
+    return GaussianMixture(mix.weights, mix.means[:, ix], mix.covs[:, ix][:, :, ix])
+
+
+# -- fusion: the particle fusion rule (eq. 19-21) and GCI feedback -----------------------------
+
+
+RATIO_SPACES = ("position", "full")
+
+
+@dataclass(frozen=True)
+class RatioConfig:
+    """How a peer's ``posterior / prediction`` ratio is formed (ALGORITHMS.md §6, our reading)."""
+
+    space: str = "position"
+    """``"position"``: ratio of the (px, py) marginals; ``"full"``: of the 6-D densities."""
+    clip: bool = True
+    """Drop negative information: keep only the positive eigen-directions of ``Y_post - Y_pred``."""
+    rel_tol: float = 1e-9
+    """Eigenvalues below ``rel_tol * max eigenvalue`` count as zero when clipping."""
+
+
+@dataclass(frozen=True)
+class GaussianRatio:
+    """``log r(x) = -1/2 (s - c)^T A (s - c) + (s - c)^T b`` on the sub-vector ``s = x[dims]``:
+    the ratio of two Gaussians ``N(s; m_p, P_p) / N(s; m_q, P_q)`` up to a constant, with
+    ``A = P_p^-1 - P_q^-1`` and ``b = P_p^-1 (m_p - c) - P_q^-1 (m_q - c)`` (centre ``c``)."""
+
+    dims: tuple[int, ...]
+    """State entries the ratio depends on."""
+    A: np.ndarray
+    """(k, k) information difference (PSD after clipping)."""
+    b: np.ndarray
+    """(k,) information-vector difference about ``centre``."""
+    centre: np.ndarray
+    """(k,) expansion point (the posterior mean), for round-off."""
+
+    @classmethod
+    def from_summaries(cls, post: GaussianMixture, pred: GaussianMixture,
+                       cfg: RatioConfig = RatioConfig()) -> GaussianRatio:
+        """The ratio of another peer's posterior and predicted summaries (each collapsed to its
+        moment-matched Gaussian on ``cfg.space``). Theory: ``p(x|z_1:k) / p(x|z_1:k-1) ∝
+        p(z_k | x)``, which for a radar depends on position only, so ``"position"`` loses
+        nothing in exact arithmetic and removes Monte Carlo noise in the other entries."""
+        if cfg.space not in RATIO_SPACES:
+            raise ValueError(f"unknown ratio space {cfg.space!r}; expected {RATIO_SPACES}")
+        dims = POS if cfg.space == "position" else tuple(range(post.dim))
+        mp, Pp = marginal(post, dims).moments()
+        mq, Pq = marginal(pred, dims).moments()
+        Yp, Yq = np.linalg.inv(Pp), np.linalg.inv(Pq)
+        A = symmetrise(Yp - Yq)
+        b = Yq @ (mp - mq)  # Yp (mp - c) = 0 with c = mp
+        if cfg.clip:
+            lam, V = np.linalg.eigh(A)
+            keep = lam > cfg.rel_tol * max(lam.max(), 0.0) if lam.max() > 0 else np.zeros_like(
+                lam, bool)
+            Vk = V[:, keep]
+            A = (Vk * lam[keep]) @ Vk.T
+            b = Vk @ (Vk.T @ b)
+        return cls(dims, A, b, mp)
+
+    def log_eval(self, X: np.ndarray) -> np.ndarray:
+        """``log r`` at states ``X (..., d)``: returns ``(...)``."""
+        S = X[..., list(self.dims)] - self.centre
+        return -0.5 * np.einsum("...i,ij,...j->...", S, self.A, S) + S @ self.b
+
+    def apply_gaussian(self, means: np.ndarray, covs: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closed-form product ``N(x; m_j, P_j) r(x)`` for Gaussians ``(M, d)``, ``(M, d, d)``
+        (the fusion rule for an IMM-EKF): new means, covariances and ``log int N r dx (M,)``.
+
+        With ``H`` selecting ``dims``: ``P' = (P^-1 + H^T A H)^-1`` computed as
+        ``P - P H^T (I + A H P H^T)^-1 A H P``; the normaliser from the marginal
+        ``s ~ N(m_s, P_s)``.
+        """
+        ix = list(self.dims)
+        k = len(ix)
+        PHt = covs[:, :, ix]  # (M, d, k)
+        Ps = PHt[:, ix, :]  # (M, k, k)
+        ms = means[:, ix] - self.centre  # (M, k)
+        Ik = np.eye(k)
+        B = Ik + self.A @ Ps  # (M, k, k): I + A P_s
+        Binv = np.linalg.inv(B)
+        # gain for the "information" b - A s: P' (P^-1 m + H^T (b - A c')) written as an update
+        g = self.b - np.einsum("ij,mj->mi", self.A, ms)  # (M, k) gradient of log r at m_s
+        K = PHt @ Binv  # (M, d, k)
+        new_means = means + np.einsum("mdk,mk->md", K, g)
+        new_covs = symmetrise(covs - K @ self.A @ np.swapaxes(PHt, 1, 2))
+        # log int N(s; m_s, P_s) exp(-1/2 s'As + s'b) ds about centre (s' = s - c)
+        _, logdet = np.linalg.slogdet(B)
+        Ps_g = np.einsum("mij,mj->mi", Binv @ Ps, g)
+        log_norm = (-0.5 * logdet + 0.5 * np.einsum("mi,mi->m", g, Ps_g)
+                    - 0.5 * np.einsum("mi,ij,mj->m", ms, self.A, ms) + ms @ self.b)
+        return new_means, new_covs, log_norm
+
+
+def gci_summaries(own: GaussianMixture, others: list[GaussianMixture],
+                  omega: float | str | None = None) -> GaussianMixture:
+    """GCI of normalised single-target mixtures (``tracking.fusion.gci_fuse(..., normalise=True)``;
+    with one Gaussian each it is covariance intersection). ``omega``: weight of each other peer
+    (own gets the rest); None gives uniform weights; ``"det"`` or ``"chernoff"`` (one other peer
+    only) chooses it per call with ``tracking.fusion.optimal_omega``."""
+    n = 1 + len(others)
+    if isinstance(omega, str):
+        if len(others) != 1:
+            raise ValueError("an optimised omega needs exactly one other peer")
+        omega = optimal_omega(own.normalised(), others[0].normalised(), omega)
+    if omega is None:
+        weights = [1.0 / n] * n
+    else:
+        weights = [1.0 - omega * (n - 1)] + [omega] * (n - 1)
+    return gci_fuse([own, *others], weights, normalise=True)
+
+
+def collapse_to_models(fused: GaussianMixture, n_models: int, cov_floor: float = 0.0
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-own-model Gaussians from a fused mixture whose components are ordered own-model
+    major (the pair order of ``gci_pair``): probs ``(M,)``, means ``(M, d)``, covs ``(M, d, d)``.
+    Component ``(a, b...)`` belongs to own model ``a``; each group is moment-matched."""
+    n, d = len(fused), fused.dim
+    per = n // n_models
+    w = fused.weights.reshape(n_models, per)
+    mass = w.sum(axis=1)
+    wn = w / np.maximum(mass, 1e-300)[:, None]
+    m = fused.means.reshape(n_models, per, d)
+    P = fused.covs.reshape(n_models, per, d, d)
+    means = np.einsum("mk,mkd->md", wn, m)
+    D = m - means[:, None, :]
+    covs = np.einsum("mk,mkab->mab", wn, P) + np.einsum("mk,mka,mkb->mab", wn, D, D)
+    covs = symmetrise(covs) + cov_floor * np.eye(d)
+    probs = mass / mass.sum()
+    return probs, means, covs
+
+
+def floored(mix: GaussianMixture, floor: float) -> GaussianMixture:
+    """The mixture with ``floor`` added to every covariance diagonal (keeps the CV component's
+    zero acceleration variance invertible for GCI)."""
+    return GaussianMixture(mix.weights, mix.means, mix.covs + floor * np.eye(mix.dim))
+
+
+__all__ = [
+    "STATE_DIM",
+    "GaussianRatio",
+    "IMMParticleFilter",
+    "ParticleParams",
+    "ParticlePrediction",
+    "ParticleState",
+    "RatioConfig",
+    "collapse_to_models",
+    "counts_to_indices",
+    "floored",
+    "gci_summaries",
+    "kmeans_summary",
+    "marginal",
+    "moment_summary",
+    "residual_counts",
+    "systematic_counts",
+    "weighted_moments",
+]
