@@ -124,9 +124,6 @@ class PeerRuntime:
 
     # -- main loop --------------------------------------------------------------------------
     def run(self) -> int:
-        # Zenoh delivers samples on its own threads, which need the GIL for the callback; with
-        # the default 5 ms switch interval a busy main thread makes them wait that long.
-        sys.setswitchinterval(float(os.environ.get("SENSORNET_SWITCH_INTERVAL", "0.0005")))
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, self._signal)
         if self.out_dir is not None and self.rerun or self.viewer:
