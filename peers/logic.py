@@ -28,7 +28,7 @@ from tracking.mixture import GaussianMixture
 from tracking.nale import NaleBuffer
 from tracking.reduction import keep_above
 
-FUSION_RULES = ("gci", "aa", "none")
+FUSION_RULES = ("gci", "aa", "ratio", "none")
 OMEGA_RULES = ("metropolis", "uniform", "det", "chernoff")
 
 
@@ -111,6 +111,8 @@ class PeerLogic:
     """One peer's behaviour; the runtime (Zenoh) and the twin (virtual clock) both drive it."""
 
     def __init__(self, options: PeerOptions, filt: GMPHDFilter) -> None:
+        if options.fusion == "ratio":
+            raise ValueError("the particle fusion rule ('ratio') needs single-target peers")
         self.o = options
         self.filter = filt
         self.reduce = filt.reducer

@@ -26,14 +26,20 @@ PALETTE = [(230, 25, 75), (60, 180, 75), (0, 130, 200), (245, 130, 48), (145, 30
            (70, 240, 240), (240, 50, 230), (210, 245, 60), (0, 128, 128), (170, 110, 40)]
 
 
+def position_columns(dim: int) -> list[int]:
+    """Columns of (px, py): ``[0, 2]`` in ``[px, vx, py, vy]``, ``[0, 3]`` in the 6-D state."""
+    return [0, 3] if dim == 6 else [0, 2]
+
+
 def ellipses(means: np.ndarray, covs: np.ndarray, sigma: float = 2.0) -> np.ndarray:
     """``sigma``-ellipses of the (px, py) marginals: ``(n, 33, 2)`` polylines, vectorised."""
     if len(means) == 0:
         return np.zeros((0, 33, 2))
-    P = covs[:, [0, 2]][:, :, [0, 2]]  # (n, 2, 2) position block of [px, vx, py, vy]
+    c = position_columns(means.shape[1])
+    P = covs[:, c][:, :, c]  # (n, 2, 2) position block
     vals, vecs = np.linalg.eigh(P)
     axes = vecs * (sigma * np.sqrt(np.maximum(vals, 0.0)))[:, None, :]  # (n, 2, 2)
-    return means[:, None, [0, 2]] + np.einsum("pj,nij->npi", _CIRCLE, axes)
+    return means[:, None, c] + np.einsum("pj,nij->npi", _CIRCLE, axes)
 
 
 def default_blueprint(peers: list[str]):
@@ -47,6 +53,8 @@ def default_blueprint(peers: list[str]):
                 rrb.TimeSeriesView(name="OSPA", origin="metrics/ospa"),
                 rrb.TimeSeriesView(name="cardinality", origin="metrics/cardinality"),
                 rrb.TimeSeriesView(name="components", origin="metrics/components"),
+                rrb.TimeSeriesView(name="model probabilities (IMM)",
+                                   origin="metrics/model_probability"),
                 rrb.Tabs(
                     rrb.TimeSeriesView(name="estimate age (scans)", origin="metrics/age"),
                     rrb.TimeSeriesView(name="late / redundant / too old",
@@ -111,7 +119,7 @@ class RerunSink:
         if not self.enabled:
             return
         rr = self.rr
-        xy = mix.means[:, [0, 2]] if len(mix) else np.zeros((0, 2))
+        xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
         rr.log(f"{path}/means", rr.Points2D(xy, colors=color,
                                             radii=3.0 + 4.0 * np.minimum(mix.weights, 2.0)))
         rr.log(f"{path}/ellipses", rr.LineStrips2D(list(ellipses(mix.means, mix.covs)),

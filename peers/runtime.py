@@ -26,7 +26,7 @@ import zenoh
 
 from peers.faults import FaultInjector, HoldQueue
 from peers.logic import PeerLogic
-from peers.rerun_sink import RerunSink, color_of
+from peers.rerun_sink import RerunSink, color_of, position_columns
 from peers.session import open_session
 from protocol.codec import Rejected, decode, encode
 from protocol.keys import Keys
@@ -344,7 +344,8 @@ class PeerRuntime:
         for old in [k for k in self.scan_sent if k < msg.k - 10]:
             del self.scan_sent[old]
         self.sink.time(msg.k, msg.k * self.interval)
-        xy = msg.states[:, [0, 2]] if len(msg.states) else np.zeros((0, 2))
+        xy = (msg.states[:, position_columns(msg.states.shape[1])] if len(msg.states)
+              else np.zeros((0, 2)))
         self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=8.0)
         self.tails.append(xy)
         if self.sink.enabled:
@@ -357,6 +358,9 @@ class PeerRuntime:
             return
         mix = self.logic.mix
         self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
+        particles = getattr(self.logic, "particles", lambda: None)()
+        if particles is not None:  # IMM-PF peers: the particle cloud
+            self.sink.points(f"peers/{self.name}/particles", particles, self.color, radius=1.0)
         self.sink.scalar(f"metrics/compute_ms/{self.name}/filter_total", self.compute_ms["filter"])
 
     def _drain_records(self) -> None:
@@ -382,6 +386,11 @@ class PeerRuntime:
                                  r["n_components"])
                 self.sink.scalar(f"metrics/components/{self.name}/after_level2",
                                  r["n_published"])
+            elif kind == "models" and self.sink.enabled:
+                self.sink.time(r["k"], r["k"] * self.interval)
+                for model, p in r.items():
+                    if model not in ("k", "kind"):
+                        self.sink.scalar(f"metrics/model_probability/{self.name}/{model}", p)
             elif kind == "ospa" and self.sink.enabled:
                 self.sink.time(r["k"], r["k"] * self.interval)
                 self.sink.scalar(f"metrics/ospa/{self.name}/{r['which']}", r["value"])

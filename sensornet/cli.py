@@ -72,18 +72,16 @@ def cmd_peer(args: argparse.Namespace) -> int:
     if args.name not in scn.sensor_names:
         raise UserError(f"no sensor named {args.name!r} in {scn.name} "
                         f"(sensors: {', '.join(scn.sensor_names)})")
-    if args.filter != "gmphd":
-        raise UserError(f"filter {args.filter!r} is not available yet; use 'gmphd'")
     net = scn.network
     scn = replace(scn, network=replace(
         net, rounds=args.rounds or net.rounds, omega=args.omega or net.omega,
-        policy=args.policy or net.policy), fusion=replace(
+        policy=args.policy or net.policy, filter=args.filter or net.filter), fusion=replace(
         scn.fusion, rule=args.fusion or scn.fusion.rule,
         level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
     speed = args.speed or scn.network.speed
     out = Path(args.out) if args.out else None
     runtime = PeerRuntime(
-        make_peer(scn, args.name), args.network, scn.scan_period / speed,
+        make_peer(scn, args.name, args.run), args.network, scn.scan_period / speed,
         scn.network.deadline, listen=args.listen or [], connect=args.connect or [],
         config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
         viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
@@ -311,8 +309,10 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
     pe.add_argument("--scenario", default="seed000", help="scenario file or built-in name")
     add_net_flags(pe, network_required=True)
-    pe.add_argument("--filter", default="gmphd", help="local filter (gmphd)")
-    pe.add_argument("--fusion", choices=["gci", "aa", "none"])
+    pe.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
+                    help="local filter (default: the scenario's network.filter)")
+    pe.add_argument("--fusion", choices=["gci", "aa", "ratio", "none"],
+                    help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
     pe.add_argument("--rounds", type=int, help="consensus rounds per scan")
     pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
     pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import zlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -196,9 +197,30 @@ def peer_options(scn: Scenario, name: str, **changes) -> PeerOptions:
     return PeerOptions(**opts)
 
 
-def make_peer(scn: Scenario, name: str, **changes) -> PeerLogic:
-    """A peer state machine for sensor ``name`` with its local filter."""
-    return PeerLogic(peer_options(scn, name, **changes), make_filter(scn, [name]))
+def make_peer(scn: Scenario, name: str, run: int = 0, **changes) -> PeerLogic:
+    """A peer state machine for sensor ``name`` with its local filter.
+
+    ``network.filter = "imm-pf"`` or ``"imm-ekf"`` gives a single-target seed-001 peer
+    (:class:`peers.single.SingleTargetPeer`), initialised like the seed-001 study: the true
+    start state plus noise drawn from ``(seed, run, peer)``.
+    """
+    options = peer_options(scn, name, **changes)
+    if scn.network.filter == "gmphd":
+        if options.fusion == "ratio":
+            raise ScenarioError(f"{scn.name}: fusion.rule 'ratio' needs single-target peers "
+                                f"(network.filter 'imm-pf' or 'imm-ekf')")
+        return PeerLogic(options, make_filter(scn, [name]))
+    from peers.single import SingleTargetPeer
+    from sim.seed001 import Seed001Scenario, truth
+
+    if options.fusion == "aa":
+        raise ScenarioError(f"{scn.name}: single-target peers fuse by 'gci', 'ratio' or "
+                            f"'none', not 'aa'")
+    s1 = Seed001Scenario(T=scn.scan_period, seed=scn.seed)
+    rng = np.random.default_rng(np.random.SeedSequence([scn.seed, run, zlib.crc32(name.encode())]))
+    m0 = truth(s1)[0] + rng.standard_normal(6) @ np.linalg.cholesky(s1.init_cov).T
+    return SingleTargetPeer(options, scn.network.filter, sensor_model(scn.sensor(name)), m0,
+                            s1.init_cov, rng)
 
 
 def fault_injector(scn: Scenario, run: int = 0) -> FaultInjector | None:

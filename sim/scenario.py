@@ -35,11 +35,12 @@ from tracking.reduction import MERGE_RULES
 
 STATE_DIM = 4
 """State ``[px, vx, py, vy]``."""
-TRUTH_MODELS = ("straight",)
+TRUTH_MODELS = ("straight", "seed001")
 MOTION_MODELS = ("cv",)
 SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
-FUSION_RULES = ("gci", "aa", "none")
+FUSION_RULES = ("gci", "aa", "ratio", "none")
+PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf")
 OMEGA_RULES = ("uniform", "metropolis", "det", "chernoff")
 CARDINALITY_RULES = ("emd", "separate")
 EXTRACTION_RULES = ("round", "cardinality")
@@ -184,6 +185,8 @@ class NetworkSpec:
     """Peers use their fused density as the prior of the next scan."""
     speed: float = 10.0
     """Wall-clock speed factor: a scan every ``scan_period / speed`` seconds."""
+    filter: str = "gmphd"
+    """Local filter of every peer: ``"gmphd"``, or for one target ``"imm-pf"``/``"imm-ekf"``."""
     deadline: float = 0.5
     """Fusion deadline after a scan, as a fraction of the (wall-clock) scan interval."""
 
@@ -613,7 +616,7 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
                                 ["ospa_cutoff", "ospa_order"])),
         network=_network(_Table(top.raw("network", {}), "network", ctx, [
             "topology", "edges", "rounds", "omega", "max_age", "policy", "feedback", "speed",
-            "deadline"]), names),
+            "deadline", "filter"]), names),
         source=origin,
     )
     raw_faults = top.raw("faults", {})
@@ -773,6 +776,7 @@ def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
         feedback=t.flag("feedback", False),
         speed=t.number("speed", 10.0, positive=True),
         deadline=deadline,
+        filter=t.choice("filter", PEER_FILTERS, "gmphd"),
     )
 
 

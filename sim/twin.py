@@ -56,7 +56,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     """
     truth, scans = generate_run(scn, run)
     names = scn.sensor_names
-    peers = peers if peers is not None else {n: make_peer(scn, n) for n in names}
+    peers = peers if peers is not None else {n: make_peer(scn, n, run) for n in names}
     if faults is None and delay is None:
         faults = fault_injector(scn, run)
     link_delay = delay or no_delay

@@ -56,6 +56,8 @@ def generate_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Tru
     is then required.
     """
     K, T = scn.num_scans, scn.scan_period
+    if scn.truth == "seed001":
+        return _seed001_truth(scn)
     noisy = scn.truth_sigma_w > 0
     if noisy and rng is None:
         raise ValueError("generate_truth needs an rng when truth_sigma_w > 0")
@@ -82,6 +84,18 @@ def generate_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Tru
         states=[np.array(s).reshape(-1, 4) for s in per_scan],
         ids=[np.array(i, dtype=int) for i in per_ids],
     )
+
+
+def _seed001_truth(scn: Scenario) -> Truth:
+    """The seed-001 manoeuvring ground target (one target, 6-D ``[px, vx, ax, py, vy, ay]``)."""
+    from sim.seed001 import Seed001Scenario, truth
+
+    X = truth(Seed001Scenario(T=scn.scan_period, seed=scn.seed))  # (651, 6), X[k] at scan k
+    if scn.num_scans > len(X) - 1:
+        raise ValueError(f"the seed-001 trajectory has {len(X) - 1} scans, "
+                         f"not {scn.num_scans}")
+    return Truth(states=[X[k][None, :] for k in range(1, scn.num_scans + 1)],
+                 ids=[np.array([1]) for _ in range(scn.num_scans)])
 
 
 def _cv_deviation(cv: ConstantVelocity, length: int, rng: np.random.Generator) -> np.ndarray:
@@ -113,7 +127,10 @@ def sensor_scans(scn: Scenario, spec: SensorSpec, truth: Truth,
     scans = []
     for states in truth.states:
         detected = rng.random(len(states)) < spec.detection_probability
-        z_targets = model.measure(states[detected], rng)  # (d, 2)
+        xs = states[detected]
+        if xs.shape[1] == 6:  # [px, vx, ax, py, vy, ay] -> the models' [px, vx, py, vy]
+            xs = xs[:, [0, 1, 3, 4]]
+        z_targets = model.measure(xs, rng)  # (d, 2)
         clutter = rng.uniform(low, high, size=(rng.poisson(spec.clutter_rate), 2))  # (c, 2)
         scan = np.concatenate([z_targets, clutter]).reshape(-1, 2)
         scans.append(scan[rng.permutation(len(scan))])

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from peers.rerun_sink import RerunSink, color_of
+from peers.rerun_sink import RerunSink, color_of, position_columns
 from peers.session import open_session
 from protocol.codec import encode
 from protocol.keys import Keys
@@ -112,12 +112,15 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             truth_pub.put(encode(Truth(k, truth.ids[k - 1], X, send_time=now)))
             sent["scans_published"] = k
             sink.time(k, k * scn.scan_period)
-            sink.points("world/truth", X[:, [0, 2]], (255, 255, 255), radius=7.0,
+            sink.points("world/truth", X[:, position_columns(X.shape[1])], (255, 255, 255),
+                        radius=7.0,
                         labels=[str(i) for i in truth.ids[k - 1]])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
-                if s.kind == "linear":
-                    sink.points(f"world/scans/{s.name}", z, color_of(i), radius=3.0)
+                if s.kind == "range-bearing" and len(z):  # shown where they point
+                    z = np.asarray(s.position) + z[:, :1] * np.column_stack(
+                        [np.cos(z[:, 1]), np.sin(z[:, 1])])
+                sink.points(f"world/scans/{s.name}", z, color_of(i), radius=3.0)
             if progress is not None:
                 progress(k)
         if not stop.is_set():

@@ -1,0 +1,74 @@
+"""Single-target IMM peers (seed 001) in the twin and as real processes over Zenoh."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sim.build import make_peer
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.scenario import ScenarioError, load_scenario, parse_overrides
+from sim.twin import run_twin
+
+
+@pytest.mark.parametrize("rule", ["ratio", "gci"])
+@pytest.mark.parametrize("kind", ["imm-pf", "imm-ekf"])
+def test_fused_beats_each_radar_alone_in_the_twin(rule, kind):
+    scn = load_scenario("seed001", overrides={"scenario.num_scans": 150, "fusion.rule": rule,
+                                              "network.filter": kind})
+    result = run_twin(scn, 0)
+    for name, peer in result.peers.items():
+        local, fused = peer.mean_ospa("local"), peer.mean_ospa("fused")
+        assert fused < 0.7 * local, (name, local, fused)
+        assert fused < 5.0  # metres, for ALGORITHMS.md §6's geometry A
+        assert peer.stats.fused_inputs == scn.num_scans
+    again = run_twin(scn, 0)
+    assert again.peers["r1"].mean_ospa("fused") == result.peers["r1"].mean_ospa("fused")
+
+
+def test_no_fusion_means_local_only():
+    scn = load_scenario("seed001", overrides={"scenario.num_scans": 80, "fusion.rule": "none"})
+    result = run_twin(scn, 1)
+    for peer in result.peers.values():
+        assert peer.stats.fused_inputs == 0 and peer.stats.estimates_out == 0
+
+
+def test_ratio_rule_needs_single_target_peers():
+    scn = load_scenario("seed000", overrides={"fusion.rule": "ratio"})
+    with pytest.raises(ScenarioError, match="ratio"):
+        make_peer(scn, "s1")
+    scn = dataclasses.replace(load_scenario("seed001"),
+                              fusion=dataclasses.replace(load_scenario("seed001").fusion,
+                                                         rule="aa"))
+    with pytest.raises(ScenarioError, match="aa"):
+        make_peer(scn, "r1")
+
+
+def test_two_imm_pf_peers_with_latency_as_processes(tmp_path):
+    sets = ["scenario.num_scans=120", "network.speed=20",
+            'faults.default.delay={kind="uniform", low=0.0, high=0.02}']
+    scn = load_scenario("seed001", overrides=parse_overrides(sets))
+    handle = start_run(scn, "seed001", tmp_path, overrides=sets)
+    try:
+        codes = wait_run(handle, timeout=120)
+    finally:
+        handle.stop_all()
+    assert all(c == 0 for c in codes.values()), codes
+    summaries = read_summaries(tmp_path, scn.sensor_names)
+    for name, s in summaries.items():
+        assert s["scans"] == scn.num_scans
+        assert s["mean_ospa_fused"] < 0.7 * s["mean_ospa_local"], (name, s)
+        assert s["injected_faults"]["reorder"] + s["injected_faults"]["deliver"] > 0
+    exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+    text = subprocess.run([exe, "rrd", "print", str(tmp_path / "rerun" / "peer-r1.rrd")],
+                          capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
+    for entity in ("/peers/r1/particles", "/metrics/model_probability/r1/CA",
+                   "/metrics/ospa/r1/fused", "/peers/r1/fused/means"):
+        assert entity in text, entity
