@@ -90,6 +90,8 @@ class PeerStats:
     fusions: int = 0
     fused_inputs: int = 0
     deadline_fusions: int = 0
+    fusion_fallbacks: int = 0
+    """Fusions that produced no finite density (disjoint summaries): own estimate kept."""
     tracks_out: int = 0
     peers_left: list[tuple[str, int]] = field(default_factory=list)
     peers_joined: list[tuple[str, int]] = field(default_factory=list)

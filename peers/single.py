@@ -263,8 +263,13 @@ class SingleTargetPeer:
             fused = gci_summaries(floored(own.summary(), floor), [posts[s] for s in senders],
                                   self.cfg.gci_omega if len(senders) == 1 else None)
             probs, means, covs = collapse_to_models(fused, self.M)
-            self.fused = (self.pf.from_gaussians(probs, means, covs, self.rng_fused)
-                          if self.kind == "imm-pf" else IMMGaussianState(probs, means, covs))
+            if np.all(np.isfinite(probs)) and np.all(np.isfinite(covs)):
+                self.fused = (self.pf.from_gaussians(probs, means, covs, self.rng_fused)
+                              if self.kind == "imm-pf"
+                              else IMMGaussianState(probs, means, covs))
+            else:  # the summaries do not overlap at all: keep the own update, count it
+                self.stats.fusion_fallbacks += 1
+                self.fused = own
         elif self.o.fusion == "ratio" and senders:
             ratios = [GaussianRatio.from_summaries(posts[s], preds[s], self.cfg.ratio)
                       for s in senders]
