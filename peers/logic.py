@@ -109,7 +109,39 @@ class _ScanState:
     done: bool = False
 
 
-class PeerLogic:
+class PeerBase:
+    """What every peer kind shares: liveliness of neighbours, truth, and the record queue.
+
+    Subclasses set ``o`` (options), ``alive``, ``stats``, ``last_k``, ``records``, ``_truth``
+    and implement ``_score(k)``.
+    """
+
+    def on_truth(self, k: int, states: np.ndarray) -> None:
+        """True target states of scan ``k`` (from the world), for OSPA in the records."""
+        self._truth[k] = np.asarray(states)
+        self._score(k)
+
+    def on_peer_left(self, name: str) -> list:
+        """A neighbour's liveliness token went away: stop waiting for it."""
+        if name in self.alive:
+            self.alive.discard(name)
+            self.stats.peers_left.append((name, self.last_k))
+        return []
+
+    def on_peer_joined(self, name: str, now: float) -> list:
+        """A neighbour (re)appeared: wait for its estimates again."""
+        if name in self.o.neighbours and name not in self.alive:
+            self.alive.add(name)
+            self.stats.peers_joined.append((name, self.last_k))
+        return []
+
+    def drain_records(self) -> list[dict]:
+        """Hand the accumulated records to the driver (and forget them)."""
+        out, self.records = self.records, []
+        return out
+
+
+class PeerLogic(PeerBase):
     """One peer's behaviour; the runtime (Zenoh) and the twin (virtual clock) both drive it."""
 
     def __init__(self, options: PeerOptions, filt: GMPHDFilter) -> None:
@@ -238,23 +270,6 @@ class PeerLogic:
             return []
         return self._finish(k, now, forced=True)
 
-    def on_truth(self, k: int, states: np.ndarray) -> None:
-        """True target states of scan ``k`` (from the world), for OSPA in the records."""
-        self._truth[k] = np.asarray(states)
-        self._score(k)
-
-    def on_peer_left(self, name: str) -> list:
-        if name in self.alive:
-            self.alive.discard(name)
-            self.stats.peers_left.append((name, self.last_k))
-        return []
-
-    def on_peer_joined(self, name: str, now: float) -> list:
-        if name in self.o.neighbours and name not in self.alive:
-            self.alive.add(name)
-            self.stats.peers_joined.append((name, self.last_k))
-        return []
-
     # -- fusion ---------------------------------------------------------------------------
     def _inputs(self, k: int, rnd: int) -> dict[str, GaussianMixture]:
         if rnd == 0:
@@ -358,10 +373,6 @@ class PeerLogic:
             for old in [kk for kk in d if kk < horizon]:
                 del d[old]
         self._scored = {(kind, kk) for kind, kk in self._scored if kk >= horizon}
-
-    def drain_records(self) -> list[dict]:
-        out, self.records = self.records, []
-        return out
 
     def fused_tracks(self, k: int) -> np.ndarray | None:
         return self._fused_est.get(k)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from peers.logic import PeerOptions, PeerStats
+from peers.logic import PeerBase, PeerOptions, PeerStats
 from protocol.messages import Estimate, Scan, Tracks
 from tracking.imm import (
     IMMEKF,
@@ -65,7 +65,7 @@ class SingleTargetConfig:
     """Added to summary covariance diagonals (the CV acceleration variance is 0)."""
 
 
-class SingleTargetPeer:
+class SingleTargetPeer(PeerBase):
     """A seed-001 peer; the filter is ``"imm-pf"`` or ``"imm-ekf"``."""
 
     position_index = (0, 3)
@@ -197,26 +197,6 @@ class SingleTargetPeer:
         if self._pending is None or self._pending[0] != k:
             return []
         return self._fuse(now, forced=True)
-
-    def on_truth(self, k: int, states: np.ndarray) -> None:
-        self._truth[k] = np.asarray(states)
-        self._score(k)
-
-    def on_peer_left(self, name: str) -> list:
-        if name in self.alive:
-            self.alive.discard(name)
-            self.stats.peers_left.append((name, self.last_k))
-        return []
-
-    def on_peer_joined(self, name: str, now: float) -> list:
-        if name in self.o.neighbours and name not in self.alive:
-            self.alive.add(name)
-            self.stats.peers_joined.append((name, self.last_k))
-        return []
-
-    def drain_records(self) -> list[dict]:
-        out, self.records = self.records, []
-        return out
 
     def current_fused(self) -> GaussianMixture | None:
         return self._last_fused_summary
