@@ -70,6 +70,51 @@ def default_blueprint(peers: list[str]):
     )
 
 
+def viewer_executable() -> str | None:
+    """The ``rerun`` viewer installed with the SDK (next to this Python), else from PATH."""
+    import shutil
+    import sys
+
+    here = Path(sys.executable).with_name("rerun")
+    return str(here) if here.is_file() else shutil.which("rerun")
+
+
+def spawn_viewer(port: int = 9876) -> bool:
+    """Start a native Rerun viewer listening on ``port`` for the run's processes.
+
+    Without a display or without the viewer binary it prints one line and returns False: the
+    recording still goes to the ``.rrd`` files. A viewer already on ``port`` is reused.
+    """
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket() as probe:
+        if probe.connect_ex(("127.0.0.1", port)) == 0:
+            return True  # a viewer (or server) is already listening
+    exe = viewer_executable()
+    if exe is None:
+        print("sensornet: no Rerun viewer found; recording to files only", file=sys.stderr)
+        return False
+    proc = subprocess.Popen([exe, "--port", str(port)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            print("sensornet: the Rerun viewer did not start (no display?); recording to "
+                  "files only", file=sys.stderr)
+            return False
+        with socket.socket() as probe:
+            if probe.connect_ex(("127.0.0.1", port)) == 0:
+                return True
+        time.sleep(0.1)
+    print("sensornet: the Rerun viewer did not open its port in 10 s; recording to files only",
+          file=sys.stderr)
+    return False
+
+
 class RerunSink:
     """Logs one process's records; every method is a no-op when disabled."""
 
@@ -94,8 +139,8 @@ class RerunSink:
             sinks.append(rr.FileSink(str(path)))
             self.path = path
         if viewer == "spawn":
-            rr.spawn(connect=False)
-            sinks.append(rr.GrpcSink())
+            if spawn_viewer():
+                sinks.append(rr.GrpcSink("rerun+http://127.0.0.1:9876/proxy"))
         elif viewer:
             sinks.append(rr.GrpcSink(viewer))
         blueprint = default_blueprint(peers or [])

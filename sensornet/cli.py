@@ -147,8 +147,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x (about {expected:.0f} s); "
           f"output in {out}", flush=True)
+    viewer = args.viewer
+    if viewer == "spawn":  # one viewer for the whole run; every process streams to it
+        from peers.rerun_sink import spawn_viewer
+
+        viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
     handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
-                       viewer=args.viewer, run=args.run, speed=args.speed,
+                       viewer=viewer, run=args.run, speed=args.speed,
                        rerun=not args.no_rerun, lease_ms=args.lease_ms)
     stop = threading.Event()
     injector = None
