@@ -28,7 +28,8 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path, edit, needle):
     assert text != scenario_text("seed000"), "the edit did not apply"
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    for command in (["experiment", str(path), "--runs", "1", "--quiet"],
+    for command in (["experiment", str(path), "--runs", "1", "--quiet", "--out",
+                     str(tmp_path / "out")],
                     ["run", str(path), "--sim"]):
         proc = _cli(*command)
         assert proc.returncode == 2, proc.stderr
@@ -40,7 +41,8 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path, edit, needle):
 def test_unknown_override_and_missing_file_are_user_errors(tmp_path, capsys):
     assert main(["run", "--sim", "--set", "network.topolgy=ring"]) == 2
     assert "network.topolgy" in capsys.readouterr().err
-    assert main(["experiment", str(tmp_path / "nope.toml"), "--runs", "1"]) == 2
+    assert main(["experiment", str(tmp_path / "nope.toml"), "--runs", "1", "--out",
+                 str(tmp_path / "out")]) == 2
     assert main(["run", "--sim", "--fault", "kill:s1@3"]) == 2
 
 
