@@ -64,12 +64,12 @@ def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
     return "\n".join(lines) + "\n"
 
 
-def run_network(source: str, out: Path, overrides: list[str], timeout: float) -> dict:
-    scn = load_scenario(source, overrides=None)
+def run_network(source: str, out: Path, overrides: list[str], timeout: float,
+                sparse: bool = False) -> dict:
     from sim.scenario import parse_overrides
 
     scn = load_scenario(source, overrides=parse_overrides(overrides))
-    handle = start_run(scn, source, out, overrides=overrides, rerun=False)
+    handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse)
     try:
         codes = wait_run(handle, timeout=timeout)
     finally:
@@ -122,7 +122,7 @@ def real_time(res: dict) -> tuple[bool, str, float]:
 
 
 def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
-                 deadline: float) -> list[str]:
+                 deadline: float, sparse: bool = True) -> list[str]:
     rows = ["| graph | peers | real time | detail |", "|---|---:|---|---|"]
     best: dict[int, int] = {}
     peak_rss = 0.0
@@ -133,7 +133,7 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
                                           deadline=deadline))
             t0 = time.monotonic()
             res = run_network(str(path), tmp / f"scale-{n}-{degree}", [],
-                              timeout=scans / 10 + 60 + 3 * n)
+                              timeout=scans / 10 + 60 + 3 * n, sparse=sparse)
             ok, why, rss = real_time(res)
             peak_rss = max(peak_rss, rss if rss == rss else 0.0)
             graph = "ring" if degree == 2 else f"mesh degree {degree}"
@@ -160,6 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sizes", default="10,20,30,40", help="peer counts to try (ascending)")
     p.add_argument("--degrees", default="2,3,4", help="graph degrees to try")
     p.add_argument("--scans", type=int, default=100, help="scans per run")
+    p.add_argument("--full-mesh", action="store_true",
+                   help="let Zenoh link every peer to every other (default: links only along "
+                        "the peer graph, gossip off)")
     p.add_argument("--deadline", type=float, default=0.9,
                    help="fusion deadline, fraction of a scan interval (default 0.9)")
     args = p.parse_args(argv)
@@ -171,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         print("## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun)\n", flush=True)
         print("\n".join(part_latency(tmp, scans)), flush=True)
         print("\n## peers in real time at 10 scans/s, 2 consensus rounds\n", flush=True)
-        print("\n".join(part_scaling(tmp, sizes, degrees, min(scans, 50), args.deadline)),
+        print("\n".join(part_scaling(tmp, sizes, degrees, min(scans, 50), args.deadline,
+                                      sparse=not args.full_mesh)),
               flush=True)
     return 0
 

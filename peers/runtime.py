@@ -50,13 +50,14 @@ class PeerRuntime:
                  lease_ms: int | None = None, out_dir: Path | None = None,
                  run_id: str | None = None, viewer: str | None = None, color_index: int = 0,
                  idle_timeout: float = 30.0, rerun: bool = True,
-                 faults: FaultInjector | None = None, save_tracks: bool = False) -> None:
+                 faults: FaultInjector | None = None, save_tracks: bool = False,
+                 gossip: bool = True) -> None:
         self.logic = logic
         self.name = logic.o.name
         self.keys = Keys(network)
         self.interval = interval
         self.deadline_frac = deadline
-        self.session_args = (list(listen), list(connect), config_file, lease_ms)
+        self.session_args = (list(listen), list(connect), config_file, lease_ms, gossip)
         self.out_dir = out_dir
         self.run_id = run_id or network
         self.viewer = viewer

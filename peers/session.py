@@ -30,7 +30,8 @@ def endpoint(port: int, host: str = "127.0.0.1") -> str:
 
 
 def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
-                 config_file: str | None = None, lease_ms: int | None = None) -> zenoh.Config:
+                 config_file: str | None = None, lease_ms: int | None = None,
+                 gossip: bool = True) -> zenoh.Config:
     """A peer-mode config: the user's JSON5 file if given, then the flags on top of it."""
     if config_file:
         path = Path(config_file)
@@ -51,15 +52,18 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
         if lease_ms:
             conf.insert_json5("transport/link/tx/lease", str(int(lease_ms)))
+        if not gossip:  # links only to the given endpoints (large networks: fewer links)
+            conf.insert_json5("scouting/gossip/enabled", "false")
     except Exception as exc:
         raise SessionError(f"bad Zenoh endpoint or setting: {exc}") from None
     return conf
 
 
 def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
-                 config_file: str | None = None, lease_ms: int | None = None) -> zenoh.Session:
+                 config_file: str | None = None, lease_ms: int | None = None,
+                 gossip: bool = True) -> zenoh.Session:
     """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
-    conf = zenoh_config(listen, connect, config_file, lease_ms)
+    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip)
     try:
         return zenoh.open(conf)
     except Exception as exc:

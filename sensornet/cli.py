@@ -86,7 +86,7 @@ def cmd_peer(args: argparse.Namespace) -> int:
         config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
         viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
         rerun=not args.no_rerun, faults=fault_injector(scn, args.run),
-        save_tracks=args.save_tracks)
+        save_tracks=args.save_tracks, gossip=not args.no_gossip)
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
     code = runtime.run()
@@ -154,7 +154,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
     handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
                        viewer=viewer, run=args.run, speed=args.speed,
-                       rerun=not args.no_rerun, lease_ms=args.lease_ms)
+                       rerun=not args.no_rerun, lease_ms=args.lease_ms, sparse=args.sparse)
     stop = threading.Event()
     injector = None
     if pfaults:
@@ -230,6 +230,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     args.fault = []
     args.lease_ms = None
     args.sim = False
+    args.sparse = False
     return cmd_run(args)
 
 
@@ -326,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("--no-level2", dest="level2", action="store_false")
     pe.add_argument("--lease-ms", type=int, help="Zenoh lease (how fast a frozen peer is seen)")
     pe.add_argument("--color", type=int, default=0, help=argparse.SUPPRESS)
+    pe.add_argument("--no-gossip", action="store_true",
+                    help="link only to the --connect endpoints (no Zenoh gossip discovery)")
     pe.add_argument("--save-tracks", action="store_true",
                     help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
     pe.add_argument("--run", type=int, default=0,
@@ -349,6 +352,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                    help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
                         "(repeatable)")
+    r.add_argument("--sparse", action="store_true",
+                   help="Zenoh links only along the peer graph (gossip off): less overhead "
+                        "in large networks; peers then see only their neighbours come and go")
     r.add_argument("--sim", action="store_true",
                    help="run the discrete-event twin instead of processes (fast, no network)")
     r.add_argument("--lease-ms", type=int,

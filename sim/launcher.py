@@ -72,7 +72,8 @@ def _cli() -> list[str]:
 def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               overrides: list[str] | None = None, viewer: str | None = None,
               run: int = 0, speed: float | None = None, peer_args: dict | None = None,
-              lease_ms: int | None = None, rerun: bool = True) -> RunHandle:
+              lease_ms: int | None = None, rerun: bool = True,
+              sparse: bool = False) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`)."""
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = f"{network}-{uuid.uuid4().hex[:6]}"
@@ -90,13 +91,21 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     cmds = {"world": [*_cli(), "world", source, *common, "--listen", eps["world"],
                       "--peers", ",".join(names), "--run", str(run)]
             + (["--speed", str(speed)] if speed else [])}
+    if sparse:  # each peer links to the world and its graph neighbours only, gossip off
+        from sim.build import adjacency
+
+        _, A = adjacency(scn)
     for i, n in enumerate(names):
-        connect = [eps["world"], *(eps[m] for m in names[:i])]
+        if sparse:
+            connect = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
+        else:
+            connect = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common, "--listen", eps[n],
                    "--color", str(i), "--run", str(run),
                    *[a for c in connect for a in ("--connect", c)],
-                   *(["--lease-ms", str(lease_ms)] if lease_ms else []), *extra] \
+                   *(["--lease-ms", str(lease_ms)] if lease_ms else []),
+                   *(["--no-gossip"] if sparse else []), *extra] \
             + (["--speed", str(speed)] if speed else [])
     handle.commands = cmds
     try:
