@@ -216,3 +216,19 @@ def test_sigterm_leaves_summary_and_recording(tmp_path):
 def test_bad_process_fault_specs(text):
     with pytest.raises(ValueError):
         ProcessFault.parse(text)
+
+
+def test_sparse_links_along_a_ring(tmp_path):
+    """Gossip off, each peer linked to the world and its ring neighbours only: still fuses."""
+    source = tmp_path / "four.toml"
+    source.write_text(FOUR)
+    sets = ["birth.model=truth", "scenario.num_scans=40", "network.topology=ring",
+            "network.deadline=0.9"]
+    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, rerun=False, sparse=True)
+    assert all(c == 0 for c in codes.values()), codes
+    twin = run_twin(scn, 0)
+    for name, s in summaries.items():
+        assert s["stats"]["fused_inputs"] == 2 * scn.num_scans, (name, s["stats"])
+        seen = {p for p, what, _, _ in s["peer_events"] if what == "joined"}
+        assert seen == set(twin.peers[name].o.neighbours)  # only the linked neighbours
+        assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 1e-9
