@@ -5,6 +5,7 @@ their streams into one recording. Each process always writes its own ``.rrd`` fi
 launcher merges them); with ``viewer`` it also streams to a viewer (``"spawn"`` starts one,
 a ``rerun+http://...`` URL connects to a running one).
 
+The 2-D map is drawn north-up (y negated: Rerun's 2-D views point y down).
 Entity paths: ``world/truth``, ``world/scans/<sensor>``, ``world/sensors``,
 ``peers/<peer>/{local,fused}`` (points and 2-sigma covariance ellipses), ``peers/<peer>/tail``,
 ``metrics/<quantity>/<peer>/...`` time series. Timeline ``scan`` (sequence) and ``sim`` (s).
@@ -53,8 +54,6 @@ def default_blueprint(peers: list[str]):
                 rrb.TimeSeriesView(name="OSPA", origin="metrics/ospa"),
                 rrb.TimeSeriesView(name="cardinality", origin="metrics/cardinality"),
                 rrb.TimeSeriesView(name="components", origin="metrics/components"),
-                rrb.TimeSeriesView(name="model probabilities (IMM)",
-                                   origin="metrics/model_probability"),
                 rrb.Tabs(
                     rrb.TimeSeriesView(name="estimate age (scans)", origin="metrics/age"),
                     rrb.TimeSeriesView(name="late / redundant / too old",
@@ -62,12 +61,21 @@ def default_blueprint(peers: list[str]):
                     rrb.TimeSeriesView(name="rejected messages", origin="metrics/rejected"),
                     rrb.TimeSeriesView(name="compute (ms)", origin="metrics/compute_ms"),
                     rrb.TimeSeriesView(name="latency (ms)", origin="metrics/latency_ms"),
+                    rrb.TimeSeriesView(name="model probabilities (IMM)",
+                                       origin="metrics/model_probability"),
                 ),
             ),
             column_shares=[3, 2],
         ),
         collapse_panels=True,
     )
+
+
+def north_up(xy: np.ndarray) -> np.ndarray:
+    """Map coordinates ``(..., 2)`` for Rerun's y-down 2-D views: y negated, so north is up."""
+    out = np.array(xy, dtype=float, copy=True)
+    out[..., 1] *= -1.0
+    return out
 
 
 def viewer_executable() -> str | None:
@@ -153,11 +161,13 @@ class RerunSink:
             self.rr.set_time("scan", sequence=int(k))
             self.rr.set_time("sim", duration=float(t))
 
-    def points(self, path: str, xy: np.ndarray, color=None, radius: float = 6.0,
+    def points(self, path: str, xy: np.ndarray, color=None, radius: float = 4.0,
                labels: list[str] | None = None) -> None:
+        """Points with ``radius`` in UI points (the same size at any zoom)."""
         if self.enabled:
-            self.rr.log(path, self.rr.Points2D(np.asarray(xy, float).reshape(-1, 2),
-                                               colors=color, radii=radius, labels=labels))
+            self.rr.log(path, self.rr.Points2D(north_up(np.asarray(xy, float).reshape(-1, 2)),
+                                               colors=color, radii=-abs(radius),
+                                               labels=labels))
 
     def mixture(self, path: str, mix: GaussianMixture, color) -> None:
         """Component means as points (radius by weight) and their 2-sigma ellipses."""
@@ -165,10 +175,10 @@ class RerunSink:
             return
         rr = self.rr
         xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
-        rr.log(f"{path}/means", rr.Points2D(xy, colors=color,
-                                            radii=3.0 + 4.0 * np.minimum(mix.weights, 2.0)))
-        rr.log(f"{path}/ellipses", rr.LineStrips2D(list(ellipses(mix.means, mix.covs)),
-                                                   colors=color, radii=1.0))
+        rr.log(f"{path}/means", rr.Points2D(north_up(xy), colors=color,
+                                            radii=-(2.0 + 2.0 * np.minimum(mix.weights, 2.0))))
+        rr.log(f"{path}/ellipses", rr.LineStrips2D(list(north_up(ellipses(mix.means, mix.covs))),
+                                                   colors=color, radii=-1.0))
 
     def scalar(self, path: str, value: float | None) -> None:
         if self.enabled and value is not None and np.isfinite(value):
@@ -176,7 +186,8 @@ class RerunSink:
 
     def strips(self, path: str, lines: list[np.ndarray], color=None) -> None:
         if self.enabled:
-            self.rr.log(path, self.rr.LineStrips2D(lines, colors=color, radii=1.5))
+            self.rr.log(path, self.rr.LineStrips2D([north_up(a) for a in lines], colors=color,
+                                                   radii=-1.5))
 
     def text(self, path: str, message: str, level: str = "INFO") -> None:
         if self.enabled:

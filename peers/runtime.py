@@ -347,11 +347,11 @@ class PeerRuntime:
         self.sink.time(msg.k, msg.k * self.interval)
         xy = (msg.states[:, position_columns(msg.states.shape[1])] if len(msg.states)
               else np.zeros((0, 2)))
-        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=8.0)
+        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=5.0)
         self.tails.append(xy)
         if self.sink.enabled:
             self.sink.points(f"peers/{self.name}/tail", np.concatenate(list(self.tails)),
-                             self.color, radius=2.0)
+                             self.color, radius=1.5)
         self.sink.scalar(f"metrics/cardinality/{self.name}/fused", len(msg.states))
 
     def _log_local(self, k: int) -> None:

@@ -91,7 +91,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         sensors = scn.sensors
         sink.time(0, 0.0)
         sink.points("world/sensors", np.array([s.position for s in sensors]),
-                    [color_of(i) for i in range(len(sensors))], radius=15.0,
+                    [color_of(i) for i in range(len(sensors))], radius=8.0,
                     labels=[s.name for s in sensors])
         start = time.monotonic()
         for k in range(1, scn.num_scans + 1):
@@ -112,15 +112,15 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             truth_pub.put(encode(Truth(k, truth.ids[k - 1], X, send_time=now)))
             sent["scans_published"] = k
             sink.time(k, k * scn.scan_period)
-            sink.points("world/truth", X[:, position_columns(X.shape[1])], (255, 255, 255),
-                        radius=7.0,
+            sink.points("world/truth", X[:, position_columns(X.shape[1])], (255, 215, 0),
+                        radius=6.0,
                         labels=[str(i) for i in truth.ids[k - 1]])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
                 if s.kind == "range-bearing" and len(z):  # shown where they point
                     z = np.asarray(s.position) + z[:, :1] * np.column_stack(
                         [np.cos(z[:, 1]), np.sin(z[:, 1])])
-                sink.points(f"world/scans/{s.name}", z, color_of(i), radius=3.0)
+                sink.points(f"world/scans/{s.name}", z, color_of(i), radius=2.0)
             if progress is not None:
                 progress(k)
         if not stop.is_set():
