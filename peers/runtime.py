@@ -51,11 +51,12 @@ class PeerRuntime:
                  run_id: str | None = None, viewer: str | None = None, color_index: int = 0,
                  idle_timeout: float = 30.0, rerun: bool = True,
                  faults: FaultInjector | None = None, save_tracks: bool = False,
-                 gossip: bool = True) -> None:
+                 gossip: bool = True, scan_period: float = 1.0) -> None:
         self.logic = logic
         self.name = logic.o.name
         self.keys = Keys(network)
         self.interval = interval
+        self.scan_period = scan_period  # simulated seconds per scan (the "sim" timeline)
         self.deadline_frac = deadline
         self.session_args = (list(listen), list(connect), config_file, lease_ms, gossip)
         self.out_dir = out_dir
@@ -232,7 +233,7 @@ class PeerRuntime:
         if isinstance(msg, Scan):
             self.scan_sent[msg.k] = msg.send_time
             self.breakdown["transit"].append((wall - msg.send_time) * 1e3)
-            self.sink.time(msg.k, msg.k * self.interval)
+            self.sink.time(msg.k, msg.k * self.scan_period)
             out = self.logic.on_scan(msg, wall)
             self.compute_ms["filter"] += (time.perf_counter() - t0) * 1e3
             self.deadlines[msg.k] = time.monotonic() + self.deadline_frac * self.interval
@@ -344,7 +345,7 @@ class PeerRuntime:
             self.sink.scalar(f"metrics/latency_ms/{self.name}", lat)
         for old in [k for k in self.scan_sent if k < msg.k - 10]:
             del self.scan_sent[old]
-        self.sink.time(msg.k, msg.k * self.interval)
+        self.sink.time(msg.k, msg.k * self.scan_period)
         xy = (msg.states[:, position_columns(msg.states.shape[1])] if len(msg.states)
               else np.zeros((0, 2)))
         self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=5.0)
@@ -371,7 +372,7 @@ class PeerRuntime:
                 for age in r["ages"].values():
                     self.ages.append(age)
                 if self.sink.enabled:
-                    self.sink.time(r["k"], r["k"] * self.interval)
+                    self.sink.time(r["k"], r["k"] * self.scan_period)
                     self.sink.scalar(f"metrics/components/{self.name}/fused", r["n_fused"])
                     if r["ages"]:
                         self.sink.scalar(f"metrics/age/{self.name}", max(r["ages"].values()))
@@ -388,12 +389,12 @@ class PeerRuntime:
                 self.sink.scalar(f"metrics/components/{self.name}/after_level2",
                                  r["n_published"])
             elif kind == "models" and self.sink.enabled:
-                self.sink.time(r["k"], r["k"] * self.interval)
+                self.sink.time(r["k"], r["k"] * self.scan_period)
                 for model, p in r.items():
                     if model not in ("k", "kind"):
                         self.sink.scalar(f"metrics/model_probability/{self.name}/{model}", p)
             elif kind == "ospa" and self.sink.enabled:
-                self.sink.time(r["k"], r["k"] * self.interval)
+                self.sink.time(r["k"], r["k"] * self.scan_period)
                 self.sink.scalar(f"metrics/ospa/{self.name}/{r['which']}", r["value"])
 
     def summary(self) -> dict:

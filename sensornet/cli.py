@@ -86,7 +86,7 @@ def cmd_peer(args: argparse.Namespace) -> int:
         config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
         viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
         rerun=not args.no_rerun, faults=fault_injector(scn, args.run),
-        save_tracks=args.save_tracks, gossip=not args.no_gossip)
+        save_tracks=args.save_tracks, gossip=not args.no_gossip, scan_period=scn.scan_period)
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
     code = runtime.run()
