@@ -75,6 +75,9 @@ class PeerRuntime:
         self.errors: Counter = Counter()
         self.rss_samples: list[tuple[int, float]] = []
         """Resident memory (MB) after scan 1 and every 1000th scan (leak checks)."""
+        self.seen_alive: set[str] = set()
+        self._session = None
+        self._ready_token = None
         self.live_events: list[tuple[str, str, float, int]] = []
         """Liveliness changes seen: (peer, "joined"/"left", wall time, last scan)."""
         self.sent = Counter()
@@ -150,6 +153,8 @@ class PeerRuntime:
                                                         history=True),
             ]
             token = session.liveliness().declare_token(self.keys.alive(self.name))
+            self._session = session
+            self._check_ready()
             try:
                 profile_dir = os.environ.get("SENSORNET_PROFILE")
                 if profile_dir:  # cProfile of the main loop, for finding hot spots
@@ -163,6 +168,8 @@ class PeerRuntime:
             finally:
                 self._finish()
                 token.undeclare()
+                if self._ready_token is not None:
+                    self._ready_token.undeclare()
                 for s in subs:
                     s.undeclare()
         finally:
@@ -202,6 +209,9 @@ class PeerRuntime:
             peer = Keys.last(key)
             if peer == self.name:
                 return
+            if payload:
+                self.seen_alive.add(peer)
+                self._check_ready()
             what = "joined" if payload else "left"
             self.sink.text(f"peers/{self.name}/events", f"{peer} {what}")
             if peer != "world":
@@ -264,6 +274,17 @@ class PeerRuntime:
         """Move the injected-fault records to ``faults-into-<peer>.csv`` (memory stays flat)."""
         if self.faults is not None and self.out_dir is not None:
             self.faults.write_log(self.out_dir / f"faults-into-{self.name}.csv", append=True)
+
+    def _check_ready(self) -> None:
+        """Declare the ``ready`` token once every neighbour has been seen alive.
+
+        The world starts the run when all peers are ready, so no peer misses its neighbours'
+        first estimates while links are still being set up (matters with ``--no-gossip``).
+        """
+        if self._ready_token is None and self._session is not None and set(
+                self.logic.o.neighbours) <= self.seen_alive:
+            self._ready_token = self._session.liveliness().declare_token(
+                self.keys.ready(self.name))
 
     def _run_time(self, wall: float) -> float:
         """Seconds on the run clock (scan ``k`` at ``k * interval``, as in the twin)."""

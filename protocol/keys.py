@@ -1,7 +1,8 @@
 """Zenoh key expressions, one namespace per network name (keeps concurrent runs apart).
 
 ``sensornet/<network>/scan/<sensor>``, ``.../estimate/<peer>``, ``.../tracks/<peer>``,
-``.../truth``, ``.../alive/<peer>`` (liveliness), ``.../ctl``.
+``.../truth``, ``.../alive/<peer>`` (liveliness), ``.../ready/<peer>`` (liveliness, once a
+peer sees all its neighbours), ``.../ctl``.
 """
 
 from __future__ import annotations
@@ -40,6 +41,10 @@ class Keys:
 
     def alive(self, peer: str = "*") -> str:
         return f"{self.base}/alive/{peer}"
+
+    def ready(self, peer: str = "*") -> str:
+        """Liveliness of a peer that sees all its neighbours (the world waits for these)."""
+        return f"{self.base}/ready/{peer}"
 
     def ctl(self) -> str:
         return f"{self.base}/ctl"

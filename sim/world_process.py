@@ -1,6 +1,7 @@
 """The world process: plays a scenario over Zenoh, publishing truth and every sensor's scans.
 
-It waits until the expected peers are alive (liveliness), then publishes scan ``k`` of every
+It waits until the expected peers are ready (a liveliness token a peer declares once it sees
+all its neighbours), then publishes scan ``k`` of every
 sensor and the truth every ``scan_period / speed`` seconds, and a ``Control("end")`` after the
 last scan's fusion deadline. Truth and scans are logged to the run's Rerun recording.
 """
@@ -65,7 +66,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
 
     sent = {"scans": 0, "bytes": 0, "scans_published": 0}
     try:
-        live_sub = session.liveliness().declare_subscriber(keys.alive("*"), on_live,
+        live_sub = session.liveliness().declare_subscriber(keys.ready("*"), on_live,
                                                            history=True)
         block = zenoh.CongestionControl.BLOCK
         pubs = {n: session.declare_publisher(keys.scan(n), congestion_control=block,
