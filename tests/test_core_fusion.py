@@ -441,3 +441,28 @@ def test_optimal_omega_empty_inputs():
     a = single(1.0, [0.0, 0.0], np.eye(2))
     assert optimal_omega(GaussianMixture.empty(2), a) == 0.5
     assert optimal_omega(a, GaussianMixture.empty(2)) == 0.5
+
+
+def test_small_gci_path_equals_the_batched_path():
+    """Few pairs go through plain LAPACK calls; they must agree with the batched closed form."""
+    import tracking.fusion as fusion
+
+    rng = np.random.default_rng(42)
+    for d in (2, 4, 6):
+        for na, nb in ((1, 1), (2, 3), (4, 5)):
+            A = rng.normal(size=(na, d, d))
+            B = rng.normal(size=(nb, d, d))
+            Di = GaussianMixture(rng.uniform(0.1, 2.0, na), rng.normal(size=(na, d)) * 3,
+                                 A @ np.swapaxes(A, 1, 2) + np.eye(d))
+            Dj = GaussianMixture(rng.uniform(0.1, 2.0, nb), rng.normal(size=(nb, d)) * 3,
+                                 B @ np.swapaxes(B, 1, 2) + np.eye(d))
+            small = fusion._gci_pair_small(Di, Dj, 0.3)
+            saved = fusion._SMALL_PAIRS
+            fusion._SMALL_PAIRS = 0
+            try:
+                batched = fusion.gci_pair(Di, Dj, 0.3)
+            finally:
+                fusion._SMALL_PAIRS = saved
+            np.testing.assert_allclose(small.weights, batched.weights, rtol=1e-10)
+            np.testing.assert_allclose(small.means, batched.means, rtol=1e-10, atol=1e-10)
+            np.testing.assert_allclose(small.covs, batched.covs, rtol=1e-10, atol=1e-10)

@@ -57,6 +57,8 @@ def gci_pair(Di: GaussianMixture, Dj: GaussianMixture, omega: float) -> Gaussian
     na, nb = len(Di), len(Dj)
     if na == 0 or nb == 0:
         return GaussianMixture.empty(d)
+    if na * nb <= _SMALL_PAIRS:
+        return _gci_pair_small(Di, Dj, omega)
     Ya, det_a = inv_det_spd(Di.covs)
     Yb, det_b = inv_det_spd(Dj.covs)
     ma, mb = Di.means, Dj.means
@@ -84,6 +86,42 @@ def gci_pair(Di: GaussianMixture, Dj: GaussianMixture, omega: float) -> Gaussian
         means, covs = means.reshape(d, -1).T, covs.reshape(d * d, -1).T.reshape(-1, d, d)
     return GaussianMixture(weights.reshape(-1), means.reshape(na * nb, d),
                            covs.reshape(na * nb, d, d))
+
+
+_SMALL_PAIRS = 24
+"""Up to this many pairs :func:`gci_pair` uses plain batched LAPACK calls (:func:`_gci_pair_small`):
+for the few components of level-2-pruned estimates the closed-form machinery costs more in
+per-call overhead than it saves."""
+
+
+def _gci_pair_small(Di: GaussianMixture, Dj: GaussianMixture, omega: float) -> GaussianMixture:
+    """:func:`gci_pair` for a few pairs: the same information-form equations, ``(na, nb)``
+    stacks through ``numpy.linalg`` (equal to the batched path up to round-off)."""
+    d, na, nb = Di.dim, len(Di), len(Dj)
+    Ya, Yb = np.linalg.inv(Di.covs), np.linalg.inv(Dj.covs)
+    _, logdet_a = np.linalg.slogdet(Di.covs)
+    _, logdet_b = np.linalg.slogdet(Dj.covs)
+    Y = (1.0 - omega) * Ya[:, None] + omega * Yb[None, :]  # (na, nb, d, d)
+    P = np.linalg.inv(Y)
+    P = 0.5 * (P + np.swapaxes(P, -1, -2))
+    _, logdet_y = np.linalg.slogdet(Y)
+    ha = np.einsum("aij,aj->ai", Ya, Di.means)
+    hb = np.einsum("bij,bj->bi", Yb, Dj.means)
+    info = (1.0 - omega) * ha[:, None] + omega * hb[None, :]  # (na, nb, d)
+    means = np.einsum("abij,abj->abi", P, info)
+    diff = Dj.means[None, :] - Di.means[:, None]  # m_b - m_a
+    u = np.einsum("aij,abj->abi", Ya, diff)  # Y_a (m_b - m_a)
+    v = np.einsum("bij,abj->abi", Yb, diff)  # Y_b (m_b - m_a)
+    quad = np.einsum("abi,abij,abj->ab", v, P, u)  # (m_b - m_a)' C^-1 (m_b - m_a)
+    oo = omega * (1.0 - omega)
+    log_det_c = logdet_y + logdet_a[:, None] + logdet_b[None, :]  # det C = det Y det Pa det Pb
+    log_n = -0.5 * (oo * quad + log_det_c - d * np.log(oo) + d * LOG_2PI)
+    with np.errstate(divide="ignore"):
+        log_w = ((1.0 - omega) * np.log(Di.weights)[:, None] + omega * np.log(Dj.weights)[None]
+                 + log_kappa(1.0 - omega, logdet_a, d)[:, None]
+                 + log_kappa(omega, logdet_b, d)[None, :] + log_n)
+    return GaussianMixture(np.exp(log_w).reshape(-1), means.reshape(na * nb, d),
+                           P.reshape(na * nb, d, d))
 
 
 _GCI_BLOCK = 8192
