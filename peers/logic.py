@@ -86,6 +86,8 @@ class PeerStats:
     tuples_out: int = 0
     """Numbers published in estimates (15 per 4-D component: ALGORITHMS.md §9)."""
     not_neighbour: int = 0
+    incompatible: int = 0
+    """Neighbour estimates of the wrong state dimension for this peer's filter."""
     old_round_estimates: int = 0
     fusions: int = 0
     fused_inputs: int = 0
@@ -134,6 +136,17 @@ class PeerBase:
             self.alive.add(name)
             self.stats.peers_joined.append((name, self.last_k))
         return []
+
+    def _from_neighbour(self, est: Estimate) -> bool:
+        """Whether ``est`` comes from a configured neighbour (own and strangers' are ignored;
+        strangers are counted); counts the accepted ones."""
+        if est.sender == self.o.name:
+            return False
+        if est.sender not in self.o.neighbours:
+            self.stats.not_neighbour += 1
+            return False
+        self.stats.estimates_in += 1
+        return True
 
     def drain_records(self) -> list[dict]:
         """Hand the accumulated records to the driver (and forget them)."""
@@ -250,12 +263,8 @@ class PeerLogic(PeerBase):
 
     def on_estimate(self, est: Estimate, now: float) -> list:
         """Store a neighbour's estimate (round 0 through NALE); fuse if a round is complete."""
-        if est.sender == self.o.name:
+        if not self._from_neighbour(est):
             return []
-        if est.sender not in self.o.neighbours:
-            self.stats.not_neighbour += 1
-            return []
-        self.stats.estimates_in += 1
         if est.round == 0:
             self.nale.offer(est.sender, est.k, est.mixture)
         if self._scan is not None and est.k < self._scan.k and est.round > 0:

@@ -20,15 +20,15 @@ import sys
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from peers.single import SingleTargetConfig
 from sim.progress import Progress
 from tracking.imm import (
     IMMEKF,
     IMMGaussianState,
-    IMMParams,
     model_posterior,
     radar_log_likelihood,
 )
@@ -164,22 +164,9 @@ RULES = ("radar 1", "radar 2", "GCI fusion", "particle fusion rule")
 
 
 @dataclass(frozen=True)
-class ExperimentConfig:
-    """Filter and fusion settings of the seed-001 experiment."""
+class ExperimentConfig(SingleTargetConfig):
+    """The peers' filter and fusion settings plus the experiment's own (losses, filters)."""
 
-    imm: IMMParams = field(default_factory=IMMParams)
-    """Models (CV sigma_a, CA jerk sigma), Markov matrix, initial probabilities."""
-    particle: ParticleParams = field(default_factory=ParticleParams)
-    """Particles per model and regularisation jitter."""
-    ratio: RatioConfig = field(default_factory=RatioConfig)
-    """Particle fusion rule: ratio space and clipping."""
-    gci_omega: float | str | None = 0.3
-    """GCI weight of the other peer: a number, None (0.5), or "det" (minimum fused determinant,
-    chosen per scan). 0.3: the fusing filter's own density already carries the fused history
-    (feedback), so the other peer's single-radar estimate gets less than half; picked on runs
-    0-3 of geometry A (0.3: 2.32 m, 0.4: 2.43 m, 0.5: 2.59 m, 0.6: 2.82 m, "det": 4.3 m)."""
-    cov_floor: float = 1e-6
-    """Added to summary covariance diagonals before GCI/ratio (CV acceleration variance 0)."""
     loss_threshold: float = 100.0
     """A track is lost when the position error exceeds this (m) ..."""
     loss_after: int = 20

@@ -161,8 +161,25 @@ def polar_to_cartesian(sensor: RangeBearing, z: np.ndarray) -> np.ndarray:
 # -- IMM-EKF ------------------------------------------------------------------------------------
 
 
+class ModelConditioned:
+    """Shared by IMM states holding ``probs (M,)``, ``means (M, 6)``, ``covs (M, 6, 6)``."""
+
+    probs: np.ndarray
+    means: np.ndarray
+    covs: np.ndarray
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Output combination ``(6,)``: ``sum_j mu_j x_j`` (seed 001 eq. 18)."""
+        return self.probs @ self.means
+
+    def summary(self) -> GaussianMixture:
+        """The one-component-per-model Gaussian mixture a peer publishes (weights = probs)."""
+        return GaussianMixture(self.probs, self.means, self.covs)
+
+
 @dataclass(frozen=True)
-class IMMGaussianState:
+class IMMGaussianState(ModelConditioned):
     """Per-model Gaussians of an IMM-EKF (or of a fused IMM summary)."""
 
     probs: np.ndarray
@@ -173,15 +190,6 @@ class IMMGaussianState:
     """(M, 6, 6) model-conditioned covariances."""
     log_likelihoods: np.ndarray | None = None
     """(M,) ``log Lambda_j`` of the last update (None after a prediction)."""
-
-    @property
-    def estimate(self) -> np.ndarray:
-        """Combined mean ``(6,)``: ``sum_j mu_j x_j``."""
-        return self.probs @ self.means
-
-    def summary(self) -> GaussianMixture:
-        """The one-component-per-model Gaussian mixture a peer publishes (weights = probs)."""
-        return GaussianMixture(self.probs, self.means, self.covs)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ import numpy as np
 
 from tracking.fusion import gci_fuse, optimal_omega
 from tracking.gaussian import symmetrise
-from tracking.imm import POS, STATE_DIM, IMMParams, mixing, model_posterior
+from tracking.imm import POS, STATE_DIM, IMMParams, ModelConditioned, mixing, model_posterior
 from tracking.mixture import GaussianMixture
 
 # -- resampling ---------------------------------------------------------------------------------
@@ -116,7 +116,7 @@ class ParticlePrediction:
 
 
 @dataclass(frozen=True)
-class ParticleState:
+class ParticleState(ModelConditioned):
     """The IMM-PF posterior after one scan."""
 
     particles: np.ndarray
@@ -129,15 +129,6 @@ class ParticleState:
     """(M, 6, 6) model-conditioned posterior covariances (same)."""
     log_likelihoods: np.ndarray | None = None
     """(M,) ``log Lambda_j`` of the last update."""
-
-    @property
-    def estimate(self) -> np.ndarray:
-        """Output combination ``(6,)``: ``sum_j mu_j x_j`` (seed 001 eq. 18)."""
-        return self.probs @ self.means
-
-    def summary(self) -> GaussianMixture:
-        """Posterior summary: one moment-matched component per model (weights ``mu``)."""
-        return GaussianMixture(self.probs, self.means, self.covs)
 
 
 def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
