@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from itertools import permutations
 
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from tracking.fusion import aa_fuse, gci_fuse, gci_pair, metropolis_weights, optimal_omega
+import tracking.fusion as fusion
+from tracking.fusion import (
+    aa_fuse,
+    gci_fuse,
+    gci_pair,
+    gci_product,
+    metropolis_weights,
+    optimal_omega,
+)
 from tracking.mixture import GaussianMixture
 from tracking.reduction import Reducer
 
@@ -305,7 +314,11 @@ def test_gci_fuse_skips_zero_weights_and_reduces():
         return Reducer(prune_threshold=0.0, merge_threshold=4.0)(m)
 
     gci_fuse(dens, [0.3, 0.3, 0.4], reduce=reduce)
-    assert calls[0] == 9 and len(calls) == 2
+    assert calls == [27]  # 3 x 3 x 3 combinations formed at once, reduced once
+    calls.clear()
+    with sequential_fusion():
+        gci_fuse(dens, [0.3, 0.3, 0.4], reduce=reduce)
+    assert calls[0] == 9 and len(calls) == 2  # pair by pair, reduced after each step
     assert gci_fuse([dens[0]], [1.0]) is dens[0]
     with pytest.raises(ValueError):
         gci_fuse(dens, [0.5, 0.5, 0.5])
@@ -313,6 +326,71 @@ def test_gci_fuse_skips_zero_weights_and_reduces():
         gci_fuse(dens, [0.5, 0.5])
     with pytest.raises(ValueError):
         gci_fuse([], [])
+
+
+@contextmanager
+def sequential_fusion():
+    """Make :func:`gci_fuse` take its pair-by-pair path whatever the sizes."""
+    saved = fusion.NARY_MAX_COMBINATIONS
+    fusion.NARY_MAX_COMBINATIONS = 0
+    try:
+        yield
+    finally:
+        fusion.NARY_MAX_COMBINATIONS = saved
+
+
+@pytest.mark.parametrize("cardinality", ["emd", "separate"])
+@pytest.mark.parametrize("d", [2, 4, 6])
+def test_gci_product_equals_sequential_pairing(d, cardinality):
+    """One batched n-ary product == sequential pair steps before any reduction (§3)."""
+    rng = np.random.default_rng(100 + d)
+    for n in (2, 3, 5):
+        dens = [random_mixture(rng, int(rng.integers(1, 4)), d, spread=2.0, scale=2.0)
+                for _ in range(n)]
+        omegas = rng.uniform(0.1, 1.0, n)
+        omegas /= omegas.sum()
+        one = gci_product(dens, omegas, cardinality)
+        with sequential_fusion():
+            seq = gci_fuse(dens, omegas, cardinality=cardinality)
+        assert len(one) == len(seq) == np.prod([len(D) for D in dens])
+        np.testing.assert_allclose(one.weights, seq.weights, rtol=1e-8, atol=1e-14)
+        np.testing.assert_allclose(one.means, seq.means, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(one.covs, seq.covs, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(gci_fuse(dens, omegas, cardinality=cardinality).weights,
+                                   one.weights)
+
+
+def test_gci_product_components_match_closed_form_per_combination():
+    """Each fused component is ``int prod_i (w_i N_i)^omega_i`` of its combination, computed
+    one combination at a time by completing the square (far from the origin: no cancellation)."""
+    rng = np.random.default_rng(7)
+    dens = [random_mixture(rng, k, 4, spread=30.0, scale=20.0) for k in (2, 3, 2)]
+    for D in dens:
+        D.means[:] += 5000.0  # positions far from the origin, as in the scenarios
+    omegas = [0.5, 0.3, 0.2]
+    out = gci_product(dens, omegas)
+    c = 0
+    for a in range(2):
+        for b in range(3):
+            for e in range(2):
+                picks = [(dens[0], a), (dens[1], b), (dens[2], e)]
+                W, m, P = power_product_integral([D.weights[i] for D, i in picks],
+                                                 [D.means[i] for D, i in picks],
+                                                 [D.covs[i] for D, i in picks], omegas)
+                assert out.weights[c] == pytest.approx(W, rel=1e-7)
+                np.testing.assert_allclose(out.means[c], m, rtol=1e-10)
+                np.testing.assert_allclose(out.covs[c], P, rtol=1e-8, atol=1e-9)
+                c += 1
+
+
+def test_gci_product_empty_and_disjoint_inputs():
+    rng = np.random.default_rng(3)
+    a, b = random_mixture(rng, 2, 4), random_mixture(rng, 3, 4)
+    assert len(gci_product([a, GaussianMixture.empty(4), b], [0.3, 0.3, 0.4])) == 0
+    far = GaussianMixture(b.weights, b.means + 1e6, b.covs)
+    assert len(gci_product([a, far], [0.5, 0.5], "separate")) == 0  # nothing in common
+    with pytest.raises(ValueError):
+        gci_product([a, b], [0.5, 0.5], "bogus")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -445,8 +523,6 @@ def test_optimal_omega_empty_inputs():
 
 def test_small_gci_path_equals_the_batched_path():
     """Few pairs go through plain LAPACK calls; they must agree with the batched closed form."""
-    import tracking.fusion as fusion
-
     rng = np.random.default_rng(42)
     for d in (2, 4, 6):
         for na, nb in ((1, 1), (2, 3), (4, 5)):

@@ -16,6 +16,7 @@ single array computation.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Sequence
 
@@ -273,29 +274,106 @@ def gci_fuse(
     normalise: bool = False,
     cardinality: str = "emd",
 ) -> GaussianMixture:
-    """n-ary GCI ``prod_i D_i^(omega_i)`` by sequential pairing (§3), reducing after each step.
+    """n-ary GCI ``prod_i D_i^(omega_i)`` (§3), reduced.
 
-    Step ``i`` fuses the running result (weight ``s = omega_0 + ... + omega_(i-1)``) with the
-    newcomer at ``omega = omega_i / (s + omega_i)``. ``normalise`` gives a unit-mass result
+    While the number of component combinations ``prod_i N_i`` is at most
+    :data:`NARY_MAX_COMBINATIONS` it is formed in one batched step (:func:`gci_product`) and
+    reduced once; beyond, by sequential pairing, reducing after each step (the pair count
+    multiplies): step ``i`` fuses the running result (weight ``s = omega_0 + ... +
+    omega_(i-1)``) with the newcomer at ``omega = omega_i / (s + omega_i)``. Before any
+    reduction both give the same mixture. ``normalise`` gives a unit-mass result
     (single-target densities; with one Gaussian each this is covariance intersection).
     ``cardinality``: see :func:`gci_combine`.
     """
     densities, weights = _check_weights(densities, weights)
-    acc, s = None, 0.0
-    for D, w in zip(densities, weights, strict=True):
-        if w <= 0.0:
-            continue
-        if acc is None:
-            acc, s = D, w
-            continue
-        acc = gci_combine(acc, D, w / (s + w), cardinality)
-        s += w
+    used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0]
+    if len(used) > 1 and math.prod(len(D) for D, _ in used) <= NARY_MAX_COMBINATIONS:
+        acc = gci_product([D for D, _ in used], [w for _, w in used], cardinality)
         if reduce is not None:
             acc = reduce(acc)
+    else:
+        acc, s = None, 0.0
+        for D, w in used:
+            if acc is None:
+                acc, s = D, w
+                continue
+            acc = gci_combine(acc, D, w / (s + w), cardinality)
+            s += w
+            if reduce is not None:
+                acc = reduce(acc)
     assert acc is not None
     if normalise and acc.mass > 0:
         acc = acc.normalised()
     return acc
+
+
+NARY_MAX_COMBINATIONS = 4096
+"""Up to this many component combinations :func:`gci_fuse` forms the n-ary product at once."""
+
+
+def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
+                cardinality: str = "emd") -> GaussianMixture:
+    """``prod_i D_i^(omega_i)`` (``sum omega_i = 1``) in one step: a component per combination.
+
+    The power of a mixture drops cross terms (§3), so the product is, over the combinations
+    ``c = (c_1, ..., c_n)`` of one component per density, ``prod_i (w_ic N_ic)^(omega_i)``:
+    in information form ``Y = sum_i omega_i Y_ic``, ``h = sum_i omega_i Y_ic m_ic``,
+    ``P = Y^-1``, ``m = P h``, and weight ``prod_i w_ic^(omega_i)`` times
+    ``int prod_i N_ic^(omega_i) = exp(-1/2 sum_i omega_i (log det P_ic + m_ic' Y_ic m_ic)
+    + 1/2 (h' m - log det Y))`` (the ``2 pi`` factors cancel as the weights sum to 1). This is
+    what sequential :func:`gci_combine` steps give before any reduction (the same equations,
+    regrouped); combinations are ordered with the first density's component slowest.
+    ``cardinality``: ``"emd"`` or ``"separate"`` (see :func:`gci_combine`).
+    """
+    if cardinality not in CARDINALITY_RULES:
+        raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
+    densities = list(densities)
+    omegas = np.asarray(weights, dtype=float)
+    d = densities[0].dim
+    if any(len(D) == 0 for D in densities):
+        return GaussianMixture.empty(d)
+    masses = np.array([D.mass for D in densities])
+    if cardinality == "separate":
+        if np.any(masses <= 0):
+            return GaussianMixture.empty(d)
+        densities = [D.scaled(1.0 / N) for D, N in zip(densities, masses, strict=True)]
+    sizes = [len(D) for D in densities]
+    n = len(densities)
+    means = np.concatenate([D.means for D in densities])
+    # one inverse for every component of every density; means relative to one reference
+    # point, so the quadratic terms stay small (no cancellation)
+    Yall, det_all = inv_det_spd(np.concatenate([D.covs for D in densities]))
+    ref = means.mean(axis=0)
+    mall = means - ref
+    hall = np.einsum("aij,aj->ai", Yall, mall)
+    with np.errstate(divide="ignore"):  # a zero weight gives zero-weight combinations
+        call = (np.log(np.concatenate([D.weights for D in densities]))
+                - 0.5 * (np.log(det_all) + np.einsum("ai,ai->a", mall, hall)))
+    Y = np.zeros((*sizes, d, d))
+    h = np.zeros((*sizes, d))
+    log_c = np.zeros(sizes)
+    start = 0
+    for i, om in enumerate(omegas.tolist()):
+        part = slice(start, start + sizes[i])
+        start += sizes[i]
+        axes = [1] * n
+        axes[i] = sizes[i]
+        Y += om * Yall[part].reshape(*axes, d, d)
+        h += om * hall[part].reshape(*axes, d)
+        log_c += om * call[part].reshape(axes)
+    C = math.prod(sizes)
+    P, det_y = inv_det_spd(Y.reshape(C, d, d))
+    P = symmetrise(P)
+    h = h.reshape(C, d)
+    m = np.einsum("cij,cj->ci", P, h)
+    log_w = log_c.reshape(C) + 0.5 * (np.einsum("ci,ci->c", h, m) - np.log(det_y))
+    fused = GaussianMixture(np.exp(log_w), m + ref, P)
+    if cardinality == "emd":
+        return fused
+    c = fused.mass
+    if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
+        return GaussianMixture.empty(d)
+    return fused.scaled(float(np.prod(masses ** omegas)) / c)
 
 
 def aa_fuse(
@@ -314,7 +392,8 @@ def _check_weights(densities, weights):
     densities, weights = list(densities), [float(w) for w in weights]
     if not densities or len(densities) != len(weights):
         raise ValueError(f"need one weight per density ({len(densities)} vs {len(weights)})")
-    if any(w < 0 for w in weights) or not np.isclose(sum(weights), 1.0):
+    if any(w < 0 for w in weights) or not math.isclose(sum(weights), 1.0, rel_tol=1e-5,
+                                                       abs_tol=1e-8):
         raise ValueError(f"fusion weights must be non-negative and sum to 1, got {weights}")
     return densities, weights
 
