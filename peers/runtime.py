@@ -8,6 +8,7 @@ A bad message is counted by reason and dropped; nothing a neighbour sends stops 
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import queue
@@ -179,6 +180,10 @@ class PeerRuntime:
 
     def _loop(self) -> None:
         self._cpu_at_start = time.process_time()
+        # the start-up heap (NumPy, SciPy, Zenoh, ...) never becomes garbage: moved out of the
+        # collector's view, a full collection no longer walks it in the middle of a scan
+        gc.collect()
+        gc.freeze()
         while not self._stop:
             now = time.monotonic()
             due = min(self.deadlines.values(), default=now + 0.25)
