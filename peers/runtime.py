@@ -90,10 +90,13 @@ class PeerRuntime:
         self.ages: deque = deque(maxlen=4096)
         self.deadlines: dict[int, float] = {}
         self.scan_sent: dict[int, float] = {}
-        # latency breakdown per scan (wall seconds): scan received, local estimate out
+        # latency breakdown per scan (wall seconds): scan received, local estimate out, and the
+        # last neighbour estimate of the scan received
         self.stage: dict[int, tuple[float, float]] = {}
-        self.breakdown: dict[str, deque] = {n: deque(maxlen=4096)
-                                            for n in ("transit", "local", "fusion_wait")}
+        self.last_arrival: dict[int, float] = {}
+        self.breakdown: dict[str, deque] = {
+            n: deque(maxlen=4096)
+            for n in ("transit", "local", "fusion_wait", "neighbours", "fusing")}
         self.tails: deque = deque(maxlen=20)
         self.stop_reason = ""
         self._stop = False
@@ -262,6 +265,7 @@ class PeerRuntime:
                 self._flush_fault_log()
             self._log_local(msg.k)
         elif isinstance(msg, Estimate):
+            self.last_arrival[msg.k] = wall
             if self.faults is not None and self._hold(msg, wall):
                 return
             out = self.logic.on_estimate(msg, wall)
@@ -363,6 +367,12 @@ class PeerRuntime:
         stage = self.stage.pop(msg.k, None)
         if stage is not None:
             self.breakdown["fusion_wait"].append((now_wall - stage[1]) * 1e3)
+            last = self.last_arrival.pop(msg.k, None)
+            if last is not None and last > stage[1]:  # waited for a neighbour, then fused
+                self.breakdown["neighbours"].append((last - stage[1]) * 1e3)
+                self.breakdown["fusing"].append((now_wall - last) * 1e3)
+        for old in [k for k in self.last_arrival if k < msg.k - 10]:
+            del self.last_arrival[old]
         for old in [k for k in self.stage if k < msg.k - 10]:
             del self.stage[old]
         if sent:
