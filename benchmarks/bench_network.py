@@ -15,7 +15,7 @@ the fusion deadline (``--deadline``, default 0.9 of a scan interval), and the p9
 scan-to-track latency stays under one scan interval (100 ms).
 
     python benchmarks/bench_network.py            # full (several minutes)
-    python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step
+    python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step (~25 s)
 """
 
 from __future__ import annotations
@@ -146,7 +146,12 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
     rows.append("")
     for degree in degrees:
         n = best.get(degree, 0)
-        verdict = "PASS" if n >= TARGETS["peers"] else "FAIL"
+        if n >= TARGETS["peers"]:
+            verdict = "PASS"
+        elif best.get(degree) == max(sizes):  # every size tried kept real time
+            verdict = f"not measured: {max(sizes)} peers was the largest size tried"
+        else:
+            verdict = "FAIL"
         rows.append(f"largest real-time network, degree {degree}: {n} peers "
                     f"(target >= {TARGETS['peers']}: {verdict})")
     rows.append(f"peak resident memory of one peer: {peak_rss:.0f} MB (target < "
@@ -168,13 +173,16 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     sizes = [6] if args.quick else [int(x) for x in args.sizes.split(",")]
     degrees = [2] if args.quick else [int(x) for x in args.degrees.split(",")]
-    scans = 30 if args.quick else args.scans
+    # the latency part always plays the whole scenario: its targets are gone after scan 100,
+    # and shorter runs carry fewer components per estimate (the wire ratio depends on it)
+    scans = args.scans
+    scale_scans = 30 if args.quick else min(scans, 50)
     with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
         tmp = Path(tmp)
         print("## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun)\n", flush=True)
         print("\n".join(part_latency(tmp, scans)), flush=True)
         print("\n## peers in real time at 10 scans/s, 2 consensus rounds\n", flush=True)
-        print("\n".join(part_scaling(tmp, sizes, degrees, min(scans, 50), args.deadline,
+        print("\n".join(part_scaling(tmp, sizes, degrees, scale_scans, args.deadline,
                                       sparse=not args.full_mesh)),
               flush=True)
     return 0
