@@ -182,6 +182,16 @@ def format_summary(summaries: dict[str, dict]) -> str:
             f"{s['bytes_received'] / 1e3:.1f} | {s['rejected_total']} | "
             f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "
             f"{f(s['latency_ms_p99'], '{:.2f}')} |")
+    stages = [("transit", "world -> peer"), ("local", "local filter"),
+              ("neighbours", "waiting for neighbours"), ("fusing", "fusing")]
+    parts = {n: s.get("latency_breakdown_ms_median") or {} for n, s in summaries.items()}
+    if any(p.get(k) is not None for p in parts.values() for k, _ in stages):
+        rows += ["", "Where the latency goes (median ms per scan):", "",
+                 "| peer | " + " | ".join(label for _, label in stages) + " |",
+                 "|---|" + "---:|" * len(stages)]
+        for n, p in parts.items():
+            rows.append(f"| {n} | " + " | ".join(f(p.get(k), "{:.2f}") for k, _ in stages)
+                        + " |")
     return "\n".join(rows)
 
 

@@ -56,3 +56,18 @@ def test_run_sim_prints_the_summary(capsys):
 def test_scenario_show_round_trips(capsys):
     assert main(["scenario", "show", "seed000"]) == 0
     assert capsys.readouterr().out == scenario_text("seed000")
+
+
+def test_run_summary_table_shows_where_the_latency_goes():
+    from sim.launcher import format_summary
+
+    base = {"scans": 10, "mean_ospa_local": 30.0, "mean_ospa_fused": 20.0, "messages_sent": 20,
+            "messages_received": 40, "bytes_sent": 4000, "bytes_received": 8000,
+            "rejected_total": 0, "mean_estimate_age": 0.0, "latency_ms_median": 4.0,
+            "latency_ms_p99": 7.0}
+    with_parts = dict(base, latency_breakdown_ms_median={
+        "transit": 0.8, "local": 0.9, "fusion_wait": 2.3, "neighbours": 1.7, "fusing": 0.6})
+    text = format_summary({"s1": with_parts, "s2": dict(base)})
+    assert "| s1 | 0.80 | 0.90 | 1.70 | 0.60 |" in text
+    assert "| s2 | - | - | - | - |" in text  # a peer without a breakdown (e.g. an old summary)
+    assert "Where the latency goes" not in format_summary({"s2": dict(base)})
