@@ -148,6 +148,10 @@ class PeerBase:
         self.stats.estimates_in += 1
         return True
 
+    def busy(self) -> bool:
+        """Whether the current scan's fusion is still to come (drivers defer side work)."""
+        return False
+
     def drain_records(self) -> list[dict]:
         """Hand the accumulated records to the driver (and forget them)."""
         out, self.records = self.records, []
@@ -181,6 +185,9 @@ class PeerLogic(PeerBase):
         self.ospa_counts = {"local": 0, "fused": 0}
         self._scored: set[tuple[str, int]] = set()
         self._unscored: list[int] = []
+
+    def busy(self) -> bool:
+        return self._scan is not None and not self._scan.done
 
     # -- helpers --------------------------------------------------------------------------
     def _next_seq(self) -> int:

@@ -98,6 +98,7 @@ class PeerRuntime:
             n: deque(maxlen=4096)
             for n in ("transit", "local", "fusion_wait", "neighbours", "fusing")}
         self.tails: deque = deque(maxlen=20)
+        self._deferred: list = []  # Rerun logging postponed off the critical path
         self.stop_reason = ""
         self._stop = False
         self._last_input = time.monotonic()
@@ -203,6 +204,7 @@ class PeerRuntime:
                 self._release_held()
                 self._fire_deadlines()
                 self._drain_records()
+                self._flush_deferred()
             except Exception as exc:  # a bug must not take the peer (and the run) down
                 self._internal_error(exc)
             if time.monotonic() - self._last_input > self.idle_timeout:
@@ -357,6 +359,7 @@ class PeerRuntime:
             self._publish(self.logic.on_deadline(k, time.time()), time.time())
         self.deadlines.clear()
         self._drain_records()
+        self._flush_deferred(force=True)
         self.write_summary()
 
     # -- records, Rerun, summary ------------------------------------------------------------
@@ -392,14 +395,36 @@ class PeerRuntime:
         self.sink.scalar(f"metrics/cardinality/{self.name}/fused", len(msg.states))
 
     def _log_local(self, k: int) -> None:
+        """Log the local estimate of scan ``k`` to Rerun, later: see :meth:`_flush_deferred`."""
         if not self.sink.enabled:
             return
         mix = self.logic.mix
-        self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
         particles = getattr(self.logic, "particles", lambda: None)()
-        if particles is not None:  # IMM-PF peers: the particle cloud
-            self.sink.points(f"peers/{self.name}/particles", particles, self.color, radius=1.0)
-        self.sink.scalar(f"metrics/compute_ms/{self.name}/filter_total", self.compute_ms["filter"])
+        filter_total = self.compute_ms["filter"]
+
+        def log() -> None:
+            self.sink.time(k, k * self.scan_period)
+            self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
+            if particles is not None:  # IMM-PF peers: the particle cloud
+                self.sink.points(f"peers/{self.name}/particles", particles, self.color,
+                                 radius=1.0)
+            self.sink.scalar(f"metrics/compute_ms/{self.name}/filter_total", filter_total)
+
+        self._deferred.append(log)
+
+    def _flush_deferred(self, force: bool = False) -> None:
+        """Run the deferred Rerun logging once the scan's tracks are out and nothing waits.
+
+        Drawing the local mixture (ellipses) right after publishing it took CPU from the
+        neighbours' filter steps on a shared machine, in the very burst that sets the
+        scan-to-track latency; the recording is the same, only written a few ms later.
+        """
+        if not self._deferred or not (force or len(self._deferred) > 10 or (
+                self.q.empty() and not self.logic.busy())):
+            return
+        pending, self._deferred = self._deferred, []
+        for log in pending:
+            log()
 
     def _drain_records(self) -> None:
         for r in self.logic.drain_records():

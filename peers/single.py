@@ -116,6 +116,9 @@ class SingleTargetPeer(PeerBase):
         """The local posterior summary (what is published)."""
         return self.local.summary()
 
+    def busy(self) -> bool:
+        return self._pending is not None
+
     def particles(self, limit: int = 600) -> np.ndarray | None:
         """Up to ``limit`` local particle positions ``(n, 2)`` for display (PF only)."""
         if self.kind != "imm-pf":
