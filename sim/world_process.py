@@ -30,7 +30,8 @@ TRUTH_DELAY = 0.5
 
 Truth is an evaluation side channel (peers score OSPA with it), not an input of the filters:
 sent with the scans it costs every peer a message, a decode and a scoring step in the very
-burst of work that decides the scan-to-track latency. Rerun still logs it at scan ``k``."""
+burst of work that decides the scan-to-track latency. The world's Rerun logging of the scan
+(truth and scans, at scan ``k`` on the timelines) is done then too, for the same reason."""
 
 
 def _wait_until(stop: threading.Event, when: float) -> None:
@@ -113,39 +114,43 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                     [color_of(i) for i in range(len(sensors))], radius=8.0,
                     labels=[s.name for s in sensors])
         start = time.monotonic()
-        pending_truth = None  # (k, due time): the truth message goes out off the scan burst
-        for k in range(1, scn.num_scans + 1):
-            if stop.is_set():
-                break
-            due = start + (k - 1) * interval
-            if pending_truth is not None:
-                _wait_until(stop, pending_truth[1])
-                _publish_truth(truth_pub, truth, pending_truth[0])
-            _wait_until(stop, due)
+
+        def after_burst(k: int) -> None:
+            """Truth message and Rerun logging of scan ``k``, off the peers' busiest moment."""
+            _publish_truth(truth_pub, truth, k)
             X = truth.states[k - 1]
-            for i, s in enumerate(sensors):
-                z = scans[i][k - 1]
-                data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
-                pubs[s.name].put(data)
-                sent["scans"] += 1
-                sent["bytes"] += len(data)
-            pending_truth = (k, due + TRUTH_DELAY * interval)
-            sent["scans_published"] = k
             sink.time(k, k * scn.scan_period)
             sink.points("world/truth", X[:, position_columns(X.shape[1])], (255, 215, 0),
-                        radius=6.0,
-                        labels=[str(i) for i in truth.ids[k - 1]])
+                        radius=6.0, labels=[str(i) for i in truth.ids[k - 1]])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
                 if s.kind == "range-bearing" and len(z):  # shown where they point
                     z = np.asarray(s.position) + z[:, :1] * np.column_stack(
                         [np.cos(z[:, 1]), np.sin(z[:, 1])])
                 sink.points(f"world/scans/{s.name}", z, color_of(i), radius=2.0)
+
+        pending = None  # (k, time): scan k's truth and logging, TRUTH_DELAY after its scans
+        for k in range(1, scn.num_scans + 1):
+            if stop.is_set():
+                break
+            due = start + (k - 1) * interval
+            if pending is not None:
+                _wait_until(stop, pending[1])
+                after_burst(pending[0])
+            _wait_until(stop, due)
+            for i, s in enumerate(sensors):
+                z = scans[i][k - 1]
+                data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
+                pubs[s.name].put(data)
+                sent["scans"] += 1
+                sent["bytes"] += len(data)
+            pending = (k, due + TRUTH_DELAY * interval)
+            sent["scans_published"] = k
             if progress is not None:
                 progress(k)
-        if pending_truth is not None and not stop.is_set():
-            _wait_until(stop, pending_truth[1])
-            _publish_truth(truth_pub, truth, pending_truth[0])
+        if pending is not None and not stop.is_set():
+            _wait_until(stop, pending[1])
+            after_burst(pending[0])
         if not stop.is_set():
             stop.wait(scn.network.deadline * interval + 0.1)
         ctl_pub.put(encode(Control("end", run_id or network, {}, send_time=time.time())))
