@@ -267,12 +267,9 @@ class PeerRuntime:
                 self._flush_fault_log()
             self._log_local(msg.k)
         elif isinstance(msg, Estimate):
-            self.last_arrival[msg.k] = wall
             if self.faults is not None and self._hold(msg, wall):
                 return
-            out = self.logic.on_estimate(msg, wall)
-            self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
-            self._publish(out, time.time())
+            self._deliver(msg, wall)
         elif isinstance(msg, Truth):
             self.logic.on_truth(msg.k, msg.states)
         elif isinstance(msg, Control) and msg.command == "start":
@@ -314,10 +311,16 @@ class PeerRuntime:
 
     def _release_held(self) -> None:
         for msg in self.held.pop_due(time.monotonic()):
-            t0 = time.perf_counter()
-            out = self.logic.on_estimate(msg, time.time())
-            self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
-            self._publish(out, time.time())
+            self._deliver(msg, time.time())
+
+    def _deliver(self, msg: Estimate, wall: float) -> None:
+        """Hand a neighbour estimate to the logic (on arrival, or when an injected delay ends)
+        and publish what it returns; ``wall`` is when the logic got it (latency breakdown)."""
+        self.last_arrival[msg.k] = wall
+        t0 = time.perf_counter()
+        out = self.logic.on_estimate(msg, wall)
+        self.compute_ms["fusion"] += (time.perf_counter() - t0) * 1e3
+        self._publish(out, time.time())
 
     def _internal_error(self, exc: Exception) -> None:
         """Count an unexpected error; print its traceback the first few times (to the log)."""

@@ -62,6 +62,20 @@ SYM4_WORK = 23
 """Scratch planes :func:`sym4_inverse_into` needs."""
 
 
+def _sym2_inverse_into(a, b, d, inv, det, recip, t1, t2) -> None:
+    """``[[a, b], [b, d]]^-1 = [[d, -b], [-b, a]] / det`` into ``inv (2, 2, ...)``, with its
+    determinant into ``det`` and ``1 / det`` into ``recip``; ``t1``, ``t2`` are scratch."""
+    np.multiply(a, d, out=t1)
+    np.multiply(b, b, out=t2)
+    np.subtract(t1, t2, out=det)
+    np.divide(1.0, det, out=recip)
+    np.multiply(d, recip, out=inv[0, 0])
+    np.negative(b, out=t1)
+    np.multiply(t1, recip, out=inv[0, 1])
+    np.multiply(a, recip, out=inv[1, 1])
+    inv[1, 0] = inv[0, 1]
+
+
 def sym4_inverse_into(A: np.ndarray, P: np.ndarray, det: np.ndarray, work: np.ndarray) -> None:
     """The closed-form inverse of :func:`sym4_inverse_entries`, written into given arrays.
 
@@ -76,15 +90,7 @@ def sym4_inverse_into(A: np.ndarray, P: np.ndarray, det: np.ndarray, work: np.nd
     a00, a01, a02, a03, a11, a12, a13, _, _, a33 = A
     Ai, X, T, T2 = (work[k:k + 4].reshape(2, 2, *work.shape[1:]) for k in (0, 4, 8, 12))
     t1, t2, det_a, r_a, s11, det_s, r_s = work[16:23]
-    mul(a00, a11, out=t1)
-    mul(a01, a01, out=t2)
-    sub(t1, t2, out=det_a)
-    np.divide(1.0, det_a, out=r_a)
-    mul(a11, r_a, out=Ai[0, 0])
-    neg(a01, out=t1)
-    mul(t1, r_a, out=Ai[0, 1])
-    mul(a00, r_a, out=Ai[1, 1])
-    Ai[1, 0] = Ai[0, 1]
+    _sym2_inverse_into(a00, a01, a11, Ai, det_a, r_a, t1, t2)
     # X = A^-1 B: x_rc = Ai_r0 a_0(2+c) + Ai_r1 a_1(2+c)
     mul(Ai[:, 0, None], A[None, 2:4], out=X)
     mul(Ai[:, 1, None], A[None, 5:7], out=T)
@@ -100,16 +106,7 @@ def sym4_inverse_into(A: np.ndarray, P: np.ndarray, det: np.ndarray, work: np.nd
     mul(a13, X[1, 1], out=t2)
     add(t1, t2, out=t1)
     sub(a33, t1, out=s11)
-    mul(s00, s11, out=t1)
-    mul(s01, s01, out=t2)
-    sub(t1, t2, out=det_s)
-    np.divide(1.0, det_s, out=r_s)
-    # S^-1 = [[s11, -s01], [-s01, s00]] / det S
-    mul(s11, r_s, out=P[2, 2])
-    neg(s01, out=t1)
-    mul(t1, r_s, out=P[2, 3])
-    mul(s00, r_s, out=P[3, 3])
-    P[3, 2] = P[2, 3]
+    _sym2_inverse_into(s00, s01, s11, P[2:4, 2:4], det_s, r_s, t1, t2)  # S^-1
     # U = -X S^-1: u_rc = -(x_r0 t_0c + x_r1 t_1c)
     U = P[0:2, 2:4]
     mul(X[:, 0, None], P[None, 2, 2:4], out=U)
