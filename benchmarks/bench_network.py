@@ -15,7 +15,7 @@ the fusion deadline (``--deadline``, default 0.9 of a scan interval), and the p9
 scan-to-track latency stays under one scan interval (100 ms).
 
     python benchmarks/bench_network.py            # full (several minutes)
-    python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step (~25 s)
+    python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step (~20 s)
 """
 
 from __future__ import annotations
