@@ -274,7 +274,7 @@ def test_multi_step_equals_repeated_one_step(steps):
 def test_transition_matches_closed_sum():
     F1, Q1 = cv_matrices(1.5, 0.5)
     motion = ConstantVelocity(T=1.5, sigma_w=0.5)
-    for k in range(5):
+    for k in (*range(5), 17, 60):
         F, Q = motion.transition(k)
         np.testing.assert_allclose(F, np.linalg.matrix_power(F1, k), rtol=1e-14)
         ref = sum(
@@ -285,6 +285,13 @@ def test_transition_matches_closed_sum():
         np.testing.assert_allclose(Q, ref, rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError):
         motion.transition(-1)
+
+
+def test_transition_of_a_huge_jump_is_immediate_and_finite():
+    """A scan index 10^9 ahead costs one closed-form evaluation, not 10^9 loop steps."""
+    F, Q = ConstantVelocity(T=1.0, sigma_w=2.0).transition(10**9)
+    assert np.all(np.isfinite(F)) and np.all(np.isfinite(Q))
+    assert F[0, 1] == 1e9 and np.all(np.linalg.eigvalsh(Q) > 0)
 
 
 # ---------------------------------------------------------------------------------------------
