@@ -352,31 +352,44 @@ class GaussianRatio:
     def apply_gaussian(self, means: np.ndarray, covs: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closed-form product ``N(x; m_j, P_j) r(x)`` for Gaussians ``(M, d)``, ``(M, d, d)``
-        (the fusion rule for an IMM-EKF): new means, covariances and ``log int N r dx (M,)``.
+        (the fusion rule of seed 001 eq. 19-21 for an IMM-EKF): new means, covariances and
+        ``log int N r dx (M,)`` (the factor the model probabilities are multiplied by).
 
-        With ``H`` selecting ``dims``: ``P' = (P^-1 + H^T A H)^-1`` computed as
-        ``P - P H^T (I + A H P H^T)^-1 A H P``; the normaliser from the marginal
-        ``s ~ N(m_s, P_s)``.
+        With ``H`` selecting ``dims``, ``P_s = H P H^T``, ``B = I + A P_s`` and the gradient
+        ``g = b - A (m_s - c)`` of ``log r`` at the marginal mean: ``P' = (P^-1 + H^T A H)^-1 =
+        P - P H^T B^-1 A H P`` and ``m' = m + P H^T B^-1 g`` (a Kalman update with a
+        pseudo-measurement of information ``A``); the normaliser is :func:`_log_ratio_normaliser`.
         """
         ix = list(self.dims)
-        k = len(ix)
         PHt = covs[:, :, ix]  # (M, d, k)
         Ps = PHt[:, ix, :]  # (M, k, k)
         ms = means[:, ix] - self.centre  # (M, k)
-        Ik = np.eye(k)
-        B = Ik + self.A @ Ps  # (M, k, k): I + A P_s
+        B = np.eye(len(ix)) + self.A @ Ps  # (M, k, k): I + A P_s
         Binv = np.linalg.inv(B)
-        # gain for the "information" b - A s: P' (P^-1 m + H^T (b - A c')) written as an update
         g = self.b - np.einsum("ij,mj->mi", self.A, ms)  # (M, k) gradient of log r at m_s
         K = PHt @ Binv  # (M, d, k)
         new_means = means + np.einsum("mdk,mk->md", K, g)
         new_covs = symmetrise(covs - K @ self.A @ np.swapaxes(PHt, 1, 2))
-        # log int N(s; m_s, P_s) exp(-1/2 s'As + s'b) ds about centre (s' = s - c)
-        _, logdet = np.linalg.slogdet(B)
-        Ps_g = np.einsum("mij,mj->mi", Binv @ Ps, g)
-        log_norm = (-0.5 * logdet + 0.5 * np.einsum("mi,mi->m", g, Ps_g)
-                    - 0.5 * np.einsum("mi,ij,mj->m", ms, self.A, ms) + ms @ self.b)
+        log_norm = _log_ratio_normaliser(self.A, self.b, ms, Ps, B, g)
         return new_means, new_covs, log_norm
+
+
+def _log_ratio_normaliser(A: np.ndarray, b: np.ndarray, ms: np.ndarray, Ps: np.ndarray,
+                          B: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``log int N(s; m_s, P_s) exp(-1/2 s^T A s + s^T b) ds`` over stacks ``(M, ...)``, ``s``
+    and ``m_s`` taken about the ratio's centre (seed 001 eq. 21 in closed form).
+
+    With ``s = m_s + u``, ``log r(s) = log r(m_s) - 1/2 u^T A u + u^T g``, and
+    ``int N(u; 0, P_s) exp(-1/2 u^T A u + u^T g) du = det(I + A P_s)^-1/2
+    exp(1/2 g^T (P_s^-1 + A)^-1 g)``. ``(P_s^-1 + A)^-1 = P_s (I + A P_s)^-1 = P_s B^-1``
+    (not ``B^-1 P_s``: ``A`` and ``P_s`` need not commute), so the quadratic term is
+    ``g^T P_s x`` with ``B x = g``.
+    """
+    _, logdet = np.linalg.slogdet(B)
+    x = np.linalg.solve(B, g[:, :, None])[:, :, 0]  # B^-1 g
+    quad = np.einsum("mi,mij,mj->m", g, Ps, x)
+    log_r_ms = -0.5 * np.einsum("mi,ij,mj->m", ms, A, ms) + ms @ b
+    return -0.5 * logdet + 0.5 * quad + log_r_ms
 
 
 def gci_summaries(own: GaussianMixture, others: list[GaussianMixture],
