@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from tracking.gmphd import GMPHDFilter, SensorParams, extract, predict, update
+from sim.scenario import FilterSpec
+from tracking.gmphd import DEFAULT_EXTRACTION, GMPHDFilter, SensorParams, extract, predict, update
 from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
 from tracking.reduction import Reducer
@@ -302,12 +303,28 @@ def test_extract_rounds_weights():
     means = np.arange(20.0).reshape(5, 4)
     covs = np.broadcast_to(np.eye(4), (5, 4, 4))
     mix = GaussianMixture(np.array([1.6, 0.4, 0.7, 2.4, 0.5]), means, covs)
-    X = extract(mix)
+    X = extract(mix, rule="round")
     expected = np.concatenate([means[[0, 0]], means[[2]], means[[3, 3]]])
     np.testing.assert_array_equal(X, expected)
-    assert extract(GaussianMixture.empty(4)).shape == (0, 4)
+    assert extract(GaussianMixture.empty(4), rule="round").shape == (0, 4)
     # custom threshold
-    np.testing.assert_array_equal(extract(mix, threshold=1.0), means[[0, 0, 3, 3]])
+    np.testing.assert_array_equal(extract(mix, threshold=1.0, rule="round"), means[[0, 0, 3, 3]])
+
+
+def test_extraction_default_is_cardinality_everywhere():
+    """One default: ``extract``, ``GMPHDFilter`` and the scenario files' ``[filter]`` all use
+    the cardinality rule (docs/algorithms.md: "our choice, the default")."""
+    means = np.arange(20.0).reshape(5, 4)
+    covs = np.broadcast_to(np.eye(4), (5, 4, 4))
+    mix = GaussianMixture(np.array([1.6, 0.4, 0.7, 2.4, 0.5]), means, covs)
+    # mass 5.6 -> 6 targets, but only the 5 components above threshold / 10
+    np.testing.assert_array_equal(extract(mix), means[[3, 0, 2, 4, 1]])
+    np.testing.assert_array_equal(extract(mix), extract(mix, rule="cardinality"))
+    filt = GMPHDFilter(motion=ConstantVelocity(T=1.0, sigma_w=1.0),
+                       sensors=[SensorParams(LinearPosition(sigma_r=1.0), 0.9, 1e-6)],
+                       birth=GaussianMixture.empty(4))
+    assert filt.extraction == DEFAULT_EXTRACTION == "cardinality"
+    assert FilterSpec().extraction == DEFAULT_EXTRACTION
 
 
 # ---------------------------------------------------------------------------------------------

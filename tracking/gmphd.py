@@ -123,9 +123,12 @@ _SELECTIONS: dict[tuple, np.ndarray | None] = {}
 
 EXTRACTION_RULES = ("round", "cardinality")
 """Extraction rules accepted by :func:`extract`."""
+DEFAULT_EXTRACTION = "cardinality"
+"""The one default extraction rule (library, scenarios and docs/algorithms.md agree)."""
 
 
-def extract(mix: GaussianMixture, threshold: float = 0.5, rule: str = "round") -> np.ndarray:
+def extract(mix: GaussianMixture, threshold: float = 0.5,
+            rule: str = DEFAULT_EXTRACTION) -> np.ndarray:
     """State estimates ``(n, d)`` from an intensity.
 
     ``"round"`` (Vo & Ma 2006, Table III): each component with ``w > threshold`` gives
@@ -163,8 +166,8 @@ class GMPHDFilter:
     """Level-1 reduction applied after each correction."""
     extraction_threshold: float = 0.5
     """Components heavier than this are reported as targets."""
-    extraction: str = "round"
-    """Extraction rule: ``"round"`` (Vo–Ma) or ``"cardinality"`` (see :func:`extract`)."""
+    extraction: str = DEFAULT_EXTRACTION
+    """Extraction rule: ``"cardinality"`` (default) or ``"round"`` (Vo–Ma); see :func:`extract`."""
     gate: float | None = None
     """Optional Mahalanobis gate (``nu^T S^-1 nu`` threshold) in the update."""
 
@@ -192,5 +195,5 @@ class GMPHDFilter:
         return extract(mix, self.extraction_threshold, self.extraction)
 
 
-__all__ = ["GMPHDFilter", "SensorParams", "extract", "predict", "update"]
+__all__ = ["DEFAULT_EXTRACTION", "GMPHDFilter", "SensorParams", "extract", "predict", "update"]
 
