@@ -8,14 +8,13 @@ it (``sim.world``) and the filter's clutter intensity is ``lambda_c / V`` over t
 
 from __future__ import annotations
 
-import json
 import math
 import zlib
 from collections.abc import Sequence
 
 import numpy as np
 
-from peers.faults import FaultInjector, FaultPlan
+from peers.faults import FaultInjector
 from peers.logic import PeerLogic, PeerOptions
 from sim.scenario import Scenario, ScenarioError, SensorSpec
 from tracking.gmphd import GMPHDFilter, SensorParams
@@ -226,12 +225,11 @@ def make_peer(scn: Scenario, name: str, run: int = 0, **changes) -> PeerLogic:
 def fault_injector(scn: Scenario, run: int = 0) -> FaultInjector | None:
     """The scenario's link faults for run ``run`` (``None`` without a ``[faults]`` table).
 
-    Seeded from ``(scenario.seed, run)``, so the twin and the real processes of the same run
-    draw the same per-link decisions.
+    Seeded from ``(scenario.seed, run)``; every decision is keyed by that seed, the link and
+    the message (:mod:`peers.faults`), so the twin and the real processes of the same run take
+    the same decisions.
     """
-    if not scn.faults:
+    if scn.faults is None:
         return None
-    plan = FaultPlan.from_spec(json.loads(scn.faults), scn.scan_period / scn.network.speed,
-                               scn.sensor_names, path="faults")
     seed = int(np.random.SeedSequence([scn.seed, run, 0xFA17]).generate_state(1)[0])
-    return FaultInjector(plan, seed)
+    return FaultInjector(scn.faults, seed)

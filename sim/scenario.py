@@ -19,7 +19,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
-import json
 import math
 import re
 import tomllib
@@ -31,6 +30,19 @@ from typing import Any
 
 import numpy as np
 
+from sim.faultplan import (
+    Constant,
+    Delay,
+    Exponential,
+    FaultPlan,
+    LinkLayer,
+    MultiStep,
+    OneStep,
+    PlanConflict,
+    Scans,
+    ShortDelay,
+    Uniform,
+)
 from tracking.reduction import MERGE_RULES
 
 STATE_DIM = 4
@@ -47,6 +59,11 @@ EXTRACTION_RULES = ("round", "cardinality")
 TOPOLOGIES = ("full", "ring", "star", "line", "custom")
 NETWORK_OMEGA_RULES = ("metropolis", "uniform", "det", "chernoff")
 OOS_POLICIES = ("nale", "drop-late", "as-is")
+FAULT_KEYS = ("delay", "loss", "duplicate", "reorder", "reorder_delay", "partitions")
+"""The keys of a ``[faults.default]``, ``[faults.peers.<name>]`` or ``faults.links`` entry."""
+DELAY_KINDS = {"constant": ("value",), "uniform": ("low", "high"), "exponential": ("mean",),
+               "scans": ("low", "high"), "short": (), "one-step": (), "multi-step": ("max_steps",)}
+"""Delay kinds and the parameters each needs."""
 
 Matrix = tuple[tuple[float, ...], ...]
 
@@ -239,8 +256,11 @@ class Scenario:
     """Metric settings."""
     network: NetworkSpec = NetworkSpec()
     """Peer network settings."""
-    faults: str = ""
-    """The ``[faults]`` table as JSON (validated on load; see :mod:`peers.faults`)."""
+    faults: FaultPlan | None = None
+    """Link faults from the ``[faults]`` table (``None``: perfect links), resolved per link
+    (:mod:`sim.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
+    the scan interval ``scan_period / network.speed`` at load: change the speed with an
+    override, not with ``dataclasses.replace``."""
     source: str = ""
     """Where the scenario was read from (a path or ``builtin:<name>``); informational."""
 
@@ -620,15 +640,10 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
         source=origin,
     )
     raw_faults = top.raw("faults", {})
-    if raw_faults:
-        from peers.faults import FaultPlan
-
-        try:
-            FaultPlan.from_spec(raw_faults, scn.scan_period / scn.network.speed, names,
-                                path="faults")
-        except ValueError as exc:
-            raise ctx.fail("faults", str(exc)) from None
-        scn = dataclasses.replace(scn, faults=json.dumps(raw_faults, sort_keys=True))
+    if raw_faults != {}:
+        faults = _faults(_Table(raw_faults, "faults", ctx, ["default", "peers", "links"]),
+                         names, scn.scan_period / scn.network.speed)
+        scn = dataclasses.replace(scn, faults=faults)
     return scn
 
 
@@ -787,6 +802,139 @@ def _metrics(m: _Table) -> MetricsSpec:
     return MetricsSpec(ospa_cutoff=m.number("ospa_cutoff", 200.0, positive=True), ospa_order=order)
 
 
+
+# --------------------------------------------------------------------------------------------
+# [faults]: the link-fault plan
+# --------------------------------------------------------------------------------------------
+
+
+def parse_faults(table: Mapping[str, Any], interval: float, peers: Iterable[str],
+                 label: str = "[faults]") -> FaultPlan:
+    """The fault plan of a ``[faults]`` table, checked like a scenario file's (for code that
+    builds plans without a file). ``interval`` is the scan interval (s) delays in scans are
+    multiples of; ``peers`` the peer names. Errors are :class:`ScenarioError` naming the key
+    (``faults.links[0].loss``), prefixed by ``label``.
+    """
+    if not (isinstance(interval, int | float) and math.isfinite(interval) and interval > 0):
+        raise ScenarioError(f"{label}: scan interval must be > 0 s, got {interval!r}")
+    ctx = _Context(label)
+    return _faults(_Table(dict(table), "faults", ctx, ["default", "peers", "links"]),
+                   list(peers), float(interval))
+
+
+def _faults(f: _Table, names: list[str], interval: float) -> FaultPlan:
+    """``faults.default``, ``faults.peers.<name>``, ``faults.links[i]`` -> the resolved plan."""
+    ctx = f.ctx
+    default = _fault_layer(_Table(f.raw("default", {}), "faults.default", ctx, FAULT_KEYS),
+                           interval)
+    peers: dict[str, LinkLayer] = {}
+    raw = f.raw("peers", {})
+    for name in raw if isinstance(raw, dict) else ():
+        if name not in names:
+            raise ctx.fail(f"faults.peers.{name}", f"key 'faults.peers.{name}' names no peer "
+                                                   f"(peers: {', '.join(names)})")
+    raw_peers = _Table(raw, "faults.peers", ctx, names)
+    for name in raw_peers.data:
+        peers[name] = _fault_layer(
+            _Table(raw_peers.raw(name), raw_peers.key(name), ctx, FAULT_KEYS), interval)
+    links: dict[tuple[str, str], LinkLayer] = {}
+    first: dict[tuple[str, str], str] = {}
+    for i, entry in enumerate(f.tables("links", [])):
+        t = _Table(entry, f"faults.links[{i}]", ctx, ["from", "to", *FAULT_KEYS])
+        pair = (t.choice("from", names), t.choice("to", names))
+        if pair[0] == pair[1]:
+            raise t.fail("to", f"is {pair[1]!r} like 'from': a link joins two different peers")
+        if pair in links:
+            raise ctx.fail(t.path, f"key '{t.path}' repeats the link {pair[0]} -> {pair[1]} "
+                                   f"of '{first[pair]}'")
+        links[pair], first[pair] = _fault_layer(t, interval), t.path
+    try:
+        return FaultPlan.layered(names, interval, default, peers, links)
+    except PlanConflict as exc:
+        raise ctx.fail(exc.key, str(exc)) from None
+
+
+def _fault_layer(t: _Table, interval: float) -> LinkLayer:
+    """One ``default`` / ``peers.<name>`` / ``links[i]`` table: the keys it sets."""
+    kw: dict[str, Any] = {}
+    for name in ("loss", "duplicate", "reorder"):
+        if t.has(name):
+            kw[name] = t.number(name, probability=True)
+    for name in ("delay", "reorder_delay"):
+        if t.has(name):
+            kw[name] = _delay(t, name, interval)
+    if t.has("partitions"):
+        kw["partitions"] = _partitions(t, "partitions")
+    return LinkLayer(**kw, where=t.path)
+
+
+def _delay(t: _Table, name: str, interval: float) -> Delay:
+    """Seconds (a number), a parameterless kind (``"short"``, ``"one-step"``) or a table
+    ``{kind = ..., <its parameters>}`` (:data:`DELAY_KINDS`)."""
+    v = t.raw(name)
+    if isinstance(v, bool) or not isinstance(v, int | float | str | dict):
+        raise t.fail(name, f"must be seconds, a delay kind or a table with 'kind', "
+                           f"got {_short(v)}")
+    if isinstance(v, int | float):
+        if not (math.isfinite(v) and v >= 0):
+            raise t.fail(name, f"must be a delay >= 0 s, got {_short(v)}")
+        return Constant(float(v))
+    path = t.key(name)
+    if isinstance(v, str):
+        kind = t.choice(name, DELAY_KINDS)
+        if DELAY_KINDS[kind]:
+            raise t.fail(name, f"is {kind!r}, which needs a table: {{kind = \"{kind}\", "
+                               + ", ".join(f"{p} = ..." for p in DELAY_KINDS[kind]) + "}")
+        d = _Table({"kind": kind}, path, t.ctx, ["kind"])
+    else:
+        kind = v.get("kind")
+        params = DELAY_KINDS[kind] if isinstance(kind, str) and kind in DELAY_KINDS else sorted(
+            {p for ps in DELAY_KINDS.values() for p in ps})
+        d = _Table(v, path, t.ctx, ["kind", *params])
+        kind = d.choice("kind", DELAY_KINDS)
+    if kind == "constant":
+        return Constant(d.number("value", minimum=0.0))
+    if kind == "uniform":
+        low, high = d.number("low", minimum=0.0), d.number("high", minimum=0.0)
+        if high < low:
+            raise d.fail("high", f"must be >= low ({low:g}), got {high:g}")
+        return Uniform(low, high)
+    if kind == "exponential":
+        return Exponential(d.number("mean", positive=True))
+    if kind == "scans":
+        low, high = d.integer("low", minimum=0), d.integer("high", minimum=0)
+        if high < low:
+            raise d.fail("high", f"must be >= low ({low}), got {high}")
+        return Scans(low, high, interval)
+    if kind == "short":
+        return ShortDelay(interval)
+    if kind == "one-step":
+        return OneStep(interval)
+    return MultiStep(d.integer("max_steps", minimum=1), interval)
+
+
+def _partitions(t: _Table, name: str) -> tuple[tuple[float, float], ...]:
+    """``[[start, end], ...]``: run-clock seconds, ``0 <= start < end``."""
+    raw = t.raw(name)
+    if not isinstance(raw, list):
+        raise t.fail(name, f"must be a list of [start, end] pairs (s), got {_short(raw)}")
+    out = []
+    for i, part in enumerate(raw):
+        where = f"{t.key(name)}[{i}]"
+        ok = isinstance(part, list) and len(part) == 2 and all(
+            isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+            for x in part)
+        if not ok:
+            raise t.ctx.fail(where, f"key '{where}' must be [start, end] (s), got {_short(part)}")
+        start, end = float(part[0]), float(part[1])
+        if start < 0:
+            raise t.ctx.fail(where, f"key '{where}' starts before 0 s: {_short(part)}")
+        if not end > start:
+            raise t.ctx.fail(where, f"key '{where}' must end after it starts, got {_short(part)}")
+        out.append((start, end))
+    return tuple(out)
+
+
 __all__ = [
     "BIRTH_MODELS",
     "FUSION_RULES",
@@ -804,6 +952,7 @@ __all__ = [
     "TargetSpec",
     "builtin_scenarios",
     "load_scenario",
+    "parse_faults",
     "parse_overrides",
     "scenario_text",
     "with_birth_model",

@@ -1,4 +1,8 @@
-"""Link faults: delay distributions, rates, partitions, seeding, reordering, specs and the log."""
+"""Link faults: delay laws, rates, partitions, seeding, reordering, plans from tables, the log.
+
+The plan comes from the scenario layer (:func:`sim.scenario.parse_faults`, the loader's
+validators); keyed draws and their order independence are in ``test_fault_keys.py``.
+"""
 
 from __future__ import annotations
 
@@ -10,21 +14,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from peers.faults import (
-    ACTIONS,
+from peers.faults import ACTIONS, FaultInjector, HoldQueue
+from sim.faultplan import (
     Constant,
     Exponential,
-    FaultInjector,
     FaultPlan,
-    HoldQueue,
     LinkFaults,
+    LinkLayer,
     MultiStep,
     OneStep,
     Scans,
     ShortDelay,
     Uniform,
-    parse_delay,
 )
+from sim.scenario import ScenarioError, parse_faults
 
 N = 20_000
 INTERVAL = 0.1
@@ -79,6 +82,11 @@ def test_exponential_has_its_tail() -> None:
     assert _within(p, math.exp(-3), math.sqrt(math.exp(-3) * (1 - math.exp(-3))), N)
 
 
+def parse_delay(spec, interval: float = INTERVAL):
+    """A delay law from its scenario spelling, through the loader (``faults.default.delay``)."""
+    return parse_faults({"default": {"delay": spec}}, interval, PEERS).default.delay
+
+
 @pytest.mark.parametrize("spec, expected", [
     (0.01, Constant(0.01)),
     (0, Constant(0.0)),
@@ -93,30 +101,31 @@ def test_exponential_has_its_tail() -> None:
     ({"kind": "multi-step", "max_steps": 3}, MultiStep(3, INTERVAL)),
 ])
 def test_parse_delay(spec, expected) -> None:
-    assert parse_delay(spec, INTERVAL) == expected
+    assert parse_delay(spec) == expected
 
 
 @pytest.mark.parametrize("spec, culprit", [
-    (-0.1, "'delay'"),
-    (True, "'delay'"),
-    ("two-step", "'delay'"),
+    (-0.1, "'faults.default.delay'"),
+    (True, "'faults.default.delay'"),
+    ("two-step", "'faults.default.delay'"),
     ("multi-step", "max_steps"),
-    ({"low": 0, "high": 3}, "'delay.kind'"),
-    ({"kind": "gauss"}, "'delay.kind'"),
-    ({"kind": "scans", "low": 0}, "'delay.high'"),
-    ({"kind": "scans", "low": 0, "high": 3, "hi": 1}, "'delay.hi'"),
-    ({"kind": "scans", "low": 0.5, "high": 3}, "'delay.low'"),
-    ({"kind": "scans", "low": 3, "high": 1}, "'delay'"),
-    ({"kind": "uniform", "low": 0.2, "high": 0.1}, "'delay'"),
-    ({"kind": "uniform", "low": "a", "high": 0.1}, "'delay.low'"),
-    ({"kind": "exponential", "mean": 0.0}, "'delay'"),
-    ({"kind": "multi-step", "max_steps": 0}, "'delay'"),
-    ([0.1], "'delay'"),
+    ({"low": 0, "high": 3}, "'faults.default.delay.kind'"),
+    ({"kind": "gauss"}, "'faults.default.delay.kind'"),
+    ({"kind": "scans", "low": 0}, "'faults.default.delay.high'"),
+    ({"kind": "scans", "low": 0, "high": 3, "hi": 1}, "'faults.default.delay.hi'"),
+    ({"kind": "scans", "low": 0.5, "high": 3}, "'faults.default.delay.low'"),
+    ({"kind": "scans", "low": 3, "high": 1}, "'faults.default.delay.high'"),
+    ({"kind": "uniform", "low": 0.2, "high": 0.1}, "'faults.default.delay.high'"),
+    ({"kind": "uniform", "low": "a", "high": 0.1}, "'faults.default.delay.low'"),
+    ({"kind": "exponential", "mean": 0.0}, "'faults.default.delay.mean'"),
+    ({"kind": "multi-step", "max_steps": 0}, "'faults.default.delay.max_steps'"),
+    ({"kind": ["scans"]}, "'faults.default.delay.kind'"),
+    ([0.1], "'faults.default.delay'"),
 ])
 def test_parse_delay_rejects(spec, culprit) -> None:
-    with pytest.raises(ValueError) as err:
-        parse_delay(spec, INTERVAL)
-    assert culprit in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(ScenarioError) as err:
+        parse_delay(spec)
+    assert culprit in str(err.value) and "\n" not in str(err.value), str(err.value)
 
 
 def test_link_faults_validation() -> None:
@@ -294,8 +303,8 @@ def test_twin_runs_with_the_injector() -> None:
     scn = load_scenario("seed000", overrides={"birth.model": "truth"})
     scn = dataclasses.replace(scn, num_scans=8)
     interval = scn.scan_period / scn.network.speed
-    plan = FaultPlan.from_spec({"default": {"delay": "short", "loss": 0.2}}, interval,
-                               scn.sensor_names)
+    plan = parse_faults({"default": {"delay": "short", "loss": 0.2}}, interval,
+                        scn.sensor_names)
     inj = FaultInjector(plan, seed=0)
     result = run_twin(scn, delay=inj.as_link_delay())
     assert set(result.tracks) == set(scn.sensor_names)
@@ -325,14 +334,14 @@ def test_hold_queue_releases_in_delivery_order() -> None:
     assert released == sorted(expected)
 
 
-# -- plans from specs --------------------------------------------------------------------------
+# -- plans from tables -------------------------------------------------------------------------
 
-def test_from_spec_example() -> None:
+def test_parse_faults_example() -> None:
     spec = {"default": {"delay": {"kind": "scans", "low": 0, "high": 3}, "reorder": 1.0,
                         "loss": 0.0},
             "links": [{"from": "s1", "to": "s2", "loss": 0.3}],
             "peers": {"s3": {"partitions": [[10.0, 20.0]]}}}
-    plan = FaultPlan.from_spec(spec, INTERVAL, ["s1", "s2", "s3"])
+    plan = parse_faults(spec, INTERVAL, ["s1", "s2", "s3"])
     scans = Scans(0, 3, INTERVAL)
     assert plan.default == LinkFaults(delay=scans, reorder=1.0,
                                       reorder_delay=Uniform(0.0, 2 * INTERVAL))
@@ -342,17 +351,19 @@ def test_from_spec_example() -> None:
         assert plan.for_link(s, r).partitions == ((10.0, 20.0),)
         assert plan.for_link(s, r).delay == scans
     assert plan.for_link("s1", "s2").partitions == ()
-    assert FaultPlan.from_spec({}, INTERVAL, PEERS) == FaultPlan(
-        default=LinkFaults(reorder_delay=Uniform(0.0, 2 * INTERVAL)))
+    assert parse_faults({}, INTERVAL, PEERS) == FaultPlan(
+        default=LinkFaults(reorder_delay=Uniform(0.0, 2 * INTERVAL)), interval=INTERVAL)
+    assert plan.interval == INTERVAL
+    hash(plan)  # frozen all the way down: a Scenario holding it stays hashable
 
 
-def test_from_spec_precedence() -> None:
+def test_parse_faults_precedence() -> None:
     """default < sender's peer entry < receiver's peer entry < link entry; partitions join."""
     spec = {"default": {"loss": 0.1, "partitions": [[100.0, 110.0]]},
             "peers": {"s1": {"loss": 0.2, "partitions": [[10.0, 20.0]]},
                       "s2": {"loss": 0.25, "duplicate": 0.5, "partitions": [[30.0, 40.0]]}},
             "links": [{"from": "s1", "to": "s2", "loss": 0.3}]}
-    plan = FaultPlan.from_spec(spec, INTERVAL, PEERS)
+    plan = parse_faults(spec, INTERVAL, PEERS)
 
     def loss(s: str, r: str) -> float:
         return plan.for_link(s, r).loss
@@ -368,40 +379,51 @@ def test_from_spec_precedence() -> None:
     assert plan.for_link("s3", "s4").partitions == ((100.0, 110.0),)
 
 
+def test_layered_plan_in_code() -> None:
+    """The same layering without a table: typed layers straight into the plan."""
+    plan = FaultPlan.layered(PEERS, INTERVAL, LinkLayer(loss=0.1),
+                             peers={"s2": LinkLayer(loss=0.25)},
+                             links={("s1", "s2"): LinkLayer(loss=0.3)})
+    assert plan == parse_faults({"default": {"loss": 0.1}, "peers": {"s2": {"loss": 0.25}},
+                                 "links": [{"from": "s1", "to": "s2", "loss": 0.3}]},
+                                INTERVAL, PEERS)
+    assert FaultPlan(links={("s2", "s1"): LinkFaults(loss=0.5)}) == FaultPlan(
+        links=((("s2", "s1"), LinkFaults(loss=0.5)),))
+
+
 @pytest.mark.parametrize("spec, culprit", [
-    ({"nodes": {}}, "'nodes'"),
-    ({"default": {"lost": 0.1}}, "'default.lost' (did you mean 'default.loss'?)"),
-    ({"default": {"loss": 1.5}}, "'default.loss'"),
-    ({"default": {"loss": "high"}}, "'default.loss'"),
-    ({"default": {"loss": True}}, "'default.loss'"),
-    ({"default": {"delay": {"kind": "scans", "low": 0}}}, "'default.delay.high'"),
+    ({"nodes": {}}, "'faults.nodes'"),
+    ({"default": {"lost": 0.1}}, "'faults.default.lost' (did you mean 'faults.default.loss'?)"),
+    ({"default": {"loss": 1.5}}, "'faults.default.loss'"),
+    ({"default": {"loss": "high"}}, "'faults.default.loss'"),
+    ({"default": {"loss": True}}, "'faults.default.loss'"),
+    ({"default": {"delay": {"kind": "scans", "low": 0}}}, "'faults.default.delay.high'"),
     ({"default": {"delay": {"kind": "scans", "low": 0, "high": 3, "hi": 1}}},
-     "'default.delay.hi'"),
-    ({"default": {"delay": {"kind": "gauss"}}}, "'default.delay.kind'"),
-    ({"default": {"reorder_delay": -1.0}}, "'default.reorder_delay'"),
-    ({"default": {"reorder": 0.5, "reorder_delay": 0.0}}, "'default'"),
-    ({"default": 0.1}, "'default'"),
-    ({"links": [{"from": "s1", "to": "s2", "los": 0.3}]}, "'links[0].los'"),
-    ({"links": [{"from": "s1", "to": "s9"}]}, "'links[0].to'"),
-    ({"links": [{"to": "s2"}]}, "'links[0].from'"),
-    ({"links": [{"from": "s1", "to": "s1"}]}, "'links[0]'"),
+     "'faults.default.delay.hi'"),
+    ({"default": {"delay": {"kind": "gauss"}}}, "'faults.default.delay.kind'"),
+    ({"default": {"reorder_delay": -1.0}}, "'faults.default.reorder_delay'"),
+    ({"default": {"reorder": 0.5, "reorder_delay": 0.0}}, "'faults.default.reorder_delay'"),
+    ({"default": {"reorder_delay": 0.0}, "links": [{"from": "s1", "to": "s2", "reorder": 0.5}]},
+     "'faults.default.reorder_delay'"),
+    ({"default": 0.1}, "'faults.default'"),
+    ({"links": [{"from": "s1", "to": "s2", "los": 0.3}]}, "'faults.links[0].los'"),
+    ({"links": [{"from": "s1", "to": "s9"}]}, "'faults.links[0].to'"),
+    ({"links": [{"to": "s2"}]}, "'faults.links[0].from'"),
+    ({"links": [{"from": "s1", "to": "s1"}]}, "'faults.links[0].to'"),
     ({"links": [{"from": "s1", "to": "s2"}, {"from": "s1", "to": "s2", "loss": 0.1}]},
-     "'links[1]'"),
-    ({"links": {"from": "s1"}}, "'links'"),
-    ({"peers": {"s9": {}}}, "'peers.s9'"),
-    ({"peers": {"s3": {"partitions": [[20.0, 10.0]]}}}, "'peers.s3.partitions[0]'"),
-    ({"peers": {"s3": {"partitions": [[1.0]]}}}, "'peers.s3.partitions[0]'"),
-    ({"peers": {"s3": {"partitions": [10.0, 20.0]}}}, "'peers.s3.partitions[0]'"),
-    ({"peers": {"s3": {"partitions": "always"}}}, "'peers.s3.partitions'"),
+     "'faults.links[1]'"),
+    ({"links": {"from": "s1"}}, "'faults.links'"),
+    ({"peers": {"s9": {}}}, "'faults.peers.s9'"),
+    ({"peers": {"s3": {"loss": -0.1}}}, "'faults.peers.s3.loss'"),
+    ({"peers": {"s3": {"partitions": [[20.0, 10.0]]}}}, "'faults.peers.s3.partitions[0]'"),
+    ({"peers": {"s3": {"partitions": [[-1.0, 10.0]]}}}, "'faults.peers.s3.partitions[0]'"),
+    ({"peers": {"s3": {"partitions": [[1.0]]}}}, "'faults.peers.s3.partitions[0]'"),
+    ({"peers": {"s3": {"partitions": [10.0, 20.0]}}}, "'faults.peers.s3.partitions[0]'"),
+    ({"peers": {"s3": {"partitions": "always"}}}, "'faults.peers.s3.partitions'"),
 ])
-def test_from_spec_rejects(spec, culprit) -> None:
-    with pytest.raises(ValueError) as err:
-        FaultPlan.from_spec(spec, INTERVAL, PEERS)
+def test_parse_faults_rejects(spec, culprit) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_faults(spec, INTERVAL, PEERS)
     message = str(err.value)
     assert culprit in message and "\n" not in message, message
-
-
-def test_from_spec_error_path_prefix() -> None:
-    with pytest.raises(ValueError, match=r"'faults\.links\[0\]\.loss'"):
-        FaultPlan.from_spec({"links": [{"from": "s1", "to": "s2", "loss": 2}]}, INTERVAL,
-                            PEERS, path="faults")
+    assert message.startswith("[faults]: "), message

@@ -199,3 +199,76 @@ def test_defaults_for_optional_sections(tmp_path) -> None:
     assert scn.sensor("a").sigma_theta == pytest.approx(np.deg2rad(1.0))
     # range-bearing clutter box: [0, r_max] x [-pi, pi), r_max to the corner (10, 10)
     assert clutter_intensity(scn, "a") == pytest.approx(10 / (np.hypot(10, 10) * 2 * np.pi))
+
+
+# --- [faults]: the typed link-fault plan ------------------------------------------------------
+
+FAULTS = GOOD + """
+[faults.default]
+delay = { kind = "scans", low = 0, high = 2 }
+loss = 0.1
+
+[faults.peers.s3]
+partitions = [[3.0, 4.5]]
+
+[[faults.links]]
+from = "s1"
+to = "s2"
+loss = 0.3
+"""
+
+
+def test_faults_table_becomes_a_typed_plan(seed000: Scenario, tmp_path) -> None:
+    from sim.faultplan import FaultPlan, Scans
+
+    assert seed000.faults is None
+    path = tmp_path / "faulty.toml"
+    path.write_text(FAULTS)
+    scn = load_scenario(path)
+    interval = scn.scan_period / scn.network.speed
+    assert isinstance(scn.faults, FaultPlan) and scn.faults.interval == interval
+    assert scn.faults.default.delay == Scans(0, 2, interval)
+    assert scn.faults.for_link("s1", "s2").loss == 0.3
+    assert scn.faults.for_link("s2", "s1").loss == 0.1
+    assert scn.faults.for_link("s1", "s3").partitions == ((3.0, 4.5),)
+    hash(scn)  # still immutable all the way down
+    assert load_scenario(path) == scn
+
+    # overrides reach the plan: existing keys, new tables, list entries, another delay kind
+    # (an override table merges into the file's table, so a kind spelled as a string)
+    changed = load_scenario(path, parse_overrides([
+        "faults.default.loss=0.2", "faults.links[0].duplicate=0.5", "faults.peers.s2.loss=0.4",
+        'faults.default.delay="one-step"']))
+    assert changed.faults.default.loss == 0.2
+    assert changed.faults.for_link("s1", "s2").duplicate == 0.5
+    assert changed.faults.for_link("s3", "s2").loss == 0.4  # into s2
+    assert changed.faults.default.delay.mean == interval
+    assert load_scenario("seed000", {"faults": {}}).faults is None
+
+
+@pytest.mark.parametrize("where, text, expected", [
+    ("file", FAULTS.replace("loss = 0.3", "loss = 1.3"), ["'faults.links[0].loss'", "[0, 1]"]),
+    ("file", FAULTS.replace("loss = 0.1", "los = 0.1"),
+     ["'faults.default.los'", "did you mean 'faults.default.loss'"]),
+    ("file", FAULTS.replace('to = "s2"', 'to = "s7"'), ["'faults.links[0].to'", "'s7'"]),
+    ("file", FAULTS.replace("[faults.peers.s3]", "[faults.peers.s9]"),
+     ["'faults.peers.s9'", "s1, s2, s3"]),
+    ("file", FAULTS.replace("high = 2", "high = -2"), ["'faults.default.delay.high'"]),
+    ("file", FAULTS.replace("[[3.0, 4.5]]", "[[4.5, 3.0]]"), ["'faults.peers.s3.partitions[0]'"]),
+    ("overrides", "faults.default.reorder=0.5\nfaults.default.reorder_delay=0",
+     ["(overrides)", "'faults.default.reorder_delay'"]),
+    ("overrides", 'faults.links[0].delay="multi-step"',
+     ["(overrides)", "'faults.links[0].delay'", "max_steps"]),
+    ("overrides", "faults=3", ["(overrides)", "'faults'", "table"]),
+])
+def test_bad_faults_give_one_line_errors_naming_the_key(where, text, expected,
+                                                        tmp_path) -> None:
+    path = tmp_path / "faulty.toml"
+    path.write_text(text if where == "file" else FAULTS)
+    overrides = parse_overrides(text.splitlines()) if where == "overrides" else None
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path, overrides)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(str(path)), msg
+    for fragment in expected:
+        assert fragment in msg, msg
