@@ -8,6 +8,7 @@ import pytest
 from tracking.imm import (
     IMMEKF,
     IMMParams,
+    constant_acceleration,
     constant_velocity,
     radar_h,
     radar_jacobian,
@@ -31,6 +32,40 @@ from tracking.particles import (
 
 ONE_MODEL = IMMParams(sigma_cv=0.5, transition=((1.0,),), initial_probs=(1.0,),
                       model_names=("CV",))
+
+
+def _ca_q_closed_form(T: float, sigma: float, gain: str) -> np.ndarray:
+    """One axis' CA process noise written out: ``sigma^2 g g^T`` for the paper's
+    ``g = [T^2/2, T, 1]`` (seed 001 eq. 24) or the integrated-jerk ``g = [T^3/6, T^2/2, T]``."""
+    if gain == "paper":
+        q = [[T**4 / 4, T**3 / 2, T**2 / 2], [T**3 / 2, T**2, T], [T**2 / 2, T, 1.0]]
+    else:
+        q = [[T**6 / 36, T**5 / 12, T**4 / 6], [T**5 / 12, T**4 / 4, T**3 / 2],
+             [T**4 / 6, T**3 / 2, T**2]]
+    return sigma**2 * np.array(q)
+
+
+@pytest.mark.parametrize("T", [0.5, 1.0, 2.0])
+@pytest.mark.parametrize("gain", ["paper", "integrated"])
+def test_ca_process_noise_matches_closed_form(T, gain):
+    """``IMMParams(ca_noise_gain=...)``'s CA ``Q``: the closed form per axis, no cross-axis
+    terms, and the paper's gain is the default."""
+    sigma = 0.3
+    params = IMMParams(T=T, sigma_ca=sigma, ca_noise_gain=gain)
+    ca = params.models()[1]
+    assert ca.name == "CA"
+    q = _ca_q_closed_form(T, sigma, gain)
+    np.testing.assert_allclose(ca.Q[:3, :3], q, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(ca.Q[3:, 3:], q, rtol=1e-14, atol=0)
+    assert not ca.Q[:3, 3:].any() and not ca.Q[3:, :3].any()
+    np.testing.assert_array_equal(constant_acceleration(T, sigma, gain).Q, ca.Q)
+    if gain == "paper":
+        np.testing.assert_array_equal(IMMParams(T=T, sigma_ca=sigma).models()[1].Q, ca.Q)
+
+
+def test_ca_noise_gain_rejects_unknown_name():
+    with pytest.raises(ValueError, match="ca_noise_gain"):
+        IMMParams(ca_noise_gain="jerk")
 
 
 def _kf(m, P, F, Q, H, R, z):

@@ -4,8 +4,10 @@ State ``x = [px, vx, ax, py, vy, ay]`` (m, m/s, m/s^2). Two models (seed 001 §2
 
 * CV: per axis ``F = [[1, T, 0], [0, 1, 0], [0, 0, 0]]`` (the acceleration is zeroed),
   ``Q = sigma_a^2 g g^T`` with ``g = [T^2/2, T, 0]``;
-* CA: per axis ``F = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]``, ``Q = sigma_j^2 g g^T`` with
-  ``g = [T^3/6, T^2/2, T]`` (discrete white jerk, our reading of "CA model").
+* CA: per axis ``F = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]]``, ``Q = sigma^2 g g^T`` with
+  ``g = [T^2/2, T, 1]`` (seed 001 eq. 24: the acceleration takes a random step ``w`` per scan,
+  sigma in m/s^2, default) or, as an option (``IMMParams.ca_noise_gain="integrated"``),
+  ``g = [T^3/6, T^2/2, T]`` (a white jerk held over the scan and integrated, sigma in m/s^3).
 
 Markov switching ``p_ij = P(model j at k | model i at k-1)``. The IMM cycle (Blom &
 Bar-Shalom 1988; seed 001 eq. 5-12): mixing probabilities ``mu_(i|j) = p_ij mu_i / c_j``,
@@ -46,7 +48,7 @@ class KinematicModel:
     G: np.ndarray
     """(6, 2) noise gain (one column per axis)."""
     sigma: float
-    """Noise standard deviation (m/s^2 for CV, m/s^3 for CA)."""
+    """Noise standard deviation (m/s^2 for CV and the paper's CA, m/s^3 for the integrated CA)."""
 
     @property
     def Q(self) -> np.ndarray:
@@ -65,10 +67,33 @@ def constant_velocity(T: float = 1.0, sigma_a: float = 0.2) -> KinematicModel:
     return KinematicModel("CV", F, G, sigma_a)
 
 
-def constant_acceleration(T: float = 1.0, sigma_j: float = 0.1) -> KinematicModel:
-    """CA (Wiener-process acceleration): white jerk noise ``sigma_j`` per axis."""
+CA_NOISE_GAINS = ("paper", "integrated")
+"""CA noise gains: ``"paper"`` ``[T^2/2, T, 1]`` (seed 001 eq. 24), ``"integrated"``
+``[T^3/6, T^2/2, T]`` (piecewise-constant white jerk)."""
+
+
+def ca_noise_gain(T: float, kind: str = "paper") -> np.ndarray:
+    """One axis' CA noise gain ``g (3,)`` (``Q = sigma^2 g g^T``).
+
+    ``"paper"``: ``[T^2/2, T, 1]``, seed 001 eq. 24 (``G_2``): the noise ``w`` (m/s^2) is the
+    acceleration's change over one scan, propagated to velocity and position as a constant
+    acceleration would be (Bar-Shalom's discrete Wiener-process acceleration model).
+    ``"integrated"``: ``[T^3/6, T^2/2, T]``: a jerk ``w`` (m/s^3) held constant over the scan and
+    integrated into acceleration, velocity and position (the gain used before the paper's).
+    """
+    if kind == "paper":
+        return np.array([T * T / 2, T, 1.0])
+    if kind == "integrated":
+        return np.array([T**3 / 6, T * T / 2, T])
+    raise ValueError(f"unknown CA noise gain {kind!r}; expected one of {CA_NOISE_GAINS}")
+
+
+def constant_acceleration(T: float = 1.0, sigma_j: float = 0.1,
+                          gain: str = "paper") -> KinematicModel:
+    """CA (Wiener-process acceleration) with noise ``sigma_j`` per axis through
+    :func:`ca_noise_gain` ``gain`` (m/s^2 for ``"paper"``, m/s^3 for ``"integrated"``)."""
     F3 = np.array([[1.0, T, T * T / 2], [0, 1, T], [0, 0, 1]])
-    F, G = _per_axis(F3, np.array([T**3 / 6, T * T / 2, T]))
+    F, G = _per_axis(F3, ca_noise_gain(T, gain))
     return KinematicModel("CA", F, G, sigma_j)
 
 
@@ -81,15 +106,22 @@ class IMMParams:
     sigma_cv: float = 0.2
     """CV white-acceleration noise in m/s^2 (our reading)."""
     sigma_ca: float = 0.1
-    """CA white-jerk noise in m/s^3 (our reading)."""
+    """CA noise (our reading): the per-scan acceleration change in m/s^2 with the paper's gain,
+    a white jerk in m/s^3 with ``ca_noise_gain="integrated"``."""
     transition: tuple[tuple[float, ...], ...] = ((0.98, 0.02), (0.02, 0.98))
     """Markov matrix ``p_ij`` = P(model j now | model i before)."""
     initial_probs: tuple[float, ...] = (0.5, 0.5)
     """Model probabilities at initialisation (CV, CA)."""
     model_names: tuple[str, ...] = ("CV", "CA")
     """Which models, in order ("CV", "CA"); one entry gives a single-model filter."""
+    ca_noise_gain: str = "paper"
+    """CA noise gain, one of :data:`CA_NOISE_GAINS`: ``"paper"`` ``[T^2/2, T, 1]`` (seed 001
+    eq. 24) or ``"integrated"`` ``[T^3/6, T^2/2, T]``."""
 
     def __post_init__(self) -> None:
+        if self.ca_noise_gain not in CA_NOISE_GAINS:
+            raise ValueError(f"IMMParams: unknown ca_noise_gain {self.ca_noise_gain!r}; "
+                             f"expected one of {CA_NOISE_GAINS}")
         M = len(self.model_names)
         if self.P.shape != (M, M) or len(self.initial_probs) != M:
             raise ValueError(f"IMMParams: {M} models need an {M}x{M} transition matrix and "
@@ -98,7 +130,7 @@ class IMMParams:
     def models(self) -> tuple[KinematicModel, ...]:
         """The models named in ``model_names``, with this configuration's noises."""
         make = {"CV": lambda: constant_velocity(self.T, self.sigma_cv),
-                "CA": lambda: constant_acceleration(self.T, self.sigma_ca)}
+                "CA": lambda: constant_acceleration(self.T, self.sigma_ca, self.ca_noise_gain)}
         return tuple(make[name]() for name in self.model_names)
 
     @property
