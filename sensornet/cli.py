@@ -1,10 +1,21 @@
-"""The ``sensornet`` command line: experiments, scenarios, and (later) peers and the world."""
+"""The ``sensornet`` command line: experiments, scenarios, peers, the world and whole runs.
+
+Every flag either does what it says or is refused: a bad value, a scenario over a budget or a
+file that does not load is one line on stderr and exit code 2 (:class:`UserError`); a run that
+ends with nothing scored is one line and exit code 1.
+"""
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import math
 import os
+import re
+import shutil
+import signal
+import socket
 import sys
 import threading
 import time
@@ -24,14 +35,270 @@ class UserError(Exception):
     """A mistake the user can fix (bad file, bad flag): reported in one line, exit code 2."""
 
 
+# --------------------------------------------------------------------------------------------
+# Run folders: unique, and none left empty when a command fails
+# --------------------------------------------------------------------------------------------
+
+_CREATED: list[Path] = []
+"""Run folders this command created (removed again on failure if nothing was written)."""
+
+
 def _run_folder(base: str | None, kind: str) -> Path:
-    root = Path(base) if base else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}"
-    root.mkdir(parents=True, exist_ok=True)
-    return root
+    """``--out`` if given, else a new ``runs/<time>-<kind>[-n]`` (two runs in the same second
+    get distinct folders: the folder is claimed with an atomic ``mkdir``)."""
+    if base:
+        root = Path(base)
+        if not root.exists():
+            root.mkdir(parents=True)
+            _CREATED.append(root)
+        elif not root.is_dir():
+            raise UserError(f"--out {base}: exists and is not a folder")
+        return root
+    parent = Path("runs")
+    parent.mkdir(exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    for n in itertools.count(1):
+        root = parent / (f"{stamp}-{kind}" if n == 1 else f"{stamp}-{kind}-{n}")
+        try:
+            root.mkdir()
+        except FileExistsError:
+            continue
+        _CREATED.append(root)
+        return root
+    raise AssertionError("unreachable")
+
+
+def _remove_empty_run_folders() -> None:
+    """Remove the folders this command created that hold no file with content."""
+    while _CREATED:
+        root = _CREATED.pop()
+        try:
+            if root.is_dir() and not any(p.is_file() and p.stat().st_size > 0
+                                         for p in root.rglob("*")):
+                shutil.rmtree(root, ignore_errors=True)
+        except OSError:
+            pass
 
 
 def _default_jobs() -> int:
     return max(1, min(os.cpu_count() or 1, 4))
+
+
+# --------------------------------------------------------------------------------------------
+# Flag values: checked by argparse (one line, exit code 2)
+# --------------------------------------------------------------------------------------------
+
+
+def _number(kind: type, minimum: float, strict: bool):
+    """An argparse ``type=``: a finite ``kind`` above (``strict``) or at least ``minimum``."""
+    what = "an integer" if kind is int else "a number"
+    bound = f"> {minimum:g}" if strict else f">= {minimum:g}"
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text!r}") from None
+        if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+            raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text}")
+        return value
+
+    parse.__name__ = what  # argparse names the type in some messages
+    return parse
+
+
+POSITIVE_INT = _number(int, 0, strict=True)
+NONNEGATIVE_INT = _number(int, 0, strict=False)
+POSITIVE_FLOAT = _number(float, 0.0, strict=True)
+
+
+def _network_name(text: str) -> str:
+    from protocol.keys import check_name
+
+    try:
+        return check_name(text, "network name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+_ENDPOINT = re.compile(r"^[a-z][a-z0-9+\-]*/\S+$")
+
+
+def _endpoint(text: str) -> str:
+    """A Zenoh endpoint ``proto/address``, e.g. ``tcp/127.0.0.1:7447``."""
+    if not _ENDPOINT.match(text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a Zenoh endpoint; use PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    return text
+
+
+_VIEWER_URL = re.compile(r"^rerun(\+https?)?://(?P<host>\[[^\]]+\]|[^/:\s]+)(:(?P<port>\d+))?"
+                         r"/proxy$")
+
+
+def _viewer(text: str) -> str | None:
+    """``spawn``, ``none``, or a Rerun gRPC URL like ``rerun+http://127.0.0.1:9876/proxy``."""
+    if text in ("spawn", "none"):
+        return text
+    if not _VIEWER_URL.match(text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not 'spawn', 'none' or a Rerun URL like "
+            f"rerun+http://127.0.0.1:9876/proxy")
+    return text
+
+
+def _existing_file(text: str) -> str:
+    if not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f"file {text!r} not found")
+    return text
+
+
+def viewer_reachable(url: str, timeout: float = 1.0) -> bool:
+    """Whether something accepts TCP connections where ``url`` points (a quick probe, so an
+    absent viewer costs a warning instead of a ten-second stall at the end of every process)."""
+    m = _VIEWER_URL.match(url)
+    if m is None:
+        return False
+    host = m.group("host").strip("[]")
+    port = int(m.group("port") or (80 if url.startswith("rerun+http:") else 443))
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def _resolve_viewer(args: argparse.Namespace) -> None:
+    """``--viewer none`` is no viewer; an unreachable URL is a warning and no viewer."""
+    viewer = getattr(args, "viewer", None)
+    if viewer == "none":
+        args.viewer = None
+    elif viewer and viewer != "spawn" and not viewer_reachable(viewer):
+        print(f"sensornet: warning: no Rerun viewer answers at {viewer}; recording to files "
+              f"only", file=sys.stderr)
+        args.viewer = None
+
+
+def _tcp_port(ep: str) -> tuple[str, int] | None:
+    m = re.match(r"^tcp/(\[[^\]]+\]|[^:/]+):(\d+)", ep)
+    return (m.group(1).strip("[]"), int(m.group(2))) if m else None
+
+
+def _check_listen_free(endpoints: list[str]) -> None:
+    """A ``--listen`` TCP port already in use is a user error before anything starts."""
+    for ep in endpoints:
+        hp = _tcp_port(ep)
+        if hp is None or hp[1] == 0:
+            continue
+        family = socket.AF_INET6 if ":" in hp[0] else socket.AF_INET
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(hp)
+            except OSError as exc:
+                raise UserError(f"--listen {ep}: cannot listen there "
+                                f"({exc.strerror or exc})") from None
+
+
+# --------------------------------------------------------------------------------------------
+# Budgets: a scenario over one refuses to start, naming the limit and the flag that lifts it
+# --------------------------------------------------------------------------------------------
+
+DEFAULT_MAX_POINTS = 5000
+"""Expected measurements per scan of one sensor (clutter + targets)."""
+DEFAULT_MAX_TARGETS = 500
+"""True targets alive at once."""
+DEFAULT_MAX_PEERS = 32
+"""Peer processes one ``sensornet run`` starts on this machine."""
+PROCESS_MB = 200.0
+"""Resident memory of one peer or world process with Rerun recording (measured 95-185 MB)."""
+
+
+def _machine_memory_gb() -> float:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    except (ValueError, OSError, AttributeError):
+        return 8.0
+
+
+def default_memory_gb() -> float:
+    """Half of this machine's memory."""
+    return round(_machine_memory_gb() / 2, 1)
+
+
+def points_per_scan(scn) -> dict[str, float]:
+    """Expected measurements per scan of each sensor: clutter rate + targets alive at most."""
+    targets = targets_at_once(scn)
+    return {s.name: s.clutter_rate + targets * s.detection_probability for s in scn.sensors}
+
+
+def targets_at_once(scn) -> int:
+    """The most true targets alive at one scan."""
+    if scn.truth != "straight" or not scn.targets:
+        return max(1, len(scn.targets))
+    edges = sorted([(t.birth_scan, 1) for t in scn.targets]
+                   + [(t.death_scan + 1, -1) for t in scn.targets])
+    alive = most = 0
+    for _, step in edges:
+        alive += step
+        most = max(most, alive)
+    return most
+
+
+def memory_estimate_gb(scn, workers: int = 1, processes: int = 0) -> float:
+    """A rough upper bound: per worker, every scan of a run held at once (16 bytes a point)
+    plus the filter update's (measurement x component) working set (about 14 float64 a pair);
+    plus :data:`PROCESS_MB` per process for a run over processes."""
+    points = points_per_scan(scn)
+    scans = scn.num_scans * sum(points.values()) * 16
+    components = scn.filter.max_components + len(scn.birth.paper) + targets_at_once(scn)
+    update = components * max(points.values(), default=0) * 14 * 8
+    per_worker = 0.15e9 + scans + update
+    return (max(1, workers) * per_worker + processes * PROCESS_MB * 1e6) / 1e9
+
+
+def check_budget(scn, args: argparse.Namespace, workers: int = 1, processes: int = 0,
+                 wire: bool = False) -> None:
+    """Refuse a scenario over a budget (or, over processes, over what a message carries)."""
+    max_points = getattr(args, "max_points", DEFAULT_MAX_POINTS)
+    max_targets = getattr(args, "max_targets", DEFAULT_MAX_TARGETS)
+    for name, n in points_per_scan(scn).items():
+        if n > max_points:
+            raise UserError(f"sensor {name} expects {n:,.0f} points per scan, over the budget "
+                            f"of {max_points} (--max-points N lifts it)")
+    targets = targets_at_once(scn)
+    if targets > max_targets:
+        raise UserError(f"{targets} true targets at once, over the budget of {max_targets} "
+                        f"(--max-targets N lifts it)")
+    if wire:
+        from protocol.codec import DEFAULT_LIMITS
+
+        for name, n in points_per_scan(scn).items():
+            high = n + 6 * math.sqrt(n)
+            if high > DEFAULT_LIMITS.max_measurements:
+                raise UserError(f"sensor {name} expects {n:,.0f} points per scan: more than one "
+                                f"scan message carries ({DEFAULT_LIMITS.max_measurements}); "
+                                f"run it offline with 'sensornet experiment'")
+        if targets >= DEFAULT_LIMITS.max_components:
+            raise UserError(f"{targets} true targets at once: more than one truth message "
+                            f"carries ({DEFAULT_LIMITS.max_components - 1}); run it offline "
+                            f"with 'sensornet experiment'")
+    if processes:
+        max_peers = getattr(args, "max_peers", DEFAULT_MAX_PEERS)
+        if len(scn.sensors) > max_peers:
+            raise UserError(f"{len(scn.sensors)} sensors would start {len(scn.sensors)} peer "
+                            f"processes on this machine, over the budget of {max_peers} "
+                            f"(--max-peers N lifts it)")
+    max_gb = getattr(args, "max_memory_gb", None) or default_memory_gb()
+    need = memory_estimate_gb(scn, workers, processes)
+    if need > max_gb:
+        raise UserError(f"estimated memory {need:.1f} GB is over the budget of {max_gb:g} GB "
+                        f"(--max-memory-gb X lifts it)")
+
+
+# --------------------------------------------------------------------------------------------
+# Commands
+# --------------------------------------------------------------------------------------------
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -39,12 +306,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from sim.scenario import with_birth_model
 
     scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
-    if args.runs < 1:
-        raise UserError(f"--runs must be at least 1, got {args.runs}")
     if args.fusion:
         from dataclasses import replace
 
         scn = replace(scn, fusion=replace(scn.fusion, rule=args.fusion))
+    check_budget(scn, args, workers=min(args.jobs, args.runs))
     births = ["paper", "truth"] if args.birth == "both" else [args.birth or scn.birth.model]
     out = _run_folder(args.out, "experiment")
     for model in births:
@@ -60,6 +326,14 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace, source: str):
     return load_scenario(source, overrides=parse_overrides(getattr(args, "set", None) or []))
+
+
+def _prepare_peer(args: argparse.Namespace, scn) -> None:
+    """Everything about a peer's flags that can be refused before the peer starts."""
+    check_budget(scn, args, wire=True)
+    _resolve_viewer(args)
+    if args.config:
+        _existing_file(args.config)
 
 
 def cmd_peer(args: argparse.Namespace) -> int:
@@ -78,6 +352,7 @@ def cmd_peer(args: argparse.Namespace) -> int:
         policy=args.policy or net.policy, filter=args.filter or net.filter), fusion=replace(
         scn.fusion, rule=args.fusion or scn.fusion.rule,
         level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
+    _prepare_peer(args, scn)
     speed = args.speed or scn.network.speed
     out = Path(args.out) if args.out else None
     runtime = PeerRuntime(
@@ -106,17 +381,49 @@ def cmd_world(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"--peers names unknown sensors {unknown} "
                         f"(sensors: {', '.join(scn.sensor_names)})")
+    check_budget(scn, args, wire=True)
+    _resolve_viewer(args)
     out = Path(args.out) if args.out else None
+    every = args.progress_every
+
+    def progress(k: int) -> None:
+        if k % every == 0 or k == scn.num_scans:
+            print(f"world: scan {k}/{scn.num_scans} published", flush=True)
+
     try:
         sent = run_world(scn, args.network, run=args.run, listen=args.listen or [],
                          connect=args.connect or [], config_file=args.config, wait_for=peers,
                          wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
-                         viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun)
+                         viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun,
+                         progress=progress, say=lambda line: print(line, flush=True))
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
           f"({sent['bytes'] / 1e3:.1f} kB)", flush=True)
     return 0
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1] if lines else ""
+
+
+def _why_nothing_scored(name: str, s: dict) -> str:
+    rejected = {k: v for k, v in (s.get("rejected") or {}).items() if v}
+    if rejected:
+        parts = ", ".join(f"{v} {k}" for k, v in sorted(rejected.items()))
+        return f"peer {name} scored no scan: it rejected {parts} messages"
+    if s.get("stop_reason"):
+        return f"peer {name} scored no scan (stopped: {s['stop_reason']})"
+    return f"peer {name} scored no scan"
+
+
+def _scored(s: dict) -> bool:
+    vals = [s.get("mean_ospa_local"), s.get("mean_ospa_fused")]
+    return bool(s.get("scans")) and any(v is not None and math.isfinite(v) for v in vals)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -139,55 +446,95 @@ def cmd_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
-    if args.sim:
+    if getattr(args, "sim", False):
+        for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms"):
+            if getattr(args, flag, None):
+                raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
+        check_budget(scn, args)
         return _run_twin(scn, args)
+    check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
+    _check_listen_free(args.listen or [])
+    _resolve_viewer(args)
     out = _run_folder(args.out, "run")
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
     print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
-          f"127.0.0.1, {scn.num_scans} scans at {speed:g}x (about {expected:.0f} s); "
-          f"output in {out}", flush=True)
+          f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
+          f"few seconds to start {len(scn.sensors) + 1} processes); output in {out}", flush=True)
     viewer = args.viewer
     if viewer == "spawn":  # one viewer for the whole run; every process streams to it
         from peers.rerun_sink import spawn_viewer
 
         viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
-    handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
-                       viewer=viewer, run=args.run, speed=args.speed,
-                       rerun=not args.no_rerun, lease_ms=args.lease_ms, sparse=args.sparse)
-    stop = threading.Event()
+    stop = threading.Event()  # SIGINT / SIGTERM: stop the children, then report as usual
+    caught: list[str] = []
+
+    def on_signal(signum, frame) -> None:
+        caught.append(signal.Signals(signum).name)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     injector = None
-    if pfaults:
-        injector = threading.Thread(target=inject_process_faults, daemon=True,
-                                    args=(handle, pfaults, scn.sensor_names[0], stop))
-        injector.start()
     try:
-        codes = wait_run(handle, timeout=expected + args.timeout)
-    except KeyboardInterrupt:
-        handle.stop_all()
-        raise
+        handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
+                           viewer=viewer, run=args.run, speed=args.speed,
+                           rerun=not args.no_rerun, lease_ms=args.lease_ms,
+                           sparse=args.sparse, listen=args.listen, connect=args.connect,
+                           config=args.config, run_id=args.run_id)
+        if pfaults:
+            injector = threading.Thread(target=inject_process_faults, daemon=True,
+                                        args=(handle, pfaults, scn.sensor_names[0], stop))
+            injector.start()
+        codes = wait_run(handle, timeout=expected + args.timeout, stop=stop)
     finally:
         stop.set()
         if injector is not None:
             injector.join(timeout=5)
+        for s, h in previous.items():
+            signal.signal(s, h)
     summaries = read_summaries(out, scn.sensor_names)
-    print(format_summary(summaries))
+    if summaries:
+        print(format_summary(summaries))
     faults_file = out / "process-faults.json"
     if pfaults and faults_file.is_file():
         from sim.launcher import fault_report
 
         print(fault_report(json.loads(faults_file.read_text()), summaries))
     rec = merge_recordings(out)
-    shown = rec or out / "rerun" / "*.rrd"
-    print(f"recording: {shown}  (view it with: rerun {shown})")
+    if rec is not None:
+        print(f"recording: {rec}  (view it with: rerun {rec})")
+    elif not args.no_rerun:
+        print(f"recording: {out / 'rerun'} (the .rrd files could not be merged)")
+    if caught:
+        print(f"sensornet: stopped by {caught[0]}; every process stopped, output in {out}",
+              file=sys.stderr)
+        return 0
+    world = codes.get("world")
+    if world not in (0, None):
+        why = _last_line(handle.logs["world"]).removeprefix("sensornet: error: ")
+        print(f"sensornet: error: the world failed (exit {world}): {why} "
+              f"(log: {handle.logs['world']})", file=sys.stderr)
+        return 2 if world == 2 else 1
     killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart")}
     bad = {n: c for n, c in codes.items() if c != 0 and n not in killed}
-    if bad or len(summaries) != len(scn.sensors):
-        for n, c in bad.items():
-            print(f"{n} exited with code {c}; see {handle.logs[n]}", file=sys.stderr)
-        missing = sorted(set(scn.sensor_names) - set(summaries))
-        if missing:
-            print(f"no summary from {missing}", file=sys.stderr)
+    if bad:
+        n, c = next(iter(bad.items()))
+        why = _last_line(handle.logs[n]).removeprefix("sensornet: error: ")
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        print(f"sensornet: error: {n} exited with code {c}{more}: {why} "
+              f"(log: {handle.logs[n]})", file=sys.stderr)
+        return 2 if c == 2 else 1
+    missing = sorted(set(scn.sensor_names) - set(summaries) - killed)
+    if missing:
+        print(f"sensornet: error: no summary from {', '.join(missing)} (logs in {out / 'logs'})",
+              file=sys.stderr)
+        return 1
+    unscored = [n for n, s in summaries.items() if not _scored(s) and n not in killed]
+    if unscored:
+        n = unscored[0]
+        print(f"sensornet: error: {_why_nothing_scored(n, summaries[n])}"
+              + (f" (and {len(unscored) - 1} more peers)" if len(unscored) > 1 else ""),
+              file=sys.stderr)
         return 1
     return 0
 
@@ -221,16 +568,17 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
             out = _run_folder(args.out, "run")
             result.faults.write_log(out / "faults.csv")
             print(f"fault log: {out / 'faults.csv'}")
+    unscored = [n for n, s in summaries.items() if not _scored(s)]
+    if unscored:
+        print(f"sensornet: error: peer {unscored[0]} scored no scan", file=sys.stderr)
+        return 1
     return 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    """``sensornet run seed000`` with a viewer (``--viewer spawn`` unless told otherwise)."""
     args.scenario = "seed000"
-    args.set = list(args.set or []) + ["birth.model=truth"]
-    args.fault = []
-    args.lease_ms = None
     args.sim = False
-    args.sparse = False
     return cmd_run(args)
 
 
@@ -244,11 +592,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     bad = [p for p in policies if p not in ("nale", "drop-late", "as-is")]
     if bad:
         raise UserError(f"unknown policies {bad}; use nale, drop-late, as-is")
-    if args.runs < 1:
-        raise UserError(f"--runs must be at least 1, got {args.runs}")
-    rows = sweep(args.scenario, args.param, values, policies, args.runs,
-                 base=parse_overrides(args.set or []), real=args.real, jobs=args.jobs,
-                 progress=not args.quiet)
+    base = parse_overrides(args.set or [])
+    scn = load_scenario(args.scenario, overrides=base)
+    if args.real:
+        check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
+    else:
+        check_budget(scn, args, workers=args.jobs)
+    rows = sweep(args.scenario, args.param, values, policies, args.runs, base=base,
+                 real=args.real, jobs=args.jobs, progress=not args.quiet)
     print(format_summary(args.param, summarise(rows)))
     for path in write_outputs(rows, args.param, _run_folder(args.out, "sweep")):
         print(f"wrote {path}")
@@ -267,18 +618,46 @@ def cmd_scenario(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------------------------
+# The parser
+# --------------------------------------------------------------------------------------------
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage block) with exit code 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see: {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="sensornet",
         description="Peer-to-peer multi-sensor multi-target tracking (GM-PHD, GCI fusion).",
     )
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+
+    def add_budget_flags(sp: argparse.ArgumentParser, peers: bool = False) -> None:
+        g = sp.add_argument_group("budgets (a scenario over one refuses to start)")
+        g.add_argument("--max-points", type=POSITIVE_INT, default=DEFAULT_MAX_POINTS,
+                       metavar="N", help="expected measurements per scan of one sensor "
+                       f"(default {DEFAULT_MAX_POINTS})")
+        g.add_argument("--max-targets", type=POSITIVE_INT, default=DEFAULT_MAX_TARGETS,
+                       metavar="N", help=f"true targets at once (default {DEFAULT_MAX_TARGETS})")
+        if peers:
+            g.add_argument("--max-peers", type=POSITIVE_INT, default=DEFAULT_MAX_PEERS,
+                           metavar="N", help="peer processes started on this machine "
+                           f"(default {DEFAULT_MAX_PEERS})")
+        g.add_argument("--max-memory-gb", type=POSITIVE_FLOAT, metavar="X",
+                       help="estimated memory (default: half of this machine's, "
+                       f"{default_memory_gb():g} GB)")
 
     def add_mc_flags(sp: argparse.ArgumentParser, runs: int) -> None:
-        sp.add_argument("--runs", type=int, default=runs, help=f"Monte Carlo runs (default {runs})")
-        sp.add_argument("--jobs", type=int, default=_default_jobs(),
+        sp.add_argument("--runs", type=POSITIVE_INT, default=runs,
+                        help=f"Monte Carlo runs (default {runs})")
+        sp.add_argument("--jobs", type=POSITIVE_INT, default=_default_jobs(),
                         help="worker processes (default: number of cores, at most 4)")
-        sp.add_argument("--out", help="output folder (default: runs/<time>-experiment)")
+        sp.add_argument("--out", help="output folder (default: runs/<time>-<command>)")
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
 
     e = sub.add_parser("experiment", help="offline Monte Carlo: local vs fused vs centralized")
@@ -291,21 +670,46 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a scenario value, e.g. --set fusion.level2_pruning=false "
                         "or --set sensors.s1.clutter_rate=50 (repeatable)")
     add_mc_flags(e, 50)
+    add_budget_flags(e)
     e.set_defaults(func=cmd_experiment)
 
-    def add_net_flags(sp: argparse.ArgumentParser, network_required: bool) -> None:
-        sp.add_argument("--network", required=network_required,
-                        help="network name: the key-space of this run (runs apart by name)")
-        sp.add_argument("--listen", action="append", metavar="ENDPOINT",
-                        help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447")
-        sp.add_argument("--connect", action="append", metavar="ENDPOINT",
-                        help="Zenoh endpoint to connect to (repeatable)")
-        sp.add_argument("--config", help="a Zenoh JSON5 config file (flags apply on top)")
-        sp.add_argument("--out", help="folder for the summary and the .rrd file")
-        sp.add_argument("--run-id", help="Rerun recording id shared by the run's processes")
-        sp.add_argument("--viewer", help="'spawn' a Rerun viewer or a rerun+http:// URL")
-        sp.add_argument("--speed", type=float, help="wall-clock speed factor (default: "
-                        "the scenario's network.speed)")
+    def add_net_flags(sp: argparse.ArgumentParser, network_required: bool,
+                      launcher: bool = False) -> None:
+        if launcher:
+            sp.add_argument("--network", type=_network_name,
+                            help="network name: the key space of this run (default: a fresh "
+                                 "random name)")
+            sp.add_argument("--listen", action="append", metavar="ENDPOINT", type=_endpoint,
+                            help="the world listens here (peers connect to the first), e.g. "
+                                 "tcp/127.0.0.1:7447, so that more peers can join by hand")
+            sp.add_argument("--connect", action="append", metavar="ENDPOINT", type=_endpoint,
+                            help="every process also connects here, e.g. a zenohd router "
+                                 "(repeatable)")
+            sp.add_argument("--config", type=_existing_file,
+                            help="a Zenoh JSON5 config file for every process (flags apply "
+                                 "on top)")
+            sp.add_argument("--out", help="run folder (default: runs/<time>-run)")
+            sp.add_argument("--run-id", type=_network_name,
+                            help="Rerun recording id of the run (default: network name + "
+                                 "random suffix)")
+        else:
+            sp.add_argument("--network", required=network_required, type=_network_name,
+                            help="network name: the key space of this run (runs apart by "
+                                 "name)")
+            sp.add_argument("--listen", action="append", metavar="ENDPOINT", type=_endpoint,
+                            help="Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447")
+            sp.add_argument("--connect", action="append", metavar="ENDPOINT", type=_endpoint,
+                            help="Zenoh endpoint to connect to (repeatable)")
+            sp.add_argument("--config", type=_existing_file,
+                            help="a Zenoh JSON5 config file (flags apply on top)")
+            sp.add_argument("--out", help="folder for the summary and the .rrd file")
+            sp.add_argument("--run-id", type=_network_name,
+                            help="Rerun recording id shared by the run's processes")
+        sp.add_argument("--viewer", type=_viewer,
+                        help="'spawn' a Rerun viewer, 'none', or a rerun+http://HOST:PORT/proxy "
+                             "URL (an unreachable URL is a warning: files only)")
+        sp.add_argument("--speed", type=POSITIVE_FLOAT, help="wall-clock speed factor "
+                        "(default: the scenario's network.speed)")
         sp.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="override a scenario value (repeatable)")
         sp.add_argument("--no-rerun", action="store_true",
@@ -319,56 +723,67 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local filter (default: the scenario's network.filter)")
     pe.add_argument("--fusion", choices=["gci", "aa", "ratio", "none"],
                     help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
-    pe.add_argument("--rounds", type=int, help="consensus rounds per scan")
+    pe.add_argument("--rounds", type=POSITIVE_INT, help="consensus rounds per scan (>= 1)")
     pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
     pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
     pe.add_argument("--level2", dest="level2", action="store_true", default=None,
                     help="level-2 pruning before publishing")
     pe.add_argument("--no-level2", dest="level2", action="store_false")
-    pe.add_argument("--lease-ms", type=int, help="Zenoh lease (how fast a frozen peer is seen)")
-    pe.add_argument("--color", type=int, default=0, help=argparse.SUPPRESS)
+    pe.add_argument("--lease-ms", type=POSITIVE_INT,
+                    help="Zenoh lease (how fast a frozen peer is seen)")
+    pe.add_argument("--color", type=NONNEGATIVE_INT, default=0, help=argparse.SUPPRESS)
     pe.add_argument("--no-gossip", action="store_true",
                     help="link only to the --connect endpoints (no Zenoh gossip discovery)")
     pe.add_argument("--save-tracks", action="store_true",
                     help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
-    pe.add_argument("--run", type=int, default=0,
+    pe.add_argument("--run", type=NONNEGATIVE_INT, default=0,
                     help="Monte Carlo run index (seeds the injected link faults)")
-    pe.add_argument("--idle-timeout", type=float, default=30.0,
+    pe.add_argument("--idle-timeout", type=POSITIVE_FLOAT, default=30.0,
                     help="stop after this many seconds without input (default 30)")
+    add_budget_flags(pe)
     pe.set_defaults(func=cmd_peer)
 
     w = sub.add_parser("world", help="play a scenario's truth and scans over Zenoh")
     w.add_argument("scenario", nargs="?", default="seed000")
     add_net_flags(w, network_required=True)
     w.add_argument("--peers", help="comma-separated peers to wait for before starting")
-    w.add_argument("--wait", type=float, default=30.0, help="seconds to wait for the peers")
-    w.add_argument("--run", type=int, default=0, help="Monte Carlo run index (random draws)")
+    w.add_argument("--wait", type=POSITIVE_FLOAT, default=30.0,
+                   help="seconds to wait for the peers (default 30)")
+    w.add_argument("--run", type=NONNEGATIVE_INT, default=0,
+                   help="Monte Carlo run index (random draws)")
+    w.add_argument("--progress-every", type=POSITIVE_INT, default=10, metavar="N",
+                   help="print a progress line every N scans (default 10)")
+    add_budget_flags(w)
     w.set_defaults(func=cmd_world)
+
+    def add_run_flags(sp: argparse.ArgumentParser) -> None:
+        add_net_flags(sp, network_required=False, launcher=True)
+        sp.add_argument("--run", type=NONNEGATIVE_INT, default=0, help="Monte Carlo run index")
+        sp.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
+                        help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
+                             "(repeatable)")
+        sp.add_argument("--sparse", action="store_true",
+                        help="Zenoh links only along the peer graph (gossip off): less "
+                             "overhead in large networks; peers then see only their "
+                             "neighbours come and go")
+        sp.add_argument("--lease-ms", type=POSITIVE_INT,
+                        help="Zenoh lease of every process: a frozen peer is noticed after "
+                             "about this long (Zenoh's default is 10000)")
+        sp.add_argument("--timeout", type=POSITIVE_FLOAT, default=60.0,
+                        help="extra seconds allowed beyond the run's own length (default 60)")
+        add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")
     r.add_argument("scenario", nargs="?", default="seed000")
-    add_net_flags(r, network_required=False)
-    r.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
-    r.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
-                   help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
-                        "(repeatable)")
-    r.add_argument("--sparse", action="store_true",
-                   help="Zenoh links only along the peer graph (gossip off): less overhead "
-                        "in large networks; peers then see only their neighbours come and go")
+    add_run_flags(r)
     r.add_argument("--sim", action="store_true",
                    help="run the discrete-event twin instead of processes (fast, no network)")
-    r.add_argument("--lease-ms", type=int,
-                   help="Zenoh lease of every process: a frozen peer is noticed after about "
-                        "this long (Zenoh's default is 10000)")
-    r.add_argument("--timeout", type=float, default=60.0,
-                   help="extra seconds allowed beyond the run's own length")
     r.set_defaults(func=cmd_run)
 
-    d = sub.add_parser("demo", help="seed-000: world + 3 peers over Zenoh, live Rerun, summary")
-    add_net_flags(d, network_required=False)
-    d.add_argument("--run", type=int, default=0, help="Monte Carlo run index")
-    d.add_argument("--timeout", type=float, default=60.0, help=argparse.SUPPRESS)
-    d.set_defaults(func=cmd_demo)
+    d = sub.add_parser("demo", help="'run seed000' with a live Rerun viewer: world + 3 peers "
+                       "over Zenoh, summary")
+    add_run_flags(d)
+    d.set_defaults(func=cmd_demo, viewer="spawn")
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
                         "over Monte Carlo runs (twin by default): CSV and plot")
@@ -383,6 +798,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--set", action="append", metavar="KEY=VALUE",
                     help="base scenario overrides (repeatable)")
     add_mc_flags(sw, 50)
+    add_budget_flags(sw, peers=True)
     sw.set_defaults(func=cmd_sweep)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
@@ -395,14 +811,30 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    code = 1
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        return code
     except (ScenarioError, UserError, SessionError) as exc:
+        code = 2
         print(f"sensornet: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        code = 130
         print("sensornet: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `sensornet experiment | head`: the reader left; be quiet
+        code = 141
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except OSError:
+            pass
+        return 141
+    finally:
+        if code != 0:
+            _remove_empty_run_folders()
+        _CREATED.clear()
 
 
 if __name__ == "__main__":

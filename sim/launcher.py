@@ -2,7 +2,10 @@
 
 Every process is ``python -m sensornet world|peer ...`` with explicit loopback endpoints on
 free ports, its log in ``<run>/logs/``, its summary and ``.rrd`` in the run folder. Whatever
-happens (an error, Ctrl-C, a timeout), every child is stopped before this returns.
+happens (an error, Ctrl-C, SIGTERM, a timeout), every child is stopped before this returns:
+:func:`wait_run` takes a ``stop`` event that the caller sets from its signal handler, and then
+sends SIGTERM to every child (SIGKILL after a grace period), so the peers still write their
+summaries and ``.rrd`` files and the recording can be merged.
 """
 
 from __future__ import annotations
@@ -33,6 +36,10 @@ class RunHandle:
     network: str = ""
     commands: dict[str, list[str]] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
+    timed_out: bool = False
+    """Set by :func:`wait_run` when the run outlived its timeout (and was stopped)."""
+    stopped: bool = False
+    """Set by :func:`wait_run` when the caller's ``stop`` event ended the run."""
 
     def restart(self, name: str) -> subprocess.Popen:
         """Start peer ``name`` again (same command, a fresh listening port)."""
@@ -73,22 +80,34 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               overrides: list[str] | None = None, viewer: str | None = None,
               run: int = 0, speed: float | None = None, peer_args: dict | None = None,
               lease_ms: int | None = None, rerun: bool = True,
-              sparse: bool = False) -> RunHandle:
-    """Start the world and the peers; returns at once (see :func:`wait_run`)."""
+              sparse: bool = False, listen: list[str] | None = None,
+              connect: list[str] | None = None, config: str | None = None,
+              run_id: str | None = None) -> RunHandle:
+    """Start the world and the peers; returns at once (see :func:`wait_run`).
+
+    ``listen``: the world's endpoints (the peers connect to the first; default a free
+    loopback port); ``connect``: endpoints every process connects to as well (a router, say);
+    ``config``: a Zenoh JSON5 file for every process; ``run_id``: the Rerun recording id.
+    """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
-    run_id = f"{network}-{uuid.uuid4().hex[:6]}"
+    run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
     names = scn.sensor_names
-    ports = {n: free_port() for n in ["world", *names]}
-    eps = {n: endpoint(p) for n, p in ports.items()}
+    eps = {n: endpoint(free_port()) for n in names}
+    world_listen = list(listen or []) or [endpoint(free_port())]
+    eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
     common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
     if viewer:
         common += ["--viewer", viewer]
     if not rerun:
         common += ["--no-rerun"]
+    if config:
+        common += ["--config", str(config)]
+    extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network)
-    cmds = {"world": [*_cli(), "world", source, *common, "--listen", eps["world"],
+    cmds = {"world": [*_cli(), "world", source, *common,
+                      *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run)]
             + (["--speed", str(speed)] if speed else [])}
     if sparse:  # each peer links to the world and its graph neighbours only, gossip off
@@ -97,17 +116,18 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         _, A = adjacency(scn)
     for i, n in enumerate(names):
         if sparse:
-            connect = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
+            links = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
         else:
-            connect = [eps["world"], *(eps[m] for m in names[:i])]
+            links = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common, "--listen", eps[n],
                    "--color", str(i), "--run", str(run),
-                   *[a for c in connect for a in ("--connect", c)],
+                   *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
                    *(["--no-gossip"] if sparse else []), *extra] \
             + (["--speed", str(speed)] if speed else [])
     handle.commands = cmds
+    (out / "commands.json").write_text(json.dumps(cmds, indent=1))  # to rerun one by hand
     try:
         for name, cmd in cmds.items():
             log = out / "logs" / f"{name}.log"
@@ -121,22 +141,45 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     return handle
 
 
-def wait_run(handle: RunHandle, timeout: float) -> dict[str, int]:
-    """Wait for the world to finish and the peers to exit; stop everything on timeout."""
+def wait_run(handle: RunHandle, timeout: float,
+             stop: threading.Event | None = None) -> dict[str, int]:
+    """Wait for the world to finish and the peers to exit; returns every exit code.
+
+    Everything is stopped (SIGTERM, then SIGKILL after a grace period) when the run outlives
+    ``timeout`` (``handle.timed_out``), when ``stop`` is set (``handle.stopped``: the caller's
+    SIGINT/SIGTERM handler), when the world fails, or when a peer exits with an error code (a
+    crash or a bad flag; peers stopped by a signal, as process faults do, exit with a negative
+    code and do not count). Peers get 15 s after the world to finish.
+    """
     end = time.monotonic() + timeout
-    codes: dict[str, int] = {}
+    world = handle.procs["world"]
+    peers_end = None
     try:
-        world = handle.procs["world"]
-        world.wait(timeout=max(0.1, end - time.monotonic()))
-        for p in handle.procs.values():
-            p.wait(timeout=max(0.1, min(15.0, end - time.monotonic())))
-    except subprocess.TimeoutExpired:
-        pass
+        while True:
+            if stop is not None and stop.is_set():
+                handle.stopped = True
+                break
+            now = time.monotonic()
+            if now >= end or (peers_end is not None and now >= peers_end):
+                handle.timed_out = now >= end
+                break
+            if all(p.poll() is not None for p in handle.procs.values()):
+                break
+            code = world.poll()
+            if code is not None:
+                if code != 0:
+                    break
+                if peers_end is None:
+                    peers_end = min(end, now + 15.0)
+            if any((p.poll() or 0) > 0 for n, p in handle.procs.items() if n != "world"):
+                break
+            if stop is not None:
+                stop.wait(0.05)
+            else:
+                time.sleep(0.05)
     finally:
         handle.stop_all()
-    for name, p in handle.procs.items():
-        codes[name] = p.returncode
-    return codes
+    return {name: p.returncode for name, p in handle.procs.items()}
 
 
 def read_summaries(out: Path, names: list[str]) -> dict[str, dict]:

@@ -52,8 +52,14 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               config_file: str | None = None, wait_for: list[str] | None = None,
               wait_timeout: float = 30.0, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
-              speed: float | None = None, progress=None, rerun: bool = True) -> dict:
-    """Play run ``run`` of the scenario; returns what was published."""
+              speed: float | None = None, progress=None, rerun: bool = True,
+              say=None) -> dict:
+    """Play run ``run`` of the scenario; returns what was published.
+
+    ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
+    lines (waiting for the peers, starting).
+    """
+    say = say or (lambda line: None)
     keys = Keys(network)
     speed = speed or scn.network.speed
     interval = scn.scan_period / speed
@@ -96,6 +102,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
         token = session.liveliness().declare_token(keys.alive("world"))
         if wait_for:
+            say(f"world: waiting up to {wait_timeout:g} s for peers {', '.join(wait_for)}")
             deadline = time.monotonic() + wait_timeout
             with cond:
                 while not set(wait_for) <= alive:
@@ -106,6 +113,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))
             time.sleep(0.2)  # let the peers' subscriptions settle on every link
+        say(f"world: starting {scn.num_scans} scans, one every {interval:g} s")
         ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
                                    send_time=time.time())))
         sensors = scn.sensors

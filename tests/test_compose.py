@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -47,3 +48,28 @@ def test_every_command_is_a_valid_cli_invocation(compose):
 def test_invalid_command_would_be_caught():
     with pytest.raises(SystemExit):
         build_parser().parse_args(["peer", "s1", "--no-such-flag"])
+
+
+def _run_steps(dockerfile: str) -> list[str]:
+    """The shell of every RUN instruction (continuation lines joined)."""
+    text = dockerfile.replace("\\\n", " ")
+    return [line.strip()[4:] for line in text.splitlines() if line.strip().startswith("RUN ")]
+
+
+def test_dockerfile_fails_when_the_install_fails():
+    steps = _run_steps((ROOT / "Dockerfile").read_text())
+    installs = [s for s in steps if "pip install" in s]
+    assert installs, steps
+    for step in installs:
+        top_level = re.sub(r"\([^()]*\)", "", step)  # `(... || true)` may only excuse itself
+        assert "||" not in top_level and ";" not in top_level, step
+        assert "sensornet --help" in step  # the installed command must run, or no image
+
+
+def test_dockerfile_image_carries_no_sources_or_tests():
+    text = (ROOT / "Dockerfile").read_text()
+    final = text[text.rindex("\nFROM "):]
+    assert "COPY --from=" in final
+    assert not re.search(r"^COPY (?!--from)", final, re.M), final  # no sources in the image
+    copies = [ln for ln in text.splitlines() if ln.startswith("COPY ")]
+    assert not [ln for ln in copies if "tests" in ln or "benchmarks" in ln or " . " in ln]

@@ -1,0 +1,263 @@
+"""Every flag is honoured or refused (issue 16), without starting a network.
+
+Each refusal is checked through a real ``sensornet`` process: exit code 2, exactly one line on
+stderr naming the problem, no traceback, and no run folder left behind.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sensornet import cli
+from sensornet.cli import build_parser, main
+from sim.scenario import load_scenario, scenario_text
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cli(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
+    return subprocess.run([sys.executable, "-m", "sensornet", *args], capture_output=True,
+                          text=True, timeout=timeout, cwd=cwd, env=env)
+
+
+def _refused(proc: subprocess.CompletedProcess, *needles: str) -> str:
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+def _no_run_folders(cwd: Path) -> None:
+    runs = cwd / "runs"
+    assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())
+
+
+# --- "Tracebacks instead of one-line errors" and "zero means not set" ----------------------
+
+BAD_FLAGS = [
+    (["peer", "s1", "--network", "x", "--rounds", "-1"], "--rounds"),
+    (["peer", "s1", "--network", "x", "--rounds", "0"], "--rounds"),
+    (["peer", "s1", "--network", "a/b*"], "--network"),
+    (["world", "--network", "a b"], "--network"),
+    (["run", "--sim", "--run", "-1"], "--run"),
+    (["run", "--speed", "-1"], "--speed"),
+    (["run", "--speed", "0"], "--speed"),
+    (["demo", "--speed", "nan"], "--speed"),
+    (["run", "--timeout", "-5"], "--timeout"),
+    (["run", "--viewer", "nonsense"], "--viewer"),
+    (["demo", "--viewer", "rerun+http://127.0.0.1:9876"], "--viewer"),
+    (["peer", "s1", "--network", "x", "--viewer", "nonsense"], "--viewer"),
+    (["world", "--network", "x", "--viewer", "nonsense"], "--viewer"),
+    (["peer", "s1", "--network", "x", "--idle-timeout", "-1"], "--idle-timeout"),
+    (["peer", "s1", "--network", "x", "--lease-ms", "-5"], "--lease-ms"),
+    (["run", "--lease-ms", "0"], "--lease-ms"),
+    (["world", "--network", "x", "--wait", "-1"], "--wait"),
+    (["world", "--network", "x", "--progress-every", "0"], "--progress-every"),
+    (["experiment", "--runs", "0"], "--runs"),
+    (["experiment", "--jobs", "0"], "--jobs"),
+    (["sweep", "--param", "a", "--values", "1", "--runs", "-2"], "--runs"),
+    (["run", "--listen", "7447"], "--listen"),
+    (["demo", "--connect", "nowhere"], "--connect"),
+    (["run", "--config", "no-such-file.json5"], "--config"),
+    (["run", "--run-id", "a/b"], "--run-id"),
+    (["run", "--max-points", "0"], "--max-points"),
+    (["experiment", "--max-memory-gb", "-1"], "--max-memory-gb"),
+]
+
+
+@pytest.mark.parametrize("argv, flag", BAD_FLAGS, ids=[" ".join(a) for a, _ in BAD_FLAGS])
+def test_bad_flag_value_is_one_line_and_exit_2(tmp_path, argv, flag):
+    line = _refused(_cli(*argv, cwd=tmp_path), flag)
+    assert line.startswith("sensornet")
+    _no_run_folders(tmp_path)
+
+
+@pytest.mark.parametrize("argv, flag", [(["run", "--sim", f], f.split()[0]) for f in (
+    "--listen=tcp/127.0.0.1:7447", "--connect=tcp/127.0.0.1:7447", "--run-id=x",
+    "--viewer=spawn", "--lease-ms=100")])
+def test_process_flags_with_sim_are_refused(tmp_path, argv, flag):
+    _refused(_cli(*argv, cwd=tmp_path), flag.split("=")[0], "--sim")
+
+
+def test_listen_on_a_port_in_use_is_refused_before_anything_starts(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        for command in ("run", "demo"):
+            _refused(_cli(command, "--listen", f"tcp/127.0.0.1:{port}", cwd=tmp_path),
+                     f"--listen tcp/127.0.0.1:{port}")
+    _no_run_folders(tmp_path)
+
+
+def test_broken_pipe_is_quiet(tmp_path):
+    """``sensornet experiment | head``: the reader leaves; no traceback."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    for argv in (["scenario", "show", "seed000"],
+                 ["experiment", "--runs", "1", "--quiet", "--jobs", "1", "--set",
+                  "scenario.num_scans=5", "--out", str(tmp_path / "out")]):
+        proc = subprocess.Popen([sys.executable, "-m", "sensornet", *argv], cwd=tmp_path,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        proc.stdout.close()  # as `head` does once it has its lines
+        err = proc.stderr.read().decode()
+        proc.stderr.close()
+        assert proc.wait(timeout=120) == 141, err
+        assert err == "", err
+
+
+# --- budgets --------------------------------------------------------------------------------
+
+
+def _many_targets(n: int) -> str:
+    text = scenario_text("seed000")
+    extra = "".join(
+        f"\n[[targets]]\nbirth_scan = 1\ndeath_scan = 5\nstart = [{i % 100 * 10.0 - 500.0}, 0.0]"
+        f"\nend = [0.0, {i % 50 * 10.0}]\n" for i in range(n))
+    return text.replace("# Sensors. kind", extra + "\n# Sensors. kind", 1)
+
+
+def _many_sensors(n: int) -> str:
+    text = scenario_text("seed000")
+    extra = "".join(
+        f'\n[[sensors]]\nname = "x{i}"\nkind = "linear"\nposition = [0.0, {float(i)}]\n'
+        f"sigma_r = 20.0\ndetection_probability = 0.9\nclutter_rate = 1\n" for i in range(n))
+    return text.replace("# A radar instead", extra + "\n# A radar instead", 1)
+
+
+def test_too_many_points_per_scan_is_refused(tmp_path):
+    clutter = "sensors.s1.clutter_rate=1000000"
+    _refused(_cli("experiment", "--set", clutter, "--runs", "1", cwd=tmp_path),
+             "s1", "points per scan", "--max-points")
+    _refused(_cli("run", "--sim", "--set", clutter, cwd=tmp_path), "--max-points")
+    # over processes a scan message carries at most so many points, whatever the budget
+    _refused(_cli("run", "--set", "sensors.s1.clutter_rate=30000", "--max-points", "100000",
+                  cwd=tmp_path), "s1", "scan message", "experiment")
+    _no_run_folders(tmp_path)
+
+
+def test_too_many_targets_is_refused(tmp_path):
+    path = tmp_path / "crowd.toml"
+    path.write_text(_many_targets(600))
+    _refused(_cli("experiment", str(path), "--runs", "1", cwd=tmp_path),
+             "targets", "--max-targets")
+    path.write_text(_many_targets(2100))
+    _refused(_cli("run", str(path), "--max-targets", "5000", "--max-points", "50000",
+                  cwd=tmp_path), "truth message")
+    _no_run_folders(tmp_path)
+
+
+def test_too_many_peers_is_refused(tmp_path):
+    path = tmp_path / "crowd.toml"
+    path.write_text(_many_sensors(40))
+    _refused(_cli("run", str(path), cwd=tmp_path), "43", "peer processes", "--max-peers")
+    _refused(_cli("run", str(path), "--max-peers", "50", "--max-memory-gb", "0.5",
+                  cwd=tmp_path), "memory", "--max-memory-gb")
+    _no_run_folders(tmp_path)
+
+
+def test_memory_estimate_grows_with_the_work():
+    scn = load_scenario("seed000")
+    base = cli.memory_estimate_gb(scn)
+    assert 0.1 < base < 1.0
+    assert cli.memory_estimate_gb(scn, workers=4) > 3 * base
+    big = load_scenario("seed000", {"sensors.s1.clutter_rate": 4000})
+    assert cli.memory_estimate_gb(big) > base
+    assert cli.targets_at_once(scn) == 4  # 1-100, 20-60, 40-80, 40-80: four at scans 40-60
+    assert cli.points_per_scan(scn)["s1"] == pytest.approx(10 + 4 * 0.99)
+
+
+# --- run seed000 and the demo agree -----------------------------------------------------
+
+
+def test_demo_is_run_seed000_with_a_viewer():
+    parser = build_parser()
+    demo, run = vars(parser.parse_args(["demo"])), vars(parser.parse_args(["run", "seed000"]))
+    assert demo.pop("viewer") == "spawn" and run.pop("viewer") is None
+    for d in (demo, run):
+        d.pop("func"), d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
+    assert demo == run
+    assert load_scenario("seed000").birth.model == "truth"  # chosen in the scenario file
+
+
+def test_run_seed000_fused_beats_every_local(capsys):
+    assert main(["run", "--sim", "seed000"]) == 0
+    rows = [r.split("|") for r in capsys.readouterr().out.splitlines() if r.startswith("| s")]
+    assert len(rows) == 3
+    for r in rows:
+        local, fused = float(r[3]), float(r[4])
+        assert fused < local, r
+
+
+# --- nothing scored, run folders -------------------------------------------------------------
+
+
+def test_run_that_scored_nothing_exits_nonzero(tmp_path, monkeypatch, capsys):
+    import sim.launcher as launcher
+
+    class Handle:
+        logs = {n: tmp_path / f"{n}.log" for n in ("world", "s1", "s2", "s3")}
+        procs: dict = {}
+
+    summary = {"scans": 0, "mean_ospa_local": None, "mean_ospa_fused": None,
+               "messages_sent": 0, "messages_received": 0, "bytes_sent": 0,
+               "bytes_received": 0, "rejected_total": 100, "rejected": {"too-many": 100},
+               "mean_estimate_age": None, "latency_ms_median": None, "latency_ms_p99": None}
+    monkeypatch.setattr(launcher, "start_run", lambda *a, **k: Handle())
+    monkeypatch.setattr(launcher, "wait_run",
+                        lambda *a, **k: {"world": 0, "s1": 0, "s2": 0, "s3": 0})
+    monkeypatch.setattr(launcher, "read_summaries",
+                        lambda out, names: {n: dict(summary) for n in names})
+    monkeypatch.setattr(launcher, "merge_recordings", lambda out: None)
+    assert main(["run", "--out", str(tmp_path / "run"), "--viewer", "none"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "s1 scored no scan" in err[0] and "too-many" in err[0], err
+
+
+def test_run_folders_are_unique_and_failed_ones_removed(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    a, b = cli._run_folder(None, "run"), cli._run_folder(None, "run")
+    assert a != b and a.is_dir() and b.is_dir()  # the same second: distinct folders
+    cli._CREATED.clear()
+
+    import sim.experiment
+
+    def fail(*args, **kwargs):
+        raise cli.UserError("stop here")
+
+    monkeypatch.setattr(sim.experiment, "run_experiment", fail)
+    before = set((tmp_path / "runs").iterdir())
+    assert main(["experiment", "--runs", "1", "--quiet"]) == 2
+    assert set((tmp_path / "runs").iterdir()) == before  # the empty folder went again
+    assert main(["experiment", "--runs", "1", "--quiet", "--out", "mine"]) == 2
+    assert not (tmp_path / "mine").exists()
+
+
+def test_viewer_probe(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        url = f"rerun+http://127.0.0.1:{s.getsockname()[1]}/proxy"
+        assert cli.viewer_reachable(url)
+    assert not cli.viewer_reachable(url, timeout=0.5)
+
+
+# --- files ------------------------------------------------------------------------------
+
+
+def test_scenario_files_cite_only_the_projects_docs():
+    for name in ("seed000", "seed001"):
+        text = scenario_text(name)
+        assert "ALGORITHMS.md" not in text
+        for cited in ("docs/algorithms.md", "docs/seed001.md"):
+            if cited in text:
+                assert (ROOT / cited).is_file()

@@ -1,0 +1,132 @@
+"""``sensornet run`` as a user drives it (issue 16): flags reach the processes, signals stop
+the run cleanly and leave a merged recording. Real processes over Zenoh on 127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from peers.session import free_port
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.network
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie is gone for our purposes
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _wait_for(predicate, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def _rerun_exe() -> str:
+    return str(Path(sys.executable).with_name("rerun"))
+
+
+def test_run_flags_reach_every_process(tmp_path):
+    """--listen, --connect, --config, --run-id, --network reach the world and the peers; an
+    unreachable --viewer is one warning and is not passed on (no stall at exit)."""
+    port = free_port()
+    world = f"tcp/127.0.0.1:{port}"
+    config = tmp_path / "zenoh.json5"
+    config.write_text('{mode: "peer", scouting: {multicast: {enabled: false}}}\n')
+    dead_viewer = f"rerun+http://127.0.0.1:{free_port()}/proxy"
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [sys.executable, "-m", "sensornet", "run", "--listen", world, "--connect", world,
+         "--config", str(config), "--run-id", "rid-16", "--network", "net16",
+         "--viewer", dead_viewer, "--set", "scenario.num_scans=12", "--no-rerun",
+         "--out", str(out)], capture_output=True, text=True, timeout=180, cwd=tmp_path,
+        env=_env())
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and "warning" in err[0] and dead_viewer in err[0], proc.stderr
+    commands = json.loads((out / "commands.json").read_text())
+    assert set(commands) == {"world", "s1", "s2", "s3"}
+    for cmd in commands.values():
+        text = " ".join(cmd)
+        assert "--run-id rid-16" in text and "--network net16" in text
+        assert f"--config {config}" in text
+        assert f"--connect {world}" in text
+        assert "--viewer" not in text
+    assert commands["world"][commands["world"].index("--listen") + 1] == world
+    world_log = (out / "logs" / "world.log").read_text()
+    assert "world: scan 10/12 published" in world_log and "world: scan 12/12" in world_log
+    for n in ("s1", "s2", "s3"):
+        assert json.loads((out / f"peer-{n}.json").read_text())["scans"] == 12
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_path, sig):
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--speed", "5",
+         "--out", str(out)], cwd=tmp_path, env=_env(), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True)
+    children: list[int] = []
+    try:
+        world_log = out / "logs" / "world.log"
+        _wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
+                  "the world's scan 10")
+        children = _children(launcher.pid)
+        assert len(children) == 4, children  # the world and three peers
+        launcher.send_signal(sig)
+        stdout, stderr = launcher.communicate(timeout=60)
+        ended = time.monotonic()
+        _wait_for(lambda: not any(_alive(p) for p in children), 5.0,
+                  "the children to end (at most 5 s after the launcher)")
+        assert time.monotonic() - ended < 5.0
+        assert launcher.returncode == 0, stderr
+        assert "Traceback" not in stderr
+        assert sig.name in stderr, stderr
+        assert "| s1 |" in stdout and "recording:" in stdout
+        rec = out / "recording.rrd"
+        assert rec.is_file()
+        check = subprocess.run([_rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
+                               text=True, timeout=120, env=_env())
+        assert check.returncode == 0, check.stderr
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+        for p in children:
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)
