@@ -101,6 +101,12 @@ def spawn_viewer(port: int = 9876) -> bool:
     with socket.socket() as probe:
         if probe.connect_ex(("127.0.0.1", port)) == 0:
             return True  # a viewer (or server) is already listening
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        print("sensornet: no display for a Rerun viewer; recording to files only (watch it "
+              "later with `rerun <run>/recording.rrd`, or stream to a web viewer: see --viewer)",
+              file=sys.stderr)
+        return False
     exe = viewer_executable()
     if exe is None:
         print("sensornet: no Rerun viewer found; recording to files only", file=sys.stderr)
