@@ -17,8 +17,7 @@ import statistics
 import sys
 import time
 
-from protocol.messages import Scan
-from sim.build import make_peer
+from sim.peers import make_parts
 from sim.scenario import load_scenario, parse_overrides
 from sim.world import generate_run
 
@@ -28,13 +27,13 @@ def step_times(pause: float, scans: int) -> list[float]:
     scn = load_scenario("seed000", overrides=parse_overrides(
         ["birth.model=truth", f"scenario.num_scans={scans}"]))
     _, z = generate_run(scn, 0)
-    peer = make_peer(scn, "s1", 0)
+    est, _ = make_parts(scn, "s1", 0)  # the peer's local estimator
     out = []
     for k in range(1, scans + 1):
         if pause:
             time.sleep(pause)
         t0 = time.thread_time()
-        peer.on_scan(Scan("s1", k, z[0][k - 1], seq=k), 0.0)
+        est.step(1, z[0][k - 1])
         out.append(time.thread_time() - t0)
     return out
 

@@ -13,6 +13,14 @@ from pathlib import Path
 
 import zenoh
 
+DEFAULT_LEASE_MS = 1500
+"""Zenoh link lease: a frozen (SIGSTOP) process is noticed within about this long (Zenoh's own
+default, 10 s, let a frozen neighbour hold up every deadline for 10 s)."""
+
+MAX_MESSAGE_BYTES = (1 << 20) + 4096
+"""Largest message the transport assembles (the codec's limit plus framing): a bigger one is
+dropped by Zenoh before it costs memory (a 50 MB payload used to be received whole)."""
+
 
 class SessionError(Exception):
     """The Zenoh session could not be configured or opened (reported in one line)."""
@@ -31,8 +39,13 @@ def endpoint(port: int, host: str = "127.0.0.1") -> str:
 
 def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
-                 gossip: bool = True) -> zenoh.Config:
-    """A peer-mode config: the user's JSON5 file if given, then the flags on top of it."""
+                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES
+                 ) -> zenoh.Config:
+    """A peer-mode config: the user's JSON5 file if given, then the flags on top of it.
+
+    Defaults on top of Zenoh's: a lease of :data:`DEFAULT_LEASE_MS` and a maximum message size
+    of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win).
+    """
     if config_file:
         path = Path(config_file)
         if not path.is_file():
@@ -50,8 +63,10 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
         if connect:
             conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-        if lease_ms:
-            conf.insert_json5("transport/link/tx/lease", str(int(lease_ms)))
+        if lease_ms or not config_file:
+            conf.insert_json5("transport/link/tx/lease", str(int(lease_ms or DEFAULT_LEASE_MS)))
+        if max_message and not config_file:
+            conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message)))
         if not gossip:  # links only to the given endpoints (large networks: fewer links)
             conf.insert_json5("scouting/gossip/enabled", "false")
     except Exception as exc:
@@ -61,9 +76,10 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
 
 def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
-                 gossip: bool = True) -> zenoh.Session:
+                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES
+                 ) -> zenoh.Session:
     """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
-    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip)
+    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message)
     try:
         return zenoh.open(conf)
     except Exception as exc:

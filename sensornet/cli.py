@@ -339,8 +339,10 @@ def _prepare_peer(args: argparse.Namespace, scn) -> None:
 def cmd_peer(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from peers.runtime import PeerRuntime
-    from sim.build import fault_injector, make_peer
+    from peers.runtime import PeerRuntime, RuntimeOptions
+    from peers.transport import DuplicatePeer
+    from sim.build import fault_injector
+    from sim.peers import make_peer
 
     scn = _load(args, args.scenario)
     if args.name not in scn.sensor_names:
@@ -355,16 +357,20 @@ def cmd_peer(args: argparse.Namespace) -> int:
     _prepare_peer(args, scn)
     speed = args.speed or scn.network.speed
     out = Path(args.out) if args.out else None
-    runtime = PeerRuntime(
-        make_peer(scn, args.name, args.run), args.network, scn.scan_period / speed,
-        scn.network.deadline, listen=args.listen or [], connect=args.connect or [],
-        config_file=args.config, lease_ms=args.lease_ms, out_dir=out, run_id=args.run_id,
-        viewer=args.viewer, color_index=args.color, idle_timeout=args.idle_timeout,
-        rerun=not args.no_rerun, faults=fault_injector(scn, args.run),
-        save_tracks=args.save_tracks, gossip=not args.no_gossip, scan_period=scn.scan_period)
+    core = make_peer(scn, args.name, args.run, network=args.network, speed=speed)
+    runtime = PeerRuntime(core, RuntimeOptions(
+        listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
+        config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
+        out_dir=out, run_id=args.run_id, viewer=args.viewer, color_index=args.color,
+        idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
+        save_tracks=args.save_tracks, scan_period=scn.scan_period,
+        faults=fault_injector(scn, args.run)))
     print(f"peer {args.name}: network {args.network}, neighbours "
-          f"{', '.join(runtime.logic.o.neighbours) or 'none'}", flush=True)
-    code = runtime.run()
+          f"{', '.join(core.consensus.o.neighbours) or 'none'}", flush=True)
+    try:
+        code = runtime.run()
+    except DuplicatePeer as exc:
+        raise UserError(str(exc)) from None
     s = runtime.summary()
     print(f"peer {args.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
           f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
@@ -548,17 +554,7 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
         raise UserError("--fault (process faults) needs real processes; drop --sim")
     t0 = time.perf_counter()
     result = run_twin(scn, args.run)
-    summaries = {}
-    for name, peer in result.peers.items():
-        ages = [a for r in peer.records if r["kind"] == "fusion" for a in r["ages"].values()]
-        summaries[name] = {
-            "scans": peer.stats.scans, "mean_ospa_local": peer.mean_ospa("local"),
-            "mean_ospa_fused": peer.mean_ospa("fused"),
-            "messages_sent": peer.stats.estimates_out + peer.stats.tracks_out,
-            "messages_received": peer.stats.estimates_in,
-            "bytes_sent": 8 * peer.stats.tuples_out, "bytes_received": 0, "rejected_total": 0,
-            "mean_estimate_age": sum(ages) / len(ages) if ages else None,
-            "latency_ms_median": None, "latency_ms_p99": None}
+    summaries = {name: result.summary(name) for name in result.peers}
     print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
           f"scans in {time.perf_counter() - t0:.1f} s (kB sent: raw tuples x 8 bytes)")
     print(format_summary(summaries))

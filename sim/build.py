@@ -9,13 +9,11 @@ it (``sim.world``) and the filter's clutter intensity is ``lambda_c / V`` over t
 from __future__ import annotations
 
 import math
-import zlib
 from collections.abc import Sequence
 
 import numpy as np
 
 from peers.faults import FaultInjector
-from peers.logic import PeerLogic, PeerOptions
 from sim.scenario import Scenario, ScenarioError, SensorSpec
 from tracking.gmphd import GMPHDFilter, SensorParams
 from tracking.mixture import GaussianMixture
@@ -163,63 +161,6 @@ def adjacency(scn: Scenario) -> tuple[list[str], np.ndarray]:
             A[names.index(a), names.index(b)] = A[names.index(b), names.index(a)] = True
     np.fill_diagonal(A, False)
     return names, A
-
-
-def peer_options(scn: Scenario, name: str, **changes) -> PeerOptions:
-    """The options of the peer that filters sensor ``name``, from the scenario's network."""
-    names, A = adjacency(scn)
-    if name not in names:
-        raise ScenarioError(f"{scn.name}: no sensor named {name!r} "
-                            f"(sensors: {', '.join(names)})")
-    i = names.index(name)
-    neighbours = tuple(names[j] for j in np.flatnonzero(A[i]))
-    deg = A.sum(axis=1)
-    net = scn.network
-    opts = dict(
-        name=name,
-        sensor=name,
-        neighbours=neighbours,
-        degrees=tuple((names[j], int(deg[j])) for j in [i, *np.flatnonzero(A[i])]),
-        fusion=scn.fusion.rule,
-        rounds=net.rounds,
-        omega=net.omega,
-        level2=scn.fusion.level2_pruning,
-        level2_threshold=scn.fusion.level2_threshold,
-        cardinality=scn.fusion.cardinality,
-        max_age=net.max_age,
-        policy=net.policy,
-        feedback=net.feedback,
-        ospa_cutoff=scn.metrics.ospa_cutoff,
-        ospa_order=scn.metrics.ospa_order,
-    )
-    opts.update(changes)
-    return PeerOptions(**opts)
-
-
-def make_peer(scn: Scenario, name: str, run: int = 0, **changes) -> PeerLogic:
-    """A peer state machine for sensor ``name`` with its local filter.
-
-    ``network.filter = "imm-pf"`` or ``"imm-ekf"`` gives a single-target seed-001 peer
-    (:class:`peers.single.SingleTargetPeer`), initialised like the seed-001 study: the true
-    start state plus noise drawn from ``(seed, run, peer)``.
-    """
-    options = peer_options(scn, name, **changes)
-    if scn.network.filter == "gmphd":
-        if options.fusion == "ratio":
-            raise ScenarioError(f"{scn.name}: fusion.rule 'ratio' needs single-target peers "
-                                f"(network.filter 'imm-pf' or 'imm-ekf')")
-        return PeerLogic(options, make_filter(scn, [name]))
-    from peers.single import SingleTargetPeer
-    from sim.seed001 import Seed001Scenario, truth
-
-    if options.fusion == "aa":
-        raise ScenarioError(f"{scn.name}: single-target peers fuse by 'gci', 'ratio' or "
-                            f"'none', not 'aa'")
-    s1 = Seed001Scenario(T=scn.scan_period, seed=scn.seed)
-    rng = np.random.default_rng(np.random.SeedSequence([scn.seed, run, zlib.crc32(name.encode())]))
-    m0 = truth(s1)[0] + rng.standard_normal(6) @ np.linalg.cholesky(s1.init_cov).T
-    return SingleTargetPeer(options, scn.network.filter, sensor_model(scn.sensor(name)), m0,
-                            s1.init_cov, rng)
 
 
 def fault_injector(scn: Scenario, run: int = 0) -> FaultInjector | None:

@@ -24,24 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from peers.single import SingleTargetConfig
+from peers.contracts import FusionInput
+from peers.estimators import ImmEstimator, SingleTargetConfig
+from peers.fusers import ImmFuser
 from sim.progress import Progress
-from tracking.imm import (
-    IMMEKF,
-    IMMGaussianState,
-    model_posterior,
-    radar_log_likelihood,
-)
 from tracking.models import RangeBearing
-from tracking.particles import (
-    GaussianRatio,
-    IMMParticleFilter,
-    ParticleParams,
-    RatioConfig,
-    collapse_to_models,
-    floored,
-    gci_summaries,
-)
+from tracking.particles import ParticleParams, RatioConfig
 
 # -- scenario ---------------------------------------------------------------------------------
 
@@ -202,8 +190,7 @@ def run_once(scn: Seed001Scenario, cfg: ExperimentConfig, run: int) -> RunResult
     errors, pos_error, seconds = {}, {}, {}
     for kind in cfg.filters:
         t0 = time.perf_counter()
-        runner = _run_ekf if kind == "IMM-EKF" else _run_pf
-        ests = runner(scn, cfg, sensors, Z, m0, g_f)  # (4, K, 6)
+        ests = _run_filters(kind, scn, cfg, sensors, Z, m0, g_f)  # (4, K, 6)
         seconds[kind] = time.perf_counter() - t0
         for r, rule in enumerate(RULES):
             e = ests[r] - X[1:]
@@ -213,63 +200,31 @@ def run_once(scn: Seed001Scenario, cfg: ExperimentConfig, run: int) -> RunResult
     return RunResult(errors, pos_error, seconds)
 
 
-def _run_ekf(scn, cfg, sensors, Z, m0, rngs) -> np.ndarray:
-    """Estimates ``(4, K, 6)`` of the IMM-EKF: radar 1, radar 2, GCI, fusion rule."""
-    ekf = IMMEKF(cfg.imm)
-    s1, r1 = sensors[0], sensors[1]  # own radar, other radar
-    st = [ekf.initialise(m0, scn.init_cov) for _ in RULES]
+def _run_filters(kind: str, scn, cfg, sensors, Z, m0, rngs) -> np.ndarray:
+    """Estimates ``(4, K, 6)``: radar 1, radar 2, GCI, particle fusion rule.
+
+    The same objects the peers run (:class:`peers.estimators.ImmEstimator`,
+    :class:`peers.fusers.ImmFuser`): radar 1's peer fuses radar 2's published estimate, so this
+    table and a two-peer network compute the same thing (tests/test_seed001.py ties them).
+    """
+    kind = "imm-pf" if kind == "IMM-PF" else "imm-ekf"
+    rngs = list(rngs) if kind == "imm-pf" else [None] * 4
+    own = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[0], m0, scn.init_cov, rngs[0],
+                       cfg.cov_floor)
+    other = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[1], m0, scn.init_cov, rngs[1],
+                         cfg.cov_floor, with_prediction=True)
+    gci = ImmFuser("gci", own, m0, scn.init_cov, rngs[2], cfg.gci_omega, cfg.ratio)
+    ratio = ImmFuser("ratio", own, m0, scn.init_cov, rngs[3], cfg.gci_omega, cfg.ratio)
     K = scn.num_scans
     out = np.empty((4, K, 6))
-    M = len(cfg.imm.initial_probs)
     for k in range(1, K + 1):
         z1, z2 = Z[0, k], Z[1, k]
-        st[0] = ekf.step(st[0], z1, s1)
-        pred2 = ekf.predict(st[1])
-        st[1] = ekf.update(pred2, z2, r1)
-        post2 = floored(st[1].summary(), cfg.cov_floor)
-        # GCI of normalised summaries, collapsed back to one Gaussian per own model
-        own = ekf.step(st[2], z1, s1)
-        fused = gci_summaries(floored(own.summary(), cfg.cov_floor), [post2], cfg.gci_omega)
-        st[2] = IMMGaussianState(*collapse_to_models(fused, M))
-        # fusion rule: own update times radar 2's posterior / prediction
-        own = ekf.step(st[3], z1, s1)
-        ratio = GaussianRatio.from_summaries(post2, floored(pred2.summary(), cfg.cov_floor),
-                                             cfg.ratio)
-        means, covs, log_norm = ratio.apply_gaussian(own.means, own.covs)
-        st[3] = IMMGaussianState(model_posterior(own.probs, log_norm), means, covs)
-        for r in range(4):
-            out[r, k - 1] = st[r].estimate
-    return out
-
-
-def _run_pf(scn, cfg, sensors, Z, m0, rngs) -> np.ndarray:
-    """Estimates ``(4, K, 6)`` of the IMM-PF: radar 1, radar 2, GCI, particle fusion rule."""
-    pf = IMMParticleFilter(cfg.imm, cfg.particle)
-    s1, s2 = sensors
-    st = [pf.initialise(m0, scn.init_cov, g) for g in rngs]
-    K = scn.num_scans
-    out = np.empty((4, K, 6))
-    M = len(cfg.imm.initial_probs)
-
-    def ll1(X):
-        return radar_log_likelihood(s1, z1, X)
-
-    def ll2(X):
-        return radar_log_likelihood(s2, z2, X)
-
-    for k in range(1, K + 1):
-        z1, z2 = Z[0, k], Z[1, k]
-        st[0], _ = pf.step(st[0], ll1, rngs[0])
-        st[1], pred2 = pf.step(st[1], ll2, rngs[1])
-        post2 = floored(st[1].summary(), cfg.cov_floor)
-        own, _ = pf.step(st[2], ll1, rngs[2])
-        fused = gci_summaries(floored(own.summary(), cfg.cov_floor), [post2], cfg.gci_omega)
-        st[2] = pf.from_gaussians(*collapse_to_models(fused, M), rngs[2])
-        ratio = GaussianRatio.from_summaries(post2, floored(pred2.summary(), cfg.cov_floor),
-                                             cfg.ratio)
-        st[3], _ = pf.step(st[3], ll1, rngs[3], extra_log_lik=ratio.log_eval)
-        for r in range(4):
-            out[r, k - 1] = st[r].estimate
+        own.step(1, z1)
+        sent = {"r2": other.step(1, z2).published}
+        for fuser in (gci, ratio):
+            fuser.fuse(FusionInput(k, 0, own.state.summary(), sent, (0.5, 0.5), z1))
+        for r, state in enumerate((own.state, other.state, gci.state, ratio.state)):
+            out[r, k - 1] = state.estimate
     return out
 
 

@@ -63,7 +63,7 @@ def run_point(source: str, base: dict, param: str, point: SweepPoint, real: bool
     row["fused_ospa"] = float(np.mean([p.mean_ospa("fused") for p in peers]))
     row["local_ospa"] = float(np.mean([p.mean_ospa("local") for p in peers]))
     for key in ("late", "redundant", "too_old", "dropped_late"):
-        row[key] = sum(getattr(p.nale.counts, key) for p in peers)
+        row[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers)
     if result.faults is not None:
         for action, n in result.faults.counts().items():
             row[f"links_{action}"] = n

@@ -1,9 +1,11 @@
-"""Discrete-event twin of the peer network: the same peer state machines on a virtual clock.
+"""Discrete-event twin of the peer network: the same sans-I/O peers on a virtual clock.
 
-No processes and no sockets: scans, estimates and deadlines are events in one priority queue
-ordered by virtual time. Every estimate a peer publishes is delivered to every other peer
-(as Zenoh does with a wildcard subscription) after the link's delay; a delay of ``None``
-drops the message. With zero delays and generous deadlines it computes what the real
+No processes and no sockets, but the same bytes: every scan, truth and estimate is encoded and
+handed to :meth:`peers.core.PeerCore.receive` exactly as the Zenoh runtime does, liveliness
+changes go through :meth:`~peers.core.PeerCore.liveliness`, and deadlines through
+:meth:`~peers.core.PeerCore.tick`; so decoding, validation, bounds and departures are covered
+here too. Every estimate a peer publishes reaches each peer that fuses it after the link's
+delay (``None`` drops it). With zero delays and generous deadlines it computes what the real
 processes compute, which the tests check.
 """
 
@@ -11,95 +13,167 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector
-from peers.logic import PeerLogic
-from protocol.messages import Estimate, Scan, Tracks
-from sim.build import fault_injector, make_peer
+from protocol.codec import encode
+from protocol.keys import Keys
+from protocol.messages import Estimate, Scan, Truth
+from sim.build import fault_injector
+from sim.peers import make_peer
 from sim.scenario import Scenario
 from sim.world import generate_run
 
 LinkDelay = Callable[[str, str, Estimate], float | None]
 """``(sender, receiver, message) -> delay in virtual seconds, or None to drop it``."""
 
+TRUTH_DELAY = 0.5
+"""The world publishes the truth of a scan half an interval after it (as the real world)."""
+
 
 def no_delay(sender: str, receiver: str, msg: Estimate) -> float | None:
     return 0.0
+
+
+@dataclass(frozen=True)
+class Inject:
+    """A raw message put on ``key`` at virtual time ``t`` and delivered to ``target``."""
+
+    t: float
+    target: str
+    key: str
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class Liveliness:
+    """Peer ``name``'s liveliness token appears (``joined``) or goes away, as seen by
+    ``target`` at virtual time ``t``."""
+
+    t: float
+    target: str
+    name: str
+    joined: bool
 
 
 @dataclass
 class TwinResult:
     """What a twin run produced, per peer."""
 
-    peers: dict[str, PeerLogic]
+    peers: dict[str, PeerCore]
     tracks: dict[str, dict[int, np.ndarray]] = field(default_factory=dict)
-    """``tracks[peer][k]``: the fused states ``(n, 4)`` the peer published for scan ``k``."""
+    """``tracks[peer][k]``: the fused states ``(n, d)`` the peer published for scan ``k``."""
     faults: FaultInjector | None = None
     """The fault injector used (its ``log`` says what was done to each message)."""
+    stops: dict[str, str] = field(default_factory=dict)
+    ages: dict[str, list[int]] = field(default_factory=dict)
+    """Ages (scans) of the neighbour estimates each peer fused."""
+    ospa: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
+    """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
 
     def mean_ospa(self, peer: str, kind: str = "fused") -> float:
         return self.peers[peer].mean_ospa(kind)
 
+    def summary(self, peer: str) -> dict:
+        """The peer's summary as the real process writes it (no wall-clock figures)."""
+        s = self.peers[peer].snapshot()
+        st = s["stats"]
+        ages = self.ages.get(peer, [])
+        s.update(messages_sent=st["estimates_out"] + st["tracks_out"],
+                 bytes_sent=8 * st["tuples_out"],
+                 mean_estimate_age=sum(ages) / len(ages) if ages else None,
+                 latency_ms_median=None, latency_ms_p99=None, stop_reason=self.stops.get(peer))
+        return s
+
 
 def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
-             peers: dict[str, PeerLogic] | None = None,
-             faults: FaultInjector | None = None) -> TwinResult:
+             peers: dict[str, PeerCore] | None = None,
+             faults: FaultInjector | None = None, network: str = "twin",
+             inject: Iterable[Inject] = (), events: Iterable[Liveliness] = ()) -> TwinResult:
     """One run of the scenario's network on the virtual clock.
 
     Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
     duplication, reordering, partitions) if given, else ``delay`` if given, else the
-    scenario's ``[faults]`` table, else instant delivery.
+    scenario's ``[faults]`` table, else instant delivery. ``inject``: raw messages (attacks);
+    ``events``: liveliness changes (departures, returns).
     """
     truth, scans = generate_run(scn, run)
     names = scn.sensor_names
-    peers = peers if peers is not None else {n: make_peer(scn, n, run) for n in names}
+    keys = Keys(network)
+    peers = peers if peers is not None else {
+        n: make_peer(scn, n, run, network=network) for n in names}
     if faults is None and delay is None:
         faults = fault_injector(scn, run)
     link_delay = delay or no_delay
     # like the runtime, a peer subscribes to its neighbours' estimate keys only
-    listeners = {n: [m for m in names if n in peers[m].o.neighbours] for n in names}
+    listeners = {n: [m for m in names if n in peers[m].consensus.o.neighbours] for n in names}
     interval = scn.scan_period / scn.network.speed
-    result = TwinResult(peers=peers, tracks={n: {} for n in names}, faults=None)
+    result = TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults)
     queue: list = []
     order = itertools.count()
 
-    def push(t: float, kind: str, target: str, payload) -> None:
+    def push(t: float, kind: str, target: str, *payload) -> None:
         heapq.heappush(queue, (t, next(order), kind, target, payload))
 
-    def emit(t: float, sender: str, messages: list) -> None:
-        for msg in messages:
-            if isinstance(msg, Tracks):
-                result.tracks[sender][msg.k] = msg.states
-            elif isinstance(msg, Estimate):
-                for other in listeners[sender]:
-                    if faults is not None:
-                        for d in faults.deliveries(sender, other, t, msg):
-                            push(t + d, "estimate", other, msg)
-                    else:
-                        d = link_delay(sender, other, msg)
-                        if d is not None:
-                            push(t + d, "estimate", other, msg)
+    def carry_out(t: float, sender: str, outputs: list) -> None:
+        for o in outputs:
+            if not isinstance(o, Publish):
+                continue
+            if o.channel == "tracks":
+                result.tracks[sender][o.k] = o.message.states
+                continue
+            for other in listeners[sender]:
+                ds = (faults.deliveries(sender, other, t, o.message) if faults is not None
+                      else [d for d in [link_delay(sender, other, o.message)] if d is not None])
+                for d in ds:
+                    push(t + d, "msg", other, keys.estimate(sender), o.payload)
 
+    for n in names:
+        push(0.0, "live", n, "world", True)
     for k in range(1, scn.num_scans + 1):
         t = k * interval
+        x = truth.states[k - 1]
+        t_msg = encode(Truth(k, truth.ids[k - 1], x, send_time=t + TRUTH_DELAY * interval))
         for i, n in enumerate(names):
-            push(t, "scan", n, (k, scans[i][k - 1], truth.states[k - 1]))
-            push(t + scn.network.deadline * interval, "deadline", n, k)
-    result.faults = faults
+            push(t, "msg", n, keys.scan(n), encode(Scan(n, k, scans[i][k - 1], seq=k,
+                                                        send_time=t)))
+            push(t + TRUTH_DELAY * interval, "msg", n, keys.truth(), t_msg)
+    for m in inject:
+        push(m.t, "msg", m.target, m.key, m.payload)
+    for e in events:
+        push(e.t, "live", e.target, e.name, e.joined)
+    end = (scn.num_scans + 1) * interval + 1.0
+    for n in names:
+        push(end, "live", n, "world", False)
+    scheduled: dict[str, float] = {}
     while queue:
         t, _, kind, target, payload = heapq.heappop(queue)
-        peer = peers[target]
-        if kind == "scan":
-            k, z, x = payload
-            peer.on_truth(k, x)
-            emit(t, target, peer.on_scan(Scan(target, k, z), t))
-            peer.score_local()
-        elif kind == "estimate":
-            emit(t, target, peer.on_estimate(payload, t))
+        if target in result.stops:
+            continue
+        core = peers[target]
+        if kind == "msg":
+            out = core.receive(payload[0], payload[1], t)
+        elif kind == "live":
+            out = core.liveliness(payload[0], payload[1], t)
         else:
-            emit(t, target, peer.on_deadline(payload, t))
+            scheduled.pop(target, None)
+            out = []
+        out += core.tick(t)
+        carry_out(t, target, out)
+        for o in out:
+            if isinstance(o, Stop):
+                result.stops[target] = o.reason
+            elif isinstance(o, Record) and o.kind == "fusion":
+                result.ages.setdefault(target, []).extend(o.values["ages"].values())
+            elif isinstance(o, Record) and o.kind == "ospa":
+                per = result.ospa.setdefault(target, {"local": {}, "fused": {}})
+                per[o.values["which"]][o.k] = o.values["value"]
+        due = core.next_due()
+        if due is not None and scheduled.get(target) != due:
+            scheduled[target] = due
+            push(max(due, t), "tick", target)
     return result

@@ -170,11 +170,15 @@ def test_ten_thousand_fuzzed_messages(tmp_path):
         s = summaries[name]
         assert s["internal_errors"] == {}
         got = s["received_by_kind"]["estimate"]
-        assert got >= 10_000  # every fuzzed message arrived and was looked at
-        rejected = s["rejected_total"]
-        # every junk message was rejected; the replays were decoded and found redundant
-        assert rejected >= 10_000 * 6 // 7 - 5, s["rejected"]
-        assert s["nale"]["redundant"] >= 10_000 // 7 - 5
+        early = s["rejected_before_decoding"]
+        # every fuzzed message arrived: most were refused from their first bytes (stale scan
+        # index, a slot already filled, over the rate), the rest decoded and rejected or redundant
+        assert got + early >= 10_000, s["rejected"]
+        assert early >= 10_000 // 2, s["rejected"]
+        decoded_ok = s["nale"]["redundant"] + s["nale"]["accepted"]
+        assert s["rejected_total"] - early + decoded_ok >= got - 5, s
+        # s1's genuine estimates still got through: fused as in the clean twin run
+        assert s["nale"]["accepted"] >= scn.num_scans - 2
         assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 5.0
 
 
@@ -230,5 +234,5 @@ def test_sparse_links_along_a_ring(tmp_path):
     for name, s in summaries.items():
         assert s["stats"]["fused_inputs"] == 2 * scn.num_scans, (name, s["stats"])
         seen = {p for p, what, _, _ in s["peer_events"] if what == "joined"}
-        assert seen == set(twin.peers[name].o.neighbours)  # only the linked neighbours
+        assert seen == set(twin.peers[name].consensus.o.neighbours)  # only the linked neighbours
         assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 1e-9

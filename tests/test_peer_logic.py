@@ -7,11 +7,17 @@ import dataclasses
 import numpy as np
 import pytest
 
+from protocol.codec import encode
+from protocol.keys import Keys
 from protocol.messages import Estimate, Scan
-from sim.build import adjacency, make_peer, peer_options
+from sim.build import adjacency
 from sim.experiment import run_once
+from sim.peers import consensus_options, make_peer
 from sim.scenario import load_scenario, with_birth_model
 from sim.twin import run_twin
+from tracking.mixture import GaussianMixture
+
+KEYS = Keys("twin")
 
 
 @pytest.fixture(scope="module")
@@ -20,33 +26,36 @@ def scn():
     return dataclasses.replace(s, num_scans=40)
 
 
-def _per_scan(peer, which):
-    return {r["k"]: r["value"] for r in peer.records if r["kind"] == "ospa"
-            and r["which"] == which}
+def _per_scan(twin, name, which):
+    return twin.ospa[name][which]
+
+
+def _published(outputs, channel):
+    return [o for o in outputs if type(o).__name__ == "Publish" and o.channel == channel]
 
 
 def test_zero_delay_network_equals_offline_fusion(scn):
     # full mesh of 3: Metropolis weights are 1/3 each, the offline experiment's uniform weights
     twin = run_twin(scn, run=3)
     offline = run_once(scn, 3)
-    fused = _per_scan(twin.peers["s2"], "fused")
-    local = _per_scan(twin.peers["s2"], "local")
+    fused = _per_scan(twin, "s2", "fused")
+    local = _per_scan(twin, "s2", "local")
     ks = sorted(fused)
     assert ks == list(range(1, scn.num_scans + 1))
     np.testing.assert_allclose([fused[k] for k in ks], offline.ospa["fused s2 (gci)"], atol=1e-9)
     np.testing.assert_allclose([local[k] for k in ks], offline.ospa["local s2"], atol=1e-9)
     for name, peer in twin.peers.items():
-        assert peer.stats.fusions == scn.num_scans
-        assert peer.stats.fused_inputs == 2 * scn.num_scans, name
-        assert peer.stats.deadline_fusions == 0
+        assert peer.consensus.stats.fusions == scn.num_scans
+        assert peer.consensus.stats.fused_inputs == 2 * scn.num_scans, name
+        assert peer.consensus.stats.deadline_fusions == 0
 
 
 def test_consensus_rounds_publish_one_estimate_per_round(scn):
     s = dataclasses.replace(scn, network=dataclasses.replace(scn.network, rounds=3))
     twin = run_twin(s, run=0)
     for peer in twin.peers.values():
-        assert peer.stats.estimates_out == 3 * s.num_scans
-        assert peer.stats.fusions == 3 * s.num_scans
+        assert peer.consensus.stats.estimates_out == 3 * s.num_scans
+        assert peer.consensus.stats.fusions == 3 * s.num_scans
     # after 3 rounds on a complete graph every peer holds (nearly) the same density
     a, b = twin.tracks["s1"][s.num_scans], twin.tracks["s3"][s.num_scans]
     assert a.shape == b.shape
@@ -60,12 +69,12 @@ def test_late_estimates_are_predicted_by_nale(scn):
 
     twin = run_twin(scn, run=1, delay=delay)
     s2 = twin.peers["s2"]
-    assert s2.stats.deadline_fusions >= scn.num_scans - 2
-    assert s2.nale.counts.late >= scn.num_scans - 3
+    assert s2.consensus.stats.deadline_fusions >= scn.num_scans - 2
+    assert s2.consensus.nale.counts.late >= scn.num_scans - 3
     # every fusion still had both neighbours (s1 through the NALE buffer, one or two scans old)
-    assert s2.stats.fused_inputs >= 2 * scn.num_scans - 3
-    ages = [r["ages"].get("s1") for r in s2.records if r["kind"] == "fusion"]
-    assert set(a for a in ages if a is not None) <= {1, 2}
+    assert s2.consensus.stats.fused_inputs >= 2 * scn.num_scans - 3
+    assert set(twin.ages["s2"]) <= {0, 1, 2}
+    assert s2.rejected == {}  # late estimates are within the window, not rejected
 
 
 def test_drop_late_policy_fuses_fewer_inputs(scn):
@@ -76,41 +85,40 @@ def test_drop_late_policy_fuses_fewer_inputs(scn):
         return 1.5 * interval if (sender, receiver) == ("s1", "s2") else 0.0
 
     s2 = run_twin(s, run=1, delay=delay).peers["s2"]
-    assert s2.nale.counts.dropped_late >= s.num_scans - 3
-    assert s2.stats.fused_inputs <= s.num_scans + 2
+    assert s2.consensus.nale.counts.dropped_late >= s.num_scans - 3
+    assert s2.consensus.stats.fused_inputs <= s.num_scans + 2
 
 
 def test_lost_messages_do_not_stall_the_peer(scn):
     twin = run_twin(scn, run=2, delay=lambda s, r, m: None if s == "s3" else 0.0)
     s2 = twin.peers["s2"]
     assert len(twin.tracks["s2"]) == scn.num_scans
-    assert s2.stats.deadline_fusions == scn.num_scans  # always waited for s3, then fused
+    assert s2.consensus.stats.deadline_fusions == scn.num_scans  # always waited for s3, then fused
 
 
 def test_peer_that_left_is_not_waited_for(scn):
     peer = make_peer(scn, "s2")
-    peer.on_peer_left("s3")
-    from tracking.mixture import GaussianMixture
-
-    out = peer.on_scan(Scan("s2", 1, np.zeros((0, 2))), 0.0)
-    assert any(isinstance(m, Estimate) for m in out)
+    peer.liveliness("s3", False, 0.0)
+    out = peer.receive(KEYS.scan("s2"), encode(Scan("s2", 1, np.zeros((0, 2)))), 0.0)
+    assert _published(out, "estimate")
     est = Estimate("s1", 1, GaussianMixture.empty(4))
-    out = peer.on_estimate(est, 0.01)
-    assert [type(m).__name__ for m in out] == ["Tracks"]
-    assert peer.stats.deadline_fusions == 0
-    assert peer.stats.peers_left == [("s3", 0)]
+    out = peer.receive(KEYS.estimate("s1"), encode(est), 0.01)
+    assert [o.channel for o in _published(out, "tracks")] == ["tracks"]
+    assert peer.consensus.stats.deadline_fusions == 0
+    assert peer.departures == [("s3", "left", 0)]
 
 
 def test_stale_scans_and_strangers_are_counted(scn):
     peer = make_peer(scn, "s1")
-    peer.on_scan(Scan("s1", 2, np.zeros((0, 2))), 0.0)
-    assert peer.on_scan(Scan("s1", 2, np.zeros((0, 2))), 0.1) == []
-    assert peer.on_scan(Scan("s1", 1, np.zeros((0, 2))), 0.1) == []
-    assert peer.stats.stale_scans == 2
-    from tracking.mixture import GaussianMixture
-
-    assert peer.on_estimate(Estimate("mallory", 2, GaussianMixture.empty(4)), 0.2) == []
-    assert peer.stats.not_neighbour == 1
+    scan = lambda k: encode(Scan("s1", k, np.zeros((0, 2))))  # noqa: E731
+    peer.receive(KEYS.scan("s1"), scan(2), 0.0)
+    assert _published(peer.receive(KEYS.scan("s1"), scan(2), 0.1), "estimate") == []
+    assert _published(peer.receive(KEYS.scan("s1"), scan(1), 0.1), "estimate") == []
+    assert peer.stale_scans == 2 and peer.rejected["stale"] == 2
+    out = peer.receive(KEYS.estimate("mallory"),
+                       encode(Estimate("mallory", 2, GaussianMixture.empty(4))), 0.2)
+    assert _published(out, "tracks") == []
+    assert peer.rejected["not-neighbour"] == 1
 
 
 def test_topologies(scn):
@@ -121,6 +129,6 @@ def test_topologies(scn):
         assert list(A.sum(axis=1)) == degrees, topo
         assert np.array_equal(A, A.T)
     s = dataclasses.replace(scn, network=dataclasses.replace(scn.network, topology="line"))
-    opts = peer_options(s, "s1")
+    opts = consensus_options(s, "s1")
     assert opts.neighbours == ("s2",)
     assert dict(opts.degrees) == {"s1": 1, "s2": 2}

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from sim.build import make_peer
 from sim.launcher import read_summaries, start_run, wait_run
+from sim.peers import make_peer
 from sim.scenario import ScenarioError, load_scenario, parse_overrides
 from sim.twin import run_twin
 
@@ -27,7 +27,7 @@ def test_fused_beats_each_radar_alone_in_the_twin(rule, kind):
         local, fused = peer.mean_ospa("local"), peer.mean_ospa("fused")
         assert fused < 0.7 * local, (name, local, fused)
         assert fused < 5.0  # metres, for ALGORITHMS.md §6's geometry A
-        assert peer.stats.fused_inputs == scn.num_scans
+        assert peer.consensus.stats.fused_inputs == scn.num_scans
     again = run_twin(scn, 0)
     assert again.peers["r1"].mean_ospa("fused") == result.peers["r1"].mean_ospa("fused")
 
@@ -36,7 +36,7 @@ def test_no_fusion_means_local_only():
     scn = load_scenario("seed001", overrides={"scenario.num_scans": 80, "fusion.rule": "none"})
     result = run_twin(scn, 1)
     for peer in result.peers.values():
-        assert peer.stats.fused_inputs == 0 and peer.stats.estimates_out == 0
+        assert peer.consensus.stats.fused_inputs == 0 and peer.consensus.stats.estimates_out == 0
 
 
 def test_ratio_rule_needs_single_target_peers():

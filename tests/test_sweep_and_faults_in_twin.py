@@ -29,8 +29,8 @@ def test_loss_in_the_scenario_reaches_the_twin():
     # 3 peers x 2 listeners x 30 scans, every one lost: nobody fuses a neighbour
     assert counts["drop-loss"] == 180
     for peer in result.peers.values():
-        assert peer.stats.fused_inputs == 0
-        assert peer.stats.estimates_in == 0
+        assert peer.consensus.stats.fused_inputs == 0
+        assert peer.consensus.stats.estimates_in == 0
 
 
 def test_duplicates_are_counted_redundant_by_nale():
@@ -38,8 +38,9 @@ def test_duplicates_are_counted_redundant_by_nale():
     result = run_twin(scn, 1)
     assert result.faults.counts()["duplicate"] == 180
     for peer in result.peers.values():
-        assert peer.stats.estimates_in == 2 * 2 * 30  # two copies from each of 2 neighbours
-        assert peer.nale.counts.redundant == 2 * 30
+        # two copies from each of 2 neighbours
+        assert peer.consensus.stats.estimates_in == 2 * 2 * 30
+        assert peer.consensus.nale.counts.redundant == 2 * 30
 
 
 def test_same_seed_same_faults_and_same_result():

@@ -1,0 +1,178 @@
+"""What a peer checks before it spends anything on a message: key, scan window, slot, rate.
+
+All of it runs before decoding (the runtime calls :meth:`Admission.admit` on Zenoh's callback
+thread), reading only the first bytes of the message (a few microseconds):
+
+- the key must be one of the network's;
+- a scan, estimate or truth names its scan index (and round and kind) in its first fields:
+  stamped outside the window the peer still fuses it is refused at once (``stale``/``future``);
+  inside, each slot ``(sender, k, round, kind)`` is let through at most :data:`SLOT_COPIES`
+  times (``duplicate``), so replays and floods of valid-looking messages cost a dictionary
+  lookup each, and a genuine message is never starved by junk on its key;
+- everything else (unparseable headers, scans outside the normal window, control messages) is
+  charged to a per-sender token bucket (``rate``), a few times what an honest sender needs.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import msgpack
+
+from protocol.keys import ROOT
+
+SLOT_COPIES = 2
+"""Copies of one (sender, scan, round, kind) let through (a duplicated delivery is normal)."""
+MAX_SLOTS = 100_000
+_HEAD = 192  # bytes holding every field read by peek()
+
+CHANNELS = ("scan", "estimate", "truth", "ctl")
+"""Keys a peer listens on (``tracks`` are for observers)."""
+
+
+@dataclass(frozen=True)
+class Route:
+    """A parsed key: ``channel`` and the name in it (sensor or peer; ``""`` for truth/ctl)."""
+
+    channel: str
+    name: str
+
+
+def parse_key(key: str, network: str) -> Route | None:
+    """``sensornet/<network>/<channel>[/<name>]`` -> Route, or None if it is not one of ours."""
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != ROOT or parts[1] != network:
+        return None
+    channel = parts[2]
+    if channel in ("truth", "ctl"):
+        return Route(channel, "") if len(parts) == 3 else None
+    if channel in ("scan", "estimate") and len(parts) == 4 and parts[3]:
+        return Route(channel, parts[3])
+    return None
+
+
+def peek(payload: bytes) -> tuple[str, int, int, int] | None:
+    """``(type, k, round, kind)`` from a message's first fields, or None if they do not parse.
+
+    Layouts (protocol.codec): ``[v, "E", s, k, r, q, ts, p, o, ...]``, ``[v, "S", s, k, ...]``,
+    ``[v, "T", k, ...]``. Nothing here is trusted: the full decode checks it all again.
+    """
+    try:
+        u = msgpack.Unpacker(raw=False, max_buffer_size=_HEAD)
+        u.feed(payload[:_HEAD])
+        n = u.read_array_header()
+        if n < 4:
+            return None
+        u.skip()
+        kind = u.unpack()
+        if kind == "E" and n >= 9:
+            u.skip()
+            k, r = u.unpack(), u.unpack()
+            u.skip(), u.skip(), u.skip()
+            o = u.unpack()
+        elif kind == "S":
+            u.skip()
+            k, r, o = u.unpack(), 0, 0
+        elif kind == "T":
+            k, r, o = u.unpack(), 0, 0
+        else:
+            return None
+    except Exception:  # truncated, wrong types, ...: the bucket and the full decode decide
+        return None
+    ints = all(type(x) is int for x in (k, r, o))
+    return (kind, k, r, o) if ints and 0 <= k < 1 << 53 else None
+
+
+class TokenBucket:
+    """``rate`` tokens per second, at most ``capacity`` saved up."""
+
+    __slots__ = ("rate", "capacity", "tokens", "last")
+
+    def __init__(self, rate: float, capacity: float) -> None:
+        self.rate, self.capacity = rate, capacity
+        self.tokens, self.last = capacity, None
+
+    def take(self, now: float) -> bool:
+        if self.last is not None and now > self.last:
+            self.tokens = min(self.capacity, self.tokens + (now - self.last) * self.rate)
+        self.last = now if self.last is None else max(self.last, now)
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+
+class Admission:
+    """Per-sender rate limits, sized from what an honest sender sends per scan.
+
+    An honest world sends one scan per sensor and one truth per scan interval; an honest
+    neighbour ``rounds x kinds`` estimates. Each sender may send ``factor`` times that on
+    average, with bursts of ``burst`` scans' worth (duplicates, catching up after a pause).
+    Over the limit a message is dropped and counted as ``rate``.
+    """
+
+    def __init__(self, network: str, interval: float, per_scan: dict[str, float],
+                 factor: float = 4.0, burst: float = 8.0, max_senders: int = 256,
+                 window: Callable[[str], tuple[int, int]] | None = None) -> None:
+        self.network = network
+        self.window = window
+        """``channel -> (lo, hi)``: scan indices the peer keeps for that channel now."""
+        self._slots: dict[tuple, int] = {}
+        self._slots_lo = 0
+        self.interval = max(interval, 1e-6)
+        self.per_scan = per_scan
+        self.factor, self.burst = factor, burst
+        self.max_senders = max_senders
+        self._buckets: dict[tuple[str, str], TokenBucket] = {}
+        self.rejected: Counter = Counter()
+
+    def _bucket(self, route: Route) -> TokenBucket | None:
+        key = (route.channel, route.name)
+        b = self._buckets.get(key)
+        if b is None:
+            if len(self._buckets) >= self.max_senders:  # names are bounded too
+                return None
+            n = self.per_scan.get(route.channel, 1.0)
+            b = TokenBucket(self.factor * n / self.interval, max(4.0, self.burst * n))
+            self._buckets[key] = b
+        return b
+
+    def admit(self, route: Route | None, now: float, payload: bytes = b"") -> bool:
+        """Whether a message on ``route`` at ``now`` may go on (counts the refusals)."""
+        if route is None:
+            self.rejected["wrong-key"] += 1
+            return False
+        head = peek(payload) if self.window is not None and route.channel != "ctl" else None
+        if head is not None:
+            verdict = self._slot(route, head)
+            if verdict is not None:
+                return verdict
+        b = self._bucket(route)
+        if b is None or not b.take(now):
+            self.rejected["rate"] += 1
+            return False
+        return True
+
+    def _slot(self, route: Route, head: tuple[str, int, int, int]) -> bool | None:
+        """Window and slot verdict for a parsed header; None: leave it to the bucket."""
+        _, k, r, o = head
+        lo, hi = self.window(route.channel)
+        if k > hi or k < lo:
+            if route.channel == "scan":
+                return None  # maybe a restart of the numbering: the core decides, rate-limited
+            self.rejected["future" if k > hi else "stale"] += 1
+            return False
+        if lo > self._slots_lo:  # forget slots that left the window (memory stays bounded)
+            self._slots = {s: n for s, n in self._slots.items() if s[2] >= lo}
+            self._slots_lo = lo
+        slot = (route.channel, route.name, k, r, o)
+        n = self._slots.get(slot, 0)
+        if n == 0 and len(self._slots) >= MAX_SLOTS:
+            return None
+        if n >= SLOT_COPIES:
+            self.rejected["duplicate"] += 1
+            return False
+        self._slots[slot] = n + 1
+        return True

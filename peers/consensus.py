@@ -1,0 +1,271 @@
+"""Consensus over a peer's neighbours: one class for any local estimator and fuser.
+
+Per scan ``k`` (ALGORITHMS.md §3, §5): the local estimator steps and its round-0 estimate goes
+out; then ``L`` consensus rounds; round ``l`` fuses the peer's current density with the
+neighbours' round-``(l-1)`` densities (round 0 through the NALE buffer, so late estimates are
+predicted to ``k``). A round runs as soon as every live neighbour's inputs are in, or at the
+deadline with whatever arrived. After round ``L`` the tracks go out.
+
+Inputs here are decoded, already validated messages (:class:`peers.core.PeerCore` checks keys,
+senders, dimensions, scan windows and rates first); outputs are messages to publish.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
+from peers.fusers import NoFuser
+from protocol.messages import Estimate, Tracks
+from tracking.mixture import GaussianMixture
+from tracking.nale import NaleBuffer
+
+
+@dataclass(frozen=True)
+class ConsensusOptions:
+    """How one peer exchanges and fuses."""
+
+    name: str
+    neighbours: tuple[str, ...] = ()
+    degrees: tuple[tuple[str, int], ...] = ()
+    """Degree of this peer and of each neighbour (Metropolis weights)."""
+    rounds: int = 1
+    """Consensus rounds ``L`` per scan."""
+    omega: str = "metropolis"
+    """``"metropolis"`` or ``"uniform"`` weights (optimised rules live in the fuser)."""
+    max_age: int | None = 5
+    """Neighbour estimates older than this many scans are not fused."""
+    policy: str = "nale"
+    """Out-of-sequence policy: ``"nale"``, ``"drop-late"`` or ``"as-is"``."""
+    feedback: bool = False
+    """Use the fused density as the local filter's prior for the next scan."""
+
+    def __post_init__(self) -> None:
+        if self.rounds < 1:
+            raise ValueError("consensus rounds must be at least 1")
+        if self.name in self.neighbours:
+            raise ValueError("a peer cannot be its own neighbour")
+
+
+@dataclass
+class ConsensusStats:
+    """Counters reported in the summary."""
+
+    scans: int = 0
+    estimates_in: int = 0
+    estimates_out: int = 0
+    tuples_out: int = 0
+    """Numbers published in estimates (15 per 4-D component: ALGORITHMS.md §9)."""
+    old_round_estimates: int = 0
+    fusions: int = 0
+    fused_inputs: int = 0
+    deadline_fusions: int = 0
+    tracks_out: int = 0
+    last_fused_from: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class _ScanState:
+    k: int
+    z: np.ndarray
+    round: int = 0
+    current: GaussianMixture | None = None
+    local: GaussianMixture | None = None
+    done: bool = False
+
+
+class Consensus:
+    """Drives a :class:`LocalEstimator` and a :class:`Fuser` through the rounds of each scan."""
+
+    def __init__(self, options: ConsensusOptions, estimator: LocalEstimator,
+                 fuser: Fuser) -> None:
+        self.o = options
+        self.estimator = estimator
+        self.fuser = fuser
+        self.fusing = bool(options.neighbours) and not isinstance(fuser, NoFuser)
+        self.rounds = min(options.rounds, fuser.max_rounds)
+        self.kinds = tuple(estimator.kinds) if self.fusing else ()
+        self.nale = NaleBuffer(max_age=options.max_age, policy=options.policy)
+        self.alive: set[str] = set(options.neighbours)
+        self._deg = dict(options.degrees)
+        self._inbox: dict[tuple[int, int, str], dict[str, GaussianMixture]] = {}
+        self._scan: _ScanState | None = None
+        self._seq = 0
+        self.last_k = 0
+        self.stats = ConsensusStats()
+        self.errors: Counter = Counter()
+        """Unexpected exceptions in the estimator or fuser, by type (each scored a miss)."""
+        self.records: list[dict] = []
+        self.last_local: GaussianMixture | None = None
+        self.last_fused: GaussianMixture | None = None
+
+    # -- inputs -----------------------------------------------------------------------------
+    def busy(self) -> bool:
+        """Whether the current scan's fusion is still to come."""
+        return self._scan is not None and not self._scan.done
+
+    def on_scan(self, k: int, z: np.ndarray, steps: int, now: float) -> list:
+        """Local step with scan ``k`` (``steps`` scans after the previous one); round-0
+        estimates out; fuse at once if nothing is awaited."""
+        out: list = []
+        if self.busy():
+            out += self.finish(now)
+        self.last_k = k
+        try:
+            local = self.estimator.step(steps, z)
+        except Exception as exc:  # a bug must not stop the scans: no output, scored a miss
+            self._error(k, exc)
+            self._scan = None
+            return out
+        self.last_local = local.density
+        self.stats.scans += 1
+        self._scan = _ScanState(k, z, 0, local.published["posterior"], local.density)
+        self._record(k, "local", **local.info)
+        if self.fusing:
+            for kind in self.kinds:
+                out.append(self._estimate(k, 0, local.published[kind], now, kind))
+        out += self._advance(now)
+        self._drop_old(k)
+        return out
+
+    def on_estimate(self, est: Estimate, now: float) -> list:
+        """Store a neighbour's estimate (round-0 posteriors through NALE); fuse if complete."""
+        self.stats.estimates_in += 1
+        if est.round == 0 and est.kind == "posterior":
+            self.nale.offer(est.sender, est.k, est.mixture)
+        if self._scan is not None and est.k < self._scan.k and est.round > 0:
+            self.stats.old_round_estimates += 1
+            return []
+        self._inbox.setdefault((est.k, est.round, est.kind), {})[est.sender] = est.mixture
+        return self._advance(now)
+
+    def on_deadline(self, k: int, now: float) -> list:
+        """The fusion deadline of scan ``k``: run the remaining rounds with what arrived."""
+        if self._scan is None or self._scan.k != k or self._scan.done:
+            return []
+        return self.finish(now)
+
+    def finish(self, now: float) -> list:
+        """Run the current scan's remaining rounds now (deadline, next scan, or end of run)."""
+        out: list = []
+        st = self._scan
+        if st is not None and not st.done:
+            self.stats.deadline_fusions += 1
+            while not st.done:
+                out += self._fuse_round(st, now)
+        return out
+
+    def peer_left(self, name: str) -> bool:
+        """A neighbour went away: stop waiting for it and forget its stored estimate."""
+        if name not in self.alive:
+            return False
+        self.alive.discard(name)
+        self.nale.forget(name)
+        return True
+
+    def peer_joined(self, name: str) -> bool:
+        if name in self.o.neighbours and name not in self.alive:
+            self.alive.add(name)
+            return True
+        return False
+
+    def reset_window(self) -> None:
+        """Forget every stored estimate (the scan numbering restarted)."""
+        self._inbox.clear()
+        for name in list(self.nale.stored):
+            self.nale.forget(name)
+        self._scan = None
+
+    # -- rounds -----------------------------------------------------------------------------
+    def _inputs(self, k: int, rnd: int) -> dict[str, dict[str, GaussianMixture]]:
+        got: dict[str, dict[str, GaussianMixture]] = {}
+        if rnd == 0:
+            for s, mix in self.nale.collect(k, self.estimator.predict).items():
+                got[s] = {"posterior": mix}
+        for kind in self.kinds:
+            for s, mix in self._inbox.get((k, rnd, kind), {}).items():
+                got.setdefault(s, {}).setdefault(kind, mix)
+        return {s: v for s, v in got.items() if all(kd in v for kd in self.kinds)}
+
+    def _ready(self, k: int, rnd: int) -> bool:
+        if not self.fusing:
+            return True
+        return all(n in self._inbox.get((k, rnd, kind), {})
+                   for n in self.alive for kind in self.kinds)
+
+    def _advance(self, now: float) -> list:
+        out: list = []
+        st = self._scan
+        while st is not None and not st.done and self._ready(st.k, st.round):
+            out += self._fuse_round(st, now)
+        return out
+
+    def _fuse_round(self, st: _ScanState, now: float) -> list:
+        """Consensus round ``st.round + 1`` of scan ``st.k``."""
+        if not self.fusing:
+            st.done = True
+            return self._tracks(st.k, st.local, now)
+        inputs = self._inputs(st.k, st.round)
+        senders = sorted(inputs)
+        weights = metropolis_weights(self.o.name, senders, self._deg,
+                                     uniform=self.o.omega == "uniform")
+        try:
+            fused = self.fuser.fuse(FusionInput(st.k, st.round, st.current, inputs, weights,
+                                                st.z))
+        except Exception as exc:  # a bug must not stop the peer: no tracks, scored a miss
+            self._error(st.k, exc)
+            st.done = True
+            return []
+        self.stats.fusions += 1
+        self.stats.fused_inputs += len(senders)
+        for s in senders:
+            self.stats.last_fused_from[s] = st.k
+        ages = self.nale.ages(st.k) if st.round == 0 else {}
+        st.round += 1
+        st.current = fused
+        self.last_fused = fused
+        self._record(st.k, "fusion", round=st.round, n_inputs=len(senders), n_fused=len(fused),
+                     ages={s: ages.get(s, 0) for s in senders})
+        if st.round < self.rounds:
+            return [self._estimate(st.k, st.round, fused, now, "posterior")]
+        st.done = True
+        if self.o.feedback:
+            self.estimator.adopt(fused)
+        return self._tracks(st.k, fused, now)
+
+    # -- outputs ----------------------------------------------------------------------------
+    def _next_seq(self) -> int:
+        self._seq += 1
+        return self._seq
+
+    def _estimate(self, k: int, rnd: int, mix: GaussianMixture, now: float,
+                  kind: str) -> Estimate:
+        self.stats.estimates_out += 1
+        d = mix.dim
+        self.stats.tuples_out += len(mix) * (1 + d + d * (d + 1) // 2)
+        return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
+                        send_time=now, pruning=2 if rnd == 0 else 1, kind=kind)
+
+    def _tracks(self, k: int, fused: GaussianMixture, now: float) -> list:
+        states = self.estimator.extract(fused)
+        self.stats.tracks_out += 1
+        return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
+
+    def _error(self, k: int, exc: Exception) -> None:
+        self.errors[type(exc).__name__] += 1
+        self._record(k, "error", error=type(exc).__name__, message=str(exc)[:300])
+
+    def _record(self, k: int, kind: str, **values) -> None:
+        self.records.append({"k": k, "kind": kind, **values})
+
+    def drain_records(self) -> list[dict]:
+        out, self.records = self.records, []
+        return out
+
+    def _drop_old(self, k: int) -> None:
+        """Bound memory: forget inbox entries of scans before ``k``."""
+        for key in [key for key in self._inbox if key[0] < k]:
+            del self._inbox[key]

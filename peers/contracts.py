@@ -1,0 +1,108 @@
+"""The two small parts a peer is built from: a local estimator and a fuser.
+
+In the spirit of Stone Soup's Predictor / Updater / Reducer split, but on arrays: a
+:class:`LocalEstimator` turns this peer's own scans into a density it publishes; a
+:class:`Fuser` combines that density with the neighbours' into the fused density the peer's
+tracks come from. :class:`peers.consensus.Consensus` drives any pair of them (consensus rounds,
+out-of-sequence buffer, deadlines), and :class:`peers.core.PeerCore` puts bytes, bounds and
+counters around it. A new estimator plugs in by implementing these methods; nothing else in
+the peer changes (docs/architecture.md has a ten-line example).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from tracking.mixture import GaussianMixture
+
+
+@dataclass(frozen=True)
+class LocalOutput:
+    """What one local step produced."""
+
+    density: GaussianMixture
+    """The estimator's full local density after the scan (for display)."""
+    published: Mapping[str, GaussianMixture]
+    """What neighbours receive, by estimate kind (``"posterior"``, ``"prediction"``, ...);
+    ``published["posterior"]`` is also this peer's own input to the first consensus round."""
+    info: Mapping[str, float] = field(default_factory=dict)
+    """Numbers for the records (e.g. components before pruning)."""
+
+
+@runtime_checkable
+class LocalEstimator(Protocol):
+    """A local filter fed with this peer's own scans."""
+
+    dim: int
+    """State dimension of every density it publishes (and accepts from neighbours)."""
+    kinds: tuple[str, ...]
+    """Estimate kinds it publishes per scan (first is ``"posterior"``)."""
+    position_index: tuple[int, int]
+    """Columns of (x, y) in the state (for scoring and display)."""
+
+    def step(self, steps: int, z: np.ndarray) -> LocalOutput:
+        """Predict ``steps`` scans ahead (>= 1) and update with the scan ``z (m, 2)``."""
+        ...
+
+    def predict(self, mix: GaussianMixture, steps: int) -> GaussianMixture:
+        """Predict a (neighbour's) density ``steps`` scans ahead (out-of-sequence estimates)."""
+        ...
+
+    def extract(self, mix: GaussianMixture) -> np.ndarray:
+        """Target state estimates ``(n, dim)`` from a (fused) density."""
+        ...
+
+    def adopt(self, fused: GaussianMixture) -> None:
+        """Use a fused density as the next scan's prior (feedback); may do nothing."""
+        ...
+
+
+@dataclass(frozen=True)
+class FusionInput:
+    """One consensus round's inputs, as the fuser sees them."""
+
+    k: int
+    """Scan index."""
+    round: int
+    """0 for the first round (local densities), l for round l + 1."""
+    own: GaussianMixture
+    """This peer's density entering the round (its published posterior in round 0)."""
+    neighbours: Mapping[str, Mapping[str, GaussianMixture]]
+    """Per neighbour present, its densities by kind."""
+    weights: Sequence[float]
+    """Fusion weights for ``[own, *sorted(neighbours)]`` (sum 1)."""
+    z: np.ndarray
+    """This peer's own scan ``(m, 2)`` (fusers that re-run a filter need it)."""
+
+
+@runtime_checkable
+class Fuser(Protocol):
+    """Combines this peer's density with its neighbours' (GCI, AA, particle ratio, none)."""
+
+    kinds: tuple[str, ...]
+    """Estimate kinds needed from each neighbour before a round can run."""
+    max_rounds: int
+    """Consensus rounds it supports per scan (1 for the single-target fusers)."""
+
+    def fuse(self, inp: FusionInput) -> GaussianMixture:
+        """The fused density of one round (never raises on well-formed, compatible inputs)."""
+        ...
+
+
+def metropolis_weights(own: str, senders: Sequence[str], degrees: Mapping[str, int],
+                       uniform: bool = False) -> list[float]:
+    """Fusion weights for ``[own, *senders]``: Metropolis on the graph degrees (seed 000 §3).
+
+    A neighbour whose input is missing simply has no term; its weight stays with this peer
+    (``omega_ii = 1 - sum_j omega_ij`` over the neighbours present).
+    """
+    n = len(senders) + 1
+    if uniform:
+        return [1.0 / n] * n
+    di = degrees.get(own, len(senders))
+    w = [1.0 / (1.0 + max(di, degrees.get(s, di))) for s in senders]
+    return [1.0 - sum(w), *w]

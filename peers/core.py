@@ -1,0 +1,345 @@
+"""The sans-I/O peer: bytes in, typed outputs out (in the style of h11's connection object).
+
+``receive(key, payload, now)``, ``tick(now)``, ``liveliness(name, joined, now)`` and
+``finish(now)`` return :class:`Publish`, :class:`Record` and :class:`Stop` outputs that a driver
+carries out: the Zenoh runtime (``peers.runtime``) with sockets, clocks and files, the twin
+(``sim.twin``) on a virtual clock. Everything between the bytes and the outputs lives here:
+key and sender checks, decoding, every bound on what one message may cost, rejection counters
+by reason code, deadlines, departures, scoring.
+
+Bounds (each rejection is counted under its reason in :meth:`snapshot`):
+
+- ``rate``: more than a few times what an honest sender sends (``peers.admission``);
+- ``wrong-key``/``spoofed``: a message of the wrong type for its key, or naming another sender;
+- the codec's reasons (``malformed``, ``too-large``, ``not-psd``, ...);
+- ``future``: a scan, estimate or truth more than ``horizon`` scans after the newest accepted
+  scan (one message cannot move a peer's clock; see :meth:`_scan` for how a real restart of the
+  scan numbering is still followed); ``stale``: before the scans still being fused;
+- ``not-neighbour``, ``incompatible`` (state dimension or estimate kind this peer cannot fuse),
+  ``round`` (a consensus round this peer does not run);
+- ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command).
+
+A ``ctl`` "end" alone never stops a peer: it stops when the world's liveliness token goes away.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from peers.admission import Admission, Route, parse_key
+from peers.consensus import Consensus
+from peers.scoring import Scorer
+from protocol.codec import DEFAULT_LIMITS, Limits, Rejected, decode, encode
+from protocol.keys import Keys
+from protocol.messages import Control, Estimate, Scan, Tracks, Truth
+
+
+@dataclass(frozen=True)
+class Publish:
+    """Put ``payload`` on this peer's ``channel`` key (``"estimate"`` or ``"tracks"``)."""
+
+    channel: str
+    k: int
+    payload: bytes
+    message: Estimate | Tracks
+
+
+@dataclass(frozen=True)
+class Record:
+    """Something to log or measure (Rerun, latency breakdown); ``values`` are plain data."""
+
+    kind: str
+    k: int
+    values: dict
+
+
+@dataclass(frozen=True)
+class Stop:
+    """The run is over for this peer."""
+
+    reason: str
+
+
+Output = Publish | Record | Stop
+
+
+@dataclass(frozen=True)
+class CoreConfig:
+    """Clock and bounds of one peer (the filter and fusion settings live in its parts)."""
+
+    name: str
+    sensor: str
+    network: str
+    interval: float = 1.0
+    """Seconds between scans on the driver's clock."""
+    deadline: float = 0.5
+    """Fusion deadline after a scan arrives, as a fraction of ``interval``."""
+    horizon: int = 5
+    """Scans ahead of the newest accepted scan that a message may be stamped with."""
+    quiet: float = 3.0
+    """Intervals without an accepted scan after which a scan outside the horizon is taken as
+    a new start of the scan numbering (a late join, a restarted world)."""
+    rate_factor: float = 4.0
+    """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
+    limits: Limits = DEFAULT_LIMITS
+
+
+class PeerCore:
+    """One peer's whole behaviour between bytes and outputs."""
+
+    def __init__(self, cfg: CoreConfig, consensus: Consensus, scorer: Scorer) -> None:
+        self.cfg = cfg
+        self.name = cfg.name
+        self.consensus = consensus
+        self.estimator = consensus.estimator
+        self.scorer = scorer
+        self.keys = Keys(cfg.network)
+        kinds = max(1, len(consensus.kinds))
+        self.admission = Admission(cfg.network, cfg.interval, {
+            "scan": 1.0, "truth": 1.0, "ctl": 0.5,
+            "estimate": float(consensus.rounds * kinds)}, factor=cfg.rate_factor,
+            window=self.window_for)
+        self.rejected: Counter = Counter()
+        self.received: Counter = Counter()
+        self.received_bytes: Counter = Counter()
+        self.stale_scans = 0
+        self.reanchored = 0
+        self.first_k: int | None = None
+        self.last_accept: float | None = None
+        self.deadlines: dict[int, float] = {}
+        self.world = "unseen"  # "alive", "left"
+        self.end_requested = False
+        self.ctl_end_early = 0
+        self.t0: float | None = None
+        self.departures: list[tuple[str, str, int]] = []
+        self.stopped: str | None = None
+        self._pending_local: list[int] = []
+
+    # -- the four entry points ------------------------------------------------------------
+    def receive(self, key: str, payload: bytes, now: float, admitted: bool = False
+                ) -> list[Output]:
+        """One message as it came off the network (``admitted``: the rate check already ran)."""
+        route = parse_key(key, self.cfg.network)
+        if route is not None and route.channel == "estimate" and route.name == self.name:
+            return []  # our own publication
+        if not admitted and not self.admission.admit(route, now, payload):
+            return []
+        if route is None:
+            return self._reject("wrong-key")
+        self.received[route.channel] += 1
+        self.received_bytes[route.channel] += len(payload)
+        try:
+            msg = decode(payload, self.cfg.limits)
+        except Rejected as exc:
+            return self._reject(exc.reason)
+        expected = {"scan": Scan, "estimate": Estimate, "truth": Truth, "ctl": Control}
+        if not isinstance(msg, expected[route.channel]):
+            return self._reject("wrong-key")
+        if route.channel == "scan":
+            return self._scan(route, msg, now)
+        if route.channel == "estimate":
+            return self._estimate(route, msg, now)
+        if route.channel == "truth":
+            return self._truth(msg)
+        return self._control(msg, now)
+
+    def tick(self, now: float) -> list[Output]:
+        """Fire due deadlines and do the deferred work (call after publishing outputs)."""
+        out: list[Output] = []
+        for k in [k for k, t in self.deadlines.items() if t <= now]:
+            del self.deadlines[k]
+            out += self._wrap(self.consensus.on_deadline(k, now))
+        self._score_local()
+        return out + self._records()
+
+    def liveliness(self, name: str, joined: bool, now: float) -> list[Output]:
+        """A liveliness token appeared or went away (``alive/<name>``)."""
+        if name == self.name:
+            return []
+        if name == "world":
+            if joined:
+                self.world = "alive"
+                return []
+            if self.world == "alive":
+                self.world = "left"
+                reason = ("end of run" if self.end_requested
+                          else "world left before ending the run")
+                return self.finish(now) + [Stop(reason)]
+            return []
+        c = self.consensus
+        changed = c.peer_joined(name) if joined else c.peer_left(name)
+        if not changed:
+            return []
+        what = "joined" if joined else "left"
+        self.departures.append((name, what, c.last_k))
+        out: list[Output] = [Record("peer", c.last_k, {"peer": name, "what": what})]
+        if not joined:  # maybe the round waited only for it
+            out += self._wrap(c._advance(now))
+        return out
+
+    def finish(self, now: float) -> list[Output]:
+        """End of the run: fuse what is pending, score what is missing."""
+        out = self._wrap(self.consensus.finish(now))
+        self.deadlines.clear()
+        self._score_local()
+        self.scorer.finish()
+        return out + self._records()
+
+    def next_due(self) -> float | None:
+        """When :meth:`tick` next has work (a deadline), or None."""
+        return min(self.deadlines.values(), default=None)
+
+    # -- channels ---------------------------------------------------------------------------
+    def _reject(self, reason: str) -> list[Output]:
+        self.rejected[reason] += 1
+        return [Record("rejected", self.consensus.last_k, {"reason": reason})]
+
+    def _scan(self, route: Route, msg: Scan, now: float) -> list[Output]:
+        if route.name != self.cfg.sensor:
+            return self._reject("wrong-key")
+        if msg.sensor != route.name:
+            return self._reject("spoofed")
+        c, k, h = self.consensus, msg.k, self.cfg.horizon
+        quiet = (self.last_accept is None
+                 or now - self.last_accept > self.cfg.quiet * self.cfg.interval)
+        if self.first_k is not None and c.last_k < k <= c.last_k + h:
+            steps = k - c.last_k
+            if steps > 1:
+                self.scorer.skipped(steps - 1)
+        elif quiet and k != c.last_k and (self.first_k is None or k > c.last_k or k >= 1):
+            # a new start of the numbering: nothing accepted for a while (late join, restart)
+            if self.first_k is not None:
+                self.reanchored += 1
+                c.reset_window()
+                self.deadlines.clear()
+            steps = k - c.last_k if k > c.last_k else 1
+            self.first_k = k if self.first_k is None else self.first_k
+        elif k <= c.last_k:
+            self.stale_scans += 1
+            return self._reject("stale")
+        else:
+            return self._reject("future")
+        self.last_accept = now
+        out = [Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
+        self.scorer.expect(k)
+        out += self._wrap(c.on_scan(k, msg.z, steps, now))
+        self.scorer.advance(k)
+        self._pending_local.append(k)
+        self.deadlines = {kk: t for kk, t in self.deadlines.items() if kk >= k}
+        if c.busy():
+            self.deadlines[k] = now + self.cfg.deadline * self.cfg.interval
+        return out
+
+    def window_for(self, channel: str) -> tuple[int, int]:
+        """Scan indices this peer takes on ``channel`` now: scans from the next one up to
+        ``horizon`` ahead; estimates and truths from the oldest still fused (``max_age``) to
+        ``horizon`` ahead of the newest accepted scan."""
+        last, h = self.consensus.last_k, self.cfg.horizon
+        if channel == "scan":
+            return last + 1, last + h
+        age = self.consensus.o.max_age
+        return last - max(2, (age if age is not None else 0) + 1), last + h
+
+    def _window(self, k: int) -> str | None:
+        """Why an estimate/truth stamped ``k`` is outside what this peer keeps, or None."""
+        lo, hi = self.window_for("estimate")
+        return "future" if k > hi else "stale" if k < lo else None
+
+    def _estimate(self, route: Route, msg: Estimate, now: float) -> list[Output]:
+        c = self.consensus
+        if msg.sender != route.name:
+            return self._reject("spoofed")
+        if msg.sender not in c.o.neighbours:
+            return self._reject("not-neighbour")
+        if msg.mixture.dim != self.estimator.dim or msg.kind not in (c.kinds or ("posterior",)):
+            return self._reject("incompatible")
+        if msg.round >= c.rounds:
+            return self._reject("round")
+        why = self._window(msg.k)
+        if why:
+            return self._reject(why)
+        out: list[Output] = [Record("estimate", msg.k, {"sender": msg.sender,
+                                                        "round": msg.round})]
+        return out + self._wrap(c.on_estimate(msg, now))
+
+    def _truth(self, msg: Truth) -> list[Output]:
+        why = self._window(msg.k) if self.first_k is not None else None
+        if why is None:
+            why = self.scorer.truth_message(msg.k, msg.states)
+        return self._reject(why) if why else self._records()
+
+    def _control(self, msg: Control, now: float) -> list[Output]:
+        if msg.command == "start":
+            self.t0 = msg.send_time
+            return []
+        if msg.command == "end":
+            self.end_requested = True
+            if self.world != "left":
+                self.ctl_end_early += 1  # the world is still there: wait for it to leave
+            return []
+        return self._reject("ctl")
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _wrap(self, messages: list) -> list[Output]:
+        out: list[Output] = []
+        for m in messages:
+            if isinstance(m, Estimate):
+                out.append(Publish("estimate", m.k, encode(m), m))
+            elif isinstance(m, Tracks):
+                out.append(Publish("tracks", m.k, encode(m), m))
+                self.scorer.output("fused", m.k, m.states)
+        return out
+
+    def _score_local(self) -> None:
+        """Extract and score the local estimate (kept off the critical path)."""
+        c = self.consensus
+        while self._pending_local:
+            k = self._pending_local.pop()
+            if k == c.last_k and c.last_local is not None:
+                self.scorer.output("local", k, self.estimator.extract(c.last_local))
+        self._pending_local.clear()
+
+    def _records(self) -> list[Output]:
+        recs = self.consensus.drain_records() + self.scorer.drain_records()
+        return [Record(r.pop("kind"), r.pop("k"), r) for r in recs]
+
+    # -- reporting --------------------------------------------------------------------------
+    def mean_ospa(self, which: str) -> float:
+        return self.scorer.mean(which)
+
+    def snapshot(self) -> dict:
+        """Counts, scores and state for the summary (plain data)."""
+        c, s = self.consensus, self.scorer
+        rejected = self.rejected + self.admission.rejected
+        return {
+            "peer": self.name,
+            "scans": c.stats.scans,
+            "last_k": c.last_k,
+            "mean_ospa_local": s.mean("local"),
+            "mean_ospa_fused": s.mean("fused"),
+            "ospa_misses": dict(s.misses),
+            "ospa_scored": dict(s.counts),
+            "ospa_unscored": s.unscored,
+            "rejected": dict(rejected),
+            "rejected_total": sum(rejected.values()),
+            "rejected_before_decoding": sum(self.admission.rejected.values()),
+            "received_by_kind": dict(self.received),
+            "bytes_received": sum(self.received_bytes.values()),
+            "messages_received": sum(self.received.values()),
+            "stale_scans": self.stale_scans,
+            "reanchored": self.reanchored,
+            "ctl_end_while_world_alive": self.ctl_end_early,
+            "peer_events": self.departures[-1000:],
+            "stats": asdict(c.stats),
+            "nale": asdict(c.nale.counts),
+            "fuser": dict(getattr(c.fuser, "counts", {})),
+            "internal_errors": dict(c.errors),
+        }
+
+
+def positions(states: np.ndarray, index: tuple[int, int]) -> np.ndarray:
+    """``(n, 2)`` positions of state rows (empty-safe)."""
+    return states[:, list(index)] if len(states) else np.zeros((0, 2))

@@ -1,0 +1,112 @@
+"""The Rerun view of one peer: what its outputs and records look like on the map and the plots.
+
+Reads only the core's public state (the latest local and fused densities, the estimator's
+particles, counters) and the outputs the driver carried out. Drawing the local mixture is
+deferred until the scan's tracks are out (:meth:`Observer.flush`): done at once it took CPU from
+the neighbours' filter steps in the very burst that sets the scan-to-track latency.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from peers.core import PeerCore, Publish, Record
+from peers.rerun_sink import RerunSink, color_of, position_columns
+
+
+class Observer:
+    """Logs one peer's run to a :class:`~peers.rerun_sink.RerunSink` (no-op when disabled)."""
+
+    def __init__(self, core: PeerCore, sink: RerunSink, color_index: int,
+                 scan_period: float) -> None:
+        self.core = core
+        self.name = core.name
+        self.sink = sink
+        self.color = color_of(color_index)
+        self.scan_period = scan_period
+        self.tails: deque = deque(maxlen=20)
+        self._deferred: list = []
+
+    @property
+    def enabled(self) -> bool:
+        return self.sink.enabled
+
+    def _time(self, k: int) -> None:
+        self.sink.time(k, k * self.scan_period)
+
+    def published(self, out: Publish, latency_ms: float | None) -> None:
+        if not self.enabled or out.channel != "tracks":
+            return
+        states = out.message.states
+        self._time(out.k)
+        if latency_ms is not None:
+            self.sink.scalar(f"metrics/latency_ms/{self.name}", latency_ms)
+        xy = states[:, position_columns(states.shape[1])] if len(states) else np.zeros((0, 2))
+        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=5.0)
+        self.tails.append(xy)
+        self.sink.points(f"peers/{self.name}/tail", np.concatenate(list(self.tails)),
+                         self.color, radius=1.5)
+        self.sink.scalar(f"metrics/cardinality/{self.name}/fused", len(states))
+
+    def record(self, r: Record, compute_ms: float | None = None) -> None:
+        if not self.enabled:
+            return
+        n, core = self.name, self.core
+        if r.kind == "local":
+            self._time(r.k)
+            self.sink.scalar(f"metrics/components/{n}/before_level2",
+                             r.values.get("n_components"))
+            self.sink.scalar(f"metrics/components/{n}/after_level2",
+                             r.values.get("n_published"))
+            self._defer_local(r.k, compute_ms)
+        elif r.kind == "fusion":
+            self._time(r.k)
+            self.sink.scalar(f"metrics/components/{n}/fused", r.values["n_fused"])
+            ages = r.values.get("ages") or {}
+            if ages:
+                self.sink.scalar(f"metrics/age/{n}", max(ages.values()))
+            c = core.consensus.nale.counts
+            for what in ("late", "redundant", "too_old", "dropped_late"):
+                self.sink.scalar(f"metrics/out_of_sequence/{n}/{what}", getattr(c, what))
+            if core.consensus.last_fused is not None:
+                self.sink.mixture(f"peers/{n}/fused", core.consensus.last_fused, self.color)
+            probs = getattr(core.consensus.fuser, "model_probabilities", None)
+            if probs is not None:
+                names = getattr(core.estimator, "model_names", None) or []
+                for i, p in enumerate(probs()):
+                    label = names[i] if i < len(names) else f"model{i}"
+                    self.sink.scalar(f"metrics/model_probability/{n}/{label}", float(p))
+        elif r.kind == "ospa":
+            self._time(r.k)
+            self.sink.scalar(f"metrics/ospa/{n}/{r.values['which']}", r.values["value"])
+        elif r.kind == "rejected":
+            self.sink.scalar(f"metrics/rejected/{n}", sum(core.rejected.values()))
+        elif r.kind == "peer":
+            self.sink.text(f"peers/{n}/events", f"{r.values['peer']} {r.values['what']}")
+
+    def _defer_local(self, k: int, compute_ms: float | None) -> None:
+        core = self.core
+        mix = core.consensus.last_local
+        particles = getattr(core.estimator, "particles", lambda: None)()
+
+        def log() -> None:
+            self._time(k)
+            if mix is not None:
+                self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
+            if particles is not None:  # IMM-PF peers: the particle cloud
+                self.sink.points(f"peers/{self.name}/particles", particles, self.color,
+                                 radius=1.0)
+            if compute_ms is not None:
+                self.sink.scalar(f"metrics/compute_ms/{self.name}/filter", compute_ms)
+
+        self._deferred.append(log)
+
+    def flush(self, idle: bool, force: bool = False) -> None:
+        """Run the deferred drawing once nothing waits (or there is a backlog, or at the end)."""
+        if not self._deferred or not (force or idle or len(self._deferred) > 10):
+            return
+        pending, self._deferred = self._deferred, []
+        for log in pending:
+            log()

@@ -1,0 +1,127 @@
+"""OSPA scoring of a peer's local and fused estimates, with missing output scored as a miss.
+
+Truth is an evaluation side channel. A peer that knows its scenario regenerates the truth
+itself (``truth=`` a function of the scan index), so a forged ``Truth`` message cannot change
+its score: a message that disagrees is rejected. Without that function, the first truth per scan
+counts and a later, different one is rejected as a conflict.
+
+Every accepted scan is expected to produce a local and a fused estimate. One that never comes
+(an internal error, a lost scan inside the normal window, the end of the run) is scored at the
+cut-off ``c`` (a miss) and stays in the mean, so a peer that stops producing output cannot look
+better for it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from tracking.metrics import ospa
+
+WHICH = ("local", "fused")
+TruthFn = Callable[[int], "np.ndarray | None"]
+
+
+class Scorer:
+    """Mean OSPA of the ``"local"`` and ``"fused"`` estimates of one peer."""
+
+    def __init__(self, cutoff: float, order: float, position_index: tuple[int, int],
+                 truth: TruthFn | None = None, window: int = 8) -> None:
+        self.c, self.p = float(cutoff), float(order)
+        self.pos = list(position_index)
+        self.truth_fn = truth
+        self.window = window
+        self._truth: dict[int, np.ndarray] = {}
+        self._waiting: dict[str, dict[int, np.ndarray]] = {w: {} for w in WHICH}
+        self._expected: dict[str, set[int]] = {w: set() for w in WHICH}
+        self.sums = dict.fromkeys(WHICH, 0.0)
+        self.counts = dict.fromkeys(WHICH, 0)
+        self.misses = dict.fromkeys(WHICH, 0)
+        self.unscored = 0
+        """Estimates whose truth never arrived (no truth function, truth messages lost)."""
+        self.records: list[dict] = []
+
+    # -- truth ------------------------------------------------------------------------------
+    def truth(self, k: int) -> np.ndarray | None:
+        if self.truth_fn is not None:
+            return self.truth_fn(k)
+        return self._truth.get(k)
+
+    def truth_message(self, k: int, states: np.ndarray) -> str | None:
+        """Take a ``Truth`` message; the rejection reason, or None if it was used."""
+        states = np.asarray(states, float)
+        if self.truth_fn is not None:
+            mine = self.truth_fn(k)
+            if mine is None or mine.shape != states.shape or not np.allclose(mine, states):
+                return "truth-mismatch"
+            return None
+        held = self._truth.get(k)
+        if held is not None:
+            same = held.shape == states.shape and np.allclose(held, states)
+            return None if same else "truth-conflict"
+        self._truth[k] = states
+        for which in WHICH:
+            if k in self._waiting[which]:
+                self._score(which, k, self._waiting[which].pop(k))
+        return None
+
+    # -- estimates --------------------------------------------------------------------------
+    def expect(self, k: int) -> None:
+        """Scan ``k`` was accepted: a local and a fused estimate are due."""
+        for which in WHICH:
+            self._expected[which].add(k)
+
+    def skipped(self, n: int) -> None:
+        """``n`` scans inside the normal window never arrived: no output for them (misses)."""
+        for which in WHICH:
+            self.misses[which] += n
+
+    def output(self, which: str, k: int, states: np.ndarray) -> None:
+        if k not in self._expected[which]:
+            return  # already scored, or not a scan this peer accepted
+        self._expected[which].discard(k)
+        if self.truth(k) is not None:
+            self._score(which, k, states)
+        else:
+            self._waiting[which][k] = states
+
+    def advance(self, newest: int) -> None:
+        """Scans far behind ``newest`` are settled: missing outputs become misses."""
+        self._settle(lambda k: k < newest - self.window)
+
+    def finish(self) -> None:
+        """End of the run: every output still missing is a miss."""
+        self._settle(lambda k: True)
+
+    def _settle(self, old: Callable[[int], bool]) -> None:
+        for which in WHICH:
+            gone = [k for k in self._expected[which] if old(k)]
+            for k in gone:
+                self._expected[which].discard(k)
+                self.misses[which] += 1
+                self.records.append({"k": k, "kind": "ospa", "which": which, "value": self.c,
+                                     "miss": True})
+            late = [k for k in self._waiting[which] if old(k)]
+            for k in late:
+                del self._waiting[which][k]
+                self.unscored += 1
+        for k in [k for k in self._truth if old(k)]:
+            del self._truth[k]
+
+    def _score(self, which: str, k: int, states: np.ndarray) -> None:
+        X = self.truth(k)
+        est = states[:, self.pos] if len(states) else np.zeros((0, 2))
+        value = ospa(est, X[:, self.pos] if len(X) else np.zeros((0, 2)), self.c, self.p)
+        self.sums[which] += value
+        self.counts[which] += 1
+        self.records.append({"k": k, "kind": "ospa", "which": which, "value": value})
+
+    def mean(self, which: str) -> float:
+        """Mean OSPA over scored estimates and misses (a miss counts ``c``)."""
+        n = self.counts[which] + self.misses[which]
+        return (self.sums[which] + self.c * self.misses[which]) / n if n else float("nan")
+
+    def drain_records(self) -> list[dict]:
+        out, self.records = self.records, []
+        return out

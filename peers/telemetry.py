@@ -1,0 +1,119 @@
+"""What a peer process measures about itself: latency and where it goes, compute, memory, bytes.
+
+The sans-I/O core has no clock of its own; the driver stamps its outputs and records with wall
+time here. Per scan ``k`` (milliseconds): ``transit`` (world sent the scan -> it arrived),
+``local`` (arrived -> local estimate out), ``fusion_wait`` (local estimate out -> tracks out),
+split into ``neighbours`` (-> last neighbour estimate in) and ``fusing`` (-> tracks out); and the
+scan-to-track ``latency`` (world sent the scan -> tracks out).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import statistics
+import time
+from collections import Counter, deque
+
+from peers.core import Publish, Record
+
+BREAKDOWN = ("transit", "local", "fusion_wait", "neighbours", "fusing")
+_KEEP = 4096  # samples kept per series (memory stays flat in long runs)
+_SCANS_KEPT = 10  # per-scan stamps older than this many scans are dropped
+
+
+def current_rss_mb() -> float:
+    """This process's resident memory now (MB), from /proc (0 where there is none)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def _median(v) -> float | None:
+    return statistics.median(v) if v else None
+
+
+class Telemetry:
+    """Counters and timings of one peer process."""
+
+    def __init__(self) -> None:
+        self.sent: Counter = Counter()
+        self.sent_bytes: Counter = Counter()
+        self.latency_ms: deque = deque(maxlen=_KEEP)
+        self.breakdown = {n: deque(maxlen=_KEEP) for n in BREAKDOWN}
+        self.compute_ms = {"filter": 0.0, "fusion": 0.0}
+        self.per_scan_ms: deque = deque(maxlen=_KEEP)
+        self.ages: deque = deque(maxlen=_KEEP)
+        self.rss_samples: list[tuple[int, float]] = []
+        self.internal_errors: Counter = Counter()
+        self._scan_sent: dict[int, float] = {}
+        self._local_done: dict[int, float] = {}
+        self._last_in: dict[int, float] = {}
+        self._cpu0 = time.process_time()
+
+    def handled(self, channel: str, entry: float, leave: float, outputs: list) -> None:
+        """One input handled between wall times ``entry`` and ``leave``."""
+        ms = (leave - entry) * 1e3
+        self.compute_ms["filter" if channel == "scan" else "fusion"] += ms
+        for o in outputs:
+            if not isinstance(o, Record):
+                continue
+            if o.kind == "scan":
+                self._scan_sent[o.k] = o.values["send_time"]
+                self.breakdown["transit"].append((entry - o.values["send_time"]) * 1e3)
+                self.breakdown["local"].append(ms)
+                self._local_done[o.k] = leave
+                self.per_scan_ms.append(ms)
+                if o.k == 1 or o.k % 1000 == 0:
+                    self.rss_samples.append((o.k, current_rss_mb()))
+                    self.rss_samples = self.rss_samples[-100:]
+            elif o.kind == "estimate":
+                self._last_in[o.k] = entry
+            elif o.kind == "fusion":
+                self.ages.extend(o.values.get("ages", {}).values())
+
+    def published(self, out: Publish, wall: float, nbytes: int) -> float | None:
+        """An output went on the wire at ``wall``; the scan-to-track latency (ms) for tracks."""
+        self.sent[out.channel] += 1
+        self.sent_bytes[out.channel] += nbytes
+        if out.channel != "tracks":
+            return None
+        k = out.k
+        local = self._local_done.pop(k, None)
+        if local is not None:
+            self.breakdown["fusion_wait"].append((wall - local) * 1e3)
+            last = self._last_in.pop(k, None)
+            if last is not None and last > local:  # waited for a neighbour, then fused
+                self.breakdown["neighbours"].append((last - local) * 1e3)
+                self.breakdown["fusing"].append((wall - last) * 1e3)
+        sent = self._scan_sent.pop(k, None)
+        for d in (self._scan_sent, self._local_done, self._last_in):
+            for old in [kk for kk in d if kk < k - _SCANS_KEPT]:
+                del d[old]
+        if sent is None:
+            return None
+        lat = (wall - sent) * 1e3
+        self.latency_ms.append(lat)
+        return lat
+
+    def summary(self, last_k: int) -> dict:
+        lat = sorted(self.latency_ms)
+        return {
+            "messages_sent": sum(self.sent.values()),
+            "bytes_sent": sum(self.sent_bytes.values()),
+            "estimates_sent": self.sent["estimate"],
+            "estimate_bytes_sent": self.sent_bytes["estimate"],
+            "latency_ms_median": statistics.median(lat) if lat else None,
+            "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "compute_ms": dict(self.compute_ms),
+            "latency_breakdown_ms_median": {n: _median(v) for n, v in self.breakdown.items()},
+            "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
+            "driver_errors": dict(self.internal_errors),
+            "rss_mb_samples": [*self.rss_samples, (last_k, current_rss_mb())],
+            "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            "cpu_s": time.process_time(),
+            "cpu_s_running": time.process_time() - self._cpu0,
+            "pid": os.getpid(),
+        }

@@ -1,0 +1,108 @@
+"""A peer's Zenoh side: session, subscriptions, publishers, liveliness tokens, one inbox queue.
+
+Zenoh callbacks only check the key and the sender's rate (:class:`peers.admission.Admission`,
+a dictionary lookup) and put admitted payloads on the queue; calling Zenoh from a callback can
+deadlock, and a slow callback holds up receiving. The driver's main thread takes items off the
+queue and hands them to the sans-I/O core.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+
+import zenoh
+
+from peers.admission import Admission, parse_key
+from peers.session import SessionError, open_session
+from protocol.keys import Keys
+
+
+class DuplicatePeer(SessionError):
+    """Another process already runs a peer of this name on this network."""
+
+
+class Transport:
+    """Subscriptions and publishers of peer ``name`` (items on :attr:`q`:
+    ``("msg", key, payload)``, ``("live", name, joined)``, ``("stop", "", b"")``)."""
+
+    def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
+                 admission: Admission, session_args: tuple) -> None:
+        self.keys, self.name, self.sensor = keys, name, sensor
+        self.neighbours = neighbours
+        self.admission = admission
+        self.session_args = session_args
+        self.q: queue.Queue = queue.Queue()
+        self.seen_alive: set[str] = set()
+        self.session = None
+        self._decl: list = []
+        self._ready = None
+        self._pubs: dict[str, object] = {}
+
+    # -- callbacks (Zenoh threads) ----------------------------------------------------------
+    def _on_sample(self, sample) -> None:
+        key = str(sample.key_expr)
+        payload = sample.payload.to_bytes()
+        if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
+            self.q.put(("msg", key, payload))
+
+    def _on_live(self, sample) -> None:
+        self.q.put(("live", Keys.last(str(sample.key_expr)),
+                    sample.kind == zenoh.SampleKind.PUT))
+
+    # -- life cycle -------------------------------------------------------------------------
+    def open(self, duplicate_wait: float = 0.3) -> None:
+        """Open the session; refuse to start if a peer of the same name is alive already."""
+        session = open_session(*self.session_args)
+        self.session = session
+        try:
+            replies = session.liveliness().get(self.keys.alive(self.name),
+                                               timeout=duplicate_wait)
+            if any(r.ok is not None for r in replies):
+                raise DuplicatePeer(f"a peer named {self.name!r} is already running on network "
+                                    f"{self.keys.network!r}; pick another name or stop it")
+            block = zenoh.CongestionControl.BLOCK  # nothing dropped under load
+            for ch in ("estimate", "tracks"):  # express: no batching delay
+                self._pubs[ch] = session.declare_publisher(
+                    getattr(self.keys, ch)(self.name), congestion_control=block, express=True)
+            keys = [self.keys.scan(self.sensor), self.keys.truth(), self.keys.ctl(),
+                    # only the neighbours' estimates: routing filters, not decoding
+                    *(self.keys.estimate(n) for n in self.neighbours)]
+            self._decl = [session.declare_subscriber(k, self._on_sample) for k in keys]
+            self._decl.append(session.liveliness().declare_subscriber(
+                self.keys.alive("*"), self._on_live, history=True))
+            self._decl.append(session.liveliness().declare_token(self.keys.alive(self.name)))
+        except BaseException:
+            self.close()
+            raise
+
+    def saw(self, name: str, joined: bool) -> None:
+        """Note a liveliness change; declare ``ready`` once every neighbour has been seen.
+
+        The world starts the run when all peers are ready, so no peer misses its neighbours'
+        first estimates while links are still being set up.
+        """
+        if joined:
+            self.seen_alive.add(name)
+        if (self._ready is None and self.session is not None
+                and set(self.neighbours) <= self.seen_alive):
+            self._ready = self.session.liveliness().declare_token(self.keys.ready(self.name))
+
+    def publish(self, channel: str, payload: bytes) -> None:
+        self._pubs[channel].put(payload)
+
+    def wake(self) -> None:
+        """Make the main loop look at its flags now (signal handlers)."""
+        self.q.put(("stop", "", b""))
+
+    def close(self) -> None:
+        for d in [*reversed(self._decl), self._ready, *self._pubs.values()]:
+            if d is not None:
+                try:
+                    d.undeclare()
+                except Exception:  # already undeclared, or the session is gone
+                    pass
+        self._decl, self._ready, self._pubs = [], None, {}
+        if self.session is not None:
+            self.session.close()
+            self.session = None
