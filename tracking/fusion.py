@@ -367,6 +367,7 @@ class _Components:
         self.means = np.concatenate([D.means for D in densities])
 
     def part(self, i: int) -> slice:
+        """Density ``i``'s rows."""
         return slice(self.start[i], self.start[i] + self.sizes[i])
 
 
@@ -380,7 +381,7 @@ def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray
     is the minimum over ``x`` of ``sum_i omega_i (m_ic - x)' Y_ic (m_ic - x)``, so a round-off
     error in ``m`` changes it only to second order. (The information form
     ``sum_i omega_i m_ic' Y_ic m_ic - h' m`` subtracts numbers of size ``|m - ref|^2 / lambda_min
-    (P)``: relative weight errors of 1e-4 at condition number 1e6 and overflow at 1e9.)
+    (P)``: relative weight errors up to 7e-3 at condition number 1e6, overflow at 1e9.)
     Up to :data:`_SMALL_COMBINATIONS` combinations are gathered into flat arrays (fewest NumPy
     calls); more are summed on the ``(*sizes)`` grid by broadcasting (least memory traffic).
     """
