@@ -6,7 +6,7 @@ thread), reading only the first bytes of the message (a few microseconds):
 - the key must be one of the network's;
 - a scan, estimate or truth names its scan index (and round and kind) in its first fields:
   stamped outside the window the peer still fuses it is refused at once (``stale``/``future``);
-  inside, each slot ``(sender, k, round, kind)`` is let through at most :data:`SLOT_COPIES`
+  inside, each slot ``(sender, k, round, kind)`` is let through at most :data:`SLOT_ATTEMPTS`
   times (``duplicate``), so replays and floods of valid-looking messages cost a dictionary
   lookup each, and a genuine message is never starved by junk on its key;
 - everything else (unparseable headers, scans outside the normal window, control messages) is
@@ -23,8 +23,9 @@ import msgpack
 
 from protocol.keys import ROOT
 
-SLOT_COPIES = 2
-"""Copies of one (sender, scan, round, kind) let through (a duplicated delivery is normal)."""
+SLOT_ATTEMPTS = 4
+"""Messages per (sender, scan, round, kind) let through to decoding: a duplicated delivery
+is normal, a few more leave room for a genuine message after junk on the same slot."""
 MAX_SLOTS = 100_000
 _HEAD = 192  # bytes holding every field read by peek()
 
@@ -119,8 +120,8 @@ class Admission:
         self.network = network
         self.window = window
         """``channel -> (lo, hi)``: scan indices the peer keeps for that channel now."""
-        self._slots: dict[tuple, int] = {}
-        self._slots_lo = 0
+        self._slots: dict[str, dict[tuple, int]] = {}
+        self._slots_lo: dict[str, int] = {}
         self.interval = max(interval, 1e-6)
         self.per_scan = per_scan
         self.factor, self.burst = factor, burst
@@ -164,15 +165,16 @@ class Admission:
                 return None  # maybe a restart of the numbering: the core decides, rate-limited
             self.rejected["future" if k > hi else "stale"] += 1
             return False
-        if lo > self._slots_lo:  # forget slots that left the window (memory stays bounded)
-            self._slots = {s: n for s, n in self._slots.items() if s[2] >= lo}
-            self._slots_lo = lo
-        slot = (route.channel, route.name, k, r, o)
-        n = self._slots.get(slot, 0)
-        if n == 0 and len(self._slots) >= MAX_SLOTS:
+        slots = self._slots.setdefault(route.channel, {})
+        if lo > self._slots_lo.get(route.channel, lo - 1):  # forget slots that left the window
+            self._slots[route.channel] = slots = {s: n for s, n in slots.items() if s[1] >= lo}
+            self._slots_lo[route.channel] = lo
+        slot = (route.name, k, r, o)
+        n = slots.get(slot, 0)
+        if n == 0 and len(slots) >= MAX_SLOTS:
             return None
-        if n >= SLOT_COPIES:
+        if n >= SLOT_ATTEMPTS:
             self.rejected["duplicate"] += 1
             return False
-        self._slots[slot] = n + 1
+        slots[slot] = n + 1
         return True

@@ -51,11 +51,29 @@ class Transport:
                     sample.kind == zenoh.SampleKind.PUT))
 
     # -- life cycle -------------------------------------------------------------------------
-    def open(self, duplicate_wait: float = 0.3) -> None:
+    def _settle(self, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -> None:
+        """Wait until the session has links and gossip has stopped adding peers (a peer does
+        not route for others, so a liveliness query reaches only the peers linked to us)."""
+        info = self.session.info
+        end = time.monotonic() + first
+        while not list(info.peers_zid()) and time.monotonic() < end:
+            time.sleep(0.01)
+        n, since, end = -1, time.monotonic(), time.monotonic() + cap
+        while time.monotonic() < end:
+            now_n = len(list(info.peers_zid()))
+            if now_n != n:
+                n, since = now_n, time.monotonic()
+            elif time.monotonic() - since >= stable:
+                return
+            time.sleep(0.02)
+
+    def open(self, duplicate_wait: float = 0.5) -> None:
         """Open the session; refuse to start if a peer of the same name is alive already."""
         session = open_session(*self.session_args)
         self.session = session
         try:
+            if self.session_args[1]:  # endpoints to connect to: let the links come up first
+                self._settle()
             replies = session.liveliness().get(self.keys.alive(self.name),
                                                timeout=duplicate_wait)
             if any(r.ok is not None for r in replies):

@@ -182,12 +182,28 @@ def wait_run(handle: RunHandle, timeout: float,
     return {name: p.returncode for name, p in handle.procs.items()}
 
 
+def summary_files(out: Path, name: str) -> list[Path]:
+    """Peer ``name``'s summaries in ``out``, first run first (a restarted peer writes
+    ``peer-<name>.restart<n>.json`` beside the earlier ones, never over them)."""
+    def restart(p: Path) -> int:
+        tail = p.name.removeprefix(f"peer-{name}").removesuffix(".json")
+        return int(tail.removeprefix(".restart")) if tail else 0
+
+    paths = [p for p in out.glob(f"peer-{name}*.json")
+             if p.name == f"peer-{name}.json"
+             or p.name.removeprefix(f"peer-{name}.restart").removesuffix(".json").isdigit()]
+    return sorted(paths, key=restart)
+
+
 def read_summaries(out: Path, names: list[str]) -> dict[str, dict]:
+    """The newest summary of each peer (after restarts: the last run's); each carries the
+    names of all its summary files under ``"summary_files"``."""
     found = {}
     for n in names:
-        path = out / f"peer-{n}.json"
-        if path.is_file():
-            found[n] = json.loads(path.read_text())
+        paths = summary_files(out, n)
+        if paths:
+            found[n] = json.loads(paths[-1].read_text())
+            found[n]["summary_files"] = [p.name for p in paths]
     return found
 
 

@@ -20,9 +20,10 @@ import numpy as np
 
 from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector
+from peers.session import MAX_MESSAGE_BYTES
 from protocol.codec import encode
 from protocol.keys import Keys
-from protocol.messages import Estimate, Scan, Truth
+from protocol.messages import Control, Estimate, Scan, Truth
 from sim.build import fault_injector
 from sim.peers import make_peer
 from sim.scenario import Scenario
@@ -72,6 +73,8 @@ class TwinResult:
     stops: dict[str, str] = field(default_factory=dict)
     ages: dict[str, list[int]] = field(default_factory=dict)
     """Ages (scans) of the neighbour estimates each peer fused."""
+    transport_drops: dict[str, int] = field(default_factory=dict)
+    """Messages over the transport's size limit, dropped before they reached each peer."""
     ospa: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
     """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
 
@@ -132,8 +135,10 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
                 for d in ds:
                     push(t + d, "msg", other, keys.estimate(sender), o.payload)
 
+    start = encode(Control("start", network, {"speed": scn.network.speed}, send_time=0.0))
     for n in names:
         push(0.0, "live", n, "world", True)
+        push(0.0, "msg", n, keys.ctl(), start)
     for k in range(1, scn.num_scans + 1):
         t = k * interval
         x = truth.states[k - 1]
@@ -147,7 +152,9 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     for e in events:
         push(e.t, "live", e.target, e.name, e.joined)
     end = (scn.num_scans + 1) * interval + 1.0
+    stop = encode(Control("end", network, {}, send_time=end))
     for n in names:
+        push(end - 0.5, "msg", n, keys.ctl(), stop)  # as the world: "end", then it leaves
         push(end, "live", n, "world", False)
     scheduled: dict[str, float] = {}
     while queue:
@@ -155,7 +162,10 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         if target in result.stops:
             continue
         core = peers[target]
-        if kind == "msg":
+        if kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
+            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
+            out = []  # the transport drops it before assembling it (peers.session)
+        elif kind == "msg":
             out = core.receive(payload[0], payload[1], t)
         elif kind == "live":
             out = core.liveliness(payload[0], payload[1], t)

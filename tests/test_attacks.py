@@ -1,0 +1,199 @@
+"""Every hostile input of tests/attacks.py against real processes, from a raw Zenoh session.
+
+Each run: world + 3 peers on loopback; once peer s1 has published the tracks of scan
+``K0``, the test's own session puts the attack on the network's keys. Every attack must end
+with no crash, every process exiting 0 at the end of the run, the victims' summaries complete
+(all scans, no internal error), the bad input counted under its reason (the same counts as in
+the twin, tests/test_attacks_twin.py), and fused OSPA within a few metres of the clean twin run.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from peers.session import open_session
+from protocol.codec import decode
+from protocol.keys import Keys
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.scenario import load_scenario, parse_overrides
+from sim.twin import run_twin
+from sim.world import generate_run
+from tests.attacks import ATTACKS, BY_NAME, K0, SETS, Attack, only_attack_counts
+
+pytestmark = pytest.mark.network
+
+
+def _when_s1_reaches(handle, k0: int, timeout: float = 60.0):
+    """A session on the run's network and the scan s1 has reached (waits on its tracks)."""
+    session = open_session(connect=list(handle.endpoints.values()))
+    keys = Keys(handle.network)
+    seen = {"k": 0}
+    reached = threading.Event()
+
+    def on_tracks(sample) -> None:
+        k = decode(sample.payload.to_bytes()).k
+        seen["k"] = max(seen["k"], k)
+        if k >= k0:
+            reached.set()
+
+    sub = session.declare_subscriber(keys.tracks("s1"), on_tracks)
+    if not reached.wait(timeout):
+        sub.undeclare()
+        session.close()
+        raise AssertionError(f"s1 never reached scan {k0} (saw {seen['k']})")
+    sub.undeclare()
+    return session, keys, seen["k"]
+
+
+def _put_all(session, msgs) -> None:
+    pubs = {}
+    try:
+        for key, payload in msgs:
+            if key not in pubs:
+                pubs[key] = session.declare_publisher(
+                    key, congestion_control=zenoh.CongestionControl.BLOCK)
+            pubs[key].put(payload)
+    finally:
+        for p in pubs.values():
+            p.undeclare()
+
+
+def _attacked_run(tmp_path: Path, attack: Attack, after=None, **kw):
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    truth, _ = generate_run(scn, 0)
+    handle = start_run(scn, "seed000", tmp_path, overrides=SETS, **kw)
+    try:
+        session, keys, k0 = _when_s1_reaches(handle, K0)
+        try:
+            _put_all(session, attack.make(keys, k0, truth.states[k0]))
+            if after is not None:
+                after(handle, session, keys)
+        finally:
+            session.close()
+        codes = wait_run(handle, timeout=120)
+    finally:
+        handle.stop_all()
+    return scn, codes, read_summaries(tmp_path, scn.sensor_names)
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return run_twin(load_scenario("seed000", overrides=parse_overrides(SETS)), 0)
+
+
+@pytest.mark.parametrize("attack", ATTACKS, ids=lambda a: a.name)
+def test_attack_against_real_processes(tmp_path, clean, attack):
+    scn, codes, summaries = _attacked_run(tmp_path, attack, rerun=False)
+    assert all(c == 0 for c in codes.values()), codes
+    for name, s in summaries.items():
+        assert s["internal_errors"] == {}, (name, s["internal_errors"])
+        assert s["scans"] == scn.num_scans, name
+        assert s["stop_reason"] == "end of run", name
+        assert s["ospa_misses"] == {"local": 0, "fused": 0}, name
+        assert abs(s["mean_ospa_fused"] - clean.mean_ospa(name)) < 5.0, name
+        if name in attack.victims:
+            assert only_attack_counts(s["rejected"], attack) == attack.counts, (name, s)
+    if attack.name == "forged-end":
+        for s in summaries.values():
+            assert s["ctl_end_while_world_alive"] == 2  # the forged "end" and the world's own
+    if attack.name == "future-estimates":
+        for name in ("s1", "s3"):  # kept whole by nobody: memory as the unattacked s2's
+            assert summaries[name]["max_rss_mb"] < 1.2 * summaries["s2"]["max_rss_mb"]
+            assert summaries[name]["stats"]["last_fused_from"]["s2"] == scn.num_scans
+    if attack.name == "oversized":
+        for name in ("s1", "s3"):  # the two largest never reached the peer at all
+            assert summaries[name]["max_rss_mb"] < 1.2 * summaries["s2"]["max_rss_mb"]
+
+
+def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tmp_path):
+    """The scan 10^9 ahead used to hang s1 (ignoring SIGTERM); now it is refused at once."""
+    stopped = {}
+
+    def terminate_s1(handle, session, keys):
+        # s1 has handled what arrived before: its tracks moved on by two more scans
+        later, _, _ = _when_s1_reaches(handle, K0 + 4)
+        later.close()
+        proc = handle.procs["s1"]
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
+        stopped["seconds"], stopped["code"] = time.monotonic() - t0, proc.returncode
+
+    scn, codes, summaries = _attacked_run(tmp_path, BY_NAME["future-scan"], after=terminate_s1)
+    assert stopped["code"] == 0 and stopped["seconds"] < 2.0, stopped
+    s1 = summaries["s1"]
+    assert s1["stop_reason"] == "SIGTERM" and s1["rejected"]["future"] == 3
+    assert s1["internal_errors"] == {}
+    exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+    verify = subprocess.run([exe, "rrd", "verify", str(tmp_path / "rerun" / "peer-s1.rrd")],
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, "RERUN_ANALYTICS": "0"})
+    assert verify.returncode == 0, verify.stderr[-2000:]
+    for name in ("s2", "s3"):  # s1's departure is seen, the others finish the run
+        assert summaries[name]["scans"] == scn.num_scans
+        assert any(p == "s1" and what == "left" for p, what, _, _ in
+                   summaries[name]["peer_events"])
+
+
+def test_a_second_peer_with_a_taken_name_is_refused(tmp_path):
+    result = {}
+
+    def duplicate(handle, session, keys):
+        cmd = [sys.executable, "-m", "sensornet", "peer", "s2", "--scenario", "seed000",
+               "--network", handle.network, "--connect", handle.endpoints["world"],
+               "--out", str(tmp_path), "--no-rerun",
+               *[a for s in SETS for a in ("--set", s)]]
+        result["p"] = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+
+    empty = Attack("none", lambda keys, k0, x: [], ())
+    scn, codes, summaries = _attacked_run(tmp_path, empty, after=duplicate, rerun=False)
+    p = result["p"]
+    assert p.returncode == 2, (p.stdout, p.stderr)
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "already running" in lines[0] and "Traceback" not in p.stderr
+    s2 = summaries["s2"]
+    assert s2["scans"] == scn.num_scans and s2["summary_files"] == ["peer-s2.json"]
+
+
+def test_flood_on_one_key_does_not_starve_another_sender(tmp_path):
+    """Replays of s1's genuine estimates at full speed for a few scans: s2 still fuses s3
+    every scan, and s3 (not flooded) does not fall back to deadline fusions."""
+    def flood(handle, session, keys):
+        got = []
+        ready = threading.Event()
+
+        def keep(sample):
+            got.append(sample.payload.to_bytes())
+            ready.set()
+
+        sub = session.declare_subscriber(keys.estimate("s1"), keep)
+        assert ready.wait(30)
+        sub.undeclare()
+        pub = session.declare_publisher(keys.estimate("s1"),
+                                        congestion_control=zenoh.CongestionControl.BLOCK)
+        end = time.monotonic() + 1.5
+        n = 0
+        while time.monotonic() < end:
+            pub.put(got[0])
+            n += 1
+        pub.undeclare()
+        handle.flooded = n
+
+    empty = Attack("none", lambda keys, k0, x: [], ())
+    scn, codes, summaries = _attacked_run(tmp_path, empty, after=flood, rerun=False)
+    assert all(c == 0 for c in codes.values()), codes
+    s2, s3 = summaries["s2"], summaries["s3"]
+    assert s2["rejected_before_decoding"] >= 1000
+    assert s2["stats"]["last_fused_from"]["s3"] == scn.num_scans
+    assert s2["stats"]["fused_inputs"] >= 2 * scn.num_scans - 3
+    assert s3["stats"]["deadline_fusions"] <= 3
