@@ -354,3 +354,13 @@ def test_filter_tracks_single_target():
     assert est.shape == (1, 4)
     assert np.linalg.norm(est[0, [0, 2]] - x[0, [0, 2]]) < 15.0
     assert mix.mass == pytest.approx(1.0, abs=0.15)
+
+
+def test_sensor_models_share_one_protocol():
+    """No attribute probing: every model says which state entries it picks (or None)."""
+    from tracking.models import LinearPosition, MeasurementModel, RangeBearing
+
+    lin, rb = LinearPosition(), RangeBearing()
+    assert isinstance(lin, MeasurementModel) and isinstance(rb, MeasurementModel)
+    assert lin.selected == tuple(np.argmax(lin.H_MATRIX, axis=1))
+    assert rb.selected is None

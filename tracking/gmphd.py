@@ -14,10 +14,11 @@ import numpy as np
 
 from tracking.gaussian import inv_det_2x2, inv_det_spd, quad_form, symmetrise
 from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from tracking.models import ConstantVelocity, MeasurementModel
 from tracking.reduction import Reducer
 
-SensorModel = LinearPosition | RangeBearing
+SensorModel = MeasurementModel
+"""Any sensor behind :class:`tracking.models.MeasurementModel` (linear, range-bearing)."""
 
 
 @dataclass(frozen=True)
@@ -104,21 +105,8 @@ def update(
 
 
 def _selected_columns(model: SensorModel) -> np.ndarray | None:
-    """The state entries a linear model's ``H`` picks (rows of a 0/1 identity), else ``None``.
-
-    Then ``H P H^T`` and ``P H^T`` are exact sub-blocks of ``P`` (products with 0 and 1 only).
-    """
-    H = getattr(model, "H_MATRIX", None)
-    if not isinstance(H, np.ndarray):
-        return None
-    key = (H.shape, H.tobytes())
-    if key not in _SELECTIONS:
-        rows_ok = H.ndim == 2 and np.all((H == 0) | (H == 1)) and np.all(H.sum(axis=1) == 1)
-        _SELECTIONS[key] = np.argmax(H, axis=1) if rows_ok else None
-    return _SELECTIONS[key]
-
-
-_SELECTIONS: dict[tuple, np.ndarray | None] = {}
+    """The state entries a linear model picks (``MeasurementModel.selected``), else None."""
+    return None if model.selected is None else np.asarray(model.selected)
 
 
 EXTRACTION_RULES = ("round", "cardinality")

@@ -7,8 +7,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+
+@runtime_checkable
+class MeasurementModel(Protocol):
+    """What a filter needs of a sensor: ``z (2,)`` from a 4-D state ``[px, vx, py, vy]``."""
+
+    dim: int
+    angular: tuple[bool, ...]
+    """Which measurement components are angles (residuals wrapped)."""
+    selected: tuple[int, ...] | None
+    """For a linear model that picks state entries (``H`` rows of the identity), their
+    indices: then ``H P H^T`` and ``P H^T`` are exact sub-blocks of ``P``; else None."""
+
+    @property
+    def R(self) -> np.ndarray: ...
+
+    def predict(self, means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted measurements ``(n, dim)`` and Jacobians ``(n, dim, 4)``."""
+        ...
+
+    def residual(self, z: np.ndarray, zhat: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -78,6 +100,7 @@ class LinearPosition:
     H_MATRIX = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     dim: int = field(default=2, init=False)
     angular: tuple[bool, ...] = field(default=(False, False), init=False)
+    selected: tuple[int, ...] | None = field(default=(0, 2), init=False)
 
     @property
     def R(self) -> np.ndarray:
@@ -115,6 +138,7 @@ class RangeBearing:
 
     dim: int = field(default=2, init=False)
     angular: tuple[bool, ...] = field(default=(False, True), init=False)
+    selected: tuple[int, ...] | None = field(default=None, init=False)
 
     @property
     def R(self) -> np.ndarray:
