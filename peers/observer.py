@@ -82,7 +82,12 @@ class Observer:
             self._time(r.k)
             self.sink.scalar(f"metrics/ospa/{n}/{r.values['which']}", r.values["value"])
         elif r.kind == "rejected":
-            self.sink.scalar(f"metrics/rejected/{n}", sum(core.rejected.values()))
+            reason = r.values["reason"]
+            self.sink.scalar(f"metrics/rejected/{n}/{reason}", core.rejected[reason])
+        elif r.kind == "scan":  # those refused before decoding, by reason, once a scan
+            self._time(r.k)
+            for reason, count in core.admission.rejected.items():
+                self.sink.scalar(f"metrics/rejected/{n}/before_decoding/{reason}", count)
         elif r.kind == "peer":
             self.sink.text(f"peers/{n}/events", f"{r.values['peer']} {r.values['what']}")
 
