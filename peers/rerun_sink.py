@@ -6,9 +6,17 @@ launcher merges them); with ``viewer`` it also streams to a viewer (``"spawn"`` 
 a ``rerun+http://...`` URL connects to a running one).
 
 The 2-D map is drawn north-up (y negated: Rerun's 2-D views point y down).
-Entity paths: ``world/truth``, ``world/scans/<sensor>``, ``world/sensors``,
-``peers/<peer>/{local,fused}`` (points and 2-sigma covariance ellipses), ``peers/<peer>/tail``,
-``metrics/<quantity>/<peer>/...`` time series. Timeline ``scan`` (sequence) and ``sim`` (s).
+Entity paths: ``world/truth``, ``world/scans/<sensor>``, ``world/sensors``, ``world/region``
+and ``world/grid`` (the surveillance region and a grid with labelled lines),
+``peers/<peer>/{local,fused}`` (points and 2-sigma covariance ellipses: local dashed, fused
+solid), ``peers/<peer>/tail``, ``metrics/<quantity>/<peer>/...`` time series (each peer in its
+own colour: local dotted, fused solid; ``metrics/cardinality/truth`` in gold), ``legend`` (a
+text document saying what each mark means), ``follow`` (a transform that centres the "around
+the target" view on a single target). Timeline ``scan`` (sequence) and ``sim`` (s).
+
+Only the process that passes ``peers`` to :meth:`RerunSink.open` (the world) sends the
+blueprint and the static decorations (:meth:`RerunSink.decorate`), so the viewer gets one
+layout whatever order the processes connect in.
 """
 
 from __future__ import annotations
@@ -23,8 +31,14 @@ from tracking.mixture import GaussianMixture
 APP = "sensornet"
 _CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)),
                     np.sin(np.linspace(0, 2 * np.pi, 33))], axis=1)  # (33, 2)
-PALETTE = [(230, 25, 75), (60, 180, 75), (0, 130, 200), (245, 130, 48), (145, 30, 180),
-           (70, 240, 240), (240, 50, 230), (210, 245, 60), (0, 128, 128), (170, 110, 40)]
+PALETTE = [(230, 25, 75), (0, 130, 200), (245, 130, 48), (145, 30, 180), (60, 180, 75),
+           (240, 50, 230), (0, 128, 128), (170, 110, 40), (70, 240, 240), (128, 128, 0)]
+"""Peer colours, far apart in hue (no two greens among the first four)."""
+COLOR_NAMES = ["red", "blue", "orange", "purple", "green", "magenta", "teal", "brown", "cyan",
+               "olive"]
+TRUTH_COLOR = (255, 215, 0)
+GRID_COLOR = (90, 90, 90)
+REGION_COLOR = (170, 170, 170)
 
 
 def position_columns(dim: int) -> list[int]:
@@ -43,27 +57,127 @@ def ellipses(means: np.ndarray, covs: np.ndarray, sigma: float = 2.0) -> np.ndar
     return means[:, None, c] + np.einsum("pj,nij->npi", _CIRCLE, axes)
 
 
-def default_blueprint(peers: list[str]):
-    """Map view of the world and all peers beside time series of the health metrics."""
+def dashed(strips: np.ndarray) -> np.ndarray:
+    """Every other segment of ``(n, m, 2)`` polylines as ``(n * (m // 2), 2, 2)`` two-point
+    strips: Rerun draws no dashed lines, so a dashed ellipse is half its segments."""
+    strips = np.asarray(strips, dtype=float)
+    n, m = strips.shape[:2]
+    if n == 0 or m < 2:
+        return np.zeros((0, 2, 2))
+    half = (m - 1) // 2
+    a, b = strips[:, 0:2 * half:2], strips[:, 1:2 * half + 1:2]
+    return np.stack([a, b], axis=2).reshape(-1, 2, 2)
+
+
+def lighter(color, amount: float = 0.45) -> tuple[int, int, int]:
+    """``color`` blended towards white by ``amount``."""
+    return tuple(int(round(c + (255 - c) * amount)) for c in color[:3])
+
+
+def nice_step(span: float, lines: int = 6) -> float:
+    """A grid step of 1, 2 or 5 x 10^k giving about ``lines`` lines over ``span``."""
+    raw = max(span, 1e-9) / max(lines, 1)
+    base = 10.0 ** np.floor(np.log10(raw))
+    for f in (1.0, 2.0, 5.0, 10.0):
+        if raw <= f * base:
+            return float(f * base)
+    return float(10 * base)
+
+
+def region_outline(region) -> np.ndarray:
+    """The closed rectangle ``((xmin, xmax), (ymin, ymax))`` as a ``(5, 2)`` polyline."""
+    (x0, x1), (y0, y1) = region
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]], dtype=float)
+
+
+def grid_lines(region, step: float | None = None) -> tuple[list[np.ndarray], np.ndarray,
+                                                             list[str]]:
+    """Grid lines every ``step`` m over ``region`` and the positions and labels of their ticks
+    (along the bottom and left edges)."""
+    (x0, x1), (y0, y1) = region
+    step = step or nice_step(max(x1 - x0, y1 - y0))
+    xs = np.arange(np.ceil(x0 / step) * step, x1 + 1e-9, step)
+    ys = np.arange(np.ceil(y0 / step) * step, y1 + 1e-9, step)
+    lines = [np.array([[x, y0], [x, y1]]) for x in xs] + [np.array([[x0, y], [x1, y]])
+                                                          for y in ys]
+    ticks = np.array([[x, y0] for x in xs] + [[x0, y] for y in ys], dtype=float).reshape(-1, 2)
+    labels = [f"x {x:g} m" for x in xs] + [f"y {y:g} m" for y in ys]
+    return lines, ticks, labels
+
+
+def legend_markdown(peers: list[str], single_target: bool = False, imm: bool = False,
+                    follow_radius: float | None = None) -> str:
+    """The legend panel: what each mark on the map and each line in the plots means."""
+    colours = ", ".join(f"**{p}** {COLOR_NAMES[i % len(COLOR_NAMES)]}"
+                        for i, p in enumerate(peers)) or "one colour per peer"
+    local = "particles (a sample) and local estimate" if imm else "local components"
+    lines = [
+        f"**Colours**: {colours} (a peer's marks, its sensor's scans, its plot lines).",
+        "",
+        "**Map** (north up, metres):",
+        "- gold, numbered: true targets; big labelled dots: sensors",
+        "- small dots: measurements of this scan (detections and clutter)",
+        f"- dashed 2-sigma ellipses, light dots: {local} (before fusion)",
+        "- solid ellipses: fused; dots with a trail: fused tracks",
+        "- grey frame: surveillance region; grid labelled on its edges",
+    ]
+    if single_target and follow_radius:
+        lines.append(f"- 'around the target': the same, centred on the true target "
+                     f"(+-{follow_radius:g} m)")
+    lines += ["", "**Plots**: dotted = local, solid = fused, gold = truth. OSPA: error with "
+              "cut-off, lower is better."
+              + (" Model probabilities: CV solid, CA dotted." if imm else "")]
+    return "\n".join(lines)
+
+
+def default_blueprint(peers: list[str], *, single_target: bool = False, imm: bool = False,
+                      follow_radius: float = 500.0):
+    """Map and legend beside time series of the health metrics.
+
+    ``single_target``: a second map view centred on the target (the ``follow`` transform the
+    world logs), for scenarios whose region dwarfs the target and its particle cloud;
+    ``imm``: the model probabilities in view instead of the component counts.
+    """
     import rerun.blueprint as rrb
 
+    hidden = rrb.PlotLegend(visible=False)  # the legend panel names the colours instead
+
+    def series(name: str, origin: str, legend=hidden):
+        return rrb.TimeSeriesView(name=name, origin=origin, plot_legend=legend)
+
+    map_view = rrb.Spatial2DView(name="map", origin="/", contents=["/world/**", "/peers/**"])
+    if single_target:
+        r = float(follow_radius)
+        maps = rrb.Vertical(
+            map_view,
+            rrb.Spatial2DView(name="around the target", origin="/follow",
+                              contents=["/world/**", "/peers/**"],
+                              visual_bounds=rrb.VisualBounds2D(x_range=[-r, r],
+                                                               y_range=[-r, r])),
+            row_shares=[1, 1])
+    else:
+        maps = map_view
+    third = (series("model probabilities (IMM)", "metrics/model_probability") if imm
+             else series("components (fused solid, local dotted)", "metrics/components"))
+    tabs = [
+        series("estimate age (scans)", "metrics/age"),
+        series("late / redundant / too old", "metrics/out_of_sequence"),
+        series("rejected messages", "metrics/rejected"),
+        series("compute per scan (ms)", "metrics/compute_ms"),
+        series("latency (ms)", "metrics/latency_ms"),
+        (series("components", "metrics/components") if imm
+         else series("model probabilities (IMM)", "metrics/model_probability")),
+    ]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial2DView(name="world", origin="/", contents=["world/**", "peers/**"]),
+            maps,
             rrb.Vertical(
-                rrb.TimeSeriesView(name="OSPA", origin="metrics/ospa"),
-                rrb.TimeSeriesView(name="cardinality", origin="metrics/cardinality"),
-                rrb.TimeSeriesView(name="components", origin="metrics/components"),
-                rrb.Tabs(
-                    rrb.TimeSeriesView(name="estimate age (scans)", origin="metrics/age"),
-                    rrb.TimeSeriesView(name="late / redundant / too old",
-                                       origin="metrics/out_of_sequence"),
-                    rrb.TimeSeriesView(name="rejected messages", origin="metrics/rejected"),
-                    rrb.TimeSeriesView(name="compute (ms)", origin="metrics/compute_ms"),
-                    rrb.TimeSeriesView(name="latency (ms)", origin="metrics/latency_ms"),
-                    rrb.TimeSeriesView(name="model probabilities (IMM)",
-                                       origin="metrics/model_probability"),
-                ),
+                rrb.TextDocumentView(name="legend", origin="legend"),
+                series("OSPA (m)", "metrics/ospa"),
+                series("cardinality (truth gold)", "metrics/cardinality"),
+                third,
+                rrb.Tabs(*tabs),
+                row_shares=[1.6, 1, 1, 1, 1],
             ),
             column_shares=[3, 2],
         ),
@@ -138,8 +252,13 @@ class RerunSink:
         self.path: Path | None = None
 
     def open(self, run_id: str, path: Path | None, viewer: str | None = None,
-             peers: list[str] | None = None) -> RerunSink:
-        """Start logging to ``path`` (an ``.rrd``) and optionally a viewer."""
+             peers: list[str] | None = None, **layout) -> RerunSink:
+        """Start logging to ``path`` (an ``.rrd``) and optionally a viewer.
+
+        With ``peers`` (the world) it also sends the blueprint, :func:`default_blueprint` with
+        ``layout`` (``single_target``, ``imm``, ``follow_radius``); without (a peer) none, so
+        that one layout reaches the viewer.
+        """
         if path is None and not viewer:
             return self
         os.environ.setdefault("RERUN_ANALYTICS", "0")
@@ -157,7 +276,7 @@ class RerunSink:
                 sinks.append(rr.GrpcSink("rerun+http://127.0.0.1:9876/proxy"))
         elif viewer:
             sinks.append(rr.GrpcSink(viewer))
-        blueprint = default_blueprint(peers or [])
+        blueprint = default_blueprint(peers, **layout) if peers is not None else None
         rr.set_sinks(*sinks, default_blueprint=blueprint)
         self.enabled = True
         return self
@@ -176,15 +295,21 @@ class RerunSink:
                                                labels=labels))
 
     def mixture(self, path: str, mix: GaussianMixture, color) -> None:
-        """Component means as points (radius by weight) and their 2-sigma ellipses."""
+        """Component means as points (radius by weight) and their 2-sigma ellipses.
+
+        A ``.../local`` path is drawn dashed and lighter (before fusion), any other solid."""
         if not self.enabled:
             return
         rr = self.rr
+        local = path.rstrip("/").endswith("local")
         xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
-        rr.log(f"{path}/means", rr.Points2D(north_up(xy), colors=color,
+        shown = lighter(color) if local else color
+        rr.log(f"{path}/means", rr.Points2D(north_up(xy), colors=shown,
                                             radii=-(2.0 + 2.0 * np.minimum(mix.weights, 2.0))))
-        rr.log(f"{path}/ellipses", rr.LineStrips2D(list(north_up(ellipses(mix.means, mix.covs))),
-                                                   colors=color, radii=-1.0))
+        strips = north_up(ellipses(mix.means, mix.covs))
+        rr.log(f"{path}/ellipses", rr.LineStrips2D(dashed(strips) if local else list(strips),
+                                                   colors=shown,
+                                                   radii=-1.0 if local else -1.5))
 
     def scalar(self, path: str, value: float | None) -> None:
         if self.enabled and value is not None and np.isfinite(value):
@@ -198,6 +323,67 @@ class RerunSink:
     def text(self, path: str, message: str, level: str = "INFO") -> None:
         if self.enabled:
             self.rr.log(path, self.rr.TextLog(message, level=level))
+
+    def decorate(self, peers: list[str], region=None, imm: bool = False,
+                 single_target: bool = False, follow_radius: float | None = None,
+                 models: tuple[str, ...] = ("CV", "CA")) -> None:
+        """Static marks that explain the view (the world logs them once): the legend text,
+        the region outline and grid, and each series' colour, style and name (IMM ``models``:
+        the first solid, the others dotted)."""
+        if not self.enabled:
+            return
+        rr = self.rr
+        rr.log("legend", rr.TextDocument(
+            legend_markdown(peers, single_target, imm, follow_radius),
+            media_type=rr.MediaType.MARKDOWN), static=True)
+        if region is not None:
+            rr.log("world/region", rr.LineStrips2D([north_up(region_outline(region))],
+                                                   colors=REGION_COLOR, radii=-1.5),
+                   static=True)
+            lines, ticks, labels = grid_lines(region)
+            rr.log("world/grid/lines", rr.LineStrips2D([north_up(a) for a in lines],
+                                                       colors=GRID_COLOR, radii=-0.5),
+                   static=True)
+            rr.log("world/grid/ticks", rr.Points2D(north_up(ticks), colors=GRID_COLOR,
+                                                   radii=-1.0, labels=labels,
+                                                   show_labels=True), static=True)
+        rr.log("metrics/cardinality/truth",
+               rr.SeriesLines(colors=TRUTH_COLOR, widths=3.0, names="truth"), static=True)
+        for i, p in enumerate(peers):
+            c = color_of(i)
+            solid = {"colors": c, "widths": 2.0}
+            for q in ("ospa", "cardinality"):
+                rr.log(f"metrics/{q}/{p}/fused", rr.SeriesLines(**solid, names=f"{p} fused"),
+                       static=True)
+                rr.log(f"metrics/{q}/{p}/local",
+                       rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
+                                       names=f"{p} local"), static=True)
+            rr.log(f"metrics/components/{p}/fused",
+                   rr.SeriesLines(**solid, names=f"{p} fused"), static=True)
+            for what, marker in (("before_level2", "circle"), ("after_level2", "cross")):
+                rr.log(f"metrics/components/{p}/{what}",
+                       rr.SeriesPoints(colors=c, markers=marker, marker_sizes=1.5,
+                                       names=f"{p} local {what.replace('_', ' ')}"),
+                       static=True)
+            for q in ("age", "rejected", "latency_ms"):
+                rr.log(f"metrics/{q}/{p}", rr.SeriesLines(**solid, names=p), static=True)
+            rr.log(f"metrics/compute_ms/{p}/filter",
+                   rr.SeriesLines(**solid, names=f"{p} filter step"), static=True)
+            rr.log(f"metrics/compute_ms/{p}/fusion",
+                   rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
+                                   names=f"{p} fusion"), static=True)
+            if imm:
+                for j, model in enumerate(models):
+                    style = (rr.SeriesLines(**solid, names=f"{p} {model}") if j == 0 else
+                             rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
+                                             names=f"{p} {model}"))
+                    rr.log(f"metrics/model_probability/{p}/{model}", style, static=True)
+
+    def follow(self, xy) -> None:
+        """Centre the "around the target" view on ``xy`` (map coordinates) at this time."""
+        if self.enabled:
+            x, y = north_up(np.asarray(xy, dtype=float).reshape(2))
+            self.rr.log("follow", self.rr.Transform3D(translation=[x, y, 0.0]))
 
     def close(self) -> None:
         """Flush and close the sinks (the ``.rrd`` is complete afterwards)."""

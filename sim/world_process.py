@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from peers.rerun_sink import RerunSink, color_of, position_columns
+from peers.rerun_sink import TRUTH_COLOR, RerunSink, color_of, position_columns
 from peers.session import open_session
 from protocol.codec import encode
 from protocol.keys import Keys
@@ -42,6 +42,10 @@ def _wait_until(stop: threading.Event, when: float) -> None:
 
 def _publish_truth(pub, truth, k: int) -> None:
     pub.put(encode(Truth(k, truth.ids[k - 1], truth.states[k - 1], send_time=time.time())))
+
+
+FOLLOW_RADIUS = 400.0
+"""Half-width (m) of the "around the target" view of single-target scenarios."""
 
 
 class WorldError(Exception):
@@ -72,10 +76,14 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, on_signal)
     sink = RerunSink()
+    single = scn.truth == "seed001" or len(scn.targets) == 1
+    imm = scn.network.filter != "gmphd"
+    layout = {"single_target": single, "imm": imm, "follow_radius": FOLLOW_RADIUS}
     if out_dir is not None and rerun or viewer:
         sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
                   else None,
-                  viewer, peers=list(wait_for or []))
+                  viewer, peers=scn.sensor_names, **layout)
+        sink.decorate(scn.sensor_names, region=scn.region, **layout)
     session = open_session(listen, connect, config_file)
     alive: set[str] = set()
     cond = threading.Condition()
@@ -128,8 +136,12 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             _publish_truth(truth_pub, truth, k)
             X = truth.states[k - 1]
             sink.time(k, k * scn.scan_period)
-            sink.points("world/truth", X[:, position_columns(X.shape[1])], (255, 215, 0),
-                        radius=6.0, labels=[str(i) for i in truth.ids[k - 1]])
+            xy = X[:, position_columns(X.shape[1])]
+            sink.points("world/truth", xy, TRUTH_COLOR, radius=6.0,
+                        labels=[str(i) for i in truth.ids[k - 1]])
+            sink.scalar("metrics/cardinality/truth", len(X))
+            if single and len(xy):
+                sink.follow(xy[0])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
                 if s.kind == "range-bearing" and len(z):  # shown where they point
