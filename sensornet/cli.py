@@ -331,6 +331,8 @@ def _load(args: argparse.Namespace, source: str):
 def _prepare_peer(args: argparse.Namespace, scn) -> None:
     """Everything about a peer's flags that can be refused before the peer starts."""
     check_budget(scn, args, wire=True)
+    if args.color is None:
+        args.color = scn.sensor_names.index(args.name)
     _resolve_viewer(args)
     if args.config:
         _existing_file(args.config)
@@ -727,7 +729,8 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("--no-level2", dest="level2", action="store_false")
     pe.add_argument("--lease-ms", type=POSITIVE_INT,
                     help="Zenoh lease (how fast a frozen peer is seen)")
-    pe.add_argument("--color", type=NONNEGATIVE_INT, default=0, help=argparse.SUPPRESS)
+    pe.add_argument("--color", type=NONNEGATIVE_INT, help=argparse.SUPPRESS)  # default:
+    # the sensor's index in the scenario, the colour the world's legend and plots give it
     pe.add_argument("--no-gossip", action="store_true",
                     help="link only to the --connect endpoints (no Zenoh gossip discovery)")
     pe.add_argument("--save-tracks", action="store_true",

@@ -261,3 +261,11 @@ def test_scenario_files_cite_only_the_projects_docs():
         for cited in ("docs/algorithms.md", "docs/seed001.md"):
             if cited in text:
                 assert (ROOT / cited).is_file()
+
+
+def test_a_peer_started_by_hand_takes_its_sensors_colour():
+    """Four terminals: each peer gets the colour the world's legend and plots give it."""
+    args = build_parser().parse_args(["peer", "s2", "--network", "lab"])
+    assert args.color is None
+    cli._prepare_peer(args, load_scenario("seed000"))
+    assert args.color == 1
