@@ -31,6 +31,12 @@ def current_rss_mb() -> float:
         return 0.0
 
 
+def percentile(sorted_values, q: float) -> float | None:
+    """The sample at index ``floor(q n)`` of ``n`` sorted samples (no interpolation)."""
+    v = sorted_values
+    return v[min(len(v) - 1, int(q * len(v)))] if len(v) else None
+
+
 def _median(v) -> float | None:
     return statistics.median(v) if v else None
 
@@ -106,7 +112,8 @@ class Telemetry:
             "estimates_sent": self.sent["estimate"],
             "estimate_bytes_sent": self.sent_bytes["estimate"],
             "latency_ms_median": statistics.median(lat) if lat else None,
-            "latency_ms_p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))] if lat else None,
+            "latency_ms_p99": percentile(lat, 0.99),
+            "latency_ms_samples": [round(x, 4) for x in self.latency_ms],
             "compute_ms": dict(self.compute_ms),
             "latency_breakdown_ms_median": {n: _median(v) for n, v in self.breakdown.items()},
             "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,

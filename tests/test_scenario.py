@@ -37,7 +37,7 @@ def test_builtin_loads(seed000: Scenario) -> None:
     assert seed000.sensor("s1").position == (-800.0, -1000.0)
     assert seed000.fusion.fusing_sensor == "s2"
     assert seed000.filter.gate is None
-    assert seed000.birth.model == "paper"
+    assert seed000.birth.model == "truth"  # births at the true birth points (README: results)
     assert len(seed000.birth.paper) == 2
     hash(seed000)  # immutable all the way down
 
@@ -89,12 +89,12 @@ def test_bad_override_is_reported_as_override() -> None:
 
 
 def test_with_birth_model(seed000: Scenario) -> None:
-    truth = with_birth_model(seed000, "truth")
-    assert truth.birth.model == "truth" and seed000.birth.model == "paper"
-    assert len(birth_mixture(truth)) == 4
-    np.testing.assert_array_equal(birth_mixture(truth).means[:, [0, 2]],
+    paper = with_birth_model(seed000, "paper")
+    assert paper.birth.model == "paper" and seed000.birth.model == "truth"
+    assert len(birth_mixture(seed000)) == 4
+    np.testing.assert_array_equal(birth_mixture(seed000).means[:, [0, 2]],
                                   [t.start for t in seed000.targets])
-    assert len(birth_mixture(seed000)) == 2
+    assert len(birth_mixture(paper)) == 2
     with pytest.raises(ScenarioError):
         with_birth_model(seed000, "adaptiv")
 
