@@ -121,6 +121,7 @@ def ours_filter(clutter: float, gate: float | None) -> GMPHDFilter:
         survival_probability=PS,
         reducer=Reducer(PRUNE, MERGE, CAP, merge_rule="vo-ma"),
         extraction_threshold=EXTRACT,
+        extraction="round",  # the round(w) column (the library default is "cardinality")
         gate=None if gate is None else gate * gate,  # ours gates nu^T S^-1 nu
     )
 
@@ -257,7 +258,7 @@ def run_stonesoup(scans, clutter, gate) -> Run:
         state = filt.step(state, scan, k + 1)
         run.times[k] = time.perf_counter() - t0
         mix = stonesoup_mixture(state)
-        run.estimates.append(extract(mix, EXTRACT))
+        run.estimates.append(extract(mix, EXTRACT, "round"))
         run.single.append(one_per_component(mix))
         run.max_weight = max(run.max_weight, float(mix.weights.max(initial=0.0)))
     return run
