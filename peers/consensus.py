@@ -166,6 +166,10 @@ class Consensus:
         self.nale.forget(name)
         return True
 
+    def resume(self, now: float) -> list:
+        """Run the rounds that are now complete (e.g. they waited only for a peer that left)."""
+        return self._advance(now)
+
     def peer_joined(self, name: str) -> bool:
         if name in self.o.neighbours and name not in self.alive:
             self.alive.add(name)

@@ -177,7 +177,7 @@ class PeerCore:
         self.departures.append((name, what, c.last_k))
         out: list[Output] = [Record("peer", c.last_k, {"peer": name, "what": what})]
         if not joined:  # maybe the round waited only for it
-            out += self._wrap(c._advance(now))
+            out += self._wrap(c.resume(now))
         return out
 
     def finish(self, now: float) -> list[Output]:
