@@ -50,6 +50,9 @@ class RuntimeOptions:
     scan_period: float = 1.0
     """Simulated seconds per scan (the "sim" timeline in Rerun)."""
     faults: FaultInjector | None = field(default=None, compare=False)
+    record: dict[str, str] | None = None
+    """Record the core's inputs to ``<out_dir>/record/<stem>.mcap`` with this metadata
+    (scenario text, overrides, run, ...: what ``sensornet replay`` needs to rebuild the peer)."""
 
 
 def output_stem(out_dir: Path, name: str) -> str:
@@ -87,6 +90,7 @@ class PeerRuntime:
         self.stop_reason = ""
         self._stop = False
         self._last_input = time.monotonic()
+        self.recorder = None
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
@@ -100,6 +104,11 @@ class PeerRuntime:
         o = self.o
         self.transport.open()  # raises DuplicatePeer before any file is written
         try:
+            if o.record is not None and o.out_dir is not None:
+                from peers.recording import Recorder
+
+                meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
+                self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
             if o.out_dir is not None and o.rerun or o.viewer:
                 rrd = o.out_dir / "rerun" / f"{self.stem}.rrd" if o.out_dir and o.rerun else None
                 self.sink.open(o.run_id or self.core.cfg.network, rrd, o.viewer)
@@ -110,6 +119,8 @@ class PeerRuntime:
         finally:
             self.transport.close()
             self.sink.close()
+            if self.recorder is not None:
+                self.recorder.close()
         return 0
 
     def _loop(self) -> None:
@@ -136,7 +147,11 @@ class PeerRuntime:
                     self._handle(*item)
                 for key, payload in self.held.pop_due(time.monotonic()):
                     self._feed("estimate", key, payload)
-                self._carry_out("tick", self.core.tick, time.time())
+                now = time.time()
+                due = self.core.next_due()
+                if self.recorder is not None and due is not None and due <= now:
+                    self.recorder.tick(now)  # a deadline fires: replay must tick here too
+                self._carry_out("tick", self.core.tick, now)
                 self.observer.flush(idle=q.empty() and not self.core.consensus.busy())
             except Exception as exc:  # a bug must not take the peer (and the run) down
                 self._internal_error(exc)
@@ -153,8 +168,10 @@ class PeerRuntime:
             if name != "world" and name != self.name:
                 self.live_events.append((name, "joined" if joined else "left", time.time(),
                                          self.core.consensus.last_k))
-            self._carry_out("live", lambda now: self.core.liveliness(name, joined, now),
-                            time.time())
+            now = time.time()
+            if self.recorder is not None:
+                self.recorder.liveliness(now, name, joined)
+            self._carry_out("live", lambda now: self.core.liveliness(name, joined, now), now)
             return
         self._last_input = time.monotonic()
         route = parse_key(key, self.core.cfg.network)
@@ -164,8 +181,11 @@ class PeerRuntime:
         self._feed(channel, key, payload)
 
     def _feed(self, channel: str, key: str, payload: bytes) -> None:
+        now = time.time()
+        if self.recorder is not None:
+            self.recorder.receive(now, key, payload)
         self._carry_out(channel, lambda now: self.core.receive(key, payload, now,
-                                                               admitted=True), time.time())
+                                                               admitted=True), now)
 
     def _carry_out(self, channel: str, step, now: float) -> None:
         """Run one core step at wall time ``now``; publish and record what it returns."""
@@ -181,6 +201,8 @@ class PeerRuntime:
                 lat = self.telemetry.published(out, wall, len(out.payload))
                 if out.channel == "tracks" and self.saved_tracks is not None:
                     self.saved_tracks[out.k] = out.message.states
+                if out.channel == "tracks" and self.recorder is not None:
+                    self.recorder.tracks(wall, out.k, out.payload)
                 self.observer.published(out, lat)
             elif isinstance(out, Record):
                 self.observer.record(out, scan_ms)
@@ -236,7 +258,10 @@ class PeerRuntime:
     def _finish(self) -> None:
         """Fuse what is pending, then write the summary, tracks and fault log."""
         try:
-            self._carry_out("tick", self.core.finish, time.time())
+            now = time.time()
+            if self.recorder is not None:
+                self.recorder.finish(now)
+            self._carry_out("tick", self.core.finish, now)
         except Exception as exc:
             self._internal_error(exc)
         self.observer.flush(idle=True, force=True)

@@ -366,7 +366,8 @@ def cmd_peer(args: argparse.Namespace) -> int:
         out_dir=out, run_id=args.run_id, viewer=args.viewer, color_index=args.color,
         idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
         save_tracks=args.save_tracks, scan_period=scn.scan_period,
-        faults=fault_injector(scn, args.run)))
+        faults=fault_injector(scn, args.run),
+        record=_record_meta(args, speed) if args.record else None))
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(core.consensus.o.neighbours) or 'none'}", flush=True)
     try:
@@ -378,6 +379,53 @@ def cmd_peer(args: argparse.Namespace) -> int:
           f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
           f"rejected {s['rejected_total']}", flush=True)
     return code
+
+
+def _record_meta(args: argparse.Namespace, speed: float) -> dict[str, str]:
+    """What ``sensornet replay`` needs to rebuild this peer: the scenario's text and every
+    setting the command line changed, as ``--set`` items."""
+    src = Path(args.scenario)
+    text = src.read_text() if src.is_file() else scenario_text(args.scenario)
+    sets = list(args.set or [])
+    for flag, key in (("rounds", "network.rounds"), ("omega", "network.omega"),
+                      ("policy", "network.policy"), ("filter", "network.filter"),
+                      ("fusion", "fusion.rule")):
+        value = getattr(args, flag, None)
+        if value is not None:
+            sets.append(f"{key}={json.dumps(value)}")
+    if getattr(args, "level2", None) is not None:
+        sets.append(f"fusion.level2_pruning={'true' if args.level2 else 'false'}")
+    return {"scenario_text": text, "scenario_file": src.name if src.is_file() else
+            f"{args.scenario}.toml", "overrides": json.dumps(sets), "run": str(args.run),
+            "speed": str(speed)}
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from peers.recording import replay
+
+    path = Path(args.path)
+    files = sorted((path / "record").glob("*.mcap")) if path.is_dir() else [path]
+    if not files or not all(f.is_file() for f in files):
+        raise UserError(f"no recording at {path} (record with 'sensornet run --record')")
+    if args.peer:
+        files = [f for f in files if f.stem.split(".")[0] == f"peer-{args.peer}"]
+        if not files:
+            raise UserError(f"no recording of peer {args.peer!r} in {path}")
+    print("| peer | file | scans | tracks recorded | replayed identical | mean OSPA fused |")
+    print("|---|---|---:|---:|---|---:|")
+    ok = True
+    for f in files:
+        try:
+            r = replay(f, args.set or [])
+        except (ValueError, ScenarioError, OSError) as exc:
+            raise UserError(f"{f}: {exc}") from None
+        same = r.identical
+        ok = ok and (same or bool(args.set))
+        print(f"| {r.peer} | {f.name} | {r.snapshot['scans']} | {len(r.recorded)} | "
+              f"{'yes' if same else 'NO'} | {r.snapshot['mean_ospa_fused']:.2f} |", flush=True)
+    if args.set:
+        print("(with --set the replay is a what-if run: its tracks are expected to differ)")
+    return 0 if ok else 1
 
 
 def cmd_world(args: argparse.Namespace) -> int:
@@ -455,7 +503,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
     if getattr(args, "sim", False):
-        for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms"):
+        for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
             if getattr(args, flag, None):
                 raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
         check_budget(scn, args)
@@ -488,7 +536,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                            viewer=viewer, run=args.run, speed=args.speed,
                            rerun=not args.no_rerun, lease_ms=args.lease_ms,
                            sparse=args.sparse, listen=args.listen, connect=args.connect,
-                           config=args.config, run_id=args.run_id)
+                           config=args.config, run_id=args.run_id,
+                           peer_args={n: ["--record"] for n in scn.sensor_names}
+                           if args.record else None)
         if pfaults:
             injector = threading.Thread(target=inject_process_faults, daemon=True,
                                         args=(handle, pfaults, scn.sensor_names[0], stop))
@@ -735,6 +785,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="link only to the --connect endpoints (no Zenoh gossip discovery)")
     pe.add_argument("--save-tracks", action="store_true",
                     help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
+    pe.add_argument("--record", action="store_true",
+                    help="record what the peer's core is given to <out>/record/peer-<name>.mcap "
+                         "(sensornet replay re-runs it offline, bit for bit)")
     pe.add_argument("--run", type=NONNEGATIVE_INT, default=0,
                     help="Monte Carlo run index (seeds the injected link faults)")
     pe.add_argument("--idle-timeout", type=POSITIVE_FLOAT, default=30.0,
@@ -761,6 +814,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                         help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
                              "(repeatable)")
+        sp.add_argument("--record", action="store_true",
+                        help="every peer records its inputs to <out>/record/*.mcap "
+                             "(see: sensornet replay)")
         sp.add_argument("--sparse", action="store_true",
                         help="Zenoh links only along the peer graph (gossip off): less "
                              "overhead in large networks; peers then see only their "
@@ -783,6 +839,14 @@ def build_parser() -> argparse.ArgumentParser:
                        "over Zenoh, summary")
     add_run_flags(d)
     d.set_defaults(func=cmd_demo, viewer="spawn")
+
+    rp = sub.add_parser("replay", help="feed a recorded run through the peers offline: the "
+                        "same fused tracks bit for bit, or a what-if with --set")
+    rp.add_argument("path", help="a run folder (its record/*.mcap) or one .mcap file")
+    rp.add_argument("--peer", help="only this peer's recording")
+    rp.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="change a setting for the replay (what-if), e.g. network.rounds=3")
+    rp.set_defaults(func=cmd_replay)
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
                         "over Monte Carlo runs (twin by default): CSV and plot")
