@@ -209,7 +209,7 @@ class PeerCore:
             steps = k - c.last_k
             if steps > 1:
                 self.scorer.skipped(steps - 1)
-        elif quiet and k != c.last_k and (self.first_k is None or k > c.last_k or k >= 1):
+        elif quiet and k != c.last_k:
             # a new start of the numbering: nothing accepted for a while (late join, restart)
             if self.first_k is not None:
                 self.reanchored += 1
