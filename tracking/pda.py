@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
@@ -62,13 +63,28 @@ class LinearSensor:
     @property
     def gamma(self) -> float:
         """Gate threshold on ``nu^T S^-1 nu``: the ``PG`` quantile of chi2 with n_z dof."""
-        return float(chi2.ppf(self.gate_probability, self.H.shape[0]))
+        return _chi2_ppf(self.gate_probability, self.H.shape[0])
 
     def gate_volume(self, S: np.ndarray) -> float:
         """Volume of the ellipsoidal gate ``{nu: nu^T S^-1 nu < gamma}`` (n_z = 1, 2 or 3)."""
         nz = self.H.shape[0]
         c = {1: 2.0, 2: np.pi, 3: 4.0 * np.pi / 3.0}[nz]
         return float(c * self.gamma ** (nz / 2) * np.sqrt(np.linalg.det(S)))
+
+
+@lru_cache(maxsize=256)
+def _chi2_ppf(p: float, dof: int) -> float:
+    return float(chi2.ppf(p, dof))
+
+
+def _quadratic_form(nu: np.ndarray, Sinv: np.ndarray) -> np.ndarray:
+    """``nu^T S^-1 nu`` for ``nu (M, m, n_z)``, ``Sinv (M, n_z, n_z)``; ``(M, m)`` (closed
+    form for n_z = 2, the common case, else einsum)."""
+    if nu.shape[-1] == 2:
+        a, b, d = Sinv[:, 0, 0, None], Sinv[:, 0, 1, None], Sinv[:, 1, 1, None]
+        u, v = nu[..., 0], nu[..., 1]
+        return a * u * u + 2.0 * b * u * v + d * v * v
+    return np.einsum("kmi,kij,kmj->km", nu, Sinv, nu)
 
 
 class ReturnWeighting(Protocol):
@@ -203,7 +219,7 @@ class ImmPda:
         S = H @ PHt + R  # (M, n_z, n_z)
         Sinv = np.linalg.inv(S)
         nu = Z[None, :, :] - zhat[:, None, :]  # (M, m, n_z)
-        g = np.einsum("kmi,kij,kmj->km", nu, Sinv, nu)
+        g = _quadratic_form(nu, Sinv)
         inside = (g < sensor.gamma).any(axis=0)  # union of the models' gates
         nu, g, Zg = nu[:, inside], g[:, inside], Z[inside]
         det2piS = np.linalg.det(2.0 * np.pi * S)
