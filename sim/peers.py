@@ -32,7 +32,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
     nb = np.flatnonzero(A[i])
     deg = A.sum(axis=1)
     net = scn.network
-    single = net.filter != "gmphd"
+    single = net.filter not in ("gmphd", "et-gmphd")
     opts = ConsensusOptions(
         name=name,
         neighbours=tuple(names[j] for j in nb),
@@ -61,12 +61,19 @@ def make_parts(scn: Scenario, name: str, run: int = 0):
     """The estimator and fuser of sensor ``name``'s peer."""
     net, fus = scn.network, scn.fusion
     rule = fus.rule
-    if net.filter == "gmphd":
+    if net.filter in ("gmphd", "et-gmphd"):
         if rule == "ratio":
             raise ScenarioError(f"{scn.name}: fusion.rule 'ratio' needs single-target peers "
                                 f"(network.filter 'imm-pf' or 'imm-ekf')")
-        filt = make_filter(scn, [name])
-        est = GmphdEstimator(filt, fus.level2_pruning, fus.level2_threshold)
+        if net.filter == "et-gmphd":  # seed 002: extended targets, same mixtures and fusers
+            from peers.extended import EtGmphdEstimator
+            from sim.extended import make_et_filter
+
+            filt = make_et_filter(scn, name)
+            est = EtGmphdEstimator(filt, fus.level2_pruning, fus.level2_threshold)
+        else:
+            filt = make_filter(scn, [name])
+            est = GmphdEstimator(filt, fus.level2_pruning, fus.level2_threshold)
         if rule == "gci":
             fuser = GciFuser(filt.reducer, fus.cardinality, net.omega)
         elif rule == "aa":

@@ -52,7 +52,8 @@ MOTION_MODELS = ("cv",)
 SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
 FUSION_RULES = ("gci", "aa", "ratio", "none")
-PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf")
+PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd")
+PARTITIONS = ("distance", "grid-spectral")
 OMEGA_RULES = ("uniform", "metropolis", "det", "chernoff")
 CARDINALITY_RULES = ("emd", "separate")
 EXTRACTION_RULES = ("round", "cardinality")
@@ -209,6 +210,34 @@ class NetworkSpec:
 
 
 @dataclass(frozen=True)
+class ExtendedSpec:
+    """Extended targets (seed 002, ALGORITHMS.md §7): returns per target and partitioning."""
+
+    rate: float = 10.0
+    """``gamma``: Poisson mean of the measurements of a detected target per scan."""
+    partition: str = "distance"
+    """``"distance"`` (Granström, MST thresholds) or ``"grid-spectral"`` (the seed's method)."""
+    p_lower: float = 0.3
+    """Distance partitioning: lower chi-square(2) probability of the thresholds on d^2/2."""
+    p_upper: float = 0.8
+    """Distance partitioning: upper chi-square(2) probability."""
+    compression: float = 0.5
+    """Grid-spectral: compression rate ``gamma`` of the grid (seed 002 eq. 5)."""
+    cell_factor: float = 4.0
+    """Grid-spectral: ``c0`` in ``ceil(N_z^(gamma/2) c0)`` cells per axis (our reading)."""
+    rho: float = 2.0
+    """Grid-spectral: density parameter ``rho > 1`` of the edge length ``rho^dist - 1``."""
+    k_rule: str = "eigengap"
+    """Grid-spectral: number of clusters by ``"eigengap"`` or ``"core-regions"``."""
+    k_spread: int = 0
+    """Grid-spectral: also partitions for K +- 1..k_spread (0: one partition, the paper's)."""
+    units: str = "sigma"
+    """Grid-spectral: distances in ``"sigma"`` units or the paper's ``"unit-box"`` [0, 1]."""
+    max_measurements: int = 2000
+    """Scans with more points are not partitioned (counted, corrected as all-missed)."""
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Error metric settings (§11)."""
 
@@ -256,6 +285,8 @@ class Scenario:
     """Metric settings."""
     network: NetworkSpec = NetworkSpec()
     """Peer network settings."""
+    extended: ExtendedSpec | None = None
+    """Extended targets (``[extended]`` table); ``None``: point targets (one return each)."""
     faults: FaultPlan | None = None
     """Link faults from the ``[faults]`` table (``None``: perfect links), resolved per link
     (:mod:`sim.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
@@ -600,7 +631,7 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
-                                 "fusion", "metrics", "network", "faults"])
+                                 "fusion", "metrics", "network", "faults", "extended"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -639,6 +670,13 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             "deadline", "filter"]), names),
         source=origin,
     )
+    if top.has("extended"):
+        scn = dataclasses.replace(scn, extended=_extended(_Table(
+            top.raw("extended"), "extended", ctx, [f.name for f in
+                                                   dataclasses.fields(ExtendedSpec)])))
+    if scn.network.filter == "et-gmphd" and scn.extended is None:
+        raise ctx.fail("network.filter", "key 'network.filter' is 'et-gmphd', which needs an "
+                                         "[extended] table")
     raw_faults = top.raw("faults", {})
     if raw_faults != {}:
         faults = _faults(_Table(raw_faults, "faults", ctx, ["default", "peers", "links"]),
@@ -795,6 +833,37 @@ def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
     )
 
 
+def _extended(t: _Table) -> ExtendedSpec:
+    from tracking.partition import DistancePartitioner, GridSpectralPartitioner
+
+    spec = ExtendedSpec(
+        rate=t.number("rate", 10.0, positive=True),
+        partition=t.choice("partition", PARTITIONS, "distance"),
+        p_lower=t.number("p_lower", 0.3, probability=True),
+        p_upper=t.number("p_upper", 0.8, probability=True),
+        compression=t.number("compression", 0.5, positive=True),
+        cell_factor=t.number("cell_factor", 4.0, positive=True),
+        rho=t.number("rho", 2.0, positive=True),
+        k_rule=t.choice("k_rule", ("eigengap", "core-regions"), "eigengap"),
+        k_spread=t.integer("k_spread", 0, minimum=0),
+        units=t.choice("units", ("sigma", "unit-box"), "sigma"),
+        max_measurements=t.integer("max_measurements", 2000, minimum=1),
+    )
+    try:
+        DistancePartitioner(20.0, spec.p_lower, spec.p_upper)
+    except ValueError:
+        raise t.fail("p_upper", f"must be >= p_lower and both in (0, 1), got p_lower "
+                                f"{spec.p_lower:g}, p_upper {spec.p_upper:g}") from None
+    if spec.rho <= 1:
+        raise t.fail("rho", f"must be > 1, got {spec.rho:g}")
+    if spec.compression > 2:
+        raise t.fail("compression", f"must be in (0, 2], got {spec.compression:g}")
+    GridSpectralPartitioner(compression=spec.compression, cell_factor=spec.cell_factor,
+                            rho=spec.rho, k_rule=spec.k_rule, k_spread=spec.k_spread,
+                            units=spec.units)
+    return spec
+
+
 def _metrics(m: _Table) -> MetricsSpec:
     order = m.number("ospa_order", 2.0)
     if order < 1:
@@ -942,6 +1011,7 @@ __all__ = [
     "SENSOR_KINDS",
     "BirthComponent",
     "BirthSpec",
+    "ExtendedSpec",
     "FilterSpec",
     "FusionSpec",
     "MetricsSpec",

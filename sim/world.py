@@ -118,23 +118,38 @@ def sensor_scans(scn: Scenario, spec: SensorSpec, truth: Truth,
     """One sensor's scans: ``scans[k-1]`` is ``(m_k, 2)`` for scan ``k``.
 
     Each true target is detected with ``Pd`` and measured with the sensor model
-    (``tracking.models``; bearings wrapped to ``[-pi, pi)``); ``Poisson(clutter_rate)`` clutter
-    points are drawn uniformly over :func:`sim.build.measurement_box`; the rows are shuffled
-    so a measurement's position in the scan says nothing about its origin.
+    (``tracking.models``; bearings wrapped to ``[-pi, pi)``); with an ``[extended]`` table a
+    detected target gives ``Poisson(extended.rate)`` measurements instead of one (seed 002);
+    ``Poisson(clutter_rate)`` clutter points are drawn uniformly over
+    :func:`sim.build.measurement_box`; the rows are shuffled so a measurement's position in the
+    scan says nothing about its origin.
     """
+    return labelled_sensor_scans(scn, spec, truth, rng)[0]
+
+
+def labelled_sensor_scans(scn: Scenario, spec: SensorSpec, truth: Truth,
+                          rng: np.random.Generator) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """:func:`sensor_scans` and each measurement's origin: ``origins[k-1]`` is ``(m_k,)``, the
+    target id (``truth.ids``) or 0 for clutter (for partition scores)."""
     model = sensor_model(spec)
     low, high = measurement_box(scn, spec)
-    scans = []
-    for states in truth.states:
+    scans, origins = [], []
+    for states, ids in zip(truth.states, truth.ids, strict=True):
         detected = rng.random(len(states)) < spec.detection_probability
-        xs = states[detected]
+        xs, who = states[detected], ids[detected]
         if xs.shape[1] == 6:  # [px, vx, ax, py, vy, ay] -> the models' [px, vx, py, vy]
             xs = xs[:, [0, 1, 3, 4]]
+        if scn.extended is not None:  # extended targets: Poisson(rate) returns each
+            n = rng.poisson(scn.extended.rate, len(xs))
+            xs, who = np.repeat(xs, n, axis=0), np.repeat(who, n)
         z_targets = model.measure(xs, rng)  # (d, 2)
         clutter = rng.uniform(low, high, size=(rng.poisson(spec.clutter_rate), 2))  # (c, 2)
         scan = np.concatenate([z_targets, clutter]).reshape(-1, 2)
-        scans.append(scan[rng.permutation(len(scan))])
-    return scans
+        origin = np.concatenate([who, np.zeros(len(clutter), dtype=int)]).astype(int)
+        order = rng.permutation(len(scan))
+        scans.append(scan[order])
+        origins.append(origin[order])
+    return scans, origins
 
 
 def generate_scans(
@@ -187,6 +202,7 @@ __all__ = [
     "generate_run",
     "generate_scans",
     "generate_truth",
+    "labelled_sensor_scans",
     "sensor_rng",
     "sensor_scans",
     "truth_rng",

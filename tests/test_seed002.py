@@ -1,0 +1,83 @@
+"""Seed 002: the scenario file, extended returns in the world, ET-GM-PHD peers' parts."""
+
+import numpy as np
+import pytest
+
+from peers.extended import EtGmphdEstimator
+from peers.fusers import GciFuser
+from sim.extended import make_et_filter, with_partition
+from sim.peers import consensus_options, make_parts
+from sim.scenario import ScenarioError, load_scenario
+from sim.world import generate_run, labelled_sensor_scans, sensor_rng
+from tracking.metrics import ospa
+from tracking.partition import DistancePartitioner, GridSpectralPartitioner
+
+
+def test_scenario_loads_with_extended_table():
+    scn = load_scenario("seed002")
+    assert scn.network.filter == "et-gmphd" and scn.extended.partition == "distance"
+    assert scn.sensor("s1").position == (1000.0, 0.0) and len(scn.sensors) == 3
+    assert len(scn.targets) == 4
+    gs = load_scenario("seed002", {"extended.partition": "grid-spectral"})
+    assert isinstance(make_et_filter(gs, "s1").partitioner, GridSpectralPartitioner)
+    assert isinstance(make_et_filter(scn, "s1").partitioner, DistancePartitioner)
+
+
+@pytest.mark.parametrize("key,value,msg", [
+    ("extended.partition", "kmeans", "extended.partition"),
+    ("extended.rho", 1.0, "extended.rho"),
+    ("extended.p_lower", 0.9, "extended.p_upper"),
+    ("extended.rate", 0, "extended.rate"),
+    ("extended.units", "km", "extended.units"),
+    ("extended.k_spread", -1, "extended.k_spread"),
+])
+def test_bad_partition_parameters_are_one_line_errors(key, value, msg):
+    with pytest.raises(ScenarioError, match=msg) as err:
+        load_scenario("seed002", {key: value})
+    assert "\n" not in str(err.value)
+
+
+def test_et_filter_without_extended_table_is_refused():
+    with pytest.raises(ScenarioError, match="needs an \\[extended\\] table"):
+        load_scenario("seed000", {"network.filter": "et-gmphd"})
+    rb = load_scenario("seed002", {"sensors.s1.kind": "range-bearing",
+                                   "sensors.s1.sigma_theta_deg": 1.0})
+    with pytest.raises(ScenarioError, match="linear"):
+        make_et_filter(rb, "s1")
+
+
+def test_world_draws_poisson_returns_per_detected_target():
+    scn = load_scenario("seed002", {"sensors.*.clutter_rate": 0})
+    truth, _ = generate_run(scn, 0)
+    scans, origins = labelled_sensor_scans(scn, scn.sensor("s1"), truth,
+                                           sensor_rng(scn, 0, "s1"))
+    per_target = np.concatenate([np.bincount(o, minlength=5)[ids]
+                                 for o, ids in zip(origins, truth.ids, strict=True)])
+    assert per_target.mean() == pytest.approx(10 * 0.99, rel=0.05)
+    # detected with Pd then Poisson(10): variance Pd (10 + 100) - (10 Pd)^2 = 10.89
+    assert per_target.var() == pytest.approx(0.99 * 110 - 9.9**2, rel=0.3)
+    assert all(len(z) == len(o) for z, o in zip(scans, origins, strict=True))
+    # point-target scenarios keep their draws: seed000's scans have one return per target
+    s0 = load_scenario("seed000", {"sensors.*.clutter_rate": 0})
+    t0, sc0 = generate_run(s0, 0)
+    assert all(len(z) <= len(x) for z, x in zip(sc0[0], t0.states, strict=True))
+
+
+def test_make_parts_builds_et_peers_fused_by_gci():
+    scn = load_scenario("seed002")
+    est, fuser = make_parts(scn, "s2")
+    assert isinstance(est, EtGmphdEstimator) and isinstance(fuser, GciFuser)
+    opts = consensus_options(scn, "s2")
+    assert opts.policy == "nale" and set(opts.neighbours) == {"s1", "s3"}
+
+
+@pytest.mark.parametrize("partition", ["distance", "grid-spectral"])
+def test_et_filter_tracks_the_seed002_targets(partition):
+    scn = with_partition(load_scenario("seed002"), partition)
+    truth, scans = generate_run(scn, 1)
+    filt = make_et_filter(scn, "s1")
+    mix, errs = filt.initial(), []
+    for k in range(1, 61):
+        mix = filt.step(mix, scans[0][k - 1])
+        errs.append(ospa(truth.positions(k), filt.extract(mix)[:, [0, 2]], 200.0, 2.0))
+    assert np.mean(errs) < 60.0
