@@ -7,7 +7,7 @@ import importlib
 import pytest
 
 SCRIPTS = ["bench_gci", "bench_gmphd_stonesoup", "bench_idle_penalty", "bench_immpf",
-           "bench_network", "soak"]
+           "bench_network", "soak", "bench_idpc"]
 
 
 @pytest.mark.parametrize("name", SCRIPTS)
