@@ -654,6 +654,46 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from sim.campaign import default_folder, format_status, load_campaign, run_campaign, status
+
+    c = load_campaign(args.file, runs=args.runs)
+    folder = Path(args.out) if args.out else default_folder(c)
+    if args.status:
+        print(format_status(c, folder, status(c, folder)))
+        return 0
+    if args.dask and args.scheduler:
+        raise UserError("--dask local and --scheduler: give one of them")
+    dask = "local" if args.dask else args.scheduler
+    jobs = args.jobs or (1 if c.runner == "real" and dask is None else os.cpu_count() or 1)
+    try:
+        summary = run_campaign(c, folder, jobs=jobs, dask=dask, progress=not args.quiet,
+                               stop_after=args.stop_after)
+    except (ImportError, ConnectionError) as exc:
+        raise UserError(str(exc)) from None
+    print(format_status(c, folder, status(c, folder)))
+    rate = summary.ran / summary.seconds if summary.seconds > 0 else 0.0
+    print(f"ran {summary.ran} runs in {summary.seconds:.1f} s ({rate:.2f} runs/s), "
+          f"{summary.skipped} already stored")
+    if summary.stopped:
+        print(f"stopped after {summary.ran} runs: run the same command again to finish")
+        return 1
+    print(f"report: sensornet report {folder}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from sim.report import write_report
+
+    try:
+        written = write_report(args.dir, args.out)
+    except ImportError as exc:
+        raise UserError(str(exc)) from None
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_scenario(args: argparse.Namespace) -> int:
     if args.action == "list":
         for name in builtin_scenarios():
@@ -863,6 +903,29 @@ def build_parser() -> argparse.ArgumentParser:
     add_mc_flags(sw, 50)
     add_budget_flags(sw, peers=True)
     sw.set_defaults(func=cmd_sweep)
+
+    ca = sub.add_parser("campaign", help="run an experiment campaign file (cells x Monte "
+                        "Carlo runs; resumable; local pool or Dask)")
+    ca.add_argument("file", help="campaign .toml (or a shipped one: seed000-figures, "
+                    "seed000-twin, policy-sweep, loss-sweep)")
+    ca.add_argument("--runs", type=POSITIVE_INT, help="Monte Carlo runs per cell "
+                    "(default: the file's)")
+    ca.add_argument("--jobs", type=POSITIVE_INT, help="worker processes, or LocalCluster "
+                    "workers with --dask local (default: all cores; 1 for runner 'real')")
+    ca.add_argument("--dask", choices=["local"], help="run on a Dask LocalCluster")
+    ca.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                    help="run on a running Dask scheduler (see README: campaigns)")
+    ca.add_argument("--status", action="store_true", help="show progress without running")
+    ca.add_argument("--out", help="campaign folder (default: runs/campaign-<name>)")
+    ca.add_argument("--quiet", action="store_true", help="no progress bar")
+    ca.add_argument("--stop-after", type=POSITIVE_INT, help=argparse.SUPPRESS)  # tests:
+    # stop as an interrupt would once this many runs have finished
+    ca.set_defaults(func=cmd_campaign)
+
+    rp = sub.add_parser("report", help="markdown + PNG report of a campaign folder")
+    rp.add_argument("dir", help="campaign folder (runs/campaign-<name>)")
+    rp.add_argument("--out", help="report folder (default: DIR/report)")
+    rp.set_defaults(func=cmd_report)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])

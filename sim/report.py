@@ -1,0 +1,314 @@
+"""``sensornet report CAMPAIGN_DIR``: a markdown report with PNG figures from a campaign's results.
+
+Per-cell tables give every scalar metric's mean over the runs with a 95 % confidence interval
+(Student t, ``mean ± t(0.975, n-1) s / sqrt(n)``). Figures, as the campaign's ``[[figures]]``
+ask (default: OSPA over time per cell):
+
+* ``seed000``: per cell, seed 000's Figs. 4-8: the mean number of estimates against the truth
+  (cardinality), its RMSE over the runs, OSPA over time for each sensor alone, the fused
+  estimate and the centralized filter (95 % band), and the component counts of the fusing
+  sensor before and after level-2 pruning and after fusion;
+* ``sweep``: a metric (``y``, default the fused OSPA) against one grid key (``x``), a line per
+  value of ``lines`` (or per combination of the other grid keys), 95 % error bars;
+* ``ospa-time``: every cell's mean fused OSPA per scan in one plot.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.campaign import _fmt, read_manifest, results_table
+from sim.results import META_COLUMNS
+
+
+def interval(values: np.ndarray) -> tuple[float, float, int]:
+    """``(mean, half-width of the 95 % interval, n)`` over finite values."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    n = len(v)
+    if n == 0:
+        return math.nan, math.nan, 0
+    if n == 1:
+        return float(v[0]), math.nan, 1
+    from scipy.stats import t
+
+    return float(v.mean()), float(t.ppf(0.975, n - 1) * v.std(ddof=1) / math.sqrt(n)), n
+
+
+def _num(x: float) -> str:
+    if not math.isfinite(x):
+        return "–"
+    return f"{x:.1f}" if abs(x) >= 100 else f"{x:.3g}"
+
+
+def _columns(table) -> tuple[list[str], list[str]]:
+    """(scalar metric columns, per-scan series columns)."""
+    import pyarrow as pa
+
+    scalars, series = [], []
+    for f in table.schema:
+        if f.name in META_COLUMNS:
+            continue
+        (series if pa.types.is_list(f.type) else scalars).append(f.name)
+    return scalars, series
+
+
+def _by_cell(table, manifest) -> dict[int, dict[str, Any]]:
+    cells = table.column("cell").to_pylist()
+    cols = {c: table.column(c).to_pylist() for c in table.column_names}
+    out: dict[int, dict[str, Any]] = {}
+    for cell in manifest["cells"]:
+        idx = [i for i, c in enumerate(cells) if c == cell["index"]]
+        out[cell["index"]] = {c: [cols[c][i] for i in idx] for c in cols}
+    return out
+
+
+def _series(rows: list, K: int | None = None) -> np.ndarray:
+    """Runs x scans from a list of per-run lists (None rows dropped)."""
+    rows = [r for r in rows if r is not None]
+    if not rows:
+        return np.zeros((0, K or 0))
+    return np.array(rows, dtype=float)
+
+
+def _headline(scalars: list[str]) -> list[str]:
+    keys = [c for c in scalars if c.startswith("mean_ospa.")]
+    if not keys:
+        keys = [c for c in ("fused_ospa", "local_ospa") if c in scalars]
+    return keys or scalars[:3]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _methods(data: dict[str, Any], prefix: str) -> list[str]:
+    return [c[len(prefix):] for c in data if c.startswith(prefix)]
+
+
+def _band(ax, k, s: np.ndarray, label: str, **kw) -> None:
+    mean = np.nanmean(s, axis=0)
+    line, = ax.plot(k, mean, label=label, **kw)
+    if len(s) > 1:
+        from scipy.stats import t
+
+        half = t.ppf(0.975, len(s) - 1) * np.nanstd(s, axis=0, ddof=1) / math.sqrt(len(s))
+        ax.fill_between(k, mean - half, mean + half, color=line.get_color(), alpha=0.2, lw=0)
+
+
+def seed000_figures(cell: dict, data: dict[str, Any], out: Path) -> list[tuple[str, Path]]:
+    """Figs. 4-8 of seed 000 for one cell of an ``experiment`` campaign."""
+    plt = _plt()
+    if "n_true_k" not in data or not data["n_true_k"]:
+        return []
+    n_true = _series(data["n_true_k"])
+    runs, K = n_true.shape
+    k = np.arange(1, K + 1)
+    methods = _methods(data, "ospa_k.")
+    tag = f"cell{cell['index']}"
+    title = f"{cell['label']} ({runs} runs)"
+    figs: list[tuple[str, Path]] = []
+
+    def save(fig, ax, name: str, ylabel: str, caption: str) -> None:
+        ax.set_xlabel("scan")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        ax.set_title(title, fontsize=10)
+        fig.tight_layout()
+        path = out / f"{tag}-{name}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        figs.append((caption, path))
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for m in methods:
+        ax.plot(k, _series(data[f"n_est_k.{m}"]).mean(axis=0), label=m)
+    ax.plot(k, n_true.mean(axis=0), "k--", label="truth")
+    save(fig, ax, "cardinality", "mean number of targets",
+         "Cardinality: mean number of estimated targets against the truth (Fig. 4)")
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for m in methods:
+        err = _series(data[f"n_est_k.{m}"]) - n_true
+        ax.plot(k, np.sqrt((err ** 2).mean(axis=0)), label=m)
+    save(fig, ax, "cardinality-rmse", "cardinality RMSE (targets)",
+         "Cardinality RMSE over the runs per scan (Fig. 5)")
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for m in methods:
+        _band(ax, k, _series(data[f"ospa_k.{m}"]), m,
+              lw=2 if m in ("fused", "centralized") else 1)
+    save(fig, ax, "ospa", "OSPA (m)",
+         "OSPA over time: each sensor alone, GCI-fused, centralized; 95 % bands (Figs. 6-7)")
+    comp = [(c, f"comp_k.{c}") for c in ("local", "level2", "fused") if f"comp_k.{c}" in data]
+    if comp:
+        fig, ax = plt.subplots(figsize=(8, 4))
+        names = {"local": "local filter output (after level-1 pruning)",
+                 "level2": "after level-2 pruning (published)", "fused": "after fusion"}
+        for c, col in comp:
+            ax.plot(k, _series(data[col]).mean(axis=0), label=names[c])
+        save(fig, ax, "components", "mean number of components",
+             "Components at the fusing sensor before and after each pruning level (Fig. 8)")
+    return figs
+
+
+def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
+                 n: int) -> tuple[str, Path] | None:
+    plt = _plt()
+    x = spec["x"]
+    y = spec.get("y") or ("mean_ospa.fused" if any(
+        "mean_ospa.fused" in d for d in cells.values()) else "fused_ospa")
+    lines_key = spec.get("lines")
+    groups: dict[str, list[tuple[Any, float, float]]] = {}
+    for cell in manifest["cells"]:
+        vals = cell["values"]
+        if x not in vals or y not in cells[cell["index"]]:
+            continue
+        if lines_key:
+            g = f"{lines_key}={_fmt(vals.get(lines_key))}"
+        else:
+            g = ", ".join(f"{k}={_fmt(v)}" for k, v in vals.items() if k != x) or y
+        mean, half, _ = interval(np.array(cells[cell["index"]][y], dtype=float))
+        groups.setdefault(g, []).append((vals[x], mean, half))
+    if not groups:
+        return None
+    xs = list(dict.fromkeys(repr(v) for pts in groups.values() for v, _, _ in pts))
+    labels = {repr(v): _fmt(v) for pts in groups.values() for v, _, _ in pts}
+    numeric = all(isinstance(v, int | float) and not isinstance(v, bool)
+                  for pts in groups.values() for v, _, _ in pts)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for g, pts in groups.items():
+        px = [v if numeric else xs.index(repr(v)) for v, _, _ in pts]
+        ax.errorbar(px, [m for _, m, _ in pts], yerr=[0 if math.isnan(h) else h
+                                                       for _, _, h in pts],
+                    marker="o", capsize=3, label=g)
+    if not numeric:
+        ax.set_xticks(range(len(xs)), [labels[v] for v in xs])
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{manifest['name']}: {y} against {x} (95 % intervals)", fontsize=10)
+    fig.tight_layout()
+    path = out / f"sweep-{n}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return f"{y} against {x}, 95 % intervals", path
+
+
+def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,
+                     n: int) -> tuple[str, Path] | None:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    drew = False
+    for cell in manifest["cells"]:
+        data = cells[cell["index"]]
+        col = "ospa_k.fused" if "ospa_k.fused" in data else None
+        if col is None or not data[col]:
+            continue
+        s = _series(data[col])
+        _band(ax, np.arange(1, s.shape[1] + 1), s, cell["label"])
+        drew = True
+    if not drew:
+        plt.close(fig)
+        return None
+    ax.set_xlabel("scan")
+    ax.set_ylabel("fused OSPA (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(f"{manifest['name']}: fused OSPA over time (95 % bands)", fontsize=10)
+    fig.tight_layout()
+    path = out / f"ospa-time-{n}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return "Fused OSPA over time per cell, 95 % bands", path
+
+
+def overview(table, manifest: dict) -> list[str]:
+    """A markdown table: a row per cell, its headline metrics with 95 % intervals."""
+    scalars, _ = _columns(table)
+    cells = _by_cell(table, manifest)
+    head = _headline(scalars)
+    lines = ["| cell | runs | " + " | ".join(f"{h} (95 % CI)" for h in head) + " |",
+             "|---|---:|" + "---:|" * len(head)]
+    for cell in manifest["cells"]:
+        d = cells[cell["index"]]
+        parts = []
+        for h in head:
+            mean, half, _ = interval(np.array(d.get(h, []), dtype=float))
+            parts.append(f"{_num(mean)} ± {_num(half)}")
+        lines.append(f"| {cell['label']} | {len(d['key'])} | " + " | ".join(parts) + " |")
+    return lines
+
+
+def write_report(folder: str | Path, out: str | Path | None = None) -> list[Path]:
+    """Write ``report.md`` and its PNGs (default: ``<folder>/report/``); return the files."""
+    folder = Path(folder)
+    manifest = read_manifest(folder)
+    out = Path(out) if out else folder / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    table = results_table(folder, manifest)
+    total = sum(len(c["keys"]) for c in manifest["cells"])
+    lines = [f"# Campaign {manifest['name']}", "",
+             f"Runner `{manifest['runner']}`, scenario `{manifest['scenario']}`, "
+             f"{len(manifest['cells'])} cells × {manifest['runs']} runs "
+             f"(runs {manifest['first_run']}–{manifest['first_run'] + manifest['runs'] - 1}); "
+             f"{table.num_rows}/{total} runs computed; code version "
+             f"`{manifest['code_version']}`.", "",
+             "Means over the runs with 95 % confidence intervals "
+             "(Student t: mean ± t(0.975, n−1)·s/√n).", ""]
+    written: list[Path] = []
+    if table.num_rows == 0:
+        lines.append("No results yet.")
+        path = out / "report.md"
+        path.write_text("\n".join(lines) + "\n")
+        return [path]
+    scalars, _ = _columns(table)
+    cells = _by_cell(table, manifest)
+    lines += ["## Overview", "", *overview(table, manifest), ""]
+    figures = manifest.get("figures") or [{"kind": "ospa-time"}]
+    campaign_figs: list[tuple[str, Path]] = []
+    for n, spec in enumerate(figures):
+        got = None
+        if spec["kind"] == "sweep":
+            got = sweep_figure(spec, manifest, cells, out, n)
+        elif spec["kind"] == "ospa-time":
+            got = ospa_time_figure(manifest, cells, out, n)
+        if got:
+            campaign_figs.append(got)
+    if campaign_figs:
+        lines += ["## Figures", ""]
+        for caption, path in campaign_figs:
+            lines += [f"![{caption}]({path.name})", "", f"*{caption}*", ""]
+            written.append(path)
+    lines += ["## Cells", ""]
+    for cell in manifest["cells"]:
+        d = cells[cell["index"]]
+        lines += [f"### Cell {cell['index']}: {cell['label']}", "",
+                  f"{len(d['key'])} runs; overrides: "
+                  + (", ".join(f"`{k}={v}`" for k, v in cell["set"].items()) or "none"), "",
+                  "| metric | mean | 95 % CI | runs |", "|---|---:|---:|---:|"]
+        for s in scalars:
+            mean, half, k = interval(np.array([np.nan if v is None else v for v in d[s]],
+                                              dtype=float))
+            if k == 0:
+                continue
+            ci = (f"[{_num(mean - half)}, {_num(mean + half)}]" if math.isfinite(half)
+                  else "–")
+            lines.append(f"| {s} | {_num(mean)} | {ci} | {k} |")
+        lines.append("")
+        if any(f["kind"] == "seed000" for f in figures):
+            for caption, path in seed000_figures(cell, d, out):
+                lines += [f"![{caption}]({path.name})", "", f"*{caption}*", ""]
+                written.append(path)
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return [path, *written]

@@ -1,0 +1,196 @@
+"""Campaigns: resumption after an interruption, worker-count invariance, status and report."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sensornet.cli import main
+from sim.campaign import (
+    canonical_rows,
+    load_campaign,
+    results_table,
+    run_campaign,
+    status,
+)
+from sim.results import ResultStore
+
+TWIN = """
+[campaign]
+name = "t-twin"
+scenario = "seed000"
+runner = "twin"
+runs = 6
+
+[set]
+"scenario.num_scans" = 8
+"faults.default.loss" = 0.2
+
+[grid]
+"network.rounds" = [1, 2]
+"""
+
+EXPERIMENT = """
+[campaign]
+name = "t-exp"
+scenario = "seed000"
+runner = "experiment"
+runs = 4
+
+[set]
+"scenario.num_scans" = 8
+
+[grid]
+"birth.model" = ["truth", "paper"]
+
+[[figures]]
+kind = "seed000"
+
+[[figures]]
+kind = "sweep"
+x = "birth.model"
+"""
+
+
+def _file(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_stopped_campaign_resumes_to_the_uninterrupted_table(tmp_path):
+    c = load_campaign(_file(tmp_path, TWIN))
+    whole = run_campaign(c, tmp_path / "whole", jobs=1, progress=False)
+    assert (whole.ran, whole.skipped, whole.stopped) == (12, 0, False)
+    seen: list[str] = []
+    first = run_campaign(c, tmp_path / "cut", jobs=2, progress=False, stop_after=5,
+                         on_row=lambda r: seen.append(r["key"]))
+    assert first.stopped and first.ran == 5
+    stored = ResultStore(tmp_path / "cut" / "results").done_keys()
+    assert stored == set(seen)  # every finished run kept; runs in flight lost, nothing else
+    assert status(c, tmp_path / "cut").done == 5
+    rest = run_campaign(c, tmp_path / "cut", jobs=2, progress=False)
+    assert (rest.ran, rest.skipped, rest.stopped) == (7, 5, False)
+    again = run_campaign(c, tmp_path / "cut", jobs=2, progress=False)
+    assert (again.ran, again.skipped) == (0, 12)
+    a, b = results_table(tmp_path / "whole"), results_table(tmp_path / "cut")
+    assert a.num_rows == b.num_rows == 12
+    assert canonical_rows(a) == canonical_rows(b)
+    assert b.column("run").to_pylist() == list(range(6)) * 2
+
+
+def test_killed_campaign_process_resumes(tmp_path):
+    """``kill -9`` of the campaign process half-way: only its run in flight is redone."""
+    path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 30'))
+    out = tmp_path / "killed"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    proc = subprocess.Popen([sys.executable, "-m", "sensornet", "campaign", str(path), "--out",
+                             str(out), "--jobs", "1", "--quiet"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    store = ResultStore(out / "results")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        if store.count_files() >= 4:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.stderr.read().decode()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    proc.stderr.close()
+    done = len(store.done_keys())
+    assert 4 <= done < 12
+    c = load_campaign(path)
+    summary = run_campaign(c, out, jobs=2, progress=False)
+    assert (summary.ran, summary.skipped) == (12 - done, done)
+    whole = run_campaign(c, tmp_path / "whole", jobs=2, progress=False)
+    assert whole.ran == 12
+    assert canonical_rows(results_table(out)) == canonical_rows(results_table(tmp_path / "whole"))
+
+
+def test_same_numbers_from_one_two_workers_and_a_dask_local_cluster(tmp_path):
+    pytest.importorskip("distributed", reason="needs the campaign extra (dask[distributed])")
+    c = load_campaign(_file(tmp_path, EXPERIMENT))
+    tables = []
+    for name, kw in (("one", {"jobs": 1}), ("two", {"jobs": 2}),
+                     ("dask", {"jobs": 2, "dask": "local"})):
+        s = run_campaign(c, tmp_path / name, progress=False, **kw)
+        assert s.ran == 8
+        tables.append(canonical_rows(results_table(tmp_path / name, complete_only=True)))
+    assert tables[0] == tables[1] == tables[2]
+    # and the twin runner on the cluster (fault draws included)
+    t = load_campaign(_file(tmp_path, TWIN.replace("runs = 6", "runs = 2"), "t.toml"))
+    run_campaign(t, tmp_path / "t1", jobs=1, progress=False)
+    run_campaign(t, tmp_path / "td", jobs=2, dask="local", progress=False)
+    assert canonical_rows(results_table(tmp_path / "t1")) == \
+        canonical_rows(results_table(tmp_path / "td"))
+
+
+def test_status_without_running_and_cli(tmp_path, capsys):
+    path = _file(tmp_path, TWIN.replace("runs = 6", "runs = 3"))
+    out = tmp_path / "camp"
+    assert main(["campaign", str(path), "--out", str(out), "--status"]) == 0
+    text = capsys.readouterr().out
+    assert "0/6 runs done, 0/2 cells complete" in text
+    assert "cell   0  network.rounds=1" in text and "0/3" in text
+    assert not (out / "results").exists()  # --status runs nothing
+    assert main(["campaign", str(path), "--out", str(out), "--jobs", "1", "--quiet",
+                 "--stop-after", "4"]) == 1
+    text = capsys.readouterr().out
+    assert "stopped after 4 runs" in text
+    assert main(["campaign", str(path), "--out", str(out), "--status"]) == 0
+    text = capsys.readouterr().out
+    assert "4/6 runs done, 1/2 cells complete" in text
+    assert "3/3  done" in text and "1/3  running/partial" in text
+    assert main(["campaign", str(path), "--out", str(out), "--runs", "4", "--status"]) == 0
+    assert "4/8 runs done, 0/2 cells complete" in capsys.readouterr().out
+    assert main(["campaign", str(path), "--out", str(out), "--jobs", "2", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "6/6 runs done, 2/2 cells complete" in text and "2 runs in" in text
+    assert "4 already stored" in text
+
+
+def test_report_tables_and_seed000_figures(tmp_path, capsys):
+    path = _file(tmp_path, EXPERIMENT)
+    out = tmp_path / "exp"
+    assert main(["campaign", str(path), "--out", str(out), "--jobs", "2", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 0
+    written = [Path(line.split(" ", 1)[1]) for line in capsys.readouterr().out.splitlines()]
+    names = {p.name for p in written}
+    for cell in (0, 1):
+        for fig in ("cardinality", "cardinality-rmse", "ospa", "components"):
+            assert f"cell{cell}-{fig}.png" in names
+    assert "sweep-1.png" in names
+    assert all(p.stat().st_size > 1000 for p in written)
+    md = (out / "report" / "report.md").read_text()
+    assert "| birth.model=truth | 4 |" in md and "95 % CI" in md
+    assert "mean_ospa.fused" in md and "mean_ospa.centralized" in md
+
+
+def test_campaign_file_errors_are_one_line(tmp_path, capsys):
+    bad = _file(tmp_path, TWIN.replace('runner = "twin"', 'runner = "cloud"'))
+    assert main(["campaign", str(bad)]) == 2
+    assert "campaign.runner must be one of" in capsys.readouterr().err
+    bad = _file(tmp_path, TWIN.replace('"network.rounds" = [1, 2]',
+                                       '"network.rounds" = [1, 0]'), "b.toml")
+    assert main(["campaign", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "cell 'network.rounds=0'" in err and len(err.strip().splitlines()) == 1
+    assert main(["campaign", str(tmp_path / "none.toml")]) == 2
+    assert "no such campaign file" in capsys.readouterr().err
+    assert main(["report", str(tmp_path)]) == 2
+    assert "no manifest.json" in capsys.readouterr().err
+
+
+def test_shipped_campaigns_load():
+    for name in ("seed000-figures", "seed000-twin", "policy-sweep", "loss-sweep"):
+        c = load_campaign(name, runs=2)
+        assert c.cells and all(len(cell.keys) == 2 for cell in c.cells)
+    c = load_campaign("seed000-figures")
+    assert [cell.label for cell in c.cells] == ["birth.model=truth", "birth.model=paper"]
