@@ -50,6 +50,8 @@ class RuntimeOptions:
     scan_period: float = 1.0
     """Simulated seconds per scan (the "sim" timeline in Rerun)."""
     faults: FaultInjector | None = field(default=None, compare=False)
+    security: object = None
+    """A :class:`peers.security.Security`: mutual TLS and the network's access control."""
     record: dict[str, str] | None = None
     """Record the core's inputs to ``<out_dir>/record/<stem>.mcap`` with this metadata
     (scenario text, overrides, run, ...: what ``sensornet replay`` needs to rebuild the peer)."""
@@ -79,7 +81,8 @@ class PeerRuntime:
         self.transport = Transport(core.keys, core.name, core.cfg.sensor, c.o.neighbours,
                                    core.admission,
                                    (list(self.o.listen), list(self.o.connect),
-                                    self.o.config_file, self.o.lease_ms, self.o.gossip))
+                                    self.o.config_file, self.o.lease_ms, self.o.gossip),
+                                   security=self.o.security)
         self.telemetry = Telemetry()
         self.sink = RerunSink()
         self.observer = Observer(core, self.sink, self.o.color_index, self.o.scan_period)

@@ -39,9 +39,12 @@ def endpoint(port: int, host: str = "127.0.0.1") -> str:
 
 def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
-                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES
-                 ) -> zenoh.Config:
+                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES,
+                 security=None) -> zenoh.Config:
     """A peer-mode config: the user's JSON5 file if given, then the flags on top of it.
+
+    ``security`` (a :class:`peers.security.Security`): mutual TLS against the network's CA
+    and the network's access control policy; every endpoint must then be ``tls/``.
 
     Defaults on top of Zenoh's: a lease of :data:`DEFAULT_LEASE_MS` and a maximum message size
     of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win).
@@ -69,6 +72,13 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message)))
         if not gossip:  # links only to the given endpoints (large networks: fewer links)
             conf.insert_json5("scouting/gossip/enabled", "false")
+        if security is not None:
+            from peers.security import check_endpoints
+
+            check_endpoints([*listen, *connect])
+            security.apply(conf)
+    except SessionError:
+        raise
     except Exception as exc:
         raise SessionError(f"bad Zenoh endpoint or setting: {exc}") from None
     return conf
@@ -76,10 +86,10 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
 
 def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
-                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES
-                 ) -> zenoh.Session:
+                 gossip: bool = True, max_message: int | None = MAX_MESSAGE_BYTES,
+                 security=None) -> zenoh.Session:
     """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
-    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message)
+    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message, security)
     try:
         return zenoh.open(conf)
     except Exception as exc:

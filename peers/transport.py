@@ -27,11 +27,12 @@ class Transport:
     ``("msg", key, payload)``, ``("live", name, joined)``, ``("stop", "", b"")``)."""
 
     def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
-                 admission: Admission, session_args: tuple) -> None:
+                 admission: Admission, session_args: tuple, security=None) -> None:
         self.keys, self.name, self.sensor = keys, name, sensor
         self.neighbours = neighbours
         self.admission = admission
         self.session_args = session_args
+        self.security = security  # peers.security.Security: mutual TLS + access control
         self.q: queue.Queue = queue.Queue()
         self.seen_alive: set[str] = set()
         self.session = None
@@ -69,7 +70,7 @@ class Transport:
 
     def open(self, duplicate_wait: float = 0.5) -> None:
         """Open the session; refuse to start if a peer of the same name is alive already."""
-        session = open_session(*self.session_args)
+        session = open_session(*self.session_args, security=self.security)
         self.session = session
         try:
             if self.session_args[1]:  # endpoints to connect to: let the links come up first

@@ -180,7 +180,7 @@ def _resolve_viewer(args: argparse.Namespace) -> None:
 
 
 def _tcp_port(ep: str) -> tuple[str, int] | None:
-    m = re.match(r"^tcp/(\[[^\]]+\]|[^:/]+):(\d+)", ep)
+    m = re.match(r"^(?:tcp|tls)/(\[[^\]]+\]|[^:/]+):(\d+)", ep)
     return (m.group(1).strip("[]"), int(m.group(2))) if m else None
 
 
@@ -338,6 +338,44 @@ def _prepare_peer(args: argparse.Namespace, scn) -> None:
         _existing_file(args.config)
 
 
+def _security(args: argparse.Namespace, member: str, scn):
+    """``--secure DIR`` of a peer or the world: its TLS files and the network's policy."""
+    if not getattr(args, "secure", None):
+        return None
+    from peers.security import Security, check_endpoints
+
+    sec = Security.load(args.secure, member, args.network, scn.sensor_names)
+    check_endpoints([*(args.listen or []), *(args.connect or [])])
+    return sec
+
+
+def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
+    """``run/demo --secure [DIR]``: the keys folder (fresh keys in <out>/keys without DIR);
+    the network name defaults to the one the keys were made for."""
+    if args.secure is None:
+        return None
+    from peers.security import WORLD, check_endpoints, keys_network, make_keys
+
+    check_endpoints([*(args.listen or []), *(args.connect or [])])
+    if args.secure == "":
+        args.network = args.network or f"run-{os.urandom(4).hex()}"
+        folder = out / "keys"
+        make_keys(args.network, [WORLD, *scn.sensor_names], folder)
+        return folder.resolve()
+    folder = Path(args.secure)
+    made_for = keys_network(folder)
+    if args.network and args.network != made_for:
+        raise UserError(f"--secure {folder}: keys of network {made_for!r}, not of "
+                        f"{args.network!r}")
+    args.network = made_for
+    missing = [m for m in [WORLD, *scn.sensor_names] if not (folder / f"{m}.key").is_file()]
+    if missing:
+        raise UserError(f"--secure {folder}: no key for {', '.join(missing)} (add them with: "
+                        f"sensornet keys {made_for} --out {folder} --members "
+                        f"{','.join(missing)})")
+    return folder.resolve()
+
+
 def cmd_peer(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -359,8 +397,9 @@ def cmd_peer(args: argparse.Namespace) -> int:
     _prepare_peer(args, scn)
     speed = args.speed or scn.network.speed
     out = Path(args.out) if args.out else None
+    security = _security(args, args.name, scn)
     core = make_peer(scn, args.name, args.run, network=args.network, speed=speed)
-    runtime = PeerRuntime(core, RuntimeOptions(
+    runtime = PeerRuntime(core, RuntimeOptions(security=security,
         listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
         config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
         out_dir=out, run_id=args.run_id, viewer=args.viewer, color_index=args.color,
@@ -451,7 +490,8 @@ def cmd_world(args: argparse.Namespace) -> int:
                          connect=args.connect or [], config_file=args.config, wait_for=peers,
                          wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
                          viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun,
-                         progress=progress, say=lambda line: print(line, flush=True))
+                         progress=progress, say=lambda line: print(line, flush=True),
+                         security=_security(args, "world", scn))
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
@@ -506,12 +546,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
             if getattr(args, flag, None):
                 raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
+        if args.secure is not None:
+            raise UserError("--secure needs real processes; drop --sim")
         check_budget(scn, args)
         return _run_twin(scn, args)
     check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
     _check_listen_free(args.listen or [])
     _resolve_viewer(args)
+    if args.secure is not None and pfaults:
+        raise UserError("--fault watches the scans with its own session: not available with "
+                        "--secure yet")
     out = _run_folder(args.out, "run")
+    secure = _run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
     print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
@@ -536,7 +582,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                            viewer=viewer, run=args.run, speed=args.speed,
                            rerun=not args.no_rerun, lease_ms=args.lease_ms,
                            sparse=args.sparse, listen=args.listen, connect=args.connect,
-                           config=args.config, run_id=args.run_id,
+                           config=args.config, run_id=args.run_id, secure=secure,
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
         if pfaults:
@@ -694,6 +740,28 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_keys(args: argparse.Namespace) -> int:
+    """``sensornet keys NETWORK --out DIR``: the network's CA and one key + certificate per
+    member (every peer and the world), plain PEM files (see :mod:`peers.security`)."""
+    from peers.security import WORLD, SecurityError, make_keys
+
+    if args.members:
+        members = [m.strip() for m in args.members.split(",") if m.strip()]
+    else:
+        members = [WORLD, *_load(args, args.scenario).sensor_names]
+    hosts = [h.strip() for h in (args.hosts or "localhost,127.0.0.1").split(",") if h.strip()]
+    try:
+        paths = make_keys(args.network, members, Path(args.out), days=args.days, hosts=hosts,
+                          overwrite=args.rotate)
+    except (SecurityError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+    print(f"keys for network {args.network}: CA and {len(members)} members "
+          f"({', '.join(members)}) in {args.out}")
+    print(f"  {len(paths)} files; give each member only ca.pem, <name>.pem and <name>.key; "
+          "keep ca.key apart")
+    return 0
+
+
 def cmd_scenario(args: argparse.Namespace) -> int:
     if args.action == "list":
         for name in builtin_scenarios():
@@ -802,6 +870,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help="override a scenario value (repeatable)")
         sp.add_argument("--no-rerun", action="store_true",
                         help="do not write .rrd files (benchmarks)")
+        if launcher:
+            sp.add_argument("--secure", nargs="?", const="", metavar="DIR",
+                            help="mutual TLS and access control with the keys in DIR "
+                                 "(sensornet keys); without DIR, fresh keys in <out>/keys")
+        else:
+            sp.add_argument("--secure", metavar="DIR",
+                            help="mutual TLS and access control with this member's key, "
+                                 "certificate and the network's CA in DIR (sensornet keys)")
+
 
     pe = sub.add_parser("peer", help="run one sensor peer (a process) over Zenoh")
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
@@ -931,6 +1008,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("action", choices=["list", "show"])
     s.add_argument("name", nargs="?", default="seed000")
     s.set_defaults(func=cmd_scenario)
+
+    k = sub.add_parser("keys", help="make a network's CA and each member's key and "
+                       "certificate (for --secure)")
+    k.add_argument("network", type=_network_name, help="the network the keys are for")
+    k.add_argument("--out", required=True, help="folder for the PEM files")
+    k.add_argument("--scenario", default="seed000",
+                   help="members: the world and the scenario's sensors (default seed000)")
+    k.add_argument("--members", help="comma-separated member names instead, e.g. "
+                   "world,s1,s2,s3")
+    k.add_argument("--hosts", help="host names and addresses the certificates are valid for "
+                   "(default localhost,127.0.0.1)")
+    k.add_argument("--days", type=POSITIVE_INT, default=365, help="validity (default 365)")
+    k.add_argument("--rotate", action="store_true",
+                   help="issue new keys for the named members (same CA)")
+    k.set_defaults(func=cmd_keys, set=None)
     return p
 
 

@@ -21,6 +21,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from peers.security import tls_endpoint
 from peers.session import endpoint, free_port
 from sim.scenario import Scenario
 
@@ -49,7 +50,7 @@ class RunHandle:
             old.wait()
         cmd = list(self.commands[name])
         i = cmd.index("--listen")
-        cmd[i + 1] = endpoint(free_port())
+        cmd[i + 1] = f"{cmd[i + 1].split('/', 1)[0]}/127.0.0.1:{free_port()}"  # tcp/ or tls/
         self.restarts[name] = self.restarts.get(name, 0) + 1
         log = self.out / "logs" / f"{name}.restart{self.restarts[name]}.log"
         with log.open("w") as fh:
@@ -82,18 +83,21 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               lease_ms: int | None = None, rerun: bool = True,
               sparse: bool = False, listen: list[str] | None = None,
               connect: list[str] | None = None, config: str | None = None,
-              run_id: str | None = None) -> RunHandle:
+              run_id: str | None = None, secure: Path | None = None) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`).
 
     ``listen``: the world's endpoints (the peers connect to the first; default a free
     loopback port); ``connect``: endpoints every process connects to as well (a router, say);
-    ``config``: a Zenoh JSON5 file for every process; ``run_id``: the Rerun recording id.
+    ``config``: a Zenoh JSON5 file for every process; ``run_id``: the Rerun recording id;
+    ``secure``: a folder of the network's keys (``sensornet keys``): every process then speaks
+    mutual TLS on ``tls/`` endpoints under the network's access control.
     """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
     names = scn.sensor_names
-    eps = {n: endpoint(free_port()) for n in names}
-    world_listen = list(listen or []) or [endpoint(free_port())]
+    ep = tls_endpoint if secure else endpoint
+    eps = {n: ep(free_port()) for n in names}
+    world_listen = list(listen or []) or [ep(free_port())]
     eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
     common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
@@ -103,6 +107,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         common += ["--no-rerun"]
     if config:
         common += ["--config", str(config)]
+    if secure:
+        common += ["--secure", str(secure)]
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network)

@@ -57,7 +57,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               wait_timeout: float = 30.0, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
-              say=None) -> dict:
+              say=None, security=None) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
 
     ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
@@ -84,7 +84,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                   else None,
                   viewer, peers=scn.sensor_names, **layout)
         sink.decorate(scn.sensor_names, region=scn.region, **layout)
-    session = open_session(listen, connect, config_file)
+    session = open_session(listen, connect, config_file, security=security)
     alive: set[str] = set()
     cond = threading.Condition()
 

@@ -1,0 +1,307 @@
+"""Who may speak on a network: member keys and certificates, mutual TLS, per-key access control.
+
+``sensornet keys NETWORK --out DIR`` (:func:`make_keys`) writes a network CA and, per member
+(every peer and the world), a private key and a certificate whose common name is the member's
+name, all plain PEM files (``openssl x509 -in DIR/s1.pem -noout -text`` reads them):
+
+    DIR/ca.pem  DIR/ca.key          the network's CA (keep ca.key off the members' machines)
+    DIR/<name>.pem  DIR/<name>.key  one per member: CN=<name>, O=<network>, signed by the CA
+
+A member process in secure mode (``--secure DIR``, :class:`Security`) builds its Zenoh session
+with ``tls/`` endpoints, mutual TLS against the network's CA only, and the network's access
+control policy (:func:`acl_config`, default deny, subjects by certificate common name): a peer
+may put only on its own ``estimate/`` and ``tracks/`` keys and declare only its own ``alive/``
+and ``ready/`` liveliness tokens; only the world may put ``scan/``, ``truth`` and ``ctl``.
+Zenoh applies the policy where a message *arrives* (each member filters what it receives), so
+every member loads the same policy: a member that lies about whose key it puts on is refused
+by every other member, whatever its own process does.
+"""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+import json
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from peers.session import SessionError
+from protocol.keys import Keys, check_name
+
+WORLD = "world"
+"""The member name of the world process (scans, truth, control)."""
+CA_CERT, CA_KEY = "ca.pem", "ca.key"
+DEFAULT_HOSTS = ("localhost", "127.0.0.1")
+"""Names every member certificate is valid for (the host part of the endpoints dialled)."""
+
+
+class SecurityError(SessionError):
+    """Keys could not be made or a secure-mode folder is incomplete (one line)."""
+
+
+# -- keys and certificates --------------------------------------------------------------------
+def _name(cn: str, org: str | None = None):
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    attrs = [x509.NameAttribute(NameOID.COMMON_NAME, cn)]
+    if org:
+        attrs.append(x509.NameAttribute(NameOID.ORGANIZATION_NAME, org))
+    return x509.Name(attrs)
+
+
+def _write(path: Path, data: bytes, private: bool = False) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    tmp.replace(path)
+
+
+def _san(hosts: Iterable[str]):
+    from cryptography import x509
+
+    names = []
+    for h in hosts:
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(h)))
+        except ValueError:
+            names.append(x509.DNSName(h))
+    return x509.SubjectAlternativeName(names)
+
+
+def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
+              hosts: Sequence[str] = DEFAULT_HOSTS, overwrite: bool = False) -> list[Path]:
+    """Write a network CA and a key + certificate per member into ``out``; returns the paths.
+
+    An existing CA in ``out`` is reused (so members can be added later with the same CA);
+    an existing member key is kept unless ``overwrite`` (key rotation: issue a new one).
+    Keys are ECDSA P-256 (what every TLS stack accepts); member certificates carry both
+    serverAuth and clientAuth (a peer listens and connects) and ``hosts`` as SANs.
+    """
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    check_name(network, "network name")
+    members = list(dict.fromkeys(members))
+    if not members:
+        raise SecurityError("no members: give --members a,b,c or --scenario")
+    for m in members:
+        check_name(m, "member name")
+    if CA_CERT.removesuffix(".pem") in members:
+        raise SecurityError("'ca' cannot be a member name (it is the CA's file)")
+    out.mkdir(parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.UTC)
+    start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
+    pem = serialization.Encoding.PEM
+    no_pw = serialization.NoEncryption()
+    pkcs8 = serialization.PrivateFormat.PKCS8
+
+    ca_cert_path, ca_key_path = out / CA_CERT, out / CA_KEY
+    if ca_cert_path.exists() and ca_key_path.exists():
+        ca_key = serialization.load_pem_private_key(ca_key_path.read_bytes(), None)
+        ca_cert = x509.load_pem_x509_certificate(ca_cert_path.read_bytes())
+        org = ca_cert.subject.get_attributes_for_oid(x509.oid.NameOID.ORGANIZATION_NAME)
+        if not org or org[0].value != network:
+            raise SecurityError(f"{out} holds the CA of another network "
+                                f"({org[0].value if org else '?'!r}); use another folder")
+    else:
+        ca_key = ec.generate_private_key(ec.SECP256R1())
+        subject = _name(f"sensornet {network} CA", network)
+        ca_cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
+                   .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(start).not_valid_after(end)
+                   .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+                   .add_extension(x509.KeyUsage(
+                       digital_signature=False, content_commitment=False,
+                       key_encipherment=False, data_encipherment=False, key_agreement=False,
+                       key_cert_sign=True, crl_sign=True, encipher_only=False,
+                       decipher_only=False), critical=True)
+                   .add_extension(x509.SubjectKeyIdentifier.from_public_key(
+                       ca_key.public_key()), critical=False)
+                   .sign(ca_key, hashes.SHA256()))
+        _write(ca_key_path, ca_key.private_bytes(pem, pkcs8, no_pw), private=True)
+        _write(ca_cert_path, ca_cert.public_bytes(pem))
+    written = [ca_cert_path, ca_key_path]
+    for m in members:
+        key_path, cert_path = out / f"{m}.key", out / f"{m}.pem"
+        if key_path.exists() and cert_path.exists() and not overwrite:
+            written += [cert_path, key_path]
+            continue
+        key = ec.generate_private_key(ec.SECP256R1())
+        cert = (x509.CertificateBuilder().subject_name(_name(m, network))
+                .issuer_name(ca_cert.subject).public_key(key.public_key())
+                .serial_number(x509.random_serial_number())
+                .not_valid_before(start).not_valid_after(end)
+                .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+                .add_extension(x509.KeyUsage(
+                    digital_signature=True, content_commitment=False, key_encipherment=False,
+                    data_encipherment=False, key_agreement=False, key_cert_sign=False,
+                    crl_sign=False, encipher_only=False, decipher_only=False), critical=True)
+                .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
+                                                      ExtendedKeyUsageOID.CLIENT_AUTH]),
+                               critical=False)
+                .add_extension(_san(hosts), critical=False)
+                .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
+                    ca_key.public_key()), critical=False)
+                .sign(ca_key, hashes.SHA256()))
+        _write(key_path, key.private_bytes(pem, pkcs8, no_pw), private=True)
+        _write(cert_path, cert.public_bytes(pem))
+        written += [cert_path, key_path]
+    roster = out / "members.json"
+    old = json.loads(roster.read_text()).get("members", []) if roster.exists() else []
+    _write(roster, json.dumps({"network": network,
+                               "members": list(dict.fromkeys([*old, *members]))},
+                              indent=1).encode())
+    return [*written, roster]
+
+
+def keys_network(folder: str | Path) -> str:
+    """The network a keys folder was made for (its CA's organisation name)."""
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    path = Path(folder) / CA_CERT
+    if not path.is_file():
+        raise SecurityError(f"{folder}: no {CA_CERT} (make the keys with: sensornet keys "
+                            f"NETWORK --out {folder})")
+    org = x509.load_pem_x509_certificate(path.read_bytes()).subject \
+        .get_attributes_for_oid(NameOID.ORGANIZATION_NAME)
+    if not org:
+        raise SecurityError(f"{path} names no network (its O= field is empty)")
+    return str(org[0].value)
+
+
+def common_name(cert_path: Path) -> str:
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    cert = x509.load_pem_x509_certificate(Path(cert_path).read_bytes())
+    return str(cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value)
+
+
+# -- access control ---------------------------------------------------------------------------
+def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
+    """The network's Zenoh ``access_control`` section (default deny).
+
+    Zenoh checks a put or a declaration where it arrives (ingress, against the sender's
+    certificate name) and where it leaves (egress, against the *receiver's*): every member
+    loads this same policy, so each refuses what another member may not send, whatever that
+    member's own process does. Subjects are certificate common names (reliable in peer mode;
+    user names are not). Per member:
+
+    - peer ``p``: puts ``estimate/p`` and ``tracks/p``; liveliness tokens ``alive/p`` and
+      ``ready/p``; subscribes to its own ``scan/p``, ``truth``, ``ctl`` and ``estimate/*``
+      (what it fuses), to liveliness ``alive/*``;
+    - the world: puts ``scan/*``, ``truth``, ``ctl``; token ``alive/<world>``; liveliness
+      subscriptions on ``alive/*`` and ``ready/*``.
+    """
+    k = Keys(network)
+    everything = f"{k.base}/**"
+
+    def rule(rid: str, messages: list[str], key_exprs: list[str],
+             flows: tuple[str, ...] = ("ingress",)) -> dict:
+        return {"id": rid, "permission": "allow", "flows": list(flows), "messages": messages,
+                "key_exprs": key_exprs}
+
+    rules = [
+        rule(f"{world}-put", ["put"], [k.scan("*"), k.truth(), k.ctl()]),
+        rule(f"{world}-token", ["liveliness_token"], [k.alive(world)]),
+        rule(f"{world}-hear", ["declare_liveliness_subscriber", "liveliness_query"],
+             [k.alive("*"), k.ready("*")]),
+        # liveliness replies (who is alive), on every member's ingress
+        rule("replies", ["reply"], [everything]),
+        # egress is checked against the receiving member: a member sends what it may send
+        # (every receiver checks the sender on its ingress)
+        rule("send", ["put", "delete", "liveliness_token", "declare_subscriber",
+                      "declare_liveliness_subscriber", "liveliness_query", "reply"],
+             [everything], flows=("egress",)),
+    ]
+    subjects = [{"id": f"m-{world}", "cert_common_names": [world]}]
+    policies = [{"rules": [f"{world}-put", f"{world}-token", f"{world}-hear", "replies",
+                           "send"], "subjects": [f"m-{world}"]}]
+    for p in peers:
+        check_name(p, "peer name")
+        rules += [
+            rule(f"{p}-put", ["put"], [k.estimate(p), k.tracks(p)]),
+            rule(f"{p}-token", ["liveliness_token"], [k.alive(p), k.ready(p)]),
+            rule(f"{p}-hear", ["declare_subscriber"],
+                 [k.scan(p), k.truth(), k.ctl(), k.estimate("*")]),
+            rule(f"{p}-live", ["declare_liveliness_subscriber", "liveliness_query"],
+                 [k.alive("*")]),
+        ]
+        subjects.append({"id": f"m-{p}", "cert_common_names": [p]})
+        policies.append({"rules": [f"{p}-put", f"{p}-token", f"{p}-hear", f"{p}-live",
+                                   "replies", "send"], "subjects": [f"m-{p}"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}
+
+
+# -- secure mode ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Security:
+    """One member's secure-mode settings: its folder, its name, the network's roster."""
+
+    folder: Path
+    member: str
+    network: str
+    peers: tuple[str, ...]
+    world: str = WORLD
+
+    @classmethod
+    def load(cls, folder: str | Path, member: str, network: str,
+             peers: Sequence[str]) -> Security:
+        """Check that ``folder`` holds the CA and ``member``'s key and certificate."""
+        folder = Path(folder)
+        need = [folder / CA_CERT, folder / f"{member}.pem", folder / f"{member}.key"]
+        missing = [p.name for p in need if not p.is_file()]
+        if missing:
+            raise SecurityError(f"--secure {folder}: missing {', '.join(missing)} (make them "
+                                f"with: sensornet keys {network} --out {folder} ...)")
+        made_for = keys_network(folder)
+        if made_for != network:
+            raise SecurityError(f"--secure {folder}: keys of network {made_for!r}, not of "
+                                f"{network!r} (use --network {made_for})")
+        cn = common_name(folder / f"{member}.pem")
+        if cn != member:
+            raise SecurityError(f"{folder / (member + '.pem')} is the certificate of {cn!r}, "
+                                f"not of {member!r}")
+        return cls(folder.resolve(), member, network, tuple(peers))
+
+    @property
+    def ca(self) -> Path:
+        return self.folder / CA_CERT
+
+    @property
+    def cert(self) -> Path:
+        return self.folder / f"{self.member}.pem"
+
+    @property
+    def key(self) -> Path:
+        return self.folder / f"{self.member}.key"
+
+    def apply(self, conf) -> None:
+        """TLS certificates, mutual TLS and the access control policy on a Zenoh config."""
+        tls = {"root_ca_certificate": str(self.ca),
+               "listen_certificate": str(self.cert), "listen_private_key": str(self.key),
+               "connect_certificate": str(self.cert), "connect_private_key": str(self.key),
+               "enable_mtls": True}
+        for name, value in tls.items():
+            conf.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
+        conf.insert_json5("access_control", json.dumps(
+            acl_rules(self.network, self.peers, self.world)))
+
+
+def tls_endpoint(port: int, host: str = "127.0.0.1") -> str:
+    return f"tls/{host}:{port}"
+
+
+def check_endpoints(endpoints: Iterable[str]) -> None:
+    """Secure mode speaks TLS only: a ``tcp/`` endpoint would bypass mutual TLS."""
+    bad = [e for e in endpoints if not e.startswith("tls/")]
+    if bad:
+        raise SecurityError(f"secure mode needs tls/ endpoints, not {', '.join(bad)}")
