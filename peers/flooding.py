@@ -1,0 +1,136 @@
+"""Measurement flooding (seed 004; ALGORITHMS.md §9): one peer's sans-I/O state, and a network.
+
+In iteration 1 a peer sends its own scan to every neighbour; in iteration ``t >= 2`` it sends
+the scans it received in iteration ``t - 1`` and has not sent before. Scans are keyed by
+``(origin, scan)``; a copy of a scan already held is a duplicate and is dropped. After
+``diameter`` iterations on a loss-free connected network every peer holds every scan.
+
+:class:`Flooder` is one peer's state (no clock, no socket: the caller delivers what arrived and
+asks what to send); :func:`flood` runs synchronous iterations over an adjacency matrix with
+optional message loss, the way the offline experiment and the tests use it. Tuples are the
+seed's unit: a 2-D measurement is 2 tuples, counted once per neighbour a scan is sent to.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TUPLES_PER_MEASUREMENT = 2
+"""A 2-D measurement is 2 tuples (seed 004)."""
+
+ScanKey = tuple[int, int]
+"""``(origin peer, scan index)``."""
+
+
+@dataclass
+class Flooder:
+    """One peer's flooding state for the scans it is collecting."""
+
+    peer: int
+    """This peer's index (the origin of its own scans)."""
+    held: dict[ScanKey, np.ndarray] = field(default_factory=dict)
+    """Every scan held, own and received, ``(m, 2)`` points each."""
+    duplicates: int = 0
+    """Copies received of scans already held (dropped)."""
+    late: int = 0
+    """Scans received after their scan index was closed (dropped)."""
+    _pending: list[ScanKey] = field(default_factory=list)
+    _closed_before: int = 0
+
+    def own(self, scan: int, points: np.ndarray) -> None:
+        """This peer's own measurements of ``scan``: held, and sent in the next iteration."""
+        self._add((self.peer, scan), points)
+
+    def receive(self, origin: int, scan: int, points: np.ndarray) -> bool:
+        """A scan from a neighbour; True when it is new (held and queued for forwarding)."""
+        if scan < self._closed_before:
+            self.late += 1
+            return False
+        if (origin, scan) in self.held:
+            self.duplicates += 1
+            return False
+        self._add((origin, scan), points)
+        return True
+
+    def outgoing(self) -> list[tuple[ScanKey, np.ndarray]]:
+        """What to send to every neighbour this iteration: the scans new since the last call."""
+        out = [(k, self.held[k]) for k in self._pending]
+        self._pending = []
+        return out
+
+    def pooled(self, scan: int) -> dict[int, np.ndarray]:
+        """The scans of index ``scan`` held now, by origin."""
+        return {o: z for (o, s), z in self.held.items() if s == scan}
+
+    def close(self, scan: int, peers: int) -> int:
+        """Stop collecting scans ``<= scan`` (their deadline passed); returns how many of the
+        ``peers`` origins of ``scan`` never arrived (missing), and forgets those scans."""
+        missing = peers - len(self.pooled(scan))
+        self._closed_before = max(self._closed_before, scan + 1)
+        self.held = {k: z for k, z in self.held.items() if k[1] > scan}
+        self._pending = [k for k in self._pending if k[1] > scan]
+        return missing
+
+    def _add(self, key: ScanKey, points: np.ndarray) -> None:
+        self.held[key] = np.asarray(points, dtype=float).reshape(-1, 2)
+        self._pending.append(key)
+
+
+@dataclass(frozen=True)
+class FloodOutcome:
+    """What one scan's flooding left behind."""
+
+    held: list[set[int]]
+    """Per peer, the origins whose scan it holds."""
+    tuples_sent: np.ndarray
+    """``(S,)`` tuples each peer sent (2 per measurement per neighbour)."""
+    duplicates: np.ndarray
+    """``(S,)`` duplicate copies each peer received and dropped."""
+
+
+def flood(adjacency: np.ndarray, scans: Sequence[np.ndarray], iterations: int, scan: int = 0,
+          loss: float = 0.0, rng: np.random.Generator | None = None) -> FloodOutcome:
+    """Flood one scan index over ``adjacency (S, S)`` for ``iterations`` synchronous iterations.
+
+    ``scans[i]`` is peer i's own ``(m_i, 2)`` scan. Each (sender, receiver, scan) message is lost
+    with probability ``loss`` (one draw from ``rng`` each, in a fixed order).
+    """
+    A = np.asarray(adjacency, dtype=bool)
+    S = len(A)
+    neighbours = [np.flatnonzero(A[i]) for i in range(S)]
+    peers = [Flooder(i) for i in range(S)]
+    for i, z in enumerate(scans):
+        peers[i].own(scan, z)
+    sent = np.zeros(S, dtype=np.int64)
+    if loss > 0 and rng is None:
+        raise ValueError("flood with loss needs an rng")
+    for _ in range(iterations):
+        messages = [(i, peers[i].outgoing()) for i in range(S)]  # all send, then all receive
+        for i, out in messages:
+            for key, z in out:
+                sent[i] += TUPLES_PER_MEASUREMENT * len(z) * len(neighbours[i])
+                for j in neighbours[i]:
+                    if loss > 0 and rng.random() < loss:
+                        continue
+                    peers[j].receive(key[0], key[1], z)
+    return FloodOutcome([set(p.pooled(scan)) for p in peers], sent,
+                        np.array([p.duplicates for p in peers]))
+
+
+def flooding_tuples(hops: np.ndarray, sizes: np.ndarray, iterations: int) -> np.ndarray:
+    """Closed form of the tuples each peer sends flooding one scan index, loss-free: ``(S,)``.
+
+    In iteration ``t`` peer i sends the scans of the peers at hop distance ``t - 1``, so after
+    ``T`` iterations ``tuples_i = deg_i * sum_{j: hop(i, j) <= T - 1} 2 |Z_j|``.
+    ``hops (S, S)`` hop distances (``inf`` if unreachable), ``sizes (S,)`` points per scan.
+    """
+    hops = np.asarray(hops, dtype=float)
+    deg = (hops == 1).sum(axis=1)
+    reach = hops <= iterations - 1
+    return deg * (reach @ (TUPLES_PER_MEASUREMENT * np.asarray(sizes, dtype=np.int64)))
+
+
+__all__ = ["FloodOutcome", "Flooder", "TUPLES_PER_MEASUREMENT", "flood", "flooding_tuples"]
