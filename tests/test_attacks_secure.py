@@ -1,0 +1,191 @@
+"""Issue 10's attacks against real processes in secure mode (mutual TLS + access control).
+
+World + 3 peers (seed 000, 40 scans at 10 scans/s) started with ``--secure`` keys. The attacker
+holds s3's own key and certificate (a member that lies about whose keys it speaks on), or a
+certificate of the right CA for a name outside the roster; others have no certificate or one
+from another CA. Every forged message is refused by the receivers' transport (Zenoh's access
+control at ingress), so the peers never see it: no rejection is even counted, the run ends
+normally and every peer's fused OSPA equals the clean secure run's.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from peers.security import Security, make_keys
+from peers.session import open_session
+from protocol.codec import decode, encode
+from protocol.keys import Keys
+from protocol.messages import Control, Estimate, Scan
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.scenario import load_scenario, parse_overrides
+from tests.attacks import K0, SETS
+from tracking.mixture import GaussianMixture
+
+pytestmark = pytest.mark.network
+
+NETWORK = "secnet"
+PEERS = ("s1", "s2", "s3")
+
+
+@pytest.fixture(scope="module")
+def keys(tmp_path_factory):
+    d = tmp_path_factory.mktemp("keys")
+    make_keys(NETWORK, ["world", *PEERS], d)
+    return d
+
+
+@pytest.fixture(scope="module")
+def scn():
+    return load_scenario("seed000", overrides=parse_overrides(SETS))
+
+
+def _run(out: Path, keys: Path, scn, during=None):
+    handle = start_run(scn, "seed000", out, network=NETWORK, overrides=SETS, rerun=False,
+                       secure=keys)
+    try:
+        if during is not None:
+            during(handle)
+        codes = wait_run(handle, timeout=120)
+    finally:
+        handle.stop_all()
+    return codes, read_summaries(out, scn.sensor_names)
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory, keys, scn):
+    out = tmp_path_factory.mktemp("clean")
+    return _run(out, keys, scn)
+
+
+def _check_complete(scn, codes, summaries):
+    assert all(c == 0 for c in codes.values()), codes
+    assert set(summaries) == set(PEERS)
+    for name, s in summaries.items():
+        assert s["internal_errors"] == {}, (name, s["internal_errors"])
+        assert s["scans"] == scn.num_scans, name
+        assert s["stop_reason"] == "end of run", name
+        assert s["ospa_misses"] == {"local": 0, "fused": 0}, name
+
+
+def test_a_secure_run_works_end_to_end(clean, scn):
+    codes, summaries = clean
+    _check_complete(scn, codes, summaries)
+    for name, s in summaries.items():
+        assert s["rejected_total"] == 0, (name, s["rejected"])
+        assert s["mean_ospa_fused"] < s["mean_ospa_local"], name
+        assert s["stats"]["last_fused_from"] == {m: scn.num_scans for m in PEERS
+                                                 if m != name}, name
+
+
+def _session_as(folder: Path, member: str, endpoints) -> zenoh.Session:
+    return open_session(connect=list(endpoints),
+                        security=Security.load(folder, member, NETWORK, PEERS))
+
+
+def _refused(conf: zenoh.Config, endpoints) -> bool:
+    """True if a session with this config cannot connect to any of ``endpoints``."""
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/endpoints", json.dumps(list(endpoints)))
+    conf.insert_json5("connect/timeout_ms", "1000")
+    conf.insert_json5("connect/exit_on_failure", "true")
+    try:
+        zenoh.open(conf).close()
+    except Exception:
+        return True
+    return False
+
+
+def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys, clean, scn):
+    """s3's key puts on s2's estimate, every scan key, ctl, truth, alive/ready tokens for
+    others; a same-CA stranger (s9) does the same; sessions without a certificate or with
+    another CA's cannot even connect."""
+    stranger = tmp_path / "stranger"
+    stranger.mkdir()
+    for f in ("ca.pem", "ca.key"):
+        shutil.copy(keys / f, stranger / f)
+    make_keys(NETWORK, ["s9"], stranger)
+    other_ca = tmp_path / "other"
+    make_keys(NETWORK, ["s2"], other_ca)
+    report = {}
+
+    def attack(handle):
+        eps = list(handle.endpoints.values())
+        k = Keys(handle.network)
+        no_cert = zenoh.Config()
+        no_cert.insert_json5("transport/link/tls/root_ca_certificate",
+                             json.dumps(str(keys / "ca.pem")))
+        report["no_cert_refused"] = _refused(no_cert, eps)
+        foreign = zenoh.Config()
+        Security.load(other_ca, "s2", NETWORK, PEERS).apply(foreign)
+        report["other_ca_refused"] = _refused(foreign, eps)
+        report["plain_tcp_refused"] = _refused(
+            zenoh.Config(), [e.replace("tls/", "tcp/") for e in eps])
+
+        s3 = _session_as(keys, "s3", eps)  # s3's own key, in another process's hands
+        s9 = _session_as(stranger, "s9", eps)
+        seen = {"k": 0}
+        reached = threading.Event()
+
+        def on_scan(sample) -> None:  # s3 may read its own scans: the run's clock
+            seen["k"] = max(seen["k"], decode(sample.payload.to_bytes()).k)
+            if seen["k"] >= K0:
+                reached.set()
+
+        sub = s3.declare_subscriber(k.scan("s3"), on_scan)
+        tokens, sent = [], 0
+        try:
+            assert reached.wait(60), f"the run never reached scan {K0} ({seen})"
+            empty = GaussianMixture(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
+            phantom = np.array([[0.0, 0.0]])
+            for who in (s3, s9):
+                tokens += [who.liveliness().declare_token(k.alive("s1")),
+                           who.liveliness().declare_token(k.alive("s9")),
+                           who.liveliness().declare_token(k.ready("s2"))]
+            end_k = K0 + 15
+            while seen["k"] < end_k:  # every scan: forge what the issue measured
+                kk = seen["k"]
+                for who in (s3, s9):
+                    for rnd in range(3):
+                        who.put(k.estimate("s2"), encode(Estimate("s2", kk, empty, round=rnd,
+                                                                  send_time=time.time())))
+                    for sensor in PEERS:
+                        who.put(k.scan(sensor), encode(Scan(sensor, kk + 1, phantom,
+                                                            seq=kk + 1,
+                                                            send_time=time.time())))
+                    who.put(k.ctl(), encode(Control("end", "forged", {})))
+                    sent += 3 + len(PEERS) + 1
+                time.sleep(0.02)  # a few forgeries per scan interval (0.1 s)
+        finally:
+            for t in tokens:
+                t.undeclare()
+            sub.undeclare()
+            s9.close()
+            s3.close()
+        report["sent"] = sent
+
+    codes, summaries = _run(tmp_path / "run", keys, scn, during=attack)
+    assert report["no_cert_refused"] and report["other_ca_refused"]
+    assert report["plain_tcp_refused"]
+    assert report["sent"] > 100, report
+    _check_complete(scn, codes, summaries)
+    _, clean_summaries = clean
+    for name, s in summaries.items():
+        # refused by the transport: the peers never even saw the forgeries
+        assert s["rejected_total"] == 0, (name, s["rejected"])
+        assert s["ctl_end_while_world_alive"] <= 1, name  # only the world's own "end"
+        assert not [e for e in s["peer_events"] if e[0] in ("s9",)], s["peer_events"]
+        assert not [e for e in s["peer_events"] if e[0] == "s1" and e[1] == "left"]
+        assert abs(s["mean_ospa_fused"] - clean_summaries[name]["mean_ospa_fused"]) < 3.0, (
+            name, s["mean_ospa_fused"], clean_summaries[name]["mean_ospa_fused"])
+        assert s["stats"]["last_fused_from"] == clean_summaries[name]["stats"][
+            "last_fused_from"], name
