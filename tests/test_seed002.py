@@ -81,3 +81,25 @@ def test_et_filter_tracks_the_seed002_targets(partition):
         mix = filt.step(mix, scans[0][k - 1])
         errs.append(ospa(truth.positions(k), filt.extract(mix)[:, [0, 2]], 200.0, 2.0))
     assert np.mean(errs) < 60.0
+
+
+def test_experiment_smoke_and_table(tmp_path, capsys):
+    from sim import seed002
+
+    base = load_scenario("seed002", {"scenario.num_scans": 15})
+    res = seed002.run_experiment(1, clutters=(10,), first_run=3, progress=False, base=base)
+    assert [r.partition for r in res] == ["distance", "grid-spectral"]
+    for r in res:
+        assert r.clutter == 10 and r.partition_ms > 0 and r.step_ms >= r.partition_ms
+        assert 0.0 < r.ari <= 1.0 and r.partitions_per_scan >= 1
+    rows = seed002.summarise(res)
+    table = seed002.format_table(rows)
+    assert "grid-spectral" in table and "40.8" in table  # the paper's distance time at 10
+    assert seed002.truth_labels(np.array([2, 0, 2, 0])).tolist() == [2, -1, 2, -2]
+
+
+def test_experiment_cli_refuses_bad_flags(capsys):
+    from sim import seed002
+
+    assert seed002.main(["--runs", "0"]) == 2
+    assert "--runs" in capsys.readouterr().err

@@ -1,0 +1,210 @@
+"""Seed-002 Monte Carlo: distance vs grid-density + spectral partitioning in the ET-GM-PHD.
+
+``python -m sim.seed002 --runs 20`` runs the paper's single-sensor experiment (sensor ``s1`` of
+``sim/scenarios/seed002.toml``) at clutter 10 / 15 / 20 / 25 for both partitioners on the same
+runs (common random numbers) and prints, per clutter level and partitioner: partition time per
+scan, whole ET-GM-PHD step time per scan (predict, partition, update, reduce), mean OSPA
+(c = 200, p = 2), mean cardinality error, partitions per scan, the adjusted Rand index of the
+best partition against the true measurement origins (clutter points as one-point cells), and
+the paper's partition time beside ours. ``--csv`` writes one row per (clutter, partitioner).
+
+Evaluation runs are ``--first-run .. --first-run + runs - 1`` of the scenario's seed; nothing
+was tuned on them (the grid's ``cell_factor`` was picked on synthetic scans of another
+generator, see :class:`tracking.partition.GridSpectralPartitioner`). Times are CPU time of this
+thread per scan (``time.thread_time``: other processes on shared cores do not inflate them),
+with BLAS on one thread (set below, before NumPy loads).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small eigenproblems: threads only hurt
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import dataclasses  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from sim.extended import make_et_filter  # noqa: E402
+from sim.progress import Progress  # noqa: E402
+from sim.scenario import Scenario, load_scenario  # noqa: E402
+from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
+from tracking.metrics import cardinality_error, ospa  # noqa: E402
+from tracking.partition import adjusted_rand_index  # noqa: E402
+
+CLUTTER_LEVELS = (10, 15, 20, 25)
+PARTITIONS = ("distance", "grid-spectral")
+PAPER_PARTITION_TIME = {  # seconds per scan, seed 002 Table 3
+    "distance": {10: 0.0408, 15: 0.0538, 20: 0.0677, 25: 0.0891},
+    "grid-spectral": {10: 0.0225, 15: 0.0363, 20: 0.0410, 25: 0.0565},
+}
+
+
+class _Timed:
+    """Wraps a partitioner and adds up the time spent in it."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.seconds = 0.0
+
+    def __call__(self, z):
+        t = time.thread_time()
+        try:
+            return self.inner(z)
+        finally:
+            self.seconds += time.thread_time() - t
+
+
+@dataclasses.dataclass(frozen=True)
+class RunResult:
+    """One run of one partitioner at one clutter level (means over the run's scans)."""
+
+    clutter: int
+    partition: str
+    run: int
+    ospa: float
+    cardinality_error: float
+    partition_ms: float
+    step_ms: float
+    partitions_per_scan: float
+    ari: float
+
+
+def scenario_at(clutter: float, base: Scenario | None = None) -> Scenario:
+    """The seed-002 scenario with every sensor's clutter rate set to ``clutter``."""
+    base = base or load_scenario("seed002")
+    return dataclasses.replace(base, sensors=tuple(
+        dataclasses.replace(s, clutter_rate=float(clutter)) for s in base.sensors))
+
+
+def truth_labels(origin: np.ndarray) -> np.ndarray:
+    """Origins with each clutter point (origin 0) its own label, for the Rand index."""
+    lab = origin.astype(int).copy()
+    clutter = lab == 0
+    lab[clutter] = -1 - np.arange(clutter.sum())
+    return lab
+
+
+def one_run(scn: Scenario, run: int, partition: str, sensor: str = "s1") -> RunResult:
+    """One Monte Carlo run of the ET-GM-PHD on ``sensor`` with ``partition``."""
+    truth = generate_truth(scn, truth_rng(scn, run))
+    scans, origins = labelled_sensor_scans(scn, scn.sensor(sensor), truth,
+                                           sensor_rng(scn, run, sensor))
+    filt = make_et_filter(scn, sensor, partition)
+    timed = _Timed(filt.partitioner)
+    filt.partitioner = timed
+    c, p = scn.metrics.ospa_cutoff, scn.metrics.ospa_order
+    mix = filt.initial()
+    errs, card, aris, nparts, step_s = [], [], [], [], 0.0
+    for k in range(1, scn.num_scans + 1):
+        z = scans[k - 1]
+        t = time.thread_time()
+        mix = filt.step(mix, z)
+        step_s += time.thread_time() - t
+        est = filt.extract(mix)[:, [0, 2]]
+        X = truth.positions(k)
+        errs.append(ospa(X, est, c, p))
+        card.append(abs(cardinality_error(X, est)))
+        parts = filt.last_partitions
+        nparts.append(len(parts))
+        if parts:
+            lab = truth_labels(origins[k - 1])
+            aris.append(max(adjusted_rand_index(q, lab) for q in parts))
+    K = scn.num_scans
+    return RunResult(int(scn.sensor(sensor).clutter_rate), partition, run, float(np.mean(errs)),
+                     float(np.mean(card)), 1e3 * timed.seconds / K, 1e3 * step_s / K,
+                     float(np.mean(nparts)), float(np.mean(aris)) if aris else float("nan"))
+
+
+def run_experiment(runs: int, clutters=CLUTTER_LEVELS, partitions=PARTITIONS,
+                   first_run: int = 0, progress: bool = True,
+                   base: Scenario | None = None) -> list[RunResult]:
+    """Every (clutter, run, partitioner) on the same runs; partitioners alternate per run so
+    machine load drifts hit both alike."""
+    out = []
+    with Progress(len(clutters) * runs * len(partitions), "ET-GM-PHD runs",
+                  enabled=progress) as bar:
+        for c in clutters:
+            scn = scenario_at(c, base)
+            for r in range(first_run, first_run + runs):
+                for part in partitions:
+                    out.append(one_run(scn, r, part))
+                    bar.advance()
+    return out
+
+
+def summarise(results: list[RunResult]) -> list[dict]:
+    """Per (clutter, partitioner): means over runs, and the paper's partition time."""
+    rows = []
+    keys = sorted({(r.clutter, r.partition) for r in results},
+                  key=lambda k: (k[0], PARTITIONS.index(k[1])))
+    for c, part in keys:
+        rs = [r for r in results if r.clutter == c and r.partition == part]
+        row = {"clutter": c, "partition": part, "runs": len(rs)}
+        for f in ("ospa", "cardinality_error", "partition_ms", "step_ms",
+                  "partitions_per_scan", "ari"):
+            row[f] = float(np.mean([getattr(r, f) for r in rs]))
+        row["ospa_sem"] = float(np.std([r.ospa for r in rs], ddof=1) / np.sqrt(len(rs))
+                                ) if len(rs) > 1 else float("nan")
+        row["paper_partition_ms"] = 1e3 * PAPER_PARTITION_TIME.get(part, {}).get(c, np.nan)
+        rows.append(row)
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    head = (f"{'clutter':>7} {'partition':<14} {'runs':>4} {'OSPA':>7} {'±sem':>5} "
+            f"{'|card|':>6} {'part ms':>7} {'paper ms':>8} {'step ms':>7} {'parts':>5} "
+            f"{'ARI':>5}")
+    lines = [head]
+    for r in rows:
+        lines.append(f"{r['clutter']:>7} {r['partition']:<14} {r['runs']:>4} {r['ospa']:>7.2f} "
+                     f"{r['ospa_sem']:>5.2f} {r['cardinality_error']:>6.3f} "
+                     f"{r['partition_ms']:>7.3f} {r['paper_partition_ms']:>8.1f} "
+                     f"{r['step_ms']:>7.3f} {r['partitions_per_scan']:>5.1f} {r['ari']:>5.3f}")
+    by = {(r["clutter"], r["partition"]): r for r in rows}
+    lines.append("")
+    lines.append(f"{'clutter':>7} {'time saved':>10} {'paper':>6} {'OSPA change':>11} "
+                 f"{'paper':>6}")
+    for c in sorted({r["clutter"] for r in rows}):
+        d, g = by.get((c, "distance")), by.get((c, "grid-spectral"))
+        if d is None or g is None:
+            continue
+        saved = 1 - g["partition_ms"] / d["partition_ms"]
+        paper = 1 - PAPER_PARTITION_TIME["grid-spectral"][c] / PAPER_PARTITION_TIME["distance"][c]
+        lines.append(f"{c:>7} {100 * saved:>9.0f}% {100 * paper:>5.0f}% "
+                     f"{100 * (g['ospa'] / d['ospa'] - 1):>+10.1f}% {'~+5%':>6}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sim.seed002", description=__doc__.split("\n")[0])
+    ap.add_argument("--runs", type=int, default=20, help="Monte Carlo runs per clutter level")
+    ap.add_argument("--first-run", type=int, default=0, help="index of the first run")
+    ap.add_argument("--clutter", type=float, nargs="+", default=list(CLUTTER_LEVELS),
+                    help="clutter rates (mean points per scan)")
+    ap.add_argument("--csv", help="write the summary table here")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = ap.parse_args(argv)
+    if a.runs < 1 or a.first_run < 0 or any(c < 0 or c > 10_000 for c in a.clutter):
+        print("seed002: --runs must be >= 1, --first-run >= 0, --clutter in [0, 10000]",
+              file=sys.stderr)
+        return 2
+    clutters = [int(c) if float(c).is_integer() else c for c in a.clutter]
+    results = run_experiment(a.runs, clutters, first_run=a.first_run, progress=not a.quiet)
+    rows = summarise(results)
+    print(format_table(rows))
+    if a.csv:
+        with open(a.csv, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
