@@ -1,0 +1,529 @@
+"""Seed 004: measurement flooding + density-peaks clustering against distributed GM-PHD filters.
+
+The offline Monte Carlo of ALGORITHMS.md §9 on ``sim/scenarios/seed004.toml``: 20 sensors on a
+connected random geometric graph of diameter 4, three targets, Pd = 0.95, clutter 10 per sensor.
+Every run draws one truth and one scan per sensor per time step (seeded by ``(seed, run)``) and
+feeds the same scans to every method:
+
+- ``IDPC``: after complete flooding (``flooding.iterations`` = diameter) every peer holds every
+  scan and clusters the pooled plane points with :func:`tracking.idpc.idpc`; all peers compute the
+  same estimate. After ``t`` < diameter iterations peer ``i`` holds the scans within ``t`` hops
+  (``peers.flooding.flood`` on a loss-free network, tested) and clusters those
+  (``S`` = scans held): the OSPA-against-iterations curve.
+- ``FTC``: DBSCAN + k-means (:func:`tracking.idpc.ftc`) on the same pooled set.
+- ``local``: each peer's own GM-PHD, no exchange.
+- ``GCI L=l`` / ``AA L=l``: every peer runs its GM-PHD on its own scan and publishes its
+  posterior (components above ``filter.publish_threshold``); ``l`` consensus rounds follow, each
+  fusing a peer's density with its neighbours' by GCI (``cardinality`` rule of the scenario) or
+  arithmetic averaging, Metropolis weights; the peer reports the extraction of its fused
+  density. The local filters keep their own posteriors (no feedback: our reading).
+- ``IC``: the iterated corrector (sensor-by-sensor update) of one GM-PHD over the 20 scans in the
+  depth-first order of the graph from sensor 0; the density travels along that order.
+- ``centralised``: the same iterated-corrector GM-PHD at the peer of least eccentricity, fed by
+  every scan routed to it over shortest paths: the estimates are IC's, the cost differs.
+
+Costs are the seed's tuples per peer per scan (a Gaussian component 15, a cardinality 1, a 2-D
+measurement 2): flooding ``deg_i sum_{hop(i,j) <= t-1} 2|Z_j|`` (:func:`peers.flooding.
+flooding_tuples`); consensus ``deg_i (15 n_i + 1)`` per round; IC ``hops(next) (15 n + 1)`` per
+sensor; centralised ``hops(j, centre) 2|Z_j|`` per scan, averaged over the peers. CPU is the
+wall time of the method's own computation per peer per scan in this single-threaded worker.
+
+``python -m sim.seed004 --runs 20 --jobs 2 --out runs/seed004`` prints the table and writes
+``seed004_table.csv``, ``seed004_iterations.csv`` and ``seed004_tradeoff.png``. Runs are
+0..N-1 from ``--first-run``; nothing here is tuned on them (the parameters in the TOML were set
+before any run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+import tomllib
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
+from scipy.sparse.csgraph import depth_first_order, shortest_path
+
+from peers.flooding import TUPLES_PER_MEASUREMENT, flooding_tuples
+from sim.progress import Progress
+from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
+from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
+from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
+from tracking.metrics import ospa
+from tracking.mixture import GaussianMixture
+from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from tracking.reduction import Reducer, keep_above
+
+SCENARIO = Path(__file__).with_name("scenarios") / "seed004.toml"
+TUPLES_COMPONENT = 15
+"""A 4-D Gaussian component: weight 1, mean 4, covariance 10 (seed 004)."""
+TUPLES_CARDINALITY = 1
+VARIANTS = ("linear", "range-bearing", "mixed")
+
+# -- scenario ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Seed004:
+    """The seed-004 scenario (``sim/scenarios/seed004.toml``; every field documented there)."""
+
+    seed: int = 4
+    scan_period: float = 1.0
+    num_scans: int = 60
+    region: tuple[tuple[float, float], tuple[float, float]] = ((-1000.0, 1000.0),
+                                                               (-1000.0, 1000.0))
+    variant: str = "linear"
+    truth_sigma_w: float = 0.0
+    starts: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    detection_probability: float = 0.95
+    clutter_rate: float = 10.0
+    sigma: float = 10.0
+    sigma_range: float = 10.0
+    sigma_bearing_deg: float = 0.5
+    radius: float = 800.0
+    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    sigma_w: float = 2.0
+    survival_probability: float = 0.98
+    birth_weight: float = 0.05
+    birth_cov_diag: tuple[float, ...] = (100.0, 25.0, 100.0, 25.0)
+    prune_threshold: float = 1e-5
+    merge_threshold: float = 4.0
+    max_components: int = 100
+    publish_threshold: float = 0.01
+    cardinality: str = "separate"
+    clustering: ClusterParams = ClusterParams()
+    iterations: int = 4
+    rounds: tuple[int, ...] = (1, 2, 3, 4)
+    ospa_cutoff: float = 100.0
+    ospa_order: float = 2.0
+
+    @property
+    def adjacency(self) -> np.ndarray:
+        p = self.positions
+        d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        return (d <= self.radius) & ~np.eye(len(p), dtype=bool)
+
+    @property
+    def hops(self) -> np.ndarray:
+        return shortest_path(self.adjacency, unweighted=True)
+
+    @property
+    def area(self) -> float:
+        (x0, x1), (y0, y1) = self.region
+        return (x1 - x0) * (y1 - y0)
+
+    def models(self) -> list[LinearPosition | RangeBearing]:
+        """One measurement model per sensor, by ``variant``."""
+        out = []
+        for i, p in enumerate(self.positions):
+            pos = (float(p[0]), float(p[1]))
+            radar = self.variant == "range-bearing" or (self.variant == "mixed" and i % 2 == 1)
+            out.append(RangeBearing(self.sigma_range, float(np.deg2rad(self.sigma_bearing_deg)),
+                                    pos) if radar else LinearPosition(self.sigma, pos))
+        return out
+
+    def r_max(self, position) -> float:
+        """Farthest region corner from ``position`` (range-bearing clutter extent)."""
+        (x0, x1), (y0, y1) = self.region
+        c = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
+        return float(np.linalg.norm(c - np.asarray(position), axis=1).max())
+
+    def sensor_params(self, model) -> SensorParams:
+        if isinstance(model, RangeBearing):
+            kappa = self.clutter_rate / (self.r_max(model.position) * 2 * np.pi)
+        else:
+            kappa = self.clutter_rate / self.area
+        return SensorParams(model, self.detection_probability, kappa)
+
+    def birth(self) -> GaussianMixture:
+        n = len(self.starts)
+        return GaussianMixture(np.full(n, self.birth_weight), self.starts,
+                               np.tile(np.diag(self.birth_cov_diag), (n, 1, 1)))
+
+    def reducer(self) -> Reducer:
+        return Reducer(self.prune_threshold, self.merge_threshold, self.max_components)
+
+
+_KEYS = {
+    "scenario": {"name": None, "seed": "seed", "scan_period": "scan_period",
+                 "num_scans": "num_scans", "region": "region", "variant": "variant"},
+    "truth": {"sigma_w": "truth_sigma_w", "starts": "starts"},
+    "sensors": {"detection_probability": "detection_probability",
+                "clutter_rate": "clutter_rate", "sigma": "sigma", "sigma_range": "sigma_range",
+                "sigma_bearing_deg": "sigma_bearing_deg", "radius": "radius",
+                "positions": "positions"},
+    "filter": {k: k for k in ("sigma_w", "survival_probability", "birth_weight",
+                              "birth_cov_diag", "prune_threshold", "merge_threshold",
+                              "max_components", "publish_threshold", "cardinality")},
+    "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
+    "flooding": {"iterations": "iterations"},
+    "consensus": {"rounds": "rounds"},
+    "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
+}
+
+
+class ScenarioError(ValueError):
+    """A scenario file or ``--set`` value the loader refuses (one line naming the key)."""
+
+
+def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
+    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values)."""
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+        for item in overrides:
+            key, _, value = item.partition("=")
+            table, _, name = key.partition(".")
+            if not _ or not name:
+                raise ScenarioError(f"--set {item!r}: expected TABLE.KEY=VALUE")
+            doc.setdefault(table, {})[name] = tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: {e}") from None
+    kw: dict = {}
+    cluster: dict = {}
+    for table, values in doc.items():
+        if table not in _KEYS:
+            raise ScenarioError(f"{path}: unknown table [{table}]")
+        for k, v in values.items():
+            if k not in _KEYS[table]:
+                raise ScenarioError(f"{path}: unknown key {table}.{k}")
+            if table == "clustering":
+                cluster[k] = float(v)
+            elif _KEYS[table][k] is not None:
+                kw[_KEYS[table][k]] = v
+    for k in ("starts", "positions"):
+        if k in kw:
+            kw[k] = np.asarray(kw[k], dtype=float)
+    for k in ("region", "birth_cov_diag", "rounds"):
+        if k in kw:
+            kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
+    scn = Seed004(**kw)
+    if scn.variant not in VARIANTS:
+        raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
+    scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
+        scn.detection_probability)))
+    if not np.isfinite(scn.hops).all():
+        raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
+    return scn
+
+
+# -- truth and scans --------------------------------------------------------------------------
+
+
+def truth(scn: Seed004, rng: np.random.Generator) -> np.ndarray:
+    """``(K, n, 4)`` target states (every target alive at every scan, our reading)."""
+    cv = ConstantVelocity(scn.scan_period, scn.truth_sigma_w)
+    F, Q = cv.transition(1)
+    X = np.empty((scn.num_scans, len(scn.starts), 4))
+    X[0] = scn.starts
+    for k in range(1, scn.num_scans):
+        X[k] = X[k - 1] @ F.T
+        if scn.truth_sigma_w > 0:
+            X[k] += rng.multivariate_normal(np.zeros(4), Q, size=len(scn.starts))
+    return X
+
+
+def measure(scn: Seed004, models, x: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+    """One scan per sensor ``(m_i, 2)`` in its measurement space: detections, then clutter."""
+    (x0, x1), (y0, y1) = scn.region
+    out = []
+    for model in models:
+        seen = x[rng.random(len(x)) < scn.detection_probability]
+        z, _ = model.predict(seen) if len(seen) else (np.zeros((0, 2)), None)
+        z = z + rng.standard_normal(z.shape) @ np.linalg.cholesky(model.R).T
+        nc = rng.poisson(scn.clutter_rate)
+        if isinstance(model, RangeBearing):
+            c = np.column_stack((rng.uniform(0, scn.r_max(model.position), nc),
+                                 rng.uniform(-np.pi, np.pi, nc)))
+        else:
+            c = np.column_stack((rng.uniform(x0, x1, nc), rng.uniform(y0, y1, nc)))
+        out.append(np.concatenate((z.reshape(-1, 2), c)))
+    return out
+
+
+def to_plane(models, scans: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Scans projected to plane points (range-bearing converted to Cartesian)."""
+    return [polar_to_cartesian(z, m.position) if isinstance(m, RangeBearing) else z
+            for m, z in zip(models, scans, strict=True)]
+
+
+# -- one run ----------------------------------------------------------------------------------
+
+
+@dataclass
+class Tally:
+    """Sums over scans (and peers) for one method in one run."""
+
+    ospa: float = 0.0
+    card_err: float = 0.0
+    card_ok: float = 0.0
+    tuples: float = 0.0
+    cpu: float = 0.0
+    n: int = 0
+
+    def add(self, est: np.ndarray, x: np.ndarray, scn: Seed004, tuples: float = 0.0,
+            cpu: float = 0.0) -> None:
+        self.ospa += ospa(est, x, scn.ospa_cutoff, scn.ospa_order)
+        err = abs(len(est) - len(x))
+        self.card_err += err
+        self.card_ok += err == 0
+        self.tuples += tuples
+        self.cpu += cpu
+        self.n += 1
+
+    def means(self) -> dict[str, float]:
+        n = max(self.n, 1)
+        return {"ospa": self.ospa / n, "card_err": self.card_err / n,
+                "card_ok": self.card_ok / n, "tuples": self.tuples / n,
+                "cpu_ms": 1e3 * self.cpu / n}
+
+
+def _positions(mix: GaussianMixture) -> np.ndarray:
+    return extract(mix, 0.5, "cardinality")[:, [0, 2]]
+
+
+def _n_tuples(mix: GaussianMixture) -> int:
+    return TUPLES_COMPONENT * len(mix) + TUPLES_CARDINALITY
+
+
+def run_once(scn: Seed004, run: int) -> dict[str, dict[str, float]]:
+    """Every method on run ``run``'s truth and scans; per-method means over scans and peers."""
+    root = np.random.default_rng([scn.seed, run])
+    rng_truth, rng_scan, rng_cluster = root.spawn(3)
+    models = scn.models()
+    S, A, hops = len(models), scn.adjacency, scn.hops
+    deg = A.sum(axis=1)
+    diameter = int(hops.max())
+    full = max(scn.iterations, diameter)
+    W = metropolis_weights(A)
+    nbrs = [np.flatnonzero(A[i]) for i in range(S)]
+    cv = ConstantVelocity(scn.scan_period, scn.sigma_w)
+    birth, reducer = scn.birth(), scn.reducer()
+    sensors = [scn.sensor_params(m) for m in models]
+    local = [GMPHDFilter(cv, [s], birth, scn.survival_probability, reducer) for s in sensors]
+    mixes = [f.initial() for f in local]
+    order = depth_first_order(A, 0, directed=False, return_predecessors=False)
+    ecc = hops.max(axis=1)
+    centre = int(np.argmin(ecc))
+    ic_mix = GaussianMixture.empty(4)
+    tallies: dict[str, Tally] = {}
+
+    def tally(name: str) -> Tally:
+        return tallies.setdefault(name, Tally())
+
+    X = truth(scn, rng_truth)
+    for k in range(scn.num_scans):
+        x = X[k][:, [0, 2]]
+        scans = measure(scn, models, X[k], rng_scan)
+        plane = to_plane(models, scans)
+        sizes = np.array([len(z) for z in scans])
+        # flooding + clustering: the full pooled set, then what t < diameter iterations leave
+        pooled = np.concatenate(plane)
+        t0 = time.perf_counter()
+        est_idpc = idpc(pooled, S, scn.clustering, rng_cluster).centres
+        dt = time.perf_counter() - t0
+        flood_cost = float(flooding_tuples(hops, sizes, full).mean())
+        tally("IDPC").add(est_idpc, x, scn, flood_cost, dt)
+        t0 = time.perf_counter()
+        est = ftc(pooled, S, scn.clustering, rng_cluster).centres
+        tally("FTC").add(est, x, scn, flood_cost, time.perf_counter() - t0)
+        for t in range(1, full + 1):
+            cost = flooding_tuples(hops, sizes, t)
+            for i in range(S):
+                held = hops[i] <= t
+                t0 = time.perf_counter()
+                if held.all():
+                    out, dt_i = est_idpc, dt
+                else:
+                    out = idpc(np.concatenate([plane[j] for j in np.flatnonzero(held)]),
+                               int(held.sum()), scn.clustering, rng_cluster).centres
+                    dt_i = time.perf_counter() - t0
+                tally(f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i)
+        # local GM-PHD filters, then consensus on what they publish
+        cpu_local = np.zeros(S)
+        for i in range(S):
+            t0 = time.perf_counter()
+            mixes[i] = local[i].step(mixes[i], scans[i])
+            cpu_local[i] = time.perf_counter() - t0
+            tally("local").add(_positions(mixes[i]), x, scn, 0.0, cpu_local[i])
+        for rule, fuse in (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))):
+            dens = [keep_above(m, scn.publish_threshold) for m in mixes]
+            tuples, cpu = np.zeros(S), cpu_local.copy()
+            for r in range(1, max(scn.rounds) + 1):
+                tuples += deg * np.array([_n_tuples(d) for d in dens])
+                new = []
+                for i in range(S):
+                    t0 = time.perf_counter()
+                    group = [dens[i]] + [dens[j] for j in nbrs[i]]
+                    w = np.concatenate(([W[i, i]], W[i, nbrs[i]]))
+                    new.append(fuse(group, w / w.sum()))
+                    cpu[i] += time.perf_counter() - t0
+                dens = [keep_above(d, scn.publish_threshold) for d in new]
+                if r in scn.rounds:
+                    for i in range(S):
+                        tally(f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i], cpu[i])
+        # iterated corrector along the depth-first order; centralised: the same at the centre
+        t0 = time.perf_counter()
+        ic_mix = local[0].predict(ic_mix)
+        ic_tuples = 0.0
+        for s, nxt in zip(order, np.roll(order, -1), strict=True):
+            ic_mix = reducer(update(ic_mix, scans[s], sensors[s], None, scn.prune_threshold))
+            ic_tuples += hops[s, nxt] * _n_tuples(ic_mix)
+        dt = time.perf_counter() - t0
+        est = _positions(ic_mix)
+        tally("IC").add(est, x, scn, ic_tuples / S, dt / S)
+        routed = float((hops[:, centre] * TUPLES_PER_MEASUREMENT * sizes).sum())
+        tally("centralised").add(est, x, scn, routed / S, dt / S)
+    return {name: t.means() for name, t in tallies.items()}
+
+
+def _gci(scn: Seed004, reducer: Reducer):
+    def fuse(group, w):
+        return gci_fuse(group, w, reduce=reducer, cardinality=scn.cardinality)
+    return fuse
+
+
+def _aa(reducer: Reducer):
+    def fuse(group, w):
+        return aa_fuse(group, w, reduce=reducer)
+    return fuse
+
+
+# -- Monte Carlo ------------------------------------------------------------------------------
+
+
+def run_experiment(scn: Seed004, runs: Sequence[int], jobs: int = 1,
+                   progress: bool = True) -> dict[str, dict[str, float]]:
+    """Mean over ``runs`` of every method's per-run means (and the OSPA standard error)."""
+    per_run: list[dict[str, dict[str, float]]] = []
+    with Progress(len(runs), "runs", enabled=progress) as bar:
+        if jobs <= 1:
+            for r in runs:
+                per_run.append(run_once(scn, r))
+                bar.advance()
+        else:
+            with ProcessPoolExecutor(jobs) as pool:
+                futures = [pool.submit(run_once, scn, r) for r in runs]
+                for f in as_completed(futures):
+                    per_run.append(f.result())
+                    bar.advance()
+    out: dict[str, dict[str, float]] = {}
+    for name in per_run[0]:
+        rows = [pr[name] for pr in per_run]
+        out[name] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+        o = np.array([r["ospa"] for r in rows])
+        out[name]["ospa_se"] = float(o.std(ddof=1) / np.sqrt(len(o))) if len(o) > 1 else 0.0
+    return out
+
+
+TABLE_ROWS = ("IDPC", "FTC", "GCI L=1", "GCI L=2", "GCI L=3", "GCI L=4", "AA L=1", "AA L=2",
+              "AA L=3", "AA L=4", "IC", "centralised", "local")
+
+
+def table_rows(result: dict[str, dict[str, float]]) -> list[str]:
+    return [n for n in TABLE_ROWS if n in result]
+
+
+def format_table(result: dict[str, dict[str, float]]) -> str:
+    lines = ["| method | mean OSPA (m) | ± s.e. | card. error | scans card. right | "
+             "tuples / peer / scan | CPU ms / peer / scan |",
+             "|---|---|---|---|---|---|---|"]
+    for n in table_rows(result) + [k for k in result if k.startswith("IDPC t=")]:
+        r = result[n]
+        lines.append(f"| {n} | {r['ospa']:.2f} | {r['ospa_se']:.2f} | {r['card_err']:.3f} | "
+                     f"{100 * r['card_ok']:.1f} % | {r['tuples']:.0f} | {r['cpu_ms']:.2f} |")
+    return "\n".join(lines)
+
+
+def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str) -> list[Path]:
+    """``seed004_table.csv``, ``seed004_iterations.csv``, ``seed004_tradeoff.png``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    keys = ("ospa", "ospa_se", "card_err", "card_ok", "tuples", "cpu_ms")
+    table = folder / "seed004_table.csv"
+    with table.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("method", *keys))
+        for n in table_rows(result):
+            w.writerow((n, *(f"{result[n][k]:.6g}" for k in keys)))
+    iters = sorted((int(k.split("=")[1]), k) for k in result if k.startswith("IDPC t="))
+    it_csv = folder / "seed004_iterations.csv"
+    with it_csv.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("iterations", *keys))
+        for t, k in iters:
+            w.writerow((t, *(f"{result[k][kk]:.6g}" for kk in keys)))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.8))
+    for n in table_rows(result):
+        r = result[n]
+        x = max(r["tuples"], 1.0)
+        a.errorbar(x, r["ospa"], yerr=r["ospa_se"], fmt="o")
+        a.annotate(n, (x, r["ospa"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    a.set_xscale("log")
+    a.set_xlabel("tuples per peer per scan (log; local = 1)")
+    a.set_ylabel("mean OSPA (m), c = 100, p = 2")
+    a.set_title("OSPA against communication cost")
+    a.grid(True, which="both", alpha=0.3)
+    ts = [t for t, _ in iters]
+    b.errorbar(ts, [result[k]["ospa"] for _, k in iters],
+               yerr=[result[k]["ospa_se"] for _, k in iters], fmt="o-", label="IDPC")
+    b.set_xticks(ts)
+    b.set_xlabel("flooding iterations completed (diameter 4)")
+    b.set_ylabel("mean OSPA (m)")
+    b.set_title("IDPC against incomplete flooding")
+    b.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    png = folder / "seed004_tradeoff.png"
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return [table, it_csv, png]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    doc = (__doc__ or "").split("\n")[0]
+    p = argparse.ArgumentParser(prog="python -m sim.seed004", description=doc)
+    p.add_argument("--runs", type=int, default=20, help="Monte Carlo runs")
+    p.add_argument("--first-run", type=int, default=0, help="first run index")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes")
+    p.add_argument("--scenario", type=Path, default=SCENARIO)
+    p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
+                   help="override a scenario value (TOML syntax), e.g. scenario.variant='mixed'")
+    p.add_argument("--out", type=Path, help="write the CSVs and the PNG here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = p.parse_args(argv)
+    try:
+        scn = load(a.scenario, a.set)
+    except (ScenarioError, OSError) as e:
+        print(f"seed004: {e}", file=sys.stderr)
+        return 2
+    if a.runs < 1 or a.jobs < 1:
+        print("seed004: --runs and --jobs must be at least 1", file=sys.stderr)
+        return 2
+    runs = range(a.first_run, a.first_run + a.runs)
+    t0 = time.monotonic()
+    result = run_experiment(scn, runs, a.jobs, not a.quiet)
+    deg = scn.adjacency.sum(axis=1)
+    title = (f"seed 004, {scn.variant}, {len(scn.positions)} sensors (diameter "
+             f"{int(scn.hops.max())}, mean degree {deg.mean():.1f}), clutter "
+             f"{scn.clutter_rate:g}, runs {runs.start}..{runs.stop - 1}")
+    print(title)
+    print(format_table(result))
+    print(f"({time.monotonic() - t0:.0f} s)")
+    if a.out:
+        for path in write_outputs(result, a.out, title):
+            print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

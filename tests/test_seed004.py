@@ -1,0 +1,76 @@
+"""Seed-004 scenario and offline Monte Carlo (sim/seed004.py): geometry, tuple counts, outputs."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from peers.flooding import flood
+from sim import seed004
+
+
+@pytest.fixture(scope="module")
+def scn():
+    return seed004.load()
+
+
+def test_scenario_is_the_seed(scn):
+    assert len(scn.positions) == 20
+    assert np.isfinite(scn.hops).all() and scn.hops.max() == 4  # connected, diameter 4
+    assert scn.iterations == 4 and scn.sigma == 10.0 and scn.ospa_cutoff == 100.0
+    assert scn.detection_probability == 0.95 and scn.survival_probability == 0.98
+    b = scn.birth()
+    np.testing.assert_allclose(b.weights, [0.05, 0.05, 0.05])
+    np.testing.assert_allclose(b.means, [[-100, 10, -800, 30], [-800, 20, -500, 0],
+                                         [0, 0, 950, -30]])
+    np.testing.assert_allclose(b.covs[0], np.diag([100.0, 25.0, 100.0, 25.0]))
+
+
+def test_offline_holdings_are_what_flooding_delivers(scn):
+    # the experiment gives peer i the scans within t hops; the message-level flood agrees
+    rng = np.random.default_rng(0)
+    scans = [rng.normal(size=(3, 2)) for _ in range(20)]
+    for t in range(1, 5):
+        out = flood(scn.adjacency, scans, t)
+        for i, held in enumerate(out.held):
+            assert held == set(np.flatnonzero(scn.hops[i] <= t).tolist())
+
+
+def test_tuple_counts_equal_the_closed_form(scn):
+    # Pd = 1, no clutter: every scan is the 3 targets (6 tuples); in 4 iterations a peer sends
+    # every scan within 3 hops (the last iteration's arrivals are not forwarded) to each neighbour
+    known = replace(scn, num_scans=2, detection_probability=1.0, clutter_rate=0.0)
+    out = seed004.run_once(known, 0)
+    deg, hops = known.adjacency.sum(axis=1), known.hops
+    flooding = np.mean(deg * (hops <= 3).sum(axis=1) * 3 * 2)
+    assert out["IDPC"]["tuples"] == pytest.approx(flooding)
+    assert out["IDPC t=1"]["tuples"] == pytest.approx(np.mean(deg * 3 * 2))
+    centre = int(np.argmin(hops.max(axis=1)))
+    assert out["centralised"]["tuples"] == pytest.approx(hops[:, centre].sum() * 3 * 2 / 20)
+    assert out["local"]["tuples"] == 0.0
+    # with no clutter and Pd = 1, flooding + IDPC finds the three targets at every scan
+    assert out["IDPC"]["card_ok"] == 1.0 and out["IDPC"]["ospa"] < 6.0
+
+
+def test_unknown_key_is_refused_in_one_line(tmp_path):
+    bad = tmp_path / "s.toml"
+    bad.write_text(seed004.SCENARIO.read_text().replace("[metrics]", "[metrics]\nospa_c = 1"))
+    with pytest.raises(seed004.ScenarioError, match="metrics.ospa_c"):
+        seed004.load(bad)
+    assert seed004.main(["--scenario", str(bad), "--runs", "1"]) == 2
+
+
+def test_main_writes_table_iterations_and_plot(tmp_path, capsys):
+    rc = seed004.main(["--runs", "1", "--first-run", "900", "--set", "scenario.num_scans=3",
+                       "--set", "consensus.rounds=[1]", "--out", str(tmp_path), "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "| IDPC |" in text and "| GCI L=1 |" in text and "| centralised |" in text
+    rows = list(csv.DictReader((tmp_path / "seed004_table.csv").open()))
+    assert [r["method"] for r in rows][:3] == ["IDPC", "FTC", "GCI L=1"]
+    its = list(csv.DictReader((tmp_path / "seed004_iterations.csv").open()))
+    assert [int(r["iterations"]) for r in its] == [1, 2, 3, 4]
+    assert (tmp_path / "seed004_tradeoff.png").stat().st_size > 10_000
