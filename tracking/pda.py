@@ -122,17 +122,20 @@ class SensorUpdate:
 
 
 def pda_weights(g: np.ndarray, det2piS: np.ndarray, sensor: LinearSensor,
-                mu: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                mu: np.ndarray | None = None, clutter_density: float | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Association weights over a stack of models.
 
     ``g (M, m)`` NIS of each return under each model, ``det2piS (M,)`` ``|2 pi S_j|``.
     Returns ``W0 (M,)``, ``W (M, m)`` (``beta`` when ``mu`` is None, else ``mu beta / c``) and
     ``Lambda (M,)`` the model likelihood ``b + sum_i L_ij`` (up to a factor common to all
     models). With no return and ``b = 0`` (PD = PG = 1), ``W0 = 1``: nothing to update with.
+    ``clutter_density`` overrides the sensor's (clutter simulated in the gate).
     """
     pd, pg = sensor.detection_probability, sensor.gate_probability
+    lam = sensor.clutter_density if clutter_density is None else clutter_density
     b = 1.0 - pd * pg
-    L = (pd / sensor.clutter_density) * np.exp(-0.5 * g) / np.sqrt(det2piS)[:, None]
+    L = (pd / lam) * np.exp(-0.5 * g) / np.sqrt(det2piS)[:, None]
     lik = b + L.sum(axis=1)
     if mu is not None:
         L = L * mu
@@ -187,6 +190,12 @@ class ImmPda:
         P = np.einsum("k,kij->ij", self.probs, self.P + dx[:, :, None] * dx[:, None, :])
         return x, P
 
+    def predicted_measurement(self, sensor: LinearSensor) -> tuple[np.ndarray, np.ndarray]:
+        """``zhat (n_z,)`` and ``S (n_z, n_z)`` of the combined estimate: the gate drawn in the
+        view and the one clutter is simulated in (seed 003 eq. 3)."""
+        x, P = self.estimate()
+        return sensor.H @ x, sensor.H @ P @ sensor.H.T + sensor.R
+
     def adopt(self, x: np.ndarray, P: np.ndarray) -> None:
         """Replace every model's state by ``(x, P)`` (a fused estimate fed back)."""
         self.x[:] = x
@@ -209,8 +218,10 @@ class ImmPda:
         if self.weighting is not None:
             self.weighting.new_scan()
 
-    def update(self, sensor: LinearSensor, Z: np.ndarray) -> SensorUpdate:
-        """One sensor's PDA update on the latest estimate (eq. 26-33); returns what it did."""
+    def update(self, sensor: LinearSensor, Z: np.ndarray,
+               clutter_density: float | None = None) -> SensorUpdate:
+        """One sensor's PDA update on the latest estimate (eq. 26-33); returns what it did.
+        ``clutter_density`` overrides the sensor's for this scan."""
         H, R = sensor.H, sensor.R
         nz = H.shape[0]
         Z = np.asarray(Z, float).reshape(-1, nz)
@@ -224,14 +235,14 @@ class ImmPda:
         nu, g, Zg = nu[:, inside], g[:, inside], Z[inside]
         det2piS = np.linalg.det(2.0 * np.pi * S)
         K = PHt @ Sinv
-        W0, W, lik = pda_weights(g, det2piS, sensor)
+        W0, W, lik = pda_weights(g, det2piS, sensor, None, clutter_density)
         if self.weighting is not None:
             # the detector sees model 0's (no-manoeuvre) PDA-combined innovation
             nubar0 = W[0] @ nu[0]
             self.weighting.observe(float(nubar0 @ Sinv[0] @ nubar0), nz)
             mu = self.weighting.degrees(g)
             if mu is not None:
-                W0, W, _ = pda_weights(g, det2piS, sensor, mu)
+                W0, W, _ = pda_weights(g, det2piS, sensor, mu, clutter_density)
         self.x, self.P = pda_moments(self.x, self.P, K, S, nu, W0, W)
         if len(self.probs) > 1:
             p = self.probs * lik
