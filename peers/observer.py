@@ -13,7 +13,7 @@ from collections import deque
 import numpy as np
 
 from peers.core import PeerCore, Publish, Record
-from peers.rerun_sink import RerunSink, color_of, position_columns
+from peers.rerun_sink import RerunSink, color_of, ellipses, position_columns
 
 
 class Observer:
@@ -95,6 +95,7 @@ class Observer:
         core = self.core
         mix = core.consensus.last_local
         particles = getattr(core.estimator, "particles", lambda: None)()
+        cells = getattr(core.estimator, "partition_view", lambda: None)()
 
         def log() -> None:
             self._time(k)
@@ -103,10 +104,33 @@ class Observer:
             if particles is not None:  # IMM-PF peers: the particle cloud
                 self.sink.points(f"peers/{self.name}/particles", particles, self.color,
                                  radius=1.0)
+            if cells is not None:  # ET-GM-PHD peers: the scan's cells
+                self._cells(*cells)
             if compute_ms is not None:
                 self.sink.scalar(f"metrics/compute_ms/{self.name}/filter", compute_ms)
 
         self._deferred.append(log)
+
+    def _cells(self, z: np.ndarray, labels: np.ndarray) -> None:
+        """The scan coloured by cell of the most probable partition; one-point cells (the
+        clutter the grid method removed, isolated points) grey; 2-sigma extents of the cells
+        of 3 or more points."""
+        _, inv, counts = np.unique(labels, return_inverse=True, return_counts=True)
+        inv = inv.reshape(-1)
+        single = counts[inv] == 1
+        colors = np.array([color_of(i) for i in range(len(counts))])[inv]
+        colors[single] = (128, 128, 128)
+        self.sink.points(f"peers/{self.name}/cells/points", z, colors, radius=2.5)
+        big = np.flatnonzero(counts >= 3)
+        means = np.zeros((len(big), 4))
+        covs = np.zeros((len(big), 4, 4))
+        for i, c in enumerate(big):
+            w = z[inv == c]
+            means[i, [0, 2]] = w.mean(axis=0)
+            covs[i][np.ix_([0, 2], [0, 2])] = np.cov(w.T)
+        strips = ellipses(means, covs)
+        self.sink.strips(f"peers/{self.name}/cells/extents", list(strips),
+                         [color_of(int(c)) for c in big] if len(big) else None)
 
     def flush(self, idle: bool, force: bool = False) -> None:
         """Run the deferred drawing once nothing waits (or there is a backlog, or at the end)."""

@@ -103,3 +103,47 @@ def test_experiment_cli_refuses_bad_flags(capsys):
 
     assert seed002.main(["--runs", "0"]) == 2
     assert "--runs" in capsys.readouterr().err
+
+
+class _Sink:
+    enabled = True
+
+    def __init__(self):
+        self.calls = []
+
+    def time(self, k, t):
+        pass
+
+    def points(self, path, xy, color=None, radius=4.0, labels=None):
+        self.calls.append(("points", path, np.asarray(xy), color))
+
+    def strips(self, path, lines, color=None):
+        self.calls.append(("strips", path, lines, color))
+
+    def mixture(self, path, mix, color):
+        pass
+
+    def scalar(self, path, value):
+        pass
+
+
+def test_rerun_view_colours_cells_and_greys_one_point_cells():
+    from peers.observer import Observer
+    from sim.peers import make_peer
+
+    scn = load_scenario("seed002", {"extended.partition": "grid-spectral"})
+    core = make_peer(scn, "s1")
+    truth, scans = generate_run(scn, 0)
+    est = core.consensus.estimator
+    assert est.partition_view() is None
+    for k in range(1, 4):
+        est.step(1, scans[0][k - 1])
+    z, labels = est.partition_view()
+    assert len(z) == len(labels) == len(scans[0][2])
+    sink = _Sink()
+    Observer(core, sink, 0, 1.0)._cells(z, labels)
+    (_, path, xy, colors), (_, epath, lines, _) = sink.calls
+    assert path == "peers/s1/cells/points" and epath == "peers/s1/cells/extents"
+    single = np.bincount(labels)[labels] == 1
+    assert single.any() and (colors[single] == 128).all() and not (colors[~single] == 128).all()
+    assert len(lines) == (np.bincount(labels) >= 3).sum() >= 1

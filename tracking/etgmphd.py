@@ -87,11 +87,13 @@ def cells_of(partitions: Sequence[np.ndarray], m: int) -> tuple[np.ndarray, list
 
 
 def update(mix: GaussianMixture, z: np.ndarray, partitions: Sequence[np.ndarray],
-           sensor: ExtendedSensor, min_weight: float = 0.0) -> GaussianMixture:
+           sensor: ExtendedSensor, min_weight: float = 0.0,
+           diagnostics: dict | None = None) -> GaussianMixture:
     """ET-GM-PHD corrector for scan ``z (m, 2)`` over the given ``partitions`` (module doc).
 
     ``min_weight``: detection components lighter than this are not materialised (the same as
-    pruning them afterwards).
+    pruning them afterwards). ``diagnostics``: if given, ``"partition_weights"`` ``(p,)`` is
+    stored in it (``w_p``; for display).
     """
     Pd, gamma, kappa = sensor.detection_probability, sensor.rate, sensor.clutter_intensity
     w, mean, P = mix.weights, mix.means, mix.covs
@@ -123,6 +125,8 @@ def update(mix: GaussianMixture, z: np.ndarray, partitions: Sequence[np.ndarray]
         wp = np.full(len(log_wp), 1.0 / len(log_wp))
     else:
         wp = np.exp(log_wp - logsumexp(log_wp))
+    if diagnostics is not None:
+        diagnostics["partition_weights"] = wp
     omega = np.zeros(len(member))
     for p, cells in enumerate(per_partition):
         omega[cells] += wp[p]
@@ -165,6 +169,8 @@ class ETGMPHDFilter:
     """``scans_too_large``: scans over the partitioner's cap (corrected as all-missed)."""
     last_partitions: list = field(default_factory=list)
     """The partitions of the latest scan (for display)."""
+    last_weights: np.ndarray | None = None
+    """Their weights ``w_p`` in the latest update (for display)."""
 
     def initial(self) -> GaussianMixture:
         return GaussianMixture.empty(self.motion.dim)
@@ -189,7 +195,9 @@ class ETGMPHDFilter:
         parts = self.partition(z)
         if not parts:
             z = z[:0]
-        mix = update(mix, z, parts, self.sensor, self.reducer.prune_threshold)
+        diag: dict = {}
+        mix = update(mix, z, parts, self.sensor, self.reducer.prune_threshold, diag)
+        self.last_weights = diag.get("partition_weights")
         return self.reducer(mix)
 
     def step(self, mix: GaussianMixture, z: np.ndarray) -> GaussianMixture:
