@@ -260,13 +260,14 @@ def run_once(cfg: Mapping, run: int, methods: Sequence[str] = METHODS,
         raise ValueError(f"seed003: unknown clutter.mode {mode!r}; expected 'gate' or 'region'")
     region = region_clutter(cfg, X, sens, rng) if mode == "region" else None
     res = RunResult(run)
-    for mi, method in enumerate(methods):
+    for method in methods:
         for n in sensor_counts:
             flt = make_filter(cfg, method, m0, P0)
             t0 = time.perf_counter()
-            # gate clutter: each filter draws its own, from a stream of (seed, run, filter)
+            # gate clutter: every filter draws from the same stream (seed, run, sensors), so
+            # the unit-disc draws are shared and scaled by each filter's own gate (paired)
             est, fired = run_filter(cfg, flt, sens[:n], [p[:n] for p in target], region,
-                                    np.random.default_rng([seed, int(run), mi, n]))
+                                    np.random.default_rng([seed, int(run), 1000 + n]))
             res.step_seconds[(method, n)] = (time.perf_counter() - t0) / len(target)
             d = est - X[1:]
             res.pos_err[(method, n)] = np.hypot(d[:, POS[0]], d[:, POS[1]])
