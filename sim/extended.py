@@ -30,7 +30,8 @@ def make_partitioner(scn: Scenario, name: str, partition: str | None = None):
         return DistancePartitioner(sigma, ext.p_lower, ext.p_upper, ext.max_measurements)
     if which == "grid-spectral":
         return GridSpectralPartitioner(
-            sigma=sigma, compression=ext.compression, cell_factor=ext.cell_factor, rho=ext.rho,
+            sigma=sigma, compression=ext.compression, cell_factor=ext.cell_factor,
+            core_level=ext.core_level, rho=ext.rho,
             k_rule=ext.k_rule, k_spread=ext.k_spread, units=ext.units,
             max_measurements=ext.max_measurements)
     raise ScenarioError(f"{scn.name}: unknown partition {which!r} "

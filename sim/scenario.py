@@ -225,6 +225,8 @@ class ExtendedSpec:
     """Grid-spectral: compression rate ``gamma`` of the grid (seed 002 eq. 5)."""
     cell_factor: float = 4.0
     """Grid-spectral: ``c0`` in ``ceil(N_z^(gamma/2) c0)`` cells per axis (our reading)."""
+    core_level: float = 0.5
+    """Grid-spectral: core threshold ``min + core_level (max - min)`` of the cell counts."""
     rho: float = 2.0
     """Grid-spectral: density parameter ``rho > 1`` of the edge length ``rho^dist - 1``."""
     k_rule: str = "eigengap"
@@ -843,6 +845,7 @@ def _extended(t: _Table) -> ExtendedSpec:
         p_upper=t.number("p_upper", 0.8, probability=True),
         compression=t.number("compression", 0.5, positive=True),
         cell_factor=t.number("cell_factor", 4.0, positive=True),
+        core_level=t.number("core_level", 0.5, probability=True),
         rho=t.number("rho", 2.0, positive=True),
         k_rule=t.choice("k_rule", ("eigengap", "core-regions"), "eigengap"),
         k_spread=t.integer("k_spread", 0, minimum=0),
@@ -859,8 +862,8 @@ def _extended(t: _Table) -> ExtendedSpec:
     if spec.compression > 2:
         raise t.fail("compression", f"must be in (0, 2], got {spec.compression:g}")
     GridSpectralPartitioner(compression=spec.compression, cell_factor=spec.cell_factor,
-                            rho=spec.rho, k_rule=spec.k_rule, k_spread=spec.k_spread,
-                            units=spec.units)
+                            core_level=spec.core_level, rho=spec.rho, k_rule=spec.k_rule,
+                            k_spread=spec.k_spread, units=spec.units)
     return spec
 
 

@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 
 from sim.extended import make_et_filter  # noqa: E402
 from sim.progress import Progress  # noqa: E402
-from sim.scenario import Scenario, load_scenario  # noqa: E402
+from sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides  # noqa: E402
 from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
 from tracking.metrics import cardinality_error, ospa  # noqa: E402
 from tracking.partition import adjusted_rand_index  # noqa: E402
@@ -210,6 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="clutter rates (mean points per scan)")
     ap.add_argument("--csv", help="write the summary table here")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="scenario override, e.g. fusion.rule=aa (repeatable)")
     ap.add_argument("--network", action="store_true",
                     help="instead: the 3-peer GCI network on the twin, fused vs local OSPA")
     a = ap.parse_args(argv)
@@ -217,15 +219,21 @@ def main(argv: list[str] | None = None) -> int:
         print("seed002: --runs must be >= 1, --first-run >= 0, --clutter in [0, 10000]",
               file=sys.stderr)
         return 2
+    try:
+        base = load_scenario("seed002", parse_overrides(a.set))
+    except ScenarioError as exc:
+        print(f"seed002: {exc}", file=sys.stderr)
+        return 2
     if a.network:
-        res = network_experiment(a.runs, a.first_run, progress=not a.quiet)
+        res = network_experiment(a.runs, a.first_run, progress=not a.quiet, base=base)
         print(f"{'peer':<5} {'local OSPA':>10} {'fused OSPA':>10} {'runs fused better':>17}")
         for n, d in res.items():
             print(f"{n:<5} {d['local']:>10.2f} {d['fused']:>10.2f} "
                   f"{100 * d['fused_better_runs']:>16.0f}%")
         return 0
     clutters = [int(c) if float(c).is_integer() else c for c in a.clutter]
-    results = run_experiment(a.runs, clutters, first_run=a.first_run, progress=not a.quiet)
+    results = run_experiment(a.runs, clutters, first_run=a.first_run, progress=not a.quiet,
+                             base=base)
     rows = summarise(results)
     print(format_table(rows))
     if a.csv:

@@ -111,3 +111,19 @@ def test_grid_spectral_parameters_fail_in_one_line(kw):
 def test_grid_spectral_cap():
     with pytest.raises(ScanTooLarge):
         GridSpectralPartitioner(max_measurements=10)(np.zeros((11, 2)))
+
+
+def test_core_level_keeps_a_sparse_target_beside_a_dense_one():
+    """eps2 = (max + min) / 2 (core_level 0.5) is relative to the densest target: a target with
+    a third of its points has no core cell and is removed; a lower core level keeps it."""
+    rng = np.random.default_rng(11)
+    kept = {0.5: [], 0.2: []}
+    for _ in range(20):
+        z = np.concatenate([rng.normal([0, 0], 20, (24, 2)), rng.normal([600, 600], 20, (8, 2)),
+                            rng.uniform(-1000, 1000, (10, 2))])
+        for level in kept:
+            k = GridSpectralPartitioner(core_level=level).grid_keep(z)[0]
+            kept[level].append(k[24:32].mean())
+    assert np.mean(kept[0.5]) < 0.5 < 0.9 < np.mean(kept[0.2])
+    with pytest.raises(ValueError, match="core_level"):
+        GridSpectralPartitioner(core_level=1.5)

@@ -30,6 +30,7 @@ def test_scenario_loads_with_extended_table():
     ("extended.rate", 0, "extended.rate"),
     ("extended.units", "km", "extended.units"),
     ("extended.k_spread", -1, "extended.k_spread"),
+    ("extended.core_level", 1.5, "extended.core_level"),
 ])
 def test_bad_partition_parameters_are_one_line_errors(key, value, msg):
     with pytest.raises(ScenarioError, match=msg) as err:
