@@ -712,14 +712,23 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise UserError("--dask local and --scheduler: give one of them")
     dask = "local" if args.dask else args.scheduler
     jobs = args.jobs or (1 if c.runner == "real" and dask is None else os.cpu_count() or 1)
+
+    def interrupt(signum, frame) -> None:  # SIGTERM as Ctrl-C: cancel, keep what finished
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, interrupt)
     try:
         summary = run_campaign(c, folder, jobs=jobs, dask=dask, progress=not args.quiet,
                                stop_after=args.stop_after)
     except (ImportError, ConnectionError) as exc:
         raise UserError(str(exc)) from None
+    finally:
+        signal.signal(signal.SIGTERM, old)
     print(format_status(c, folder, status(c, folder)))
     rate = summary.ran / summary.seconds if summary.seconds > 0 else 0.0
-    print(f"ran {summary.ran} runs in {summary.seconds:.1f} s ({rate:.2f} runs/s), "
+    print(f"ran {summary.ran} runs in {summary.seconds:.1f} s ({rate:.2f} runs/s, "
+          f"{summary.cpu_seconds / max(summary.ran, 1):.2f} CPU s per run, "
+          f"{summary.cpu_seconds / max(summary.seconds, 1e-9):.2f} cores busy), "
           f"{summary.skipped} already stored")
     if summary.stopped:
         print(f"stopped after {summary.ran} runs: run the same command again to finish")

@@ -299,6 +299,9 @@ class RunSummary:
     skipped: int
     stopped: bool
     seconds: float
+    cpu_seconds: float = 0.0
+    """CPU time the finished tasks used (all workers): ``cpu_seconds / seconds`` is how many
+    cores the campaign actually had."""
 
 
 def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = None,
@@ -323,10 +326,12 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
     sizes = {cell.index: len(cell.keys) for cell in c.cells}
     done0 = {cell.index: sum(1 for k in cell.keys if k in stored) for cell in c.cells}
     t0 = time.monotonic()
-    ran = 0
+    ran, cpu = 0, 0.0
     stopped = False
     rows: Iterator[dict]
-    if dask is None:
+    if not tasks:
+        rows = iter(())
+    elif dask is None:
         from sim.runners import run_pool
 
         rows = run_pool(tasks, jobs)
@@ -340,6 +345,7 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
             for row in rows:
                 store.write(row)
                 ran += 1
+                cpu += float(row.get("cpu_seconds", 0.0))
                 bar.finished(row["cell"])
                 if on_row is not None:
                     on_row(row)
@@ -351,7 +357,7 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
         if close is not None:
             close()
         store.compact()
-    return RunSummary(ran, skipped, stopped, time.monotonic() - t0)
+    return RunSummary(ran, skipped, stopped, time.monotonic() - t0, cpu)
 
 
 # --------------------------------------------------------------------------------------------
@@ -395,9 +401,10 @@ def results_table(folder: Path, manifest: dict[str, Any] | None = None,
 
 def canonical_rows(table) -> list[tuple]:
     """The table's computed values as exact text (``repr`` of every float), without timing
-    columns: equal lists mean bit-identical results."""
+    columns, keys and code versions: equal lists mean bit-identical results."""
     from sim.results import is_timing
 
-    cols = sorted(c for c in table.column_names if not is_timing(c))
+    cols = sorted(c for c in table.column_names
+                  if not is_timing(c) and c not in ("key", "code_version"))
     data = {c: table.column(c).to_pylist() for c in cols}
     return [tuple((c, repr(data[c][i])) for c in cols) for i in range(table.num_rows)]

@@ -20,10 +20,11 @@ from pathlib import Path
 from typing import Any
 
 META_COLUMNS = ("key", "cell", "cell_label", "run", "runner", "code_version", "seconds",
-                "worker")
+                "cpu_seconds", "worker")
 """Columns every row has; the others are the runner's metrics."""
 
-TIMING_COLUMNS = ("seconds", "worker", "ms_per_scan.*", "cell", "cell_label")
+TIMING_COLUMNS = ("seconds", "cpu_seconds", "worker", "ms_per_scan.*", "ms_latency_*",
+                  "cell", "cell_label")
 """Columns that depend on the machine, the clock or the campaign file's cell order rather than
 on the computation (left out when results are compared bit for bit)."""
 

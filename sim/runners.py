@@ -38,10 +38,18 @@ _NOT_CODE = {"report.py", "progress.py", "campaign.py", "results.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
 
 
-@functools.cache
 def code_version() -> str:
     """A hash of the source that computes a task (``tracking``, ``peers``, ``protocol``,
-    ``sim``) and of the numeric libraries' versions: results from other code are not reused."""
+    ``sim``) and of the numeric libraries' versions: results from other code are not reused.
+
+    ``$SENSORNET_CODE_VERSION``, when set, is used instead (the tests pin it, so that edits
+    made to a shared working tree while they run do not change it half-way).
+    """
+    return os.environ.get("SENSORNET_CODE_VERSION") or _source_hash()
+
+
+@functools.cache
+def _source_hash() -> str:
     import scipy
 
     root = Path(__file__).resolve().parent.parent
@@ -114,7 +122,7 @@ def run_task(task: Task) -> dict[str, Any]:
     if task.scenario_hash and scenario_hash(scn) != task.scenario_hash:
         raise RuntimeError(f"worker {socket.gethostname()}: the scenario of cell "
                            f"{task.cell_label!r} resolves differently here than on the client")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if task.runner == "experiment":
         metrics = _experiment_row(scn, task.run)
     elif task.runner == "twin":
@@ -126,7 +134,8 @@ def run_task(task: Task) -> dict[str, Any]:
     row: dict[str, Any] = {
         "key": task.key, "cell": task.cell, "cell_label": task.cell_label, "run": task.run,
         "runner": task.runner, "code_version": code_version(),
-        "seconds": time.perf_counter() - t0, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+        "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0,
+        "worker": f"{socket.gethostname()}:{os.getpid()}"}
     for k, v in metrics.items():
         if any(fnmatch.fnmatchcase(k, p) for p in task.metrics):
             row[k] = v
@@ -206,7 +215,7 @@ def _real_row(scn, task: Task) -> dict[str, Any]:
     for name, s in summaries.items():
         out[f"fused_ospa.{name}"] = float(s["mean_ospa_fused"])
         if s.get("latency_ms_median") is not None:
-            out[f"ms_per_scan.latency_median.{name}"] = float(s["latency_ms_median"])
+            out[f"ms_latency_median.{name}"] = float(s["latency_ms_median"])
     return out
 
 

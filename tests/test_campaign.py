@@ -58,6 +58,13 @@ x = "birth.model"
 """
 
 
+@pytest.fixture(autouse=True)
+def _pinned_code_version(monkeypatch):
+    """Other work may edit the source tree while these tests run: pin the code version (the
+    subprocesses and Dask workers inherit it)."""
+    monkeypatch.setenv("SENSORNET_CODE_VERSION", "test-pinned")
+
+
 def _file(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     path = tmp_path / name
     path.write_text(text)
@@ -87,7 +94,7 @@ def test_stopped_campaign_resumes_to_the_uninterrupted_table(tmp_path):
 
 def test_killed_campaign_process_resumes(tmp_path):
     """``kill -9`` of the campaign process half-way: only its run in flight is redone."""
-    path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 30'))
+    path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 20'))
     out = tmp_path / "killed"
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
     proc = subprocess.Popen([sys.executable, "-m", "sensornet", "campaign", str(path), "--out",
@@ -188,9 +195,49 @@ def test_campaign_file_errors_are_one_line(tmp_path, capsys):
     assert "no manifest.json" in capsys.readouterr().err
 
 
+def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):
+    path = _file(tmp_path, TWIN.replace("runs = 6", "runs = 2"))
+    out = tmp_path / "v"
+    assert run_campaign(load_campaign(path), out, jobs=1, progress=False).ran == 4
+    monkeypatch.setenv("SENSORNET_CODE_VERSION", "test-other")
+    c = load_campaign(path)
+    st = status(c, out)
+    assert (st.done, st.stale) == (0, 4)
+    assert main(["campaign", str(path), "--out", str(out), "--status"]) == 0
+    assert "4 stored runs belong to other code versions or cells" in capsys.readouterr().out
+    assert run_campaign(c, out, jobs=1, progress=False).ran == 4
+    monkeypatch.delenv("SENSORNET_CODE_VERSION")
+    from sim.runners import code_version
+
+    assert len(code_version()) == 16 and code_version() != "test-other"
+
+
 def test_shipped_campaigns_load():
     for name in ("seed000-figures", "seed000-twin", "policy-sweep", "loss-sweep"):
         c = load_campaign(name, runs=2)
         assert c.cells and all(len(cell.keys) == 2 for cell in c.cells)
     c = load_campaign("seed000-figures")
     assert [cell.label for cell in c.cells] == ["birth.model=truth", "birth.model=paper"]
+
+
+def test_sigterm_is_an_interrupt_that_keeps_finished_runs(tmp_path):
+    path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 20'))
+    out = tmp_path / "term"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    proc = subprocess.Popen([sys.executable, "-m", "sensornet", "campaign", str(path), "--out",
+                             str(out), "--jobs", "2", "--quiet"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    store = ResultStore(out / "results")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None and store.count_files() < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err.decode()
+    assert "interrupted" in err.decode()
+    files = [p.name for p in (out / "results").iterdir()]
+    assert len(files) == 1 and files[0].startswith("part-")  # compacted on the way out
+    done = len(store.done_keys())
+    assert 2 <= done < 12
+    summary = run_campaign(load_campaign(path), out, jobs=2, progress=False)
+    assert (summary.ran, summary.skipped) == (12 - done, done)
