@@ -9,7 +9,8 @@ feeds the same scans to every method:
   scan and clusters the pooled plane points with :func:`tracking.idpc.idpc`; all peers compute the
   same estimate. After ``t`` < diameter iterations peer ``i`` holds the scans within ``t`` hops
   (``peers.flooding.flood`` on a loss-free network, tested) and clusters those
-  (``S`` = scans held): the OSPA-against-iterations curve.
+  (``S`` = scans held, or all ``S`` sensors with ``flooding.assumed_scans = "all"``): the
+  OSPA-against-iterations curve.
 - ``FTC``: DBSCAN + k-means (:func:`tracking.idpc.ftc`) on the same pooled set.
 - ``local``: each peer's own GM-PHD, no exchange.
 - ``GCI L=l`` / ``AA L=l``: every peer runs its GM-PHD on its own scan and publishes its
@@ -26,7 +27,9 @@ Costs are the seed's tuples per peer per scan (a Gaussian component 15, a cardin
 measurement 2): flooding ``deg_i sum_{hop(i,j) <= t-1} 2|Z_j|`` (:func:`peers.flooding.
 flooding_tuples`); consensus ``deg_i (15 n_i + 1)`` per round; IC ``hops(next) (15 n + 1)`` per
 sensor; centralised ``hops(j, centre) 2|Z_j|`` per scan, averaged over the peers. CPU is the
-wall time of the method's own computation per peer per scan in this single-threaded worker.
+process CPU time (``time.process_time``, so a loaded machine does not inflate it) of the
+method's own computation per peer per scan in this single-threaded worker; for GCI and AA it
+includes the peer's local GM-PHD step.
 
 ``python -m sim.seed004 --runs 20 --jobs 2 --out runs/seed004`` prints the table and writes
 ``seed004_table.csv``, ``seed004_iterations.csv`` and ``seed004_tradeoff.png``. Runs are
@@ -98,6 +101,7 @@ class Seed004:
     publish_threshold: float = 0.01
     cardinality: str = "separate"
     clustering: ClusterParams = ClusterParams()
+    assumed_scans: str = "held"
     iterations: int = 4
     rounds: tuple[int, ...] = (1, 2, 3, 4)
     ospa_cutoff: float = 100.0
@@ -162,7 +166,7 @@ _KEYS = {
                               "birth_cov_diag", "prune_threshold", "merge_threshold",
                               "max_components", "publish_threshold", "cardinality")},
     "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
-    "flooding": {"iterations": "iterations"},
+    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans"},
     "consensus": {"rounds": "rounds"},
     "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
 }
@@ -203,6 +207,9 @@ def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
         if k in kw:
             kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
     scn = Seed004(**kw)
+    if scn.assumed_scans not in ("held", "all"):
+        raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
+                            f"expected 'held' or 'all'")
     if scn.variant not in VARIANTS:
         raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
     scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
@@ -291,8 +298,11 @@ def _n_tuples(mix: GaussianMixture) -> int:
     return TUPLES_COMPONENT * len(mix) + TUPLES_CARDINALITY
 
 
-def run_once(scn: Seed004, run: int) -> dict[str, dict[str, float]]:
-    """Every method on run ``run``'s truth and scans; per-method means over scans and peers."""
+def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[str, float]]:
+    """Every method on run ``run``'s truth and scans; per-method means over scans and peers.
+
+    ``consensus=False`` leaves out the GCI and AA rounds (most of the time of a run).
+    """
     root = np.random.default_rng([scn.seed, run])
     rng_truth, rng_scan, rng_cluster = root.spawn(3)
     models = scn.models()
@@ -324,57 +334,59 @@ def run_once(scn: Seed004, run: int) -> dict[str, dict[str, float]]:
         sizes = np.array([len(z) for z in scans])
         # flooding + clustering: the full pooled set, then what t < diameter iterations leave
         pooled = np.concatenate(plane)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         est_idpc = idpc(pooled, S, scn.clustering, rng_cluster).centres
-        dt = time.perf_counter() - t0
+        dt = time.process_time() - t0
         flood_cost = float(flooding_tuples(hops, sizes, full).mean())
         tally("IDPC").add(est_idpc, x, scn, flood_cost, dt)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         est = ftc(pooled, S, scn.clustering, rng_cluster).centres
-        tally("FTC").add(est, x, scn, flood_cost, time.perf_counter() - t0)
+        tally("FTC").add(est, x, scn, flood_cost, time.process_time() - t0)
         for t in range(1, full + 1):
             cost = flooding_tuples(hops, sizes, t)
             for i in range(S):
                 held = hops[i] <= t
-                t0 = time.perf_counter()
+                t0 = time.process_time()
                 if held.all():
                     out, dt_i = est_idpc, dt
                 else:
+                    n_scans = int(held.sum()) if scn.assumed_scans == "held" else S
                     out = idpc(np.concatenate([plane[j] for j in np.flatnonzero(held)]),
-                               int(held.sum()), scn.clustering, rng_cluster).centres
-                    dt_i = time.perf_counter() - t0
+                               n_scans, scn.clustering, rng_cluster).centres
+                    dt_i = time.process_time() - t0
                 tally(f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i)
         # local GM-PHD filters, then consensus on what they publish
         cpu_local = np.zeros(S)
         for i in range(S):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             mixes[i] = local[i].step(mixes[i], scans[i])
-            cpu_local[i] = time.perf_counter() - t0
+            cpu_local[i] = time.process_time() - t0
             tally("local").add(_positions(mixes[i]), x, scn, 0.0, cpu_local[i])
-        for rule, fuse in (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))):
+        rules = (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))) if consensus else ()
+        for rule, fuse in rules:
             dens = [keep_above(m, scn.publish_threshold) for m in mixes]
             tuples, cpu = np.zeros(S), cpu_local.copy()
             for r in range(1, max(scn.rounds) + 1):
                 tuples += deg * np.array([_n_tuples(d) for d in dens])
                 new = []
                 for i in range(S):
-                    t0 = time.perf_counter()
+                    t0 = time.process_time()
                     group = [dens[i]] + [dens[j] for j in nbrs[i]]
                     w = np.concatenate(([W[i, i]], W[i, nbrs[i]]))
                     new.append(fuse(group, w / w.sum()))
-                    cpu[i] += time.perf_counter() - t0
+                    cpu[i] += time.process_time() - t0
                 dens = [keep_above(d, scn.publish_threshold) for d in new]
                 if r in scn.rounds:
                     for i in range(S):
                         tally(f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i], cpu[i])
         # iterated corrector along the depth-first order; centralised: the same at the centre
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         ic_mix = local[0].predict(ic_mix)
         ic_tuples = 0.0
         for s, nxt in zip(order, np.roll(order, -1), strict=True):
             ic_mix = reducer(update(ic_mix, scans[s], sensors[s], None, scn.prune_threshold))
             ic_tuples += hops[s, nxt] * _n_tuples(ic_mix)
-        dt = time.perf_counter() - t0
+        dt = time.process_time() - t0
         est = _positions(ic_mix)
         tally("IC").add(est, x, scn, ic_tuples / S, dt / S)
         routed = float((hops[:, centre] * TUPLES_PER_MEASUREMENT * sizes).sum())
@@ -397,18 +409,18 @@ def _aa(reducer: Reducer):
 # -- Monte Carlo ------------------------------------------------------------------------------
 
 
-def run_experiment(scn: Seed004, runs: Sequence[int], jobs: int = 1,
-                   progress: bool = True) -> dict[str, dict[str, float]]:
+def run_experiment(scn: Seed004, runs: Sequence[int], jobs: int = 1, progress: bool = True,
+                   consensus: bool = True) -> dict[str, dict[str, float]]:
     """Mean over ``runs`` of every method's per-run means (and the OSPA standard error)."""
     per_run: list[dict[str, dict[str, float]]] = []
     with Progress(len(runs), "runs", enabled=progress) as bar:
         if jobs <= 1:
             for r in runs:
-                per_run.append(run_once(scn, r))
+                per_run.append(run_once(scn, r, consensus))
                 bar.advance()
         else:
             with ProcessPoolExecutor(jobs) as pool:
-                futures = [pool.submit(run_once, scn, r) for r in runs]
+                futures = [pool.submit(run_once, scn, r, consensus) for r in runs]
                 for f in as_completed(futures):
                     per_run.append(f.result())
                     bar.advance()
@@ -499,6 +511,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
                    help="override a scenario value (TOML syntax), e.g. scenario.variant='mixed'")
     p.add_argument("--out", type=Path, help="write the CSVs and the PNG here")
+    p.add_argument("--no-consensus", action="store_true",
+                   help="leave out GCI and AA (fast: flooding, IC, centralised, local only)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     a = p.parse_args(argv)
     try:
@@ -511,7 +525,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     runs = range(a.first_run, a.first_run + a.runs)
     t0 = time.monotonic()
-    result = run_experiment(scn, runs, a.jobs, not a.quiet)
+    result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)
     deg = scn.adjacency.sum(axis=1)
     title = (f"seed 004, {scn.variant}, {len(scn.positions)} sensors (diameter "
              f"{int(scn.hops.max())}, mean degree {deg.mean():.1f}), clutter "

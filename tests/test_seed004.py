@@ -43,7 +43,8 @@ def test_tuple_counts_equal_the_closed_form(scn):
     # Pd = 1, no clutter: every scan is the 3 targets (6 tuples); in 4 iterations a peer sends
     # every scan within 3 hops (the last iteration's arrivals are not forwarded) to each neighbour
     known = replace(scn, num_scans=2, detection_probability=1.0, clutter_rate=0.0)
-    out = seed004.run_once(known, 0)
+    out = seed004.run_once(known, 0, consensus=False)
+    assert "GCI L=1" not in out and "AA L=1" not in out
     deg, hops = known.adjacency.sum(axis=1), known.hops
     flooding = np.mean(deg * (hops <= 3).sum(axis=1) * 3 * 2)
     assert out["IDPC"]["tuples"] == pytest.approx(flooding)
