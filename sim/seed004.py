@@ -475,11 +475,12 @@ def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str)
     import matplotlib.pyplot as plt
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.8))
-    for n in table_rows(result):
+    colours = plt.get_cmap("tab20").colors
+    for i, n in enumerate(table_rows(result)):
         r = result[n]
-        x = max(r["tuples"], 1.0)
-        a.errorbar(x, r["ospa"], yerr=r["ospa_se"], fmt="o")
-        a.annotate(n, (x, r["ospa"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        a.errorbar(max(r["tuples"], 1.0), r["ospa"], yerr=r["ospa_se"], fmt="osD^v"[i % 5],
+                   color=colours[i % len(colours)], label=n, markersize=7)
+    a.legend(fontsize=8, ncol=2, loc="lower left")
     a.set_xscale("log")
     a.set_xlabel("tuples per peer per scan (log; local = 1)")
     a.set_ylabel("mean OSPA (m), c = 100, p = 2")
@@ -501,6 +502,18 @@ def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str)
     return [table, it_csv, png]
 
 
+def read_outputs(folder: Path) -> dict[str, dict[str, float]]:
+    """The result dict back from ``seed004_table.csv`` and ``seed004_iterations.csv``."""
+    out: dict[str, dict[str, float]] = {}
+    for row in csv.DictReader((folder / "seed004_table.csv").open()):
+        name = row.pop("method")
+        out[name] = {k: float(v) for k, v in row.items()}
+    for row in csv.DictReader((folder / "seed004_iterations.csv").open()):
+        t = row.pop("iterations")
+        out[f"IDPC t={t}"] = {k: float(v) for k, v in row.items()}
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     doc = (__doc__ or "").split("\n")[0]
     p = argparse.ArgumentParser(prog="python -m sim.seed004", description=doc)
@@ -513,8 +526,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="write the CSVs and the PNG here")
     p.add_argument("--no-consensus", action="store_true",
                    help="leave out GCI and AA (fast: flooding, IC, centralised, local only)")
+    p.add_argument("--replot", metavar="TITLE",
+                   help="redraw the PNG in --out from its CSVs (no runs) with this title")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     a = p.parse_args(argv)
+    if a.replot is not None:
+        if a.out is None:
+            p.error("--replot needs --out")
+        print(f"wrote {write_outputs(read_outputs(a.out), a.out, a.replot)[-1]}")
+        return 0
     try:
         scn = load(a.scenario, a.set)
     except (ScenarioError, OSError) as e:

@@ -75,3 +75,7 @@ def test_main_writes_table_iterations_and_plot(tmp_path, capsys):
     its = list(csv.DictReader((tmp_path / "seed004_iterations.csv").open()))
     assert [int(r["iterations"]) for r in its] == [1, 2, 3, 4]
     assert (tmp_path / "seed004_tradeoff.png").stat().st_size > 10_000
+    back = seed004.read_outputs(tmp_path)
+    assert back["IDPC"]["tuples"] == pytest.approx(float(rows[0]["tuples"]))
+    assert "IDPC t=4" in back
+    assert seed004.main(["--replot", "again", "--out", str(tmp_path)]) == 0
