@@ -292,6 +292,10 @@ class PeerRuntime:
         s["peer_events"] = self.live_events[-1000:]
         s["injected_faults"] = self.o.faults.counts() if self.o.faults is not None else {}
         s["files"] = self.stem
+        refusals = self.transport.refusals
+        if refusals is not None:  # secure mode: what the access control refused on arrival
+            s["refused_by_transport"] = refusals.counts()
+            s["refused_by_transport_total"] = refusals.total()
         errors = dict(s["internal_errors"])
         for name, n in s.pop("driver_errors").items():
             errors[name] = errors.get(name, 0) + n

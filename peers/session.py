@@ -76,6 +76,9 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             from peers.security import check_endpoints
 
             check_endpoints([*listen, *connect])
+            if not listen:  # not Zenoh's default plain tcp/[::]:0 listener: others would
+                # learn it by gossip and link to it unauthenticated (every message refused)
+                conf.insert_json5("listen/endpoints", "[]")
             security.apply(conf)
     except SessionError:
         raise

@@ -33,6 +33,7 @@ class Transport:
         self.admission = admission
         self.session_args = session_args
         self.security = security  # peers.security.Security: mutual TLS + access control
+        self.refusals = None  # peers.security.RefusalLog in secure mode
         self.q: queue.Queue = queue.Queue()
         self.seen_alive: set[str] = set()
         self.session = None
@@ -70,6 +71,10 @@ class Transport:
 
     def open(self, duplicate_wait: float = 0.5) -> None:
         """Open the session; refuse to start if a peer of the same name is alive already."""
+        if self.security is not None and self.refusals is None:
+            from peers.security import RefusalLog
+
+            self.refusals = RefusalLog().start()  # counts what the access control refuses
         session = open_session(*self.session_args, security=self.security)
         self.session = session
         try:
@@ -129,3 +134,5 @@ class Transport:
         if self.session is not None:
             self.session.close()
             self.session = None
+        if self.refusals is not None:
+            self.refusals.stop()

@@ -219,10 +219,11 @@ def test_access_control_refuses_what_a_member_may_not_put(keys, tmp_path):
             k.alive("*"), lambda s: live.append(str(s.key_expr)), history=True))
         subs.append(world.liveliness().declare_subscriber(
             k.ready("*"), lambda s: ready.append(str(s.key_expr)), history=True))
-        end = time.monotonic() + 5  # both attackers linked to s1 and the world
-        while time.monotonic() < end and not (
-                len(list(s1.info.peers_zid())) >= 3 and len(list(world.info.peers_zid())) >= 3):
+        end = time.monotonic() + 5  # both attackers linked to s1 and the world (which do
+        while time.monotonic() < end and not (  # not listen: world and s9 are not linked)
+                len(list(s1.info.peers_zid())) >= 3 and len(list(world.info.peers_zid())) >= 2):
             time.sleep(0.02)
+        end = time.monotonic() + 5
         while not probe.is_set() and time.monotonic() < end:  # s1's subscriptions are up
             s3.put(k.estimate("s3"), b"probe")
             probe.wait(0.05)
@@ -254,3 +255,29 @@ def test_access_control_refuses_what_a_member_may_not_put(keys, tmp_path):
     finally:
         for s in (s9, world, s3, s1):
             s.close()
+
+
+def test_secure_flags_are_refused_in_one_line(keys, tmp_path, capsys):
+    def refused(argv, *needles):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        for n in needles:
+            assert n in err[0], err[0]
+
+    refused(["run", "seed000", "--sim", "--secure"], "--secure needs real processes")
+    refused(["run", "seed000", "--secure", str(keys), "--network", "other",
+             "--out", str(tmp_path / "r1")], "keys of network 'net1'")
+    refused(["run", "seed000", "--secure", str(keys), "--listen", "tcp/127.0.0.1:7447",
+             "--out", str(tmp_path / "r2")], "tls/ endpoints")
+    refused(["run", "seed000", "--secure", str(keys), "--fault", "kill:s2@3",
+             "--out", str(tmp_path / "r3")], "--secure")
+    refused(["peer", "s1", "--network", "net2", "--secure", str(keys)],
+            "keys of network 'net1'")
+    refused(["world", "seed000", "--network", "net1", "--secure", str(keys),
+             "--listen", "tcp/127.0.0.1:7447"], "tls/ endpoints")
+    partial = tmp_path / "partial"
+    make_keys("net1", ["world", "s1"], partial)
+    refused(["run", "seed000", "--secure", str(partial), "--out", str(tmp_path / "r4")],
+            "no key for s2, s3")
+    assert not any((tmp_path / f"r{i}").exists() for i in range(1, 5))  # nothing left behind
