@@ -306,6 +306,12 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from sim.scenario import with_birth_model
 
     scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
+    if scn.extended is not None:  # seed 002: the partitioner comparison (sim/seed002.py)
+        from sim.seed002 import main as seed002_main
+
+        sets = [a for item in (args.set or []) for a in ("--set", item)]
+        return seed002_main(["--scenario", args.scenario, "--runs", str(args.runs), *sets,
+                             *(["--quiet"] if args.quiet else [])])
     if args.fusion:
         from dataclasses import replace
 

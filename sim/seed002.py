@@ -210,6 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="clutter rates (mean points per scan)")
     ap.add_argument("--csv", help="write the summary table here")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--scenario", default="seed002",
+                    help="a scenario with an [extended] table (default: seed002)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="scenario override, e.g. fusion.rule=aa (repeatable)")
     ap.add_argument("--network", action="store_true",
@@ -220,7 +222,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        base = load_scenario("seed002", parse_overrides(a.set))
+        base = load_scenario(a.scenario, parse_overrides(a.set))
+        if base.extended is None:
+            raise ScenarioError(f"{base.name}: no [extended] table (extended targets)")
     except ScenarioError as exc:
         print(f"seed002: {exc}", file=sys.stderr)
         return 2

@@ -148,3 +148,12 @@ def test_rerun_view_colours_cells_and_greys_one_point_cells():
     single = np.bincount(labels)[labels] == 1
     assert single.any() and (colors[single] == 128).all() and not (colors[~single] == 128).all()
     assert len(lines) == (np.bincount(labels) >= 3).sum() >= 1
+
+
+def test_sensornet_experiment_seed002_runs_the_partitioner_comparison(capsys):
+    from sensornet.cli import main
+
+    assert main(["experiment", "seed002", "--runs", "1", "--quiet",
+                 "--set", "scenario.num_scans=5"]) == 0
+    out = capsys.readouterr().out
+    assert "grid-spectral" in out and "paper ms" in out
