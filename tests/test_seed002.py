@@ -97,6 +97,8 @@ def test_experiment_smoke_and_table(tmp_path, capsys):
     table = seed002.format_table(rows)
     assert "grid-spectral" in table and "40.8" in table  # the paper's distance time at 10
     assert seed002.truth_labels(np.array([2, 0, 2, 0])).tolist() == [2, -1, 2, -2]
+    seed002.write_png(rows, str(tmp_path / "fig.png"))
+    assert (tmp_path / "fig.png").stat().st_size > 10_000
 
 
 def test_experiment_cli_refuses_bad_flags(capsys):
