@@ -14,6 +14,7 @@ fixed in the TOML before any evaluation run (nothing is tuned on runs 0..N-1).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 import tomllib
@@ -145,11 +146,13 @@ def gate_clutter(zhat: np.ndarray, S: np.ndarray, gamma: float, n: int,
 def run_filter(cfg: Mapping, flt: ImmPda, sens: Sequence[LinearSensor],
                target: Sequence[Sequence[np.ndarray]],
                region: Sequence[Sequence[np.ndarray]] | None,
-               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+               rng: np.random.Generator, on_update=None) -> tuple[np.ndarray, np.ndarray]:
     """Run ``flt`` over the scans with the sequential update of ``sens`` in order; clutter from
     ``region`` (per scan, per sensor) or, when None, drawn in the filter's own gate with
     ``rng`` (Poisson with mean ``clutter.in_gate``; the PDA's density is that mean over the
-    gate's volume). Returns estimates ``(K, d)`` and detector flags ``(K,)``."""
+    gate's volume). ``on_update(Z, detected, update)`` sees every sensor update (the target's
+    return, when ``detected``, is ``Z[0]``). Returns estimates ``(K, d)`` and detector flags
+    ``(K,)``."""
     in_gate = float(cfg["clutter"]["in_gate"])
     est = np.empty((len(target), flt.x.shape[1]))
     fired = np.zeros(len(target), bool)
@@ -157,11 +160,15 @@ def run_filter(cfg: Mapping, flt: ImmPda, sens: Sequence[LinearSensor],
         flt.predict()
         for i, s in enumerate(sens):
             if region is not None:
-                flt.update(s, np.vstack([per[i], region[k][i]]))
-                continue
-            zhat, S = flt.predicted_measurement(s)
-            Z = np.vstack([per[i], gate_clutter(zhat, S, s.gamma, rng.poisson(in_gate), rng)])
-            flt.update(s, Z, in_gate / s.gate_volume(S))
+                Z = np.vstack([per[i], region[k][i]])
+                up = flt.update(s, Z)
+            else:
+                zhat, S = flt.predicted_measurement(s)
+                Z = np.vstack([per[i], gate_clutter(zhat, S, s.gamma, rng.poisson(in_gate),
+                                                    rng)])
+                up = flt.update(s, Z, in_gate / s.gate_volume(S))
+            if on_update is not None:
+                on_update(Z, len(per[i]) > 0, up, flt)
         est[k] = flt.estimate()[0]
         if flt.weighting is not None:
             fired[k] = flt.weighting.detector.fired
@@ -275,6 +282,46 @@ def run_once(cfg: Mapping, run: int, methods: Sequence[str] = METHODS,
             if flt.weighting is not None:
                 res.fired[(method, n)] = fired
     return res
+
+
+def training_samples(cfg: Mapping, run: int, n_sensors: int = 2
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Features and labels of every gated return of the fuzzy IMM on run ``run``: NIS under
+    each model, ``D_L / (L n_z)``, and 1 for the target's return (training runs only)."""
+    seed = int(cfg["scenario"]["seed"])
+    rng = np.random.default_rng([seed, int(run)])
+    X = truth(cfg)
+    sens = sensors(cfg)[:n_sensors]
+    target = target_returns(X, sens, rng)
+    m0, P0 = initial_state(cfg, X[0], rng)
+    flt = make_filter(cfg, "fuzzy IMM", m0, P0)
+    rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def record(Z, detected, up, f) -> None:
+        if len(up.returns) == 0:
+            return
+        is_target = (np.all(up.returns == Z[0], axis=1) if detected
+                     else np.zeros(len(up.returns), bool))
+        d = f.weighting.normalised_statistic()
+        for gm in up.nis:
+            rows.append((gm, np.full(len(gm), d), is_target))
+
+    run_filter(cfg, flt, sens, target, None,
+               np.random.default_rng([seed, int(run), 1000 + n_sensors]), record)
+    if not rows:
+        return np.empty(0), np.empty(0), np.empty(0)
+    return tuple(np.concatenate(c) for c in zip(*rows, strict=True))
+
+
+def train_fuzzy(cfg: Mapping, runs: int, first_run: int = 10000, what: str = "all") -> dict:
+    """Fit the fuzzy system on training runs ``first_run..`` (never the evaluation runs) and
+    return the fitted ``[fuzzy]`` table."""
+    from tracking.fuzzy import FuzzySystem, fit, to_config
+
+    parts = [training_samples(cfg, r) for r in range(first_run, first_run + runs)]
+    g, d, t = (np.concatenate(c) for c in zip(*parts, strict=True))
+    fis = fit(FuzzySystem.from_config(cfg["fuzzy"]), g, d, t, what)
+    return to_config(fis, cfg["fuzzy"].get("mode", "switched"))
 
 
 def lost(pos_err: np.ndarray, bound: float, scans_: int) -> bool:
@@ -396,6 +443,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help=f"comma-separated subset of {', '.join(METHODS)}")
     p.add_argument("--csv", type=Path, help="write the table and RMSE-over-time CSVs here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--train-fuzzy", type=int, metavar="N", default=0,
+                   help="fit the fuzzy system on training runs 10000..10000+N-1, print the "
+                        "fitted [fuzzy] table as JSON and exit")
+    p.add_argument("--fuzzy", type=Path, metavar="JSON",
+                   help="use this [fuzzy] table (e.g. a --train-fuzzy result) instead of the "
+                        "scenario's")
     a = p.parse_args(argv)
     overrides = {}
     for item in a.set:
@@ -411,6 +464,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if a.fuzzy:
+        mode = cfg["fuzzy"].get("mode")
+        cfg["fuzzy"] = json.loads(a.fuzzy.read_text(encoding="utf-8"))
+        cfg["fuzzy"]["mode"] = overrides.get("fuzzy.mode", mode)
+    if a.train_fuzzy:
+        print(json.dumps(train_fuzzy(cfg, a.train_fuzzy), indent=1))
+        return 0
     methods = tuple(m.strip() for m in a.methods.split(","))
     if unknown := [m for m in methods if m not in METHODS]:
         p.error(f"--methods: unknown {unknown}; expected some of {', '.join(METHODS)}")

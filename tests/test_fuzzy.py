@@ -105,3 +105,18 @@ def test_detector_false_alarm_rate_on_manoeuvre_free_runs():
     n_eff = fired[:, L - 1:].size / L
     se = math.sqrt(pf * (1 - pf) / n_eff)
     assert abs(rate - pf) < 3 * se, (rate, se)
+
+
+def test_fit_recovers_known_outputs_and_round_trips_through_config():
+    from tracking.fuzzy import fit, to_config
+
+    rng = np.random.default_rng(5)
+    true = FuzzySystem(np.array([[0.0, 1.0], [8.0, 1.0], [4.0, 4.0]]),
+                       np.array([[2.0, 1.0], [2.0, 1.0], [2.0, 1.0]]), np.array([0.9, 0.1, 0.6]))
+    g, d = rng.uniform(0, 12, 20000), rng.uniform(0, 6, 20000)
+    t = rng.random(20000) < true(g, d)
+    start = FuzzySystem(true.centres, true.widths, np.full(3, 0.5))
+    got = fit(start, g, d, t, "outputs")
+    np.testing.assert_allclose(got.outputs, true.outputs, atol=0.05)
+    again = FuzzySystem.from_config(to_config(got))
+    np.testing.assert_allclose(again(g[:50], d[:50]), got(g[:50], d[:50]))

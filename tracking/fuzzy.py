@@ -169,6 +169,57 @@ class FuzzyWeighting:
         return self.fis(g, self.normalised_statistic())
 
 
+def fit(fis: FuzzySystem, g: np.ndarray, d: np.ndarray, target: np.ndarray,
+        what: str = "all", max_samples: int = 20000,
+        rng: np.random.Generator | None = None) -> FuzzySystem:
+    """Fit the system to labelled returns (the trainable option; the paper trains by steepest
+    descent, its ref. [5]): minimise the binary cross-entropy of ``mu(g, d)`` against
+    ``target`` (1: the return is the target's) with bounded L-BFGS-B (outputs in [0.01, 0.99],
+    NIS centres in [0, 20], D centres in [0, 10], widths in [0.3, 10]). ``what``:
+    ``"outputs"`` fits the output centres only, ``"all"`` also the input centres and widths.
+    At most ``max_samples`` returns (a random subset). Fit on training runs only
+    (``sim.seed003 --train-fuzzy``), never on the runs a table reports."""
+    from scipy.optimize import minimize
+
+    g, d, t = (np.asarray(a, float) for a in (g, d, target))
+    if len(g) > max_samples:
+        pick = (rng or np.random.default_rng(0)).choice(len(g), max_samples, replace=False)
+        g, d, t = g[pick], d[pick], t[pick]
+    R = len(fis.outputs)
+    p0 = [np.clip(fis.outputs, 0.01, 0.99)]
+    bounds = [(0.01, 0.99)] * R
+    if what == "all":
+        p0 += [fis.centres.ravel(), np.clip(fis.widths.ravel(), 0.3, 10.0)]
+        bounds += [(0.0, 20.0), (0.0, 10.0)] * R + [(0.3, 10.0)] * (2 * R)
+    elif what != "outputs":
+        raise ValueError(f"fuzzy fit: {what!r}, expected 'outputs' or 'all'")
+
+    def unpack(p: np.ndarray) -> FuzzySystem:
+        if what == "outputs":
+            return FuzzySystem(fis.centres, fis.widths, p[:R].copy())
+        return FuzzySystem(p[R:3 * R].reshape(R, 2), p[3 * R:].reshape(R, 2), p[:R].copy())
+
+    def loss(p: np.ndarray) -> float:
+        mu = np.clip(unpack(p)(g, d), 1e-6, 1 - 1e-6)
+        return float(-np.mean(t * np.log(mu) + (1 - t) * np.log(1 - mu)))
+
+    res = minimize(loss, np.concatenate(p0), method="L-BFGS-B", bounds=bounds,
+                   options={"maxiter": 200})
+    return unpack(res.x)
+
+
+def to_config(fis: FuzzySystem, mode: str = "switched") -> dict:
+    """A ``[fuzzy]`` table for ``fis`` (one term per rule and input: fitted rules need not
+    share terms)."""
+    nis = {f"r{r}": [float(c), float(w)] for r, (c, w) in
+           enumerate(zip(fis.centres[:, 0], fis.widths[:, 0], strict=True))}
+    dl = {f"r{r}": [float(c), float(w)] for r, (c, w) in
+          enumerate(zip(fis.centres[:, 1], fis.widths[:, 1], strict=True))}
+    out = {f"r{r}": float(y) for r, y in enumerate(fis.outputs)}
+    return {"mode": mode, "rules": [[f"r{r}"] * 3 for r in range(len(out))],
+            "inputs": {"nis": nis, "dl": dl}, "outputs": out}
+
+
 def weighting_from_config(cfg: Mapping, detector_cfg: Mapping) -> FuzzyWeighting:
     """A :class:`FuzzyWeighting` from the ``[fuzzy]`` and ``[detector]`` tables."""
     det = ManoeuvreDetector(int(detector_cfg.get("window", 5)),
