@@ -247,6 +247,15 @@ def format_summary(summaries: dict[str, dict]) -> str:
             f"{s['bytes_received'] / 1e3:.1f} | {s['rejected_total']} | "
             f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "
             f"{f(s['latency_ms_p99'], '{:.2f}')} |")
+    refused = {n: s.get("refused_by_transport") or {} for n, s in summaries.items()}
+    if any(refused.values()):  # secure mode: what the access control refused on arrival
+        rows += ["", "Refused by access control (secure mode; sender, message, key: count):", ""]
+        for n, r in refused.items():
+            if r:
+                top = sorted(r.items(), key=lambda kv: -kv[1])
+                rows.append(f"- {n}: {sum(r.values())} refused: "
+                            + ", ".join(f"{label} x{c}" for label, c in top[:6])
+                            + (f", ... ({len(top) - 6} more)" if len(top) > 6 else ""))
     stages = [("transit", "world -> peer"), ("local", "local filter"),
               ("neighbours", "waiting for neighbours"), ("fusing", "fusing")]
     parts = {n: s.get("latency_breakdown_ms_median") or {} for n, s in summaries.items()}
