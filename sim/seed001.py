@@ -10,7 +10,9 @@ the fusing filter runs on radar 1 and at every scan fuses radar 2's published su
 (posterior, and for the ratio rule also prediction). The fusion calls are the ones a peer
 would make with a received message (``tracking.particles``).
 
-``python -m sim.seed001 --runs 300 --geometry A --jobs 2`` prints the table.
+``python -m sim.seed001 --runs 300 --geometry A --jobs 2`` prints the table (runs 0..299);
+``python -m sim.seed001 --tune-omega 0.2,0.3,0.4,det --tune-runs 40 --jobs 2`` compares GCI
+weights on runs 10000..10039, which the table never evaluates.
 """
 
 from __future__ import annotations
@@ -179,13 +181,20 @@ def _errors(est: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, float]:
     return est[[0, 1, 2]] - x[[0, 1, 2]], float(np.hypot(est[0] - x[0], est[3] - x[3]))
 
 
-def run_once(scn: Seed001Scenario, cfg: ExperimentConfig, run: int) -> RunResult:
-    """One Monte Carlo run: both filter kinds, four rules each, on the same measurements."""
+def _run_inputs(scn: Seed001Scenario, run: int):
+    """Run ``run``'s truth ``(K + 1, 6)``, sensors, measurements, initial estimate and the four
+    filter streams (own radar, other radar, GCI fuser, ratio fuser)."""
     g_meas, g_init, *g_f = run_streams(scn, run, 2 + 4)
     X = truth(scn)
     sensors = scn.sensors()
     Z = measure(sensors, X, g_meas)
     m0 = X[0] + g_init.standard_normal(6) @ np.linalg.cholesky(scn.init_cov).T
+    return X, sensors, Z, m0, g_f
+
+
+def run_once(scn: Seed001Scenario, cfg: ExperimentConfig, run: int) -> RunResult:
+    """One Monte Carlo run: both filter kinds, four rules each, on the same measurements."""
+    X, sensors, Z, m0, g_f = _run_inputs(scn, run)
     K = scn.num_scans
     errors, pos_error, seconds = {}, {}, {}
     for kind in cfg.filters:
@@ -207,23 +216,33 @@ def _run_filters(kind: str, scn, cfg, sensors, Z, m0, rngs) -> np.ndarray:
     :class:`peers.fusers.ImmFuser`): radar 1's peer fuses radar 2's published estimate, so this
     table and a two-peer network compute the same thing (tests/test_seed001.py ties them).
     """
+    rngs = list(rngs) if kind == "IMM-PF" else [None] * 4
+    return _run_fusers(kind, scn, cfg, sensors, Z, m0, rngs[:2],
+                       [("gci", cfg.gci_omega, rngs[2]), ("ratio", cfg.gci_omega, rngs[3])])
+
+
+def _run_fusers(kind: str, scn, cfg, sensors, Z, m0, filter_rngs, fusers) -> np.ndarray:
+    """Estimates ``(2 + F, K, 6)``: radar 1, radar 2, then one row per fuser ``(rule, omega,
+    rng)``. Every fuser runs on radar 1 and fuses radar 2's published estimate; the fusers never
+    touch each other or the local filters, so a fuser's estimates do not depend on which other
+    fusers run beside it (the omega tuning runs several GCI fusers on one pair of filters)."""
     kind = "imm-pf" if kind == "IMM-PF" else "imm-ekf"
-    rngs = list(rngs) if kind == "imm-pf" else [None] * 4
-    own = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[0], m0, scn.init_cov, rngs[0],
+    r_own, r_other = filter_rngs if kind == "imm-pf" else (None, None)
+    own = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[0], m0, scn.init_cov, r_own,
                        cfg.cov_floor)
-    other = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[1], m0, scn.init_cov, rngs[1],
+    other = ImmEstimator(kind, cfg.imm, cfg.particle, sensors[1], m0, scn.init_cov, r_other,
                          cfg.cov_floor, with_prediction=True)
-    gci = ImmFuser("gci", own, m0, scn.init_cov, rngs[2], cfg.gci_omega, cfg.ratio)
-    ratio = ImmFuser("ratio", own, m0, scn.init_cov, rngs[3], cfg.gci_omega, cfg.ratio)
+    fused = [ImmFuser(rule, own, m0, scn.init_cov, rng if kind == "imm-pf" else None, omega,
+                      cfg.ratio) for rule, omega, rng in fusers]
     K = scn.num_scans
-    out = np.empty((4, K, 6))
+    out = np.empty((2 + len(fused), K, 6))
     for k in range(1, K + 1):
         z1, z2 = Z[0, k], Z[1, k]
         own.step(1, z1)
         sent = {"r2": other.step(1, z2).published}
-        for fuser in (gci, ratio):
+        for fuser in fused:
             fuser.fuse(FusionInput(k, 0, own.state.summary(), sent, (0.5, 0.5), z1))
-        for r, state in enumerate((own.state, other.state, gci.state, ratio.state)):
+        for r, state in enumerate([own.state, other.state] + [f.state for f in fused]):
             out[r, k - 1] = state.estimate
     return out
 
@@ -305,8 +324,177 @@ def format_table(result: ExperimentResult) -> str:
     return "\n".join(lines)
 
 
+# -- GCI weight tuning (on runs that Table 1 never evaluates) ---------------------------------
+
+
+TUNE_FIRST_RUN = 10000
+"""First run of the omega tuning; Table 1 evaluates runs ``0..N-1`` with ``N`` <= 10000, so the
+weight is never chosen on a run it is evaluated on."""
+
+
+def omega_label(omega: float | str | None) -> str:
+    """``0.3`` -> ``"0.3"``, ``"det"`` -> ``"det"``, None -> ``"0.5"`` (uniform weights)."""
+    if omega is None:
+        return "0.5"
+    return omega if isinstance(omega, str) else f"{omega:g}"
+
+
+def parse_omegas(text: str) -> tuple[float | str, ...]:
+    """``"0.2,0.3,det"`` -> ``(0.2, 0.3, "det")``; ValueError on anything else."""
+    out: list[float | str] = []
+    for item in (t.strip() for t in text.split(",")):
+        if not item:
+            continue
+        if item in ("det", "chernoff"):
+            out.append(item)
+            continue
+        w = float(item)
+        if not 0.0 <= w <= 1.0:
+            raise ValueError(f"omega {w} outside [0, 1]")
+        out.append(w)
+    if not out:
+        raise ValueError("no omega candidates")
+    if len({omega_label(w) for w in out}) != len(out):
+        raise ValueError("repeated omega candidate")
+    return tuple(out)
+
+
+def tune_once(scn: Seed001Scenario, cfg: ExperimentConfig, run: int,
+              omegas: Sequence[float | str]) -> dict[tuple[str, str], np.ndarray]:
+    """GCI-fused errors of run ``run`` for every candidate weight: ``{(filter, label): (2, K)}``
+    (x-position error, position error norm). One pair of local filters per filter kind feeds
+    one GCI fuser per candidate; each fuser gets the run's GCI stream afresh, so candidate
+    ``w`` reproduces :func:`run_once`'s "GCI fusion" row with ``gci_omega = w`` exactly (and
+    the candidates differ by the weight only: common random numbers)."""
+    X, sensors, Z, m0, g_f = _run_inputs(scn, run)
+    out = {}
+    for kind in cfg.filters:
+        fusers = [("gci", w, run_streams(scn, run, 2 + 4)[2 + 2] if kind == "IMM-PF" else None)
+                  for w in omegas]
+        ests = _run_fusers(kind, scn, cfg, sensors, Z, m0, g_f[:2], fusers)[2:]
+        e = ests - X[1:]
+        for w, ek in zip(omegas, e, strict=True):
+            out[(kind, omega_label(w))] = np.stack([ek[:, 0], np.hypot(ek[:, 0], ek[:, 3])])
+    return out
+
+
+@dataclass(frozen=True)
+class OmegaTuning:
+    """GCI-fused errors of every candidate weight on the tuning runs."""
+
+    scenario: Seed001Scenario
+    config: ExperimentConfig
+    omegas: tuple[float | str, ...]
+    runs: tuple[int, ...]
+    """The run indices used (all >= :data:`TUNE_FIRST_RUN`)."""
+    x_error: dict[tuple[str, str], np.ndarray]
+    """(runs, K) x-position error per (filter, candidate label)."""
+    pos_error: dict[tuple[str, str], np.ndarray]
+    """(runs, K) position error norm."""
+
+    def lost(self, key: tuple[str, str]) -> np.ndarray:
+        """(runs,) lost tracks, the rule of :meth:`ExperimentResult.lost`."""
+        c = self.config
+        return self.pos_error[key][:, c.loss_after:].max(axis=1) > c.loss_threshold
+
+    def rows(self) -> list[dict]:
+        """Per candidate and filter: x-position RMSE over the runs not lost (as Table 1), lost
+        count, and the RMSE difference to the best candidate of that filter with its paired
+        standard error (per-run mean squared errors over the runs neither lost)."""
+        out = []
+        for w in self.omegas:
+            row: dict = {"omega": omega_label(w), "value": w}
+            for kind in self.config.filters:
+                key = (kind, row["omega"])
+                kept = ~self.lost(key)
+                mse = np.mean(np.square(self.x_error[key]), axis=1)
+                row[kind] = {"rmse": float(np.sqrt(mse[kept].mean())) if kept.any() else np.nan,
+                             "lost": int((~kept).sum()), "mse": mse, "kept": kept}
+            out.append(row)
+        for kind in self.config.filters:
+            best = min(out, key=lambda r, k=kind: (r[k]["lost"], _nan_last(r[k]["rmse"])))
+            for r in out:
+                both = r[kind]["kept"] & best[kind]["kept"]
+                d = r[kind]["mse"][both] - best[kind]["mse"][both]
+                rmse = best[kind]["rmse"]
+                n = int(both.sum())
+                r[kind]["delta"] = float(r[kind]["rmse"] - rmse)
+                # delta RMSE ~ delta MSE / (2 RMSE); standard error of the paired mean
+                r[kind]["delta_se"] = (float(d.std(ddof=1) / np.sqrt(n) / (2 * rmse))
+                                       if n > 1 else np.nan)
+        return out
+
+    def best(self, kind: str | None = None) -> str:
+        """Label of the best candidate: fewest lost tracks, then the smallest x-position RMSE
+        (``kind`` None: the mean over the filters run)."""
+        kinds = [kind] if kind else list(self.config.filters)
+        rows = self.rows()
+        return min(rows, key=lambda r: (sum(r[k]["lost"] for k in kinds),
+                                        _nan_last(float(np.mean([r[k]["rmse"]
+                                                                 for k in kinds])))))["omega"]
+
+
+def _nan_last(x: float) -> float:
+    return np.inf if np.isnan(x) else x
+
+
+def tune_omega(scn: Seed001Scenario, cfg: ExperimentConfig, omegas: Sequence[float | str],
+               runs: int, jobs: int = 1, progress: bool = True,
+               first_run: int = TUNE_FIRST_RUN) -> OmegaTuning:
+    """The GCI weight candidates on runs ``first_run .. first_run + runs - 1`` (never below
+    :data:`TUNE_FIRST_RUN`), over ``jobs`` worker processes, with a progress bar."""
+    if first_run < TUNE_FIRST_RUN:
+        raise ValueError(f"tuning runs start at {TUNE_FIRST_RUN} (runs below are evaluated)")
+    omegas = tuple(omegas)
+    idx = tuple(range(first_run, first_run + runs))
+    results: list[dict | None] = [None] * runs
+    label = f"tuning runs (seed001 omega, geometry {scn.geometry}, {len(omegas)} candidates)"
+    with Progress(runs, label, enabled=progress) as bar:
+        if jobs <= 1:
+            for i, r in enumerate(idx):
+                results[i] = tune_once(scn, cfg, r, omegas)
+                bar.advance()
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                futs = {pool.submit(tune_once, scn, cfg, r, omegas): i for i, r in enumerate(idx)}
+                for fut in as_completed(futs):
+                    results[futs[fut]] = fut.result()
+                    bar.advance()
+    done = [r for r in results if r is not None]
+    keys = list(done[0])
+    return OmegaTuning(scn, cfg, omegas, idx,
+                       {k: np.stack([r[k][0] for r in done]) for k in keys},
+                       {k: np.stack([r[k][1] for r in done]) for k in keys})
+
+
+def format_tuning(t: OmegaTuning) -> str:
+    """The tuning table (Markdown): one row per candidate, then the best candidate."""
+    kinds = list(t.config.filters)
+    head = "| omega | " + " | ".join(
+        f"{k} x pos RMSE (m) | {k} vs best (m) | {k} lost" for k in kinds) + " |"
+    lines = [f"seed001 GCI weight tuning, geometry {t.scenario.geometry}: runs {t.runs[0]}.."
+             f"{t.runs[-1]} ({len(t.runs)} runs x {t.scenario.num_scans} scans; Table 1 "
+             f"evaluates runs below {TUNE_FIRST_RUN}); x-position RMSE of the GCI-fused filter "
+             f"over the runs not lost; 'vs best': paired difference to that filter's best "
+             f"candidate +- standard error", "", head,
+             "|---|" + "---:|---:|---:|" * len(kinds)]
+    for r in t.rows():
+        cells = []
+        for k in kinds:
+            c = r[k]
+            cells += [f"{c['rmse']:.3f}", f"{c['delta']:+.3f} +- {c['delta_se']:.3f}"
+                      if c["delta"] != 0 else "best", f"{c['lost']}/{len(t.runs)}"]
+        lines.append(f"| {r['omega']} | " + " | ".join(cells) + " |")
+    per = ", ".join(f"{k}: {t.best(k)}" for k in kinds)
+    lines += ["", f"best omega: {t.best()} (fewest lost tracks, then the smallest x-position "
+              f"RMSE{' averaged over ' + ' and '.join(kinds) if len(kinds) > 1 else ''}); "
+              f"best per filter: {per}"]
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed001 --runs N --geometry A|G|close [--jobs J]``."""
+    """``python -m sim.seed001 --runs N --geometry A|G|close|near [--jobs J]`` prints Table 1;
+    ``--tune-omega 0.2,0.3,det --tune-runs N`` compares GCI weights on runs 10000.. instead."""
     ap = argparse.ArgumentParser(prog="python -m sim.seed001", description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--geometry", choices=sorted(GEOMETRIES), default="A")
@@ -316,11 +504,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jitter-kind", choices=("add", "shrink"), default="add")
     ap.add_argument("--ratio-space", choices=("position", "full"), default="position")
     ap.add_argument("--no-clip", action="store_true", help="keep negative information")
-    ap.add_argument("--omega", default="0.3",
-                    help="GCI weight of the other peer: a number in [0, 1], 'det' or 'chernoff'")
+    default_omega = omega_label(SingleTargetConfig.gci_omega)
+    ap.add_argument("--omega", default=default_omega,
+                    help="GCI weight of the other peer: a number in [0, 1], 'det' or 'chernoff' "
+                         f"(default {default_omega})")
     ap.add_argument("--filters", default="IMM-EKF,IMM-PF")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--first-run", type=int, default=0)
+    ap.add_argument("--tune-omega", metavar="W1,W2,...",
+                    help="instead of Table 1: the GCI-fused x-position RMSE for each candidate "
+                         "weight (numbers, 'det', 'chernoff') on runs "
+                         f"{TUNE_FIRST_RUN}.. only (never evaluated runs), and the best")
+    ap.add_argument("--tune-runs", type=int, default=40,
+                    help=f"tuning runs {TUNE_FIRST_RUN}..{TUNE_FIRST_RUN}+N-1 (default 40)")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)
     if a.runs < 1:
@@ -340,6 +536,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 jitter_kind=a.jitter_kind),
         ratio=RatioConfig(space=a.ratio_space, clip=not a.no_clip),
         gci_omega=omega, filters=filters)
+    if a.tune_omega is not None:
+        if a.first_run != 0:
+            ap.error(f"--first-run does not apply to --tune-omega (tuning runs start at "
+                     f"{TUNE_FIRST_RUN})")
+        if a.tune_runs < 2:
+            ap.error("--tune-runs must be at least 2")
+        try:
+            omegas = parse_omegas(a.tune_omega)
+        except ValueError as exc:
+            ap.error(f"--tune-omega: {exc}")
+        t = tune_omega(scn, cfg, omegas, a.tune_runs, jobs=a.jobs, progress=not a.quiet)
+        print(format_tuning(t))
+        return 0
+    if a.first_run + a.runs > TUNE_FIRST_RUN:
+        print(f"note: runs >= {TUNE_FIRST_RUN} are the GCI weight's tuning runs",
+              file=sys.stderr)
     res = run_experiment(scn, cfg, a.runs, jobs=a.jobs, progress=not a.quiet,
                          first_run=a.first_run)
     print(format_table(res))
@@ -350,12 +562,17 @@ __all__ = [
     "GEOMETRIES",
     "ExperimentConfig",
     "ExperimentResult",
+    "OmegaTuning",
     "RadarSpec",
     "Seed001Scenario",
+    "TUNE_FIRST_RUN",
     "format_table",
+    "format_tuning",
     "measure",
     "run_experiment",
     "run_once",
+    "tune_omega",
+    "tune_once",
     "truth",
 ]
 
