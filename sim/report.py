@@ -309,6 +309,16 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> list[Path
             for caption, path in seed000_figures(cell, d, out):
                 lines += [f"![{caption}]({path.name})", "", f"*{caption}*", ""]
                 written.append(path)
+    csv_path = out / "per_run.csv"
+    with csv_path.open("w", newline="") as fh:
+        import csv
+
+        w = csv.writer(fh)
+        cols = ["cell", "cell_label", "run", *scalars]
+        w.writerow(cols)
+        data = [table.column(c).to_pylist() for c in cols]
+        w.writerows(zip(*data, strict=True))
+    lines += ["Every run's scalar metrics: [per_run.csv](per_run.csv).", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")
-    return [path, *written]
+    return [path, csv_path, *written]

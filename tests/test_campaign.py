@@ -178,6 +178,8 @@ def test_report_tables_and_seed000_figures(tmp_path, capsys):
     md = (out / "report" / "report.md").read_text()
     assert "| birth.model=truth | 4 |" in md and "95 % CI" in md
     assert "mean_ospa.fused" in md and "mean_ospa.centralized" in md
+    csv_lines = (out / "report" / "per_run.csv").read_text().splitlines()
+    assert len(csv_lines) == 9 and csv_lines[0].startswith("cell,cell_label,run,mean_ospa.")
 
 
 def test_campaign_file_errors_are_one_line(tmp_path, capsys):
