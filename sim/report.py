@@ -160,6 +160,17 @@ def seed000_figures(cell: dict, data: dict[str, Any], out: Path) -> list[tuple[s
     return figs
 
 
+def _tick_labels(values: list) -> dict[str, str]:
+    """Short labels: for tables (``{kind = "scans", low = 0, high = 2}``) only the entries
+    that differ between the values (``high=2``)."""
+    if values and all(isinstance(v, dict) for v in values):
+        keys = [k for k in dict.fromkeys(k for v in values for k in v)
+                if len({repr(v.get(k)) for v in values}) > 1]
+        if keys:
+            return {repr(v): ", ".join(f"{k}={_fmt(v.get(k))}" for k in keys) for v in values}
+    return {repr(v): _fmt(v) for v in values}
+
+
 def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
                  n: int) -> tuple[str, Path] | None:
     plt = _plt()
@@ -181,7 +192,7 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     if not groups:
         return None
     xs = list(dict.fromkeys(repr(v) for pts in groups.values() for v, _, _ in pts))
-    labels = {repr(v): _fmt(v) for pts in groups.values() for v, _, _ in pts}
+    labels = _tick_labels([v for pts in groups.values() for v, _, _ in pts])
     numeric = all(isinstance(v, int | float) and not isinstance(v, bool)
                   for pts in groups.values() for v, _, _ in pts)
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -191,7 +202,8 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
                                                        for _, _, h in pts],
                     marker="o", capsize=3, label=g)
     if not numeric:
-        ax.set_xticks(range(len(xs)), [labels[v] for v in xs])
+        ax.set_xticks(range(len(xs)), [labels[v] for v in xs],
+                      rotation=20 if max(len(labels[v]) for v in xs) > 12 else 0)
     ax.set_xlabel(x)
     ax.set_ylabel(y)
     ax.grid(alpha=0.3)
