@@ -200,7 +200,7 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
       ``ready/p``; subscribes to its own ``scan/p``, ``truth``, ``ctl`` and ``estimate/*``
       (what it fuses), to liveliness ``alive/*``;
     - the world: puts ``scan/*``, ``truth``, ``ctl``; token ``alive/<world>``; liveliness
-      subscriptions on ``alive/*`` and ``ready/*``.
+      subscriptions on ``alive/*`` and ``ready/*``; subscribes to ``scan/*`` (its own tools).
     """
     k = Keys(network)
     everything = f"{k.base}/**"
@@ -215,6 +215,8 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
         rule(f"{world}-token", ["liveliness_token"], [k.alive(world)]),
         rule(f"{world}-hear", ["declare_liveliness_subscriber", "liveliness_query"],
              [k.alive("*"), k.ready("*")]),
+        # the world's own tools (the launcher's process-fault injector) follow the scans
+        rule(f"{world}-watch", ["declare_subscriber"], [k.scan("*")]),
         # liveliness replies (who is alive), on every member's ingress
         rule("replies", ["reply"], [everything]),
         # egress is checked against the receiving member: a member sends what it may send
@@ -224,8 +226,8 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
              [everything], flows=("egress",)),
     ]
     subjects = [{"id": f"m-{world}", "cert_common_names": [world]}]
-    policies = [{"rules": [f"{world}-put", f"{world}-token", f"{world}-hear", "replies",
-                           "send"], "subjects": [f"m-{world}"]}]
+    policies = [{"rules": [f"{world}-put", f"{world}-token", f"{world}-hear",
+                           f"{world}-watch", "replies", "send"], "subjects": [f"m-{world}"]}]
     for p in peers:
         check_name(p, "peer name")
         rules += [

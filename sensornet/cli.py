@@ -559,9 +559,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
     _check_listen_free(args.listen or [])
     _resolve_viewer(args)
-    if args.secure is not None and pfaults:
-        raise UserError("--fault watches the scans with its own session: not available with "
-                        "--secure yet")
     out = _run_folder(args.out, "run")
     secure = _run_keys(args, scn, out)
     speed = args.speed or scn.network.speed

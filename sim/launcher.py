@@ -41,6 +41,8 @@ class RunHandle:
     """Set by :func:`wait_run` when the run outlived its timeout (and was stopped)."""
     stopped: bool = False
     """Set by :func:`wait_run` when the caller's ``stop`` event ended the run."""
+    secure: Path | None = None
+    """The network's keys folder in secure mode (tools of the launcher use the world's key)."""
 
     def restart(self, name: str) -> subprocess.Popen:
         """Start peer ``name`` again (same command, a fresh listening port)."""
@@ -111,7 +113,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         common += ["--secure", str(secure)]
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    handle = RunHandle(out=out, endpoints=eps, network=network)
+    handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure)
     cmds = {"world": [*_cli(), "world", source, *common,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run)]
@@ -324,7 +326,13 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
             current["k"] = max(current["k"], k)
             cond.notify_all()
 
-    session = open_session(connect=[handle.endpoints["world"]])
+    security = None
+    if handle.secure is not None:  # watches the scans as the world may (its own key)
+        from peers.security import WORLD, Security
+
+        security = Security.load(handle.secure, WORLD, handle.network,
+                                 [n for n in handle.procs if n != "world"])
+    session = open_session(connect=[handle.endpoints["world"]], security=security)
     try:
         sub = session.declare_subscriber(Keys(handle.network).scan(sensor), on_scan)
         while pending and not stop.is_set():

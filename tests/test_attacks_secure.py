@@ -205,3 +205,20 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
             name, s["mean_ospa_fused"], clean_summaries[name]["mean_ospa_fused"])
         assert s["stats"]["last_fused_from"] == clean_summaries[name]["stats"][
             "last_fused_from"], name
+
+
+def test_process_faults_in_secure_mode(tmp_path, keys):
+    """The launcher's fault injector follows the scans with the world's key."""
+    from sensornet.cli import main
+
+    out = tmp_path / "run"
+    code = main(["run", "seed000", "--secure", str(keys), "--no-rerun", "--out", str(out),
+                 "--fault", "kill:s3@15", *[a for s in SETS for a in ("--set", s)]])
+    assert code == 0
+    done = json.loads((out / "process-faults.json").read_text())
+    assert [(f["action"], f["peer"]) for f in done] == [("kill", "s3")]
+    assert done[0]["at_scan"] >= 15
+    summaries = read_summaries(out, ["s1", "s2"])
+    for name, s in summaries.items():
+        assert s["scans"] == 40 and s["stop_reason"] == "end of run", name
+        assert any(p == "s3" and what == "left" for p, what, _, _ in s["peer_events"]), name
