@@ -4,9 +4,11 @@ Two single-target peers, one per sensor, each an IMM-PDAF (or fuzzy IMM) behind 
 :class:`peers.contracts.LocalEstimator` contract (:class:`peers.pda_parts.PdaEstimator`):
 
 * ``local``: each peer on its own sensor, no exchange;
-* ``CI``: estimate sharing: each peer publishes its posterior, fuses the other's by
-  covariance intersection (:class:`peers.pda_parts.CiFuser`, the fuser a peer runs) and takes
-  the fused estimate as its next prior (feedback);
+* ``CI``: estimate sharing: each peer publishes its local posterior and fuses the other's
+  by covariance intersection (:class:`peers.pda_parts.CiFuser`, the fuser a peer runs); the
+  local filters run on (track-to-track fusion);
+* ``CI+feedback``: the same, and each peer takes the fused estimate as its next prior (every
+  IMM model restarts from the one fused Gaussian: the models' own states are lost);
 * ``sequential``: measurement sharing: every peer applies sensor 1's returns, then sensor 2's,
   on the latest estimate (the paper's scheme, exact; both peers hold the same estimate).
 
@@ -33,7 +35,7 @@ from sim import seed003
 from sim.progress import Progress
 from tracking.imm import POS, VEL
 
-MODES = ("local", "CI", "sequential")
+MODES = ("local", "CI", "CI+feedback", "sequential")
 
 
 def run_once(cfg: Mapping, run: int, method: str = "IMM-PDAF") -> dict[str, np.ndarray]:
@@ -55,7 +57,7 @@ def run_once(cfg: Mapping, run: int, method: str = "IMM-PDAF") -> dict[str, np.n
         out[key] = np.stack([np.hypot(d[:, POS[0]], d[:, POS[1]]),
                              np.hypot(d[:, VEL[0]], d[:, VEL[1]])])
 
-    for feedback, mode in ((False, "local"), (True, "CI")):
+    for feedback, mode in ((False, "local"), (False, "CI"), (True, "CI+feedback")):
         peers = [PdaEstimator(seed003.make_filter(cfg, method, m0, P0), s, POS, feedback)
                  for s in sens]
         fusers = [CiFuser() for _ in sens]

@@ -52,7 +52,8 @@ def test_parts_meet_the_contracts_and_fuse():
 def test_peer_modes_one_run():
     cfg = seed003.load(overrides={"clutter.mode": "region", "clutter.in_gate": 0.5})
     r = seed003_peers.run_once(cfg, 10000)
-    assert set(r) == {"local s1", "local s2", "CI s1", "CI s2", "sequential s1+s2"}
+    assert set(r) == {"local s1", "local s2", "CI s1", "CI s2", "CI+feedback s1",
+                      "CI+feedback s2", "sequential s1+s2"}
     rows = seed003_peers.summarise(cfg, [r])
     assert "sequential" in seed003_peers.format_table(rows)
     # straight leg, light clutter: every mode tracks within a few sigma
