@@ -345,12 +345,14 @@ def _prepare_peer(args: argparse.Namespace, scn) -> None:
 
 
 def _security(args: argparse.Namespace, member: str, scn):
-    """``--secure DIR`` of a peer or the world: its TLS files and the network's policy."""
-    if not getattr(args, "secure", None):
+    """``--secure DIR`` (or the scenario's ``[security] keys``) of a peer or the world: its
+    TLS files and the network's policy."""
+    folder = getattr(args, "secure", None) or scn.security
+    if not folder:
         return None
     from peers.security import Security, check_endpoints
 
-    sec = Security.load(args.secure, member, args.network, scn.sensor_names)
+    sec = Security.load(folder, member, args.network, scn.sensor_names)
     check_endpoints([*(args.listen or []), *(args.connect or [])])
     return sec
 
@@ -559,6 +561,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
     _check_listen_free(args.listen or [])
     _resolve_viewer(args)
+    if args.secure is None and scn.security:  # the scenario's [security] keys
+        args.secure = scn.security
     out = _run_folder(args.out, "run")
     secure = _run_keys(args, scn, out)
     speed = args.speed or scn.network.speed

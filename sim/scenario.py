@@ -294,6 +294,10 @@ class Scenario:
     (:mod:`sim.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
     the scan interval ``scan_period / network.speed`` at load: change the speed with an
     override, not with ``dataclasses.replace``."""
+    security: str | None = None
+    """The network's keys folder from ``[security] keys = "DIR"`` (relative to the scenario
+    file): ``run``/``demo``/``peer``/``world`` then run in secure mode as with ``--secure DIR``
+    (:mod:`peers.security`). ``None``: plain mode unless ``--secure`` is given."""
     source: str = ""
     """Where the scenario was read from (a path or ``builtin:<name>``); informational."""
 
@@ -633,7 +637,8 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
-                                 "fusion", "metrics", "network", "faults", "extended"])
+                                 "fusion", "metrics", "network", "faults", "extended",
+                                 "security"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -679,6 +684,12 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
     if scn.network.filter == "et-gmphd" and scn.extended is None:
         raise ctx.fail("network.filter", "key 'network.filter' is 'et-gmphd', which needs an "
                                          "[extended] table")
+    if top.has("security"):
+        sec = _Table(top.raw("security"), "security", ctx, ["keys"])
+        keys = Path(sec.text("keys"))
+        if not keys.is_absolute() and not origin.startswith("builtin:"):
+            keys = Path(origin).parent / keys
+        scn = dataclasses.replace(scn, security=str(keys))
     raw_faults = top.raw("faults", {})
     if raw_faults != {}:
         faults = _faults(_Table(raw_faults, "faults", ctx, ["default", "peers", "links"]),

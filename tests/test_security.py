@@ -279,3 +279,30 @@ def test_secure_flags_are_refused_in_one_line(keys, tmp_path, capsys):
     refused(["run", "seed000", "--secure", str(partial), "--out", str(tmp_path / "r4")],
             "no key for s2, s3")
     assert not any((tmp_path / f"r{i}").exists() for i in (1, 2, 4))  # nothing left behind
+
+
+def test_a_scenario_security_table_runs_secure(keys, tmp_path):
+    """``[security] keys = "DIR"`` (relative to the scenario file) is ``--secure DIR``."""
+    from sim.scenario import ScenarioError, load_scenario, scenario_text
+
+    folder = tmp_path / "scn"
+    folder.mkdir()
+    import shutil
+
+    shutil.copytree(keys, folder / "keys")
+    text = scenario_text("seed000") + '\n[security]\nkeys = "keys"\n'
+    (folder / "secure.toml").write_text(text)
+    scn = load_scenario(folder / "secure.toml")
+    assert scn.security == str(folder / "keys")
+    with pytest.raises(ScenarioError, match="did you mean 'security.keys'"):
+        load_scenario("seed000", overrides={"security.key": "x"})
+    # the launcher's peers and world get --secure: a wrong network name is refused at once
+    assert main(["run", str(folder / "secure.toml"), "--network", "other",
+                 "--out", str(tmp_path / "r")]) == 2
+    out = tmp_path / "run"
+    assert main(["run", str(folder / "secure.toml"), "--no-rerun", "--out", str(out),
+                 "--set", "scenario.num_scans=15", "--set", "birth.model=truth"]) == 0
+    cmds = json.loads((out / "commands.json").read_text())
+    assert all("--secure" in c for c in cmds.values())
+    assert all(e.startswith("tls/") for c in cmds.values()
+               for i, e in enumerate(c) if i and c[i - 1] in ("--listen", "--connect"))
