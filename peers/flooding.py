@@ -13,7 +13,7 @@ seed's unit: a 2-D measurement is 2 tuples, counted once per neighbour a scan is
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,14 +89,25 @@ class FloodOutcome:
     """``(S,)`` tuples each peer sent (2 per measurement per neighbour)."""
     duplicates: np.ndarray
     """``(S,)`` duplicate copies each peer received and dropped."""
+    late: np.ndarray
+    """``(S,)`` copies that arrived after the last iteration (the scan's deadline)."""
+
+
+Deliver = Callable[[int, int, ScanKey, int], Sequence[float]]
+"""``deliver(sender, receiver, (origin, scan), iteration)``: the delays, in iterations, of the
+copies that arrive (``[]`` lost, ``[0.0]`` this iteration, two entries duplicated); a copy
+``d`` iterations late is received in iteration ``iteration + floor(d)``."""
 
 
 def flood(adjacency: np.ndarray, scans: Sequence[np.ndarray], iterations: int, scan: int = 0,
-          loss: float = 0.0, rng: np.random.Generator | None = None) -> FloodOutcome:
+          loss: float = 0.0, rng: np.random.Generator | None = None,
+          deliver: Deliver | None = None) -> FloodOutcome:
     """Flood one scan index over ``adjacency (S, S)`` for ``iterations`` synchronous iterations.
 
     ``scans[i]`` is peer i's own ``(m_i, 2)`` scan. Each (sender, receiver, scan) message is lost
-    with probability ``loss`` (one draw from ``rng`` each, in a fixed order).
+    with probability ``loss`` (one draw from ``rng`` each, in a fixed order), or ``deliver``
+    decides (e.g. the fault layer: ``sim.seed004.fault_delivery``). After the last iteration
+    every peer closes the scan: a copy still in flight then counts as late at its receiver.
     """
     A = np.asarray(adjacency, dtype=bool)
     S = len(A)
@@ -107,17 +118,27 @@ def flood(adjacency: np.ndarray, scans: Sequence[np.ndarray], iterations: int, s
     sent = np.zeros(S, dtype=np.int64)
     if loss > 0 and rng is None:
         raise ValueError("flood with loss needs an rng")
-    for _ in range(iterations):
+    in_flight: dict[int, list[tuple[int, ScanKey, np.ndarray]]] = {}
+    for it in range(iterations):
         messages = [(i, peers[i].outgoing()) for i in range(S)]  # all send, then all receive
         for i, out in messages:
             for key, z in out:
                 sent[i] += TUPLES_PER_MEASUREMENT * len(z) * len(neighbours[i])
                 for j in neighbours[i]:
-                    if loss > 0 and rng.random() < loss:
-                        continue
-                    peers[j].receive(key[0], key[1], z)
-    return FloodOutcome([set(p.pooled(scan)) for p in peers], sent,
-                        np.array([p.duplicates for p in peers]))
+                    if deliver is not None:
+                        for d in deliver(i, int(j), key, it):
+                            in_flight.setdefault(it + int(np.floor(d)), []).append((j, key, z))
+                    elif not (loss > 0 and rng.random() < loss):
+                        in_flight.setdefault(it, []).append((j, key, z))
+        for j, key, z in in_flight.pop(it, []):
+            peers[j].receive(key[0], key[1], z)
+    held = [set(p.pooled(scan)) for p in peers]
+    for p in peers:
+        p.close(scan, S)
+    for j, key, z in (m for arrivals in in_flight.values() for m in arrivals):
+        peers[j].receive(key[0], key[1], z)  # after the close: counted late
+    return FloodOutcome(held, sent, np.array([p.duplicates for p in peers]),
+                        np.array([p.late for p in peers]))
 
 
 def flooding_tuples(hops: np.ndarray, sizes: np.ndarray, iterations: int) -> np.ndarray:
@@ -133,4 +154,5 @@ def flooding_tuples(hops: np.ndarray, sizes: np.ndarray, iterations: int) -> np.
     return deg * (reach @ (TUPLES_PER_MEASUREMENT * np.asarray(sizes, dtype=np.int64)))
 
 
-__all__ = ["FloodOutcome", "Flooder", "TUPLES_PER_MEASUREMENT", "flood", "flooding_tuples"]
+__all__ = ["Deliver", "FloodOutcome", "Flooder", "TUPLES_PER_MEASUREMENT", "flood",
+           "flooding_tuples"]

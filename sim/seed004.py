@@ -44,6 +44,7 @@ import csv
 import sys
 import time
 import tomllib
+import zlib
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
@@ -53,7 +54,9 @@ import numpy as np
 import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
 from scipy.sparse.csgraph import depth_first_order, shortest_path
 
-from peers.flooding import TUPLES_PER_MEASUREMENT, flooding_tuples
+from peers.faults import FaultInjector
+from peers.flooding import TUPLES_PER_MEASUREMENT, Deliver, flood, flooding_tuples
+from sim.faultplan import FaultPlan, LinkFaults, Uniform
 from sim.progress import Progress
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
@@ -406,6 +409,49 @@ def _aa(reducer: Reducer):
     return fuse
 
 
+# -- flooding under the fault layer ----------------------------------------------------------
+
+
+def fault_delivery(injector: FaultInjector, names: Sequence[str], k: int, interval: float,
+                   slot: float) -> Deliver:
+    """``peers.flooding.flood``'s ``deliver`` from the fault layer: each forward of scan
+    ``(origin, k)`` in iteration ``it`` on ``s -> r`` is one message to
+    :meth:`peers.faults.FaultInjector.decide`, keyed ``(k, it, crc32("flood/" + origin))`` at
+    the scan time ``k * interval``; its delays are returned in iterations of ``slot`` s."""
+    def deliver(i: int, j: int, key: tuple[int, int], it: int) -> list[float]:
+        origin = names[key[0]]
+        delays = injector.decide(names[i], names[j], k * interval, f"flood/{origin}/{k}/{it}",
+                                 (k & 0xFFFFFFFF, it, zlib.crc32(f"flood/{origin}".encode())))
+        return [d / slot for d in delays]
+    return deliver
+
+
+def flooding_under_faults(scn: Seed004, plan: FaultPlan, scans: int = 60, seed: int = 0,
+                          deadline: float = 0.5) -> dict[str, float]:
+    """Flood ``scans`` scan indices through ``plan``'s faults, ``scn.iterations`` iterations of
+    ``deadline * scan_period / iterations`` s each: the share of (peer, scan) pairs holding
+    every scan, and missing, duplicate and late scans per peer per scan."""
+    names = [f"s{i + 1}" for i in range(len(scn.positions))]
+    injector = FaultInjector(plan, seed)
+    slot = deadline * scn.scan_period / scn.iterations
+    S = len(names)
+    rng = np.random.default_rng([scn.seed, seed])
+    complete = missing = dup = late = 0.0
+    for k in range(1, scans + 1):
+        z = [np.zeros((rng.poisson(scn.clutter_rate + 3 * scn.detection_probability), 2))
+             for _ in range(S)]
+        out = flood(scn.adjacency, z, scn.iterations, k,
+                    deliver=fault_delivery(injector, names, k, scn.scan_period, slot))
+        sizes = np.array([len(h) for h in out.held])
+        complete += (sizes == S).sum()
+        missing += (S - sizes).sum()
+        dup += out.duplicates.sum()
+        late += out.late.sum()
+    n = scans * S
+    return {"complete": complete / n, "missing": missing / n, "duplicates": dup / n,
+            "late": late / n}
+
+
 # -- Monte Carlo ------------------------------------------------------------------------------
 
 
@@ -526,6 +572,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--out", type=Path, help="write the CSVs and the PNG here")
     p.add_argument("--no-consensus", action="store_true",
                    help="leave out GCI and AA (fast: flooding, IC, centralised, local only)")
+    p.add_argument("--flood-loss", metavar="P1,P2,...",
+                   help="only measure flooding completion under these link-loss probabilities "
+                        "(fault layer, 0-20 ms uniform delay, deadline 0.5 scan)")
     p.add_argument("--replot", metavar="TITLE",
                    help="redraw the PNG in --out from its CSVs (no runs) with this title")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -543,6 +592,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if a.runs < 1 or a.jobs < 1:
         print("seed004: --runs and --jobs must be at least 1", file=sys.stderr)
         return 2
+    if a.flood_loss:
+        print("| link loss | (peer, scan) complete | missing / peer / scan | duplicates | late |")
+        print("|---|---|---|---|---|")
+        for p_loss in (float(x) for x in a.flood_loss.split(",")):
+            plan = FaultPlan(LinkFaults(delay=Uniform(0.0, 0.02), loss=p_loss),
+                             interval=scn.scan_period)
+            r = flooding_under_faults(scn, plan, scn.num_scans, a.first_run)
+            print(f"| {p_loss:g} | {100 * r['complete']:.1f} % | {r['missing']:.3f} | "
+                  f"{r['duplicates']:.1f} | {r['late']:.3f} |")
+        return 0
     runs = range(a.first_run, a.first_run + a.runs)
     t0 = time.monotonic()
     result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)

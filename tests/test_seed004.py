@@ -79,3 +79,22 @@ def test_main_writes_table_iterations_and_plot(tmp_path, capsys):
     assert back["IDPC"]["tuples"] == pytest.approx(float(rows[0]["tuples"]))
     assert "IDPC t=4" in back
     assert seed004.main(["--replot", "again", "--out", str(tmp_path)]) == 0
+
+
+def test_flooding_through_the_fault_layer(scn):
+    from sim.faultplan import Constant, FaultPlan, LinkFaults
+
+    clean = seed004.flooding_under_faults(scn, FaultPlan(interval=1.0), scans=2)
+    assert clean["complete"] == 1.0 and clean["late"] == 0.0
+    twice = seed004.flooding_under_faults(
+        scn, FaultPlan(LinkFaults(duplicate=1.0), interval=1.0), scans=2)
+    assert twice["complete"] == 1.0 and twice["duplicates"] > clean["duplicates"]
+    lossy = FaultPlan(LinkFaults(loss=0.3), interval=1.0)
+    a = seed004.flooding_under_faults(scn, lossy, scans=3)
+    assert a == seed004.flooding_under_faults(scn, lossy, scans=3)  # keyed draws: repeatable
+    assert a["complete"] < 1.0 and a["missing"] > 0
+    # every copy takes longer than the deadline (0.5 s): each peer keeps only its own scan and
+    # every forward of it arrives late
+    slow = seed004.flooding_under_faults(
+        scn, FaultPlan(LinkFaults(delay=Constant(0.6)), interval=1.0), scans=1)
+    assert slow["missing"] == 19.0 and slow["late"] == pytest.approx(scn.adjacency.sum() / 20)
