@@ -187,7 +187,12 @@ def common_name(cert_path: Path) -> str:
 
 
 # -- access control ---------------------------------------------------------------------------
-def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
+ROUTER_PREFIX = "router"
+"""Members whose name starts with this are routers (``sensornet router``): they relay."""
+
+
+def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
+              routers: Sequence[str] = ()) -> dict:
     """The network's Zenoh ``access_control`` section (default deny).
 
     Zenoh checks a put or a declaration where it arrives (ingress, against the sender's
@@ -200,7 +205,10 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
       ``ready/p``; subscribes to its own ``scan/p``, ``truth``, ``ctl`` and ``estimate/*``
       (what it fuses), to liveliness ``alive/*``;
     - the world: puts ``scan/*``, ``truth``, ``ctl``; token ``alive/<world>``; liveliness
-      subscriptions on ``alive/*`` and ``ready/*``; subscribes to ``scan/*`` (its own tools).
+      subscriptions on ``alive/*`` and ``ready/*``; subscribes to ``scan/*`` (its own tools);
+    - a router (``routers``): relays anything on the network's keys. A member behind a router
+      sees every message as coming from the router's certificate, so the router is where the
+      per-member rules are enforced (at its ingress, by the client's certificate name).
     """
     k = Keys(network)
     everything = f"{k.base}/**"
@@ -241,6 +249,15 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD) -> dict:
         subjects.append({"id": f"m-{p}", "cert_common_names": [p]})
         policies.append({"rules": [f"{p}-put", f"{p}-token", f"{p}-hear", f"{p}-live",
                                    "replies", "send"], "subjects": [f"m-{p}"]})
+    if routers:
+        rules.append(rule("relay", ["put", "delete", "liveliness_token", "declare_subscriber",
+                                    "declare_liveliness_subscriber", "liveliness_query",
+                                    "reply", "query", "declare_queryable"],
+                          [everything], flows=("ingress", "egress")))
+        for r in routers:
+            check_name(r, "router name")
+            subjects.append({"id": f"m-{r}", "cert_common_names": [r]})
+        policies.append({"rules": ["relay"], "subjects": [f"m-{r}" for r in routers]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
 
@@ -255,6 +272,8 @@ class Security:
     network: str
     peers: tuple[str, ...]
     world: str = WORLD
+    routers: tuple[str, ...] = ()
+    """Members named ``router*`` in the folder's ``members.json``: trusted to relay."""
 
     @classmethod
     def load(cls, folder: str | Path, member: str, network: str,
@@ -274,7 +293,10 @@ class Security:
         if cn != member:
             raise SecurityError(f"{folder / (member + '.pem')} is the certificate of {cn!r}, "
                                 f"not of {member!r}")
-        return cls(folder.resolve(), member, network, tuple(peers))
+        roster = folder / "members.json"
+        names = json.loads(roster.read_text()).get("members", []) if roster.is_file() else []
+        routers = tuple(n for n in names if n.startswith(ROUTER_PREFIX))
+        return cls(folder.resolve(), member, network, tuple(peers), routers=routers)
 
     @property
     def ca(self) -> Path:
@@ -297,7 +319,7 @@ class Security:
         for name, value in tls.items():
             conf.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
         conf.insert_json5("access_control", json.dumps(
-            acl_rules(self.network, self.peers, self.world)))
+            acl_rules(self.network, self.peers, self.world, self.routers)))
 
 
 def tls_endpoint(port: int, host: str = "127.0.0.1") -> str:

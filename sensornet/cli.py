@@ -756,6 +756,21 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_router(args: argparse.Namespace) -> int:
+    """``sensornet router``: a Zenoh router (see :mod:`sim.router`)."""
+    from sim.router import router_security, run_router
+
+    security = None
+    if args.secure:
+        security = router_security(args.secure, args.name, args.network)
+        from peers.security import check_endpoints
+
+        check_endpoints([*args.listen, *(args.connect or [])])
+    run_router(args.listen, args.connect or [], args.config, security,
+               say=lambda line: print(line, flush=True))
+    return 0
+
+
 def cmd_keys(args: argparse.Namespace) -> int:
     """``sensornet keys NETWORK --out DIR``: the network's CA and one key + certificate per
     member (every peer and the world), plain PEM files (see :mod:`peers.security`)."""
@@ -1024,6 +1039,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("action", choices=["list", "show"])
     s.add_argument("name", nargs="?", default="seed000")
     s.set_defaults(func=cmd_scenario)
+
+    ro = sub.add_parser("router", help="a Zenoh router for members that cannot all reach "
+                        "each other (clients connect to it)")
+    ro.add_argument("--listen", action="append", required=True, metavar="ENDPOINT",
+                    type=_endpoint, help="endpoint to listen on, e.g. tls/0.0.0.0:7447")
+    ro.add_argument("--connect", action="append", metavar="ENDPOINT", type=_endpoint,
+                    help="another router to link to (repeatable)")
+    ro.add_argument("--config", type=_existing_file, help="a Zenoh JSON5 config file")
+    ro.add_argument("--secure", metavar="DIR", help="mutual TLS and the network's access "
+                    "control with the router's key in DIR (sensornet keys ... --members router)")
+    ro.add_argument("--name", default="router", help="the router's member name (default "
+                    "router; must start with 'router')")
+    ro.add_argument("--network", type=_network_name,
+                    help="check that the keys are this network's")
+    ro.set_defaults(func=cmd_router)
 
     k = sub.add_parser("keys", help="make a network's CA and each member's key and "
                        "certificate (for --secure)")

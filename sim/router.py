@@ -1,0 +1,65 @@
+"""``sensornet router``: a Zenoh router from the Python package (no ``zenohd`` is available from
+the package index), for networks whose members cannot all reach each other.
+
+Members connect to it as Zenoh clients (``mode: "client"`` in a ``--config`` file, or a session
+of their own). In secure mode it holds a ``router*`` member certificate of the network's CA
+(``sensornet keys NETWORK --out DIR --members router``): it speaks mutual TLS only and enforces
+the network's access control at its ingress, by each client's certificate name; the members
+trust the ``router*`` names to relay (a member behind a router sees every message as the
+router's).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+from peers.session import SessionError, zenoh_config
+
+
+def router_security(folder: str | Path, name: str, network: str | None = None):
+    """The router's :class:`peers.security.Security` from a keys folder (roster from its
+    ``members.json``: the world, the routers, every other name a peer)."""
+    from peers.security import ROUTER_PREFIX, WORLD, Security, SecurityError, keys_network
+
+    made_for = keys_network(folder)
+    if network and network != made_for:
+        raise SecurityError(f"--secure {folder}: keys of network {made_for!r}, not of "
+                            f"{network!r}")
+    roster = Path(folder) / "members.json"
+    names = json.loads(roster.read_text()).get("members", []) if roster.is_file() else []
+    peers = [n for n in names if n != WORLD and not n.startswith(ROUTER_PREFIX)]
+    if not name.startswith(ROUTER_PREFIX):
+        raise SecurityError(f"a router's member name must start with {ROUTER_PREFIX!r}, "
+                            f"not {name!r}")
+    return Security.load(folder, name, made_for, peers)
+
+
+def run_router(listen: Sequence[str], connect: Sequence[str] = (),
+               config_file: str | None = None, security=None,
+               stop: threading.Event | None = None, say=None) -> None:
+    """Run a router until SIGINT/SIGTERM (or ``stop`` is set)."""
+    say = say or (lambda line: None)
+    conf = zenoh_config(listen, connect, config_file, security=security)
+    conf.insert_json5("mode", '"router"')
+    stop = stop or threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, lambda signum, frame: stop.set())
+    try:
+        session = zenoh.open(conf)
+    except Exception as exc:
+        raise SessionError(f"cannot start the router (listen {list(listen)}): {exc}") from None
+    try:
+        who = f" as {security.member} of network {security.network}" if security else ""
+        say(f"router: listening on {', '.join(listen)}{who}")
+        while not stop.wait(0.5):
+            pass
+    finally:
+        session.close()
+    say("router: stopped")
