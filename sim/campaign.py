@@ -5,7 +5,7 @@ A campaign file (see ``sim/campaigns/*.toml``)::
     [campaign]
     name = "policy-sweep"
     scenario = "seed000"        # built-in name, or a scenario file (relative to this file)
-    runner = "twin"             # "experiment" | "twin" | "real" (sim/runners.py)
+    runner = "twin"             # "experiment" | "twin" | "real" | "seed001" (sim/runners.py)
     runs = 50                   # Monte Carlo runs per cell (runs first_run .. first_run+runs-1)
     first_run = 0
     metrics = ["*"]             # patterns of the metric columns to keep (fnmatch)
@@ -49,7 +49,7 @@ from sim.progress import Progress
 from sim.runners import RUNNERS, Task, code_version, scenario_hash
 from sim.scenario import ScenarioError, builtin_scenarios, load_scenario
 
-FIGURE_KINDS = ("seed000", "sweep", "ospa-time")
+FIGURE_KINDS = ("seed000", "seed001", "sweep", "ospa-time")
 
 
 class CampaignError(ScenarioError):
@@ -166,9 +166,13 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     metrics = head.get("metrics", ["*"])
     _check(isinstance(metrics, list) and all(isinstance(m, str) for m in metrics) and metrics,
            label, "campaign.metrics must be a list of column patterns, e.g. [\"*\"]")
-    scen = str(head.get("scenario", "seed000"))
+    scen = str(head.get("scenario", "seed001" if runner == "seed001" else "seed000"))
     scen_path = path.parent / scen
-    if scen_path.is_file():
+    if runner == "seed001":
+        _check(scen == "seed001", label, "the seed001 runner takes scenario = \"seed001\" "
+               "(its settings are the [set]/[grid] keys geometry, particles, omega, ...)")
+        scen_name, scen_text = scen, None
+    elif scen_path.is_file():
         scen_name, scen_text = scen_path.name, scen_path.read_text(encoding="utf-8")
     else:
         key = scen[:-5] if scen.endswith(".toml") else scen
@@ -200,10 +204,15 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     version = code_version()
     for c in cells:
         try:
-            scn = load_scenario(scenario_source(scen_name, scen_text), overrides=c.overrides)
-        except ScenarioError as exc:
+            if runner == "seed001":
+                from sim.runners import seed001_hash, seed001_setup
+
+                c.hash = seed001_hash(seed001_setup(c.overrides))
+            else:
+                c.hash = scenario_hash(load_scenario(scenario_source(scen_name, scen_text),
+                                                     overrides=c.overrides))
+        except (ScenarioError, ValueError) as exc:
             raise CampaignError(f"{label}, cell {c.label!r}: {exc}") from None
-        c.hash = scenario_hash(scn)
         c.keys = [task_key(c.hash, runner, first + r, version) for r in range(n_runs)]
     figures = data.get("figures", [])
     _check(isinstance(figures, list), label, "[[figures]] must be an array of tables")

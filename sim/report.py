@@ -10,7 +10,9 @@ ask (default: OSPA over time per cell):
   sensor before and after level-2 pruning and after fusion;
 * ``sweep``: a metric (``y``, default the fused OSPA) against one grid key (``x``), a line per
   value of ``lines`` (or per combination of the other grid keys), 95 % error bars;
-* ``ospa-time``: every cell's mean fused OSPA per scan in one plot.
+* ``ospa-time``: every cell's mean fused OSPA per scan in one plot;
+* ``seed001``: per cell of a ``seed001`` campaign, Table 1 (x-axis RMSE over the runs not lost,
+  lost tracks) beside the paper's numbers, and a bar chart of the position RMSE.
 """
 
 from __future__ import annotations
@@ -158,6 +160,58 @@ def seed000_figures(cell: dict, data: dict[str, Any], out: Path) -> list[tuple[s
         save(fig, ax, "components", "mean number of components",
              "Components at the fusing sensor before and after each pruning level (Fig. 8)")
     return figs
+
+
+def seed001_table(cell: dict, data: dict[str, Any], out: Path) -> tuple[list[str], Path | None]:
+    """Seed 001's Table 1 for one cell of a ``seed001`` campaign: x-axis RMSE over the runs
+    whose track was not lost, beside the paper's numbers; and a bar chart of the x position
+    RMSE with the paper's values marked."""
+    from sim.seed001 import PAPER_TABLE1
+
+    methods = _methods(data, "msx_pos.")
+    if not methods:
+        return [], None
+    lines = ["| filter | estimate | x pos RMSE (m) | x vel RMSE (m/s) | x acc RMSE (m/s²) | "
+             "lost tracks |", "|---|---|---:|---:|---:|---:|"]
+    pos: dict[str, float] = {}
+    for m in methods:
+        lost = np.array(data[f"lost.{m}"], dtype=float) > 0.5
+        kept = ~lost
+        rmse = [math.sqrt(float(np.mean(np.array(data[f"msx_{q}.{m}"], dtype=float)[kept])))
+                if kept.any() else math.nan for q in ("pos", "vel", "acc")]
+        filt, rule = m.split(".", 1)
+        pos[m] = rmse[0]
+        lines.append(f"| {filt} | {rule.replace('_', ' ')} | {rmse[0]:.3f} | {rmse[1]:.4f} | "
+                     f"{rmse[2]:.4f} | {int(lost.sum())}/{len(lost)} |")
+    for (filt, rule), (p, v, a) in PAPER_TABLE1.items():
+        lines.append(f"| {filt} (paper, 300 runs) | {rule} | {p} | {v} | {a} | – |")
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 4))
+    x = np.arange(len(methods))
+    ax.bar(x, [0.0 if math.isnan(pos[m]) else pos[m] for m in methods], color="tab:blue",
+           label="measured")
+    for i, m in enumerate(methods):
+        if math.isnan(pos[m]):
+            ax.text(i, 0.5, "every track lost", ha="center", va="bottom", fontsize=8)
+    labelled = False
+    for i, m in enumerate(methods):
+        filt, rule = m.split(".", 1)
+        paper = PAPER_TABLE1.get((filt, "fusion")) if "fusion" in rule.lower() else None
+        if paper is not None:
+            ax.plot([i - 0.4, i + 0.4], [paper[0]] * 2, "r-", lw=2,
+                    label=None if labelled else "paper (its fusion row)")
+            labelled = True
+    ax.set_xticks(x, [m.replace(".", "\n").replace("_", " ") for m in methods], fontsize=7)
+    ax.set_ylabel("x position RMSE (m)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8)
+    ax.set_title(f"seed 001 Table 1, {cell['label']} ({len(data['key'])} runs)", fontsize=10)
+    fig.tight_layout()
+    path = out / f"cell{cell['index']}-table1.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return lines, path
 
 
 def _tick_labels(values: list) -> dict[str, str]:
@@ -317,6 +371,14 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> list[Path
                   else "–")
             lines.append(f"| {s} | {_num(mean)} | {ci} | {k} |")
         lines.append("")
+        if any(f["kind"] == "seed001" for f in figures):
+            table1, png = seed001_table(cell, d, out)
+            if table1:
+                lines += ["Table 1 (x axis; RMSE over the runs not lost):", "", *table1, ""]
+            if png is not None:
+                caption = "x position RMSE per filter and estimate; red: the paper's"
+                lines += [f"![{caption}]({png.name})", "", f"*{caption}*", ""]
+                written.append(png)
         if any(f["kind"] == "seed000" for f in figures):
             for caption, path in seed000_figures(cell, d, out):
                 lines += [f"![{caption}]({path.name})", "", f"*{caption}*", ""]

@@ -13,7 +13,12 @@ Runners (``runner`` in the campaign file):
   counts, component counts before and after level-2 pruning (the seed-000 figures);
 * ``twin``: the peer network on the discrete-event twin (:func:`sim.twin.run_twin`): fused and
   local OSPA averaged over the peers, out-of-sequence counters, link-fault counts;
-* ``real``: the peers as processes over Zenoh (:mod:`sim.launcher`), as ``sensornet run``.
+* ``real``: the peers as processes over Zenoh (:mod:`sim.launcher`), as ``sensornet run``;
+* ``seed001``: seed 001's single-target study (:func:`sim.seed001.run_once`: IMM-EKF and IMM-PF
+  peers, each radar alone, GCI fusion and the particle fusion rule); its cells set
+  :data:`SEED001_KEYS` (``geometry = "A"``, ``particles = 800``, ``omega = 0.15``, ...), not
+  scenario-file keys. Per run: mean squared x position / velocity / acceleration error and
+  whether the track was lost, per (filter, estimate): Table 1 from them.
 """
 
 from __future__ import annotations
@@ -32,7 +37,11 @@ from typing import Any
 
 import numpy as np
 
-RUNNERS = ("experiment", "twin", "real")
+RUNNERS = ("experiment", "twin", "real", "seed001")
+
+SEED001_KEYS = ("geometry", "seed", "particles", "jitter", "omega", "filters", "loss_threshold",
+                "loss_after")
+"""What a ``seed001`` campaign's ``[set]``/``[grid]`` may change (sim/seed001.py)."""
 
 _NOT_CODE = {"report.py", "progress.py", "campaign.py", "results.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
@@ -105,6 +114,46 @@ def scenario_source(name: str, text: str | None) -> str:
     return str(_SCENARIO_DIR[digest] / Path(name).name)
 
 
+def seed001_setup(overrides: dict):
+    """``(Seed001Scenario, ExperimentConfig)`` of a ``seed001`` cell; ``ValueError`` naming the
+    key for anything else."""
+    from dataclasses import replace
+
+    from sim.seed001 import FILTERS, GEOMETRIES, ExperimentConfig, Seed001Scenario
+
+    unknown = sorted(set(overrides) - set(SEED001_KEYS))
+    if unknown:
+        raise ValueError(f"seed001 runner: unknown key(s) {unknown} (known: "
+                         f"{', '.join(SEED001_KEYS)})")
+    o = dict(overrides)
+    geometry = o.get("geometry", "A")
+    if geometry not in GEOMETRIES:
+        raise ValueError(f"seed001 runner: geometry must be one of {sorted(GEOMETRIES)}, "
+                         f"got {geometry!r}")
+    scn = Seed001Scenario(geometry=geometry, seed=int(o.get("seed", 1)))
+    cfg = ExperimentConfig()
+    if "particles" in o or "jitter" in o:
+        cfg = replace(cfg, particle=replace(
+            cfg.particle, n_particles=int(o.get("particles", cfg.particle.n_particles)),
+            jitter=float(o.get("jitter", cfg.particle.jitter))))
+    if "omega" in o:
+        cfg = replace(cfg, gci_omega=o["omega"])
+    if "filters" in o:
+        filters = tuple(o["filters"]) if isinstance(o["filters"], list) else (o["filters"],)
+        if not filters or any(f not in FILTERS for f in filters):
+            raise ValueError(f"seed001 runner: filters must be a list of {FILTERS}, "
+                             f"got {o['filters']!r}")
+        cfg = replace(cfg, filters=filters)
+    for k in ("loss_threshold", "loss_after"):
+        if k in o:
+            cfg = replace(cfg, **{k: type(getattr(cfg, k))(o[k])})
+    return scn, cfg
+
+
+def seed001_hash(setup) -> str:
+    return hashlib.sha256(repr(setup).encode()).hexdigest()[:16]
+
+
 def load_task_scenario(task: Task):
     from sim.scenario import load_scenario
 
@@ -118,8 +167,13 @@ def run_task(task: Task) -> dict[str, Any]:
         raise RuntimeError(f"worker {socket.gethostname()}: code version {code_version()} "
                            f"differs from the client's {task.code_version}: install the same "
                            "sensornet version on every worker")
-    scn = load_task_scenario(task)
-    if task.scenario_hash and scenario_hash(scn) != task.scenario_hash:
+    if task.runner == "seed001":
+        setup = seed001_setup(task.overrides)
+        scn, here = setup, seed001_hash(setup)
+    else:
+        scn = load_task_scenario(task)
+        here = scenario_hash(scn)
+    if task.scenario_hash and here != task.scenario_hash:
         raise RuntimeError(f"worker {socket.gethostname()}: the scenario of cell "
                            f"{task.cell_label!r} resolves differently here than on the client")
     t0, c0 = time.perf_counter(), time.process_time()
@@ -129,6 +183,8 @@ def run_task(task: Task) -> dict[str, Any]:
         metrics = _twin_row(scn, task.run)
     elif task.runner == "real":
         metrics = _real_row(scn, task)
+    elif task.runner == "seed001":
+        metrics = _seed001_row(*scn, task.run)
     else:
         raise ValueError(f"unknown runner {task.runner!r} (expected one of {RUNNERS})")
     row: dict[str, Any] = {
@@ -167,6 +223,28 @@ def _experiment_row(scn, run: int) -> dict[str, Any]:
     out["n_true_k"] = res.n_true
     for c, v in res.components.items():
         out[f"comp_k.{c}"] = v
+    return out
+
+
+def seed001_method(filt: str, rule: str) -> str:
+    """``("IMM-EKF", "GCI fusion")`` -> ``IMM-EKF.GCI_fusion``."""
+    return f"{filt}.{rule.replace(' ', '_')}"
+
+
+def _seed001_row(scn, cfg, run: int) -> dict[str, Any]:
+    from sim.seed001 import run_once
+
+    res = run_once(scn, cfg, run)
+    out: dict[str, Any] = {}
+    for (filt, rule), e in res.errors.items():
+        m = seed001_method(filt, rule)
+        sq = np.mean(np.square(e), axis=0)  # x position, velocity, acceleration
+        out[f"msx_pos.{m}"], out[f"msx_vel.{m}"], out[f"msx_acc.{m}"] = (float(x) for x in sq)
+        pe = res.pos_error[(filt, rule)]
+        out[f"lost.{m}"] = float(pe[cfg.loss_after:].max() > cfg.loss_threshold)
+        out[f"mean_pos_error.{m}"] = float(pe.mean())
+    for filt, sec in res.seconds.items():
+        out[f"ms_per_scan.{filt}"] = sec / scn.num_scans * 1e3
     return out
 
 

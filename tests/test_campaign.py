@@ -214,8 +214,39 @@ def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):
     assert len(code_version()) == 16 and code_version() != "test-other"
 
 
+def test_seed001_runner_reproduces_the_table1_rows(tmp_path, capsys):
+    from sim.seed001 import ExperimentConfig, Seed001Scenario, run_experiment
+
+    path = _file(tmp_path, """
+[campaign]
+runner = "seed001"
+runs = 1
+[set]
+filters = ["IMM-EKF"]
+[grid]
+geometry = ["A"]
+[[figures]]
+kind = "seed001"
+""")
+    out = tmp_path / "s1"
+    assert main(["campaign", str(path), "--out", str(out), "--jobs", "2", "--quiet"]) == 0
+    assert main(["report", str(out)]) == 0
+    assert "cell0-table1.png" in capsys.readouterr().out
+    md = (out / "report" / "report.md").read_text()
+    ref = run_experiment(Seed001Scenario(geometry="A"), ExperimentConfig(filters=("IMM-EKF",)),
+                         1, progress=False)
+    for r in ref.rows():
+        p, v, a = r["rmse"]
+        assert f"| IMM-EKF | {r['rule']} | {p:.3f} | {v:.4f} | {a:.4f} | {r['lost']}/1 |" in md
+    assert "| IMM-PF (paper, 300 runs) | fusion | 12.29 |" in md
+    bad = _file(tmp_path, "[campaign]\nrunner = \"seed001\"\n[set]\nparticle = 5\n", "b.toml")
+    assert main(["campaign", str(bad)]) == 2
+    assert "unknown key(s) ['particle']" in capsys.readouterr().err
+
+
 def test_shipped_campaigns_load():
-    for name in ("seed000-figures", "seed000-twin", "policy-sweep", "loss-sweep"):
+    for name in ("seed000-figures", "seed000-twin", "policy-sweep", "loss-sweep",
+                 "seed001-table1"):
         c = load_campaign(name, runs=2)
         assert c.cells and all(len(cell.keys) == 2 for cell in c.cells)
     c = load_campaign("seed000-figures")
