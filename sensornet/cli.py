@@ -305,6 +305,17 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from sim.experiment import format_table, run_experiment, write_outputs
     from sim.scenario import with_birth_model
 
+    if args.scenario == "seed004" or Path(args.scenario).name == "seed004.toml":
+        # seed 004: flooding + clustering against distributed PHD filters (sim/seed004.py)
+        from sim.seed004 import SCENARIO as SEED004
+        from sim.seed004 import main as seed004_main
+
+        path = SEED004 if args.scenario == "seed004" else Path(args.scenario)
+        sets = [a for item in (args.set or []) for a in ("--set", item)]
+        return seed004_main(["--scenario", str(path), "--runs", str(args.runs),
+                             "--jobs", str(min(args.jobs, args.runs)),
+                             "--out", str(_run_folder(args.out, "experiment")), *sets,
+                             *(["--quiet"] if args.quiet else [])])
     scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
     if scn.extended is not None:  # seed 002: the partitioner comparison (sim/seed002.py)
         from sim.seed002 import main as seed002_main

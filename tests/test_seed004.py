@@ -98,3 +98,12 @@ def test_flooding_through_the_fault_layer(scn):
     slow = seed004.flooding_under_faults(
         scn, FaultPlan(LinkFaults(delay=Constant(0.6)), interval=1.0), scans=1)
     assert slow["missing"] == 19.0 and slow["late"] == pytest.approx(scn.adjacency.sum() / 20)
+
+
+def test_sensornet_experiment_seed004(tmp_path):
+    from sensornet.cli import main
+
+    rc = main(["experiment", "seed004", "--runs", "1", "--set", "scenario.num_scans=2",
+               "--set", "consensus.rounds=[1]", "--out", str(tmp_path), "--quiet"])
+    assert rc == 0
+    assert (tmp_path / "seed004_table.csv").exists()
