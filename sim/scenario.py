@@ -383,6 +383,10 @@ def load_scenario(source: str | Path, overrides: Mapping[str, Any] | None = None
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{label}: invalid TOML: {exc}") from None
+    offline = data.get("scenario", {}).get("offline") if isinstance(data.get("scenario"),
+                                                                    dict) else None
+    if offline:  # e.g. seed003.toml: read by its own study, no network peers yet
+        raise ScenarioError(f"{label}: an offline study, not a network scenario; run '{offline}'")
     ctx = _Context(label)
     if overrides:
         ctx.override_paths = _apply_overrides(data, overrides, label)

@@ -93,3 +93,10 @@ def test_one_run_gives_every_row_and_same_draws_give_same_numbers():
 def test_unknown_setting_is_refused_in_one_line(capsys):
     assert seed003.main(["--runs", "1", "--set", "clutter.density=3"]) == 2
     assert "unknown setting 'clutter.density'" in capsys.readouterr().err
+
+
+def test_network_loader_refuses_the_offline_study_with_a_hint():
+    from sim.scenario import ScenarioError, load_scenario
+
+    with pytest.raises(ScenarioError, match="offline study.*python -m sim.seed003"):
+        load_scenario("seed003")
