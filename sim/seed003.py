@@ -432,6 +432,29 @@ def write_csv(rows: Sequence[dict], over_time: Mapping, folder: Path) -> list[Pa
     return [t, o]
 
 
+def plot_rmse(over_time: Mapping, cfg: Mapping, path: Path) -> Path:
+    """Position RMSE per scan (all runs, lost tracks included, log scale) as a PNG, the turn
+    shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    first, last = cfg["scenario"]["turn_scans"]
+    ax.axvspan(first, last, color="0.9", label="turn")
+    for (method, n), v in over_time.items():
+        ax.semilogy(np.arange(1, len(v) + 1), v, "-" if n == 2 else "--",
+                    label=f"{method}, {n} sensor{'s' if n > 1 else ''}")
+    ax.set_xlabel("scan")
+    ax.set_ylabel("position RMSE over all runs (m)")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m sim.seed003", description=__doc__.split("\n")[0])
     p.add_argument("--runs", type=int, default=200, help="Monte Carlo runs (0..N-1)")
@@ -441,7 +464,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="override a scenario setting (TOML value), e.g. clutter.in_gate=1")
     p.add_argument("--methods", default=",".join(METHODS),
                    help=f"comma-separated subset of {', '.join(METHODS)}")
-    p.add_argument("--csv", type=Path, help="write the table and RMSE-over-time CSVs here")
+    p.add_argument("--csv", type=Path,
+                   help="write the table and RMSE-over-time CSVs and the RMSE PNG here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--train-fuzzy", type=int, metavar="N", default=0,
                    help="fit the fuzzy system on training runs 10000..10000+N-1, print the "
@@ -482,7 +506,9 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{cfg['metrics']['loss_bound']:g} m for {cfg['metrics']['loss_scans']} scans; RMSE "
           f"over kept tracks; detector rates per scan)")
     if a.csv:
-        for path in write_csv(rows, rmse_over_time(results), a.csv):
+        over_time = rmse_over_time(results)
+        for path in [*write_csv(rows, over_time, a.csv),
+                     plot_rmse(over_time, cfg, a.csv / "seed003_rmse.png")]:
             print(f"wrote {path}")
     return 0
 

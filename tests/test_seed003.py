@@ -100,3 +100,13 @@ def test_network_loader_refuses_the_offline_study_with_a_hint():
 
     with pytest.raises(ScenarioError, match="offline study.*python -m sim.seed003"):
         load_scenario("seed003")
+
+
+def test_csv_and_png_outputs(tmp_path, capsys):
+    assert seed003.main(["--runs", "1", "--first-run", "10000", "--quiet", "--methods",
+                         "IMM-PDAF", "--csv", str(tmp_path)]) == 0
+    table = (tmp_path / "seed003_table.csv").read_text().splitlines()
+    assert table[0].startswith("method,sensors,runs,lost") and len(table) == 3
+    rmse = (tmp_path / "seed003_rmse.csv").read_text().splitlines()
+    assert rmse[0] == "scan,IMM-PDAF x1,IMM-PDAF x2" and len(rmse) == 101
+    assert (tmp_path / "seed003_rmse.png").read_bytes()[:4] == b"\x89PNG"
