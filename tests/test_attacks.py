@@ -9,6 +9,7 @@ the twin, tests/test_attacks_twin.py), and fused OSPA within a few metres of the
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import signal
@@ -31,6 +32,11 @@ from sim.world import generate_run
 from tests.attacks import ATTACKS, BY_NAME, K0, SETS, Attack, only_attack_counts
 
 pytestmark = pytest.mark.network
+
+REAL = [*SETS, "network.speed=5"]
+"""The real runs at 5 scans/s (the twin's counts do not depend on the speed): an attack stamped
+``K0 + 1`` is still inside the receivers' window (6 scans back) 1.4 s after s1 reached ``K0``,
+however late a busy machine lets this process see it and put the attack."""
 
 
 def _when_s1_reaches(handle, k0: int, timeout: float = 60.0):
@@ -68,14 +74,18 @@ def _put_all(session, msgs) -> None:
             p.undeclare()
 
 
-def _attacked_run(tmp_path: Path, attack: Attack, after=None, **kw):
-    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+def _attacked_run(tmp_path: Path, attack: Attack, after=None, sets=REAL, **kw):
+    scn = load_scenario("seed000", overrides=parse_overrides(sets))
     truth, _ = generate_run(scn, 0)
-    handle = start_run(scn, "seed000", tmp_path, overrides=SETS, **kw)
+    handle = start_run(scn, "seed000", tmp_path, overrides=sets, **kw)
     try:
-        session, keys, k0 = _when_s1_reaches(handle, K0)
+        # the attack's bytes (up to 170 MB) are made before the run gets to K0: on a busy
+        # machine making them takes long enough for scans stamped K0 + 1 to leave the window
+        msgs = attack.make(Keys(handle.network), K0, truth.states[K0])
+        session, keys, _ = _when_s1_reaches(handle, K0)
         try:
-            _put_all(session, attack.make(keys, k0, truth.states[k0]))
+            _put_all(session, msgs)
+            del msgs
             if after is not None:
                 after(handle, session, keys)
         finally:
@@ -88,7 +98,7 @@ def _attacked_run(tmp_path: Path, attack: Attack, after=None, **kw):
 
 @pytest.fixture(scope="module")
 def clean():
-    return run_twin(load_scenario("seed000", overrides=parse_overrides(SETS)), 0)
+    return run_twin(load_scenario("seed000", overrides=parse_overrides(REAL)), 0)
 
 
 @pytest.mark.parametrize("attack", ATTACKS, ids=lambda a: a.name)
@@ -106,13 +116,15 @@ def test_attack_against_real_processes(tmp_path, clean, attack):
     if attack.name == "forged-end":
         for s in summaries.values():
             assert s["ctl_end_while_world_alive"] == 2  # the forged "end" and the world's own
+    rss = {name: s["max_rss_mb"] for name, s in summaries.items()}
     if attack.name == "future-estimates":
         for name in ("s1", "s3"):  # kept whole by nobody: memory as the unattacked s2's
-            assert summaries[name]["max_rss_mb"] < 1.2 * summaries["s2"]["max_rss_mb"]
-            assert summaries[name]["stats"]["last_fused_from"]["s2"] == scn.num_scans
+            assert rss[name] < 1.2 * rss["s2"], rss
+            assert summaries[name]["stats"]["last_fused_from"]["s2"] == scn.num_scans, (
+                name, summaries[name]["stats"])
     if attack.name == "oversized":
         for name in ("s1", "s3"):  # the two largest never reached the peer at all
-            assert summaries[name]["max_rss_mb"] < 1.2 * summaries["s2"]["max_rss_mb"]
+            assert rss[name] < 1.2 * rss["s2"], rss
 
 
 def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tmp_path):
@@ -126,11 +138,13 @@ def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tm
         proc = handle.procs["s1"]
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=30)
+        proc.wait(timeout=60)  # the hang this guards against never ended
         stopped["seconds"], stopped["code"] = time.monotonic() - t0, proc.returncode
 
     scn, codes, summaries = _attacked_run(tmp_path, BY_NAME["future-scan"], after=terminate_s1)
-    assert stopped["code"] == 0 and stopped["seconds"] < 2.0, stopped
+    # at once: the summary and the recording written, the session closed; a few seconds at most
+    # on a busy machine (idle: well under one), never the 60 s the hang would have taken
+    assert stopped["code"] == 0 and stopped["seconds"] < 10.0, stopped
     s1 = summaries["s1"]
     assert s1["stop_reason"] == "SIGTERM" and s1["rejected"]["future"] == 3
     assert s1["internal_errors"] == {}
@@ -147,27 +161,37 @@ def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tm
 
 def test_a_second_peer_with_a_taken_name_is_refused(tmp_path):
     result = {}
+    # a run far longer than the second peer needs to start and look (seconds, more on a busy
+    # machine), ended as soon as it has: the first s2 is alive throughout the check
+    sets = [*REAL, "scenario.num_scans=3000"]
 
     def duplicate(handle, session, keys):
         cmd = [sys.executable, "-m", "sensornet", "peer", "s2", "--scenario", "seed000",
                "--network", handle.network, "--connect", handle.endpoints["world"],
                "--out", str(tmp_path), "--no-rerun",
-               *[a for s in SETS for a in ("--set", s)]]
-        result["p"] = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+               *[a for s in sets for a in ("--set", s)]]
+        result["p"] = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        result["alive"] = {n: p.poll() is None for n, p in handle.procs.items()}
+        handle.stop_all()
 
     empty = Attack("none", lambda keys, k0, x: [], ())
-    scn, codes, summaries = _attacked_run(tmp_path, empty, after=duplicate, rerun=False)
+    scn, codes, summaries = _attacked_run(tmp_path, empty, after=duplicate, sets=sets,
+                                          rerun=False)
+    assert all(result["alive"].values()), result["alive"]  # the run outlived the check
     p = result["p"]
     assert p.returncode == 2, (p.stdout, p.stderr)
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "already running" in lines[0] and "Traceback" not in p.stderr
-    s2 = summaries["s2"]
-    assert s2["scans"] == scn.num_scans and s2["summary_files"] == ["peer-s2.json"]
+    s2 = summaries["s2"]  # the first s2 ran on undisturbed until the run was stopped
+    assert s2["stop_reason"] == "SIGTERM" and s2["internal_errors"] == {}, s2
+    assert K0 <= s2["scans"] < scn.num_scans and s2["summary_files"] == ["peer-s2.json"]
 
 
 def test_flood_on_one_key_does_not_starve_another_sender(tmp_path):
-    """Replays of s1's genuine estimates at full speed for a few scans: s2 still fuses s3
-    every scan, and s3 (not flooded) does not fall back to deadline fusions."""
+    """Replays of s1's genuine estimates at full speed for 1.5 s: s2 still fuses s3 every
+    scan, and s3 (also flooded) falls back to deadline fusions only while the flood lasts."""
+    flooded = {}
+
     def flood(handle, session, keys):
         got = []
         ready = threading.Event()
@@ -181,13 +205,14 @@ def test_flood_on_one_key_does_not_starve_another_sender(tmp_path):
         sub.undeclare()
         pub = session.declare_publisher(keys.estimate("s1"),
                                         congestion_control=zenoh.CongestionControl.BLOCK)
-        end = time.monotonic() + 1.5
+        start = time.monotonic()
+        end = start + 1.5
         n = 0
         while time.monotonic() < end:
             pub.put(got[0])
             n += 1
         pub.undeclare()
-        handle.flooded = n
+        flooded["n"], flooded["seconds"] = n, time.monotonic() - start
 
     empty = Attack("none", lambda keys, k0, x: [], ())
     scn, codes, summaries = _attacked_run(tmp_path, empty, after=flood, rerun=False)
@@ -196,4 +221,9 @@ def test_flood_on_one_key_does_not_starve_another_sender(tmp_path):
     assert s2["rejected_before_decoding"] >= 1000
     assert s2["stats"]["last_fused_from"]["s3"] == scn.num_scans
     assert s2["stats"]["fused_inputs"] >= 2 * scn.num_scans - 3
-    assert s3["stats"]["deadline_fusions"] <= 3
+    assert s3["stats"]["fused_inputs"] >= 2 * scn.num_scans - 3, s3["stats"]
+    # idle: at most a few. On a busy machine the flooding process takes a core of its own and
+    # every peer (s1 too, never flooded) may miss deadlines while it lasts; never the run long
+    during = math.ceil(flooded["seconds"] * scn.network.speed / scn.scan_period) + 1
+    assert s3["stats"]["deadline_fusions"] <= 3 + min(during, scn.num_scans // 2), (
+        s3["stats"], flooded, during)

@@ -1,6 +1,9 @@
 """The hostile network with real processes: twin equality, process faults, fuzzing, loss, SIGTERM.
 
-Every run's processes are stopped in ``finally`` blocks (``RunHandle.stop_all``).
+Every run's processes are stopped in ``finally`` blocks (``RunHandle.stop_all``). Nothing here
+sleeps for a fixed time or times the run: the tests wait on events (samples, liveliness changes,
+exit codes) with generous timeouts, so they hold on a busy machine. The only time bounds are
+the ones the lease promises (docs/architecture.md: departures).
 """
 
 from __future__ import annotations
@@ -8,10 +11,12 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import msgpack
@@ -20,7 +25,7 @@ import pytest
 import zenoh
 
 from peers.session import open_session
-from protocol.codec import VERSION, encode, pack_mixture
+from protocol.codec import VERSION, decode, encode, pack_mixture
 from protocol.keys import Keys
 from protocol.messages import Estimate, Scan
 from sim.launcher import (
@@ -45,65 +50,136 @@ clutter_rate = 10
 """
 
 
-def _run(source: str, out: Path, sets: list[str], faults: list[str] = (), timeout=90,
-         during=None, **kw):
+def _run(source: str, out: Path, sets: list[str], faults: list[str] = (), timeout=120,
+         during: Callable | None = None, **kw):
+    """Start a run, apply process ``faults``, call ``during(handle)`` (which may return a
+    function called once the run is over, e.g. to close its session), wait for the end."""
     scn = load_scenario(source, overrides=parse_overrides(sets))
     handle = start_run(scn, source, out, overrides=sets, **kw)
     stop = threading.Event()
     thread = None
+    after = None
     try:
         if faults:
             thread = threading.Thread(target=inject_process_faults, daemon=True, args=(
                 handle, [ProcessFault.parse(f) for f in faults], scn.sensor_names[0], stop))
             thread.start()
         if during is not None:
-            during(handle)
+            after = during(handle)
         codes = wait_run(handle, timeout=timeout)
     finally:
         stop.set()
         handle.stop_all()
         if thread is not None:
-            thread.join(timeout=5)
+            thread.join(timeout=30)
+        if after is not None:
+            after()
     return scn, codes, read_summaries(out, scn.sensor_names)
 
 
+def _when_tracks_reach(session, keys: Keys, peer: str, k0: int, timeout: float = 60.0) -> int:
+    """Wait until ``peer`` has published the tracks of scan ``k0``; the newest scan seen."""
+    seen = {"k": 0}
+    reached = threading.Event()
+
+    def on_tracks(sample) -> None:
+        seen["k"] = max(seen["k"], decode(sample.payload.to_bytes()).k)
+        if seen["k"] >= k0:
+            reached.set()
+
+    sub = session.declare_subscriber(keys.tracks(peer), on_tracks)
+    try:
+        assert reached.wait(timeout), f"{peer} never published the tracks of scan {k0} ({seen})"
+    finally:
+        sub.undeclare()
+    return seen["k"]
+
+
+DEADLINE_FUSIONS = 2
+"""Fusions at the deadline (a neighbour's estimate later than a whole scan interval) a run of
+40 scans may have on a busy machine: 5 %. Each is counted; every other scan must be exact."""
+
+
+def _assert_tracks_equal_the_twin(out: Path, scn, summaries: dict, twin) -> None:
+    """Every scan's tracks as in the twin, bit for bit, except at most one scan per fusion
+    the peer ran at its deadline (the twin has every input; the scans after are exact again:
+    no feedback, and the late estimate is the newest only until the next one)."""
+    for name in scn.sensor_names:
+        late = summaries[name]["stats"]["deadline_fusions"]
+        assert late <= DEADLINE_FUSIONS, (name, summaries[name]["stats"])
+        saved = np.load(out / f"tracks-{name}.npz")
+        assert len(saved.files) == scn.num_scans
+        differ = []
+        for k in range(1, scn.num_scans + 1):
+            real, virtual = saved[f"k{k}"], twin.tracks[name][k]
+            if real.shape != virtual.shape or not np.allclose(real, virtual, rtol=0, atol=1e-9):
+                differ.append(k)
+        assert len(differ) <= late, (name, differ, late)
+        if late == 0:
+            assert summaries[name]["mean_ospa_fused"] == pytest.approx(
+                twin.peers[name].mean_ospa("fused"), rel=0, abs=1e-9)
+
+
+@pytest.mark.network
 def test_real_processes_equal_the_twin(tmp_path):
+    # 5 scans/s: the deadline (a whole interval, 0.2 s) leaves room for a loaded machine
     sets = ["birth.model=truth", "scenario.num_scans=40", "network.deadline=1.0",
-            "network.speed=10"]
+            "network.speed=5"]
     scn, codes, summaries = _run("seed000", tmp_path, sets, rerun=False,
                                  peer_args={n: ["--save-tracks"] for n in ("s1", "s2", "s3")})
     assert all(c == 0 for c in codes.values()), codes
-    twin = run_twin(scn, 0)
-    for name in scn.sensor_names:
-        assert summaries[name]["stats"]["deadline_fusions"] == 0  # every input arrived
-        saved = np.load(tmp_path / f"tracks-{name}.npz")
-        assert len(saved.files) == scn.num_scans
-        for k in range(1, scn.num_scans + 1):
-            real, virtual = saved[f"k{k}"], twin.tracks[name][k]
-            assert real.shape == virtual.shape, (name, k)
-            np.testing.assert_allclose(real, virtual, rtol=0, atol=1e-9)
+    _assert_tracks_equal_the_twin(tmp_path, scn, summaries, run_twin(scn, 0))
 
 
+def _watch_liveliness(events: list) -> Callable:
+    """``during``: a session of the test's own (the peers' default lease) linked to every
+    process of the run, appending ``(peer, "joined"|"left", wall time)`` as Zenoh reports it."""
+    def during(handle):
+        session = open_session(connect=list(handle.endpoints.values()))
+
+        def on_live(sample) -> None:
+            what = "joined" if sample.kind == zenoh.SampleKind.PUT else "left"
+            events.append((Keys.last(str(sample.key_expr)), what, time.time()))
+
+        session.liveliness().declare_subscriber(Keys(handle.network).alive("*"), on_live,
+                                                history=True)
+        return session.close
+    return during
+
+
+@pytest.mark.network
 def test_kill_restart_and_freeze(tmp_path):
     source = tmp_path / "four.toml"
     source.write_text(FOUR)
     sets = ["birth.model=truth", "scenario.num_scans=90"]
-    faults = ["kill:s4@15", "restart:s4@30", "stop:s3@50", "cont:s3@65"]
+    # s3 stays frozen 3 s: longer than the lease promises to take, so it must be noticed
+    faults = ["kill:s4@15", "restart:s4@30", "stop:s3@50", "cont:s3@80"]
+    watched: list = []
     # the default Zenoh lease (peers.session.DEFAULT_LEASE_MS): no --lease-ms
-    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, faults, rerun=False)
+    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, faults, rerun=False,
+                                 during=_watch_liveliness(watched))
     done = json.loads((tmp_path / "run" / "process-faults.json").read_text())
     assert [d["action"] for d in done] == ["kill", "restart", "stop", "cont"]
     assert codes["world"] == 0 and codes["s1"] == 0 and codes["s2"] == 0, codes
-    kill, restart, stop = done[0]["wall"], done[1]["wall"], done[2]["wall"]
+    # wall times the injector took right after each signal
+    kill, restart, stop, cont = (d["wall"] for d in done)
+    # the lease's promise, timed from the signal to Zenoh's report in a session of its own (a
+    # peer's own record of it waits behind whatever that peer still has queued on a busy
+    # machine): kill -9 seen within 2 s, a frozen peer within 2.5 s (1.5 s default lease)
+    left = [w for p, what, w in watched if p == "s4" and what == "left" and w >= kill]
+    assert left and left[0] - kill < 2.0, (kill, watched)
+    froze = [w for p, what, w in watched if p == "s3" and what == "left" and w >= stop]
+    assert froze and froze[0] - stop < 2.5, (stop, watched)
+    assert froze[0] < cont  # noticed while frozen (the lease expired, not the process)
     for name in ("s1", "s2"):
         events = summaries[name]["peer_events"]
+        # each peer saw the same, in order: s4 left, then came back; s3 left
         left = [w for p, what, w, _ in events if p == "s4" and what == "left" and w >= kill]
-        assert left and left[0] - kill < 2.0, (name, events)  # kill -9 seen within 2 s
         back = [w for p, what, w, _ in events if p == "s4" and what == "joined" and w > restart]
-        assert back, (name, events)  # the restarted peer rejoined
+        assert left and back and left[0] < back[0], (name, events)  # the restarted peer rejoined
         assert summaries[name]["stats"]["last_fused_from"]["s4"] > 30  # and is fused again
         froze = [w for p, what, w, _ in events if p == "s3" and what == "left" and w >= stop]
-        assert froze and froze[0] - stop < 2.5, (name, events)  # 1.5 s default lease
+        assert froze, (name, events)
         assert summaries[name]["scans"] == scn.num_scans  # kept fusing, finished the run
 
 
@@ -135,40 +211,54 @@ def _fuzz_payloads(rng: np.random.Generator, replays: list[bytes], n: int) -> li
     return out
 
 
+@pytest.mark.network
 def test_ten_thousand_fuzzed_messages(tmp_path):
-    sets = ["birth.model=truth", "scenario.num_scans=100", "network.deadline=0.9"]
+    # a run far longer than the fuzzing takes (seconds idle, much longer on a busy machine),
+    # ended by stopping the world (which ends the run for everyone, as at its last scan) once
+    # both receivers have handled 20 more scans after the last fuzzed message went out
+    base = ["birth.model=truth", "network.deadline=0.9"]
+    sets = [*base, "scenario.num_scans=3000"]
     sent = {"n": 0}
 
     def fuzz(handle):
         session = open_session(connect=list(handle.endpoints.values()))
-        keys = Keys(handle.network)
-        replays: list[bytes] = []
-        sub = session.declare_subscriber(keys.estimate("s1"),
-                                         lambda s: replays.append(s.payload.to_bytes()))
         try:
-            deadline = time.monotonic() + 30
-            while len(replays) < 10 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert replays, "no genuine estimate seen"
+            keys = Keys(handle.network)
+            replays: list[bytes] = []
+            ten = threading.Event()
+
+            def keep(sample) -> None:
+                replays.append(sample.payload.to_bytes())
+                if len(replays) >= 10:
+                    ten.set()
+
+            sub = session.declare_subscriber(keys.estimate("s1"), keep)
+            assert ten.wait(60), f"{len(replays)} genuine estimates seen, not 10"
+            sub.undeclare()
             pub = session.declare_publisher(keys.estimate("s1"),
                                             congestion_control=zenoh.CongestionControl.BLOCK)
             rng = np.random.default_rng(11)
             for payload in _fuzz_payloads(rng, list(replays[:10]), 10_000):
                 pub.put(payload)
                 sent["n"] += 1
-            time.sleep(0.5)
+            for peer in ("s2", "s3"):
+                now = _when_tracks_reach(session, keys, peer, 1)  # its next tracks
+                _when_tracks_reach(session, keys, peer, now + 20)
             pub.undeclare()
         finally:
-            sub.undeclare()
             session.close()
+        handle.procs["world"].send_signal(signal.SIGTERM)
 
     scn, codes, summaries = _run("seed000", tmp_path, sets, during=fuzz, rerun=False)
     assert sent["n"] == 10_000
     assert all(c == 0 for c in codes.values()), codes
-    twin = run_twin(scn, 0)
+    n = summaries["s2"]["scans"]
+    assert 20 < n < scn.num_scans and summaries["s3"]["scans"] == n, summaries
+    twin = run_twin(load_scenario("seed000", overrides=parse_overrides(
+        [*base, f"scenario.num_scans={n}"])), 0)
     for name in ("s2", "s3"):  # they subscribe to s1's estimate key
         s = summaries[name]
-        assert s["internal_errors"] == {}
+        assert s["stop_reason"] == "end of run" and s["internal_errors"] == {}, s
         got = s["received_by_kind"]["estimate"]
         early = s["rejected_before_decoding"]
         # every fuzzed message arrived: most were refused from their first bytes (stale scan
@@ -178,10 +268,11 @@ def test_ten_thousand_fuzzed_messages(tmp_path):
         decoded_ok = s["nale"]["redundant"] + s["nale"]["accepted"]
         assert s["rejected_total"] - early + decoded_ok >= got - 5, s
         # s1's genuine estimates still got through: fused as in the clean twin run
-        assert s["nale"]["accepted"] >= scn.num_scans - 2
+        assert s["nale"]["accepted"] >= n - 2
         assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 5.0
 
 
+@pytest.mark.network
 def test_loss_duplication_and_reordering(tmp_path):
     sets = ["birth.model=truth", "scenario.num_scans=60", "faults.default.loss=0.3",
             "faults.default.duplicate=0.2", "faults.default.reorder=1.0",
@@ -200,12 +291,29 @@ def test_loss_duplication_and_reordering(tmp_path):
     assert total["duplicate"] > 0
 
 
+@pytest.mark.network
 def test_sigterm_leaves_summary_and_recording(tmp_path):
     sets = ["birth.model=truth", "scenario.num_scans=60"]
-    scn, codes, summaries = _run("seed000", tmp_path, sets, ["term:s2@20"])
-    assert codes["s2"] == 0  # a clean exit on SIGTERM
+    term = {}
+
+    def terminate_s2(handle):
+        # once s2 itself has published the tracks of scan 20 (however far behind the world
+        # a busy machine leaves it), SIGTERM it and wait for it to exit
+        session = open_session(connect=list(handle.endpoints.values()))
+        try:
+            term["k"] = _when_tracks_reach(session, Keys(handle.network), "s2", 20)
+        finally:
+            session.close()
+        proc = handle.procs["s2"]
+        proc.send_signal(signal.SIGTERM)
+        term["code"] = proc.wait(timeout=60)
+
+    scn, codes, summaries = _run("seed000", tmp_path, sets, during=terminate_s2)
+    assert term["code"] == 0 and codes["s2"] == 0  # a clean exit on SIGTERM
     s2 = summaries["s2"]
-    assert s2["stop_reason"] == "SIGTERM" and 15 <= s2["scans"] < scn.num_scans
+    assert s2["stop_reason"] == "SIGTERM", s2["stop_reason"]
+    # everything s2 did before the signal is in its summary, and it stopped before the end
+    assert term["k"] <= s2["scans"] < scn.num_scans, (term, s2["scans"])
     rrd = tmp_path / "rerun" / "peer-s2.rrd"
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
     verify = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True,
@@ -222,17 +330,24 @@ def test_bad_process_fault_specs(text):
         ProcessFault.parse(text)
 
 
+@pytest.mark.network
 def test_sparse_links_along_a_ring(tmp_path):
     """Gossip off, each peer linked to the world and its ring neighbours only: still fuses."""
     source = tmp_path / "four.toml"
     source.write_text(FOUR)
+    # 5 scans/s: the deadline (0.9 of an interval) leaves room for a loaded machine
     sets = ["birth.model=truth", "scenario.num_scans=40", "network.topology=ring",
-            "network.deadline=0.9"]
-    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, rerun=False, sparse=True)
+            "network.deadline=0.9", "network.speed=5"]
+    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, rerun=False, sparse=True,
+                                 peer_args={n: ["--save-tracks"] for n in ("s1", "s2", "s3",
+                                                                           "s4")})
     assert all(c == 0 for c in codes.values()), codes
     twin = run_twin(scn, 0)
     for name, s in summaries.items():
-        assert s["stats"]["fused_inputs"] == 2 * scn.num_scans, (name, s["stats"])
+        # two ring neighbours a scan, each fusion short of at most both at its deadline
+        late = s["stats"]["deadline_fusions"]
+        assert 2 * (scn.num_scans - late) <= s["stats"]["fused_inputs"] <= 2 * scn.num_scans, (
+            name, s["stats"])
         seen = {p for p, what, _, _ in s["peer_events"] if what == "joined"}
         assert seen == set(twin.peers[name].consensus.o.neighbours)  # only the linked neighbours
-        assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 1e-9
+    _assert_tracks_equal_the_twin(tmp_path / "run", scn, summaries, twin)

@@ -50,19 +50,23 @@ def test_ratio_rule_needs_single_target_peers():
         make_peer(scn, "r1")
 
 
+@pytest.mark.network
 def test_two_imm_pf_peers_with_latency_as_processes(tmp_path):
-    sets = ["scenario.num_scans=120", "network.speed=20",
+    # 5 scans/s (the scenario's 20 leaves a particle filter behind the world on a busy machine,
+    # each peer by its own lag, and estimates a few scans apart are not fused)
+    sets = ["scenario.num_scans=120", "network.speed=5",
             'faults.default.delay={kind="uniform", low=0.0, high=0.02}']
     scn = load_scenario("seed001", overrides=parse_overrides(sets))
     handle = start_run(scn, "seed001", tmp_path, overrides=sets)
     try:
-        codes = wait_run(handle, timeout=120)
+        codes = wait_run(handle, timeout=scn.num_scans / 5 + 120)
     finally:
         handle.stop_all()
     assert all(c == 0 for c in codes.values()), codes
     summaries = read_summaries(tmp_path, scn.sensor_names)
     for name, s in summaries.items():
         assert s["scans"] == scn.num_scans
+        assert s["stats"]["fused_inputs"] >= 0.95 * scn.num_scans, (name, s["stats"])
         assert s["mean_ospa_fused"] < 0.7 * s["mean_ospa_local"], (name, s)
         assert s["injected_faults"]["reorder"] + s["injected_faults"]["deliver"] > 0
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
