@@ -71,6 +71,7 @@ def _file(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     return path
 
 
+@pytest.mark.network
 def test_stopped_campaign_resumes_to_the_uninterrupted_table(tmp_path):
     c = load_campaign(_file(tmp_path, TWIN))
     whole = run_campaign(c, tmp_path / "whole", jobs=1, progress=False)
@@ -92,6 +93,7 @@ def test_stopped_campaign_resumes_to_the_uninterrupted_table(tmp_path):
     assert b.column("run").to_pylist() == list(range(6)) * 2
 
 
+@pytest.mark.network
 def test_killed_campaign_process_resumes(tmp_path):
     """``kill -9`` of the campaign process half-way: only its run in flight is redone."""
     path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 20'))
@@ -120,6 +122,7 @@ def test_killed_campaign_process_resumes(tmp_path):
     assert canonical_rows(results_table(out)) == canonical_rows(results_table(tmp_path / "whole"))
 
 
+@pytest.mark.network
 def test_same_numbers_from_one_two_workers_and_a_dask_local_cluster(tmp_path):
     pytest.importorskip("distributed", reason="needs the campaign extra (dask[distributed])")
     c = load_campaign(_file(tmp_path, EXPERIMENT))
@@ -138,6 +141,7 @@ def test_same_numbers_from_one_two_workers_and_a_dask_local_cluster(tmp_path):
         canonical_rows(results_table(tmp_path / "td"))
 
 
+@pytest.mark.network
 def test_status_without_running_and_cli(tmp_path, capsys):
     path = _file(tmp_path, TWIN.replace("runs = 6", "runs = 3"))
     out = tmp_path / "camp"
@@ -162,6 +166,7 @@ def test_status_without_running_and_cli(tmp_path, capsys):
     assert "4 already stored" in text
 
 
+@pytest.mark.network
 def test_report_tables_and_seed000_figures(tmp_path, capsys):
     path = _file(tmp_path, EXPERIMENT)
     out = tmp_path / "exp"
@@ -253,6 +258,7 @@ def test_shipped_campaigns_load():
     assert [cell.label for cell in c.cells] == ["birth.model=truth", "birth.model=paper"]
 
 
+@pytest.mark.network
 def test_sigterm_is_an_interrupt_that_keeps_finished_runs(tmp_path):
     path = _file(tmp_path, TWIN.replace('"scenario.num_scans" = 8', '"scenario.num_scans" = 20'))
     out = tmp_path / "term"

@@ -281,6 +281,7 @@ def test_secure_flags_are_refused_in_one_line(keys, tmp_path, capsys):
     assert not any((tmp_path / f"r{i}").exists() for i in (1, 2, 4))  # nothing left behind
 
 
+@pytest.mark.network
 def test_a_scenario_security_table_runs_secure(keys, tmp_path):
     """``[security] keys = "DIR"`` (relative to the scenario file) is ``--secure DIR``."""
     from sim.scenario import ScenarioError, load_scenario, scenario_text
