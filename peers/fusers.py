@@ -90,7 +90,7 @@ class ImmFuser:
 
     def __init__(self, rule: str, local: ImmEstimator, init_mean: np.ndarray,
                  init_cov: np.ndarray, rng: np.random.Generator | None,
-                 omega: float | str | None = 0.3, ratio: RatioConfig | None = None) -> None:
+                 omega: float | str | None = 0.15, ratio: RatioConfig | None = None) -> None:
         if rule not in ("gci", "ratio"):
             raise ValueError(f"single-target peers fuse by 'gci', 'ratio' or 'none', "
                              f"not {rule!r}")
