@@ -23,6 +23,7 @@ def _cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
                          "cov = [[1.0, 2.0, 0.0, 0.0], [2.0, 1.0, 0.0, 0.0], "
                          "[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]"), "birth"),
 ])
+@pytest.mark.network  # runs the CLI as a subprocess
 def test_bad_scenario_file_is_one_line_exit_2(tmp_path, edit, needle):
     text = edit(scenario_text("seed000"))
     assert text != scenario_text("seed000"), "the edit did not apply"

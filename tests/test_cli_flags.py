@@ -20,6 +20,10 @@ from sim.scenario import load_scenario, scenario_text
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# the CLI is exercised as a user runs it: as a subprocess (so the fast '-m "not network"' run,
+# which starts no process, leaves these to the full suite)
+pytestmark = pytest.mark.network
+
 
 def _cli(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}

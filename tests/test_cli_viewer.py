@@ -10,6 +10,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from peers import rerun_sink
 from peers.rerun_sink import (
@@ -94,6 +95,7 @@ def test_blueprint_has_a_legend_panel_and_adapts_to_the_scenario():
     assert "model probabilities (IMM)" in {getattr(v, "name", None) for v in column.contents}
 
 
+@pytest.mark.network  # starts the world process
 def test_world_recording_with_decorations_verifies(tmp_path):
     path = tmp_path / "world.rrd"
     sink = RerunSink().open("test-run", path, peers=["r1", "r2"], single_target=True,
