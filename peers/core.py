@@ -24,7 +24,7 @@ A ``ctl`` "end" alone never stops a peer: it stops when the world's liveliness t
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -114,7 +114,7 @@ class PeerCore:
         self.end_requested = False
         self.ctl_end_early = 0
         self.t0: float | None = None
-        self.departures: list[tuple[str, str, int]] = []
+        self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
         self.stopped: str | None = None
         self._pending_local: list[int] = []
 
@@ -332,7 +332,7 @@ class PeerCore:
             "stale_scans": self.stale_scans,
             "reanchored": self.reanchored,
             "ctl_end_while_world_alive": self.ctl_end_early,
-            "peer_events": self.departures[-1000:],
+            "peer_events": list(self.departures),
             "stats": asdict(c.stats),
             "nale": asdict(c.nale.counts),
             "fuser": dict(getattr(c.fuser, "counts", {})),

@@ -105,7 +105,7 @@ def test_peer_that_left_is_not_waited_for(scn):
     out = peer.receive(KEYS.estimate("s1"), encode(est), 0.01)
     assert [o.channel for o in _published(out, "tracks")] == ["tracks"]
     assert peer.consensus.stats.deadline_fusions == 0
-    assert peer.departures == [("s3", "left", 0)]
+    assert list(peer.departures) == [("s3", "left", 0)]
 
 
 def test_stale_scans_and_strangers_are_counted(scn):
