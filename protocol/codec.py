@@ -13,6 +13,7 @@ ALGORITHMS.md §9.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -68,6 +69,17 @@ DEFAULT_LIMITS = Limits()
 def _tri_index(d: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column indices of the upper triangle of a ``d x d`` matrix (cached)."""
     return np.triu_indices(d)
+
+
+@lru_cache(maxsize=16)
+def _tri_to_full(d: int) -> np.ndarray:
+    """For each of the ``d * d`` entries of a symmetric matrix, its column in the packed upper
+    triangle (cached): ``tri[:, _tri_to_full(d)]`` is the full matrix, one gather."""
+    r, c = _tri_index(d)
+    col = np.empty((d, d), dtype=np.intp)
+    col[r, c] = np.arange(r.size)
+    col[c, r] = np.arange(r.size)
+    return col.reshape(-1)
 
 
 def pack_mixture(mix: GaussianMixture) -> bytes:
@@ -175,11 +187,11 @@ def _count(body: dict, key: str, limit: int) -> int:
 
 
 def _floats(blob: bytes, shape: tuple[int, ...]) -> np.ndarray:
-    expected = int(np.prod(shape)) * 8
+    expected = math.prod(shape) * 8
     if len(blob) != expected:
         raise Rejected("shape", f"{len(blob)} bytes for shape {shape} ({expected} expected)")
     a = np.frombuffer(blob, dtype=_F8).reshape(shape).astype(float)
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         raise Rejected("nonfinite", "array holds NaN or infinity")
     return a
 
@@ -189,12 +201,9 @@ def unpack_mixture(blob: bytes, n: int, d: int) -> GaussianMixture:
     t = d * (d + 1) // 2
     rows = _floats(blob, (n, 1 + d + t))
     w, m, tri = rows[:, 0], rows[:, 1:1 + d], rows[:, 1 + d:]
-    if np.any(w < 0):
+    if (w < 0).any():
         raise Rejected("weight", "negative component weight")
-    iu = _tri_index(d)
-    P = np.zeros((n, d, d))
-    P[:, iu[0], iu[1]] = tri
-    P[:, iu[1], iu[0]] = tri
+    P = tri[:, _tri_to_full(d)].reshape(n, d, d)
     if n:
         try:
             np.linalg.cholesky(P)
