@@ -69,6 +69,8 @@ class ResultStore:
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
+        self._written: dict[Path, Any] = {}
+        """The rows this store wrote, kept so compaction need not read their files back."""
 
     def _files(self) -> list[Path]:
         if not self.folder.is_dir():
@@ -82,8 +84,10 @@ class ResultStore:
         self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / f"{row['key']}.parquet"
         tmp = self.folder / f".{row['key']}.{uuid.uuid4().hex}.tmp"
-        pq.write_table(pa.Table.from_pylist([_normalise(row)]), tmp)
+        table = pa.Table.from_pylist([_normalise(row)])
+        pq.write_table(table, tmp)
         os.replace(tmp, path)
+        self._written[path] = table
         return path
 
     def done_keys(self) -> set[str]:
@@ -119,7 +123,9 @@ class ResultStore:
         loose = [p for p in self._files() if not p.name.startswith("part-")]
         if len(loose) < 2:
             return None
-        table = pa.concat_tables([pq.read_table(p) for p in loose], promote_options="default")
+        written, self._written = self._written, {}
+        table = pa.concat_tables([written[p] if p in written else pq.read_table(p)
+                                  for p in loose], promote_options="default")
         path = self.folder / f"part-{uuid.uuid4().hex[:12]}.parquet"
         tmp = self.folder / f".{path.name}.tmp"
         pq.write_table(table, tmp)

@@ -154,11 +154,54 @@ def seed001_hash(setup) -> str:
     return hashlib.sha256(repr(setup).encode()).hexdigest()[:16]
 
 
+_SCENARIOS: dict[tuple[str, str | None, str], Any] = {}
+
+
 def load_task_scenario(task: Task):
+    """The task's resolved scenario, parsed once per process and cell (scenarios are frozen
+    dataclasses: the runs of a cell share one)."""
+    import json
+
     from sim.scenario import load_scenario
 
-    return load_scenario(scenario_source(task.scenario, task.scenario_text),
-                         overrides=task.overrides)
+    key = (task.scenario, task.scenario_text, json.dumps(task.overrides, sort_keys=True,
+                                                         default=repr))
+    if key not in _SCENARIOS:
+        _SCENARIOS[key] = load_scenario(scenario_source(task.scenario, task.scenario_text),
+                                        overrides=task.overrides)
+    return _SCENARIOS[key]
+
+
+_RUNNER_MODULES = {"experiment": ("sim.experiment",), "twin": ("sim.twin",),
+                   "real": ("sim.launcher", "sim.sweep"), "seed001": ("sim.seed001",)}
+
+
+def warm(tasks: list[Task]) -> None:
+    """Import what the tasks' runners need and parse each cell's scenario once, here: a
+    process pool forked after this call starts with all of it (its workers neither import
+    nor parse per task or per worker)."""
+    import importlib
+
+    for name in {m for t in tasks for m in _RUNNER_MODULES.get(t.runner, ())}:
+        importlib.import_module(name)
+    seen = set()
+    for t in tasks:
+        if t.runner != "seed001" and (t.cell, t.scenario) not in seen:
+            seen.add((t.cell, t.scenario))
+            load_task_scenario(t)
+
+
+def _worker_init(tasks: list[Task]) -> None:
+    """Pool worker start: one BLAS thread (two workers with a BLAS pool each would
+    oversubscribe the cores the pool already fills), and the imports when the pool does not
+    fork (spawn/forkserver start methods)."""
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:
+        pass
+    warm(tasks)
 
 
 def run_task(task: Task) -> dict[str, Any]:
@@ -315,7 +358,11 @@ def run_pool(tasks: list[Task], jobs: int) -> Iterator[dict]:
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     code_version()  # computed once here, inherited by the workers
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)))
+    # One task per cell is enough to warm a worker (imports, scenarios): sent once, not per task.
+    firsts = list({t.cell: t for t in reversed(tasks)}.values())
+    warm(firsts)
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=_worker_init,
+                               initargs=(firsts,))
     try:
         futures = [pool.submit(run_task, t) for t in tasks]
         for fut in as_completed(futures):
