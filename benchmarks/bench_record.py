@@ -4,8 +4,9 @@ Runs the seed-000 network (3 peers as processes over Zenoh on loopback, 10 scans
 truth births, Rerun off, as the latency part of ``bench_network.py``) in pairs: one run with
 every peer recording its core's inputs (``--record``: ``record/peer-<name>.mcap``), one
 without, the order alternating from pair to pair so that a drift in the machine's load falls
-on both. Per run, the median of the pooled scan -> fused-track latencies (one sample per scan
-and peer, from the peers' summaries); per variant, the median of those medians. Prints:
+on both, after one uncounted warm-up run. Per run, the median of the pooled scan -> fused-track
+latencies (one sample per scan and peer, from the peers' summaries); per variant, the median of
+those medians. Prints:
 
 * the latency with and without recording and their ratio, against the target (<= 5 % more);
 * the size of one run's recording (every peer's ``.mcap``), against the target (<= 20 MB);
@@ -54,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pairs", type=int, default=5, help="(recorded, plain) pairs (5)")
     ap.add_argument("--scans", type=int, default=100, help="scans per run (100)")
+    ap.add_argument("--warmup", type=int, default=1,
+                    help="plain 20-scan runs first, not counted (1)")
     ap.add_argument("--quick", action="store_true", help="1 pair of 20-scan runs")
     args = ap.parse_args(argv)
     if args.quick:
@@ -64,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(tmpdir)
         print(f"seed000, 3 peers, {args.scans} scans at 10 scans/s, {args.pairs} pairs; "
               f"load average before: {load0[0]:.2f}", flush=True)
+        for i in range(args.warmup):  # file caches, .pyc files, Zenoh's first start
+            one_run(tmp / f"warmup-{i}", min(args.scans, 20), False)
         for i in range(args.pairs):
             order = (True, False) if i % 2 == 0 else (False, True)
             for rec in order:
