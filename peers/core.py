@@ -17,7 +17,10 @@ Bounds (each rejection is counted under its reason in :meth:`snapshot`):
   scan numbering is still followed); ``stale``: before the scans still being fused;
 - ``not-neighbour``, ``incompatible`` (state dimension or estimate kind this peer cannot fuse),
   ``round`` (a consensus round this peer does not run);
-- ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command).
+- ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command);
+- secure mode, counted by the transport before anything is decoded (``protocol.envelope``):
+  ``unauthenticated`` (no valid signature of the key's owner), ``replayed`` (a copy of a
+  message already taken, or one older than it).
 
 A ``ctl`` "end" alone never stops a peer: it stops when the world's liveliness token goes away.
 """

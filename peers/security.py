@@ -6,6 +6,8 @@ name, all plain PEM files (``openssl x509 -in DIR/s1.pem -noout -text`` reads th
 
     DIR/ca.pem  DIR/ca.key          the network's CA (keep ca.key off the members' machines)
     DIR/<name>.pem  DIR/<name>.key  one per member: CN=<name>, O=<network>, signed by the CA
+    DIR/<name>.ed25519              one per member: its message-signing key (Ed25519)
+    DIR/members.json                the roster: member names and signing public keys
 
 A member process in secure mode (``--secure DIR``, :class:`Security`) builds its Zenoh session
 with ``tls/`` endpoints, mutual TLS against the network's CA only, and the network's access
@@ -14,7 +16,9 @@ may put only on its own ``estimate/`` and ``tracks/`` keys and declare only its 
 and ``ready/`` liveliness tokens; only the world may put ``scan/``, ``truth`` and ``ctl``.
 Zenoh applies the policy where a message *arrives* (each member filters what it receives), so
 every member loads the same policy: a member that lies about whose key it puts on is refused
-by every other member, whatever its own process does.
+by every other member, whatever its own process does. On top of that every message is signed by
+its sender's Ed25519 key and checked by each receiver against the roster, with replays refused
+(:mod:`protocol.envelope`): what a router relays or a recording holds still names its sender.
 """
 
 from __future__ import annotations
@@ -35,6 +39,10 @@ from protocol.keys import Keys, check_name
 WORLD = "world"
 """The member name of the world process (scans, truth, control)."""
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
+SIGN_KEY = ".ed25519"
+"""Suffix of a member's message-signing private key (``NAME.ed25519``, PEM PKCS#8)."""
+SIGNING = "ed25519"
+"""Field of ``members.json`` holding the roster: member name -> signing public key."""
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 """Names every member certificate is valid for (the host part of the endpoints dialled)."""
 
@@ -81,11 +89,14 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
     An existing CA in ``out`` is reused (so members can be added later with the same CA);
     an existing member key is kept unless ``overwrite`` (key rotation: issue a new one).
     Keys are ECDSA P-256 (what every TLS stack accepts); member certificates carry both
-    serverAuth and clientAuth (a peer listens and connects) and ``hosts`` as SANs.
+    serverAuth and clientAuth (a peer listens and connects) and ``hosts`` as SANs. Each
+    member also gets a message-signing key ``NAME.ed25519`` (made where missing, new with
+    ``overwrite``), whose public half goes into the roster, ``members.json``.
     """
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     check_name(network, "network name")
@@ -155,11 +166,52 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
         _write(cert_path, cert.public_bytes(pem))
         written += [cert_path, key_path]
     roster = out / "members.json"
-    old = json.loads(roster.read_text()).get("members", []) if roster.exists() else []
+    known = json.loads(roster.read_text()) if roster.exists() else {}
+    signing = dict(known.get(SIGNING, {}))
+    for m in members:  # message signing keys (Ed25519): made where missing, or rotated
+        sign_path = out / f"{m}{SIGN_KEY}"
+        if overwrite or not sign_path.is_file():
+            _write(sign_path, Ed25519PrivateKey.generate().private_bytes(pem, pkcs8, no_pw),
+                   private=True)
+        signing[m] = _public_b64(serialization.load_pem_private_key(
+            sign_path.read_bytes(), None).public_key())
+        written.append(sign_path)
     _write(roster, json.dumps({"network": network,
-                               "members": list(dict.fromkeys([*old, *members]))},
-                              indent=1).encode())
+                               "members": list(dict.fromkeys([*known.get("members", []),
+                                                              *members])),
+                               SIGNING: signing}, indent=1).encode())
     return [*written, roster]
+
+
+def _public_b64(public_key) -> str:
+    """An Ed25519 public key as the base64 of its DER SubjectPublicKeyInfo: the one line
+    between the PEM markers of ``openssl pkey -in NAME.ed25519 -pubout``."""
+    import base64
+
+    from cryptography.hazmat.primitives import serialization
+
+    der = public_key.public_bytes(serialization.Encoding.DER,
+                                  serialization.PublicFormat.SubjectPublicKeyInfo)
+    return base64.b64encode(der).decode()
+
+
+def load_roster(folder: str | Path) -> dict:
+    """The members' message-signing public keys from ``members.json`` (name -> key)."""
+    import base64
+
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+    from cryptography.hazmat.primitives.serialization import load_der_public_key
+
+    path = Path(folder) / "members.json"
+    try:
+        entries = json.loads(path.read_text()).get(SIGNING, {}) if path.is_file() else {}
+        roster = {n: load_der_public_key(base64.b64decode(v)) for n, v in entries.items()}
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise SecurityError(f"{path}: unreadable signing roster ({exc})") from None
+    bad = [n for n, k in roster.items() if not isinstance(k, Ed25519PublicKey)]
+    if bad:
+        raise SecurityError(f"{path}: the signing keys of {', '.join(bad)} are not Ed25519")
+    return roster
 
 
 def keys_network(folder: str | Path) -> str:
@@ -309,6 +361,44 @@ class Security:
     @property
     def key(self) -> Path:
         return self.folder / f"{self.member}.key"
+
+    def signer(self):
+        """This member's :class:`protocol.envelope.Signer` (its ``NAME.ed25519`` key), checked
+        against the roster's public key for it."""
+        from cryptography.hazmat.primitives.serialization import load_pem_private_key
+
+        from protocol.envelope import Signer
+
+        path = self.folder / f"{self.member}{SIGN_KEY}"
+        hint = (f"add it with: sensornet keys {self.network} --out {self.folder} "
+                f"--members {self.member}")
+        if not path.is_file():
+            raise SecurityError(f"--secure {self.folder}: no message-signing key "
+                                f"{path.name} ({hint})")
+        try:
+            key = load_pem_private_key(path.read_bytes(), None)
+        except ValueError as exc:
+            raise SecurityError(f"{path}: not a private key ({exc})") from None
+        listed = load_roster(self.folder).get(self.member)
+        if listed is None or _public_b64(listed) != _public_b64(key.public_key()):
+            raise SecurityError(f"{path} does not match {self.member}'s key in "
+                                f"{self.folder / 'members.json'} ({hint})")
+        return Signer(key)
+
+    def verifier(self, senders: Sequence[str] | None = None):
+        """A :class:`protocol.envelope.Verifier` holding the roster's keys; every name of
+        ``senders`` (default: the world and every peer) must have one."""
+        from protocol.envelope import Verifier
+
+        roster = load_roster(self.folder)
+        need = [self.world, *self.peers] if senders is None else list(senders)
+        missing = [n for n in need if n not in roster]
+        if missing:
+            raise SecurityError(f"--secure {self.folder}: members.json has no signing key for "
+                                f"{', '.join(missing)} (add them with: sensornet keys "
+                                f"{self.network} --out {self.folder} --members "
+                                f"{','.join(missing)})")
+        return Verifier(roster, world=self.world)
 
     def apply(self, conf) -> None:
         """TLS certificates, mutual TLS and the access control policy on a Zenoh config."""

@@ -34,6 +34,7 @@ class Transport:
         self.session_args = session_args
         self.security = security  # peers.security.Security: mutual TLS + access control
         self.refusals = None  # peers.security.RefusalLog in secure mode
+        self.signer = self.verifier = None  # protocol.envelope, in secure mode
         self.q: queue.Queue = queue.Queue()
         self.seen_alive: set[str] = set()
         self.session = None
@@ -46,6 +47,11 @@ class Transport:
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
         if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
+            if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
+                payload, why = self.verifier.open(key, payload)
+                if why is not None:
+                    self.admission.rejected[why] += 1
+                    return
             self.q.put(("msg", key, payload))
 
     def _on_live(self, sample) -> None:
@@ -71,6 +77,8 @@ class Transport:
 
     def open(self, duplicate_wait: float = 0.5) -> None:
         """Open the session; refuse to start if a peer of the same name is alive already."""
+        if self.security is not None and self.signer is None:  # signed messages
+            self.signer, self.verifier = self.security.signer(), self.security.verifier()
         if self.security is not None and self.refusals is None:
             from peers.security import RefusalLog
 
@@ -113,6 +121,8 @@ class Transport:
             self._ready = self.session.liveliness().declare_token(self.keys.ready(self.name))
 
     def publish(self, channel: str, payload: bytes) -> None:
+        if self.signer is not None:
+            payload = self.signer.seal(getattr(self.keys, channel)(self.name), payload)
         self._pubs[channel].put(payload)
 
     def wake(self) -> None:

@@ -373,7 +373,7 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     the network name defaults to the one the keys were made for."""
     if args.secure is None:
         return None
-    from peers.security import WORLD, check_endpoints, keys_network, make_keys
+    from peers.security import SIGN_KEY, WORLD, check_endpoints, keys_network, make_keys
 
     check_endpoints([*(args.listen or []), *(args.connect or [])])
     if args.secure == "":
@@ -387,7 +387,8 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
         raise UserError(f"--secure {folder}: keys of network {made_for!r}, not of "
                         f"{args.network!r}")
     args.network = made_for
-    missing = [m for m in [WORLD, *scn.sensor_names] if not (folder / f"{m}.key").is_file()]
+    missing = [m for m in [WORLD, *scn.sensor_names]
+               if not all((folder / f"{m}{x}").is_file() for x in (".key", SIGN_KEY))]
     if missing:
         raise UserError(f"--secure {folder}: no key for {', '.join(missing)} (add them with: "
                         f"sensornet keys {made_for} --out {folder} --members "
@@ -799,8 +800,8 @@ def cmd_keys(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     print(f"keys for network {args.network}: CA and {len(members)} members "
           f"({', '.join(members)}) in {args.out}")
-    print(f"  {len(paths)} files; give each member only ca.pem, <name>.pem and <name>.key; "
-          "keep ca.key apart")
+    print(f"  {len(paths)} files; give each member only ca.pem, members.json (the roster of "
+          "signing keys), <name>.pem, <name>.key and <name>.ed25519; keep ca.key apart")
     return 0
 
 

@@ -310,8 +310,10 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
     """
     from peers.session import open_session
     from protocol.codec import Rejected, decode
+    from protocol.envelope import inner
     from protocol.keys import Keys
 
+    unseal = inner if handle.secure is not None else bytes  # secure: signed scans
     pending = sorted(faults, key=lambda f: f.scan)
     done: list[dict] = []
     current = {"k": 0}
@@ -319,7 +321,7 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
 
     def on_scan(sample) -> None:
         try:
-            k = decode(sample.payload.to_bytes()).k
+            k = decode(unseal(sample.payload.to_bytes())).k
         except (Rejected, AttributeError):
             return
         with cond:

@@ -44,6 +44,16 @@ def _publish_truth(pub, truth, k: int) -> None:
     pub.put(encode(Truth(k, truth.ids[k - 1], truth.states[k - 1], send_time=time.time())))
 
 
+class _Sealed:
+    """A publisher whose every message is signed by the world (secure mode)."""
+
+    def __init__(self, pub, key: str, signer) -> None:
+        self.pub, self.key, self.signer = pub, key, signer
+
+    def put(self, payload: bytes) -> None:
+        self.pub.put(self.signer.seal(self.key, payload))
+
+
 FOLLOW_RADIUS = 400.0
 """Half-width (m) of the "around the target" view of single-target scenarios."""
 
@@ -84,6 +94,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                   else None,
                   viewer, peers=scn.sensor_names, **layout)
         sink.decorate(scn.sensor_names, region=scn.region, **layout)
+    signer = security.signer() if security is not None else None  # before any socket
     session = open_session(listen, connect, config_file, security=security)
     alive: set[str] = set()
     cond = threading.Condition()
@@ -108,6 +119,10 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
         ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
+        if signer is not None:  # scans, truth and control, signed (protocol.envelope)
+            pubs = {n: _Sealed(p, keys.scan(n), signer) for n, p in pubs.items()}
+            truth_pub = _Sealed(truth_pub, keys.truth(), signer)
+            ctl_pub = _Sealed(ctl_pub, keys.ctl(), signer)
         token = session.liveliness().declare_token(keys.alive("world"))
         if wait_for:
             say(f"world: waiting up to {wait_timeout:g} s for peers {', '.join(wait_for)}")

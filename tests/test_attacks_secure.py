@@ -24,6 +24,7 @@ import zenoh
 from peers.security import Security, make_keys
 from peers.session import open_session
 from protocol.codec import decode, encode
+from protocol.envelope import inner
 from protocol.keys import Keys
 from protocol.messages import Control, Estimate, Scan
 from sim.launcher import read_summaries, start_run, wait_run
@@ -128,7 +129,7 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
         reached = threading.Event()
 
         def on_scan(sample) -> None:  # s3 may read its own scans: the run's clock
-            seen["k"] = max(seen["k"], decode(sample.payload.to_bytes()).k)
+            seen["k"] = max(seen["k"], decode(inner(sample.payload.to_bytes())).k)
             if seen["k"] >= K0:
                 reached.set()
 
