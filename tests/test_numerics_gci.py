@@ -239,3 +239,77 @@ def test_gci_product_paths_agree(d, monkeypatch):
         np.testing.assert_allclose(gathered.covs, grid.covs, rtol=1e-12, atol=1e-12)
         assert np.array_equal(grid.covs, np.swapaxes(grid.covs, 1, 2))
         assert np.array_equal(gathered.covs, np.swapaxes(gathered.covs, 1, 2))
+
+
+def _spread(rng, sizes, d, n_targets, sep, sigma):
+    """Densities whose components sit near ``n_targets`` points ``sep`` apart (a PHD per peer)."""
+    centres = rng.normal(size=(n_targets, d)) * sep
+    dens = []
+    for k in sizes:
+        L = rng.normal(size=(k, d, d))
+        who = rng.permutation(k) % n_targets  # every peer sees every target (k >= n_targets)
+        dens.append(GaussianMixture(rng.uniform(0.05, 1.0, k),
+                                    centres[who] + rng.normal(size=(k, d)) * sigma,
+                                    sigma**2 * (L @ np.swapaxes(L, 1, 2) + np.eye(d))))
+    return dens
+
+
+@pytest.mark.parametrize("d", [2, 4])
+def test_gated_product_keeps_every_combination_that_matters(d, monkeypatch):
+    """``gate=True`` leaves out only combinations whose weight bound is negligible: every
+    combination it drops weighs less than 1e-20 times its components' weight product, all of
+    them together less than 1e-14 of the kept mass, the kept ones equal the
+    full product's (gathered evaluation, to the last bits), and far-apart targets are not
+    combined at all."""
+    monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 0)
+    rng = np.random.default_rng(7 + d)
+    for sizes in [(3, 4, 3, 4, 3), (5, 5, 5, 5), (3, 6, 3)]:
+        dens = _spread(rng, sizes, d, n_targets=3, sep=300.0, sigma=5.0)
+        omegas = rng.dirichlet(np.ones(len(sizes)))
+        comps = fusion._Components(dens, omegas)
+        rows, left_out = fusion._gated_rows(comps)
+        everything = np.indices(sizes).reshape(len(sizes), -1) + comps.start[:, None]
+        full = fusion._centred_gathered(comps, everything)
+        kept = {tuple(c) for c in rows.T}
+        assert len(kept) < math.prod(sizes)  # the gate does leave combinations out
+        is_kept = np.array([tuple(c) in kept for c in everything.T])
+        w = np.exp(full[0])
+        w_bound = np.exp((np.log(np.concatenate([D.weights for D in dens]))[everything]
+                          * omegas[:, None]).sum(axis=0))  # prod_i w_ic^omega_i
+        assert np.all(w[~is_kept] <= 1e-20 * w_bound[~is_kept])
+        assert w[~is_kept].sum() <= left_out <= 1e-14 * w[is_kept].sum()
+        gated = gci_product(dens, omegas, gate=True)
+        np.testing.assert_allclose(gated.weights, w[is_kept], rtol=1e-13)  # same formula, the
+        np.testing.assert_allclose(gated.means, full[1][is_kept], rtol=1e-13)  # last bit aside
+
+
+def test_gated_product_falls_back_when_what_is_left_out_could_matter(monkeypatch):
+    """Densities that barely overlap: the kept mass is tiny, the bound on what the gate left out
+    is not negligible beside it, so every combination is formed (same as ``gate=False``)."""
+    monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 0)
+    rng = np.random.default_rng(3)
+    dens = _spread(rng, (3, 3, 3), 2, n_targets=3, sep=300.0, sigma=5.0)
+    assert fusion._gated_rows(fusion._Components(dens, np.array([0.3, 0.3, 0.4]))) is not None
+    dens[2] = GaussianMixture(dens[2].weights, dens[2].means + 60.0, dens[2].covs)
+    omegas = np.array([0.3, 0.3, 0.4])
+    monkeypatch.setattr(fusion, "_GATE", 4.0)  # a gate this tight leaves out real mass
+    plain, gated = gci_product(dens, omegas), gci_product(dens, omegas, gate=True)
+    assert len(gated) == len(plain) == 27
+    np.testing.assert_array_equal(gated.weights, plain.weights)
+
+
+def test_gci_fuse_with_a_reducer_equals_the_ungated_product_reduced():
+    """What a peer's fusion returns (n-ary GCI, then prune/merge) does not change with the gate."""
+    from tracking.fusion import gci_fuse
+    from tracking.reduction import Reducer
+
+    rng = np.random.default_rng(11)
+    reduce = Reducer()
+    for card in ("emd", "separate"):
+        dens = _spread(rng, (4, 4, 4, 4, 4), 4, n_targets=4, sep=300.0, sigma=8.0)
+        omegas = list(rng.dirichlet(np.ones(5)))
+        fused = gci_fuse(dens, omegas, reduce, cardinality=card)
+        ref = reduce(gci_product(dens, omegas, card))
+        np.testing.assert_allclose(fused.weights, ref.weights, rtol=1e-12)
+        np.testing.assert_allclose(fused.means, ref.means, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(fused.covs, ref.covs, rtol=1e-10, atol=1e-9)

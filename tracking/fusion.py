@@ -28,6 +28,8 @@ from tracking.gaussian import (
     SYM4_INDEX,
     SYM4_WORK,
     inv_det_spd,
+    inv_spd,
+    quad_form,
     sym4_inverse_into,
     symmetrise,
 )
@@ -288,7 +290,8 @@ def gci_fuse(
     densities, weights = _check_weights(densities, weights)
     used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0]
     if len(used) > 1 and math.prod(len(D) for D, _ in used) <= NARY_MAX_COMBINATIONS:
-        acc = gci_product([D for D, _ in used], [w for _, w in used], cardinality)
+        acc = gci_product([D for D, _ in used], [w for _, w in used], cardinality,
+                          gate=reduce is not None)
         if reduce is not None:
             acc = reduce(acc)
     else:
@@ -312,7 +315,7 @@ NARY_MAX_COMBINATIONS = 4096
 
 
 def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
-                cardinality: str = "emd") -> GaussianMixture:
+                cardinality: str = "emd", gate: bool = False) -> GaussianMixture:
     """``prod_i D_i^(omega_i)`` (``sum omega_i = 1``) in one step: a component per combination.
 
     The power of a mixture drops cross terms (§3; seed 000 eq. 14-17), so the product is, over
@@ -326,7 +329,8 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
     arithmetic (tested to condition number 1e12). This is what sequential :func:`gci_combine`
     steps give before any reduction (the same equations, regrouped); combinations are ordered
     with the first density's component slowest. ``cardinality``: ``"emd"`` or ``"separate"`` (see
-    :func:`gci_combine`).
+    :func:`gci_combine`). ``gate``: leave out the combinations that two far-apart components
+    make negligible (:func:`_gated_rows`; for a reduced result: a pruning reducer drops them).
     """
     if cardinality not in CARDINALITY_RULES:
         raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
@@ -340,7 +344,7 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
         if np.any(masses <= 0):
             return GaussianMixture.empty(d)
         densities = [D.scaled(1.0 / N) for D, N in zip(densities, masses, strict=True)]
-    log_w, means, covs = _centred_terms(densities, omegas)
+    log_w, means, covs = _centred_terms(densities, omegas, gate)
     fused = GaussianMixture(np.exp(log_w), means, covs)
     if cardinality == "emd":
         return fused
@@ -365,13 +369,14 @@ class _Components:
                             - 0.5 * np.log(det_all))
         self.wY = om[:, None, None] * Yall
         self.means = np.concatenate([D.means for D in densities])
+        self.densities, self.omegas = densities, omegas
 
     def part(self, i: int) -> slice:
         """Density ``i``'s rows."""
         return slice(self.start[i], self.start[i] + self.sizes[i])
 
 
-def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray
+def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray, gate: bool = False
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`gci_product`'s ``log w (C,)``, means ``(C, d)`` and covariances ``(C, d, d)``.
 
@@ -383,11 +388,20 @@ def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray
     ``sum_i omega_i m_ic' Y_ic m_ic - h' m`` subtracts numbers of size ``|m - ref|^2 / lambda_min
     (P)``: relative weight errors up to 7e-3 at condition number 1e6, overflow at 1e9.)
     Up to :data:`_SMALL_COMBINATIONS` combinations are gathered into flat arrays (fewest NumPy
-    calls); more are summed on the ``(*sizes)`` grid by broadcasting (least memory traffic).
+    calls); more are summed on the ``(*sizes)`` grid by broadcasting (least memory traffic), or
+    with ``gate`` only those :func:`_gated_rows` keeps, gathered, when what it leaves out carries
+    at most :data:`_GATE_TOLERANCE` of the kept mass.
     """
     comps = _Components(densities, omegas)
     if math.prod(comps.sizes) <= _SMALL_COMBINATIONS:
         return _centred_gathered(comps)
+    if gate:
+        gated = _gated_rows(comps)
+        if gated is not None:
+            rows, left_out = gated
+            terms = _centred_gathered(comps, rows)
+            if left_out <= _GATE_TOLERANCE * np.exp(terms[0]).sum():
+                return terms  # else what was left out might matter: form every combination
     return _centred_on_grid(comps)
 
 
@@ -396,10 +410,52 @@ _SMALL_COMBINATIONS = 64
 level-2-pruned inputs of a peer's fusion are usually this few)."""
 
 
-def _centred_gathered(comps: _Components) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_centred_terms` with every density's term gathered to ``(n, C, ...)``."""
+_GATE = 2.0 * math.log(1e20)
+"""Pair term above which :func:`_gated_rows` leaves a combination out (its weight is then at
+most ``1e-20`` times the largest product of its components' weights)."""
+
+_GATE_TOLERANCE = 1e-14
+"""Largest share of the fused mass the combinations left out may carry (else: all of them)."""
+
+
+def _gated_rows(comps: _Components) -> tuple[np.ndarray, float] | None:
+    """The combinations worth forming, as ``(n, C_kept)`` component rows, and a bound on the
+    mass of those left out; None if none is kept.
+
+    A combination's quadratic term is ``min_x sum_i omega_i |m_ic - x|^2_(Y_ic)``, at least the
+    same minimum over two of its components, its first density's ``a`` and density ``i``'s
+    ``b``: ``(m_a - m_b)' (P_a / omega_1 + P_b / omega_i)^-1 (m_a - m_b)``; and its determinant
+    factor is at most 1 (log det is concave), so its weight is at most ``prod_i w_ic^(omega_i)
+    exp(-pair / 2)``. Combinations with a pair term above :data:`_GATE` are left out, densities
+    added one at a time (a PHD's components for different targets never combine).
+    """
+    sizes, start, n = comps.sizes, comps.start, len(comps.sizes)
+    om = np.repeat(comps.omegas, sizes)
+    S = np.concatenate([D.covs for D in comps.densities]) / om[:, None, None]  # P / omega
+    first = comps.part(0)
+    # pair terms of each first-density component with every other component: (N_1, K)
+    diff = comps.means[None, :, :] - comps.means[first, None, :]
+    pair = quad_form(diff, inv_spd(S[first, None] + S[None, :]))
+    rows = np.arange(sizes[0])[:, None] + start[0]  # (M, i) kept partial combinations
+    for i in range(1, n):
+        new = np.arange(sizes[i]) + start[i]
+        mi, ni = np.nonzero(pair[rows[:, 0]][:, new] <= _GATE)
+        rows = np.concatenate([rows[mi], new[ni, None]], axis=1)
+    if not len(rows):
+        return None
+    log_wmax = sum(o * math.log(D.weights.max()) if D.weights.max() > 0 else -math.inf
+                   for D, o in zip(comps.densities, comps.omegas, strict=True))
+    dropped = math.prod(sizes) - len(rows)
+    return rows.T, dropped * math.exp(min(700.0, log_wmax - 0.5 * _GATE))
+
+
+def _centred_gathered(comps: _Components, idx: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_centred_terms` with every density's term gathered to ``(n, C, ...)``, over all
+    combinations or the ``(n, C)`` component rows ``idx``."""
     n, sizes = len(comps.sizes), comps.sizes
-    idx = np.indices(sizes).reshape(n, -1) + comps.start[:, None]  # (n, C) component rows
+    if idx is None:
+        idx = np.indices(sizes).reshape(n, -1) + comps.start[:, None]  # (n, C) component rows
     wY = comps.wY[idx]  # (n, C, d, d)
     ref = comps.means[idx[0]]  # (C, d)
     u = comps.means[idx] - ref  # (n, C, d)
