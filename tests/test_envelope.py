@@ -237,3 +237,17 @@ def test_world_messages_need_the_worlds_key(keys, signers, verifier):
     assert verifier.open(K.scan("s1"), signers["s2"].seal(K.scan("s1"), data))[1] == \
         "unauthenticated"
     assert verifier.open(K.scan("s1"), signers["world"].seal(K.scan("s1"), data))[1] is None
+
+
+def test_signing_benchmark_runs(capsys):
+    """benchmarks/bench_signing.py prints one row per message kind and the per-scan cost."""
+    from benchmarks import bench_signing
+
+    assert bench_signing.main(["--n", "3"]) == 0
+    out = capsys.readouterr().out
+    rows = [ln for ln in out.splitlines() if ln.startswith("| ") and "---" not in ln]
+    assert [r.split("|")[1].strip() for r in rows[1:7]] == [
+        "scan (8 measurements)", "truth (4 targets)", "estimate (1 component)",
+        "estimate (10 components)", "estimate (100 components)", "tracks (4 targets)"]
+    assert all("(+76)" in r for r in rows[1:7])  # the trailer: stamp, signature, tag
+    assert "| total |" in out
