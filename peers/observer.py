@@ -72,6 +72,9 @@ class Observer:
                 self.sink.scalar(f"metrics/out_of_sequence/{n}/{what}", getattr(c, what))
             if core.consensus.last_fused is not None:
                 self.sink.mixture(f"peers/{n}/fused", core.consensus.last_fused, self.color)
+            view = getattr(core.estimator, "pda_view", lambda: None)()
+            if view is not None:  # PDA peers (seed 003): gates, weighted returns, detector
+                self._deferred.append(lambda k=r.k, v=view: self._pda(k, v))
             probs = getattr(core.consensus.fuser, "model_probabilities", None)
             if probs is not None:
                 names = getattr(core.estimator, "model_names", None) or []
@@ -131,6 +134,27 @@ class Observer:
         strips = ellipses(means, covs)
         self.sink.strips(f"peers/{self.name}/cells/extents", list(strips),
                          [color_of(int(c)) for c in big] if len(big) else None)
+
+    def _pda(self, k: int, view: dict) -> None:
+        """A PDA update: each sensor's gate (its ``gamma`` ellipse about the predicted
+        measurement), the validated returns coloured by weight (blue 0 to red 1), and the
+        detector statistic ``D_L`` beside its threshold."""
+        self._time(k)
+        n = self.name
+        for s, v in view["sensors"].items():
+            mean = np.zeros((1, 4))
+            mean[0, [0, 2]] = v["zhat"]
+            cov = np.zeros((1, 4, 4))
+            cov[0][np.ix_([0, 2], [0, 2])] = v["S"]
+            gate = ellipses(mean, cov, sigma=float(np.sqrt(v["gamma"])))
+            self.sink.strips(f"peers/{n}/pda/{s}/gate", list(gate), self.color)
+            w = np.clip(np.asarray(v["weights"], float), 0.0, 1.0)
+            colors = np.stack([255 * w, 40 + 0 * w, 255 * (1 - w)], axis=1).astype(np.uint8)
+            self.sink.points(f"peers/{n}/pda/{s}/returns", v["returns"], colors, radius=3.0)
+        if "detector" in view:
+            d, threshold = view["detector"]
+            self.sink.scalar(f"metrics/detector/{n}/D_L", d)
+            self.sink.scalar(f"metrics/detector/{n}/threshold", threshold)
 
     def flush(self, idle: bool, force: bool = False) -> None:
         """Run the deferred drawing once nothing waits (or there is a backlog, or at the end)."""

@@ -9,20 +9,34 @@ into every peer's filter creates. With two inputs ``w`` minimises ``log det P`` 
 choice, ``omega="det"``); otherwise the consensus weights are used.
 
 Measurement sharing (each peer applies every peer's returns in a fixed sensor order, the
-paper's sequential scheme) is what :func:`sim.seed003.run_filter` does with two sensors; it is
-not a peer mode yet (its messages would carry returns, not densities).
+paper's sequential scheme, :func:`sim.seed003.run_filter` with two sensors) is the pair
+:class:`SequentialPdaEstimator` / :class:`SequentialFuser`: a peer predicts, publishes the
+returns of its own scan that fall in a wide pre-gate (``pregate`` times the gate threshold, on
+the union of the models' gates) as an estimate of kind ``"returns"``, and, once every peer's
+returns are in (or at the deadline), runs the PDA update sensor by sensor in the fixed order on
+its own filter. With identical initial states every peer then holds the same estimate. A
+sensor whose returns did not arrive in time is left out of that scan (the update falls back to
+the sensors that did), and counted.
+
+On the wire a return set is a :class:`~tracking.mixture.GaussianMixture` of the state's
+dimension (the codec's estimate format): one unit-weight component per return, its mean the
+return in the position columns (zero elsewhere), its covariance the sensor noise ``R`` in the
+position block (identity elsewhere: unused) — each return as the Gaussian likelihood it is on
+the target's position.
 """
 
 from __future__ import annotations
 
+import copy
 from collections import Counter
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from peers.contracts import FusionInput, LocalOutput
 from tracking.mixture import GaussianMixture
-from tracking.pda import ImmPda, LinearSensor
+from tracking.pda import ImmPda, LinearSensor, SensorUpdate, _quadratic_form
 
 
 def covariance_intersection(means: np.ndarray, covs: np.ndarray,
@@ -67,6 +81,7 @@ class PdaEstimator:
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
         self.filter.predict(steps)
         up = self.filter.update(self.sensor, np.asarray(z, float).reshape(-1, 2))
+        self.last_update = up
         x, P = self.filter.estimate()
         mix = _single(x, P)
         return LocalOutput(mix, {"posterior": mix},
@@ -81,6 +96,11 @@ class PdaEstimator:
     def adopt(self, fused: GaussianMixture) -> None:
         if self.feedback and len(fused) == 1:
             self.filter.adopt(fused.means[0], fused.covs[0])
+
+    def pda_view(self) -> dict | None:
+        """This sensor's last update for the Rerun view (see :func:`pda_view`)."""
+        up = getattr(self, "last_update", None)
+        return None if up is None else pda_view(self.filter, {"own": self.sensor}, {"own": up})
 
 
 class CiFuser:
@@ -111,3 +131,145 @@ class CiFuser:
             self.counts["fusion_fallbacks"] += 1
             return inp.own
         return _single(x, P)
+
+
+# -- measurement sharing ------------------------------------------------------------------------
+
+
+def returns_mixture(Z: np.ndarray, R: np.ndarray, dim: int,
+                    position_index: tuple[int, int]) -> GaussianMixture:
+    """Returns ``Z (m, 2)`` as the wire mixture of kind ``"returns"`` (module docstring)."""
+    Z = np.asarray(Z, float).reshape(-1, 2)
+    m = len(Z)
+    pos = list(position_index)
+    means = np.zeros((m, dim))
+    means[:, pos] = Z
+    covs = np.broadcast_to(np.eye(dim), (m, dim, dim)).copy()
+    covs[np.ix_(range(m), pos, pos)] = R
+    return GaussianMixture(np.ones(m), means, covs)
+
+
+def mixture_returns(mix: GaussianMixture, position_index: tuple[int, int]) -> np.ndarray:
+    """The returns ``(m, 2)`` a ``"returns"`` mixture carries."""
+    return np.asarray(mix.means, float)[:, list(position_index)].reshape(-1, 2)
+
+
+class SequentialPdaEstimator:
+    """Measurement sharing: a (fuzzy) IMM-PDAF that every peer runs on every sensor's returns
+    in the fixed order ``order`` (this peer's sensor is ``own``).
+
+    :meth:`step` predicts and publishes this peer's pre-gated returns (kind ``"returns"``);
+    its local density (for the local score and display) is this sensor's update alone, on a
+    copy of the filter. :meth:`apply` (called by :class:`SequentialFuser`) runs the updates.
+    """
+
+    kinds = ("returns",)
+
+    def __init__(self, filt: ImmPda, sensors: Mapping[str, LinearSensor], order: Sequence[str],
+                 own: str, position_index: tuple[int, int], pregate: float = 4.0) -> None:
+        if own not in order or set(order) != set(sensors):
+            raise ValueError(f"sequential PDA: own sensor {own!r} and order {list(order)} "
+                             f"must name the sensors {sorted(sensors)}")
+        if pregate < 1.0:
+            raise ValueError(f"sequential PDA: pregate {pregate} must be >= 1")
+        self.filter = filt
+        self.sensors = dict(sensors)
+        self.order = tuple(order)
+        self.own = own
+        self.dim = filt.x.shape[1]
+        self.position_index = position_index
+        self.pregate = float(pregate)
+        self.own_returns = np.zeros((0, 2))
+        self.last_updates: dict[str, SensorUpdate] = {}
+        self.counts: Counter = Counter()
+
+    def gate(self, Z: np.ndarray) -> np.ndarray:
+        """The rows of ``Z`` inside ``pregate`` x the gate of any model (after predicting)."""
+        s = self.sensors[self.own]
+        f = self.filter
+        zhat = f.x @ s.H.T
+        S = s.H @ f.P @ s.H.T + s.R
+        g = _quadratic_form(Z[None] - zhat[:, None], np.linalg.inv(S))
+        return Z[(g < self.pregate * s.gamma).any(axis=0)]
+
+    def step(self, steps: int, z: np.ndarray) -> LocalOutput:
+        self.filter.predict(steps)
+        Z = np.asarray(z, float).reshape(-1, 2)
+        self.own_returns = self.gate(Z)
+        solo = copy.deepcopy(self.filter)
+        up = solo.update(self.sensors[self.own], self.own_returns)
+        local = _single(*solo.estimate())
+        wire = returns_mixture(self.own_returns, self.sensors[self.own].R, self.dim,
+                               self.position_index)
+        return LocalOutput(local, {"posterior": local, "returns": wire},
+                           {"returns": float(len(Z)), "published": float(len(self.own_returns)),
+                            "gated": float(len(up.returns))})
+
+    def apply(self, returns: Mapping[str, np.ndarray]) -> GaussianMixture:
+        """Update with each sensor's returns in the fixed order (absent sensors skipped)."""
+        self.last_updates = {}
+        for name in self.order:
+            Z = returns.get(name)
+            if Z is not None:
+                self.last_updates[name] = self.filter.update(self.sensors[name], Z)
+        return _single(*self.filter.estimate())
+
+    def predict(self, mix: GaussianMixture, steps: int) -> GaussianMixture:
+        return mix
+
+    def extract(self, mix: GaussianMixture) -> np.ndarray:
+        return (mix.weights @ mix.means)[None, :] / max(float(mix.weights.sum()), 1e-300)
+
+    def adopt(self, fused: GaussianMixture) -> None:
+        pass  # the filter itself ran the sequential update
+
+    def pda_view(self) -> dict | None:
+        """The last sequential update for the Rerun view: per sensor the gate (``zhat``,
+        ``S``, ``gamma``) and the validated returns with their weights; the detector's
+        ``D_L`` and threshold (fuzzy filters)."""
+        return pda_view(self.filter, self.sensors, self.last_updates)
+
+
+def pda_view(filt: ImmPda, sensors: Mapping[str, LinearSensor],
+             updates: Mapping[str, SensorUpdate]) -> dict | None:
+    """What the Rerun view draws of a PDA filter's last updates (see
+    :meth:`SequentialPdaEstimator.pda_view`)."""
+    if not updates:
+        return None
+    view: dict = {"sensors": {n: {"zhat": u.zhat, "S": u.S, "gamma": sensors[n].gamma,
+                                  "returns": u.returns, "weights": u.weights}
+                              for n, u in updates.items()}}
+    w = filt.weighting
+    if w is not None:
+        d, dof = w.detector.statistic
+        view["detector"] = (d, w.detector.threshold(dof) if dof else float("nan"))
+    return view
+
+
+class SequentialFuser:
+    """Measurement sharing's "fusion": the sequential PDA update with every sensor's returns
+    that arrived (one round). A scan missing some sensor's returns (late, lost, its peer gone)
+    falls back to the others; counted per missing sensor (``missing_<name>``), in
+    ``fallbacks``, and the first such scan in ``first_fallback_scan``."""
+
+    kinds = ("returns",)
+    max_rounds = 1
+
+    def __init__(self, estimator: SequentialPdaEstimator) -> None:
+        self.estimator = estimator
+        self.counts: Counter = Counter()
+
+    def fuse(self, inp: FusionInput) -> GaussianMixture:
+        est = self.estimator
+        got = {est.own: est.own_returns}
+        for s, kinds in inp.neighbours.items():
+            if s in est.sensors:
+                got[s] = mixture_returns(kinds["returns"], est.position_index)
+        missing = [s for s in est.order if s not in got]
+        for s in missing:
+            self.counts[f"missing_{s}"] += 1
+        if missing:
+            self.counts["fallbacks"] += 1
+            self.counts.setdefault("first_fallback_scan", inp.k)
+        self.counts["scans"] += 1
+        return est.apply(got)

@@ -95,7 +95,7 @@ def _array(a: np.ndarray) -> bytes:
     return np.ascontiguousarray(a, dtype=_F8).tobytes()
 
 
-_KINDS = ("posterior", "prediction")
+_KINDS = ("posterior", "prediction", "returns")  # "returns": measurement sharing (seed 003)
 _FIELDS = {
     # type letter: field names after [version, type], in wire order
     "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "x"),

@@ -96,15 +96,17 @@ class TwinResult:
 def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
              peers: dict[str, PeerCore] | None = None,
              faults: FaultInjector | None = None, network: str = "twin",
-             inject: Iterable[Inject] = (), events: Iterable[Liveliness] = ()) -> TwinResult:
+             inject: Iterable[Inject] = (), events: Iterable[Liveliness] = (),
+             data=None) -> TwinResult:
     """One run of the scenario's network on the virtual clock.
 
     Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
     duplication, reordering, partitions) if given, else ``delay`` if given, else the
     scenario's ``[faults]`` table, else instant delivery. ``inject``: raw messages (attacks);
-    ``events``: liveliness changes (departures, returns).
+    ``events``: liveliness changes (departures, returns). ``data``: the run's ``(truth,
+    scans)`` for scenarios that draw their own (as :func:`sim.world.generate_run` returns them).
     """
-    truth, scans = generate_run(scn, run)
+    truth, scans = data if data is not None else generate_run(scn, run)
     names = scn.sensor_names
     keys = Keys(network)
     peers = peers if peers is not None else {

@@ -67,8 +67,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               wait_timeout: float = 30.0, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
-              say=None, security=None) -> dict:
+              say=None, security=None, data=None) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
+
+    ``data``: the run's ``(truth, scans)`` as :func:`sim.world.generate_run` returns them,
+    for scenarios that draw their own (seed 003, :mod:`sim.seed003_net`).
 
     ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
     lines (waiting for the peers, starting).
@@ -77,7 +80,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     keys = Keys(network)
     speed = speed or scn.network.speed
     interval = scn.scan_period / speed
-    truth, scans = generate_run(scn, run)
+    truth, scans = data if data is not None else generate_run(scn, run)
     stop = threading.Event()
 
     def on_signal(signum, frame):
