@@ -30,6 +30,9 @@ from peers.transport import Transport
 from protocol.codec import Rejected, decode
 from protocol.messages import Estimate
 
+BATCH = 64
+"""At most this many queued messages are handled per wake-up before deadlines are checked."""
+
 
 @dataclass(frozen=True)
 class RuntimeOptions:
@@ -146,8 +149,13 @@ class PeerRuntime:
             except Exception:  # queue.Empty
                 item = None
             try:
-                if item is not None:
+                # what has queued up meanwhile is handled before the deferred work (one tick
+                # and one Rerun flush per wake-up instead of per message; bounded)
+                for _ in range(BATCH):
+                    if item is None or self._stop:
+                        break
                     self._handle(*item)
+                    item = None if q.empty() else q.get_nowait()
                 for key, payload in self.held.pop_due(time.monotonic()):
                     self._feed("estimate", key, payload)
                 now = time.time()
