@@ -19,7 +19,7 @@ import numpy as np
 
 from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
 from peers.fusers import NoFuser
-from protocol.messages import Estimate, Tracks
+from protocol.messages import Estimate, Forward, ScanSet, Tracks
 from tracking.mixture import GaussianMixture
 from tracking.nale import NaleBuffer
 
@@ -42,6 +42,9 @@ class ConsensusOptions:
     """Out-of-sequence policy: ``"nale"``, ``"drop-late"`` or ``"as-is"``."""
     feedback: bool = False
     """Use the fused density as the local filter's prior for the next scan."""
+    round_deadlines: bool = False
+    """One deadline per round (the scan's deadline split evenly over the rounds) instead of
+    one per scan: a round then runs with what arrived by its own deadline (flooding)."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
@@ -58,7 +61,11 @@ class ConsensusStats:
     estimates_in: int = 0
     estimates_out: int = 0
     tuples_out: int = 0
-    """Numbers published in estimates (15 per 4-D component: ALGORITHMS.md §9)."""
+    """Numbers published in estimates (15 per 4-D component, 2 per 2-D measurement:
+    ALGORITHMS.md §9), once per publication."""
+    tuples_to_neighbours: int = 0
+    """The same, once per neighbour it goes to (the seed's count: a publication reaches every
+    live neighbour over its own link)."""
     old_round_estimates: int = 0
     fusions: int = 0
     fused_inputs: int = 0
@@ -75,6 +82,15 @@ class _ScanState:
     current: GaussianMixture | None = None
     local: GaussianMixture | None = None
     done: bool = False
+
+
+def payload_tuples(payload: GaussianMixture | ScanSet) -> int:
+    """The seed's tuples in one published payload: a ``d``-dimensional Gaussian component
+    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (ALGORITHMS.md §9)."""
+    if isinstance(payload, ScanSet):
+        return payload.tuples()
+    d = payload.dim
+    return len(payload) * (1 + d + d * (d + 1) // 2)
 
 
 class Consensus:
@@ -134,19 +150,33 @@ class Consensus:
     def on_estimate(self, est: Estimate, now: float) -> list:
         """Store a neighbour's estimate (round-0 posteriors through NALE); fuse if complete."""
         self.stats.estimates_in += 1
+        payload = est.scans if isinstance(est, Forward) else est.mixture
+        st, late = self._scan, getattr(self.fuser, "late", None)
+        if late is not None and st is not None and (
+                est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
+            late(est.sender, payload, est.k)  # after its round: the fuser decides (flooding)
+            return []
         if est.round == 0 and est.kind == "posterior":
-            self.nale.offer(est.sender, est.k, est.mixture)
+            self.nale.offer(est.sender, est.k, payload)
         if self._scan is not None and est.k < self._scan.k and est.round > 0:
             self.stats.old_round_estimates += 1
             return []
-        self._inbox.setdefault((est.k, est.round, est.kind), {})[est.sender] = est.mixture
+        self._inbox.setdefault((est.k, est.round, est.kind), {})[est.sender] = payload
         return self._advance(now)
 
     def on_deadline(self, k: int, now: float) -> list:
         """The fusion deadline of scan ``k``: run the remaining rounds with what arrived."""
         if self._scan is None or self._scan.k != k or self._scan.done:
             return []
+        if self.o.round_deadlines:  # this round's deadline: run it, then what is complete
+            self.stats.deadline_fusions += 1
+            return self._fuse_round(self._scan, now) + self._advance(now)
         return self.finish(now)
+
+    def round_of(self, k: int) -> int | None:
+        """Rounds of scan ``k`` already run (None: not the scan being fused, or done)."""
+        st = self._scan
+        return st.round if st is not None and st.k == k and not st.done else None
 
     def finish(self, now: float) -> list:
         """Run the current scan's remaining rounds now (deadline, next scan, or end of run)."""
@@ -234,7 +264,10 @@ class Consensus:
         self._record(st.k, "fusion", round=st.round, n_inputs=len(senders), n_fused=len(fused),
                      ages={s: ages.get(s, 0) for s in senders})
         if st.round < self.rounds:
-            return [self._estimate(st.k, st.round, fused, now, "posterior")]
+            outgoing = getattr(self.fuser, "outgoing", None)  # flooding sends only what is new
+            return [self._estimate(st.k, st.round,
+                                   fused if outgoing is None else outgoing(fused), now,
+                                   "posterior")]
         st.done = True
         if self.o.feedback:
             self.estimator.adopt(fused)
@@ -248,8 +281,11 @@ class Consensus:
     def _estimate(self, k: int, rnd: int, mix: GaussianMixture, now: float,
                   kind: str) -> Estimate:
         self.stats.estimates_out += 1
-        d = mix.dim
-        self.stats.tuples_out += len(mix) * (1 + d + d * (d + 1) // 2)
+        tuples = payload_tuples(mix)
+        self.stats.tuples_out += tuples
+        self.stats.tuples_to_neighbours += tuples * len(self.alive)
+        if isinstance(mix, ScanSet):
+            return Forward(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
         return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
                         send_time=now, pruning=2 if rnd == 0 else 1, kind=kind)
 

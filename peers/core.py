@@ -37,7 +37,7 @@ from peers.consensus import Consensus
 from peers.scoring import Scorer
 from protocol.codec import DEFAULT_LIMITS, Limits, Rejected, decode, encode
 from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan, Tracks, Truth
+from protocol.messages import Control, Estimate, Forward, Scan, Tracks, Truth
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class Publish:
     channel: str
     k: int
     payload: bytes
-    message: Estimate | Tracks
+    message: Estimate | Forward | Tracks
 
 
 @dataclass(frozen=True)
@@ -120,6 +120,10 @@ class PeerCore:
         self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
         self.stopped: str | None = None
         self._pending_local: list[int] = []
+        self.sent_bytes: Counter = Counter()
+        """Bytes of every publication, by channel (what the runtime puts on the wire)."""
+        self._scan_at: tuple[int, float] | None = None
+        self._cost_mark = (0, 0, 0)
 
     # -- the four entry points ------------------------------------------------------------
     def receive(self, key: str, payload: bytes, now: float, admitted: bool = False
@@ -138,7 +142,8 @@ class PeerCore:
             msg = decode(payload, self.cfg.limits)
         except Rejected as exc:
             return self._reject(exc.reason)
-        expected = {"scan": Scan, "estimate": Estimate, "truth": Truth, "ctl": Control}
+        expected = {"scan": Scan, "estimate": (Estimate, Forward), "truth": Truth,
+                    "ctl": Control}
         if not isinstance(msg, expected[route.channel]):
             return self._reject("wrong-key")
         if route.channel == "scan":
@@ -154,7 +159,12 @@ class PeerCore:
         out: list[Output] = []
         for k in [k for k, t in self.deadlines.items() if t <= now]:
             del self.deadlines[k]
+            due = self._due(k)
+            if due is not None and due > now:  # its round already ran: the next round's
+                self.deadlines[k] = due
+                continue
             out += self._wrap(self.consensus.on_deadline(k, now))
+            self._arm(k)
         self._score_local()
         return out + self._records()
 
@@ -232,9 +242,25 @@ class PeerCore:
         self.scorer.advance(k)
         self._pending_local.append(k)
         self.deadlines = {kk: t for kk, t in self.deadlines.items() if kk >= k}
-        if c.busy():
-            self.deadlines[k] = now + self.cfg.deadline * self.cfg.interval
+        self._scan_at = (k, now)
+        self._arm(k)
         return out
+
+    def _due(self, k: int) -> float | None:
+        """The next fusion deadline of scan ``k`` while it is being fused: the scan's, or with
+        ``round_deadlines`` the next round's (its share of the scan's deadline)."""
+        c = self.consensus
+        if not c.busy() or self._scan_at is None or self._scan_at[0] != k:
+            return None
+        span = self.cfg.deadline * self.cfg.interval
+        if c.o.round_deadlines:
+            span *= ((c.round_of(k) or 0) + 1) / c.rounds
+        return self._scan_at[1] + span
+
+    def _arm(self, k: int) -> None:
+        due = self._due(k)
+        if due is not None:
+            self.deadlines[k] = due
 
     def window_for(self, channel: str) -> tuple[int, int]:
         """Scan indices this peer takes on ``channel`` now: scans from the next one up to
@@ -257,8 +283,12 @@ class PeerCore:
             return self._reject("spoofed")
         if msg.sender not in c.o.neighbours:
             return self._reject("not-neighbour")
-        if msg.mixture.dim != self.estimator.dim or msg.kind not in (c.kinds or ("posterior",)):
+        scans = getattr(self.estimator, "payload", "mixture") == "scans"
+        if (isinstance(msg, Forward) != scans or msg.kind not in (c.kinds or ("posterior",))
+                or (not scans and msg.mixture.dim != self.estimator.dim)):
             return self._reject("incompatible")
+        if scans and not set(msg.scans.scans) <= self.estimator.roster.keys():
+            return self._reject("spoofed")  # a scan of a sensor not in the network
         if msg.round >= c.rounds:
             return self._reject("round")
         why = self._window(msg.k)
@@ -289,12 +319,23 @@ class PeerCore:
     def _wrap(self, messages: list) -> list[Output]:
         out: list[Output] = []
         for m in messages:
-            if isinstance(m, Estimate):
+            if isinstance(m, Estimate | Forward):
                 out.append(Publish("estimate", m.k, encode(m), m))
+                self.sent_bytes["estimate"] += len(out[-1].payload)
             elif isinstance(m, Tracks):
                 out.append(Publish("tracks", m.k, encode(m), m))
+                self.sent_bytes["tracks"] += len(out[-1].payload)
+                out.append(self._scan_cost(m.k))
                 self.scorer.output("fused", m.k, m.states)
         return out
+
+    def _scan_cost(self, k: int) -> Record:
+        """What this scan's estimates or forwards cost (published since the last tracks)."""
+        st = self.consensus.stats
+        now = (st.tuples_out, st.tuples_to_neighbours, self.sent_bytes["estimate"])
+        d = [a - b for a, b in zip(now, self._cost_mark, strict=True)]
+        self._cost_mark = now
+        return Record("cost", k, {"tuples": d[1], "tuples_published": d[0], "bytes": d[2]})
 
     def _score_local(self) -> None:
         """Extract and score the local estimate (kept off the critical path)."""
@@ -310,6 +351,16 @@ class PeerCore:
         return [Record(r.pop("kind"), r.pop("k"), r) for r in recs]
 
     # -- reporting --------------------------------------------------------------------------
+    def cost(self) -> dict:
+        """Tuples and bytes this peer sent per scan (estimates and forwards; ALGORITHMS.md §9:
+        a 4-D Gaussian component 15 tuples, a 2-D measurement 2; no fusion mode here sends
+        particles or a separate cardinality). ``tuples_per_scan`` counts a publication once
+        per live neighbour (the seed's count), ``tuples_published_per_scan`` once; bytes are
+        the encoded payloads, ``..._to_neighbours`` times the neighbours."""
+        c = self.consensus
+        return cost_per_scan(asdict(c.stats) | {"scans": c.stats.scans},
+                             self.sent_bytes["estimate"], len(c.o.neighbours))
+
     def mean_ospa(self, which: str) -> float:
         return self.scorer.mean(which)
 
@@ -337,10 +388,20 @@ class PeerCore:
             "ctl_end_while_world_alive": self.ctl_end_early,
             "peer_events": list(self.departures),
             "stats": asdict(c.stats),
+            "cost": self.cost(),
             "nale": asdict(c.nale.counts),
             "fuser": dict(getattr(c.fuser, "counts", {})),
             "internal_errors": dict(c.errors),
         }
+
+
+def cost_per_scan(stats: dict, sent_bytes: int, neighbours: int) -> dict:
+    """Communication cost per scan from a peer's counters (plain data, for summaries)."""
+    n = max(stats.get("scans", 0), 1)
+    return {"tuples_per_scan": stats.get("tuples_to_neighbours", 0) / n,
+            "tuples_published_per_scan": stats.get("tuples_out", 0) / n,
+            "estimate_bytes_per_scan": sent_bytes / n,
+            "estimate_bytes_to_neighbours_per_scan": sent_bytes * neighbours / n}
 
 
 def positions(states: np.ndarray, index: tuple[int, int]) -> np.ndarray:

@@ -13,10 +13,14 @@ seed's unit: a 2-D measurement is 2 tuples, counted once per neighbour a scan is
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from peers.contracts import FusionInput, LocalOutput
+from protocol.messages import ScanSet
 
 TUPLES_PER_MEASUREMENT = 2
 """A 2-D measurement is 2 tuples (seed 004)."""
@@ -64,6 +68,10 @@ class Flooder:
     def pooled(self, scan: int) -> dict[int, np.ndarray]:
         """The scans of index ``scan`` held now, by origin."""
         return {o: z for (o, s), z in self.held.items() if s == scan}
+
+    def pooled_keys(self, scan: int) -> dict[ScanKey, np.ndarray]:
+        """The scans of index ``scan`` held now, by key."""
+        return {key: z for key, z in self.held.items() if key[1] == scan}
 
     def close(self, scan: int, peers: int) -> int:
         """Stop collecting scans ``<= scan`` (their deadline passed); returns how many of the
@@ -154,5 +162,153 @@ def flooding_tuples(hops: np.ndarray, sizes: np.ndarray, iterations: int) -> np.
     return deg * (reach @ (TUPLES_PER_MEASUREMENT * np.asarray(sizes, dtype=np.int64)))
 
 
-__all__ = ["Deliver", "FloodOutcome", "Flooder", "TUPLES_PER_MEASUREMENT", "flood",
-           "flooding_tuples"]
+# -- flooding as a peer mode (peers.contracts) ----------------------------------------------
+class FloodEstimator:
+    """The local part of a flooding peer: its scan is the payload, its estimate a clustering.
+
+    ``step`` publishes the own scan (iteration 1 of the flooding); ``extract`` clusters a pooled
+    :class:`~protocol.messages.ScanSet` with :func:`tracking.idpc.idpc`, range-bearing scans
+    converted to the plane with their origin's position first, ``S`` = the scans held (or
+    every sensor of the roster with ``assumed_scans = "all"``).
+    """
+
+    kinds = ("posterior",)
+    position_index = (0, 2)
+    dim = 4
+    """Estimates are ``[px, 0, py, 0]`` rows (clustering gives no velocity), so tracks, scores
+    and views read positions from the same columns as every other point-target peer."""
+    payload = "scans"
+    """What it exchanges: :class:`~protocol.messages.Forward` messages, not mixtures."""
+
+    def __init__(self, name: str, roster: Mapping[str, object], params=None,
+                 assumed_scans: str = "held", seed: int = 0) -> None:
+        from tracking.idpc import ClusterParams
+
+        if assumed_scans not in ("held", "all"):
+            raise ValueError(f"assumed_scans {assumed_scans!r}: expected 'held' or 'all'")
+        self.name = name
+        self.roster = dict(roster)
+        self._rank = {o: i for i, o in enumerate(self.roster)}
+        """Every sensor of the network by name -> its measurement model (``position`` and
+        whether it is range-bearing); an origin outside it is refused (``spoofed``)."""
+        self.params = params or ClusterParams()
+        self.assumed_scans = assumed_scans
+        self.seed = seed
+        """Seeds the k-means split afresh for every clustering: peers holding the same scans
+        compute the same estimate."""
+
+    def _order(self, origin: str) -> int:
+        return self._rank.get(origin, len(self._rank))
+
+    def step(self, steps: int, z: np.ndarray) -> LocalOutput:
+        own = ScanSet({self.name: np.asarray(z, dtype=float).reshape(-1, 2)})
+        return LocalOutput(own, {"posterior": own}, {"n_points": own.points})
+
+    def predict(self, mix, steps: int):
+        return mix  # scans of another index are never pooled
+
+    def plane(self, scans: ScanSet) -> np.ndarray:
+        """The pooled points ``(n, 2)`` in the plane."""
+        from tracking.idpc import polar_to_cartesian
+        from tracking.models import RangeBearing
+
+        parts = []
+        for origin in sorted(scans.scans, key=self._order):  # one order at every peer
+            z, model = scans.scans[origin], self.roster.get(origin)
+            parts.append(polar_to_cartesian(z, model.position)
+                         if isinstance(model, RangeBearing) else z)
+        return np.concatenate(parts) if parts else np.zeros((0, 2))
+
+    def extract(self, scans: ScanSet) -> np.ndarray:
+        from tracking.idpc import idpc
+
+        S = len(self.roster) if self.assumed_scans == "all" else len(scans)
+        c = idpc(self.plane(scans), S, self.params, np.random.default_rng(self.seed)).centres
+        out = np.zeros((len(c), 4))
+        out[:, [0, 2]] = c
+        return out
+
+    def adopt(self, fused) -> None:
+        """Nothing: a scan set is not a prior."""
+
+
+class FloodFuser:
+    """The flooding of one peer as consensus rounds: round ``l`` takes in what the neighbours
+    forwarded in iteration ``l`` (de-duplicated by (origin, scan) in a :class:`Flooder`) and
+    the peer then forwards only the scans new to it (:meth:`outgoing`). After the last round
+    the scan is closed: origins never received count as missing.
+
+    ``counts`` (in the peer summary): ``scans_closed``, ``scans_complete`` (every origin
+    held), ``missing`` (origins not held at the close), ``duplicates`` (copies of scans held),
+    ``late_absorbed`` (copies after their iteration, before the close: still pooled and
+    forwarded), ``late`` (after the close: dropped).
+    """
+
+    kinds = ("posterior",)
+    max_rounds = 1 << 30
+
+    def __init__(self, name: str, origins: Sequence[str], rounds: int) -> None:
+        self.name = name
+        self.index = {o: i for i, o in enumerate(origins)}
+        self.rounds = rounds
+        self.k: int | None = None
+        self.flooder = Flooder(self.index.get(name, -1))
+        self.counts: Counter = Counter()
+
+    def _names(self, held: dict) -> dict[str, np.ndarray]:
+        names = list(self.index)
+        return {names[o]: z for (o, _), z in held.items()}
+
+    def _take(self, sender: str, scans: ScanSet, k: int) -> None:
+        f = self.flooder
+        for origin, z in scans.scans.items():
+            o = self.index.get(origin)
+            if o is not None:
+                f.receive(o, k, z)
+
+    def fuse(self, inp: FusionInput) -> ScanSet:
+        f = self.flooder
+        if inp.round == 0:
+            if self.k is not None and inp.k <= self.k:  # the scan numbering restarted
+                self.flooder = f = Flooder(self.index.get(self.name, -1))
+            elif self.k is not None and (self.index.get(self.name, -1), self.k) in f.held:
+                self._close(self.k)  # a scan ended without its last round
+            self.k = inp.k
+            for origin, z in inp.own.scans.items():  # the own scan went out in iteration 1
+                f.held[(self.index[origin], inp.k)] = np.asarray(z, float).reshape(-1, 2)
+        dup = f.duplicates
+        for s in sorted(inp.neighbours):
+            self._take(s, inp.neighbours[s]["posterior"], inp.k)
+        self.counts["duplicates"] += f.duplicates - dup
+        pooled = ScanSet(self._names(f.pooled_keys(inp.k)))
+        if inp.round + 1 >= self.rounds:
+            self._close(inp.k)
+        return pooled
+
+    def outgoing(self, fused: ScanSet) -> ScanSet:
+        """What to forward in the next iteration: the scans new since the last one."""
+        names = list(self.index)
+        return ScanSet({names[o]: z for (o, _), z in self.flooder.outgoing()})
+
+    def late(self, sender: str, scans: ScanSet, k: int) -> None:
+        """Scans that came after their iteration: pooled (and forwarded) while the scan is
+        open, else counted late."""
+        if self.k is not None and k == self.k and (self.index.get(self.name, -1), k) in \
+                self.flooder.held:
+            dup = self.flooder.duplicates
+            before = len(self.flooder.held)
+            self._take(sender, scans, k)
+            self.counts["duplicates"] += self.flooder.duplicates - dup
+            self.counts["late_absorbed"] += len(self.flooder.held) - before
+        else:
+            self.counts["late"] += len(scans)
+
+    def _close(self, k: int) -> None:
+        missing = self.flooder.close(k, len(self.index))
+        self.counts["scans_closed"] += 1
+        self.counts["scans_complete"] += missing == 0
+        self.counts["missing"] += missing
+
+
+__all__ = ["Deliver", "FloodEstimator", "FloodFuser", "FloodOutcome", "Flooder",
+           "TUPLES_PER_MEASUREMENT", "flood", "flooding_tuples"]

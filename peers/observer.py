@@ -14,6 +14,7 @@ import numpy as np
 
 from peers.core import PeerCore, Publish, Record
 from peers.rerun_sink import RerunSink, color_of, ellipses, position_columns
+from protocol.messages import ScanSet
 
 
 class Observer:
@@ -70,8 +71,14 @@ class Observer:
             c = core.consensus.nale.counts
             for what in ("late", "redundant", "too_old", "dropped_late"):
                 self.sink.scalar(f"metrics/out_of_sequence/{n}/{what}", getattr(c, what))
-            if core.consensus.last_fused is not None:
-                self.sink.mixture(f"peers/{n}/fused", core.consensus.last_fused, self.color)
+            fused = core.consensus.last_fused
+            if isinstance(fused, ScanSet):  # flooding: the pooled scans (drawn once, at the end)
+                self.sink.scalar(f"metrics/flooding/{n}/scans_held", len(fused))
+                if r.values["round"] == core.consensus.rounds:
+                    self.sink.points(f"peers/{n}/pooled", core.estimator.plane(fused),
+                                     self.color, radius=1.0)
+            elif fused is not None:
+                self.sink.mixture(f"peers/{n}/fused", fused, self.color)
             view = getattr(core.estimator, "pda_view", lambda: None)()
             if view is not None:  # PDA peers (seed 003): gates, weighted returns, detector
                 self._deferred.append(lambda k=r.k, v=view: self._pda(k, v))
@@ -81,6 +88,10 @@ class Observer:
                 for i, p in enumerate(probs()):
                     label = names[i] if i < len(names) else f"model{i}"
                     self.sink.scalar(f"metrics/model_probability/{n}/{label}", float(p))
+        elif r.kind == "cost":
+            self._time(r.k)
+            for what, value in r.values.items():
+                self.sink.scalar(f"metrics/cost/{n}/{what}", value)
         elif r.kind == "ospa":
             self._time(r.k)
             self.sink.scalar(f"metrics/ospa/{n}/{r.values['which']}", r.values["value"])
@@ -102,7 +113,10 @@ class Observer:
 
         def log() -> None:
             self._time(k)
-            if mix is not None:
+            if isinstance(mix, ScanSet):  # flooding: the own scan in the plane
+                self.sink.points(f"peers/{self.name}/local", core.estimator.plane(mix),
+                                 self.color, radius=2.0)
+            elif mix is not None:
                 self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
             if particles is not None:  # IMM-PF peers: the particle cloud
                 self.sink.points(f"peers/{self.name}/particles", particles, self.color,

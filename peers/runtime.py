@@ -28,7 +28,7 @@ from peers.rerun_sink import RerunSink
 from peers.telemetry import Telemetry
 from peers.transport import Transport
 from protocol.codec import Rejected, decode
-from protocol.messages import Estimate
+from protocol.messages import Estimate, Forward
 
 BATCH = 64
 """At most this many queued messages are handled per wake-up before deadlines are checked."""
@@ -239,7 +239,7 @@ class PeerRuntime:
             msg = decode(payload, self.core.cfg.limits)
         except Rejected:
             return False  # the core counts it
-        if not isinstance(msg, Estimate):
+        if not isinstance(msg, Estimate | Forward):
             return False
         delays = self.o.faults.deliveries(msg.sender, self.name,
                                           self._run_time(msg.send_time), msg)

@@ -20,7 +20,7 @@ from functools import lru_cache
 import msgpack
 import numpy as np
 
-from protocol.messages import Control, Estimate, Message, Scan, Tracks, Truth
+from protocol.messages import Control, Estimate, Forward, Message, Scan, ScanSet, Tracks, Truth
 from tracking.mixture import GaussianMixture
 
 VERSION = 1
@@ -59,6 +59,8 @@ class Limits:
     max_measurements: int = 20000
     max_dim: int = 6
     max_name: int = 64
+    max_entries: int = 256
+    """Scans (origins) in one flooding forward."""
 
 
 DEFAULT_LIMITS = Limits()
@@ -103,6 +105,7 @@ _FIELDS = {
     "K": ("s", "k", "q", "ts", "d", "x"),
     "T": ("k", "ts", "d", "x", "i"),
     "C": ("c", "id", "pa", "ts"),
+    "F": ("s", "k", "r", "q", "ts", "o", "n", "x"),
 }
 
 
@@ -128,6 +131,13 @@ def encode(msg: Message) -> bytes:
         ids = np.ascontiguousarray(msg.ids, dtype=_I8)
         t, body = "T", {"k": int(msg.k), "ts": float(msg.send_time), "d": x.shape[1],
                         "x": _array(x), "i": ids.tobytes()}
+    elif isinstance(msg, Forward):
+        origins = list(msg.scans.scans)
+        zs = [np.asarray(msg.scans.scans[o], dtype=float).reshape(-1, 2) for o in origins]
+        t, body = "F", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
+                        "q": int(msg.seq), "ts": float(msg.send_time), "o": origins,
+                        "n": [len(z) for z in zs],
+                        "x": _array(np.concatenate(zs) if zs else np.zeros((0, 2)))}
     elif isinstance(msg, Control):
         t, body = "C", {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
                         "ts": float(msg.send_time)}
@@ -212,6 +222,30 @@ def unpack_mixture(blob: bytes, n: int, d: int) -> GaussianMixture:
     return GaussianMixture(w, m, P)
 
 
+def _forward(body: dict, limits: Limits) -> Forward:
+    """A flooding forward: origin names (unique), points per origin, one block of points."""
+    origins = _get(body, "o", list)
+    counts = _get(body, "n", list)
+    if len(origins) > limits.max_entries:
+        raise Rejected("too-many", f"{len(origins)} scans > {limits.max_entries}")
+    if len(counts) != len(origins):
+        raise Rejected("shape", f"{len(counts)} counts for {len(origins)} scans")
+    names = [_name({"o": o}, "o", limits) for o in origins]
+    if len(set(names)) != len(names):
+        raise Rejected("field", "a scan's origin appears twice")
+    sizes = [_count({"n": c}, "n", limits.max_measurements) for c in counts]
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "measurements")
+    if sum(sizes) != n:
+        raise Rejected("shape", f"{n} measurements for counts summing to {sum(sizes)}")
+    z = _floats(blob, (n, 2))
+    ends = np.cumsum([0, *sizes])
+    scans = {o: z[a:b] for o, a, b in zip(names, ends[:-1], ends[1:], strict=True)}
+    return Forward(sender=_name(body, "s", limits), k=_index(body, "k"),
+                   scans=ScanSet(scans), round=_index(body, "r"), seq=_index(body, "q"),
+                   send_time=_time(body))
+
+
 def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
     """Parse and validate bytes into a message, or raise :class:`Rejected`."""
     if not isinstance(data, bytes | bytearray | memoryview):
@@ -272,6 +306,8 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
                 raise Rejected("shape", f"{len(ib)} id bytes for {n} targets")
             ids = np.frombuffer(ib, dtype=_I8).astype(np.int64)
             return Truth(k=_index(body, "k"), ids=ids, states=x, send_time=_time(body))
+        if kind == "F":
+            return _forward(body, limits)
         params = _get(body, "pa", dict)
         for key, value in params.items():
             if not isinstance(key, str) or not isinstance(value, str | int | float | bool):

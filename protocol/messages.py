@@ -6,7 +6,9 @@ clock (``time.time()``) at publication, for latency and age measurements.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -71,4 +73,39 @@ class Control:
     send_time: float = 0.0
 
 
-Message = Scan | Estimate | Tracks | Truth | Control
+@dataclass(frozen=True)
+class ScanSet:
+    """Scans of one scan index by origin sensor (seed 004's flooding payload):
+    ``scans[origin]`` is that sensor's ``(m, 2)`` measurements, in its own measurement space."""
+
+    scans: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    @property
+    def points(self) -> int:
+        """Measurements over all entries."""
+        return sum(len(z) for z in self.scans.values())
+
+    def tuples(self) -> int:
+        """The seed's cost unit: 2 per 2-D measurement (ALGORITHMS.md §9)."""
+        return 2 * self.points
+
+
+@dataclass(frozen=True)
+class Forward:
+    """Flooding iteration ``round + 1`` of scan ``k``: the scans ``sender`` forwards (its own
+    in iteration 1, then only those it had not forwarded before)."""
+
+    sender: str
+    k: int
+    scans: ScanSet
+    round: int = 0
+    seq: int = 0
+    send_time: float = 0.0
+    kind: ClassVar[str] = "posterior"
+    """The consensus slot it fills (flooding has one kind)."""
+
+
+Message = Scan | Estimate | Tracks | Truth | Control | Forward

@@ -234,17 +234,23 @@ def merge_recordings(out: Path) -> Path | None:
 
 
 def format_summary(summaries: dict[str, dict]) -> str:
-    """The end-of-run table: per peer OSPA local vs fused, traffic, rejections, age, latency."""
+    """The end-of-run table: per peer OSPA local vs fused, communication cost per scan (the
+    seed-004 tuples and the estimate bytes, both counted once per neighbour), traffic,
+    rejections, age, latency."""
     def f(v, fmt="{:.1f}"):
         return "-" if v is None else fmt.format(v)
 
-    head = ("| peer | scans | OSPA local | OSPA fused | msgs sent | msgs recv | kB sent | "
-            "kB recv | rejected | mean age (scans) | latency median / p99 (ms) |\n"
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    head = ("| peer | scans | OSPA local | OSPA fused | tuples / scan | B / scan | msgs sent | "
+            "msgs recv | kB sent | kB recv | rejected | mean age (scans) | "
+            "latency median / p99 (ms) |\n"
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows = [head]
     for n, s in summaries.items():
+        cost = s.get("cost") or {}
         rows.append(
             f"| {n} | {s['scans']} | {f(s['mean_ospa_local'])} | {f(s['mean_ospa_fused'])} | "
+            f"{f(cost.get('tuples_per_scan'), '{:.0f}')} | "
+            f"{f(cost.get('estimate_bytes_to_neighbours_per_scan'), '{:.0f}')} | "
             f"{s['messages_sent']} | {s['messages_received']} | {s['bytes_sent'] / 1e3:.1f} | "
             f"{s['bytes_received'] / 1e3:.1f} | {s['rejected_total']} | "
             f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "

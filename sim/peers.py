@@ -32,7 +32,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
     nb = np.flatnonzero(A[i])
     deg = A.sum(axis=1)
     net = scn.network
-    single = net.filter not in ("gmphd", "et-gmphd")
+    single = net.filter not in ("gmphd", "et-gmphd")  # and flooding: scans of the same k only
     opts = ConsensusOptions(
         name=name,
         neighbours=tuple(names[j] for j in nb),
@@ -42,6 +42,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         max_age=0 if single else net.max_age,
         policy="drop-late" if single else net.policy,
         feedback=net.feedback and not single,
+        round_deadlines=net.filter == "flooding",
     )
     return replace(opts, **changes)
 
@@ -61,6 +62,18 @@ def make_parts(scn: Scenario, name: str, run: int = 0):
     """The estimator and fuser of sensor ``name``'s peer."""
     net, fus = scn.network, scn.fusion
     rule = fus.rule
+    if net.filter == "flooding":  # seed 004: flood the scans, cluster the pooled set
+        from peers.flooding import FloodEstimator, FloodFuser
+        from tracking.idpc import ClusterParams
+
+        c = scn.clustering
+        pds = {s.detection_probability for s in scn.sensors}
+        params = ClusterParams(c.cutoff, c.zeta, c.radius_factor, c.split_factor,
+                               detection_probability=float(np.mean(sorted(pds))))
+        roster = {s.name: sensor_model(s) for s in scn.sensors}
+        est = FloodEstimator(name, roster, params, c.assumed_scans,
+                             seed=zlib.crc32(f"{scn.seed}/{run}".encode()))
+        return est, FloodFuser(name, scn.sensor_names, net.rounds)
     if net.filter in ("gmphd", "et-gmphd"):
         if rule == "ratio":
             raise ScenarioError(f"{scn.name}: fusion.rule 'ratio' needs single-target peers "

@@ -52,7 +52,7 @@ MOTION_MODELS = ("cv",)
 SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
 FUSION_RULES = ("gci", "aa", "ratio", "none")
-PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd")
+PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd", "flooding")
 PARTITIONS = ("distance", "grid-spectral")
 OMEGA_RULES = ("uniform", "metropolis", "det", "chernoff")
 CARDINALITY_RULES = ("emd", "separate")
@@ -204,7 +204,9 @@ class NetworkSpec:
     speed: float = 10.0
     """Wall-clock speed factor: a scan every ``scan_period / speed`` seconds."""
     filter: str = "gmphd"
-    """Local filter of every peer: ``"gmphd"``, or for one target ``"imm-pf"``/``"imm-ekf"``."""
+    """Local filter of every peer: ``"gmphd"``, for one target ``"imm-pf"``/``"imm-ekf"``, or
+    ``"flooding"`` (seed 004: peers flood their scans for ``rounds`` iterations and cluster the
+    pooled set, ``[clustering]`` table)."""
     deadline: float = 0.5
     """Fusion deadline after a scan, as a fraction of the (wall-clock) scan interval."""
 
@@ -237,6 +239,22 @@ class ExtendedSpec:
     """Grid-spectral: distances in ``"sigma"`` units or the paper's ``"unit-box"`` [0, 1]."""
     max_measurements: int = 2000
     """Scans with more points are not partitioned (counted, corrected as all-missed)."""
+
+
+@dataclass(frozen=True)
+class ClusteringSpec:
+    """Flooding peers' clustering (seed 004, ``tracking.idpc``; ``[clustering]`` table)."""
+
+    cutoff: float = 25.0
+    """``d_c`` in metres."""
+    zeta: float = 0.3
+    """Target points have more than ``zeta S`` neighbours within ``d_c``."""
+    radius_factor: float = 1.25
+    """``L``: a cluster takes the points within ``L d_c`` of its seed."""
+    split_factor: float = 1.6
+    """Clusters above ``split_factor S Pd`` points are split by k-means."""
+    assumed_scans: str = "held"
+    """``S``: the scans a peer holds (``"held"``) or every sensor (``"all"``)."""
 
 
 @dataclass(frozen=True)
@@ -288,6 +306,8 @@ class Scenario:
     network: NetworkSpec = NetworkSpec()
     """Peer network settings."""
     extended: ExtendedSpec | None = None
+    clustering: ClusteringSpec = ClusteringSpec()
+    """Flooding peers' clustering (``network.filter = "flooding"``)."""
     """Extended targets (``[extended]`` table); ``None``: point targets (one return each)."""
     faults: FaultPlan | None = None
     """Link faults from the ``[faults]`` table (``None``: perfect links), resolved per link
@@ -390,6 +410,12 @@ def load_scenario(source: str | Path, overrides: Mapping[str, Any] | None = None
     ctx = _Context(label)
     if overrides:
         ctx.override_paths = _apply_overrides(data, overrides, label)
+    study = data.get("scenario", {}).get("study") if isinstance(data.get("scenario"),
+                                                                dict) else None
+    if study == "seed004":  # its own format: the network scenario is built from it
+        from sim.seed004 import network_document
+
+        data = network_document(data, label)
     return _parse(data, ctx, default_name=stem, origin=origin)
 
 
@@ -642,7 +668,7 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
                                  "fusion", "metrics", "network", "faults", "extended",
-                                 "security"])
+                                 "security", "clustering"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -685,6 +711,15 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
         scn = dataclasses.replace(scn, extended=_extended(_Table(
             top.raw("extended"), "extended", ctx, [f.name for f in
                                                    dataclasses.fields(ExtendedSpec)])))
+    if top.has("clustering"):
+        t = _Table(top.raw("clustering"), "clustering", ctx,
+                   [f.name for f in dataclasses.fields(ClusteringSpec)])
+        scn = dataclasses.replace(scn, clustering=ClusteringSpec(
+            cutoff=t.number("cutoff", 25.0, positive=True),
+            zeta=t.number("zeta", 0.3, positive=True),
+            radius_factor=t.number("radius_factor", 1.25, positive=True),
+            split_factor=t.number("split_factor", 1.6, positive=True),
+            assumed_scans=t.choice("assumed_scans", ("held", "all"), "held")))
     if scn.network.filter == "et-gmphd" and scn.extended is None:
         raise ctx.fail("network.filter", "key 'network.filter' is 'et-gmphd', which needs an "
                                          "[extended] table")

@@ -158,7 +158,7 @@ class Seed004:
 
 
 _KEYS = {
-    "scenario": {"name": None, "seed": "seed", "scan_period": "scan_period",
+    "scenario": {"name": None, "study": None, "seed": "seed", "scan_period": "scan_period",
                  "num_scans": "num_scans", "region": "region", "variant": "variant"},
     "truth": {"sigma_w": "truth_sigma_w", "starts": "starts"},
     "sensors": {"detection_probability": "detection_probability",
@@ -191,9 +191,16 @@ def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
             doc.setdefault(table, {})[name] = tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{path}: {e}") from None
+    return from_document(doc, path)
+
+
+def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
+    """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers)."""
     kw: dict = {}
     cluster: dict = {}
     for table, values in doc.items():
+        if table == "network":
+            continue  # the peers' settings (network_document)
         if table not in _KEYS:
             raise ScenarioError(f"{path}: unknown table [{table}]")
         for k, v in values.items():
@@ -220,6 +227,66 @@ def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
     if not np.isfinite(scn.hops).all():
         raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
     return scn
+
+
+def network_document(doc: dict, label: str = "seed004.toml") -> dict:
+    """The seed-004 document as a network scenario (``sim.scenario``'s format): sensors
+    ``s1..s20`` at the recorded positions, the graph as custom edges, the three straight-line
+    targets over the whole run, the paper's births, and the ``[network]`` table (flooding peers
+    by default: ``filter = "flooding"``, ``rounds`` = the flooding iterations)."""
+    import sim.scenario as sc
+
+    passed = ("faults", "security")  # network-scenario tables, taken as they are
+    try:
+        scn = from_document({k: v for k, v in doc.items() if k not in passed}, label)
+    except (ScenarioError, TypeError, ValueError) as e:
+        raise sc.ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") \
+            from None
+    names = [f"s{i + 1}" for i in range(len(scn.positions))]
+    K, T = scn.num_scans, scn.scan_period
+    sensors = []
+    for i, model in enumerate(scn.models()):
+        radar = isinstance(model, RangeBearing)
+        spec = {"name": names[i], "kind": "range-bearing" if radar else "linear",
+                "position": [float(v) for v in scn.positions[i]],
+                "sigma_r": scn.sigma_range if radar else scn.sigma,
+                "detection_probability": scn.detection_probability,
+                "clutter_rate": scn.clutter_rate}
+        if radar:
+            spec["sigma_theta_deg"] = scn.sigma_bearing_deg
+        sensors.append(spec)
+    targets = [{"birth_scan": 1, "death_scan": K, "start": [float(x[0]), float(x[2])],
+                "end": [float(x[0] + x[1] * (K - 1) * T), float(x[2] + x[3] * (K - 1) * T)]}
+               for x in scn.starts]
+    cov = np.diag(scn.birth_cov_diag).tolist()
+    A = scn.adjacency
+    edges = [[names[i], names[j]] for i, j in zip(*np.nonzero(np.triu(A)), strict=True)]
+    network = {"topology": "custom", "edges": edges, "rounds": scn.iterations,
+               "filter": "flooding", "speed": 10.0, "deadline": 0.8, **doc.get("network", {})}
+    c = scn.clustering
+    return {
+        "scenario": {"name": doc.get("scenario", {}).get("name", "seed004"), "seed": scn.seed,
+                     "scan_period": T, "num_scans": K,
+                     "region": [list(r) for r in scn.region],
+                     "truth_sigma_w": scn.truth_sigma_w},
+        "motion": {"model": "cv", "sigma_w": scn.sigma_w,
+                   "survival_probability": scn.survival_probability},
+        "targets": targets,
+        "sensors": sensors,
+        "birth": {"model": "paper", "paper": [
+            {"weight": scn.birth_weight, "mean": [float(v) for v in m], "cov": cov}
+            for m in scn.starts]},
+        "filter": {"prune_threshold": scn.prune_threshold,
+                   "merge_threshold": scn.merge_threshold,
+                   "max_components": scn.max_components, "extraction": "cardinality"},
+        "fusion": {"rule": "gci", "level2_threshold": scn.publish_threshold,
+                   "cardinality": scn.cardinality},
+        "metrics": {"ospa_cutoff": scn.ospa_cutoff, "ospa_order": scn.ospa_order},
+        "network": network,
+        **{k: doc[k] for k in passed if k in doc},
+        "clustering": {"cutoff": c.cutoff, "zeta": c.zeta, "radius_factor": c.radius_factor,
+                       "split_factor": c.split_factor, "assumed_scans": scn.assumed_scans},
+    }
 
 
 # -- truth and scans --------------------------------------------------------------------------

@@ -55,6 +55,7 @@ def run_point(source: str, base: dict, param: str, point: SweepPoint, real: bool
         row["local_ospa"] = float(np.mean([s["mean_ospa_local"] for s in summaries.values()]))
         for key in ("late", "redundant", "too_old", "dropped_late"):
             row[key] = sum(s["nale"][key] for s in summaries.values())
+        row.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
         return row
     from sim.twin import run_twin
 
@@ -64,10 +65,20 @@ def run_point(source: str, base: dict, param: str, point: SweepPoint, real: bool
     row["local_ospa"] = float(np.mean([p.mean_ospa("local") for p in peers]))
     for key in ("late", "redundant", "too_old", "dropped_late"):
         row[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers)
+    row.update(cost_columns([p.cost() for p in peers]))
     if result.faults is not None:
         for action, n in result.faults.counts().items():
             row[f"links_{action}"] = n
     return row
+
+
+def cost_columns(costs: list[dict]) -> dict[str, float]:
+    """Communication cost per peer per scan, averaged over the peers (``PeerCore.cost``)."""
+    return {"tuples_per_peer_scan": float(np.mean([c.get("tuples_per_scan", np.nan)
+                                                   for c in costs])) if costs else np.nan,
+            "bytes_per_peer_scan": float(np.mean([
+                c.get("estimate_bytes_to_neighbours_per_scan", np.nan) for c in costs]))
+            if costs else np.nan}
 
 
 def _toml(value: Any) -> str:

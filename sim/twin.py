@@ -82,12 +82,14 @@ class TwinResult:
         return self.peers[peer].mean_ospa(kind)
 
     def summary(self, peer: str) -> dict:
-        """The peer's summary as the real process writes it (no wall-clock figures)."""
+        """The peer's summary as the real process writes it (no wall-clock figures; bytes
+        are the encoded messages the core published, as the runtime counts them)."""
         s = self.peers[peer].snapshot()
         st = s["stats"]
         ages = self.ages.get(peer, [])
+        sent = self.peers[peer].sent_bytes
         s.update(messages_sent=st["estimates_out"] + st["tracks_out"],
-                 bytes_sent=8 * st["tuples_out"],
+                 bytes_sent=sum(sent.values()), estimate_bytes_sent=sent["estimate"],
                  mean_estimate_age=sum(ages) / len(ages) if ages else None,
                  latency_ms_median=None, latency_ms_p99=None, stop_reason=self.stops.get(peer))
         return s
