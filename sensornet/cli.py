@@ -316,6 +316,14 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                              "--jobs", str(min(args.jobs, args.runs)),
                              "--out", str(_run_folder(args.out, "experiment")), *sets,
                              *(["--quiet"] if args.quiet else [])])
+    if _is_seed003(args.scenario):
+        # seed 003: PDAF / IMM-PDAF / fuzzy PDA / fuzzy IMM, one and two sensors (sim/seed003.py)
+        from sim.seed003 import main as seed003_main
+
+        sets = [a for item in (args.set or []) for a in ("--set", item)]
+        return seed003_main(["--runs", str(args.runs), "--jobs", str(min(args.jobs, args.runs)),
+                             "--csv", str(_run_folder(args.out, "experiment")), *sets,
+                             *(["--quiet"] if args.quiet else [])])
     scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
     if scn.extended is not None:  # seed 002: the partitioner comparison (sim/seed002.py)
         from sim.seed002 import main as seed002_main
@@ -339,6 +347,40 @@ def cmd_experiment(args: argparse.Namespace) -> int:
             print(f"wrote {path}")
         print()
     return 0
+
+
+def _is_seed003(source: str) -> bool:
+    """Seed 003 has its own file format (sim/seed003.py): the network loader refuses it."""
+    return source == "seed003" or Path(source).name == "seed003.toml"
+
+
+def _run_seed003(args: argparse.Namespace) -> int:
+    """``sensornet run seed003``: the PDA peers in both modes (:mod:`sim.seed003_net`)."""
+    from sim.seed003_net import main as seed003_net_main
+
+    for flag in ("listen", "connect", "config", "run_id", "lease_ms", "fault", "secure",
+                 "record"):
+        if getattr(args, flag, None) not in (None, False, []):
+            raise UserError(f"--{flag.replace('_', '-')} is not supported by 'run seed003'")
+    if args.sparse:
+        raise UserError("--sparse is not supported by 'run seed003'")
+    _resolve_viewer(args)
+    argv = ["run", "--run", str(args.run), "--timeout", str(args.timeout),
+            *[a for item in (args.set or []) for a in ("--set", item)]]
+    if args.speed:
+        argv += ["--speed", str(args.speed)]
+    if args.no_rerun:
+        argv += ["--no-rerun"]
+    if args.sim:
+        return seed003_net_main(argv + ["--sim"])
+    viewer = args.viewer
+    if viewer == "spawn":
+        from peers.rerun_sink import spawn_viewer
+
+        viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
+    if viewer:
+        argv += ["--viewer", viewer]
+    return seed003_net_main(argv + ["--out", str(_run_folder(args.out, "run"))])
 
 
 def _load(args: argparse.Namespace, source: str):
@@ -553,6 +595,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         wait_run,
     )
 
+    if _is_seed003(args.scenario):
+        return _run_seed003(args)
     scn = _load(args, args.scenario)
     try:
         pfaults = [ProcessFault.parse(f) for f in args.fault or []]
