@@ -1,0 +1,124 @@
+"""Seed 003 peers over the peer core (sim/seed003_net.py): the twin against the offline filters,
+the late-sensor fallback, the returns on the wire, and (network) real processes against the twin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from peers.contracts import FusionInput
+from peers.pda_parts import CiFuser, PdaEstimator, mixture_returns, returns_mixture
+from protocol.codec import decode, encode
+from protocol.messages import Estimate
+from sim import seed003, seed003_net
+from tracking.imm import POS
+
+RUN = 1
+
+
+def _tracks(res, peer: str) -> np.ndarray:
+    t = res.tracks[peer]
+    return np.array([t[k][0] for k in sorted(t)])
+
+
+def _offline_sequential(cfg, run: int, n_sensors: int = 2) -> np.ndarray:
+    X, sens, target, region, m0, P0 = seed003_net.draws(cfg, run)
+    flt = seed003.make_filter(cfg, seed003_net.METHOD, m0, P0)
+    est, _ = seed003.run_filter(cfg, flt, sens[:n_sensors], [p[:n_sensors] for p in target],
+                                [r[:n_sensors] for r in region], None)
+    return est
+
+
+def test_measurement_sharing_twin_is_the_offline_sequential_filter():
+    """Both peers' tracks equal the offline two-sensor sequential filter bit for bit (the
+    pre-gate lost no return the receivers' gates take)."""
+    cfg = seed003_net.load()
+    res = seed003_net.twin(cfg, "meas", RUN)
+    ref = _offline_sequential(cfg, RUN)
+    for peer in ("s1", "s2"):
+        np.testing.assert_array_equal(_tracks(res, peer), ref)
+        assert res.peers[peer].consensus.fuser.counts["fallbacks"] == 0
+
+
+def test_estimate_sharing_twin_is_offline_ci():
+    cfg = seed003_net.load()
+    res = seed003_net.twin(cfg, "ci", RUN)
+    X, sens, target, region, m0, P0 = seed003_net.draws(cfg, RUN)
+    peers = [PdaEstimator(seed003.make_filter(cfg, seed003_net.METHOD, m0, P0), s, POS, False)
+             for s in sens]
+    fuser = CiFuser()
+    ref = []
+    for k in range(len(target)):
+        posts = [p.step(1, np.vstack([target[k][i], region[k][i]])).published["posterior"]
+                 for i, p in enumerate(peers)]
+        fused = fuser.fuse(FusionInput(k + 1, 0, posts[0], {"s2": {"posterior": posts[1]}},
+                                       [0.5, 0.5], np.zeros((0, 2))))
+        ref.append(peers[0].extract(fused)[0])
+    np.testing.assert_allclose(_tracks(res, "s1"), np.array(ref), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(_tracks(res, "s2"), np.array(ref), rtol=0, atol=1e-6)
+
+
+def test_late_s2_returns_fall_back_to_s1_only_and_are_counted():
+    """Every s2 -> s1 message held 5 scan intervals: s1 fuses at its deadline with its own
+    sensor only, on every scan (counted), and its tracks are the one-sensor filter's; s2 gets
+    s1's returns in time and keeps the two-sensor estimate."""
+    cfg = seed003_net.load()
+    cfg["faults"] = {"links": [{"from": "s2", "to": "s1", "delay": 0.5}]}  # interval 0.1 s
+    res = seed003_net.twin(cfg, "meas", RUN)
+    counts = res.peers["s1"].consensus.fuser.counts
+    K = int(cfg["scenario"]["num_scans"])
+    assert counts["fallbacks"] == counts["missing_s2"] == K
+    assert counts["first_fallback_scan"] == 1
+    np.testing.assert_array_equal(_tracks(res, "s1"), _offline_sequential(cfg, RUN, 1))
+    np.testing.assert_array_equal(_tracks(res, "s2"), _offline_sequential(cfg, RUN))
+    assert res.peers["s2"].consensus.fuser.counts["fallbacks"] == 0
+    row = seed003_net.make_row(cfg, "meas", "s1", res.summary("s1"), res.tracks["s1"])
+    assert row.missing_inputs == K
+
+
+def test_lost_returns_are_counted_per_dropped_message():
+    cfg = seed003_net.load(overrides={"scenario.num_scans": 40})
+    cfg["faults"] = {"links": [{"from": "s2", "to": "s1", "loss": 0.3}]}
+    res = seed003_net.twin(cfg, "meas", RUN)
+    dropped = sum(1 for r in res.faults.log
+                  if r.sender == "s2" and r.receiver == "s1" and r.action == "drop-loss")
+    assert 0 < dropped < 40
+    assert res.peers["s1"].consensus.fuser.counts["missing_s2"] == dropped
+
+
+def test_returns_survive_the_wire():
+    Z = np.array([[1.5, -2.25], [1e4, 3e3], [0.0, 7.0]])
+    R = np.diag([2500.0, 2500.0])
+    mix = returns_mixture(Z, R, 6, POS)
+    back = decode(encode(Estimate("s1", 3, mix, kind="returns")))
+    assert back.kind == "returns"
+    np.testing.assert_array_equal(mixture_returns(back.mixture, POS), Z)
+    empty = decode(encode(Estimate("s1", 3, returns_mixture(np.zeros((0, 2)), R, 6, POS),
+                                   kind="returns")))
+    assert mixture_returns(empty.mixture, POS).shape == (0, 2)
+
+
+def test_unknown_mode_and_sensor_are_one_line_errors():
+    cfg = seed003_net.load()
+    with pytest.raises(ValueError, match="unknown peer mode"):
+        seed003_net.make_core(cfg, "s1", "gossip")
+    with pytest.raises(ValueError, match="no sensor named"):
+        seed003_net.make_core(cfg, "s9", "meas")
+
+
+@pytest.mark.network
+def test_processes_equal_the_twin(tmp_path):
+    """World + 2 PDA peers as processes over Zenoh on loopback, 20 scans at 2 scans/s, each
+    mode: every peer publishes a track per scan, fuses every scan with the other's input, and
+    its tracks equal the twin's bit for bit."""
+    a = seed003_net._parser().parse_args(
+        ["run", "--run", str(RUN), "--speed", "2", "--set", "scenario.num_scans=20",
+         "--no-rerun", "--timeout", "90"])
+    cfg = seed003_net.load(seed003_net._overrides(a.set))
+    for mode in seed003_net.MODES:
+        rows, code = seed003_net.run_mode(a, cfg, mode, tmp_path / mode)
+        assert code == 0, (tmp_path / mode / "logs").glob("*.log")
+        assert [r.peer for r in rows] == ["s1", "s2"]
+        for r in rows:
+            assert r.tracks == 20 and r.missing_inputs == 0, r
+            assert r.twin_diff == 0.0, r
