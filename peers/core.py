@@ -228,6 +228,12 @@ class PeerCore:
                 self.reanchored += 1
                 c.reset_window()
                 self.deadlines.clear()
+                # the same numbering after a pause (this peer was frozen or fell behind): the
+                # scans in between had no output, misses; a jump further than the pause
+                # explains is a new numbering (the world restarted), not misses
+                elapsed = now - self.last_accept if self.last_accept is not None else 0.0
+                if c.last_k < k <= c.last_k + h + elapsed / self.cfg.interval:
+                    self.scorer.skipped(k - c.last_k - 1)
             steps = k - c.last_k if k > c.last_k else 1
             self.first_k = k if self.first_k is None else self.first_k
         elif k <= c.last_k:

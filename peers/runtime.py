@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from peers.admission import parse_key
+from peers.admission import parse_key, peek
 from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector, HoldQueue
 from peers.observer import Observer
@@ -151,11 +151,13 @@ class PeerRuntime:
             try:
                 # what has queued up meanwhile is handled before the deferred work (one tick
                 # and one Rerun flush per wake-up instead of per message; bounded)
-                for _ in range(BATCH):
-                    if item is None or self._stop:
+                items = [item] if item is not None else []
+                while items and len(items) < BATCH and not q.empty():
+                    items.append(q.get_nowait())
+                for item in self._catch_up(items):
+                    if self._stop:
                         break
                     self._handle(*item)
-                    item = None if q.empty() else q.get_nowait()
                 for key, payload in self.held.pop_due(time.monotonic()):
                     self._feed("estimate", key, payload)
                 now = time.time()
@@ -169,6 +171,20 @@ class PeerRuntime:
             if time.monotonic() - self._last_input > self.o.idle_timeout:
                 self.stop_reason = f"no input for {self.o.idle_timeout:g} s"
                 break
+
+    def _catch_up(self, items: list[tuple]) -> list[tuple]:
+        """A peer that has fallen behind (two or more of its scans waiting) goes straight to
+        the newest: the older scans are left out (counted, scored as misses), so its scan
+        index stays with its neighbours' and their estimates stay inside its window."""
+        scans = [i for i, (tag, key, _) in enumerate(items)
+                 if tag == "msg" and "/scan/" in key]
+        if len(scans) < 2:
+            return items
+        ks = {i: (peek(items[i][2]) or ("", -1))[1] for i in scans}
+        newest = max(scans, key=ks.__getitem__)
+        drop = {i for i in scans if 0 <= ks[i] < ks[newest]}
+        self.telemetry.scans_skipped_behind += len(drop)
+        return [it for i, it in enumerate(items) if i not in drop]
 
     def _handle(self, tag: str, key: str, payload) -> None:
         if tag == "stop":

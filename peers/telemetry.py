@@ -54,6 +54,7 @@ class Telemetry:
         self.ages: deque = deque(maxlen=_KEEP)
         self.rss_samples: list[tuple[int, float]] = []
         self.internal_errors: Counter = Counter()
+        self.scans_skipped_behind = 0  # scans left out to catch up (see PeerRuntime._catch_up)
         self._scan_sent: dict[int, float] = {}
         self._local_done: dict[int, float] = {}
         self._last_in: dict[int, float] = {}
@@ -118,6 +119,7 @@ class Telemetry:
             "latency_breakdown_ms_median": {n: _median(v) for n, v in self.breakdown.items()},
             "mean_estimate_age": statistics.fmean(self.ages) if self.ages else None,
             "driver_errors": dict(self.internal_errors),
+            "scans_skipped_behind": self.scans_skipped_behind,
             "rss_mb_samples": [*self.rss_samples, (last_k, current_rss_mb())],
             "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "cpu_s": time.process_time(),

@@ -99,6 +99,24 @@ def test_a_gap_in_the_scans_is_scored_as_misses(scn):
     assert s["mean_ospa_fused"] >= 2 * c / 5  # the two misses count c each
 
 
+def test_scans_missed_during_a_pause_are_misses_a_new_numbering_is_not(scn):
+    """A peer frozen (or far behind) for 2 s at 10 scans/s comes back at scan 23: the 20
+    scans in between had no output (misses). The world restarting its numbering at 500 after
+    a pause is a new start, not 480 misses."""
+    core = make_peer(scn, "s1", neighbours=(), degrees=())
+    dt = core.cfg.interval
+    for k in (1, 2):
+        _scan(core, k, k * dt)
+        core.tick(k * dt)
+    _scan(core, 23, 2 * dt + 2.0)
+    core.tick(2 * dt + 2.0)
+    assert core.consensus.last_k == 23 and core.reanchored == 1
+    assert core.snapshot()["ospa_misses"] == {"local": 20, "fused": 20}
+    _scan(core, 500, 2 * dt + 2.0 + 4 * dt)
+    assert core.consensus.last_k == 500 and core.reanchored == 2
+    assert core.snapshot()["ospa_misses"] == {"local": 20, "fused": 20}
+
+
 def test_scorer_truth_from_the_scenario_rejects_a_forged_truth():
     true = np.array([[0.0, 0.0, 0.0, 0.0]])
     sc = Scorer(100.0, 2.0, (0, 2), truth=lambda k: true)

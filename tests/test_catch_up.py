@@ -1,0 +1,79 @@
+"""A peer that has fallen behind goes straight to its newest scan.
+
+Found with two overloaded IMM-PF peers: each processed every queued scan, fell behind by a
+different amount, and then refused the other's estimates as stale or future. The fast test
+checks the driver's choice on a queue; the network test freezes a real peer (SIGSTOP) for
+less than the Zenoh lease, so its scans pile up, and checks that it skips to the newest and
+fuses with its neighbours again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from peers.runtime import PeerRuntime
+from peers.telemetry import Telemetry
+from protocol.codec import encode
+from protocol.keys import Keys
+from protocol.messages import Estimate, Scan
+from tracking.mixture import GaussianMixture
+
+
+class _Driver:
+    """Just what :meth:`PeerRuntime._catch_up` uses."""
+
+    def __init__(self) -> None:
+        self.telemetry = Telemetry()
+
+
+def _scan(keys: Keys, k: int) -> tuple:
+    return ("msg", keys.scan("s1"), encode(Scan("s1", k, np.zeros((3, 2)))))
+
+
+def _estimate(keys: Keys, k: int) -> tuple:
+    mix = GaussianMixture(np.ones(1), np.zeros((1, 4)), np.eye(4)[None])
+    return ("msg", keys.estimate("s2"), encode(Estimate("s2", k, mix)))
+
+
+def test_only_the_newest_of_several_queued_scans_is_processed():
+    keys, drv = Keys("net"), _Driver()
+    items = [_scan(keys, 4), _estimate(keys, 4), _scan(keys, 5), ("live", "s3", True),
+             _scan(keys, 7), _estimate(keys, 7), _scan(keys, 6)]
+    kept = PeerRuntime._catch_up(drv, items)
+    assert kept == [items[1], items[3], items[4], items[5]]  # estimates, liveliness stay
+    assert drv.telemetry.scans_skipped_behind == 3
+    assert drv.telemetry.summary(7)["scans_skipped_behind"] == 3
+
+
+def test_one_scan_or_unreadable_scans_are_left_alone():
+    keys, drv = Keys("net"), _Driver()
+    one = [_scan(keys, 4), _estimate(keys, 4)]
+    assert PeerRuntime._catch_up(drv, one) == one
+    junk = ("msg", keys.scan("s1"), b"\x93not a scan")
+    items = [junk, _scan(keys, 9)]  # the core counts the junk; nothing dropped for it
+    assert PeerRuntime._catch_up(drv, items) == items
+    assert drv.telemetry.scans_skipped_behind == 0
+
+
+@pytest.mark.network
+def test_a_frozen_peer_catches_up_and_fuses_again(tmp_path):
+    from tests.test_network_faults import _run
+
+    sets = ["birth.model=truth", "scenario.num_scans=60"]
+    # 0.8 s frozen at 10 scans/s: under the 1.5 s lease, so nobody sees it leave
+    scn, codes, summaries = _run("seed000", tmp_path / "run", sets, ["stop:s2@20", "cont:s2@28"],
+                                 rerun=False)
+    assert all(c == 0 for c in codes.values()), codes
+    s2 = summaries["s2"]
+    assert s2["scans_skipped_behind"] >= 3, s2  # it went straight to the newest scan
+    n = scn.num_scans
+    assert s2["stats"]["scans"] == n - s2["scans_skipped_behind"]
+    # and fused with its neighbours again right to the end, both ways
+    for name in ("s1", "s3"):
+        assert s2["stats"]["last_fused_from"][name] >= n - 1, s2["stats"]
+        assert summaries[name]["stats"]["last_fused_from"]["s2"] >= n - 1, summaries[name]
+    # the skipped scans have no output and are scored as misses, not left out of the mean
+    skipped = s2["scans_skipped_behind"]
+    assert s2["ospa_misses"]["fused"] == skipped and s2["ospa_misses"]["local"] == skipped, s2
+    assert s2["ospa_scored"]["fused"] + s2["ospa_misses"]["fused"] == n, s2
