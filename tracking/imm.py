@@ -178,11 +178,37 @@ def radar_jacobian(sensor: RangeBearing, X: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def radar_log_likelihood(sensor: RangeBearing, z: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """``log N(z; h(x), R)`` at states ``X (..., 6)``: returns ``(...)``. Bearing wrapped."""
-    nu = sensor.residual(z, radar_h(sensor, X))
+    """``log N(z; h(x), R)`` at states ``X (..., 6)``: returns ``(...)``. Bearing wrapped.
+
+    The arithmetic of ``sensor.residual(z, radar_h(sensor, X))`` and the Gaussian, fused: no
+    stacked ``(..., 2)`` temporaries, and the wrap's ``%`` only when a residual leaves
+    ``[-pi, pi)`` (inside it ``(a + pi) % 2 pi`` is ``a + pi``: the same numbers).
+    """
+    X = np.asarray(X)
+    if X.ndim < 2:
+        return radar_log_likelihood(sensor, z, X[None])[0]
+    dx = X[..., 0] - sensor.position[0]
+    dy = X[..., 3] - sensor.position[1]
+    nr = z[0] - np.hypot(dx, dy)
+    nt = np.arctan2(dy, dx, out=dy)
+    np.subtract(z[1], nt, out=nt)
+    nt += np.pi
+    if nt.size and (nt.min() < 0.0 or nt.max() >= _TWO_PI):
+        np.remainder(nt, _TWO_PI, out=nt)
+    nt -= np.pi
     sr, st = sensor.sigma_r, sensor.sigma_theta
-    return (-0.5 * ((nu[..., 0] / sr) ** 2 + (nu[..., 1] / st) ** 2)
-            - np.log(sr * st) - LOG_2PI)
+    nr /= sr
+    np.square(nr, out=nr)
+    nt /= st
+    np.square(nt, out=nt)
+    nr += nt
+    nr *= -0.5
+    nr -= np.log(sr * st)
+    nr -= LOG_2PI
+    return nr
+
+
+_TWO_PI = 2.0 * np.pi
 
 
 def polar_to_cartesian(sensor: RangeBearing, z: np.ndarray) -> np.ndarray:

@@ -133,11 +133,21 @@ class ParticleState(ModelConditioned):
 
 def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean ``(..., d)`` and covariance ``(..., d, d)`` of particles ``X (..., N, d)`` with
-    normalised weights ``w (..., N)``."""
-    mean = np.einsum("...n,...nd->...d", w, X)
+    normalised weights ``w (..., N)``.
+
+    Two matrix products per stack entry (BLAS, any memory layout of ``X``, including the
+    filter's dimension-major particles): ``mean = w^T X``, ``cov = (D w)^T D``, ``D = X - mean``.
+    """
+    mean = np.matmul(w[..., None, :], X)[..., 0, :]
     D = X - mean[..., None, :]
-    cov = np.einsum("...na,...nb->...ab", D * w[..., None], D)
+    cov = np.matmul(np.swapaxes(D * w[..., None], -1, -2), D)
     return mean, symmetrise(cov)
+
+
+def _dim_major(X: np.ndarray) -> np.ndarray:
+    """Particles ``X (M, N, d)`` as a C-contiguous ``(d, M, N)`` array (a view when ``X`` is
+    already the transposed view of one, as the filter's own states are)."""
+    return np.ascontiguousarray(X.transpose(2, 0, 1))
 
 
 @dataclass(frozen=True)
@@ -150,12 +160,16 @@ class IMMParticleFilter:
     """Particle count and regularisation."""
 
     @cached_property
-    def _F_t(self) -> np.ndarray:
-        return np.stack([m.F.T for m in self.params.models()])  # (M, 6, 6)
+    def _F(self) -> np.ndarray:
+        return np.stack([m.F for m in self.params.models()])  # (M, 6, 6)
 
     @cached_property
-    def _G_t(self) -> np.ndarray:
-        return np.stack([(m.sigma * m.G).T for m in self.params.models()])  # (M, 2, 6)
+    def _G(self) -> np.ndarray:
+        return np.stack([m.sigma * m.G for m in self.params.models()])  # (M, 6, 2)
+
+    @cached_property
+    def _P(self) -> np.ndarray:
+        return self.params.P
 
     def initialise(self, mean: np.ndarray, cov: np.ndarray,
                    rng: np.random.Generator) -> ParticleState:
@@ -176,17 +190,28 @@ class IMMParticleFilter:
         X = means[:, None, :] + rng.standard_normal((M, N, means.shape[1])) @ np.swapaxes(L, 1, 2)
         return ParticleState(X, np.asarray(probs, float), means, covs)
 
+    # The step keeps the particles dimension-major, ``(d, M, N)`` C-contiguous, and hands out
+    # the ``(M, N, d)`` transposed view: every per-coordinate operation (likelihood, moments,
+    # gathers) then runs over contiguous rows. The arithmetic is the same as the particle-major
+    # form's, operation for operation (the same random draws, in the same order).
+
     def predict(self, state: ParticleState, rng: np.random.Generator) -> ParticlePrediction:
         """Interaction (mixing) and model-matched propagation (steps 1-2)."""
-        X = state.particles
-        M, N, d = X.shape
-        c, mu = mixing(state.probs, self.params.P)  # mu[i, j] = mu_(i|j)
+        X = _dim_major(state.particles)
+        d, M, N = X.shape
+        c, mu = mixing(state.probs, self._P)  # mu[i, j] = mu_(i|j)
         # model j samples the M*N particles with weight mu_(i|j)/N (particles equal-weighted)
         q = np.repeat(mu.T, N, axis=1)  # (j, i*N)
-        idx = counts_to_indices(systematic_counts(q, N, rng.random(M)))  # (M, N) into M*N
-        X0 = X.reshape(M * N, d)[idx]
-        Xp = X0 @ self._F_t + rng.standard_normal((M, N, 2)) @ self._G_t
-        return ParticlePrediction(Xp, c)
+        counts = systematic_counts(q, N, rng.random(M))  # (M, M*N), rows sum to N
+        idx = np.repeat(np.tile(np.arange(M * N), M), counts.reshape(-1))  # (M*N,) into M*N
+        X0 = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
+        E = rng.standard_normal((M, N, 2))
+        Xp = np.empty((d, M, N))
+        F, G = self._F, self._G
+        for j in range(M):  # x' = F_j x + G_j w per model, as (d, N) products
+            np.matmul(F[j], X0[:, j], out=Xp[:, j])
+            Xp[:, j] += G[j] @ E[j].T
+        return ParticlePrediction(Xp.transpose(1, 2, 0), c)
 
     def update(self, pred: ParticlePrediction, log_lik: np.ndarray,
                rng: np.random.Generator) -> ParticleState:
@@ -195,40 +220,43 @@ class IMMParticleFilter:
         ``log_lik (M, N)``: ``log p(z | x)`` at the predicted particles, plus any fusion
         log-ratio (eq. 19-21). ``log Lambda_j = log mean_n exp(log_lik_jn)``.
         """
-        X = pred.particles
-        M, N, d = X.shape
+        X = _dim_major(pred.particles)
+        d, M, N = X.shape
         top = log_lik.max(axis=1, keepdims=True)
         lik = np.exp(log_lik - top)
         s = lik.sum(axis=1)
         log_Lambda = np.log(s) + top[:, 0] - np.log(N)
         probs = model_posterior(pred.probs, log_Lambda)
         w = lik / s[:, None]
-        means, covs = weighted_moments(X, w)
-        idx = counts_to_indices(residual_counts(w, N, rng)) + self._row_offsets(M, N)
-        Xr = X.reshape(M * N, d)[idx]
+        means, covs = weighted_moments(X.transpose(1, 2, 0), w)
+        counts = residual_counts(w, N, rng)  # (M, N), rows sum to N
+        idx = np.repeat(np.arange(M * N), counts.reshape(-1))  # (M*N,) row j within model j
+        Xr = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
         Xr = self._regularise(Xr, means, covs, rng)
-        return ParticleState(Xr, probs, means, covs, log_Lambda)
-
-    @staticmethod
-    def _row_offsets(M: int, N: int) -> np.ndarray:
-        return (np.arange(M) * N)[:, None]
+        return ParticleState(Xr.transpose(1, 2, 0), probs, means, covs, log_Lambda)
 
     def _regularise(self, X: np.ndarray, means: np.ndarray, covs: np.ndarray,
                     rng: np.random.Generator) -> np.ndarray:
-        """Jitter the resampled particles ``X (M, N, d)`` (step 6)."""
+        """Jitter the resampled particles ``X (d, M, N)`` (dimension-major; step 6)."""
         h = self.particle.jitter
         if h <= 0.0:
             return X
-        d = X.shape[-1]
+        kind = self.particle.jitter_kind
+        if kind not in ("add", "shrink"):
+            raise ValueError(f"unknown jitter_kind {kind!r}; expected 'add' or 'shrink'")
+        d, M, N = X.shape
         L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(d))
-        E = h * (rng.standard_normal(X.shape) @ np.swapaxes(L, 1, 2))
-        if self.particle.jitter_kind == "add":
-            return X + E
-        if self.particle.jitter_kind == "shrink":
-            a = np.sqrt(1.0 - h * h)
-            return a * X + (1.0 - a) * means[:, None, :] + E
-        raise ValueError(f"unknown jitter_kind {self.particle.jitter_kind!r}; "
-                         "expected 'add' or 'shrink'")
+        Z = rng.standard_normal((M, N, d))
+        E = np.matmul(L, np.swapaxes(Z, 1, 2))  # (M, d, N): L_j e per particle
+        E *= h
+        if kind == "add":
+            X += E.transpose(1, 0, 2)
+            return X
+        a = np.sqrt(1.0 - h * h)
+        X *= a
+        X += ((1.0 - a) * means).T[:, :, None]
+        X += E.transpose(1, 0, 2)
+        return X
 
     def step(self, state: ParticleState, log_lik_fn, rng: np.random.Generator,
              extra_log_lik=None) -> tuple[ParticleState, ParticlePrediction]:

@@ -1,0 +1,123 @@
+"""The filters' hot paths as they were before issue 15's speed work (commit fea5bab), kept as
+the same-run reference of ``bench_immpf.py`` and ``bench_gmphd_stonesoup.py``: each benchmark
+times the current code against these in one process (the machine is shared, so ratios from
+one run are what count) and checks that both give the same numbers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
+from tracking.imm import (
+    IMMEKF,
+    STATE_DIM,
+    IMMGaussianState,
+    mixing,
+    model_posterior,
+    radar_jacobian,
+)
+from tracking.models import RangeBearing, wrap_angle
+from tracking.particles import (
+    IMMParticleFilter,
+    ParticlePrediction,
+    ParticleState,
+    counts_to_indices,
+    residual_counts,
+    systematic_counts,
+)
+
+
+def radar_log_likelihood(sensor: RangeBearing, z: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``log N(z; h(x), R)`` (before: stacked ``h``, ``residual`` with a copy, ``%`` wrap)."""
+    dx = X[..., 0] - sensor.position[0]
+    dy = X[..., 3] - sensor.position[1]
+    zhat = np.stack([np.hypot(dx, dy), np.arctan2(dy, dx)], axis=-1)
+    nu = np.asarray(z - zhat, dtype=float).copy()
+    nu[..., 1] = wrap_angle(nu[..., 1])
+    sr, st = sensor.sigma_r, sensor.sigma_theta
+    return (-0.5 * ((nu[..., 0] / sr) ** 2 + (nu[..., 1] / st) ** 2)
+            - np.log(sr * st) - LOG_2PI)
+
+
+def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance by ``np.einsum`` (sequential sums over particles)."""
+    mean = np.einsum("...n,...nd->...d", w, X)
+    D = X - mean[..., None, :]
+    cov = np.einsum("...na,...nb->...ab", D * w[..., None], D)
+    return mean, symmetrise(cov)
+
+
+@dataclass(frozen=True)
+class IMMParticleFilterBefore(IMMParticleFilter):
+    """The IMM-PF step before: particle-major ``(M, N, 6)`` arrays, row gathers, einsum."""
+
+    def predict(self, state: ParticleState, rng: np.random.Generator) -> ParticlePrediction:
+        X = state.particles
+        M, N, d = X.shape
+        c, mu = mixing(state.probs, self.params.P)
+        q = np.repeat(mu.T, N, axis=1)
+        idx = counts_to_indices(systematic_counts(q, N, rng.random(M)))
+        X0 = X.reshape(M * N, d)[idx]
+        F_t = np.stack([m.F.T for m in self.params.models()])
+        G_t = np.stack([(m.sigma * m.G).T for m in self.params.models()])
+        Xp = X0 @ F_t + rng.standard_normal((M, N, 2)) @ G_t
+        return ParticlePrediction(Xp, c)
+
+    def update(self, pred: ParticlePrediction, log_lik: np.ndarray,
+               rng: np.random.Generator) -> ParticleState:
+        X = pred.particles
+        M, N, d = X.shape
+        top = log_lik.max(axis=1, keepdims=True)
+        lik = np.exp(log_lik - top)
+        s = lik.sum(axis=1)
+        log_Lambda = np.log(s) + top[:, 0] - np.log(N)
+        probs = model_posterior(pred.probs, log_Lambda)
+        w = lik / s[:, None]
+        means, covs = weighted_moments(X, w)
+        idx = counts_to_indices(residual_counts(w, N, rng)) + (np.arange(M) * N)[:, None]
+        Xr = X.reshape(M * N, d)[idx]
+        h = self.particle.jitter
+        if h > 0.0:
+            L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(d))
+            E = h * (rng.standard_normal(Xr.shape) @ np.swapaxes(L, 1, 2))
+            if self.particle.jitter_kind == "add":
+                Xr = Xr + E
+            else:
+                a = np.sqrt(1.0 - h * h)
+                Xr = a * Xr + (1.0 - a) * means[:, None, :] + E
+        return ParticleState(Xr, probs, means, covs, log_Lambda)
+
+
+@dataclass(frozen=True)
+class IMMEKFBefore(IMMEKF):
+    """The IMM-EKF step before: models rebuilt per call, generic batched products."""
+
+    def predict(self, state: IMMGaussianState) -> IMMGaussianState:
+        models = self.params.models()
+        c, mu = mixing(state.probs, self.params.P)
+        m0 = mu.T @ state.means
+        diff = state.means[None, :, :] - m0[:, None, :]
+        P0 = np.einsum("ij,iab->jab", mu, state.covs) + np.einsum(
+            "ij,jia,jib->jab", mu, diff, diff)
+        F = np.stack([m.F for m in models])
+        Q = np.stack([m.Q for m in models])
+        means = np.einsum("jab,jb->ja", F, m0)
+        covs = symmetrise(F @ P0 @ np.swapaxes(F, 1, 2) + Q)
+        return IMMGaussianState(c, means, covs)
+
+    def update(self, pred: IMMGaussianState, z: np.ndarray,
+               sensor: RangeBearing) -> IMMGaussianState:
+        zhat, H = radar_jacobian(sensor, pred.means)
+        nu = sensor.residual(z, zhat)
+        PHt = pred.covs @ np.swapaxes(H, 1, 2)
+        S = H @ PHt + sensor.R
+        Sinv, detS = inv_det_2x2(S)
+        K = PHt @ Sinv
+        means = pred.means + np.einsum("jab,jb->ja", K, nu)
+        IKH = np.eye(STATE_DIM) - K @ H
+        covs = symmetrise(IKH @ pred.covs @ np.swapaxes(IKH, 1, 2)
+                          + K @ sensor.R @ np.swapaxes(K, 1, 2))
+        log_lik = -0.5 * (np.einsum("ja,jab,jb->j", nu, Sinv, nu) + np.log(detS) + 2 * LOG_2PI)
+        return IMMGaussianState(model_posterior(pred.probs, log_lik), means, covs, log_lik)
