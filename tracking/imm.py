@@ -21,10 +21,11 @@ This module also holds the range-bearing measurement on the 6-D state (positions
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
+from tracking.gaussian import LOG_2PI, inv_det_2x2
 from tracking.mixture import GaussianMixture
 from tracking.models import RangeBearing
 
@@ -263,23 +264,29 @@ class IMMEKF:
         return IMMGaussianState(np.asarray(self.params.initial_probs, float),
                                 np.tile(mean, (M, 1)), np.tile(cov, (M, 1, 1)))
 
+    @cached_property
+    def _models(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``P (M, M)``, ``F (M, 6, 6)``, ``F^T`` (a view) and ``Q (M, 6, 6)``, built once."""
+        models = self.params.models()
+        F = np.stack([m.F for m in models])
+        return self.params.P, F, np.swapaxes(F, 1, 2), np.stack([m.Q for m in models])
+
     def predict(self, state: IMMGaussianState) -> IMMGaussianState:
         """Interaction (mixing) and model-matched prediction; ``probs`` become ``c_j``.
 
         ``m0_j = sum_i mu_(i|j) m_i``, ``P0_j = sum_i mu_(i|j) [P_i + (m_i - m0_j)(.)^T]``,
         then ``m_j = F_j m0_j``, ``P_j = F_j P0_j F_j^T + Q_j``.
         """
-        models = self.params.models()
-        c, mu = mixing(state.probs, self.params.P)
+        P, F, Ft, Q = self._models
+        c, mu = mixing(state.probs, P)
         m0 = mu.T @ state.means  # (j, d)
         diff = state.means[None, :, :] - m0[:, None, :]  # (j, i, d)
         P0 = np.einsum("ij,iab->jab", mu, state.covs) + np.einsum(
             "ij,jia,jib->jab", mu, diff, diff)
-        F = np.stack([m.F for m in models])
-        Q = np.stack([m.Q for m in models])
         means = np.einsum("jab,jb->ja", F, m0)
-        covs = symmetrise(F @ P0 @ np.swapaxes(F, 1, 2) + Q)
-        return IMMGaussianState(c, means, covs)
+        covs = F @ P0 @ Ft
+        covs += Q
+        return IMMGaussianState(c, means, _symmetrise(covs))
 
     def update(self, pred: IMMGaussianState, z: np.ndarray,
                sensor: RangeBearing) -> IMMGaussianState:
@@ -289,22 +296,43 @@ class IMMEKF:
         Joseph-form covariance, ``Lambda_j = N(nu_j; 0, S_j)`` (seed 001 eq. 9-11).
         """
         zhat, H = radar_jacobian(sensor, pred.means)
-        nu = sensor.residual(z, zhat)  # (M, 2)
-        PHt = pred.covs @ np.swapaxes(H, 1, 2)  # (M, 6, 2)
-        S = H @ PHt + sensor.R
+        nu = z - zhat  # (M, 2), bearing wrapped below
+        nu[:, 1] += np.pi
+        nu[:, 1] %= 2.0 * np.pi
+        nu[:, 1] -= np.pi
+        R = sensor.R
+        Ht = np.swapaxes(H, 1, 2)
+        PHt = pred.covs @ Ht  # (M, 6, 2)
+        S = H @ PHt
+        S += R
         Sinv, detS = inv_det_2x2(S)
         K = PHt @ Sinv  # (M, 6, 2)
         means = pred.means + np.einsum("jab,jb->ja", K, nu)
-        IKH = np.eye(STATE_DIM) - K @ H
-        covs = symmetrise(IKH @ pred.covs @ np.swapaxes(IKH, 1, 2)
-                          + K @ sensor.R @ np.swapaxes(K, 1, 2))
-        log_lik = -0.5 * (np.einsum("ja,jab,jb->j", nu, Sinv, nu) + np.log(detS) + 2 * LOG_2PI)
-        return IMMGaussianState(model_posterior(pred.probs, log_lik), means, covs, log_lik)
+        IKH = _EYE6 - K @ H
+        covs = IKH @ pred.covs @ np.swapaxes(IKH, 1, 2)
+        covs += K @ R @ np.swapaxes(K, 1, 2)
+        log_lik = np.einsum("ja,jab,jb->j", nu, Sinv, nu)
+        log_lik += np.log(detS)
+        log_lik += 2 * LOG_2PI
+        log_lik *= -0.5
+        return IMMGaussianState(model_posterior(pred.probs, log_lik), means, _symmetrise(covs),
+                                log_lik)
 
     def step(self, state: IMMGaussianState, z: np.ndarray,
              sensor: RangeBearing) -> IMMGaussianState:
         """One scan: :meth:`predict` then :meth:`update`."""
         return self.update(self.predict(state), z, sensor)
+
+
+_EYE6 = np.eye(STATE_DIM)
+
+
+def _symmetrise(P: np.ndarray) -> np.ndarray:
+    """``(P + P^T) / 2`` over a stack, as :func:`tracking.gaussian.symmetrise`, in place."""
+    Pt = np.swapaxes(P, -1, -2).copy()
+    Pt += P
+    Pt *= 0.5
+    return Pt
 
 
 def model_posterior(c: np.ndarray, log_lik: np.ndarray) -> np.ndarray:
