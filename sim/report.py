@@ -9,7 +9,10 @@ ask (default: OSPA over time per cell):
   estimate and the centralized filter (95 % band), and the component counts of the fusing
   sensor before and after level-2 pruning and after fusion;
 * ``sweep``: a metric (``y``, default the fused OSPA) against one grid key (``x``), a line per
-  value of ``lines`` (or per combination of the other grid keys), 95 % error bars;
+  value of ``lines`` (or per combination of the other grid keys), 95 % error bars; optional
+  ``baseline`` (another metric drawn dashed beside each line, e.g. ``local_ospa``: each peer
+  alone), ``paper = {value = ..., label = "..."}`` (the paper's number, a red line, where the
+  paper gives one; ``note`` otherwise, e.g. that it gives none), ``xlabel`` and ``ylabel``;
 * ``ospa-time``: every cell's mean fused OSPA per scan in one plot;
 * ``seed001``: per cell of a ``seed001`` campaign, Table 1 (x-axis RMSE over the runs not lost,
   lost tracks) beside the paper's numbers, and a bar chart of the position RMSE.
@@ -232,7 +235,9 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     y = spec.get("y") or ("mean_ospa.fused" if any(
         "mean_ospa.fused" in d for d in cells.values()) else "fused_ospa")
     lines_key = spec.get("lines")
+    base_key = spec.get("baseline")
     groups: dict[str, list[tuple[Any, float, float]]] = {}
+    base: dict[str, list[tuple[Any, float, float]]] = {}
     for cell in manifest["cells"]:
         vals = cell["values"]
         if x not in vals or y not in cells[cell["index"]]:
@@ -243,6 +248,9 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
             g = ", ".join(f"{k}={_fmt(v)}" for k, v in vals.items() if k != x) or y
         mean, half, _ = interval(np.array(cells[cell["index"]][y], dtype=float))
         groups.setdefault(g, []).append((vals[x], mean, half))
+        if base_key and base_key in cells[cell["index"]]:
+            bm, bh, _ = interval(np.array(cells[cell["index"]][base_key], dtype=float))
+            base.setdefault(g, []).append((vals[x], bm, bh))
     if not groups:
         return None
     xs = list(dict.fromkeys(repr(v) for pts in groups.values() for v, _, _ in pts))
@@ -252,14 +260,22 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for g, pts in groups.items():
         px = [v if numeric else xs.index(repr(v)) for v, _, _ in pts]
-        ax.errorbar(px, [m for _, m, _ in pts], yerr=[0 if math.isnan(h) else h
-                                                       for _, _, h in pts],
-                    marker="o", capsize=3, label=g)
+        bar = ax.errorbar(px, [m for _, m, _ in pts], yerr=[0 if math.isnan(h) else h
+                                                             for _, _, h in pts],
+                          marker="o", capsize=3, label=g)
+        if g in base:
+            bx = [v if numeric else xs.index(repr(v)) for v, _, _ in base[g]]
+            ax.plot(bx, [m for _, m, _ in base[g]], "--", color=bar[0].get_color(), alpha=0.7,
+                    label=f"{base_key}, {g}")
+    paper = spec.get("paper")
+    if isinstance(paper, dict) and isinstance(paper.get("value"), int | float):
+        ax.axhline(paper["value"], color="red", lw=1.5,
+                   label=str(paper.get("label", "paper")))
     if not numeric:
         ax.set_xticks(range(len(xs)), [labels[v] for v in xs],
                       rotation=20 if max(len(labels[v]) for v in xs) > 12 else 0)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    ax.set_xlabel(spec.get("xlabel", x))
+    ax.set_ylabel(spec.get("ylabel", y))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(f"{manifest['name']}: {y} against {x} (95 % intervals)", fontsize=10)
@@ -267,7 +283,14 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     path = out / f"sweep-{n}.png"
     fig.savefig(path, dpi=100)
     plt.close(fig)
-    return f"{y} against {x}, 95 % intervals", path
+    caption = f"{y} against {x}, 95 % intervals"
+    if base:
+        caption += f"; dashed: {base_key}"
+    if isinstance(paper, dict) and "value" in paper:
+        caption += f"; red: {paper.get('label', 'paper')} ({_num(float(paper['value']))})"
+    elif spec.get("note"):
+        caption += f" ({spec['note']})"
+    return caption, path
 
 
 def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,

@@ -251,7 +251,7 @@ kind = "seed001"
 
 def test_shipped_campaigns_load():
     for name in ("seed000-figures", "seed000-twin", "policy-sweep", "loss-sweep",
-                 "seed001-table1"):
+                 "latency-sweep", "seed001-table1"):
         c = load_campaign(name, runs=2)
         assert c.cells and all(len(cell.keys) == 2 for cell in c.cells)
     c = load_campaign("seed000-figures")
@@ -280,3 +280,95 @@ def test_sigterm_is_an_interrupt_that_keeps_finished_runs(tmp_path):
     assert 2 <= done < 12
     summary = run_campaign(load_campaign(path), out, jobs=2, progress=False)
     assert (summary.ran, summary.skipped) == (12 - done, done)
+
+
+LATENCY = """
+[campaign]
+name = "t-lat"
+scenario = "seed000"
+runner = "twin"
+runs = 2
+
+[set]
+"scenario.num_scans" = 8
+
+[grid]
+"faults.default.delay" = [0.0, 0.07]
+"network.policy" = ["nale", "drop-late"]
+
+[[figures]]
+kind = "sweep"
+x = "faults.default.delay"
+lines = "network.policy"
+baseline = "local_ospa"
+paper = { value = 30.0, label = "a paper's number" }
+"""
+
+
+def test_latency_sweep_report_figure_and_its_numbers(tmp_path, capsys):
+    """A latency sweep in this process (jobs 1): estimates past the 50 ms deadline reach the
+    policy as late (NALE) or are dropped (drop-late); the report's numbers are the runs'."""
+    import csv
+
+    import numpy as np
+    from scipy.stats import t
+
+    c = load_campaign(_file(tmp_path, LATENCY))
+    out = tmp_path / "lat"
+    assert run_campaign(c, out, jobs=1, progress=False).ran == 8
+    table = results_table(out, complete_only=True)
+    rows = {(r["cell_label"], r["run"]): r for r in table.to_pylist()}
+    on_time = [r for (lab, _), r in rows.items() if "delay=0.0," in lab]
+    assert all(r["late"] == 0 and r["dropped_late"] == 0 for r in on_time)
+    nale = [r for (lab, _), r in rows.items() if lab.endswith("0.07, network.policy=nale")]
+    drop = [r for (lab, _), r in rows.items() if lab.endswith("0.07, network.policy=drop-late")]
+    assert len(nale) == len(drop) == 2
+    assert all(r["late"] > 0 and r["dropped_late"] == 0 for r in nale)
+    assert all(r["dropped_late"] > 0 for r in drop)
+    assert main(["report", str(out)]) == 0
+    capsys.readouterr()
+    md = (out / "report" / "report.md").read_text()
+    assert "![fused_ospa against faults.default.delay, 95 % intervals; dashed: local_ospa; " \
+           "red: a paper's number (30)](sweep-0.png)" in md
+    assert (out / "report" / "sweep-0.png").stat().st_size > 10_000
+    # the overview's mean and 95 % half-width of a cell, recomputed from per_run.csv
+    with (out / "report" / "per_run.csv").open() as fh:
+        per = [r for r in csv.DictReader(fh) if r["cell"] == "3"]
+    v = np.array([float(r["fused_ospa"]) for r in per])
+    half = t.ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v))
+    label = per[0]["cell_label"]
+    row = next(line for line in md.splitlines() if line.startswith(f"| {label} | 2 |"))
+    mean_text, half_text = row.split("|")[3].strip().split(" ± ")
+    assert float(mean_text) == pytest.approx(v.mean(), rel=5e-3)
+    assert float(half_text) == pytest.approx(half, rel=5e-3)
+
+
+@pytest.mark.network
+def test_real_process_campaign_runs_stores_and_resumes(tmp_path):
+    """The ``real`` runner: each run is the world and three peers as processes over Zenoh;
+    stopped after one run, the campaign resumes with only the other."""
+    c = load_campaign(_file(tmp_path, """
+[campaign]
+name = "t-real"
+scenario = "seed000"
+runner = "real"
+runs = 2
+
+[set]
+"scenario.num_scans" = 6
+"birth.model" = "truth"
+"""))
+    out = tmp_path / "real"
+    first = run_campaign(c, out, jobs=1, progress=False, stop_after=1)
+    assert (first.ran, first.stopped) == (1, True)
+    assert len(ResultStore(out / "results").done_keys()) == 1
+    rest = run_campaign(c, out, jobs=1, progress=False)
+    assert (rest.ran, rest.skipped) == (1, 1)
+    assert run_campaign(c, out, jobs=1, progress=False).ran == 0
+    table = results_table(out, complete_only=True)
+    assert table.column("run").to_pylist() == [0, 1]
+    for r in table.to_pylist():
+        assert r["runner"] == "real"
+        assert 0 < r["fused_ospa"] <= 200 and 0 < r["local_ospa"] <= 200  # OSPA cut-off c
+        assert all(0 < r[f"fused_ospa.{n}"] <= 200 for n in ("s1", "s2", "s3"))
+        assert r["ms_latency_median.s1"] > 0
