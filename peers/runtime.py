@@ -134,6 +134,7 @@ class PeerRuntime:
         # collector's view, a full collection no longer walks it in the middle of a scan
         gc.collect()
         gc.freeze()
+        self.telemetry.start_cpu()
         q = self.transport.q
         while not self._stop:
             wall, mono = time.time(), time.monotonic()
@@ -165,7 +166,9 @@ class PeerRuntime:
                 if self.recorder is not None and due is not None and due <= now:
                     self.recorder.tick(now)  # a deadline fires: replay must tick here too
                 self._carry_out("tick", self.core.tick, now)
+                t0 = time.thread_time()
                 self.observer.flush(idle=q.empty() and not self.core.consensus.busy())
+                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
             except Exception as exc:  # a bug must not take the peer (and the run) down
                 self._internal_error(exc)
             if time.monotonic() - self._last_input > self.o.idle_timeout:
@@ -216,7 +219,11 @@ class PeerRuntime:
 
     def _carry_out(self, channel: str, step, now: float) -> None:
         """Run one core step at wall time ``now``; publish and record what it returns."""
+        cpu = self.telemetry.cpu_ms
+        t0 = time.thread_time()
         outputs = step(now)
+        t1 = time.thread_time()
+        cpu[channel] = cpu.get(channel, 0.0) + (t1 - t0) * 1e3
         leave = time.time()
         if channel in ("scan", "estimate", "tick") and outputs:
             self.telemetry.handled(channel, now, leave, outputs)
@@ -224,15 +231,21 @@ class PeerRuntime:
         for out in outputs:
             if isinstance(out, Publish):
                 wall = time.time()
+                t0 = time.thread_time()
                 self.transport.publish(out.channel, out.payload)
+                cpu["publish"] += (time.thread_time() - t0) * 1e3
                 lat = self.telemetry.published(out, wall, len(out.payload))
                 if out.channel == "tracks" and self.saved_tracks is not None:
                     self.saved_tracks[out.k] = out.message.states
                 if out.channel == "tracks" and self.recorder is not None:
                     self.recorder.tracks(wall, out.k, out.payload)
+                t0 = time.thread_time()
                 self.observer.published(out, lat)
+                cpu["rerun"] += (time.thread_time() - t0) * 1e3
             elif isinstance(out, Record):
+                t0 = time.thread_time()
                 self.observer.record(out, scan_ms)
+                cpu["rerun"] += (time.thread_time() - t0) * 1e3
                 if out.kind == "error":
                     self._report_error(out)
                 if out.kind == "scan" and out.k % 1000 == 0:
