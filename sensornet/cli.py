@@ -804,7 +804,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from sim.report import write_report
 
     try:
-        written = write_report(args.dir, args.out)
+        written = write_report(args.dir, args.out, html=args.html)
     except ImportError as exc:
         raise UserError(str(exc)) from None
     for path in written:
@@ -1089,6 +1089,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("report", help="markdown + PNG report of a campaign folder")
     rp.add_argument("dir", help="campaign folder (runs/campaign-<name>)")
     rp.add_argument("--out", help="report folder (default: DIR/report)")
+    rp.add_argument("--html", action="store_true",
+                    help="also report.html beside report.md: one self-contained file (tables, "
+                         "every figure embedded)")
     rp.set_defaults(func=cmd_report)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")

@@ -372,3 +372,60 @@ runs = 2
         assert 0 < r["fused_ospa"] <= 200 and 0 < r["local_ospa"] <= 200  # OSPA cut-off c
         assert all(0 < r[f"fused_ospa.{n}"] <= 200 for n in ("s1", "s2", "s3"))
         assert r["ms_latency_median.s1"] > 0
+
+
+def test_html_report_is_one_self_contained_file(tmp_path, capsys):
+    """``report --html``: report.html beside report.md, every table of the markdown as a table,
+    every PNG embedded byte for byte, the per-run CSV as a data link; nothing fetched."""
+    import base64
+    import re
+    from html.parser import HTMLParser
+
+    path = _file(tmp_path, EXPERIMENT.replace("runs = 4", "runs = 2"))
+    out = tmp_path / "exp"
+    assert main(["campaign", str(path), "--out", str(out), "--jobs", "1", "--quiet"]) == 0
+    assert main(["report", str(out), "--html"]) == 0
+    written = [line.split(" ", 1)[1] for line in capsys.readouterr().out.splitlines()
+               if line.startswith("wrote ")]
+    page = out / "report" / "report.html"
+    assert str(page) in written
+    md = (out / "report" / "report.md").read_text()
+
+    class Collect(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.srcs, self.hrefs, self.tables, self.rows = [], [], 0, 0
+            self.tags = set()
+
+        def handle_starttag(self, tag, attrs):
+            a = dict(attrs)
+            self.tags.add(tag)
+            if tag == "img":
+                self.srcs.append(a["src"])
+            elif tag == "a":
+                self.hrefs.append(a["href"])
+            elif tag == "table":
+                self.tables += 1
+            elif tag == "tr":
+                self.rows += 1
+
+    c = Collect()
+    c.feed(page.read_text())
+    assert not {"script", "link", "iframe"} & c.tags
+    pngs = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", md)
+    assert len(pngs) == 9  # 4 seed-000 figures x 2 cells + the sweep
+    assert len(c.srcs) == len(pngs)
+    for name, src in zip(pngs, c.srcs, strict=True):
+        prefix = "data:image/png;base64,"
+        assert src.startswith(prefix)
+        assert base64.b64decode(src[len(prefix):]) == (out / "report" / name).read_bytes()
+    md_lines = md.splitlines()
+    tables = sum(1 for i, line in enumerate(md_lines) if line.startswith("|")
+                 and (i == 0 or not md_lines[i - 1].startswith("|")))
+    rows = sum(1 for line in md_lines if line.startswith("|") and not line.startswith("|---"))
+    assert (c.tables, c.rows) == (tables, rows)
+    csv_links = [h for h in c.hrefs if h.startswith("data:text/csv;base64,")]
+    assert len(csv_links) == 1 and all(h.startswith("data:") for h in c.hrefs)
+    assert base64.b64decode(csv_links[0].split(",", 1)[1]) == \
+        (out / "report" / "per_run.csv").read_bytes()
+    assert "<td class=r>2</td>" in page.read_text()  # runs, right-aligned as in the markdown
