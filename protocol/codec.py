@@ -230,17 +230,23 @@ def _forward(body: dict, limits: Limits) -> Forward:
         raise Rejected("too-many", f"{len(origins)} scans > {limits.max_entries}")
     if len(counts) != len(origins):
         raise Rejected("shape", f"{len(counts)} counts for {len(origins)} scans")
-    names = [_name({"o": o}, "o", limits) for o in origins]
-    if len(set(names)) != len(names):
+    if not all(type(o) is str and 0 < len(o) <= limits.max_name for o in origins):
+        raise Rejected("field", f"origins must be names of 1-{limits.max_name} characters")
+    if len(set(origins)) != len(origins):
         raise Rejected("field", "a scan's origin appears twice")
-    sizes = [_count({"n": c}, "n", limits.max_measurements) for c in counts]
+    if not all(type(c) is int for c in counts):
+        raise Rejected("field", "point counts must be integers")
+    if any(c < 0 or c > limits.max_measurements for c in counts):
+        raise Rejected("too-many", f"a point count outside [0, {limits.max_measurements}]")
     blob = _get(body, "x", bytes)
     n = _rows(blob, 2, limits.max_measurements, "measurements")
-    if sum(sizes) != n:
-        raise Rejected("shape", f"{n} measurements for counts summing to {sum(sizes)}")
+    if sum(counts) != n:
+        raise Rejected("shape", f"{n} measurements for counts summing to {sum(counts)}")
     z = _floats(blob, (n, 2))
-    ends = np.cumsum([0, *sizes])
-    scans = {o: z[a:b] for o, a, b in zip(names, ends[:-1], ends[1:], strict=True)}
+    scans, a = {}, 0
+    for o, c in zip(origins, counts, strict=True):
+        scans[o] = z[a:a + c]
+        a += c
     return Forward(sender=_name(body, "s", limits), k=_index(body, "k"),
                    scans=ScanSet(scans), round=_index(body, "r"), seq=_index(body, "q"),
                    send_time=_time(body))
