@@ -10,7 +10,8 @@ Prints, against the targets of the peers issue:
 3. the largest number of peers that keeps real time at 10 scans/s with 2 consensus rounds, on
    a ring (degree 2) and on circulant meshes of degree 3 and 4, and the peak resident memory
    of one peer process;
-4. the peak resident memory of a peer while a raw Zenoh session floods its neighbour's key for
+4. process CPU per peer per scan (3 peers, and every scaling run) with where it goes;
+5. the peak resident memory of a peer while a raw Zenoh session floods its neighbour's key for
    10 s with valid 2000-component estimates stamped far in the future, against the same
    peer in the clean latency run (target: within 1.2x).
 
@@ -36,7 +37,8 @@ from sim.launcher import read_summaries, start_run, wait_run
 from sim.scenario import load_scenario
 
 TARGETS = {"latency_median_ms": 5.0, "wire_ratio": 1.1, "peers": 20, "rss_mb": 200.0,
-           "flood_rss_ratio": 1.2}
+           "flood_rss_ratio": 1.2, "cpu_ms": 2.0}
+"""cpu_ms: process CPU per peer per scan at 20 peers of degree 4 (the scale issue's target)."""
 
 
 def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
@@ -155,7 +157,7 @@ def part_latency(tmp: Path, scans: int, clean: dict | None = None) -> list[str]:
     ratio = wire / (8 * tuples) if tuples else float("nan")
     ok_lat = med < TARGETS["latency_median_ms"]
     ok_wire = ratio <= TARGETS["wire_ratio"]
-    return [
+    return cpu_rows("3 peers", s) + [
         "| measure | value | target | |",
         "|---|---:|---:|---|",
         f"| scan -> fused tracks, median (ms) | {med:.2f} | < {TARGETS['latency_median_ms']} | "
@@ -166,6 +168,34 @@ def part_latency(tmp: Path, scans: int, clean: dict | None = None) -> list[str]:
         f"| wire / raw | {ratio:.3f} | <= {TARGETS['wire_ratio']} | "
         f"{'PASS' if ok_wire else 'FAIL'} |",
     ]
+
+
+CPU_PARTS = ("transport", "scan", "estimate", "truth", "tick", "publish", "rerun", "loop")
+"""Columns of the CPU table (peers.telemetry.Telemetry.cpu_breakdown); the rest is "other"."""
+
+
+def cpu_per_scan(summaries: dict) -> tuple[float, dict[str, float]]:
+    """Process CPU per peer per scan (ms), all peers pooled (their CPU over their scans), and
+    its breakdown: main-thread core steps by channel (decoding, filtering, fusing and encoding
+    inside), publishing, Rerun, the rest of the loop, and Zenoh's and the callbacks' threads."""
+    scans = sum(max(1, v["scans"]) for v in summaries.values())
+    total = sum(v["cpu_s_running"] * 1e3 for v in summaries.values()) / scans
+    parts: dict[str, float] = {}
+    for v in summaries.values():
+        for k, ms in (v.get("cpu_ms_breakdown") or {}).items():
+            key = k if k in CPU_PARTS else "other"
+            parts[key] = parts.get(key, 0.0) + ms / scans
+    return total, parts
+
+
+def cpu_rows(label: str, summaries: dict, target: float | None = None) -> list[str]:
+    total, parts = cpu_per_scan(summaries)
+    cols = [*CPU_PARTS, "other"]
+    verdict = "" if target is None else (
+        f" (target <= {target:g}: {'PASS' if total <= target else 'FAIL'})")
+    return [f"CPU per peer per scan, {label}: {total:.2f} ms{verdict}", "",
+            "| " + " | ".join(cols) + " |", "|" + "---:|" * len(cols),
+            "| " + " | ".join(f"{parts.get(c, 0.0):.2f}" for c in cols) + " |", ""]
 
 
 def pooled(summaries: dict) -> tuple[float, float]:
@@ -212,6 +242,10 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
             rows.append(f"| {graph} | {n} | {'yes' if ok else 'NO'} | {why} "
                         f"({time.monotonic() - t0:.0f} s wall) |")
             print(rows[-1], flush=True)
+            if res["summaries"]:
+                target = TARGETS["cpu_ms"] if (n, degree) == (20, 4) else None
+                print("\n".join(cpu_rows(f"{n} peers, {graph}", res["summaries"], target)),
+                      flush=True)
             if not ok:
                 break
             best[degree] = n
