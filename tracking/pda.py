@@ -34,6 +34,7 @@ Vectorised over the gated returns and the models; nothing here draws random numb
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -77,6 +78,18 @@ def _chi2_ppf(p: float, dof: int) -> float:
     return float(chi2.ppf(p, dof))
 
 
+_SIGN2 = np.array([[1.0, -1.0], [-1.0, 1.0]])
+
+
+def _inv_det(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``S^-1`` and ``|S|`` of a stack ``S (M, n, n)`` (closed form for n = 2: NumPy's
+    batched ``inv`` and ``det`` cost more in call overhead than the arithmetic)."""
+    if S.shape[-1] == 2:
+        det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+        return np.swapaxes(S[:, ::-1, ::-1], 1, 2) * _SIGN2 / det[:, None, None], det
+    return np.linalg.inv(S), np.linalg.det(S)
+
+
 def _quadratic_form(nu: np.ndarray, Sinv: np.ndarray) -> np.ndarray:
     """``nu^T S^-1 nu`` for ``nu (M, m, n_z)``, ``Sinv (M, n_z, n_z)``; ``(M, m)`` (closed
     form for n_z = 2, the common case, else einsum)."""
@@ -109,16 +122,29 @@ class SensorUpdate:
 
     returns: np.ndarray
     """(m, n_z) the validated returns."""
-    weights: np.ndarray
-    """(m,) their weights in the output (model-probability-weighted ``W_j``)."""
-    beta0: float
-    """Weight of "no return is the target's" (model-probability-weighted)."""
+    model_weights: np.ndarray
+    """(M, m) ``W_ij`` per model and return."""
+    model_beta0: np.ndarray
+    """(M,) ``W_0`` per model."""
+    probs: np.ndarray
+    """(M,) model probabilities after the update."""
     nis: np.ndarray
     """(M, m) ``g_ij`` per model and return."""
     S: np.ndarray
     """(n_z, n_z) innovation covariance of model 0 (the gate drawn in the view)."""
     zhat: np.ndarray
     """(n_z,) predicted measurement of model 0."""
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(m,) the returns' weights in the output (model-probability-weighted ``W_j``;
+        computed when asked: the filter's step does not need them)."""
+        return self.probs @ self.model_weights
+
+    @property
+    def beta0(self) -> float:
+        """Weight of "no return is the target's" (model-probability-weighted)."""
+        return float(self.probs @ self.model_beta0)
 
 
 def pda_weights(g: np.ndarray, det2piS: np.ndarray, sensor: LinearSensor,
@@ -135,11 +161,15 @@ def pda_weights(g: np.ndarray, det2piS: np.ndarray, sensor: LinearSensor,
     pd, pg = sensor.detection_probability, sensor.gate_probability
     lam = sensor.clutter_density if clutter_density is None else clutter_density
     b = 1.0 - pd * pg
-    L = (pd / lam) * np.exp(-0.5 * g) / np.sqrt(det2piS)[:, None]
+    L = np.exp(-0.5 * g) * ((pd / lam) / np.sqrt(det2piS))[:, None]
     lik = b + L.sum(axis=1)
     if mu is not None:
         L = L * mu
-    denom = b + L.sum(axis=1)
+        denom = b + L.sum(axis=1)
+    else:
+        denom = lik
+    if (denom > 0).all():
+        return b / denom, L / denom[:, None], lik
     safe = denom > 0
     W0 = np.where(safe, b / np.where(safe, denom, 1.0), 1.0)
     W = np.where(safe[:, None], L / np.where(safe, denom, 1.0)[:, None], 0.0)
@@ -153,11 +183,11 @@ def pda_moments(x: np.ndarray, P: np.ndarray, K: np.ndarray, S: np.ndarray, nu: 
     ``x (M, d)``, ``P (M, d, d)``, ``K (M, d, n_z)``, ``S (M, n_z, n_z)``, ``nu (M, m, n_z)``,
     ``W0 (M,)``, ``W (M, m)``.
     """
-    nubar = np.einsum("km,kmi->ki", W, nu)
-    x_new = x + np.einsum("kij,kj->ki", K, nubar)
-    KSK = K @ S @ K.transpose(0, 2, 1)
-    spread = np.einsum("km,kmi,kmj->kij", W, nu, nu) - nubar[:, :, None] * nubar[:, None, :]
-    P_new = P - (1.0 - W0)[:, None, None] * KSK + K @ spread @ K.transpose(0, 2, 1)
+    nubar = (W[:, None, :] @ nu)[:, 0]  # (M, n_z)
+    x_new = x + (K @ nubar[:, :, None])[:, :, 0]
+    # P - (1 - W0) K S K^T + K spread K^T = P + K (spread - (1 - W0) S) K^T
+    spread = (nu.transpose(0, 2, 1) * W[:, None, :]) @ nu - nubar[:, :, None] * nubar[:, None, :]
+    P_new = P + K @ (spread - (1.0 - W0)[:, None, None] * S) @ K.transpose(0, 2, 1)
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
 
 
@@ -180,6 +210,7 @@ class ImmPda:
         self.probs = (np.full(M, 1.0 / M) if probs0 is None
                       else np.asarray(probs0, float).copy())
         self.weighting = weighting
+        self._FT = self.F.transpose(0, 2, 1).copy()
 
     # -- output -----------------------------------------------------------------------------
 
@@ -187,8 +218,9 @@ class ImmPda:
         """Combined mean ``(d,)`` and covariance ``(d, d)`` (moment match over the models)."""
         x = self.probs @ self.x
         dx = self.x - x
-        P = np.einsum("k,kij->ij", self.probs, self.P + dx[:, :, None] * dx[:, None, :])
-        return x, P
+        M, d = self.x.shape
+        P = self.probs @ (self.P + dx[:, :, None] * dx[:, None, :]).reshape(M, d * d)
+        return x, P.reshape(d, d)
 
     def predicted_measurement(self, sensor: LinearSensor) -> tuple[np.ndarray, np.ndarray]:
         """``zhat (n_z,)`` and ``S (n_z, n_z)`` of the combined estimate: the gate drawn in the
@@ -205,16 +237,18 @@ class ImmPda:
 
     def predict(self, steps: int = 1) -> None:
         """IMM mixing and model-matched prediction, ``steps`` times (eq. 16, 22-23, 45)."""
+        M, d = self.x.shape
         for _ in range(int(steps)):
-            if len(self.probs) > 1:
+            if M > 1:
                 c, mix = mixing(self.probs, self.transition)  # mix (i, j)
-                x0 = np.einsum("ij,id->jd", mix, self.x)
+                x0 = mix.T @ self.x
                 dx = self.x[:, None, :] - x0[None, :, :]  # (i, j, d)
-                P0 = np.einsum("ij,ijab->jab", mix,
-                               self.P[:, None] + dx[..., :, None] * dx[..., None, :])
+                # sum_i mix_ij (P_i + dx_ij dx_ij^T), as two matrix products
+                P0 = (mix.T @ self.P.reshape(M, d * d)).reshape(M, d, d) + \
+                    (dx * mix[:, :, None]).transpose(1, 2, 0) @ dx.transpose(1, 0, 2)
                 self.x, self.P, self.probs = x0, P0, c
-            self.x = np.einsum("kij,kj->ki", self.F, self.x)
-            self.P = self.F @ self.P @ self.F.transpose(0, 2, 1) + self.Q
+            self.x = (self.F @ self.x[:, :, None])[:, :, 0]
+            self.P = self.F @ self.P @ self._FT + self.Q
         if self.weighting is not None:
             self.weighting.new_scan()
 
@@ -225,15 +259,20 @@ class ImmPda:
         H, R = sensor.H, sensor.R
         nz = H.shape[0]
         Z = np.asarray(Z, float).reshape(-1, nz)
-        zhat = self.x @ H.T  # (M, n_z)
-        PHt = self.P @ H.T  # (M, d, n_z)
+        Ht = H.T
+        zhat = self.x @ Ht  # (M, n_z)
+        PHt = self.P @ Ht  # (M, d, n_z)
         S = H @ PHt + R  # (M, n_z, n_z)
-        Sinv = np.linalg.inv(S)
+        Sinv, detS = _inv_det(S)
         nu = Z[None, :, :] - zhat[:, None, :]  # (M, m, n_z)
-        g = _quadratic_form(nu, Sinv)
+        g = _quadratic_form(nu, Sinv)  # (M, m) NIS, element by element: the same bits
+        # whatever other returns the scan holds (a peer's pre-gated share of it included)
         inside = (g < sensor.gamma).any(axis=0)  # union of the models' gates
-        nu, g, Zg = nu[:, inside], g[:, inside], Z[inside]
-        det2piS = np.linalg.det(2.0 * np.pi * S)
+        if inside.all():
+            Zg = Z
+        else:
+            nu, g, Zg = nu[:, inside], g[:, inside], Z[inside]
+        det2piS = (2.0 * np.pi) ** nz * detS
         K = PHt @ Sinv
         W0, W, lik = pda_weights(g, det2piS, sensor, None, clutter_density)
         if self.weighting is not None:
@@ -246,9 +285,9 @@ class ImmPda:
         self.x, self.P = pda_moments(self.x, self.P, K, S, nu, W0, W)
         if len(self.probs) > 1:
             p = self.probs * lik
-            total = p.sum()
-            self.probs = p / total if total > 0 and np.isfinite(total) else self.probs
-        return SensorUpdate(Zg, self.probs @ W, float(self.probs @ W0), g, S[0], zhat[0])
+            total = float(p.sum())
+            self.probs = p / total if total > 0 and math.isfinite(total) else self.probs
+        return SensorUpdate(Zg, W, W0, self.probs, g, S[0], zhat[0])
 
     def step(self, sensors: Sequence[LinearSensor], scans: Sequence[np.ndarray | None],
              steps: int = 1) -> list[SensorUpdate | None]:
