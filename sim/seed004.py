@@ -238,7 +238,8 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
 
     passed = ("faults", "security")  # network-scenario tables, taken as they are
     try:
-        scn = from_document({k: v for k, v in doc.items() if k not in passed}, label)
+        scn = from_document({k: v for k, v in doc.items() if k not in (*passed, "fusion")},
+                            label)
     except (ScenarioError, TypeError, ValueError) as e:
         raise sc.ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") \
             from None
@@ -280,7 +281,7 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
                    "merge_threshold": scn.merge_threshold,
                    "max_components": scn.max_components, "extraction": "cardinality"},
         "fusion": {"rule": "gci", "level2_threshold": scn.publish_threshold,
-                   "cardinality": scn.cardinality},
+                   "cardinality": scn.cardinality, **doc.get("fusion", {})},
         "metrics": {"ospa_cutoff": scn.ospa_cutoff, "ospa_order": scn.ospa_order},
         "network": network,
         **{k: doc[k] for k in passed if k in doc},
