@@ -429,3 +429,26 @@ def test_html_report_is_one_self_contained_file(tmp_path, capsys):
     assert base64.b64decode(csv_links[0].split(",", 1)[1]) == \
         (out / "report" / "per_run.csv").read_bytes()
     assert "<td class=r>2</td>" in page.read_text()  # runs, right-aligned as in the markdown
+
+
+def test_compaction_from_memory_equals_reading_the_files_back(tmp_path, monkeypatch):
+    """Compaction takes the rows a store wrote from memory (up to KEEP) and reads the rest
+    (earlier, interrupted writers') back: the folded file is the same either way."""
+    rows = [{"key": f"k{i}", "cell": i % 2, "cell_label": "c", "run": i, "runner": "twin",
+             "code_version": "v", "seconds": 0.1, "cpu_seconds": 0.1, "worker": "w",
+             "fused_ospa": 10.0 + i / 3, "ospa_k.fused": [float(i), 1 / 3],
+             **({"links_drop-loss": 2} if i % 2 else {})} for i in range(6)]
+    tables = []
+    for keep in (0, 3, 100):
+        monkeypatch.setattr(ResultStore, "KEEP", keep)
+        folder = tmp_path / f"keep{keep}"
+        ResultStore(folder).write(rows[0])  # a row from an earlier (interrupted) writer
+        store = ResultStore(folder)
+        for r in rows[1:]:
+            store.write(r)
+        assert len(store._written) == min(keep, 5)
+        assert store.compact() is not None and store.count_files() == 1
+        t = ResultStore(folder).read()
+        tables.append(sorted(zip(*(t.column(c).to_pylist() for c in sorted(t.column_names)),
+                                 strict=True)))
+    assert tables[0] == tables[1] == tables[2] and len(tables[0]) == 6
