@@ -339,7 +339,7 @@ def read_tracks(out: Path, name: str) -> dict[int, np.ndarray]:
 
 def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[list[Row], int]:
     """One mode as processes; its table rows (beside the twin) and an exit code."""
-    from sim.launcher import read_summaries, wait_run
+    from sim.launcher import merge_recordings, read_summaries, wait_run
 
     out.mkdir(parents=True, exist_ok=True)
     names = [s["name"] for s in cfg["sensors"]]
@@ -350,6 +350,9 @@ def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[li
     summaries = read_summaries(out, names)
     rows = [make_row(cfg, mode, n, summaries[n], read_tracks(out, n), ref.tracks[n])
             for n in names if n in summaries]
+    rec = None if a.no_rerun else merge_recordings(out)
+    if rec is not None:
+        print(f"{mode}: recording {rec}  (view it with: rerun {rec})", flush=True)
     bad = {n: c for n, c in codes.items() if c != 0}
     missing = [n for n in names if n not in summaries]
     if bad or missing or handle.timed_out:

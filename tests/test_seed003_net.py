@@ -89,6 +89,28 @@ def test_lost_returns_are_counted_per_dropped_message():
     assert res.peers["s1"].consensus.fuser.counts["missing_s2"] == dropped
 
 
+def test_pda_view_holds_gates_weights_and_the_detector():
+    """What the Rerun view draws: per sensor the gate and the validated returns with weights
+    that, with beta0, sum to 1; the detector's D_L beside chi2.isf(pf, dof)."""
+    from scipy.stats import chi2
+
+    cfg = seed003_net.load(overrides={"scenario.num_scans": 8})
+    res = seed003_net.twin(cfg, "meas", RUN)
+    est = res.peers["s1"].estimator
+    view = est.pda_view()
+    assert set(view["sensors"]) == {"s1", "s2"}
+    for name, v in view["sensors"].items():
+        up = est.last_updates[name]
+        assert v["returns"].shape == (len(v["weights"]), 2)
+        assert float(np.sum(v["weights"])) + up.beta0 == pytest.approx(1.0)
+        assert v["gamma"] == pytest.approx(chi2.ppf(0.99, 2))
+    d, threshold = view["detector"]
+    dof = est.filter.weighting.detector.statistic[1]
+    assert dof == 2 * 2 * int(cfg["detector"]["window"])  # L scans x 2 sensors x n_z
+    assert threshold == pytest.approx(chi2.isf(float(cfg["detector"]["false_alarm"]), dof))
+    assert d >= 0
+
+
 def test_returns_survive_the_wire():
     Z = np.array([[1.5, -2.25], [1e4, 3e3], [0.0, 7.0]])
     R = np.diag([2500.0, 2500.0])
