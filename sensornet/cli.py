@@ -418,10 +418,11 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     from peers.security import SIGN_KEY, WORLD, check_endpoints, keys_network, make_keys
 
     check_endpoints([*(args.listen or []), *(args.connect or [])])
+    router = ["router"] if getattr(args, "router", False) else []  # sim.launcher.ROUTER
     if args.secure == "":
         args.network = args.network or f"run-{os.urandom(4).hex()}"
         folder = out / "keys"
-        make_keys(args.network, [WORLD, *scn.sensor_names], folder)
+        make_keys(args.network, [WORLD, *scn.sensor_names, *router], folder)
         return folder.resolve()
     folder = Path(args.secure)
     made_for = keys_network(folder)
@@ -429,7 +430,7 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
         raise UserError(f"--secure {folder}: keys of network {made_for!r}, not of "
                         f"{args.network!r}")
     args.network = made_for
-    missing = [m for m in [WORLD, *scn.sensor_names]
+    missing = [m for m in [WORLD, *scn.sensor_names, *router]
                if not all((folder / f"{m}{x}").is_file() for x in (".key", SIGN_KEY))]
     if missing:
         raise UserError(f"--secure {folder}: no key for {', '.join(missing)} (add them with: "
@@ -619,6 +620,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     _resolve_viewer(args)
     if args.secure is None and scn.security:  # the scenario's [security] keys
         args.secure = scn.security
+    if getattr(args, "router", False):
+        clash = [f for f in ("config", "listen", "sparse") if getattr(args, f, None)]
+        if clash:
+            raise UserError(f"--router makes every process a client of the run's router: "
+                            f"drop --{clash[0]}")
     out = _run_folder(args.out, "run")
     secure = _run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
@@ -646,6 +652,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                            rerun=not args.no_rerun, lease_ms=args.lease_ms,
                            sparse=args.sparse, listen=args.listen, connect=args.connect,
                            config=args.config, run_id=args.run_id, secure=secure,
+                           router=getattr(args, "router", False),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
         if pfaults:
@@ -1021,6 +1028,10 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--record", action="store_true",
                         help="every peer records its inputs to <out>/record/*.mcap "
                              "(see: sensornet replay)")
+        sp.add_argument("--router", action="store_true",
+                        help="start a Zenoh router and make every process its client (the "
+                             "topology of several machines, on loopback; with --secure DIR, "
+                             "DIR needs a 'router' member)")
         sp.add_argument("--sparse", action="store_true",
                         help="Zenoh links only along the peer graph (gossip off): less "
                              "overhead in large networks; peers then see only their "

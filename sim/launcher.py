@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from peers.security import tls_endpoint
-from peers.session import endpoint, free_port
+from peers.session import SessionError, endpoint, free_port
 from sim.scenario import Scenario
 
 
@@ -43,6 +43,9 @@ class RunHandle:
     """Set by :func:`wait_run` when the caller's ``stop`` event ended the run."""
     secure: Path | None = None
     """The network's keys folder in secure mode (tools of the launcher use the world's key)."""
+    router: subprocess.Popen | None = None
+    """The run's router (``start_run(router=True)``): every other process is its client."""
+    router_command: list[str] = field(default_factory=list)
 
     def restart(self, name: str) -> subprocess.Popen:
         """Start peer ``name`` again (same command, a fresh listening port)."""
@@ -51,8 +54,9 @@ class RunHandle:
             old.kill()
             old.wait()
         cmd = list(self.commands[name])
-        i = cmd.index("--listen")
-        cmd[i + 1] = f"{cmd[i + 1].split('/', 1)[0]}/127.0.0.1:{free_port()}"  # tcp/ or tls/
+        if "--listen" in cmd:  # a router's client listens nowhere
+            i = cmd.index("--listen")
+            cmd[i + 1] = f"{cmd[i + 1].split('/', 1)[0]}/127.0.0.1:{free_port()}"  # tcp/, tls/
         self.restarts[name] = self.restarts.get(name, 0) + 1
         log = self.out / "logs" / f"{name}.restart{self.restarts[name]}.log"
         with log.open("w") as fh:
@@ -60,14 +64,41 @@ class RunHandle:
                                                 stdin=subprocess.DEVNULL)
         return self.procs[name]
 
+    def start_router(self, timeout: float = 30.0) -> subprocess.Popen:
+        """Start (or start again) the run's router; returns once it listens."""
+        if self.router is not None and self.router.poll() is None:
+            self.router.kill()
+            self.router.wait()
+        n = self.restarts["router"] = self.restarts.get("router", -1) + 1
+        log = self.out / "logs" / ("router.log" if n == 0 else f"router.restart{n}.log")
+        self.logs["router" if n == 0 else f"router.restart{n}"] = log
+        with log.open("w") as fh:
+            self.router = subprocess.Popen(self.router_command, stdout=fh,
+                                           stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        end = time.monotonic() + timeout
+        while "router: listening" not in log.read_text(errors="replace"):
+            if self.router.poll() is not None or time.monotonic() > end:
+                tail = log.read_text(errors="replace").strip().splitlines()[-1:]
+                raise SessionError(f"the router did not start: {' '.join(tail) or 'no output'} "
+                                   f"(log: {log})")
+            time.sleep(0.02)  # the router prints one line once it listens
+        return self.router
+
     def stop_all(self, grace: float = 5.0) -> None:
-        """SIGTERM every child still running, then SIGKILL after ``grace`` seconds."""
-        for p in self.procs.values():
+        """SIGTERM every child still running, then SIGKILL after ``grace`` seconds; the
+        router last (the others may still be sending their last messages through it)."""
+        self._stop(list(self.procs.values()), grace)
+        if self.router is not None:
+            self._stop([self.router], grace)
+
+    @staticmethod
+    def _stop(procs: list[subprocess.Popen], grace: float) -> None:
+        for p in procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGCONT)  # a stopped process cannot handle SIGTERM
                 p.send_signal(signal.SIGTERM)
         end = time.monotonic() + grace
-        for p in self.procs.values():
+        for p in procs:
             try:
                 p.wait(timeout=max(0.0, end - time.monotonic()))
             except subprocess.TimeoutExpired:
@@ -85,14 +116,18 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               lease_ms: int | None = None, rerun: bool = True,
               sparse: bool = False, listen: list[str] | None = None,
               connect: list[str] | None = None, config: str | None = None,
-              run_id: str | None = None, secure: Path | None = None) -> RunHandle:
+              run_id: str | None = None, secure: Path | None = None,
+              router: bool = False) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`).
 
     ``listen``: the world's endpoints (the peers connect to the first; default a free
     loopback port); ``connect``: endpoints every process connects to as well (a router, say);
     ``config``: a Zenoh JSON5 file for every process; ``run_id``: the Rerun recording id;
     ``secure``: a folder of the network's keys (``sensornet keys``): every process then speaks
-    mutual TLS on ``tls/`` endpoints under the network's access control.
+    mutual TLS on ``tls/`` endpoints under the network's access control. ``router``: start a
+    router first (``sensornet router``, with the folder's ``router`` key in secure mode) and make
+    every process its Zenoh client (a config file ``<out>/zenoh-client.json5``; nobody else
+    listens): the routed topology of several machines, on loopback. Returns once it listens.
     """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
@@ -114,6 +149,14 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure)
+    if router:
+        if config or listen or sparse:
+            raise ValueError("a routed run makes its own client config and endpoints: "
+                             "no --config, --listen or --sparse with --router")
+        common, eps = _routed(handle, common, ep(free_port()), names)
+        world_listen = []
+    if router:
+        extra_connect = ["--connect", eps["router"], *extra_connect]
     cmds = {"world": [*_cli(), "world", source, *common,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run)]
@@ -123,20 +166,26 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
 
         _, A = adjacency(scn)
     for i, n in enumerate(names):
-        if sparse:
+        if router:
+            links = []  # the router, in extra_connect like every process
+        elif sparse:
             links = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
         else:
             links = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
-        cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common, "--listen", eps[n],
+        cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common,
+                   *(["--listen", eps[n]] if not router else []),
                    "--color", str(i), "--run", str(run),
                    *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
                    *(["--no-gossip"] if sparse else []), *extra] \
             + (["--speed", str(speed)] if speed else [])
     handle.commands = cmds
-    (out / "commands.json").write_text(json.dumps(cmds, indent=1))  # to rerun one by hand
+    (out / "commands.json").write_text(json.dumps(
+        {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
     try:
+        if router:
+            handle.start_router()
         for name, cmd in cmds.items():
             log = out / "logs" / f"{name}.log"
             handle.logs[name] = log
@@ -147,6 +196,30 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         handle.stop_all(grace=1.0)
         raise
     return handle
+
+
+def _routed(handle: RunHandle, common: list[str], router_ep: str,
+            names: list[str]) -> tuple[list[str], dict[str, str]]:
+    """A routed run: the router's command, the clients' config file, every endpoint the
+    router's."""
+    from peers.session import DEFAULT_LEASE_MS, MAX_MESSAGE_BYTES
+
+    config = handle.out / "zenoh-client.json5"
+    config.write_text(json.dumps({
+        "mode": "client", "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {"tx": {"lease": DEFAULT_LEASE_MS},
+                               "rx": {"max_message_size": MAX_MESSAGE_BYTES}}}}, indent=1))
+    handle.router_command = [*_cli(), "router", "--listen", router_ep,
+                             "--network", handle.network]
+    if handle.secure:
+        handle.router_command += ["--secure", str(handle.secure), "--name", ROUTER]
+    handle.endpoints = {"router": router_ep}
+    return [*common, "--config", str(config)], {"router": router_ep, "world": router_ep,
+                                               **{n: router_ep for n in names}}
+
+
+ROUTER = "router"
+"""The member name of the router a routed run starts (its key in secure mode)."""
 
 
 def wait_run(handle: RunHandle, timeout: float,
@@ -340,7 +413,8 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
 
         security = Security.load(handle.secure, WORLD, handle.network,
                                  [n for n in handle.procs if n != "world"])
-    session = open_session(connect=[handle.endpoints["world"]], security=security)
+    session = open_session(connect=[handle.endpoints.get("router")
+                                    or handle.endpoints["world"]], security=security)
     try:
         sub = session.declare_subscriber(Keys(handle.network).scan(sensor), on_scan)
         while pending and not stop.is_set():

@@ -54,6 +54,17 @@ class _Sealed:
         self.pub.put(self.signer.seal(self.key, payload))
 
 
+def _await_subscribers(pubs, stop: threading.Event, timeout: float) -> None:
+    """Until every publisher has a matching subscriber, or ``timeout``: through a router a
+    peer's subscription can reach the world after the peer's ``ready`` token (under load, the
+    first scan was lost without this)."""
+    end = time.monotonic() + timeout
+    while not stop.is_set() and time.monotonic() < end:
+        if all(getattr(p, "pub", p).matching_status.matching for p in pubs):
+            return
+        stop.wait(0.01)
+
+
 FOLLOW_RADIUS = 400.0
 """Half-width (m) of the "around the target" view of single-target scenarios."""
 
@@ -139,6 +150,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))
             time.sleep(0.2)  # let the peers' subscriptions settle on every link
+            _await_subscribers([*(pubs[n] for n in wait_for if n in pubs), truth_pub,
+                                ctl_pub], stop, 5.0)
         say(f"world: starting {scn.num_scans} scans, one every {interval:g} s")
         ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
                                    send_time=time.time())))

@@ -1,0 +1,195 @@
+"""The routed topology: ``run --router`` (every process a client of one router the run starts)
+and docker-compose.secure.yml (the same behind one router over mutual TLS, per-service keys).
+
+There is no Docker engine here: the compose file is checked to parse and to mount each service
+only its own key, and its commands run as processes on loopback (the service names replaced by
+127.0.0.1 and the mounted paths by the test's folders), router first, as compose would.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+import yaml
+
+from peers.security import make_keys
+from peers.session import free_port
+from sensornet.cli import build_parser, main
+from sim.launcher import read_summaries
+
+ROOT = Path(__file__).resolve().parents[1]
+COMPOSE = ROOT / "docker-compose.secure.yml"
+CLIENT = ROOT / "docker" / "zenoh-client.json5"
+PEERS = ["s1", "s2", "s3"]
+SETS = ["scenario.num_scans=30", "birth.model=truth"]
+
+
+@pytest.fixture(scope="module")
+def compose():
+    return yaml.safe_load(COMPOSE.read_text())
+
+
+def test_compose_services_are_a_router_and_its_clients(compose):
+    services = compose["services"]
+    assert set(services) == {"router", "world", *PEERS}
+    assert {s["image"] for s in services.values()} == {"sensornet:latest"}
+    parser = build_parser()
+    for name, s in services.items():
+        # the config file is mounted from the repository (the parser checks that it exists)
+        cmd = [str(CLIENT) if a == "/etc/sensornet/client.json5" else a for a in s["command"]]
+        args = parser.parse_args(cmd)  # argparse exits on an invalid command
+        assert args.secure == "/keys", name
+        if name == "router":
+            assert args.command == "router" and args.listen == ["tls/0.0.0.0:7447"]
+            assert set(s["networks"]) == {"control", "sensors"}
+            continue
+        assert args.command == ("world" if name == "world" else "peer"), name
+        assert args.connect == ["tls/router:7447"] and not args.listen, name  # a client only
+        assert args.config == str(CLIENT), name
+        assert s["depends_on"] == ["router"], name
+        # the world and the peers share no bridge: only the router links them
+        assert s["networks"] == (["control"] if name == "world" else ["sensors"]), name
+        assert args.network == "compose" and args.out == "/runs/compose-secure", name
+
+
+def test_compose_mounts_each_service_only_its_own_key(compose):
+    for name, s in compose["services"].items():
+        mounts = {v.split(":")[1]: v.split(":")[0] for v in s["volumes"]}
+        keys = {target for target in mounts if target.startswith("/keys/")}
+        own = {f"/keys/{name}.pem", f"/keys/{name}.key"}
+        if name != "router":
+            own.add(f"/keys/{name}.ed25519")  # the router relays, it signs nothing
+        assert keys == {"/keys/ca.pem", "/keys/members.json", *own}, name
+        assert all(v.endswith(":ro") for v in s["volumes"] if ":/keys/" in v), name
+        assert "./keys/compose/ca.key" not in mounts.values(), name  # the CA stays home
+        if name != "router":
+            assert mounts["/etc/sensornet/client.json5"] == "./docker/zenoh-client.json5"
+
+
+def test_the_client_config_is_zenoh_client_mode():
+    import zenoh
+
+    conf = zenoh.Config.from_file(str(CLIENT))
+    assert json.loads(conf.get_json("mode")) == "client"
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+
+
+def test_router_flag_refuses_what_it_replaces(capsys):
+    for flag in (["--sparse"], ["--config", str(CLIENT)]):
+        assert main(["run", "seed000", "--router", "--no-rerun", *flag]) == 2
+        err = capsys.readouterr().err
+        assert "--router makes every process a client" in err and len(err.splitlines()) == 1
+
+
+def _sets() -> list[str]:
+    return [a for s in SETS for a in ("--set", s)]
+
+
+def _check(summaries: dict, scans: int = 30) -> None:
+    assert set(summaries) == set(PEERS)
+    for name, s in summaries.items():
+        assert s["scans"] == scans and s["stop_reason"] == "end of run", (name, s["scans"])
+        assert s["ospa_misses"] == {"local": 0, "fused": 0}, name
+        assert s["rejected_total"] == 0, (name, s["rejected"])
+        assert s["internal_errors"] == {}, name
+        assert s["stats"]["last_fused_from"] == {m: scans for m in PEERS if m != name}, name
+
+
+@pytest.fixture(scope="module")
+def peer_to_peer(tmp_path_factory):
+    out = tmp_path_factory.mktemp("p2p") / "run"
+    assert main(["run", "seed000", "--no-rerun", "--out", str(out), *_sets()]) == 0
+    return read_summaries(out, PEERS)
+
+
+@pytest.fixture(scope="module")
+def routed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("routed") / "run"
+    assert main(["run", "seed000", "--router", "--secure", "--no-rerun", "--out", str(out),
+                 *_sets()]) == 0
+    return out
+
+
+@pytest.mark.network
+def test_run_router_makes_every_process_a_client(routed, peer_to_peer):
+    cmds = json.loads((routed / "commands.json").read_text())
+    router_ep = cmds["router"][cmds["router"].index("--listen") + 1]
+    assert router_ep.startswith("tls/127.0.0.1:")
+    for name in ["world", *PEERS]:
+        assert "--listen" not in cmds[name], name  # clients listen nowhere
+        assert [cmds[name][i + 1] for i, a in enumerate(cmds[name]) if a == "--connect"] == [
+            router_ep], name
+    conf = (routed / "zenoh-client.json5").read_text()
+    assert json.loads(conf)["mode"] == "client"
+    assert "listening on tls/127.0.0.1" in (routed / "logs" / "router.log").read_text()
+    summaries = read_summaries(routed, PEERS)
+    _check(summaries)
+    _check(peer_to_peer)
+    for name, s in summaries.items():  # the same fused tracks through the router
+        assert abs(s["mean_ospa_fused"] - peer_to_peer[name]["mean_ospa_fused"]) < 2.0, name
+    print("fused OSPA routed/secure vs peer to peer: " + ", ".join(
+        f"{n} {s['mean_ospa_fused']:.2f}/{peer_to_peer[n]['mean_ospa_fused']:.2f}"
+        for n, s in summaries.items()))
+
+
+@pytest.mark.network
+def test_compose_commands_run_as_processes_on_loopback(compose, tmp_path, peer_to_peer):
+    """docker-compose.secure.yml's own commands, router first, each with only its own key."""
+    keys = tmp_path / "keys"
+    make_keys("compose", ["world", *PEERS, "router"], keys)
+    port = free_port()
+    out = tmp_path / "runs"
+    procs: dict[str, subprocess.Popen] = {}
+
+    def command(name: str) -> list[str]:
+        s = compose["services"][name]
+        member = tmp_path / "mounted" / name  # what the service's volumes mount at /keys
+        member.mkdir(parents=True)
+        for v in s["volumes"]:
+            src, target = v.split(":")[:2]
+            if target.startswith("/keys/"):
+                (member / Path(target).name).write_bytes((keys / Path(src).name).read_bytes())
+        subs = {"tls/router:7447": f"tls/127.0.0.1:{port}",
+                "tls/0.0.0.0:7447": f"tls/127.0.0.1:{port}", "/keys": str(member),
+                "/etc/sensornet/client.json5": str(CLIENT), "/runs": str(out)}
+        cmd = [next((v + a[len(k):] for k, v in subs.items() if a.startswith(k)), a)
+               for a in s["command"]]
+        return [sys.executable, "-m", "sensornet", *cmd,
+                *(_sets() if name != "router" else [])]
+
+    try:
+        logs = tmp_path / "logs"
+        logs.mkdir()
+        # depends_on starts the router first (the clients would retry it for 60 s)
+        router = procs["router"] = subprocess.Popen(command("router"), stdout=subprocess.PIPE,
+                                                    stderr=subprocess.STDOUT, text=True)
+        listening = threading.Event()
+        first: list[str] = []
+        threading.Thread(target=lambda: (first.append(router.stdout.readline()),
+                                         listening.set()), daemon=True).start()
+        assert listening.wait(30) and "router: listening" in first[0], first
+        for name in ["world", *PEERS]:
+            with (logs / f"{name}.log").open("w") as fh:
+                procs[name] = subprocess.Popen(command(name), stdout=fh,
+                                               stderr=subprocess.STDOUT)
+        assert procs["world"].wait(timeout=120) == 0, (logs / "world.log").read_text()
+        for n in PEERS:
+            assert procs[n].wait(timeout=30) == 0, (logs / f"{n}.log").read_text()
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.terminate()
+                try:
+                    p.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+    summaries = read_summaries(out / "compose-secure", PEERS)
+    _check(summaries)
+    for name, s in summaries.items():
+        assert abs(s["mean_ospa_fused"] - peer_to_peer[name]["mean_ospa_fused"]) < 2.0, name
