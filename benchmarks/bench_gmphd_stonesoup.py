@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -62,12 +63,16 @@ TARGETS = (
 )
 BIRTH_WEIGHT = 0.1
 BIRTH_COV = np.diag([100.0, 2500.0, 100.0, 2500.0])
+# the seed paper's printed birth model (seed 000 §10; sim.scenario.PAPER_BIRTH)
+PAPER_BIRTH_MEANS = ((250.0, 0.0, 250.0, 0.0), (-250.0, 0.0, -250.0, 0.0))
+PAPER_BIRTH_COV = np.diag([100.0, 25.0, 100.0, 25.0])
 
-# (name, clutter mean, gated?, target speed-up)
+# (name, clutter mean, gated?, target speed-up, births)
 SETTINGS = (
-    ("clutter 10, no gate", 10.0, False, 100.0),
-    ("clutter 200, no gate", 200.0, False, 500.0),
-    ("clutter 200, gate", 200.0, True, 50.0),
+    ("clutter 10, no gate", 10.0, False, 100.0, "truth"),
+    ("clutter 10, paper births", 10.0, False, 100.0, "paper"),
+    ("clutter 200, no gate", 200.0, False, 500.0, "truth"),
+    ("clutter 200, gate", 200.0, True, 50.0, "truth"),
 )
 OSPA_TOLERANCE = 1.05  # ours at most 5 % above Stone Soup's
 
@@ -82,11 +87,16 @@ def truth_at(k: int) -> np.ndarray:
     return np.array(rows).reshape(-1, 4)
 
 
-def birth_mixture() -> GaussianMixture:
-    """Births at the true birth points, zero velocity, wide velocity spread (§10)."""
-    means = np.array([[x0, 0.0, y0, 0.0] for _, _, x0, _, y0, _ in TARGETS])
+def birth_mixture(births: str = "truth") -> GaussianMixture:
+    """``"truth"``: births at the true birth points, zero velocity, wide velocity spread (§10);
+    ``"paper"``: the seed paper's printed births (two components at (+-250, +-250), cov
+    diag(100, 25, 100, 25), weight 0.1 each), which miss the targets' birth points."""
+    if births == "paper":
+        means, cov = np.array(PAPER_BIRTH_MEANS), PAPER_BIRTH_COV
+    else:
+        means, cov = np.array([[x0, 0.0, y0, 0.0] for _, _, x0, _, y0, _ in TARGETS]), BIRTH_COV
     n = len(means)
-    return GaussianMixture(np.full(n, BIRTH_WEIGHT), means, np.repeat(BIRTH_COV[None], n, 0))
+    return GaussianMixture(np.full(n, BIRTH_WEIGHT), means, np.repeat(cov[None], n, 0))
 
 
 def make_scans(n_scans: int, clutter: float, rng: np.random.Generator) -> list[np.ndarray]:
@@ -113,13 +123,22 @@ def one_per_component(mix: GaussianMixture) -> np.ndarray:
 
 
 # -- ours ---------------------------------------------------------------------------------------
-def ours_filter(clutter: float, gate: float | None) -> GMPHDFilter:
-    return GMPHDFilter(
+def ours_filter(clutter: float, gate: float | None, births: str = "truth", before: bool = False):
+    """Our GM-PHD (``before``: the code before issue 15, ``benchmarks/before``)."""
+    if before:
+        from benchmarks.before import gmphd as before_gmphd
+        from benchmarks.before import reduction as before_reduction
+
+        filt, sensor, reducer = (before_gmphd.GMPHDFilter, before_gmphd.SensorParams,
+                                 before_reduction.Reducer)
+    else:
+        filt, sensor, reducer = GMPHDFilter, SensorParams, Reducer
+    return filt(
         motion=ConstantVelocity(T, SIGMA_W),
-        sensors=[SensorParams(LinearPosition(SIGMA_R), PD, clutter / AREA)],
-        birth=birth_mixture(),
+        sensors=[sensor(LinearPosition(SIGMA_R), PD, clutter / AREA)],
+        birth=birth_mixture(births),
         survival_probability=PS,
-        reducer=Reducer(PRUNE, MERGE, CAP, merge_rule="vo-ma"),
+        reducer=reducer(PRUNE, MERGE, CAP, merge_rule="vo-ma"),
         extraction_threshold=EXTRACT,
         extraction="round",  # the round(w) column (the library default is "cardinality")
         gate=None if gate is None else gate * gate,  # ours gates nu^T S^-1 nu
@@ -134,24 +153,41 @@ class Run:
     estimates: list  # round(w) rule, per scan
     single: list  # one estimate per component, per scan
     max_weight: float = 0.0
+    before: np.ndarray | None = None  # (scans,) the code before issue 15, same scans
+    same_as_before: bool = True
 
 
-def run_ours(scans, clutter, gate, repeats: int) -> Run:
-    """Our filter; per-scan time is the median over ``repeats`` identical passes."""
-    filt = ours_filter(clutter, gate)
+def run_ours(scans, clutter, gate, repeats: int, births: str = "truth") -> Run:
+    """Our filter; per-scan time is the median over ``repeats`` identical passes. Each scan
+    is also stepped by the code before issue 15 from the same input, interleaved (which of
+    the two goes first alternates), and its outputs compared."""
+    filt = ours_filter(clutter, gate, births)
+    before = ours_filter(clutter, gate, births, before=True)
     times = np.empty((repeats, len(scans)))
+    t_before = np.empty((repeats, len(scans)))
     run = Run(np.empty(0), [], [])
     for r in range(repeats):
         mix = filt.initial()
         for k, scan in enumerate(scans):
-            t0 = time.perf_counter()
-            mix = filt.step(mix, scan)
-            times[r, k] = time.perf_counter() - t0
+            for which in ((0, 1) if (r + k) % 2 else (1, 0)):
+                t0 = time.perf_counter()
+                if which == 0:
+                    out = filt.step(mix, scan)
+                    times[r, k] = time.perf_counter() - t0
+                else:
+                    ref = before.step(mix, scan)
+                    t_before[r, k] = time.perf_counter() - t0
+            if r == 0:
+                run.same_as_before &= all(
+                    np.array_equal(a, b) for a, b in ((out.weights, ref.weights),
+                                                      (out.means, ref.means), (out.covs, ref.covs)))
+            mix = out
             if r == 0:
                 run.estimates.append(filt.extract(mix))
                 run.single.append(one_per_component(mix))
                 run.max_weight = max(run.max_weight, float(mix.weights.max(initial=0.0)))
     run.times = np.median(times, axis=0)
+    run.before = np.median(t_before, axis=0)
     return run
 
 
@@ -180,7 +216,8 @@ class StoneSoupGMPHD:
         return set(self.reducer.reduce(self.updater.update(hyps)))
 
 
-def stonesoup_filter(clutter: float, gate: float | None, start) -> StoneSoupGMPHD:
+def stonesoup_filter(clutter: float, gate: float | None, start,
+                     births: str = "truth") -> StoneSoupGMPHD:
     from stonesoup.gater.distance import DistanceGater
     from stonesoup.hypothesiser.distance import DistanceHypothesiser
     from stonesoup.hypothesiser.gaussianmixture import GaussianMixtureHypothesiser
@@ -219,7 +256,7 @@ def stonesoup_filter(clutter: float, gate: float | None, start) -> StoneSoupGMPH
                                 missed_distance=np.inf, include_all=True)
     if gate is not None:  # keeps sqrt(nu^T S^-1 nu) < gate: the pairs ours keeps at gate^2
         base = DistanceGater(base, measure=Mahalanobis(), gate_threshold=gate)
-    births = birth_mixture()
+    births = birth_mixture(births)
     return StoneSoupGMPHD(
         hypothesiser=GaussianMixtureHypothesiser(base, order_by_detection=True),
         updater=PHDUpdater(kalman_updater, clutter_spatial_density=clutter / AREA,
@@ -247,10 +284,10 @@ def stonesoup_mixture(state: set) -> GaussianMixture:
     )
 
 
-def run_stonesoup(scans, clutter, gate) -> Run:
+def run_stonesoup(scans, clutter, gate, births: str = "truth") -> Run:
     """Stone Soup's GM-PHD, one pass (it is slow); extraction as ours."""
     start = datetime.datetime(2000, 1, 1)
-    filt = stonesoup_filter(clutter, gate, start)
+    filt = stonesoup_filter(clutter, gate, start, births)
     state: set = set()
     run = Run(np.empty(len(scans)), [], [])
     for k, scan in enumerate(scans):
@@ -324,23 +361,27 @@ def main(argv=None) -> int:
     print(f"gate: Stone Soup DistanceGater(Mahalanobis) distance < {args.gate:g}; ours "
           f"nu^T S^-1 nu <= {args.gate**2:g} (same pairs)")
     print(f"time: mean over scans of one step (predict+update+reduce); ours = per-scan median "
-          f"of {args.repeats} passes, Stone Soup = one pass")
+          f"of {args.repeats} passes, Stone Soup = one pass; 'before' = our filter before issue "
+          f"15 (benchmarks/before), stepped from the same inputs interleaved with ours")
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     if args.heavy_scans < args.scans:
         print(f"subsampled: the clutter-200 settings run the first {args.heavy_scans} scans of "
               f"the scenario (the same scans on both sides); clutter 10 runs {args.scans}")
     print()
     rows = []
-    for name, clutter, gated, target in SETTINGS:
+    for name, clutter, gated, target, births in SETTINGS:
         gate = args.gate if gated else None
         n_scans = args.scans if clutter <= 10 else args.heavy_scans
         ours, theirs = [], []
         for r in range(args.runs):
             scans = make_scans(n_scans, clutter, np.random.default_rng([args.seed + r,
                                                                         int(clutter)]))
-            ours.append(run_ours(scans, clutter, gate, args.repeats))
-            theirs.append(run_stonesoup(scans, clutter, gate))
+            ours.append(run_ours(scans, clutter, gate, args.repeats, births))
+            theirs.append(run_stonesoup(scans, clutter, gate, births))
         ms_ours = 1e3 * float(np.mean([run.times for run in ours]))
         ms_ss = 1e3 * float(np.mean([run.times for run in theirs]))
+        ms_before = 1e3 * float(np.mean([run.before for run in ours]))
+        same = all(run.same_as_before for run in ours)
         o_ours = float(np.mean([mean_ospa(run.estimates) for run in ours]))
         o_ss = float(np.mean([mean_ospa(run.estimates) for run in theirs]))
         s_ours = float(np.mean([mean_ospa(run.single) for run in ours]))
@@ -350,26 +391,29 @@ def main(argv=None) -> int:
         label = f"{name} {args.gate:g}" if gated else name
         rows.append(dict(
             name=label, scans=n_scans, ours=ms_ours, ss=ms_ss, target=target, o_ours=o_ours,
+            before=ms_before, same=same,
             o_ss=o_ss, s_ours=s_ours, s_ss=s_ss, time_ok=time_ok, ospa_ok=ospa_ok,
             dup_ours=sum(duplicate_scans(run.estimates) for run in ours),
             dup_ss=sum(duplicate_scans(run.estimates) for run in theirs),
             w_ours=max(run.max_weight for run in ours),
             w_ss=max(run.max_weight for run in theirs)))
 
-    head = (f"{'setting':<22} {'scans':>5} {'ours ms':>8} {'SS ms':>9} {'ratio':>7} "
+    head = (f"{'setting':<24} {'scans':>5} {'ours ms':>8} {'SS ms':>9} {'ratio':>7} "
             f"{'target':>7}  {'OSPA ours':>9} {'OSPA SS':>8} {'ratio':>6} {'target':>6}  "
-            f"{'time':<4} {'OSPA':<4}")
+            f"{'time':<4} {'OSPA':<4}  {'before ms':>9} {'before/ours':>11} {'outputs':<9}")
     print(head)
     print("-" * len(head))
     for r in rows:
-        print(f"{r['name']:<22} {r['scans']:>5} {r['ours']:8.3f} {r['ss']:9.1f} "
+        print(f"{r['name']:<24} {r['scans']:>5} {r['ours']:8.3f} {r['ss']:9.1f} "
               f"{r['ss'] / r['ours']:6.0f}x {r['target']:>6.0f}x  {r['o_ours']:9.2f} "
               f"{r['o_ss']:8.2f} {r['o_ours'] / r['o_ss']:6.3f} {'<=1.05':>6}  "
-              f"{'PASS' if r['time_ok'] else 'FAIL':<4} {'PASS' if r['ospa_ok'] else 'FAIL':<4}")
+              f"{'PASS' if r['time_ok'] else 'FAIL':<4} {'PASS' if r['ospa_ok'] else 'FAIL':<4}  "
+              f"{r['before']:9.3f} {r['before'] / r['ours']:11.2f} "
+              f"{'identical' if r['same'] else 'DIFFER':<9}")
     print()
     print("OSPA with one estimate per component w > 0.5 (Stone Soup's tutorial rule) instead of "
           "round(w) copies:")
-    head2 = (f"{'setting':<22} {'OSPA ours':>9} {'OSPA SS':>8} {'ratio':>6}  {'OSPA':<4}  "
+    head2 = (f"{'setting':<24} {'OSPA ours':>9} {'OSPA SS':>8} {'ratio':>6}  {'OSPA':<4}  "
              f"{'scans with round(w) >= 2: ours':>30} {'SS':>3}  {'max w ours':>10} {'SS':>5}")
     print(head2)
     print("-" * len(head2))
@@ -377,7 +421,7 @@ def main(argv=None) -> int:
     for r in rows:
         passed = r["s_ours"] <= OSPA_TOLERANCE * r["s_ss"]
         single_ok &= passed
-        print(f"{r['name']:<22} {r['s_ours']:9.2f} {r['s_ss']:8.2f} "
+        print(f"{r['name']:<24} {r['s_ours']:9.2f} {r['s_ss']:8.2f} "
               f"{r['s_ours'] / r['s_ss']:6.3f}  {'PASS' if passed else 'FAIL':<4}  "
               f"{r['dup_ours']:>30} {r['dup_ss']:>3}  {r['w_ours']:10.2f} {r['w_ss']:5.2f}")
     print()

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
-from tracking.gaussian import inv_det_2x2, inv_det_spd, quad_form, symmetrise
+from tracking.gaussian import inv_det_2x2, inv_det_spd
 from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity, MeasurementModel
 from tracking.reduction import Reducer
@@ -52,7 +53,7 @@ def predict(
         P = np.concatenate((P, birth.covs))
     elif steps == 0:
         return mix
-    return GaussianMixture(w, m, P)
+    return GaussianMixture.trusted(w, m, P)
 
 
 def update(
@@ -75,38 +76,63 @@ def update(
     scan = np.asarray(scan, dtype=float).reshape(-1, sensor.model.dim)
     n, m = len(mix), len(scan)
     if n == 0 or m == 0:
-        return GaussianMixture(missed_w, mean, P)
+        return GaussianMixture.trusted(missed_w, mean, P)
     cols = _selected_columns(sensor.model)
+    R = sensor.model.R
     if cols is not None:  # H picks state entries: H P H^T and P H^T are sub-blocks of P
         zhat = mean[:, cols]  # (n, 2)
         PHt = P[:, :, cols]  # (n, d, 2)
-        S = PHt[:, cols, :] + sensor.model.R  # (n, 2, 2)
+        S = PHt[:, cols, :] + R  # (n, 2, 2)
     else:
         zhat, H = sensor.model.predict(mean)  # (n, 2), (n, 2, d)
         PHt = P @ np.swapaxes(H, 1, 2)  # (n, d, 2)
-        S = H @ PHt + sensor.model.R  # (n, 2, 2)
+        S = H @ PHt + R  # (n, 2, 2)
     S_inv, S_det = (inv_det_2x2(S) if S.shape[-1] == 2 else inv_det_spd(S))
     K = PHt @ S_inv  # (n, d, 2)
-    P_upd = symmetrise(P - K @ np.swapaxes(PHt, 1, 2))  # (n, d, d)
+    P_upd = P - K @ PHt.swapaxes(1, 2)  # (n, d, d), symmetrised: (P + P^T) / 2
+    P_upd = P_upd + P_upd.swapaxes(1, 2)
+    P_upd *= 0.5
     nu = sensor.model.residual(scan[:, None, :], zhat[None, :, :])  # (m, n, 2)
-    d2 = quad_form(nu, S_inv[None])  # (m, n)
-    logq = -0.5 * (d2 + np.log(S_det)[None] + S.shape[-1] * np.log(2 * np.pi))
-    num = Pd * w[None, :] * np.exp(logq)  # (m, n)
+    d2 = _c_einsum("...i,...ij,...j->...", nu, S_inv[None], nu)  # (m, n): quad_form
+    # num = Pd w q(z): the operations of -0.5 (d2 + log det S + k log 2 pi), exp, times Pd w,
+    # in that order, in place
+    num = d2 + np.log(S_det)[None]
+    num += S.shape[-1] * _LOG_2PI
+    num *= -0.5
+    np.exp(num, out=num)
+    num *= Pd * w[None, :]  # (m, n)
     if gate is not None:
         num = np.where(d2 <= gate, num, 0.0)
-    w_upd = num / (sensor.clutter_intensity + num.sum(axis=1, keepdims=True))
-    zi, ji = np.nonzero(w_upd > min_weight) if min_weight > 0 else np.nonzero(w_upd >= 0)
-    means_upd = mean[ji] + np.einsum("kij,kj->ki", K[ji], nu[zi, ji])
-    return GaussianMixture(
-        np.concatenate((missed_w, w_upd[zi, ji])),
+    denom = num.sum(axis=1, keepdims=True)
+    denom += sensor.clutter_intensity
+    num /= denom  # w_upd
+    zi, ji = (num > min_weight).nonzero() if min_weight > 0 else (num >= 0).nonzero()
+    means_upd = mean[ji] + _c_einsum("kij,kj->ki", K[ji], nu[zi, ji])
+    return GaussianMixture.trusted(
+        np.concatenate((missed_w, num[zi, ji])),
         np.concatenate((mean, means_upd)),
         np.concatenate((P, P_upd[ji])),
     )
 
 
+_LOG_2PI = float(np.log(2 * np.pi))
+try:
+    from numpy._core.multiarray import c_einsum as _c_einsum
+except ImportError:  # pragma: no cover (NumPy 1.x)
+    _c_einsum = np.einsum
+"""``np.einsum`` without its Python wrapper (what ``np.einsum(..., optimize=False)`` calls)."""
+
+
+@lru_cache(maxsize=64)
+def _columns(selected: tuple[int, ...]) -> np.ndarray:
+    cols = np.asarray(selected)
+    cols.setflags(write=False)
+    return cols
+
+
 def _selected_columns(model: SensorModel) -> np.ndarray | None:
     """The state entries a linear model picks (``MeasurementModel.selected``), else None."""
-    return None if model.selected is None else np.asarray(model.selected)
+    return None if model.selected is None else _columns(tuple(model.selected))
 
 
 EXTRACTION_RULES = ("round", "cardinality")

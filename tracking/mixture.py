@@ -47,6 +47,18 @@ class GaussianMixture:
 
     # -- construction -------------------------------------------------------------------
     @classmethod
+    def trusted(cls, weights: np.ndarray, means: np.ndarray, covs: np.ndarray) -> GaussianMixture:
+        """A mixture from arrays the caller guarantees: float ``(n,)``, ``(n, d)``,
+        ``(n, d, d)``. No conversion and no shape checks (for filter hot paths whose arrays
+        come from validated mixtures; the checks cost more than a small filter step's
+        arithmetic)."""
+        mix = object.__new__(cls)
+        object.__setattr__(mix, "weights", weights)
+        object.__setattr__(mix, "means", means)
+        object.__setattr__(mix, "covs", covs)
+        return mix
+
+    @classmethod
     def empty(cls, dim: int) -> GaussianMixture:
         """A mixture with no components in ``dim`` dimensions."""
         return cls(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)))
@@ -79,7 +91,9 @@ class GaussianMixture:
 
     def select(self, index: np.ndarray | slice) -> GaussianMixture:
         """The sub-mixture of the components picked by a boolean mask or index array."""
-        return GaussianMixture(self.weights[index], self.means[index], self.covs[index])
+        if not isinstance(index, slice) and np.ndim(index) == 0:  # one component: validated
+            return GaussianMixture(self.weights[index], self.means[index], self.covs[index])
+        return GaussianMixture.trusted(self.weights[index], self.means[index], self.covs[index])
 
     def scaled(self, factor: float) -> GaussianMixture:
         """The same components with every weight multiplied by ``factor``."""

@@ -6,7 +6,7 @@ State order is ``x = [px, vx, py, vy]`` (metres, m/s).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -102,9 +102,10 @@ class LinearPosition:
     angular: tuple[bool, ...] = field(default=(False, False), init=False)
     selected: tuple[int, ...] | None = field(default=(0, 2), init=False)
 
-    @property
+    @cached_property
     def R(self) -> np.ndarray:
-        return self.sigma_r**2 * np.eye(2)
+        """(2, 2) measurement noise covariance (built once, read-only)."""
+        return _read_only(self.sigma_r**2 * np.eye(2))
 
     def predict(self, means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Predicted measurements ``(n, 2)`` and Jacobians ``(n, 2, 4)`` at ``means (n, 4)``."""
@@ -118,6 +119,11 @@ class LinearPosition:
     def measure(self, states: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy measurements of true states ``(n, 4)``: ``(n, 2)``."""
         return states[:, [0, 2]] + rng.normal(0.0, self.sigma_r, size=(len(states), 2))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -140,9 +146,10 @@ class RangeBearing:
     angular: tuple[bool, ...] = field(default=(False, True), init=False)
     selected: tuple[int, ...] | None = field(default=None, init=False)
 
-    @property
+    @cached_property
     def R(self) -> np.ndarray:
-        return np.diag([self.sigma_r**2, self.sigma_theta**2])
+        """(2, 2) measurement noise covariance (built once, read-only)."""
+        return _read_only(np.diag([self.sigma_r**2, self.sigma_theta**2]))
 
     def h(self, means: np.ndarray) -> np.ndarray:
         dx = means[:, 0] - self.position[0]

@@ -22,8 +22,13 @@ from functools import lru_cache
 import numpy as np
 from scipy.optimize import minimize
 
-from tracking.gaussian import inv_det_spd, inv_spd, log_gaussian, symmetrise
+from tracking.gaussian import _generic_inverse, inv_det_spd, inv_spd, log_gaussian
 from tracking.mixture import GaussianMixture
+
+try:  # the ufunc np.linalg.inv calls (NumPy 1.x and 2.x)
+    from numpy.linalg import _umath_linalg as _lapack
+except ImportError:  # pragma: no cover
+    _lapack = None
 
 MERGE_RULES = ("vo-ma", "weighted")
 
@@ -70,20 +75,25 @@ def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> Gaussi
     """
     if rule not in MERGE_RULES:
         raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
-    n = len(mix)
-    if n <= 1:
+    if len(mix) <= 1:
         return mix
-    order = np.argsort(-mix.weights, kind="stable")
+    return _merge_in_order(mix, (-mix.weights).argsort(kind="stable"), threshold, rule)
+
+
+def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
+                    rule: str) -> GaussianMixture:
+    """:func:`merge` of the components ``order`` (at least two indices, heaviest first)."""
+    n = len(order)
     w, m, P = mix.weights[order], mix.means[order], mix.covs[order]  # heaviest first
     ci, cj = _close_pairs(w, m, P, threshold, rule)
     if ci.size == 0:
-        return GaussianMixture(w, m, P)
+        return GaussianMixture.trusted(w, m, P)
     centres, members = _greedy_groups(ci, cj)
     out_w, out_m, out_P = w.copy(), m.copy(), P.copy()
     _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P)
     keep = np.ones(n, dtype=bool)
     keep[[i for g in members for i in g]] = False
-    return GaussianMixture(out_w[keep], out_m[keep], out_P[keep])
+    return GaussianMixture.trusted(out_w[keep], out_m[keep], out_P[keep])
 
 
 def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
@@ -105,10 +115,10 @@ def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
         ci, cj = _candidate_pairs(w, m, P, threshold * (1.0 + 1e-3), rule)
         if ci.size == 0:
             return ci, cj
-    inv = inv_spd(P)
+    inv = _inv_spd(P)
     diff = m[ci] - m[cj]
     if rule == "vo-ma":
-        close = np.einsum("gi,gij,gj->g", diff, inv[ci], diff) <= threshold
+        close = _c_einsum("gi,gij,gj->g", diff, inv[ci], diff) <= threshold
     else:
         d2 = np.einsum("gi,gij,gj->g", diff, inv[cj], diff)
         close = (w[ci] * w[cj] / (w[ci] + w[cj])) * d2 < threshold
@@ -145,6 +155,24 @@ def _candidate_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, lim: float,
     return ci[ok], cj[ok]
 
 
+def _inv_spd(P: np.ndarray) -> np.ndarray:
+    """:func:`tracking.gaussian.inv_spd` (the same numbers: the same LAPACK call) without
+    ``np.linalg.inv``'s Python wrapper, which costs more than inverting a few 4x4 matrices; a
+    singular or non-finite stack goes through ``inv_spd`` (and its errors) unchanged."""
+    if _lapack is None or not _generic_inverse(P) or P.dtype != np.float64:
+        return inv_spd(P)
+    with np.errstate(all="ignore"):
+        inv = _lapack.inv(P, signature="d->d")
+    if not np.isfinite(inv).all():
+        return inv_spd(P)
+    return 0.5 * (inv + inv.swapaxes(-1, -2))
+
+
+try:
+    from numpy._core.multiarray import c_einsum as _c_einsum
+except ImportError:  # pragma: no cover (NumPy 1.x)
+    _c_einsum = np.einsum
+"""``np.einsum`` without its Python wrapper (what ``np.einsum(..., optimize=False)`` calls)."""
 _ALL_PAIRS_UP_TO = 48
 """Up to this many components, :func:`_close_pairs` tests every pair exactly."""
 
@@ -208,7 +236,7 @@ def _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P) -> None
     c = idx[0]
     out_w[c] = tw
     out_m[c] = mean
-    out_P[c] = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+    out_P[c] = 0.5 * (cov + cov.swapaxes(1, 2))
 
 
 def ise_refit(original: GaussianMixture, reduced: GaussianMixture) -> GaussianMixture:
@@ -275,11 +303,23 @@ class Reducer:
             raise ValueError(f"unknown merge rule {self.merge_rule!r}; expected {MERGE_RULES}")
 
     def __call__(self, mix: GaussianMixture) -> GaussianMixture:
-        pruned = prune(mix, self.prune_threshold)
-        reduced = cap(merge(pruned, self.merge_threshold, self.merge_rule), self.max_components)
         if self.refit:
+            pruned = prune(mix, self.prune_threshold)
+            reduced = cap(merge(pruned, self.merge_threshold, self.merge_rule),
+                          self.max_components)
             reduced = ise_refit(pruned, reduced)
-        return GaussianMixture(reduced.weights, reduced.means, symmetrise(reduced.covs))
+        else:  # prune then merge, with one gather: the kept indices in merge's order
+            w = mix.weights
+            kept = np.flatnonzero(w >= self.prune_threshold)
+            if len(kept) <= 1:
+                reduced = mix.select(kept)
+            else:
+                order = kept[(-w[kept]).argsort(kind="stable")]
+                reduced = _merge_in_order(mix, order, self.merge_threshold, self.merge_rule)
+            reduced = cap(reduced, self.max_components)
+        P = reduced.covs
+        return GaussianMixture.trusted(reduced.weights, reduced.means,
+                                       0.5 * (P + P.swapaxes(-1, -2)))  # symmetrise
 
 
 __all__ = [
