@@ -14,8 +14,8 @@ Two single-target peers, one per sensor, each an IMM-PDAF (or fuzzy IMM) behind 
 
 The exchange is synchronous (every estimate arrives in its scan), so this is the table of
 what the modes can do, not of the network; the process peers are ``sensornet run seed003``
-(:mod:`sim.seed003_net`). Clutter is the world's (``clutter.mode = "region"``: the same clutter for every
-mode, as sensors in a network see it), not drawn in each filter's gate.
+(:mod:`sim.seed003_net`). Clutter is the world's (``clutter.mode = "region"``: the same clutter
+for every mode, as sensors in a network see it), not drawn in each filter's gate.
 
 ``python -m sim.seed003_peers --runs 200 --jobs 2``.
 """
