@@ -162,6 +162,27 @@ def flooding_tuples(hops: np.ndarray, sizes: np.ndarray, iterations: int) -> np.
     return deg * (reach @ (TUPLES_PER_MEASUREMENT * np.asarray(sizes, dtype=np.int64)))
 
 
+def flooding_bytes(hops: np.ndarray, scans: Sequence[np.ndarray], iterations: int,
+                   names: Sequence[str], k: int = 1) -> np.ndarray:
+    """Encoded bytes each peer sends flooding one scan index, loss-free, per iteration:
+    ``(S, iterations)``, once per neighbour. In iteration ``t`` peer i sends one
+    :class:`~protocol.messages.Forward` holding the scans of the peers at hop distance
+    ``t - 1`` (as :func:`flooding_tuples`), to each of its ``deg_i`` neighbours."""
+    from protocol.codec import encode
+    from protocol.messages import Forward
+
+    hops = np.asarray(hops, dtype=float)
+    deg = (hops == 1).sum(axis=1)
+    out = np.zeros((len(hops), iterations), dtype=np.int64)
+    for i in range(len(hops)):  # one message per (peer, iteration): S x T encodes
+        for t in range(iterations):
+            ring = np.flatnonzero(hops[i] == t)
+            msg = Forward(names[i], k, ScanSet({names[j]: scans[j] for j in ring}), round=t,
+                          seq=k * iterations + t, send_time=float(k))
+            out[i, t] = deg[i] * len(encode(msg))
+    return out
+
+
 # -- flooding as a peer mode (peers.contracts) ----------------------------------------------
 class FloodEstimator:
     """The local part of a flooding peer: its scan is the payload, its estimate a clustering.
@@ -311,4 +332,4 @@ class FloodFuser:
 
 
 __all__ = ["Deliver", "FloodEstimator", "FloodFuser", "FloodOutcome", "Flooder",
-           "TUPLES_PER_MEASUREMENT", "flood", "flooding_tuples"]
+           "TUPLES_PER_MEASUREMENT", "flood", "flooding_bytes", "flooding_tuples"]

@@ -55,7 +55,15 @@ import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a
 from scipy.sparse.csgraph import depth_first_order, shortest_path
 
 from peers.faults import FaultInjector
-from peers.flooding import TUPLES_PER_MEASUREMENT, Deliver, flood, flooding_tuples
+from peers.flooding import (
+    TUPLES_PER_MEASUREMENT,
+    Deliver,
+    flood,
+    flooding_bytes,
+    flooding_tuples,
+)
+from protocol.codec import encode
+from protocol.messages import Estimate, Scan
 from sim.faultplan import FaultPlan, LinkFaults, Uniform
 from sim.progress import Progress
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
@@ -342,27 +350,34 @@ class Tally:
     card_ok: float = 0.0
     tuples: float = 0.0
     cpu: float = 0.0
+    bytes: float = 0.0
     n: int = 0
 
     def add(self, est: np.ndarray, x: np.ndarray, scn: Seed004, tuples: float = 0.0,
-            cpu: float = 0.0) -> None:
+            cpu: float = 0.0, nbytes: float = 0.0) -> None:
         self.ospa += ospa(est, x, scn.ospa_cutoff, scn.ospa_order)
         err = abs(len(est) - len(x))
         self.card_err += err
         self.card_ok += err == 0
         self.tuples += tuples
         self.cpu += cpu
+        self.bytes += nbytes
         self.n += 1
 
     def means(self) -> dict[str, float]:
         n = max(self.n, 1)
         return {"ospa": self.ospa / n, "card_err": self.card_err / n,
                 "card_ok": self.card_ok / n, "tuples": self.tuples / n,
-                "cpu_ms": 1e3 * self.cpu / n}
+                "cpu_ms": 1e3 * self.cpu / n, "bytes": self.bytes / n}
 
 
 def _positions(mix: GaussianMixture) -> np.ndarray:
     return extract(mix, 0.5, "cardinality")[:, [0, 2]]
+
+
+def _n_bytes(mix: GaussianMixture, k: int, rnd: int = 0) -> int:
+    """Encoded size of ``mix`` as one estimate message (the peers' wire format)."""
+    return len(encode(Estimate("s20", k, mix, round=rnd, seq=k, send_time=float(k))))
 
 
 def _n_tuples(mix: GaussianMixture) -> int:
@@ -398,6 +413,7 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
         return tallies.setdefault(name, Tally())
 
     X = truth(scn, rng_truth)
+    names = [f"s{i + 1}" for i in range(S)]  # as the network scenario names them
     for k in range(scn.num_scans):
         x = X[k][:, [0, 2]]
         scans = measure(scn, models, X[k], rng_scan)
@@ -409,10 +425,12 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
         est_idpc = idpc(pooled, S, scn.clustering, rng_cluster).centres
         dt = time.process_time() - t0
         flood_cost = float(flooding_tuples(hops, sizes, full).mean())
-        tally("IDPC").add(est_idpc, x, scn, flood_cost, dt)
+        flood_bytes = flooding_bytes(hops, scans, full, names, k + 1).cumsum(axis=1)
+        tally("IDPC").add(est_idpc, x, scn, flood_cost, dt, flood_bytes[:, -1].mean())
         t0 = time.process_time()
         est = ftc(pooled, S, scn.clustering, rng_cluster).centres
-        tally("FTC").add(est, x, scn, flood_cost, time.process_time() - t0)
+        tally("FTC").add(est, x, scn, flood_cost, time.process_time() - t0,
+                         flood_bytes[:, -1].mean())
         for t in range(1, full + 1):
             cost = flooding_tuples(hops, sizes, t)
             for i in range(S):
@@ -425,7 +443,8 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
                     out = idpc(np.concatenate([plane[j] for j in np.flatnonzero(held)]),
                                n_scans, scn.clustering, rng_cluster).centres
                     dt_i = time.process_time() - t0
-                tally(f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i)
+                tally(f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i,
+                                         float(flood_bytes[i, t - 1]))
         # local GM-PHD filters, then consensus on what they publish
         cpu_local = np.zeros(S)
         for i in range(S):
@@ -436,9 +455,10 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
         rules = (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))) if consensus else ()
         for rule, fuse in rules:
             dens = [keep_above(m, scn.publish_threshold) for m in mixes]
-            tuples, cpu = np.zeros(S), cpu_local.copy()
+            tuples, cpu, nbytes = np.zeros(S), cpu_local.copy(), np.zeros(S)
             for r in range(1, max(scn.rounds) + 1):
                 tuples += deg * np.array([_n_tuples(d) for d in dens])
+                nbytes += deg * np.array([_n_bytes(d, k + 1, r - 1) for d in dens])
                 new = []
                 for i in range(S):
                     t0 = time.process_time()
@@ -449,19 +469,24 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
                 dens = [keep_above(d, scn.publish_threshold) for d in new]
                 if r in scn.rounds:
                     for i in range(S):
-                        tally(f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i], cpu[i])
+                        tally(f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i], cpu[i],
+                                                   nbytes[i])
         # iterated corrector along the depth-first order; centralised: the same at the centre
         t0 = time.process_time()
         ic_mix = local[0].predict(ic_mix)
-        ic_tuples = 0.0
+        ic_tuples, ic_bytes = 0.0, 0.0
         for s, nxt in zip(order, np.roll(order, -1), strict=True):
             ic_mix = reducer(update(ic_mix, scans[s], sensors[s], None, scn.prune_threshold))
             ic_tuples += hops[s, nxt] * _n_tuples(ic_mix)
+            ic_bytes += hops[s, nxt] * _n_bytes(ic_mix, k + 1)
         dt = time.process_time() - t0
         est = _positions(ic_mix)
-        tally("IC").add(est, x, scn, ic_tuples / S, dt / S)
+        tally("IC").add(est, x, scn, ic_tuples / S, dt / S, ic_bytes / S)
         routed = float((hops[:, centre] * TUPLES_PER_MEASUREMENT * sizes).sum())
-        tally("centralised").add(est, x, scn, routed / S, dt / S)
+        routed_bytes = sum(hops[j, centre] * len(encode(Scan(names[j], k + 1, scans[j], seq=k + 1,
+                                                             send_time=float(k + 1))))
+                           for j in range(S))
+        tally("centralised").add(est, x, scn, routed / S, dt / S, routed_bytes / S)
     return {name: t.means() for name, t in tallies.items()}
 
 
@@ -557,19 +582,20 @@ def table_rows(result: dict[str, dict[str, float]]) -> list[str]:
 
 def format_table(result: dict[str, dict[str, float]]) -> str:
     lines = ["| method | mean OSPA (m) | ± s.e. | card. error | scans card. right | "
-             "tuples / peer / scan | CPU ms / peer / scan |",
-             "|---|---|---|---|---|---|---|"]
+             "tuples / peer / scan | bytes / peer / scan | CPU ms / peer / scan |",
+             "|---|---|---|---|---|---|---|---|"]
     for n in table_rows(result) + [k for k in result if k.startswith("IDPC t=")]:
         r = result[n]
         lines.append(f"| {n} | {r['ospa']:.2f} | {r['ospa_se']:.2f} | {r['card_err']:.3f} | "
-                     f"{100 * r['card_ok']:.1f} % | {r['tuples']:.0f} | {r['cpu_ms']:.2f} |")
+                     f"{100 * r['card_ok']:.1f} % | {r['tuples']:.0f} | "
+                     f"{r.get('bytes', float('nan')):.0f} | {r['cpu_ms']:.2f} |")
     return "\n".join(lines)
 
 
 def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str) -> list[Path]:
     """``seed004_table.csv``, ``seed004_iterations.csv``, ``seed004_tradeoff.png``."""
     folder.mkdir(parents=True, exist_ok=True)
-    keys = ("ospa", "ospa_se", "card_err", "card_ok", "tuples", "cpu_ms")
+    keys = ("ospa", "ospa_se", "card_err", "card_ok", "tuples", "cpu_ms", "bytes")
     table = folder / "seed004_table.csv"
     with table.open("w", newline="") as f:
         w = csv.writer(f)

@@ -229,3 +229,20 @@ def test_five_flooding_processes_over_zenoh_hold_every_scan(tmp_path):
         assert s["estimate_bytes_sent"] == twin.summary(n)["estimate_bytes_sent"], n
         assert s["mean_ospa_fused"] == pytest.approx(twin.mean_ospa(n, "fused"), rel=1e-9), n
         assert s["cost"]["tuples_per_scan"] == pytest.approx(closed[n] / SCANS)
+
+
+def test_offline_flooding_bytes_match_what_the_twin_peers_put_on_the_wire():
+    from peers.flooding import flooding_bytes
+
+    scn = _line()
+    res = run_twin(scn, 0)
+    names, A = adjacency(scn)
+    hops = shortest_path(A.astype(float), unweighted=True)
+    _, scans = generate_run(scn, 0)
+    offline = sum(flooding_bytes(hops, [scans[i][k] for i in range(len(names))],
+                                 scn.network.rounds, names, k + 1).sum(axis=1)
+                  for k in range(SCANS))
+    deg = A.sum(axis=1)
+    for i, n in enumerate(names):  # the same messages; only sequence numbers' sizes differ
+        wire = res.peers[n].sent_bytes["estimate"] * deg[i]
+        assert wire == pytest.approx(offline[i], rel=0.01), n
