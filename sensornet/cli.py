@@ -724,7 +724,7 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
     result = run_twin(scn, args.run)
     summaries = {name: result.summary(name) for name in result.peers}
     print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
-          f"scans in {time.perf_counter() - t0:.1f} s (kB sent: raw tuples x 8 bytes)")
+          f"scans in {time.perf_counter() - t0:.1f} s (bytes: the encoded messages)")
     print(format_summary(summaries))
     if result.faults is not None:
         print(f"injected link faults: {result.faults.counts()}")
