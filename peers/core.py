@@ -99,6 +99,10 @@ class PeerCore:
         self.consensus = consensus
         self.estimator = consensus.estimator
         self.scorer = scorer
+        self.wants_truth = scorer.truth_fn is None
+        """Whether truth messages are any use to this peer: one that regenerates the truth from
+        its scenario neither subscribes to them nor is fed them in the twin (a message and a
+        decode per scan saved, and nothing a forger could put there reaches it)."""
         self.keys = Keys(cfg.network)
         kinds = max(1, len(consensus.kinds))
         self.admission = Admission(cfg.network, cfg.interval, {

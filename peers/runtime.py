@@ -85,7 +85,7 @@ class PeerRuntime:
                                    core.admission,
                                    (list(self.o.listen), list(self.o.connect),
                                     self.o.config_file, self.o.lease_ms, self.o.gossip),
-                                   security=self.o.security)
+                                   security=self.o.security, truth=core.wants_truth)
         self.telemetry = Telemetry()
         self.sink = RerunSink()
         self.observer = Observer(core, self.sink, self.o.color_index, self.o.scan_period)
@@ -176,16 +176,20 @@ class PeerRuntime:
                 break
 
     def _catch_up(self, items: list[tuple]) -> list[tuple]:
-        """A peer that has fallen behind (two or more of its scans waiting) goes straight to
-        the newest: the older scans are left out (counted, scored as misses), so its scan
-        index stays with its neighbours' and their estimates stay inside its window."""
+        """A peer that has fallen behind (a run of consecutive scans waiting) goes straight to
+        the newest: a scan whose successor is queued too is left out (counted, scored as a
+        miss), so its scan index stays with its neighbours' and their estimates inside its
+        window. Only scans a backlog explains count (up to the scan window's end plus one per
+        queued scan): forged scans far ahead are left to the core, which refuses them."""
         scans = [i for i, (tag, key, _) in enumerate(items)
                  if tag == "msg" and "/scan/" in key]
         if len(scans) < 2:
             return items
+        top = self.core.window_for("scan")[1] + len(scans)
         ks = {i: (peek(items[i][2]) or ("", -1))[1] for i in scans}
-        newest = max(scans, key=ks.__getitem__)
-        drop = {i for i in scans if 0 <= ks[i] < ks[newest]}
+        ks = {i: k for i, k in ks.items() if 0 <= k <= top}
+        queued = set(ks.values())
+        drop = {i for i, k in ks.items() if k + 1 in queued}
         self.telemetry.scans_skipped_behind += len(drop)
         return [it for i, it in enumerate(items) if i not in drop]
 

@@ -27,12 +27,14 @@ class Transport:
     ``("msg", key, payload)``, ``("live", name, joined)``, ``("stop", "", b"")``)."""
 
     def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
-                 admission: Admission, session_args: tuple, security=None) -> None:
+                 admission: Admission, session_args: tuple, security=None,
+                 truth: bool = True) -> None:
         self.keys, self.name, self.sensor = keys, name, sensor
         self.neighbours = neighbours
         self.admission = admission
         self.session_args = session_args
         self.security = security  # peers.security.Security: mutual TLS + access control
+        self.truth = truth  # subscribe to the world's truth (only a peer without its own)
         self.refusals = None  # peers.security.RefusalLog in secure mode
         self.signer = self.verifier = None  # protocol.envelope, in secure mode
         self.q: queue.Queue = queue.Queue()
@@ -97,7 +99,8 @@ class Transport:
             for ch in ("estimate", "tracks"):  # express: no batching delay
                 self._pubs[ch] = session.declare_publisher(
                     getattr(self.keys, ch)(self.name), congestion_control=block, express=True)
-            keys = [self.keys.scan(self.sensor), self.keys.truth(), self.keys.ctl(),
+            keys = [self.keys.scan(self.sensor), self.keys.ctl(),
+                    *([self.keys.truth()] if self.truth else []),
                     # only the neighbours' estimates: routing filters, not decoding
                     *(self.keys.estimate(n) for n in self.neighbours)]
             self._decl = [session.declare_subscriber(k, self._on_sample) for k in keys]

@@ -161,11 +161,14 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         push(end - 0.5, "msg", n, keys.ctl(), stop)  # as the world: "end", then it leaves
         push(end, "live", n, "world", False)
     scheduled: dict[str, float] = {}
+    truth_key = keys.truth()
     while queue:
         t, _, kind, target, payload = heapq.heappop(queue)
         if target in result.stops:
             continue
         core = peers[target]
+        if kind == "msg" and payload[0] == truth_key and not core.wants_truth:
+            continue  # not subscribed (peers.transport): Zenoh does not deliver it
         if kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
             result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
             out = []  # the transport drops it before assembling it (peers.session)

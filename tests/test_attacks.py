@@ -113,6 +113,7 @@ def test_attack_against_real_processes(tmp_path, clean, attack):
         assert abs(s["mean_ospa_fused"] - clean.mean_ospa(name)) < 5.0, name
         if name in attack.victims:
             assert only_attack_counts(s["rejected"], attack) == attack.counts, (name, s)
+            assert "truth" not in s["received_by_kind"], name  # not subscribed to it
     if attack.name == "forged-end":
         for s in summaries.values():
             assert s["ctl_end_while_world_alive"] == 2  # the forged "end" and the world's own

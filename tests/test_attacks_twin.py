@@ -48,6 +48,7 @@ def test_attack_in_the_twin(scn, clean, attack):
         assert abs(core.mean_ospa("fused") - clean.mean_ospa(name)) < 3.0, name
         if name in attack.victims:
             assert only_attack_counts(snap["rejected"], attack) == attack.counts, name
+            assert "truth" not in snap["received_by_kind"], name  # not subscribed to it
             assert result.transport_drops.get(name, 0) == attack.transport_drops
     if attack.name == "forged-end":
         for core in result.peers.values():

@@ -20,11 +20,18 @@ from protocol.messages import Estimate, Scan
 from tracking.mixture import GaussianMixture
 
 
+class _Core:
+    @staticmethod
+    def window_for(channel: str) -> tuple[int, int]:
+        return 4, 8  # last scan 3, horizon 5
+
+
 class _Driver:
     """Just what :meth:`PeerRuntime._catch_up` uses."""
 
     def __init__(self) -> None:
         self.telemetry = Telemetry()
+        self.core = _Core()
 
 
 def _scan(keys: Keys, k: int) -> tuple:
@@ -44,6 +51,13 @@ def test_only_the_newest_of_several_queued_scans_is_processed():
     assert kept == [items[1], items[3], items[4], items[5]]  # estimates, liveliness stay
     assert drv.telemetry.scans_skipped_behind == 3
     assert drv.telemetry.summary(7)["scans_skipped_behind"] == 3
+
+
+def test_a_forged_scan_far_ahead_drops_nothing():
+    keys, drv = Keys("net"), _Driver()
+    items = [_scan(keys, 5), *(_scan(keys, 10**9 + i) for i in range(3)), _estimate(keys, 5)]
+    assert PeerRuntime._catch_up(drv, items) == items  # the core refuses the forgeries
+    assert drv.telemetry.scans_skipped_behind == 0
 
 
 def test_one_scan_or_unreadable_scans_are_left_alone():
