@@ -23,10 +23,13 @@ from tracking.particles import (
     ParticlePrediction,
     RatioConfig,
     collapse_to_models,
+    counts_to_indices,
     gci_summaries,
+    interaction_indices,
     kmeans_summary,
     moment_summary,
     residual_counts,
+    systematic_counts,
     weighted_moments,
 )
 
@@ -117,6 +120,23 @@ def test_residual_resampling_keeps_floor_counts():
     assert np.all(counts.sum(axis=1) == 50)
     assert np.all(counts >= np.floor(50 * w))
     assert np.all(counts <= np.floor(50 * w) + 1)  # systematic residual draws: at most one more
+
+
+@pytest.mark.parametrize("M", [2, 3])
+def test_interaction_indices_equal_systematic_sampling_over_all_particles(M):
+    """The block-boundary form draws the same particles as systematic sampling over the
+    ``M*N`` cumulative weights, including models of probability 0 and 1."""
+    rng = np.random.default_rng(11)
+    cases = [rng.dirichlet(np.full(M, 0.4)) for _ in range(300)]
+    cases += [np.eye(M)[0], np.eye(M)[-1], np.r_[1e-300, np.ones(M - 1)] / (M - 1)]
+    P = np.full((M, M), 0.02 / (M - 1)) + (0.98 - 0.02 / (M - 1)) * np.eye(M)
+    for k, p in enumerate(cases):
+        N = (7, 50, 800)[k % 3]
+        mu = P * p[:, None]
+        mu /= mu.sum(axis=0)
+        u = rng.random(M)
+        ref = counts_to_indices(systematic_counts(np.repeat(mu.T, N, axis=1), N, u)).ravel()
+        np.testing.assert_array_equal(interaction_indices(mu, N, u), ref)
 
 
 def test_moment_summary_keeps_mean_and_covariance():

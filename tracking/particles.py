@@ -72,6 +72,45 @@ def residual_counts(weights: np.ndarray, n: int, rng: np.random.Generator) -> np
     return base.astype(np.int64) + extra
 
 
+def interaction_indices(mu: np.ndarray, n: int, u: np.ndarray) -> np.ndarray:
+    """The IMM-PF interaction draws: for each model ``j``, ``n`` systematic draws (offset
+    ``u_j``) from the ``M*n`` particles, model ``i``'s ``n`` particles each weighted
+    ``mu_(i|j) / n``. Returns indices ``(M*n,)`` into the particles (model-major), row ``j``
+    sorted: the same as ``counts_to_indices(systematic_counts(np.repeat(mu.T, n, axis=1), n,
+    u))``, computed from the ``M`` block boundaries instead of a cumulative sum over ``M*n``.
+
+    Draw ``t_k = (k + u_j) / n`` lands in block ``i`` with ``B_(i-1) < t <= B_i`` (``B`` the
+    cumulative ``mu_(.|j)``, normalised) and on particle ``l`` of it with
+    ``B_(i-1) + l v < t <= B_(i-1) + (l + 1) v``, ``v = mu_(i|j) / n``: ``l = ceil((t -
+    B_(i-1)) / v) - 1``. (Empty blocks are skipped: their two boundaries are equal.)
+    """
+    M = mu.shape[0]
+    B = np.cumsum(mu.T, axis=1)  # (j, i) block ends
+    B /= B[:, -1:]
+    B[:, -1] = 1.0
+    start = np.zeros_like(B)
+    start[:, 1:] = B[:, :-1]
+    v = (B - start) / n  # (j, i) the mass of one particle of block i
+    t = np.arange(n) + u[:, None]
+    t /= n  # (j, k) the draws
+    if M == 2:
+        hi = t > B[:, :1]
+        t -= np.where(hi, start[:, 1:], 0.0)
+        t /= np.where(hi, v[:, 1:], v[:, :1])
+        block = np.where(hi, n, 0)
+    else:
+        b = (t[:, :, None] > B[:, None, :-1]).sum(axis=2)
+        t -= np.take_along_axis(start, b, axis=1)
+        t /= np.take_along_axis(v, b, axis=1)
+        block = b * n
+    np.ceil(t, out=t)
+    t -= 1.0
+    np.clip(t, 0, n - 1, out=t)
+    g = t.astype(np.intp)
+    g += block
+    return g.reshape(-1)
+
+
 def counts_to_indices(counts: np.ndarray) -> np.ndarray:
     """Column indices ``(R, n)`` from per-row counts ``(R, K)`` that each sum to ``n``."""
     R, K = counts.shape
@@ -200,10 +239,7 @@ class IMMParticleFilter:
         X = _dim_major(state.particles)
         d, M, N = X.shape
         c, mu = mixing(state.probs, self._P)  # mu[i, j] = mu_(i|j)
-        # model j samples the M*N particles with weight mu_(i|j)/N (particles equal-weighted)
-        q = np.repeat(mu.T, N, axis=1)  # (j, i*N)
-        counts = systematic_counts(q, N, rng.random(M))  # (M, M*N), rows sum to N
-        idx = np.repeat(np.tile(np.arange(M * N), M), counts.reshape(-1))  # (M*N,) into M*N
+        idx = interaction_indices(mu, N, rng.random(M))  # (M*N,) into the M*N particles
         X0 = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
         E = rng.standard_normal((M, N, 2))
         Xp = np.empty((d, M, N))
@@ -476,6 +512,7 @@ __all__ = [
     "counts_to_indices",
     "floored",
     "gci_summaries",
+    "interaction_indices",
     "kmeans_summary",
     "marginal",
     "moment_summary",
