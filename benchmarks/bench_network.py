@@ -72,12 +72,17 @@ def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
     return "\n".join(lines) + "\n"
 
 
+ZENOH_CONFIG: str | None = None
+"""A Zenoh JSON5 file for every process of every run (``--config``), e.g. to try a setting."""
+
+
 def run_network(source: str, out: Path, overrides: list[str], timeout: float,
                 sparse: bool = False) -> dict:
     from sim.scenario import parse_overrides
 
     scn = load_scenario(source, overrides=parse_overrides(overrides))
-    handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse)
+    handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse,
+                       config=ZENOH_CONFIG)
     try:
         codes = wait_run(handle, timeout=timeout)
     finally:
@@ -276,7 +281,12 @@ def main(argv: list[str] | None = None) -> int:
                         "the peer graph, gossip off)")
     p.add_argument("--deadline", type=float, default=0.9,
                    help="fusion deadline, fraction of a scan interval (default 0.9)")
+    p.add_argument("--config", metavar="FILE",
+                   help="a Zenoh JSON5 config file for every process (to compare a setting; "
+                        "it replaces the defaults: set mode, lease and message size in it)")
     args = p.parse_args(argv)
+    global ZENOH_CONFIG
+    ZENOH_CONFIG = args.config
     sizes = [6] if args.quick else [int(x) for x in args.sizes.split(",")]
     degrees = [2] if args.quick else [int(x) for x in args.degrees.split(",")]
     # the latency part always plays the whole scenario: its targets are gone after scan 100,
