@@ -87,6 +87,10 @@ class CoreConfig:
     a new start of the scan numbering (a late join, a restarted world)."""
     rate_factor: float = 4.0
     """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
+    world_grace: float = 0.0
+    """Seconds a peer waits for the world's liveliness token to come back before the run is
+    over for it (0: at once). A router restart takes every token away for its outage: the
+    world back within the grace is an outage (``world_outages``), not the end."""
     limits: Limits = DEFAULT_LIMITS
 
 
@@ -124,6 +128,8 @@ class PeerCore:
         self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
         self.stopped: str | None = None
         self._pending_local: list[int] = []
+        self.world_gone: float | None = None  # when the world's token went (in the grace)
+        self.world_outages: list[tuple[int, float]] = []  # (last scan before, seconds)
         self.sent_bytes: Counter = Counter()
         """Bytes of every publication, by channel (what the runtime puts on the wire)."""
         self._scan_at: tuple[int, float] | None = None
@@ -160,6 +166,9 @@ class PeerCore:
 
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""
+        if self.world_gone is not None and now >= self.world_gone + self.cfg.world_grace:
+            self.world_gone, self.world = None, "left"  # not back within the grace
+            return self.finish(now) + [Stop("world left before ending the run")]
         out: list[Output] = []
         for k in [k for k, t in self.deadlines.items() if t <= now]:
             del self.deadlines[k]
@@ -178,7 +187,14 @@ class PeerCore:
             return []
         if name == "world":
             if joined:
+                if self.world_gone is not None:  # back within the grace: an outage
+                    self.world_outages.append((self.consensus.last_k, now - self.world_gone))
+                    self.world_gone = None
                 self.world = "alive"
+                return []
+            if self.world == "alive" and self.cfg.world_grace > 0 and not self.end_requested:
+                if self.world_gone is None:
+                    self.world_gone = now  # maybe a router outage: see tick()
                 return []
             if self.world == "alive":
                 self.world = "left"
@@ -207,7 +223,11 @@ class PeerCore:
 
     def next_due(self) -> float | None:
         """When :meth:`tick` next has work (a deadline), or None."""
-        return min(self.deadlines.values(), default=None)
+        due = min(self.deadlines.values(), default=None)
+        if self.world_gone is not None:
+            end = self.world_gone + self.cfg.world_grace
+            due = end if due is None else min(due, end)
+        return due
 
     # -- channels ---------------------------------------------------------------------------
     def _reject(self, reason: str) -> list[Output]:
@@ -345,7 +365,9 @@ class PeerCore:
         now = (st.tuples_out, st.tuples_to_neighbours, self.sent_bytes["estimate"])
         d = [a - b for a, b in zip(now, self._cost_mark, strict=True)]
         self._cost_mark = now
-        return Record("cost", k, {"tuples": d[1], "tuples_published": d[0], "bytes": d[2]})
+        fan = len(self.consensus.alive)
+        return Record("cost", k, {"tuples": d[1], "tuples_published": d[0],
+                                  "bytes": d[2] * fan, "bytes_published": d[2]})
 
     def _score_local(self) -> None:
         """Extract and score the local estimate (kept off the critical path)."""
@@ -395,6 +417,7 @@ class PeerCore:
             "messages_received": sum(self.received.values()),
             "stale_scans": self.stale_scans,
             "reanchored": self.reanchored,
+            "world_outages": list(self.world_outages),
             "ctl_end_while_world_alive": self.ctl_end_early,
             "peer_events": list(self.departures),
             "stats": asdict(c.stats),

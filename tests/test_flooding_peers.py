@@ -246,3 +246,37 @@ def test_offline_flooding_bytes_match_what_the_twin_peers_put_on_the_wire():
     for i, n in enumerate(names):  # the same messages; only sequence numbers' sizes differ
         wire = res.peers[n].sent_bytes["estimate"] * deg[i]
         assert wire == pytest.approx(offline[i], rel=0.01), n
+
+
+class _RecordingSink:
+    enabled = True
+
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        return lambda *a, **kw: self.calls.append((name, *a))
+
+
+def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
+    from peers.core import Publish, Record
+    from peers.observer import Observer
+
+    scn = _line(**{"scenario.num_scans": 3})
+    sink = _RecordingSink()
+    res = run_twin(scn, 0)
+    core = res.peers["s3"]
+    obs = Observer(core, sink, 0, 1.0)
+    obs.record(Record("local", 3, {"n_points": 12}))
+    obs.record(Record("fusion", 3, {"round": 4, "n_inputs": 2, "n_fused": 5, "ages": {}}))
+    obs.record(Record("cost", 3, {"tuples": 120, "tuples_published": 60, "bytes": 700}))
+    obs.flush(idle=True, force=True)
+    paths = {c[1]: c for c in sink.calls}
+    assert paths["metrics/cost/s3/tuples"][2] == 120
+    assert paths["metrics/cost/s3/bytes"][2] == 700
+    assert paths["metrics/flooding/s3/scans_held"][2] == 5
+    assert paths["peers/s3/pooled"][2].shape[1] == 2  # the pooled points in the plane
+    assert paths["peers/s3/local"][0] == "points"
+    assert not any(c[0] == "mixture" for c in sink.calls)
+    out = [o for o in core.finish(99.0) if isinstance(o, Publish)]
+    assert out == []  # nothing pending after the run
