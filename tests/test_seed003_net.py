@@ -148,3 +148,34 @@ def test_processes_equal_the_twin(tmp_path):
         for r in rows:
             assert r.tracks == 20 and r.missing_inputs == 0, r
             assert r.twin_diff <= 1e-6, r
+
+
+def test_cli_run_seed003_sim_prints_both_modes(capsys):
+    from sensornet.cli import main
+
+    assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=10"]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines()
+            if ln.startswith("| measurement") or ln.startswith("| estimate")]
+    assert len(rows) == 4 and all("| 10 | 10 |" in r for r in rows)
+
+
+def test_cli_run_seed003_refuses_what_it_cannot_honour(capsys):
+    from sensornet.cli import main
+
+    assert main(["run", "seed003", "--fault", "kill:s1@3"]) == 2
+    assert "--fault is not supported by 'run seed003'" in capsys.readouterr().err
+    assert main(["run", "seed003", "--sim", "--set", "clutter.nope=1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "clutter.nope" in err[0]
+
+
+def test_cli_experiment_seed003_writes_the_table(tmp_path, capsys):
+    from sensornet.cli import main
+
+    assert main(["experiment", "seed003", "--runs", "2", "--jobs", "1", "--quiet",
+                 "--out", str(tmp_path / "exp")]) == 0
+    out = capsys.readouterr().out
+    assert sum(ln.split()[0] in ("PDAF", "IMM-PDAF", "fuzzy") for ln in out.splitlines()
+               if ln.strip()) == 8
+    for name in ("seed003_table.csv", "seed003_rmse.csv", "seed003_rmse.png"):
+        assert (tmp_path / "exp" / name).is_file()
