@@ -292,6 +292,7 @@ def _seed001_row(scn, cfg, run: int) -> dict[str, Any]:
 
 
 def _twin_row(scn, run: int) -> dict[str, Any]:
+    from sim.sweep import cost_columns
     from sim.twin import run_twin
 
     result = run_twin(scn, run)
@@ -301,6 +302,7 @@ def _twin_row(scn, run: int) -> dict[str, Any]:
         "local_ospa": float(np.mean([p.mean_ospa("local") for p in peers.values()]))}
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers.values())
+    out.update(cost_columns([p.cost() for p in peers.values()]))
     if result.faults is not None:
         for action, n in sorted(result.faults.counts().items()):
             out[f"links_{action}"] = n
@@ -317,7 +319,7 @@ def _twin_row(scn, run: int) -> dict[str, Any]:
 
 def _real_row(scn, task: Task) -> dict[str, Any]:
     from sim.launcher import read_summaries, start_run, wait_run
-    from sim.sweep import _toml
+    from sim.sweep import _toml, cost_columns
 
     source = scenario_source(task.scenario, task.scenario_text)
     sets = [f"{k}={_toml(v)}" for k, v in task.overrides.items()]
@@ -333,6 +335,7 @@ def _real_row(scn, task: Task) -> dict[str, Any]:
         "local_ospa": float(np.mean([s["mean_ospa_local"] for s in summaries.values()]))}
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(s["nale"][key] for s in summaries.values())
+    out.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
     for name, s in summaries.items():
         out[f"fused_ospa.{name}"] = float(s["mean_ospa_fused"])
         if s.get("latency_ms_median") is not None:
