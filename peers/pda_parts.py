@@ -196,7 +196,8 @@ class SequentialPdaEstimator:
         self.filter.predict(steps)
         Z = np.asarray(z, float).reshape(-1, 2)
         self.own_returns = self.gate(Z)
-        solo = copy.deepcopy(self.filter)
+        solo = copy.copy(self.filter)  # update replaces x, P, probs; only the detector mutates
+        solo.weighting = copy.deepcopy(self.filter.weighting)
         up = solo.update(self.sensors[self.own], self.own_returns)
         local = _single(*solo.estimate())
         wire = returns_mixture(self.own_returns, self.sensors[self.own].R, self.dim,
