@@ -50,9 +50,11 @@ def systematic_counts(weights: np.ndarray, n: np.ndarray | int, u: np.ndarray) -
     np.cumsum(weights, axis=1, out=C[:, 1:])
     C[:, 1:] /= C[:, -1:]
     C[:, -1] = 1.0
-    n = np.asarray(n, dtype=float).reshape(-1, 1) if np.ndim(n) else float(n)
-    f = np.floor(C * n - u[:, None])
-    return np.diff(f, axis=1).astype(np.int64)
+    C *= np.asarray(n, dtype=float).reshape(-1, 1) if np.ndim(n) else float(n)
+    C -= u[:, None]
+    np.floor(C, out=C)  # floor(n C - u), in place
+    f = C[:, 1:] - C[:, :-1]
+    return f.astype(np.int64)
 
 
 def residual_counts(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -61,15 +63,18 @@ def residual_counts(weights: np.ndarray, n: int, rng: np.random.Generator) -> np
     Deterministic part ``floor(n w_i)`` exactly; the ``n - sum floor(n w)`` remaining draws are
     systematic over the residual weights ``n w_i - floor(n w_i)``.
     """
-    w = weights / weights.sum(axis=1, keepdims=True)
-    nw = n * w
+    nw = weights / weights.sum(axis=1, keepdims=True)
+    nw *= n  # n w
     base = np.floor(nw)
-    rest = nw - base
+    rest = nw
+    rest -= base  # n w - floor(n w)
     left = n - base.sum(axis=1)  # (R,) integer-valued
     total = rest.sum(axis=1, keepdims=True)
-    rest = np.where(total > 0, rest, 1.0)
-    extra = systematic_counts(rest, left, rng.random(len(w)))
-    return base.astype(np.int64) + extra
+    if not np.all(total > 0):
+        rest = np.where(total > 0, rest, 1.0)
+    counts = base.astype(np.int64)
+    counts += systematic_counts(rest, left, rng.random(len(weights)))
+    return counts
 
 
 def interaction_indices(mu: np.ndarray, n: int, u: np.ndarray) -> np.ndarray:
