@@ -462,6 +462,8 @@ def cmd_peer(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     security = _security(args, args.name, scn)
     core = make_peer(scn, args.name, args.run, network=args.network, speed=speed)
+    if args.world_grace:  # a router's outage takes the world's token away for a while
+        core.cfg = replace(core.cfg, world_grace=args.world_grace)
     runtime = PeerRuntime(core, RuntimeOptions(security=security,
         listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
         config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
@@ -603,7 +605,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         pfaults = [ProcessFault.parse(f) for f in args.fault or []]
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    unknown = sorted({f.peer for f in pfaults} - set(scn.sensor_names))
+    routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
+    unknown = sorted({f.peer for f in pfaults} - set(scn.sensor_names) - routed)
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
@@ -978,6 +981,10 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
     pe.add_argument("--scenario", default="seed000", help="scenario file or built-in name")
     add_net_flags(pe, network_required=True)
+    pe.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
+                    help="keep running this long when the world's liveliness goes away, in "
+                         "case it comes back (a router restart); counted as an outage "
+                         "(default: stop at once)")
     pe.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
                     help="local filter (default: the scenario's network.filter)")
     pe.add_argument("--fusion", choices=["gci", "aa", "ratio", "none"],
@@ -1024,7 +1031,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--run", type=NONNEGATIVE_INT, default=0, help="Monte Carlo run index")
         sp.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                         help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
-                             "(repeatable)")
+                             "(repeatable); with --router also restart:router@K")
         sp.add_argument("--record", action="store_true",
                         help="every peer records its inputs to <out>/record/*.mcap "
                              "(see: sensornet replay)")

@@ -48,7 +48,10 @@ class RunHandle:
     router_command: list[str] = field(default_factory=list)
 
     def restart(self, name: str) -> subprocess.Popen:
-        """Start peer ``name`` again (same command, a fresh listening port)."""
+        """Start peer ``name`` again (same command, a fresh listening port), or the router
+        (``name`` ``router``: killed, started again on the same endpoint)."""
+        if name == ROUTER and self.router is not None:
+            return self.start_router()
         old = self.procs[name]
         if old.poll() is None:
             old.kill()
@@ -174,7 +177,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
             links = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common,
-                   *(["--listen", eps[n]] if not router else []),
+                   *(["--listen", eps[n]] if not router else
+                     ["--world-grace", str(ROUTER_GRACE)]),
                    "--color", str(i), "--run", str(run),
                    *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
@@ -209,8 +213,8 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
         "mode": "client", "scouting": {"multicast": {"enabled": False}},
         "transport": {"link": {"tx": {"lease": DEFAULT_LEASE_MS},
                                "rx": {"max_message_size": MAX_MESSAGE_BYTES}}}}, indent=1))
-    handle.router_command = [*_cli(), "router", "--listen", router_ep,
-                             "--network", handle.network]
+    handle.router_command = [sys.executable, "-m", "sim.router", "--listen", router_ep,
+                             "--network", handle.network]  # sensornet router, started faster
     if handle.secure:
         handle.router_command += ["--secure", str(handle.secure), "--name", ROUTER]
     handle.endpoints = {"router": router_ep}
@@ -220,6 +224,9 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
 
 ROUTER = "router"
 """The member name of the router a routed run starts (its key in secure mode)."""
+ROUTER_GRACE = 30.0
+"""Seconds the peers of a routed run wait for the world to come back (``--world-grace``):
+while the router is down every liveliness token is gone, the world's too."""
 
 
 def wait_run(handle: RunHandle, timeout: float,
@@ -423,7 +430,7 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
                 k = current["k"]
             while pending and pending[0].scan <= k:
                 f = pending.pop(0)
-                proc = handle.procs[f.peer]
+                proc = handle.router if f.peer == ROUTER else handle.procs[f.peer]
                 sig = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "cont": signal.SIGCONT,
                        "term": signal.SIGTERM}.get(f.action)
                 if f.action == "restart":
@@ -443,6 +450,13 @@ def fault_report(done: list[dict], summaries: dict[str, dict]) -> str:
     """When each peer saw each killed, stopped or restarted peer leave or come back."""
     lines = []
     for f in done:
+        if f["peer"] == ROUTER:  # the peers saw the world (and everyone) go and come back
+            seen = [f"{n} " + (", ".join(f"{sec:.2f} s after scan {k}" for k, sec in
+                                         s.get("world_outages", [])) or "no outage")
+                    for n, s in summaries.items()]
+            lines.append(f"{f['action']} router at scan {f['at_scan']}: outages seen by "
+                         + "; ".join(seen))
+            continue
         seen = []
         for name, s in summaries.items():
             if name == f["peer"]:

@@ -63,3 +63,36 @@ def run_router(listen: Sequence[str], connect: Sequence[str] = (),
     finally:
         session.close()
     say("router: stopped")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m sim.router``: ``sensornet router`` without the CLI's imports (SciPy and the
+    rest take seconds to load on a busy machine: a routed run restarts its router this way)."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m sim.router", description=__doc__)
+    ap.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
+    ap.add_argument("--connect", action="append", metavar="ENDPOINT")
+    ap.add_argument("--config")
+    ap.add_argument("--secure", metavar="DIR")
+    ap.add_argument("--name", default="router")
+    ap.add_argument("--network")
+    args = ap.parse_args(argv)
+    try:
+        security = None
+        if args.secure:
+            from peers.security import check_endpoints
+
+            security = router_security(args.secure, args.name, args.network)
+            check_endpoints([*args.listen, *(args.connect or [])])
+        run_router(args.listen, args.connect or [], args.config, security,
+                   say=lambda line: print(line, flush=True))
+    except SessionError as exc:
+        print(f"{ap.prog}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -150,8 +150,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))
             time.sleep(0.2)  # let the peers' subscriptions settle on every link
-            _await_subscribers([*(pubs[n] for n in wait_for if n in pubs), truth_pub,
-                                ctl_pub], stop, 5.0)
+            _await_subscribers([pubs[n] for n in wait_for if n in pubs], stop, 5.0)
         say(f"world: starting {scn.num_scans} scans, one every {interval:g} s")
         ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
                                    send_time=time.time())))

@@ -193,3 +193,74 @@ def test_compose_commands_run_as_processes_on_loopback(compose, tmp_path, peer_t
     _check(summaries)
     for name, s in summaries.items():
         assert abs(s["mean_ospa_fused"] - peer_to_peer[name]["mean_ospa_fused"]) < 2.0, name
+
+
+def _core(grace: float):
+    from dataclasses import replace
+
+    from sim.peers import make_peer
+    from sim.scenario import load_scenario
+
+    core = make_peer(load_scenario("seed000"), "s1", 0, network="grace")
+    core.cfg = replace(core.cfg, world_grace=grace)
+    return core
+
+
+def test_world_grace_turns_a_short_absence_into_a_counted_outage():
+    from peers.core import Stop
+
+    core = _core(5.0)
+    assert core.liveliness("world", True, 0.0) == []
+    assert core.liveliness("world", False, 1.0) == []  # gone: maybe a router restart
+    assert core.next_due() == 6.0
+    assert not [o for o in core.tick(5.9) if isinstance(o, Stop)]
+    assert core.liveliness("world", True, 2.5) == []  # back within the grace: an outage
+    assert core.world_outages == [(core.consensus.last_k, 1.5)]
+    assert core.snapshot()["world_outages"] == [(core.consensus.last_k, 1.5)]
+    assert core.next_due() is None
+    core.liveliness("world", False, 10.0)  # gone for good this time
+    assert not [o for o in core.tick(14.9) if isinstance(o, Stop)]
+    stops = [o for o in core.tick(15.0) if isinstance(o, Stop)]
+    assert stops == [Stop("world left before ending the run")]
+    assert len(core.world_outages) == 1
+
+
+def test_without_grace_or_after_end_the_world_leaving_stops_at_once():
+    from peers.core import Stop
+    from protocol.codec import encode
+    from protocol.keys import Keys
+    from protocol.messages import Control
+
+    core = _core(0.0)
+    core.liveliness("world", True, 0.0)
+    assert Stop("world left before ending the run") in core.liveliness("world", False, 1.0)
+    core = _core(5.0)
+    core.liveliness("world", True, 0.0)
+    core.receive(Keys("grace").ctl(), encode(Control("end", "r")), 0.5)
+    assert Stop("end of run") in core.liveliness("world", False, 1.0)  # no grace after "end"
+
+
+@pytest.mark.network
+def test_a_routed_run_survives_a_router_restart(tmp_path):
+    """The router is killed and started again at scan 20 of 60 (4 scans/s): every peer sees
+    the world (and everyone) go and come back, counts one outage and the scans it missed as
+    misses, and the run ends normally, fused from both neighbours to the last scan."""
+    out = tmp_path / "run"
+    n = 60
+    assert main(["run", "seed000", "--router", "--secure", "--no-rerun", "--out", str(out),
+                 "--speed", "4", "--set", f"scenario.num_scans={n}",
+                 "--set", "birth.model=truth", "--fault", "restart:router@20"]) == 0
+    done = json.loads((out / "process-faults.json").read_text())
+    assert [(f["action"], f["peer"]) for f in done] == [("restart", "router")]
+    assert (out / "logs" / "router.restart1.log").read_text().startswith("router: listening")
+    summaries = read_summaries(out, PEERS)
+    for name, s in summaries.items():
+        assert s["stop_reason"] == "end of run", name
+        assert s["internal_errors"] == {}, name
+        [(k, seconds)] = s["world_outages"]  # one outage, after the restart's scan
+        assert k >= 20 and 0 < seconds < 30, (name, s["world_outages"])
+        missed = s["ospa_misses"]["fused"]
+        assert s["ospa_misses"]["local"] == missed, name
+        assert s["scans"] + missed == n and missed >= 1, (name, s["scans"], missed)
+        assert s["stats"]["last_fused_from"] == {m: n for m in PEERS if m != name}, name
+        print(f"{name}: outage {seconds:.2f} s after scan {k}, {missed} scans missed")
