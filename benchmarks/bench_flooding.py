@@ -30,7 +30,24 @@ from sim.scenario import load_scenario, parse_overrides
 from sim.twin import run_twin
 
 
-def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str]) -> dict:
+def _patient_world(handle, wait: float) -> None:
+    """Start the world again at once with ``--wait`` seconds for the peers: 21 processes
+    importing NumPy, SciPy and Zenoh on a busy 2-core machine can take longer than the
+    default 30 s to come up (the peers get ``--idle-timeout`` to match)."""
+    import subprocess
+
+    old = handle.procs["world"]
+    old.kill()
+    old.wait()
+    cmd = [*handle.commands["world"], "--wait", str(wait)]
+    handle.commands["world"] = cmd
+    with handle.logs["world"].open("w") as fh:
+        handle.procs["world"] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
+                                                 stdin=subprocess.DEVNULL)
+
+
+def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
+            startup: float) -> dict:
     sets = [f"scenario.num_scans={scans}", f"network.speed={speed}", *extra]
     scn = load_scenario("seed004", overrides=parse_overrides(sets))
     load0 = os.getloadavg()
@@ -38,9 +55,12 @@ def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str]) 
         out = Path(tmp)
         t0 = time.monotonic()
         handle = start_run(scn, "seed004", out, overrides=sets, rerun=False, sparse=sparse,
-                           run=run)
+                           run=run, peer_args={n: ["--idle-timeout", str(startup + 30)]
+                                               for n in scn.sensor_names})
         try:
-            codes = wait_run(handle, timeout=scans / speed + 90)
+            if startup > 30:
+                _patient_world(handle, startup)
+            codes = wait_run(handle, timeout=scans / speed + startup + 60)
         finally:
             handle.stop_all()
         wall = time.monotonic() - t0
@@ -86,10 +106,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=10.0)
     ap.add_argument("--full-mesh", action="store_true", help="let Zenoh link every process")
     ap.add_argument("--set", action="append", default=[], help="scenario override")
+    ap.add_argument("--startup", type=float, default=30.0,
+                    help="seconds the world waits for the peers to come up (default 30, as "
+                         "sensornet run; more on a busy machine)")
     a = ap.parse_args(argv)
     ok = True
     for run in range(a.runs):
-        r = one_run(a.scans, a.speed, run, not a.full_mesh, a.set)
+        r = one_run(a.scans, a.speed, run, not a.full_mesh, a.set, a.startup)
         (l0, l1) = r["load"]
         print(f"run {run}: load average {l0[0]:.1f} before, {l1[0]:.1f} after "
               f"({os.cpu_count()} cores)")
