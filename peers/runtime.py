@@ -33,6 +33,10 @@ from protocol.messages import Estimate, Forward
 BATCH = 64
 """At most this many queued messages are handled per wake-up before deadlines are checked."""
 
+BACKLOG = 2
+"""Scans a peer may be behind and still work off every one (see PeerRuntime._catch_up): two
+keep its scan index within the window its neighbours' estimates are taken in."""
+
 
 @dataclass(frozen=True)
 class RuntimeOptions:
@@ -176,11 +180,12 @@ class PeerRuntime:
                 break
 
     def _catch_up(self, items: list[tuple]) -> list[tuple]:
-        """A peer that has fallen behind (a run of consecutive scans waiting) goes straight to
-        the newest: a scan whose successor is queued too is left out (counted, scored as a
-        miss), so its scan index stays with its neighbours' and their estimates inside its
-        window. Only scans a backlog explains count (up to the scan window's end plus one per
-        queued scan): forged scans far ahead are left to the core, which refuses them."""
+        """A peer that has fallen behind by more than :data:`BACKLOG` scans goes to the newest
+        ones: a scan with its next ``BACKLOG`` successors queued too is left out (counted,
+        scored as a miss), so its scan index stays with its neighbours' and their estimates
+        inside its window; a shorter backlog is worked off whole. Only scans a backlog
+        explains count (up to the scan window's end plus one per queued scan): forged scans
+        far ahead are left to the core, which refuses them."""
         scans = [i for i, (tag, key, _) in enumerate(items)
                  if tag == "msg" and "/scan/" in key]
         if len(scans) < 2:
@@ -189,7 +194,7 @@ class PeerRuntime:
         ks = {i: (peek(items[i][2]) or ("", -1))[1] for i in scans}
         ks = {i: k for i, k in ks.items() if 0 <= k <= top}
         queued = set(ks.values())
-        drop = {i for i, k in ks.items() if k + 1 in queued}
+        drop = {i for i, k in ks.items() if all(k + j in queued for j in range(1, BACKLOG + 1))}
         self.telemetry.scans_skipped_behind += len(drop)
         return [it for i, it in enumerate(items) if i not in drop]
 

@@ -43,14 +43,22 @@ def _estimate(keys: Keys, k: int) -> tuple:
     return ("msg", keys.estimate("s2"), encode(Estimate("s2", k, mix)))
 
 
-def test_only_the_newest_of_several_queued_scans_is_processed():
+def test_a_peer_three_or_more_scans_behind_goes_to_the_newest_two():
     keys, drv = Keys("net"), _Driver()
     items = [_scan(keys, 4), _estimate(keys, 4), _scan(keys, 5), ("live", "s3", True),
              _scan(keys, 7), _estimate(keys, 7), _scan(keys, 6)]
     kept = PeerRuntime._catch_up(drv, items)
-    assert kept == [items[1], items[3], items[4], items[5]]  # estimates, liveliness stay
-    assert drv.telemetry.scans_skipped_behind == 3
-    assert drv.telemetry.summary(7)["scans_skipped_behind"] == 3
+    # 4 and 5 left out; the last two (6, 7), estimates and liveliness stay, in their order
+    assert kept == [items[1], items[3], items[4], items[5], items[6]]
+    assert drv.telemetry.scans_skipped_behind == 2
+    assert drv.telemetry.summary(7)["scans_skipped_behind"] == 2
+
+
+def test_a_backlog_of_two_scans_is_worked_off_whole():
+    keys, drv = Keys("net"), _Driver()
+    items = [_scan(keys, 4), _estimate(keys, 4), _scan(keys, 5)]
+    assert PeerRuntime._catch_up(drv, items) == items
+    assert drv.telemetry.scans_skipped_behind == 0
 
 
 def test_a_forged_scan_far_ahead_drops_nothing():
