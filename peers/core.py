@@ -268,6 +268,7 @@ class PeerCore:
         self.last_accept = now
         out = [Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
         self.scorer.expect(k)
+        self._score_local()  # the previous scan's, if no tick came between (a backlog)
         out += self._wrap(c.on_scan(k, msg.z, steps, now))
         self.scorer.advance(k)
         self._pending_local.append(k)
