@@ -227,12 +227,13 @@ def _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P) -> None
     gw[2, idx[2] == idx[0]] = 0.0  # the padding of groups of two
     X = np.concatenate((m, P.reshape(n, d * d)), axis=1)[idx]  # (3, k, d + d*d)
     wX = gw[:, :, None] * X
-    tw = (gw[0] + gw[1]) + gw[2]
-    tX = (wX[0] + wX[1]) + wX[2]  # sum w m | sum w P
+    # np.add.reduce over the first axis adds the rows in order: (x0 + x1) + x2
+    tw = np.add.reduce(gw, axis=0)
+    tX = np.add.reduce(wX, axis=0)  # sum w m | sum w P
     mean = tX[:, :d] / tw[:, None]
     diff = X[:, :, :d] - mean  # (3, k, d)
     outer = (gw[:, :, None] * diff)[:, :, :, None] * diff[:, :, None, :]
-    cov = (tX[:, d:].reshape(-1, d, d) + ((outer[0] + outer[1]) + outer[2])) / tw[:, None, None]
+    cov = (tX[:, d:].reshape(-1, d, d) + np.add.reduce(outer, axis=0)) / tw[:, None, None]
     c = idx[0]
     out_w[c] = tw
     out_m[c] = mean
