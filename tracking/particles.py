@@ -188,6 +188,20 @@ def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return mean, symmetrise(cov)
 
 
+def _model_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`weighted_moments` of dimension-major particles ``X (d, M, N)`` with weights
+    ``w (M, N)``, one model at a time (the same products; ``(d, N)`` temporaries)."""
+    d, M, _ = X.shape
+    means = np.empty((M, d))
+    covs = np.empty((M, d, d))
+    for j in range(M):
+        Xj = X[:, j]
+        np.matmul(Xj, w[j], out=means[j])
+        D = Xj - means[j][:, None]
+        np.matmul(D * w[j], D.T, out=covs[j])
+    return means, symmetrise(covs)
+
+
 def _dim_major(X: np.ndarray) -> np.ndarray:
     """Particles ``X (M, N, d)`` as a C-contiguous ``(d, M, N)`` array (a view when ``X`` is
     already the transposed view of one, as the filter's own states are)."""
@@ -269,7 +283,7 @@ class IMMParticleFilter:
         log_Lambda = np.log(s) + top[:, 0] - np.log(N)
         probs = model_posterior(pred.probs, log_Lambda)
         w = lik / s[:, None]
-        means, covs = weighted_moments(X.transpose(1, 2, 0), w)
+        means, covs = _model_moments(X, w)
         counts = residual_counts(w, N, rng)  # (M, N), rows sum to N
         idx = np.repeat(np.arange(M * N), counts.reshape(-1))  # (M*N,) row j within model j
         Xr = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
@@ -288,15 +302,14 @@ class IMMParticleFilter:
         d, M, N = X.shape
         L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(d))
         Z = rng.standard_normal((M, N, d))
-        E = np.matmul(L, np.swapaxes(Z, 1, 2))  # (M, d, N): L_j e per particle
-        E *= h
-        if kind == "add":
-            X += E.transpose(1, 0, 2)
-            return X
-        a = np.sqrt(1.0 - h * h)
-        X *= a
-        X += ((1.0 - a) * means).T[:, :, None]
-        X += E.transpose(1, 0, 2)
+        if kind == "shrink":
+            a = np.sqrt(1.0 - h * h)
+            X *= a
+            X += ((1.0 - a) * means).T[:, :, None]
+        for j in range(M):  # per model: (d, N) temporaries that stay in cache
+            E = L[j] @ Z[j].T  # L_j e per particle
+            E *= h
+            X[:, j] += E
         return X
 
     def step(self, state: ParticleState, log_lik_fn, rng: np.random.Generator,
