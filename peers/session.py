@@ -22,6 +22,13 @@ MAX_MESSAGE_BYTES = (1 << 20) + 4096
 dropped by Zenoh before it costs memory (a 50 MB payload used to be received whole)."""
 
 
+SHARED_MEMORY_NOTE = """Zenoh's shared-memory transport optimisation is off: with it, a large
+message (over 3 kB) from a sender on the same host comes through that sender's 16 MiB pool,
+which every receiver maps: +20 MB resident in a peer flooded with 240 kB estimates (+2 MB
+without), and up to 16 MiB more per large-message sender. Estimates are a few hundred bytes;
+bounded memory is worth more than a copy saved on a rare large one."""
+
+
 class SessionError(Exception):
     """The Zenoh session could not be configured or opened (reported in one line)."""
 
@@ -46,8 +53,9 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
     ``security`` (a :class:`peers.security.Security`): mutual TLS against the network's CA
     and the network's access control policy; every endpoint must then be ``tls/``.
 
-    Defaults on top of Zenoh's: a lease of :data:`DEFAULT_LEASE_MS` and a maximum message size
-    of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win).
+    Defaults on top of Zenoh's: a lease of :data:`DEFAULT_LEASE_MS`, a maximum message size
+    of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win) and no
+    shared-memory transport optimisation (:data:`SHARED_MEMORY_NOTE`).
     """
     if config_file:
         path = Path(config_file)
@@ -70,6 +78,8 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             conf.insert_json5("transport/link/tx/lease", str(int(lease_ms or DEFAULT_LEASE_MS)))
         if max_message and not config_file:
             conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message)))
+        if not config_file:  # see SHARED_MEMORY_NOTE
+            conf.insert_json5("transport/shared_memory/transport_optimization/enabled", "false")
         if not gossip:  # links only to the given endpoints (large networks: fewer links)
             conf.insert_json5("scouting/gossip/enabled", "false")
         if security is not None:
