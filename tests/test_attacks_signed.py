@@ -93,7 +93,8 @@ def test_replayed_and_forged_signed_messages_are_counted(tmp_path):
     print(f"sent: {sent}; rejected: " + ", ".join(f"{n} {s['rejected']}"
                                                  for n, s in summaries.items()))
     assert all(c == 0 for c in codes.values()), codes
-    assert sent["replayed"] >= 20, sent  # s2 publishes an estimate per scan (40 scans)
+    # s2 publishes an estimate per scan (40); the relay links to it once s2 listens
+    assert sent["replayed"] >= 10, sent
     for name, s in summaries.items():
         assert s["scans"] == scn.num_scans and s["stop_reason"] == "end of run", name
         assert s["internal_errors"] == {}, name
