@@ -63,14 +63,19 @@ class Transport:
     # -- life cycle -------------------------------------------------------------------------
     def _settle(self, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -> None:
         """Wait until the session has links and gossip has stopped adding peers (a peer does
-        not route for others, so a liveliness query reaches only the peers linked to us)."""
+        not route for others, so a liveliness query reaches only the peers linked to us); a
+        client of a router is linked once it has the router."""
         info = self.session.info
+
+        def linked() -> int:  # peers, or the routers a client reaches everyone through
+            return len(list(info.peers_zid())) + len(list(info.routers_zid()))
+
         end = time.monotonic() + first
-        while not list(info.peers_zid()) and time.monotonic() < end:
+        while not linked() and time.monotonic() < end:
             time.sleep(0.01)
         n, since, end = -1, time.monotonic(), time.monotonic() + cap
         while time.monotonic() < end:
-            now_n = len(list(info.peers_zid()))
+            now_n = linked()
             if now_n != n:
                 n, since = now_n, time.monotonic()
             elif time.monotonic() - since >= stable:
