@@ -6,6 +6,7 @@ one run are what count) and checks that both give the same numbers."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -24,9 +25,33 @@ from tracking.particles import (
     ParticlePrediction,
     ParticleState,
     counts_to_indices,
-    residual_counts,
-    systematic_counts,
 )
+
+
+def systematic_counts(weights: np.ndarray, n: np.ndarray | int, u: np.ndarray) -> np.ndarray:
+    """Systematic-sampling counts per row (before: new temporaries at every operation)."""
+    R, K = weights.shape
+    C = np.empty((R, K + 1))
+    C[:, 0] = 0.0
+    np.cumsum(weights, axis=1, out=C[:, 1:])
+    C[:, 1:] /= C[:, -1:]
+    C[:, -1] = 1.0
+    n = np.asarray(n, dtype=float).reshape(-1, 1) if np.ndim(n) else float(n)
+    f = np.floor(C * n - u[:, None])
+    return np.diff(f, axis=1).astype(np.int64)
+
+
+def residual_counts(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Residual resampling counts per row (before)."""
+    w = weights / weights.sum(axis=1, keepdims=True)
+    nw = n * w
+    base = np.floor(nw)
+    rest = nw - base
+    left = n - base.sum(axis=1)
+    total = rest.sum(axis=1, keepdims=True)
+    rest = np.where(total > 0, rest, 1.0)
+    extra = systematic_counts(rest, left, rng.random(len(w)))
+    return base.astype(np.int64) + extra
 
 
 def radar_log_likelihood(sensor: RangeBearing, z: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -53,6 +78,14 @@ def weighted_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarr
 class IMMParticleFilterBefore(IMMParticleFilter):
     """The IMM-PF step before: particle-major ``(M, N, 6)`` arrays, row gathers, einsum."""
 
+    @cached_property
+    def _F_t(self) -> np.ndarray:
+        return np.stack([m.F.T for m in self.params.models()])  # (M, 6, 6)
+
+    @cached_property
+    def _G_t(self) -> np.ndarray:
+        return np.stack([(m.sigma * m.G).T for m in self.params.models()])  # (M, 2, 6)
+
     def predict(self, state: ParticleState, rng: np.random.Generator) -> ParticlePrediction:
         X = state.particles
         M, N, d = X.shape
@@ -60,9 +93,7 @@ class IMMParticleFilterBefore(IMMParticleFilter):
         q = np.repeat(mu.T, N, axis=1)
         idx = counts_to_indices(systematic_counts(q, N, rng.random(M)))
         X0 = X.reshape(M * N, d)[idx]
-        F_t = np.stack([m.F.T for m in self.params.models()])
-        G_t = np.stack([(m.sigma * m.G).T for m in self.params.models()])
-        Xp = X0 @ F_t + rng.standard_normal((M, N, 2)) @ G_t
+        Xp = X0 @ self._F_t + rng.standard_normal((M, N, 2)) @ self._G_t
         return ParticlePrediction(Xp, c)
 
     def update(self, pred: ParticlePrediction, log_lik: np.ndarray,
