@@ -34,6 +34,11 @@ from tracking.gaussian import symmetrise
 from tracking.imm import POS, STATE_DIM, IMMParams, ModelConditioned, mixing, model_posterior
 from tracking.mixture import GaussianMixture
 
+try:  # the ufuncs np.linalg calls (NumPy 1.x and 2.x)
+    from numpy.linalg import _umath_linalg as _lapack
+except ImportError:  # pragma: no cover
+    _lapack = None
+
 # -- resampling ---------------------------------------------------------------------------------
 
 
@@ -90,27 +95,30 @@ def interaction_indices(mu: np.ndarray, n: int, u: np.ndarray) -> np.ndarray:
     B_(i-1)) / v) - 1``. (Empty blocks are skipped: their two boundaries are equal.)
     """
     M = mu.shape[0]
-    B = np.cumsum(mu.T, axis=1)  # (j, i) block ends
-    B /= B[:, -1:]
-    B[:, -1] = 1.0
-    start = np.zeros_like(B)
-    start[:, 1:] = B[:, :-1]
-    v = (B - start) / n  # (j, i) the mass of one particle of block i
     t = np.arange(n) + u[:, None]
     t /= n  # (j, k) the draws
-    if M == 2:
-        hi = t > B[:, :1]
-        t -= np.where(hi, start[:, 1:], 0.0)
-        t /= np.where(hi, v[:, 1:], v[:, :1])
+    if M == 2:  # the same arithmetic on Python floats (IEEE doubles, as NumPy's)
+        b0 = [mu[0, j] / (mu[0, j] + mu[1, j]) for j in (0, 1)]  # end of block 0
+        hi = t > np.array(b0)[:, None]
+        t -= np.where(hi, np.array(b0)[:, None], 0.0)
+        t /= np.where(hi, np.array([(1.0 - b) / n for b in b0])[:, None],
+                      np.array([b / n for b in b0])[:, None])
         block = np.where(hi, n, 0)
     else:
+        B = np.cumsum(mu.T, axis=1)  # (j, i) block ends
+        B /= B[:, -1:]
+        B[:, -1] = 1.0
+        start = np.zeros_like(B)
+        start[:, 1:] = B[:, :-1]
+        v = (B - start) / n  # (j, i) the mass of one particle of block i
         b = (t[:, :, None] > B[:, None, :-1]).sum(axis=2)
         t -= np.take_along_axis(start, b, axis=1)
         t /= np.take_along_axis(v, b, axis=1)
         block = b * n
     np.ceil(t, out=t)
     t -= 1.0
-    np.clip(t, 0, n - 1, out=t)
+    np.maximum(t, 0.0, out=t)
+    np.minimum(t, n - 1, out=t)
     g = t.astype(np.intp)
     g += block
     return g.reshape(-1)
@@ -202,6 +210,19 @@ def _model_moments(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return means, symmetrise(covs)
 
 
+def _cholesky(A: np.ndarray) -> np.ndarray:
+    """``np.linalg.cholesky(A)`` (the same LAPACK call and numbers) without its Python wrapper,
+    which costs more than factorising two 6x6 matrices; a stack that is not positive definite
+    goes through ``np.linalg.cholesky`` (and its error) unchanged."""
+    if _lapack is None or A.dtype != np.float64:
+        return np.linalg.cholesky(A)
+    with np.errstate(all="ignore"):
+        L = _lapack.cholesky_lo(A, signature="d->d")
+    if not np.isfinite(L).all():
+        return np.linalg.cholesky(A)
+    return L
+
+
 def _dim_major(X: np.ndarray) -> np.ndarray:
     """Particles ``X (M, N, d)`` as a C-contiguous ``(d, M, N)`` array (a view when ``X`` is
     already the transposed view of one, as the filter's own states are)."""
@@ -228,6 +249,13 @@ class IMMParticleFilter:
     @cached_property
     def _P(self) -> np.ndarray:
         return self.params.P
+
+    def _floor_eye(self, d: int) -> np.ndarray:
+        """``cov_floor * np.eye(d)`` (built once per dimension)."""
+        cache = self.__dict__.setdefault("_floor_eyes", {})
+        if d not in cache:
+            cache[d] = self.particle.cov_floor * np.eye(d)
+        return cache[d]
 
     def initialise(self, mean: np.ndarray, cov: np.ndarray,
                    rng: np.random.Generator) -> ParticleState:
@@ -259,7 +287,7 @@ class IMMParticleFilter:
         d, M, N = X.shape
         c, mu = mixing(state.probs, self._P)  # mu[i, j] = mu_(i|j)
         idx = interaction_indices(mu, N, rng.random(M))  # (M*N,) into the M*N particles
-        X0 = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
+        X0 = X.reshape(d, M * N).take(idx, axis=1).reshape(d, M, N)
         E = rng.standard_normal((M, N, 2))
         Xp = np.empty((d, M, N))
         F, G = self._F, self._G
@@ -285,8 +313,8 @@ class IMMParticleFilter:
         w = lik / s[:, None]
         means, covs = _model_moments(X, w)
         counts = residual_counts(w, N, rng)  # (M, N), rows sum to N
-        idx = np.repeat(np.arange(M * N), counts.reshape(-1))  # (M*N,) row j within model j
-        Xr = np.take(X.reshape(d, M * N), idx, axis=1).reshape(d, M, N)
+        idx = np.arange(M * N).repeat(counts.reshape(-1))  # (M*N,) row j within model j
+        Xr = X.reshape(d, M * N).take(idx, axis=1).reshape(d, M, N)
         Xr = self._regularise(Xr, means, covs, rng)
         return ParticleState(Xr.transpose(1, 2, 0), probs, means, covs, log_Lambda)
 
@@ -300,7 +328,7 @@ class IMMParticleFilter:
         if kind not in ("add", "shrink"):
             raise ValueError(f"unknown jitter_kind {kind!r}; expected 'add' or 'shrink'")
         d, M, N = X.shape
-        L = np.linalg.cholesky(covs + self.particle.cov_floor * np.eye(d))
+        L = _cholesky(covs + self._floor_eye(d))
         Z = rng.standard_normal((M, N, d))
         if kind == "shrink":
             a = np.sqrt(1.0 - h * h)
