@@ -19,7 +19,7 @@ import numpy as np
 
 from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
 from peers.fusers import NoFuser
-from protocol.messages import Estimate, Forward, ScanSet, Tracks
+from protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from tracking.mixture import GaussianMixture
 from tracking.nale import NaleBuffer
 
@@ -84,11 +84,14 @@ class _ScanState:
     done: bool = False
 
 
-def payload_tuples(payload: GaussianMixture | ScanSet) -> int:
+def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
     """The seed's tuples in one published payload: a ``d``-dimensional Gaussian component
-    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (ALGORITHMS.md §9)."""
+    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (ALGORITHMS.md §9); an array is
+    shared returns ``(m, 2)`` (:class:`~protocol.messages.Returns`)."""
     if isinstance(payload, ScanSet):
         return payload.tuples()
+    if isinstance(payload, np.ndarray):
+        return payload.size
     d = payload.dim
     return len(payload) * (1 + d + d * (d + 1) // 2)
 
@@ -150,7 +153,8 @@ class Consensus:
     def on_estimate(self, est: Estimate, now: float) -> list:
         """Store a neighbour's estimate (round-0 posteriors through NALE); fuse if complete."""
         self.stats.estimates_in += 1
-        payload = est.scans if isinstance(est, Forward) else est.mixture
+        payload = (est.scans if isinstance(est, Forward) else est.z if isinstance(est, Returns)
+                   else est.mixture)
         st, late = self._scan, getattr(self.fuser, "late", None)
         if late is not None and st is not None and (
                 est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
@@ -286,6 +290,8 @@ class Consensus:
         self.stats.tuples_to_neighbours += tuples * len(self.alive)
         if isinstance(mix, ScanSet):
             return Forward(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
+        if isinstance(mix, np.ndarray):
+            return Returns(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
         return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
                         send_time=now, pruning=2 if rnd == 0 else 1, kind=kind)
 

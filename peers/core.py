@@ -37,7 +37,7 @@ from peers.consensus import Consensus
 from peers.scoring import Scorer
 from protocol.codec import DEFAULT_LIMITS, Limits, Rejected, decode, encode
 from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Forward, Scan, Tracks, Truth
+from protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class Publish:
     channel: str
     k: int
     payload: bytes
-    message: Estimate | Forward | Tracks
+    message: Estimate | Forward | Returns | Tracks
 
 
 @dataclass(frozen=True)
@@ -152,7 +152,7 @@ class PeerCore:
             msg = decode(payload, self.cfg.limits)
         except Rejected as exc:
             return self._reject(exc.reason)
-        expected = {"scan": Scan, "estimate": (Estimate, Forward), "truth": Truth,
+        expected = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,
                     "ctl": Control}
         if not isinstance(msg, expected[route.channel]):
             return self._reject("wrong-key")
@@ -316,7 +316,8 @@ class PeerCore:
             return self._reject("not-neighbour")
         scans = getattr(self.estimator, "payload", "mixture") == "scans"
         if (isinstance(msg, Forward) != scans or msg.kind not in (c.kinds or ("posterior",))
-                or (not scans and msg.mixture.dim != self.estimator.dim)):
+                or (isinstance(msg, Estimate) and msg.mixture.dim != self.estimator.dim)
+                or isinstance(msg, Returns) != (msg.kind == "returns")):
             return self._reject("incompatible")
         if scans and not set(msg.scans.scans) <= self.estimator.roster.keys():
             return self._reject("spoofed")  # a scan of a sensor not in the network
@@ -350,7 +351,7 @@ class PeerCore:
     def _wrap(self, messages: list) -> list[Output]:
         out: list[Output] = []
         for m in messages:
-            if isinstance(m, Estimate | Forward):
+            if isinstance(m, Estimate | Forward | Returns):
                 out.append(Publish("estimate", m.k, encode(m), m))
                 self.sent_bytes["estimate"] += len(out[-1].payload)
             elif isinstance(m, Tracks):

@@ -28,7 +28,7 @@ from peers.rerun_sink import RerunSink
 from peers.telemetry import Telemetry
 from peers.transport import Transport
 from protocol.codec import Rejected, decode
-from protocol.messages import Estimate, Forward
+from protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
 """At most this many queued messages are handled per wake-up before deadlines are checked."""
@@ -277,7 +277,7 @@ class PeerRuntime:
             msg = decode(payload, self.core.cfg.limits)
         except Rejected:
             return False  # the core counts it
-        if not isinstance(msg, Estimate | Forward):
+        if not isinstance(msg, Estimate | Forward | Returns):
             return False
         delays = self.o.faults.deliveries(msg.sender, self.name,
                                           self._run_time(msg.send_time), msg)

@@ -20,7 +20,17 @@ from functools import lru_cache
 import msgpack
 import numpy as np
 
-from protocol.messages import Control, Estimate, Forward, Message, Scan, ScanSet, Tracks, Truth
+from protocol.messages import (
+    Control,
+    Estimate,
+    Forward,
+    Message,
+    Returns,
+    Scan,
+    ScanSet,
+    Tracks,
+    Truth,
+)
 from tracking.mixture import GaussianMixture
 
 VERSION = 1
@@ -97,7 +107,7 @@ def _array(a: np.ndarray) -> bytes:
     return np.ascontiguousarray(a, dtype=_F8).tobytes()
 
 
-_KINDS = ("posterior", "prediction", "returns")  # "returns": measurement sharing (seed 003)
+_KINDS = ("posterior", "prediction", "returns")  # "returns": seed 003 before Returns ("R")
 _FIELDS = {
     # type letter: field names after [version, type], in wire order
     "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "x"),
@@ -106,6 +116,7 @@ _FIELDS = {
     "T": ("k", "ts", "d", "x", "i"),
     "C": ("c", "id", "pa", "ts"),
     "F": ("s", "k", "r", "q", "ts", "o", "n", "x"),
+    "R": ("s", "k", "r", "q", "ts", "x"),
 }
 
 
@@ -138,6 +149,10 @@ def encode(msg: Message) -> bytes:
                         "q": int(msg.seq), "ts": float(msg.send_time), "o": origins,
                         "n": [len(z) for z in zs],
                         "x": _array(np.concatenate(zs) if zs else np.zeros((0, 2)))}
+    elif isinstance(msg, Returns):
+        z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+        t, body = "R", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
+                        "q": int(msg.seq), "ts": float(msg.send_time), "x": _array(z)}
     elif isinstance(msg, Control):
         t, body = "C", {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
                         "ts": float(msg.send_time)}
@@ -314,6 +329,13 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
             return Truth(k=_index(body, "k"), ids=ids, states=x, send_time=_time(body))
         if kind == "F":
             return _forward(body, limits)
+        if kind == "R":
+            sender, k, rnd = _name(body, "s", limits), _index(body, "k"), _index(body, "r")
+            seq, ts = _index(body, "q"), _time(body)
+            blob = _get(body, "x", bytes)
+            n = _rows(blob, 2, limits.max_measurements, "returns")
+            return Returns(sender=sender, k=k, z=_floats(blob, (n, 2)), round=rnd, seq=seq,
+                           send_time=ts)
         params = _get(body, "pa", dict)
         for key, value in params.items():
             if not isinstance(key, str) or not isinstance(value, str | int | float | bool):

@@ -108,4 +108,21 @@ class Forward:
     """The consensus slot it fills (flooding has one kind)."""
 
 
-Message = Scan | Estimate | Tracks | Truth | Control | Forward
+@dataclass(frozen=True)
+class Returns:
+    """Measurement sharing (seed 003): the returns ``z (m, 2)`` of ``sender``'s own scan ``k``
+    that it shares for every peer's sequential update (the sensor is the sender's; its noise
+    comes from the scenario). 16 bytes a return on the wire, where the same return as a
+    component of a 6-D state's mixture took 224."""
+
+    sender: str
+    k: int
+    z: np.ndarray
+    round: int = 0
+    seq: int = 0
+    send_time: float = 0.0
+    kind: ClassVar[str] = "returns"
+    """The consensus slot it fills."""
+
+
+Message = Scan | Estimate | Tracks | Truth | Control | Forward | Returns

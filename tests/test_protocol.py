@@ -164,3 +164,59 @@ def test_keys():
     for bad in ("", "a/b", "x*", "a b", "ä"):
         with pytest.raises(ValueError):
             check_name(bad)
+
+
+# -- shared returns (seed 003 measurement sharing) ------------------------------------------
+def _returns_fields(z: np.ndarray) -> list:
+    return [VERSION, "R", "s1", 3, 0, 1, 1.0, np.ascontiguousarray(z, "<f8").tobytes()]
+
+
+def test_returns_round_trip_is_exact_and_compact(rng):
+    from protocol.messages import Returns
+
+    for n in (0, 1, 7):
+        z = rng.normal(size=(n, 2)) * 1e4
+        out = decode(encode(Returns("s2", 41, z, round=0, seq=5, send_time=1.7e9 + 0.5)))
+        assert isinstance(out, Returns) and out.kind == "returns"
+        assert (out.sender, out.k, out.round, out.seq, out.send_time) == (
+            "s2", 41, 0, 5, 1.7e9 + 0.5)
+        assert out.z.shape == (n, 2) and out.z.dtype == np.float64
+        np.testing.assert_array_equal(out.z, z)
+    # 16 bytes a return plus a header of about 30 bytes (a 6-D mixture took 224 a return)
+    size = len(encode(Returns("s1", 100, rng.normal(size=(50, 2)), seq=1000, send_time=1.7e9)))
+    assert 50 * 16 < size <= 50 * 16 + 40, size
+
+
+def test_hostile_returns_rejected(rng):
+    from protocol.messages import Returns
+
+    z = rng.normal(size=(4, 2))
+    good = _returns_fields(z)
+    assert isinstance(decode(msgpack.packb(good, use_bin_type=True)), Returns)
+    cases = {
+        "field": [(2, 12), (2, ""), (2, "x" * 65), (3, -1), (3, 1 << 53), (3, "3"), (4, True),
+                  (5, 2.5), (6, "now"), (7, [1.0, 2.0])],
+        "nonfinite": [(6, float("inf"))],
+        "shape": [(7, good[7][:-8]), (7, good[7] + b"\0")],
+    }
+    for reason, edits in cases.items():
+        for i, v in edits:
+            f = list(good)
+            f[i] = v
+            assert _reason(msgpack.packb(f, use_bin_type=True)) == reason, (i, v)
+    assert _reason(msgpack.packb(good[:-1], use_bin_type=True)) == "field"  # a field missing
+    bad = z.copy()
+    bad[2, 1] = np.nan
+    assert _reason(encode(Returns("s1", 1, bad))) == "nonfinite"
+    bad[2, 1] = -np.inf
+    assert _reason(encode(Returns("s1", 1, bad))) == "nonfinite"
+    with pytest.raises(Rejected) as info:  # more returns than a receiver takes: before copying
+        decode(encode(Returns("s1", 1, np.zeros((51, 2)))), Limits(max_measurements=50))
+    assert info.value.reason == "too-many"
+    with pytest.raises(Rejected) as info:
+        decode(encode(Returns("s1", 1, np.zeros((200, 2)))), Limits(max_bytes=1000))
+    assert info.value.reason == "too-large"
+    # fields are checked before the array: a bad sender with a bad blob is a field error
+    f = list(good)
+    f[2], f[7] = 12, b"\0" * 3
+    assert _reason(msgpack.packb(f, use_bin_type=True)) == "field"

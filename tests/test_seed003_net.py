@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from peers.contracts import FusionInput
-from peers.pda_parts import CiFuser, PdaEstimator, mixture_returns, returns_mixture
+from peers.pda_parts import CiFuser, PdaEstimator
 from protocol.codec import decode, encode
-from protocol.messages import Estimate
+from protocol.messages import Estimate, Returns
 from sim import seed003, seed003_net
 from tracking.imm import POS
+from tracking.mixture import GaussianMixture
 
 RUN = 1
 
@@ -112,15 +113,24 @@ def test_pda_view_holds_gates_weights_and_the_detector():
 
 
 def test_returns_survive_the_wire():
+    """A peer's pre-gated returns go out as a Returns message (16 bytes a return), arrive
+    bit for bit, and a receiving core takes them in its "returns" slot; the old form (a
+    mixture of kind "returns") and a Returns for a peer that shares estimates are refused."""
+    cfg = seed003_net.load()
     Z = np.array([[1.5, -2.25], [1e4, 3e3], [0.0, 7.0]])
-    R = np.diag([2500.0, 2500.0])
-    mix = returns_mixture(Z, R, 6, POS)
-    back = decode(encode(Estimate("s1", 3, mix, kind="returns")))
-    assert back.kind == "returns"
-    np.testing.assert_array_equal(mixture_returns(back.mixture, POS), Z)
-    empty = decode(encode(Estimate("s1", 3, returns_mixture(np.zeros((0, 2)), R, 6, POS),
-                                   kind="returns")))
-    assert mixture_returns(empty.mixture, POS).shape == (0, 2)
+    back = decode(encode(Returns("s1", 3, Z, seq=2, send_time=1.0)))
+    assert isinstance(back, Returns) and back.kind == "returns"
+    np.testing.assert_array_equal(back.z, Z)
+    assert decode(encode(Returns("s1", 3, np.zeros((0, 2))))).z.shape == (0, 2)
+    meas, ci = seed003_net.make_core(cfg, "s2", "meas"), seed003_net.make_core(cfg, "s2", "ci")
+    key = meas.keys.estimate("s1")
+    for c in (meas, ci):
+        c.receive(key, encode(Returns("s1", 1, Z)), 0.0, admitted=True)
+    assert meas.rejected["incompatible"] == 0 and meas.received["estimate"] == 1
+    assert ci.rejected["incompatible"] == 1
+    old = GaussianMixture(np.ones(1), np.zeros((1, 6)), np.eye(6)[None])
+    meas.receive(key, encode(Estimate("s1", 1, old, kind="returns")), 0.0, admitted=True)
+    assert meas.rejected["incompatible"] == 1
 
 
 def test_unknown_mode_and_sensor_are_one_line_errors():
