@@ -209,12 +209,14 @@ def test_twin_round_deadlines_let_a_slow_link_catch_up():
 # -- real processes ---------------------------------------------------------------------------
 @pytest.mark.network
 def test_five_flooding_processes_over_zenoh_hold_every_scan(tmp_path):
-    scn = _line(**{"network.speed": 5})
+    # a scan a second, iterations of 225 ms: room for a busy machine (the real-time question
+    # is benchmarks/bench_flooding.py's)
+    scn = _line(**{"network.speed": 1, "network.deadline": 0.9})
     sets = [f"sensors.positions={LINE['sensors.positions']}", "sensors.radius=500.0",
-            f"scenario.num_scans={SCANS}", "network.speed=5"]
+            f"scenario.num_scans={SCANS}", "network.speed=1", "network.deadline=0.9"]
     handle = start_run(scn, "seed004", tmp_path, overrides=sets, rerun=False)
     try:
-        codes = wait_run(handle, timeout=SCANS / 5 + 60)
+        codes = wait_run(handle, timeout=SCANS + 60)
     finally:
         handle.stop_all()
     assert codes == {"world": 0, **{n: 0 for n in scn.sensor_names}}, codes
