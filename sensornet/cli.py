@@ -358,8 +358,11 @@ def _run_seed003(args: argparse.Namespace) -> int:
     """``sensornet run seed003``: the PDA peers in both modes (:mod:`sim.seed003_net`)."""
     from sim.seed003_net import main as seed003_net_main
 
-    for flag in ("listen", "connect", "config", "run_id", "lease_ms", "fault", "secure",
-                 "record"):
+    if args.fault:
+        raise UserError("--fault (process faults) is not supported by 'run seed003'; link "
+                        "faults are: a [faults] table in the scenario file, or --set "
+                        "faults.default.loss=0.2 (any faults.* key)")
+    for flag in ("listen", "connect", "config", "run_id", "lease_ms", "secure", "record"):
         if getattr(args, flag, None) not in (None, False, []):
             raise UserError(f"--{flag.replace('_', '-')} is not supported by 'run seed003'")
     if args.sparse:
@@ -367,6 +370,8 @@ def _run_seed003(args: argparse.Namespace) -> int:
     _resolve_viewer(args)
     argv = ["run", "--run", str(args.run), "--timeout", str(args.timeout),
             *[a for item in (args.set or []) for a in ("--set", item)]]
+    if args.scenario != "seed003":  # a file: its settings and its [faults] table
+        argv += ["--scenario", str(Path(args.scenario).resolve())]
     if args.speed:
         argv += ["--speed", str(args.speed)]
     if args.no_rerun:

@@ -117,15 +117,29 @@ class NetScenario:
         return (x0, x1), (y0, y1)
 
 
-def load(overrides: Mapping | None = None, faults_file: str | Path | None = None) -> dict:
-    """The scenario with region clutter (what a peer network sees); ``faults_file``: a TOML
-    file whose ``[faults]`` table sets the link faults."""
-    cfg = seed003.load(overrides={"clutter.mode": "region", **(overrides or {})})
+def load(overrides: Mapping | None = None, faults_file: str | Path | None = None,
+         path: str | Path | None = None) -> dict:
+    """The scenario (``path``, default ``sim/scenarios/seed003.toml``) with region clutter (what
+    a peer network sees). Link faults: the file's ``[faults]`` table, replaced by the one of
+    ``faults_file`` if given, then ``overrides`` under ``faults.`` (the other scenarios'
+    spelling: ``faults.default.loss``, ``faults.links[0].delay``); checked by
+    :func:`net_scenario`."""
+    from sim.scenario import _apply_overrides
+
+    overrides = dict(overrides or {})
+    fault_keys = {k[len("faults."):]: overrides.pop(k) for k in list(overrides)
+                  if k.startswith("faults.")}
+    cfg = seed003.load(path or seed003.SCENARIO,
+                       overrides={"clutter.mode": "region", **overrides})
     if faults_file is not None:
         table = tomllib.loads(Path(faults_file).read_text(encoding="utf-8"))
         if "faults" not in table:
             raise ValueError(f"{faults_file}: no [faults] table")
         cfg["faults"] = table["faults"]
+    if fault_keys:
+        if not isinstance(cfg.setdefault("faults", {}), dict):
+            raise ValueError("seed003: 'faults' must be a table")
+        _apply_overrides(cfg["faults"], fault_keys, "seed003 [faults]")
     return cfg
 
 
@@ -290,6 +304,8 @@ def _common(a: argparse.Namespace) -> list[str]:
            "--method", a.method, *[x for s in a.set for x in ("--set", s)]]
     if a.faults:
         out += ["--faults", str(a.faults)]
+    if a.scenario:
+        out += ["--scenario", str(a.scenario)]
     return out
 
 
@@ -329,6 +345,11 @@ def start(a: argparse.Namespace, cfg: dict, mode: str, out: Path):
     return handle
 
 
+def _fault_counts(faults) -> str:
+    """The injected link faults' decisions, those that happened."""
+    return ", ".join(f"{a} {n}" for a, n in faults.counts().items() if n) or "none"
+
+
 def read_tracks(out: Path, name: str) -> dict[int, np.ndarray]:
     path = out / f"tracks-{name}.npz"
     if not path.is_file():
@@ -344,6 +365,8 @@ def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[li
     out.mkdir(parents=True, exist_ok=True)
     names = [s["name"] for s in cfg["sensors"]]
     ref = twin(cfg, mode, a.run, speed=a.speed, deadline=a.deadline, method=a.method)
+    if ref.faults is not None:
+        print(f"{mode}: link faults, twin's decisions: {_fault_counts(ref.faults)}", flush=True)
     handle = start(a, cfg, mode, out)
     expected = int(cfg["scenario"]["num_scans"]) * float(cfg["scenario"]["scan_period"]) / a.speed
     codes = wait_run(handle, timeout=expected + a.timeout)
@@ -376,6 +399,8 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--method", default=METHOD, choices=seed003.METHODS)
         sp.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
         sp.add_argument("--faults", type=Path, help="TOML file with a [faults] table")
+        sp.add_argument("--scenario", type=Path,
+                        help="scenario file (default sim/scenarios/seed003.toml)")
         sp.add_argument("--out", type=Path)
         sp.add_argument("--viewer")
         sp.add_argument("--no-rerun", action="store_true")
@@ -418,7 +443,7 @@ def _overrides(items: Sequence[str]) -> dict:
 def main(argv: Sequence[str] | None = None) -> int:
     a = _parser().parse_args(argv)
     try:
-        cfg = load(_overrides(a.set), a.faults)
+        cfg = load(_overrides(a.set), a.faults, a.scenario)
         scn = net_scenario(cfg, a.speed, a.deadline)
     except (ValueError, OSError) as exc:
         print(f"sensornet: error: seed003: {exc}", file=sys.stderr)
@@ -460,6 +485,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for mode in modes:
             res = twin(cfg, mode, a.run, speed=a.speed, deadline=a.deadline, method=a.method)
             rows += [make_row(cfg, mode, n, res.summary(n), res.tracks[n]) for n in res.peers]
+            if res.faults is not None:
+                print(f"{mode}: injected link faults: {_fault_counts(res.faults)}")
         print(f"seed003 twin, run {a.run} ({a.method}, {time.monotonic() - t0:.1f} s):")
     else:
         out = a.out or Path("runs") / f"seed003-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -180,10 +180,45 @@ def test_cli_run_seed003_refuses_what_it_cannot_honour(capsys):
     from sensornet.cli import main
 
     assert main(["run", "seed003", "--fault", "kill:s1@3"]) == 2
-    assert "--fault is not supported by 'run seed003'" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fault (process faults) is not supported by 'run seed003'" in err[0]
+    assert "--set faults.default.loss" in err[0]  # says where link faults go
+    assert main(["run", "seed003", "--sim", "--set", "faults.default.los=0.1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "faults.default.los" in err[0]
     assert main(["run", "seed003", "--sim", "--set", "clutter.nope=1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "clutter.nope" in err[0]
+
+
+def _meas_missing(out: str) -> dict[str, int]:
+    """Missing inputs per peer of the measurement-sharing rows of a printed table."""
+    rows = [ln.split("|") for ln in out.splitlines() if ln.startswith("| measurement")]
+    return {r[2].strip(): int(r[5]) for r in rows}
+
+
+def test_cli_run_seed003_takes_link_faults_from_set_and_from_the_file(tmp_path, capsys):
+    """Link faults as for the other scenarios: ``--set faults....`` or the file's [faults]
+    table (``run path/seed003.toml``). A lost link s2 -> s1 leaves s1 without s2's returns at
+    every scan and s2 with all of s1's; the twin counts the losses."""
+    from sensornet.cli import main
+
+    lost = '[{from = "s2", to = "s1", loss = 1.0}]'
+    assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=12",
+                 "--set", f"faults.links={lost}"]) == 0
+    out = capsys.readouterr().out
+    assert _meas_missing(out) == {"s1": 12, "s2": 0}
+    assert "meas: injected link faults: deliver 12, drop-loss 12" in out
+    text = seed003.SCENARIO.read_text(encoding="utf-8")
+    path = tmp_path / "seed003.toml"
+    path.write_text(text.replace("num_scans = 100", "num_scans = 12")
+                    + f"\n[faults]\nlinks = {lost}\n", encoding="utf-8")
+    assert "num_scans = 12" in path.read_text()
+    assert main(["run", str(path), "--sim"]) == 0
+    out = capsys.readouterr().out
+    assert _meas_missing(out) == {"s1": 12, "s2": 0}
+    assert main(["run", str(path), "--sim", "--set", "faults.links[0].loss=0.0"]) == 0
+    assert _meas_missing(capsys.readouterr().out) == {"s1": 0, "s2": 0}
 
 
 def test_cli_experiment_seed003_writes_the_table(tmp_path, capsys):
