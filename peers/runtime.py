@@ -62,6 +62,9 @@ class RuntimeOptions:
     record: dict[str, str] | None = None
     """Record the core's inputs to ``<out_dir>/record/<stem>.mcap`` with this metadata
     (scenario text, overrides, run, ...: what ``sensornet replay`` needs to rebuild the peer)."""
+    recover: bool = False
+    """Estimates and scans through Zenoh's advanced publisher/subscriber (routed runs): what a
+    router's outage held back is asked for again; ``recovery`` in the summary counts it."""
 
 
 def output_stem(out_dir: Path, name: str) -> str:
@@ -89,7 +92,8 @@ class PeerRuntime:
                                    core.admission,
                                    (list(self.o.listen), list(self.o.connect),
                                     self.o.config_file, self.o.lease_ms, self.o.gossip),
-                                   security=self.o.security, truth=core.wants_truth)
+                                   security=self.o.security, truth=core.wants_truth,
+                                   recover=self.o.recover)
         self.telemetry = Telemetry()
         self.sink = RerunSink()
         self.observer = Observer(core, self.sink, self.o.color_index, self.o.scan_period)
@@ -342,6 +346,8 @@ class PeerRuntime:
         if refusals is not None:  # secure mode: what the access control refused on arrival
             s["refused_by_transport"] = refusals.counts()
             s["refused_by_transport_total"] = refusals.total()
+        if self.transport.recover:  # delivered late from a publisher's cache, or lost
+            s["recovery"] = self.transport.recovery()
         errors = dict(s["internal_errors"])
         for name, n in s.pop("driver_errors").items():
             errors[name] = errors.get(name, 0) + n

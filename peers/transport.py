@@ -17,6 +17,38 @@ from peers.admission import Admission, parse_key
 from peers.session import SessionError, open_session
 from protocol.keys import Keys
 
+RECOVER_CACHE = 64
+"""Messages each publisher keeps per key for subscribers that missed them (``recover``): at
+4 scans/s a 16 s outage of a router."""
+RECOVER_HEARTBEAT = 0.5
+"""Seconds between a recovering publisher's heartbeats (its last sequence number): how a
+subscriber that missed the publisher's last messages notices and asks for them."""
+
+
+def recovering_publisher(session, key: str, express: bool = True):
+    """Zenoh's advanced publisher on ``key``: numbered messages, a cache of the last
+    :data:`RECOVER_CACHE` and heartbeats, so a subscriber that missed some (a router's outage)
+    gets them from the cache. Replies to such queries are not ``express``: the subscriber
+    tells a recovered message from a live one by that (``express`` must be true here)."""
+    import zenoh.ext as zx
+
+    return zx.declare_advanced_publisher(
+        session, key, congestion_control=zenoh.CongestionControl.BLOCK, express=express,
+        cache=zx.CacheConfig(RECOVER_CACHE, replies_config=zx.RepliesConfig(express=False)),
+        sample_miss_detection=zx.MissDetectionConfig(heartbeat=RECOVER_HEARTBEAT))
+
+
+def recovering_subscriber(session, key: str, callback, on_miss):
+    """Zenoh's advanced subscriber on ``key``: asks a :func:`recovering_publisher` for what it
+    missed (on a gap in the numbers or a heartbeat ahead of it) and delivers in order;
+    ``on_miss(n)`` for ``n`` messages the publisher's cache no longer held."""
+    import zenoh.ext as zx
+
+    sub = zx.declare_advanced_subscriber(session, key, callback,
+                                         recovery=zx.RecoveryConfig(heartbeat=True))
+    listener = sub.sample_miss_listener(lambda miss: on_miss(miss.nb))
+    return sub, listener
+
 
 class DuplicatePeer(SessionError):
     """Another process already runs a peer of this name on this network."""
@@ -28,7 +60,7 @@ class Transport:
 
     def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
                  admission: Admission, session_args: tuple, security=None,
-                 truth: bool = True) -> None:
+                 truth: bool = True, recover: bool = False) -> None:
         self.keys, self.name, self.sensor = keys, name, sensor
         self.neighbours = neighbours
         self.admission = admission
@@ -36,6 +68,10 @@ class Transport:
         self.security = security  # peers.security.Security: mutual TLS + access control
         self.truth = truth  # subscribe to the world's truth (only a peer without its own)
         self.refusals = None  # peers.security.RefusalLog in secure mode
+        self._scan_key = keys.scan(sensor)
+        self.recover = recover  # estimates and scans through Zenoh's advanced pub/sub
+        self.recovered = {"estimate": 0, "scan": 0}  # delivered late from a publisher's cache
+        self.unrecovered = {"estimate": 0, "scan": 0}  # missed, no longer in the cache
         self.signer = self.verifier = None  # protocol.envelope, in secure mode
         self.q: queue.Queue = queue.Queue()
         self.seen_alive: set[str] = set()
@@ -47,6 +83,9 @@ class Transport:
     # -- callbacks (Zenoh threads) ----------------------------------------------------------
     def _on_sample(self, sample) -> None:
         key = str(sample.key_expr)
+        if self.recover and not sample.express:  # a reply from a publisher's cache
+            ch = "scan" if key == self._scan_key else "estimate"
+            self.recovered[ch] += 1
         payload = sample.payload.to_bytes()
         if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
@@ -55,6 +94,13 @@ class Transport:
                     self.admission.rejected[why] += 1
                     return
             self.q.put(("msg", key, payload))
+
+    def _missed(self, channel: str, n: int) -> None:
+        self.unrecovered[channel] += n
+
+    def recovery(self) -> dict:
+        """What the advanced subscribers recovered and missed (``recover`` only), per channel."""
+        return {"recovered": dict(self.recovered), "unrecovered": dict(self.unrecovered)}
 
     def _on_live(self, sample) -> None:
         self.q.put(("live", Keys.last(str(sample.key_expr)),
@@ -102,13 +148,24 @@ class Transport:
                                     f"{self.keys.network!r}; pick another name or stop it")
             block = zenoh.CongestionControl.BLOCK  # nothing dropped under load
             for ch in ("estimate", "tracks"):  # express: no batching delay
-                self._pubs[ch] = session.declare_publisher(
-                    getattr(self.keys, ch)(self.name), congestion_control=block, express=True)
-            keys = [self.keys.scan(self.sensor), self.keys.ctl(),
+                key = getattr(self.keys, ch)(self.name)
+                self._pubs[ch] = (recovering_publisher(session, key)
+                                  if self.recover and ch == "estimate" else
+                                  session.declare_publisher(key, congestion_control=block,
+                                                            express=True))
+            keys = [self._scan_key, self.keys.ctl(),
                     *([self.keys.truth()] if self.truth else []),
                     # only the neighbours' estimates: routing filters, not decoding
                     *(self.keys.estimate(n) for n in self.neighbours)]
-            self._decl = [session.declare_subscriber(k, self._on_sample) for k in keys]
+            recovering = {self._scan_key, *(self.keys.estimate(n) for n in self.neighbours)}
+            for k in keys:
+                if self.recover and k in recovering:
+                    ch = "scan" if k == self._scan_key else "estimate"
+                    self._decl.extend(recovering_subscriber(
+                        session, k, self._on_sample,
+                        lambda n, ch=ch: self._missed(ch, n)))
+                else:
+                    self._decl.append(session.declare_subscriber(k, self._on_sample))
             self._decl.append(session.liveliness().declare_subscriber(
                 self.keys.alive("*"), self._on_live, history=True))
             self._decl.append(session.liveliness().declare_token(self.keys.alive(self.name)))

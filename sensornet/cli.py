@@ -475,7 +475,7 @@ def cmd_peer(args: argparse.Namespace) -> int:
         out_dir=out, run_id=args.run_id, viewer=args.viewer, color_index=args.color,
         idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
         save_tracks=args.save_tracks, scan_period=scn.scan_period,
-        faults=fault_injector(scn, args.run),
+        faults=fault_injector(scn, args.run), recover=args.recover,
         record=_record_meta(args, speed) if args.record else None))
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(core.consensus.o.neighbours) or 'none'}", flush=True)
@@ -561,7 +561,7 @@ def cmd_world(args: argparse.Namespace) -> int:
                          wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
                          viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun,
                          progress=progress, say=lambda line: print(line, flush=True),
-                         security=_security(args, "world", scn))
+                         security=_security(args, "world", scn), recover=args.recover)
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
@@ -963,6 +963,11 @@ def build_parser() -> argparse.ArgumentParser:
             sp.add_argument("--out", help="folder for the summary and the .rrd file")
             sp.add_argument("--run-id", type=_network_name,
                             help="Rerun recording id shared by the run's processes")
+            sp.add_argument("--recover", action="store_true",
+                            help="estimates and scans through Zenoh's advanced publisher/"
+                                 "subscriber: publishers keep their last messages, a "
+                                 "subscriber that missed some (a router's outage) asks for "
+                                 "them; counted in the summary (run --router sets it)")
         sp.add_argument("--viewer", type=_viewer,
                         help="'spawn' a Rerun viewer, 'none', or a rerun+http://HOST:PORT/proxy "
                              "URL (an unreachable URL is a warning: files only)")

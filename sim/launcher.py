@@ -158,8 +158,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
                              "no --config, --listen or --sparse with --router")
         common, eps = _routed(handle, common, ep(free_port()), names)
         world_listen = []
-    if router:
-        extra_connect = ["--connect", eps["router"], *extra_connect]
+    if router:  # recover: what a router's outage held back comes from the publishers' caches
+        extra_connect = ["--connect", eps["router"], *extra_connect, "--recover"]
     cmds = {"world": [*_cli(), "world", source, *common,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run)]

@@ -78,14 +78,16 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               wait_timeout: float = 30.0, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
-              say=None, security=None, data=None) -> dict:
+              say=None, security=None, data=None, recover: bool = False) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
 
     ``data``: the run's ``(truth, scans)`` as :func:`sim.world.generate_run` returns them,
     for scenarios that draw their own (seed 003, :mod:`sim.seed003_net`).
 
     ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
-    lines (waiting for the peers, starting).
+    lines (waiting for the peers, starting). ``recover``: scans through Zenoh's advanced
+    publisher (:func:`peers.transport.recovering_publisher`), so a peer that missed some (a
+    router's outage) gets them from the world's cache.
     """
     say = say or (lambda line: None)
     keys = Keys(network)
@@ -130,6 +132,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         pubs = {n: session.declare_publisher(keys.scan(n), congestion_control=block,
                                               express=True)
                 for n in scn.sensor_names}
+        probes = pubs  # matching_status: an advanced publisher has none, a plain one does
+        if recover:
+            from peers.transport import recovering_publisher
+
+            pubs = {n: recovering_publisher(session, keys.scan(n)) for n in scn.sensor_names}
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
         ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
@@ -150,7 +157,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))
             time.sleep(0.2)  # let the peers' subscriptions settle on every link
-            _await_subscribers([pubs[n] for n in wait_for if n in pubs], stop, 5.0)
+            _await_subscribers([probes[n] for n in wait_for if n in probes], stop, 5.0)
         say(f"world: starting {scn.num_scans} scans, one every {interval:g} s")
         ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
                                    send_time=time.time())))

@@ -126,8 +126,18 @@ def test_acl_lets_each_member_put_only_its_own_keys():
         return {e for r in pol[f"m-{member}"] for e in rules[r]["key_exprs"]
                 if "put" in rules[r]["messages"] and "ingress" in rules[r]["flows"]}
 
-    assert puts("s2") == {k.estimate("s2"), k.tracks("s2")}
-    assert puts("world") == {k.scan("*"), k.truth(), k.ctl()}
+    # and the recovery machinery's heartbeats under its own keys (--recover, routed runs)
+    assert puts("s2") == {k.estimate("s2"), k.tracks("s2"), f"{k.estimate('s2')}/@adv/**"}
+    assert puts("world") == {k.scan("*"), k.truth(), k.ctl(), f"{k.scan('*')}/@adv/**"}
+
+    def allowed(member, message):
+        return {e for r in pol[f"m-{member}"] for e in rules[r]["key_exprs"]
+                if message in rules[r]["messages"] and "ingress" in rules[r]["flows"]}
+
+    # a cache answers queries only under its owner's keys; a peer asks where it listens
+    assert allowed("s2", "declare_queryable") == {f"{k.estimate('s2')}/@adv/**"}
+    assert allowed("world", "declare_queryable") == {f"{k.scan('*')}/@adv/**"}
+    assert allowed("s3", "query") == {f"{k.scan('s3')}/@adv/**", f"{k.estimate('*')}/@adv/**"}
     tokens = {e for r in pol["m-s3"] for e in rules[r]["key_exprs"]
               if "liveliness_token" in rules[r]["messages"] and "ingress" in rules[r]["flows"]}
     assert tokens == {k.alive("s3"), k.ready("s3")}
