@@ -456,6 +456,11 @@ def fault_report(done: list[dict], summaries: dict[str, dict]) -> str:
                     for n, s in summaries.items()]
             lines.append(f"{f['action']} router at scan {f['at_scan']}: outages seen by "
                          + "; ".join(seen))
+            rec = {n: s["recovery"] for n, s in summaries.items() if "recovery" in s}
+            if rec:  # --recover: what came late from the publishers' caches, what was lost
+                lines.append("recovered after the outage (scans, estimates; lost): " + "; ".join(
+                    f"{n} {r['recovered']['scan']}, {r['recovered']['estimate']}; "
+                    f"{sum(r['unrecovered'].values())}" for n, r in rec.items()))
             continue
         seen = []
         for name, s in summaries.items():
