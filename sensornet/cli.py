@@ -610,6 +610,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         pfaults = [ProcessFault.parse(f) for f in args.fault or []]
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    if scn.network.router and hasattr(args, "router") and not args.router:
+        args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
     unknown = sorted({f.peer for f in pfaults} - set(scn.sensor_names) - routed)
     if unknown:
@@ -621,6 +623,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
         if args.secure is not None:
             raise UserError("--secure needs real processes; drop --sim")
+        if args.router is True:
+            raise UserError("--router needs real processes; drop --sim")
         check_budget(scn, args)
         return _run_twin(scn, args)
     check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
@@ -631,7 +635,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if getattr(args, "router", False):
         clash = [f for f in ("config", "listen", "sparse") if getattr(args, f, None)]
         if clash:
-            raise UserError(f"--router makes every process a client of the run's router: "
+            why = args.router if isinstance(args.router, str) else "--router"
+            raise UserError(f"{why} makes every process a client of the run's router: "
                             f"drop --{clash[0]}")
     out = _run_folder(args.out, "run")
     secure = _run_keys(args, scn, out)
@@ -660,7 +665,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                            rerun=not args.no_rerun, lease_ms=args.lease_ms,
                            sparse=args.sparse, listen=args.listen, connect=args.connect,
                            config=args.config, run_id=args.run_id, secure=secure,
-                           router=getattr(args, "router", False),
+                           router=bool(getattr(args, "router", False)),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
         if pfaults:

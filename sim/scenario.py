@@ -209,6 +209,9 @@ class NetworkSpec:
     pooled set, ``[clustering]`` table)."""
     deadline: float = 0.5
     """Fusion deadline after a scan, as a fraction of the (wall-clock) scan interval."""
+    router: bool = False
+    """``sensornet run``/``demo``: every process a client of one Zenoh router the run starts
+    (as ``--router``), not peer to peer."""
 
 
 @dataclass(frozen=True)
@@ -704,7 +707,7 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
                                 ["ospa_cutoff", "ospa_order"])),
         network=_network(_Table(top.raw("network", {}), "network", ctx, [
             "topology", "edges", "rounds", "omega", "max_age", "policy", "feedback", "speed",
-            "deadline", "filter"]), names),
+            "deadline", "filter", "router"]), names),
         source=origin,
     )
     if top.has("extended"):
@@ -882,6 +885,7 @@ def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
         speed=t.number("speed", 10.0, positive=True),
         deadline=deadline,
         filter=t.choice("filter", PEER_FILTERS, "gmphd"),
+        router=t.flag("router", False),
     )
 
 

@@ -277,3 +277,47 @@ def test_a_routed_run_survives_a_router_restart(tmp_path):
     # the estimates published while the router was down (at least those of the scan it died
     # at, or of the recovered scans before every subscription was back), from the peers' caches
     assert sum(s["recovery"]["recovered"]["estimate"] for s in summaries.values()) >= 1
+
+
+def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys):
+    """``[network] router = true`` in a scenario file is ``--router``; flags that a routed run
+    replaces are refused in one line naming the option."""
+    import sim.launcher
+    from sim.scenario import ScenarioError, load_scenario
+
+    text = (ROOT / "sim" / "scenarios" / "seed000.toml").read_text()
+    assert "\nrouter = false" in text and load_scenario("seed000").network.router is False
+    path = tmp_path / "routed.toml"
+    path.write_text(text.replace("\nrouter = false", "\nrouter = true"))
+    assert load_scenario(str(path)).network.router is True
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("\nrouter = false", '\nrouter = "yes"'))
+    with pytest.raises(ScenarioError, match="router"):
+        load_scenario(str(bad))
+    for flag in (["--sparse"], ["--config", str(CLIENT)]):
+        assert main(["run", str(path), "--no-rerun", *flag]) == 2
+        err = capsys.readouterr().err
+        assert "[network] router = true makes every process a client" in err, err
+        assert len(err.splitlines()) == 1
+    assert main(["run", "seed000", "--router", "--sim", "--no-rerun"]) == 2
+    assert "--router needs real processes" in capsys.readouterr().err
+    started = {}
+
+    class Started(Exception):
+        pass
+
+    def fake_start_run(*a, **kw):  # what cmd_run would start, without starting it
+        started.update(kw)
+        raise Started
+
+    monkeypatch.setattr(sim.launcher, "start_run", fake_start_run)
+    for source, sets in ((str(path), []), ("seed000", ["--set", "network.router=true"])):
+        started.clear()
+        with pytest.raises(Started):  # restart:router@K is a fault of a routed run only
+            main(["run", source, "--no-rerun", "--out", str(tmp_path / "o"), *sets,
+                  "--fault", "restart:router@5"])
+        assert started["router"], source
+    started.clear()
+    with pytest.raises(Started):
+        main(["run", "seed000", "--no-rerun", "--out", str(tmp_path / "p")])
+    assert not started["router"]  # plain runs stay peer to peer
