@@ -33,9 +33,10 @@ from protocol.messages import Estimate, Forward, Returns
 BATCH = 64
 """At most this many queued messages are handled per wake-up before deadlines are checked."""
 
-BACKLOG = 2
-"""Scans a peer may be behind and still work off every one (see PeerRuntime._catch_up): two
-keep its scan index within the window its neighbours' estimates are taken in."""
+BACKLOG = 4
+"""Scans a peer may be behind and still work off every one (see PeerRuntime._catch_up): a
+transient backlog (a pause, a busy moment) costs latency, not measurements; a longer one
+(the scan window is 5 ahead) means the peer cannot keep up, and it skips to the newest."""
 
 
 @dataclass(frozen=True)
