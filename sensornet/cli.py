@@ -321,6 +321,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         from sim.seed003 import main as seed003_main
 
         sets = [a for item in (args.set or []) for a in ("--set", item)]
+        if args.scenario != "seed003":  # a file: its settings
+            sets += ["--scenario", str(Path(args.scenario).resolve())]
         return seed003_main(["--runs", str(args.runs), "--jobs", str(min(args.jobs, args.runs)),
                              "--csv", str(_run_folder(args.out, "experiment")), *sets,
                              *(["--quiet"] if args.quiet else [])])

@@ -479,6 +479,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--csv", type=Path,
                    help="write the table and RMSE-over-time CSVs and the RMSE PNG here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--scenario", type=Path, default=SCENARIO,
+                   help="scenario file (default sim/scenarios/seed003.toml)")
     p.add_argument("--train-fuzzy", type=int, metavar="N", default=0,
                    help="fit the fuzzy system on training runs 10000..10000+N-1, print the "
                         "fitted [fuzzy] table as JSON and exit")
@@ -496,8 +498,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         except tomllib.TOMLDecodeError:
             overrides[k] = v  # a bare word is a string
     try:
-        cfg = load(SCENARIO, overrides)
-    except ValueError as exc:
+        cfg = load(a.scenario, overrides)
+    except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if a.fuzzy:

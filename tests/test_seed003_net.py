@@ -231,3 +231,10 @@ def test_cli_experiment_seed003_writes_the_table(tmp_path, capsys):
                if ln.strip()) == 8
     for name in ("seed003_table.csv", "seed003_rmse.csv", "seed003_rmse.png"):
         assert (tmp_path / "exp" / name).is_file()
+    assert len((tmp_path / "exp" / "seed003_rmse.csv").read_text().splitlines()) == 1 + 100
+    path = tmp_path / "seed003.toml"  # a scenario file of that name: its settings are used
+    path.write_text(seed003.SCENARIO.read_text(encoding="utf-8").replace(
+        "num_scans = 100", "num_scans = 80"), encoding="utf-8")
+    assert main(["experiment", str(path), "--runs", "1", "--jobs", "1", "--quiet",
+                 "--out", str(tmp_path / "file")]) == 0
+    assert len((tmp_path / "file" / "seed003_rmse.csv").read_text().splitlines()) == 1 + 80
