@@ -69,6 +69,7 @@ class Transport:
         self.truth = truth  # subscribe to the world's truth (only a peer without its own)
         self.refusals = None  # peers.security.RefusalLog in secure mode
         self._scan_key = keys.scan(sensor)
+        self._recovering: dict[str, str] = {}  # key -> channel of the recovering subscribers
         self.recover = recover  # estimates and scans through Zenoh's advanced pub/sub
         self.recovered = {"estimate": 0, "scan": 0}  # delivered late from a publisher's cache
         self.unrecovered = {"estimate": 0, "scan": 0}  # missed, no longer in the cache
@@ -83,9 +84,9 @@ class Transport:
     # -- callbacks (Zenoh threads) ----------------------------------------------------------
     def _on_sample(self, sample) -> None:
         key = str(sample.key_expr)
-        if self.recover and not sample.express:  # a reply from a publisher's cache
-            ch = "scan" if key == self._scan_key else "estimate"
-            self.recovered[ch] += 1
+        # a reply from a recovering publisher's cache (not express; ctl is never express)
+        if self.recover and not sample.express and key in self._recovering:
+            self.recovered[self._recovering[key]] += 1
         payload = sample.payload.to_bytes()
         if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
@@ -157,10 +158,13 @@ class Transport:
                     *([self.keys.truth()] if self.truth else []),
                     # only the neighbours' estimates: routing filters, not decoding
                     *(self.keys.estimate(n) for n in self.neighbours)]
-            recovering = {self._scan_key, *(self.keys.estimate(n) for n in self.neighbours)}
+            if self.recover:
+                self._recovering = {self._scan_key: "scan",
+                                    **{self.keys.estimate(n): "estimate"
+                                       for n in self.neighbours}}
             for k in keys:
-                if self.recover and k in recovering:
-                    ch = "scan" if k == self._scan_key else "estimate"
+                if k in self._recovering:
+                    ch = self._recovering[k]
                     self._decl.extend(recovering_subscriber(
                         session, k, self._on_sample,
                         lambda n, ch=ch: self._missed(ch, n)))

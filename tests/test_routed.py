@@ -268,15 +268,20 @@ def test_a_routed_run_survives_a_router_restart(tmp_path):
         assert s["ospa_misses"]["local"] == missed, name
         assert s["scans"] + missed == n, (name, s["scans"], missed)
         assert s["stats"]["last_fused_from"] == {m: n for m in PEERS if m != name}, name
+        # the access control lets the recovery machinery through (its @adv keys)
+        assert s["refused_by_transport_total"] == 0, (name, s["refused_by_transport"])
         rec = s["recovery"]
         assert rec["unrecovered"] == {"estimate": 0, "scan": 0}, (name, rec)
         # the scans published while the router was down, from the world's cache
         assert rec["recovered"]["scan"] >= 1, (name, rec)
         print(f"{name}: outage {seconds:.2f} s after scan {k}, recovered {rec['recovered']}, "
               f"{missed} scans missed")
-    # the estimates published while the router was down (at least those of the scan it died
-    # at, or of the recovered scans before every subscription was back), from the peers' caches
-    assert sum(s["recovery"]["recovered"]["estimate"] for s in summaries.values()) >= 1
+    # the estimates published while the router was down (those of the scan it died at, or of
+    # recovered scans before every subscription was back: 0-2 per peer seen) are in
+    # recovered["estimate"], not asserted here (none may have been held back);
+    # test_recovering_pub_sub_get_what_a_router_outage_held_back checks that they would be
+    print("estimates recovered: " + ", ".join(
+        f"{n} {s['recovery']['recovered']['estimate']}" for n, s in summaries.items()))
 
 
 def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys):
@@ -321,3 +326,77 @@ def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys
     with pytest.raises(Started):
         main(["run", "seed000", "--no-rerun", "--out", str(tmp_path / "p")])
     assert not started["router"]  # plain runs stay peer to peer
+
+
+@pytest.mark.network
+def test_recovering_pub_sub_get_what_a_router_outage_held_back():
+    """Through a router killed and started again: a plain subscriber loses what was published
+    while it was down, the recovering one (``--recover``) gets every message, in order, the
+    held-back ones from the publisher's cache (counted as recovered: not express)."""
+    import time
+
+    import zenoh
+
+    from peers.transport import recovering_publisher, recovering_subscriber
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+
+    def router():
+        proc = subprocess.Popen([sys.executable, "-m", "sim.router", "--listen", ep],
+                                cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        assert "router: listening" in proc.stdout.readline()
+        return proc
+
+    def client():
+        conf = zenoh.Config.from_file(str(CLIENT))
+        conf.insert_json5("connect/endpoints", json.dumps([ep]))
+        return zenoh.open(conf)
+
+    def until(cond, timeout=20.0):
+        done = threading.Event()
+        end = time.monotonic() + timeout
+        while not cond() and time.monotonic() < end:
+            done.wait(0.02)  # polls a condition of another process's making, bounded
+        return cond()
+
+    procs, sessions, decl = [router()], [], []
+    got, plain, missed = [], [], []
+    try:
+        pub_s, sub_s = client(), client()
+        sessions += [pub_s, sub_s]
+        decl += recovering_subscriber(sub_s, "t/estimate/s2",
+                                      lambda s: got.append((int(s.payload.to_bytes()),
+                                                            s.express)), missed.append)
+        decl.append(sub_s.declare_subscriber(
+            "t/estimate/s2", lambda s: plain.append(int(s.payload.to_bytes()))))
+        pub = recovering_publisher(pub_s, "t/estimate/s2")
+        decl.append(pub)
+        assert until(lambda: list(pub_s.info.routers_zid()) and list(sub_s.info.routers_zid()))
+        for i in range(5):
+            pub.put(str(i).encode())
+        assert until(lambda: len(plain) == 5)
+        procs[0].kill()
+        procs[0].wait()
+        assert until(lambda: not list(pub_s.info.routers_zid()))  # the publisher is cut off
+        for i in range(5, 15):  # published during the outage
+            pub.put(str(i).encode())
+        procs.append(router())
+        assert until(lambda: list(pub_s.info.routers_zid()) and list(sub_s.info.routers_zid()))
+        for i in range(15, 20):
+            pub.put(str(i).encode())
+        assert until(lambda: len(got) >= 20 and len(plain) >= 10)
+    finally:
+        for d in reversed(decl):
+            d.undeclare()
+        for s in sessions:
+            s.close()
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+                p.wait(timeout=10)
+    assert [i for i, _ in got] == list(range(20)) and missed == []
+    recovered = {i for i, express in got if not express}
+    assert set(range(5, 15)) <= recovered <= set(range(5, 20)), sorted(recovered)
+    assert not set(range(5, 15)) & set(plain)  # lost without recovery
+    print(f"recovered {len(recovered)} of 20 ({sorted(recovered)}); plain subscriber got "
+          f"{len(plain)}")
