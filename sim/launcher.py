@@ -120,7 +120,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               sparse: bool = False, listen: list[str] | None = None,
               connect: list[str] | None = None, config: str | None = None,
               run_id: str | None = None, secure: Path | None = None,
-              router: bool = False) -> RunHandle:
+              router: bool = False, recover: bool = True) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`).
 
     ``listen``: the world's endpoints (the peers connect to the first; default a free
@@ -130,7 +130,9 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     mutual TLS on ``tls/`` endpoints under the network's access control. ``router``: start a
     router first (``sensornet router``, with the folder's ``router`` key in secure mode) and make
     every process its Zenoh client (a config file ``<out>/zenoh-client.json5``; nobody else
-    listens): the routed topology of several machines, on loopback. Returns once it listens.
+    listens): the routed topology of several machines, on loopback; ``recover`` (routed runs):
+    estimates and scans through Zenoh's advanced publisher/subscriber (``--recover``). Returns
+    once it listens.
     """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
@@ -159,7 +161,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         common, eps = _routed(handle, common, ep(free_port()), names)
         world_listen = []
     if router:  # recover: what a router's outage held back comes from the publishers' caches
-        extra_connect = ["--connect", eps["router"], *extra_connect, "--recover"]
+        extra_connect = ["--connect", eps["router"], *extra_connect,
+                         *(["--recover"] if recover else [])]
     cmds = {"world": [*_cli(), "world", source, *common,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run)]
