@@ -54,11 +54,17 @@ def parse_key(key: str, network: str) -> Route | None:
     return None
 
 
+_OTHER_KINDS = {"F": 100, "R": 101}
+"""Slot kinds of flooding forwards (seed 004) and shared returns (seed 003): apart from the
+estimate kinds (0, 1), so they never share a slot with an estimate."""
+
+
 def peek(payload: bytes) -> tuple[str, int, int, int] | None:
     """``(type, k, round, kind)`` from a message's first fields, or None if they do not parse.
 
     Layouts (protocol.codec): ``[v, "E", s, k, r, q, ts, p, o, ...]``, ``[v, "S", s, k, ...]``,
-    ``[v, "T", k, ...]``. Nothing here is trusted: the full decode checks it all again.
+    ``[v, "F"|"R", s, k, r, ...]``, ``[v, "T", k, ...]``. Nothing here is trusted: the full
+    decode checks it all again.
     """
     try:
         u = msgpack.Unpacker(raw=False, max_buffer_size=_HEAD)
@@ -76,6 +82,9 @@ def peek(payload: bytes) -> tuple[str, int, int, int] | None:
         elif kind == "S":
             u.skip()
             k, r, o = u.unpack(), 0, 0
+        elif kind in _OTHER_KINDS and n >= 6:  # [v, "F"|"R", s, k, r, ...]
+            u.skip()
+            k, r, o = u.unpack(), u.unpack(), _OTHER_KINDS[kind]
         elif kind == "T":
             k, r, o = u.unpack(), 0, 0
         else:

@@ -13,7 +13,7 @@ from peers.fusers import NoFuser
 from peers.scoring import Scorer
 from protocol.codec import encode
 from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan, Truth
+from protocol.messages import Control, Estimate, Forward, Returns, Scan, ScanSet, Truth
 from sim.peers import consensus_options, make_peer
 from sim.scenario import load_scenario, parse_overrides
 from tracking.mixture import GaussianMixture
@@ -34,6 +34,9 @@ def test_peek_reads_the_header_of_every_message_and_nothing_else():
     assert peek(encode(Estimate("s2", 12, MIX, round=1, kind="prediction"))) == ("E", 12, 1, 1)
     assert peek(encode(Scan("s1", 7, np.zeros((4, 2))))) == ("S", 7, 0, 0)
     assert peek(encode(Truth(9, np.arange(1), np.zeros((1, 4))))) == ("T", 9, 0, 0)
+    assert peek(encode(Returns("s1", 5, np.zeros((3, 2)), round=0))) == ("R", 5, 0, 101)
+    fwd = Forward("s2", 6, ScanSet({"s1": np.zeros((2, 2)), "s2": np.zeros((1, 2))}), round=2)
+    assert peek(encode(fwd)) == ("F", 6, 2, 100)
     assert peek(encode(Control("end"))) is None
     for junk in (b"", b"\x93", b"\xff" * 50, b"\x9b" + b"\x01" * 300,
                  encode(Scan("s1", 7, np.zeros((4, 2))))[:5]):
