@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pytest
+import zenoh
 
 from peers.security import Security, make_keys
 from peers.session import open_session
@@ -33,6 +34,7 @@ pytestmark = pytest.mark.network
 
 NETWORK = "signnet"
 PEERS = ("s1", "s2", "s3")
+BLOCK = zenoh.CongestionControl.BLOCK  # a put's default (drop) loses copies on a busy machine
 
 
 def test_replayed_and_forged_signed_messages_are_counted(tmp_path):
@@ -66,16 +68,17 @@ def test_replayed_and_forged_signed_messages_are_counted(tmp_path):
                 if real in ours:
                     continue
                 ours.add(real)
-                relay.put(k.estimate("s2"), real)  # the real, signed message, once more
+                relay.put(k.estimate("s2"), real, congestion_control=BLOCK)  # once more
                 sent["replayed"] += 1
                 kk = decode(inner(real)).k  # the forgery names the same scan (in the window)
                 forged = s3_signer.seal(k.estimate("s2"), encode(
                     Estimate("s2", kk, empty, send_time=time.time())))
                 ours.add(forged)
-                relay.put(k.estimate("s2"), forged)
+                relay.put(k.estimate("s2"), forged, congestion_control=BLOCK)
                 sent["forged"] += 1
                 if sent["replayed"] % 2:  # well inside the ctl rate limit (the world's too)
-                    relay.put(k.ctl(), s2_signer.seal(k.ctl(), encode(Control("end", "x"))))
+                    relay.put(k.ctl(), s2_signer.seal(k.ctl(), encode(Control("end", "x"))),
+                              congestion_control=BLOCK)
                     sent["ctl"] += 1
 
         worker = threading.Thread(target=attack, daemon=True)
