@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -66,6 +67,22 @@ class RunHandle:
             self.procs[name] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                 stdin=subprocess.DEVNULL)
         return self.procs[name]
+
+    def wait_listening(self, name: str = "world", timeout: float = 60.0) -> None:
+        """Return once process ``name`` accepts connections on its endpoint (it may still be
+        importing when :func:`start_run` returns: a session that connects earlier waits for
+        Zenoh's reconnection back-off, and a refused connection means nothing)."""
+        host, _, port = self.endpoints[name].split("/", 1)[1].rpartition(":")
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                socket.create_connection((host.strip("[]"), int(port)), timeout=1.0).close()
+                return
+            except OSError:
+                if self.procs[name].poll() is not None or time.monotonic() > end:
+                    raise SessionError(f"{name} is not listening on "
+                                       f"{self.endpoints[name]}") from None
+                time.sleep(0.05)
 
     def start_router(self, timeout: float = 30.0) -> subprocess.Popen:
         """Start (or start again) the run's router; returns once it listens."""

@@ -121,6 +121,7 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
     report = {}
 
     def attack(handle):
+        handle.wait_listening("world")  # else "cannot connect" could mean "not up yet"
         eps = list(handle.endpoints.values())
         k = Keys(handle.network)
         s3 = _session_as(keys, "s3", eps)  # s3's own key, in another process's hands
