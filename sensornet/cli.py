@@ -836,16 +836,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_router(args: argparse.Namespace) -> int:
     """``sensornet router``: a Zenoh router (see :mod:`sim.router`)."""
-    from sim.router import router_security, run_router
+    from sim.router import serve
 
-    security = None
-    if args.secure:
-        security = router_security(args.secure, args.name, args.network)
-        from peers.security import check_endpoints
-
-        check_endpoints([*args.listen, *(args.connect or [])])
-    run_router(args.listen, args.connect or [], args.config, security,
-               say=lambda line: print(line, flush=True))
+    serve(args.listen, args.connect or [], args.config, args.secure, args.name, args.network)
     return 0
 
 

@@ -65,6 +65,19 @@ def run_router(listen: Sequence[str], connect: Sequence[str] = (),
     say("router: stopped")
 
 
+def serve(listen: list[str], connect: list[str], config: str | None, secure: str | None,
+          name: str = "router", network: str | None = None) -> None:
+    """Run a router from command-line values (``secure``: the keys folder), printing its
+    lines; what ``sensornet router`` and ``python -m sim.router`` both do."""
+    security = None
+    if secure:
+        from peers.security import check_endpoints
+
+        security = router_security(secure, name, network)
+        check_endpoints([*listen, *connect])
+    run_router(listen, connect, config, security, say=lambda line: print(line, flush=True))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sim.router``: ``sensornet router`` without the CLI's imports (SciPy and the
     rest take seconds to load on a busy machine: a routed run restarts its router this way)."""
@@ -80,14 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--network")
     args = ap.parse_args(argv)
     try:
-        security = None
-        if args.secure:
-            from peers.security import check_endpoints
-
-            security = router_security(args.secure, args.name, args.network)
-            check_endpoints([*args.listen, *(args.connect or [])])
-        run_router(args.listen, args.connect or [], args.config, security,
-                   say=lambda line: print(line, flush=True))
+        serve(args.listen, args.connect or [], args.config, args.secure, args.name, args.network)
     except SessionError as exc:
         print(f"{ap.prog}: error: {exc}", file=sys.stderr)
         return 2
