@@ -352,7 +352,7 @@ def test_recovering_pub_sub_get_what_a_router_outage_held_back():
         conf.insert_json5("connect/endpoints", json.dumps([ep]))
         return zenoh.open(conf)
 
-    def until(cond, timeout=20.0):
+    def until(cond, timeout=60.0):  # a bound for failure only: each wait ends on its event
         done = threading.Event()
         end = time.monotonic() + timeout
         while not cond() and time.monotonic() < end:
