@@ -135,7 +135,7 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
                 reached.set()
 
         sub = s3.declare_subscriber(k.scan("s3"), on_scan)
-        tokens, sent = [], 0
+        tokens, sent, rounds, attacked = [], 0, 0, set()
         try:
             # while the world waits for its peers: who cannot even connect
             no_cert = zenoh.Config()
@@ -156,8 +156,13 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
                            who.liveliness().declare_token(k.alive("s9")),
                            who.liveliness().declare_token(k.ready("s2"))]
             end_k = min(seen["k"] + 15, scn.num_scans - 2)
-            while seen["k"] < end_k:  # every scan: forge what the issue measured
+            t0 = time.monotonic()
+            # every scan: forge what the issue measured, for 15 scans and at least 10 rounds
+            # (one clean-clone run got only 7 rounds in during those 15 scans)
+            while seen["k"] < end_k or (rounds < 10 and seen["k"] < scn.num_scans - 2):
                 kk = seen["k"]
+                rounds += 1
+                attacked.add(kk)
                 for who in (s3, s9):
                     for rnd in range(3):
                         who.put(k.estimate("s2"), encode(Estimate("s2", kk, empty, round=rnd,
@@ -169,18 +174,20 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
                     who.put(k.ctl(), encode(Control("end", "forged", {})))
                     sent += 3 + len(PEERS) + 1
                 time.sleep(0.02)  # a few forgeries per scan interval (0.1 s)
+            report["attack_s"] = round(time.monotonic() - t0, 2)
         finally:
             for t in tokens:
                 t.undeclare()
             sub.undeclare()
             s9.close()
             s3.close()
-        report["sent"] = sent
+        report.update(sent=sent, rounds=rounds, scans_attacked=len(attacked))
 
     codes, summaries = _run(tmp_path / "run", keys, scn, during=attack)
     assert report["no_cert_refused"] and report["other_ca_refused"]
     assert report["plain_tcp_refused"] and report["all_up"]  # refused by live peers
-    assert report["sent"] > 100, report
+    assert report["rounds"] >= 5 and report["scans_attacked"] >= 3, report
+    assert report["sent"] == report["rounds"] * 2 * (3 + len(PEERS) + 1), report
     _check_complete(scn, codes, summaries)
     _, clean_summaries = clean
     for name, s in clean_summaries.items():
