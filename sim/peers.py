@@ -67,12 +67,19 @@ def make_parts(scn: Scenario, name: str, run: int = 0):
         from tracking.idpc import ClusterParams
 
         c = scn.clustering
+        if c.estimator == "ic":  # or run the iterated-corrector GM-PHD over it
+            from peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
+
+            names, A = adjacency(scn)
+            order = [names[i] for i in corrector_order(A)]
+            est = IcFloodEstimator(name, make_filter(scn, order), order)
+            return est, IcFloodFuser(name, scn.sensor_names, net.rounds, est)
         pds = {s.detection_probability for s in scn.sensors}
         params = ClusterParams(c.cutoff, c.zeta, c.radius_factor, c.split_factor,
                                detection_probability=float(np.mean(sorted(pds))))
         roster = {s.name: sensor_model(s) for s in scn.sensors}
         est = FloodEstimator(name, roster, params, c.assumed_scans,
-                             seed=zlib.crc32(f"{scn.seed}/{run}".encode()))
+                             seed=zlib.crc32(f"{scn.seed}/{run}".encode()), method=c.estimator)
         return est, FloodFuser(name, scn.sensor_names, net.rounds)
     if net.filter in ("gmphd", "et-gmphd"):
         if rule == "ratio":

@@ -53,6 +53,9 @@ SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
 FUSION_RULES = ("gci", "aa", "ratio", "none")
 PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd", "flooding")
+FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
+"""What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
+FTC baseline, or the iterated-corrector GM-PHD (``clustering.estimator``)."""
 PARTITIONS = ("distance", "grid-spectral")
 OMEGA_RULES = ("uniform", "metropolis", "det", "chernoff")
 CARDINALITY_RULES = ("emd", "separate")
@@ -258,6 +261,11 @@ class ClusteringSpec:
     """Clusters above ``split_factor S Pd`` points are split by k-means."""
     assumed_scans: str = "held"
     """``S``: the scans a peer holds (``"held"``) or every sensor (``"all"``)."""
+    estimator: str = "idpc"
+    """The flooding peers' estimator from the pooled scans: ``"idpc"`` (density-peaks
+    clustering), ``"ftc"`` (DBSCAN + k-means) or ``"ic"`` (the iterated-corrector GM-PHD, one
+    ``[filter]``/``[birth]`` GM-PHD corrected with each pooled scan in turn, carried from scan
+    to scan; ``peers.flooding.IcFloodEstimator``). Seed 004's ``flooding.estimator``."""
 
 
 @dataclass(frozen=True)
@@ -722,7 +730,8 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             zeta=t.number("zeta", 0.3, positive=True),
             radius_factor=t.number("radius_factor", 1.25, positive=True),
             split_factor=t.number("split_factor", 1.6, positive=True),
-            assumed_scans=t.choice("assumed_scans", ("held", "all"), "held")))
+            assumed_scans=t.choice("assumed_scans", ("held", "all"), "held"),
+            estimator=t.choice("estimator", FLOOD_ESTIMATORS, "idpc")))
     if scn.network.filter == "et-gmphd" and scn.extended is None:
         raise ctx.fail("network.filter", "key 'network.filter' is 'et-gmphd', which needs an "
                                          "[extended] table")

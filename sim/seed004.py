@@ -19,7 +19,10 @@ feeds the same scans to every method:
   arithmetic averaging, Metropolis weights; the peer reports the extraction of its fused
   density. The local filters keep their own posteriors (no feedback: our reading).
 - ``IC``: the iterated corrector (sensor-by-sensor update) of one GM-PHD over the 20 scans in the
-  depth-first order of the graph from sensor 0; the density travels along that order.
+  depth-first order of the graph from sensor 0 (:func:`iterated_corrector`, order
+  :func:`peers.flooding.corrector_order`); the density travels along that order. In the network
+  (``sensornet run seed004 --set flooding.estimator=ic``) every flooding peer runs the same
+  corrector over its pooled scans (:class:`peers.flooding.IcFloodEstimator`).
 - ``centralised``: the same iterated-corrector GM-PHD at the peer of least eccentricity, fed by
   every scan routed to it over shortest paths: the estimates are IC's, the cost differs.
 
@@ -52,12 +55,13 @@ from pathlib import Path
 
 import numpy as np
 import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
-from scipy.sparse.csgraph import depth_first_order, shortest_path
+from scipy.sparse.csgraph import shortest_path
 
 from peers.faults import FaultInjector
 from peers.flooding import (
     TUPLES_PER_MEASUREMENT,
     Deliver,
+    corrector_order,
     flood,
     flooding_bytes,
     flooding_tuples,
@@ -66,6 +70,7 @@ from protocol.codec import encode
 from protocol.messages import Estimate, Scan
 from sim.faultplan import FaultPlan, LinkFaults, Uniform
 from sim.progress import Progress
+from sim.scenario import FLOOD_ESTIMATORS
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
 from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
@@ -113,6 +118,7 @@ class Seed004:
     cardinality: str = "separate"
     clustering: ClusterParams = ClusterParams()
     assumed_scans: str = "held"
+    estimator: str = "idpc"
     iterations: int = 4
     rounds: tuple[int, ...] = (1, 2, 3, 4)
     ospa_cutoff: float = 100.0
@@ -177,7 +183,8 @@ _KEYS = {
                               "birth_cov_diag", "prune_threshold", "merge_threshold",
                               "max_components", "publish_threshold", "cardinality")},
     "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
-    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans"},
+    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans",
+                 "estimator": "estimator"},
     "consensus": {"rounds": "rounds"},
     "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
 }
@@ -228,6 +235,9 @@ def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
     if scn.assumed_scans not in ("held", "all"):
         raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
                             f"expected 'held' or 'all'")
+    if scn.estimator not in FLOOD_ESTIMATORS:
+        raise ScenarioError(f"{path}: flooding.estimator {scn.estimator!r}: expected one of "
+                            f"{', '.join(map(repr, FLOOD_ESTIMATORS))}")
     if scn.variant not in VARIANTS:
         raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
     scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
@@ -294,7 +304,8 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
         "network": network,
         **{k: doc[k] for k in passed if k in doc},
         "clustering": {"cutoff": c.cutoff, "zeta": c.zeta, "radius_factor": c.radius_factor,
-                       "split_factor": c.split_factor, "assumed_scans": scn.assumed_scans},
+                       "split_factor": c.split_factor, "assumed_scans": scn.assumed_scans,
+                       "estimator": scn.estimator},
     }
 
 
@@ -384,6 +395,19 @@ def _n_tuples(mix: GaussianMixture) -> int:
     return TUPLES_COMPONENT * len(mix) + TUPLES_CARDINALITY
 
 
+def iterated_corrector(mix: GaussianMixture, scans: Sequence[np.ndarray],
+                       sensors: Sequence[SensorParams], order: Sequence[int], reducer: Reducer,
+                       prune_threshold: float) -> list[GaussianMixture]:
+    """The IC of seed 004 (ALGORITHMS.md §9): the prediction ``mix`` corrected with ``scans[s]``
+    by ``sensors[s]`` for ``s`` in ``order``, reduced after each sensor; the density after each
+    sensor (the last is the posterior)."""
+    out = []
+    for s in order:
+        mix = reducer(update(mix, scans[s], sensors[s], None, prune_threshold))
+        out.append(mix)
+    return out
+
+
 def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[str, float]]:
     """Every method on run ``run``'s truth and scans; per-method means over scans and peers.
 
@@ -403,7 +427,7 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
     sensors = [scn.sensor_params(m) for m in models]
     local = [GMPHDFilter(cv, [s], birth, scn.survival_probability, reducer) for s in sensors]
     mixes = [f.initial() for f in local]
-    order = depth_first_order(A, 0, directed=False, return_predecessors=False)
+    order = corrector_order(A)
     ecc = hops.max(axis=1)
     centre = int(np.argmin(ecc))
     ic_mix = GaussianMixture.empty(4)
@@ -473,12 +497,13 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
                                                    nbytes[i])
         # iterated corrector along the depth-first order; centralised: the same at the centre
         t0 = time.process_time()
-        ic_mix = local[0].predict(ic_mix)
+        passes = iterated_corrector(local[0].predict(ic_mix), scans, sensors, order, reducer,
+                                    scn.prune_threshold)
+        ic_mix = passes[-1]
         ic_tuples, ic_bytes = 0.0, 0.0
-        for s, nxt in zip(order, np.roll(order, -1), strict=True):
-            ic_mix = reducer(update(ic_mix, scans[s], sensors[s], None, scn.prune_threshold))
-            ic_tuples += hops[s, nxt] * _n_tuples(ic_mix)
-            ic_bytes += hops[s, nxt] * _n_bytes(ic_mix, k + 1)
+        for s, nxt, mix in zip(order, np.roll(order, -1), passes, strict=True):
+            ic_tuples += hops[s, nxt] * _n_tuples(mix)
+            ic_bytes += hops[s, nxt] * _n_bytes(mix, k + 1)
         dt = time.process_time() - t0
         est = _positions(ic_mix)
         tally("IC").add(est, x, scn, ic_tuples / S, dt / S, ic_bytes / S)
