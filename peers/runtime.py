@@ -347,6 +347,7 @@ class PeerRuntime:
         if refusals is not None:  # secure mode: what the access control refused on arrival
             s["refused_by_transport"] = refusals.counts()
             s["refused_by_transport_total"] = refusals.total()
+            s["signatures_checked"] = self.transport.check_signatures
         if self.transport.recover:  # delivered late from a publisher's cache, or lost
             s["recovery"] = self.transport.recovery()
         errors = dict(s["internal_errors"])

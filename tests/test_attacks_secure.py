@@ -84,6 +84,8 @@ def test_a_secure_run_works_end_to_end(clean, scn):
     for name, s in summaries.items():
         assert s["rejected_total"] == 0, (name, s["rejected"])
         assert s["mean_ospa_fused"] < s["mean_ospa_local"], name
+        # a mutual-TLS mesh without a router: the links prove each sender (tests/test_envelope)
+        assert s["signatures_checked"] is False, name
         assert s["stats"]["last_fused_from"] == {m: scn.num_scans for m in PEERS
                                                  if m != name}, name
 

@@ -111,6 +111,7 @@ def test_replayed_and_forged_signed_messages_are_counted(tmp_path):
         assert s["ospa_misses"] == {"local": 0, "fused": 0}, name
         assert s["mean_ospa_fused"] < s["mean_ospa_local"], name
         assert s["ctl_end_while_world_alive"] <= 1, name  # the world's own "end" only
+        assert s["signatures_checked"] is True, name  # a router is in the roster
         # nothing the relay sent reached a core: only the envelope's reasons (and no decoding)
         assert set(s["rejected"]) <= {"replayed", "unauthenticated"}, (name, s["rejected"])
         bad = s["rejected"].get("unauthenticated", 0)

@@ -183,6 +183,39 @@ def test_forged_moved_tampered_or_unsigned_messages_are_unauthenticated(keys, si
     assert verifier.open(key, good)[1] is None
 
 
+def test_without_the_signature_check_the_trailer_and_replays_are_still_checked(signers,
+                                                                                 keys):
+    """``check_signature=False`` (a link that proves the sender): a wrong signature is not
+    looked at, but an unsigned message is still refused and a copy is still ``replayed``."""
+    v = Security.load(keys, "s1", NET, PEERS).verifier()
+    key = K.estimate("s2")
+    payload = _estimate(k=5)
+    forged = signers["s3"].seal(key, payload)  # a link would have refused its sender
+    assert v.open(key, forged) == (None, "unauthenticated")
+    assert v.open(key, forged, check_signature=False) == (payload, None)
+    assert v.open(key, forged, check_signature=False) == (None, "replayed")
+    assert v.open(key, payload, check_signature=False) == (None, "unauthenticated")
+    assert v.open(K.estimate("s9"), signers["s2"].seal(K.estimate("s9"), payload),
+                  check_signature=False) == (None, "unauthenticated")  # owner not in roster
+
+
+def test_signatures_are_checked_where_a_link_does_not_prove_the_sender(keys, tmp_path):
+    """A peer checks every signature when the network has a router (which the access control
+    lets put on every key), runs with recovery (a publisher's cache replies on any member's
+    ingress) or with a user's Zenoh config file; in a mesh of mutual-TLS links without any of
+    these, the access control already refuses every put but the key owner's, and only the
+    trailer and the replay check run."""
+    routed = tmp_path / "routed"
+    make_keys(NET, ["world", *PEERS, "router"], routed)
+    for folder, recover, conf, expect in ((keys, False, None, False), (keys, True, None, True),
+                                          (routed, False, None, True),
+                                          (keys, False, "zenoh.json5", True)):
+        t = Transport(K, "s1", "s1", ("s2", "s3"), None, ((), (), conf, None, True),
+                      security=Security.load(folder, "s1", NET, PEERS), recover=recover)
+        t.arm_signatures()  # what open() does first, before any session
+        assert t.verifier is not None and t.check_signatures is expect, (folder, recover, conf)
+
+
 class _Sample:
     def __init__(self, key: str, payload: bytes) -> None:
         self.key_expr, self._p = key, payload
