@@ -128,6 +128,7 @@ class PeerCore:
         self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
         self.stopped: str | None = None
         self._pending_local: list[int] = []
+        self._pending_fused: list[tuple[int, np.ndarray]] = []  # (k, states), to score
         self.world_gone: float | None = None  # when the world's token went (in the grace)
         self.world_outages: list[tuple[int, float]] = []  # (last scan before, seconds)
         self.sent_bytes: Counter = Counter()
@@ -178,7 +179,7 @@ class PeerCore:
                 continue
             out += self._wrap(self.consensus.on_deadline(k, now))
             self._arm(k)
-        self._score_local()
+        self._score_deferred()
         return out + self._records()
 
     def liveliness(self, name: str, joined: bool, now: float) -> list[Output]:
@@ -217,7 +218,7 @@ class PeerCore:
         """End of the run: fuse what is pending, score what is missing."""
         out = self._wrap(self.consensus.finish(now))
         self.deadlines.clear()
-        self._score_local()
+        self._score_deferred()
         self.scorer.finish()
         return out + self._records()
 
@@ -268,7 +269,7 @@ class PeerCore:
         self.last_accept = now
         out = [Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
         self.scorer.expect(k)
-        self._score_local()  # the previous scan's, if no tick came between (a backlog)
+        self._score_deferred()  # the previous scan's, if no tick came between (a backlog)
         out += self._wrap(c.on_scan(k, msg.z, steps, now))
         self.scorer.advance(k)
         self._pending_local.append(k)
@@ -358,7 +359,7 @@ class PeerCore:
                 out.append(Publish("tracks", m.k, encode(m), m))
                 self.sent_bytes["tracks"] += len(out[-1].payload)
                 out.append(self._scan_cost(m.k))
-                self.scorer.output("fused", m.k, m.states)
+                self._pending_fused.append((m.k, m.states))  # scored after publishing
         return out
 
     def _scan_cost(self, k: int) -> Record:
@@ -371,8 +372,12 @@ class PeerCore:
         return Record("cost", k, {"tuples": d[1], "tuples_published": d[0],
                                   "bytes": d[2] * fan, "bytes_published": d[2]})
 
-    def _score_local(self) -> None:
-        """Extract and score the local estimate (kept off the critical path)."""
+    def _score_deferred(self) -> None:
+        """Score the fused tracks published since the last call, then extract and score the
+        local estimate: both kept off the path from scan to published tracks."""
+        for k, states in self._pending_fused:
+            self.scorer.output("fused", k, states)
+        self._pending_fused.clear()
         c = self.consensus
         while self._pending_local:
             k = self._pending_local.pop()
