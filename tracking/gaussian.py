@@ -11,6 +11,13 @@ import numpy as np
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
+try:
+    from numpy._core.multiarray import c_einsum
+except ImportError:  # pragma: no cover (NumPy 1.x)
+    c_einsum = np.einsum
+"""``np.einsum`` without its Python wrapper: what ``np.einsum(..., optimize=False)`` (the
+default) calls, so the same numbers; the wrapper costs more than a small stack's product."""
+
 
 def _inv_det_2x2(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray):
     """Elementwise inverse entries and determinant of [[a, b], [c, d]]."""

@@ -13,6 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from tracking.gaussian import c_einsum as _c_einsum
 from tracking.gaussian import inv_det_spd
 from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity, MeasurementModel
@@ -126,11 +127,6 @@ def _inv_det_2x2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     inv = S[:, ::-1, ::-1].swapaxes(1, 2) * _ADJ_SIGN  # [[d, -b], [-c, a]]
     inv *= (1.0 / det)[:, None, None]
     return inv, det
-try:
-    from numpy._core.multiarray import c_einsum as _c_einsum
-except ImportError:  # pragma: no cover (NumPy 1.x)
-    _c_einsum = np.einsum
-"""``np.einsum`` without its Python wrapper (what ``np.einsum(..., optimize=False)`` calls)."""
 
 
 @lru_cache(maxsize=64)

@@ -25,7 +25,7 @@ from functools import cached_property
 
 import numpy as np
 
-from tracking.gaussian import LOG_2PI, inv_det_2x2
+from tracking.gaussian import LOG_2PI, c_einsum, inv_det_2x2
 from tracking.mixture import GaussianMixture
 from tracking.models import RangeBearing
 
@@ -281,9 +281,9 @@ class IMMEKF:
         c, mu = mixing(state.probs, P)
         m0 = mu.T @ state.means  # (j, d)
         diff = state.means[None, :, :] - m0[:, None, :]  # (j, i, d)
-        P0 = np.einsum("ij,iab->jab", mu, state.covs) + np.einsum(
+        P0 = c_einsum("ij,iab->jab", mu, state.covs) + c_einsum(
             "ij,jia,jib->jab", mu, diff, diff)
-        means = np.einsum("jab,jb->ja", F, m0)
+        means = c_einsum("jab,jb->ja", F, m0)
         covs = F @ P0 @ Ft
         covs += Q
         return IMMGaussianState(c, means, _symmetrise(covs))
@@ -307,11 +307,11 @@ class IMMEKF:
         S += R
         Sinv, detS = inv_det_2x2(S)
         K = PHt @ Sinv  # (M, 6, 2)
-        means = pred.means + np.einsum("jab,jb->ja", K, nu)
+        means = pred.means + c_einsum("jab,jb->ja", K, nu)
         IKH = _EYE6 - K @ H
         covs = IKH @ pred.covs @ np.swapaxes(IKH, 1, 2)
         covs += K @ R @ np.swapaxes(K, 1, 2)
-        log_lik = np.einsum("ja,jab,jb->j", nu, Sinv, nu)
+        log_lik = c_einsum("ja,jab,jb->j", nu, Sinv, nu)
         log_lik += np.log(detS)
         log_lik += 2 * LOG_2PI
         log_lik *= -0.5

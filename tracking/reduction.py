@@ -23,6 +23,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from tracking.gaussian import _generic_inverse, inv_det_spd, inv_spd, log_gaussian
+from tracking.gaussian import c_einsum as _c_einsum
 from tracking.mixture import GaussianMixture
 
 try:  # the ufunc np.linalg.inv calls (NumPy 1.x and 2.x)
@@ -168,11 +169,6 @@ def _inv_spd(P: np.ndarray) -> np.ndarray:
     return 0.5 * (inv + inv.swapaxes(-1, -2))
 
 
-try:
-    from numpy._core.multiarray import c_einsum as _c_einsum
-except ImportError:  # pragma: no cover (NumPy 1.x)
-    _c_einsum = np.einsum
-"""``np.einsum`` without its Python wrapper (what ``np.einsum(..., optimize=False)`` calls)."""
 _ALL_PAIRS_UP_TO = 48
 """Up to this many components, :func:`_close_pairs` tests every pair exactly."""
 
