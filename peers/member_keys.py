@@ -1,0 +1,228 @@
+"""A network's member keys: its CA, a TLS key and certificate per member, the signing roster.
+
+``sensornet keys NETWORK --out DIR`` (:func:`make_keys`) writes a network CA and, per member
+(every peer and the world), a private key and a certificate whose common name is the member's
+name, all plain PEM files (``openssl x509 -in DIR/s1.pem -noout -text`` reads them):
+
+    DIR/ca.pem  DIR/ca.key          the network's CA (keep ca.key off the members' machines)
+    DIR/<name>.pem  DIR/<name>.key  one per member: CN=<name>, O=<network>, signed by the CA
+    DIR/<name>.ed25519              one per member: its message-signing key (Ed25519)
+    DIR/members.json                the roster: member names and signing public keys
+
+:func:`load_roster` reads the signing public keys back, :func:`keys_network` and
+:func:`common_name` what a folder's CA and a member's certificate name. How a member uses the
+folder in secure mode is :class:`peers.security.Security`.
+"""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+import json
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from peers.session import SessionError
+from protocol.keys import check_name
+
+WORLD = "world"
+"""The member name of the world process (scans, truth, control)."""
+CA_CERT, CA_KEY = "ca.pem", "ca.key"
+SIGN_KEY = ".ed25519"
+"""Suffix of a member's message-signing private key (``NAME.ed25519``, PEM PKCS#8)."""
+SIGNING = "ed25519"
+"""Field of ``members.json`` holding the roster: member name -> signing public key."""
+DEFAULT_HOSTS = ("localhost", "127.0.0.1")
+"""Names every member certificate is valid for (the host part of the endpoints dialled)."""
+
+
+class SecurityError(SessionError):
+    """Keys could not be made or a secure-mode folder is incomplete (one line)."""
+
+
+# -- keys and certificates --------------------------------------------------------------------
+def _name(cn: str, org: str | None = None):
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    attrs = [x509.NameAttribute(NameOID.COMMON_NAME, cn)]
+    if org:
+        attrs.append(x509.NameAttribute(NameOID.ORGANIZATION_NAME, org))
+    return x509.Name(attrs)
+
+
+def _write(path: Path, data: bytes, private: bool = False) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    tmp.replace(path)
+
+
+def _san(hosts: Iterable[str]):
+    from cryptography import x509
+
+    names = []
+    for h in hosts:
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(h)))
+        except ValueError:
+            names.append(x509.DNSName(h))
+    return x509.SubjectAlternativeName(names)
+
+
+def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
+              hosts: Sequence[str] = DEFAULT_HOSTS, overwrite: bool = False) -> list[Path]:
+    """Write a network CA and a key + certificate per member into ``out``; returns the paths.
+
+    An existing CA in ``out`` is reused (so members can be added later with the same CA);
+    an existing member key is kept unless ``overwrite`` (key rotation: issue a new one).
+    Keys are ECDSA P-256 (what every TLS stack accepts); member certificates carry both
+    serverAuth and clientAuth (a peer listens and connects) and ``hosts`` as SANs. Each
+    member also gets a message-signing key ``NAME.ed25519`` (made where missing, new with
+    ``overwrite``), whose public half goes into the roster, ``members.json``.
+    """
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    check_name(network, "network name")
+    members = list(dict.fromkeys(members))
+    if not members:
+        raise SecurityError("no members: give --members a,b,c or --scenario")
+    for m in members:
+        check_name(m, "member name")
+    if CA_CERT.removesuffix(".pem") in members:
+        raise SecurityError("'ca' cannot be a member name (it is the CA's file)")
+    out.mkdir(parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.UTC)
+    start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
+    pem = serialization.Encoding.PEM
+    no_pw = serialization.NoEncryption()
+    pkcs8 = serialization.PrivateFormat.PKCS8
+
+    ca_cert_path, ca_key_path = out / CA_CERT, out / CA_KEY
+    if ca_cert_path.exists() and ca_key_path.exists():
+        ca_key = serialization.load_pem_private_key(ca_key_path.read_bytes(), None)
+        ca_cert = x509.load_pem_x509_certificate(ca_cert_path.read_bytes())
+        org = ca_cert.subject.get_attributes_for_oid(x509.oid.NameOID.ORGANIZATION_NAME)
+        if not org or org[0].value != network:
+            raise SecurityError(f"{out} holds the CA of another network "
+                                f"({org[0].value if org else '?'!r}); use another folder")
+    else:
+        ca_key = ec.generate_private_key(ec.SECP256R1())
+        subject = _name(f"sensornet {network} CA", network)
+        ca_cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
+                   .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(start).not_valid_after(end)
+                   .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+                   .add_extension(x509.KeyUsage(
+                       digital_signature=False, content_commitment=False,
+                       key_encipherment=False, data_encipherment=False, key_agreement=False,
+                       key_cert_sign=True, crl_sign=True, encipher_only=False,
+                       decipher_only=False), critical=True)
+                   .add_extension(x509.SubjectKeyIdentifier.from_public_key(
+                       ca_key.public_key()), critical=False)
+                   .sign(ca_key, hashes.SHA256()))
+        _write(ca_key_path, ca_key.private_bytes(pem, pkcs8, no_pw), private=True)
+        _write(ca_cert_path, ca_cert.public_bytes(pem))
+    written = [ca_cert_path, ca_key_path]
+    for m in members:
+        key_path, cert_path = out / f"{m}.key", out / f"{m}.pem"
+        if key_path.exists() and cert_path.exists() and not overwrite:
+            written += [cert_path, key_path]
+            continue
+        key = ec.generate_private_key(ec.SECP256R1())
+        cert = (x509.CertificateBuilder().subject_name(_name(m, network))
+                .issuer_name(ca_cert.subject).public_key(key.public_key())
+                .serial_number(x509.random_serial_number())
+                .not_valid_before(start).not_valid_after(end)
+                .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+                .add_extension(x509.KeyUsage(
+                    digital_signature=True, content_commitment=False, key_encipherment=False,
+                    data_encipherment=False, key_agreement=False, key_cert_sign=False,
+                    crl_sign=False, encipher_only=False, decipher_only=False), critical=True)
+                .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
+                                                      ExtendedKeyUsageOID.CLIENT_AUTH]),
+                               critical=False)
+                .add_extension(_san(hosts), critical=False)
+                .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
+                    ca_key.public_key()), critical=False)
+                .sign(ca_key, hashes.SHA256()))
+        _write(key_path, key.private_bytes(pem, pkcs8, no_pw), private=True)
+        _write(cert_path, cert.public_bytes(pem))
+        written += [cert_path, key_path]
+    roster = out / "members.json"
+    known = json.loads(roster.read_text()) if roster.exists() else {}
+    signing = dict(known.get(SIGNING, {}))
+    for m in members:  # message signing keys (Ed25519): made where missing, or rotated
+        sign_path = out / f"{m}{SIGN_KEY}"
+        if overwrite or not sign_path.is_file():
+            _write(sign_path, Ed25519PrivateKey.generate().private_bytes(pem, pkcs8, no_pw),
+                   private=True)
+        signing[m] = _public_b64(serialization.load_pem_private_key(
+            sign_path.read_bytes(), None).public_key())
+        written.append(sign_path)
+    _write(roster, json.dumps({"network": network,
+                               "members": list(dict.fromkeys([*known.get("members", []),
+                                                              *members])),
+                               SIGNING: signing}, indent=1).encode())
+    return [*written, roster]
+
+
+def _public_b64(public_key) -> str:
+    """An Ed25519 public key as the base64 of its DER SubjectPublicKeyInfo: the one line
+    between the PEM markers of ``openssl pkey -in NAME.ed25519 -pubout``."""
+    import base64
+
+    from cryptography.hazmat.primitives import serialization
+
+    der = public_key.public_bytes(serialization.Encoding.DER,
+                                  serialization.PublicFormat.SubjectPublicKeyInfo)
+    return base64.b64encode(der).decode()
+
+
+def load_roster(folder: str | Path) -> dict:
+    """The members' message-signing public keys from ``members.json`` (name -> key)."""
+    import base64
+
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+    from cryptography.hazmat.primitives.serialization import load_der_public_key
+
+    path = Path(folder) / "members.json"
+    try:
+        entries = json.loads(path.read_text()).get(SIGNING, {}) if path.is_file() else {}
+        roster = {n: load_der_public_key(base64.b64decode(v)) for n, v in entries.items()}
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise SecurityError(f"{path}: unreadable signing roster ({exc})") from None
+    bad = [n for n, k in roster.items() if not isinstance(k, Ed25519PublicKey)]
+    if bad:
+        raise SecurityError(f"{path}: the signing keys of {', '.join(bad)} are not Ed25519")
+    return roster
+
+
+def keys_network(folder: str | Path) -> str:
+    """The network a keys folder was made for (its CA's organisation name)."""
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    path = Path(folder) / CA_CERT
+    if not path.is_file():
+        raise SecurityError(f"{folder}: no {CA_CERT} (make the keys with: sensornet keys "
+                            f"NETWORK --out {folder})")
+    org = x509.load_pem_x509_certificate(path.read_bytes()).subject \
+        .get_attributes_for_oid(NameOID.ORGANIZATION_NAME)
+    if not org:
+        raise SecurityError(f"{path} names no network (its O= field is empty)")
+    return str(org[0].value)
+
+
+def common_name(cert_path: Path) -> str:
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    cert = x509.load_pem_x509_certificate(Path(cert_path).read_bytes())
+    return str(cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value)
