@@ -1,4 +1,4 @@
-"""Measurement flooding (peers/flooding.py): de-duplication, completion, loss, tuple counts."""
+"""Measurement flooding (peers/flooder.py): de-duplication, completion, loss, tuple counts."""
 
 from __future__ import annotations
 
