@@ -5,7 +5,9 @@
 carries out: the Zenoh runtime (``peers.runtime``) with sockets, clocks and files, the twin
 (``sim.twin``) on a virtual clock. Everything between the bytes and the outputs lives here:
 key and sender checks, decoding, every bound on what one message may cost, rejection counters
-by reason code, deadlines, departures, scoring.
+by reason code, deadlines, departures, scoring. Its configuration (:class:`CoreConfig`)
+and output types are in ``peers.core_types``, what it reports for the summary in
+``peers.core_summary``.
 
 Bounds (each rejection is counted under its reason in :meth:`snapshot`):
 
@@ -28,70 +30,17 @@ A ``ctl`` "end" alone never stops a peer: it stops when the world's liveliness t
 from __future__ import annotations
 
 from collections import Counter, deque
-from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from peers.admission import Admission, Route, parse_key
 from peers.consensus import Consensus
+from peers.core_summary import core_cost, core_snapshot, cost_per_scan
+from peers.core_types import CoreConfig, Output, Publish, Record, Stop
 from peers.scoring import Scorer
-from protocol.codec import DEFAULT_LIMITS, Limits, Rejected, decode, encode
+from protocol.codec import Rejected, decode, encode
 from protocol.keys import Keys
 from protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
-
-
-@dataclass(frozen=True)
-class Publish:
-    """Put ``payload`` on this peer's ``channel`` key (``"estimate"`` or ``"tracks"``)."""
-
-    channel: str
-    k: int
-    payload: bytes
-    message: Estimate | Forward | Returns | Tracks
-
-
-@dataclass(frozen=True)
-class Record:
-    """Something to log or measure (Rerun, latency breakdown); ``values`` are plain data."""
-
-    kind: str
-    k: int
-    values: dict
-
-
-@dataclass(frozen=True)
-class Stop:
-    """The run is over for this peer."""
-
-    reason: str
-
-
-Output = Publish | Record | Stop
-
-
-@dataclass(frozen=True)
-class CoreConfig:
-    """Clock and bounds of one peer (the filter and fusion settings live in its parts)."""
-
-    name: str
-    sensor: str
-    network: str
-    interval: float = 1.0
-    """Seconds between scans on the driver's clock."""
-    deadline: float = 0.5
-    """Fusion deadline after a scan arrives, as a fraction of ``interval``."""
-    horizon: int = 5
-    """Scans ahead of the newest accepted scan that a message may be stamped with."""
-    quiet: float = 3.0
-    """Intervals without an accepted scan after which a scan outside the horizon is taken as
-    a new start of the scan numbering (a late join, a restarted world)."""
-    rate_factor: float = 4.0
-    """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
-    world_grace: float = 0.0
-    """Seconds a peer waits for the world's liveliness token to come back before the run is
-    over for it (0: at once). A router restart takes every token away for its outage: the
-    world back within the grace is an outage (``world_outages``), not the end."""
-    limits: Limits = DEFAULT_LIMITS
 
 
 class PeerCore:
@@ -389,61 +338,24 @@ class PeerCore:
         recs = self.consensus.drain_records() + self.scorer.drain_records()
         return [Record(r.pop("kind"), r.pop("k"), r) for r in recs]
 
-    # -- reporting --------------------------------------------------------------------------
+    # -- reporting (peers.core_summary) ------------------------------------------------------
     def cost(self) -> dict:
-        """Tuples and bytes this peer sent per scan (estimates and forwards; ALGORITHMS.md §9:
-        a 4-D Gaussian component 15 tuples, a 2-D measurement 2; no fusion mode here sends
-        particles or a separate cardinality). ``tuples_per_scan`` counts a publication once
-        per live neighbour (the seed's count), ``tuples_published_per_scan`` once; bytes are
-        the encoded payloads, ``..._to_neighbours`` times the neighbours."""
-        c = self.consensus
-        return cost_per_scan(asdict(c.stats) | {"scans": c.stats.scans},
-                             self.sent_bytes["estimate"], len(c.o.neighbours))
+        """Tuples and bytes this peer sent per scan (:func:`peers.core_summary.core_cost`)."""
+        return core_cost(self)
 
     def mean_ospa(self, which: str) -> float:
         return self.scorer.mean(which)
 
     def snapshot(self) -> dict:
-        """Counts, scores and state for the summary (plain data)."""
-        c, s = self.consensus, self.scorer
-        rejected = self.rejected + self.admission.rejected
-        return {
-            "peer": self.name,
-            "scans": c.stats.scans,
-            "last_k": c.last_k,
-            "mean_ospa_local": s.mean("local"),
-            "mean_ospa_fused": s.mean("fused"),
-            "ospa_misses": dict(s.misses),
-            "ospa_scored": dict(s.counts),
-            "ospa_unscored": s.unscored,
-            "rejected": dict(rejected),
-            "rejected_total": sum(rejected.values()),
-            "rejected_before_decoding": sum(self.admission.rejected.values()),
-            "received_by_kind": dict(self.received),
-            "bytes_received": sum(self.received_bytes.values()),
-            "messages_received": sum(self.received.values()),
-            "stale_scans": self.stale_scans,
-            "reanchored": self.reanchored,
-            "world_outages": list(self.world_outages),
-            "ctl_end_while_world_alive": self.ctl_end_early,
-            "peer_events": list(self.departures),
-            "stats": asdict(c.stats),
-            "cost": self.cost(),
-            "nale": asdict(c.nale.counts),
-            "fuser": dict(getattr(c.fuser, "counts", {})),
-            "internal_errors": dict(c.errors),
-        }
-
-
-def cost_per_scan(stats: dict, sent_bytes: int, neighbours: int) -> dict:
-    """Communication cost per scan from a peer's counters (plain data, for summaries)."""
-    n = max(stats.get("scans", 0), 1)
-    return {"tuples_per_scan": stats.get("tuples_to_neighbours", 0) / n,
-            "tuples_published_per_scan": stats.get("tuples_out", 0) / n,
-            "estimate_bytes_per_scan": sent_bytes / n,
-            "estimate_bytes_to_neighbours_per_scan": sent_bytes * neighbours / n}
+        """Counts, scores and state for the summary (plain data;
+        :func:`peers.core_summary.core_snapshot`)."""
+        return core_snapshot(self)
 
 
 def positions(states: np.ndarray, index: tuple[int, int]) -> np.ndarray:
     """``(n, 2)`` positions of state rows (empty-safe)."""
     return states[:, list(index)] if len(states) else np.zeros((0, 2))
+
+
+__all__ = ["CoreConfig", "Output", "PeerCore", "Publish", "Record", "Stop", "cost_per_scan",
+           "positions"]

@@ -1,0 +1,61 @@
+"""What a peer reports for the run summary: its counts, scores and communication cost.
+
+:meth:`peers.core.PeerCore.snapshot` and :meth:`~peers.core.PeerCore.cost` are these functions
+of the core's counters (plain data out, nothing changed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+
+def core_cost(core) -> dict:
+    """Tuples and bytes a peer sent per scan (estimates and forwards; ALGORITHMS.md §9:
+    a 4-D Gaussian component 15 tuples, a 2-D measurement 2; no fusion mode here sends
+    particles or a separate cardinality). ``tuples_per_scan`` counts a publication once
+    per live neighbour (the seed's count), ``tuples_published_per_scan`` once; bytes are
+    the encoded payloads, ``..._to_neighbours`` times the neighbours."""
+    c = core.consensus
+    return cost_per_scan(asdict(c.stats) | {"scans": c.stats.scans},
+                         core.sent_bytes["estimate"], len(c.o.neighbours))
+
+
+def core_snapshot(core) -> dict:
+    """A :class:`~peers.core.PeerCore`'s counts, scores and state for the summary (plain data)."""
+    c, s = core.consensus, core.scorer
+    rejected = core.rejected + core.admission.rejected
+    return {
+        "peer": core.name,
+        "scans": c.stats.scans,
+        "last_k": c.last_k,
+        "mean_ospa_local": s.mean("local"),
+        "mean_ospa_fused": s.mean("fused"),
+        "ospa_misses": dict(s.misses),
+        "ospa_scored": dict(s.counts),
+        "ospa_unscored": s.unscored,
+        "rejected": dict(rejected),
+        "rejected_total": sum(rejected.values()),
+        "rejected_before_decoding": sum(core.admission.rejected.values()),
+        "received_by_kind": dict(core.received),
+        "bytes_received": sum(core.received_bytes.values()),
+        "messages_received": sum(core.received.values()),
+        "stale_scans": core.stale_scans,
+        "reanchored": core.reanchored,
+        "world_outages": list(core.world_outages),
+        "ctl_end_while_world_alive": core.ctl_end_early,
+        "peer_events": list(core.departures),
+        "stats": asdict(c.stats),
+        "cost": core.cost(),
+        "nale": asdict(c.nale.counts),
+        "fuser": dict(getattr(c.fuser, "counts", {})),
+        "internal_errors": dict(c.errors),
+    }
+
+
+def cost_per_scan(stats: dict, sent_bytes: int, neighbours: int) -> dict:
+    """Communication cost per scan from a peer's counters (plain data, for summaries)."""
+    n = max(stats.get("scans", 0), 1)
+    return {"tuples_per_scan": stats.get("tuples_to_neighbours", 0) / n,
+            "tuples_published_per_scan": stats.get("tuples_out", 0) / n,
+            "estimate_bytes_per_scan": sent_bytes / n,
+            "estimate_bytes_to_neighbours_per_scan": sent_bytes * neighbours / n}

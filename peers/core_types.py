@@ -1,0 +1,66 @@
+"""What goes into and out of the sans-I/O peer (:class:`peers.core.PeerCore`).
+
+:class:`CoreConfig` is one peer's clock and bounds; :class:`Publish`, :class:`Record` and
+:class:`Stop` are the outputs its entry points return for a driver to carry out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from protocol.codec import DEFAULT_LIMITS, Limits
+from protocol.messages import Estimate, Forward, Returns, Tracks
+
+
+@dataclass(frozen=True)
+class Publish:
+    """Put ``payload`` on this peer's ``channel`` key (``"estimate"`` or ``"tracks"``)."""
+
+    channel: str
+    k: int
+    payload: bytes
+    message: Estimate | Forward | Returns | Tracks
+
+
+@dataclass(frozen=True)
+class Record:
+    """Something to log or measure (Rerun, latency breakdown); ``values`` are plain data."""
+
+    kind: str
+    k: int
+    values: dict
+
+
+@dataclass(frozen=True)
+class Stop:
+    """The run is over for this peer."""
+
+    reason: str
+
+
+Output = Publish | Record | Stop
+
+
+@dataclass(frozen=True)
+class CoreConfig:
+    """Clock and bounds of one peer (the filter and fusion settings live in its parts)."""
+
+    name: str
+    sensor: str
+    network: str
+    interval: float = 1.0
+    """Seconds between scans on the driver's clock."""
+    deadline: float = 0.5
+    """Fusion deadline after a scan arrives, as a fraction of ``interval``."""
+    horizon: int = 5
+    """Scans ahead of the newest accepted scan that a message may be stamped with."""
+    quiet: float = 3.0
+    """Intervals without an accepted scan after which a scan outside the horizon is taken as
+    a new start of the scan numbering (a late join, a restarted world)."""
+    rate_factor: float = 4.0
+    """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
+    world_grace: float = 0.0
+    """Seconds a peer waits for the world's liveliness token to come back before the run is
+    over for it (0: at once). A router restart takes every token away for its outage: the
+    world back within the grace is an outage (``world_outages``), not the end."""
+    limits: Limits = DEFAULT_LIMITS
