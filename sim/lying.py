@@ -1,0 +1,327 @@
+"""A member lying about its own estimate, on the twin (docs/security.md, "What is not protected").
+
+A member with a valid key may publish any well-formed estimate under its own name: the core's
+checks (codec, dimensions, windows, rates) and secure mode pass it, and the neighbours fuse it.
+This module measures what that costs the *honest* peers under each fusion rule. It is a test
+and experiment hook of the twin only, not a network feature: :class:`LyingCore` is the liar's
+:class:`peers.core.PeerCore` with every outgoing :class:`~protocol.messages.Estimate` replaced
+by a lie just before it is encoded. The liar's own filter and fusion run on its real data; only
+what it tells its neighbours is wrong (every round's estimate, when there are several rounds).
+
+The lies (:data:`LIES`), each a well-formed message the core accepts:
+
+- ``empty``: a mixture with no components ("there is nothing");
+- ``shifted``: every component's position moved by :data:`SHIFT` metres along x, with a tight
+  covariance (:data:`TIGHT` on every state variance): a confident wrong estimate;
+- ``inflated``: the real estimate with every weight times :data:`INFLATE` (phantom mass);
+- ``phantoms``: the real estimate plus three components of weight 1 at fixed points inside the
+  region (10 % in from three of its corners), at rest, with the tight covariance.
+
+``python -m sim.lying [--runs N] [--first-run R] [--out DIR]`` runs every lie and the clean run
+under each GM-PHD fusion rule (:data:`RULES`) on seed 000 (3 peers, ``s2`` lies) and on the
+seed-004 graph with GM-PHD peers (20 peers, one round, ``s15`` lies: 14 honest neighbours),
+prints a markdown table of the honest peers' mean fused OSPA (their local OSPA, which no lie can
+touch, is the no-fusion baseline) and writes ``lying-runs.csv``, ``lying-summary.csv`` and
+``lying.png`` into ``--out`` (default ``runs/lying``). Missing output is scored as a miss (the
+scorer's cut-off), never dropped. The default runs 7000.. are used by nothing else: no setting
+here was chosen on them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from peers.core import Output, PeerCore
+from protocol.messages import Estimate
+from sim.peers import make_peer
+from sim.scenario import Scenario, load_scenario
+from sim.twin import TwinResult, run_twin
+from tracking.mixture import GaussianMixture
+
+SHIFT = 110.0
+"""Metres the ``shifted`` lie moves every component along x."""
+TIGHT = 1.0
+"""Variance (m^2, (m/s)^2) on the diagonal of the lies' covariances: confident."""
+INFLATE = 5.0
+"""The ``inflated`` lie's weight factor."""
+
+Lie = Callable[[GaussianMixture], GaussianMixture]
+
+
+def _tight(n: int, d: int) -> np.ndarray:
+    return np.broadcast_to(TIGHT * np.eye(d), (n, d, d)).copy()
+
+
+def phantom_positions(scn: Scenario) -> np.ndarray:
+    """The ``phantoms`` lie's three fixed points: 10 % in from the region's top-left,
+    top-right and bottom-left corners (far from every seed-000 and seed-004 track)."""
+    (x0, x1), (y0, y1) = scn.region
+    dx, dy = 0.1 * (x1 - x0), 0.1 * (y1 - y0)
+    return np.array([[x0 + dx, y1 - dy], [x1 - dx, y1 - dy], [x0 + dx, y0 + dy]])
+
+
+def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2)) -> Lie:
+    """The function that turns the liar's real mixture into lie ``kind`` (:data:`LIES`)."""
+    ix, iy = position_index
+
+    def empty(mix: GaussianMixture) -> GaussianMixture:
+        return GaussianMixture.empty(mix.dim)
+
+    def shifted(mix: GaussianMixture) -> GaussianMixture:
+        means = mix.means.copy()
+        means[:, ix] += SHIFT
+        return GaussianMixture(mix.weights.copy(), means, _tight(len(mix), mix.dim))
+
+    def inflated(mix: GaussianMixture) -> GaussianMixture:
+        return mix.scaled(INFLATE)
+
+    def phantoms(mix: GaussianMixture) -> GaussianMixture:
+        pos = phantom_positions(scn)
+        means = np.zeros((len(pos), mix.dim))
+        means[:, ix], means[:, iy] = pos[:, 0], pos[:, 1]
+        extra = GaussianMixture(np.ones(len(pos)), means, _tight(len(pos), mix.dim))
+        return GaussianMixture.concatenate([mix, extra])
+
+    lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms}
+    if kind not in lies:
+        raise ValueError(f"unknown lie {kind!r}; expected one of {', '.join(lies)}")
+    return lies[kind]
+
+
+LIES = ("empty", "shifted", "inflated", "phantoms")
+
+
+class LyingCore(PeerCore):
+    """A peer that publishes ``lie(its real mixture)`` in every estimate it sends (twin only).
+
+    Built from a peer made by :func:`sim.peers.make_peer` (same parts, same settings); the lie
+    is applied to each outgoing :class:`Estimate` before the core encodes it, so the bytes are
+    as well-formed as an honest peer's. ``lies_told`` counts them.
+    """
+
+    def __init__(self, core: PeerCore, lie: Lie) -> None:
+        super().__init__(core.cfg, core.consensus, core.scorer)
+        self.lie = lie
+        self.lies_told = 0
+
+    def _wrap(self, messages: list) -> list[Output]:
+        told = []
+        for m in messages:
+            if type(m) is Estimate:
+                m = replace(m, mixture=self.lie(m.mixture))
+                self.lies_told += 1
+            told.append(m)
+        return super()._wrap(told)
+
+
+def run_with_liar(scn: Scenario, run: int, liar: str, lie: str | None) -> TwinResult:
+    """One twin run of ``scn`` in which peer ``liar`` tells lie ``lie`` (None: the clean run)."""
+    peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
+    if lie is not None:
+        core = peers[liar]
+        peers[liar] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
+    return run_twin(scn, run, peers=peers)
+
+
+def honest_scores(result: TwinResult, liar: str) -> dict[str, float]:
+    """Mean OSPA over the honest peers (fused, local) and over the liar's honest neighbours
+    (fused); each peer's mean counts a scan without output as a miss at the cut-off."""
+    peers = result.peers
+    honest = [n for n in peers if n != liar]
+    near = [n for n in honest if liar in peers[n].consensus.o.neighbours]
+    return {"fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
+            "local": float(np.mean([peers[n].mean_ospa("local") for n in honest])),
+            "fused_neighbours": float(np.mean([peers[n].mean_ospa("fused") for n in near])),
+            "liar_fused": float(peers[liar].mean_ospa("fused")),
+            "rejected": float(sum(sum(peers[n].rejected.values()) for n in honest))}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """A scenario to lie in: its name, overrides and the liar."""
+
+    label: str
+    scenario: str
+    overrides: dict
+    liar: str
+
+
+SETUPS = (
+    Setup("seed000", "seed000", {}, "s2"),
+    Setup("seed004-gmphd", "seed004", {"network.filter": "gmphd", "network.rounds": 1}, "s15"),
+)
+"""seed 000: 3 peers in a full mesh (s2 has 2 honest neighbours, Metropolis weight 1/3 each).
+seed 004 with GM-PHD peers, one consensus round (four rounds fuse worse than one there, clean:
+19.4 m against 11.3 m, run 0): s15 has the highest degree, 14 of the 19 honest peers."""
+
+RULES: dict[str, dict] = {
+    "gci": {"fusion.rule": "gci"},
+    "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
+    "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
+    "aa": {"fusion.rule": "aa"},
+}
+"""The GM-PHD peers' fusion rules: GCI with Metropolis weights and the cardinality fused apart
+(the scenarios' default), GCI with the exact Poisson EMD mass, GCI with each pair's weight
+chosen at the Chernoff point, and the arithmetic average (AA)."""
+
+
+def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:
+    ov = {**setup.overrides, **RULES[rule]}
+    if scans is not None:
+        ov["scenario.num_scans"] = scans
+    return load_scenario(setup.scenario, overrides=ov)
+
+
+def measure(setups=SETUPS, rules=tuple(RULES), lies=LIES, runs: int = 5, first_run: int = 7000,
+            scans: int | None = None, progress: bool = True) -> list[dict]:
+    """One row per setup, rule, lie (``"clean"`` for none) and run."""
+    rows = []
+    for setup in setups:
+        for rule in rules:
+            scn = scenario_for(setup, rule, scans)
+            for lie in ("clean", *lies):
+                t = time.perf_counter()
+                for r in range(first_run, first_run + runs):
+                    res = run_with_liar(scn, r, setup.liar, None if lie == "clean" else lie)
+                    rows.append({"setup": setup.label, "liar": setup.liar, "rule": rule,
+                                 "lie": lie, "run": r, **honest_scores(res, setup.liar)})
+                if progress:
+                    print(f"  {setup.label} {rule} {lie}: {time.perf_counter() - t:.1f} s",
+                          file=sys.stderr)
+    return rows
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """Mean and spread over runs per setup, rule and lie, with the change from the clean run."""
+    keys = list(dict.fromkeys((r["setup"], r["rule"], r["lie"]) for r in rows))
+    out = []
+    for setup, rule, lie in keys:
+        sel = [r for r in rows if (r["setup"], r["rule"], r["lie"]) == (setup, rule, lie)]
+        clean = [r for r in rows if (r["setup"], r["rule"], r["lie"]) == (setup, rule, "clean")]
+        f = np.array([r["fused"] for r in sel])
+        row = {"setup": setup, "rule": rule, "lie": lie, "runs": len(sel),
+               "fused": f.mean(), "fused_sd": f.std(ddof=1) if len(f) > 1 else 0.0,
+               "fused_min": f.min(), "fused_max": f.max(),
+               "fused_neighbours": np.mean([r["fused_neighbours"] for r in sel]),
+               "local": np.mean([r["local"] for r in sel]),
+               "clean": np.mean([r["fused"] for r in clean]) if clean else math.nan,
+               "rejected": sum(r["rejected"] for r in sel)}
+        row["change"] = row["fused"] - row["clean"]
+        out.append(row)
+    return out
+
+
+def markdown(summary: list[dict]) -> str:
+    lines = ["| graph | rule | lie | honest fused OSPA (m), mean ± sd [min, max] | vs clean | "
+             "liar's neighbours, fused | honest local (no fusion) |",
+             "|---|---|---|---|---|---|---|"]
+    for s in summary:
+        change = "" if s["lie"] == "clean" else f"{s['change']:+.1f}"
+        lines.append(f"| {s['setup']} | {s['rule']} | {s['lie']} | {s['fused']:.1f} ± "
+                     f"{s['fused_sd']:.1f} [{s['fused_min']:.1f}, {s['fused_max']:.1f}] | "
+                     f"{change} | {s['fused_neighbours']:.1f} | {s['local']:.1f} |")
+    return "\n".join(lines)
+
+
+def compact(summary: list[dict]) -> str:
+    """The same means as one row per graph and rule, one column per lie (± the sd over runs)."""
+    lies = list(dict.fromkeys(s["lie"] for s in summary))
+    lines = ["| graph | rule | " + " | ".join(lies) + " | honest local |",
+             "|---|---|" + "---|" * (len(lies) + 1)]
+    for setup, rule in dict.fromkeys((s["setup"], s["rule"]) for s in summary):
+        sel = {s["lie"]: s for s in summary if (s["setup"], s["rule"]) == (setup, rule)}
+        cells = [f"{sel[lie]['fused']:.1f} ± {sel[lie]['fused_sd']:.1f}" if lie in sel else ""
+                 for lie in lies]
+        local = np.mean([s["local"] for s in sel.values()])
+        lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + f" | {local:.1f} |")
+    return "\n".join(lines)
+
+
+def write(rows: list[dict], summary: list[dict], folder: Path) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, data in (("lying-runs.csv", rows), ("lying-summary.csv", summary)):
+        path = folder / name
+        with path.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(data[0]))
+            w.writeheader()
+            w.writerows(data)
+        paths.append(path)
+    paths.append(_plot(summary, folder / "lying.png"))
+    return paths
+
+
+def _plot(summary: list[dict], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    setups = list(dict.fromkeys(s["setup"] for s in summary))
+    fig, axes = plt.subplots(len(setups), 1, figsize=(9, 3.6 * len(setups)), squeeze=False)
+    for ax, setup in zip(axes[:, 0], setups, strict=True):
+        sel = [s for s in summary if s["setup"] == setup]
+        rules = list(dict.fromkeys(s["rule"] for s in sel))
+        lies = list(dict.fromkeys(s["lie"] for s in sel))
+        width = 0.8 / len(lies)
+        x = np.arange(len(rules))
+        for j, lie in enumerate(lies):
+            vals = [next(s for s in sel if s["rule"] == r and s["lie"] == lie) for r in rules]
+            ax.bar(x + (j - (len(lies) - 1) / 2) * width, [v["fused"] for v in vals], width,
+                   yerr=[v["fused_sd"] for v in vals], capsize=2, label=lie)
+        local = np.mean([s["local"] for s in sel])
+        ax.axhline(local, color="k", ls="--", lw=1, label="honest local (no fusion)")
+        ax.set_xticks(x, rules)
+        ax.set_ylabel("honest peers' fused OSPA (m)")
+        ax.set_title(f"{setup}: one peer ({_liar(setup)}) lies, "
+                     f"{sel[0]['runs']} runs")
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _liar(label: str) -> str:
+    return next((s.liar for s in SETUPS if s.label == label), "?")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m sim.lying", description=__doc__.split("\n")[0])
+    p.add_argument("--runs", type=int, default=5, help="Monte Carlo runs per cell (default 5)")
+    p.add_argument("--first-run", type=int, default=7000,
+                   help="first run index (default 7000: runs no tuning used)")
+    p.add_argument("--out", type=Path, default=Path("runs/lying"))
+    p.add_argument("--setups", default=",".join(s.label for s in SETUPS),
+                   help="comma-separated: " + ", ".join(s.label for s in SETUPS))
+    p.add_argument("--rules", default=",".join(RULES), help="comma-separated: " + ", ".join(RULES))
+    p.add_argument("--scans", type=int, default=None, help="scans per run (default: scenario's)")
+    a = p.parse_args(argv)
+    setups = [s for s in SETUPS if s.label in a.setups.split(",")]
+    rules = [r for r in a.rules.split(",") if r]
+    if a.runs < 1 or not setups or any(r not in RULES for r in rules):
+        p.error("need --runs >= 1, a known setup and known rules")
+    rows = measure(setups, rules, LIES, a.runs, a.first_run, a.scans)
+    summary = summarise(rows)
+    print(f"Honest peers' mean OSPA over {a.runs} runs ({a.first_run}..{a.first_run + a.runs - 1})"
+          f"; liars: " + ", ".join(f"{s.label} {s.liar}" for s in setups) + "\n")
+    print(markdown(summary))
+    print("\nCompact (honest peers' fused OSPA, m, mean ± sd over runs):\n")
+    print(compact(summary))
+    for path in write(rows, summary, a.out):
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,91 @@
+"""A member lying about its own estimate (sim.lying, docs/security.md "What is not protected").
+
+Seed 000 on the twin, 30 scans, runs 8000-8001 (neither the measurement's runs 7000.. nor the
+runs its thresholds were read from). s2 lies; s1 and s3 are honest. The margins below were read
+off runs 9003-9006 (30 scans): GCI empty/shifted 200/197 m against 30 m clean, GCI
+inflated/phantoms +0.9 m, AA inflated/phantoms +79/+118 m, AA empty/shifted 57/37 m.
+"""
+
+import numpy as np
+import pytest
+
+from sim.lying import LIES, SETUPS, LyingCore, honest_scores, make_lie, run_with_liar, scenario_for
+from tracking.mixture import GaussianMixture
+
+RUNS = (8000, 8001)
+SCANS = 30
+HONEST = ("s1", "s3")
+
+
+@pytest.fixture(scope="module")
+def results():
+    out = {}
+    for rule in ("gci", "aa"):
+        scn = scenario_for(SETUPS[0], rule, SCANS)
+        for lie in ("clean", *LIES):
+            out[rule, lie] = [run_with_liar(scn, r, "s2", None if lie == "clean" else lie)
+                              for r in RUNS]
+    return out
+
+
+def fused(results, rule, lie):
+    return float(np.mean([honest_scores(r, "s2")["fused"] for r in results[rule, lie]]))
+
+
+def test_lies_are_well_formed_and_accepted(results):
+    for (rule, lie), runs in results.items():
+        for res in runs:
+            liar = res.peers["s2"]
+            assert isinstance(liar, LyingCore) == (lie != "clean")
+            if lie != "clean":
+                assert liar.lies_told >= SCANS
+            for n in HONEST:
+                assert not res.peers[n].rejected, (rule, lie, n, res.peers[n].rejected)
+                assert res.peers[n].consensus.stats.last_fused_from.get("s2") == SCANS
+
+
+def test_local_filtering_is_untouched(results):
+    for (rule, lie), runs in results.items():
+        for res, clean in zip(runs, results[rule, "clean"], strict=True):
+            for n in HONEST:
+                assert res.ospa[n]["local"] == clean.ospa[n]["local"], (rule, lie, n)
+
+
+def test_every_lie_hurts_under_some_rule(results):
+    for lie in LIES:
+        worst = max(fused(results, rule, lie) - fused(results, rule, "clean")
+                    for rule in ("gci", "aa"))
+        assert worst > 10.0, lie
+
+
+def test_gci_is_vetoed_by_nothing_and_by_a_confident_wrong_estimate(results):
+    cutoff = scenario_for(SETUPS[0], "gci", SCANS).metrics.ospa_cutoff
+    assert fused(results, "gci", "clean") < 60.0
+    assert fused(results, "gci", "empty") > 0.95 * cutoff
+    assert fused(results, "gci", "shifted") > 0.9 * cutoff
+    for lie in ("empty", "shifted"):  # AA keeps the honest peers' own components
+        assert fused(results, "aa", lie) < 0.5 * cutoff
+
+
+def test_gci_limits_phantom_mass_that_aa_takes_in(results):
+    for lie in ("inflated", "phantoms"):
+        assert abs(fused(results, "gci", lie) - fused(results, "gci", "clean")) < 5.0, lie
+        assert fused(results, "aa", lie) > fused(results, "aa", "clean") + 30.0, lie
+
+
+def test_the_lies():
+    scn = scenario_for(SETUPS[0], "gci", SCANS)
+    mix = GaussianMixture(np.array([0.9, 0.6]), np.array([[0.0, 1.0, 50.0, 0.0],
+                                                          [300.0, 0.0, -20.0, 2.0]]),
+                          np.stack([np.diag([100.0, 25.0, 100.0, 25.0])] * 2))
+    assert len(make_lie("empty", scn)(mix)) == 0
+    s = make_lie("shifted", scn)(mix)
+    assert np.allclose(s.means[:, 0], mix.means[:, 0] + 110.0)
+    assert np.allclose(s.means[:, 1:], mix.means[:, 1:])
+    assert np.allclose(s.covs, np.eye(4)) and np.allclose(s.weights, mix.weights)
+    assert np.isclose(make_lie("inflated", scn)(mix).mass, 5 * mix.mass)
+    p = make_lie("phantoms", scn)(mix)
+    assert len(p) == len(mix) + 3 and np.isclose(p.mass, mix.mass + 3)
+    assert np.allclose(p.means[2:][:, [0, 2]], [[-800, 800], [800, 800], [-800, -800]])
+    with pytest.raises(ValueError):
+        make_lie("bigger", scn)
