@@ -7,6 +7,7 @@ work on every host network, so it is off unless a user's own config file turns i
 from __future__ import annotations
 
 import json
+import random
 import socket
 from collections.abc import Sequence
 from pathlib import Path
@@ -33,8 +34,43 @@ class SessionError(Exception):
     """The Zenoh session could not be configured or opened (reported in one line)."""
 
 
+def _ephemeral_low() -> int:
+    """First port of the kernel's range for outgoing connections (Linux; else IANA's)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 49152
+
+
+_LISTEN_LOW = 20000
+"""Listening ports are drawn from here up to the ephemeral range."""
+_RANDOM = random.SystemRandom()  # not the global generator a test or a run may have seeded
+
+
+def _bindable(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that is free right now on ``host`` (the OS picks it)."""
+    """A TCP port that is free right now on ``host``, for a process to listen on later.
+
+    Drawn at random *below* the kernel's ephemeral range: a port the OS hands out itself
+    (``bind(0)``) comes from the range every outgoing connection also takes its local port
+    from, and on a busy machine one of them took such a port between this choice and the
+    listener's bind ("Address already in use": a whole run failed to start). Falls back to
+    the OS's choice when the range below is too small or full.
+    """
+    hi = _ephemeral_low()
+    if hi - _LISTEN_LOW >= 1000:
+        for _ in range(50):
+            port = _RANDOM.randrange(_LISTEN_LOW, hi)
+            if _bindable(host, port):
+                return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
         return int(s.getsockname()[1])

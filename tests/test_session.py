@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 import textwrap
@@ -80,3 +81,18 @@ def test_a_flood_of_large_messages_costs_a_receiver_little_memory():
             proc.kill()
             proc.wait()
         sender.close()
+
+
+def test_free_ports_come_from_below_the_ephemeral_range():
+    """Outgoing connections take their local ports from the ephemeral range: a listening port
+    chosen there could be taken before the listener binds it (a run failed so, loaded)."""
+    from peers.session import _LISTEN_LOW, _ephemeral_low
+
+    low = _ephemeral_low()
+    ports = {free_port() for _ in range(20)}
+    if low - _LISTEN_LOW >= 1000:
+        assert all(_LISTEN_LOW <= p < low for p in ports), (ports, low)
+    assert len(ports) > 1  # drawn, not one fixed port
+    for p in ports:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", p))  # free right now
