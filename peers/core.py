@@ -190,6 +190,7 @@ class PeerCore:
         if msg.sensor != route.name:
             return self._reject("spoofed")
         c, k, h = self.consensus, msg.k, self.cfg.horizon
+        closed: list[Output] = []  # the scan a pause interrupted, fused on return
         quiet = (self.last_accept is None
                  or now - self.last_accept > self.cfg.quiet * self.cfg.interval)
         if self.first_k is not None and c.last_k < k <= c.last_k + h:
@@ -200,13 +201,17 @@ class PeerCore:
             # a new start of the numbering: nothing accepted for a while (late join, restart)
             if self.first_k is not None:
                 self.reanchored += 1
+                # the same numbering after a pause (this peer was frozen or fell behind): the
+                # scan it was fusing is fused now with what it has, the scans in between had
+                # no output (misses); a jump further than the pause explains is a new
+                # numbering (the world restarted), not misses
+                elapsed = now - self.last_accept if self.last_accept is not None else 0.0
+                pause = c.last_k < k <= c.last_k + h + elapsed / self.cfg.interval
+                if pause:
+                    closed = self._wrap(c.finish(now))
                 c.reset_window()
                 self.deadlines.clear()
-                # the same numbering after a pause (this peer was frozen or fell behind): the
-                # scans in between had no output, misses; a jump further than the pause
-                # explains is a new numbering (the world restarted), not misses
-                elapsed = now - self.last_accept if self.last_accept is not None else 0.0
-                if c.last_k < k <= c.last_k + h + elapsed / self.cfg.interval:
+                if pause:
                     self.scorer.skipped(k - c.last_k - 1)
             steps = k - c.last_k if k > c.last_k else 1
             self.first_k = k if self.first_k is None else self.first_k
@@ -216,7 +221,7 @@ class PeerCore:
         else:
             return self._reject("future")
         self.last_accept = now
-        out = [Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
+        out = [*closed, Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
         self.scorer.expect(k)
         self._score_deferred()  # the previous scan's, if no tick came between (a backlog)
         out += self._wrap(c.on_scan(k, msg.z, steps, now))

@@ -211,3 +211,19 @@ def test_a_restarted_peer_never_overwrites_its_earlier_files(tmp_path):
     got = read_summaries(tmp_path, ["s2"])["s2"]
     assert got["scans"] == 9
     assert got["summary_files"] == ["peer-s2.restart1.json", "peer-s2.restart2.json"]
+
+
+def test_tracks_closed_by_a_scan_far_ahead_are_scored_not_missed(scn):
+    """A peer frozen while scan 1's consensus waited for its neighbours comes back at scan 15:
+    that scan closes scan 1 with what it has (tracks published, scored after publishing) and
+    scans 2-14 are misses. Scan 1's tracks must be scored before the scorer settles scans
+    that far behind (a loaded run once counted one miss too many)."""
+    core = make_peer(scn, "s1", 0)  # neighbours s2, s3, which never send
+    dt = core.cfg.interval
+    _scan(core, 1, dt)
+    _scan(core, 15, dt + 2.0)
+    core.tick(dt + 2.0)
+    core.finish(dt + 2.0 + dt)
+    s = core.snapshot()
+    assert s["ospa_misses"]["fused"] == 13, s["ospa_misses"]
+    assert s["ospa_scored"]["fused"] == 2, s["ospa_scored"]
