@@ -30,6 +30,11 @@ without), and up to 16 MiB more per large-message sender. Estimates are a few hu
 bounded memory is worth more than a copy saved on a rare large one."""
 
 
+PEER_WAIT = 60.0
+"""Seconds the world waits for its peers to be ready (it starts as soon as they are): four
+processes on a loaded 2-core machine once took more than 30 s to start and link up."""
+
+
 class SessionError(Exception):
     """The Zenoh session could not be configured or opened (reported in one line)."""
 

@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from peers.session import SessionError  # noqa: E402
+from peers.session import PEER_WAIT, SessionError  # noqa: E402
 from sim.scenario import (
     ScenarioError,
     builtin_scenarios,
@@ -1027,8 +1027,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("scenario", nargs="?", default="seed000")
     add_net_flags(w, network_required=True)
     w.add_argument("--peers", help="comma-separated peers to wait for before starting")
-    w.add_argument("--wait", type=POSITIVE_FLOAT, default=30.0,
-                   help="seconds to wait for the peers (default 30)")
+    w.add_argument("--wait", type=POSITIVE_FLOAT, default=PEER_WAIT,
+                   help=f"seconds to wait for the peers (default {PEER_WAIT:g}; the run starts "
+                        "as soon as they are ready)")
     w.add_argument("--run", type=NONNEGATIVE_INT, default=0,
                    help="Monte Carlo run index (random draws)")
     w.add_argument("--progress-every", type=POSITIVE_INT, default=10, metavar="N",

@@ -18,7 +18,7 @@ import numpy as np
 import zenoh
 
 from peers.rerun_sink import TRUTH_COLOR, RerunSink, color_of, position_columns
-from peers.session import open_session
+from peers.session import PEER_WAIT, open_session
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
@@ -75,7 +75,7 @@ class WorldError(Exception):
 
 def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               config_file: str | None = None, wait_for: list[str] | None = None,
-              wait_timeout: float = 30.0, out_dir: Path | None = None,
+              wait_timeout: float = PEER_WAIT, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
               say=None, security=None, data=None, recover: bool = False) -> dict:

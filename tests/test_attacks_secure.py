@@ -150,7 +150,7 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
             report["plain_tcp_refused"] = _refused(
                 zenoh.Config(), [e.replace("tls/", "tcp/") for e in eps])
             report["all_up"] = all(p.poll() is None for p in handle.procs.values())
-            assert reached.wait(60), f"the run never reached scan {K0} ({seen})"
+            assert reached.wait(150), f"the run never reached scan {K0} ({seen})"
             empty = GaussianMixture(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
             phantom = np.array([[0.0, 0.0]])
             for who in (s3, s9):

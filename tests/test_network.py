@@ -51,7 +51,8 @@ def network_run(tmp_path_factory):
                     reached.set()
 
             sub = session.declare_subscriber(keys.tracks("s1"), on_tracks)
-            assert reached.wait(60), f"s1 never published the tracks of scan {K0} ({seen})"
+            # bounded by the world's wait for its peers (peers.session.PEER_WAIT) and more
+            assert reached.wait(150), f"s1 never published the tracks of scan {K0} ({seen})"
             sub.undeclare()
             pub = session.declare_publisher(keys.estimate("s1"),
                                             congestion_control=zenoh.CongestionControl.BLOCK)
