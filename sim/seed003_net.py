@@ -41,6 +41,7 @@ from peers.consensus import Consensus, ConsensusOptions
 from peers.core import CoreConfig, PeerCore
 from peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
 from peers.scoring import Scorer
+from peers.session import PEER_WAIT
 from sim import seed003
 from tracking.imm import POS
 
@@ -452,7 +453,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from sim.world_process import run_world
 
         sent = run_world(scn, a.network, run=a.run, listen=a.listen, connect=a.connect,
-                         wait_for=[p for p in a.peers.split(",") if p], wait_timeout=60.0,
+                         wait_for=[p for p in a.peers.split(",") if p], wait_timeout=PEER_WAIT,
                          out_dir=a.out, run_id=a.run_id, viewer=a.viewer, speed=a.speed,
                          rerun=not a.no_rerun, say=lambda line: print(line, flush=True),
                          data=run_data(cfg, a.run))

@@ -12,17 +12,14 @@ from peers.contracts import FusionInput
 from peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
 from protocol.messages import ScanSet
 from sim.build import adjacency, make_filter
-from sim.launcher import read_summaries, start_run, wait_run
 from sim.peers import make_parts
 from sim.scenario import ScenarioError, load_scenario
 from sim.twin import run_twin
 from sim.world import generate_run
+from tests.test_flooding_peers import LINE, SCANS, run_line_processes
 from tracking.gmphd import GMPHDFilter
 from tracking.models import ConstantVelocity
 
-LINE = {"sensors.positions": [[-900, 0], [-450, 0], [0, 0], [450, 0], [900, 0]],
-        "sensors.radius": 500.0}
-SCANS = 8
 IC = {"flooding.estimator": "ic"}
 
 
@@ -185,19 +182,7 @@ def test_twin_ftc_peers_agree(monkeypatch):
 # -- real processes ---------------------------------------------------------------------------
 @pytest.mark.network
 def test_five_ic_flooding_processes_over_zenoh_equal_the_twin(tmp_path):
-    # as test_flooding_peers' process test: a scan a second, room for a busy machine
-    scn = _line(**{"network.speed": 1, "network.deadline": 0.9})
-    sets = [f"sensors.positions={LINE['sensors.positions']}", "sensors.radius=500.0",
-            f"scenario.num_scans={SCANS}", "network.speed=1", "network.deadline=0.9",
-            "flooding.estimator=ic"]
-    handle = start_run(scn, "seed004", tmp_path, overrides=sets, rerun=False)
-    try:
-        codes = wait_run(handle, timeout=SCANS + 60)
-    finally:
-        handle.stop_all()
-    assert codes == {"world": 0, **{n: 0 for n in scn.sensor_names}}, codes
-    summaries = read_summaries(tmp_path, scn.sensor_names)
-    twin = run_twin(scn, 0)
+    scn, summaries, twin = run_line_processes(tmp_path, **IC)
     for n, s in summaries.items():
         t = twin.summary(n)
         assert s["stop_reason"] == "end of run" and s["scans"] == SCANS, n

@@ -207,21 +207,28 @@ def test_twin_round_deadlines_let_a_slow_link_catch_up():
 
 
 # -- real processes ---------------------------------------------------------------------------
-@pytest.mark.network
-def test_five_flooding_processes_over_zenoh_hold_every_scan(tmp_path):
-    # a scan a second, iterations of 225 ms: room for a busy machine (the real-time question
-    # is benchmarks/bench_flooding.py's)
-    scn = _line(**{"network.speed": 1, "network.deadline": 0.9})
-    sets = [f"sensors.positions={LINE['sensors.positions']}", "sensors.radius=500.0",
-            f"scenario.num_scans={SCANS}", "network.speed=1", "network.deadline=0.9"]
-    handle = start_run(scn, "seed004", tmp_path, overrides=sets, rerun=False)
+def run_line_processes(out, **more):
+    """The line of 5 flooding peers as real processes, a scan a second with iterations of
+    225 ms (room for a busy machine), every process exiting 0; and the twin of the same run.
+    ``more``: scenario settings on top (e.g. ``{"flooding.estimator": "ic"}``)."""
+    settings = {**LINE, "scenario.num_scans": SCANS, "network.speed": 1,
+                "network.deadline": 0.9, **more}
+    scn = load_scenario("seed004", settings)
+    sets = [f"{key}={value}" for key, value in settings.items()]
+    handle = start_run(scn, "seed004", out, overrides=sets, rerun=False)
     try:
         codes = wait_run(handle, timeout=SCANS + 60)
     finally:
         handle.stop_all()
     assert codes == {"world": 0, **{n: 0 for n in scn.sensor_names}}, codes
-    summaries = read_summaries(tmp_path, scn.sensor_names)
-    twin = run_twin(scn, 0)
+    return scn, read_summaries(out, scn.sensor_names), run_twin(scn, 0)
+
+
+@pytest.mark.network
+def test_five_flooding_processes_over_zenoh_hold_every_scan(tmp_path):
+    # a scan a second, iterations of 225 ms: room for a busy machine (the real-time question
+    # is benchmarks/bench_flooding.py's)
+    scn, summaries, twin = run_line_processes(tmp_path)
     closed = _closed_form(scn, 0)
     for n, s in summaries.items():
         assert s["stop_reason"] == "end of run" and s["scans"] == SCANS, n
