@@ -10,6 +10,7 @@ import pytest
 
 from peers.flooding import flood
 from sim import seed004
+from tracking.mixture import GaussianMixture
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +71,7 @@ def test_main_writes_table_iterations_and_plot(tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "| IDPC |" in text and "| GCI L=1 |" in text and "| centralised |" in text
+    assert "x the reference's exchange of 4-component mixtures over 4 rounds" in text
     rows = list(csv.DictReader((tmp_path / "seed004_table.csv").open()))
     assert [r["method"] for r in rows][:3] == ["IDPC", "FTC", "GCI L=1"]
     its = list(csv.DictReader((tmp_path / "seed004_iterations.csv").open()))
@@ -79,6 +81,27 @@ def test_main_writes_table_iterations_and_plot(tmp_path, capsys):
     assert back["IDPC"]["tuples"] == pytest.approx(float(rows[0]["tuples"]))
     assert "IDPC t=4" in back
     assert seed004.main(["--replot", "again", "--out", str(tmp_path)]) == 0
+
+
+def test_gm_exchange_closed_form_and_the_reference_ratio(scn):
+    """4 rounds of 4-component mixtures: deg (15*4 + 1) * 4 per peer, as a message-level count
+    of the same exchange; flooding at the scenario's expected scan size is about 2x that (the
+    reference: 4,100 against 2,000 tuples)."""
+    A = scn.adjacency
+    deg = A.sum(axis=1)
+    mix = GaussianMixture(np.full(4, 0.5), np.zeros((4, 4)), np.tile(np.eye(4), (4, 1, 1)))
+    sent = np.zeros(len(A))
+    for _ in range(4):  # every round, every peer sends its mixture to each neighbour
+        for i in np.nonzero(A)[0]:  # one entry per (peer, neighbour)
+            sent[i] += seed004._n_tuples(mix)
+    counted = sent.mean()
+    assert seed004.gm_exchange_tuples(A, 4, 4) == pytest.approx(counted)
+    assert counted == pytest.approx(deg.mean() * 61 * 4)
+    # flooding at the expected scan size: clutter plus Pd per target in view, every scan
+    # reaching every peer (diameter 4): deg_i * S * 2 * E|Z|
+    ez = scn.clutter_rate + scn.detection_probability * 3
+    flood = float(np.mean(deg * len(A) * 2 * ez))
+    assert 1.8 <= flood / seed004.gm_exchange_tuples(A, 4, 4) <= 2.4
 
 
 def test_flooding_through_the_fault_layer(scn):
