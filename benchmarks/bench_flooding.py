@@ -24,26 +24,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from peers.session import PEER_WAIT
 from peers.telemetry import percentile
 from sim.launcher import read_summaries, start_run, wait_run
 from sim.scenario import load_scenario, parse_overrides
 from sim.twin import run_twin
-
-
-def _patient_world(handle, wait: float) -> None:
-    """Start the world again at once with ``--wait`` seconds for the peers: 21 processes
-    importing NumPy, SciPy and Zenoh on a busy 2-core machine can take longer than the
-    default 30 s to come up (the peers get ``--idle-timeout`` to match)."""
-    import subprocess
-
-    old = handle.procs["world"]
-    old.kill()
-    old.wait()
-    cmd = [*handle.commands["world"], "--wait", str(wait)]
-    handle.commands["world"] = cmd
-    with handle.logs["world"].open("w") as fh:
-        handle.procs["world"] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
-                                                 stdin=subprocess.DEVNULL)
 
 
 def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
@@ -56,10 +41,9 @@ def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
         t0 = time.monotonic()
         handle = start_run(scn, "seed004", out, overrides=sets, rerun=False, sparse=sparse,
                            run=run, peer_args={n: ["--idle-timeout", str(startup + 30)]
-                                               for n in scn.sensor_names})
+                                               for n in scn.sensor_names},
+                           world_args=["--wait", str(startup)])
         try:
-            if startup > 30:
-                _patient_world(handle, startup)
             codes = wait_run(handle, timeout=scans / speed + startup + 60)
         finally:
             handle.stop_all()
@@ -106,9 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=10.0)
     ap.add_argument("--full-mesh", action="store_true", help="let Zenoh link every process")
     ap.add_argument("--set", action="append", default=[], help="scenario override")
-    ap.add_argument("--startup", type=float, default=30.0,
-                    help="seconds the world waits for the peers to come up (default 30, as "
-                         "sensornet run; more on a busy machine)")
+    ap.add_argument("--startup", type=float, default=PEER_WAIT,
+                    help=f"seconds the world waits for the peers to come up (default "
+                         f"{PEER_WAIT:g}, as sensornet run; more on a busy machine)")
     a = ap.parse_args(argv)
     ok = True
     for run in range(a.runs):

@@ -93,6 +93,8 @@ def child(i: int, folder: Path) -> None:
                     return
                 lat.append(time.monotonic() - float(np.frombuffer(b[:8], np.float64)[0]))
                 got[0] += 1
+    elif plan["handler"] == "wildcard":  # one subscriber, one callback thread, the queue
+        subs = [session.declare_subscriber("floor/*", on_sample)]
     else:
         subs = [session.declare_subscriber(f"floor/{j}", on_sample) for j in nbrs]
     worker = threading.Thread(target=loop, daemon=True)
@@ -198,10 +200,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bytes", type=int, default=1000, help="bytes per message")
     ap.add_argument("--scans", type=int, default=100)
     ap.add_argument("--runs", type=int, default=1)
-    ap.add_argument("--handler", choices=["callback", "fifo", "both"], default="callback",
-                    help="callback: one Python callback per subscriber handing off through a "
-                         "queue.Queue (as the peers); fifo: one wildcard subscriber whose "
-                         "channel the loop thread reads (no callback thread, no queue)")
+    ap.add_argument("--handler", choices=["callback", "wildcard", "fifo", "all"],
+                    default="callback",
+                    help="callback: one subscriber per neighbour, each a Python callback "
+                         "handing off through a queue.Queue (as the peers); wildcard: one "
+                         "subscriber to every key (the links bring only the neighbours'), one "
+                         "callback, the queue; fifo: one wildcard subscriber whose channel "
+                         "the loop thread reads (no callback thread, no queue)")
     ap.add_argument("--dir", default="runs/bench_transport_floor")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -223,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| graph | handler | processes | mean degree | received / process / scan | CPU ms / "
           "process / scan (mean, max) | total cores | delivered | latency median / p99 ms |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    handlers = ["callback", "fifo"] if a.handler == "both" else [a.handler]
+    handlers = ["callback", "wildcard", "fifo"] if a.handler == "all" else [a.handler]
     for name, A in graphs:
         for _ in range(a.runs):
             for h in handlers:  # interleaved run for run

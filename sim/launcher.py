@@ -137,7 +137,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               sparse: bool = False, listen: list[str] | None = None,
               connect: list[str] | None = None, config: str | None = None,
               run_id: str | None = None, secure: Path | None = None,
-              router: bool = False, recover: bool = True) -> RunHandle:
+              router: bool = False, recover: bool = True,
+              world_args: list[str] | None = None) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`).
 
     ``listen``: the world's endpoints (the peers connect to the first; default a free
@@ -148,8 +149,9 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     router first (``sensornet router``, with the folder's ``router`` key in secure mode) and make
     every process its Zenoh client (a config file ``<out>/zenoh-client.json5``; nobody else
     listens): the routed topology of several machines, on loopback; ``recover`` (routed runs):
-    estimates and scans through Zenoh's advanced publisher/subscriber (``--recover``). Returns
-    once it listens.
+    estimates and scans through Zenoh's advanced publisher/subscriber (``--recover``);
+    ``world_args``: more arguments for the world (``--wait 150``, say), as ``peer_args`` for
+    the peers. Returns once it listens.
     """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
@@ -182,7 +184,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
                          *(["--recover"] if recover else [])]
     cmds = {"world": [*_cli(), "world", source, *common,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
-                      "--peers", ",".join(names), "--run", str(run)]
+                      "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
             + (["--speed", str(speed)] if speed else [])}
     if sparse:  # each peer links to the world and its graph neighbours only, gossip off
         from sim.build import adjacency
