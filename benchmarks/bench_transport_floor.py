@@ -106,8 +106,11 @@ def child(i: int, folder: Path) -> None:
     while len(list(session.info.peers_zid())) < len(nbrs) and time.monotonic() < end:
         time.sleep(0.01)
     (folder / f"ready.{i}").write_text("1")
-    go = folder / "go"
-    while not go.exists():
+    go, end = folder / "go", time.monotonic() + 300.0
+    while not go.exists():  # the driver writes it; gone driver: give up
+        if time.monotonic() > end:
+            session.close()
+            raise SystemExit(f"process {i}: no start signal in 300 s")
         time.sleep(0.01)
     t0 = float(go.read_text())
     rate, per, scans = plan["rate"], plan["per_scan"], plan["scans"]

@@ -7,7 +7,8 @@ import importlib
 import pytest
 
 SCRIPTS = ["bench_gci", "bench_gmphd_stonesoup", "bench_idle_penalty", "bench_immpf",
-           "bench_network", "soak", "bench_idpc", "bench_campaign", "bench_record", "bench_pda"]
+           "bench_network", "soak", "bench_idpc", "bench_campaign", "bench_record", "bench_pda",
+           "bench_flooding", "bench_transport_floor"]
 
 
 @pytest.mark.parametrize("name", SCRIPTS)
@@ -28,3 +29,27 @@ def test_idle_penalty_prints_one_row_per_pause(capsys):
                                                        "30 ms", "100 ms"]
     assert body[0].split("|")[3].strip() == "1.00"
     assert all(float(r.split("|")[3]) > 0 for r in body)
+
+
+def test_circulant_graphs_have_the_degree_asked():
+    from benchmarks.bench_transport_floor import circulant
+
+    for n, degree in ((20, 4), (20, 3), (50, 4), (6, 2)):
+        A = circulant(n, degree)
+        assert (A == A.T).all() and not A.diagonal().any()
+        assert (A.sum(axis=1) == degree).all(), (n, degree)
+
+
+@pytest.mark.network
+def test_transport_floor_delivers_every_message_with_each_handler(tmp_path, capsys):
+    """Three bare processes on a ring, every receive path: all messages arrive, rows print."""
+    from benchmarks import bench_transport_floor
+
+    assert bench_transport_floor.main(["--peers", "3", "--degree", "2", "--scans", "5",
+                                       "--handler", "all", "--dir", str(tmp_path)]) == 0
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| circulant")]
+    assert [r.split("|")[2].strip() for r in rows] == ["callback", "wildcard", "fifo"]
+    for r in rows:
+        cells = [c.strip() for c in r.split("|")]
+        assert cells[5] == "6.0"  # 2 neighbours x 3 messages a scan
+        assert cells[8] == "100.0 %"
