@@ -70,6 +70,15 @@ def child(i: int, folder: Path) -> None:
     q: queue.Queue = queue.Queue()
     lat: list[float] = []
     got = [0]
+    heard: set[int] = set()  # neighbours whose hello arrived: our subscription reached them
+
+    def count(b: bytes) -> None:
+        v = float(np.frombuffer(b[:8], dtype=np.float64)[0])
+        if v < 0.0:  # a hello, -1 - sender, before the start: not a measured message
+            heard.add(int(-v - 1.0))
+            return
+        lat.append(time.monotonic() - v)
+        got[0] += 1
 
     def on_sample(sample) -> None:
         q.put(sample.payload.to_bytes())
@@ -79,8 +88,7 @@ def child(i: int, folder: Path) -> None:
             b = q.get()
             if b is None:
                 return
-            lat.append(time.monotonic() - float(np.frombuffer(b[:8], dtype=np.float64)[0]))
-            got[0] += 1
+            count(b)
 
     if plan["handler"] == "fifo":  # one subscriber, its Rust channel read by the loop thread
         sub = session.declare_subscriber("floor/*", zenoh.handlers.FifoChannel(4096))
@@ -91,8 +99,7 @@ def child(i: int, folder: Path) -> None:
                 b = sub.recv().payload.to_bytes()
                 if len(b) < 8:
                     return
-                lat.append(time.monotonic() - float(np.frombuffer(b[:8], np.float64)[0]))
-                got[0] += 1
+                count(b)
     elif plan["handler"] == "wildcard":  # one subscriber, one callback thread, the queue
         subs = [session.declare_subscriber("floor/*", on_sample)]
     else:
@@ -102,16 +109,21 @@ def child(i: int, folder: Path) -> None:
     pub = session.declare_publisher(f"floor/{i}", express=True,  # not to our own subscriber
                                     congestion_control=zenoh.CongestionControl.BLOCK,
                                     allowed_destination=zenoh.Locality.REMOTE)
-    end = time.monotonic() + 120.0
-    while len(list(session.info.peers_zid())) < len(nbrs) and time.monotonic() < end:
-        time.sleep(0.01)
-    (folder / f"ready.{i}").write_text("1")
+    # ready once every neighbour's hello arrived (links up is not enough: a put before the
+    # neighbour's subscription reaches us is lost); hellos go on until the start signal, so
+    # that slower neighbours hear ours
+    hello = np.float64(-1.0 - i).tobytes()
     go, end = folder / "go", time.monotonic() + 300.0
+    ready = False
     while not go.exists():  # the driver writes it; gone driver: give up
         if time.monotonic() > end:
             session.close()
             raise SystemExit(f"process {i}: no start signal in 300 s")
-        time.sleep(0.01)
+        pub.put(hello)
+        if not ready and heard >= set(nbrs):
+            (folder / f"ready.{i}").write_text("1")
+            ready = True
+        time.sleep(0.05)
     t0 = float(go.read_text())
     rate, per, scans = plan["rate"], plan["per_scan"], plan["scans"]
     body = bytes(plan["bytes"] - 8)
