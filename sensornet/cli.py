@@ -684,6 +684,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     summaries = read_summaries(out, scn.sensor_names)
     if summaries:
         print(format_summary(summaries))
+        if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
+            from sim.launcher import realtime_note
+
+            note = realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
+            if note:
+                print(note)
     faults_file = out / "process-faults.json"
     if pfaults and faults_file.is_file():
         from sim.launcher import fault_report

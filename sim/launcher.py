@@ -24,6 +24,7 @@ from pathlib import Path
 
 from peers.security import tls_endpoint
 from peers.session import SessionError, endpoint, free_port
+from peers.telemetry import percentile
 from sim.scenario import Scenario
 
 
@@ -377,6 +378,37 @@ def format_summary(summaries: dict[str, dict]) -> str:
             rows.append(f"| {n} | " + " | ".join(f(p.get(k), "{:.2f}") for k, _ in stages)
                         + " |")
     return "\n".join(rows)
+
+
+REALTIME_DEADLINE_SHARE = 0.05
+"""Above this share of fusion rounds run at their deadline a run did not keep real time (the
+network benchmark's criterion, with a p99 scan -> tracks latency under one scan interval)."""
+
+
+def realtime_note(summaries: dict[str, dict], interval_s: float, speed: float,
+                  cores: int | None) -> str | None:
+    """One paragraph when the peers did not keep real time (deadline fusions above
+    :data:`REALTIME_DEADLINE_SHARE`, or the pooled p99 scan -> tracks latency over one scan
+    interval), saying by how much and what to try; None when they did."""
+    fusions = sum(s.get("stats", {}).get("fusions", 0) for s in summaries.values())
+    late = sum(s.get("stats", {}).get("deadline_fusions", 0) for s in summaries.values())
+    lat = sorted(x for s in summaries.values() for x in s.get("latency_ms_samples") or [])
+    share = late / fusions if fusions else 0.0
+    p99 = percentile(lat, 0.99)  # the sample at floor(0.99 n), as the benchmarks
+    interval_ms = 1e3 * interval_s
+    if share <= REALTIME_DEADLINE_SHARE and (p99 is None or p99 <= interval_ms):
+        return None
+    what = []
+    if share > REALTIME_DEADLINE_SHARE:
+        what.append(f"{100 * share:.1f} % of fusion rounds ran at their deadline")
+    if p99 is not None and p99 > interval_ms:
+        what.append(f"p99 scan -> tracks {p99:.0f} ms against a {interval_ms:.0f} ms scan "
+                    f"interval")
+    slower = speed / 2.0
+    return (f"note: these {len(summaries)} peers did not keep real time at {speed:g}x "
+            f"({'; '.join(what)}) on {cores or '?'} cores: the scores above include what "
+            f"arrived too late. Run slower (--speed {slower:g}) or with fewer peers; "
+            f"benchmarks/README.md has what such a machine sustains.")
 
 
 PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term")

@@ -130,3 +130,24 @@ def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_p
         for p in children:
             if _alive(p):
                 os.kill(p, signal.SIGKILL)
+
+
+def _summary(fusions: int, late: int, lat: list[float]) -> dict:
+    return {"stats": {"fusions": fusions, "deadline_fusions": late}, "latency_ms_samples": lat}
+
+
+def test_realtime_note_only_when_the_peers_fell_behind():
+    from sim.launcher import realtime_note
+
+    kept = {"s1": _summary(100, 5, [4.0] * 99 + [90.0]), "s2": _summary(100, 0, [5.0] * 100)}
+    assert realtime_note(kept, 0.1, 10.0, 2) is None  # 2.5 % at the deadline, p99 90 ms
+    late = {"s1": _summary(100, 30, [120.0] * 100), "s2": _summary(100, 10, [50.0] * 100)}
+    note = realtime_note(late, 0.1, 10.0, 2)
+    assert note.startswith("note: these 2 peers did not keep real time at 10x")
+    assert "20.0 % of fusion rounds ran at their deadline" in note
+    assert "p99 scan -> tracks 120 ms against a 100 ms scan interval" in note
+    assert "--speed 5" in note and "2 cores" in note
+    slow_only = {"s1": _summary(100, 0, [30.0] * 98 + [150.0, 160.0])}  # p99: index 99
+    note = realtime_note(slow_only, 0.1, 10.0, None)
+    assert "deadline" not in note and "p99 scan -> tracks 160 ms" in note
+    assert realtime_note({"s1": _summary(0, 0, [])}, 0.1, 10.0, 2) is None  # nothing ran
