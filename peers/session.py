@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import random
 import socket
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -50,6 +51,8 @@ def _ephemeral_low() -> int:
 _LISTEN_LOW = 20000
 """Listening ports are drawn from here up to the ephemeral range."""
 _RANDOM = random.SystemRandom()  # not the global generator a test or a run may have seeded
+_HANDED_OUT: set[int] = set()  # every port free_port returned in this process (not again)
+_HANDED_LOCK = threading.Lock()
 
 
 def _bindable(host: str, port: int) -> bool:
@@ -67,18 +70,27 @@ def free_port(host: str = "127.0.0.1") -> int:
     Drawn at random *below* the kernel's ephemeral range: a port the OS hands out itself
     (``bind(0)``) comes from the range every outgoing connection also takes its local port
     from, and on a busy machine one of them took such a port between this choice and the
-    listener's bind ("Address already in use": a whole run failed to start). Falls back to
-    the OS's choice when the range below is too small or full.
+    listener's bind ("Address already in use": a whole run failed to start). Never the same
+    port twice in one process: the ports of a run are all chosen before any is bound, and two
+    random draws once gave the world and a peer the same port (a loaded suite pass lost a
+    run). Falls back to the OS's choice when the range below is too small or full.
     """
     hi = _ephemeral_low()
-    if hi - _LISTEN_LOW >= 1000:
+    with _HANDED_LOCK:
+        if hi - _LISTEN_LOW >= 1000:
+            for _ in range(50):
+                port = _RANDOM.randrange(_LISTEN_LOW, hi)
+                if port not in _HANDED_OUT and _bindable(host, port):
+                    _HANDED_OUT.add(port)
+                    return port
         for _ in range(50):
-            port = _RANDOM.randrange(_LISTEN_LOW, hi)
-            if _bindable(host, port):
+            with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+                s.bind((host, 0))
+                port = int(s.getsockname()[1])
+            if port not in _HANDED_OUT:
+                _HANDED_OUT.add(port)
                 return port
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
+    raise SessionError("no free TCP port found on " + host)
 
 
 def endpoint(port: int, host: str = "127.0.0.1") -> str:

@@ -83,6 +83,19 @@ def test_a_flood_of_large_messages_costs_a_receiver_little_memory():
         sender.close()
 
 
+def test_free_port_never_hands_out_a_port_twice(monkeypatch):
+    """The ports of a run are chosen before any is bound: two draws must differ even when the
+    generator repeats itself (a loaded pass once gave the world and s1 the same port)."""
+    import peers.session as session
+
+    draws = iter([23456, 23456, 23456, 24567])
+    monkeypatch.setattr(session._RANDOM, "randrange", lambda lo, hi: next(draws))
+    monkeypatch.setattr(session, "_HANDED_OUT", set())
+    monkeypatch.setattr(session, "_bindable", lambda host, port: True)
+    assert session.free_port() == 23456
+    assert session.free_port() == 24567
+
+
 def test_free_ports_come_from_below_the_ephemeral_range():
     """Outgoing connections take their local ports from the ephemeral range: a listening port
     chosen there could be taken before the listener binds it (a run failed so, loaded)."""
@@ -92,7 +105,7 @@ def test_free_ports_come_from_below_the_ephemeral_range():
     ports = {free_port() for _ in range(20)}
     if low - _LISTEN_LOW >= 1000:
         assert all(_LISTEN_LOW <= p < low for p in ports), (ports, low)
-    assert len(ports) > 1  # drawn, not one fixed port
+    assert len(ports) == 20  # drawn, and never the same port twice in one process
     for p in ports:
         with socket.socket() as s:
             s.bind(("127.0.0.1", p))  # free right now
