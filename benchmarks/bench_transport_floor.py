@@ -40,18 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-
-def circulant(n: int, degree: int) -> np.ndarray:
-    """The adjacency ``(n, n)`` of a circulant graph: node i linked to i +- 1 .. i +- degree/2
-    (and i + n/2 for an odd degree), as bench_network's meshes."""
-    A = np.zeros((n, n), dtype=bool)
-    for i in range(n):
-        for s in range(1, degree // 2 + 1):
-            A[i, (i + s) % n] = A[(i + s) % n, i] = True
-        if degree % 2:
-            A[i, (i + n // 2) % n] = A[(i + n // 2) % n, i] = True
-    np.fill_diagonal(A, False)
-    return A
+from benchmarks.bench_network import circulant
+from peers.telemetry import percentile
 
 
 def child(i: int, folder: Path) -> None:
@@ -202,7 +192,7 @@ def run(A: np.ndarray, rate: float, per_scan: int, nbytes: int, scans: int, fold
             "delivered": sum(r["received"] for r in results)
             / max(1, sum(r["expected"] for r in results)),
             "lat_median_ms": 1e3 * lat[len(lat) // 2] if lat else float("nan"),
-            "lat_p99_ms": 1e3 * lat[int(0.99 * len(lat))] if lat else float("nan")}
+            "lat_p99_ms": 1e3 * percentile(lat, 0.99) if lat else float("nan")}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,7 +32,7 @@ def test_idle_penalty_prints_one_row_per_pause(capsys):
 
 
 def test_circulant_graphs_have_the_degree_asked():
-    from benchmarks.bench_transport_floor import circulant
+    from benchmarks.bench_network import circulant
 
     for n, degree in ((20, 4), (20, 3), (50, 4), (6, 2)):
         A = circulant(n, degree)
