@@ -32,9 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from peers.telemetry import percentile
+from sim.graphs import circulant, network_scenario  # noqa: F401 (circulant: re-exported)
 from sim.launcher import read_summaries, start_run, wait_run
 from sim.scenario import load_scenario
 
@@ -43,43 +42,10 @@ TARGETS = {"latency_median_ms": 5.0, "wire_ratio": 1.1, "peers": 20, "rss_mb": 2
 """cpu_ms: process CPU per peer per scan at 20 peers of degree 4 (the scale issue's target)."""
 
 
-def circulant(n: int, degree: int) -> np.ndarray:
-    """The adjacency ``(n, n)`` of a circulant graph: node i linked to i +- 1 .. i +- degree/2,
-    and for an odd degree (n even) to i + n/2 (the meshes here and in bench_transport_floor)."""
-    A = np.zeros((n, n), dtype=bool)
-    i = np.arange(n)
-    for s in range(1, degree // 2 + 1):
-        A[i, (i + s) % n] = A[(i + s) % n, i] = True
-    if degree % 2 == 1 and n % 2 == 0:
-        A[i, (i + n // 2) % n] = True
-    np.fill_diagonal(A, False)
-    return A
-
-
 def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
                   deadline: float = 0.9) -> str:
     """A seed-000-like scenario with ``n`` linear sensors on a circulant graph of ``degree``."""
-    base = load_scenario("seed000")
-    lines = [
-        "[scenario]", f'name = "scale{n}d{degree}"', "seed = 0", "scan_period = 1.0",
-        f"num_scans = {scans}", "region = [[-1000.0, 1000.0], [-1000.0, 1000.0]]",
-        "[motion]", "sigma_w = 2.0", "survival_probability = 0.99",
-    ]
-    for t in base.targets:
-        lines += ["[[targets]]", f"birth_scan = {t.birth_scan}", f"death_scan = {t.death_scan}",
-                  f"start = {list(t.start)}", f"end = {list(t.end)}"]
-    names = [f"p{i:02d}" for i in range(n)]
-    for i, name in enumerate(names):
-        pos = base.sensors[i % len(base.sensors)].position
-        lines += ["[[sensors]]", f'name = "{name}"', 'kind = "linear"', f"position = {list(pos)}",
-                  "sigma_r = 20.0", "detection_probability = 0.99", "clutter_rate = 10"]
-    edges = np.argwhere(np.triu(circulant(n, degree)))  # (a, b), a < b, sorted
-    edge_text = ", ".join(f'["{names[a]}", "{names[b]}"]' for a, b in edges)
-    lines += ['[birth]', 'model = "truth"', "[fusion]", 'rule = "gci"',
-              f'fusing_sensor = "{names[0]}"',
-              "[network]", 'topology = "custom"', f"edges = [{edge_text}]", f"rounds = {rounds}",
-              f"speed = {speed}", f"deadline = {deadline}"]
-    return "\n".join(lines) + "\n"
+    return network_scenario(n, degree, scans, rounds, speed, deadline)
 
 
 ZENOH_CONFIG: str | None = None

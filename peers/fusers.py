@@ -12,7 +12,7 @@ import numpy as np
 
 from peers.contracts import FusionInput
 from peers.estimators import ImmEstimator, step_imm
-from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised
+from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, hybrid_fuse
 from tracking.imm import IMMGaussianState, model_posterior
 from tracking.mixture import GaussianMixture
 from tracking.particles import (
@@ -61,6 +61,21 @@ class AaFuser:
 
     def fuse(self, inp: FusionInput) -> GaussianMixture:
         return aa_fuse(_densities(inp), list(inp.weights), self.reducer)
+
+
+class HybridFuser:
+    """AA target weights, GCI (covariance-intersection) locations per target, then reduced
+    (:func:`tracking.fusion.hybrid_fuse`): robust to neighbours that missed or pruned a target."""
+
+    kinds = ("posterior",)
+    max_rounds = 1 << 30
+
+    def __init__(self, reducer: Reducer) -> None:
+        self.reducer = reducer
+        self.counts: Counter = Counter()
+
+    def fuse(self, inp: FusionInput) -> GaussianMixture:
+        return hybrid_fuse(_densities(inp), list(inp.weights), self.reducer)
 
 
 class NoFuser:

@@ -301,6 +301,14 @@ def check_budget(scn, args: argparse.Namespace, workers: int = 1, processes: int
 # --------------------------------------------------------------------------------------------
 
 
+def _warn_fusion(scn) -> None:
+    """One line per fusion setting the fusion-quality study measured to hurt."""
+    from sim.fusion_advice import fusion_warnings
+
+    for line in fusion_warnings(scn):
+        print(f"warning: {line}", file=sys.stderr, flush=True)
+
+
 def cmd_experiment(args: argparse.Namespace) -> int:
     from sim.experiment import format_table, run_experiment, write_outputs
     from sim.scenario import with_birth_model
@@ -337,6 +345,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scn = replace(scn, fusion=replace(scn.fusion, rule=args.fusion))
+    _warn_fusion(scn)
     check_budget(scn, args, workers=min(args.jobs, args.runs))
     births = ["paper", "truth"] if args.birth == "both" else [args.birth or scn.birth.model]
     out = _run_folder(args.out, "experiment")
@@ -608,6 +617,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if _is_seed003(args.scenario):
         return _run_seed003(args)
     scn = _load(args, args.scenario)
+    _warn_fusion(scn)
     try:
         pfaults = [ProcessFault.parse(f) for f in args.fault or []]
     except ValueError as exc:
@@ -929,7 +939,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenario file (.toml) or built-in name (default seed000)")
     e.add_argument("--birth", choices=["paper", "truth", "both"],
                    help="birth model (default: the scenario's)")
-    e.add_argument("--fusion", choices=["gci", "aa", "none"], help="override the fusion rule")
+    e.add_argument("--fusion", choices=["gci", "aa", "hybrid", "none"],
+                   help="override the fusion rule")
     e.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set fusion.level2_pruning=false "
                         "or --set sensors.s1.clutter_rate=50 (repeatable)")
@@ -1003,7 +1014,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: stop at once)")
     pe.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
                     help="local filter (default: the scenario's network.filter)")
-    pe.add_argument("--fusion", choices=["gci", "aa", "ratio", "none"],
+    pe.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
                     help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
     pe.add_argument("--rounds", type=POSITIVE_INT, help="consensus rounds per scan (>= 1)")
     pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])

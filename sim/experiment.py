@@ -26,7 +26,7 @@ from sim.build import make_filter, make_reducer
 from sim.progress import Progress
 from sim.scenario import Scenario
 from sim.world import generate_run
-from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, metropolis_weights
+from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, hybrid_fuse, metropolis_weights
 from tracking.metrics import cardinality_error, ospa
 from tracking.mixture import GaussianMixture
 from tracking.reduction import keep_above
@@ -53,6 +53,8 @@ def fuse_estimates(scn: Scenario, densities: list[GaussianMixture]) -> GaussianM
         densities = [keep_above(D, scn.fusion.level2_threshold) for D in densities]
     if scn.fusion.rule == "aa":
         return aa_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce)
+    if scn.fusion.rule == "hybrid":
+        return hybrid_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce)
     if scn.fusion.omega in ("det", "chernoff"):
         return gci_fuse_optimised(densities, scn.fusion.omega, reduce, scn.fusion.cardinality)
     return gci_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce,

@@ -15,7 +15,7 @@ import numpy as np
 from peers.consensus import Consensus, ConsensusOptions
 from peers.core import CoreConfig, PeerCore
 from peers.estimators import GmphdEstimator, ImmEstimator, SingleTargetConfig
-from peers.fusers import AaFuser, GciFuser, ImmFuser, NoFuser
+from peers.fusers import AaFuser, GciFuser, HybridFuser, ImmFuser, NoFuser
 from peers.scoring import Scorer
 from sim.build import adjacency, make_filter, sensor_model
 from sim.scenario import Scenario, ScenarioError
@@ -98,12 +98,14 @@ def make_parts(scn: Scenario, name: str, run: int = 0):
             fuser = GciFuser(filt.reducer, fus.cardinality, net.omega)
         elif rule == "aa":
             fuser = AaFuser(filt.reducer)
+        elif rule == "hybrid":
+            fuser = HybridFuser(filt.reducer)
         else:
             fuser = NoFuser()
         return est, fuser
-    if rule == "aa":
+    if rule in ("aa", "hybrid"):
         raise ScenarioError(f"{scn.name}: single-target peers fuse by 'gci', 'ratio' or "
-                            f"'none', not 'aa'")
+                            f"'none', not {rule!r}")
     from sim.seed001 import Seed001Scenario, truth
 
     cfg = SingleTargetConfig()

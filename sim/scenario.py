@@ -51,7 +51,7 @@ TRUTH_MODELS = ("straight", "seed001")
 MOTION_MODELS = ("cv",)
 SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
-FUSION_RULES = ("gci", "aa", "ratio", "none")
+FUSION_RULES = ("gci", "aa", "hybrid", "ratio", "none")
 PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd", "flooding")
 FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
 """What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
@@ -173,7 +173,8 @@ class FusionSpec:
     """How local estimates are fused (§3, §4 level 2)."""
 
     rule: str = "gci"
-    """``"gci"``, ``"aa"`` (arithmetic average) or ``"none"`` (local filters only)."""
+    """``"gci"``, ``"aa"`` (arithmetic average), ``"hybrid"`` (AA target weights, GCI
+    locations: :func:`tracking.fusion.hybrid_fuse`) or ``"none"`` (local filters only)."""
     omega: str = "uniform"
     """Fusion weights: ``"uniform"``, ``"metropolis"``, or optimised ``"det"`` / ``"chernoff"``."""
     level2_pruning: bool = True
@@ -851,7 +852,7 @@ def _filter(f: _Table) -> FilterSpec:
 def _fusion(f: _Table, sensor_names: list[str]) -> FusionSpec:
     fuser = f.choice("fusing_sensor", sensor_names, sensor_names[0])
     return FusionSpec(
-        rule=f.choice("rule", FUSION_RULES, "gci"),
+        rule=f.choice("rule", FUSION_RULES, "hybrid"),
         omega=f.choice("omega", OMEGA_RULES, "uniform"),
         level2_pruning=f.flag("level2_pruning", True),
         level2_threshold=f.number("level2_threshold", 0.5, minimum=0.0),

@@ -42,7 +42,8 @@ def test_zero_delay_network_equals_offline_fusion(scn):
     local = _per_scan(twin, "s2", "local")
     ks = sorted(fused)
     assert ks == list(range(1, scn.num_scans + 1))
-    np.testing.assert_allclose([fused[k] for k in ks], offline.ospa["fused s2 (gci)"], atol=1e-9)
+    offline_fused = offline.ospa[f"fused s2 ({scn.fusion.rule})"]
+    np.testing.assert_allclose([fused[k] for k in ks], offline_fused, atol=1e-9)
     np.testing.assert_allclose([local[k] for k in ks], offline.ospa["local s2"], atol=1e-9)
     for name, peer in twin.peers.items():
         assert peer.consensus.stats.fusions == scn.num_scans

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from peers.extended import EtGmphdEstimator
-from peers.fusers import GciFuser
+from peers.fusers import GciFuser, HybridFuser
 from sim.extended import make_et_filter, with_partition
 from sim.peers import consensus_options, make_parts
 from sim.scenario import ScenarioError, load_scenario
@@ -64,10 +64,12 @@ def test_world_draws_poisson_returns_per_detected_target():
     assert all(len(z) <= len(x) for z, x in zip(sc0[0], t0.states, strict=True))
 
 
-def test_make_parts_builds_et_peers_fused_by_gci():
+def test_make_parts_builds_et_peers_fused_by_the_mixture_fusers():
     scn = load_scenario("seed002")
     est, fuser = make_parts(scn, "s2")
-    assert isinstance(est, EtGmphdEstimator) and isinstance(fuser, GciFuser)
+    assert isinstance(est, EtGmphdEstimator) and isinstance(fuser, HybridFuser)
+    _, fuser = make_parts(load_scenario("seed002", {"fusion.rule": "gci"}), "s2")
+    assert isinstance(fuser, GciFuser)
     opts = consensus_options(scn, "s2")
     assert opts.policy == "nale" and set(opts.neighbours) == {"s1", "s3"}
 

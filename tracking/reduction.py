@@ -81,6 +81,31 @@ def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> Gaussi
     return _merge_in_order(mix, (-mix.weights).argsort(kind="stable"), threshold, rule)
 
 
+def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> np.ndarray:
+    """The group each component joins in :func:`merge`'s sweep: ``(n,)`` labels ``0..G-1``.
+
+    The same close pairs and greedy groups as :func:`merge` (heaviest first), so a group here is
+    exactly the set of components :func:`merge` would moment-match into one. Label ``g`` is the
+    ``g``-th group in sweep order (its heaviest member first).
+    """
+    if rule not in MERGE_RULES:
+        raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
+    n = len(mix)
+    if n <= 1:
+        return np.zeros(n, dtype=np.intp)
+    order = (-mix.weights).argsort(kind="stable")
+    root = np.arange(n)
+    ci, cj = _close_pairs(mix.weights[order], mix.means[order], mix.covs[order], threshold, rule)
+    if ci.size:
+        centres, members = _greedy_groups(ci, cj)
+        sizes = [len(g) for g in members]
+        root[np.concatenate(members)] = np.repeat(centres, sizes)
+    _, labels_sorted = np.unique(root, return_inverse=True)  # centres are sorted positions
+    labels = np.empty(n, dtype=np.intp)
+    labels[order] = labels_sorted
+    return labels
+
+
 def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
                     rule: str) -> GaussianMixture:
     """:func:`merge` of the components ``order`` (at least two indices, heaviest first)."""
@@ -328,4 +353,5 @@ __all__ = [
     "merge",
     "moment_match",
     "prune",
+    "sweep_labels",
 ]
