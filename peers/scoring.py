@@ -38,6 +38,8 @@ class Scorer:
         self.sums = dict.fromkeys(WHICH, 0.0)
         self.counts = dict.fromkeys(WHICH, 0)
         self.misses = dict.fromkeys(WHICH, 0)
+        self.card_sums = dict.fromkeys(WHICH, 0.0)
+        """Sums of ``|estimated - true|`` target numbers (a missing output estimates 0)."""
         self.unscored = 0
         """Estimates whose truth never arrived (no truth function, truth messages lost)."""
         self.records: list[dict] = []
@@ -100,6 +102,8 @@ class Scorer:
             for k in gone:
                 self._expected[which].discard(k)
                 self.misses[which] += 1
+                X = self.truth(k)
+                self.card_sums[which] += len(X) if X is not None else 0
                 self.records.append({"k": k, "kind": "ospa", "which": which, "value": self.c,
                                      "miss": True})
             late = [k for k in self._waiting[which] if old(k)]
@@ -114,6 +118,7 @@ class Scorer:
         est = states[:, self.pos] if len(states) else np.zeros((0, 2))
         value = ospa(est, X[:, self.pos] if len(X) else np.zeros((0, 2)), self.c, self.p)
         self.sums[which] += value
+        self.card_sums[which] += abs(len(est) - len(X))
         self.counts[which] += 1
         self.records.append({"k": k, "kind": "ospa", "which": which, "value": value})
 
@@ -121,6 +126,12 @@ class Scorer:
         """Mean OSPA over scored estimates and misses (a miss counts ``c``)."""
         n = self.counts[which] + self.misses[which]
         return (self.sums[which] + self.c * self.misses[which]) / n if n else float("nan")
+
+    def mean_cardinality_error(self, which: str) -> float:
+        """Mean ``|estimated - true|`` target number over the same scans as :meth:`mean` (a
+        missing output counts as no target estimated)."""
+        n = self.counts[which] + self.misses[which]
+        return self.card_sums[which] / n if n else float("nan")
 
     def drain_records(self) -> list[dict]:
         out, self.records = self.records, []

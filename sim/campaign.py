@@ -65,6 +65,12 @@ class Cell:
     """The grid/list values that make this cell (for tables and sweep plots)."""
     hash: str = ""
     keys: list[str] = field(default_factory=list)
+    scenario: str | None = None
+    """This cell's own scenario (name or file name of ``scenario_text``); None: the
+    campaign's (a study's cells run on several networks: :mod:`sim.fusion_study`)."""
+    scenario_text: str | None = None
+    runner: str | None = None
+    """This cell's own runner; None: the campaign's."""
 
 
 @dataclass
@@ -84,10 +90,12 @@ class Campaign:
     def tasks(self) -> list[Task]:
         out = []
         for c in self.cells:
+            own = c.scenario is not None
             for i, key in enumerate(c.keys):
                 out.append(Task(key=key, cell=c.index, cell_label=c.label,
-                                run=self.first_run + i, runner=self.runner,
-                                scenario=self.scenario, scenario_text=self.scenario_text,
+                                run=self.first_run + i, runner=c.runner or self.runner,
+                                scenario=c.scenario if own else self.scenario,
+                                scenario_text=c.scenario_text if own else self.scenario_text,
                                 overrides=c.overrides, scenario_hash=c.hash,
                                 code_version=self.code_version, metrics=self.metrics))
         return out
@@ -98,7 +106,9 @@ class Campaign:
                 "first_run": self.first_run, "code_version": self.code_version,
                 "metrics": list(self.metrics), "figures": self.figures,
                 "cells": [{"index": c.index, "label": c.label, "set": c.overrides,
-                           "values": c.values, "hash": c.hash, "keys": c.keys}
+                           "values": c.values, "hash": c.hash, "keys": c.keys,
+                           **({"scenario": c.scenario} if c.scenario is not None else {}),
+                           **({"runner": c.runner} if c.runner is not None else {})}
                           for c in self.cells]}
 
 
@@ -147,6 +157,10 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(f"{label}: invalid TOML: {exc}") from None
+    if "study" in data:  # a study expands into its own cells (scenarios, runners, runs)
+        from sim.fusion_study import study_campaign
+
+        return study_campaign(data, path, runs)
     unknown = set(data) - {"campaign", "set", "grid", "cells", "figures"}
     _check(not unknown, label, f"unknown table(s) {sorted(unknown)} (known: campaign, set, "
            "grid, cells, figures)")

@@ -299,7 +299,11 @@ def _twin_row(scn, run: int) -> dict[str, Any]:
     peers = result.peers
     out: dict[str, Any] = {
         "fused_ospa": float(np.mean([p.mean_ospa("fused") for p in peers.values()])),
-        "local_ospa": float(np.mean([p.mean_ospa("local") for p in peers.values()]))}
+        "local_ospa": float(np.mean([p.mean_ospa("local") for p in peers.values()])),
+        "fused_card_error": float(np.mean([p.scorer.mean_cardinality_error("fused")
+                                           for p in peers.values()])),
+        "local_card_error": float(np.mean([p.scorer.mean_cardinality_error("local")
+                                           for p in peers.values()]))}
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers.values())
     out.update(cost_columns([p.cost() for p in peers.values()]))
