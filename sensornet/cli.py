@@ -522,20 +522,27 @@ def cmd_replay(args: argparse.Namespace) -> int:
         files = [f for f in files if f.stem.split(".")[0] == f"peer-{args.peer}"]
         if not files:
             raise UserError(f"no recording of peer {args.peer!r} in {path}")
-    print("| peer | file | scans | tracks recorded | replayed identical | mean OSPA fused |")
-    print("|---|---|---:|---:|---|---:|")
     ok = True
-    for f in files:
+    changed = False
+    for i, f in enumerate(files):
         try:
             r = replay(f, args.set or [])
         except (ValueError, ScenarioError, OSError) as exc:
             raise UserError(f"{f}: {exc}") from None
+        if i == 0:  # after the first replay: a refused --set is one line, no table head
+            print("| peer | file | scans | tracks recorded | replayed identical | "
+                  "mean OSPA fused |")
+            print("|---|---|---:|---:|---|---:|")
         same = r.identical
         ok = ok and (same or bool(args.set))
+        changed = changed or not same
         print(f"| {r.peer} | {f.name} | {r.snapshot['scans']} | {len(r.recorded)} | "
               f"{'yes' if same else 'NO'} | {r.snapshot['mean_ospa_fused']:.2f} |", flush=True)
-    if args.set:
+    if args.set and changed:
         print("(with --set the replay is a what-if run: its tracks are expected to differ)")
+    elif args.set:
+        print("(with --set the replay is a what-if run; these settings changed none of the "
+              "tracks)")
     return 0 if ok else 1
 
 
@@ -1084,7 +1091,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("path", help="a run folder (its record/*.mcap) or one .mcap file")
     rp.add_argument("--peer", help="only this peer's recording")
     rp.add_argument("--set", action="append", metavar="KEY=VALUE",
-                    help="change a setting for the replay (what-if), e.g. network.rounds=3")
+                    help="change a setting for the replay (what-if), e.g. fusion.cardinality=emd "
+                         "(not network.rounds: the recording holds only the rounds it had)")
     rp.set_defaults(func=cmd_replay)
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
