@@ -626,6 +626,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
+    late = [f for f in pfaults if f.scan >= scn.num_scans]
+    if late:  # it would be accepted and never fire (or fire as the run ends)
+        f = late[0]
+        raise UserError(f"--fault {f.action}:{f.peer}@{f.scan}: scan {f.scan} is at or after "
+                        f"the run's last scan ({scn.name} has {scn.num_scans} scans); "
+                        f"schedule it before scan {scn.num_scans}")
     if getattr(args, "sim", False):
         for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
             if getattr(args, flag, None):
@@ -1055,7 +1061,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--run", type=NONNEGATIVE_INT, default=0, help="Monte Carlo run index")
         sp.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                         help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
-                             "(repeatable); with --router also restart:router@K")
+                             "(repeatable; SCAN before the run's last); with --router also "
+                             "restart:router@K")
         sp.add_argument("--record", action="store_true",
                         help="every peer records its inputs to <out>/record/*.mcap "
                              "(see: sensornet replay)")

@@ -47,6 +47,31 @@ def test_unknown_override_and_missing_file_are_user_errors(tmp_path, capsys):
     assert main(["run", "--sim", "--fault", "kill:s1@3"]) == 2
 
 
+@pytest.mark.parametrize("argv", [
+    ["run", "--fault", "kill:s2@300"],                   # processes: 100 scans
+    ["run", "--sim", "--fault", "kill:s2@300"],          # the twin
+    ["demo", "--fault", "stop:s1@100"],                  # at the last scan
+    ["run", "--set", "scenario.num_scans=20", "--fault", "kill:s1@5", "--fault",
+     "restart:s3@20"],
+])
+def test_fault_at_or_after_the_last_scan_is_refused(argv, tmp_path, capsys):
+    """A process fault the run never reaches was accepted and never fired: refused, one line
+    naming the fault and the run's length, before any process or folder."""
+    assert main([*argv, "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    fault = next(a for a in reversed(argv) if "@" in a)
+    scans = "20" if "scenario.num_scans=20" in argv else "100"
+    assert len(err) == 1 and f"--fault {fault}:" in err[0], err
+    assert f"has {scans} scans" in err[0]
+    assert not (tmp_path / "run").exists()
+
+
+def test_fault_before_the_last_scan_passes_the_check(capsys):
+    """kill:s2@99 of 100 scans gets past the scan check (--sim then refuses process faults)."""
+    assert main(["run", "--sim", "--fault", "kill:s2@99"]) == 2
+    assert "needs real processes" in capsys.readouterr().err
+
+
 def test_run_sim_prints_the_summary(capsys):
     assert main(["run", "--sim", "--set", "birth.model=truth",
                  "--set", "scenario.num_scans=30"]) == 0
