@@ -660,6 +660,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
           f"few seconds to start {len(scn.sensors) + 1} processes); output in {out}", flush=True)
+    if secure is not None:
+        made = " (fresh keys made for this run)" if args.secure == "" else ""
+        print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
+              f"{secure}{made}", flush=True)
     viewer = args.viewer
     if viewer == "spawn":  # one viewer for the whole run; every process streams to it
         from peers.rerun_sink import spawn_viewer
@@ -683,6 +687,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                            router=bool(getattr(args, "router", False)),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
+        if handle.router_command:
+            why = f" ({args.router})" if isinstance(args.router, str) else ""
+            print(f"routed{why}: the world and every peer are clients of the run's router "
+                  f"(sensornet router) at {handle.endpoints['router']}", flush=True)
         if pfaults:
             injector = threading.Thread(target=inject_process_faults, daemon=True,
                                         args=(handle, pfaults, scn.sensor_names[0], stop))
