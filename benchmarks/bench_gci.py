@@ -7,7 +7,7 @@ both give the same mixture (largest relative difference), and prints PASS/FAIL a
 issue's targets: gci_pair under 0.6 ms at 50x50 and under 2 ms at 100x100.
 
 Times are medians over many repeats (this machine is a shared VM: single timings are noisy).
-Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_gci.py [--quick]``.
+Run from the repository root: ``python benchmarks/bench_gci.py [--quick]``.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ Gate: ``--gate G`` is a Mahalanobis *distance*. Stone Soup's ``DistanceGater`` w
 
 Stone Soup is an optional extra (``pip install 'sensornet[bench]'``); without it the script
 prints one line and exits 0. Run from the repository root:
-``PYTHONPATH=. python benchmarks/bench_gmphd_stonesoup.py [--quick]``.
+``python benchmarks/bench_gmphd_stonesoup.py [--quick]``.
 """
 
 from __future__ import annotations
@@ -32,8 +32,12 @@ import os
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # `python benchmarks/bench_gmphd_stonesoup.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tracking.gmphd import GMPHDFilter, SensorParams, extract
 from tracking.metrics import ospa

@@ -7,7 +7,7 @@ sensor, or ``--clutter``) uniform over (-1000, 1000]^2: about 260 points. Times
 medians over many calls on fresh sets, and prints the ratio to the issue's target (clustering
 <= 0.5 ms per peer per scan) with PASS/FAIL.
 
-Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_idpc.py [--quick]``.
+Run from the repository root: ``python benchmarks/bench_idpc.py [--quick]``.
 """
 
 from __future__ import annotations
