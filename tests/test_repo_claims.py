@@ -30,3 +30,33 @@ def test_sources_are_not_ignored():
     p = subprocess.run(["git", "check-ignore", "-q", "--no-index", "peers/security.py"],
                        cwd=ROOT, timeout=30)
     assert p.returncode == 1
+
+
+def _set_claim() -> tuple[set[str], set[str]]:
+    """README's two lists: the commands that take ``--set`` and those that take none."""
+    import re
+
+    text = " ".join((ROOT / "README.md").read_text().split())
+    m = re.search(r"The commands that play a scenario, (.*?) take `--set KEY=VALUE`.*?; a "
+                  r"campaign file holds its overrides in its `\[set\]` table, and (.*?) take "
+                  r"no `--set`", text)
+    assert m, "README's --set sentence is gone"
+    return set(re.findall(r"`([a-z]+)`", m.group(1))), set(re.findall(r"`([a-z]+)`",
+                                                                      m.group(2)))
+
+
+def test_readme_says_exactly_which_commands_take_set():
+    """README claimed every command takes --set; campaign, report, keys, scenario and router
+    do not. Its lists now are the parser's, every command in one of them."""
+    import argparse
+
+    from sensornet.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    takes = {name for name, sp in sub.choices.items()
+             if any("--set" in a.option_strings for a in sp._actions)}
+    with_set, without = _set_claim()
+    assert with_set == takes
+    assert without == set(sub.choices) - takes
+    assert "Every command takes `--set" not in (ROOT / "README.md").read_text()
