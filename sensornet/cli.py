@@ -813,12 +813,25 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    from sim.campaign import default_folder, format_status, load_campaign, run_campaign, status
+    from sim.campaign import (
+        default_folder,
+        format_status,
+        load_campaign,
+        recorded_runs,
+        run_campaign,
+        status,
+    )
 
     c = load_campaign(args.file, runs=args.runs)
     folder = Path(args.out) if args.out else default_folder(c)
-    if args.status:
+    if args.status:  # against the plan the folder records (its last run's), not --runs
+        planned = recorded_runs(folder)
+        if planned is not None and planned != c.runs:
+            c = load_campaign(args.file, runs=planned)
         print(format_status(c, folder, status(c, folder)))
+        if args.runs is not None and args.runs != c.runs:
+            print(f"(--runs {args.runs} not counted: the folder's plan is {c.runs} runs per "
+                  f"cell; running with --runs {args.runs} makes it the plan)")
         return 0
     if args.dask and args.scheduler:
         raise UserError("--dask local and --scheduler: give one of them")
