@@ -486,6 +486,14 @@ def cmd_peer(args: argparse.Namespace) -> int:
     except DuplicatePeer as exc:
         raise UserError(str(exc)) from None
     s = runtime.summary()
+    if getattr(core, "world", None) == "unseen" and not s["scans"]:
+        if s["stop_reason"].startswith("no input"):  # the idle timeout: say so, no "OSPA nan"
+            print(f"peer {args.name}: no world on network {args.network} within "
+                  f"{args.idle_timeout:g} s: nothing was tracked", flush=True)
+            return 1
+        print(f"peer {args.name}: stopped ({s['stop_reason']}) before a world appeared on "
+              f"network {args.network}: nothing was tracked", flush=True)
+        return code
     print(f"peer {args.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
           f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
           f"rejected {s['rejected_total']}", flush=True)
