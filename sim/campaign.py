@@ -476,6 +476,12 @@ def _run(c: Campaign, folder: Path, jobs: int, dask: str | None, progress: bool,
 
 def read_manifest(folder: Path) -> dict[str, Any]:
     path = Path(folder) / "manifest.json"
+    if not Path(folder).exists():
+        raise CampaignError(f"{folder}: no such folder (a campaign folder is what 'sensornet "
+                            "campaign FILE' writes, runs/campaign-<name> by default)")
+    if not Path(folder).is_dir():
+        raise CampaignError(f"{folder}: not a folder (give the campaign's folder, e.g. "
+                            "runs/campaign-<name>)")
     if not path.is_file():
         raise CampaignError(f"{folder}: no manifest.json (not a campaign folder; run "
                             "'sensornet campaign FILE' first)")

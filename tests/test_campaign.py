@@ -255,6 +255,12 @@ def test_campaign_file_errors_are_one_line(tmp_path, capsys):
     assert "no such campaign file" in capsys.readouterr().err
     assert main(["report", str(tmp_path)]) == 2
     assert "no manifest.json" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "runs" / "campaign-nope")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{tmp_path / 'runs' / 'campaign-nope'}: no such folder" in err[0]
+    assert "manifest" not in err[0] and not (tmp_path / "runs").exists()
+    assert main(["report", str(bad)]) == 2  # a file
+    assert "not a folder" in capsys.readouterr().err
 
 
 def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):
