@@ -1,7 +1,7 @@
 """Benchmark: our array GM-PHD against Stone Soup's GM-PHD on the same scans.
 
-Both filters see the same seed-000 scenario (ALGORITHMS.md §10), generated here: 4 targets
-moving in straight lines start -> end over their lives, a linear position sensor
+Both filters see the same seed-000 scenario (docs/algorithms.md "Seed-000 scenario"), generated
+here: 4 targets moving in straight lines start -> end over their lives, a linear position sensor
 (sigma_r = 20 m), Pd = Ps = 0.99, Poisson clutter uniform over [-1000, 1000]^2, births at the
 true birth points (zero velocity, cov diag(100, 2500, 100, 2500), weight 0.1 each). Same
 parameters on both sides: CV motion with sigma_w = 2 and §1's discrete ``Q = sigma_w^2 G G^T``,
@@ -45,7 +45,7 @@ from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity, LinearPosition
 from tracking.reduction import Reducer
 
-# -- the seed-000 scenario (ALGORITHMS.md §10) ------------------------------------------------
+# -- the seed-000 scenario (docs/algorithms.md "Seed-000 scenario") ----------------------------
 REGION = (-1000.0, 1000.0)
 AREA = (REGION[1] - REGION[0]) ** 2
 T = 1.0
