@@ -695,7 +695,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                            router=bool(getattr(args, "router", False)),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
-        if handle.router_command:
+        if getattr(args, "router", False):
             why = f" ({args.router})" if isinstance(args.router, str) else ""
             print(f"routed{why}: the world and every peer are clients of the run's router "
                   f"(sensornet router) at {handle.endpoints['router']}", flush=True)

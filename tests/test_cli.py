@@ -93,8 +93,7 @@ def test_run_says_at_start_when_it_is_secure_or_routed(flags, secure, routed, tm
 
     def fake_start_run(*a, **kw):  # the processes are not started: only what cmd_run says
         ep = ("tls" if kw["secure"] else "tcp") + "/127.0.0.1:7999"
-        return types.SimpleNamespace(router_command=["router"] if kw["router"] else [],
-                                     endpoints={"router": ep} if kw["router"] else {})
+        return types.SimpleNamespace(endpoints={"router": ep} if kw["router"] else {})
 
     def fake_wait_run(*a, **kw):
         raise _Started
