@@ -11,6 +11,12 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def test_gitignore_names_the_key_folders():
+    lines = (ROOT / ".gitignore").read_text().splitlines()
+    assert {"keys/", "*.key", "*.ed25519"} <= set(lines)
+
+
+@pytest.mark.network  # runs git
 @pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(),
                     reason="needs a git checkout")
 @pytest.mark.parametrize("path", ["keys/lab/ca.key", "keys/lab/s1.key", "keys/lab/s1.ed25519",
@@ -24,6 +30,7 @@ def test_key_folders_are_git_ignored(path):
     assert p.returncode == 0, f"{path} is not git-ignored"
 
 
+@pytest.mark.network  # runs git
 @pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(),
                     reason="needs a git checkout")
 def test_sources_are_not_ignored():
