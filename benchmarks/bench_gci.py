@@ -1,13 +1,13 @@
 """Benchmark: GCI fusion of two 4-D Gaussian mixtures, batched against a plain per-pair loop.
 
-Times :func:`tracking.fusion.gci_pair` on 50x50 and 100x100 components (random SPD
-covariances, means spread over the surveillance region) beside a per-pair Python loop written
-here with ``numpy.linalg`` (the formulas of ALGORITHMS.md §3, one pair at a time), checks that
-both give the same mixture (largest relative difference), and prints PASS/FAIL against the
-issue's targets: gci_pair under 0.6 ms at 50x50 and under 2 ms at 100x100.
+Times :func:`tracking.fusion.gci_pair` on 50x50 and 100x100 components (random SPD covariances,
+means spread over the surveillance region) beside a per-pair Python loop written here with
+``numpy.linalg`` (the formulas of docs/algorithms.md "GCI fusion", one pair at a time), checks that
+both give the same mixture (largest relative difference), and prints PASS/FAIL against the issue's
+targets: gci_pair under 0.6 ms at 50x50 and under 2 ms at 100x100.
 
 Times are medians over many repeats (this machine is a shared VM: single timings are noisy).
-Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_gci.py [--quick]``.
+Run from the repository root: ``python benchmarks/bench_gci.py [--quick]``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def random_mixture(rng: np.random.Generator, n: int) -> GaussianMixture:
 
 
 def gci_pair_loop(Di: GaussianMixture, Dj: GaussianMixture, omega: float) -> GaussianMixture:
-    """GCI by a plain loop over pairs, ``numpy.linalg`` per pair (ALGORITHMS.md §3):
+    """GCI by a plain loop over pairs, ``numpy.linalg`` per pair (docs/algorithms.md "GCI fusion"):
 
     ``P_ab = [(1-w) P_a^-1 + w P_b^-1]^-1``, ``m_ab = P_ab [(1-w) P_a^-1 m_a + w P_b^-1 m_b]``,
     ``w_ab = w_a^(1-w) w_b^w kappa(1-w, P_a) kappa(w, P_b) N(m_a - m_b; 0, P_a/(1-w) + P_b/w)``,

@@ -1,7 +1,7 @@
 """Benchmark: our array GM-PHD against Stone Soup's GM-PHD on the same scans.
 
-Both filters see the same seed-000 scenario (ALGORITHMS.md §10), generated here: 4 targets
-moving in straight lines start -> end over their lives, a linear position sensor
+Both filters see the same seed-000 scenario (docs/algorithms.md "Seed-000 scenario"), generated
+here: 4 targets moving in straight lines start -> end over their lives, a linear position sensor
 (sigma_r = 20 m), Pd = Ps = 0.99, Poisson clutter uniform over [-1000, 1000]^2, births at the
 true birth points (zero velocity, cov diag(100, 2500, 100, 2500), weight 0.1 each). Same
 parameters on both sides: CV motion with sigma_w = 2 and §1's discrete ``Q = sigma_w^2 G G^T``,
@@ -21,7 +21,7 @@ Gate: ``--gate G`` is a Mahalanobis *distance*. Stone Soup's ``DistanceGater`` w
 
 Stone Soup is an optional extra (``pip install 'sensornet[bench]'``); without it the script
 prints one line and exits 0. Run from the repository root:
-``PYTHONPATH=. python benchmarks/bench_gmphd_stonesoup.py [--quick]``.
+``python benchmarks/bench_gmphd_stonesoup.py [--quick]``.
 """
 
 from __future__ import annotations
@@ -32,8 +32,12 @@ import os
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # `python benchmarks/bench_gmphd_stonesoup.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tracking.gmphd import GMPHDFilter, SensorParams, extract
 from tracking.metrics import ospa
@@ -41,7 +45,7 @@ from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity, LinearPosition
 from tracking.reduction import Reducer
 
-# -- the seed-000 scenario (ALGORITHMS.md §10) ------------------------------------------------
+# -- the seed-000 scenario (docs/algorithms.md "Seed-000 scenario") ----------------------------
 REGION = (-1000.0, 1000.0)
 AREA = (REGION[1] - REGION[0]) ** 2
 T = 1.0

@@ -1,13 +1,13 @@
 """Benchmark: IDPC and FTC clustering of one pooled seed-004 scan set, against the 0.5 ms target.
 
-A pooled set as a peer holds it after complete flooding (ALGORITHMS.md §9): 20 sensors, 3
+A pooled set as a peer holds it after complete flooding (docs/seed004.md): 20 sensors, 3
 separated targets seen with Pd = 0.95 and sigma = 10 m per axis, Poisson clutter (mean 10 per
 sensor, or ``--clutter``) uniform over (-1000, 1000]^2: about 260 points. Times
 :func:`tracking.idpc.idpc` and :func:`tracking.idpc.ftc` (scikit-learn DBSCAN + k-means) as
 medians over many calls on fresh sets, and prints the ratio to the issue's target (clustering
 <= 0.5 ms per peer per scan) with PASS/FAIL.
 
-Run from the repository root: ``PYTHONPATH=. python benchmarks/bench_idpc.py [--quick]``.
+Run from the repository root: ``python benchmarks/bench_idpc.py [--quick]``.
 """
 
 from __future__ import annotations

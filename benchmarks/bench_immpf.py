@@ -10,7 +10,7 @@ particle per step, and the floor no NumPy rewrite of the same filter can go belo
 its random draws alone (8 normals and a few uniforms per particle, the same stream). Medians
 over many steps; the load average is printed. Run from the repository root:
 
-    PYTHONPATH=. python benchmarks/bench_immpf.py [--quick] [--loop]
+    python benchmarks/bench_immpf.py [--quick] [--loop]
 
 ``--loop`` adds the per-particle Python loop of the same step (slow; the original reference).
 Both filters start from the same state and random stream each step, and the table says
@@ -22,9 +22,14 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # `python benchmarks/bench_immpf.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.filters_before import IMMEKFBefore, IMMParticleFilterBefore
 from benchmarks.filters_before import radar_log_likelihood as radar_log_likelihood_before

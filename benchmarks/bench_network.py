@@ -6,7 +6,7 @@ Prints, against the targets of the peers issue:
    with 3 peers at 10 scans/s, no Rerun: median and p99 of the pooled samples, one per scan of
    every peer (p99 = the sample at index floor(0.99 n) of the n sorted samples);
 2. wire bytes per estimate against the raw tuple count (15 numbers per 4-D component, 8 bytes
-   each: ALGORITHMS.md §9);
+   each: docs/seed004.md);
 3. the largest number of peers that keeps real time at 10 scans/s with 2 consensus rounds, on
    a ring (degree 2) and on circulant meshes of degree 3 and 4, and the peak resident memory
    of one peer process;

@@ -8,7 +8,7 @@ points. PASS/FAIL against the issue's targets: the seed method >= 38 % faster at
 <= 1 ms per partition and <= 5 ms per step at clutter 25.
 
 CPU time of this thread (``time.thread_time``), BLAS on one thread. Run from the repository
-root: ``PYTHONPATH=. python benchmarks/bench_partition.py [--runs R]``.
+root: ``python benchmarks/bench_partition.py [--runs R]``.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ network sees, where the IMM's wide CA gate holds hundreds of returns); both filt
 same returns, and the table says how far their final estimates differ. Medians over every
 step of every repetition; the load average is printed. Run from the repository root:
 
-    PYTHONPATH=. python benchmarks/bench_pda.py [--quick] [--region]
+    python benchmarks/bench_pda.py [--quick] [--region]
 """
 
 from __future__ import annotations
@@ -19,9 +19,14 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # `python benchmarks/bench_pda.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.pda_before import ImmPdaBefore
 from sim import seed003

@@ -15,9 +15,9 @@ Prints per run: messages received per process per scan, process CPU per process 
 in cores, the share of messages delivered, and the publish-to-loop latency (median, p99 of the
 pooled samples). Run from the repository root:
 
-    PYTHONPATH=. python benchmarks/bench_transport_floor.py --graph seed004 --per-scan 4 \
+    python benchmarks/bench_transport_floor.py --graph seed004 --per-scan 4 \
         --bytes 1060
-    PYTHONPATH=. python benchmarks/bench_transport_floor.py --peers 20 50 --degree 4 --per-scan 2
+    python benchmarks/bench_transport_floor.py --peers 20 50 --degree 4 --per-scan 2
 
 (seed004: the scenario's 20-sensor graph; a flooding peer sends one forward per iteration, 4 per
 scan, about 1,060 bytes each on average. A consensus peer with 2 rounds sends 2 estimates per
@@ -39,6 +39,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # `python benchmarks/bench_transport_floor.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_network import circulant
 from peers.telemetry import percentile

@@ -1,8 +1,8 @@
 """Consensus over a peer's neighbours: one class for any local estimator and fuser.
 
-Per scan ``k`` (ALGORITHMS.md §3, §5): the local estimator steps and its round-0 estimate goes
-out; then ``L`` consensus rounds; round ``l`` fuses the peer's current density with the
-neighbours' round-``(l-1)`` densities (round 0 through the NALE buffer, so late estimates are
+Per scan ``k`` (docs/algorithms.md "GCI fusion", "NALE"): the local estimator steps and its round-0
+estimate goes out; then ``L`` consensus rounds; round ``l`` fuses the peer's current density with
+the neighbours' round-``(l-1)`` densities (round 0 through the NALE buffer, so late estimates are
 predicted to ``k``). A round runs as soon as every live neighbour's inputs are in, or at the
 deadline with whatever arrived. After round ``L`` the tracks go out.
 
@@ -62,7 +62,7 @@ class ConsensusStats:
     estimates_out: int = 0
     tuples_out: int = 0
     """Numbers published in estimates (15 per 4-D component, 2 per 2-D measurement:
-    ALGORITHMS.md §9), once per publication."""
+    docs/seed004.md), once per publication."""
     tuples_to_neighbours: int = 0
     """The same, once per neighbour it goes to (the seed's count: a publication reaches every
     live neighbour over its own link)."""
@@ -86,7 +86,7 @@ class _ScanState:
 
 def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
     """The seed's tuples in one published payload: a ``d``-dimensional Gaussian component
-    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (ALGORITHMS.md §9); an array is
+    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (docs/seed004.md); an array is
     shared returns ``(m, 2)`` (:class:`~protocol.messages.Returns`)."""
     if isinstance(payload, ScanSet):
         return payload.tuples()

@@ -10,7 +10,7 @@ from dataclasses import asdict
 
 
 def core_cost(core) -> dict:
-    """Tuples and bytes a peer sent per scan (estimates and forwards; ALGORITHMS.md §9:
+    """Tuples and bytes a peer sent per scan (estimates and forwards; docs/seed004.md:
     a 4-D Gaussian component 15 tuples, a 2-D measurement 2; no fusion mode here sends
     particles or a separate cardinality). ``tuples_per_scan`` counts a publication once
     per live neighbour (the seed's count), ``tuples_published_per_scan`` once; bytes are

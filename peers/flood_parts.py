@@ -172,7 +172,7 @@ class FloodFuser:
 
 # -- the iterated-corrector baseline as a flooding peer (seed 004) ---------------------------
 def corrector_order(adjacency: np.ndarray) -> np.ndarray:
-    """The iterated corrector's sensor order (seed 004, ALGORITHMS.md §9): depth-first over the
+    """The iterated corrector's sensor order (seed 004, docs/seed004.md): depth-first over the
     graph from sensor 0, the order in which the offline IC (``sim.seed004``) passes the density
     along; sensors it does not reach (a disconnected graph) follow in index order."""
     from scipy.sparse.csgraph import depth_first_order
@@ -185,7 +185,7 @@ def corrector_order(adjacency: np.ndarray) -> np.ndarray:
 
 
 class IcFloodEstimator(FloodEstimator):
-    """The iterated-corrector PHD (sensor-by-sensor update) of seed 004 (ALGORITHMS.md §9) as a
+    """The iterated-corrector PHD (sensor-by-sensor update) of seed 004 (docs/seed004.md) as a
     flooding peer's estimator: the scans are flooded as for IDPC, and each peer runs one GM-PHD
     over its pooled scan set.
 

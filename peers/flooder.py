@@ -1,4 +1,4 @@
-"""Measurement flooding (seed 004; ALGORITHMS.md §9), sans-I/O: one peer's state, and a network.
+"""Measurement flooding (seed 004; docs/seed004.md), sans-I/O: one peer's state, and a network.
 
 In iteration 1 a peer sends its own scan to every neighbour; in iteration ``t >= 2`` it sends
 the scans it received in iteration ``t - 1`` and has not sent before. Scans are keyed by

@@ -1,4 +1,4 @@
-"""Measurement flooding (seed 004; ALGORITHMS.md §9): everything importable from one place.
+"""Measurement flooding (seed 004; docs/seed004.md): everything importable from one place.
 
 - :mod:`peers.flooder`: sans-I/O, one peer's flooding state (:class:`Flooder`), :func:`flood`
   over a network, and the tuples and bytes a flood sends (:func:`flooding_tuples`,

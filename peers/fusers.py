@@ -92,7 +92,8 @@ class NoFuser:
 
 
 class ImmFuser:
-    """Seed-001 fusion for single-target peers (ALGORITHMS.md §6, seed 001 eq. 19-21).
+    """Seed-001 fusion for single-target peers (seed 001 eq. 19-21;
+    docs/algorithms.md "IMM models and the particle fusion rule").
 
     A second IMM filter (the *fused* filter) steps with the own radar's return and absorbs the
     neighbours' summaries: ``"gci"`` fuses the normalised summaries and collapses back to one

@@ -123,8 +123,16 @@ def replay(path: Path, overrides: list[str] = ()) -> Replay:
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / meta.get("scenario_file", "scenario.toml")
         src.write_text(meta["scenario_text"])
-        sets = [*json.loads(meta.get("overrides", "[]")), *overrides]
-        scn = load_scenario(str(src), overrides=parse_overrides(sets))
+        recorded = json.loads(meta.get("overrides", "[]"))
+        scn = load_scenario(str(src), overrides=parse_overrides([*recorded, *overrides]))
+        if overrides:
+            was = load_scenario(str(src), overrides=parse_overrides(recorded)).network.rounds
+            if scn.network.rounds != was:
+                raise ValueError(
+                    f"--set network.rounds={scn.network.rounds}: the recording holds only the "
+                    f"{was} round(s) per scan the run had, and a replay cannot make the "
+                    f"neighbours' other rounds (run again with --set "
+                    f"network.rounds={scn.network.rounds})")
     speed = float(meta["speed"]) if meta.get("speed") else None
     core = make_peer(scn, meta["peer"], int(meta.get("run", 0)), network=meta["network"],
                      speed=speed)

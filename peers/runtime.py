@@ -322,6 +322,7 @@ class PeerRuntime:
         out = self.o.out_dir
         if out is None:
             return
+        out.mkdir(parents=True, exist_ok=True)  # --out of a folder not made yet (--no-rerun)
         self._flush_fault_log()
         if self.saved_tracks is not None:
             suffix = self.stem.removeprefix(f"peer-{self.name}")

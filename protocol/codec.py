@@ -5,7 +5,7 @@ per-message overhead near 25 bytes). Arrays travel as raw little-endian float64 
 row count follows from the byte length and the declared width. A Gaussian mixture is one
 ``(n, 1 + d + d(d+1)/2)`` block: weight, mean, and the upper triangle of the covariance
 (symmetric by construction), so a 4-D component is 15 numbers, the raw tuple count of
-ALGORITHMS.md §9.
+docs/seed004.md.
 
 ``decode`` never trusts its input: any problem raises :class:`Rejected` with a short
 ``reason`` code (counted by the receiver) and a human-readable detail.

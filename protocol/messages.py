@@ -89,7 +89,7 @@ class ScanSet:
         return sum(len(z) for z in self.scans.values())
 
     def tuples(self) -> int:
-        """The seed's cost unit: 2 per 2-D measurement (ALGORITHMS.md §9)."""
+        """The seed's cost unit: 2 per 2-D measurement (docs/seed004.md)."""
         return 2 * self.points
 
 

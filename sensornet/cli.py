@@ -495,6 +495,14 @@ def cmd_peer(args: argparse.Namespace) -> int:
     except DuplicatePeer as exc:
         raise UserError(str(exc)) from None
     s = runtime.summary()
+    if getattr(core, "world", None) == "unseen" and not s["scans"]:
+        if s["stop_reason"].startswith("no input"):  # the idle timeout: say so, no "OSPA nan"
+            print(f"peer {args.name}: no world on network {args.network} within "
+                  f"{args.idle_timeout:g} s: nothing was tracked", flush=True)
+            return 1
+        print(f"peer {args.name}: stopped ({s['stop_reason']}) before a world appeared on "
+              f"network {args.network}: nothing was tracked", flush=True)
+        return code
     print(f"peer {args.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
           f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
           f"rejected {s['rejected_total']}", flush=True)
@@ -531,20 +539,27 @@ def cmd_replay(args: argparse.Namespace) -> int:
         files = [f for f in files if f.stem.split(".")[0] == f"peer-{args.peer}"]
         if not files:
             raise UserError(f"no recording of peer {args.peer!r} in {path}")
-    print("| peer | file | scans | tracks recorded | replayed identical | mean OSPA fused |")
-    print("|---|---|---:|---:|---|---:|")
     ok = True
-    for f in files:
+    changed = False
+    for i, f in enumerate(files):
         try:
             r = replay(f, args.set or [])
         except (ValueError, ScenarioError, OSError) as exc:
             raise UserError(f"{f}: {exc}") from None
+        if i == 0:  # after the first replay: a refused --set is one line, no table head
+            print("| peer | file | scans | tracks recorded | replayed identical | "
+                  "mean OSPA fused |")
+            print("|---|---|---:|---:|---|---:|")
         same = r.identical
         ok = ok and (same or bool(args.set))
+        changed = changed or not same
         print(f"| {r.peer} | {f.name} | {r.snapshot['scans']} | {len(r.recorded)} | "
               f"{'yes' if same else 'NO'} | {r.snapshot['mean_ospa_fused']:.2f} |", flush=True)
-    if args.set:
+    if args.set and changed:
         print("(with --set the replay is a what-if run: its tracks are expected to differ)")
+    elif args.set:
+        print("(with --set the replay is a what-if run; these settings changed none of the "
+              "tracks)")
     return 0 if ok else 1
 
 
@@ -629,6 +644,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
+    late = [f for f in pfaults if f.scan >= scn.num_scans]
+    if late:  # it would be accepted and never fire (or fire as the run ends)
+        f = late[0]
+        raise UserError(f"--fault {f.action}:{f.peer}@{f.scan}: scan {f.scan} is at or after "
+                        f"the run's last scan ({scn.name} has {scn.num_scans} scans); "
+                        f"schedule it before scan {scn.num_scans}")
     if getattr(args, "sim", False):
         for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
             if getattr(args, flag, None):
@@ -657,6 +678,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
           f"few seconds to start {len(scn.sensors) + 1} processes); output in {out}", flush=True)
+    if secure is not None:
+        made = " (fresh keys made for this run)" if args.secure == "" else ""
+        print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
+              f"{secure}{made}", flush=True)
     viewer = args.viewer
     if viewer == "spawn":  # one viewer for the whole run; every process streams to it
         from peers.rerun_sink import spawn_viewer
@@ -680,6 +705,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                            router=bool(getattr(args, "router", False)),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
                            if args.record else None)
+        if getattr(args, "router", False):
+            why = f" ({args.router})" if isinstance(args.router, str) else ""
+            print(f"routed{why}: the world and every peer are clients of the run's router "
+                  f"(sensornet router) at {handle.endpoints['router']}", flush=True)
         if pfaults:
             injector = threading.Thread(target=inject_process_faults, daemon=True,
                                         args=(handle, pfaults, scn.sensor_names[0], stop))
@@ -802,12 +831,25 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    from sim.campaign import default_folder, format_status, load_campaign, run_campaign, status
+    from sim.campaign import (
+        default_folder,
+        format_status,
+        load_campaign,
+        recorded_runs,
+        run_campaign,
+        status,
+    )
 
     c = load_campaign(args.file, runs=args.runs)
     folder = Path(args.out) if args.out else default_folder(c)
-    if args.status:
+    if args.status:  # against the plan the folder records (its last run's), not --runs
+        planned = recorded_runs(folder)
+        if planned is not None and planned != c.runs:
+            c = load_campaign(args.file, runs=planned)
         print(format_status(c, folder, status(c, folder)))
+        if args.runs is not None and args.runs != c.runs:
+            print(f"(--runs {args.runs} not counted: the folder's plan is {c.runs} runs per "
+                  f"cell; running with --runs {args.runs} makes it the plan)")
         return 0
     if args.dask and args.scheduler:
         raise UserError("--dask local and --scheduler: give one of them")
@@ -1059,7 +1101,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--run", type=NONNEGATIVE_INT, default=0, help="Monte Carlo run index")
         sp.add_argument("--fault", action="append", metavar="ACTION:PEER@SCAN",
                         help="process fault: kill|stop|cont|restart|term, e.g. kill:s2@30 "
-                             "(repeatable); with --router also restart:router@K")
+                             "(repeatable; SCAN before the run's last); with --router also "
+                             "restart:router@K")
         sp.add_argument("--record", action="store_true",
                         help="every peer records its inputs to <out>/record/*.mcap "
                              "(see: sensornet replay)")
@@ -1095,7 +1138,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("path", help="a run folder (its record/*.mcap) or one .mcap file")
     rp.add_argument("--peer", help="only this peer's recording")
     rp.add_argument("--set", action="append", metavar="KEY=VALUE",
-                    help="change a setting for the replay (what-if), e.g. network.rounds=3")
+                    help="change a setting for the replay (what-if), e.g. fusion.cardinality=emd "
+                         "(not network.rounds: the recording holds only the rounds it had)")
     rp.set_defaults(func=cmd_replay)
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "

@@ -28,7 +28,9 @@ A campaign file (see ``sim/campaigns/*.toml``)::
     lines = "network.policy"
 
 Results go to ``runs/campaign-<name>/`` (``--out`` elsewhere): ``manifest.json`` (the resolved
-cells and every task's key) and ``results/`` (:class:`sim.results.ResultStore`). Running the
+cells and every task's key: the plan of the last command that ran it), ``results/``
+(:class:`sim.results.ResultStore`) and, while a process runs it, ``running.json`` (its pid and
+host: ``--status`` says running, stopped or incomplete from it). Running the
 same file again skips every task whose key is stored, so an interrupted campaign loses only
 the runs that were in flight; adding runs or cells computes only what is new.
 """
@@ -256,6 +258,10 @@ class Status:
     per_cell: list[tuple[Cell, int]]
     stale: int
     """Stored rows that belong to no task of this campaign (other code, other cells)."""
+    running: dict[str, Any] | None = None
+    """The lock of the process running the campaign now (pid, host), if one does."""
+    died: dict[str, Any] | None = None
+    """The lock a process left when it died without finishing (``kill -9``, a crash)."""
 
     @property
     def cells_done(self) -> int:
@@ -268,7 +274,20 @@ def status(c: Campaign, folder: Path) -> Status:
     stored = ResultStore(folder / "results").done_keys()
     per = [(cell, sum(1 for k in cell.keys if k in stored)) for cell in c.cells]
     wanted = {k for cell in c.cells for k in cell.keys}
-    return Status(sum(n for _, n in per), len(wanted), per, len(stored - wanted))
+    lock = read_lock(folder)
+    alive = lock is not None and lock_alive(lock)
+    return Status(sum(n for _, n in per), len(wanted), per, len(stored - wanted),
+                  running=lock if alive else None,
+                  died=lock if lock is not None and not alive else None)
+
+
+def recorded_runs(folder: Path) -> int | None:
+    """Runs per cell of the plan the folder records (its ``manifest.json``), if any."""
+    try:
+        runs = json.loads((Path(folder) / "manifest.json").read_text()).get("runs")
+    except (OSError, ValueError):
+        return None
+    return runs if isinstance(runs, int) and runs >= 1 else None
 
 
 def format_status(c: Campaign, folder: Path, st: Status) -> str:
@@ -276,9 +295,22 @@ def format_status(c: Campaign, folder: Path, st: Status) -> str:
              f"code {c.code_version}",
              f"{st.done}/{st.total} runs done, {st.cells_done}/{len(c.cells)} cells complete"
              f" ({folder})"]
+    left = st.total - st.done
+    if st.running is not None:
+        lines.append(f"running: pid {st.running.get('pid')} on {st.running.get('host')}")
+    elif left and st.died is not None:
+        lines.append(f"stopped: the process that ran it (pid {st.died.get('pid')} on "
+                     f"{st.died.get('host')}) is gone, {left} runs to go; run the campaign "
+                     "again to finish")
+    elif left and st.done:
+        lines.append(f"incomplete: no process is running it, {left} runs to go; run the "
+                     "campaign again to finish")
+    elif left:
+        lines.append("not started")
     width = max(len(cell.label) for cell in c.cells)
+    partial = "running" if st.running is not None else "incomplete"
     for cell, n in st.per_cell:
-        mark = "done" if n == len(cell.keys) else ("running/partial" if n else "")
+        mark = "done" if n == len(cell.keys) else (partial if n else "")
         lines.append(f"  cell {cell.index:>3}  {cell.label:<{width}}  {n:>5}/{len(cell.keys)}"
                      f"  {mark}".rstrip())
     if st.stale:
@@ -316,6 +348,62 @@ class CampaignProgress(Progress):
 # --------------------------------------------------------------------------------------------
 
 
+LOCK = "running.json"
+"""In a campaign folder while a process runs it: ``{"pid", "host", "start"}``."""
+
+
+def _start_stamp(pid: int) -> str | None:
+    """When process ``pid`` started (Linux ``/proc``: a pid reused by another process has
+    another stamp), or None where that cannot be read."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return None
+
+
+def read_lock(folder: Path) -> dict[str, Any] | None:
+    try:
+        lock = json.loads((Path(folder) / LOCK).read_text())
+    except (OSError, ValueError):
+        return None
+    return lock if isinstance(lock, dict) else None
+
+
+def lock_alive(lock: dict[str, Any]) -> bool:
+    """Whether the process that wrote ``lock`` still runs (one on another host: assumed)."""
+    import os
+    import socket
+
+    if lock.get("host") != socket.gethostname():
+        return True  # cannot be checked from here
+    pid = lock.get("pid")
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    stamp = _start_stamp(pid)
+    return stamp is None or lock.get("start") in (None, stamp)
+
+
+def _claim(folder: Path) -> Path:
+    """Write the folder's lock (refused while another live process holds it)."""
+    import os
+    import socket
+
+    held = read_lock(folder)
+    if held is not None and held.get("pid") != os.getpid() and lock_alive(held):
+        raise CampaignError(f"{folder}: the campaign is running already (pid {held.get('pid')} "
+                            f"on {held.get('host')}); wait for it, or stop it first")
+    path = folder / LOCK
+    path.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                                "start": _start_stamp(os.getpid())}) + "\n")
+    return path
+
+
 @dataclass
 class RunSummary:
     ran: int
@@ -337,10 +425,22 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
     ``LocalCluster`` of ``jobs`` workers) or a scheduler address. ``stop_after``: stop (as an
     interrupt would) once that many tasks have finished in this call.
     """
-    from sim.results import ResultStore, need_pyarrow
+    from sim.results import need_pyarrow
 
     need_pyarrow()
     folder.mkdir(parents=True, exist_ok=True)
+    lock = _claim(folder)
+    try:
+        return _run(c, folder, jobs, dask, progress, stop_after, on_row, stream)
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def _run(c: Campaign, folder: Path, jobs: int, dask: str | None, progress: bool,
+         stop_after: int | None, on_row: Callable[[dict], None] | None,
+         stream: TextIO | None) -> RunSummary:
+    from sim.results import ResultStore
+
     (folder / "manifest.json").write_text(json.dumps(c.manifest(), indent=1) + "\n")
     store = ResultStore(folder / "results")
     stored = store.done_keys()
@@ -390,6 +490,12 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
 
 def read_manifest(folder: Path) -> dict[str, Any]:
     path = Path(folder) / "manifest.json"
+    if not Path(folder).exists():
+        raise CampaignError(f"{folder}: no such folder (a campaign folder is what 'sensornet "
+                            "campaign FILE' writes, runs/campaign-<name> by default)")
+    if not Path(folder).is_dir():
+        raise CampaignError(f"{folder}: not a folder (give the campaign's folder, e.g. "
+                            "runs/campaign-<name>)")
     if not path.is_file():
         raise CampaignError(f"{folder}: no manifest.json (not a campaign folder; run "
                             "'sensornet campaign FILE' first)")

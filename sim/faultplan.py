@@ -11,7 +11,7 @@ Layering (:meth:`FaultPlan.layered`): for the link ``s -> r``, the last of ``def
 down whenever either end, or the whole network, is cut off.
 
 Delays in scan intervals (the papers' "short", "one-step", "multi-step" and random-scan
-delays, ALGORITHMS.md §5) carry the scan interval they were built with and sample seconds
+delays, docs/algorithms.md "NALE") carry the scan interval they were built with and sample seconds
 like the others.
 """
 

@@ -1,4 +1,4 @@
-"""Scenario files: TOML in, frozen dataclasses out (ALGORITHMS.md §10).
+"""Scenario files: TOML in, frozen dataclasses out (annotated: sim/scenarios/seed000.toml).
 
 A scenario file says everything a run needs that is not code: the truth (targets as start →
 end positions over their lives), the sensors, the motion and birth models, the filter's
@@ -220,7 +220,7 @@ class NetworkSpec:
 
 @dataclass(frozen=True)
 class ExtendedSpec:
-    """Extended targets (seed 002, ALGORITHMS.md §7): returns per target and partitioning."""
+    """Extended targets (seed 002, docs/seed002.md): returns per target and partitioning."""
 
     rate: float = 10.0
     """``gamma``: Poisson mean of the measurements of a detected target per scan."""

@@ -1,4 +1,4 @@
-"""Seed 001: a manoeuvring ground target seen by two range-bearing radars (ALGORITHMS.md §6).
+"""Seed 001: a manoeuvring ground target seen by two range-bearing radars (docs/seed001.md).
 
 Scenario (truth, measurements per radar, geometry presets; every draw from a seed) as plain
 frozen dataclasses, and the Monte Carlo experiment of the paper's Table 1: x-axis position,
@@ -54,7 +54,7 @@ class RadarSpec:
 
 
 GEOMETRIES: dict[str, tuple[RadarSpec, RadarSpec]] = {
-    # ALGORITHMS.md §6 "geometry A" (default): the radars 12 km apart, target ~5-15 km away
+    # docs/seed001.md "geometry A" (default): the radars 12 km apart, target ~5-15 km away
     "A": (RadarSpec((0.0, 0.0), 3.0, 0.08), RadarSpec((12000.0, 0.0), 2.0, 0.1)),
     # "geometry G": ~100 km away, nearly the same viewing direction
     "G": (RadarSpec((0.0, -100000.0), 3.0, 0.08), RadarSpec((2000.0, -100000.0), 2.0, 0.1)),
@@ -70,7 +70,7 @@ GEOMETRIES: dict[str, tuple[RadarSpec, RadarSpec]] = {
 
 @dataclass(frozen=True)
 class Seed001Scenario:
-    """The seed-001 ground target and radars (ALGORITHMS.md §6)."""
+    """The seed-001 ground target and radars (docs/seed001.md)."""
 
     start: tuple[float, float] = (6000.0, 8400.0)
     """Initial position in m."""

@@ -1,4 +1,4 @@
-"""Seed 003: a manoeuvring target in dense clutter, two position sensors (ALGORITHMS.md §8).
+"""Seed 003: a manoeuvring target in dense clutter, two position sensors (docs/seed003.md).
 
 The scenario (``sim/scenarios/seed003.toml``), the Monte Carlo comparison of PDAF, IMM-PDAF,
 fuzzy PDA and fuzzy IMM with one sensor and with the sequential two-sensor update, and the

@@ -1,4 +1,4 @@
-"""Seed 003 peer modes compared offline on the peers' own parts (ALGORITHMS.md §8).
+"""Seed 003 peer modes compared offline on the peers' own parts (docs/seed003.md).
 
 Two single-target peers, one per sensor, each an IMM-PDAF (or fuzzy IMM) behind the
 :class:`peers.contracts.LocalEstimator` contract (:class:`peers.pda_parts.PdaEstimator`):

@@ -1,6 +1,6 @@
 """Seed 004: measurement flooding + density-peaks clustering against distributed GM-PHD filters.
 
-The offline Monte Carlo of ALGORITHMS.md §9 on ``sim/scenarios/seed004.toml``: 20 sensors on a
+The offline Monte Carlo of docs/seed004.md on ``sim/scenarios/seed004.toml``: 20 sensors on a
 connected random geometric graph of diameter 4, three targets, Pd = 0.95, clutter 10 per sensor.
 Every run draws one truth and one scan per sensor per time step (seeded by ``(seed, run)``) and
 feeds the same scans to every method:
@@ -396,7 +396,7 @@ def _n_tuples(mix: GaussianMixture) -> int:
 
 
 REFERENCE_MIXTURE = (4, 4)
-"""The reference's GM-exchange count (ALGORITHMS.md §9): 4-component mixtures, 4 rounds."""
+"""The reference's GM-exchange count (docs/seed004.md): 4-component mixtures, 4 rounds."""
 
 
 def gm_exchange_tuples(adjacency: np.ndarray, components: int, rounds: int) -> float:
@@ -425,7 +425,7 @@ def reference_comparison(result: dict[str, dict[str, float]], adjacency: np.ndar
 def iterated_corrector(mix: GaussianMixture, scans: Sequence[np.ndarray],
                        sensors: Sequence[SensorParams], order: Sequence[int], reducer: Reducer,
                        prune_threshold: float) -> list[GaussianMixture]:
-    """The IC of seed 004 (ALGORITHMS.md §9): the prediction ``mix`` corrected with ``scans[s]``
+    """The IC of seed 004 (docs/seed004.md): the prediction ``mix`` corrected with ``scans[s]``
     by ``sensors[s]`` for ``s`` in ``order``, reduced after each sensor; the density after each
     sensor (the last is the posterior)."""
     out = []

@@ -1,4 +1,6 @@
-"""The simulated world: true target states and every sensor's scans (ALGORITHMS.md §1, §10).
+"""The simulated world: true target states and every sensor's scans.
+
+Our reading of seed 000's truth: docs/algorithms.md "Seed-000 scenario".
 
 Scans are 1-based (scan ``k`` at time ``k T``); lists are indexed by ``k - 1``.
 

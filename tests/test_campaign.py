@@ -13,7 +13,10 @@ import pytest
 
 from sensornet.cli import main
 from sim.campaign import (
+    LOCK,
+    CampaignError,
     canonical_rows,
+    format_status,
     load_campaign,
     results_table,
     run_campaign,
@@ -65,6 +68,13 @@ def _pinned_code_version(monkeypatch):
     monkeypatch.setenv("SENSORNET_CODE_VERSION", "test-pinned")
 
 
+def _says_running(status_text: str) -> bool:
+    """A ``running:`` state line, or a cell marked running."""
+    import re
+
+    return bool(re.search(r"^running:|  running$", status_text, re.M))
+
+
 def _file(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     path = tmp_path / name
     path.write_text(text)
@@ -109,12 +119,19 @@ def test_killed_campaign_process_resumes(tmp_path):
             break
         time.sleep(0.05)
     assert proc.poll() is None, proc.stderr.read().decode()
+    c = load_campaign(path)
+    st = status(c, out)  # while it runs: its lock names it
+    assert st.running is not None and st.running["pid"] == proc.pid, st.running
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     proc.stderr.close()
     done = len(store.done_keys())
     assert 4 <= done < 12
-    c = load_campaign(path)
+    st = status(c, out)  # killed: its lock is left, nothing runs
+    assert st.running is None and st.died["pid"] == proc.pid
+    text = format_status(c, out, st)
+    assert f"stopped: the process that ran it (pid {proc.pid} on" in text
+    assert not _says_running(text)
     summary = run_campaign(c, out, jobs=2, progress=False)
     assert (summary.ran, summary.skipped) == (12 - done, done)
     whole = run_campaign(c, tmp_path / "whole", jobs=2, progress=False)
@@ -157,9 +174,13 @@ def test_status_without_running_and_cli(tmp_path, capsys):
     assert main(["campaign", str(path), "--out", str(out), "--status"]) == 0
     text = capsys.readouterr().out
     assert "4/6 runs done, 1/2 cells complete" in text
-    assert "3/3  done" in text and "1/3  running/partial" in text
+    assert "3/3  done" in text and "1/3  incomplete" in text and not _says_running(text)
+    assert "incomplete: no process is running it, 2 runs to go" in text
+    # against the folder's recorded plan (3 runs per cell), not whatever --runs says
     assert main(["campaign", str(path), "--out", str(out), "--runs", "4", "--status"]) == 0
-    assert "4/8 runs done, 0/2 cells complete" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "4/6 runs done, 1/2 cells complete" in text and "4/8" not in text
+    assert "(--runs 4 not counted: the folder's plan is 3 runs per cell" in text
     assert main(["campaign", str(path), "--out", str(out), "--jobs", "2", "--quiet"]) == 0
     text = capsys.readouterr().out
     assert "6/6 runs done, 2/2 cells complete" in text and "2 runs in" in text
@@ -187,6 +208,40 @@ def test_report_tables_and_seed000_figures(tmp_path, capsys):
     assert len(csv_lines) == 9 and csv_lines[0].startswith("cell,cell_label,run,mean_ospa.")
 
 
+def test_status_says_running_only_while_a_live_process_holds_the_lock(tmp_path):
+    """running.json names the process running the campaign: status says running while it
+    lives, stopped once it is gone (a kill -9 leaves the file), incomplete without one; a
+    second run of the same folder is refused while the first lives."""
+    import json
+    import socket
+
+    from sim.campaign import _claim
+
+    c = load_campaign(_file(tmp_path, TWIN.replace("runs = 6", "runs = 2")))
+    out = tmp_path / "camp"
+    out.mkdir()
+    assert "not started" in format_status(c, out, status(c, out))
+    host = socket.gethostname()
+    other = os.getppid()  # a live process that is not this one
+    (out / LOCK).write_text(json.dumps({"pid": other, "host": host}))
+    st = status(c, out)
+    assert st.running == {"pid": other, "host": host} and st.died is None
+    assert f"running: pid {other} on {host}" in format_status(c, out, st)
+    with pytest.raises(CampaignError, match=f"running already \\(pid {other}"):
+        _claim(out)
+    gone = 2 ** 22 + 12345  # above the kernel's default pid_max: no such process
+    (out / LOCK).write_text(json.dumps({"pid": gone, "host": host}))
+    st = status(c, out)
+    assert st.running is None and st.died["pid"] == gone
+    text = format_status(c, out, st)
+    assert f"stopped: the process that ran it (pid {gone} on {host}) is gone, 4 runs to go" \
+        in text and not _says_running(text)
+    assert _claim(out).is_file()  # a dead holder's lock is taken over
+    assert json.loads((out / LOCK).read_text())["pid"] == os.getpid()
+    (out / LOCK).unlink()
+    assert not _says_running(format_status(c, out, status(c, out)))
+
+
 def test_campaign_file_errors_are_one_line(tmp_path, capsys):
     bad = _file(tmp_path, TWIN.replace('runner = "twin"', 'runner = "cloud"'))
     assert main(["campaign", str(bad)]) == 2
@@ -200,6 +255,12 @@ def test_campaign_file_errors_are_one_line(tmp_path, capsys):
     assert "no such campaign file" in capsys.readouterr().err
     assert main(["report", str(tmp_path)]) == 2
     assert "no manifest.json" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "runs" / "campaign-nope")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{tmp_path / 'runs' / 'campaign-nope'}: no such folder" in err[0]
+    assert "manifest" not in err[0] and not (tmp_path / "runs").exists()
+    assert main(["report", str(bad)]) == 2  # a file
+    assert "not a folder" in capsys.readouterr().err
 
 
 def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):

@@ -47,6 +47,76 @@ def test_unknown_override_and_missing_file_are_user_errors(tmp_path, capsys):
     assert main(["run", "--sim", "--fault", "kill:s1@3"]) == 2
 
 
+@pytest.mark.parametrize("argv", [
+    ["run", "--fault", "kill:s2@300"],                   # processes: 100 scans
+    ["run", "--sim", "--fault", "kill:s2@300"],          # the twin
+    ["demo", "--fault", "stop:s1@100"],                  # at the last scan
+    ["run", "--set", "scenario.num_scans=20", "--fault", "kill:s1@5", "--fault",
+     "restart:s3@20"],
+])
+def test_fault_at_or_after_the_last_scan_is_refused(argv, tmp_path, capsys):
+    """A process fault the run never reaches was accepted and never fired: refused, one line
+    naming the fault and the run's length, before any process or folder."""
+    assert main([*argv, "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    fault = next(a for a in reversed(argv) if "@" in a)
+    scans = "20" if "scenario.num_scans=20" in argv else "100"
+    assert len(err) == 1 and f"--fault {fault}:" in err[0], err
+    assert f"has {scans} scans" in err[0]
+    assert not (tmp_path / "run").exists()
+
+
+def test_fault_before_the_last_scan_passes_the_check(capsys):
+    """kill:s2@99 of 100 scans gets past the scan check (--sim then refuses process faults)."""
+    assert main(["run", "--sim", "--fault", "kill:s2@99"]) == 2
+    assert "needs real processes" in capsys.readouterr().err
+
+
+class _Started(Exception):
+    pass
+
+
+@pytest.mark.parametrize("flags, secure, routed", [
+    ([], False, False),
+    (["--secure"], True, False),
+    (["--router"], False, True),
+    (["--router", "--secure"], True, True),
+    (["--set", "network.router=true"], False, True),
+])
+def test_run_says_at_start_when_it_is_secure_or_routed(flags, secure, routed, tmp_path,
+                                                       monkeypatch, capsys):
+    """A secure run says so (and where its keys are), a routed run says where its router
+    listens, each in one line at start; a plain run says neither."""
+    import types
+
+    import sim.launcher
+
+    def fake_start_run(*a, **kw):  # the processes are not started: only what cmd_run says
+        ep = ("tls" if kw["secure"] else "tcp") + "/127.0.0.1:7999"
+        return types.SimpleNamespace(endpoints={"router": ep} if kw["router"] else {})
+
+    def fake_wait_run(*a, **kw):
+        raise _Started
+
+    monkeypatch.setattr(sim.launcher, "start_run", fake_start_run)
+    monkeypatch.setattr(sim.launcher, "wait_run", fake_wait_run)
+    out = tmp_path / "run"
+    with pytest.raises(_Started):
+        main(["run", "seed000", "--no-rerun", "--out", str(out), *flags])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("run seed000: world + 3 peers")
+    said = [ln for ln in lines if ln.startswith("secure mode:")]
+    assert len(said) == int(secure), lines
+    if secure:
+        assert "mutual TLS + access control" in said[0] and f"keys in {out / 'keys'}" in said[0]
+        assert (out / "keys" / "ca.pem").is_file()
+    said = [ln for ln in lines if ln.startswith("routed")]
+    assert len(said) == int(routed), lines
+    if routed:
+        assert said[0].endswith(("tls" if secure else "tcp") + "/127.0.0.1:7999")
+        assert any("network.router" in f for f in flags) == ("[network] router = true" in said[0])
+
+
 def test_run_sim_prints_the_summary(capsys):
     assert main(["run", "--sim", "--set", "birth.model=truth",
                  "--set", "scenario.num_scans=30"]) == 0

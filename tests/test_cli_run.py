@@ -94,6 +94,27 @@ def test_run_flags_reach_every_process(tmp_path):
         assert json.loads((out / f"peer-{n}.json").read_text())["scans"] == 12
 
 
+def test_a_peer_with_no_world_says_so_and_prints_no_nan(tmp_path):
+    """A peer whose world never appears waited out its idle timeout and printed "mean OSPA
+    local nan fused nan": it says in one line that no world came, exit code 1."""
+    config = tmp_path / "zenoh.json5"  # alone: no scouting, nobody to meet
+    config.write_text('{mode: "peer", scouting: {multicast: {enabled: false}}}\n')
+    network = f"noworld{os.getpid()}"
+    proc = subprocess.run(
+        [sys.executable, "-m", "sensornet", "peer", "s1", "--network", network,
+         "--listen", f"tcp/127.0.0.1:{free_port()}", "--config", str(config),
+         "--idle-timeout", "2", "--no-rerun", "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=120, cwd=tmp_path, env=_env())
+    assert proc.returncode == 1, proc.stderr + proc.stdout
+    last = proc.stdout.strip().splitlines()[-1]
+    assert last == (f"peer s1: no world on network {network} within 2 s: nothing was "
+                    "tracked"), proc.stdout
+    assert "nan" not in proc.stdout and proc.stderr.strip() == "", proc.stderr
+    # --out of a folder not made yet, no Rerun: the summary is still written (it crashed)
+    summary = json.loads((tmp_path / "out" / "peer-s1.json").read_text())
+    assert summary["scans"] == 0 and summary["stop_reason"] == "no input for 2 s"
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_path, sig):
     out = tmp_path / "run"

@@ -1,4 +1,4 @@
-"""The iterated-corrector PHD as a flooding peer (seed 004, ALGORITHMS.md §9): the estimator
+"""The iterated-corrector PHD as a flooding peer (seed 004, docs/seed004.md): the estimator
 against the offline IC of sim/seed004.py, skipped scans, the twin, and 5 real processes."""
 
 from __future__ import annotations

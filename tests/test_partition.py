@@ -85,7 +85,7 @@ def test_grid_spectral_finds_separated_targets_and_removes_clutter():
 
 
 def test_unit_box_scaling_makes_the_eigengap_say_one_cluster():
-    """ALGORITHMS.md §7: with the scan scaled to [0, 1] the similarity 1 / (D + 1) stays in
+    """docs/seed002.md: with the scan scaled to [0, 1] the similarity 1 / (D + 1) stays in
     [0.5, 1] and the eigengap picks K = 1; in units of sigma it picks the targets."""
     rng = np.random.default_rng(4)
     z, truth = _clusters(rng, np.array([[0.0, 0], [400, 0], [0, 400]]), clutter=0)

@@ -60,7 +60,7 @@ def test_other_messages_round_trip(rng):
 
 
 def test_wire_size_is_close_to_raw_tuples(rng):
-    # ALGORITHMS.md §9: a 4-D component is 15 numbers; the issue asks for <= 1.1x of 15 * 8 bytes
+    # docs/seed004.md: a 4-D component is 15 numbers; the issue asks for <= 1.1x of 15 * 8 bytes
     for n in (4, 10, 50):
         size = len(encode(Estimate("s1", 100, random_mixture(rng, n), seq=1000,
                                    send_time=1.7e9)))

@@ -57,3 +57,36 @@ def test_replay_command(recorded):
     bad = subprocess.run([sys.executable, "-m", "sensornet", "replay", str(out / "nope")],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "no recording" in bad.stderr
+
+
+def test_replay_refuses_other_rounds(recorded):
+    """The recording holds the neighbours' estimates of the rounds the run had: a replay with
+    another ``network.rounds`` cannot make the others (it came out identical and said
+    "expected to differ"); refused in one line, exit code 2, no table."""
+    out, scn, _ = recorded
+    with pytest.raises(ValueError, match="network.rounds=3: the recording holds only the 1"):
+        replay(out / "record" / "peer-s2.mcap", ["network.rounds=3"])
+    p = subprocess.run([sys.executable, "-m", "sensornet", "replay", str(out), "--peer", "s2",
+                        "--set", "network.rounds=3"], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 2 and p.stdout == "", (p.stdout, p.stderr)
+    assert len(p.stderr.strip().splitlines()) == 1 and "network.rounds" in p.stderr
+    same = subprocess.run([sys.executable, "-m", "sensornet", "replay", str(out), "--peer",
+                           "s2", "--set", f"network.rounds={scn.network.rounds}"],
+                          capture_output=True, text=True, timeout=120)
+    assert same.returncode == 0 and "| yes |" in same.stdout
+    assert "changed none of the tracks" in same.stdout and "expected to differ" not in same.stdout
+
+
+def test_readme_what_if_example_differs(recorded):
+    """README's what-if example (its --set) changes the replayed tracks."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    line = next(ln for ln in readme.splitlines() if ln.startswith("sensornet replay ")
+                and "--set" in ln)
+    sets = re.findall(r"--set (\S+)", line)
+    assert sets and not any(s.startswith("network.rounds") for s in sets)
+    out, _, _ = recorded
+    assert not replay(out / "record" / "peer-s2.mcap", sets).identical

@@ -241,7 +241,7 @@ def test_without_grace_or_after_end_the_world_leaving_stops_at_once():
 
 
 @pytest.mark.network
-def test_a_routed_run_survives_a_router_restart(tmp_path):
+def test_a_routed_run_survives_a_router_restart(tmp_path, capsys):
     """The router is killed and started again at scan 20 of 60 (4 scans/s): every peer sees
     the world (and everyone) go and come back, counts one outage, and the run ends normally,
     fused from both neighbours to the last scan. The world goes on publishing scans through the
@@ -254,6 +254,9 @@ def test_a_routed_run_survives_a_router_restart(tmp_path):
     assert main(["run", "seed000", "--router", "--secure", "--no-rerun", "--out", str(out),
                  "--speed", "4", "--set", f"scenario.num_scans={n}",
                  "--set", "birth.model=truth", "--fault", "restart:router@20"]) == 0
+    said = capsys.readouterr().out.splitlines()  # it says it is secure and routed, at start
+    assert said[1].startswith("secure mode: mutual TLS + access control"), said[:3]
+    assert said[2].startswith("routed: ") and "router (sensornet router) at tls/" in said[2]
     done = json.loads((out / "process-faults.json").read_text())
     assert [(f["action"], f["peer"]) for f in done] == [("restart", "router")]
     assert (out / "logs" / "router.restart1.log").read_text().startswith("router: listening")

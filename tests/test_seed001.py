@@ -1,4 +1,4 @@
-"""Seed-001 scenario and experiment (ALGORITHMS.md §6)."""
+"""Seed-001 scenario and experiment (docs/seed001.md)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def test_truth_matches_the_published_trajectory():
     # left turn 1.15 deg/s x 80 s then right turn 0.43 deg/s x 140 s
     h = np.rad2deg(np.arctan2(X[:, 4], X[:, 1]))
     assert np.isclose(h[260] - h[180], 92.0) and np.isclose(h[510] - h[370], -60.2)
-    # the true x-acceleration RMS the paper's ~9 m/s^2 cannot be measuring (ALGORITHMS.md §6)
+    # the true x-acceleration RMS the paper's ~9 m/s^2 cannot be measuring (docs/seed001.md)
     assert 0.08 < np.sqrt(np.mean(X[1:, 2] ** 2)) < 0.1
 
 

@@ -26,7 +26,7 @@ def test_fused_beats_each_radar_alone_in_the_twin(rule, kind):
     for name, peer in result.peers.items():
         local, fused = peer.mean_ospa("local"), peer.mean_ospa("fused")
         assert fused < 0.7 * local, (name, local, fused)
-        assert fused < 5.0  # metres, for ALGORITHMS.md §6's geometry A
+        assert fused < 5.0  # metres, for docs/seed001.md's geometry A
         assert peer.consensus.stats.fused_inputs == scn.num_scans
     again = run_twin(scn, 0)
     assert again.peers["r1"].mean_ospa("fused") == result.peers["r1"].mean_ospa("fused")

@@ -1,4 +1,6 @@
-"""Fusion of Gaussian-mixture intensities: GCI, AA, Metropolis weights (ALGORITHMS.md §3).
+"""Fusion of Gaussian-mixture intensities: GCI, AA, Metropolis weights.
+
+Formulas and our readings: docs/algorithms.md "GCI fusion".
 
 The GCI formula lives here, once. For two mixtures ``D_i = sum_a``, ``D_j = sum_b`` and weight
 ``omega`` (seed 000 eq. 14-17; Uney, Clark & Julier 2013), with ``C = omega P_a + (1-omega) P_b``:

@@ -1,5 +1,5 @@
 """Fuzzy association degrees and the Neyman-Pearson manoeuvre detector (seed 003 §3-4,
-eq. 37-48; ALGORITHMS.md §8).
+eq. 37-48; docs/seed003.md).
 
 The fuzzy inference system (Wang's fuzzy basis functions, the paper's ref. [6]): rules
 ``R_r: IF y1 is A_r1 AND y2 is A_r2 THEN mu is B_r``, Gaussian input membership functions

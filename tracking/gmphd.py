@@ -1,4 +1,4 @@
-"""Gaussian-mixture PHD filter (Vo & Ma 2006; seed 000 §3.1; ALGORITHMS.md §2).
+"""Gaussian-mixture PHD filter (Vo & Ma 2006; seed 000 §3.1; docs/algorithms.md "GM-PHD filter").
 
 The parts compose like Stone Soup's predictor / updater / reducer: ``predict`` (survival and
 births), ``update`` (one scan, every (measurement, component) pair in one array computation),

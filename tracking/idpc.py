@@ -1,4 +1,4 @@
-"""Clustering a pooled measurement set into target positions (seed 004; ALGORITHMS.md §9).
+"""Clustering a pooled measurement set into target positions (seed 004; docs/seed004.md).
 
 After measurement flooding every peer holds the scans of ``S`` sensors; targets show as dense
 groups of about ``S Pd`` points, clutter as a sparse scatter. Two clusterers turn the pooled

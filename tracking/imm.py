@@ -1,4 +1,6 @@
-"""Interacting multiple models on the 6-D kinematic state, and the IMM-EKF (ALGORITHMS.md §6).
+"""Interacting multiple models on the 6-D kinematic state, and the IMM-EKF.
+
+Formulas and our readings: docs/algorithms.md "IMM models and the particle fusion rule".
 
 State ``x = [px, vx, ax, py, vy, ay]`` (m, m/s, m/s^2). Two models (seed 001 §2):
 

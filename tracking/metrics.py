@@ -1,4 +1,4 @@
-"""Multi-target error metrics (ALGORITHMS.md §11): OSPA, GOSPA, cardinality error, RMSE."""
+"""Multi-target error metrics (docs/algorithms.md "Metrics"): OSPA, GOSPA, cardinality, RMSE."""
 
 from __future__ import annotations
 

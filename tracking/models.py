@@ -1,4 +1,4 @@
-"""Motion and sensor models (ALGORITHMS.md §1) as small objects with array methods.
+"""Motion and sensor models (docs/algorithms.md: notation) as small objects with array methods.
 
 State order is ``x = [px, vx, py, vy]`` (metres, m/s).
 """

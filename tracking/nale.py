@@ -4,8 +4,8 @@ Per neighbour the buffer keeps only the newest estimate received, stamped with i
 ``kappa_i``. An estimate stamped ``a <= kappa_i`` is redundant and dropped. At fusion time ``k``
 each stored estimate is predicted from ``kappa_i`` to ``k`` (multi-step model plus the births
 once) unless it is older than ``max_age`` scans. Two naive policies are offered for comparison
-(ALGORITHMS.md §5): ``"drop-late"`` uses only estimates stamped exactly ``k``; ``"as-is"`` uses
-the newest estimate without predicting it.
+(docs/algorithms.md "NALE"): ``"drop-late"`` uses only estimates stamped exactly ``k``;
+``"as-is"`` uses the newest estimate without predicting it.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The IMM particle filter, its Gaussian-mixture summaries, and fusion for single-target peers.
 
-Seed 001 (ALGORITHMS.md §6). Particles of all models live in one array ``X (M, N, 6)``
-(M models, N particles per model); every step is array code over particles and models, with no
-Python loop over particles.
+Seed 001 (docs/algorithms.md "IMM models and the particle fusion rule"). Particles of all models
+live in one array ``X (M, N, 6)`` (M models, N particles per model); every step is array code over
+particles and models, with no Python loop over particles.
 
 Cycle per scan (seed 001 eq. 13-18, our reading of the interaction step for particles):
 
@@ -13,7 +13,7 @@ Cycle per scan (seed 001 eq. 13-18, our reading of the interaction step for part
 3. model probabilities ``mu_j ∝ c_j Lambda_j``, ``Lambda_j = (1/N) sum_n p(z | x_j^n)``;
 4. residual resampling per model;
 5. output ``x = sum_j mu_j x_j`` (from the weighted particles, before resampling);
-6. regularisation (ALGORITHMS.md §6): after resampling each model's particles are jittered by
+6. regularisation (docs/seed001.md): after resampling each model's particles are jittered by
    ``h`` times that model's posterior spread, either added (``"add"``: covariance grows by
    ``h^2``, like extra process noise) or with Liu & West (2001) shrinkage (``"shrink"``:
    ``x -> a x + (1-a) mean + h L e``, ``a = sqrt(1-h^2)``, mean and covariance kept).
@@ -135,7 +135,8 @@ def counts_to_indices(counts: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ParticleParams:
-    """Particle-filter settings of the IMM-PF (seed 001 §4 and ALGORITHMS.md §6)."""
+    """Particle-filter settings of the IMM-PF (seed 001 §4;
+    docs/algorithms.md "IMM models and the particle fusion rule")."""
 
     n_particles: int = 800
     """Particles per model ``N``."""
@@ -405,7 +406,8 @@ RATIO_SPACES = ("position", "full")
 
 @dataclass(frozen=True)
 class RatioConfig:
-    """How a peer's ``posterior / prediction`` ratio is formed (ALGORITHMS.md §6, our reading)."""
+    """How a peer's ``posterior / prediction`` ratio is formed (our reading:
+    docs/algorithms.md "IMM models and the particle fusion rule")."""
 
     space: str = "position"
     """``"position"``: ratio of the (px, py) marginals; ``"full"``: of the 6-D densities."""

@@ -1,4 +1,4 @@
-"""Measurement-set partitioning for extended targets (seed 002; ALGORITHMS.md §7).
+"""Measurement-set partitioning for extended targets (seed 002; docs/seed002.md).
 
 A *partition* of a scan ``Z (m, 2)`` is an integer label array ``(m,)``: measurements with the
 same label form one *cell* ``W``. The ET-GM-PHD update (:mod:`tracking.etgmphd`) sums over a
@@ -137,7 +137,7 @@ def cut_linkage(Z: np.ndarray, m: int, cuts) -> list[np.ndarray]:
 @dataclass(frozen=True)
 class GridSpectralPartitioner:
     """The seed-002 partitioner: grid-density clutter removal, then density-sensitive spectral
-    clustering of what is kept (ALGORITHMS.md §7; the paper lost formulas 5-7, the defaults are
+    clustering of what is kept (docs/seed002.md; the paper lost formulas 5-7, the defaults are
     the spec's reading). Removed points become one-measurement cells.
 
     1. Grid (seed 002 §2.1): the scan's bounding box is split into

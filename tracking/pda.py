@@ -1,5 +1,5 @@
 """Probabilistic data association: PDAF and IMM-PDAF with a sequential multi-sensor update
-(ALGORITHMS.md §8; seed 003 eq. 22-36; Bar-Shalom & Tse 1975, Houles & Bar-Shalom 1989).
+(docs/seed003.md; seed 003 eq. 22-36; Bar-Shalom & Tse 1975, Houles & Bar-Shalom 1989).
 
 One target, linear Gaussian models on any state (seed 003 uses the 6-D kinematic state
 ``[px, vx, ax, py, vy, ay]`` of :mod:`tracking.imm` so that CV and CA share it), linear

@@ -1,4 +1,4 @@
-"""Mixture reduction: pruning, merging, capping, ISE weight re-fit (ALGORITHMS.md §4).
+"""Mixture reduction: pruning, merging, capping, ISE weight re-fit (docs/algorithms.md "Reduction").
 
 Two merge rules share one sweep (take the heaviest remaining component, merge its neighbours
 into it by moment matching, repeat):
