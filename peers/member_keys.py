@@ -24,10 +24,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from peers.session import SessionError
-from protocol.keys import check_name
+from protocol.keys import WORLD, check_name  # noqa: F401  (WORLD: re-exported)
 
-WORLD = "world"
-"""The member name of the world process (scans, truth, control)."""
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 SIGN_KEY = ".ed25519"
 """Suffix of a member's message-signing private key (``NAME.ed25519``, PEM PKCS#8)."""
@@ -95,7 +93,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
         raise SecurityError("no members: give --members a,b,c or --scenario")
     for m in members:
         check_name(m, "member name")
-    if CA_CERT.removesuffix(".pem") in members:
+    if any(m.lower() == CA_CERT.removesuffix(".pem") for m in members):
         raise SecurityError("'ca' cannot be a member name (it is the CA's file)")
     out.mkdir(parents=True, exist_ok=True)
     now = datetime.datetime.now(datetime.UTC)

@@ -121,6 +121,28 @@ def _network_name(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _router_name(text: str) -> str:
+    from protocol.keys import ROUTER_PREFIX, check_name
+
+    try:
+        check_name(text, "router name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if not text.startswith(ROUTER_PREFIX):
+        raise argparse.ArgumentTypeError(f"invalid router name {text!r}: a router's name "
+                                         f"starts with {ROUTER_PREFIX!r}")
+    return text
+
+
+def _run_id(text: str) -> str:
+    from protocol.keys import check_run_id
+
+    try:
+        return check_run_id(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 _ENDPOINT = re.compile(r"^[a-z][a-z0-9+\-]*/\S+$")
 
 
@@ -953,7 +975,7 @@ def build_parser() -> argparse.ArgumentParser:
                             help="a Zenoh JSON5 config file for every process (flags apply "
                                  "on top)")
             sp.add_argument("--out", help="run folder (default: runs/<time>-run)")
-            sp.add_argument("--run-id", type=_network_name,
+            sp.add_argument("--run-id", type=_run_id,
                             help="Rerun recording id of the run (default: network name + "
                                  "random suffix)")
         else:
@@ -967,7 +989,7 @@ def build_parser() -> argparse.ArgumentParser:
             sp.add_argument("--config", type=_existing_file,
                             help="a Zenoh JSON5 config file (flags apply on top)")
             sp.add_argument("--out", help="folder for the summary and the .rrd file")
-            sp.add_argument("--run-id", type=_network_name,
+            sp.add_argument("--run-id", type=_run_id,
                             help="Rerun recording id shared by the run's processes")
             sp.add_argument("--recover", action="store_true",
                             help="estimates and scans through Zenoh's advanced publisher/"
@@ -1143,8 +1165,8 @@ def build_parser() -> argparse.ArgumentParser:
     ro.add_argument("--config", type=_existing_file, help="a Zenoh JSON5 config file")
     ro.add_argument("--secure", metavar="DIR", help="mutual TLS and the network's access "
                     "control with the router's key in DIR (sensornet keys ... --members router)")
-    ro.add_argument("--name", default="router", help="the router's member name (default "
-                    "router; must start with 'router')")
+    ro.add_argument("--name", default="router", type=_router_name,
+                    help="the router's member name (default router; must start with 'router')")
     ro.add_argument("--network", type=_network_name,
                     help="check that the keys are this network's")
     ro.set_defaults(func=cmd_router)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from protocol.keys import check_name
 from sim.faultplan import (
     Constant,
     Delay,
@@ -781,13 +782,23 @@ def _sensors(top: _Table, ctx: _Context) -> tuple[SensorSpec, ...]:
     if not raw:
         raise top.fail("sensors", "must list at least one sensor ([[sensors]])")
     out: list[SensorSpec] = []
+    seen: dict[str, int] = {}
     for i, entry in enumerate(raw):
         s = _Table(entry, f"sensors[{i}]", ctx, [
             "name", "kind", "position", "sigma_r", "sigma_theta_deg", "detection_probability",
             "clutter_rate"])
-        name = s.text("name")
-        if name in (o.name for o in out):
-            raise s.fail("name", f"repeats the sensor name {name!r}")
+        name = s.raw("name")
+        try:
+            check_name(name, "sensor name", peer=True)
+        except ValueError as exc:
+            raise ctx.fail(s.key("name"), f"key '{s.key('name')}': {exc}") from None
+        if name.lower() in seen:  # a set: linear in the number of sensors
+            first = out[seen[name.lower()]].name
+            if first == name:
+                raise s.fail("name", f"repeats the sensor name {name!r}")
+            raise s.fail("name", f"is {name!r}, which differs from sensor {first!r} only in "
+                                 f"case (one log file on a case-insensitive file system)")
+        seen[name.lower()] = i
         kind = s.choice("kind", SENSOR_KINDS)
         if kind == "range-bearing":
             if not s.has("sigma_theta_deg"):
