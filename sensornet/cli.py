@@ -23,6 +23,8 @@ from pathlib import Path
 
 from peers.session import PEER_WAIT, SessionError  # noqa: E402
 from sim.scenario import (
+    MAX_ROUNDS,
+    MAX_RUNS,
     ScenarioError,
     builtin_scenarios,
     load_scenario,
@@ -89,17 +91,21 @@ def _default_jobs() -> int:
 # --------------------------------------------------------------------------------------------
 
 
-def _number(kind: type, minimum: float, strict: bool):
-    """An argparse ``type=``: a finite ``kind`` above (``strict``) or at least ``minimum``."""
+def _number(kind: type, minimum: float, strict: bool, maximum: float | None = None):
+    """An argparse ``type=``: a finite ``kind`` above (``strict``) or at least ``minimum``,
+    and at most ``maximum`` if given."""
     what = "an integer" if kind is int else "a number"
     bound = f"> {minimum:g}" if strict else f">= {minimum:g}"
+    if maximum is not None:
+        bound += f" and <= {maximum:,g}"
 
     def parse(text: str):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text!r}") from None
-        if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+        if (not math.isfinite(value) or value < minimum or (strict and value == minimum)
+                or (maximum is not None and value > maximum)):
             raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text}")
         return value
 
@@ -110,6 +116,8 @@ def _number(kind: type, minimum: float, strict: bool):
 POSITIVE_INT = _number(int, 0, strict=True)
 NONNEGATIVE_INT = _number(int, 0, strict=False)
 POSITIVE_FLOAT = _number(float, 0.0, strict=True)
+RUNS = _number(int, 0, strict=True, maximum=MAX_RUNS)
+ROUNDS = _number(int, 0, strict=True, maximum=MAX_ROUNDS)
 
 
 def _network_name(text: str) -> str:
@@ -939,7 +947,7 @@ def build_parser() -> argparse.ArgumentParser:
                        f"{default_memory_gb():g} GB)")
 
     def add_mc_flags(sp: argparse.ArgumentParser, runs: int) -> None:
-        sp.add_argument("--runs", type=POSITIVE_INT, default=runs,
+        sp.add_argument("--runs", type=RUNS, default=runs,
                         help=f"Monte Carlo runs (default {runs})")
         sp.add_argument("--jobs", type=POSITIVE_INT, default=_default_jobs(),
                         help="worker processes (default: number of cores, at most 4)")
@@ -1027,7 +1035,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local filter (default: the scenario's network.filter)")
     pe.add_argument("--fusion", choices=["gci", "aa", "ratio", "none"],
                     help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
-    pe.add_argument("--rounds", type=POSITIVE_INT, help="consensus rounds per scan (>= 1)")
+    pe.add_argument("--rounds", type=ROUNDS,
+                    help=f"consensus rounds per scan (1..{MAX_ROUNDS})")
     pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
     pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
     pe.add_argument("--level2", dest="level2", action="store_true", default=None,
@@ -1129,7 +1138,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "Carlo runs; resumable; local pool or Dask)")
     ca.add_argument("file", help="campaign .toml (or a shipped one: seed000-figures, "
                     "seed000-twin, policy-sweep, loss-sweep)")
-    ca.add_argument("--runs", type=POSITIVE_INT, help="Monte Carlo runs per cell "
+    ca.add_argument("--runs", type=RUNS, help="Monte Carlo runs per cell "
                     "(default: the file's)")
     ca.add_argument("--jobs", type=POSITIVE_INT, help="worker processes, or LocalCluster "
                     "workers with --dask local (default: all cores; 1 for runner 'real')")

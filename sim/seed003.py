@@ -52,13 +52,16 @@ def load(path: str | Path = SCENARIO, overrides: Mapping | None = None) -> dict:
 
 
 def check_sensor_names(sensors, label: str) -> None:
-    """The ``[[sensors]]`` of a seed-003 file: a list of tables, each ``name`` following the
-    name rule
+    """The ``[[sensors]]`` of a seed-003 file: a list of tables, at most
+    :data:`sim.scenario.MAX_SENSORS`, each ``name`` following the name rule
     (:func:`protocol.keys.check_name`) and not repeated. :class:`ValueError` (one line)."""
     from protocol.keys import check_name
+    from sim.scenario import MAX_SENSORS
 
     if not isinstance(sensors, list) or not sensors:
         raise ValueError(f"{label}: 'sensors' must list at least one sensor ([[sensors]])")
+    if len(sensors) > MAX_SENSORS:
+        raise ValueError(f"{label}: {len(sensors):,} sensors, over the limit of {MAX_SENSORS}")
     seen: set[str] = set()
     for i, s in enumerate(sensors):
         name = s.get("name") if isinstance(s, dict) else None
