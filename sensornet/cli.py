@@ -452,7 +452,14 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     the network name defaults to the one the keys were made for."""
     if args.secure is None:
         return None
-    from peers.security import SIGN_KEY, WORLD, check_endpoints, keys_network, make_keys
+    from peers.security import (
+        SIGN_KEY,
+        WORLD,
+        check_endpoints,
+        check_private,
+        keys_network,
+        make_keys,
+    )
 
     check_endpoints([*(args.listen or []), *(args.connect or [])])
     router = ["router"] if getattr(args, "router", False) else []  # sim.launcher.ROUTER
@@ -473,6 +480,9 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
         raise UserError(f"--secure {folder}: no key for {', '.join(missing)} (add them with: "
                         f"sensornet keys {made_for} --out {folder} --members "
                         f"{','.join(missing)})")
+    for m in [WORLD, *scn.sensor_names, *router]:  # before any process reads one
+        for x in (".key", SIGN_KEY):
+            check_private(folder / f"{m}{x}")
     return folder.resolve()
 
 
