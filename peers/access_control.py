@@ -10,10 +10,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from peers.member_keys import WORLD
-from protocol.keys import Keys, check_name
+from protocol.keys import ROUTER_PREFIX, Keys, check_name
 
-ROUTER_PREFIX = "router"
-"""Members whose name starts with this are routers (``sensornet router``): they relay."""
+__all__ = ["ROUTER_PREFIX", "acl_rules"]
 
 
 def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,

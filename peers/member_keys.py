@@ -16,18 +16,18 @@ folder in secure mode is :class:`peers.security.Security`.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import ipaddress
 import json
 import os
+import stat
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from peers.session import SessionError
-from protocol.keys import check_name
+from protocol.keys import WORLD, check_name  # noqa: F401  (WORLD: re-exported)
 
-WORLD = "world"
-"""The member name of the world process (scans, truth, control)."""
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 SIGN_KEY = ".ed25519"
 """Suffix of a member's message-signing private key (``NAME.ed25519``, PEM PKCS#8)."""
@@ -53,11 +53,51 @@ def _name(cn: str, org: str | None = None):
 
 
 def _write(path: Path, data: bytes, private: bool = False) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
-    with os.fdopen(fd, "wb") as fh:
-        fh.write(data)
-    tmp.replace(path)
+    """Write ``path`` atomically: a fresh temporary file beside it (``tempfile.mkstemp``: a
+    random name, created exclusively, never through a symlink, mode 0600), then
+    ``os.replace``. No fixed ``NAME.tmp`` name, so neither a leftover file (its mode kept by
+    ``O_TRUNC``) nor a planted symlink there decides where or how a key is written. Public
+    files (certificates, the roster) are made 0644 before they take their name."""
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if not private:
+                os.fchmod(fh.fileno(), 0o644)
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def check_private(path: Path) -> Path:
+    """Refuse a private key file that is a symbolic link, not a regular file, or readable or
+    writable by the group or others (as ssh does): one line saying which file and what to do.
+    """
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise SecurityError(f"{path}: no such private key file") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise SecurityError(f"{path} is a symbolic link: a private key must be the file itself "
+                            f"(copy it there, then: chmod 600 {path})")
+    if not stat.S_ISREG(st.st_mode):
+        raise SecurityError(f"{path} is not a regular file: a private key must be one")
+    if st.st_mode & 0o077:
+        raise SecurityError(f"{path} is accessible by others (mode "
+                            f"{stat.S_IMODE(st.st_mode):04o}); a private key must be readable "
+                            f"by its owner only: chmod 600 {path}")
+    return path
+
+
+def _read_private(path: Path) -> bytes:
+    """A private key file's bytes, after :func:`check_private`."""
+    return check_private(path).read_bytes()
 
 
 def _san(hosts: Iterable[str]):
@@ -95,9 +135,9 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
         raise SecurityError("no members: give --members a,b,c or --scenario")
     for m in members:
         check_name(m, "member name")
-    if CA_CERT.removesuffix(".pem") in members:
+    if any(m.lower() == CA_CERT.removesuffix(".pem") for m in members):
         raise SecurityError("'ca' cannot be a member name (it is the CA's file)")
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(mode=0o700, parents=True, exist_ok=True)
     now = datetime.datetime.now(datetime.UTC)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
     pem = serialization.Encoding.PEM
@@ -106,7 +146,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
 
     ca_cert_path, ca_key_path = out / CA_CERT, out / CA_KEY
     if ca_cert_path.exists() and ca_key_path.exists():
-        ca_key = serialization.load_pem_private_key(ca_key_path.read_bytes(), None)
+        ca_key = serialization.load_pem_private_key(_read_private(ca_key_path), None)
         ca_cert = x509.load_pem_x509_certificate(ca_cert_path.read_bytes())
         org = ca_cert.subject.get_attributes_for_oid(x509.oid.NameOID.ORGANIZATION_NAME)
         if not org or org[0].value != network:
@@ -133,6 +173,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
     for m in members:
         key_path, cert_path = out / f"{m}.key", out / f"{m}.pem"
         if key_path.exists() and cert_path.exists() and not overwrite:
+            check_private(key_path)  # kept: it must still be private
             written += [cert_path, key_path]
             continue
         key = ec.generate_private_key(ec.SECP256R1())
@@ -164,7 +205,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
             _write(sign_path, Ed25519PrivateKey.generate().private_bytes(pem, pkcs8, no_pw),
                    private=True)
         signing[m] = _public_b64(serialization.load_pem_private_key(
-            sign_path.read_bytes(), None).public_key())
+            _read_private(sign_path), None).public_key())
         written.append(sign_path)
     _write(roster, json.dumps({"network": network,
                                "members": list(dict.fromkeys([*known.get("members", []),

@@ -38,6 +38,7 @@ from peers.member_keys import (
     WORLD,
     SecurityError,
     _public_b64,
+    check_private,
     common_name,
     keys_network,
     load_roster,
@@ -68,6 +69,7 @@ class Security:
         if missing:
             raise SecurityError(f"--secure {folder}: missing {', '.join(missing)} (make them "
                                 f"with: sensornet keys {network} --out {folder} ...)")
+        check_private(folder / f"{member}.key")  # Zenoh reads it: check it first
         made_for = keys_network(folder)
         if made_for != network:
             raise SecurityError(f"--secure {folder}: keys of network {made_for!r}, not of "
@@ -107,7 +109,7 @@ class Security:
             raise SecurityError(f"--secure {self.folder}: no message-signing key "
                                 f"{path.name} ({hint})")
         try:
-            key = load_pem_private_key(path.read_bytes(), None)
+            key = load_pem_private_key(check_private(path).read_bytes(), None)
         except ValueError as exc:
             raise SecurityError(f"{path}: not a private key ({exc})") from None
         listed = load_roster(self.folder).get(self.member)
@@ -156,5 +158,5 @@ def check_endpoints(endpoints: Iterable[str]) -> None:
 
 __all__ = ["ACL_LOG", "CA_CERT", "CA_KEY", "DEFAULT_HOSTS", "ROUTER_PREFIX", "SIGNING",
            "SIGN_KEY", "WORLD", "RefusalLog", "Security", "SecurityError", "acl_rules",
-           "check_endpoints", "common_name", "keys_network", "load_roster", "make_keys",
-           "tls_endpoint"]
+           "check_endpoints", "check_private", "common_name", "keys_network", "load_roster",
+           "make_keys", "tls_endpoint"]

@@ -23,6 +23,8 @@ from pathlib import Path
 
 from peers.session import PEER_WAIT, SessionError  # noqa: E402
 from sim.scenario import (
+    MAX_ROUNDS,
+    MAX_RUNS,
     ScenarioError,
     builtin_scenarios,
     load_scenario,
@@ -89,17 +91,21 @@ def _default_jobs() -> int:
 # --------------------------------------------------------------------------------------------
 
 
-def _number(kind: type, minimum: float, strict: bool):
-    """An argparse ``type=``: a finite ``kind`` above (``strict``) or at least ``minimum``."""
+def _number(kind: type, minimum: float, strict: bool, maximum: float | None = None):
+    """An argparse ``type=``: a finite ``kind`` above (``strict``) or at least ``minimum``,
+    and at most ``maximum`` if given."""
     what = "an integer" if kind is int else "a number"
     bound = f"> {minimum:g}" if strict else f">= {minimum:g}"
+    if maximum is not None:
+        bound += f" and <= {maximum:,g}"
 
     def parse(text: str):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text!r}") from None
-        if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+        if (not math.isfinite(value) or value < minimum or (strict and value == minimum)
+                or (maximum is not None and value > maximum)):
             raise argparse.ArgumentTypeError(f"must be {what} {bound}, got {text}")
         return value
 
@@ -110,6 +116,8 @@ def _number(kind: type, minimum: float, strict: bool):
 POSITIVE_INT = _number(int, 0, strict=True)
 NONNEGATIVE_INT = _number(int, 0, strict=False)
 POSITIVE_FLOAT = _number(float, 0.0, strict=True)
+RUNS = _number(int, 0, strict=True, maximum=MAX_RUNS)
+ROUNDS = _number(int, 0, strict=True, maximum=MAX_ROUNDS)
 
 
 def _network_name(text: str) -> str:
@@ -117,6 +125,28 @@ def _network_name(text: str) -> str:
 
     try:
         return check_name(text, "network name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _router_name(text: str) -> str:
+    from protocol.keys import ROUTER_PREFIX, check_name
+
+    try:
+        check_name(text, "router name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if not text.startswith(ROUTER_PREFIX):
+        raise argparse.ArgumentTypeError(f"invalid router name {text!r}: a router's name "
+                                         f"starts with {ROUTER_PREFIX!r}")
+    return text
+
+
+def _run_id(text: str) -> str:
+    from protocol.keys import check_run_id
+
+    try:
+        return check_run_id(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -431,7 +461,14 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     the network name defaults to the one the keys were made for."""
     if args.secure is None:
         return None
-    from peers.security import SIGN_KEY, WORLD, check_endpoints, keys_network, make_keys
+    from peers.security import (
+        SIGN_KEY,
+        WORLD,
+        check_endpoints,
+        check_private,
+        keys_network,
+        make_keys,
+    )
 
     check_endpoints([*(args.listen or []), *(args.connect or [])])
     router = ["router"] if getattr(args, "router", False) else []  # sim.launcher.ROUTER
@@ -452,6 +489,9 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
         raise UserError(f"--secure {folder}: no key for {', '.join(missing)} (add them with: "
                         f"sensornet keys {made_for} --out {folder} --members "
                         f"{','.join(missing)})")
+    for m in [WORLD, *scn.sensor_names, *router]:  # before any process reads one
+        for x in (".key", SIGN_KEY):
+            check_private(folder / f"{m}{x}")
     return folder.resolve()
 
 
@@ -969,7 +1009,7 @@ def build_parser() -> argparse.ArgumentParser:
                        f"{default_memory_gb():g} GB)")
 
     def add_mc_flags(sp: argparse.ArgumentParser, runs: int) -> None:
-        sp.add_argument("--runs", type=POSITIVE_INT, default=runs,
+        sp.add_argument("--runs", type=RUNS, default=runs,
                         help=f"Monte Carlo runs (default {runs})")
         sp.add_argument("--jobs", type=POSITIVE_INT, default=_default_jobs(),
                         help="worker processes (default: number of cores, at most 4)")
@@ -1006,7 +1046,7 @@ def build_parser() -> argparse.ArgumentParser:
                             help="a Zenoh JSON5 config file for every process (flags apply "
                                  "on top)")
             sp.add_argument("--out", help="run folder (default: runs/<time>-run)")
-            sp.add_argument("--run-id", type=_network_name,
+            sp.add_argument("--run-id", type=_run_id,
                             help="Rerun recording id of the run (default: network name + "
                                  "random suffix)")
         else:
@@ -1020,7 +1060,7 @@ def build_parser() -> argparse.ArgumentParser:
             sp.add_argument("--config", type=_existing_file,
                             help="a Zenoh JSON5 config file (flags apply on top)")
             sp.add_argument("--out", help="folder for the summary and the .rrd file")
-            sp.add_argument("--run-id", type=_network_name,
+            sp.add_argument("--run-id", type=_run_id,
                             help="Rerun recording id shared by the run's processes")
             sp.add_argument("--recover", action="store_true",
                             help="estimates and scans through Zenoh's advanced publisher/"
@@ -1058,7 +1098,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local filter (default: the scenario's network.filter)")
     pe.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
                     help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
-    pe.add_argument("--rounds", type=POSITIVE_INT, help="consensus rounds per scan (>= 1)")
+    pe.add_argument("--rounds", type=ROUNDS,
+                    help=f"consensus rounds per scan (1..{MAX_ROUNDS})")
     pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
     pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
     pe.add_argument("--level2", dest="level2", action="store_true", default=None,
@@ -1162,7 +1203,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "Carlo runs; resumable; local pool or Dask)")
     ca.add_argument("file", help="campaign .toml (or a shipped one: seed000-figures, "
                     "seed000-twin, policy-sweep, loss-sweep)")
-    ca.add_argument("--runs", type=POSITIVE_INT, help="Monte Carlo runs per cell "
+    ca.add_argument("--runs", type=RUNS, help="Monte Carlo runs per cell "
                     "(default: the file's)")
     ca.add_argument("--jobs", type=POSITIVE_INT, help="worker processes, or LocalCluster "
                     "workers with --dask local (default: all cores; 1 for runner 'real')")
@@ -1198,8 +1239,8 @@ def build_parser() -> argparse.ArgumentParser:
     ro.add_argument("--config", type=_existing_file, help="a Zenoh JSON5 config file")
     ro.add_argument("--secure", metavar="DIR", help="mutual TLS and the network's access "
                     "control with the router's key in DIR (sensornet keys ... --members router)")
-    ro.add_argument("--name", default="router", help="the router's member name (default "
-                    "router; must start with 'router')")
+    ro.add_argument("--name", default="router", type=_router_name,
+                    help="the router's member name (default router; must start with 'router')")
     ro.add_argument("--network", type=_network_name,
                     help="check that the keys are this network's")
     ro.set_defaults(func=cmd_router)

@@ -49,7 +49,7 @@ from typing import Any, TextIO
 
 from sim.progress import Progress
 from sim.runners import RUNNERS, Task, code_version, scenario_hash
-from sim.scenario import ScenarioError, builtin_scenarios, load_scenario
+from sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
 
 FIGURE_KINDS = ("seed000", "seed001", "sweep", "ospa-time")
 
@@ -174,8 +174,8 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     _check(runner in RUNNERS, label, f"campaign.runner must be one of {', '.join(RUNNERS)}, "
            f"got {runner!r}")
     n_runs = runs if runs is not None else head.get("runs", 50)
-    _check(isinstance(n_runs, int) and n_runs >= 1, label,
-           f"campaign.runs must be an integer >= 1, got {n_runs!r}")
+    _check(isinstance(n_runs, int) and 1 <= n_runs <= MAX_RUNS, label,
+           f"campaign.runs must be an integer in 1..{MAX_RUNS:,}, got {n_runs!r}")
     first = head.get("first_run", 0)
     _check(isinstance(first, int) and first >= 0, label,
            f"campaign.first_run must be an integer >= 0, got {first!r}")

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from protocol.keys import check_name
 from sim.faultplan import (
     Constant,
     Delay,
@@ -68,6 +69,18 @@ FAULT_KEYS = ("delay", "loss", "duplicate", "reorder", "reorder_delay", "partiti
 DELAY_KINDS = {"constant": ("value",), "uniform": ("low", "high"), "exponential": ("mean",),
                "scans": ("low", "high"), "short": (), "one-step": (), "multi-step": ("max_steps",)}
 """Delay kinds and the parameters each needs."""
+MAX_SENSORS = 256
+"""Sensors (= peers) a scenario may list: a flooding forward carries at most this many scans
+(protocol.codec.Limits.max_entries), and a peer's work per scan grows with its neighbours."""
+MAX_ROUNDS = 16
+"""``network.rounds``: consensus (or flooding) rounds per scan. Every round is a message per
+peer and link held until the scan is done, so the twin's memory grows with it."""
+MAX_RUNS = 100_000
+"""Monte Carlo runs one command or campaign cell may ask for (``--runs``, ``campaign.runs``):
+each run's results are held until the table is written."""
+MAX_COORDINATE = 1e7
+"""Largest ``|x|`` or ``|y|`` in metres of the region (and of sensor and target positions):
+10,000 km, well past any surveillance area; areas and distances stay far from overflow."""
 
 Matrix = tuple[tuple[float, ...], ...]
 
@@ -576,12 +589,15 @@ class _Table:
         return name in self.data
 
     # typed getters ---------------------------------------------------------------------------
-    def integer(self, name: str, default: Any = _REQUIRED, minimum: int | None = None) -> int:
+    def integer(self, name: str, default: Any = _REQUIRED, minimum: int | None = None,
+                maximum: int | None = None) -> int:
         v = self.raw(name, default)
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.fail(name, f"must be an integer, got {_short(v)}")
         if minimum is not None and v < minimum:
             raise self.fail(name, f"must be >= {minimum}, got {v}")
+        if maximum is not None and v > maximum:
+            raise self.fail(name, f"must be <= {maximum}, got {_short(v)}")
         return v
 
     def number(self, name: str, default: Any = _REQUIRED, minimum: float | None = None,
@@ -629,6 +645,13 @@ class _Table:
         if not isinstance(v, list | tuple) or len(v) != length:
             raise self.fail(name, f"must be a list of {length} numbers, got {_short(v)}")
         return tuple(self._number(name, x, f"a list of {length} numbers") for x in v)
+
+    def position(self, name: str) -> tuple[float, float]:
+        """``[x, y]`` in metres, each within :data:`MAX_COORDINATE`."""
+        x, y = self.vector(name, 2)
+        if max(abs(x), abs(y)) > MAX_COORDINATE:
+            raise self.fail(name, f"is [{x:g}, {y:g}] m, beyond +-{MAX_COORDINATE:g} m")
+        return x, y
 
     def tables(self, name: str, default: Any = _REQUIRED) -> list[Any]:
         v = self.raw(name, default)
@@ -762,8 +785,11 @@ def _region(sc: _Table) -> tuple[tuple[float, float], tuple[float, float]]:
         ):
             raise sc.fail("region", f"must be [[xmin, xmax], [ymin, ymax]], got {_short(raw)}")
         lo, hi = float(row[0]), float(row[1])
+        if max(abs(lo), abs(hi)) > MAX_COORDINATE:
+            raise sc.fail("region", f"has {axis} = {max(lo, hi, key=abs):g} m, beyond "
+                                    f"+-{MAX_COORDINATE:g} m")
         if not lo < hi:
-            raise sc.fail("region", f"has {axis}min {lo:g} >= {axis}max {hi:g}")
+            raise sc.fail("region", f"has {axis}min {lo:g} >= {axis}max {hi:g} (an empty area)")
         out.append((lo, hi))
     return out[0], out[1]
 
@@ -773,7 +799,7 @@ def _target(t: _Table) -> TargetSpec:
     death = t.integer("death_scan")
     if death < birth:
         raise t.fail("death_scan", f"is {death}, before birth_scan {birth}")
-    start, end = t.vector("start", 2), t.vector("end", 2)
+    start, end = t.position("start"), t.position("end")
     return TargetSpec(birth, death, (start[0], start[1]), (end[0], end[1]))
 
 
@@ -781,14 +807,27 @@ def _sensors(top: _Table, ctx: _Context) -> tuple[SensorSpec, ...]:
     raw = top.tables("sensors")
     if not raw:
         raise top.fail("sensors", "must list at least one sensor ([[sensors]])")
+    if len(raw) > MAX_SENSORS:
+        raise top.fail("sensors", f"lists {len(raw):,} sensors, over the limit of "
+                                  f"{MAX_SENSORS} (one peer each)")
     out: list[SensorSpec] = []
+    seen: dict[str, int] = {}
     for i, entry in enumerate(raw):
         s = _Table(entry, f"sensors[{i}]", ctx, [
             "name", "kind", "position", "sigma_r", "sigma_theta_deg", "detection_probability",
             "clutter_rate"])
-        name = s.text("name")
-        if name in (o.name for o in out):
-            raise s.fail("name", f"repeats the sensor name {name!r}")
+        name = s.raw("name")
+        try:
+            check_name(name, "sensor name", peer=True)
+        except ValueError as exc:
+            raise ctx.fail(s.key("name"), f"key '{s.key('name')}': {exc}") from None
+        if name.lower() in seen:  # a set: linear in the number of sensors
+            first = out[seen[name.lower()]].name
+            if first == name:
+                raise s.fail("name", f"repeats the sensor name {name!r}")
+            raise s.fail("name", f"is {name!r}, which differs from sensor {first!r} only in "
+                                 f"case (one log file on a case-insensitive file system)")
+        seen[name.lower()] = i
         kind = s.choice("kind", SENSOR_KINDS)
         if kind == "range-bearing":
             if not s.has("sigma_theta_deg"):
@@ -799,7 +838,7 @@ def _sensors(top: _Table, ctx: _Context) -> tuple[SensorSpec, ...]:
             raise s.fail("sigma_theta_deg", "is only for kind 'range-bearing'")
         else:
             sigma_theta = None
-        px, py = s.vector("position", 2)
+        px, py = s.position("position")
         out.append(SensorSpec(
             name=name,
             kind=kind,
@@ -887,7 +926,7 @@ def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
     return NetworkSpec(
         topology=topology,
         edges=tuple(edges),
-        rounds=t.integer("rounds", 1, minimum=1),
+        rounds=t.integer("rounds", 1, minimum=1, maximum=MAX_ROUNDS),
         omega=t.choice("omega", NETWORK_OMEGA_RULES, "metropolis"),
         max_age=t.integer("max_age", 5, minimum=0),
         policy=t.choice("policy", OOS_POLICIES, "nale"),

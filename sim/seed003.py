@@ -47,7 +47,31 @@ def load(path: str | Path = SCENARIO, overrides: Mapping | None = None) -> dict:
         if table not in cfg or key not in cfg[table]:
             raise ValueError(f"seed003: unknown setting {dotted!r}")
         cfg[table][key] = value
+    check_sensor_names(cfg.get("sensors"), f"seed003 ({Path(path).name})")
     return cfg
+
+
+def check_sensor_names(sensors, label: str) -> None:
+    """The ``[[sensors]]`` of a seed-003 file: a list of tables, at most
+    :data:`sim.scenario.MAX_SENSORS`, each ``name`` following the name rule
+    (:func:`protocol.keys.check_name`) and not repeated. :class:`ValueError` (one line)."""
+    from protocol.keys import check_name
+    from sim.scenario import MAX_SENSORS
+
+    if not isinstance(sensors, list) or not sensors:
+        raise ValueError(f"{label}: 'sensors' must list at least one sensor ([[sensors]])")
+    if len(sensors) > MAX_SENSORS:
+        raise ValueError(f"{label}: {len(sensors):,} sensors, over the limit of {MAX_SENSORS}")
+    seen: set[str] = set()
+    for i, s in enumerate(sensors):
+        name = s.get("name") if isinstance(s, dict) else None
+        try:
+            check_name(name, "sensor name", peer=True)
+        except ValueError as exc:
+            raise ValueError(f"{label}: sensors[{i}].name: {exc}") from None
+        if name.lower() in seen:
+            raise ValueError(f"{label}: sensors[{i}].name repeats the sensor name {name!r}")
+        seen.add(name.lower())
 
 
 # -- truth and measurements -------------------------------------------------------------------

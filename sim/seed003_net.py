@@ -42,6 +42,7 @@ from peers.core import CoreConfig, PeerCore
 from peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
 from peers.scoring import Scorer
 from peers.session import PEER_WAIT
+from protocol.keys import check_name, check_run_id
 from sim import seed003
 from tracking.imm import POS
 
@@ -387,6 +388,16 @@ def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[li
     return rows, 0
 
 
+def _checked(check, *what: str):
+    """An argparse ``type=`` from a name check: its one-line message on a bad value."""
+    def parse(text: str) -> str:
+        try:
+            return check(text, *what)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return parse
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m sim.seed003_net",
                                 description=__doc__.split("\n")[0])
@@ -415,8 +426,8 @@ def _parser() -> argparse.ArgumentParser:
     for cmd in ("world", "peer"):
         sp = sub.add_parser(cmd)
         common(sp)
-        sp.add_argument("--network", required=True)
-        sp.add_argument("--run-id")
+        sp.add_argument("--network", required=True, type=_checked(check_name, "network name"))
+        sp.add_argument("--run-id", type=_checked(check_run_id))
         sp.add_argument("--listen", action="append", default=[])
         sp.add_argument("--connect", action="append", default=[])
         if cmd == "world":

@@ -70,7 +70,7 @@ from protocol.codec import encode
 from protocol.messages import Estimate, Scan
 from sim.faultplan import FaultPlan, LinkFaults, Uniform
 from sim.progress import Progress
-from sim.scenario import FLOOD_ESTIMATORS
+from sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
 from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
@@ -232,6 +232,7 @@ def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
         if k in kw:
             kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
     scn = Seed004(**kw)
+    _check_sizes(scn, path)
     if scn.assumed_scans not in ("held", "all"):
         raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
                             f"expected 'held' or 'all'")
@@ -245,6 +246,34 @@ def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
     if not np.isfinite(scn.hops).all():
         raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
     return scn
+
+
+def _check_sizes(scn: Seed004, path: str | Path) -> None:
+    """The bounds of ``sim.scenario`` (MAX_SENSORS, MAX_ROUNDS, MAX_COORDINATE), checked
+    before anything is built from the sizes (the graph is sensors x sensors)."""
+    n = len(scn.positions)
+    if scn.positions.ndim != 2 or scn.positions.shape[1] != 2:
+        raise ScenarioError(f"{path}: sensors.positions must be a list of [x, y] pairs")
+    if n > MAX_SENSORS:
+        raise ScenarioError(f"{path}: sensors.positions lists {n:,} sensors, over the limit "
+                            f"of {MAX_SENSORS}")
+    rounds = [scn.iterations, *scn.rounds]
+    if not all(isinstance(r, int) and 1 <= r <= MAX_ROUNDS for r in rounds):
+        raise ScenarioError(f"{path}: flooding.iterations and consensus.rounds must be "
+                            f"integers in 1..{MAX_ROUNDS}, got {scn.iterations!r} and "
+                            f"{list(scn.rounds)!r}")
+    try:
+        region = np.asarray(scn.region, dtype=float).reshape(2, 2)
+        coords = np.concatenate([region.ravel(), scn.positions.ravel()])
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{path}: scenario.region must be [[xmin, xmax], [ymin, ymax]] "
+                            f"(m)") from None
+    if not (region[:, 0] < region[:, 1]).all():
+        raise ScenarioError(f"{path}: scenario.region must have xmin < xmax and ymin < ymax "
+                            f"(a non-empty area)")
+    if not (np.isfinite(coords).all() and (np.abs(coords) <= MAX_COORDINATE).all()):
+        raise ScenarioError(f"{path}: scenario.region and sensors.positions must be finite "
+                            f"and within +-{MAX_COORDINATE:g} m")
 
 
 def network_document(doc: dict, label: str = "seed004.toml") -> dict:
