@@ -19,6 +19,7 @@ import numpy as np
 
 from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
 from peers.fusers import NoFuser
+from peers.trust import Trust, TrustConfig
 from protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from tracking.mixture import GaussianMixture
 from tracking.nale import NaleBuffer
@@ -45,6 +46,9 @@ class ConsensusOptions:
     round_deadlines: bool = False
     """One deadline per round (the scan's deadline split evenly over the rounds) instead of
     one per scan: a round then runs with what arrived by its own deadline (flooding)."""
+    trust: TrustConfig | None = None
+    """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
+    None: every neighbour fused at its consensus weight."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
@@ -120,6 +124,9 @@ class Consensus:
         self.records: list[dict] = []
         self.last_local: GaussianMixture | None = None
         self.last_fused: GaussianMixture | None = None
+        self.trust = (Trust(options.trust, options.neighbours)
+                      if self.fusing and options.trust is not None and options.trust.enabled
+                      else None)
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -250,6 +257,8 @@ class Consensus:
         senders = sorted(inputs)
         weights = metropolis_weights(self.o.name, senders, self._deg,
                                      uniform=self.o.omega == "uniform")
+        if self.trust is not None and senders and isinstance(st.current, GaussianMixture):
+            inputs, senders, weights = self._trusted(st, inputs, senders, weights)
         try:
             fused = self.fuser.fuse(FusionInput(st.k, st.round, st.current, inputs, weights,
                                                 st.z))
@@ -276,6 +285,22 @@ class Consensus:
         if self.o.feedback:
             self.estimator.adopt(fused)
         return self._tracks(st.k, fused, now)
+
+    def _trusted(self, st: _ScanState, inputs: dict, senders: list[str], weights: list[float]):
+        """The round's inputs and weights after the trust test: a neighbour's weight scaled by
+        its trust (the rest to own); a neighbour at weight 0 is left out (fusers that do not
+        use the weights, e.g. the single-target rules, must not see it)."""
+        mixes = {s: inputs[s]["posterior"] for s in senders}
+        if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
+            return inputs, senders, weights  # raw scans (flooding): not densities
+        weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights))
+        self.records.extend(self.trust.drain_records())
+        kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]
+        if len(kept) == len(senders):
+            return inputs, senders, weights
+        senders = [senders[i] for i in kept]
+        return ({s: inputs[s] for s in senders}, senders,
+                [weights[0]] + [weights[1 + i] for i in kept])
 
     # -- outputs ----------------------------------------------------------------------------
     def _next_seq(self) -> int:

@@ -166,6 +166,9 @@ class PeerCore:
     def finish(self, now: float) -> list[Output]:
         """End of the run: fuse what is pending, score what is missing."""
         out = self._wrap(self.consensus.finish(now))
+        if self.consensus.trust is not None:
+            self.consensus.trust.finish()
+            self.consensus.records.extend(self.consensus.trust.drain_records())
         self.deadlines.clear()
         self._score_deferred()
         self.scorer.finish()

@@ -49,6 +49,7 @@ def core_snapshot(core) -> dict:
         "nale": asdict(c.nale.counts),
         "fuser": dict(getattr(c.fuser, "counts", {})),
         "internal_errors": dict(c.errors),
+        "trust": c.trust.summary() if c.trust is not None else None,
     }
 
 

@@ -104,6 +104,15 @@ class Observer:
                 self.sink.scalar(f"metrics/rejected/{n}/before_decoding/{reason}", count)
         elif r.kind == "peer":
             self.sink.text(f"peers/{n}/events", f"{r.values['peer']} {r.values['what']}")
+        elif r.kind == "trust":  # one plot per peer: each neighbour's statistic and weight
+            self._time(r.k)
+            j = r.values["neighbour"]
+            self.sink.scalar(f"metrics/trust/{n}/{j}/statistic", r.values["statistic"])
+            self.sink.scalar(f"metrics/trust/{n}/{j}/weight", r.values["weight"])
+        elif r.kind == "trust-event":
+            v = r.values
+            self.sink.text(f"peers/{n}/events", f"{v['neighbour']} {v['from']} -> {v['to']} "
+                           f"(score {v['score']})", level="WARN")
 
     def _defer_local(self, k: int, compute_ms: float | None) -> None:
         core = self.core

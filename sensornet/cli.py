@@ -762,7 +762,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
     summaries = read_summaries(out, scn.sensor_names)
     if summaries:
+        from sim.launcher import trust_note
+
         print(format_summary(summaries))
+        if trust_note(summaries):
+            print(trust_note(summaries))
         if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
             from sim.launcher import realtime_note
 
@@ -826,6 +830,10 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
     print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
           f"scans in {time.perf_counter() - t0:.1f} s (bytes: the encoded messages)")
     print(format_summary(summaries))
+    from sim.launcher import trust_note
+
+    if trust_note(summaries):
+        print(trust_note(summaries))
     if result.faults is not None:
         print(f"injected link faults: {result.faults.counts()}")
         if args.out:

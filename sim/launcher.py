@@ -385,6 +385,22 @@ REALTIME_DEADLINE_SHARE = 0.05
 network benchmark's criterion, with a p99 scan -> tracks latency under one scan interval)."""
 
 
+def trust_note(summaries: dict[str, dict]) -> str | None:
+    """Who was quarantined by whom and when (peers with ``fusion.trust``), one line per
+    neighbour; None if nobody was."""
+    by: dict[str, list[str]] = {}
+    for peer, s in sorted(summaries.items()):
+        for ch in ((s.get("trust") or {}).get("changes") or []):
+            if ch["to"] == "quarantined":
+                by.setdefault(ch["neighbour"], []).append(f"{peer} at scan {ch['k']}")
+            elif ch["from"] == "quarantined":
+                by.setdefault(ch["neighbour"], []).append(f"readmitted by {peer} at scan "
+                                                          f"{ch['k']}")
+    if not by:
+        return None
+    return "\n".join(f"quarantined: {n} by " + ", ".join(v) for n, v in sorted(by.items()))
+
+
 def realtime_note(summaries: dict[str, dict], interval_s: float, speed: float,
                   cores: int | None) -> str | None:
     """One paragraph when the peers did not keep real time (deadline fusions above

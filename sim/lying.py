@@ -53,6 +53,8 @@ TIGHT = 1.0
 """Variance (m^2, (m/s)^2) on the diagonal of the lies' covariances: confident."""
 INFLATE = 5.0
 """The ``inflated`` lie's weight factor."""
+BIAS = 30.0
+"""Metres the ``biased`` sensor's estimates sit off along x (its covariance stays honest)."""
 
 Lie = Callable[[GaussianMixture], GaussianMixture]
 
@@ -91,13 +93,26 @@ def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2))
         extra = GaussianMixture(np.ones(len(pos)), means, _tight(len(pos), mix.dim))
         return GaussianMixture.concatenate([mix, extra])
 
-    lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms}
+    def biased(mix: GaussianMixture) -> GaussianMixture:
+        means = mix.means.copy()
+        means[:, ix] += BIAS
+        return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
+
+    held: list[GaussianMixture] = []
+
+    def stuck(mix: GaussianMixture) -> GaussianMixture:
+        if not held and len(mix):
+            held.append(mix.copy())
+        return held[0].copy() if held else mix
+
+    lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms,
+            "biased": biased, "stuck": stuck}
     if kind not in lies:
         raise ValueError(f"unknown lie {kind!r}; expected one of {', '.join(lies)}")
     return lies[kind]
 
 
-LIES = ("empty", "shifted", "inflated", "phantoms")
+LIES = ("empty", "shifted", "inflated", "phantoms", "biased", "stuck")
 
 
 class LyingCore(PeerCore):
@@ -124,11 +139,13 @@ class LyingCore(PeerCore):
 
 
 def run_with_liar(scn: Scenario, run: int, liar: str, lie: str | None) -> TwinResult:
-    """One twin run of ``scn`` in which peer ``liar`` tells lie ``lie`` (None: the clean run)."""
+    """One twin run of ``scn`` in which peer ``liar`` (or each of ``"a,b"``) tells lie ``lie``
+    (None: the clean run)."""
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     if lie is not None:
-        core = peers[liar]
-        peers[liar] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
+        for name in liar.split(","):
+            core = peers[name]
+            peers[name] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
     return run_twin(scn, run, peers=peers)
 
 
@@ -136,12 +153,13 @@ def honest_scores(result: TwinResult, liar: str) -> dict[str, float]:
     """Mean OSPA over the honest peers (fused, local) and over the liar's honest neighbours
     (fused); each peer's mean counts a scan without output as a miss at the cut-off."""
     peers = result.peers
-    honest = [n for n in peers if n != liar]
-    near = [n for n in honest if liar in peers[n].consensus.o.neighbours]
+    liars = liar.split(",")
+    honest = [n for n in peers if n not in liars]
+    near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)]
     return {"fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
             "local": float(np.mean([peers[n].mean_ospa("local") for n in honest])),
             "fused_neighbours": float(np.mean([peers[n].mean_ospa("fused") for n in near])),
-            "liar_fused": float(peers[liar].mean_ospa("fused")),
+            "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars])),
             "rejected": float(sum(sum(peers[n].rejected.values()) for n in honest))}
 
 
@@ -158,20 +176,28 @@ class Setup:
 SETUPS = (
     Setup("seed000", "seed000", {}, "s2"),
     Setup("seed004-gmphd", "seed004", {"network.filter": "gmphd", "network.rounds": 1}, "s15"),
+    Setup("seed004-gmphd-2", "seed004", {"network.filter": "gmphd", "network.rounds": 1},
+          "s15,s19"),
 )
 """seed 000: 3 peers in a full mesh (s2 has 2 honest neighbours, Metropolis weight 1/3 each).
 seed 004 with GM-PHD peers, one consensus round (four rounds fuse worse than one there, clean:
-19.4 m against 11.3 m, run 0): s15 has the highest degree, 14 of the 19 honest peers."""
+19.4 m against 11.3 m, run 0): s15 has the highest degree, 14 of the 19 honest peers; with
+two liars s19 (degree 13) lies too."""
 
 RULES: dict[str, dict] = {
+    "hybrid": {"fusion.rule": "hybrid"},
+    "hybrid+trust": {"fusion.rule": "hybrid", "fusion.trust": True},
     "gci": {"fusion.rule": "gci"},
+    "gci+trust": {"fusion.rule": "gci", "fusion.trust": True},
     "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
     "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
     "aa": {"fusion.rule": "aa"},
+    "aa+trust": {"fusion.rule": "aa", "fusion.trust": True},
 }
-"""The GM-PHD peers' fusion rules: GCI with Metropolis weights and the cardinality fused apart
-(the scenarios' default), GCI with the exact Poisson EMD mass, GCI with each pair's weight
-chosen at the Chernoff point, and the arithmetic average (AA)."""
+"""The GM-PHD peers' fusion rules, each without and (``+trust``) with the neighbour test of
+:mod:`peers.trust`: the hybrid (the default), GCI with Metropolis weights and the cardinality
+fused apart, GCI with the exact Poisson EMD mass, GCI with each pair's weight chosen at the
+Chernoff point, and the arithmetic average (AA)."""
 
 
 def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:

@@ -17,6 +17,7 @@ from peers.core import CoreConfig, PeerCore
 from peers.estimators import GmphdEstimator, ImmEstimator, SingleTargetConfig
 from peers.fusers import AaFuser, GciFuser, HybridFuser, ImmFuser, NoFuser
 from peers.scoring import Scorer
+from peers.trust import TrustConfig
 from sim.build import adjacency, make_filter, sensor_model
 from sim.scenario import Scenario, ScenarioError
 from sim.world import generate_truth, truth_rng
@@ -43,6 +44,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         policy="drop-late" if single else net.policy,
         feedback=net.feedback and not single,
         round_deadlines=net.filter == "flooding",
+        trust=TrustConfig() if scn.fusion.trust and net.filter != "flooding" else None,
     )
     return replace(opts, **changes)
 

@@ -198,6 +198,9 @@ class FusionSpec:
     """The sensor that fuses in the offline experiment (seed 000: ``"s2"``)."""
     cardinality: str = "separate"
     """GCI mass rule: ``"emd"`` (exact Poisson EMD) or ``"separate"`` (Battistelli 2013)."""
+    trust: bool = False
+    """Test each neighbour's density before fusing it and down-weight or quarantine the
+    inconsistent ones (:mod:`peers.trust`)."""
 
 
 @dataclass(frozen=True)
@@ -734,7 +737,7 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             "extraction_threshold", "extraction", "gate", "refit"])),
         fusion=_fusion(_Table(top.raw("fusion", {}), "fusion", ctx, [
             "rule", "omega", "level2_pruning", "level2_threshold", "fusing_sensor",
-            "cardinality"]), names),
+            "cardinality", "trust"]), names),
         metrics=_metrics(_Table(top.raw("metrics", {}), "metrics", ctx,
                                 ["ospa_cutoff", "ospa_order"])),
         network=_network(_Table(top.raw("network", {}), "network", ctx, [
@@ -897,6 +900,7 @@ def _fusion(f: _Table, sensor_names: list[str]) -> FusionSpec:
         level2_threshold=f.number("level2_threshold", 0.5, minimum=0.0),
         fusing_sensor=fuser,
         cardinality=f.choice("cardinality", CARDINALITY_RULES, "separate"),
+        trust=f.flag("trust", False),
     )
 
 

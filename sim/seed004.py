@@ -327,7 +327,7 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
         "filter": {"prune_threshold": scn.prune_threshold,
                    "merge_threshold": scn.merge_threshold,
                    "max_components": scn.max_components, "extraction": "cardinality"},
-        "fusion": {"rule": "gci", "level2_threshold": scn.publish_threshold,
+        "fusion": {"level2_threshold": scn.publish_threshold,  # the default rule (hybrid)
                    "cardinality": scn.cardinality, **doc.get("fusion", {})},
         "metrics": {"ospa_cutoff": scn.ospa_cutoff, "ospa_order": scn.ospa_order},
         "network": network,

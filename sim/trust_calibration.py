@@ -1,0 +1,153 @@
+"""Calibrate the trust thresholds of :mod:`peers.trust` on clean training runs.
+
+Runs the honest networks (seed 000, seed 004's graph with GM-PHD peers, the 20-peer circulant
+graph of degree 4) on the twin with the test on and nothing down-weighted (thresholds at
+infinity), under the conditions honest peers must ride out: Pd 0.9 and link faults (latency,
+loss, reordering). Every (peer, neighbour, scan) score is kept; the printed quantiles are what
+:class:`peers.trust.TrustConfig`'s ``suspect`` and ``quarantine`` were set from. Training runs
+9000.. are used here only (the lying study evaluates on 7000..).
+
+    python -m sim.trust_calibration --runs 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from peers.trust import TrustConfig
+from sim.graphs import network_scenario
+from sim.peers import make_peer
+from sim.scenario import load_scenario
+from sim.twin import run_twin
+
+OPEN = TrustConfig(suspect=1e9, quarantine=2e9)
+"""The test runs, nothing is down-weighted."""
+
+CONDITIONS = {
+    "clean": {},
+    "pd0.9": {"sensors.*.detection_probability": 0.9},
+    "faults": {"faults.default.delay": 0.03, "faults.default.loss": 0.2,
+               "faults.default.reorder": 0.2},
+}
+
+
+def setups(tmp: Path) -> dict[str, tuple[str, dict]]:
+    circ = tmp / "circulant20d4.toml"
+    circ.write_text(network_scenario(20, 4))
+    return {"seed000": ("seed000", {}),
+            "seed004-gmphd": ("seed004", {"network.filter": "gmphd", "network.rounds": 1}),
+            "circ4-20": (str(circ), {"network.rounds": 2})}
+
+
+def sequences(source: str, overrides: dict, run: int) -> list[np.ndarray]:
+    """Per (peer, neighbour): the per-scan statistic (largest of the scan's rounds) of one
+    clean twin run with the test open, in scan order."""
+    scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
+    peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
+    for p in peers.values():
+        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.history = []
+    run_twin(scn, run, peers=peers)
+    out = []
+    for p in peers.values():
+        per: dict[str, dict[int, float]] = {}
+        for k, s, stat, _ in p.consensus.trust.history:
+            d = per.setdefault(s, {})
+            d[k] = max(d.get(k, 0.0), stat)
+        out += [np.array([d[k] for k in sorted(d)]) for d in per.values()]
+    return out
+
+
+def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
+                   run: int) -> list[np.ndarray]:
+    """Per honest neighbour of ``liar``: the liar's per-scan statistic (test open), training
+    runs only (for the detection delay the thresholds give; :mod:`sim.lying`'s lies)."""
+    from sim.lying import LyingCore, make_lie
+
+    scn = load_scenario(scenario, overrides={**overrides, "fusion.trust": True})
+    peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
+    core = peers[liar]
+    peers[liar] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
+    for p in peers.values():
+        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.history = []
+    run_twin(scn, run, peers=peers)
+    out = []
+    for n, p in peers.items():
+        if n == liar or liar not in p.consensus.o.neighbours:
+            continue
+        d: dict[int, float] = {}
+        for k, s, stat, _ in p.consensus.trust.history:
+            if s == liar:
+                d[k] = max(d.get(k, 0.0), stat)
+        out.append(np.array([d[k] for k in sorted(d)]))
+    return out
+
+
+def simulate(seqs: list[np.ndarray], cfg: TrustConfig) -> dict[str, float]:
+    """The scores :class:`peers.trust.Trust` would reach on these statistics: the share of
+    (pair, scan) triples at weight < 1 (suspect) and at weight 0 (quarantined, with the
+    hysteresis), and the scores' quantiles."""
+    from peers.trust import NeighbourTrust, Trust
+
+    t = Trust(cfg, ())
+    scores, low, zero, n = [], 0, 0, 0
+    for seq in seqs:
+        rec = NeighbourTrust()
+        for stat in seq:
+            score = t._next(rec.score, stat)
+            w = t._trust(rec, score)
+            low += w < 1.0
+            zero += w == 0.0
+            n += 1
+            rec.score = score
+            if score >= cfg.quarantine:
+                rec.state, rec.streak = "quarantined", 0
+            elif rec.state == "quarantined":
+                rec.streak = rec.streak + 1 if score < cfg.suspect else 0
+                if rec.streak >= cfg.readmit:
+                    rec.state = "trusted"
+            scores.append(score)
+    q = np.quantile(scores, [0.99, 0.995, 0.999]) if scores else [np.nan] * 3
+    return {"triples": n, "down": low / max(n, 1), "quarantined": zero / max(n, 1),
+            "q99": q[0], "q99.5": q[1], "q99.9": q[2]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sim.trust_calibration",
+                                 description=__doc__.split("\n")[0])
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--first-run", type=int, default=9000)
+    ap.add_argument("--save", help="write the statistics here (.npz)")
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        pooled = []
+        for label, (source, over) in setups(Path(tmp)).items():
+            for cond, extra in CONDITIONS.items():
+                if label.startswith("seed004") and cond == "pd0.9":
+                    extra = {"sensors.detection_probability": 0.9}
+                seqs = [q for r in range(a.first_run, a.first_run + a.runs)
+                        for q in sequences(source, {**over, **extra}, r)]
+                pooled += seqs
+                stat = np.concatenate(seqs)
+                sim = simulate(seqs, TrustConfig())
+                print(f"{label:14s} {cond:7s} statistic q50 {np.quantile(stat, 0.5):.2f} "
+                      f"q90 {np.quantile(stat, 0.9):.2f} q99 {np.quantile(stat, 0.99):.2f}; "
+                      f"score q99 {sim['q99']:.2f} q99.9 {sim['q99.9']:.2f}; down "
+                      f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
+                      f" of {sim['triples']}", flush=True)
+        if a.save:
+            np.savez_compressed(a.save, *pooled)
+        sim = simulate(pooled, TrustConfig())
+        print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
+              f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "
+              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

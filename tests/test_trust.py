@@ -1,0 +1,159 @@
+"""The neighbour test: the Cauchy–Schwarz divergence against numerical integration, the
+statistic and score on hand-made mixtures, and the consensus leaving out what it quarantines."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from peers.trust import Trust, TrustConfig
+from tracking.divergence import cs_divergence, log_overlaps
+from tracking.mixture import GaussianMixture
+
+P4 = np.diag([100.0, 25.0, 100.0, 25.0])
+
+
+def mix(*comps) -> GaussianMixture:
+    w, m, P = zip(*comps, strict=True)
+    return GaussianMixture(np.array(w, float), np.array(m, float), np.array(P, float))
+
+
+def _grid_density(D: GaussianMixture, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    pts = np.stack([X.ravel(), Y.ravel()], axis=1)
+    out = np.zeros(len(pts))
+    for w, m, P in zip(D.weights, D.means, D.covs, strict=True):
+        diff = pts - m
+        q = np.einsum("ni,ij,nj->n", diff, np.linalg.inv(P), diff)
+        out += w * np.exp(-0.5 * q) / (2 * np.pi * np.sqrt(np.linalg.det(P)))
+    return out
+
+
+def test_overlaps_and_cs_divergence_match_numerical_integration():
+    p = mix((0.9, [0.0, 0.0], [[40.0, 10.0], [10.0, 30.0]]),
+            (0.6, [60.0, -20.0], [[25.0, 0.0], [0.0, 60.0]]))
+    q = mix((1.2, [8.0, 5.0], [[50.0, -5.0], [-5.0, 45.0]]),
+            (0.3, [-40.0, 30.0], [[80.0, 0.0], [0.0, 20.0]]),
+            (0.5, [55.0, -10.0], [[30.0, 12.0], [12.0, 40.0]]))
+    x = np.linspace(-120.0, 140.0, 1041)
+    X, Y = np.meshgrid(x, x)
+    cell = (x[1] - x[0]) ** 2
+    fp, fq = _grid_density(p, X, Y), _grid_density(q, X, Y)
+    L = log_overlaps([p, q])
+    np.testing.assert_allclose(np.exp(L), [[np.sum(fp * fp) * cell, np.sum(fp * fq) * cell],
+                                           [np.sum(fq * fp) * cell, np.sum(fq * fq) * cell]],
+                               rtol=1e-6)
+    numeric = (-np.log(np.sum(fp * fq)) + 0.5 * np.log(np.sum(fp * fp))
+               + 0.5 * np.log(np.sum(fq * fq)))
+    assert cs_divergence(p, q) == pytest.approx(numeric, rel=1e-6)
+    assert cs_divergence(p, p.scaled(3.0)) == pytest.approx(0.0, abs=1e-12)  # scale-free
+
+
+def test_cs_divergence_of_two_gaussians_is_the_closed_form():
+    # equal covariances: D_CS = (m1 - m2)' P^-1 (m1 - m2) / 4
+    d = np.array([30.0, 2.0, -10.0, 1.0])
+    a, b = mix((1.0, np.zeros(4), P4)), mix((2.0, d, P4))
+    assert cs_divergence(a, b) == pytest.approx(d @ np.linalg.solve(P4, d) / 4.0)
+    # far-apart tight components underflow nothing: the log-domain sum stays finite
+    far = mix((1.0, [5000.0, 0.0, 0.0, 0.0], np.eye(4)))
+    value = cs_divergence(a, far)
+    assert np.isfinite(value) and value > 1e3
+    assert np.isnan(cs_divergence(a, GaussianMixture.empty(4)))
+
+
+A = np.array([0.0, 1.0, 0.0, -1.0])
+B = np.array([500.0, 0.0, -400.0, 2.0])
+
+
+def _honest(rng, n=4):
+    """An honest neighbour: the two targets, estimated with scatter of its own covariance."""
+    L = np.linalg.cholesky(P4)
+    return mix((0.95, A + L @ rng.standard_normal(4), P4),
+               (0.9, B + L @ rng.standard_normal(4), P4))
+
+
+def test_statistic_is_small_for_honest_neighbours_and_large_for_lies():
+    rng = np.random.default_rng(11)
+    t = Trust(TrustConfig(), ("h1", "h2", "liar"))
+    own = _honest(rng)
+    lies = {
+        "shifted": mix((0.95, A + [110.0, 0, 0, 0], np.eye(4)), (0.9, B + [110.0, 0, 0, 0],
+                                                                  np.eye(4))),
+        "inflated": _honest(rng).scaled(5.0),
+        "empty": GaussianMixture.empty(4),
+        "phantoms": GaussianMixture.concatenate([_honest(rng), mix(
+            (1.0, [-800.0, 0, 800.0, 0], np.eye(4)), (1.0, [800.0, 0, 800.0, 0], np.eye(4)))]),
+    }
+    w = {"": 0.25, "h1": 0.25, "h2": 0.25, "liar": 0.25}
+    for name, lie in lies.items():
+        stats = t.statistics(own, {"h1": _honest(rng), "h2": _honest(rng), "liar": lie}, w)
+        assert stats["h1"] < 2.0 and stats["h2"] < 2.0, (name, stats)
+        assert stats["liar"] > 4.0, (name, stats)
+
+
+def test_score_weight_quarantine_and_readmission():
+    cfg = TrustConfig(warmup=0)
+    t = Trust(cfg, ("h", "liar"))
+    rng = np.random.default_rng(5)
+    shifted = mix((0.95, A + [150.0, 0, 0, 0], np.eye(4)))
+    weights_seen = []
+    for k in range(1, 30):
+        lying = k <= 10
+        inputs = {"h": _honest(rng), "liar": shifted if lying else _honest(rng)}
+        w = t.weigh(k, 0, _honest(rng), inputs, [0.5, 0.25, 0.25])
+        assert sum(w) == pytest.approx(1.0) and min(w) >= 0.0
+        weights_seen.append((k, w[2]))
+    t.finish()
+    by_k = dict(weights_seen)
+    # (the liar's consensus weight is 0.25)
+    assert by_k[1] < 0.25 and by_k[2] == 0.0  # down-weighted at once, out by the second scan
+    assert all(by_k[k] == 0.0 for k in range(3, 12))  # quarantined, then hysteresis
+    assert by_k[29] == 0.25  # readmitted once consistent for `readmit` scans
+    changes = t.summary()["changes"]
+    assert [c["to"] for c in changes if c["neighbour"] == "liar"] == ["suspect", "quarantined",
+                                                                       "trusted"]
+    assert not [c for c in changes if c["neighbour"] == "h"]
+
+
+def test_own_weight_takes_what_is_taken_from_a_neighbour():
+    t = Trust(TrustConfig(warmup=0), ("a", "b"))
+    own = mix((1.0, A, P4))
+    w = t.weigh(1, 0, own, {"a": mix((1.0, A, P4)), "b": mix((1.0, A + 200.0, np.eye(4)))},
+                [0.4, 0.3, 0.3])
+    assert w[1] == 0.3 and w[2] < 0.3 and w[0] == pytest.approx(1.0 - w[1] - w[2])
+
+
+def test_disabled_or_warming_up_changes_nothing():
+    own = mix((1.0, A, P4))
+    bad = {"x": mix((1.0, A + 500.0, np.eye(4)))}
+    assert Trust(TrustConfig(enabled=False), ("x",)).weigh(1, 0, own, bad, [0.5, 0.5]) == [0.5,
+                                                                                         0.5]
+    warm = Trust(TrustConfig(warmup=2), ("x",))
+    assert warm.weigh(1, 0, own, bad, [0.5, 0.5]) == [0.5, 0.5]
+    with pytest.raises(ValueError):
+        TrustConfig(suspect=5.0, quarantine=4.0)
+
+
+def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
+    from sim.launcher import trust_note
+    from sim.lying import run_with_liar
+    from sim.scenario import load_scenario
+
+    # plain GCI: a confident wrong estimate erases every target the honest peers fuse, unless
+    # the liar is left out
+    base = {"fusion.rule": "gci", "scenario.num_scans": 25}
+    scn = load_scenario("seed000", overrides={**base, "fusion.trust": True})
+    res = run_with_liar(scn, 8100, "s2", "shifted")
+    for n in ("s1", "s3"):
+        trust = res.peers[n].snapshot()["trust"]
+        assert trust["neighbours"]["s2"]["state"] == "quarantined"
+        other = "s3" if n == "s1" else "s1"
+        assert trust["neighbours"][other]["state"] == "trusted"
+        first = [c for c in trust["changes"] if c["neighbour"] == "s2" and c["to"] ==
+                 "quarantined"][0]
+        assert first["k"] <= 3  # within 3 scans of the first lie
+    note = trust_note({n: res.summary(n) for n in ("s1", "s3")})
+    assert note.startswith("quarantined: s2 by s1 at scan") and "s3 at scan" in note
+    open_door = run_with_liar(load_scenario("seed000", overrides=base), 8100, "s2", "shifted")
+    for n in ("s1", "s3"):  # near its own filter (two peers left), far better than the lie
+        assert res.mean_ospa(n) < 1.1 * res.mean_ospa(n, "local")
+        assert res.mean_ospa(n) < 0.5 * open_door.mean_ospa(n)
