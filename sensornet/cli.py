@@ -661,7 +661,8 @@ def _scored(s: dict) -> bool:
 
 def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
     """With hosts (``--per-process N``, N > 1) only ``kill`` (one peer, in its host) and
-    ``killhost`` (a whole host, named h1, h2, ...); ``killhost`` only with hosts."""
+    ``killhost`` (a whole host, named h1, h2, ...) of the peers' faults (the router's as
+    ever); ``killhost`` only with hosts."""
     from sim.launcher import HOSTED_ACTIONS
 
     for f in pfaults:
@@ -671,7 +672,7 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
         if f.action == "killhost" and f.peer not in hosts:
             raise UserError(f"--fault names unknown host {f.peer!r} (hosts: "
                             f"{', '.join(hosts)})")
-        if hosts and f.action not in HOSTED_ACTIONS:
+        if hosts and f.action not in HOSTED_ACTIONS and f.peer != "router":
             raise UserError(f"--fault {f.action}:{f.peer}@{f.scan} with --per-process: only "
                             f"{' and '.join(HOSTED_ACTIONS)} so far")
     if hosts and getattr(args, "sim", False):
