@@ -21,6 +21,12 @@ scan-to-track latency stays under one scan interval (100 ms).
 
     python benchmarks/bench_network.py            # full (several minutes)
     python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step (~20 s)
+    python benchmarks/bench_network.py --sizes 20 --degrees 4 --per-process 20  # one host
+
+``--per-process N`` runs N peers per process (``sensornet run --per-process``, peer hosts):
+the CPU per peer per scan is then each host's CPU split between its peers
+(``peers.telemetry.SharedCpu``); the flood part, which measures one peer process's memory,
+is left out.
 """
 
 from __future__ import annotations
@@ -50,6 +56,8 @@ def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
 
 ZENOH_CONFIG: str | None = None
 """A Zenoh JSON5 file for every process of every run (``--config``), e.g. to try a setting."""
+PER_PROCESS = 1
+"""Peers per process of every run (``--per-process``; 1: a process per peer)."""
 
 
 def run_network(source: str, out: Path, overrides: list[str], timeout: float,
@@ -58,7 +66,7 @@ def run_network(source: str, out: Path, overrides: list[str], timeout: float,
 
     scn = load_scenario(source, overrides=parse_overrides(overrides))
     handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse,
-                       config=ZENOH_CONFIG)
+                       config=ZENOH_CONFIG, per_process=PER_PROCESS)
     try:
         codes = wait_run(handle, timeout=timeout)
     finally:
@@ -260,9 +268,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", metavar="FILE",
                    help="a Zenoh JSON5 config file for every process (to compare a setting; "
                         "it replaces the defaults: set mode, lease and message size in it)")
+    p.add_argument("--per-process", type=int, default=1, metavar="N",
+                   help="peers per process (peer hosts, sensornet run --per-process; default "
+                        "1: a process per peer)")
     args = p.parse_args(argv)
-    global ZENOH_CONFIG
-    ZENOH_CONFIG = args.config
+    if args.per_process < 1:
+        p.error("--per-process must be >= 1")
+    global ZENOH_CONFIG, PER_PROCESS
+    ZENOH_CONFIG, PER_PROCESS = args.config, args.per_process
+    hosted = f", {PER_PROCESS} peers per process" if PER_PROCESS > 1 else ""
     sizes = [6] if args.quick else [int(x) for x in args.sizes.split(",")]
     degrees = [2] if args.quick else [int(x) for x in args.degrees.split(",")]
     # the latency part always plays the whole scenario: its targets are gone after scan 100,
@@ -271,13 +285,17 @@ def main(argv: list[str] | None = None) -> int:
     scale_scans = 30 if args.quick else min(scans, 50)
     with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
         tmp = Path(tmp)
-        print("## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun)\n", flush=True)
+        print(f"## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun{hosted})\n",
+              flush=True)
         clean: dict = {}
         print("\n".join(part_latency(tmp, scans, clean)), flush=True)
-        if not args.quick:
+        if not args.quick and PER_PROCESS > 1:
+            print("\n(the flood part measures one peer process: left out with --per-process)")
+        elif not args.quick:
             print("\n## memory under a 10 s flood of far-future estimates\n", flush=True)
             print("\n".join(part_flood(tmp, clean)), flush=True)
-        print("\n## peers in real time at 10 scans/s, 2 consensus rounds\n", flush=True)
+        print(f"\n## peers in real time at 10 scans/s, 2 consensus rounds{hosted}\n",
+              flush=True)
         print("\n".join(part_scaling(tmp, sizes, degrees, scale_scans, args.deadline,
                                       sparse=not args.full_mesh)),
               flush=True)

@@ -243,10 +243,37 @@ def spawn_viewer(port: int = 9876) -> bool:
     return False
 
 
-class RerunSink:
-    """Logs one process's records; every method is a no-op when disabled."""
+class _Stream:
+    """The ``rerun`` module, with logging, time and sinks of one ``RecordingStream`` of its
+    own: several sinks in one process (the peers of a host), each its own ``.rrd``."""
 
-    def __init__(self) -> None:
+    def __init__(self, rr, stream) -> None:
+        self._rr, self._stream = rr, stream
+
+    def __getattr__(self, name: str):
+        return getattr(self._rr, name)
+
+    def log(self, *args, **kwargs) -> None:
+        self._stream.log(*args, **kwargs)
+
+    def set_time(self, *args, **kwargs) -> None:
+        self._stream.set_time(*args, **kwargs)
+
+    def set_sinks(self, *sinks, default_blueprint=None) -> None:
+        self._stream.set_sinks(*sinks, default_blueprint=default_blueprint)
+
+    def disconnect(self) -> None:
+        self._stream.disconnect()
+
+
+class RerunSink:
+    """Logs one process's records; every method is a no-op when disabled.
+
+    ``own_stream``: log to a recording stream of this sink's own, not the process's global
+    one (a process with several sinks: the peers of a host)."""
+
+    def __init__(self, own_stream: bool = False) -> None:
+        self.own_stream = own_stream
         self.enabled = False
         self.rr = None
         self.path: Path | None = None
@@ -264,8 +291,11 @@ class RerunSink:
         os.environ.setdefault("RERUN_ANALYTICS", "0")
         import rerun as rr
 
+        if self.own_stream:
+            rr = _Stream(rr, rr.RecordingStream(APP, recording_id=run_id))
+        else:
+            rr.init(APP, recording_id=run_id, spawn=False)
         self.rr = rr
-        rr.init(APP, recording_id=run_id, spawn=False)
         sinks = []
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -25,7 +25,7 @@ from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector, HoldQueue
 from peers.observer import Observer
 from peers.rerun_sink import RerunSink
-from peers.telemetry import Telemetry
+from peers.telemetry import SharedCpu, Telemetry
 from peers.transport import Transport
 from protocol.codec import Rejected, decode
 from protocol.messages import Estimate, Forward, Returns
@@ -84,7 +84,11 @@ def output_stem(out_dir: Path, name: str) -> str:
 class PeerRuntime:
     """Runs one peer until its core says stop, SIGINT/SIGTERM, or no input for a while."""
 
-    def __init__(self, core: PeerCore, options: RuntimeOptions | None = None) -> None:
+    def __init__(self, core: PeerCore, options: RuntimeOptions | None = None,
+                 inbox=None, shared_cpu: SharedCpu | None = None) -> None:
+        """``inbox``: where the transport puts what arrives (a host's tagged queue, see
+        :mod:`peers.host`); by default the peer's own queue, which :meth:`run` drains.
+        ``shared_cpu``: the host's CPU, which this peer shares (see :class:`SharedCpu`)."""
         self.core = core
         self.o = options or RuntimeOptions()
         self.name = core.name
@@ -94,15 +98,18 @@ class PeerRuntime:
                                    (list(self.o.listen), list(self.o.connect),
                                     self.o.config_file, self.o.lease_ms, self.o.gossip),
                                    security=self.o.security, truth=core.wants_truth,
-                                   recover=self.o.recover)
-        self.telemetry = Telemetry()
-        self.sink = RerunSink()
+                                   recover=self.o.recover, inbox=inbox)
+        self.telemetry = Telemetry(shared_cpu)
+        self.sink = RerunSink(own_stream=inbox is not None)  # a host's peers: one .rrd each
         self.observer = Observer(core, self.sink, self.o.color_index, self.o.scan_period)
         self.held = HoldQueue()
         self.saved_tracks: dict[int, np.ndarray] | None = {} if self.o.save_tracks else None
         self.live_events: list[tuple[str, str, float, int]] = []
         self.stem = output_stem(self.o.out_dir, self.name) if self.o.out_dir else None
         self.stop_reason = ""
+        self.killed_at: int | None = None
+        self.host: dict | None = None
+        """A hosted peer's host: its name and peers (in the summary)."""
         self._stop = False
         self._last_input = time.monotonic()
         self.recorder = None
@@ -116,8 +123,20 @@ class PeerRuntime:
     def run(self) -> int:
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, self._signal)
+        self.open()  # raises DuplicatePeer before any file is written
+        try:
+            try:
+                self._loop()
+            finally:
+                self._finish()
+        finally:
+            self.close()
+        return 0
+
+    def open(self, session=None) -> None:
+        """Open the transport (on ``session`` if given: a host's), the recorder and the sink."""
         o = self.o
-        self.transport.open()  # raises DuplicatePeer before any file is written
+        self.transport.open(session=session)
         try:
             if o.record is not None and o.out_dir is not None:
                 from peers.recording import Recorder
@@ -127,16 +146,19 @@ class PeerRuntime:
             if o.out_dir is not None and o.rerun or o.viewer:
                 rrd = o.out_dir / "rerun" / f"{self.stem}.rrd" if o.out_dir and o.rerun else None
                 self.sink.open(o.run_id or self.core.cfg.network, rrd, o.viewer)
-            try:
-                self._loop()
-            finally:
-                self._finish()
-        finally:
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Undeclare everything on the transport (the token goes), close the sink and recorder."""
+        try:
             self.transport.close()
+        finally:
             self.sink.close()
             if self.recorder is not None:
                 self.recorder.close()
-        return 0
+                self.recorder = None
 
     def _loop(self) -> None:
         # the start-up heap (NumPy, SciPy, Zenoh, ...) never becomes garbage: out of the
@@ -146,43 +168,61 @@ class PeerRuntime:
         self.telemetry.start_cpu()
         q = self.transport.q
         while not self._stop:
-            wall, mono = time.time(), time.monotonic()
-            wait = 0.25
-            due = self.core.next_due()
-            if due is not None:
-                wait = min(wait, due - wall)
-            held = self.held.next_due()
-            if held is not None:
-                wait = min(wait, held - mono)
+            wake = self.next_wake(time.time(), time.monotonic())
+            wait = 0.25 if wake is None else min(0.25, wake)
             try:
                 item = q.get(timeout=max(0.0, wait))
             except Exception:  # queue.Empty
                 item = None
-            try:
-                # what has queued up meanwhile is handled before the deferred work (one tick
-                # and one Rerun flush per wake-up instead of per message; bounded)
-                items = [item] if item is not None else []
-                while items and len(items) < BATCH and not q.empty():
-                    items.append(q.get_nowait())
-                for item in self._catch_up(items):
-                    if self._stop:
-                        break
-                    self._handle(*item)
-                for key, payload in self.held.pop_due(time.monotonic()):
-                    self._feed("estimate", key, payload)
-                now = time.time()
-                due = self.core.next_due()
-                if self.recorder is not None and due is not None and due <= now:
-                    self.recorder.tick(now)  # a deadline fires: replay must tick here too
-                self._carry_out("tick", self.core.tick, now)
-                t0 = time.thread_time()
-                self.observer.flush(idle=q.empty() and not self.core.consensus.busy())
-                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
-            except Exception as exc:  # a bug must not take the peer (and the run) down
-                self._internal_error(exc)
-            if time.monotonic() - self._last_input > self.o.idle_timeout:
-                self.stop_reason = f"no input for {self.o.idle_timeout:g} s"
+            # what has queued up meanwhile is handled before the deferred work (one tick
+            # and one Rerun flush per wake-up instead of per message; bounded)
+            items = [item] if item is not None else []
+            while items and len(items) < BATCH and not q.empty():
+                items.append(q.get_nowait())
+            self.step(items, q.empty)
+            if self.idle_expired():
                 break
+
+    def next_wake(self, wall: float, mono: float) -> float | None:
+        """Seconds from now (``wall``/``mono``: the two clocks read now) to this peer's next
+        deferred work, a core deadline or a held message; None when it has none."""
+        wait = None
+        due = self.core.next_due()
+        if due is not None:
+            wait = due - wall
+        held = self.held.next_due()
+        if held is not None:
+            wait = held - mono if wait is None else min(wait, held - mono)
+        return wait
+
+    def step(self, items: list[tuple], queue_empty) -> None:
+        """One wake-up's work: ``items`` (at most :data:`BATCH`), the held messages now due,
+        the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
+        peer, so the observer may flush)."""
+        try:
+            for item in self._catch_up(items):
+                if self._stop:
+                    break
+                self._handle(*item)
+            for key, payload in self.held.pop_due(time.monotonic()):
+                self._feed("estimate", key, payload)
+            now = time.time()
+            due = self.core.next_due()
+            if self.recorder is not None and due is not None and due <= now:
+                self.recorder.tick(now)  # a deadline fires: replay must tick here too
+            self._carry_out("tick", self.core.tick, now)
+            t0 = time.thread_time()
+            self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
+            self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
+        except Exception as exc:  # a bug must not take the peer (and the run) down
+            self._internal_error(exc)
+
+    def idle_expired(self) -> bool:
+        """No input for ``idle_timeout`` seconds: set the stop reason, say so."""
+        if time.monotonic() - self._last_input > self.o.idle_timeout:
+            self.stop_reason = f"no input for {self.o.idle_timeout:g} s"
+            return True
+        return False
 
     def _catch_up(self, items: list[tuple]) -> list[tuple]:
         """A peer that has fallen behind by more than :data:`BACKLOG` scans goes to the newest
@@ -309,6 +349,21 @@ class PeerRuntime:
             traceback.print_exc()
 
     # -- the end ----------------------------------------------------------------------------
+    def kill(self, at_scan: int) -> None:
+        """Stop at once, as a killed process would (``kill:PEER@K`` in a host): no last fusion
+        and nothing more published; the liveliness token goes; unlike a killed process it
+        still writes its summary (saying so), fault log and saved tracks."""
+        self.stop_reason = f"killed at scan {at_scan}"
+        self.killed_at = at_scan
+        self._stop = True
+        try:
+            self.close()
+        finally:
+            if self.o.out_dir is not None:
+                self._flush_fault_log()
+                self._save_tracks()
+                self.write_summary()
+
     def _finish(self) -> None:
         """Fuse what is pending, then write the summary, tracks and fault log."""
         try:
@@ -324,11 +379,14 @@ class PeerRuntime:
             return
         out.mkdir(parents=True, exist_ok=True)  # --out of a folder not made yet (--no-rerun)
         self._flush_fault_log()
+        self._save_tracks()
+        self.write_summary()
+
+    def _save_tracks(self) -> None:
         if self.saved_tracks is not None:
             suffix = self.stem.removeprefix(f"peer-{self.name}")
-            np.savez(out / f"tracks-{self.name}{suffix}.npz",
+            np.savez(self.o.out_dir / f"tracks-{self.name}{suffix}.npz",
                      **{f"k{k}": v for k, v in self.saved_tracks.items()})
-        self.write_summary()
 
     def _flush_fault_log(self) -> None:
         """Move the injected-fault records to ``faults-into-<peer>.csv``."""
@@ -344,6 +402,10 @@ class PeerRuntime:
         s["peer_events"] = self.live_events[-1000:]
         s["injected_faults"] = self.o.faults.counts() if self.o.faults is not None else {}
         s["files"] = self.stem
+        if self.killed_at is not None:
+            s["killed_at_scan"] = self.killed_at
+        if self.host is not None:
+            s["host"] = self.host
         refusals = self.transport.refusals
         if refusals is not None:  # secure mode: what the access control refused on arrival
             s["refused_by_transport"] = refusals.counts()

@@ -41,10 +41,37 @@ def _median(v) -> float | None:
     return statistics.median(v) if v else None
 
 
-class Telemetry:
-    """Counters and timings of one peer process."""
+class SharedCpu:
+    """The CPU of one process that several peers share (a :class:`peers.host.PeerHost`).
+
+    Each peer's own steps (its core, publishing, Rerun) are measured as in a process of its
+    own; what the peers share is split evenly between them: the rest of the host loop's thread
+    ("loop") and every other thread ("transport": Zenoh's threads and the callbacks), so the
+    hosted peers' ``cpu_s_running`` add up to the process's. Read from the loop's thread."""
 
     def __init__(self) -> None:
+        self.peers: list[Telemetry] = []
+        self.start()
+
+    def start(self) -> None:
+        self._cpu0, self._thread0 = time.process_time(), time.thread_time()
+
+    def shares(self) -> tuple[float, float]:
+        """One peer's share (ms) of the loop's own work and of the other threads'."""
+        main = (time.thread_time() - self._thread0) * 1e3
+        total = (time.process_time() - self._cpu0) * 1e3
+        own = sum(sum(t.cpu_ms.values()) for t in self.peers)
+        n = max(1, len(self.peers))
+        return max(0.0, main - own) / n, max(0.0, total - main) / n
+
+
+class Telemetry:
+    """Counters and timings of one peer process (or of one peer in a shared process)."""
+
+    def __init__(self, shared: SharedCpu | None = None) -> None:
+        self.shared = shared
+        if shared is not None:
+            shared.peers.append(self)
         self.sent: Counter = Counter()
         self.sent_bytes: Counter = Counter()
         self.latency_ms: deque = deque(maxlen=_KEEP)
@@ -119,12 +146,22 @@ class Telemetry:
         publishing, Rerun and the rest of its loop ("loop": queue, liveliness, telemetry), and
         every other thread ("transport": Zenoh's threads and the callbacks that admit messages).
         A core step includes decoding what it received and encoding what it publishes."""
+        out = {k: round(v, 3) for k, v in self.cpu_ms.items()}
+        if self.shared is not None:  # a hosted peer: its own steps, its share of the rest
+            loop, transport = self.shared.shares()
+            out["loop"], out["transport"] = round(loop, 3), round(transport, 3)
+            return out
         main = (time.thread_time() - self._thread0) * 1e3
         total = (time.process_time() - self._cpu0) * 1e3
-        out = {k: round(v, 3) for k, v in self.cpu_ms.items()}
         out["loop"] = round(max(0.0, main - sum(self.cpu_ms.values())), 3)
         out["transport"] = round(max(0.0, total - main), 3)
         return out
+
+    def cpu_s_running(self) -> float:
+        """Process CPU (s) since :meth:`start_cpu`; a hosted peer's: its part of it."""
+        if self.shared is not None:
+            return sum(self.cpu_breakdown().values()) / 1e3
+        return time.process_time() - self._cpu0
 
     def summary(self, last_k: int) -> dict:
         lat = sorted(self.latency_ms)
@@ -144,7 +181,7 @@ class Telemetry:
             "rss_mb_samples": [*self.rss_samples, (last_k, current_rss_mb())],
             "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "cpu_s": time.process_time(),
-            "cpu_s_running": time.process_time() - self._cpu0,
+            "cpu_s_running": self.cpu_s_running(),
             "cpu_ms_breakdown": self.cpu_breakdown(),
             "pid": os.getpid(),
         }

@@ -50,6 +50,28 @@ def recovering_subscriber(session, key: str, callback, on_miss):
     return sub, listener
 
 
+def settle(session, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -> None:
+    """Wait until ``session`` has links and gossip has stopped adding peers (a peer does not
+    route for others, so a liveliness query reaches only the peers linked to us); a client of
+    a router is linked once it has the router."""
+    info = session.info
+
+    def linked() -> int:  # peers, or the routers a client reaches everyone through
+        return len(list(info.peers_zid())) + len(list(info.routers_zid()))
+
+    end = time.monotonic() + first
+    while not linked() and time.monotonic() < end:
+        time.sleep(0.01)
+    n, since, end = -1, time.monotonic(), time.monotonic() + cap
+    while time.monotonic() < end:
+        now_n = linked()
+        if now_n != n:
+            n, since = now_n, time.monotonic()
+        elif time.monotonic() - since >= stable:
+            return
+        time.sleep(0.02)
+
+
 class DuplicatePeer(SessionError):
     """Another process already runs a peer of this name on this network."""
 
@@ -60,7 +82,7 @@ class Transport:
 
     def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
                  admission: Admission, session_args: tuple, security=None,
-                 truth: bool = True, recover: bool = False) -> None:
+                 truth: bool = True, recover: bool = False, inbox=None) -> None:
         self.keys, self.name, self.sensor = keys, name, sensor
         self.neighbours = neighbours
         self.admission = admission
@@ -75,12 +97,16 @@ class Transport:
         self.unrecovered = {"estimate": 0, "scan": 0}  # missed, no longer in the cache
         self.signer = self.verifier = None  # protocol.envelope, in secure mode
         self.check_signatures = True  # see open(): off where the links prove the sender
-        self.q: queue.Queue = queue.Queue()
+        self.q = queue.Queue() if inbox is None else inbox
+        """Where the callbacks put their items: this peer's own queue, or (a peer in a
+        :class:`peers.host.PeerHost`) an inbox that tags them with the peer and puts them on
+        the host's one queue (anything with ``put``)."""
         self.seen_alive: set[str] = set()
         self.session = None
         self._decl: list = []
         self._ready = None
         self._pubs: dict[str, object] = {}
+        self._owns_session = True
 
     # -- callbacks (Zenoh threads) ----------------------------------------------------------
     def _on_sample(self, sample) -> None:
@@ -109,26 +135,8 @@ class Transport:
                     sample.kind == zenoh.SampleKind.PUT))
 
     # -- life cycle -------------------------------------------------------------------------
-    def _settle(self, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -> None:
-        """Wait until the session has links and gossip has stopped adding peers (a peer does
-        not route for others, so a liveliness query reaches only the peers linked to us); a
-        client of a router is linked once it has the router."""
-        info = self.session.info
-
-        def linked() -> int:  # peers, or the routers a client reaches everyone through
-            return len(list(info.peers_zid())) + len(list(info.routers_zid()))
-
-        end = time.monotonic() + first
-        while not linked() and time.monotonic() < end:
-            time.sleep(0.01)
-        n, since, end = -1, time.monotonic(), time.monotonic() + cap
-        while time.monotonic() < end:
-            now_n = linked()
-            if now_n != n:
-                n, since = now_n, time.monotonic()
-            elif time.monotonic() - since >= stable:
-                return
-            time.sleep(0.02)
+    def _settle(self) -> None:
+        settle(self.session)
 
     def arm_signatures(self) -> None:
         """Secure mode: a signer for what this peer puts, a verifier for what it receives.
@@ -147,17 +155,22 @@ class Transport:
         config_file = self.session_args[2] if len(self.session_args) > 2 else None
         self.check_signatures = bool(self.security.routers or self.recover or config_file)
 
-    def open(self, duplicate_wait: float = 0.5) -> None:
-        """Open the session; refuse to start if a peer of the same name is alive already."""
+    def open(self, duplicate_wait: float = 0.5, session=None) -> None:
+        """Open the session; refuse to start if a peer of the same name is alive already.
+
+        ``session``: an open session shared with other peers (a host's, already settled):
+        declared on, never closed here (:meth:`close` undeclares this peer's part only)."""
         self.arm_signatures()
         if self.security is not None and self.refusals is None:
             from peers.security import RefusalLog
 
             self.refusals = RefusalLog().start()  # counts what the access control refuses
-        session = open_session(*self.session_args, security=self.security)
+        self._owns_session = session is None
+        if session is None:
+            session = open_session(*self.session_args, security=self.security)
         self.session = session
         try:
-            if self.session_args[1]:  # endpoints to connect to: let the links come up first
+            if self._owns_session and self.session_args[1]:  # let the links come up first
                 self._settle()
             replies = session.liveliness().get(self.keys.alive(self.name),
                                                timeout=duplicate_wait)
@@ -224,7 +237,8 @@ class Transport:
                     pass
         self._decl, self._ready, self._pubs = [], None, {}
         if self.session is not None:
-            self.session.close()
+            if self._owns_session:
+                self.session.close()
             self.session = None
         if self.refusals is not None:
             self.refusals.stop()

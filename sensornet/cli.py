@@ -495,39 +495,56 @@ def _run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     return folder.resolve()
 
 
-def cmd_peer(args: argparse.Namespace) -> int:
+def _peer_scenario(args: argparse.Namespace):
+    """The scenario of ``sensornet peer``/``host`` with the command line's network and fusion
+    settings on top."""
     from dataclasses import replace
 
-    from peers.runtime import PeerRuntime, RuntimeOptions
-    from peers.transport import DuplicatePeer
+    scn = _load(args, args.scenario)
+    net = scn.network
+    return replace(scn, network=replace(
+        net, rounds=args.rounds or net.rounds, omega=args.omega or net.omega,
+        policy=args.policy or net.policy, filter=args.filter or net.filter), fusion=replace(
+        scn.fusion, rule=args.fusion or scn.fusion.rule,
+        level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
+
+
+def _peer_parts(args: argparse.Namespace, scn, name: str, color: int, security=None):
+    """Peer ``name``'s core and runtime options from the command line."""
+    from dataclasses import replace
+
+    from peers.runtime import RuntimeOptions
     from sim.build import fault_injector
     from sim.peers import make_peer
+
+    speed = args.speed or scn.network.speed
+    core = make_peer(scn, name, args.run, network=args.network, speed=speed)
+    if args.world_grace:  # a router's outage takes the world's token away for a while
+        core.cfg = replace(core.cfg, world_grace=args.world_grace)
+    options = RuntimeOptions(security=security,
+        listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
+        config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
+        out_dir=Path(args.out) if args.out else None, run_id=args.run_id, viewer=args.viewer,
+        color_index=color, idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
+        save_tracks=args.save_tracks, scan_period=scn.scan_period,
+        faults=fault_injector(scn, args.run), recover=args.recover,
+        record=_record_meta(args, speed) if args.record else None)
+    return core, options
+
+
+def cmd_peer(args: argparse.Namespace) -> int:
+    from peers.runtime import PeerRuntime
+    from peers.transport import DuplicatePeer
 
     scn = _load(args, args.scenario)
     if args.name not in scn.sensor_names:
         raise UserError(f"no sensor named {args.name!r} in {scn.name} "
                         f"(sensors: {', '.join(scn.sensor_names)})")
-    net = scn.network
-    scn = replace(scn, network=replace(
-        net, rounds=args.rounds or net.rounds, omega=args.omega or net.omega,
-        policy=args.policy or net.policy, filter=args.filter or net.filter), fusion=replace(
-        scn.fusion, rule=args.fusion or scn.fusion.rule,
-        level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
+    scn = _peer_scenario(args)
     _prepare_peer(args, scn)
-    speed = args.speed or scn.network.speed
-    out = Path(args.out) if args.out else None
     security = _security(args, args.name, scn)
-    core = make_peer(scn, args.name, args.run, network=args.network, speed=speed)
-    if args.world_grace:  # a router's outage takes the world's token away for a while
-        core.cfg = replace(core.cfg, world_grace=args.world_grace)
-    runtime = PeerRuntime(core, RuntimeOptions(security=security,
-        listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
-        config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
-        out_dir=out, run_id=args.run_id, viewer=args.viewer, color_index=args.color,
-        idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
-        save_tracks=args.save_tracks, scan_period=scn.scan_period,
-        faults=fault_injector(scn, args.run), recover=args.recover,
-        record=_record_meta(args, speed) if args.record else None))
+    core, options = _peer_parts(args, scn, args.name, args.color, security)
+    runtime = PeerRuntime(core, options)
     print(f"peer {args.name}: network {args.network}, neighbours "
           f"{', '.join(core.consensus.o.neighbours) or 'none'}", flush=True)
     try:
@@ -546,6 +563,45 @@ def cmd_peer(args: argparse.Namespace) -> int:
     print(f"peer {args.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
           f"local {s['mean_ospa_local']:.1f} fused {s['mean_ospa_fused']:.1f}, "
           f"rejected {s['rejected_total']}", flush=True)
+    return code
+
+
+def cmd_host(args: argparse.Namespace) -> int:
+    """``sensornet host --peers s1,s2 SCENARIO``: several peers in one process, one session."""
+    from peers.host import PeerHost
+    from peers.transport import DuplicatePeer
+
+    scn = _load(args, args.scenario)
+    names = [n for n in (args.peers or "").split(",") if n]
+    unknown = [n for n in names if n not in scn.sensor_names]
+    if not names or unknown:
+        raise UserError(f"--peers needs sensors of {scn.name}"
+                        + (f" ({', '.join(unknown)} unknown)" if unknown else "")
+                        + f" (sensors: {', '.join(scn.sensor_names)})")
+    if len(set(names)) != len(names):
+        raise UserError(f"--peers names a peer twice: {args.peers}")
+    if args.secure or scn.security:
+        raise UserError("a host has one Zenoh session, so one TLS identity: run secure peers "
+                        "one per process (sensornet peer)")
+    scn = _peer_scenario(args)
+    check_budget(scn, args, wire=True)
+    _resolve_viewer(args)
+    if args.config:
+        _existing_file(args.config)
+    parts = [_peer_parts(args, scn, n, scn.sensor_names.index(n)) for n in names]
+    host = PeerHost(args.name, parts, (list(args.listen or ()), list(args.connect or ()),
+                                       args.config, args.lease_ms, not args.no_gossip))
+    print(f"host {args.name}: network {args.network}, peers {', '.join(names)} (pid "
+          f"{os.getpid()})", flush=True)
+    for core, _ in parts:
+        print(f"peer {core.name}: network {args.network}, neighbours "
+              f"{', '.join(core.consensus.o.neighbours) or 'none'}", flush=True)
+    host.read_commands(sys.stdin)
+    try:
+        code = host.run()
+    except DuplicatePeer as exc:
+        raise UserError(str(exc)) from None
+    print(f"host {args.name}: stopped; {len(names)} peers", flush=True)
     return code
 
 
@@ -658,10 +714,32 @@ def _scored(s: dict) -> bool:
     return bool(s.get("scans")) and any(v is not None and math.isfinite(v) for v in vals)
 
 
+def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
+    """With hosts (``--per-process N``, N > 1) only ``kill`` (one peer, in its host) and
+    ``killhost`` (a whole host, named h1, h2, ...) of the peers' faults (the router's as
+    ever); ``killhost`` only with hosts."""
+    from sim.launcher import HOSTED_ACTIONS
+
+    for f in pfaults:
+        if f.action == "killhost" and not hosts:
+            raise UserError(f"--fault killhost:{f.peer}@{f.scan} needs hosts: add "
+                            f"--per-process N (N > 1)")
+        if f.action == "killhost" and f.peer not in hosts:
+            raise UserError(f"--fault names unknown host {f.peer!r} (hosts: "
+                            f"{', '.join(hosts)})")
+        if hosts and f.action not in HOSTED_ACTIONS and f.peer != "router":
+            raise UserError(f"--fault {f.action}:{f.peer}@{f.scan} with --per-process: only "
+                            f"{' and '.join(HOSTED_ACTIONS)} so far")
+    if hosts and getattr(args, "sim", False):
+        raise UserError("--per-process needs real processes; drop --sim")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.launcher import (
         ProcessFault,
         format_summary,
+        host_groups,
+        hosts_line,
         inject_process_faults,
         merge_recordings,
         read_summaries,
@@ -680,7 +758,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.network.router and hasattr(args, "router") and not args.router:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
-    unknown = sorted({f.peer for f in pfaults} - set(scn.sensor_names) - routed)
+    per_process = getattr(args, "per_process", 1) or 1
+    hosts = host_groups(scn.sensor_names, per_process)
+    _check_hosted_faults(pfaults, hosts, args)
+    unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
+                     - set(scn.sensor_names) - routed)
     if unknown:
         raise UserError(f"--fault names unknown peers {unknown} "
                         f"(peers: {', '.join(scn.sensor_names)})")
@@ -700,11 +782,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UserError("--router needs real processes; drop --sim")
         check_budget(scn, args)
         return _run_twin(scn, args)
-    check_budget(scn, args, processes=len(scn.sensors) + 1, wire=True)
+    check_budget(scn, args, processes=len(hosts or scn.sensors) + 1, wire=True)
     _check_listen_free(args.listen or [])
     _resolve_viewer(args)
     if args.secure is None and scn.security:  # the scenario's [security] keys
         args.secure = scn.security
+    if hosts and args.secure is not None:
+        raise UserError("--per-process: a host has one Zenoh session, so one TLS identity: "
+                        "no --secure (run secure peers one per process)")
     if getattr(args, "router", False):
         clash = [f for f in ("config", "listen", "sparse") if getattr(args, f, None)]
         if clash:
@@ -715,9 +800,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     secure = _run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
-    print(f"run {scn.name}: world + {len(scn.sensors)} peers as processes over Zenoh on "
+    how = f"in {len(hosts)} host processes" if hosts else "as processes"
+    print(f"run {scn.name}: world + {len(scn.sensors)} peers {how} over Zenoh on "
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
-          f"few seconds to start {len(scn.sensors) + 1} processes); output in {out}", flush=True)
+          f"few seconds to start {len(hosts or scn.sensors) + 1} processes); output in {out}",
+          flush=True)
+    if hosts:
+        print(hosts_line(hosts), flush=True)
     if secure is not None:
         made = " (fresh keys made for this run)" if args.secure == "" else ""
         print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
@@ -744,7 +833,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                            config=args.config, run_id=args.run_id, secure=secure,
                            router=bool(getattr(args, "router", False)),
                            peer_args={n: ["--record"] for n in scn.sensor_names}
-                           if args.record else None)
+                           if args.record else None, per_process=per_process)
         if getattr(args, "router", False):
             why = f" ({args.router})" if isinstance(args.router, str) else ""
             print(f"routed{why}: the world and every peer are clients of the run's router "
@@ -793,7 +882,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"sensornet: error: the world failed (exit {world}): {why} "
               f"(log: {handle.logs['world']})", file=sys.stderr)
         return 2 if world == 2 else 1
-    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart")}
+    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
+    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
     bad = {n: c for n, c in codes.items() if c != 0 and n not in killed}
     if bad:
         n, c = next(iter(bad.items()))
@@ -1094,42 +1184,59 @@ def build_parser() -> argparse.ArgumentParser:
                                  "certificate and the network's CA in DIR (sensornet keys)")
 
 
+    def add_peer_flags(sp: argparse.ArgumentParser) -> None:
+        """The flags ``sensornet peer`` and ``sensornet host`` share (each peer of a host
+        gets them all)."""
+        add_net_flags(sp, network_required=True)
+        sp.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
+                        help="keep running this long when the world's liveliness goes away, in "
+                             "case it comes back (a router restart); counted as an outage "
+                             "(default: stop at once)")
+        sp.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
+                        help="local filter (default: the scenario's network.filter)")
+        sp.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
+                        help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
+        sp.add_argument("--rounds", type=ROUNDS,
+                        help=f"consensus rounds per scan (1..{MAX_ROUNDS})")
+        sp.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
+        sp.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
+        sp.add_argument("--level2", dest="level2", action="store_true", default=None,
+                        help="level-2 pruning before publishing")
+        sp.add_argument("--no-level2", dest="level2", action="store_false")
+        sp.add_argument("--lease-ms", type=POSITIVE_INT,
+                        help="Zenoh lease (how fast a frozen peer is seen)")
+        sp.add_argument("--color", type=NONNEGATIVE_INT, help=argparse.SUPPRESS)  # default:
+        # the sensor's index in the scenario, the colour the world's legend and plots give it
+        sp.add_argument("--no-gossip", action="store_true",
+                        help="link only to the --connect endpoints (no Zenoh gossip discovery)")
+        sp.add_argument("--save-tracks", action="store_true",
+                        help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
+        sp.add_argument("--record", action="store_true",
+                        help="record what the peer's core is given to "
+                             "<out>/record/peer-<name>.mcap (sensornet replay re-runs it "
+                             "offline, bit for bit)")
+        sp.add_argument("--run", type=NONNEGATIVE_INT, default=0,
+                        help="Monte Carlo run index (seeds the injected link faults)")
+        sp.add_argument("--idle-timeout", type=POSITIVE_FLOAT, default=30.0,
+                        help="stop after this many seconds without input (default 30)")
+        add_budget_flags(sp)
+
     pe = sub.add_parser("peer", help="run one sensor peer (a process) over Zenoh")
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
     pe.add_argument("--scenario", default="seed000", help="scenario file or built-in name")
-    add_net_flags(pe, network_required=True)
-    pe.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
-                    help="keep running this long when the world's liveliness goes away, in "
-                         "case it comes back (a router restart); counted as an outage "
-                         "(default: stop at once)")
-    pe.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
-                    help="local filter (default: the scenario's network.filter)")
-    pe.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
-                    help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
-    pe.add_argument("--rounds", type=ROUNDS,
-                    help=f"consensus rounds per scan (1..{MAX_ROUNDS})")
-    pe.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
-    pe.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
-    pe.add_argument("--level2", dest="level2", action="store_true", default=None,
-                    help="level-2 pruning before publishing")
-    pe.add_argument("--no-level2", dest="level2", action="store_false")
-    pe.add_argument("--lease-ms", type=POSITIVE_INT,
-                    help="Zenoh lease (how fast a frozen peer is seen)")
-    pe.add_argument("--color", type=NONNEGATIVE_INT, help=argparse.SUPPRESS)  # default:
-    # the sensor's index in the scenario, the colour the world's legend and plots give it
-    pe.add_argument("--no-gossip", action="store_true",
-                    help="link only to the --connect endpoints (no Zenoh gossip discovery)")
-    pe.add_argument("--save-tracks", action="store_true",
-                    help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
-    pe.add_argument("--record", action="store_true",
-                    help="record what the peer's core is given to <out>/record/peer-<name>.mcap "
-                         "(sensornet replay re-runs it offline, bit for bit)")
-    pe.add_argument("--run", type=NONNEGATIVE_INT, default=0,
-                    help="Monte Carlo run index (seeds the injected link faults)")
-    pe.add_argument("--idle-timeout", type=POSITIVE_FLOAT, default=30.0,
-                    help="stop after this many seconds without input (default 30)")
-    add_budget_flags(pe)
+    add_peer_flags(pe)
     pe.set_defaults(func=cmd_peer)
+
+    ho = sub.add_parser("host", help="run several sensor peers in one process over one Zenoh "
+                        "session (a peer host)")
+    ho.add_argument("scenario", nargs="?", default="seed000",
+                    help="scenario file or built-in name")
+    ho.add_argument("--peers", required=True,
+                    help="comma-separated sensors this host runs, e.g. s1,s2,s3")
+    ho.add_argument("--name", type=_network_name, default="h1",
+                    help="the host's name in its log lines (default h1)")
+    add_peer_flags(ho)
+    ho.set_defaults(func=cmd_host)
 
     w = sub.add_parser("world", help="play a scenario's truth and scans over Zenoh")
     w.add_argument("scenario", nargs="?", default="seed000")
@@ -1168,6 +1275,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "about this long (Zenoh's default is 10000)")
         sp.add_argument("--timeout", type=POSITIVE_FLOAT, default=60.0,
                         help="extra seconds allowed beyond the run's own length (default 60)")
+        sp.add_argument("--per-process", type=POSITIVE_INT, default=1, metavar="N",
+                        help="peers per process: hosts h1, h2, ... of N peers each, one Zenoh "
+                             "session per host (sensornet host); default 1, a process per "
+                             "peer")
         add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")

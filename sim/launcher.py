@@ -48,6 +48,25 @@ class RunHandle:
     router: subprocess.Popen | None = None
     """The run's router (``start_run(router=True)``): every other process is its client."""
     router_command: list[str] = field(default_factory=list)
+    hosts: dict[str, list[str]] = field(default_factory=dict)
+    """``start_run(per_process=N)``, N > 1: each host process (``h1``, ``h2``, ...; its key in
+    :attr:`procs`) and the peers it runs; empty when every peer is a process of its own."""
+
+    def host_of(self, peer: str) -> str | None:
+        """The host that runs ``peer`` (None: the peer is a process of its own)."""
+        return next((h for h, names in self.hosts.items() if peer in names), None)
+
+    def kill_hosted(self, peer: str, at_scan: int) -> subprocess.Popen:
+        """Stop hosted peer ``peer`` as if killed (its host's ``kill`` command, on the
+        host's standard input): the host's other peers keep running."""
+        proc = self.procs[self.host_of(peer)]
+        if proc.poll() is None and proc.stdin is not None:
+            try:
+                proc.stdin.write(f"kill {peer} {at_scan}\n".encode())
+                proc.stdin.flush()
+            except OSError:  # the host is gone already
+                pass
+        return proc
 
     def restart(self, name: str) -> subprocess.Popen:
         """Start peer ``name`` again (same command, a fresh listening port), or the router
@@ -139,7 +158,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
               connect: list[str] | None = None, config: str | None = None,
               run_id: str | None = None, secure: Path | None = None,
               router: bool = False, recover: bool = True,
-              world_args: list[str] | None = None) -> RunHandle:
+              world_args: list[str] | None = None, per_process: int = 1) -> RunHandle:
     """Start the world and the peers; returns at once (see :func:`wait_run`).
 
     ``listen``: the world's endpoints (the peers connect to the first; default a free
@@ -152,13 +171,19 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     listens): the routed topology of several machines, on loopback; ``recover`` (routed runs):
     estimates and scans through Zenoh's advanced publisher/subscriber (``--recover``);
     ``world_args``: more arguments for the world (``--wait 150``, say), as ``peer_args`` for
-    the peers. Returns once it listens.
+    the peers; ``per_process``: peers per process (``sensornet host``, one Zenoh session
+    each; hosts ``h1``, ``h2``, ... take the peers in the scenario's order, see
+    :func:`host_groups`); 1, the default: every peer a process of its own. Returns at once.
     """
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
     names = scn.sensor_names
+    groups = host_groups(names, per_process)
+    if groups and secure:
+        raise ValueError("a host has one Zenoh session, so one TLS identity: no --secure "
+                         "with more than one peer per process")
     ep = tls_endpoint if secure else endpoint
-    eps = {n: ep(free_port()) for n in names}
+    eps = {n: ep(free_port()) for n in (groups or names)}
     world_listen = list(listen or []) or [ep(free_port())]
     eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
@@ -173,12 +198,12 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         common += ["--secure", str(secure)]
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure)
+    handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure, hosts=groups)
     if router:
         if config or listen or sparse:
             raise ValueError("a routed run makes its own client config and endpoints: "
                              "no --config, --listen or --sparse with --router")
-        common, eps = _routed(handle, common, ep(free_port()), names)
+        common, eps = _routed(handle, common, ep(free_port()), list(groups or names))
         world_listen = []
     if router:  # recover: what a router's outage held back comes from the publishers' caches
         extra_connect = ["--connect", eps["router"], *extra_connect,
@@ -192,7 +217,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
 
         _, A = adjacency(scn)
     for i, n in enumerate(names):
-        if router:
+        if router or groups:  # a host's links: _host_commands
             links = []  # the router, in extra_connect like every process
         elif sparse:
             links = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
@@ -200,13 +225,16 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
             links = [eps["world"], *(eps[m] for m in names[:i])]
         extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common,
-                   *(["--listen", eps[n]] if not router else
+                   *(["--listen", eps.get(n, "")] if not router else
                      ["--world-grace", str(ROUTER_GRACE)]),
                    "--color", str(i), "--run", str(run),
                    *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
                    *(["--no-gossip"] if sparse else []), *extra] \
             + (["--speed", str(speed)] if speed else [])
+    if groups:  # the hosts instead of the peers' processes
+        cmds = {"world": cmds["world"], **_host_commands(
+            groups, cmds, names, eps, extra_connect, router, sparse, A if sparse else None)}
     handle.commands = cmds
     (out / "commands.json").write_text(json.dumps(
         {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
@@ -216,13 +244,83 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         for name, cmd in cmds.items():
             log = out / "logs" / f"{name}.log"
             handle.logs[name] = log
-            with log.open("w") as fh:
-                handle.procs[name] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
-                                                      stdin=subprocess.DEVNULL)
+            with log.open("w") as fh:  # a host reads its commands (kill PEER) on stdin
+                handle.procs[name] = subprocess.Popen(
+                    cmd, stdout=fh, stderr=subprocess.STDOUT,
+                    stdin=subprocess.PIPE if name in groups else subprocess.DEVNULL)
     except BaseException:
         handle.stop_all(grace=1.0)
         raise
     return handle
+
+
+def host_groups(names: list[str], per_process: int) -> dict[str, list[str]]:
+    """``h1``, ``h2``, ...: ``per_process`` peers each, in the scenario's order (the last
+    host may hold fewer); empty for ``per_process`` 1 (every peer a process of its own)."""
+    if per_process < 1:
+        raise ValueError(f"per_process must be >= 1, not {per_process}")
+    if per_process == 1:
+        return {}
+    return {f"h{j + 1}": names[i:i + per_process]
+            for j, i in enumerate(range(0, len(names), per_process))}
+
+
+def hosts_line(hosts: dict[str, list[str]]) -> str:
+    """One line: which peers each host holds."""
+    return "hosts: " + "; ".join(f"{h} = {','.join(p)}" for h, p in hosts.items())
+
+
+def _host_commands(groups: dict[str, list[str]], peer_cmds: dict[str, list[str]],
+                   names: list[str], eps: dict[str, str], extra_connect: list[str],
+                   router: bool, sparse: bool, A) -> dict[str, list[str]]:
+    """Each host's ``sensornet host`` command, made from its peers' commands: their shared
+    flags, the host's own endpoint, links to the world and the earlier hosts (with
+    ``sparse`` only those that hold a neighbour of one of its peers)."""
+    index = {n: i for i, n in enumerate(names)}
+    order = list(groups)
+    cmds = {}
+    for j, (h, members) in enumerate(groups.items()):
+        first = peer_cmds[members[0]]
+        for m in members[1:]:
+            if _without_own(peer_cmds[m]) != _without_own(first):
+                raise ValueError(f"the peers of host {h} need the same peer flags "
+                                 f"({members[0]}: {first[len(_cli()) + 2:]}; {m}: "
+                                 f"{peer_cmds[m][len(_cli()) + 2:]})")
+        rest = _without_own(first)
+        if router:
+            links = []
+        else:
+            earlier = order[:j]
+            if sparse:
+                earlier = [g for g in earlier if any(A[index[a], index[b]] for a in members
+                                                     for b in groups[g])]
+            links = [eps["world"], *(eps[g] for g in earlier)]
+        source = rest[rest.index("--scenario") + 1]
+        rest = _drop(rest, "--scenario", 1)
+        cmds[h] = [*_cli(), "host", source, "--peers", ",".join(members), "--name", h,
+                   *(["--listen", eps[h]] if not router else []),
+                   *[a for c in links for a in ("--connect", c)], *extra_connect, *rest]
+    return cmds
+
+
+def _drop(cmd: list[str], flag: str, values: int) -> list[str]:
+    """``cmd`` without every ``flag`` and the ``values`` arguments after it."""
+    out, i = [], 0
+    while i < len(cmd):
+        if cmd[i] == flag:
+            i += 1 + values
+            continue
+        out.append(cmd[i])
+        i += 1
+    return out
+
+
+def _without_own(cmd: list[str]) -> list[str]:
+    """A peer's command without what is its own (name, endpoint, links, colour)."""
+    rest = cmd[len(_cli()) + 2:]  # after "peer NAME"
+    for flag in ("--listen", "--connect", "--color"):
+        rest = _drop(rest, flag, 1)
+    return rest
 
 
 def _routed(handle: RunHandle, common: list[str], router_ep: str,
@@ -427,7 +525,10 @@ def realtime_note(summaries: dict[str, dict], interval_s: float, speed: float,
             f"benchmarks/README.md has what such a machine sustains.")
 
 
-PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term")
+PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term", "killhost")
+HOSTED_ACTIONS = ("kill", "killhost")
+"""What a run with hosts (``per_process`` > 1) can do: stop one peer inside its host as if
+killed, or SIGKILL a whole host (a machine failure)."""
 
 
 @dataclass(frozen=True)
@@ -441,7 +542,9 @@ class ProcessFault:
     @classmethod
     def parse(cls, text: str) -> ProcessFault:
         """``ACTION:PEER@SCAN``, e.g. ``kill:s2@30`` (SIGKILL), ``stop:s3@20`` (SIGSTOP),
-        ``cont:s3@40`` (SIGCONT), ``restart:s2@50``, ``term:s1@60`` (SIGTERM)."""
+        ``cont:s3@40`` (SIGCONT), ``restart:s2@50``, ``term:s1@60`` (SIGTERM); with hosts
+        (``per_process`` > 1) ``kill:s2@30`` stops that peer inside its host and
+        ``killhost:h1@30`` SIGKILLs host ``h1`` (all its peers)."""
         try:
             head, scan = text.rsplit("@", 1)
             action, peer = head.split(":", 1)
@@ -500,15 +603,22 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
                 k = current["k"]
             while pending and pending[0].scan <= k:
                 f = pending.pop(0)
-                proc = handle.router if f.peer == ROUTER else handle.procs[f.peer]
+                hosted = handle.host_of(f.peer)
+                proc = (handle.router if f.peer == ROUTER else
+                        handle.procs[hosted or f.peer])
                 sig = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "cont": signal.SIGCONT,
-                       "term": signal.SIGTERM}.get(f.action)
-                if f.action == "restart":
+                       "term": signal.SIGTERM, "killhost": signal.SIGKILL}.get(f.action)
+                if hosted is not None and f.action == "kill":  # that peer only, in its host
+                    proc = handle.kill_hosted(f.peer, f.scan)
+                elif f.action == "restart":
                     proc = handle.restart(f.peer)
                 elif proc.poll() is None:
                     proc.send_signal(sig)
                 done.append({"action": f.action, "peer": f.peer, "scan": f.scan, "at_scan": k,
-                             "wall": time.time(), "pid": proc.pid})
+                             "wall": time.time(), "pid": proc.pid,
+                             **({"host": hosted} if hosted else {}),
+                             **({"peers": handle.hosts[f.peer]} if f.action == "killhost"
+                                else {})})
         sub.undeclare()
     finally:
         session.close()
@@ -531,6 +641,20 @@ def fault_report(done: list[dict], summaries: dict[str, dict]) -> str:
                 lines.append("recovered after the outage (scans, estimates; lost): " + "; ".join(
                     f"{n} {r['recovered']['scan']}, {r['recovered']['estimate']}; "
                     f"{sum(r['unrecovered'].values())}" for n, r in rec.items()))
+            continue
+        if f["action"] == "killhost":  # seen leaving: the last of the host's peers
+            members = f.get("peers") or []
+            seen = []
+            for name, s in summaries.items():
+                if name in members or s.get("killed_at_scan", f["at_scan"] + 1) <= f["at_scan"]:
+                    continue  # its host's, or itself killed before
+                first = [min((w for (peer, what, w, _k) in s.get("peer_events", [])
+                              if peer == m and what == "left" and w >= f["wall"] - 0.01),
+                             default=None) for m in members]
+                seen.append(f"{name} never" if None in first or not first else
+                            f"{name} +{max(first) - f['wall']:.2f} s")
+            lines.append(f"killhost {f['peer']} ({', '.join(members)}) at scan {f['at_scan']}: "
+                         f"seen left by " + ", ".join(seen))
             continue
         seen = []
         for name, s in summaries.items():

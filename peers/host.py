@@ -1,0 +1,232 @@
+"""A peer host: several sans-I/O peers in one process, over one Zenoh session.
+
+Each hosted peer is a :class:`peers.runtime.PeerRuntime` as in a process of its own (its name,
+liveliness token, neighbours, link faults, summary, log lines, Rerun stream), except that
+its transport declares on the host's one session and puts what arrives on the host's one
+queue, tagged with the peer. Co-hosted peers still publish and subscribe through that
+session (Zenoh delivers locally), so an estimate between two of them goes through the same
+admission and the same link-fault layer (:class:`peers.faults.HoldQueue`) as a remote one.
+
+One loop thread does every peer's work: at each wake-up it moves what has arrived to the
+peers' own backlogs, then gives each peer with due work (a message waiting, a held message or
+a core deadline due) one step of at most :data:`peers.runtime.BATCH` messages, earliest due
+first; a peer with a long backlog or a slow step thus delays the others by one bounded step,
+not by its whole backlog. Commands on standard input (one per line): ``kill PEER [SCAN]``
+stops that peer as if its process had been killed (``sensornet run --fault kill:PEER@K``).
+"""
+
+from __future__ import annotations
+
+import gc
+import queue
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import TextIO
+
+from peers.core import PeerCore
+from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
+from peers.session import open_session
+from peers.telemetry import SharedCpu
+from peers.transport import settle
+
+CONTROL = -1
+"""The slot of the host's own items on its queue (commands, a signal's wake-up)."""
+
+
+class _Inbox:
+    """What one peer's transport puts on: the host's queue, tagged with the peer's slot."""
+
+    def __init__(self, q: queue.Queue, slot: int) -> None:
+        self._q, self._slot = q, slot
+
+    def put(self, item) -> None:
+        self._q.put((self._slot, item))
+
+
+class PeerHost:
+    """Runs several peers in one process until every one has stopped (or SIGINT/SIGTERM).
+
+    ``session_args``: ``(listen, connect, config_file, lease_ms, gossip)`` of the host's one
+    session (each peer's ``RuntimeOptions`` connection fields are not used)."""
+
+    def __init__(self, name: str, peers: list[tuple[PeerCore, RuntimeOptions]],
+                 session_args: tuple, say: Callable[[str], None] | None = None) -> None:
+        if not peers:
+            raise ValueError("a host needs at least one peer")
+        if any(o.security is not None for _, o in peers):
+            raise ValueError("a host has one Zenoh session, so one TLS identity: run secure "
+                             "peers one per process")
+        self.name = name
+        self.session_args = session_args
+        self.say = say or (lambda line: print(line, flush=True))
+        self.q: queue.Queue = queue.Queue()
+        self.cpu = SharedCpu()
+        self.peers = [PeerRuntime(core, o, inbox=_Inbox(self.q, i), shared_cpu=self.cpu)
+                      for i, (core, o) in enumerate(peers)]
+        info = {"name": name, "peers": [rt.name for rt in self.peers]}
+        for rt in self.peers:
+            rt.host = info
+        self.by_name = {rt.name: i for i, rt in enumerate(self.peers)}
+        self.session = None
+        self.stop_reason = ""
+        self._stop = False
+        self._active: list[int] = []
+        self._backlog: list[deque] = [deque() for _ in self.peers]
+
+    # -- life cycle -------------------------------------------------------------------------
+    def _signal(self, signum, frame) -> None:
+        self.stop_reason = signal.Signals(signum).name
+        self._stop = True
+        self.q.put((CONTROL, ("stop", "", b"")))
+
+    def command(self, line: str) -> None:
+        """A command line from standard input (:meth:`read_commands`), to the loop."""
+        self.q.put((CONTROL, ("cmd", line.strip(), b"")))
+
+    def read_commands(self, stream: TextIO) -> threading.Thread:
+        """Read commands from ``stream`` (standard input) in a daemon thread, until its end."""
+        def read() -> None:
+            try:
+                for line in stream:
+                    if line.strip():
+                        self.command(line)
+            except (OSError, ValueError):
+                pass
+
+        t = threading.Thread(target=read, name=f"{self.name}-commands", daemon=True)
+        t.start()
+        return t
+
+    def run(self) -> int:
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, self._signal)
+        self.session = open_session(*self.session_args)
+        opened: list[int] = []
+        try:
+            if self.session_args[1]:  # endpoints to connect to: let the links come up first
+                settle(self.session)
+            for i, rt in enumerate(self.peers):
+                rt.open(session=self.session)  # DuplicatePeer before this peer writes a file
+                opened.append(i)
+            self._active = list(opened)
+            try:
+                self._loop()
+            finally:
+                for i in list(self._active):  # SIGTERM, or a bug in the loop: finish them all
+                    self._end(i)
+        finally:
+            for i in opened:
+                try:
+                    self.peers[i].close()  # idempotent: already closed when it ended
+                except Exception:
+                    pass
+            self.session.close()
+        return 0
+
+    def _end(self, i: int) -> None:
+        """Peer ``i`` stopped (its core said so, or idle): fuse what is pending, write its
+        files, undeclare its part of the session."""
+        rt = self.peers[i]
+        if self.stop_reason and not rt.stop_reason:
+            rt.stop_reason = self.stop_reason
+        try:
+            rt._finish()
+        finally:
+            rt.close()
+            self._active.remove(i)
+            self._backlog[i].clear()
+            self.say(rt_line(rt))
+
+    def kill(self, name: str, at_scan: int | None = None) -> bool:
+        """Stop peer ``name`` as if killed (no last fusion); False if it is not running."""
+        i = self.by_name.get(name)
+        if i is None or i not in self._active:
+            return False
+        rt = self.peers[i]
+        self._active.remove(i)
+        self._backlog[i].clear()
+        rt.kill(at_scan if at_scan is not None else rt.core.consensus.last_k)
+        self.say(f"host {self.name}: killed peer {name} at scan {rt.killed_at}")
+        return True
+
+    def _control(self, item: tuple) -> None:
+        tag, line, _ = item
+        if tag != "cmd":
+            return
+        words = line.split()
+        if len(words) in (2, 3) and words[0] == "kill" and (len(words) == 2
+                                                          or words[2].isdigit()):
+            if not self.kill(words[1], int(words[2]) if len(words) == 3 else None):
+                self.say(f"host {self.name}: no running peer {words[1]!r} to kill")
+        else:
+            self.say(f"host {self.name}: unknown command {line!r} (kill PEER [SCAN])")
+
+    # -- the loop ---------------------------------------------------------------------------
+    def _loop(self) -> None:
+        gc.collect()  # as PeerRuntime._loop: the start-up heap out of the collector's view
+        gc.freeze()
+        self.cpu.start()
+        for rt in self.peers:
+            rt.telemetry.start_cpu()
+        q, backlog = self.q, self._backlog
+        while self._active and not self._stop:
+            wall, mono = time.time(), time.monotonic()
+            wait = 0.0 if any(backlog[i] for i in self._active) else 0.25
+            for i in self._active:
+                w = self.peers[i].next_wake(wall, mono)
+                if w is not None:
+                    wait = min(wait, w)
+            try:
+                first = q.get(timeout=max(0.0, wait))
+            except queue.Empty:
+                first = None
+            arrived = [first] if first is not None else []
+            limit = BATCH * len(self._active)  # bounded: the loop comes back to deadlines
+            while arrived and len(arrived) < limit and not q.empty():
+                arrived.append(q.get_nowait())
+            now = time.time()
+            for slot, item in arrived:
+                if slot == CONTROL:
+                    self._control(item)
+                elif slot in self._active:
+                    backlog[slot].append((now, item))
+            self._work(time.time(), time.monotonic())
+            for i in [i for i in self._active if self.peers[i].idle_expired()]:
+                self._end(i)
+
+    def _work(self, wall: float, mono: float) -> None:
+        """One step for each peer with due work, the earliest due first."""
+        due = []
+        for i in self._active:
+            rt, when = self.peers[i], []
+            if self._backlog[i]:
+                when.append(self._backlog[i][0][0])
+            d = rt.next_wake(wall, mono)
+            if d is not None and d <= 0:
+                when.append(wall + d)
+            if when:
+                due.append((min(when), i))
+        for _, i in sorted(due):
+            if self._stop:
+                return
+            rt, mine = self.peers[i], self._backlog[i]
+            items = [mine.popleft()[1] for _ in range(min(BATCH, len(mine)))]
+            rt.step(items, lambda mine=mine: not mine)
+            if rt._stop:
+                self._end(i)
+
+
+def rt_line(rt: PeerRuntime) -> str:
+    """The line a peer prints when it stops (as ``sensornet peer`` does)."""
+    s = rt.summary()
+    fused, local = s.get("mean_ospa_fused"), s.get("mean_ospa_local")
+
+    def f(v) -> str:
+        return "-" if v is None else f"{v:.1f}"
+
+    return (f"peer {rt.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
+            f"local {f(local)} fused {f(fused)}, rejected {s['rejected_total']}")
+

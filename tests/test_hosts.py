@@ -1,0 +1,272 @@
+"""Peer hosts: several peers in one process over one Zenoh session (``--per-process N``).
+
+The process tests wait on events (exit codes, tracks published, liveliness reported), never on
+sleeps; every run is stopped in ``finally`` (``tests.test_network_faults._run``).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import deque
+from pathlib import Path
+
+import pytest
+
+from peers.host import CONTROL, PeerHost
+from peers.runtime import BATCH
+from peers.telemetry import SharedCpu, Telemetry
+from sensornet.cli import main
+from sim.graphs import network_scenario
+from sim.launcher import ProcessFault, _host_commands, host_groups, hosts_line
+from sim.twin import run_twin
+from tests.test_network_faults import _assert_tracks_equal_the_twin, _run
+
+SIX = [f"p{i:02d}" for i in range(6)]
+
+
+def _six(path: Path, scans: int = 40, degree: int = 2) -> str:
+    """Six peers on a ring (degree 2): hosts of three have co-hosted and remote links."""
+    path.write_text(network_scenario(6, degree, scans=scans, rounds=1, speed=5.0, deadline=1.0))
+    return str(path)
+
+
+# -- without processes ---------------------------------------------------------------------
+
+def test_host_groups_in_scenario_order():
+    assert host_groups(SIX, 1) == {}
+    assert host_groups(SIX, 3) == {"h1": SIX[:3], "h2": SIX[3:]}
+    assert host_groups(SIX, 4) == {"h1": SIX[:4], "h2": SIX[4:]}
+    assert host_groups(SIX, 20) == {"h1": SIX}
+    assert hosts_line({"h1": ["a", "b"], "h2": ["c"]}) == "hosts: h1 = a,b; h2 = c"
+    with pytest.raises(ValueError):
+        host_groups(SIX, 0)
+
+
+def test_host_commands_link_to_the_world_and_earlier_hosts():
+    names = ["a", "b", "c"]
+    peer = {n: ["py", "-m", "sensornet", "peer", n, "--scenario", "x.toml", "--network", "net",
+                "--listen", f"tcp/127.0.0.1:{i}", "--color", str(i), "--run", "0",
+                "--save-tracks"] for i, n in enumerate(names)}
+    eps = {"world": "tcp/127.0.0.1:9", "h1": "tcp/127.0.0.1:10", "h2": "tcp/127.0.0.1:11"}
+    cmds = _host_commands({"h1": ["a", "b"], "h2": ["c"]}, peer, names, eps, [], False, False,
+                          None)
+    h2 = cmds["h2"][3:]
+    assert h2[:6] == ["host", "x.toml", "--peers", "c", "--name", "h2"]
+    assert h2[6:] == ["--listen", eps["h2"], "--connect", eps["world"], "--connect", eps["h1"],
+                      "--network", "net", "--run", "0", "--save-tracks"]
+    peer["b"] = [*peer["b"], "--record"]  # a host's peers share their flags
+    with pytest.raises(ValueError, match="same peer flags"):
+        _host_commands({"h1": ["a", "b"], "h2": ["c"]}, peer, names, eps, [], False, False,
+                       None)
+
+
+def test_killhost_fault_parses():
+    assert ProcessFault.parse("killhost:h2@30") == ProcessFault("killhost", "h2", 30)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--fault", "killhost:h1@5"], "needs hosts"),
+    (["--per-process", "3", "--fault", "killhost:h9@5"], "unknown host"),
+    (["--per-process", "3", "--fault", "stop:p01@5"], "only kill and killhost"),
+    (["--per-process", "3", "--fault", "kill:p99@5"], "unknown peers"),
+    (["--per-process", "3", "--sim"], "drop --sim"),
+    (["--per-process", "3", "--secure"], "no --secure"),
+])
+def test_run_refuses_what_hosts_cannot_do(tmp_path, capsys, argv, message):
+    assert main(["run", _six(tmp_path / "six.toml"), "--out", str(tmp_path / "o"),
+                 *argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_host_refuses_unknown_or_repeated_peers(capsys):
+    assert main(["host", "seed000", "--peers", "s1,s9", "--network", "n"]) == 2
+    assert "s9 unknown" in capsys.readouterr().err
+    assert main(["host", "seed000", "--peers", "s1,s1", "--network", "n"]) == 2
+    assert "twice" in capsys.readouterr().err
+
+
+def test_shared_cpu_splits_what_the_peers_share():
+    shared = SharedCpu()
+    a, b = Telemetry(shared), Telemetry(shared)
+    a.start_cpu()
+    b.start_cpu()
+    shared.start()
+    a.cpu_ms["scan"] = 3.0
+    sum(i * i for i in range(200_000))  # some CPU of the loop's own
+    loop, _ = shared.shares()
+    ba, bb = a.cpu_breakdown(), b.cpu_breakdown()  # the clock runs on between the calls
+    assert ba["loop"] == pytest.approx(loop, abs=1.0) and bb["loop"] == pytest.approx(
+        ba["loop"], abs=1.0)
+    assert loop > 1.0  # half of the loop's own (not the 3 ms step of a)
+    assert a.cpu_s_running() == pytest.approx(sum(ba.values()) / 1e3, abs=2e-3)
+    assert a.cpu_s_running() > b.cpu_s_running() + 2e-3  # its step on top of the same share
+
+
+class _FakePeer:
+    """What the host loop asks of a peer: when its work is due, one step, stop, idle."""
+
+    def __init__(self, name: str, log: list) -> None:
+        self.name, self.log, self._stop = name, log, False
+
+    def next_wake(self, wall, mono):
+        return None
+
+    def step(self, items, queue_empty):
+        self.log.append((self.name, len(items)))
+
+    def idle_expired(self):
+        return False
+
+
+def test_one_busy_peer_does_not_hold_the_others_back():
+    """A peer with a long backlog gets one bounded step, then the peer whose message came
+    later gets its turn: earliest due first, at most BATCH messages a step."""
+    host = PeerHost.__new__(PeerHost)
+    log: list = []
+    host.peers = [_FakePeer("busy", log), _FakePeer("quiet", log)]
+    host._active, host._stop = [0, 1], False
+    host._backlog = [deque((1.0 + i * 1e-6, ("msg", "k", b"")) for i in range(3 * BATCH)),
+                     deque([(2.0, ("msg", "k", b""))])]
+    host._work(10.0, 10.0)
+    assert log == [("busy", BATCH), ("quiet", 1)]
+    host._work(10.0, 10.0)
+    assert log[2:] == [("busy", BATCH)]
+
+
+def test_host_commands_reach_the_loop():
+    host = PeerHost.__new__(PeerHost)
+    import queue
+
+    host.q, host.name = queue.Queue(), "h1"
+    done = threading.Event()
+
+    class Lines:
+        def __iter__(self):
+            yield "kill p01 30\n"
+            yield "\n"
+            done.set()
+
+    host.read_commands(Lines()).join(timeout=10)
+    assert done.is_set()
+    assert host.q.get_nowait() == (CONTROL, ("cmd", "kill p01 30", b""))
+    assert host.q.empty()
+
+
+# -- real processes ------------------------------------------------------------------------
+
+@pytest.mark.network
+def test_two_hosts_of_three_equal_the_twin(tmp_path):
+    """Six peers in two hosts: every summary, every scan's tracks as in the twin; a small
+    constant link delay on every link, co-hosted ones too, goes through the fault layer."""
+    source = _six(tmp_path / "six.toml")
+    sets = ["faults.default.delay=0.01"]
+    scn, codes, summaries = _run(source, tmp_path / "run", sets, rerun=False, per_process=3,
+                                 peer_args={n: ["--save-tracks"] for n in SIX})
+    assert set(codes) == {"world", "h1", "h2"} and all(c == 0 for c in codes.values()), codes
+    assert set(summaries) == set(SIX)
+    for name, s in summaries.items():
+        assert s["host"]["name"] == ("h1" if name in SIX[:3] else "h2"), s["host"]
+        assert s["scans"] == scn.num_scans and s["internal_errors"] == {}
+        # one fault decision per estimate from each of its two ring neighbours
+        assert sum(s["injected_faults"].values()) == 2 * scn.num_scans, s["injected_faults"]
+    pids = {s["pid"] for s in summaries.values()}
+    assert len(pids) == 2  # two processes
+    _assert_tracks_equal_the_twin(tmp_path / "run", scn, summaries, run_twin(scn, 0))
+
+
+@pytest.mark.network
+def test_a_killed_peer_leaves_its_host_running(tmp_path):
+    """kill:p01@15 inside h1: p01's token goes (its host mates and the other host see it
+    leave), its summary says it was killed at scan 15, the other five finish the run."""
+    source = _six(tmp_path / "six.toml", scans=50)
+    scn, codes, summaries = _run(source, tmp_path / "run", [], ["kill:p01@15"], rerun=False,
+                                 per_process=3)
+    assert all(c == 0 for c in codes.values()), codes
+    assert set(summaries) == set(SIX)
+    killed = summaries["p01"]
+    assert killed["killed_at_scan"] == 15 and killed["stop_reason"] == "killed at scan 15"
+    assert 15 <= killed["scans"] < scn.num_scans
+    done = json.loads((tmp_path / "run" / "process-faults.json").read_text())
+    assert [(d["action"], d["peer"], d.get("host")) for d in done] == [("kill", "p01", "h1")]
+    for name in set(SIX) - {"p01"}:
+        s = summaries[name]
+        assert s["scans"] == scn.num_scans and s["stop_reason"] == "end of run", (name, s)
+        left = [e for e in s["peer_events"] if e[0] == "p01" and e[1] == "left"]
+        assert left, (name, s["peer_events"])  # its liveliness token went away
+
+
+@pytest.mark.network
+def test_a_killed_host_takes_its_peers_the_other_host_finishes(tmp_path, capsys):
+    """killhost:h2@15 SIGKILLs h2: its three peers stop (no summaries), h1's peers see all
+    three leave and finish the run; `sensornet run` reports it and exits 0."""
+    source = _six(tmp_path / "six.toml", scans=50)
+    out = tmp_path / "run"
+    code = main(["run", source, "--per-process", "3", "--no-rerun", "--out", str(out),
+                 "--fault", "killhost:h2@15", "--timeout", "240"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "hosts: h1 = p00,p01,p02; h2 = p03,p04,p05" in text
+    done = json.loads((out / "process-faults.json").read_text())
+    assert [(d["action"], d["peer"], d["peers"]) for d in done] == [
+        ("killhost", "h2", SIX[3:])]
+    assert "killhost h2 (p03, p04, p05) at scan" in text
+    for name in SIX[3:]:
+        assert not (out / f"peer-{name}.json").exists()  # SIGKILL: nothing written
+    for name in SIX[:3]:
+        s = json.loads((out / f"peer-{name}.json").read_text())
+        assert s["scans"] == 50 and s["stop_reason"] == "end of run", s["stop_reason"]
+        gone = {e[0] for e in s["peer_events"] if e[1] == "left"}
+        assert set(SIX[3:]) <= gone, (name, s["peer_events"])
+
+
+@pytest.mark.network
+def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp_path):
+    """SIGTERM to `sensornet run --per-process 2` (h1 = s1,s2; h2 = s3): both hosts end, each
+    peer wrote its summary (SIGTERM) and its own .rrd, and the recording merges and verifies."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from tests.test_cli_run import _alive, _children, _env, _rerun_exe, _wait_for
+
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "sensornet", "run", "--per-process", "2", "--viewer", "none",
+         "--speed", "5", "--out", str(out)], cwd=tmp_path, env=_env(),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    children: list[int] = []
+    try:
+        world_log = out / "logs" / "world.log"
+        _wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
+                  "the world's scan 10")
+        children = _children(launcher.pid)
+        assert len(children) == 3, children  # the world and two hosts
+        launcher.send_signal(signal.SIGTERM)
+        stdout, stderr = launcher.communicate(timeout=60)
+        ended = time.monotonic()
+        _wait_for(lambda: not any(_alive(p) for p in children), 5.0,
+                  "the children to end (at most 5 s after the launcher)")
+        assert time.monotonic() - ended < 5.0
+        assert launcher.returncode == 0 and "Traceback" not in stderr, stderr
+        assert "hosts: h1 = s1,s2; h2 = s3" in stdout
+        for name in ("s1", "s2", "s3"):
+            s = json.loads((out / f"peer-{name}.json").read_text())
+            assert s["stop_reason"] == "SIGTERM" and s["scans"] >= 10, (name, s["stop_reason"])
+            assert (out / "rerun" / f"peer-{name}.rrd").is_file()
+        rec = out / "recording.rrd"
+        check = subprocess.run([_rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
+                               text=True, timeout=120, env=_env())
+        assert check.returncode == 0, check.stderr
+        text = subprocess.run([_rerun_exe(), "rrd", "print", str(out / "rerun" / "peer-s2.rrd")],
+                              capture_output=True, text=True, timeout=120, env=_env()).stdout
+        assert "/metrics/ospa/s2/fused" in text and "/metrics/ospa/s1/fused" not in text
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+        for p in children:
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)
