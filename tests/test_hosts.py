@@ -186,7 +186,8 @@ def test_a_killed_peer_leaves_its_host_running(tmp_path):
     assert set(summaries) == set(SIX)
     killed = summaries["p01"]
     assert killed["killed_at_scan"] == 15 and killed["stop_reason"] == "killed at scan 15"
-    assert 15 <= killed["scans"] < scn.num_scans
+    # the kill fires at the world's scan 15; a peer behind on a busy machine has done fewer
+    assert 0 < killed["scans"] < scn.num_scans
     done = json.loads((tmp_path / "run" / "process-faults.json").read_text())
     assert [(d["action"], d["peer"], d.get("host")) for d in done] == [("kill", "p01", "h1")]
     for name in set(SIX) - {"p01"}:
