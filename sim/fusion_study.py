@@ -147,7 +147,13 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
                   else None)
              for r in _table_list(study, "rules", label, ("name",),
                                   ("set", "max_peers", "rounds"))]
-    conditions = _table_list(study, "conditions", label, ("pd", "clutter"), ("graphs",))
+    conditions = _table_list(study, "conditions", label, ("pd", "clutter"), ("graphs", "rules"))
+    names = {r.name for r in rules}
+    for cond in conditions:
+        unknown = sorted(set(cond.get("rules", [])) - names)
+        if unknown:
+            raise _fail(label, f"condition {cond!r} names unknown rule(s) {unknown} "
+                        f"(rules: {', '.join(sorted(names))})")
     version = code_version()
     base = path.parent if path is not None else None
     cells: list[Cell] = []
@@ -164,6 +170,8 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
                       g.clutter_key: float(cond["clutter"])}
             plan: list[tuple[str, int | None, str, dict]] = []
             for rule in rules:
+                if "rules" in cond and rule.name not in cond["rules"]:
+                    continue
                 for L in rule.rounds or rounds:
                     plan.append((rule.name, L, "twin", {**common, **rule.overrides,
                                                         "network.rounds": L}))
@@ -285,6 +293,8 @@ def plot(rows: list[dict], out: Path) -> list[Path]:
     nrows = math.ceil(len(graphs) / cols)
     fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 3.4 * nrows), squeeze=False,
                              sharey=True)
+    top = 1.05 * max((r["fused_ospa"] + np.nan_to_num(r["fused_ospa_ci"]) for r in base
+                      if np.isfinite(r["fused_ospa"])), default=1.0)
     for ax, graph in zip(axes.flat, graphs, strict=False):
         g = [r for r in base if r["graph"] == graph]
         for rule in rules:
@@ -301,7 +311,7 @@ def plot(rows: list[dict], out: Path) -> list[Path]:
         ax.set_title(f"{graph} ({g[0]['peers']} peers)")
         ax.set_xlabel("consensus rounds L")
         ax.set_xticks(sorted({r["rounds"] for r in g if r["rounds"]}))
-        ax.set_ylim(bottom=0)
+        ax.set_ylim(0, top)
     for ax in axes[:, 0]:
         ax.set_ylabel("mean fused OSPA (m)")
     for ax in list(axes.flat)[len(graphs):]:

@@ -43,7 +43,8 @@ SEED001_KEYS = ("geometry", "seed", "particles", "jitter", "omega", "filters", "
                 "loss_after")
 """What a ``seed001`` campaign's ``[set]``/``[grid]`` may change (sim/seed001.py)."""
 
-_NOT_CODE = {"report.py", "progress.py", "campaign.py", "results.py"}
+_NOT_CODE = {"report.py", "progress.py", "campaign.py", "results.py", "fusion_study.py",
+             "trust_calibration.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
 
 

@@ -35,7 +35,7 @@ rules = [
 ]
 conditions = [
     { pd = 0.99, clutter = 10 },
-    { pd = 0.9, clutter = 10, graphs = ["ring-6"] },
+    { pd = 0.9, clutter = 10, graphs = ["ring-6"], rules = ["hybrid"] },
 ]
 """
 
@@ -50,15 +50,17 @@ def study(tmp_path):
 def test_the_study_expands_into_cells_per_graph_rule_and_round(study):
     c = load_campaign(study)
     labels = [cell.values for cell in c.cells]
-    # full-3: hybrid L=1,2, gci L=1, aa L=1,2, none, centralised; ring-6 (twice): no aa
-    assert len(c.cells) == 7 + 5 + 5
+    # full-3: hybrid L=1,2, gci L=1, aa L=1,2, none, centralised; ring-6: no aa, and at Pd
+    # 0.9 the hybrid only (and the references)
+    assert len(c.cells) == 7 + 5 + 4
     assert {(v["graph"], v["rule"]) for v in labels if v["rule"] == "aa"} == {("full-3", "aa")}
     assert [v["rounds"] for v in labels if v["graph"] == "full-3" and v["rule"] == "hybrid"] \
         == [1, 2]
     central = [cell for cell in c.cells if cell.values["rule"] == "centralised"]
     assert all(cell.runner == "experiment" for cell in central)
-    assert [len(cell.keys) for cell in c.cells if cell.values["graph"] == "ring-6"] == [1] * 10
+    assert [len(cell.keys) for cell in c.cells if cell.values["graph"] == "ring-6"] == [1] * 9
     pd9 = [cell for cell in c.cells if cell.values["pd"] == 0.9]
+    assert {cell.values["rule"] for cell in pd9} == {"hybrid", "none", "centralised"}
     assert pd9 and all(cell.overrides["sensors.*.detection_probability"] == 0.9 for cell in pd9)
     keys = [k for cell in c.cells for k in cell.keys]
     assert len(set(keys)) == len(keys)  # no-fusion and centralised share a scenario, not keys
@@ -122,6 +124,7 @@ def test_interval_is_the_student_t_half_width():
     (('rounds = [1, 2]\n', 'rounds = [0]\n'), "study.rounds must be"),
     (('"circulant:6:2"', '"circulant:6"'), "expected circulant:N:D"),
     (('graphs = ["ring-6"]', 'graphs = ["ring-7"]'), "unknown graph 'ring-7'"),
+    (('rules = ["hybrid"] }', 'rules = ["nope"] }'), "unknown rule"),
     (('"fusion.rule" = "aa"', '"fusion.rule" = "bogus"'), "rule 'aa'"),
 ])
 def test_a_bad_study_file_is_one_line(tmp_path, edit, problem):
