@@ -66,3 +66,19 @@ def test_plain_gci_is_still_there_and_warned_about(source):
     assert len(fusion_warnings(emd)) == 2
     local, fused = _ospa(source, {"fusion.rule": "gci", "network.rounds": 2})
     assert fused.mean() > local.mean()  # what the warning says: measured worse than local
+
+
+def test_run_and_experiment_say_so_in_one_line_at_start(capsys, tmp_path):
+    from sensornet.cli import main
+
+    sets = ["--set", "fusion.rule=gci", "--set", "fusion.cardinality=emd",
+            "--set", "scenario.num_scans=5"]
+    assert main(["run", "seed000", "--sim", *sets]) == 0
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("warning: ")]
+    assert len(lines) == 1 and "'emd' under-counts" in lines[0]
+    assert main(["experiment", "seed000", "--runs", "1", "--jobs", "1", "--quiet",
+                 "--out", str(tmp_path / "exp"), *sets]) == 0
+    assert "'emd' under-counts" in capsys.readouterr().err
+    assert main(["run", "seed000", "--sim", "--set", "scenario.num_scans=5"]) == 0
+    assert "warning:" not in capsys.readouterr().err  # the default: nothing to say
