@@ -9,6 +9,7 @@ only its own key, and its commands run as processes on loopback (the service nam
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import threading
@@ -153,7 +154,8 @@ def test_compose_commands_run_as_processes_on_loopback(compose, tmp_path, peer_t
         for v in s["volumes"]:
             src, target = v.split(":")[:2]
             if target.startswith("/keys/"):
-                (member / Path(target).name).write_bytes((keys / Path(src).name).read_bytes())
+                # a bind mount keeps the file's mode (private keys 0600: loose ones are refused)
+                shutil.copy2(keys / Path(src).name, member / Path(target).name)
         subs = {"tls/router:7447": f"tls/127.0.0.1:{port}",
                 "tls/0.0.0.0:7447": f"tls/127.0.0.1:{port}", "/keys": str(member),
                 "/etc/sensornet/client.json5": str(CLIENT), "/runs": str(out)}
