@@ -199,7 +199,7 @@ class PeerCore:
         if self.first_k is not None and c.last_k < k <= c.last_k + h:
             steps = k - c.last_k
             if steps > 1:
-                self.scorer.skipped(steps - 1)
+                self.scorer.skipped(range(c.last_k + 1, k))
         elif quiet and k != c.last_k:
             # a new start of the numbering: nothing accepted for a while (late join, restart)
             if self.first_k is not None:
@@ -215,7 +215,7 @@ class PeerCore:
                 c.reset_window()
                 self.deadlines.clear()
                 if pause:
-                    self.scorer.skipped(k - c.last_k - 1)
+                    self.scorer.skipped(range(c.last_k + 1, k))
             steps = k - c.last_k if k > c.last_k else 1
             self.first_k = k if self.first_k is None else self.first_k
         elif k <= c.last_k:

@@ -49,33 +49,32 @@ class GciFuser:
         return gci_fuse(densities, list(inp.weights), self.reducer, cardinality=self.cardinality)
 
 
-class AaFuser:
-    """Arithmetic-average fusion of GM-PHD densities, then reduced."""
+class _MixtureFuser:
+    """A fuser of GM-PHD densities by one formula of ``tracking.fusion``, then reduced."""
 
     kinds = ("posterior",)
     max_rounds = 1 << 30
+    rule = staticmethod(aa_fuse)
 
     def __init__(self, reducer: Reducer) -> None:
         self.reducer = reducer
         self.counts: Counter = Counter()
 
     def fuse(self, inp: FusionInput) -> GaussianMixture:
-        return aa_fuse(_densities(inp), list(inp.weights), self.reducer)
+        return self.rule(_densities(inp), list(inp.weights), self.reducer)
 
 
-class HybridFuser:
+class AaFuser(_MixtureFuser):
+    """Arithmetic-average fusion of GM-PHD densities, then reduced."""
+
+    rule = staticmethod(aa_fuse)
+
+
+class HybridFuser(_MixtureFuser):
     """AA target weights, GCI (covariance-intersection) locations per target, then reduced
     (:func:`tracking.fusion.hybrid_fuse`): robust to neighbours that missed or pruned a target."""
 
-    kinds = ("posterior",)
-    max_rounds = 1 << 30
-
-    def __init__(self, reducer: Reducer) -> None:
-        self.reducer = reducer
-        self.counts: Counter = Counter()
-
-    def fuse(self, inp: FusionInput) -> GaussianMixture:
-        return hybrid_fuse(_densities(inp), list(inp.weights), self.reducer)
+    rule = staticmethod(hybrid_fuse)
 
 
 class NoFuser:

@@ -74,10 +74,13 @@ class Scorer:
         for which in WHICH:
             self._expected[which].add(k)
 
-    def skipped(self, n: int) -> None:
-        """``n`` scans inside the normal window never arrived: no output for them (misses)."""
+    def skipped(self, ks: range) -> None:
+        """Scans ``ks`` inside the normal window never arrived: no output for them (misses,
+        each at the cut-off and, for the cardinality error, as no target estimated)."""
+        card = sum(len(X) for X in map(self.truth, ks) if X is not None)
         for which in WHICH:
-            self.misses[which] += n
+            self.misses[which] += len(ks)
+            self.card_sums[which] += card
 
     def output(self, which: str, k: int, states: np.ndarray) -> None:
         if k not in self._expected[which]:

@@ -227,3 +227,15 @@ def test_tracks_closed_by_a_scan_far_ahead_are_scored_not_missed(scn):
     s = core.snapshot()
     assert s["ospa_misses"]["fused"] == 13, s["ospa_misses"]
     assert s["ospa_scored"]["fused"] == 2, s["ospa_scored"]
+
+
+def test_skipped_scans_count_in_the_cardinality_error_as_no_target():
+    from peers.scoring import Scorer
+
+    truth = {k: np.zeros((k, 4)) for k in range(1, 6)}  # k targets at scan k
+    s = Scorer(100.0, 2.0, (0, 2), truth=truth.get)
+    s.expect(1)
+    s.output("fused", 1, np.zeros((1, 4)))  # right number at scan 1
+    s.skipped(range(2, 4))  # scans 2 and 3 never arrived: 2 + 3 targets missed
+    assert s.mean("fused") == pytest.approx((0.0 + 2 * 100.0) / 3)
+    assert s.mean_cardinality_error("fused") == pytest.approx((0 + 2 + 3) / 3)
