@@ -391,42 +391,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def _is_seed003(source: str) -> bool:
-    """Seed 003 has its own file format (sim/seed003.py): the network loader refuses it."""
+    """Seed 003's offline study is its own (sim/seed003.py); the network scenario reads the
+    same file (sim/seed003_net.network_document)."""
     return source == "seed003" or Path(source).name == "seed003.toml"
-
-
-def _run_seed003(args: argparse.Namespace) -> int:
-    """``sensornet run seed003``: the PDA peers in both modes (:mod:`sim.seed003_net`)."""
-    from sim.seed003_net import main as seed003_net_main
-
-    if args.fault:
-        raise UserError("--fault (process faults) is not supported by 'run seed003'; link "
-                        "faults are: a [faults] table in the scenario file, or --set "
-                        "faults.default.loss=0.2 (any faults.* key)")
-    for flag in ("listen", "connect", "config", "run_id", "lease_ms", "secure", "record"):
-        if getattr(args, flag, None) not in (None, False, []):
-            raise UserError(f"--{flag.replace('_', '-')} is not supported by 'run seed003'")
-    if args.sparse:
-        raise UserError("--sparse is not supported by 'run seed003'")
-    _resolve_viewer(args)
-    argv = ["run", "--run", str(args.run), "--timeout", str(args.timeout),
-            *[a for item in (args.set or []) for a in ("--set", item)]]
-    if args.scenario != "seed003":  # a file: its settings and its [faults] table
-        argv += ["--scenario", str(Path(args.scenario).resolve())]
-    if args.speed:
-        argv += ["--speed", str(args.speed)]
-    if args.no_rerun:
-        argv += ["--no-rerun"]
-    if args.sim:
-        return seed003_net_main(argv + ["--sim"])
-    viewer = args.viewer
-    if viewer == "spawn":
-        from peers.rerun_sink import spawn_viewer
-
-        viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
-    if viewer:
-        argv += ["--viewer", viewer]
-    return seed003_net_main(argv + ["--out", str(_run_folder(args.out, "run"))])
 
 
 def _load(args: argparse.Namespace, source: str):
@@ -747,8 +714,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         wait_run,
     )
 
-    if _is_seed003(args.scenario):
-        return _run_seed003(args)
     scn = _load(args, args.scenario)
     _warn_fusion(scn)
     try:

@@ -7,18 +7,16 @@ peer from the same file.
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import replace
 
 import numpy as np
 
 from peers.consensus import Consensus, ConsensusOptions
 from peers.core import CoreConfig, PeerCore
-from peers.estimators import GmphdEstimator, ImmEstimator, SingleTargetConfig
-from peers.fusers import AaFuser, GciFuser, HybridFuser, ImmFuser, NoFuser
 from peers.scoring import Scorer
 from peers.trust import TrustConfig
-from sim.build import adjacency, make_filter, sensor_model
+from sim.build import adjacency
+from sim.kinds import kind_of
 from sim.scenario import Scenario, ScenarioError
 from sim.world import generate_truth, truth_rng
 
@@ -33,7 +31,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
     nb = np.flatnonzero(A[i])
     deg = A.sum(axis=1)
     net = scn.network
-    single = net.filter not in ("gmphd", "et-gmphd")  # and flooding: scans of the same k only
+    kind = kind_of(scn)
+    single = kind.same_scan  # fuse estimates of the scan at hand only
     opts = ConsensusOptions(
         name=name,
         neighbours=tuple(names[j] for j in nb),
@@ -43,8 +42,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         max_age=0 if single else net.max_age,
         policy="drop-late" if single else net.policy,
         feedback=net.feedback and not single,
-        round_deadlines=net.filter == "flooding",
-        trust=TrustConfig() if scn.fusion.trust and net.filter != "flooding" else None,
+        round_deadlines=kind.round_deadlines,
+        trust=TrustConfig() if scn.fusion.trust and kind.trust else None,
     )
     return replace(opts, **changes)
 
@@ -61,66 +60,14 @@ def truth_function(scn: Scenario, run: int):
 
 
 def make_parts(scn: Scenario, name: str, run: int = 0):
-    """The estimator and fuser of sensor ``name``'s peer."""
-    net, fus = scn.network, scn.fusion
-    rule = fus.rule
-    if net.filter == "flooding":  # seed 004: flood the scans, cluster the pooled set
-        from peers.flooding import FloodEstimator, FloodFuser
-        from tracking.idpc import ClusterParams
-
-        c = scn.clustering
-        if c.estimator == "ic":  # or run the iterated-corrector GM-PHD over it
-            from peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
-
-            names, A = adjacency(scn)
-            order = [names[i] for i in corrector_order(A)]
-            est = IcFloodEstimator(name, make_filter(scn, order), order)
-            return est, IcFloodFuser(name, scn.sensor_names, net.rounds, est)
-        pds = {s.detection_probability for s in scn.sensors}
-        params = ClusterParams(c.cutoff, c.zeta, c.radius_factor, c.split_factor,
-                               detection_probability=float(np.mean(sorted(pds))))
-        roster = {s.name: sensor_model(s) for s in scn.sensors}
-        est = FloodEstimator(name, roster, params, c.assumed_scans,
-                             seed=zlib.crc32(f"{scn.seed}/{run}".encode()), method=c.estimator)
-        return est, FloodFuser(name, scn.sensor_names, net.rounds)
-    if net.filter in ("gmphd", "et-gmphd"):
-        if rule == "ratio":
-            raise ScenarioError(f"{scn.name}: fusion.rule 'ratio' needs single-target peers "
-                                f"(network.filter 'imm-pf' or 'imm-ekf')")
-        if net.filter == "et-gmphd":  # seed 002: extended targets, same mixtures and fusers
-            from peers.extended import EtGmphdEstimator
-            from sim.extended import make_et_filter
-
-            filt = make_et_filter(scn, name)
-            est = EtGmphdEstimator(filt, fus.level2_pruning, fus.level2_threshold)
-        else:
-            filt = make_filter(scn, [name])
-            est = GmphdEstimator(filt, fus.level2_pruning, fus.level2_threshold)
-        if rule == "gci":
-            fuser = GciFuser(filt.reducer, fus.cardinality, net.omega)
-        elif rule == "aa":
-            fuser = AaFuser(filt.reducer)
-        elif rule == "hybrid":
-            fuser = HybridFuser(filt.reducer)
-        else:
-            fuser = NoFuser()
-        return est, fuser
-    if rule in ("aa", "hybrid"):
-        raise ScenarioError(f"{scn.name}: single-target peers fuse by 'gci', 'ratio' or "
-                            f"'none', not {rule!r}")
-    from sim.seed001 import Seed001Scenario, truth
-
-    cfg = SingleTargetConfig()
-    s1 = Seed001Scenario(T=scn.scan_period, seed=scn.seed)
-    rng = np.random.default_rng(np.random.SeedSequence([scn.seed, run,
-                                                        zlib.crc32(name.encode())]))
-    m0 = truth(s1)[0] + rng.standard_normal(6) @ np.linalg.cholesky(s1.init_cov).T
-    rng_local, rng_fused = rng.spawn(2)
-    est = ImmEstimator(net.filter, cfg.imm, cfg.particle, sensor_model(scn.sensor(name)), m0,
-                       s1.init_cov, rng_local, cfg.cov_floor, with_prediction=rule == "ratio")
-    if rule == "none":
-        return est, NoFuser()
-    return est, ImmFuser(rule, est, m0, s1.init_cov, rng_fused, cfg.gci_omega, cfg.ratio)
+    """The estimator and fuser of sensor ``name``'s peer, built by the scenario's peer kind
+    (:mod:`sim.kinds`); :class:`ScenarioError` for a fusion rule the kind does not take (the
+    loader refuses it first; this catches scenarios changed after loading)."""
+    kind = kind_of(scn)
+    if scn.fusion.rule not in kind.rules:
+        raise ScenarioError(f"{scn.name}: fusion.rule {scn.fusion.rule!r} is not one that "
+                            f"{kind.name!r} peers take ({', '.join(kind.rules)})")
+    return kind.build(scn, name, run)
 
 
 def make_peer(scn: Scenario, name: str, run: int = 0, *, network: str = "twin",

@@ -44,16 +44,23 @@ from sim.faultplan import (
     ShortDelay,
     Uniform,
 )
+from sim.formats import adapt_document
+from sim.kinds import kind as peer_kind
+from sim.kinds import names as kind_names
+from sim.truths import names as truth_names
 from tracking.reduction import MERGE_RULES
 
 STATE_DIM = 4
 """State ``[px, vx, py, vy]``."""
-TRUTH_MODELS = ("straight", "seed001")
+TRUTH_MODELS = truth_names()
+"""The shipped truth models (:mod:`sim.truths`)."""
 MOTION_MODELS = ("cv",)
 SENSOR_KINDS = ("linear", "range-bearing")
 BIRTH_MODELS = ("paper", "truth")
 FUSION_RULES = ("gci", "aa", "hybrid", "ratio", "none")
-PEER_FILTERS = ("gmphd", "imm-pf", "imm-ekf", "et-gmphd", "flooding")
+PEER_FILTERS = kind_names()
+"""The peer kinds known at import (:mod:`sim.kinds`; the loader asks the registry, which also
+knows plug-ins registered later)."""
 FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
 """What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
 FTC baseline, or the iterated-corrector GM-PHD (``clustering.estimator``)."""
@@ -286,6 +293,26 @@ class ClusteringSpec:
 
 
 @dataclass(frozen=True)
+class PdaSpec:
+    """Single-target PDA peers (seed 003, ``network.filter = "pda"``; ``[pda]`` table)."""
+
+    config: dict
+    """The seed-003 tables the PDA filters and the world's draws read (``scenario``, ``sensors``,
+    ``clutter``, ``filters``, ``detector``, ``fuzzy``, ``metrics``: :mod:`sim.seed003`)."""
+    mode: str = "meas"
+    """``"meas"``: measurement sharing with the sequential update (the paper's scheme);
+    ``"ci"``: estimate sharing fused by covariance intersection."""
+    method: str = "fuzzy IMM"
+    """The filter: ``"PDAF"``, ``"IMM-PDAF"``, ``"fuzzy PDA"`` or ``"fuzzy IMM"``."""
+    pregate: float = 4.0
+    """Measurement sharing publishes the returns inside ``pregate`` x the gate threshold."""
+
+
+PDA_MODES = ("meas", "ci")
+PDA_METHODS = ("PDAF", "IMM-PDAF", "fuzzy PDA", "fuzzy IMM")
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Error metric settings (§11)."""
 
@@ -334,9 +361,11 @@ class Scenario:
     network: NetworkSpec = NetworkSpec()
     """Peer network settings."""
     extended: ExtendedSpec | None = None
+    """Extended targets (``[extended]`` table); ``None``: point targets (one return each)."""
     clustering: ClusteringSpec = ClusteringSpec()
     """Flooding peers' clustering (``network.filter = "flooding"``)."""
-    """Extended targets (``[extended]`` table); ``None``: point targets (one return each)."""
+    pda: PdaSpec | None = None
+    """PDA peers' settings (``network.filter = "pda"``)."""
     faults: FaultPlan | None = None
     """Link faults from the ``[faults]`` table (``None``: perfect links), resolved per link
     (:mod:`sim.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
@@ -440,10 +469,11 @@ def load_scenario(source: str | Path, overrides: Mapping[str, Any] | None = None
         ctx.override_paths = _apply_overrides(data, overrides, label)
     study = data.get("scenario", {}).get("study") if isinstance(data.get("scenario"),
                                                                 dict) else None
-    if study == "seed004":  # its own format: the network scenario is built from it
-        from sim.seed004 import network_document
-
-        data = network_document(data, label)
+    if study is not None:  # a study's own format: the network scenario is built from it
+        try:
+            data = adapt_document(study, data, label)
+        except KeyError as exc:
+            raise ScenarioError(str(exc.args[0])) from None
     return _parse(data, ctx, default_name=stem, origin=origin)
 
 
@@ -706,7 +736,7 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenario:
     top = _Table(data, "", ctx, ["scenario", "motion", "targets", "sensors", "birth", "filter",
                                  "fusion", "metrics", "network", "faults", "extended",
-                                 "security", "clustering"])
+                                 "security", "clustering", "pda"])
     sc = _Table(top.raw("scenario"), "scenario", ctx,
                 ["name", "seed", "scan_period", "num_scans", "region", "truth", "truth_sigma_w"])
     num_scans = sc.integer("num_scans", minimum=1)
@@ -759,9 +789,21 @@ def _parse(data: dict, ctx: _Context, default_name: str, origin: str) -> Scenari
             split_factor=t.number("split_factor", 1.6, positive=True),
             assumed_scans=t.choice("assumed_scans", ("held", "all"), "held"),
             estimator=t.choice("estimator", FLOOD_ESTIMATORS, "idpc")))
-    if scn.network.filter == "et-gmphd" and scn.extended is None:
-        raise ctx.fail("network.filter", "key 'network.filter' is 'et-gmphd', which needs an "
-                                         "[extended] table")
+    if top.has("pda"):
+        t = _Table(top.raw("pda"), "pda", ctx, ["config", "mode", "method", "pregate"])
+        config = t.raw("config", {})
+        if not isinstance(config, dict):
+            raise t.fail("config", f"must be a table, got {_short(config)}")
+        scn = dataclasses.replace(scn, pda=PdaSpec(
+            config=config, mode=t.choice("mode", PDA_MODES, "meas"),
+            method=t.choice("method", PDA_METHODS, "fuzzy IMM"),
+            pregate=t.number("pregate", 4.0, positive=True)))
+    kind = peer_kind(scn.network.filter)
+    if scn.fusion.rule not in kind.rules:
+        raise ctx.fail("fusion.rule", f"key 'fusion.rule' is {scn.fusion.rule!r}, which "
+                       f"{kind.name!r} peers do not take (they take: {', '.join(kind.rules)})")
+    if kind.check is not None and (bad := kind.check(scn)) is not None:
+        raise ctx.fail(*bad)
     if top.has("security"):
         sec = _Table(top.raw("security"), "security", ctx, ["keys"])
         keys = Path(sec.text("keys"))
@@ -937,7 +979,7 @@ def _network(t: _Table, sensor_names: list[str]) -> NetworkSpec:
         feedback=t.flag("feedback", False),
         speed=t.number("speed", 10.0, positive=True),
         deadline=deadline,
-        filter=t.choice("filter", PEER_FILTERS, "gmphd"),
+        filter=t.choice("filter", kind_names(), "gmphd"),
         router=t.flag("router", False),
     )
 

@@ -25,6 +25,7 @@ the estimates between peers, in the twin and in the processes alike.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import subprocess
 import sys
@@ -182,26 +183,97 @@ def run_data(cfg: Mapping, run: int):
     return truth, scans
 
 
+def network_document(doc: dict, label: str = "seed003.toml") -> dict:
+    """The seed-003 document as a network scenario (:mod:`sim.scenario`'s format, for
+    ``sensornet run seed003`` and every other command): one PDA peer per sensor on a full
+    graph (``network.filter = "pda"``), region clutter (every peer sees the world's clutter),
+    the study's own draws (truth model ``"seed003"``), the loss bound as the OSPA cut-off, and
+    the ``[pda]`` table (``mode``, ``method``, ``pregate``). ``[network]``, ``[faults]``,
+    ``[security]`` are taken as they are."""
+    from sim.scenario import ScenarioError  # noqa: PLC0415 (the loader imports this module)
+
+    passed = ("network", "faults", "security", "pda", "fusion")
+    cfg = copy.deepcopy({k: v for k, v in doc.items() if k not in passed})
+    if bad := _unknown_keys(cfg, tomllib.loads(seed003.SCENARIO.read_text(encoding="utf-8"))):
+        raise ScenarioError(f"{label}: unknown key {bad!r} (not a seed-003 setting: "
+                            f"sim/scenarios/seed003.toml lists them)")
+    try:
+        seed003.check_sensor_names(cfg.get("sensors"), label)
+        cfg.setdefault("clutter", {})["mode"] = "region"
+        sc = cfg["scenario"]
+        sens = seed003.sensors(cfg)
+        hw = float(cfg["clutter"]["halfwidth"])
+        X = seed003.truth(cfg)
+        lo, hi = X[:, list(POS)].min(0) - hw, X[:, list(POS)].max(0) + hw
+        sensors = [{"name": s["name"], "kind": "linear", "position": [2000.0 * i, 0.0],
+                    "sigma_r": float(s["sigma"]),
+                    "detection_probability": float(s["detection_probability"]),
+                    "clutter_rate": float(m.clutter_density * (2 * hw) ** 2)}
+                   for i, (s, m) in enumerate(zip(cfg["sensors"], sens, strict=True))]
+        scenario = {"name": sc.get("name", "seed003"), "seed": int(sc["seed"]),
+                    "scan_period": float(sc["scan_period"]), "num_scans": int(sc["num_scans"]),
+                    "region": [[float(lo[0]), float(hi[0])], [float(lo[1]), float(hi[1])]],
+                    "truth": "seed003"}
+        metrics = {"ospa_cutoff": float(cfg["metrics"]["loss_bound"]), "ospa_order": 2.0}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ScenarioError(f"{label}: {exc}" if not str(exc).startswith(label)
+                            else str(exc)) from None
+    network = {"topology": "full", "rounds": 1, "filter": "pda", "speed": SPEED,
+               "deadline": DEADLINE, **doc.get("network", {})}
+    pda = {"mode": "meas", "method": METHOD, "pregate": PREGATE, **doc.get("pda", {}),
+           "config": cfg}
+    return {"scenario": scenario, "sensors": sensors, "metrics": metrics, "network": network,
+            "pda": pda, **{k: doc[k] for k in ("faults", "security", "fusion") if k in doc}}
+
+
 # -- peers --------------------------------------------------------------------------------------
+
+
+def _unknown_keys(doc: Mapping, ref: Mapping, prefix: str = "") -> str | None:
+    """The first dotted key of ``doc`` that the shipped file ``ref`` does not have (tables
+    recursively, ``[[sensors]]`` entries against the first shipped one), or None."""
+    for key, value in doc.items():
+        here = f"{prefix}{key}"
+        if key not in ref:
+            return here
+        want = ref[key]
+        if isinstance(value, dict) and isinstance(want, dict):
+            if bad := _unknown_keys(value, want, here + "."):
+                return bad
+        elif (isinstance(value, list) and isinstance(want, list) and want
+              and isinstance(want[0], dict)):
+            for i, entry in enumerate(value):
+                if isinstance(entry, dict) and (bad := _unknown_keys(entry, want[0],
+                                                                     f"{here}[{i}].")):
+                    return bad
+    return None
+
+
+def make_parts(cfg: Mapping, name: str, mode: str, run: int = 0, *, method: str = METHOD,
+               pregate: float = PREGATE):
+    """The estimator and fuser of the PDA peer of sensor ``name`` in ``mode``, from the run's
+    one initial estimate (every peer starts from it)."""
+    names = [s["name"] for s in cfg["sensors"]]
+    if name not in names:
+        raise ValueError(f"seed003: no sensor named {name!r} (sensors: {', '.join(names)})")
+    _, sens, _, _, m0, P0 = draws(cfg, run)
+    by_name = dict(zip(names, sens, strict=True))
+    filt = seed003.make_filter(cfg, method, m0, P0)
+    if mode == "meas":
+        est = SequentialPdaEstimator(filt, by_name, names, name, POS, pregate)
+        return est, SequentialFuser(est)
+    if mode == "ci":
+        return PdaEstimator(filt, by_name[name], POS, feedback=False), CiFuser()
+    raise ValueError(f"seed003: unknown peer mode {mode!r}; expected one of {MODES}")
 
 
 def make_core(cfg: dict, name: str, mode: str, run: int = 0, *, network: str = "twin",
               speed: float = SPEED, deadline: float = DEADLINE, method: str = METHOD,
               pregate: float = PREGATE) -> PeerCore:
     """The sans-I/O PDA peer of sensor ``name`` in ``mode`` (``"meas"`` or ``"ci"``)."""
+    est, fuser = make_parts(cfg, name, mode, run, method=method, pregate=pregate)
     names = [s["name"] for s in cfg["sensors"]]
-    if name not in names:
-        raise ValueError(f"seed003: no sensor named {name!r} (sensors: {', '.join(names)})")
-    X, sens, _, _, m0, P0 = draws(cfg, run)
-    by_name = dict(zip(names, sens, strict=True))
-    filt = seed003.make_filter(cfg, method, m0, P0)
-    if mode == "meas":
-        est = SequentialPdaEstimator(filt, by_name, names, name, POS, pregate)
-        fuser = SequentialFuser(est)
-    elif mode == "ci":
-        est, fuser = PdaEstimator(filt, by_name[name], POS, feedback=False), CiFuser()
-    else:
-        raise ValueError(f"seed003: unknown peer mode {mode!r}; expected one of {MODES}")
+    X = seed003.truth(cfg)
     others = tuple(n for n in names if n != name)
     opts = ConsensusOptions(name=name, neighbours=others,
                             degrees=tuple((n, len(others)) for n in (name, *others)),

@@ -20,6 +20,7 @@ import numpy as np
 
 from sim.build import measurement_box, sensor_model
 from sim.scenario import Scenario, SensorSpec
+from sim.truths import TruthModel, truth_model
 from tracking.models import ConstantVelocity
 
 
@@ -48,6 +49,22 @@ class Truth:
 
 
 def generate_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Truth:
+    """True states of every target over ``scn.num_scans`` scans, by the scenario's truth model
+    (:mod:`sim.truths`); ``rng``: the run's truth stream (:func:`truth_rng`)."""
+    return truth_model(scn.truth).truth(scn, rng)
+
+
+def initial_state(scn: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """The one target's initial state and spread ``(x0 (d,), P0 (d, d))`` single-target peers
+    start from; :class:`ValueError` if the truth model has none."""
+    model = truth_model(scn.truth)
+    if model.initial is None:
+        raise ValueError(f"{scn.name}: truth model {scn.truth!r} has no known initial state "
+                         f"(single-target peers need one)")
+    return model.initial(scn)
+
+
+def straight_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Truth:
     """True states of every target over ``scn.num_scans`` scans (``truth = "straight"``).
 
     A target lives at scans ``birth_scan..death_scan`` (inclusive, clipped to the run) moving at
@@ -58,8 +75,6 @@ def generate_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Tru
     is then required.
     """
     K, T = scn.num_scans, scn.scan_period
-    if scn.truth == "seed001":
-        return _seed001_truth(scn)
     noisy = scn.truth_sigma_w > 0
     if noisy and rng is None:
         raise ValueError("generate_truth needs an rng when truth_sigma_w > 0")
@@ -86,18 +101,6 @@ def generate_truth(scn: Scenario, rng: np.random.Generator | None = None) -> Tru
         states=[np.array(s).reshape(-1, 4) for s in per_scan],
         ids=[np.array(i, dtype=int) for i in per_ids],
     )
-
-
-def _seed001_truth(scn: Scenario) -> Truth:
-    """The seed-001 manoeuvring ground target (one target, 6-D ``[px, vx, ax, py, vy, ay]``)."""
-    from sim.seed001 import Seed001Scenario, truth
-
-    X = truth(Seed001Scenario(T=scn.scan_period, seed=scn.seed))  # (651, 6), X[k] at scan k
-    if scn.num_scans > len(X) - 1:
-        raise ValueError(f"the seed-001 trajectory has {len(X) - 1} scans, "
-                         f"not {scn.num_scans}")
-    return Truth(states=[X[k][None, :] for k in range(1, scn.num_scans + 1)],
-                 ids=[np.array([1]) for _ in range(scn.num_scans)])
 
 
 def _cv_deviation(cv: ConstantVelocity, length: int, rng: np.random.Generator) -> np.ndarray:
@@ -193,17 +196,25 @@ def sensor_rng(scn: Scenario, run: int, name: str) -> np.random.Generator:
 
 
 def generate_run(scn: Scenario, run: int) -> tuple[Truth, list[list[np.ndarray]]]:
-    """Truth and all scans of Monte Carlo run ``run``, deterministic in ``(scn.seed, run)``."""
+    """Truth and all scans of Monte Carlo run ``run``, deterministic in ``(scn.seed, run)``
+    (a truth model that draws its own runs draws them)."""
+    model = truth_model(scn.truth)
+    if model.run is not None:
+        return model.run(scn, run)
     truth = generate_truth(scn, truth_rng(scn, run))
     scans = generate_scans(scn, truth, [sensor_rng(scn, run, s.name) for s in scn.sensors])
     return truth, scans
 
+
+STRAIGHT = TruthModel("straight", "targets on straight lines from start to end (seed 000)",
+                      straight_truth)
 
 __all__ = [
     "Truth",
     "generate_run",
     "generate_scans",
     "generate_truth",
+    "initial_state",
     "labelled_sensor_scans",
     "sensor_rng",
     "sensor_scans",

@@ -22,6 +22,7 @@ from peers.session import PEER_WAIT, open_session
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
+from sim.kinds import kind_of
 from sim.scenario import Scenario
 from sim.world import generate_run
 
@@ -81,8 +82,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               say=None, security=None, data=None, recover: bool = False) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
 
-    ``data``: the run's ``(truth, scans)`` as :func:`sim.world.generate_run` returns them,
-    for scenarios that draw their own (seed 003, :mod:`sim.seed003_net`).
+    ``data``: the run's ``(truth, scans)`` (default :func:`sim.world.generate_run`'s).
 
     ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
     lines (waiting for the peers, starting). ``recover``: scans through Zenoh's advanced
@@ -102,9 +102,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, on_signal)
     sink = RerunSink()
-    single = scn.truth == "seed001" or len(scn.targets) == 1
-    imm = scn.network.filter != "gmphd"
-    layout = {"single_target": single, "imm": imm, "follow_radius": FOLLOW_RADIUS}
+    view = kind_of(scn).view  # the peer kind's Rerun layout (sim/kinds)
+    single = view.single_target or len(scn.targets) == 1
+    layout = {"single_target": single, "imm": view.imm, "follow_radius": FOLLOW_RADIUS}
     if out_dir is not None and rerun or viewer:
         sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
                   else None,

@@ -167,34 +167,45 @@ def test_processes_equal_the_twin(tmp_path):
                 assert r.twin_diff <= 1e-6, r
 
 
-def test_cli_run_seed003_sim_prints_both_modes(capsys):
+def _rows(out: str) -> dict[str, list[str]]:
+    """The end-of-run table's rows by peer."""
+    return {c[1].strip(): [x.strip() for x in c[2:]] for c in
+            (ln.split("|") for ln in out.splitlines()) if len(c) > 3 and c[1].strip() in
+            ("s1", "s2")}
+
+
+@pytest.mark.parametrize("mode", seed003_net.MODES)
+def test_cli_run_seed003_sim_is_the_common_run(capsys, mode):
+    """`run seed003` is the common run of the one scenario loader (one PDA peer kind, the
+    mode a setting), not a second command line: the twin's table for both peers."""
     from sensornet.cli import main
 
-    assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=10"]) == 0
-    rows = [ln for ln in capsys.readouterr().out.splitlines()
-            if ln.startswith("| measurement") or ln.startswith("| estimate")]
-    assert len(rows) == 4 and all("| 10 | 10 |" in r for r in rows)
+    assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=10",
+                 "--set", f"pda.mode={mode}"]) == 0
+    rows = _rows(capsys.readouterr().out)
+    assert sorted(rows) == ["s1", "s2"] and all(r[0] == "10" for r in rows.values())
 
 
-def test_cli_run_seed003_refuses_what_it_cannot_honour(capsys):
+def test_cli_run_seed003_refuses_bad_settings_in_one_line(capsys):
     from sensornet.cli import main
 
-    assert main(["run", "seed003", "--fault", "kill:s1@3"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--fault (process faults) is not supported by 'run seed003'" in err[0]
-    assert "--set faults.default.loss" in err[0]  # says where link faults go
     assert main(["run", "seed003", "--sim", "--set", "faults.default.los=0.1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "faults.default.los" in err[0]
     assert main(["run", "seed003", "--sim", "--set", "clutter.nope=1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "clutter.nope" in err[0]
+    assert main(["run", "seed003", "--sim", "--set", "pda.mode=both"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pda.mode" in err[0] and "'meas'" in err[0]
 
 
-def _meas_missing(out: str) -> dict[str, int]:
-    """Missing inputs per peer of the measurement-sharing rows of a printed table."""
-    rows = [ln.split("|") for ln in out.splitlines() if ln.startswith("| measurement")]
-    return {r[2].strip(): int(r[5]) for r in rows}
+def _received(scn) -> dict[str, int]:
+    """Per peer, the neighbour inputs its fusions had over the run (the twin)."""
+    from sim.twin import run_twin
+
+    res = run_twin(scn, RUN)
+    return {n: res.summary(n)["stats"]["fused_inputs"] for n in res.peers}
 
 
 def test_cli_run_seed003_takes_link_faults_from_set_and_from_the_file(tmp_path, capsys):
@@ -202,23 +213,26 @@ def test_cli_run_seed003_takes_link_faults_from_set_and_from_the_file(tmp_path, 
     table (``run path/seed003.toml``). A lost link s2 -> s1 leaves s1 without s2's returns at
     every scan and s2 with all of s1's; the twin counts the losses."""
     from sensornet.cli import main
+    from sim.scenario import load_scenario
 
     lost = '[{from = "s2", to = "s1", loss = 1.0}]'
     assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=12",
                  "--set", f"faults.links={lost}"]) == 0
     out = capsys.readouterr().out
-    assert _meas_missing(out) == {"s1": 12, "s2": 0}
-    assert "meas: injected link faults: deliver 12, drop-loss 12" in out
+    assert "'deliver': 12, 'drop-loss': 12" in out
+    assert _received(load_scenario("seed003", {"scenario.num_scans": 12,
+                                               "faults.links": [{"from": "s2", "to": "s1",
+                                                                 "loss": 1.0}]})) == \
+        {"s1": 0, "s2": 12}
     text = seed003.SCENARIO.read_text(encoding="utf-8")
     path = tmp_path / "seed003.toml"
     path.write_text(text.replace("num_scans = 100", "num_scans = 12")
                     + f"\n[faults]\nlinks = {lost}\n", encoding="utf-8")
     assert "num_scans = 12" in path.read_text()
     assert main(["run", str(path), "--sim"]) == 0
-    out = capsys.readouterr().out
-    assert _meas_missing(out) == {"s1": 12, "s2": 0}
-    assert main(["run", str(path), "--sim", "--set", "faults.links[0].loss=0.0"]) == 0
-    assert _meas_missing(capsys.readouterr().out) == {"s1": 0, "s2": 0}
+    assert "'drop-loss': 12" in capsys.readouterr().out
+    assert _received(load_scenario(path)) == {"s1": 0, "s2": 12}
+    assert _received(load_scenario(path, {"faults.links[0].loss": 0.0})) == {"s1": 12, "s2": 12}
 
 
 def test_cli_experiment_seed003_writes_the_table(tmp_path, capsys):

@@ -40,9 +40,8 @@ def test_no_fusion_means_local_only():
 
 
 def test_ratio_rule_needs_single_target_peers():
-    scn = load_scenario("seed000", overrides={"fusion.rule": "ratio"})
-    with pytest.raises(ScenarioError, match="ratio"):
-        make_peer(scn, "s1")
+    with pytest.raises(ScenarioError, match="ratio"):  # refused at load (sim/kinds rules)
+        load_scenario("seed000", overrides={"fusion.rule": "ratio"})
     scn = dataclasses.replace(load_scenario("seed001"),
                               fusion=dataclasses.replace(load_scenario("seed001").fusion,
                                                          rule="aa"))

@@ -1,0 +1,34 @@
+"""GM-PHD peers (seed 000): a GM-PHD filter per sensor, mixtures fused by GCI, AA or the hybrid."""
+
+from __future__ import annotations
+
+from peers.estimators import GmphdEstimator
+from peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
+from sim.build import make_filter
+from sim.kinds import PeerKind
+from sim.scenario import Scenario
+
+MIXTURE_RULES = ("hybrid", "gci", "aa", "none")
+"""The rules that combine multi-target Gaussian mixtures (:mod:`peers.fusers`)."""
+
+
+def mixture_fuser(scn: Scenario, reducer):
+    """The fuser of ``fusion.rule`` for mixture peers (GM-PHD and ET-GM-PHD)."""
+    rule = scn.fusion.rule
+    if rule == "gci":
+        return GciFuser(reducer, scn.fusion.cardinality, scn.network.omega)
+    if rule == "aa":
+        return AaFuser(reducer)
+    if rule == "hybrid":
+        return HybridFuser(reducer)
+    return NoFuser()
+
+
+def build(scn: Scenario, name: str, run: int = 0):
+    filt = make_filter(scn, [name])
+    est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold)
+    return est, mixture_fuser(scn, filt.reducer)
+
+
+GMPHD = PeerKind("gmphd", "GM-PHD filter per sensor; mixtures fused (seed 000)", build,
+                 MIXTURE_RULES)

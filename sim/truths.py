@@ -1,0 +1,58 @@
+"""The registry of truth models: how the world draws a scenario's true targets (``truth``).
+
+A truth model gives the true states per scan (:class:`sim.world.Truth`); one that also draws
+its sensors' returns itself (a study whose published numbers come from its own draws) gives
+whole runs. The world (:mod:`sim.world`), the peers' scoring (:mod:`sim.peers`) and the
+single-target kinds' initialisation look a model up here by name and never name one.
+Adding a model is one function and one line in :data:`TRUTHS`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from sim.scenario import Scenario
+    from sim.world import Truth
+
+TRUTHS: dict[str, str] = {
+    "straight": "sim.world:STRAIGHT",
+    "seed001": "sim.truth_models:SEED001",
+    "seed003": "sim.truth_models:SEED003",
+}
+"""``truth`` value -> ``"module:attribute"`` of its :class:`TruthModel`."""
+
+
+@dataclass(frozen=True)
+class TruthModel:
+    name: str
+    summary: str
+    truth: Callable[[Scenario, np.random.Generator | None], Truth]
+    """``(scenario, the run's truth stream) -> Truth``."""
+    initial: Callable[[Scenario], tuple[np.ndarray, np.ndarray]] | None = None
+    """``scenario -> (x0, P0)``: the known initial state and the spread single-target peers
+    start from (one-target models)."""
+    run: Callable[[Scenario, int], tuple[Truth, list[list[np.ndarray]]]] | None = None
+    """``(scenario, run) -> (truth, scans)`` when the model draws the sensors' returns too."""
+
+
+_loaded: dict[str, TruthModel] = {}
+
+
+def names() -> tuple[str, ...]:
+    return tuple(TRUTHS)
+
+
+def truth_model(name: str) -> TruthModel:
+    """The model called ``name``; :class:`KeyError` naming the known ones if there is none."""
+    if name not in _loaded:
+        if name not in TRUTHS:
+            raise KeyError(f"unknown truth model {name!r}; known: {', '.join(TRUTHS)}")
+        module, attr = TRUTHS[name].split(":")
+        _loaded[name] = getattr(importlib.import_module(module), attr)
+    return _loaded[name]
