@@ -127,7 +127,7 @@ def load(overrides: Mapping | None = None, faults_file: str | Path | None = None
     ``faults_file`` if given, then ``overrides`` under ``faults.`` (the other scenarios'
     spelling: ``faults.default.loss``, ``faults.links[0].delay``); checked by
     :func:`net_scenario`."""
-    from sim.scenario import _apply_overrides
+    from sim.scenario import apply_overrides
 
     overrides = dict(overrides or {})
     fault_keys = {k[len("faults."):]: overrides.pop(k) for k in list(overrides)
@@ -142,7 +142,7 @@ def load(overrides: Mapping | None = None, faults_file: str | Path | None = None
     if fault_keys:
         if not isinstance(cfg.setdefault("faults", {}), dict):
             raise ValueError("seed003: 'faults' must be a table")
-        _apply_overrides(cfg["faults"], fault_keys, "seed003 [faults]")
+        apply_overrides(cfg["faults"], fault_keys, "seed003 [faults]")
     return cfg
 
 

@@ -12,13 +12,14 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
-if TYPE_CHECKING:
-    import numpy as np
-
-    from sim.scenario import Scenario
-    from sim.world import Truth
+Scenario = Any
+"""A :class:`sim.scenario.Scenario` (the registry imports nothing of the project: no cycle)."""
+Truth = Any
+"""A :class:`sim.world.Truth`."""
+Array = Any
+"""A NumPy array."""
 
 TRUTHS: dict[str, str] = {
     "straight": "sim.world:STRAIGHT",
@@ -32,12 +33,12 @@ TRUTHS: dict[str, str] = {
 class TruthModel:
     name: str
     summary: str
-    truth: Callable[[Scenario, np.random.Generator | None], Truth]
+    truth: Callable[[Scenario, Any], Truth]
     """``(scenario, the run's truth stream) -> Truth``."""
-    initial: Callable[[Scenario], tuple[np.ndarray, np.ndarray]] | None = None
+    initial: Callable[[Scenario], tuple[Array, Array]] | None = None
     """``scenario -> (x0, P0)``: the known initial state and the spread single-target peers
     start from (one-target models)."""
-    run: Callable[[Scenario, int], tuple[Truth, list[list[np.ndarray]]]] | None = None
+    run: Callable[[Scenario, int], tuple[Truth, list[list[Array]]]] | None = None
     """``(scenario, run) -> (truth, scans)`` when the model draws the sensors' returns too."""
 
 

@@ -18,12 +18,14 @@ import importlib
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from peers.contracts import Fuser, LocalEstimator
-    from sim.scenario import Scenario
-
+Scenario = Any
+"""A :class:`sim.scenario.Scenario` (the registry imports nothing of the project, so the loader
+can ask it for names without an import cycle)."""
+Parts = tuple[Any, Any]
+"""``(estimator, fuser)``: a :class:`peers.contracts.LocalEstimator` and a
+:class:`peers.contracts.Fuser`."""
 
 KINDS: dict[str, str] = {
     "gmphd": "sim.kinds.gmphd:GMPHD",
@@ -59,7 +61,7 @@ class PeerKind:
     """``network.filter`` value."""
     summary: str
     """One line for ``sensornet scenario`` and error messages."""
-    build: Callable[[Scenario, str, int], tuple[LocalEstimator, Fuser]]
+    build: Callable[[Scenario, str, int], Parts]
     """``(scenario, sensor name, Monte Carlo run) -> (estimator, fuser)``."""
     rules: tuple[str, ...]
     """The ``fusion.rule`` values it takes (checked at load)."""
