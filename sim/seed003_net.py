@@ -1,10 +1,10 @@
-"""Seed 003 over Zenoh: single-target PDA peers, one per sensor, as real processes, and their twin.
+"""Seed 003 as a network scenario: one single-target PDA peer per sensor (docs/seed003.md).
 
-``sensornet run seed003`` (= ``python -m sim.seed003_net run``) plays one run of
-``sim/scenarios/seed003.toml`` (region clutter: every peer sees the world's clutter) twice, once
-per mode, each time as a world process and one peer process per sensor over Zenoh on
-127.0.0.1, through the common peer core (:class:`peers.core.PeerCore`, the Zenoh runtime, link
-faults, Rerun), and prints one table:
+``sim/scenarios/seed003.toml`` is the offline study's file; :func:`network_document` makes the
+network scenario of it (``[scenario] study = "seed003"``), so every command runs it: ``sensornet
+run seed003`` (world + one PDA peer process per sensor over Zenoh, ``--sim``, ``--record``,
+``--fault``, ``--secure``, campaigns). The peers (:mod:`sim.kinds.pda`) are built here
+(:func:`make_parts`) in one of two modes, ``pda.mode``:
 
 * ``meas`` — measurement sharing (the paper's scheme): each peer predicts, publishes the returns
   of its own scan inside a wide pre-gate, and runs the PDA update sensor by sensor in the fixed
@@ -16,35 +16,33 @@ faults, Rerun), and prints one table:
   (:class:`peers.pda_parts.PdaEstimator`, :class:`~peers.pda_parts.CiFuser`; no feedback).
 
 Every peer starts from the run's one initial estimate (drawn as in :mod:`sim.seed003_peers`),
-so measurement-sharing peers hold the same estimate, and with every message in time the
-processes compute what :func:`twin` computes (the table's last column; the tests check it).
-Link faults: a ``[faults]`` table (``--faults FILE``, the scenario files' format) applies to
-the estimates between peers, in the twin and in the processes alike.
+so measurement-sharing peers hold the same estimate. ``python -m sim.seed003_net run`` compares
+the two modes in one table: each mode a common run (:func:`sim.launcher.start_run`) beside its
+twin (``--sim``: the twins only); with every message in time the processes compute what the
+twin computes (the table's "max diff to twin" column; the tests check it).
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
-import json
-import subprocess
 import sys
 import time
 import tomllib
-import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from peers.consensus import Consensus, ConsensusOptions
-from peers.core import CoreConfig, PeerCore
+from peers.core import PeerCore
 from peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
-from peers.scoring import Scorer
-from peers.session import PEER_WAIT
-from protocol.keys import check_name, check_run_id
 from sim import seed003
+from sim.build import fault_injector
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.peers import make_peer
+from sim.scenario import Scenario, ScenarioError, apply_overrides, load_document
+from sim.twin import run_twin
 from tracking.imm import POS
 
 MODES = ("meas", "ci")
@@ -61,84 +59,19 @@ predicted estimate: a later sensor's gate (on the estimate after the earlier sen
 lies inside it unless that update moved the estimate by more than a gate's size."""
 
 
-# -- the scenario as the world and the twin see it --------------------------------------------
+
+# -- the scenario ------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class NetSensor:
-    name: str
-    kind: str = "linear"
-    position: tuple[float, float] = (0.0, 0.0)
-    """Drawn only (position sensors: where they stand is not part of the model)."""
-
-
-@dataclass(frozen=True)
-class NetSettings:
-    speed: float
-    deadline: float
-    filter: str = "pda"
-
-
-@dataclass(frozen=True, eq=False)
-class NetScenario:
-    """``seed003.toml`` with the fields :func:`sim.world_process.run_world`,
-    :func:`sim.twin.run_twin` and :func:`sim.build.fault_injector` read."""
-
-    cfg: dict
-    network: NetSettings
-    faults: object = None
-    name: str = "seed003"
-    truth: str = "seed003"
-    targets: tuple = (1,)
-
-    @property
-    def seed(self) -> int:
-        return int(self.cfg["scenario"]["seed"])
-
-    @property
-    def num_scans(self) -> int:
-        return int(self.cfg["scenario"]["num_scans"])
-
-    @property
-    def scan_period(self) -> float:
-        return float(self.cfg["scenario"]["scan_period"])
-
-    @property
-    def sensor_names(self) -> list[str]:
-        return [s["name"] for s in self.cfg["sensors"]]
-
-    @property
-    def sensors(self) -> tuple[NetSensor, ...]:
-        return tuple(NetSensor(n, position=(2000.0 * i, 0.0))
-                     for i, n in enumerate(self.sensor_names))
-
-    @property
-    def region(self):
-        X = seed003.truth(self.cfg)
-        hw = float(self.cfg["clutter"]["halfwidth"])
-        (x0, y0), (x1, y1) = X[:, list(POS)].min(0) - hw, X[:, list(POS)].max(0) + hw
-        return (x0, x1), (y0, y1)
-
-
-def load(overrides: Mapping | None = None, faults_file: str | Path | None = None,
-         path: str | Path | None = None) -> dict:
-    """The scenario (``path``, default ``sim/scenarios/seed003.toml``) with region clutter (what
-    a peer network sees). Link faults: the file's ``[faults]`` table, replaced by the one of
-    ``faults_file`` if given, then ``overrides`` under ``faults.`` (the other scenarios'
-    spelling: ``faults.default.loss``, ``faults.links[0].delay``); checked by
-    :func:`net_scenario`."""
-    from sim.scenario import apply_overrides
-
+def load(overrides: Mapping | None = None, path: str | Path | None = None) -> dict:
+    """The seed-003 tables (``path``, default ``sim/scenarios/seed003.toml``) with region clutter
+    (what a peer network sees), ``overrides`` applied (``"table.key"``; ``faults.*`` keys as in
+    the other scenarios: ``faults.default.loss``, ``faults.links[0].delay``)."""
     overrides = dict(overrides or {})
     fault_keys = {k[len("faults."):]: overrides.pop(k) for k in list(overrides)
                   if k.startswith("faults.")}
     cfg = seed003.load(path or seed003.SCENARIO,
                        overrides={"clutter.mode": "region", **overrides})
-    if faults_file is not None:
-        table = tomllib.loads(Path(faults_file).read_text(encoding="utf-8"))
-        if "faults" not in table:
-            raise ValueError(f"{faults_file}: no [faults] table")
-        cfg["faults"] = table["faults"]
     if fault_keys:
         if not isinstance(cfg.setdefault("faults", {}), dict):
             raise ValueError("seed003: 'faults' must be a table")
@@ -146,15 +79,14 @@ def load(overrides: Mapping | None = None, faults_file: str | Path | None = None
     return cfg
 
 
-def net_scenario(cfg: dict, speed: float = SPEED, deadline: float = DEADLINE) -> NetScenario:
-    plan = None
-    if cfg.get("faults"):
-        from sim.scenario import parse_faults
-
-        names = [s["name"] for s in cfg["sensors"]]
-        interval = float(cfg["scenario"]["scan_period"]) / speed
-        plan = parse_faults(cfg["faults"], interval, names, "seed003 [faults]")
-    return NetScenario(cfg, NetSettings(float(speed), float(deadline)), plan)
+def scenario_of(cfg: Mapping, mode: str, speed: float = SPEED, deadline: float = DEADLINE,
+                method: str = METHOD) -> Scenario:
+    """The network scenario of the tables ``cfg`` with peers in ``mode`` (checked like a file)."""
+    doc = copy.deepcopy(dict(cfg))
+    doc["network"] = {**doc.get("network", {}), "speed": float(speed),
+                      "deadline": float(deadline)}
+    doc["pda"] = {**doc.get("pda", {}), "mode": mode, "method": method}
+    return load_document(doc, "seed003.toml", name="seed003")
 
 
 def draws(cfg: Mapping, run: int):
@@ -190,8 +122,6 @@ def network_document(doc: dict, label: str = "seed003.toml") -> dict:
     the study's own draws (truth model ``"seed003"``), the loss bound as the OSPA cut-off, and
     the ``[pda]`` table (``mode``, ``method``, ``pregate``). ``[network]``, ``[faults]``,
     ``[security]`` are taken as they are."""
-    from sim.scenario import ScenarioError  # noqa: PLC0415 (the loader imports this module)
-
     passed = ("network", "faults", "security", "pda", "fusion")
     cfg = copy.deepcopy({k: v for k, v in doc.items() if k not in passed})
     if bad := _unknown_keys(cfg, tomllib.loads(seed003.SCENARIO.read_text(encoding="utf-8"))):
@@ -267,40 +197,24 @@ def make_parts(cfg: Mapping, name: str, mode: str, run: int = 0, *, method: str 
     raise ValueError(f"seed003: unknown peer mode {mode!r}; expected one of {MODES}")
 
 
-def make_core(cfg: dict, name: str, mode: str, run: int = 0, *, network: str = "twin",
-              speed: float = SPEED, deadline: float = DEADLINE, method: str = METHOD,
-              pregate: float = PREGATE) -> PeerCore:
-    """The sans-I/O PDA peer of sensor ``name`` in ``mode`` (``"meas"`` or ``"ci"``)."""
-    est, fuser = make_parts(cfg, name, mode, run, method=method, pregate=pregate)
-    names = [s["name"] for s in cfg["sensors"]]
-    X = seed003.truth(cfg)
-    others = tuple(n for n in names if n != name)
-    opts = ConsensusOptions(name=name, neighbours=others,
-                            degrees=tuple((n, len(others)) for n in (name, *others)),
-                            rounds=1, max_age=0, policy="drop-late", feedback=False)
-
-    def truth(k: int) -> np.ndarray | None:
-        return X[k][None] if 1 <= k < len(X) else None
-
-    scorer = Scorer(float(cfg["metrics"]["loss_bound"]), 2.0, POS, truth)
-    core_cfg = CoreConfig(name=name, sensor=name, network=network,
-                          interval=float(cfg["scenario"]["scan_period"]) / speed,
-                          deadline=deadline)
-    return PeerCore(core_cfg, Consensus(opts, est, fuser), scorer)
+def make_core(cfg: Mapping, name: str, mode: str, run: int = 0, *, network: str = "twin",
+              speed: float = SPEED, deadline: float = DEADLINE,
+              method: str = METHOD) -> PeerCore:
+    """The sans-I/O PDA peer of sensor ``name`` in ``mode`` (``"meas"`` or ``"ci"``): the common
+    peer of the network scenario (:func:`sim.peers.make_peer`)."""
+    scn = scenario_of(cfg, mode, speed, deadline, method)
+    if name not in scn.sensor_names:
+        raise ValueError(f"seed003: no sensor named {name!r} "
+                         f"(sensors: {', '.join(scn.sensor_names)})")
+    return make_peer(scn, name, run, network=network)
 
 
-def twin(cfg: dict, mode: str, run: int = 0, *, speed: float = SPEED,
+def twin(cfg: Mapping, mode: str, run: int = 0, *, speed: float = SPEED,
          deadline: float = DEADLINE, method: str = METHOD, faults=None):
     """The run on the discrete-event twin (:func:`sim.twin.run_twin`); ``faults``: a
     :class:`peers.faults.FaultInjector` (default: the ``[faults]`` table's, if any)."""
-    from sim.build import fault_injector
-    from sim.twin import run_twin
-
-    scn = net_scenario(cfg, speed, deadline)
-    peers = {n: make_core(cfg, n, mode, run, speed=speed, deadline=deadline, method=method)
-             for n in scn.sensor_names}
-    return run_twin(scn, run, peers=peers, faults=faults or fault_injector(scn, run),
-                    data=run_data(cfg, run))
+    scn = scenario_of(cfg, mode, speed, deadline, method)
+    return run_twin(scn, run, faults=faults or fault_injector(scn, run))
 
 
 # -- scores and the table ---------------------------------------------------------------------
@@ -373,52 +287,6 @@ def format_rows(rows: Sequence[Row]) -> str:
 # -- processes ----------------------------------------------------------------------------------
 
 
-def _common(a: argparse.Namespace) -> list[str]:
-    out = ["--run", str(a.run), "--speed", str(a.speed), "--deadline", str(a.deadline),
-           "--method", a.method, *[x for s in a.set for x in ("--set", s)]]
-    if a.faults:
-        out += ["--faults", str(a.faults)]
-    if a.scenario:
-        out += ["--scenario", str(a.scenario)]
-    return out
-
-
-def start(a: argparse.Namespace, cfg: dict, mode: str, out: Path):
-    """World and peers of one mode as processes (a :class:`sim.launcher.RunHandle`)."""
-    from peers.session import endpoint, free_port
-    from sim.launcher import RunHandle
-
-    names = [s["name"] for s in cfg["sensors"]]
-    network = f"seed003-{mode}-{uuid.uuid4().hex[:8]}"
-    run_id = f"{network}-{uuid.uuid4().hex[:6]}"
-    eps = {"world": endpoint(free_port()), **{n: endpoint(free_port()) for n in names}}
-    me = [sys.executable, "-m", "sim.seed003_net"]
-    shared = ["--network", network, "--out", str(out), "--run-id", run_id, *_common(a)]
-    if a.viewer:
-        shared += ["--viewer", a.viewer]
-    if a.no_rerun:
-        shared += ["--no-rerun"]
-    cmds = {"world": [*me, "world", *shared, "--listen", eps["world"],
-                      "--peers", ",".join(names)]}
-    for i, n in enumerate(names):
-        links = [eps["world"], *(eps[m] for m in names[:i])]
-        cmds[n] = [*me, "peer", n, "--mode", mode, *shared, "--listen", eps[n],
-                   "--color", str(i), *[x for c in links for x in ("--connect", c)]]
-    (out / "logs").mkdir(parents=True, exist_ok=True)
-    (out / "commands.json").write_text(json.dumps(cmds, indent=1))
-    handle = RunHandle(out=out, endpoints=eps, network=network, commands=cmds)
-    try:
-        for n, cmd in cmds.items():
-            handle.logs[n] = out / "logs" / f"{n}.log"
-            with handle.logs[n].open("w") as fh:
-                handle.procs[n] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
-                                                   stdin=subprocess.DEVNULL)
-    except BaseException:
-        handle.stop_all(grace=1.0)
-        raise
-    return handle
-
-
 def _fault_counts(faults) -> str:
     """The injected link faults' decisions, those that happened."""
     return ", ".join(f"{a} {n}" for a, n in faults.counts().items() if n) or "none"
@@ -433,23 +301,26 @@ def read_tracks(out: Path, name: str) -> dict[int, np.ndarray]:
 
 
 def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[list[Row], int]:
-    """One mode as processes; its table rows (beside the twin) and an exit code."""
-    from sim.launcher import merge_recordings, read_summaries, wait_run
-
+    """One mode as a common run (world + one peer process per sensor over Zenoh); its table
+    rows (beside the twin) and an exit code."""
     out.mkdir(parents=True, exist_ok=True)
-    names = [s["name"] for s in cfg["sensors"]]
+    scn = scenario_of(cfg, mode, a.speed, a.deadline, a.method)
+    names = scn.sensor_names
     ref = twin(cfg, mode, a.run, speed=a.speed, deadline=a.deadline, method=a.method)
     if ref.faults is not None:
         print(f"{mode}: link faults, twin's decisions: {_fault_counts(ref.faults)}", flush=True)
-    handle = start(a, cfg, mode, out)
-    expected = int(cfg["scenario"]["num_scans"]) * float(cfg["scenario"]["scan_period"]) / a.speed
-    codes = wait_run(handle, timeout=expected + a.timeout)
+    sets = [*a.set, f"pda.mode={mode}", f"pda.method={a.method}",
+            f"network.deadline={a.deadline}"]
+    handle = start_run(scn, str(a.scenario or "seed003"), out, overrides=sets,
+                       viewer=a.viewer, run=a.run, speed=a.speed, rerun=not a.no_rerun,
+                       peer_args={n: ["--save-tracks"] for n in names})
+    try:
+        codes = wait_run(handle, timeout=scn.num_scans * scn.scan_period / a.speed + a.timeout)
+    finally:
+        handle.stop_all()
     summaries = read_summaries(out, names)
     rows = [make_row(cfg, mode, n, summaries[n], read_tracks(out, n), ref.tracks[n])
             for n in names if n in summaries]
-    rec = None if a.no_rerun else merge_recordings(out)
-    if rec is not None:
-        print(f"{mode}: recording {rec}  (view it with: rerun {rec})", flush=True)
     bad = {n: c for n, c in codes.items() if c != 0}
     missing = [n for n in names if n not in summaries]
     if bad or missing or handle.timed_out:
@@ -460,54 +331,27 @@ def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[li
     return rows, 0
 
 
-def _checked(check, *what: str):
-    """An argparse ``type=`` from a name check: its one-line message on a bad value."""
-    def parse(text: str) -> str:
-        try:
-            return check(text, *what)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-    return parse
-
-
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m sim.seed003_net",
-                                description=__doc__.split("\n")[0])
+                                description="seed 003: the two PDA peer modes compared")
     sub = p.add_subparsers(dest="cmd", required=True)
-
-    def common(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--run", type=int, default=0, help="Monte Carlo run (its draws)")
-        sp.add_argument("--speed", type=float, default=SPEED, help="scans per scan period")
-        sp.add_argument("--deadline", type=float, default=DEADLINE,
-                        help="fusion deadline, fraction of the scan interval")
-        sp.add_argument("--method", default=METHOD, choices=seed003.METHODS)
-        sp.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
-        sp.add_argument("--faults", type=Path, help="TOML file with a [faults] table")
-        sp.add_argument("--scenario", type=Path,
-                        help="scenario file (default sim/scenarios/seed003.toml)")
-        sp.add_argument("--out", type=Path)
-        sp.add_argument("--viewer")
-        sp.add_argument("--no-rerun", action="store_true")
-
-    r = sub.add_parser("run", help="both modes as processes, one table")
-    common(r)
+    r = sub.add_parser("run", help="both modes as processes (or twins), one table")
+    r.add_argument("--run", type=int, default=0, help="Monte Carlo run (its draws)")
+    r.add_argument("--speed", type=float, default=SPEED, help="scans per scan period")
+    r.add_argument("--deadline", type=float, default=DEADLINE,
+                   help="fusion deadline, fraction of the scan interval")
+    r.add_argument("--method", default=METHOD, choices=seed003.METHODS)
+    r.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
+    r.add_argument("--scenario", type=Path,
+                   help="scenario file (default sim/scenarios/seed003.toml; its [faults] "
+                        "table applies)")
+    r.add_argument("--out", type=Path)
+    r.add_argument("--viewer")
+    r.add_argument("--no-rerun", action="store_true")
     r.add_argument("--modes", default=",".join(MODES))
     r.add_argument("--timeout", type=float, default=60.0,
                    help="seconds allowed beyond the scans' own time")
     r.add_argument("--sim", action="store_true", help="the twin only (no processes)")
-    for cmd in ("world", "peer"):
-        sp = sub.add_parser(cmd)
-        common(sp)
-        sp.add_argument("--network", required=True, type=_checked(check_name, "network name"))
-        sp.add_argument("--run-id", type=_checked(check_run_id))
-        sp.add_argument("--listen", action="append", default=[])
-        sp.add_argument("--connect", action="append", default=[])
-        if cmd == "world":
-            sp.add_argument("--peers", default="")
-        else:
-            sp.add_argument("name")
-            sp.add_argument("--mode", choices=MODES, required=True)
-            sp.add_argument("--color", type=int, default=0)
     return p
 
 
@@ -527,36 +371,12 @@ def _overrides(items: Sequence[str]) -> dict:
 def main(argv: Sequence[str] | None = None) -> int:
     a = _parser().parse_args(argv)
     try:
-        cfg = load(_overrides(a.set), a.faults, a.scenario)
-        scn = net_scenario(cfg, a.speed, a.deadline)
-    except (ValueError, OSError) as exc:
+        cfg = load(_overrides(a.set), a.scenario)
+        for mode in MODES:
+            scenario_of(cfg, mode, a.speed, a.deadline, a.method)  # checked before any run
+    except (ValueError, OSError, ScenarioError) as exc:
         print(f"sensornet: error: seed003: {exc}", file=sys.stderr)
         return 2
-    if a.cmd == "world":
-        from sim.world_process import run_world
-
-        sent = run_world(scn, a.network, run=a.run, listen=a.listen, connect=a.connect,
-                         wait_for=[p for p in a.peers.split(",") if p], wait_timeout=PEER_WAIT,
-                         out_dir=a.out, run_id=a.run_id, viewer=a.viewer, speed=a.speed,
-                         rerun=not a.no_rerun, say=lambda line: print(line, flush=True),
-                         data=run_data(cfg, a.run))
-        print(f"world: published {sent['scans_published']} scans", flush=True)
-        return 0
-    if a.cmd == "peer":
-        from peers.runtime import PeerRuntime, RuntimeOptions
-        from sim.build import fault_injector
-
-        core = make_core(cfg, a.name, a.mode, a.run, network=a.network, speed=a.speed,
-                         deadline=a.deadline, method=a.method)
-        runtime = PeerRuntime(core, RuntimeOptions(
-            listen=tuple(a.listen), connect=tuple(a.connect), out_dir=a.out,
-            run_id=a.run_id, viewer=a.viewer, color_index=a.color, rerun=not a.no_rerun,
-            save_tracks=True, scan_period=scn.scan_period, faults=fault_injector(scn, a.run)))
-        code = runtime.run()
-        s = runtime.summary()
-        print(f"peer {a.name} ({a.mode}): stopped ({s['stop_reason']}); {s['scans']} scans, "
-              f"fuser {s['fuser']}", flush=True)
-        return code
     modes = [m.strip() for m in a.modes.split(",") if m.strip()]
     if unknown := [m for m in modes if m not in MODES]:
         print(f"sensornet: error: seed003: unknown modes {unknown} (expected {MODES})",
@@ -574,8 +394,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"seed003 twin, run {a.run} ({a.method}, {time.monotonic() - t0:.1f} s):")
     else:
         out = a.out or Path("runs") / f"seed003-{time.strftime('%Y%m%d-%H%M%S')}"
-        print(f"seed003: world + {len(scn.sensor_names)} PDA peers as processes over Zenoh on "
-              f"127.0.0.1, run {a.run}, {scn.num_scans} scans at {a.speed:g}x, modes "
+        n = len(cfg["sensors"])
+        print(f"seed003: world + {n} PDA peers as processes over Zenoh on 127.0.0.1, run "
+              f"{a.run}, {cfg['scenario']['num_scans']} scans at {a.speed:g}x, modes "
               f"{', '.join(modes)}; output in {out}", flush=True)
         for mode in modes:
             r, c = run_mode(a, cfg, mode, out / mode)

@@ -121,3 +121,30 @@ def test_a_registered_kind_runs_as_processes_and_replays(tmp_path):
     r = _sensornet("replay", str(out))
     assert r.returncode == 0, r.stderr
     assert r.stdout.count("| yes |") == 3, r.stdout
+
+
+def test_readme_kind_example_runs():
+    """README's two code blocks (the estimator, then its kind) register and run as they are."""
+    import re
+
+    from peers.contracts import LocalOutput
+    from peers.fusers import AaFuser
+    from sim.kinds import PeerKind
+    from tracking.mixture import GaussianMixture
+    from tracking.reduction import Reducer
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    est = next(b for b in blocks if "class CountingEstimator" in b)
+    kind = next(b for b in blocks if "COUNTING = PeerKind" in b)
+    ns = {"np": np, "GaussianMixture": GaussianMixture, "LocalOutput": LocalOutput,
+          "PeerKind": PeerKind, "AaFuser": AaFuser, "Reducer": Reducer}
+    exec(est + kind, ns)  # noqa: S102 (the README's own text)
+    kinds.register(ns["COUNTING"])
+    try:
+        scn = load_scenario("seed000", {"network.filter": "counting", "fusion.rule": "aa",
+                                        "scenario.num_scans": 5})
+        res = run_twin(scn, 0)
+        assert all(res.summary(n)["scans"] == 5 for n in scn.sensor_names)
+    finally:
+        kinds.unregister("counting")

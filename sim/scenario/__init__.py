@@ -17,7 +17,7 @@ comparable and cheap to pickle to worker processes.
 from __future__ import annotations
 
 from sim.scenario.faults import parse_faults
-from sim.scenario.loader import builtin_scenarios, load_scenario, scenario_text
+from sim.scenario.loader import builtin_scenarios, load_document, load_scenario, scenario_text
 from sim.scenario.model import (
     BIRTH_MODELS,
     CARDINALITY_RULES,
@@ -100,6 +100,7 @@ __all__ = [
     "TargetSpec",
     "apply_overrides",
     "builtin_scenarios",
+    "load_document",
     "load_scenario",
     "parse_faults",
     "parse_overrides",

@@ -72,6 +72,14 @@ def load_scenario(source: str | Path, overrides: Mapping[str, Any] | None = None
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{label}: invalid TOML: {exc}") from None
+    return load_document(data, label, overrides, stem, origin)
+
+
+def load_document(data: dict, label: str, overrides: Mapping[str, Any] | None = None,
+                  name: str = "scenario", origin: str = "") -> Scenario:
+    """A scenario from an already-read TOML document (``data`` is changed in place by the
+    overrides): what :func:`load_scenario` does after reading the file. ``label`` names it in
+    error messages, ``name`` is the default ``scenario.name``."""
     offline = data.get("scenario", {}).get("offline") if isinstance(data.get("scenario"),
                                                                     dict) else None
     if offline:  # e.g. seed003.toml: read by its own study, no network peers yet
@@ -86,6 +94,6 @@ def load_scenario(source: str | Path, overrides: Mapping[str, Any] | None = None
             data = adapt_document(study, data, label)
         except KeyError as exc:
             raise ScenarioError(str(exc.args[0])) from None
-    return parse_document(data, ctx, default_name=stem, origin=origin)
+    return parse_document(data, ctx, default_name=name, origin=origin or label)
 
 
