@@ -95,11 +95,13 @@ def test_unknown_setting_is_refused_in_one_line(capsys):
     assert "unknown setting 'clutter.density'" in capsys.readouterr().err
 
 
-def test_network_loader_refuses_the_offline_study_with_a_hint():
-    from sim.scenario import ScenarioError, load_scenario
+def test_network_loader_builds_pda_peers_from_the_seed_file():
+    """seed003 is a plain scenario file of the one model: its peers are PDA peers."""
+    from sim.scenario import load_scenario
 
-    with pytest.raises(ScenarioError, match="offline study.*python -m sim.seed003"):
-        load_scenario("seed003")
+    scenario = load_scenario("seed003")
+    assert scenario.network.filter == "pda"
+    assert len(scenario.sensors) >= 2
 
 
 def test_csv_and_png_outputs(tmp_path, capsys):
