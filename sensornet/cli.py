@@ -832,6 +832,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from sim.launcher import fault_report
 
         print(fault_report(json.loads(faults_file.read_text()), summaries))
+    _report_results(out)
     rec = merge_recordings(out)
     if rec is not None:
         print(f"recording: {rec}  (view it with: rerun {rec})")
@@ -872,8 +873,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report_results(out: Path) -> Path | None:
+    """Merge the peers' per-scan parts into ``<out>/results.parquet`` and say where it is."""
+    from peers.scan_results import merge_parts
+
+    try:
+        table = merge_parts(sorted(out.glob("*.scans.msgpack")), out / "results.parquet")
+    except ImportError:
+        print("per-scan results: not merged (needs pyarrow: pip install pyarrow)")
+        return None
+    if table is not None:
+        print(f"per-scan results: {table}  (plots: sensornet plot {out})")
+    return table
+
+
 def _run_twin(scn, args: argparse.Namespace) -> int:
     """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
+    from peers.scan_results import write_part
     from sim.launcher import format_summary
     from sim.twin import run_twin
 
@@ -889,12 +905,14 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
 
     if trust_note(summaries):
         print(trust_note(summaries))
+    out = _run_folder(args.out, "sim")
+    for name, core in result.peers.items():
+        write_part(core.scorer.results, name, out / f"peer-{name}.scans.msgpack")
+    _report_results(out)
     if result.faults is not None:
         print(f"injected link faults: {result.faults.counts()}")
-        if args.out:
-            out = _run_folder(args.out, "run")
-            result.faults.write_log(out / "faults.csv")
-            print(f"fault log: {out / 'faults.csv'}")
+        result.faults.write_log(out / "faults.csv")
+        print(f"fault log: {out / 'faults.csv'}")
     unscored = [n for n, s in summaries.items() if not _scored(s)]
     if unscored:
         print(f"sensornet: error: peer {unscored[0]} scored no scan", file=sys.stderr)
@@ -980,6 +998,19 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         print(f"stopped after {summary.ran} runs: run the same command again to finish")
         return 1
     print(f"report: sensornet report {folder}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    """``sensornet plot RUN``: tracks.png and metrics.png from the run's per-scan results."""
+    from sim.run_plots import PlotError, plot_run
+
+    try:
+        paths = plot_run(Path(args.dir), Path(args.out) if args.out else None)
+    except (PlotError, ValueError, OSError) as exc:
+        raise UserError(str(exc)) from None
+    for p in paths:
+        print(p)
     return 0
 
 
@@ -1308,6 +1339,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also report.html beside report.md: one self-contained file (tables, "
                          "every figure embedded)")
     rp.set_defaults(func=cmd_report)
+
+    pl = sub.add_parser("plot", help="track map and metrics over time (PNG) of one run from "
+                                     "its per-scan results")
+    pl.add_argument("dir", help="run folder (what 'sensornet run' printed: runs/<time>-run)")
+    pl.add_argument("--out", help="figure folder (default: DIR)")
+    pl.set_defaults(func=cmd_plot)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])
