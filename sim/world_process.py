@@ -19,6 +19,7 @@ import zenoh
 
 from peers.rerun_sink import TRUTH_COLOR, RerunSink, color_of, position_columns
 from peers.session import PEER_WAIT, open_session
+from peers.transport import zenoh_encoding
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
@@ -52,7 +53,18 @@ class _Sealed:
         self.pub, self.key, self.signer = pub, key, signer
 
     def put(self, payload: bytes) -> None:
-        self.pub.put(self.signer.seal(self.key, payload))
+        self.pub.put(self.signer.seal(self.key, payload),
+                     encoding=zenoh_encoding(payload, sealed=True))
+
+
+class _Typed:
+    """A publisher whose every put declares the message's Zenoh encoding (protocol.encodings)."""
+
+    def __init__(self, pub) -> None:
+        self.pub = pub
+
+    def put(self, payload: bytes) -> None:
+        self.pub.put(payload, encoding=zenoh_encoding(payload))
 
 
 def _await_subscribers(pubs, stop: threading.Event, timeout: float) -> None:
@@ -144,6 +156,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             pubs = {n: _Sealed(p, keys.scan(n), signer) for n, p in pubs.items()}
             truth_pub = _Sealed(truth_pub, keys.truth(), signer)
             ctl_pub = _Sealed(ctl_pub, keys.ctl(), signer)
+        else:
+            pubs = {n: _Typed(p) for n, p in pubs.items()}
+            truth_pub, ctl_pub = _Typed(truth_pub), _Typed(ctl_pub)
         token = session.liveliness().declare_token(keys.alive("world"))
         if wait_for:
             say(f"world: waiting up to {wait_timeout:g} s for peers {', '.join(wait_for)}")
