@@ -340,60 +340,24 @@ def _warn_fusion(scn) -> None:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from sim.experiment import format_table, run_experiment, write_outputs
-    from sim.scenario import with_birth_model
+    """``sensornet experiment SCENARIO``: the study that reads the scenario (:mod:`sim.studies`),
+    called with the flags' values."""
+    from dataclasses import replace
 
-    if args.scenario == "seed004" or Path(args.scenario).name == "seed004.toml":
-        # seed 004: flooding + clustering against distributed PHD filters (sim/seed004.py)
-        from sim.seed004 import SCENARIO as SEED004
-        from sim.seed004 import main as seed004_main
+    from sim import studies
+    from sim.studies.base import Request, experiment
 
-        path = SEED004 if args.scenario == "seed004" else Path(args.scenario)
-        sets = [a for item in (args.set or []) for a in ("--set", item)]
-        return seed004_main(["--scenario", str(path), "--runs", str(args.runs),
-                             "--jobs", str(min(args.jobs, args.runs)),
-                             "--out", str(_run_folder(args.out, "experiment")), *sets,
-                             *(["--quiet"] if args.quiet else [])])
-    if _is_seed003(args.scenario):
-        # seed 003: PDAF / IMM-PDAF / fuzzy PDA / fuzzy IMM, one and two sensors (sim/seed003.py)
-        from sim.seed003 import main as seed003_main
-
-        sets = [a for item in (args.set or []) for a in ("--set", item)]
-        if args.scenario != "seed003":  # a file: its settings
-            sets += ["--scenario", str(Path(args.scenario).resolve())]
-        return seed003_main(["--runs", str(args.runs), "--jobs", str(min(args.jobs, args.runs)),
-                             "--csv", str(_run_folder(args.out, "experiment")), *sets,
-                             *(["--quiet"] if args.quiet else [])])
-    scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
-    if scn.extended is not None:  # seed 002: the partitioner comparison (sim/seed002.py)
-        from sim.seed002 import main as seed002_main
-
-        sets = [a for item in (args.set or []) for a in ("--set", item)]
-        return seed002_main(["--scenario", args.scenario, "--runs", str(args.runs), *sets,
-                             *(["--quiet"] if args.quiet else [])])
-    if args.fusion:
-        from dataclasses import replace
-
-        scn = replace(scn, fusion=replace(scn.fusion, rule=args.fusion))
-    _warn_fusion(scn)
-    check_budget(scn, args, workers=min(args.jobs, args.runs))
-    births = ["paper", "truth"] if args.birth == "both" else [args.birth or scn.birth.model]
-    out = _run_folder(args.out, "experiment")
-    for model in births:
-        s = with_birth_model(scn, model)
-        result = run_experiment(s, args.runs, jobs=args.jobs, progress=not args.quiet)
-        print(format_table(result))
-        print()
-        for path in write_outputs(result, out):
-            print(f"wrote {path}")
-        print()
+    overrides = parse_overrides(args.set or [])
+    study = studies.for_source(args.scenario, overrides)
+    req = Request(args.scenario, overrides, runs=args.runs, jobs=args.jobs,
+                  progress=not args.quiet, options={"fusion": args.fusion, "birth": args.birth})
+    setups = study.load(req)
+    if study.scenario:
+        _warn_fusion(setups[0])
+        for scn in setups:
+            check_budget(scn, args, workers=min(args.jobs, args.runs))
+    experiment(study, replace(req, out=_run_folder(args.out, "experiment")), setups)
     return 0
-
-
-def _is_seed003(source: str) -> bool:
-    """Seed 003's offline study is its own (sim/seed003.py); the network scenario reads the
-    same file (sim/seed003_net.network_document)."""
-    return source == "seed003" or Path(source).name == "seed003.toml"
 
 
 def _load(args: argparse.Namespace, source: str):

@@ -21,7 +21,6 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +28,7 @@ import numpy as np
 from peers.contracts import FusionInput
 from peers.estimators import ImmEstimator, SingleTargetConfig
 from peers.fusers import ImmFuser
-from sim.progress import Progress
+from sim.studies.pool import map_runs
 from tracking.models import RangeBearing
 from tracking.particles import ParticleParams, RatioConfig
 
@@ -282,19 +281,9 @@ class ExperimentResult:
 def run_experiment(scn: Seed001Scenario, cfg: ExperimentConfig, runs: int, jobs: int = 1,
                    progress: bool = True, first_run: int = 0) -> ExperimentResult:
     """``runs`` Monte Carlo runs over ``jobs`` worker processes, with a progress bar."""
-    results: list[RunResult | None] = [None] * runs
-    with Progress(runs, f"runs (seed001, geometry {scn.geometry})", enabled=progress) as bar:
-        if jobs <= 1:
-            for i in range(runs):
-                results[i] = run_once(scn, cfg, first_run + i)
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futs = {pool.submit(run_once, scn, cfg, first_run + i): i for i in range(runs)}
-                for fut in as_completed(futs):
-                    results[futs[fut]] = fut.result()
-                    bar.advance()
-    return ExperimentResult(scn, cfg, [r for r in results if r is not None])
+    results = map_runs(run_once, [(scn, cfg, first_run + i) for i in range(runs)], jobs,
+                       f"runs (seed001, geometry {scn.geometry})", progress)
+    return ExperimentResult(scn, cfg, results)
 
 
 PAPER_TABLE1 = {
@@ -447,20 +436,8 @@ def tune_omega(scn: Seed001Scenario, cfg: ExperimentConfig, omegas: Sequence[flo
         raise ValueError(f"tuning runs start at {TUNE_FIRST_RUN} (runs below are evaluated)")
     omegas = tuple(omegas)
     idx = tuple(range(first_run, first_run + runs))
-    results: list[dict | None] = [None] * runs
     label = f"tuning runs (seed001 omega, geometry {scn.geometry}, {len(omegas)} candidates)"
-    with Progress(runs, label, enabled=progress) as bar:
-        if jobs <= 1:
-            for i, r in enumerate(idx):
-                results[i] = tune_once(scn, cfg, r, omegas)
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futs = {pool.submit(tune_once, scn, cfg, r, omegas): i for i, r in enumerate(idx)}
-                for fut in as_completed(futs):
-                    results[futs[fut]] = fut.result()
-                    bar.advance()
-    done = [r for r in results if r is not None]
+    done = map_runs(tune_once, [(scn, cfg, r, omegas) for r in idx], jobs, label, progress)
     keys = list(done[0])
     return OmegaTuning(scn, cfg, omegas, idx,
                        {k: np.stack([r[k][0] for r in done]) for k in keys},

@@ -19,14 +19,13 @@ import sys
 import time
 import tomllib
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from sim.progress import Progress
+from sim.studies.pool import map_runs
 from tracking.fuzzy import weighting_from_config
 from tracking.imm import POS, VEL, constant_acceleration, constant_velocity
 from tracking.pda import ImmPda, LinearSensor
@@ -422,19 +421,7 @@ def run_experiment(cfg: Mapping, runs: int, jobs: int = 1, first_run: int = 0,
                    progress: bool = True, methods: Sequence[str] = METHODS) -> list[RunResult]:
     """Runs ``first_run .. first_run + runs - 1``, in ``jobs`` processes, in run order."""
     ids = range(first_run, first_run + runs)
-    out: list[RunResult] = []
-    with Progress(runs, "runs", enabled=progress) as bar:
-        if jobs <= 1:
-            for r in ids:
-                out.append(run_once(cfg, r, methods))
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(jobs) as pool:
-                futs = [pool.submit(run_once, cfg, r, methods) for r in ids]
-                for f in as_completed(futs):
-                    out.append(f.result())
-                    bar.advance()
-    return sorted(out, key=lambda r: r.run)
+    return map_runs(run_once, [(cfg, r, methods) for r in ids], jobs, "runs", progress)
 
 
 def format_table(rows: Sequence[dict]) -> str:

@@ -48,10 +48,10 @@ import sys
 import time
 import tomllib
 import zlib
-from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
@@ -69,8 +69,8 @@ from peers.flooding import (
 from protocol.codec import encode
 from protocol.messages import Estimate, Scan
 from sim.faultplan import FaultPlan, LinkFaults, Uniform
-from sim.progress import Progress
 from sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
+from sim.studies.pool import map_runs
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
 from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
@@ -194,16 +194,20 @@ class ScenarioError(ValueError):
     """A scenario file or ``--set`` value the loader refuses (one line naming the key)."""
 
 
-def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
-    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values)."""
+def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = ()) -> Seed004:
+    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values) or
+    ``{"TABLE.KEY": value}`` (already parsed)."""
     try:
         doc = tomllib.loads(Path(path).read_text())
-        for item in overrides:
-            key, _, value = item.partition("=")
-            table, _, name = key.partition(".")
-            if not _ or not name:
-                raise ScenarioError(f"--set {item!r}: expected TABLE.KEY=VALUE")
-            doc.setdefault(table, {})[name] = tomllib.loads(f"v = {value}")["v"]
+        items = (overrides.items() if isinstance(overrides, Mapping) else
+                 ((k, v) for k, _, v in (item.partition("=") for item in overrides)))
+        for key, value in items:
+            table, dot, name = key.partition(".")
+            if not dot or not name:
+                raise ScenarioError(f"--set {key!r}: expected TABLE.KEY=VALUE")
+            if not isinstance(overrides, Mapping):
+                value = tomllib.loads(f"v = {value}")["v"]
+            doc.setdefault(table, {})[name] = value
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{path}: {e}") from None
     return from_document(doc, path)
@@ -632,18 +636,12 @@ def flooding_under_faults(scn: Seed004, plan: FaultPlan, scans: int = 60, seed: 
 def run_experiment(scn: Seed004, runs: Sequence[int], jobs: int = 1, progress: bool = True,
                    consensus: bool = True) -> dict[str, dict[str, float]]:
     """Mean over ``runs`` of every method's per-run means (and the OSPA standard error)."""
-    per_run: list[dict[str, dict[str, float]]] = []
-    with Progress(len(runs), "runs", enabled=progress) as bar:
-        if jobs <= 1:
-            for r in runs:
-                per_run.append(run_once(scn, r, consensus))
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(jobs) as pool:
-                futures = [pool.submit(run_once, scn, r, consensus) for r in runs]
-                for f in as_completed(futures):
-                    per_run.append(f.result())
-                    bar.advance()
+    per_run = map_runs(run_once, [(scn, r, consensus) for r in runs], jobs, "runs", progress)
+    return aggregate(per_run)
+
+
+def aggregate(per_run: list[dict[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
+    """Mean over runs (in run order) of every method's per-run means, and the OSPA s.e."""
     out: dict[str, dict[str, float]] = {}
     for name in per_run[0]:
         rows = [pr[name] for pr in per_run]
@@ -671,6 +669,14 @@ def format_table(result: dict[str, dict[str, float]]) -> str:
                      f"{100 * r['card_ok']:.1f} % | {r['tuples']:.0f} | "
                      f"{r.get('bytes', float('nan')):.0f} | {r['cpu_ms']:.2f} |")
     return "\n".join(lines)
+
+
+def table_title(scn: Seed004, runs: range) -> str:
+    """The line above the table: the variant, the graph, the clutter and the runs."""
+    deg = scn.adjacency.sum(axis=1)
+    return (f"seed 004, {scn.variant}, {len(scn.positions)} sensors (diameter "
+            f"{int(scn.hops.max())}, mean degree {deg.mean():.1f}), clutter "
+            f"{scn.clutter_rate:g}, runs {runs.start}..{runs.stop - 1}")
 
 
 def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str) -> list[Path]:
@@ -780,10 +786,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs = range(a.first_run, a.first_run + a.runs)
     t0 = time.monotonic()
     result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)
-    deg = scn.adjacency.sum(axis=1)
-    title = (f"seed 004, {scn.variant}, {len(scn.positions)} sensors (diameter "
-             f"{int(scn.hops.max())}, mean degree {deg.mean():.1f}), clutter "
-             f"{scn.clutter_rate:g}, runs {runs.start}..{runs.stop - 1}")
+    title = table_title(scn, runs)
     print(title)
     print(format_table(result))
     print(reference_comparison(result, scn.adjacency))
