@@ -61,7 +61,8 @@ class PeerCore:
         self.admission = Admission(cfg.network, cfg.interval, {
             "scan": 1.0, "truth": 1.0, "ctl": 0.5,
             "estimate": float(consensus.rounds * kinds)}, factor=cfg.rate_factor,
-            window=self.window_for)
+            window=self.window_for, rounds=consensus.rounds,
+            kinds=consensus.kinds or ("posterior",))
         self.rejected: Counter = Counter()
         self.received: Counter = Counter()
         self.received_bytes: Counter = Counter()
