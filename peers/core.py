@@ -118,7 +118,7 @@ class PeerCore:
 
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""
-        if self.world_gone is not None and now >= self.world_gone + self.cfg.world_grace:
+        if self.world_gone is not None and now >= self.world_gone + self.cfg.grace():
             self.world_gone, self.world = None, "left"  # not back within the grace
             return self.finish(now) + [Stop("world left before ending the run")]
         out: list[Output] = []
@@ -144,7 +144,7 @@ class PeerCore:
                     self.world_gone = None
                 self.world = "alive"
                 return []
-            if self.world == "alive" and self.cfg.world_grace > 0 and not self.end_requested:
+            if self.world == "alive" and self.cfg.grace() > 0 and not self.end_requested:
                 if self.world_gone is None:
                     self.world_gone = now  # maybe a router outage: see tick()
                 return []
@@ -180,7 +180,7 @@ class PeerCore:
         """When :meth:`tick` next has work (a deadline), or None."""
         due = min(self.deadlines.values(), default=None)
         if self.world_gone is not None:
-            end = self.world_gone + self.cfg.world_grace
+            end = self.world_gone + self.cfg.grace()
             due = end if due is None else min(due, end)
         return due
 

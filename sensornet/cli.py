@@ -1156,7 +1156,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
                         help="keep running this long when the world's liveliness goes away, in "
                              "case it comes back (a router restart); counted as an outage "
-                             "(default: stop at once)")
+                             "(default: 8 scan intervals, at least 3 s)")
         sp.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
                         help="local filter (default: the scenario's network.filter)")
         sp.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
