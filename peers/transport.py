@@ -130,12 +130,17 @@ class Transport:
         if self.recover and not sample.express and key in self._recovering:
             self.recovered[self._recovering[key]] += 1
         payload = sample.payload.to_bytes()
-        if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
+        # bounded before anything is decoded or verified (peers.admission): window, slot,
+        # the sender's bucket and a place in the inbox, given back by the main loop (taken)
+        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
+                size = len(payload)
                 payload, why = self.verifier.open(key, payload, self.check_signatures)
                 if why is not None:
                     self.admission.rejected[why] += 1
+                    self.admission.taken(key, size)
                     return
+                self.admission.shrink(size - len(payload))  # the trailer stays here
             self.q.put(("msg", key, payload))
 
     def _missed(self, channel: str, n: int) -> None:
