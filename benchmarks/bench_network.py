@@ -32,6 +32,7 @@ is left out.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -271,7 +272,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--per-process", type=int, default=1, metavar="N",
                    help="peers per process (peer hosts, sensornet run --per-process; default "
                         "1: a process per peer)")
+    p.add_argument("--handoff", choices=("direct", "zenoh"), default="direct",
+                   help="estimates between co-hosted peers: handed over in the host (default) "
+                        "or through its Zenoh session (to compare)")
+    p.add_argument("--callbacks", choices=("direct", "thread"), default="direct",
+                   help="Zenoh callbacks on Zenoh's threads (default) or a Python thread per "
+                        "subscriber (Zenoh's default: to compare)")
     args = p.parse_args(argv)
+    os.environ["SENSORNET_HOST_HANDOFF"] = args.handoff  # read by the peer processes
+    os.environ["SENSORNET_ZENOH_CALLBACKS"] = args.callbacks
     if args.per_process < 1:
         p.error("--per-process must be >= 1")
     global ZENOH_CONFIG, PER_PROCESS

@@ -153,6 +153,40 @@ def test_host_commands_reach_the_loop():
     assert host.q.empty()
 
 
+def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_path):
+    """An estimate to a co-hosted neighbour skips Zenoh (no subscription to that neighbour)
+    but not admission: each receiver counts its own duplicates, a killed peer gets nothing,
+    a peer outside the host is still subscribed to through Zenoh."""
+    import numpy as np
+
+    from peers.admission import SLOT_ATTEMPTS
+    from peers.runtime import RuntimeOptions
+    from protocol.codec import encode
+    from protocol.messages import Estimate
+    from sim.peers import make_peer
+    from sim.scenario import load_scenario
+    from tracking.mixture import GaussianMixture
+
+    scn = load_scenario(_six(tmp_path / "six.toml"))
+    host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
+                           for n in SIX[:3]], ((), (), None, None, False))
+    t = [rt.transport for rt in host.peers]
+    assert t[0].local == {"p01"} and t[1].local == {"p00", "p02"} and t[2].local == {"p01"}
+    assert t[0].handoff is not None and t[2].handoff is not None
+    host._active = [0, 1, 2]
+    mix = GaussianMixture(np.ones(1), np.zeros((1, 4)), np.eye(4)[None])
+    payload = encode(Estimate("p01", 0, mix))
+    for _ in range(SLOT_ATTEMPTS + 1):  # the same slot once too often
+        t[1].handoff(t[1].keys.estimate("p01"), payload)
+    got = [host.q.get_nowait() for _ in range(host.q.qsize())]
+    assert sorted(slot for slot, _ in got) == [0] * SLOT_ATTEMPTS + [2] * SLOT_ATTEMPTS
+    assert all(item == ("msg", t[1].keys.estimate("p01"), payload) for _, item in got)
+    assert t[0].admission.rejected["duplicate"] == 1 == t[2].admission.rejected["duplicate"]
+    host._active = [0, 1]  # p02 killed
+    t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 0, mix, round=1)))
+    assert [slot for slot, _ in [host.q.get_nowait()]] == [0] and host.q.empty()
+
+
 # -- real processes ------------------------------------------------------------------------
 
 @pytest.mark.network
