@@ -701,6 +701,24 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
         raise UserError("--per-process needs real processes; drop --sim")
 
 
+def _packing(args: argparse.Namespace, scn, pfaults) -> int:
+    """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
+    from sim.launcher import HOSTED_ACTIONS
+    from sim.packing import choose
+
+    solo = [f"{f.action}:{f.peer}" for f in pfaults
+            if f.action not in HOSTED_ACTIONS and f.peer != "router"]
+    asked = getattr(args, "per_process", None)
+    if getattr(args, "sim", False):  # the twin: no processes to pack
+        return asked or 1
+    why_not = ("secure mode" if args.secure is not None or scn.security else
+               f"--fault {solo[0]}" if solo else "")
+    packing = choose(len(scn.sensors), asked, why_not)
+    if packing.line:
+        print(packing.line, flush=True)
+    return packing.per_process
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.launcher import (
         ProcessFault,
@@ -723,7 +741,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.network.router and hasattr(args, "router") and not args.router:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
-    per_process = getattr(args, "per_process", 1) or 1
+    per_process = _packing(args, scn, pfaults)
     hosts = host_groups(scn.sensor_names, per_process)
     _check_hosted_faults(pfaults, hosts, args)
     unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
@@ -1240,10 +1258,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "about this long (Zenoh's default is 10000)")
         sp.add_argument("--timeout", type=POSITIVE_FLOAT, default=60.0,
                         help="extra seconds allowed beyond the run's own length (default 60)")
-        sp.add_argument("--per-process", type=POSITIVE_INT, default=1, metavar="N",
+        sp.add_argument("--per-process", type=POSITIVE_INT, metavar="N",
                         help="peers per process: hosts h1, h2, ... of N peers each, one Zenoh "
-                             "session per host (sensornet host); default 1, a process per "
-                             "peer")
+                             "session per host (sensornet host); default a process per peer "
+                             "up to 16 peers, a host per core above (said in one line)")
         add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")

@@ -19,6 +19,7 @@ from peers.telemetry import SharedCpu, Telemetry
 from sensornet.cli import main
 from sim.graphs import network_scenario
 from sim.launcher import ProcessFault, _host_commands, host_groups, hosts_line
+from sim.packing import PACK_ABOVE, Packing, choose
 from sim.twin import run_twin
 from tests.test_network_faults import _assert_tracks_equal_the_twin, _run
 
@@ -59,6 +60,41 @@ def test_host_commands_link_to_the_world_and_earlier_hosts():
     with pytest.raises(ValueError, match="same peer flags"):
         _host_commands({"h1": ["a", "b"], "h2": ["c"]}, peer, names, eps, [], False, False,
                        None)
+
+
+def test_packing_is_a_process_per_peer_up_to_the_threshold_then_a_host_per_core():
+    assert choose(PACK_ABOVE, None, n_cores=2) == Packing(1)
+    big = choose(50, None, n_cores=2)
+    assert big.per_process == 25 and "2 host processes of up to 25" in big.line
+    assert "--per-process 1" in big.line and "\n" not in big.line
+    assert choose(100, None, n_cores=8).per_process == 13  # 8 hosts of up to 13
+    assert choose(PACK_ABOVE + 1, None, n_cores=1).per_process == 9  # never one loop for all
+    assert choose(50, 1, n_cores=2) == Packing(1)  # --per-process wins, silently
+    assert choose(50, 10, n_cores=2) == Packing(10)
+    stay = choose(50, None, "secure mode", n_cores=2)
+    assert stay.per_process == 1 and "(secure mode)" in stay.line
+
+
+def test_run_packs_a_large_network_and_says_so_in_one_line(tmp_path, capsys):
+    """20 peers without --per-process: two hosts (a killhost of h3 is refused naming h1 and
+    h2, before anything starts); --per-process 1 keeps a process per peer, without the line."""
+    path = tmp_path / "twenty.toml"
+    path.write_text(network_scenario(20, 4, scans=10, rounds=2))
+    out = tmp_path / "o"
+    assert main(["run", str(path), "--out", str(out), "--fault", "killhost:h3@5"]) == 2
+    cap = capsys.readouterr()
+    lines = [x for x in cap.out.splitlines() if x.startswith("packing:")]
+    assert len(lines) == 1 and "20 peers into 2 host processes of up to" in lines[0], cap.out
+    assert "unknown host 'h3' (hosts: h1, h2)" in cap.err
+    assert main(["run", str(path), "--out", str(out), "--per-process", "1",
+                 "--fault", "killhost:h1@5"]) == 2
+    cap = capsys.readouterr()
+    assert "packing:" not in cap.out and "needs hosts" in cap.err
+    assert main(["run", str(path), "--out", str(out), "--fault", "stop:p01@5",
+                 "--fault", "killhost:h1@5"]) == 2  # stop needs a process per peer
+    cap = capsys.readouterr()
+    assert "packing: 20 peers one per process (--fault stop:p01)" in cap.out
+    assert "needs hosts" in cap.err
 
 
 def test_killhost_fault_parses():
