@@ -25,10 +25,13 @@ RECOVER_HEARTBEAT = 0.5
 """Seconds between a recovering publisher's heartbeats (its last sequence number): how a
 subscriber that missed the publisher's last messages notices and asks for them."""
 
-DIRECT_CALLBACKS = os.environ.get("SENSORNET_ZENOH_CALLBACKS", "direct") != "thread"
-"""Run the subscribers' callbacks on Zenoh's own threads (they only admit and queue: no Zenoh
-call inside); ``SENSORNET_ZENOH_CALLBACKS=thread`` restores a Python thread per subscriber
-(to compare, ``benchmarks/bench_network.py --callbacks thread``)."""
+DIRECT_CALLBACKS = os.environ.get("SENSORNET_ZENOH_CALLBACKS", "thread") == "direct"
+"""``SENSORNET_ZENOH_CALLBACKS=direct``: run the subscribers' callbacks on Zenoh's own threads
+(they only admit and queue, no Zenoh call inside) instead of Zenoh's default, a Python thread
+per subscriber. Measured (``benchmarks/bench_network.py --callbacks``, load 5-7 on 2 cores):
+no gain in hosts once co-hosted estimates are handed over (50 peers of degree 4 in 2 hosts:
+3.63 vs 3.67 ms per peer per scan), none for 3 peers (three runs each: 4.26-4.36 vs
+3.88-4.34 ms, median scan -> fused 6.7-8.8 vs 6.5-7.9 ms): so not the default."""
 
 
 def recovering_publisher(session, key: str, express: bool = True):
