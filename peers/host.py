@@ -35,6 +35,8 @@ from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from peers.session import open_session
 from peers.telemetry import SharedCpu
 from peers.transport import settle
+from protocol.codec import decode
+from protocol.messages import Estimate
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
@@ -43,6 +45,35 @@ Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py 
 
 CONTROL = -1
 """The slot of the host's own items on its queue (commands, a signal's wake-up)."""
+
+
+class SharedDecode:
+    """One decode of an estimate handed to several co-hosted neighbours: the hand-off gives
+    each the same bytes object, so the last :data:`SIZE` estimates' messages are kept by
+    payload (a bytes object caches its hash) with their arrays read-only (a receiver that
+    wrote into one would raise, not change its neighbours'). Anything else, and every
+    refusal, is decoded per receiver as before."""
+
+    SIZE = 256
+
+    def __init__(self) -> None:
+        self._memo: dict[tuple[bytes, object], Estimate] = {}
+        self.hits = 0
+
+    def __call__(self, payload: bytes, limits):
+        memo_key = (payload, limits)
+        msg = self._memo.get(memo_key)
+        if msg is not None:
+            self.hits += 1
+            return msg
+        msg = decode(payload, limits)
+        if type(msg) is Estimate:
+            for a in (msg.mixture.weights, msg.mixture.means, msg.mixture.covs):
+                a.flags.writeable = False
+            if len(self._memo) >= self.SIZE:
+                del self._memo[next(iter(self._memo))]  # the oldest
+            self._memo[memo_key] = msg
+        return msg
 
 
 class _Inbox:
@@ -81,6 +112,9 @@ class PeerHost:
         self.by_name = {rt.name: i for i, rt in enumerate(self.peers)}
         if HANDOFF:
             self._wire_handoff()
+            self.decode = SharedDecode()
+            for rt in self.peers:
+                rt.core.decode = self.decode
         self.session = None
         self.stop_reason = ""
         self._stop = False

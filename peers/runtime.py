@@ -27,7 +27,7 @@ from peers.observer import Observer
 from peers.rerun_sink import RerunSink
 from peers.telemetry import SharedCpu, Telemetry
 from peers.transport import Transport
-from protocol.codec import Rejected, decode
+from protocol.codec import Rejected
 from protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
@@ -319,7 +319,7 @@ class PeerRuntime:
     def _hold(self, key: str, payload: bytes) -> bool:
         """Injected faults on the link ``sender -> self``: hold, duplicate or drop."""
         try:
-            msg = decode(payload, self.core.cfg.limits)
+            msg = self.core.decode(payload, self.core.cfg.limits)  # a host's: shared
         except Rejected:
             return False  # the core counts it
         if not isinstance(msg, Estimate | Forward | Returns):

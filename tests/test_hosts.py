@@ -197,7 +197,7 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
 
     from peers.admission import SLOT_ATTEMPTS
     from peers.runtime import RuntimeOptions
-    from protocol.codec import encode
+    from protocol.codec import Rejected, encode
     from protocol.messages import Estimate
     from sim.peers import make_peer
     from sim.scenario import load_scenario
@@ -218,6 +218,15 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     assert sorted(slot for slot, _ in got) == [0] * SLOT_ATTEMPTS + [2] * SLOT_ATTEMPTS
     assert all(item == ("msg", t[1].keys.estimate("p01"), payload) for _, item in got)
     assert t[0].admission.rejected["duplicate"] == 1 == t[2].admission.rejected["duplicate"]
+    assert all(rt.core.decode is host.decode for rt in host.peers)  # one decode per estimate
+    msgs = [rt.core.decode(payload, rt.core.cfg.limits) for rt in host.peers]
+    assert msgs[0] is msgs[1] is msgs[2] and host.decode.hits == 2
+    with pytest.raises(ValueError):  # read-only: no receiver can change what the others got
+        msgs[0].mixture.means[0, 0] = 1.0
+    with pytest.raises(Rejected):  # a refusal is not kept: each receiver counts its own
+        host.decode(payload[:-3], scn_limits := host.peers[0].core.cfg.limits)
+    with pytest.raises(Rejected):
+        host.decode(payload[:-3], scn_limits)
     host._active = [0, 1]  # p02 killed
     t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 0, mix, round=1)))
     assert [slot for slot, _ in [host.q.get_nowait()]] == [0] and host.q.empty()
