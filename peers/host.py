@@ -51,10 +51,12 @@ class SharedDecode:
     """One decode of an estimate handed to several co-hosted neighbours: the hand-off gives
     each the same bytes object, so the last :data:`SIZE` estimates' messages are kept by
     payload (a bytes object caches its hash) with their arrays read-only (a receiver that
-    wrote into one would raise, not change its neighbours'). Anything else, and every
-    refusal, is decoded per receiver as before."""
+    wrote into one would raise, not change its neighbours'). Anything else (a large payload
+    too), and every refusal, is decoded per receiver as before."""
 
     SIZE = 256
+    LARGEST = 65536
+    """Bytes of the largest payload kept (at most SIZE x LARGEST = 16 MiB held)."""
 
     def __init__(self) -> None:
         self._memo: dict[tuple[bytes, object], Estimate] = {}
@@ -67,7 +69,7 @@ class SharedDecode:
             self.hits += 1
             return msg
         msg = decode(payload, limits)
-        if type(msg) is Estimate:
+        if type(msg) is Estimate and len(payload) <= self.LARGEST:
             for a in (msg.mixture.weights, msg.mixture.means, msg.mixture.covs):
                 a.flags.writeable = False
             if len(self._memo) >= self.SIZE:

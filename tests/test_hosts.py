@@ -227,6 +227,11 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
         host.decode(payload[:-3], scn_limits := host.peers[0].core.cfg.limits)
     with pytest.raises(Rejected):
         host.decode(payload[:-3], scn_limits)
+    big = GaussianMixture(np.ones(600), np.zeros((600, 4)), np.tile(np.eye(4), (600, 1, 1)))
+    big_payload = encode(Estimate("p01", 0, big))
+    assert len(big_payload) > host.decode.LARGEST  # not kept: memory stays bounded
+    limits = host.peers[0].core.cfg.limits
+    assert host.decode(big_payload, limits) is not host.decode(big_payload, limits)
     host._active = [0, 1]  # p02 killed
     t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 0, mix, round=1)))
     assert [slot for slot, _ in [host.q.get_nowait()]] == [0] and host.q.empty()
