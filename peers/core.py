@@ -57,6 +57,8 @@ class PeerCore:
         its scenario neither subscribes to them nor is fed them in the twin (a message and a
         decode per scan saved, and nothing a forger could put there reaches it)."""
         self.keys = Keys(cfg.network)
+        self.decode = decode
+        """Bytes -> message (a host shares one read-only decode between its peers)."""
         kinds = max(1, len(consensus.kinds))
         self.admission = Admission(cfg.network, cfg.interval, {
             "scan": 1.0, "truth": 1.0, "ctl": 0.5,
@@ -101,7 +103,7 @@ class PeerCore:
         self.received[route.channel] += 1
         self.received_bytes[route.channel] += len(payload)
         try:
-            msg = decode(payload, self.cfg.limits)
+            msg = self.decode(payload, self.cfg.limits)
         except Rejected as exc:
             return self._reject(exc.reason)
         expected = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,

@@ -153,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
                         help="keep running this long when the world's liveliness goes away, in "
                              "case it comes back (a router restart); counted as an outage "
-                             "(default: stop at once)")
+                             "(default: 8 scan intervals, at least 3 s)")
         sp.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
                         help="local filter (default: the scenario's network.filter)")
         sp.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
@@ -237,10 +237,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "about this long (Zenoh's default is 10000)")
         sp.add_argument("--timeout", type=POSITIVE_FLOAT, default=60.0,
                         help="extra seconds allowed beyond the run's own length (default 60)")
-        sp.add_argument("--per-process", type=POSITIVE_INT, default=1, metavar="N",
+        sp.add_argument("--per-process", type=POSITIVE_INT, metavar="N",
                         help="peers per process: hosts h1, h2, ... of N peers each, one Zenoh "
-                             "session per host (sensornet host); default 1, a process per "
-                             "peer")
+                             "session per host (sensornet host); default a process per peer "
+                             "up to 16 peers, a host per core above (said in one line)")
         add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")

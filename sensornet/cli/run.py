@@ -62,6 +62,24 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
         raise UserError("--per-process needs real processes; drop --sim")
 
 
+def _packing(args: argparse.Namespace, scn, pfaults) -> int:
+    """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
+    from sim.launcher import HOSTED_ACTIONS
+    from sim.packing import choose
+
+    solo = [f"{f.action}:{f.peer}" for f in pfaults
+            if f.action not in HOSTED_ACTIONS and f.peer != "router"]
+    asked = getattr(args, "per_process", None)
+    if getattr(args, "sim", False):  # the twin: no processes to pack
+        return asked or 1
+    why_not = ("secure mode" if args.secure is not None or scn.security else
+               f"--fault {solo[0]}" if solo else "")
+    packing = choose(len(scn.sensors), asked, why_not)
+    if packing.line:
+        print(packing.line, flush=True)
+    return packing.per_process
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.launcher import (
         ProcessFault,
@@ -84,7 +102,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.network.router and hasattr(args, "router") and not args.router:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
-    per_process = getattr(args, "per_process", 1) or 1
+    per_process = _packing(args, scn, pfaults)
     hosts = host_groups(scn.sensor_names, per_process)
     _check_hosted_faults(pfaults, hosts, args)
     unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
