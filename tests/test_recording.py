@@ -7,8 +7,9 @@ import sys
 
 import pytest
 
-from peers.recording import read, replay
+from peers.recording import read
 from sim.launcher import read_summaries, start_run, wait_run
+from sim.replay import replay
 from sim.scenario import load_scenario, parse_overrides
 
 pytestmark = pytest.mark.network
