@@ -22,9 +22,20 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from peers.security import tls_endpoint
-from peers.session import SessionError, endpoint, free_port
+from peers.security import WORLD, Security, tls_endpoint
+from peers.session import (
+    DEFAULT_LEASE_MS,
+    MAX_MESSAGE_BYTES,
+    SessionError,
+    endpoint,
+    free_port,
+    open_session,
+)
 from peers.telemetry import percentile
+from protocol.codec import Rejected, decode
+from protocol.envelope import inner
+from protocol.keys import Keys
+from sim.build import adjacency
 from sim.scenario import Scenario
 
 
@@ -213,8 +224,6 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
                       "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
             + (["--speed", str(speed)] if speed else [])}
     if sparse:  # each peer links to the world and its graph neighbours only, gossip off
-        from sim.build import adjacency
-
         _, A = adjacency(scn)
     for i, n in enumerate(names):
         if router or groups:  # a host's links: _host_commands
@@ -327,8 +336,6 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
             names: list[str]) -> tuple[list[str], dict[str, str]]:
     """A routed run: the router's command, the clients' config file, every endpoint the
     router's."""
-    from peers.session import DEFAULT_LEASE_MS, MAX_MESSAGE_BYTES
-
     config = handle.out / "zenoh-client.json5"
     config.write_text(json.dumps({
         "mode": "client", "scouting": {"multicast": {"enabled": False}},
@@ -567,11 +574,6 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
     Runs until every fault is applied or ``stop`` is set; returns what was done, with wall
     times (also written to ``<out>/process-faults.json``).
     """
-    from peers.session import open_session
-    from protocol.codec import Rejected, decode
-    from protocol.envelope import inner
-    from protocol.keys import Keys
-
     unseal = inner if handle.secure is not None else bytes  # secure: signed scans
     pending = sorted(faults, key=lambda f: f.scan)
     done: list[dict] = []
@@ -589,8 +591,6 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
 
     security = None
     if handle.secure is not None:  # watches the scans as the world may (its own key)
-        from peers.security import WORLD, Security
-
         security = Security.load(handle.secure, WORLD, handle.network,
                                  [n for n in handle.procs if n != "world"])
     session = open_session(connect=[handle.endpoints.get("router")

@@ -19,6 +19,7 @@ import zenoh
 
 from peers.rerun_sink import TRUTH_COLOR, RerunSink, color_of, position_columns
 from peers.session import PEER_WAIT, open_session
+from peers.transport import recovering_publisher
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
@@ -134,8 +135,6 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 for n in scn.sensor_names}
         probes = pubs  # matching_status: an advanced publisher has none, a plain one does
         if recover:
-            from peers.transport import recovering_publisher
-
             pubs = {n: recovering_publisher(session, keys.scan(n)) for n in scn.sensor_names}
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
