@@ -71,19 +71,27 @@ class Recorder:
 
 
 def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
-    """The metadata and the records ``(topic, record)`` of a recording, in order."""
+    """The metadata and the records ``(topic, record)`` of a recording, in order; a file that
+    is not a complete MCAP file is a one-line :class:`ValueError`."""
+    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     with Path(path).open("rb") as fh:
-        reader = make_reader(fh)
-        meta = {}
-        for m in reader.iter_metadata():
-            if m.name == META:
-                meta = dict(m.metadata)
-        fh.seek(0)
-        reader = make_reader(fh)
-        records = [(ch.topic, msgpack.unpackb(msg.data, raw=False))
-                   for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        try:
+            reader = make_reader(fh)
+            meta = {}
+            for m in reader.iter_metadata():
+                if m.name == META:
+                    meta = dict(m.metadata)
+            fh.seek(0)
+            reader = make_reader(fh)
+            records = [(ch.topic, msgpack.unpackb(msg.data, raw=False))
+                       for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        except McapError as exc:
+            raise ValueError(
+                f"not a complete recording ({type(exc).__name__}): a peer that was "
+                f"killed (--fault kill:...) never closed its file, and what it held in its "
+                f"last chunk is lost") from None
     return meta, records
 
 
