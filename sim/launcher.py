@@ -593,6 +593,9 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
     if handle.secure is not None:  # watches the scans as the world may (its own key)
         security = Security.load(handle.secure, WORLD, handle.network,
                                  [n for n in handle.procs if n != "world"])
+    if "router" not in handle.endpoints:  # a router listens once start_run returns
+        handle.wait_listening("world")  # else Zenoh's reconnection back-off: the first scans
+        # (a short run: all of them) passed before the watcher was linked, the fault never came
     session = open_session(connect=[handle.endpoints.get("router")
                                     or handle.endpoints["world"]], security=security)
     try:
