@@ -567,6 +567,19 @@ class ProcessFault:
         return fault
 
 
+def _wait_world(handle: RunHandle, stop: threading.Event) -> None:
+    """Return once the world listens, has exited, or ``stop`` is set: a session dialled before
+    it listens waits out Zenoh's reconnection back-off, and a short run's scans (all of them,
+    in seed001's 12-scan run) passed before the watcher was linked."""
+    while not stop.is_set():
+        try:
+            handle.wait_listening("world", timeout=1.0)
+            return
+        except SessionError:
+            if handle.procs["world"].poll() is not None:
+                return
+
+
 def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor: str,
                           stop: threading.Event) -> list[dict]:
     """Watch the run's scans (a Zenoh subscriber) and apply each fault at its scan.
@@ -594,8 +607,7 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
         security = Security.load(handle.secure, WORLD, handle.network,
                                  [n for n in handle.procs if n != "world"])
     if "router" not in handle.endpoints:  # a router listens once start_run returns
-        handle.wait_listening("world")  # else Zenoh's reconnection back-off: the first scans
-        # (a short run: all of them) passed before the watcher was linked, the fault never came
+        _wait_world(handle, stop)
     session = open_session(connect=[handle.endpoints.get("router")
                                     or handle.endpoints["world"]], security=security)
     try:
