@@ -17,7 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
+from peers.contracts import (
+    EstimatorHooks,
+    Fuser,
+    FuserHooks,
+    FusionInput,
+    LocalEstimator,
+    metropolis_weights,
+)
 from peers.fusers import NoFuser
 from peers.trust import Trust, TrustConfig
 from protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
@@ -108,6 +115,10 @@ class Consensus:
         self.o = options
         self.estimator = estimator
         self.fuser = fuser
+        self.hooks = EstimatorHooks.of(estimator)
+        """The estimator's optional hooks (:class:`peers.contracts.EstimatorHooks`)."""
+        self.fuser_hooks = FuserHooks.of(fuser)
+        """The fuser's optional hooks (:class:`peers.contracts.FuserHooks`)."""
         self.fusing = bool(options.neighbours) and not isinstance(fuser, NoFuser)
         self.rounds = min(options.rounds, fuser.max_rounds)
         self.kinds = tuple(estimator.kinds) if self.fusing else ()
@@ -162,7 +173,7 @@ class Consensus:
         self.stats.estimates_in += 1
         payload = (est.scans if isinstance(est, Forward) else est.z if isinstance(est, Returns)
                    else est.mixture)
-        st, late = self._scan, getattr(self.fuser, "late", None)
+        st, late = self._scan, self.fuser_hooks.late
         if late is not None and st is not None and (
                 est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
             late(est.sender, payload, est.k)  # after its round: the fuser decides (flooding)
@@ -277,7 +288,7 @@ class Consensus:
         self._record(st.k, "fusion", round=st.round, n_inputs=len(senders), n_fused=len(fused),
                      ages={s: ages.get(s, 0) for s in senders})
         if st.round < self.rounds:
-            outgoing = getattr(self.fuser, "outgoing", None)  # flooding sends only what is new
+            outgoing = self.fuser_hooks.outgoing  # e.g. only the scans not sent before
             return [self._estimate(st.k, st.round,
                                    fused if outgoing is None else outgoing(fused), now,
                                    "posterior")]
