@@ -13,14 +13,16 @@ from collections import deque
 import numpy as np
 
 from peers.core import PeerCore, Publish, Record
-from peers.rerun_sink import RerunSink, color_of, ellipses, position_columns
+from peers.rerun_sink import RerunSink, TrackLabels, color_of, ellipses, position_columns
 
 
 class Observer:
     """Logs one peer's run to a :class:`~peers.rerun_sink.RerunSink` (no-op when disabled)."""
 
     def __init__(self, core: PeerCore, sink: RerunSink, color_index: int,
-                 scan_period: float) -> None:
+                 scan_period: float, label_gate: float = 100.0) -> None:
+        """``label_gate``: metres within which a fused track keeps its display number from
+        one scan to the next (:class:`~peers.rerun_sink.TrackLabels`)."""
         self.core = core
         self.name = core.name
         self.sink = sink
@@ -28,6 +30,7 @@ class Observer:
         self.scan_period = scan_period
         self.tails: deque = deque(maxlen=20)
         self._deferred: list = []
+        self.labels = TrackLabels(label_gate)
 
     @property
     def enabled(self) -> bool:
@@ -44,7 +47,9 @@ class Observer:
         if latency_ms is not None:
             self.sink.scalar(f"metrics/latency_ms/{self.name}", latency_ms)
         xy = states[:, position_columns(states.shape[1])] if len(states) else np.zeros((0, 2))
-        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=5.0)
+        ids = self.labels.assign(xy)
+        self.sink.labelled_points(f"peers/{self.name}/tracks", xy, self.color,
+                                  [f"{self.name}/{i}" for i in ids], radius=5.0)
         self.tails.append(xy)
         self.sink.points(f"peers/{self.name}/tail", np.concatenate(list(self.tails)),
                          self.color, radius=1.5)

@@ -3,16 +3,18 @@
 The sans-I/O core (:class:`peers.core.PeerCore`) is a function of its inputs: the bytes it
 received (after the transport's admission and the injected link faults), the liveliness
 changes, the clock at which deadlines fired, and the end of the run. A recording is exactly
-that, in an MCAP file (the robotics tools' container; msgpack-encoded records, zstd chunks),
+that, in an MCAP file (the robotics tools' container; JSON records with a JSON Schema per
+topic, :data:`SCHEMAS`, so standard tools decode them; zstd chunks),
 plus the tracks the peer published, so a replay can check itself. :func:`replay_with` feeds
 the same calls to the same peer, which its caller builds (:func:`sim.replay.replay` rebuilds it
 from the scenario stored in the file): the fused tracks come out identical to the last bit.
 With changed settings (``--set``) it is a what-if run of one peer on the inputs it really had.
-
 """
 
 from __future__ import annotations
 
+import base64
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +26,21 @@ from peers.core import PeerCore, Publish
 
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
 META = "sensornet"
+_T = {"type": "number", "description": "the peer's clock (s since the epoch) at the call"}
+_BYTES = {"type": "string", "contentEncoding": "base64",
+          "description": "the message's bytes as received or published (protocol.codec)"}
+SCHEMAS = {
+    "receive": {"t": _T, "key": {"type": "string", "description": "Zenoh key expression"},
+                "payload": _BYTES},
+    "liveliness": {"t": _T, "name": {"type": "string"}, "joined": {"type": "boolean"}},
+    "tick": {"t": _T},
+    "finish": {"t": _T},
+    "tracks": {"t": _T, "k": {"type": "integer", "description": "scan index"},
+               "payload": _BYTES},
+}
+"""Each topic's record as a JSON Schema (MCAP ``jsonschema`` schemas over ``json`` messages:
+the mcap tools and Foxglove decode them without our code; floats are written by ``repr``,
+which round-trips exactly, and bytes as base64, so a replay is still bit for bit)."""
 
 
 class Recorder:
@@ -37,37 +54,59 @@ class Recorder:
         self._fh = path.open("wb")
         self._w = Writer(self._fh, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="sensornet")
-        schema = self._w.register_schema("sensornet.record", "", b"")
-        self._ch = {t: self._w.register_channel(t, "msgpack", schema) for t in TOPICS}
+        self._ch = {}
+        for topic, props in SCHEMAS.items():
+            schema = json.dumps({"title": f"sensornet.{topic}", "type": "object",
+                                 "properties": props, "required": list(props),
+                                 "additionalProperties": False}).encode()
+            sid = self._w.register_schema(f"sensornet.{topic}", "jsonschema", schema)
+            self._ch[topic] = self._w.register_channel(topic, "json", sid)
         self._w.add_metadata(META, {k: str(v) for k, v in meta.items()})
         self._seq = 0
 
-    def _log(self, topic: str, now: float, record: list) -> None:
+    def _log(self, topic: str, now: float, record: dict) -> None:
         self._seq += 1
         t = max(0, int(now * 1e9))
-        self._w.add_message(self._ch[topic], t, msgpack.packb(record, use_bin_type=True), t,
+        self._w.add_message(self._ch[topic], t, json.dumps(record).encode(), t,
                             sequence=self._seq)
 
     def receive(self, now: float, key: str, payload: bytes) -> None:
-        self._log("receive", now, [now, key, payload])
+        self._log("receive", now, {"t": now, "key": key, "payload": _b64(payload)})
 
     def liveliness(self, now: float, name: str, joined: bool) -> None:
-        self._log("liveliness", now, [now, name, joined])
+        self._log("liveliness", now, {"t": now, "name": name, "joined": bool(joined)})
 
     def tick(self, now: float) -> None:
-        self._log("tick", now, [now])
+        self._log("tick", now, {"t": now})
 
     def finish(self, now: float) -> None:
-        self._log("finish", now, [now])
+        self._log("finish", now, {"t": now})
 
     def tracks(self, now: float, k: int, payload: bytes) -> None:
-        self._log("tracks", now, [now, k, payload])
+        self._log("tracks", now, {"t": now, "k": int(k), "payload": _b64(payload)})
 
     def close(self) -> None:
         if self._fh is not None:
             self._w.finish()
             self._fh.close()
             self._fh = None
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(bytes(data)).decode("ascii")
+
+
+_FIELDS = {"receive": ("t", "key", "payload"), "liveliness": ("t", "name", "joined"),
+           "tick": ("t",), "finish": ("t",), "tracks": ("t", "k", "payload")}
+
+
+def _record(topic: str, encoding: str, data: bytes) -> list:
+    """A message as the positional record ``replay`` feeds (JSON, or the msgpack of
+    recordings made before the schemas)."""
+    if encoding != "json":
+        return msgpack.unpackb(data, raw=False)
+    body = json.loads(data)
+    return [base64.b64decode(body[f]) if f == "payload" else body[f] for f in _FIELDS[topic]]
 
 
 def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
@@ -85,7 +124,7 @@ def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
                     meta = dict(m.metadata)
             fh.seek(0)
             reader = make_reader(fh)
-            records = [(ch.topic, msgpack.unpackb(msg.data, raw=False))
+            records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
                        for _, ch, msg in reader.iter_messages(log_time_order=False)]
         except McapError as exc:
             raise ValueError(

@@ -26,6 +26,7 @@ from peers.faults import FaultInjector, HoldQueue
 from peers.observer import Observer
 from peers.recording import Recorder
 from peers.rerun_sink import RerunSink
+from peers.scan_results import write_part
 from peers.telemetry import SharedCpu, Telemetry
 from peers.transport import Transport
 from protocol.codec import Rejected, decode
@@ -362,6 +363,7 @@ class PeerRuntime:
                 self._flush_fault_log()
                 self._save_tracks()
                 self.write_summary()
+                self._write_results()
 
     def _finish(self) -> None:
         """Fuse what is pending, then write the summary, tracks and fault log."""
@@ -380,6 +382,17 @@ class PeerRuntime:
         self._flush_fault_log()
         self._save_tracks()
         self.write_summary()
+        self._write_results()
+
+    def _write_results(self) -> None:
+        """This peer's per-scan results (``<stem>.scans.msgpack``; the launcher merges every
+        peer's into the run's ``results.parquet``, docs/results.md)."""
+        try:
+            write_part(self.core.scorer.results, self.name,
+                       self.o.out_dir / f"{self.stem}.scans.msgpack",
+                       self.telemetry.latency_by_scan)
+        except Exception as exc:  # a failed write costs the table, never the summary
+            print(f"{self.name}: per-scan results not written: {exc}", file=sys.stderr)
 
     def _save_tracks(self) -> None:
         if self.saved_tracks is not None:

@@ -16,6 +16,7 @@ import zenoh
 from peers.admission import Admission, parse_key
 from peers.refusal_log import RefusalLog
 from peers.session import SessionError, open_session
+from protocol.encodings import encoding_text, letter_of
 from protocol.keys import Keys
 
 RECOVER_CACHE = 64
@@ -71,6 +72,20 @@ def settle(session, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -
         elif time.monotonic() - since >= stable:
             return
         time.sleep(0.02)
+
+
+
+_ENCODINGS: dict[tuple[str, bool], zenoh.Encoding] = {}
+
+
+def zenoh_encoding(payload: bytes, sealed: bool = False) -> zenoh.Encoding:
+    """The Zenoh encoding a put of ``payload`` declares (protocol.encodings; cached per
+    message type: about a microsecond a put)."""
+    key = (letter_of(payload), sealed)
+    enc = _ENCODINGS.get(key)
+    if enc is None:
+        enc = _ENCODINGS[key] = zenoh.Encoding(encoding_text(payload, sealed))
+    return enc
 
 
 class DuplicatePeer(SessionError):
@@ -219,9 +234,10 @@ class Transport:
             self._ready = self.session.liveliness().declare_token(self.keys.ready(self.name))
 
     def publish(self, channel: str, payload: bytes) -> None:
+        enc = zenoh_encoding(payload, self.signer is not None)
         if self.signer is not None:
             payload = self.signer.seal(getattr(self.keys, channel)(self.name), payload)
-        self._pubs[channel].put(payload)
+        self._pubs[channel].put(payload, encoding=enc)
 
     def wake(self) -> None:
         """Make the main loop look at its flags now (signal handlers)."""

@@ -103,3 +103,28 @@ def test_a_cut_recording_is_a_one_line_error(recorded, tmp_path):
     with pytest.raises(ValueError, match="not a complete recording") as e:
         replay(cut)
     assert "\n" not in str(e.value) and "killed" in str(e.value)
+
+
+def test_standard_tools_decode_every_message_without_our_code(recorded):
+    """The mcap reader and a JSON Schema validator (jsonschema) alone: every channel has a
+    jsonschema schema and json messages, and every message validates against its schema."""
+    import base64
+    import json
+
+    import jsonschema
+    from mcap.reader import make_reader
+
+    out, scn, _ = recorded
+    files = sorted((out / "record").glob("*.mcap"))
+    assert len(files) == len(scn.sensor_names)
+    for path in files:
+        seen = set()
+        with path.open("rb") as fh:
+            for schema, channel, message in make_reader(fh).iter_messages():
+                assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+                body = json.loads(message.data)
+                jsonschema.validate(body, json.loads(schema.data))
+                if "payload" in body:
+                    assert base64.b64decode(body["payload"], validate=True)
+                seen.add(channel.topic)
+        assert {"receive", "tick", "tracks", "finish"} <= seen, seen
