@@ -52,7 +52,8 @@ class ConsensusOptions:
     """Use the fused density as the local filter's prior for the next scan."""
     round_deadlines: bool = False
     """One deadline per round (the scan's deadline split evenly over the rounds) instead of
-    one per scan: a round then runs with what arrived by its own deadline (flooding)."""
+    one per scan: a round then runs with what arrived by its own deadline (scans forwarded
+    in rounds)."""
     trust: TrustConfig | None = None
     """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
     None: every neighbour fused at its consensus weight."""
@@ -176,7 +177,7 @@ class Consensus:
         st, late = self._scan, self.fuser_hooks.late
         if late is not None and st is not None and (
                 est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
-            late(est.sender, payload, est.k)  # after its round: the fuser decides (flooding)
+            late(est.sender, payload, est.k)  # after its round: the fuser's hook decides
             return []
         if est.round == 0 and est.kind == "posterior":
             self.nale.offer(est.sender, est.k, payload)
@@ -303,7 +304,7 @@ class Consensus:
         use the weights, e.g. the single-target rules, must not see it)."""
         mixes = {s: inputs[s]["posterior"] for s in senders}
         if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
-            return inputs, senders, weights  # raw scans (flooding): not densities
+            return inputs, senders, weights  # raw scans: not densities
         weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights))
         self.records.extend(self.trust.drain_records())
         kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]

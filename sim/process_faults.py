@@ -57,7 +57,7 @@ class ProcessFault:
 def _wait_world(handle: RunHandle, stop: threading.Event) -> None:
     """Return once the world listens, has exited, or ``stop`` is set: a session dialled before
     it listens waits out Zenoh's reconnection back-off, and a short run's scans (all of them,
-    in seed001's 12-scan run) passed before the watcher was linked."""
+    in a 12-scan run of two peers) passed before the watcher was linked."""
     while not stop.is_set():
         try:
             handle.wait_listening("world", timeout=1.0)

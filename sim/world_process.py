@@ -121,8 +121,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         signal.signal(s, on_signal)
     sink = RerunSink()
     view = kind_of(scn).view  # the peer kind's Rerun layout (sim/kinds)
-    single = view.single_target or len(scn.targets) == 1
-    layout = {"single_target": single, "imm": view.imm, "follow_radius": FOLLOW_RADIUS}
+    layout = {**view.layout(), "follow_radius": FOLLOW_RADIUS}
+    layout["single_target"] = layout["single_target"] or len(scn.targets) == 1
     if out_dir is not None and rerun or viewer:
         sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
                   else None,
@@ -200,7 +200,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             sink.strips("world/truth/paths", paths.strips(), TRUTH_COLOR)
             sink.scalar("metrics/cardinality/truth", len(X))
             sink.scalar("metrics/ospa/cutoff", scn.metrics.ospa_cutoff)
-            if single and len(xy):
+            if layout["single_target"] and len(xy):
                 sink.follow(xy[0])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
