@@ -290,7 +290,7 @@ class PeerCore:
             return self._reject("spoofed")
         if msg.sender not in c.o.neighbours:
             return self._reject("not-neighbour")
-        scans = getattr(self.estimator, "payload", "mixture") == "scans"
+        scans = c.hooks.payload == "scans"
         if (isinstance(msg, Forward) != scans or msg.kind not in (c.kinds or ("posterior",))
                 or (isinstance(msg, Estimate) and msg.mixture.dim != self.estimator.dim)
                 or isinstance(msg, Returns) != (msg.kind == "returns")):

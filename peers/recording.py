@@ -5,22 +5,24 @@ received (after the transport's admission and the injected link faults), the liv
 changes, the clock at which deadlines fired, and the end of the run. A recording is exactly
 that, in an MCAP file (the robotics tools' container; JSON records with a JSON Schema per
 topic, :data:`SCHEMAS`, so standard tools decode them; zstd chunks),
-plus the tracks the peer published, so a replay can check itself. ``replay`` builds the same
-peer from the scenario stored in the file and feeds it the same calls: the fused tracks come
-out identical to the last bit. With changed settings (``--set``) it is a what-if run of one
-peer on the inputs it really had.
+plus the tracks the peer published, so a replay can check itself. :func:`replay_with` feeds
+the same calls to the same peer, which its caller builds (:func:`sim.replay.replay` rebuilds it
+from the scenario stored in the file): the fused tracks come out identical to the last bit.
+With changed settings (``--set``) it is a what-if run of one peer on the inputs it really had.
 """
 
 from __future__ import annotations
 
 import base64
 import json
-import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgpack
 import numpy as np
+
+from peers.core import PeerCore, Publish
 
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
 META = "sensornet"
@@ -108,19 +110,27 @@ def _record(topic: str, encoding: str, data: bytes) -> list:
 
 
 def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
-    """The metadata and the records ``(topic, record)`` of a recording, in order."""
+    """The metadata and the records ``(topic, record)`` of a recording, in order; a file that
+    is not a complete MCAP file is a one-line :class:`ValueError`."""
+    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     with Path(path).open("rb") as fh:
-        reader = make_reader(fh)
-        meta = {}
-        for m in reader.iter_metadata():
-            if m.name == META:
-                meta = dict(m.metadata)
-        fh.seek(0)
-        reader = make_reader(fh)
-        records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
-                   for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        try:
+            reader = make_reader(fh)
+            meta = {}
+            for m in reader.iter_metadata():
+                if m.name == META:
+                    meta = dict(m.metadata)
+            fh.seek(0)
+            reader = make_reader(fh)
+            records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
+                       for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        except McapError as exc:
+            raise ValueError(
+                f"not a complete recording ({type(exc).__name__}): a peer that was "
+                f"killed (--fault kill:...) never closed its file, and what it held in its "
+                f"last chunk is lost") from None
     return meta, records
 
 
@@ -149,32 +159,13 @@ def _states(payload: bytes | None) -> bytes | None:
     return bytes(body[-1])
 
 
-def replay(path: Path, overrides: list[str] = ()) -> Replay:
-    """Feed a recording through a freshly built peer (``overrides``: ``--set`` items on top of
-    the recorded ones)."""
-    from peers.core import Publish
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario, parse_overrides
-
+def replay_with(path: Path, build: Callable[[dict[str, str]], PeerCore]) -> Replay:
+    """Feed a recording through the peer ``build(meta)`` makes from its metadata (the caller
+    in ``sim`` rebuilds it from the stored scenario: this layer knows no scenario)."""
     meta, records = read(path)
     if not meta:
         raise ValueError(f"{path}: not a sensornet recording (no '{META}' metadata)")
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / meta.get("scenario_file", "scenario.toml")
-        src.write_text(meta["scenario_text"])
-        recorded = json.loads(meta.get("overrides", "[]"))
-        scn = load_scenario(str(src), overrides=parse_overrides([*recorded, *overrides]))
-        if overrides:
-            was = load_scenario(str(src), overrides=parse_overrides(recorded)).network.rounds
-            if scn.network.rounds != was:
-                raise ValueError(
-                    f"--set network.rounds={scn.network.rounds}: the recording holds only the "
-                    f"{was} round(s) per scan the run had, and a replay cannot make the "
-                    f"neighbours' other rounds (run again with --set "
-                    f"network.rounds={scn.network.rounds})")
-    speed = float(meta["speed"]) if meta.get("speed") else None
-    core = make_peer(scn, meta["peer"], int(meta.get("run", 0)), network=meta["network"],
-                     speed=speed)
+    core = build(meta)
     out = Replay(meta["peer"])
     for topic, r in records:
         if topic == "receive":

@@ -24,6 +24,7 @@ from peers.admission import parse_key, peek
 from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector, HoldQueue
 from peers.observer import Observer
+from peers.recording import Recorder
 from peers.rerun_sink import RerunSink
 from peers.scan_results import write_part
 from peers.telemetry import SharedCpu, Telemetry
@@ -140,8 +141,6 @@ class PeerRuntime:
         self.transport.open(session=session)
         try:
             if o.record is not None and o.out_dir is not None:
-                from peers.recording import Recorder
-
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
             if o.out_dir is not None and o.rerun or o.viewer:

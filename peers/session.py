@@ -15,6 +15,9 @@ from pathlib import Path
 
 import zenoh
 
+from peers.endpoints import check_endpoints
+from peers.errors import SessionError
+
 DEFAULT_LEASE_MS = 1500
 """Zenoh link lease: a frozen (SIGSTOP) process is noticed within about this long (Zenoh's own
 default, 10 s, let a frozen neighbour hold up every deadline for 10 s)."""
@@ -44,8 +47,6 @@ PEER_WAIT = 60.0
 processes on a loaded 2-core machine once took more than 30 s to start and link up."""
 
 
-class SessionError(Exception):
-    """The Zenoh session could not be configured or opened (reported in one line)."""
 
 
 def _ephemeral_low() -> int:
@@ -148,8 +149,6 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
         if not gossip:  # links only to the given endpoints (large networks: fewer links)
             conf.insert_json5("scouting/gossip/enabled", "false")
         if security is not None:
-            from peers.security import check_endpoints
-
             check_endpoints([*listen, *connect])
             if not listen:  # not Zenoh's default plain tcp/[::]:0 listener: others would
                 # learn it by gossip and link to it unauthenticated (every message refused)

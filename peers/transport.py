@@ -15,6 +15,7 @@ import time
 import zenoh
 
 from peers.admission import Admission, parse_key
+from peers.refusal_log import RefusalLog
 from peers.session import SessionError, open_session
 from protocol.encodings import encoding_text, letter_of
 from protocol.keys import Keys
@@ -209,8 +210,6 @@ class Transport:
         declared on, never closed here (:meth:`close` undeclares this peer's part only)."""
         self.arm_signatures()
         if self.security is not None and self.refusals is None:
-            from peers.security import RefusalLog
-
             self.refusals = RefusalLog().start()  # counts what the access control refuses
         self._owns_session = session is None
         if session is None:

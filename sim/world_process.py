@@ -25,7 +25,7 @@ from peers.rerun_sink import (
     position_columns,
 )
 from peers.session import PEER_WAIT, open_session
-from peers.transport import zenoh_encoding
+from peers.transport import recovering_publisher, zenoh_encoding
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
@@ -121,8 +121,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         signal.signal(s, on_signal)
     sink = RerunSink()
     view = kind_of(scn).view  # the peer kind's Rerun layout (sim/kinds)
-    single = view.single_target or len(scn.targets) == 1
-    layout = {"single_target": single, "imm": view.imm, "follow_radius": FOLLOW_RADIUS}
+    layout = {**view.layout(), "follow_radius": FOLLOW_RADIUS}
+    layout["single_target"] = layout["single_target"] or len(scn.targets) == 1
     if out_dir is not None and rerun or viewer:
         sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
                   else None,
@@ -153,8 +153,6 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 for n in scn.sensor_names}
         probes = pubs  # matching_status: an advanced publisher has none, a plain one does
         if recover:
-            from peers.transport import recovering_publisher
-
             pubs = {n: recovering_publisher(session, keys.scan(n)) for n in scn.sensor_names}
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
@@ -202,7 +200,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             sink.strips("world/truth/paths", paths.strips(), TRUTH_COLOR)
             sink.scalar("metrics/cardinality/truth", len(X))
             sink.scalar("metrics/ospa/cutoff", scn.metrics.ospa_cutoff)
-            if single and len(xy):
+            if layout["single_target"] and len(xy):
                 sink.follow(xy[0])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
