@@ -201,6 +201,10 @@ class PeerRuntime:
         the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
         peer, so the observer may flush)."""
         try:
+            taken = self.core.admission.taken
+            for tag, key, payload in items:  # out of the inbox (handled or skipped below)
+                if tag == "msg":
+                    taken(key, len(payload))
             for item in self._catch_up(items):
                 if self._stop:
                     break

@@ -156,13 +156,18 @@ class Transport:
 
     def deliver(self, key: str, payload: bytes) -> None:
         """What arrived on ``key``, from Zenoh or handed over by a co-hosted neighbour
-        (:mod:`peers.host`): the same admission (per sender) and signature check either way."""
-        if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
+        (:mod:`peers.host`): the same admission (per sender) and signature check either way.
+        Bounded before anything is decoded or verified (peers.admission): window, slot, the
+        sender's bucket and a place in the inbox, given back by the main loop (taken)."""
+        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
+                size = len(payload)
                 payload, why = self.verifier.open(key, payload, self.check_signatures)
                 if why is not None:
                     self.admission.rejected[why] += 1
+                    self.admission.taken(key, size)
                     return
+                self.admission.shrink(size - len(payload))  # the trailer stays here
             self.q.put(("msg", key, payload))
 
     def _missed(self, channel: str, n: int) -> None:

@@ -232,8 +232,12 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     assert len(big_payload) > host.decode.LARGEST  # not kept: memory stays bounded
     limits = host.peers[0].core.cfg.limits
     assert host.decode(big_payload, limits) is not host.decode(big_payload, limits)
-    host._active = [0, 1]  # p02 killed
+    # a round the network does not have is refused per receiver before decoding (admission)
     t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 0, mix, round=1)))
+    assert host.q.empty()
+    assert t[0].admission.rejected["round"] == 1 == t[2].admission.rejected["round"]
+    host._active = [0, 1]  # p02 killed
+    t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 1, mix)))
     assert [slot for slot, _ in [host.q.get_nowait()]] == [0] and host.q.empty()
 
 
