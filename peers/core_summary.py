@@ -30,6 +30,8 @@ def core_snapshot(core) -> dict:
         "last_k": c.last_k,
         "mean_ospa_local": s.mean("local"),
         "mean_ospa_fused": s.mean("fused"),
+        "mean_gospa_local": s.results.mean("local"),
+        "mean_gospa_fused": s.results.mean("fused"),
         "ospa_misses": dict(s.misses),
         "ospa_scored": dict(s.counts),
         "ospa_unscored": s.unscored,

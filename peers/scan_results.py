@@ -58,6 +58,13 @@ class ScanResults:
         self.rows.append((int(k), which, scored, float(value), g, loc, missed, false,
                           len(est), len(true), tracks, np.asarray(truth, float).tolist()))
 
+    def mean(self, which: str, column: str = "gospa") -> float:
+        """Mean of a metric column over this peer's ``which`` rows (misses included, as the
+        summary's OSPA means count them); NaN with no rows."""
+        i = COLUMNS.index(column) - 1  # rows hold the columns after "peer"
+        values = [r[i] for r in self.rows if r[1] == which]
+        return float(np.mean(values)) if values else float("nan")
+
     def meta(self) -> dict:
         """What a reader needs besides the rows: where the position sits in a state row, and
         the OSPA/GOSPA cut-off and order the rows were scored with."""

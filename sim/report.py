@@ -25,8 +25,9 @@ import numpy as np
 from sim import studies
 from sim.campaign import _fmt, read_manifest, results_table
 from sim.report_html import markdown_html
-from sim.report_plots import band, plt_module, series
+from sim.report_plots import axis_label, band, plt_module, series
 from sim.results import META_COLUMNS
+from sim.scenario import ScenarioError, load_scenario
 
 CAMPAIGN_FIGURES = ("sweep", "ospa-time")
 """Figure kinds drawn over the whole campaign; any other kind is a study's per-cell report."""
@@ -77,7 +78,8 @@ def _by_cell(table, manifest) -> dict[int, dict[str, Any]]:
 def _headline(scalars: list[str]) -> list[str]:
     keys = [c for c in scalars if c.startswith("mean_ospa.")]
     if not keys:
-        keys = [c for c in ("fused_ospa", "local_ospa") if c in scalars]
+        keys = [c for c in ("fused_ospa", "local_ospa", "fused_gospa", "local_gospa")
+                if c in scalars]
     return keys or scalars[:3]
 
 
@@ -90,6 +92,29 @@ def _tick_labels(values: list) -> dict[str, str]:
         if keys:
             return {repr(v): ", ".join(f"{k}={_fmt(v.get(k))}" for k in keys) for v in values}
     return {repr(v): _fmt(v) for v in values}
+
+
+def numeric_axis(values: list):
+    """Where each x value sits on a numeric axis, or None (a categorical axis): numbers as
+    themselves; tables (``{kind = "scans", low = 0, high = 2}``) that differ in one numeric
+    entry by that entry (``high``: 0, 1, 2, 4 spaced as numbers, not evenly)."""
+    def number(v) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if values and all(number(v) for v in values):
+        return lambda v: v
+    if values and all(isinstance(v, dict) for v in values):
+        keys = [k for k in dict.fromkeys(k for v in values for k in v)
+                if len({repr(v.get(k)) for v in values}) > 1]
+        if len(keys) == 1 and all(number(v.get(keys[0])) for v in values):
+            key = keys[0]
+
+            def scale(v):
+                return v[key]
+
+            scale.key = key
+            return scale
+    return None
 
 
 def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
@@ -118,17 +143,22 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     if not groups:
         return None
     xs = list(dict.fromkeys(repr(v) for pts in groups.values() for v, _, _ in pts))
-    labels = _tick_labels([v for pts in groups.values() for v, _, _ in pts])
-    numeric = all(isinstance(v, int | float) and not isinstance(v, bool)
-                  for pts in groups.values() for v, _, _ in pts)
+    values = [v for pts in groups.values() for v, _, _ in pts]
+    labels = _tick_labels(values)
+    scale = numeric_axis(values)
+    numeric = scale is not None
     fig, ax = plt.subplots(figsize=(7, 4.5))
+
+    def pos(v):
+        return scale(v) if numeric else xs.index(repr(v))
+
     for g, pts in groups.items():
-        px = [v if numeric else xs.index(repr(v)) for v, _, _ in pts]
+        px = [pos(v) for v, _, _ in pts]
         bar = ax.errorbar(px, [m for _, m, _ in pts], yerr=[0 if math.isnan(h) else h
                                                              for _, _, h in pts],
                           marker="o", capsize=3, label=g)
         if g in base:
-            bx = [v if numeric else xs.index(repr(v)) for v, _, _ in base[g]]
+            bx = [pos(v) for v, _, _ in base[g]]
             ax.plot(bx, [m for _, m, _ in base[g]], "--", color=bar[0].get_color(), alpha=0.7,
                     label=f"{base_key}, {g}")
     paper = spec.get("paper")
@@ -138,8 +168,9 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     if not numeric:
         ax.set_xticks(range(len(xs)), [labels[v] for v in xs],
                       rotation=20 if max(len(labels[v]) for v in xs) > 12 else 0)
-    ax.set_xlabel(spec.get("xlabel", x))
-    ax.set_ylabel(spec.get("ylabel", y))
+    ax.set_xlabel(spec.get("xlabel", x if getattr(scale, "key", None) is None
+                           else f"{x}: {scale.key}"))
+    ax.set_ylabel(spec.get("ylabel", axis_label(y)))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(f"{manifest['name']}: {y} against {x} (95 % intervals)", fontsize=10)
@@ -157,6 +188,18 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
     return caption, path
 
 
+def _cutoff(manifest: dict, cell: dict) -> float | None:
+    """The OSPA cut-off a cell was scored with: its own setting, else its scenario's."""
+    value = cell.get("values", {}).get("metrics.ospa_cutoff")
+    if isinstance(value, int | float):
+        return float(value)
+    try:
+        source = cell.get("scenario") or manifest.get("scenario", "")
+        return float(load_scenario(source).metrics.ospa_cutoff)
+    except (ScenarioError, OSError, ValueError):  # no longer loads: clipped at 0 only
+        return None
+
+
 def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,
                      n: int) -> tuple[str, Path] | None:
     plt = plt_module()
@@ -168,13 +211,14 @@ def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,
         if col is None or not data[col]:
             continue
         s = series(data[col])
-        band(ax, np.arange(1, s.shape[1] + 1), s, cell["label"])
+        band(ax, np.arange(1, s.shape[1] + 1), s, cell["label"], lo=0.0,
+             hi=_cutoff(manifest, cell))
         drew = True
     if not drew:
         plt.close(fig)
         return None
     ax.set_xlabel("scan")
-    ax.set_ylabel("fused OSPA (m)")
+    ax.set_ylabel("fused OSPA (m; band clipped to 0..cut-off)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(f"{manifest['name']}: fused OSPA over time (95 % bands)", fontsize=10)

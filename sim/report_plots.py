@@ -29,11 +29,31 @@ def methods(data: dict[str, Any], prefix: str) -> list[str]:
     return [c[len(prefix):] for c in data if c.startswith(prefix)]
 
 
-def band(ax, k, s: np.ndarray, label: str, **kw) -> None:
+def band(ax, k, s: np.ndarray, label: str, lo: float | None = None, hi: float | None = None,
+         **kw) -> None:
+    """Mean line and 95 % Student-t band over runs, the band clipped to ``[lo, hi]``: a metric
+    that cannot leave that range (OSPA: 0 to its cut-off) is not drawn outside it."""
     mean = np.nanmean(s, axis=0)
     line, = ax.plot(k, mean, label=label, **kw)
     if len(s) > 1:
         from scipy.stats import t
 
         half = t.ppf(0.975, len(s) - 1) * np.nanstd(s, axis=0, ddof=1) / math.sqrt(len(s))
-        ax.fill_between(k, mean - half, mean + half, color=line.get_color(), alpha=0.2, lw=0)
+        low, high = mean - half, mean + half
+        if lo is not None or hi is not None:
+            low, high = np.clip(low, lo, hi), np.clip(high, lo, hi)
+        ax.fill_between(k, low, high, color=line.get_color(), alpha=0.2, lw=0)
+
+
+UNITS = (("gospa", "m"), ("ospa", "m"), ("rmse", "m"), ("latency_ms", "ms"), ("_ms", "ms"),
+         ("seconds", "s"), ("bytes", "B"), ("tuples", "tuples per peer per scan"))
+"""Units of metric columns by a part of their name (first match)."""
+
+
+def axis_label(name: str) -> str:
+    """A metric column's name with its unit, e.g. ``fused_ospa (m)``; the name alone if its
+    unit is not known."""
+    for part, unit in UNITS:
+        if part in name:
+            return f"{name} ({unit})"
+    return name

@@ -25,6 +25,8 @@ def test_run_gives_the_summary_numbers_and_arrays():
             k, v = run.metric(p, "ospa", which)
             assert list(k) == list(range(1, 13))
             assert v.mean() == pytest.approx(run.mean_ospa(p, which), rel=1e-12)
+            g = run.metric(p, "gospa", which)[1]
+            assert g.mean() == pytest.approx(run.summary(p)[f"mean_gospa_{which}"], rel=1e-12)
     pos = run.meta["position_index"]
     tracks, truth = run.tracks("s2"), run.truth()
     for k in (1, 6, 12):

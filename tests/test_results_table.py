@@ -113,5 +113,7 @@ def test_a_process_run_writes_the_table_with_latency_and_matches_the_summaries(t
             sel = (peer == name) & (which == w)
             assert sel.sum() == 12
             assert value[sel].mean() == pytest.approx(summary[f"mean_ospa_{w}"], rel=1e-9)
+            gospa = np.array(cols["gospa"])[sel]
+            assert gospa.mean() == pytest.approx(summary[f"mean_gospa_{w}"], rel=1e-9)
         lat = np.array(cols["latency_ms"])[(peer == name) & (which == "fused")]
         assert np.isfinite(lat).sum() >= 10 and (lat[np.isfinite(lat)] > 0).all()

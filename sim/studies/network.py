@@ -29,6 +29,8 @@ def twin_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
     out: dict[str, Any] = {
         "fused_ospa": float(np.mean([p.mean_ospa("fused") for p in peers.values()])),
         "local_ospa": float(np.mean([p.mean_ospa("local") for p in peers.values()])),
+        "fused_gospa": float(np.mean([p.scorer.results.mean("fused") for p in peers.values()])),
+        "local_gospa": float(np.mean([p.scorer.results.mean("local") for p in peers.values()])),
         "fused_card_error": float(np.mean([p.scorer.mean_cardinality_error("fused")
                                            for p in peers.values()])),
         "local_card_error": float(np.mean([p.scorer.mean_cardinality_error("local")
@@ -67,7 +69,9 @@ def real_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
         summaries = read_summaries(Path(tmp), scn.sensor_names)
     out: dict[str, Any] = {
         "fused_ospa": float(np.mean([s["mean_ospa_fused"] for s in summaries.values()])),
-        "local_ospa": float(np.mean([s["mean_ospa_local"] for s in summaries.values()]))}
+        "local_ospa": float(np.mean([s["mean_ospa_local"] for s in summaries.values()])),
+        "fused_gospa": float(np.mean([s["mean_gospa_fused"] for s in summaries.values()])),
+        "local_gospa": float(np.mean([s["mean_gospa_local"] for s in summaries.values()]))}
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(s["nale"][key] for s in summaries.values())
     out.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
