@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 _NOT_CODE = {"report.py", "report_html.py", "report_plots.py", "progress.py", "campaign.py",
-             "results.py", "fusion_study.py", "trust_calibration.py"}
+             "campaign_model.py", "campaign_run.py", "campaign_results.py", "results.py",
+             "fusion_study.py", "trust_calibration.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
 
 
