@@ -43,7 +43,6 @@ from pathlib import Path
 
 from sim import studies
 from sim.campaign_model import (
-    DEFAULT_SCENARIO,
     Campaign,
     CampaignError,
     Cell,
@@ -73,6 +72,7 @@ from sim.campaign_run import (  # noqa: F401  (re-exported)
 )
 from sim.runners import code_version, setup_hash
 from sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
+from sim.studies import DEFAULT_SCENARIO
 
 
 def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:

@@ -10,9 +10,6 @@ from sim import studies
 from sim.runners import Task
 from sim.scenario import ScenarioError
 
-DEFAULT_SCENARIO = "seed000"
-"""The scenario of a campaign file that names none (the project's default, as the commands')."""
-
 
 def figure_kinds() -> tuple[str, ...]:
     """``[[figures]]`` kinds: the campaign-wide ones and each study's per-cell report."""

@@ -27,6 +27,9 @@ STUDIES: dict[str, str] = {
 """Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
 read a scenario (the last, ``experiment``, reads any). Modules are imported on first use."""
 
+DEFAULT_SCENARIO = "seed000"
+"""The built-in scenario a command or campaign plays when it names none."""
+
 PLUGINS_ENV = "SENSORNET_STUDIES"
 """Comma-separated ``"name=module:attribute"`` entries added to :data:`STUDIES` (a plug-in's
 studies, asked first; inherited by campaign workers)."""
