@@ -32,9 +32,7 @@ def run_once(scn: s4.Seed004, run: int) -> dict[str, dict[str, float]]:
 
 
 def table(o: Outcome) -> str:
-    return "\n".join([s4.table_title(o.setup, o.runs), s4.format_table(o.summary),
-                      s4.reference_comparison(o.summary, o.setup.adjacency),
-                      f"({o.seconds:.0f} s)"])
+    return s4.report_text(o.setup, o.runs, o.summary, o.seconds)
 
 
 def figures(o: Outcome, folder: Path) -> list[Path]:
