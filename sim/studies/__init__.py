@@ -22,6 +22,7 @@ STUDIES: dict[str, str] = {
     "twin": "sim.studies.network:TWIN",
     "real": "sim.studies.network:REAL",
     "fusion-quality": "sim.studies.fusion:STUDY",
+    "lying": "sim.lying:STUDY",
     "experiment": "sim.studies.seed000:STUDY",
 }
 """Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
