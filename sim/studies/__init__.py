@@ -109,5 +109,6 @@ def register(study):
 
 
 def unregister(name: str) -> None:
-    """Remove a study added with :func:`register` (tests)."""
+    """Forget a study added with :func:`register` or loaded from a plug-in (tests)."""
     _registered.pop(name, None)
+    _loaded.pop(name, None)
