@@ -70,7 +70,7 @@ from sim.campaign_run import (  # noqa: F401  (re-exported)
     read_lock,
     run_campaign,
 )
-from sim.runners import code_version, setup_hash
+from sim.runners import code_version, scenario_source, setup_hash
 from sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
 from sim.studies import DEFAULT_SCENARIO
 
@@ -149,8 +149,6 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
             parts += [f"{k}={_fmt(v)}" for k, v in values.items()]
             shown = {**({"cell": entry["name"]} if "name" in entry else own), **values}
             cells.append(Cell(len(cells), ", ".join(parts) or "base", over, shown))
-    from sim.runners import scenario_source
-
     version = code_version()
     for c in cells:
         try:
