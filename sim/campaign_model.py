@@ -9,6 +9,7 @@ from typing import Any
 from sim import studies
 from sim.runners import Task
 from sim.scenario import ScenarioError
+from sim.sweep import _toml
 
 
 def figure_kinds() -> tuple[str, ...]:
@@ -96,8 +97,6 @@ def _flatten(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def _fmt(v: Any) -> str:
     """A value as in a ``--set`` (strings bare, tables inline)."""
-    from sim.sweep import _toml
-
     return v if isinstance(v, str) else _toml(v)
 
 

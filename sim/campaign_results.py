@@ -9,6 +9,7 @@ from typing import Any
 
 from sim.campaign_model import Campaign, CampaignError, Cell
 from sim.campaign_run import lock_alive, read_lock
+from sim.results import ResultStore, is_timing
 
 # --------------------------------------------------------------------------------------------
 # Status and progress
@@ -33,8 +34,6 @@ class Status:
 
 
 def status(c: Campaign, folder: Path) -> Status:
-    from sim.results import ResultStore
-
     stored = ResultStore(folder / "results").done_keys()
     per = [(cell, sum(1 for k in cell.keys if k in stored)) for cell in c.cells]
     wanted = {k for cell in c.cells for k in cell.keys}
@@ -108,8 +107,6 @@ def results_table(folder: Path, manifest: dict[str, Any] | None = None,
     computed are absent). Columns ``cell``/``cell_label`` are the manifest's."""
     import pyarrow as pa
 
-    from sim.results import ResultStore
-
     manifest = manifest or read_manifest(folder)
     order = [(cell["index"], cell["label"], k) for cell in manifest["cells"]
              for k in cell["keys"]]
@@ -131,8 +128,6 @@ def results_table(folder: Path, manifest: dict[str, Any] | None = None,
 def canonical_rows(table) -> list[tuple]:
     """The table's computed values as exact text (``repr`` of every float), without timing
     columns, keys and code versions: equal lists mean bit-identical results."""
-    from sim.results import is_timing
-
     cols = sorted(c for c in table.column_names
                   if not is_timing(c) and c not in ("key", "code_version"))
     data = {c: table.column(c).to_pylist() for c in cols}

@@ -13,6 +13,8 @@ from typing import Any, TextIO
 
 from sim.campaign_model import Campaign, CampaignError
 from sim.progress import Progress
+from sim.results import ResultStore, need_pyarrow
+from sim.runners import run_dask, run_pool
 
 
 class CampaignProgress(Progress):
@@ -121,8 +123,6 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
     ``LocalCluster`` of ``jobs`` workers) or a scheduler address. ``stop_after``: stop (as an
     interrupt would) once that many tasks have finished in this call.
     """
-    from sim.results import need_pyarrow
-
     need_pyarrow()
     folder.mkdir(parents=True, exist_ok=True)
     lock = _claim(folder)
@@ -135,8 +135,6 @@ def run_campaign(c: Campaign, folder: Path, jobs: int = 1, dask: str | None = No
 def _run(c: Campaign, folder: Path, jobs: int, dask: str | None, progress: bool,
          stop_after: int | None, on_row: Callable[[dict], None] | None,
          stream: TextIO | None) -> RunSummary:
-    from sim.results import ResultStore
-
     (folder / "manifest.json").write_text(json.dumps(c.manifest(), indent=1) + "\n")
     store = ResultStore(folder / "results")
     stored = store.done_keys()
@@ -151,12 +149,8 @@ def _run(c: Campaign, folder: Path, jobs: int, dask: str | None, progress: bool,
     if not tasks:
         rows = iter(())
     elif dask is None:
-        from sim.runners import run_pool
-
         rows = run_pool(tasks, jobs)
     else:
-        from sim.runners import run_dask
-
         rows = run_dask(tasks, scheduler=None if dask == "local" else dask, jobs=jobs)
     try:
         with CampaignProgress(len(tasks), sizes, done0, stream=stream,
