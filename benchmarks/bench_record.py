@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         last = runs[True][-1]
         identical, replayed = 0, 0
         if last["files"]:
-            from peers.recording import replay
+            from sim.replay import replay
 
             for f in last["files"]:
                 replayed += 1

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from peers.member_keys import WORLD
-from protocol.keys import ROUTER_PREFIX, Keys, check_name
+from protocol.keys import ROUTER_PREFIX, WORLD, Keys, check_name
 
 __all__ = ["ROUTER_PREFIX", "acl_rules"]
 

@@ -17,7 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from peers.contracts import Fuser, FusionInput, LocalEstimator, metropolis_weights
+from peers.contracts import (
+    EstimatorHooks,
+    Fuser,
+    FuserHooks,
+    FusionInput,
+    LocalEstimator,
+    metropolis_weights,
+)
 from peers.fusers import NoFuser
 from peers.trust import Trust, TrustConfig
 from protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
@@ -45,7 +52,8 @@ class ConsensusOptions:
     """Use the fused density as the local filter's prior for the next scan."""
     round_deadlines: bool = False
     """One deadline per round (the scan's deadline split evenly over the rounds) instead of
-    one per scan: a round then runs with what arrived by its own deadline (flooding)."""
+    one per scan: a round then runs with what arrived by its own deadline (scans forwarded
+    in rounds)."""
     trust: TrustConfig | None = None
     """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
     None: every neighbour fused at its consensus weight."""
@@ -108,6 +116,10 @@ class Consensus:
         self.o = options
         self.estimator = estimator
         self.fuser = fuser
+        self.hooks = EstimatorHooks.of(estimator)
+        """The estimator's optional hooks (:class:`peers.contracts.EstimatorHooks`)."""
+        self.fuser_hooks = FuserHooks.of(fuser)
+        """The fuser's optional hooks (:class:`peers.contracts.FuserHooks`)."""
         self.fusing = bool(options.neighbours) and not isinstance(fuser, NoFuser)
         self.rounds = min(options.rounds, fuser.max_rounds)
         self.kinds = tuple(estimator.kinds) if self.fusing else ()
@@ -162,10 +174,10 @@ class Consensus:
         self.stats.estimates_in += 1
         payload = (est.scans if isinstance(est, Forward) else est.z if isinstance(est, Returns)
                    else est.mixture)
-        st, late = self._scan, getattr(self.fuser, "late", None)
+        st, late = self._scan, self.fuser_hooks.late
         if late is not None and st is not None and (
                 est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
-            late(est.sender, payload, est.k)  # after its round: the fuser decides (flooding)
+            late(est.sender, payload, est.k)  # after its round: the fuser's hook decides
             return []
         if est.round == 0 and est.kind == "posterior":
             self.nale.offer(est.sender, est.k, payload)
@@ -277,7 +289,7 @@ class Consensus:
         self._record(st.k, "fusion", round=st.round, n_inputs=len(senders), n_fused=len(fused),
                      ages={s: ages.get(s, 0) for s in senders})
         if st.round < self.rounds:
-            outgoing = getattr(self.fuser, "outgoing", None)  # flooding sends only what is new
+            outgoing = self.fuser_hooks.outgoing  # e.g. only the scans not sent before
             return [self._estimate(st.k, st.round,
                                    fused if outgoing is None else outgoing(fused), now,
                                    "posterior")]
@@ -292,7 +304,7 @@ class Consensus:
         use the weights, e.g. the single-target rules, must not see it)."""
         mixes = {s: inputs[s]["posterior"] for s in senders}
         if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
-            return inputs, senders, weights  # raw scans (flooding): not densities
+            return inputs, senders, weights  # raw scans: not densities
         weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights))
         self.records.extend(self.trust.drain_records())
         kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]

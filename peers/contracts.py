@@ -11,9 +11,9 @@ the peer changes (docs/architecture.md has a ten-line example).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -91,6 +91,52 @@ class Fuser(Protocol):
     def fuse(self, inp: FusionInput) -> GaussianMixture:
         """The fused density of one round (never raises on well-formed, compatible inputs)."""
         ...
+
+
+def _nothing(*_args: Any) -> None:
+    return None
+
+
+class _Hooks:
+    """Optional hooks of a part, each declared below with its default, read off the part once
+    when a peer is built: the core, the consensus and the observer then call them without
+    probing the part (a part declares a hook by having an attribute of its name)."""
+
+    @classmethod
+    def of(cls, part: object):
+        return cls(**{f.name: getattr(part, f.name) for f in fields(cls)
+                      if getattr(part, f.name, None) is not None})
+
+
+@dataclass(frozen=True)
+class EstimatorHooks(_Hooks):
+    """What a :class:`LocalEstimator` may add to its four methods."""
+
+    payload: str = "mixture"
+    """What it exchanges: ``"mixture"`` (:class:`~protocol.messages.Estimate`) or ``"scans"``
+    (raw scans in :class:`~protocol.messages.Forward` messages)."""
+    plane: Callable[[Any], np.ndarray] | None = None
+    """The points ``(n, 2)`` of a scans payload, to draw it (``payload = "scans"``)."""
+    particles: Callable[[], np.ndarray | None] = _nothing
+    """A sample of its particle cloud ``(n, 2)`` to draw, or None."""
+    partition_view: Callable[[], tuple[np.ndarray, np.ndarray] | None] = _nothing
+    """The last scan's measurement cells ``(points, labels)`` to draw, or None."""
+    pda_view: Callable[[], dict | None] = _nothing
+    """The last update's gates, weighted returns and detector state to draw, or None."""
+    model_names: tuple[str, ...] = ()
+    """Names of its motion models (labels of :attr:`FuserHooks.model_probabilities`)."""
+
+
+@dataclass(frozen=True)
+class FuserHooks(_Hooks):
+    """What a :class:`Fuser` may add to ``fuse``."""
+
+    late: Callable[[str, Any, int], None] | None = None
+    """Takes a neighbour's payload that came after its round (else it is dropped as late)."""
+    outgoing: Callable[[Any], Any] | None = None
+    """What of a fused payload the next round sends (else all of it)."""
+    model_probabilities: Callable[[], np.ndarray] | None = None
+    """The fused model probabilities (to plot), if it fuses a model mixture."""
 
 
 def metropolis_weights(own: str, senders: Sequence[str], degrees: Mapping[str, int],

@@ -5,7 +5,7 @@ One model, two drivers. The discrete-event twin (``sim.twin``) asks
 one delivery per returned delay; the Zenoh runtime asks the same question when the estimate
 arrives and holds it that long (:class:`HoldQueue`) before handing it on. Nothing here imports
 Zenoh or touches a clock. The plan (what can go wrong on each link) is
-:class:`sim.faultplan.FaultPlan`, built by the scenario loader from the ``[faults]`` table.
+:class:`peers.faultplan.FaultPlan`, built by the scenario loader from the ``[faults]`` table.
 
 Per message on the link ``sender -> receiver`` (:meth:`FaultInjector.decide`), at the
 message's time ``t`` (for an estimate of scan ``k``: its scan time ``k * plan.interval``):
@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from sim.faultplan import (
+from peers.faultplan import (
     Constant,
     Delay,
     Exponential,

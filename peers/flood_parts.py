@@ -16,6 +16,8 @@ import numpy as np
 from peers.contracts import FusionInput, LocalOutput
 from peers.flooder import Flooder
 from protocol.messages import ScanSet
+from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
+from tracking.models import RangeBearing
 
 
 class FloodEstimator:
@@ -38,8 +40,6 @@ class FloodEstimator:
 
     def __init__(self, name: str, roster: Mapping[str, object], params=None,
                  assumed_scans: str = "held", seed: int = 0, method: str = "idpc") -> None:
-        from tracking.idpc import ClusterParams
-
         if assumed_scans not in ("held", "all"):
             raise ValueError(f"assumed_scans {assumed_scans!r}: expected 'held' or 'all'")
         if method not in ("idpc", "ftc"):
@@ -68,9 +68,6 @@ class FloodEstimator:
 
     def plane(self, scans: ScanSet) -> np.ndarray:
         """The pooled points ``(n, 2)`` in the plane."""
-        from tracking.idpc import polar_to_cartesian
-        from tracking.models import RangeBearing
-
         parts = []
         for origin in sorted(scans.scans, key=self._order):  # one order at every peer
             z, model = scans.scans[origin], self.roster.get(origin)
@@ -79,8 +76,6 @@ class FloodEstimator:
         return np.concatenate(parts) if parts else np.zeros((0, 2))
 
     def extract(self, scans: ScanSet) -> np.ndarray:
-        from tracking.idpc import ftc, idpc
-
         S = len(self.roster) if self.assumed_scans == "all" else len(scans)
         cluster = ftc if self.method == "ftc" else idpc
         c = cluster(self.plane(scans), S, self.params, np.random.default_rng(self.seed)).centres

@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from protocol.messages import ScanSet
+from protocol.codec import encode
+from protocol.messages import Forward, ScanSet
 
 TUPLES_PER_MEASUREMENT = 2
 """A 2-D measurement is 2 tuples (seed 004)."""
@@ -168,9 +169,6 @@ def flooding_bytes(hops: np.ndarray, scans: Sequence[np.ndarray], iterations: in
     ``(S, iterations)``, once per neighbour. In iteration ``t`` peer i sends one
     :class:`~protocol.messages.Forward` holding the scans of the peers at hop distance
     ``t - 1`` (as :func:`flooding_tuples`), to each of its ``deg_i`` neighbours."""
-    from protocol.codec import encode
-    from protocol.messages import Forward
-
     hops = np.asarray(hops, dtype=float)
     deg = (hops == 1).sum(axis=1)
     out = np.zeros((len(hops), iterations), dtype=np.int64)

@@ -25,7 +25,7 @@ import stat
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from peers.session import SessionError
+from peers.errors import SecurityError
 from protocol.keys import WORLD, check_name  # noqa: F401  (WORLD: re-exported)
 
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
@@ -37,8 +37,6 @@ DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 """Names every member certificate is valid for (the host part of the endpoints dialled)."""
 
 
-class SecurityError(SessionError):
-    """Keys could not be made or a secure-mode folder is incomplete (one line)."""
 
 
 # -- keys and certificates --------------------------------------------------------------------

@@ -13,15 +13,16 @@ from collections import deque
 import numpy as np
 
 from peers.core import PeerCore, Publish, Record
-from peers.rerun_sink import RerunSink, color_of, ellipses, position_columns
-from protocol.messages import ScanSet
+from peers.rerun_sink import RerunSink, TrackLabels, color_of, ellipses, position_columns
 
 
 class Observer:
     """Logs one peer's run to a :class:`~peers.rerun_sink.RerunSink` (no-op when disabled)."""
 
     def __init__(self, core: PeerCore, sink: RerunSink, color_index: int,
-                 scan_period: float) -> None:
+                 scan_period: float, label_gate: float = 100.0) -> None:
+        """``label_gate``: metres within which a fused track keeps its display number from
+        one scan to the next (:class:`~peers.rerun_sink.TrackLabels`)."""
         self.core = core
         self.name = core.name
         self.sink = sink
@@ -29,6 +30,7 @@ class Observer:
         self.scan_period = scan_period
         self.tails: deque = deque(maxlen=20)
         self._deferred: list = []
+        self.labels = TrackLabels(label_gate)
 
     @property
     def enabled(self) -> bool:
@@ -45,7 +47,9 @@ class Observer:
         if latency_ms is not None:
             self.sink.scalar(f"metrics/latency_ms/{self.name}", latency_ms)
         xy = states[:, position_columns(states.shape[1])] if len(states) else np.zeros((0, 2))
-        self.sink.points(f"peers/{self.name}/tracks", xy, self.color, radius=5.0)
+        ids = self.labels.assign(xy)
+        self.sink.labelled_points(f"peers/{self.name}/tracks", xy, self.color,
+                                  [f"{self.name}/{i}" for i in ids], radius=5.0)
         self.tails.append(xy)
         self.sink.points(f"peers/{self.name}/tail", np.concatenate(list(self.tails)),
                          self.color, radius=1.5)
@@ -72,19 +76,20 @@ class Observer:
             for what in ("late", "redundant", "too_old", "dropped_late"):
                 self.sink.scalar(f"metrics/out_of_sequence/{n}/{what}", getattr(c, what))
             fused = core.consensus.last_fused
-            if isinstance(fused, ScanSet):  # flooding: the pooled scans (drawn once, at the end)
+            hooks = core.consensus.hooks
+            if fused is not None and hooks.plane is not None:  # scans: the pooled points
                 self.sink.scalar(f"metrics/flooding/{n}/scans_held", len(fused))
-                if r.values["round"] == core.consensus.rounds:
-                    self.sink.points(f"peers/{n}/pooled", core.estimator.plane(fused),
-                                     self.color, radius=1.0)
+                if r.values["round"] == core.consensus.rounds:  # drawn once, at the end
+                    self.sink.points(f"peers/{n}/pooled", hooks.plane(fused), self.color,
+                                     radius=1.0)
             elif fused is not None:
                 self.sink.mixture(f"peers/{n}/fused", fused, self.color)
-            view = getattr(core.estimator, "pda_view", lambda: None)()
-            if view is not None:  # PDA peers (seed 003): gates, weighted returns, detector
+            view = hooks.pda_view()
+            if view is not None:  # gates, weighted returns, detector
                 self._deferred.append(lambda k=r.k, v=view: self._pda(k, v))
-            probs = getattr(core.consensus.fuser, "model_probabilities", None)
+            probs = core.consensus.fuser_hooks.model_probabilities
             if probs is not None:
-                names = getattr(core.estimator, "model_names", None) or []
+                names = hooks.model_names
                 for i, p in enumerate(probs()):
                     label = names[i] if i < len(names) else f"model{i}"
                     self.sink.scalar(f"metrics/model_probability/{n}/{label}", float(p))
@@ -117,20 +122,21 @@ class Observer:
     def _defer_local(self, k: int, compute_ms: float | None) -> None:
         core = self.core
         mix = core.consensus.last_local
-        particles = getattr(core.estimator, "particles", lambda: None)()
-        cells = getattr(core.estimator, "partition_view", lambda: None)()
+        hooks = core.consensus.hooks
+        particles = hooks.particles()
+        cells = hooks.partition_view()
 
         def log() -> None:
             self._time(k)
-            if isinstance(mix, ScanSet):  # flooding: the own scan in the plane
-                self.sink.points(f"peers/{self.name}/local", core.estimator.plane(mix),
-                                 self.color, radius=2.0)
+            if mix is not None and hooks.plane is not None:  # scans: the own scan's points
+                self.sink.points(f"peers/{self.name}/local", hooks.plane(mix), self.color,
+                                 radius=2.0)
             elif mix is not None:
                 self.sink.mixture(f"peers/{self.name}/local", mix, self.color)
-            if particles is not None:  # IMM-PF peers: the particle cloud
+            if particles is not None:  # a particle cloud
                 self.sink.points(f"peers/{self.name}/particles", particles, self.color,
                                  radius=1.0)
-            if cells is not None:  # ET-GM-PHD peers: the scan's cells
+            if cells is not None:  # the scan's measurement cells
                 self._cells(*cells)
             if compute_ms is not None:
                 self.sink.scalar(f"metrics/compute_ms/{self.name}/filter", compute_ms)

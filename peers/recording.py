@@ -3,25 +3,44 @@
 The sans-I/O core (:class:`peers.core.PeerCore`) is a function of its inputs: the bytes it
 received (after the transport's admission and the injected link faults), the liveliness
 changes, the clock at which deadlines fired, and the end of the run. A recording is exactly
-that, in an MCAP file (the robotics tools' container; msgpack-encoded records, zstd chunks),
-plus the tracks the peer published, so a replay can check itself. ``replay`` builds the same
-peer from the scenario stored in the file and feeds it the same calls: the fused tracks come
-out identical to the last bit. With changed settings (``--set``) it is a what-if run of one
-peer on the inputs it really had.
+that, in an MCAP file (the robotics tools' container; JSON records with a JSON Schema per
+topic, :data:`SCHEMAS`, so standard tools decode them; zstd chunks),
+plus the tracks the peer published, so a replay can check itself. :func:`replay_with` feeds
+the same calls to the same peer, which its caller builds (:func:`sim.replay.replay` rebuilds it
+from the scenario stored in the file): the fused tracks come out identical to the last bit.
+With changed settings (``--set``) it is a what-if run of one peer on the inputs it really had.
 """
 
 from __future__ import annotations
 
+import base64
 import json
-import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgpack
 import numpy as np
 
+from peers.core import PeerCore, Publish
+
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
 META = "sensornet"
+_T = {"type": "number", "description": "the peer's clock (s since the epoch) at the call"}
+_BYTES = {"type": "string", "contentEncoding": "base64",
+          "description": "the message's bytes as received or published (protocol.codec)"}
+SCHEMAS = {
+    "receive": {"t": _T, "key": {"type": "string", "description": "Zenoh key expression"},
+                "payload": _BYTES},
+    "liveliness": {"t": _T, "name": {"type": "string"}, "joined": {"type": "boolean"}},
+    "tick": {"t": _T},
+    "finish": {"t": _T},
+    "tracks": {"t": _T, "k": {"type": "integer", "description": "scan index"},
+               "payload": _BYTES},
+}
+"""Each topic's record as a JSON Schema (MCAP ``jsonschema`` schemas over ``json`` messages:
+the mcap tools and Foxglove decode them without our code; floats are written by ``repr``,
+which round-trips exactly, and bytes as base64, so a replay is still bit for bit)."""
 
 
 class Recorder:
@@ -35,31 +54,36 @@ class Recorder:
         self._fh = path.open("wb")
         self._w = Writer(self._fh, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="sensornet")
-        schema = self._w.register_schema("sensornet.record", "", b"")
-        self._ch = {t: self._w.register_channel(t, "msgpack", schema) for t in TOPICS}
+        self._ch = {}
+        for topic, props in SCHEMAS.items():
+            schema = json.dumps({"title": f"sensornet.{topic}", "type": "object",
+                                 "properties": props, "required": list(props),
+                                 "additionalProperties": False}).encode()
+            sid = self._w.register_schema(f"sensornet.{topic}", "jsonschema", schema)
+            self._ch[topic] = self._w.register_channel(topic, "json", sid)
         self._w.add_metadata(META, {k: str(v) for k, v in meta.items()})
         self._seq = 0
 
-    def _log(self, topic: str, now: float, record: list) -> None:
+    def _log(self, topic: str, now: float, record: dict) -> None:
         self._seq += 1
         t = max(0, int(now * 1e9))
-        self._w.add_message(self._ch[topic], t, msgpack.packb(record, use_bin_type=True), t,
+        self._w.add_message(self._ch[topic], t, json.dumps(record).encode(), t,
                             sequence=self._seq)
 
     def receive(self, now: float, key: str, payload: bytes) -> None:
-        self._log("receive", now, [now, key, payload])
+        self._log("receive", now, {"t": now, "key": key, "payload": _b64(payload)})
 
     def liveliness(self, now: float, name: str, joined: bool) -> None:
-        self._log("liveliness", now, [now, name, joined])
+        self._log("liveliness", now, {"t": now, "name": name, "joined": bool(joined)})
 
     def tick(self, now: float) -> None:
-        self._log("tick", now, [now])
+        self._log("tick", now, {"t": now})
 
     def finish(self, now: float) -> None:
-        self._log("finish", now, [now])
+        self._log("finish", now, {"t": now})
 
     def tracks(self, now: float, k: int, payload: bytes) -> None:
-        self._log("tracks", now, [now, k, payload])
+        self._log("tracks", now, {"t": now, "k": int(k), "payload": _b64(payload)})
 
     def close(self) -> None:
         if self._fh is not None:
@@ -68,20 +92,45 @@ class Recorder:
             self._fh = None
 
 
+def _b64(data: bytes) -> str:
+    return base64.b64encode(bytes(data)).decode("ascii")
+
+
+_FIELDS = {"receive": ("t", "key", "payload"), "liveliness": ("t", "name", "joined"),
+           "tick": ("t",), "finish": ("t",), "tracks": ("t", "k", "payload")}
+
+
+def _record(topic: str, encoding: str, data: bytes) -> list:
+    """A message as the positional record ``replay`` feeds (JSON, or the msgpack of
+    recordings made before the schemas)."""
+    if encoding != "json":
+        return msgpack.unpackb(data, raw=False)
+    body = json.loads(data)
+    return [base64.b64decode(body[f]) if f == "payload" else body[f] for f in _FIELDS[topic]]
+
+
 def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
-    """The metadata and the records ``(topic, record)`` of a recording, in order."""
+    """The metadata and the records ``(topic, record)`` of a recording, in order; a file that
+    is not a complete MCAP file is a one-line :class:`ValueError`."""
+    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     with Path(path).open("rb") as fh:
-        reader = make_reader(fh)
-        meta = {}
-        for m in reader.iter_metadata():
-            if m.name == META:
-                meta = dict(m.metadata)
-        fh.seek(0)
-        reader = make_reader(fh)
-        records = [(ch.topic, msgpack.unpackb(msg.data, raw=False))
-                   for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        try:
+            reader = make_reader(fh)
+            meta = {}
+            for m in reader.iter_metadata():
+                if m.name == META:
+                    meta = dict(m.metadata)
+            fh.seek(0)
+            reader = make_reader(fh)
+            records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
+                       for _, ch, msg in reader.iter_messages(log_time_order=False)]
+        except McapError as exc:
+            raise ValueError(
+                f"not a complete recording ({type(exc).__name__}): a peer that was "
+                f"killed (--fault kill:...) never closed its file, and what it held in its "
+                f"last chunk is lost") from None
     return meta, records
 
 
@@ -110,32 +159,13 @@ def _states(payload: bytes | None) -> bytes | None:
     return bytes(body[-1])
 
 
-def replay(path: Path, overrides: list[str] = ()) -> Replay:
-    """Feed a recording through a freshly built peer (``overrides``: ``--set`` items on top of
-    the recorded ones)."""
-    from peers.core import Publish
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario, parse_overrides
-
+def replay_with(path: Path, build: Callable[[dict[str, str]], PeerCore]) -> Replay:
+    """Feed a recording through the peer ``build(meta)`` makes from its metadata (the caller
+    in ``sim`` rebuilds it from the stored scenario: this layer knows no scenario)."""
     meta, records = read(path)
     if not meta:
         raise ValueError(f"{path}: not a sensornet recording (no '{META}' metadata)")
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / meta.get("scenario_file", "scenario.toml")
-        src.write_text(meta["scenario_text"])
-        recorded = json.loads(meta.get("overrides", "[]"))
-        scn = load_scenario(str(src), overrides=parse_overrides([*recorded, *overrides]))
-        if overrides:
-            was = load_scenario(str(src), overrides=parse_overrides(recorded)).network.rounds
-            if scn.network.rounds != was:
-                raise ValueError(
-                    f"--set network.rounds={scn.network.rounds}: the recording holds only the "
-                    f"{was} round(s) per scan the run had, and a replay cannot make the "
-                    f"neighbours' other rounds (run again with --set "
-                    f"network.rounds={scn.network.rounds})")
-    speed = float(meta["speed"]) if meta.get("speed") else None
-    core = make_peer(scn, meta["peer"], int(meta.get("run", 0)), network=meta["network"],
-                     speed=speed)
+    core = build(meta)
     out = Replay(meta["peer"])
     for topic, r in records:
         if topic == "receive":

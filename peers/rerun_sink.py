@@ -39,6 +39,11 @@ COLOR_NAMES = ["red", "blue", "orange", "purple", "green", "magenta", "teal", "b
 TRUTH_COLOR = (255, 215, 0)
 GRID_COLOR = (90, 90, 90)
 REGION_COLOR = (170, 170, 170)
+CUTOFF_COLOR = (120, 120, 120)
+TICK_GAP = 0.03
+"""Grid labels sit this fraction of the region's larger side outside its frame."""
+TRUTH_PATH_KEEP = 500
+"""Scans of each true target's path drawn (the newest; memory stays flat in long runs)."""
 
 
 def position_columns(dim: int) -> list[int]:
@@ -100,7 +105,11 @@ def grid_lines(region, step: float | None = None) -> tuple[list[np.ndarray], np.
     ys = np.arange(np.ceil(y0 / step) * step, y1 + 1e-9, step)
     lines = [np.array([[x, y0], [x, y1]]) for x in xs] + [np.array([[x0, y], [x1, y]])
                                                           for y in ys]
-    ticks = np.array([[x, y0] for x in xs] + [[x0, y] for y in ys], dtype=float).reshape(-1, 2)
+    # labels just outside the frame (x below it, y left of it): a sensor on the edge or in a
+    # corner keeps its own label clear of the grid's (seed 001's radars sit on the edge)
+    gap = TICK_GAP * max(x1 - x0, y1 - y0)
+    ticks = np.array([[x, y0 - gap] for x in xs] + [[x0 - gap, y] for y in ys],
+                     dtype=float).reshape(-1, 2)
     labels = [f"x {x:g} m" for x in xs] + [f"y {y:g} m" for y in ys]
     return lines, ticks, labels
 
@@ -115,23 +124,24 @@ def legend_markdown(peers: list[str], single_target: bool = False, imm: bool = F
         f"**Colours**: {colours} (a peer's marks, its sensor's scans, its plot lines).",
         "",
         "**Map** (north up, metres):",
-        "- gold, numbered: true targets; big labelled dots: sensors",
+        "- gold, numbered, with their paths: true targets; big labelled dots: sensors",
         "- small dots: measurements of this scan (detections and clutter)",
         f"- dashed 2-sigma ellipses, light dots: {local} (before fusion)",
-        "- solid ellipses: fused; dots with a trail: fused tracks",
-        "- grey frame: surveillance region; grid labelled on its edges",
+        "- solid ellipses: fused; dots with a trail: fused tracks, labelled peer/number (a "
+        "number follows a track from scan to scan by association: for the eye, not scored)",
+        "- grey frame: surveillance region; grid labelled just outside its edges",
     ]
     if single_target and follow_radius:
         lines.append(f"- 'around the target': the same, centred on the true target "
                      f"(+-{follow_radius:g} m)")
     lines += ["", "**Plots**: dotted = local, solid = fused, gold = truth. OSPA: error with "
-              "cut-off, lower is better."
+              "cut-off (the grey line), lower is better."
               + (" Model probabilities: CV solid, CA dotted." if imm else "")]
     return "\n".join(lines)
 
 
 def default_blueprint(peers: list[str], *, single_target: bool = False, imm: bool = False,
-                      follow_radius: float = 500.0):
+                      follow_radius: float = 500.0, ospa_cutoff: float | None = None):
     """Map and legend beside time series of the health metrics.
 
     ``single_target``: a second map view centred on the target (the ``follow`` transform the
@@ -142,8 +152,14 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
 
     hidden = rrb.PlotLegend(visible=False)  # the legend panel names the colours instead
 
-    def series(name: str, origin: str, legend=hidden):
-        return rrb.TimeSeriesView(name=name, origin=origin, plot_legend=legend)
+    def series(name: str, origin: str, legend=hidden, y_range=None):
+        axis = rrb.ScalarAxis(range=y_range, zoom_lock=False) if y_range else None
+        return rrb.TimeSeriesView(name=name, origin=origin, plot_legend=legend, axis_y=axis)
+
+    probabilities = series("model probabilities (IMM)", "metrics/model_probability",
+                           y_range=(0.0, 1.0))
+    ospa = series("OSPA (m; grey: cut-off)", "metrics/ospa",
+                  y_range=(0.0, 1.05 * ospa_cutoff) if ospa_cutoff else None)
 
     map_view = rrb.Spatial2DView(name="map", origin="/", contents=["/world/**", "/peers/**"])
     if single_target:
@@ -157,7 +173,7 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
             row_shares=[1, 1])
     else:
         maps = map_view
-    third = (series("model probabilities (IMM)", "metrics/model_probability") if imm
+    third = (probabilities if imm
              else series("components (fused solid, local dotted)", "metrics/components"))
     tabs = [
         series("estimate age (scans)", "metrics/age"),
@@ -165,15 +181,14 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
         series("rejected messages", "metrics/rejected"),
         series("compute per scan (ms)", "metrics/compute_ms"),
         series("latency (ms)", "metrics/latency_ms"),
-        (series("components", "metrics/components") if imm
-         else series("model probabilities (IMM)", "metrics/model_probability")),
+        (series("components", "metrics/components") if imm else probabilities),
     ]
     return rrb.Blueprint(
         rrb.Horizontal(
             maps,
             rrb.Vertical(
                 rrb.TextDocumentView(name="legend", origin="legend"),
-                series("OSPA (m)", "metrics/ospa"),
+                ospa,
                 series("cardinality (truth gold)", "metrics/cardinality"),
                 third,
                 rrb.Tabs(*tabs),
@@ -181,6 +196,8 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
             ),
             column_shares=[3, 2],
         ),
+        # open on the scan timeline (the other, "sim", is the scenario's seconds)
+        rrb.TimePanel(timeline="scan", state="collapsed"),
         collapse_panels=True,
     )
 
@@ -379,6 +396,8 @@ class RerunSink:
                                                    show_labels=True), static=True)
         rr.log("metrics/cardinality/truth",
                rr.SeriesLines(colors=TRUTH_COLOR, widths=3.0, names="truth"), static=True)
+        rr.log("metrics/ospa/cutoff",
+               rr.SeriesLines(colors=CUTOFF_COLOR, widths=1.0, names="cut-off c"), static=True)
         for i, p in enumerate(peers):
             c = color_of(i)
             solid = {"colors": c, "widths": 2.0}
@@ -409,6 +428,14 @@ class RerunSink:
                                              names=f"{p} {model}"))
                     rr.log(f"metrics/model_probability/{p}/{model}", style, static=True)
 
+    def labelled_points(self, path: str, xy: np.ndarray, color, labels: list[str],
+                        radius: float = 5.0) -> None:
+        """Points that always show their labels (track and target identities)."""
+        if self.enabled:
+            self.rr.log(path, self.rr.Points2D(north_up(np.asarray(xy, float).reshape(-1, 2)),
+                                               colors=color, radii=-abs(radius),
+                                               labels=labels, show_labels=True))
+
     def follow(self, xy) -> None:
         """Centre the "around the target" view on ``xy`` (map coordinates) at this time."""
         if self.enabled:
@@ -422,6 +449,54 @@ class RerunSink:
                 self.rr.disconnect()
             finally:
                 self.enabled = False
+
+
+class TruthPaths:
+    """Each true target's path so far (by its id), the newest :data:`TRUTH_PATH_KEEP` points."""
+
+    def __init__(self) -> None:
+        self._paths: dict[int, list] = {}
+
+    def add(self, ids, xy: np.ndarray) -> None:
+        for i, p in zip(np.asarray(ids).tolist(), np.asarray(xy, float).reshape(-1, 2),
+                        strict=True):
+            path = self._paths.setdefault(int(i), [])
+            path.append(p)
+            del path[:-TRUTH_PATH_KEEP]
+
+    def strips(self) -> list[np.ndarray]:
+        """One polyline per target with at least two points."""
+        return [np.array(p) for p in self._paths.values() if len(p) > 1]
+
+
+class TrackLabels:
+    """Display identities for a peer's fused tracks: each scan's tracks are matched to the last
+    scan's by an optimal assignment (``scipy.optimize.linear_sum_assignment``) within ``gate``
+    metres and keep their number; the others get new numbers. The filters carry no labels
+    (GM-PHD): these are for the eye, not scored."""
+
+    def __init__(self, gate: float) -> None:
+        self.gate = float(gate)
+        self._last = np.zeros((0, 2))
+        self._ids: list[int] = []
+        self._next = 0
+
+    def assign(self, xy: np.ndarray) -> list[int]:
+        from scipy.optimize import linear_sum_assignment
+
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        ids = [-1] * len(xy)
+        if len(xy) and len(self._last):
+            D = np.linalg.norm(xy[:, None, :] - self._last[None, :, :], axis=-1)
+            rows, cols = linear_sum_assignment(D)
+            for r, c in zip(rows, cols, strict=True):
+                if D[r, c] <= self.gate:
+                    ids[r] = self._ids[c]
+        for r in range(len(ids)):
+            if ids[r] < 0:
+                ids[r], self._next = self._next, self._next + 1
+        self._last, self._ids = xy, ids
+        return ids
 
 
 def color_of(index: int) -> tuple[int, int, int]:

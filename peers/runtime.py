@@ -24,10 +24,12 @@ from peers.admission import parse_key, peek
 from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector, HoldQueue
 from peers.observer import Observer
+from peers.recording import Recorder
 from peers.rerun_sink import RerunSink
+from peers.scan_results import write_part
 from peers.telemetry import SharedCpu, Telemetry
 from peers.transport import Transport
-from protocol.codec import Rejected, decode
+from protocol.codec import Rejected
 from protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
@@ -139,8 +141,6 @@ class PeerRuntime:
         self.transport.open(session=session)
         try:
             if o.record is not None and o.out_dir is not None:
-                from peers.recording import Recorder
-
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
             if o.out_dir is not None and o.rerun or o.viewer:
@@ -200,6 +200,10 @@ class PeerRuntime:
         the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
         peer, so the observer may flush)."""
         try:
+            taken = self.core.admission.taken
+            for tag, key, payload in items:  # out of the inbox (handled or skipped below)
+                if tag == "msg":
+                    taken(key, len(payload))
             for item in self._catch_up(items):
                 if self._stop:
                     break
@@ -319,7 +323,7 @@ class PeerRuntime:
     def _hold(self, key: str, payload: bytes) -> bool:
         """Injected faults on the link ``sender -> self``: hold, duplicate or drop."""
         try:
-            msg = decode(payload, self.core.cfg.limits)
+            msg = self.core.decode(payload, self.core.cfg.limits)  # a host's: shared
         except Rejected:
             return False  # the core counts it
         if not isinstance(msg, Estimate | Forward | Returns):
@@ -363,6 +367,7 @@ class PeerRuntime:
                 self._flush_fault_log()
                 self._save_tracks()
                 self.write_summary()
+                self._write_results()
 
     def _finish(self) -> None:
         """Fuse what is pending, then write the summary, tracks and fault log."""
@@ -381,6 +386,17 @@ class PeerRuntime:
         self._flush_fault_log()
         self._save_tracks()
         self.write_summary()
+        self._write_results()
+
+    def _write_results(self) -> None:
+        """This peer's per-scan results (``<stem>.scans.msgpack``; the launcher merges every
+        peer's into the run's ``results.parquet``, docs/results.md)."""
+        try:
+            write_part(self.core.scorer.results, self.name,
+                       self.o.out_dir / f"{self.stem}.scans.msgpack",
+                       self.telemetry.latency_by_scan)
+        except Exception as exc:  # a failed write costs the table, never the summary
+            print(f"{self.name}: per-scan results not written: {exc}", file=sys.stderr)
 
     def _save_tracks(self) -> None:
         if self.saved_tracks is not None:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from tracking.metrics import ospa
+from peers.scan_results import ScanResults
 
 WHICH = ("local", "fused")
 TruthFn = Callable[[int], "np.ndarray | None"]
@@ -43,6 +43,8 @@ class Scorer:
         self.unscored = 0
         """Estimates whose truth never arrived (no truth function, truth messages lost)."""
         self.records: list[dict] = []
+        self.results = ScanResults(cutoff, order, position_index)
+        """Every scored estimate and miss, row by row (the run's per-scan results table)."""
 
     # -- truth ------------------------------------------------------------------------------
     def truth(self, k: int) -> np.ndarray | None:
@@ -81,6 +83,8 @@ class Scorer:
         for which in WHICH:
             self.misses[which] += len(ks)
             self.card_sums[which] += card
+            for k in ks:
+                self.results.missed(k, which, self.truth(k))
 
     def output(self, which: str, k: int, states: np.ndarray) -> None:
         if k not in self._expected[which]:
@@ -107,6 +111,7 @@ class Scorer:
                 self.misses[which] += 1
                 X = self.truth(k)
                 self.card_sums[which] += len(X) if X is not None else 0
+                self.results.missed(k, which, X)
                 self.records.append({"k": k, "kind": "ospa", "which": which, "value": self.c,
                                      "miss": True})
             late = [k for k in self._waiting[which] if old(k)]
@@ -118,10 +123,9 @@ class Scorer:
 
     def _score(self, which: str, k: int, states: np.ndarray) -> None:
         X = self.truth(k)
-        est = states[:, self.pos] if len(states) else np.zeros((0, 2))
-        value = ospa(est, X[:, self.pos] if len(X) else np.zeros((0, 2)), self.c, self.p)
+        value = self.results.scored(k, which, states, X)
         self.sums[which] += value
-        self.card_sums[which] += abs(len(est) - len(X))
+        self.card_sums[which] += abs(len(states) - len(X))
         self.counts[which] += 1
         self.records.append({"k": k, "kind": "ospa", "which": which, "value": value})
 

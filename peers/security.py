@@ -24,11 +24,12 @@ its sender's Ed25519 key and checked by each receiver against the roster, with r
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from peers.access_control import ROUTER_PREFIX, acl_rules
+from peers.endpoints import check_endpoints, tls_endpoint
 from peers.member_keys import (
     CA_CERT,
     CA_KEY,
@@ -45,6 +46,7 @@ from peers.member_keys import (
     make_keys,
 )
 from peers.refusal_log import ACL_LOG, RefusalLog
+from protocol.envelope import Signer, Verifier
 
 
 @dataclass(frozen=True)
@@ -100,8 +102,6 @@ class Security:
         against the roster's public key for it."""
         from cryptography.hazmat.primitives.serialization import load_pem_private_key
 
-        from protocol.envelope import Signer
-
         path = self.folder / f"{self.member}{SIGN_KEY}"
         hint = (f"add it with: sensornet keys {self.network} --out {self.folder} "
                 f"--members {self.member}")
@@ -121,8 +121,6 @@ class Security:
     def verifier(self, senders: Sequence[str] | None = None):
         """A :class:`protocol.envelope.Verifier` holding the roster's keys; every name of
         ``senders`` (default: the world and every peer) must have one."""
-        from protocol.envelope import Verifier
-
         roster = load_roster(self.folder)
         need = [self.world, *self.peers] if senders is None else list(senders)
         missing = [n for n in need if n not in roster]
@@ -143,17 +141,6 @@ class Security:
             conf.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
         conf.insert_json5("access_control", json.dumps(
             acl_rules(self.network, self.peers, self.world, self.routers)))
-
-
-def tls_endpoint(port: int, host: str = "127.0.0.1") -> str:
-    return f"tls/{host}:{port}"
-
-
-def check_endpoints(endpoints: Iterable[str]) -> None:
-    """Secure mode speaks TLS only: a ``tcp/`` endpoint would bypass mutual TLS."""
-    bad = [e for e in endpoints if not e.startswith("tls/")]
-    if bad:
-        raise SecurityError(f"secure mode needs tls/ endpoints, not {', '.join(bad)}")
 
 
 __all__ = ["ACL_LOG", "CA_CERT", "CA_KEY", "DEFAULT_HOSTS", "ROUTER_PREFIX", "SIGNING",

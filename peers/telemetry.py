@@ -19,6 +19,7 @@ from peers.core import Publish, Record
 
 BREAKDOWN = ("transit", "local", "fusion_wait", "neighbours", "fusing")
 _KEEP = 4096  # samples kept per series (memory stays flat in long runs)
+_BY_SCAN_MAX = 500_000  # per-scan latencies kept for the results table (peers.scan_results)
 _SCANS_KEPT = 10  # per-scan stamps older than this many scans are dropped
 
 
@@ -75,6 +76,8 @@ class Telemetry:
         self.sent: Counter = Counter()
         self.sent_bytes: Counter = Counter()
         self.latency_ms: deque = deque(maxlen=_KEEP)
+        self.latency_by_scan: dict[int, float] = {}
+        """Scan -> published fused tracks (ms) for every scan (the per-scan results table)."""
         self.breakdown = {n: deque(maxlen=_KEEP) for n in BREAKDOWN}
         self.compute_ms = {"filter": 0.0, "fusion": 0.0}
         self.per_scan_ms: deque = deque(maxlen=_KEEP)
@@ -134,6 +137,8 @@ class Telemetry:
             return None
         lat = (wall - sent) * 1e3
         self.latency_ms.append(lat)
+        if len(self.latency_by_scan) < _BY_SCAN_MAX:
+            self.latency_by_scan[k] = lat
         return lat
 
     def start_cpu(self) -> None:

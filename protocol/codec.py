@@ -14,8 +14,10 @@ docs/seed004.md.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import msgpack
 import numpy as np
@@ -120,44 +122,69 @@ _FIELDS = {
 }
 
 
+def _estimate(msg: Estimate) -> dict:
+    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "p": int(msg.pruning), "o": _KINDS.index(msg.kind),
+            "d": msg.mixture.dim, "x": pack_mixture(msg.mixture)}
+
+
+def _scan(msg: Scan) -> dict:
+    z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+    return {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+            "x": _array(z)}
+
+
+def _states(states) -> np.ndarray:
+    x = np.asarray(states, dtype=float)
+    return x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
+
+
+def _tracks(msg: Tracks) -> dict:
+    x = _states(msg.states)
+    return {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+            "d": x.shape[1], "x": _array(x)}
+
+
+def _truth(msg: Truth) -> dict:
+    x = _states(msg.states)
+    ids = np.ascontiguousarray(msg.ids, dtype=_I8)
+    return {"k": int(msg.k), "ts": float(msg.send_time), "d": x.shape[1], "x": _array(x),
+            "i": ids.tobytes()}
+
+
+def _forward(msg: Forward) -> dict:
+    origins = list(msg.scans.scans)
+    zs = [np.asarray(msg.scans.scans[o], dtype=float).reshape(-1, 2) for o in origins]
+    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "o": origins, "n": [len(z) for z in zs],
+            "x": _array(np.concatenate(zs) if zs else np.zeros((0, 2)))}
+
+
+def _returns(msg: Returns) -> dict:
+    z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "x": _array(z)}
+
+
+def _control(msg: Control) -> dict:
+    return {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
+            "ts": float(msg.send_time)}
+
+
+_ENCODERS: dict[type, tuple[str, Callable[[Any], dict]]] = {
+    Estimate: ("E", _estimate), Scan: ("S", _scan), Tracks: ("K", _tracks),
+    Truth: ("T", _truth), Forward: ("F", _forward), Returns: ("R", _returns),
+    Control: ("C", _control),
+}
+"""Message type -> (wire type letter, the fields of its body by name); ``_FIELDS`` orders them."""
+
+
 def encode(msg: Message) -> bytes:
     """Serialise a message: a msgpack array ``[version, type, fields...]`` (see ``_FIELDS``)."""
-    if isinstance(msg, Estimate):
-        t, body = "E", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
-                        "q": int(msg.seq), "ts": float(msg.send_time), "p": int(msg.pruning),
-                        "o": _KINDS.index(msg.kind), "d": msg.mixture.dim,
-                        "x": pack_mixture(msg.mixture)}
-    elif isinstance(msg, Scan):
-        z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
-        t, body = "S", {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq),
-                        "ts": float(msg.send_time), "x": _array(z)}
-    elif isinstance(msg, Tracks):
-        x = np.asarray(msg.states, dtype=float)
-        x = x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
-        t, body = "K", {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq),
-                        "ts": float(msg.send_time), "d": x.shape[1], "x": _array(x)}
-    elif isinstance(msg, Truth):
-        x = np.asarray(msg.states, dtype=float)
-        x = x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
-        ids = np.ascontiguousarray(msg.ids, dtype=_I8)
-        t, body = "T", {"k": int(msg.k), "ts": float(msg.send_time), "d": x.shape[1],
-                        "x": _array(x), "i": ids.tobytes()}
-    elif isinstance(msg, Forward):
-        origins = list(msg.scans.scans)
-        zs = [np.asarray(msg.scans.scans[o], dtype=float).reshape(-1, 2) for o in origins]
-        t, body = "F", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
-                        "q": int(msg.seq), "ts": float(msg.send_time), "o": origins,
-                        "n": [len(z) for z in zs],
-                        "x": _array(np.concatenate(zs) if zs else np.zeros((0, 2)))}
-    elif isinstance(msg, Returns):
-        z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
-        t, body = "R", {"s": msg.sender, "k": int(msg.k), "r": int(msg.round),
-                        "q": int(msg.seq), "ts": float(msg.send_time), "x": _array(z)}
-    elif isinstance(msg, Control):
-        t, body = "C", {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
-                        "ts": float(msg.send_time)}
-    else:
+    entry = next((_ENCODERS[c] for c in type(msg).__mro__ if c in _ENCODERS), None)
+    if entry is None:
         raise TypeError(f"cannot encode {type(msg).__name__}")
+    t, body = entry[0], entry[1](msg)
     return msgpack.packb([VERSION, t, *(body[f] for f in _FIELDS[t])], use_bin_type=True)
 
 

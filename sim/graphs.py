@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.scenario import load_scenario
+
 
 def circulant(n: int, degree: int) -> np.ndarray:
     """The adjacency ``(n, n)`` of a circulant graph: node i linked to i +- 1 .. i +- degree/2,
@@ -29,8 +31,6 @@ def network_scenario(n: int, degree: int, scans: int = 100, rounds: int = 1,
                      name: str | None = None) -> str:
     """Scenario text: seed 000's targets and sensor model, ``n`` linear sensors on a circulant
     graph of ``degree``, births at the true birth points, default fusion settings."""
-    from sim.scenario import load_scenario
-
     base = load_scenario("seed000")
     lines = [
         "[scenario]", f'name = "{name or f"scale{n}d{degree}"}"', "seed = 0",

@@ -11,139 +11,39 @@ summaries and ``.rrd`` files and the recording can be merged.
 from __future__ import annotations
 
 import json
-import shutil
-import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 import uuid
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from peers.security import tls_endpoint
-from peers.session import SessionError, endpoint, free_port
-from peers.telemetry import percentile
+from peers.session import (
+    DEFAULT_LEASE_MS,
+    MAX_MESSAGE_BYTES,
+    endpoint,
+    free_port,
+)
+from sim.build import adjacency
+from sim.process_faults import (  # noqa: F401  (the names other modules import from here)
+    HOSTED_ACTIONS,
+    PROCESS_ACTIONS,
+    ProcessFault,
+    fault_report,
+    inject_process_faults,
+)
+from sim.run_handle import ROUTER, ROUTER_GRACE, RunHandle  # noqa: F401
+from sim.run_summary import (  # noqa: F401  (the names other modules import from here)
+    REALTIME_DEADLINE_SHARE,
+    format_summary,
+    merge_recordings,
+    read_summaries,
+    realtime_note,
+    summary_files,
+    trust_note,
+)
 from sim.scenario import Scenario
-
-
-@dataclass
-class RunHandle:
-    """The processes of one run and where they write."""
-
-    out: Path
-    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
-    logs: dict[str, Path] = field(default_factory=dict)
-    endpoints: dict[str, str] = field(default_factory=dict)
-    network: str = ""
-    commands: dict[str, list[str]] = field(default_factory=dict)
-    restarts: dict[str, int] = field(default_factory=dict)
-    timed_out: bool = False
-    """Set by :func:`wait_run` when the run outlived its timeout (and was stopped)."""
-    stopped: bool = False
-    """Set by :func:`wait_run` when the caller's ``stop`` event ended the run."""
-    secure: Path | None = None
-    """The network's keys folder in secure mode (tools of the launcher use the world's key)."""
-    router: subprocess.Popen | None = None
-    """The run's router (``start_run(router=True)``): every other process is its client."""
-    router_command: list[str] = field(default_factory=list)
-    hosts: dict[str, list[str]] = field(default_factory=dict)
-    """``start_run(per_process=N)``, N > 1: each host process (``h1``, ``h2``, ...; its key in
-    :attr:`procs`) and the peers it runs; empty when every peer is a process of its own."""
-
-    def host_of(self, peer: str) -> str | None:
-        """The host that runs ``peer`` (None: the peer is a process of its own)."""
-        return next((h for h, names in self.hosts.items() if peer in names), None)
-
-    def kill_hosted(self, peer: str, at_scan: int) -> subprocess.Popen:
-        """Stop hosted peer ``peer`` as if killed (its host's ``kill`` command, on the
-        host's standard input): the host's other peers keep running."""
-        proc = self.procs[self.host_of(peer)]
-        if proc.poll() is None and proc.stdin is not None:
-            try:
-                proc.stdin.write(f"kill {peer} {at_scan}\n".encode())
-                proc.stdin.flush()
-            except OSError:  # the host is gone already
-                pass
-        return proc
-
-    def restart(self, name: str) -> subprocess.Popen:
-        """Start peer ``name`` again (same command, a fresh listening port), or the router
-        (``name`` ``router``: killed, started again on the same endpoint)."""
-        if name == ROUTER and self.router is not None:
-            return self.start_router()
-        old = self.procs[name]
-        if old.poll() is None:
-            old.kill()
-            old.wait()
-        cmd = list(self.commands[name])
-        if "--listen" in cmd:  # a router's client listens nowhere
-            i = cmd.index("--listen")
-            cmd[i + 1] = f"{cmd[i + 1].split('/', 1)[0]}/127.0.0.1:{free_port()}"  # tcp/, tls/
-        self.restarts[name] = self.restarts.get(name, 0) + 1
-        log = self.out / "logs" / f"{name}.restart{self.restarts[name]}.log"
-        with log.open("w") as fh:
-            self.procs[name] = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
-                                                stdin=subprocess.DEVNULL)
-        return self.procs[name]
-
-    def wait_listening(self, name: str = "world", timeout: float = 60.0) -> None:
-        """Return once process ``name`` accepts connections on its endpoint (it may still be
-        importing when :func:`start_run` returns: a session that connects earlier waits for
-        Zenoh's reconnection back-off, and a refused connection means nothing)."""
-        host, _, port = self.endpoints[name].split("/", 1)[1].rpartition(":")
-        end = time.monotonic() + timeout
-        while True:
-            try:
-                socket.create_connection((host.strip("[]"), int(port)), timeout=1.0).close()
-                return
-            except OSError:
-                if self.procs[name].poll() is not None or time.monotonic() > end:
-                    raise SessionError(f"{name} is not listening on "
-                                       f"{self.endpoints[name]}") from None
-                time.sleep(0.05)
-
-    def start_router(self, timeout: float = 30.0) -> subprocess.Popen:
-        """Start (or start again) the run's router; returns once it listens."""
-        if self.router is not None and self.router.poll() is None:
-            self.router.kill()
-            self.router.wait()
-        n = self.restarts["router"] = self.restarts.get("router", -1) + 1
-        log = self.out / "logs" / ("router.log" if n == 0 else f"router.restart{n}.log")
-        self.logs["router" if n == 0 else f"router.restart{n}"] = log
-        with log.open("w") as fh:
-            self.router = subprocess.Popen(self.router_command, stdout=fh,
-                                           stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        end = time.monotonic() + timeout
-        while "router: listening" not in log.read_text(errors="replace"):
-            if self.router.poll() is not None or time.monotonic() > end:
-                tail = log.read_text(errors="replace").strip().splitlines()[-1:]
-                raise SessionError(f"the router did not start: {' '.join(tail) or 'no output'} "
-                                   f"(log: {log})")
-            time.sleep(0.02)  # the router prints one line once it listens
-        return self.router
-
-    def stop_all(self, grace: float = 5.0) -> None:
-        """SIGTERM every child still running, then SIGKILL after ``grace`` seconds; the
-        router last (the others may still be sending their last messages through it)."""
-        self._stop(list(self.procs.values()), grace)
-        if self.router is not None:
-            self._stop([self.router], grace)
-
-    @staticmethod
-    def _stop(procs: list[subprocess.Popen], grace: float) -> None:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGCONT)  # a stopped process cannot handle SIGTERM
-                p.send_signal(signal.SIGTERM)
-        end = time.monotonic() + grace
-        for p in procs:
-            try:
-                p.wait(timeout=max(0.0, end - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
 
 
 def _cli() -> list[str]:
@@ -213,8 +113,6 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
                       "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
             + (["--speed", str(speed)] if speed else [])}
     if sparse:  # each peer links to the world and its graph neighbours only, gossip off
-        from sim.build import adjacency
-
         _, A = adjacency(scn)
     for i, n in enumerate(names):
         if router or groups:  # a host's links: _host_commands
@@ -327,8 +225,6 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
             names: list[str]) -> tuple[list[str], dict[str, str]]:
     """A routed run: the router's command, the clients' config file, every endpoint the
     router's."""
-    from peers.session import DEFAULT_LEASE_MS, MAX_MESSAGE_BYTES
-
     config = handle.out / "zenoh-client.json5"
     config.write_text(json.dumps({
         "mode": "client", "scouting": {"multicast": {"enabled": False}},
@@ -341,13 +237,6 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
     handle.endpoints = {"router": router_ep}
     return [*common, "--config", str(config)], {"router": router_ep, "world": router_ep,
                                                **{n: router_ep for n in names}}
-
-
-ROUTER = "router"
-"""The member name of the router a routed run starts (its key in secure mode)."""
-ROUTER_GRACE = 30.0
-"""Seconds the peers of a routed run wait for the world to come back (``--world-grace``):
-while the router is down every liveliness token is gone, the world's too."""
 
 
 def wait_run(handle: RunHandle, timeout: float,
@@ -390,281 +279,3 @@ def wait_run(handle: RunHandle, timeout: float,
         handle.stop_all()
     return {name: p.returncode for name, p in handle.procs.items()}
 
-
-def summary_files(out: Path, name: str) -> list[Path]:
-    """Peer ``name``'s summaries in ``out``, first run first (a restarted peer writes
-    ``peer-<name>.restart<n>.json`` beside the earlier ones, never over them)."""
-    def restart(p: Path) -> int:
-        tail = p.name.removeprefix(f"peer-{name}").removesuffix(".json")
-        return int(tail.removeprefix(".restart")) if tail else 0
-
-    paths = [p for p in out.glob(f"peer-{name}*.json")
-             if p.name == f"peer-{name}.json"
-             or p.name.removeprefix(f"peer-{name}.restart").removesuffix(".json").isdigit()]
-    return sorted(paths, key=restart)
-
-
-def read_summaries(out: Path, names: list[str]) -> dict[str, dict]:
-    """The newest summary of each peer (after restarts: the last run's); each carries the
-    names of all its summary files under ``"summary_files"``."""
-    found = {}
-    for n in names:
-        paths = summary_files(out, n)
-        if paths:
-            found[n] = json.loads(paths[-1].read_text())
-            found[n]["summary_files"] = [p.name for p in paths]
-    return found
-
-
-def merge_recordings(out: Path) -> Path | None:
-    """Merge the per-process ``.rrd`` files into ``<out>/recording.rrd`` with the Rerun CLI."""
-    parts = sorted((out / "rerun").glob("*.rrd"))
-    if not parts:
-        return None
-    exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
-    target = out / "recording.rrd"
-    try:
-        with target.open("wb") as fh:
-            subprocess.run([exe, "rrd", "merge", *map(str, parts)], stdout=fh,
-                           stderr=subprocess.DEVNULL, timeout=120, check=True,
-                           env={**__import__("os").environ, "RERUN_ANALYTICS": "0"})
-    except (OSError, subprocess.SubprocessError):
-        target.unlink(missing_ok=True)
-        return None
-    return target
-
-
-def format_summary(summaries: dict[str, dict]) -> str:
-    """The end-of-run table: per peer OSPA local vs fused, communication cost per scan (the
-    seed-004 tuples and the estimate bytes, both counted once per neighbour), traffic,
-    rejections, age, latency."""
-    def f(v, fmt="{:.1f}"):
-        return "-" if v is None else fmt.format(v)
-
-    head = ("| peer | scans | OSPA local | OSPA fused | tuples / scan | B / scan | msgs sent | "
-            "msgs recv | kB sent | kB recv | rejected | mean age (scans) | "
-            "latency median / p99 (ms) |\n"
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    rows = [head]
-    for n, s in summaries.items():
-        cost = s.get("cost") or {}
-        rows.append(
-            f"| {n} | {s['scans']} | {f(s['mean_ospa_local'])} | {f(s['mean_ospa_fused'])} | "
-            f"{f(cost.get('tuples_per_scan'), '{:.0f}')} | "
-            f"{f(cost.get('estimate_bytes_to_neighbours_per_scan'), '{:.0f}')} | "
-            f"{s['messages_sent']} | {s['messages_received']} | {s['bytes_sent'] / 1e3:.1f} | "
-            f"{s['bytes_received'] / 1e3:.1f} | {s['rejected_total']} | "
-            f"{f(s['mean_estimate_age'], '{:.2f}')} | {f(s['latency_ms_median'], '{:.2f}')} / "
-            f"{f(s['latency_ms_p99'], '{:.2f}')} |")
-    refused = {n: s.get("refused_by_transport") or {} for n, s in summaries.items()}
-    if any(refused.values()):  # secure mode: what the access control refused on arrival
-        rows += ["", "Refused by access control (secure mode; sender, message, key: count):", ""]
-        for n, r in refused.items():
-            if r:
-                top = sorted(r.items(), key=lambda kv: -kv[1])
-                rows.append(f"- {n}: {sum(r.values())} refused: "
-                            + ", ".join(f"{label} x{c}" for label, c in top[:6])
-                            + (f", ... ({len(top) - 6} more)" if len(top) > 6 else ""))
-    stages = [("transit", "world -> peer"), ("local", "local filter"),
-              ("neighbours", "waiting for neighbours"), ("fusing", "fusing")]
-    parts = {n: s.get("latency_breakdown_ms_median") or {} for n, s in summaries.items()}
-    if any(p.get(k) is not None for p in parts.values() for k, _ in stages):
-        rows += ["", "Where the latency goes (median ms per scan):", "",
-                 "| peer | " + " | ".join(label for _, label in stages) + " |",
-                 "|---|" + "---:|" * len(stages)]
-        for n, p in parts.items():
-            rows.append(f"| {n} | " + " | ".join(f(p.get(k), "{:.2f}") for k, _ in stages)
-                        + " |")
-    return "\n".join(rows)
-
-
-REALTIME_DEADLINE_SHARE = 0.05
-"""Above this share of fusion rounds run at their deadline a run did not keep real time (the
-network benchmark's criterion, with a p99 scan -> tracks latency under one scan interval)."""
-
-
-def trust_note(summaries: dict[str, dict]) -> str | None:
-    """Who was quarantined by whom and when (peers with ``fusion.trust``), one line per
-    neighbour; None if nobody was."""
-    by: dict[str, list[str]] = {}
-    for peer, s in sorted(summaries.items()):
-        for ch in ((s.get("trust") or {}).get("changes") or []):
-            if ch["to"] == "quarantined":
-                by.setdefault(ch["neighbour"], []).append(f"{peer} at scan {ch['k']}")
-            elif ch["from"] == "quarantined":
-                by.setdefault(ch["neighbour"], []).append(f"readmitted by {peer} at scan "
-                                                          f"{ch['k']}")
-    if not by:
-        return None
-    return "\n".join(f"quarantined: {n} by " + ", ".join(v) for n, v in sorted(by.items()))
-
-
-def realtime_note(summaries: dict[str, dict], interval_s: float, speed: float,
-                  cores: int | None) -> str | None:
-    """One paragraph when the peers did not keep real time (deadline fusions above
-    :data:`REALTIME_DEADLINE_SHARE`, or the pooled p99 scan -> tracks latency over one scan
-    interval), saying by how much and what to try; None when they did."""
-    fusions = sum(s.get("stats", {}).get("fusions", 0) for s in summaries.values())
-    late = sum(s.get("stats", {}).get("deadline_fusions", 0) for s in summaries.values())
-    lat = sorted(x for s in summaries.values() for x in s.get("latency_ms_samples") or [])
-    share = late / fusions if fusions else 0.0
-    p99 = percentile(lat, 0.99)  # the sample at floor(0.99 n), as the benchmarks
-    interval_ms = 1e3 * interval_s
-    if share <= REALTIME_DEADLINE_SHARE and (p99 is None or p99 <= interval_ms):
-        return None
-    what = []
-    if share > REALTIME_DEADLINE_SHARE:
-        what.append(f"{100 * share:.1f} % of fusion rounds ran at their deadline")
-    if p99 is not None and p99 > interval_ms:
-        what.append(f"p99 scan -> tracks {p99:.0f} ms against a {interval_ms:.0f} ms scan "
-                    f"interval")
-    slower = speed / 2.0
-    return (f"note: these {len(summaries)} peers did not keep real time at {speed:g}x "
-            f"({'; '.join(what)}) on {cores or '?'} cores: the scores above include what "
-            f"arrived too late. Run slower (--speed {slower:g}) or with fewer peers; "
-            f"benchmarks/README.md has what such a machine sustains.")
-
-
-PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term", "killhost")
-HOSTED_ACTIONS = ("kill", "killhost")
-"""What a run with hosts (``per_process`` > 1) can do: stop one peer inside its host as if
-killed, or SIGKILL a whole host (a machine failure)."""
-
-
-@dataclass(frozen=True)
-class ProcessFault:
-    """``action`` on peer ``peer`` when the world publishes scan ``scan``."""
-
-    action: str
-    peer: str
-    scan: int
-
-    @classmethod
-    def parse(cls, text: str) -> ProcessFault:
-        """``ACTION:PEER@SCAN``, e.g. ``kill:s2@30`` (SIGKILL), ``stop:s3@20`` (SIGSTOP),
-        ``cont:s3@40`` (SIGCONT), ``restart:s2@50``, ``term:s1@60`` (SIGTERM); with hosts
-        (``per_process`` > 1) ``kill:s2@30`` stops that peer inside its host and
-        ``killhost:h1@30`` SIGKILLs host ``h1`` (all its peers)."""
-        try:
-            head, scan = text.rsplit("@", 1)
-            action, peer = head.split(":", 1)
-            fault = cls(action.strip(), peer.strip(), int(scan))
-        except ValueError:
-            raise ValueError(f"bad process fault {text!r}: use ACTION:PEER@SCAN, "
-                             f"e.g. kill:s2@30") from None
-        if fault.action not in PROCESS_ACTIONS:
-            raise ValueError(f"bad process fault {text!r}: action must be one of "
-                             f"{', '.join(PROCESS_ACTIONS)}")
-        if fault.scan < 1:
-            raise ValueError(f"bad process fault {text!r}: scan must be >= 1")
-        return fault
-
-
-def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor: str,
-                          stop: threading.Event) -> list[dict]:
-    """Watch the run's scans (a Zenoh subscriber) and apply each fault at its scan.
-
-    Runs until every fault is applied or ``stop`` is set; returns what was done, with wall
-    times (also written to ``<out>/process-faults.json``).
-    """
-    from peers.session import open_session
-    from protocol.codec import Rejected, decode
-    from protocol.envelope import inner
-    from protocol.keys import Keys
-
-    unseal = inner if handle.secure is not None else bytes  # secure: signed scans
-    pending = sorted(faults, key=lambda f: f.scan)
-    done: list[dict] = []
-    current = {"k": 0}
-    cond = threading.Condition()
-
-    def on_scan(sample) -> None:
-        try:
-            k = decode(unseal(sample.payload.to_bytes())).k
-        except (Rejected, AttributeError):
-            return
-        with cond:
-            current["k"] = max(current["k"], k)
-            cond.notify_all()
-
-    security = None
-    if handle.secure is not None:  # watches the scans as the world may (its own key)
-        from peers.security import WORLD, Security
-
-        security = Security.load(handle.secure, WORLD, handle.network,
-                                 [n for n in handle.procs if n != "world"])
-    session = open_session(connect=[handle.endpoints.get("router")
-                                    or handle.endpoints["world"]], security=security)
-    try:
-        sub = session.declare_subscriber(Keys(handle.network).scan(sensor), on_scan)
-        while pending and not stop.is_set():
-            with cond:
-                cond.wait(timeout=0.05)
-                k = current["k"]
-            while pending and pending[0].scan <= k:
-                f = pending.pop(0)
-                hosted = handle.host_of(f.peer)
-                proc = (handle.router if f.peer == ROUTER else
-                        handle.procs[hosted or f.peer])
-                sig = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "cont": signal.SIGCONT,
-                       "term": signal.SIGTERM, "killhost": signal.SIGKILL}.get(f.action)
-                if hosted is not None and f.action == "kill":  # that peer only, in its host
-                    proc = handle.kill_hosted(f.peer, f.scan)
-                elif f.action == "restart":
-                    proc = handle.restart(f.peer)
-                elif proc.poll() is None:
-                    proc.send_signal(sig)
-                done.append({"action": f.action, "peer": f.peer, "scan": f.scan, "at_scan": k,
-                             "wall": time.time(), "pid": proc.pid,
-                             **({"host": hosted} if hosted else {}),
-                             **({"peers": handle.hosts[f.peer]} if f.action == "killhost"
-                                else {})})
-        sub.undeclare()
-    finally:
-        session.close()
-    (handle.out / "process-faults.json").write_text(json.dumps(done, indent=2))
-    return done
-
-
-def fault_report(done: list[dict], summaries: dict[str, dict]) -> str:
-    """When each peer saw each killed, stopped or restarted peer leave or come back."""
-    lines = []
-    for f in done:
-        if f["peer"] == ROUTER:  # the peers saw the world (and everyone) go and come back
-            seen = [f"{n} " + (", ".join(f"{sec:.2f} s after scan {k}" for k, sec in
-                                         s.get("world_outages", [])) or "no outage")
-                    for n, s in summaries.items()]
-            lines.append(f"{f['action']} router at scan {f['at_scan']}: outages seen by "
-                         + "; ".join(seen))
-            rec = {n: s["recovery"] for n, s in summaries.items() if "recovery" in s}
-            if rec:  # --recover: what came late from the publishers' caches, what was lost
-                lines.append("recovered after the outage (scans, estimates; lost): " + "; ".join(
-                    f"{n} {r['recovered']['scan']}, {r['recovered']['estimate']}; "
-                    f"{sum(r['unrecovered'].values())}" for n, r in rec.items()))
-            continue
-        if f["action"] == "killhost":  # seen leaving: the last of the host's peers
-            members = f.get("peers") or []
-            seen = []
-            for name, s in summaries.items():
-                if name in members or s.get("killed_at_scan", f["at_scan"] + 1) <= f["at_scan"]:
-                    continue  # its host's, or itself killed before
-                first = [min((w for (peer, what, w, _k) in s.get("peer_events", [])
-                              if peer == m and what == "left" and w >= f["wall"] - 0.01),
-                             default=None) for m in members]
-                seen.append(f"{name} never" if None in first or not first else
-                            f"{name} +{max(first) - f['wall']:.2f} s")
-            lines.append(f"killhost {f['peer']} ({', '.join(members)}) at scan {f['at_scan']}: "
-                         f"seen left by " + ", ".join(seen))
-            continue
-        seen = []
-        for name, s in summaries.items():
-            if name == f["peer"]:
-                continue
-            want = "joined" if f["action"] in ("restart", "cont") else "left"
-            times = [w for (peer, what, w, _k) in s.get("peer_events", [])
-                     if peer == f["peer"] and what == want and w >= f["wall"] - 0.01]
-            seen.append(f"{name} +{min(times) - f['wall']:.2f} s" if times else f"{name} never")
-        verb = "rejoined" if f["action"] in ("restart", "cont") else "left"
-        lines.append(f"{f['action']} {f['peer']} at scan {f['at_scan']}: seen {verb} by "
-                     + ", ".join(seen))
-    return "\n".join(lines)

@@ -19,14 +19,20 @@ from pathlib import Path
 
 import zenoh
 
+from peers.security import (
+    ROUTER_PREFIX,
+    WORLD,
+    Security,
+    SecurityError,
+    check_endpoints,
+    keys_network,
+)
 from peers.session import SessionError, zenoh_config
 
 
 def router_security(folder: str | Path, name: str, network: str | None = None):
     """The router's :class:`peers.security.Security` from a keys folder (roster from its
     ``members.json``: the world, the routers, every other name a peer)."""
-    from peers.security import ROUTER_PREFIX, WORLD, Security, SecurityError, keys_network
-
     made_for = keys_network(folder)
     if network and network != made_for:
         raise SecurityError(f"--secure {folder}: keys of network {made_for!r}, not of "
@@ -71,8 +77,6 @@ def serve(listen: list[str], connect: list[str], config: str | None, secure: str
     lines; what ``sensornet router`` and ``python -m sim.router`` both do."""
     security = None
     if secure:
-        from peers.security import check_endpoints
-
         security = router_security(secure, name, network)
         check_endpoints([*listen, *connect])
     run_router(listen, connect, config, security, say=lambda line: print(line, flush=True))

@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from sim.launcher import read_summaries, start_run, wait_run
 from sim.scenario import load_scenario
 from sim.studies.pool import map_runs
+from sim.twin import run_twin
 
 
 @dataclass(frozen=True)
@@ -37,8 +39,6 @@ def run_point(source: str, base: dict, param: str, point: SweepPoint, real: bool
     row: dict[str, Any] = {"param": param, "value": point.value, "policy": point.policy,
                            "run": point.run}
     if real:
-        from sim.launcher import read_summaries, start_run, wait_run
-
         sets = [f"{k}={_toml(v)}" for k, v in _overrides(base, param, point.value,
                                                          point.policy).items()]
         with tempfile.TemporaryDirectory(prefix="sensornet-sweep-") as tmp:
@@ -56,8 +56,6 @@ def run_point(source: str, base: dict, param: str, point: SweepPoint, real: bool
             row[key] = sum(s["nale"][key] for s in summaries.values())
         row.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
         return row
-    from sim.twin import run_twin
-
     result = run_twin(scn, point.run)
     peers = result.peers.values()
     row["fused_ospa"] = float(np.mean([p.mean_ospa("fused") for p in peers]))

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from peers.trust import TrustConfig
+from peers.trust import NeighbourTrust, Trust, TrustConfig
 from sim.graphs import network_scenario
+from sim.lying import LyingCore, make_lie
 from sim.peers import make_peer
 from sim.scenario import load_scenario
 from sim.twin import run_twin
@@ -66,8 +67,6 @@ def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
                    run: int) -> list[np.ndarray]:
     """Per honest neighbour of ``liar``: the liar's per-scan statistic (test open), training
     runs only (for the detection delay the thresholds give; :mod:`sim.lying`'s lies)."""
-    from sim.lying import LyingCore, make_lie
-
     scn = load_scenario(scenario, overrides={**overrides, "fusion.trust": True})
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     core = peers[liar]
@@ -92,8 +91,6 @@ def simulate(seqs: list[np.ndarray], cfg: TrustConfig) -> dict[str, float]:
     """The scores :class:`peers.trust.Trust` would reach on these statistics: the share of
     (pair, scan) triples at weight < 1 (suspect) and at weight 0 (quarantined, with the
     hysteresis), and the scores' quantiles."""
-    from peers.trust import NeighbourTrust, Trust
-
     t = Trust(cfg, ())
     scores, low, zero, n = [], 0, 0, 0
     for seq in seqs:

@@ -17,8 +17,15 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from peers.rerun_sink import TRUTH_COLOR, RerunSink, color_of, position_columns
+from peers.rerun_sink import (
+    TRUTH_COLOR,
+    RerunSink,
+    TruthPaths,
+    color_of,
+    position_columns,
+)
 from peers.session import PEER_WAIT, open_session
+from peers.transport import recovering_publisher, zenoh_encoding
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import Control, Scan, Truth
@@ -52,7 +59,18 @@ class _Sealed:
         self.pub, self.key, self.signer = pub, key, signer
 
     def put(self, payload: bytes) -> None:
-        self.pub.put(self.signer.seal(self.key, payload))
+        self.pub.put(self.signer.seal(self.key, payload),
+                     encoding=zenoh_encoding(payload, sealed=True))
+
+
+class _Typed:
+    """A publisher whose every put declares the message's Zenoh encoding (protocol.encodings)."""
+
+    def __init__(self, pub) -> None:
+        self.pub = pub
+
+    def put(self, payload: bytes) -> None:
+        self.pub.put(payload, encoding=zenoh_encoding(payload))
 
 
 def _await_subscribers(pubs, stop: threading.Event, timeout: float) -> None:
@@ -103,12 +121,13 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         signal.signal(s, on_signal)
     sink = RerunSink()
     view = kind_of(scn).view  # the peer kind's Rerun layout (sim/kinds)
-    single = view.single_target or len(scn.targets) == 1
-    layout = {"single_target": single, "imm": view.imm, "follow_radius": FOLLOW_RADIUS}
+    layout = {**view.layout(), "follow_radius": FOLLOW_RADIUS}
+    layout["single_target"] = layout["single_target"] or len(scn.targets) == 1
     if out_dir is not None and rerun or viewer:
         sink.open(run_id or network, out_dir / "rerun" / "world.rrd" if out_dir and rerun
                   else None,
-                  viewer, peers=scn.sensor_names, **layout)
+                  viewer, peers=scn.sensor_names, ospa_cutoff=scn.metrics.ospa_cutoff,
+                  **layout)
         sink.decorate(scn.sensor_names, region=scn.region, **layout)
     signer = security.signer() if security is not None else None  # before any socket
     session = open_session(listen, connect, config_file, security=security)
@@ -134,8 +153,6 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 for n in scn.sensor_names}
         probes = pubs  # matching_status: an advanced publisher has none, a plain one does
         if recover:
-            from peers.transport import recovering_publisher
-
             pubs = {n: recovering_publisher(session, keys.scan(n)) for n in scn.sensor_names}
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
@@ -144,6 +161,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             pubs = {n: _Sealed(p, keys.scan(n), signer) for n, p in pubs.items()}
             truth_pub = _Sealed(truth_pub, keys.truth(), signer)
             ctl_pub = _Sealed(ctl_pub, keys.ctl(), signer)
+        else:
+            pubs = {n: _Typed(p) for n, p in pubs.items()}
+            truth_pub, ctl_pub = _Typed(truth_pub), _Typed(ctl_pub)
         token = session.liveliness().declare_token(keys.alive("world"))
         if wait_for:
             say(f"world: waiting up to {wait_timeout:g} s for peers {', '.join(wait_for)}")
@@ -176,8 +196,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             xy = X[:, position_columns(X.shape[1])]
             sink.points("world/truth", xy, TRUTH_COLOR, radius=6.0,
                         labels=[str(i) for i in truth.ids[k - 1]])
+            paths.add(truth.ids[k - 1], xy)
+            sink.strips("world/truth/paths", paths.strips(), TRUTH_COLOR)
             sink.scalar("metrics/cardinality/truth", len(X))
-            if single and len(xy):
+            sink.scalar("metrics/ospa/cutoff", scn.metrics.ospa_cutoff)
+            if layout["single_target"] and len(xy):
                 sink.follow(xy[0])
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
@@ -186,6 +209,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                         [np.cos(z[:, 1]), np.sin(z[:, 1])])
                 sink.points(f"world/scans/{s.name}", z, color_of(i), radius=2.0)
 
+        paths = TruthPaths()
         pending = None  # (k, time): scan k's truth and logging, TRUTH_DELAY after its scans
         for k in range(1, scn.num_scans + 1):
             if stop.is_set():

@@ -143,9 +143,10 @@ def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tm
         stopped["seconds"], stopped["code"] = time.monotonic() - t0, proc.returncode
 
     scn, codes, summaries = _attacked_run(tmp_path, BY_NAME["future-scan"], after=terminate_s1)
-    # at once: the summary and the recording written, the session closed; a few seconds at most
-    # on a busy machine (idle: well under one), never the 60 s the hang would have taken
-    assert stopped["code"] == 0 and stopped["seconds"] < 10.0, stopped
+    # at once: the summary and the recording written, the session closed (idle: well under a
+    # second); the bound only tells a stop from the hang this guards against, which never
+    # ended, so it leaves room for a machine loaded several times over
+    assert stopped["code"] == 0 and stopped["seconds"] < 40.0, stopped
     s1 = summaries["s1"]
     assert s1["stop_reason"] == "SIGTERM" and s1["rejected"]["future"] == 3
     assert s1["internal_errors"] == {}

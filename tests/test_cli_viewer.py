@@ -55,6 +55,14 @@ def test_region_outline_and_grid():
     lines, ticks, labels = grid_lines(region)
     assert len(lines) == 10 and len(ticks) == len(labels) == 10
     assert "x -1000 m" in labels and "y 500 m" in labels
+    # labels sit outside the frame: x below its bottom edge, y left of its left edge, so a
+    # sensor on the edge or in a corner (seed 001's radars at y = 0) keeps its label clear
+    xs = [t for t, lab in zip(ticks, labels, strict=True) if lab.startswith("x")]
+    ys = [t for t, lab in zip(ticks, labels, strict=True) if lab.startswith("y")]
+    assert all(t[1] < -1000.0 for t in xs) and all(t[0] < -1000.0 for t in ys)
+    seed001 = grid_lines(((0.0, 20000.0), (0.0, 12000.0)))[1]
+    radars = np.array([[0.0, 0.0], [12000.0, 0.0]])
+    assert np.linalg.norm(seed001[:, None] - radars[None], axis=-1).min() >= 0.03 * 20000 - 1e-9
 
 
 def test_legend_names_every_peer_and_mark():
@@ -78,12 +86,41 @@ def _views(blueprint) -> list:
     return out
 
 
+def test_blueprint_opens_on_scans_and_fixes_the_axes_that_need_it():
+    bp = default_blueprint(["r1", "r2"], imm=True, ospa_cutoff=100.0)
+    assert bp.time_panel.timeline == "scan"
+    views = {v.name: v for v in _views(bp)}
+    prob = views["model probabilities (IMM)"].properties["ScalarAxis"]
+    assert prob.range.as_arrow_array().to_pylist() == [[0.0, 1.0]]
+    ospa = views["OSPA (m; grey: cut-off)"].properties["ScalarAxis"]
+    assert ospa.range.as_arrow_array().to_pylist() == [[0.0, 105.0]]
+
+
+def test_track_labels_follow_tracks_and_truth_paths_join_ids():
+    from peers.rerun_sink import TrackLabels, TruthPaths
+
+    labels = TrackLabels(gate=50.0)
+    assert labels.assign(np.array([[0.0, 0.0], [500.0, 0.0]])) == [0, 1]
+    # the same two tracks, listed in the other order and moved a little: same numbers
+    assert labels.assign(np.array([[510.0, 5.0], [8.0, 3.0]])) == [1, 0]
+    # one jumps beyond the gate: a new number; a new track: another
+    assert labels.assign(np.array([[8.0, 3.0], [900.0, 0.0], [700.0, 0.0]])) == [0, 2, 3]
+    assert labels.assign(np.zeros((0, 2))) == []
+    paths = TruthPaths()
+    paths.add([4, 7], np.array([[0.0, 0.0], [10.0, 10.0]]))
+    assert paths.strips() == []
+    paths.add([7, 4], np.array([[11.0, 11.0], [1.0, 0.0]]))
+    strips = sorted(paths.strips(), key=lambda a: a[0, 0])
+    np.testing.assert_array_equal(strips[0], [[0.0, 0.0], [1.0, 0.0]])
+    np.testing.assert_array_equal(strips[1], [[10.0, 10.0], [11.0, 11.0]])
+
+
 def test_blueprint_has_a_legend_panel_and_adapts_to_the_scenario():
     import rerun.blueprint as rrb
 
     base = _views(default_blueprint(["s1", "s2", "s3"]))
     names = {v.name for v in base}
-    assert {"map", "legend", "OSPA (m)", "cardinality (truth gold)"} <= names
+    assert {"map", "legend", "OSPA (m; grey: cut-off)", "cardinality (truth gold)"} <= names
     assert any(isinstance(v, rrb.TextDocumentView) for v in base)
     assert "around the target" not in names
     single = _views(default_blueprint(["r1", "r2"], single_target=True, imm=True))

@@ -144,3 +144,32 @@ def test_rmse():
     e = np.array([[1.0, -2.0], [3.0, 2.0], [-1.0, 0.0]])
     np.testing.assert_allclose(rmse(e), np.sqrt([(1 + 9 + 1) / 3, (4 + 4) / 3]))
     np.testing.assert_allclose(rmse(e, axis=1), np.sqrt([2.5, 6.5, 0.5]))
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0])
+def test_gospa_parts_add_up_to_gospa_and_count_points(p):
+    """The decomposition reproduces gospa() and its counts obey n - false = m - missed."""
+    from tracking.metrics import gospa_parts
+
+    rng = np.random.default_rng(7)
+    c = 20.0
+    for _ in range(200):
+        n, m = rng.integers(0, 5, size=2)
+        X, Y = rng.uniform(0, 40, (n, 2)), rng.uniform(0, 40, (m, 2))
+        total, loc, missed, false = gospa_parts(X, Y, c, p)
+        assert total == pytest.approx(gospa(X, Y, c=c, p=p), rel=1e-12, abs=1e-12)
+        assert total == pytest.approx((loc + c**p / 2 * (missed + false)) ** (1 / p), rel=1e-12)
+        assert n - false == m - missed >= 0
+        assert loc <= (n - false) * c**p
+
+
+def test_gospa_parts_closed_form():
+    """One estimate 3 m from a target and one far from the other target: loc 3^2, and the far
+    pair counts as one missed target and one false estimate."""
+    from tracking.metrics import gospa_parts
+
+    X = np.array([[0.0, 3.0], [500.0, 500.0]])
+    Y = np.array([[0.0, 0.0], [100.0, 0.0]])
+    total, loc, missed, false = gospa_parts(X, Y, c=10.0, p=2.0)
+    assert (loc, missed, false) == (9.0, 1, 1)
+    assert total == pytest.approx(np.sqrt(9.0 + 100.0 / 2 * 2))

@@ -14,8 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from peers.faults import ACTIONS, FaultInjector, HoldQueue
-from sim.faultplan import (
+from peers.faultplan import (
     Constant,
     Exponential,
     FaultPlan,
@@ -27,6 +26,7 @@ from sim.faultplan import (
     ShortDelay,
     Uniform,
 )
+from peers.faults import ACTIONS, FaultInjector, HoldQueue
 from sim.scenario import ScenarioError, parse_faults
 
 N = 20_000

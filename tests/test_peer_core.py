@@ -239,3 +239,25 @@ def test_skipped_scans_count_in_the_cardinality_error_as_no_target():
     s.skipped(range(2, 4))  # scans 2 and 3 never arrived: 2 + 3 targets missed
     assert s.mean("fused") == pytest.approx((0.0 + 2 * 100.0) / 3)
     assert s.mean_cardinality_error("fused") == pytest.approx((0 + 2 + 3) / 3)
+
+
+def test_optional_hooks_are_declared_with_defaults():
+    """The core, the consensus and the observer call a part's optional hooks through the
+    contracts' declarations: a part without them gets the defaults, one with them its own."""
+    from peers.contracts import EstimatorHooks, FuserHooks
+    from sim.peers import make_parts
+    from sim.scenario import load_scenario
+
+    plain = EstimatorHooks.of(object())
+    assert plain.payload == "mixture" and plain.plane is None and plain.model_names == ()
+    assert plain.particles() is None and plain.pda_view() is None
+    assert plain.partition_view() is None
+    assert FuserHooks.of(object()) == FuserHooks()
+    est, fuser = make_parts(load_scenario("seed004"), "s1")
+    hooks, fh = EstimatorHooks.of(est), FuserHooks.of(fuser)
+    assert hooks.payload == "scans" and hooks.plane == est.plane
+    assert fh.late == fuser.late and fh.outgoing == fuser.outgoing
+    est, fuser = make_parts(load_scenario("seed001"), "r1")
+    hooks = EstimatorHooks.of(est)
+    assert hooks.model_names == ("CV", "CA") and hooks.particles == est.particles
+    assert FuserHooks.of(fuser).model_probabilities == fuser.model_probabilities

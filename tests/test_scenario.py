@@ -219,7 +219,7 @@ loss = 0.3
 
 
 def test_faults_table_becomes_a_typed_plan(seed000: Scenario, tmp_path) -> None:
-    from sim.faultplan import FaultPlan, Scans
+    from peers.faultplan import FaultPlan, Scans
 
     assert seed000.faults is None
     path = tmp_path / "faulty.toml"

@@ -135,7 +135,8 @@ def test_returns_survive_the_wire():
 
 def test_unknown_mode_and_sensor_are_one_line_errors():
     cfg = seed003_net.load()
-    with pytest.raises(ValueError, match="key .pda.mode. is .gossip., expected one of .meas., .ci."):
+    with pytest.raises(ValueError,
+                       match="key .pda.mode. is .gossip., expected one of .meas., .ci."):
         seed003_net.make_core(cfg, "s1", "gossip")
     with pytest.raises(ValueError, match="no sensor named"):
         seed003_net.make_core(cfg, "s9", "meas")

@@ -105,7 +105,7 @@ def test_gm_exchange_closed_form_and_the_reference_ratio(scn):
 
 
 def test_flooding_through_the_fault_layer(scn):
-    from sim.faultplan import Constant, FaultPlan, LinkFaults
+    from peers.faultplan import Constant, FaultPlan, LinkFaults
 
     clean = seed004.flooding_under_faults(scn, FaultPlan(interval=1.0), scans=2)
     assert clean["complete"] == 1.0 and clean["late"] == 0.0

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tracking.gaussian import gaussian_pdf_points
+
 
 @dataclass(frozen=True)
 class GaussianMixture:
@@ -121,8 +123,6 @@ class GaussianMixture:
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
         """Intensity at points ``x (p, d)``: returns ``(p,)``. For tests and plots."""
-        from tracking.gaussian import gaussian_pdf_points
-
         x = np.atleast_2d(np.asarray(x, dtype=float))
         if len(self) == 0:
             return np.zeros(x.shape[0])

@@ -28,6 +28,7 @@ from sensornet.cli.common import (
     _viewer,
 )
 from sensornet.cli.peer import cmd_host, cmd_peer, cmd_replay, cmd_world
+from sensornet.cli.results import add_parsers as add_result_parsers
 from sensornet.cli.run import cmd_demo, cmd_run
 from sensornet.cli.studies import cmd_campaign, cmd_experiment, cmd_report, cmd_sweep
 from sim.scenario import (
@@ -153,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--world-grace", type=POSITIVE_FLOAT, metavar="SECONDS",
                         help="keep running this long when the world's liveliness goes away, in "
                              "case it comes back (a router restart); counted as an outage "
-                             "(default: stop at once)")
+                             "(default: 8 scan intervals, at least 3 s)")
         sp.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
                         help="local filter (default: the scenario's network.filter)")
         sp.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
@@ -237,10 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "about this long (Zenoh's default is 10000)")
         sp.add_argument("--timeout", type=POSITIVE_FLOAT, default=60.0,
                         help="extra seconds allowed beyond the run's own length (default 60)")
-        sp.add_argument("--per-process", type=POSITIVE_INT, default=1, metavar="N",
+        sp.add_argument("--per-process", type=POSITIVE_INT, metavar="N",
                         help="peers per process: hosts h1, h2, ... of N peers each, one Zenoh "
-                             "session per host (sensornet host); default 1, a process per "
-                             "peer")
+                             "session per host (sensornet host); default a process per peer "
+                             "up to 16 peers, a host per core above (said in one line)")
         add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")
@@ -305,6 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also report.html beside report.md: one self-contained file (tables, "
                          "every figure embedded)")
     rp.set_defaults(func=cmd_report)
+
+    add_result_parsers(sub)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])

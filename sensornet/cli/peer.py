@@ -214,7 +214,7 @@ def _record_meta(args: argparse.Namespace, speed: float) -> dict[str, str]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from peers.recording import replay
+    from sim.replay import replay
 
     path = Path(args.path)
     files = sorted((path / "record").glob("*.mcap")) if path.is_dir() else [path]

@@ -21,6 +21,7 @@ from sensornet.cli.common import (
     _run_folder,
 )
 from sensornet.cli.peer import _load, _run_keys
+from sensornet.cli.results import report_results
 from sensornet.cli.studies import _warn_fusion
 
 
@@ -67,6 +68,24 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
         raise UserError("--per-process needs real processes; drop --sim")
 
 
+def _packing(args: argparse.Namespace, scn, pfaults) -> int:
+    """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
+    from sim.launcher import HOSTED_ACTIONS
+    from sim.packing import choose
+
+    solo = [f"{f.action}:{f.peer}" for f in pfaults
+            if f.action not in HOSTED_ACTIONS and f.peer != "router"]
+    asked = getattr(args, "per_process", None)
+    if getattr(args, "sim", False):  # the twin: no processes to pack
+        return asked or 1
+    why_not = ("secure mode" if args.secure is not None or scn.security else
+               f"--fault {solo[0]}" if solo else "")
+    packing = choose(len(scn.sensors), asked, why_not)
+    if packing.line:
+        print(packing.line, flush=True)
+    return packing.per_process
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.launcher import (
         ProcessFault,
@@ -89,7 +108,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.network.router and hasattr(args, "router") and not args.router:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
-    per_process = getattr(args, "per_process", 1) or 1
+    per_process = _packing(args, scn, pfaults)
     hosts = host_groups(scn.sensor_names, per_process)
     _check_hosted_faults(pfaults, hosts, args)
     unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
@@ -198,6 +217,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from sim.launcher import fault_report
 
         print(fault_report(json.loads(faults_file.read_text()), summaries))
+    report_results(out)
     rec = merge_recordings(out)
     if rec is not None:
         print(f"recording: {rec}  (view it with: rerun {rec})")
@@ -240,6 +260,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run_twin(scn, args: argparse.Namespace) -> int:
     """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
+    from peers.scan_results import write_part
     from sim.launcher import format_summary
     from sim.twin import run_twin
 
@@ -255,12 +276,14 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
 
     if trust_note(summaries):
         print(trust_note(summaries))
+    out = _run_folder(args.out, "sim")
+    for name, core in result.peers.items():
+        write_part(core.scorer.results, name, out / f"peer-{name}.scans.msgpack")
+    report_results(out)
     if result.faults is not None:
         print(f"injected link faults: {result.faults.counts()}")
-        if args.out:
-            out = _run_folder(args.out, "run")
-            result.faults.write_log(out / "faults.csv")
-            print(f"fault log: {out / 'faults.csv'}")
+        result.faults.write_log(out / "faults.csv")
+        print(f"fault log: {out / 'faults.csv'}")
     unscored = [n for n, s in summaries.items() if not _scored(s)]
     if unscored:
         print(f"sensornet: error: peer {unscored[0]} scored no scan", file=sys.stderr)

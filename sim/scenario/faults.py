@@ -6,7 +6,7 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from sim.faultplan import (
+from peers.faultplan import (
     Constant,
     Delay,
     Exponential,

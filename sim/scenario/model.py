@@ -8,7 +8,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from sim.faultplan import (
+from peers.faultplan import (
     FaultPlan,
 )
 from sim.kinds import names as kind_names
@@ -343,7 +343,7 @@ class Scenario:
     """PDA peers' settings (``network.filter = "pda"``)."""
     faults: FaultPlan | None = None
     """Link faults from the ``[faults]`` table (``None``: perfect links), resolved per link
-    (:mod:`sim.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
+    (:mod:`peers.faultplan`); injected by :mod:`peers.faults`. Its delays in scans are bound to
     the scan interval ``scan_period / network.speed`` at load: change the speed with an
     override, not with ``dataclasses.replace``."""
     security: str | None = None

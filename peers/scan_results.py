@@ -1,0 +1,159 @@
+"""Per-scan results of one peer: what it estimated, what was true, and what each estimate scored.
+
+One row per (scan, estimate) that the peer owed, ``estimate`` being ``"local"`` or ``"fused"``.
+A row whose output never came (``scored`` false) carries no tracks and is scored as a miss:
+OSPA at the cut-off and GOSPA with every true target missed, as the summary's means count it.
+The schema (:data:`COLUMNS`) is documented in docs/results.md; :func:`write_parquet` writes it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+from tracking.metrics import gospa_parts, ospa
+
+COLUMNS = ("peer", "scan", "estimate", "scored", "ospa", "gospa", "gospa_localisation",
+           "gospa_missed", "gospa_false", "n_estimated", "n_true", "latency_ms", "tracks",
+           "truth")
+"""The table's columns, in order (docs/results.md says what each holds)."""
+
+MAX_ROWS = 500_000
+"""Rows kept per peer (a 10 scans/s run of about 7 hours); later rows are counted, not kept."""
+
+
+class ScanResults:
+    """Collects a peer's per-scan rows; ``position_index`` picks the position from a state."""
+
+    def __init__(self, cutoff: float, order: float, position_index: tuple[int, int]) -> None:
+        self.c, self.p = float(cutoff), float(order)
+        self.pos = list(position_index)
+        self.rows: list[tuple] = []
+        self.dropped = 0
+
+    def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray) -> float:
+        """Add an estimate that arrived; its OSPA (the value the summary's mean takes)."""
+        est, true = self._xy(states), self._xy(truth)
+        value = ospa(est, true, self.c, self.p)
+        self._add(k, which, True, value, est, true, states, truth)
+        return value
+
+    def missed(self, k: int, which: str, truth: np.ndarray | None) -> None:
+        """Add an output that never came: OSPA at the cut-off, every true target missed."""
+        truth = np.zeros((0, 0)) if truth is None else truth
+        self._add(k, which, False, self.c, np.zeros((0, 2)), self._xy(truth), None, truth)
+
+    def _xy(self, states: np.ndarray) -> np.ndarray:
+        return states[:, self.pos] if len(states) else np.zeros((0, 2))
+
+    def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
+             true: np.ndarray, states: np.ndarray | None, truth: np.ndarray) -> None:
+        if len(self.rows) >= MAX_ROWS:
+            self.dropped += 1
+            return
+        g, loc, missed, false = gospa_parts(est, true, self.c, self.p)
+        tracks = [] if states is None else np.asarray(states, float).tolist()
+        self.rows.append((int(k), which, scored, float(value), g, loc, missed, false,
+                          len(est), len(true), tracks, np.asarray(truth, float).tolist()))
+
+    def meta(self) -> dict:
+        """What a reader needs besides the rows: where the position sits in a state row, and
+        the OSPA/GOSPA cut-off and order the rows were scored with."""
+        return {"position_index": list(self.pos), "cutoff": self.c, "order": self.p}
+
+    def table(self, peer: str, latency_ms: dict[int, float] | None = None) -> dict[str, list]:
+        """The rows as columns (:data:`COLUMNS`), sorted by scan then estimate; a fused row's
+        latency from ``latency_ms`` (scan -> published tracks), NaN where none was measured."""
+        lat = latency_ms or {}
+        rows = sorted(self.rows, key=lambda r: (r[0], r[1]))
+        cols: dict[str, list] = {name: [] for name in COLUMNS}
+        for r in rows:
+            cols["peer"].append(peer)
+            for name, v in zip(COLUMNS[1:11], r[:10], strict=True):
+                cols[name].append(v)
+            cols["latency_ms"].append(float(lat.get(r[0], np.nan)) if r[1] == "fused"
+                                      else np.nan)
+            cols["tracks"].append(r[10])
+            cols["truth"].append(r[11])
+        return cols
+
+
+def write_part(results: ScanResults, peer: str, path: Path,
+               latency_ms: dict[int, float] | None = None) -> Path:
+    """Write one peer's rows and meta as msgpack (cheap at a peer's exit; :func:`merge_parts`
+    turns a run's parts into one Parquet table), atomically."""
+    path = Path(path)
+    tmp = path.with_suffix(".tmp")
+    part = {"columns": results.table(peer, latency_ms), "meta": results.meta()}
+    tmp.write_bytes(msgpack.packb(part, use_bin_type=True))
+    tmp.replace(path)
+    return path
+
+
+def read_part(path: Path) -> tuple[dict[str, list], dict]:
+    """``(columns, meta)`` of a part written by :func:`write_part`; ``ValueError`` if it is
+    not one."""
+    part = msgpack.unpackb(Path(path).read_bytes(), raw=False, strict_map_key=False)
+    if (not isinstance(part, dict) or not isinstance(part.get("columns"), dict)
+            or tuple(part["columns"]) != COLUMNS or not isinstance(part.get("meta"), dict)):
+        raise ValueError("not a per-scan results part")
+    return part["columns"], part["meta"]
+
+
+def merge_parts(parts: list[Path], path: Path) -> Path | None:
+    """Concatenate peers' parts (sorted by peer, then scan) into one Parquet table at
+    ``path``; None if there are no parts. A part that cannot be read is named and skipped."""
+    tables, meta = [], None
+    for part in sorted(parts):
+        try:
+            cols, m = read_part(part)
+        except (ValueError, OSError, msgpack.UnpackException) as exc:
+            print(f"per-scan results: skipped {part.name}: {exc}")
+            continue
+        tables.append(cols)
+        meta = meta or m
+    if not tables:
+        return None
+    merged = {name: [v for t in tables for v in t[name]] for name in COLUMNS}
+    return write_parquet(merged, meta, path)
+
+
+def write_parquet(columns: dict[str, list], meta: dict, path: Path) -> Path:
+    """Write a results table (:data:`COLUMNS`, ``meta`` as the file's key-value metadata)
+    atomically (temporary name, then rename)."""
+    import pyarrow as pa  # heavy optional dependency: loaded only when a run writes results
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    tmp = path.with_suffix(".tmp")
+    table = pa.table(columns, schema=schema()).replace_schema_metadata(
+        {"sensornet": msgpack.packb(meta).hex()})
+    pq.write_table(table, tmp)
+    tmp.replace(path)
+    return path
+
+
+def read_table(path: Path) -> tuple[dict[str, list], dict]:
+    """``(columns, meta)`` of a ``results.parquet``; ``ValueError`` if it is not one."""
+    import pyarrow.parquet as pq  # heavy optional dependency, see write_parquet
+
+    table = pq.read_table(path)
+    raw = (table.schema.metadata or {}).get(b"sensornet")
+    if raw is None or tuple(table.column_names) != COLUMNS:
+        raise ValueError(f"{path}: not a sensornet per-scan results table")
+    return table.to_pydict(), msgpack.unpackb(bytes.fromhex(raw.decode()))
+
+
+def schema():
+    """The pyarrow schema of a results table."""
+    import pyarrow as pa  # heavy optional dependency, see write_parquet
+
+    rows = pa.list_(pa.list_(pa.float64()))
+    return pa.schema([("peer", pa.string()), ("scan", pa.int64()), ("estimate", pa.string()),
+                      ("scored", pa.bool_()), ("ospa", pa.float64()), ("gospa", pa.float64()),
+                      ("gospa_localisation", pa.float64()), ("gospa_missed", pa.int64()),
+                      ("gospa_false", pa.int64()), ("n_estimated", pa.int64()),
+                      ("n_true", pa.int64()), ("latency_ms", pa.float64()), ("tracks", rows),
+                      ("truth", rows)])
