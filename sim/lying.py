@@ -32,8 +32,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -43,7 +41,9 @@ import numpy as np
 from peers.core import Output, PeerCore
 from protocol.messages import Estimate
 from sim.peers import make_peer
-from sim.scenario import Scenario, load_scenario
+from sim.scenario import Scenario, ScenarioError, load_scenario
+from sim.studies.base import Outcome, Request, Study, experiment
+from sim.studies.pool import map_runs
 from sim.twin import TwinResult, run_twin
 from tracking.mixture import GaussianMixture
 
@@ -207,23 +207,60 @@ def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:
     return load_scenario(setup.scenario, overrides=ov)
 
 
+def lie_once(scn: Scenario, run: int, setup: Setup, rule: str, lie: str) -> dict:
+    """One row: run ``run`` of ``scn`` with ``setup``'s liar telling ``lie`` (``"clean"``: none)."""
+    res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
+    return {"setup": setup.label, "liar": setup.liar, "rule": rule, "lie": lie, "run": run,
+            **honest_scores(res, setup.liar)}
+
+
 def measure(setups=SETUPS, rules=tuple(RULES), lies=LIES, runs: int = 5, first_run: int = 7000,
-            scans: int | None = None, progress: bool = True) -> list[dict]:
-    """One row per setup, rule, lie (``"clean"`` for none) and run."""
-    rows = []
-    for setup in setups:
-        for rule in rules:
-            scn = scenario_for(setup, rule, scans)
-            for lie in ("clean", *lies):
-                t = time.perf_counter()
-                for r in range(first_run, first_run + runs):
-                    res = run_with_liar(scn, r, setup.liar, None if lie == "clean" else lie)
-                    rows.append({"setup": setup.label, "liar": setup.liar, "rule": rule,
-                                 "lie": lie, "run": r, **honest_scores(res, setup.liar)})
-                if progress:
-                    print(f"  {setup.label} {rule} {lie}: {time.perf_counter() - t:.1f} s",
-                          file=sys.stderr)
-    return rows
+            scans: int | None = None, progress: bool = True, jobs: int = 1) -> list[dict]:
+    """One row per setup, rule, lie (``"clean"`` for none) and run, in that order."""
+    calls = [(scn, r, setup, rule, lie) for setup in setups for rule in rules
+             for scn in [scenario_for(setup, rule, scans)] for lie in ("clean", *lies)
+             for r in range(first_run, first_run + runs)]
+    return map_runs(lie_once, calls, jobs, "twin runs (graph x rule x lie x run)", progress)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The lying study's cells: graphs with their liars, rules, lies, scans per run."""
+
+    setups: tuple[Setup, ...] = SETUPS
+    rules: tuple[str, ...] = tuple(RULES)
+    lies: tuple[str, ...] = LIES
+    scans: int | None = None
+
+
+def plan_of(req: Request) -> list[Plan]:
+    """``options``: ``setups`` and ``rules`` (names), ``scans``; unknown names are refused."""
+    o = req.options
+    setups = tuple(s for s in SETUPS if s.label in o.get("setups", [s.label for s in SETUPS]))
+    rules = tuple(o.get("rules", RULES))
+    if not setups or any(r not in RULES for r in rules):
+        raise ScenarioError("lying: need a known setup and known rules")
+    return [Plan(setups, rules, LIES, o.get("scans"))]
+
+
+def run_plan(plan: Plan, run: int) -> list[dict]:
+    """Run ``run`` of every cell (graph, rule, lie)."""
+    return [lie_once(scenario_for(s, rule, plan.scans), run, s, rule, lie)
+            for s in plan.setups for rule in plan.rules for lie in ("clean", *plan.lies)]
+
+
+def summarise_plan(plan: Plan, per_run: list[list[dict]]) -> tuple[list[dict], list[dict]]:
+    """``(rows, summary)``: the rows cell by cell (as :func:`measure` gives them)."""
+    rows = [row for i in range(len(per_run[0])) for row in (run[i] for run in per_run)]
+    return rows, summarise(rows)
+
+
+def table(o: Outcome) -> str:
+    plan, runs = o.setup, o.runs
+    return (f"Honest peers' mean OSPA over {len(runs)} runs ({runs.start}..{runs.stop - 1}); "
+            "liars: " + ", ".join(f"{s.label} {s.liar}" for s in plan.setups) + "\n\n"
+            + markdown(o.summary[1]) + "\n\nCompact (honest peers' fused OSPA, m, mean ± sd "
+            "over runs):\n\n" + compact(o.summary[1]))
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -332,21 +369,26 @@ def main(argv: list[str] | None = None) -> int:
                    help="comma-separated: " + ", ".join(s.label for s in SETUPS))
     p.add_argument("--rules", default=",".join(RULES), help="comma-separated: " + ", ".join(RULES))
     p.add_argument("--scans", type=int, default=None, help="scans per run (default: scenario's)")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     a = p.parse_args(argv)
-    setups = [s for s in SETUPS if s.label in a.setups.split(",")]
-    rules = [r for r in a.rules.split(",") if r]
-    if a.runs < 1 or not setups or any(r not in RULES for r in rules):
+    req = Request("lying", runs=a.runs, jobs=max(a.jobs, 1), first_run=a.first_run, out=a.out,
+                  options={"setups": a.setups.split(","),
+                           "rules": [r for r in a.rules.split(",") if r], "scans": a.scans})
+    try:
+        plans = plan_of(req)
+    except ScenarioError:
+        plans = []
+    if a.runs < 1 or not plans:
         p.error("need --runs >= 1, a known setup and known rules")
-    rows = measure(setups, rules, LIES, a.runs, a.first_run, a.scans)
-    summary = summarise(rows)
-    print(f"Honest peers' mean OSPA over {a.runs} runs ({a.first_run}..{a.first_run + a.runs - 1})"
-          f"; liars: " + ", ".join(f"{s.label} {s.liar}" for s in setups) + "\n")
-    print(markdown(summary))
-    print("\nCompact (honest peers' fused OSPA, m, mean ± sd over runs):\n")
-    print(compact(summary))
-    for path in write(rows, summary, a.out):
-        print(f"wrote {path}")
+    experiment(STUDY, req, plans)
     return 0
+
+
+STUDY = Study(
+    name="lying", about="a member lying about its estimate: what each rule costs the honest",
+    load=plan_of, run_once=run_plan, summarise=summarise_plan, table=table,
+    figures=lambda o, folder: write(*o.summary, folder), label=lambda plan: "twin runs "
+    "(every graph, rule and lie)")
 
 
 if __name__ == "__main__":

@@ -27,8 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from sim import studies
+from sim.scenario import load_scenario
+from sim.studies.pool import iter_pool
+
 _NOT_CODE = {"report.py", "report_html.py", "report_plots.py", "progress.py", "campaign.py",
-             "results.py", "fusion_study.py", "trust_calibration.py"}
+             "campaign_model.py", "campaign_run.py", "campaign_results.py", "results.py",
+             "fusion_study.py", "trust_calibration.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
 
 
@@ -107,9 +112,6 @@ def load_task_scenario(task: Task):
     made once per process and cell (setups are frozen: the runs of a cell share one)."""
     import json
 
-    from sim import studies
-    from sim.scenario import load_scenario
-
     key = (task.runner, task.scenario, task.scenario_text,
            json.dumps(task.overrides, sort_keys=True, default=repr))
     if key not in _SCENARIOS:
@@ -122,8 +124,6 @@ def load_task_scenario(task: Task):
 
 def setup_hash(runner: str, setup: Any) -> str:
     """The hash a cell's setup is checked by on every worker (the study's, or the scenario's)."""
-    from sim import studies
-
     own = studies.get(runner).setup_hash
     return own(setup) if own is not None else scenario_hash(setup)
 
@@ -133,8 +133,6 @@ def warm(tasks: list[Task]) -> None:
     pool forked after this call starts with all of it (its workers neither import nor parse
     per task or per worker)."""
     import importlib
-
-    from sim import studies
 
     for name in {m for t in tasks for m in studies.get(t.runner).modules}:
         importlib.import_module(name)
@@ -164,8 +162,6 @@ def run_task(task: Task) -> dict[str, Any]:
         raise RuntimeError(f"worker {socket.gethostname()}: code version {code_version()} "
                            f"differs from the client's {task.code_version}: install the same "
                            "sensornet version on every worker")
-    from sim import studies
-
     study = studies.get(task.runner)
     if study.row is None:
         raise ValueError(f"study {task.runner!r} is not a campaign runner")
@@ -201,8 +197,6 @@ def run_pool(tasks: list[Task], jobs: int) -> Iterator[dict]:
     if jobs <= 1 or len(tasks) <= 1:
         yield from run_serial(tasks)
         return
-    from sim.studies.pool import iter_pool
-
     code_version()  # computed once here, inherited by the workers
     # One task per cell is enough to warm a worker (imports, scenarios): sent once, not per task.
     firsts = list({t.cell: t for t in reversed(tasks)}.values())

@@ -214,6 +214,14 @@ def format_table(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
+def footer(cfg: Mapping, runs: range, seconds: float) -> str:
+    """The line under the table: the runs, the time, what lost and RMSE mean."""
+    m = cfg["metrics"]
+    return (f"({len(runs)} runs from {runs.start}, {seconds:.0f} s; lost: error > "
+            f"{m['loss_bound']:g} m for {m['loss_scans']} scans; RMSE over kept tracks; "
+            "detector rates per scan)")
+
+
 def write_csv(rows: Sequence[dict], over_time: Mapping, folder: Path) -> list[Path]:
     """``seed003_table.csv`` (the rows) and ``seed003_rmse.csv`` (position RMSE per scan)."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -303,9 +311,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = run_experiment(cfg, a.runs, a.jobs, a.first_run, not a.quiet, methods)
     rows = summarise(cfg, results)
     print(format_table(rows))
-    print(f"({a.runs} runs from {a.first_run}, {time.monotonic() - t0:.0f} s; lost: error > "
-          f"{cfg['metrics']['loss_bound']:g} m for {cfg['metrics']['loss_scans']} scans; RMSE "
-          f"over kept tracks; detector rates per scan)")
+    print(footer(cfg, range(a.first_run, a.first_run + a.runs), time.monotonic() - t0))
     if a.csv:
         over_time = rmse_over_time(results)
         for path in [*write_csv(rows, over_time, a.csv),

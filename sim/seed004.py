@@ -72,6 +72,7 @@ from sim.seed004_output import (  # noqa: F401  (re-exported)
     gm_exchange_tuples,
     read_outputs,
     reference_comparison,
+    report_text,
     table_rows,
     table_title,
     write_outputs,
@@ -386,13 +387,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs = range(a.first_run, a.first_run + a.runs)
     t0 = time.monotonic()
     result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)
-    title = table_title(scn, runs)
-    print(title)
-    print(format_table(result))
-    print(reference_comparison(result, scn.adjacency))
-    print(f"({time.monotonic() - t0:.0f} s)")
+    print(report_text(scn, runs, result, time.monotonic() - t0))
     if a.out:
-        for path in write_outputs(result, a.out, title):
+        for path in write_outputs(result, a.out, table_title(scn, runs)):
             print(f"wrote {path}")
     return 0
 

@@ -65,6 +65,13 @@ def table_title(scn: Seed004, runs: range) -> str:
             f"{scn.clutter_rate:g}, runs {runs.start}..{runs.stop - 1}")
 
 
+def report_text(scn: Seed004, runs: range, result: dict[str, dict[str, float]],
+                seconds: float) -> str:
+    """What the study prints: the title, the table, the reference comparison, the time."""
+    return "\n".join([table_title(scn, runs), format_table(result),
+                      reference_comparison(result, scn.adjacency), f"({seconds:.0f} s)"])
+
+
 def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str) -> list[Path]:
     """``seed004_table.csv``, ``seed004_iterations.csv``, ``seed004_tradeoff.png``."""
     folder.mkdir(parents=True, exist_ok=True)

@@ -163,3 +163,17 @@ def test_an_unknown_runner_or_figure_kind_names_the_studies(toy, tmp_path):
                     '[[figures]]\nkind = "nope"\n')
     with pytest.raises(CampaignError, match=f"kind = one of .*{NAME}"):
         load_campaign(path)
+
+
+def test_a_plugin_study_is_found_through_the_environment(monkeypatch):
+    """Campaign workers find a plug-in study by ``SENSORNET_STUDIES=name=module:attribute``."""
+    assert NAME not in studies.names()
+    monkeypatch.setenv(studies.PLUGINS_ENV, f"{NAME}={__name__}:TOY")
+    try:
+        assert NAME in studies.names() and studies.get(NAME) is TOY
+        assert studies.for_source(NAME).name == NAME
+    finally:
+        studies.unregister(NAME)
+    monkeypatch.setenv(studies.PLUGINS_ENV, "broken")
+    with pytest.raises(ValueError, match="is not 'name=module:attribute'"):
+        studies.names()

@@ -17,6 +17,7 @@ from sim.scenario import (
     MAX_ROUNDS,
     MAX_RUNS,
 )
+from sim.studies import DEFAULT_SCENARIO  # noqa: F401  (the parser's and demo's)
 
 
 class UserError(Exception):

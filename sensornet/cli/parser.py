@@ -13,6 +13,7 @@ from sensornet.cli.budgets import (
     default_memory_gb,
 )
 from sensornet.cli.common import (
+    DEFAULT_SCENARIO,
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
     POSITIVE_INT,
@@ -77,8 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
 
     e = sub.add_parser("experiment", help="offline Monte Carlo: local vs fused vs centralized")
-    e.add_argument("scenario", nargs="?", default="seed000",
-                   help="scenario file (.toml) or built-in name (default seed000)")
+    e.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
+                   help=f"scenario file (.toml) or built-in name (default {DEFAULT_SCENARIO})")
     e.add_argument("--birth", choices=["paper", "truth", "both"],
                    help="birth model (default: the scenario's)")
     e.add_argument("--fusion", choices=["gci", "aa", "hybrid", "none"],
@@ -185,13 +186,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     pe = sub.add_parser("peer", help="run one sensor peer (a process) over Zenoh")
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
-    pe.add_argument("--scenario", default="seed000", help="scenario file or built-in name")
+    pe.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario file or built-in name")
     add_peer_flags(pe)
     pe.set_defaults(func=cmd_peer)
 
     ho = sub.add_parser("host", help="run several sensor peers in one process over one Zenoh "
                         "session (a peer host)")
-    ho.add_argument("scenario", nargs="?", default="seed000",
+    ho.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                     help="scenario file or built-in name")
     ho.add_argument("--peers", required=True,
                     help="comma-separated sensors this host runs, e.g. s1,s2,s3")
@@ -201,7 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     ho.set_defaults(func=cmd_host)
 
     w = sub.add_parser("world", help="play a scenario's truth and scans over Zenoh")
-    w.add_argument("scenario", nargs="?", default="seed000")
+    w.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
     add_net_flags(w, network_required=True)
     w.add_argument("--peers", help="comma-separated peers to wait for before starting")
     w.add_argument("--wait", type=POSITIVE_FLOAT, default=PEER_WAIT,
@@ -244,14 +245,14 @@ def build_parser() -> argparse.ArgumentParser:
         add_budget_flags(sp, peers=True)
 
     r = sub.add_parser("run", help="run a scenario: world + peers as processes over Zenoh")
-    r.add_argument("scenario", nargs="?", default="seed000")
+    r.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
     add_run_flags(r)
     r.add_argument("--sim", action="store_true",
                    help="run the discrete-event twin instead of processes (fast, no network)")
     r.set_defaults(func=cmd_run)
 
-    d = sub.add_parser("demo", help="'run seed000' with a live Rerun viewer: world + 3 peers "
-                       "over Zenoh, summary")
+    d = sub.add_parser("demo", help=f"'run {DEFAULT_SCENARIO}' with a live Rerun viewer: world "
+                       "+ 3 peers over Zenoh, summary")
     add_run_flags(d)
     d.set_defaults(func=cmd_demo, viewer="spawn")
 
@@ -266,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
                         "over Monte Carlo runs (twin by default): CSV and plot")
-    sw.add_argument("scenario", nargs="?", default="seed000")
+    sw.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
     sw.add_argument("--param", required=True,
                     help="scenario key to sweep, e.g. faults.default.delay.high")
     sw.add_argument("--values", required=True,
@@ -310,7 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])
-    s.add_argument("name", nargs="?", default="seed000")
+    s.add_argument("name", nargs="?", default=DEFAULT_SCENARIO)
     s.set_defaults(func=cmd_scenario)
 
     ro = sub.add_parser("router", help="a Zenoh router for members that cannot all reach "
@@ -332,8 +333,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "certificate (for --secure)")
     k.add_argument("network", type=_network_name, help="the network the keys are for")
     k.add_argument("--out", required=True, help="folder for the PEM files")
-    k.add_argument("--scenario", default="seed000",
-                   help="members: the world and the scenario's sensors (default seed000)")
+    k.add_argument("--scenario", default=DEFAULT_SCENARIO,
+                   help="members: the world and the scenario's sensors "
+                   f"(default {DEFAULT_SCENARIO})")
     k.add_argument("--members", help="comma-separated member names instead, e.g. "
                    "world,s1,s2,s3")
     k.add_argument("--hosts", help="host names and addresses the certificates are valid for "

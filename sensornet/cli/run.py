@@ -13,7 +13,13 @@ import time
 from pathlib import Path
 
 from sensornet.cli.budgets import check_budget
-from sensornet.cli.common import UserError, _check_listen_free, _resolve_viewer, _run_folder
+from sensornet.cli.common import (
+    DEFAULT_SCENARIO,
+    UserError,
+    _check_listen_free,
+    _resolve_viewer,
+    _run_folder,
+)
 from sensornet.cli.peer import _load, _run_keys
 from sensornet.cli.results import report_results
 from sensornet.cli.studies import _warn_fusion
@@ -286,7 +292,8 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """``sensornet run seed000`` with a viewer (``--viewer spawn`` unless told otherwise)."""
-    args.scenario = "seed000"
+    """``sensornet run`` of the default scenario with a viewer (``--viewer spawn`` unless told
+    otherwise)."""
+    args.scenario = DEFAULT_SCENARIO
     args.sim = False
     return cmd_run(args)

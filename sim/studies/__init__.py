@@ -22,10 +22,14 @@ STUDIES: dict[str, str] = {
     "twin": "sim.studies.network:TWIN",
     "real": "sim.studies.network:REAL",
     "fusion-quality": "sim.studies.fusion:STUDY",
+    "lying": "sim.lying:STUDY",
     "experiment": "sim.studies.seed000:STUDY",
 }
 """Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
 read a scenario (the last, ``experiment``, reads any). Modules are imported on first use."""
+
+DEFAULT_SCENARIO = "seed000"
+"""The built-in scenario a command or campaign plays when it names none."""
 
 PLUGINS_ENV = "SENSORNET_STUDIES"
 """Comma-separated ``"name=module:attribute"`` entries added to :data:`STUDIES` (a plug-in's
@@ -105,5 +109,6 @@ def register(study):
 
 
 def unregister(name: str) -> None:
-    """Remove a study added with :func:`register` (tests)."""
+    """Forget a study added with :func:`register` or loaded from a plug-in (tests)."""
     _registered.pop(name, None)
+    _loaded.pop(name, None)

@@ -11,8 +11,12 @@ from typing import Any
 
 import numpy as np
 
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.runners import scenario_source
 from sim.scenario import Scenario, load_scenario
 from sim.studies.base import Cell, Outcome, Request, Study
+from sim.sweep import _toml, cost_columns
+from sim.twin import run_twin
 
 
 def load(req: Request) -> list[Scenario]:
@@ -21,9 +25,6 @@ def load(req: Request) -> list[Scenario]:
 
 def twin_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
     """One twin run's columns."""
-    from sim.sweep import cost_columns
-    from sim.twin import run_twin
-
     result = run_twin(scn, cell.run)
     peers = result.peers
     out: dict[str, Any] = {
@@ -54,10 +55,6 @@ def twin_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
 
 def real_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
     """One run over processes: the launcher's world and peers, their summaries' columns."""
-    from sim.launcher import read_summaries, start_run, wait_run
-    from sim.runners import scenario_source
-    from sim.sweep import _toml, cost_columns
-
     source = scenario_source(cell.scenario, cell.scenario_text)
     sets = [f"{k}={_toml(v)}" for k, v in cell.overrides.items()]
     with tempfile.TemporaryDirectory(prefix="sensornet-campaign-") as tmp:

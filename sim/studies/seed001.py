@@ -21,6 +21,7 @@ import numpy as np
 from sim import seed001 as s1
 from sim.report_plots import methods as methods_of
 from sim.report_plots import plt_module
+from sim.scenario import ScenarioError
 from sim.seed001 import PAPER_TABLE1
 from sim.studies.base import Cell, Outcome, Request, Study
 
@@ -67,8 +68,6 @@ def setup_hash(s: Setup) -> str:
 
 
 def load(req: Request) -> list[Setup]:
-    from sim.scenario import ScenarioError
-
     try:
         return [setup(req.source, req.overrides)]
     except ValueError as exc:

@@ -32,11 +32,7 @@ def run_once(cfg: dict, run: int) -> s3.RunResult:
 
 
 def table(o: Outcome) -> str:
-    m = o.setup["metrics"]
-    return (s3.format_table(o.summary) + "\n"
-            f"({len(o.runs)} runs from {o.runs.start}, {o.seconds:.0f} s; lost: error > "
-            f"{m['loss_bound']:g} m for {m['loss_scans']} scans; RMSE over kept tracks; "
-            "detector rates per scan)")
+    return s3.format_table(o.summary) + "\n" + s3.footer(o.setup, o.runs, o.seconds)
 
 
 def figures(o: Outcome, folder: Path) -> list[Path]:

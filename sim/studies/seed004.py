@@ -8,7 +8,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from sim import seed004 as s4
+from sim import seed004_output as out
+from sim import seed004_scenario as s4
 from sim.scenario import ScenarioError
 from sim.studies.base import Outcome, Request, Study
 
@@ -28,21 +29,29 @@ def load(req: Request) -> list[s4.Seed004]:
 
 
 def run_once(scn: s4.Seed004, run: int) -> dict[str, dict[str, float]]:
-    return s4.run_once(scn, run, True)
+    # sim.seed004 imports sklearn (FTC's DBSCAN), 1-3 s: not for every 'experiment' that asks
+    # this study whether it reads a scenario
+    from sim import seed004
+
+    return seed004.run_once(scn, run, True)
+
+
+def summarise(scn: s4.Seed004, per_run: list) -> dict[str, dict[str, float]]:
+    from sim import seed004  # sklearn, as above
+
+    return seed004.aggregate(per_run)
 
 
 def table(o: Outcome) -> str:
-    return "\n".join([s4.table_title(o.setup, o.runs), s4.format_table(o.summary),
-                      s4.reference_comparison(o.summary, o.setup.adjacency),
-                      f"({o.seconds:.0f} s)"])
+    return out.report_text(o.setup, o.runs, o.summary, o.seconds)
 
 
 def figures(o: Outcome, folder: Path) -> list[Path]:
-    return s4.write_outputs(o.summary, folder, s4.table_title(o.setup, o.runs))
+    return out.write_outputs(o.summary, folder, out.table_title(o.setup, o.runs))
 
 
 STUDY = Study(
     name="seed004",
     about="seed 004: flooding + IDPC/FTC against GCI/AA consensus, IC, centralised, local",
-    load=load, run_once=run_once, summarise=lambda scn, per_run: s4.aggregate(per_run),
+    load=load, run_once=run_once, summarise=summarise,
     table=table, figures=figures, claims=claims)
