@@ -328,9 +328,10 @@ def test_sigterm_is_an_interrupt_that_keeps_finished_runs(tmp_path):
                              str(out), "--jobs", "2", "--quiet"], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     store = ResultStore(out / "results")
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 600  # a bound for failure only: the wait is on the files
     while time.monotonic() < deadline and proc.poll() is None and store.count_files() < 2:
         time.sleep(0.05)
+    assert proc.poll() is None and store.count_files() >= 2, "no two finished runs to keep"
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err.decode()
