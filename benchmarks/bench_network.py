@@ -22,6 +22,8 @@ scan-to-track latency stays under one scan interval (100 ms).
     python benchmarks/bench_network.py            # full (several minutes)
     python benchmarks/bench_network.py --quick    # 3-peer part and one small scaling step (~20 s)
     python benchmarks/bench_network.py --sizes 20 --degrees 4 --per-process 20  # one host
+    python benchmarks/bench_network.py --targets   # the hosts issue's table: 20/50/100 peers,
+                                                   # ring/degree 3/4, one per process and auto
 
 ``--per-process N`` runs N peers per process (``sensornet run --per-process``, peer hosts):
 the CPU per peer per scan is then each host's CPU split between its peers
@@ -32,6 +34,7 @@ is left out.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -56,6 +59,8 @@ def scenario_text(n: int, degree: int, scans: int, rounds: int, speed: float,
 
 ZENOH_CONFIG: str | None = None
 """A Zenoh JSON5 file for every process of every run (``--config``), e.g. to try a setting."""
+SIZES = "10,20,30,40"
+"""Default --sizes of the scaling part (the targets table's: 20,50,100)."""
 PER_PROCESS = 1
 """Peers per process of every run (``--per-process``; 1: a process per peer)."""
 
@@ -254,10 +259,68 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
     return rows
 
 
+def packing_of(n: int, packing: str) -> int:
+    """Peers per process for ``packing``: a number, or ``auto`` (what ``sensornet run``
+    chooses without ``--per-process``: sim.packing)."""
+    from sim.packing import choose
+
+    return choose(n, None).per_process if packing == "auto" else int(packing)
+
+
+def load_average() -> str:
+    """The 1-minute load average now (the machine may be shared: CPU numbers with it)."""
+    try:
+        return f"{os.getloadavg()[0]:.1f}"
+    except OSError:
+        return "?"
+
+
+def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list[str],
+                 scans: int, deadline: float) -> list[str]:
+    """The issue's targets table: every size x graph x packing, one row each (no early stop):
+    CPU per peer per scan with its breakdown, p99 scan -> fused, deadline fusions, scans
+    processed, and the load average at the run's end."""
+    cols = [*CPU_PARTS, "other"]
+    rows = ["| graph | peers | per process | real time | CPU ms/peer/scan | "
+            + " | ".join(cols) + " | p99 scan->fused (ms) | deadline fusions (worst peer) "
+            "| scans processed | load avg |",
+            "|---|---:|---:|---|---:|" + "---:|" * len(cols) + "---:|---:|---:|---:|"]
+    print("\n".join(rows), flush=True)
+    global PER_PROCESS
+    for n in sizes:
+        for degree in degrees:
+            for packing in packings:
+                PER_PROCESS = per = packing_of(n, packing)
+                path = tmp / f"t-{n}-{degree}-{per}.toml"
+                path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0,
+                                              deadline=deadline))
+                res = run_network(str(path), tmp / f"t-{n}-{degree}-{per}", [],
+                                  timeout=scans / 10 + 60 + 3 * n, sparse=True)
+                s, graph = res["summaries"], "ring" if degree == 2 else f"degree {degree}"
+                ok, _, _ = real_time(res)
+                if not s:
+                    rows.append(f"| {graph} | {n} | {per} | NO | (no summaries: exit codes "
+                                f"{res['codes']}) |")
+                    print(rows[-1], flush=True)
+                    continue
+                total, parts = cpu_per_scan(s)
+                worst = max(v["stats"]["deadline_fusions"] / max(1, v["scans"])
+                            for v in s.values())
+                done = sum(min(v["scans"], scans) for v in s.values()) / (n * scans)
+                auto = " (auto)" if packing == "auto" else ""
+                rows.append(f"| {graph} | {n} | {per}{auto} | {'yes' if ok else 'NO'} | "
+                            f"{total:.2f} | "
+                            + " | ".join(f"{parts.get(c, 0.0):.2f}" for c in cols)
+                            + f" | {pooled(s)[1]:.1f} | {100 * worst:.1f} % | "
+                            f"{100 * done:.1f} % | {load_average()} |")
+                print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="short runs, one small scaling step")
-    p.add_argument("--sizes", default="10,20,30,40", help="peer counts to try (ascending)")
+    p.add_argument("--sizes", default=SIZES, help="peer counts to try (ascending)")
     p.add_argument("--degrees", default="2,3,4", help="graph degrees to try")
     p.add_argument("--scans", type=int, default=100, help="scans per run")
     p.add_argument("--full-mesh", action="store_true",
@@ -271,7 +334,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--per-process", type=int, default=1, metavar="N",
                    help="peers per process (peer hosts, sensornet run --per-process; default "
                         "1: a process per peer)")
+    p.add_argument("--handoff", choices=("direct", "zenoh"), default="direct",
+                   help="estimates between co-hosted peers: handed over in the host (default) "
+                        "or through its Zenoh session (to compare)")
+    p.add_argument("--callbacks", choices=("direct", "thread"), default="thread",
+                   help="Zenoh callbacks on a Python thread per subscriber (Zenoh's default) "
+                        "or on Zenoh's own threads (to compare)")
+    p.add_argument("--targets", action="store_true",
+                   help="only the targets table: --sizes (default 20,50,100) x --degrees x "
+                        "--packings, every combination run (no early stop)")
+    p.add_argument("--packings", default="1,auto",
+                   help="with --targets: peers per process to try, numbers or 'auto' "
+                        "(sensornet run's choice; default 1,auto)")
     args = p.parse_args(argv)
+    os.environ["SENSORNET_HOST_HANDOFF"] = args.handoff  # read by the peer processes
+    os.environ["SENSORNET_ZENOH_CALLBACKS"] = args.callbacks
     if args.per_process < 1:
         p.error("--per-process must be >= 1")
     global ZENOH_CONFIG, PER_PROCESS
@@ -283,6 +360,14 @@ def main(argv: list[str] | None = None) -> int:
     # and shorter runs carry fewer components per estimate (the wire ratio depends on it)
     scans = args.scans
     scale_scans = 30 if args.quick else min(scans, 50)
+    if args.targets:
+        sizes = [int(x) for x in (args.sizes if args.sizes != SIZES else "20,50,100").split(",")]
+        with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
+            print(f"## targets: 10 scans/s, 2 consensus rounds, {scale_scans} scans, links "
+                  f"along the graph; load average {load_average()} at the start\n", flush=True)
+            part_targets(Path(tmp), sizes, degrees, args.packings.split(","), scale_scans,
+                         args.deadline)
+        return 0
     with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
         tmp = Path(tmp)
         print(f"## latency and wire size (seed000, 3 peers, 10 scans/s, no Rerun{hosted})\n",

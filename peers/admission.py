@@ -5,18 +5,25 @@ thread), reading only the first bytes of the message (a few microseconds):
 
 - the key must be one of the network's;
 - a scan, estimate or truth names its scan index (and round and kind) in its first fields:
-  stamped outside the window the peer still fuses it is refused at once (``stale``/``future``);
-  inside, each slot ``(sender, k, round, kind)`` is let through at most :data:`SLOT_ATTEMPTS`
-  times (``duplicate``), so replays and floods of valid-looking messages cost a dictionary
-  lookup each, and a genuine message is never starved by junk on its key;
-- everything else (unparseable headers, scans outside the normal window, control messages) is
-  charged to a per-sender token bucket (``rate``), a few times what an honest sender needs.
+  stamped outside the window the peer still fuses it is refused at once (``stale``/``future``),
+  an estimate of a round the peer does not run (``round``) or of a kind it does not fuse
+  (``incompatible``) too; inside, each slot ``(sender, k, round, kind)`` is let through at most
+  :data:`SLOT_ATTEMPTS` times (``duplicate``), so replays and floods of valid-looking messages
+  cost a dictionary lookup each;
+- every message that would go on to be decoded (or, in secure mode, have its signature
+  verified) is charged to its sender's token bucket (``rate``), a few times what an honest sender
+  needs: however a member stamps its messages, what it costs a receiver is bounded;
+- what the callbacks hand to the main loop waits in an inbox bounded per sender
+  (:data:`INBOX_SCANS` scans' worth, ``inbox``) and in total (:data:`INBOX_TOTAL` messages,
+  :data:`INBOX_BYTES` bytes, ``inbox-total``): a main loop that falls behind drops, it does not
+  grow (:meth:`Admission.arrive`, :meth:`Admission.taken`).
 """
 
 from __future__ import annotations
 
+import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import msgpack
@@ -27,6 +34,19 @@ SLOT_ATTEMPTS = 4
 """Messages per (sender, scan, round, kind) let through to decoding: a duplicated delivery
 is normal, a few more leave room for a genuine message after junk on the same slot."""
 MAX_SLOTS = 100_000
+SCAN_BURST = 32
+"""Scans the world's bucket holds: a peer frozen for a few seconds gets every queued scan to
+its catch-up (peers.runtime), which skips or works them off; each is small and decoded once."""
+INBOX_SCANS = 16
+"""Messages one sender may have waiting for the main loop, in scans of its honest rate (at
+least :data:`INBOX_MIN`): a loop this far behind skips to the newest scans anyway."""
+INBOX_MIN = 32
+INBOX_TOTAL = 4096
+"""Messages waiting for one peer's main loop, from all senders together."""
+INBOX_BYTES = 32 << 20
+"""Bytes waiting for one peer's main loop (32 MiB: what a flood of large messages may hold)."""
+ESTIMATE_KINDS = ("posterior", "prediction", "returns")
+"""Estimate kinds by their index in the wire header (``o``, protocol.codec)."""
 _HEAD = 192  # bytes holding every field read by peek()
 
 CHANNELS = ("scan", "estimate", "truth", "ctl")
@@ -125,10 +145,24 @@ class Admission:
 
     def __init__(self, network: str, interval: float, per_scan: dict[str, float],
                  factor: float = 4.0, burst: float = 8.0, max_senders: int = 256,
-                 window: Callable[[str], tuple[int, int]] | None = None) -> None:
+                 window: Callable[[str], tuple[int, int]] | None = None,
+                 rounds: int | None = None, kinds: Iterable[str] | None = None) -> None:
+        """``rounds``: consensus rounds the peer runs (estimates of round ``0 <= r < rounds``
+        are taken); ``kinds``: estimate kinds it fuses (None: no check before decoding)."""
         self.network = network
         self.window = window
         """``channel -> (lo, hi)``: scan indices the peer keeps for that channel now."""
+        self.rounds = rounds
+        self.kinds = (None if kinds is None else
+                      frozenset(ESTIMATE_KINDS.index(k) for k in kinds if k in ESTIMATE_KINDS))
+        self._lock = threading.Lock()  # Zenoh calls back on several threads
+        self._queued: Counter = Counter()  # (channel, name) -> messages in the inbox
+        self.queued_total = 0
+        self.queued_bytes = 0
+        self.inbox_peak = 0
+        """Most messages ever waiting in the inbox at once."""
+        self.admitted: Counter = Counter()
+        """Messages let through to decoding, by ``channel/sender``."""
         self._slots: dict[str, dict[tuple, int]] = {}
         self._slots_lo: dict[str, int] = {}
         self.interval = max(interval, 1e-6)
@@ -145,28 +179,88 @@ class Admission:
             if len(self._buckets) >= self.max_senders:  # names are bounded too
                 return None
             n = self.per_scan.get(route.channel, 1.0)
-            b = TokenBucket(self.factor * n / self.interval, max(4.0, self.burst * n))
+            burst = max(self.burst, SCAN_BURST) if route.channel == "scan" else self.burst
+            b = TokenBucket(self.factor * n / self.interval, max(4.0, burst * n))
             self._buckets[key] = b
         return b
 
     def admit(self, route: Route | None, now: float, payload: bytes = b"") -> bool:
-        """Whether a message on ``route`` at ``now`` may go on (counts the refusals)."""
+        """Whether a message on ``route`` at ``now`` may be decoded (counts the refusals)."""
+        with self._lock:
+            return self._admit(route, now, payload, inbox=False)
+
+    def arrive(self, route: Route | None, now: float, payload: bytes = b"") -> bool:
+        """:meth:`admit`, and a place in the inbox for it: call :meth:`taken` with its key
+        when the main loop takes it off the queue (or when it is dropped before that)."""
+        with self._lock:
+            return self._admit(route, now, payload, inbox=True)
+
+    def taken(self, key: str, size: int) -> None:
+        """A message :meth:`arrive` let in has left the inbox (handled, skipped or refused)."""
+        route = parse_key(key, self.network)
+        if route is None:
+            return
+        with self._lock:
+            name = (route.channel, route.name)
+            n = self._queued.get(name, 0)
+            if n <= 0:
+                return  # not one arrive() counted (a driver feeding its own queue)
+            if n == 1:
+                del self._queued[name]
+            else:
+                self._queued[name] = n - 1
+            self.queued_total -= 1
+            self.queued_bytes -= size
+
+    def shrink(self, n: int) -> None:
+        """A message in the inbox became ``n`` bytes shorter (its signature trailer removed)."""
+        with self._lock:
+            self.queued_bytes -= n
+
+    def _admit(self, route: Route | None, now: float, payload: bytes, inbox: bool) -> bool:
         if route is None:
             self.rejected["wrong-key"] += 1
             return False
         head = peek(payload) if self.window is not None and route.channel != "ctl" else None
-        if head is not None:
-            verdict = self._slot(route, head)
-            if verdict is not None:
-                return verdict
+        slot = self._slot(route, head) if head is not None else None
+        if slot is False:
+            return False
+        name = (route.channel, route.name)
+        if inbox:
+            if self._queued.get(name, 0) >= self._inbox_bound(route.channel):
+                self.rejected["inbox"] += 1
+                return False
+            if (self.queued_total >= INBOX_TOTAL
+                    or self.queued_bytes + len(payload) > INBOX_BYTES):
+                self.rejected["inbox-total"] += 1
+                return False
         b = self._bucket(route)
         if b is None or not b.take(now):
             self.rejected["rate"] += 1
             return False
+        if slot is not None:
+            slots, key = slot
+            slots[key] = slots.get(key, 0) + 1
+        self.admitted[f"{route.channel}/{route.name}"] += 1
+        if inbox:
+            self._queued[name] += 1
+            self.queued_total += 1
+            self.queued_bytes += len(payload)
+            self.inbox_peak = max(self.inbox_peak, self.queued_total)
         return True
 
-    def _slot(self, route: Route, head: tuple[str, int, int, int]) -> bool | None:
-        """Window and slot verdict for a parsed header; None: leave it to the bucket."""
+    def _inbox_bound(self, channel: str) -> int:
+        return max(INBOX_MIN, int(INBOX_SCANS * self.per_scan.get(channel, 1.0)))
+
+    def queued(self) -> dict:
+        """What waits in the inbox now (messages per sender, in total, bytes)."""
+        with self._lock:
+            return {"senders": {f"{c}/{n}": q for (c, n), q in self._queued.items()},
+                    "messages": self.queued_total, "bytes": self.queued_bytes}
+
+    def _slot(self, route: Route, head: tuple[str, int, int, int]):
+        """Window, round, kind and slot verdict for a parsed header: False (refused, counted),
+        None (no slot: the bucket decides) or ``(slots, slot)`` to count once it is let in."""
         _, k, r, o = head
         lo, hi = self.window(route.channel)
         if k > hi or k < lo:
@@ -174,6 +268,13 @@ class Admission:
                 return None  # maybe a restart of the numbering: the core decides, rate-limited
             self.rejected["future" if k > hi else "stale"] += 1
             return False
+        if route.channel == "estimate":
+            if self.rounds is not None and not 0 <= r < self.rounds:
+                self.rejected["round"] += 1
+                return False
+            if self.kinds is not None and head[0] == "E" and o not in self.kinds:
+                self.rejected["incompatible"] += 1
+                return False
         slots = self._slots.setdefault(route.channel, {})
         if lo > self._slots_lo.get(route.channel, lo - 1):  # forget slots that left the window
             self._slots[route.channel] = slots = {s: n for s, n in slots.items() if s[1] >= lo}
@@ -185,5 +286,4 @@ class Admission:
         if n >= SLOT_ATTEMPTS:
             self.rejected["duplicate"] += 1
             return False
-        slots[slot] = n + 1
-        return True
+        return slots, slot

@@ -57,11 +57,14 @@ class PeerCore:
         its scenario neither subscribes to them nor is fed them in the twin (a message and a
         decode per scan saved, and nothing a forger could put there reaches it)."""
         self.keys = Keys(cfg.network)
+        self.decode = decode
+        """Bytes -> message (a host shares one read-only decode between its peers)."""
         kinds = max(1, len(consensus.kinds))
         self.admission = Admission(cfg.network, cfg.interval, {
             "scan": 1.0, "truth": 1.0, "ctl": 0.5,
             "estimate": float(consensus.rounds * kinds)}, factor=cfg.rate_factor,
-            window=self.window_for)
+            window=self.window_for, rounds=consensus.rounds,
+            kinds=consensus.kinds or ("posterior",))
         self.rejected: Counter = Counter()
         self.received: Counter = Counter()
         self.received_bytes: Counter = Counter()
@@ -83,6 +86,7 @@ class PeerCore:
         self.sent_bytes: Counter = Counter()
         """Bytes of every publication, by channel (what the runtime puts on the wire)."""
         self._scan_at: tuple[int, float] | None = None
+        self._last_scan: tuple[int, float] | None = None  # (k, world's send time) accepted
         self._cost_mark = (0, 0, 0)
 
     # -- the four entry points ------------------------------------------------------------
@@ -99,7 +103,7 @@ class PeerCore:
         self.received[route.channel] += 1
         self.received_bytes[route.channel] += len(payload)
         try:
-            msg = decode(payload, self.cfg.limits)
+            msg = self.decode(payload, self.cfg.limits)
         except Rejected as exc:
             return self._reject(exc.reason)
         expected = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,
@@ -116,7 +120,7 @@ class PeerCore:
 
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""
-        if self.world_gone is not None and now >= self.world_gone + self.cfg.world_grace:
+        if self.world_gone is not None and now >= self.world_gone + self.cfg.grace():
             self.world_gone, self.world = None, "left"  # not back within the grace
             return self.finish(now) + [Stop("world left before ending the run")]
         out: list[Output] = []
@@ -142,7 +146,7 @@ class PeerCore:
                     self.world_gone = None
                 self.world = "alive"
                 return []
-            if self.world == "alive" and self.cfg.world_grace > 0 and not self.end_requested:
+            if self.world == "alive" and self.cfg.grace() > 0 and not self.end_requested:
                 if self.world_gone is None:
                     self.world_gone = now  # maybe a router outage: see tick()
                 return []
@@ -178,7 +182,7 @@ class PeerCore:
         """When :meth:`tick` next has work (a deadline), or None."""
         due = min(self.deadlines.values(), default=None)
         if self.world_gone is not None:
-            end = self.world_gone + self.cfg.world_grace
+            end = self.world_gone + self.cfg.grace()
             due = end if due is None else min(due, end)
         return due
 
@@ -206,10 +210,9 @@ class PeerCore:
                 self.reanchored += 1
                 # the same numbering after a pause (this peer was frozen or fell behind): the
                 # scan it was fusing is fused now with what it has, the scans in between had
-                # no output (misses); a jump further than the pause explains is a new
+                # no output (misses); a jump the world's clock does not explain is a new
                 # numbering (the world restarted), not misses
-                elapsed = now - self.last_accept if self.last_accept is not None else 0.0
-                pause = c.last_k < k <= c.last_k + h + elapsed / self.cfg.interval
+                pause = c.last_k < k and self._same_numbering(k, msg.send_time, now)
                 if pause:
                     closed = self._wrap(c.finish(now))
                 c.reset_window()
@@ -224,6 +227,7 @@ class PeerCore:
         else:
             return self._reject("future")
         self.last_accept = now
+        self._last_scan = (k, msg.send_time)
         out = [*closed, Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
         self.scorer.expect(k)
         self._score_deferred()  # the previous scan's, if no tick came between (a backlog)
@@ -234,6 +238,20 @@ class PeerCore:
         self._scan_at = (k, now)
         self._arm(k)
         return out
+
+    def _same_numbering(self, k: int, sent: float, now: float) -> bool:
+        """Whether scan ``k`` (sent at ``sent``) follows the last accepted one in the same
+        numbering: the pause since this peer's last scan explains the jump, or the world's
+        send times differ by the scans between them (give or take the horizon), however late
+        this peer handled either (a backlog it skipped is misses, not a new numbering)."""
+        h, dt = self.cfg.horizon, self.cfg.interval
+        elapsed = now - self.last_accept if self.last_accept is not None else 0.0
+        if k <= self.consensus.last_k + h + elapsed / dt:
+            return True
+        if self._last_scan is None:
+            return False
+        last_k, last_sent = self._last_scan
+        return abs((sent - last_sent) - (k - last_k) * dt) <= max(h * dt, 1.0)
 
     def _due(self, k: int) -> float | None:
         """The next fusion deadline of scan ``k`` while it is being fused: the scan's, or with

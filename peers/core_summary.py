@@ -36,6 +36,8 @@ def core_snapshot(core) -> dict:
         "rejected": dict(rejected),
         "rejected_total": sum(rejected.values()),
         "rejected_before_decoding": sum(core.admission.rejected.values()),
+        "admitted_by_sender": dict(core.admission.admitted),
+        "inbox_peak": core.admission.inbox_peak,
         "received_by_kind": dict(core.received),
         "bytes_received": sum(core.received_bytes.values()),
         "messages_received": sum(core.received.values()),

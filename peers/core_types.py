@@ -41,6 +41,10 @@ class Stop:
 Output = Publish | Record | Stop
 
 
+WORLD_GRACE_SCANS = 8
+WORLD_GRACE_MIN = 3.0
+
+
 @dataclass(frozen=True)
 class CoreConfig:
     """Clock and bounds of one peer (the filter and fusion settings live in its parts)."""
@@ -59,8 +63,18 @@ class CoreConfig:
     a new start of the scan numbering (a late join, a restarted world)."""
     rate_factor: float = 4.0
     """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
-    world_grace: float = 0.0
+    world_grace: float | None = None
     """Seconds a peer waits for the world's liveliness token to come back before the run is
-    over for it (0: at once). A router restart takes every token away for its outage: the
-    world back within the grace is an outage (``world_outages``), not the end."""
+    over for it (0: at once; None: :meth:`grace`'s default). A router restart, a peer frozen
+    past the lease or a partition from the world takes the token away for a while: the world
+    back within the grace is an outage (``world_outages``), not the end. A world that sent
+    ``ctl`` "end" first has ended the run: its leaving stops the peer at once, grace or not."""
     limits: Limits = DEFAULT_LIMITS
+
+    def grace(self) -> float:
+        """:attr:`world_grace`, by default :data:`WORLD_GRACE_SCANS` scan intervals and at
+        least :data:`WORLD_GRACE_MIN` seconds (a frozen peer relinks after Zenoh's connect
+        retry, about a second, whatever the scan rate)."""
+        if self.world_grace is not None:
+            return self.world_grace
+        return max(WORLD_GRACE_SCANS * self.interval, WORLD_GRACE_MIN)

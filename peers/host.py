@@ -3,9 +3,12 @@
 Each hosted peer is a :class:`peers.runtime.PeerRuntime` as in a process of its own (its name,
 liveliness token, neighbours, link faults, summary, log lines, Rerun stream), except that
 its transport declares on the host's one session and puts what arrives on the host's one
-queue, tagged with the peer. Co-hosted peers still publish and subscribe through that
-session (Zenoh delivers locally), so an estimate between two of them goes through the same
-admission and the same link-fault layer (:class:`peers.faults.HoldQueue`) as a remote one.
+queue, tagged with the peer. An estimate from one peer to a co-hosted neighbour is handed
+over in the process (:data:`HANDOFF`): the encoded bytes the publisher put on Zenoh go
+straight to the neighbour's :meth:`peers.transport.Transport.deliver`, so they pass the same
+admission (per sender) and the same link-fault layer (:class:`peers.faults.HoldQueue`) as a
+remote one, without Zenoh's local routing, a callback thread or a copy; remote neighbours get
+the one Zenoh put (Zenoh sends it once to each remote host, whose session fans it out).
 
 One loop thread does every peer's work: at each wake-up it moves what has arrived to the
 peers' own backlogs, then gives each peer with due work (a message waiting, a held message or
@@ -18,6 +21,7 @@ stops that peer as if its process had been killed (``sensornet run --fault kill:
 from __future__ import annotations
 
 import gc
+import os
 import queue
 import signal
 import threading
@@ -31,9 +35,47 @@ from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from peers.session import open_session
 from peers.telemetry import SharedCpu
 from peers.transport import settle
+from protocol.codec import decode
+from protocol.messages import Estimate
+
+HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
+"""Hand estimates between co-hosted peers over in-process (default) or through the host's
+Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py --handoff``).
+"""
 
 CONTROL = -1
 """The slot of the host's own items on its queue (commands, a signal's wake-up)."""
+
+
+class SharedDecode:
+    """One decode of an estimate handed to several co-hosted neighbours: the hand-off gives
+    each the same bytes object, so the last :data:`SIZE` estimates' messages are kept by
+    payload (a bytes object caches its hash) with their arrays read-only (a receiver that
+    wrote into one would raise, not change its neighbours'). Anything else (a large payload
+    too), and every refusal, is decoded per receiver as before."""
+
+    SIZE = 256
+    LARGEST = 65536
+    """Bytes of the largest payload kept (at most SIZE x LARGEST = 16 MiB held)."""
+
+    def __init__(self) -> None:
+        self._memo: dict[tuple[bytes, object], Estimate] = {}
+        self.hits = 0
+
+    def __call__(self, payload: bytes, limits):
+        memo_key = (payload, limits)
+        msg = self._memo.get(memo_key)
+        if msg is not None:
+            self.hits += 1
+            return msg
+        msg = decode(payload, limits)
+        if type(msg) is Estimate and len(payload) <= self.LARGEST:
+            for a in (msg.mixture.weights, msg.mixture.means, msg.mixture.covs):
+                a.flags.writeable = False
+            if len(self._memo) >= self.SIZE:
+                del self._memo[next(iter(self._memo))]  # the oldest
+            self._memo[memo_key] = msg
+        return msg
 
 
 class _Inbox:
@@ -70,11 +112,35 @@ class PeerHost:
         for rt in self.peers:
             rt.host = info
         self.by_name = {rt.name: i for i, rt in enumerate(self.peers)}
+        if HANDOFF:
+            self._wire_handoff()
+            self.decode = SharedDecode()
+            for rt in self.peers:
+                rt.core.decode = self.decode
         self.session = None
         self.stop_reason = ""
         self._stop = False
         self._active: list[int] = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
+
+    def _wire_handoff(self) -> None:
+        """Each peer's co-hosted neighbours: not subscribed to through Zenoh, handed over."""
+        listeners: dict[str, list[int]] = {}
+        for i, rt in enumerate(self.peers):
+            t = rt.transport
+            t.local = frozenset(n for n in t.neighbours if n in self.by_name)
+            for n in t.local:
+                listeners.setdefault(n, []).append(i)
+        for name, subs in listeners.items():
+            self.peers[self.by_name[name]].transport.handoff = (
+                lambda key, payload, subs=tuple(subs): self._hand_over(subs, key, payload))
+
+    def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
+        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running."""
+        active = self._active
+        for j in subs:
+            if j in active:
+                self.peers[j].transport.deliver(key, payload)
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:

@@ -29,7 +29,7 @@ from peers.rerun_sink import RerunSink
 from peers.scan_results import write_part
 from peers.telemetry import SharedCpu, Telemetry
 from peers.transport import Transport
-from protocol.codec import Rejected, decode
+from protocol.codec import Rejected
 from protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
@@ -200,6 +200,10 @@ class PeerRuntime:
         the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
         peer, so the observer may flush)."""
         try:
+            taken = self.core.admission.taken
+            for tag, key, payload in items:  # out of the inbox (handled or skipped below)
+                if tag == "msg":
+                    taken(key, len(payload))
             for item in self._catch_up(items):
                 if self._stop:
                     break
@@ -319,7 +323,7 @@ class PeerRuntime:
     def _hold(self, key: str, payload: bytes) -> bool:
         """Injected faults on the link ``sender -> self``: hold, duplicate or drop."""
         try:
-            msg = decode(payload, self.core.cfg.limits)
+            msg = self.core.decode(payload, self.core.cfg.limits)  # a host's: shared
         except Rejected:
             return False  # the core counts it
         if not isinstance(msg, Estimate | Forward | Returns):

@@ -27,6 +27,14 @@ MAX_MESSAGE_BYTES = (1 << 20) + 4096
 dropped by Zenoh before it costs memory (a 50 MB payload used to be received whole)."""
 
 
+ACCEPT_PENDING = 1024
+"""Incoming links Zenoh keeps in their opening handshake at once (its default, 100, let an
+outsider's 400 idle TCP connections keep a new member out for 13 s: it waited for a slot)."""
+ACCEPT_TIMEOUT_MS = 3000
+"""How long an incoming link may take to finish its handshake (Zenoh's default 10 s): a flood
+of idle connections larger than :data:`ACCEPT_PENDING` clears within this."""
+
+
 SHARED_MEMORY_NOTE = """Zenoh's shared-memory transport optimisation is off: with it, a large
 message (over 3 kB) from a sender on the same host comes through that sender's 16 MiB pool,
 which every receiver maps: +20 MB resident in a peer flooded with 240 kB estimates (+2 MB
@@ -108,8 +116,9 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
     and the network's access control policy; every endpoint must then be ``tls/``.
 
     Defaults on top of Zenoh's: a lease of :data:`DEFAULT_LEASE_MS`, a maximum message size
-    of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win) and no
-    shared-memory transport optimisation (:data:`SHARED_MEMORY_NOTE`).
+    of :data:`MAX_MESSAGE_BYTES` (a user's file may set both; flags still win), no
+    shared-memory transport optimisation (:data:`SHARED_MEMORY_NOTE`) and room for
+    :data:`ACCEPT_PENDING` handshakes of at most :data:`ACCEPT_TIMEOUT_MS` each.
     """
     if config_file:
         path = Path(config_file)
@@ -134,6 +143,9 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
             conf.insert_json5("transport/link/rx/max_message_size", str(int(max_message)))
         if not config_file:  # see SHARED_MEMORY_NOTE
             conf.insert_json5("transport/shared_memory/transport_optimization/enabled", "false")
+        if not config_file:  # idle connections must not lock members out (ACCEPT_PENDING)
+            conf.insert_json5("transport/unicast/accept_pending", str(ACCEPT_PENDING))
+            conf.insert_json5("transport/unicast/accept_timeout", str(ACCEPT_TIMEOUT_MS))
         if not gossip:  # links only to the given endpoints (large networks: fewer links)
             conf.insert_json5("scouting/gossip/enabled", "false")
         if security is not None:

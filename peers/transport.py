@@ -8,6 +8,7 @@ queue and hands them to the sans-I/O core.
 
 from __future__ import annotations
 
+import os
 import queue
 import time
 
@@ -25,6 +26,14 @@ RECOVER_CACHE = 64
 RECOVER_HEARTBEAT = 0.5
 """Seconds between a recovering publisher's heartbeats (its last sequence number): how a
 subscriber that missed the publisher's last messages notices and asks for them."""
+
+DIRECT_CALLBACKS = os.environ.get("SENSORNET_ZENOH_CALLBACKS", "thread") == "direct"
+"""``SENSORNET_ZENOH_CALLBACKS=direct``: run the subscribers' callbacks on Zenoh's own threads
+(they only admit and queue, no Zenoh call inside) instead of Zenoh's default, a Python thread
+per subscriber. Measured (``benchmarks/bench_network.py --callbacks``, load 5-7 on 2 cores):
+no gain in hosts once co-hosted estimates are handed over (50 peers of degree 4 in 2 hosts:
+3.63 vs 3.67 ms per peer per scan), none for 3 peers (three runs each: 4.26-4.36 vs
+3.88-4.34 ms, median scan -> fused 6.7-8.8 vs 6.5-7.9 ms): so not the default."""
 
 
 def recovering_publisher(session, key: str, express: bool = True):
@@ -73,6 +82,14 @@ def settle(session, first: float = 2.0, stable: float = 0.2, cap: float = 1.5) -
             return
         time.sleep(0.02)
 
+
+def callback(fn):
+    """``fn`` as a Zenoh callback run on the Zenoh thread that received the sample
+    (:data:`DIRECT_CALLBACKS`) or, Zenoh's default, on a Python thread of its own per
+    subscriber (a thread hop per message, and a thread per subscription: 8 per peer)."""
+    if not DIRECT_CALLBACKS:
+        return fn
+    return zenoh.handlers.Callback(fn, indirect=False)
 
 
 _ENCODINGS: dict[tuple[str, bool], zenoh.Encoding] = {}
@@ -123,6 +140,12 @@ class Transport:
         self._ready = None
         self._pubs: dict[str, object] = {}
         self._owns_session = True
+        self.local: frozenset[str] = frozenset()
+        """Neighbours whose estimates are handed over in-process (co-hosted peers): not
+        subscribed to through Zenoh, so nothing arrives twice."""
+        self.handoff = None
+        """``handoff(key, payload)``: called with each estimate this peer publishes (a host's
+        direct hand-off to co-hosted neighbours), before it is put on Zenoh for the others."""
 
     # -- callbacks (Zenoh threads) ----------------------------------------------------------
     def _on_sample(self, sample) -> None:
@@ -130,13 +153,22 @@ class Transport:
         # a reply from a recovering publisher's cache (not express; ctl is never express)
         if self.recover and not sample.express and key in self._recovering:
             self.recovered[self._recovering[key]] += 1
-        payload = sample.payload.to_bytes()
-        if self.admission.admit(parse_key(key, self.keys.network), time.monotonic(), payload):
+        self.deliver(key, sample.payload.to_bytes())
+
+    def deliver(self, key: str, payload: bytes) -> None:
+        """What arrived on ``key``, from Zenoh or handed over by a co-hosted neighbour
+        (:mod:`peers.host`): the same admission (per sender) and signature check either way.
+        Bounded before anything is decoded or verified (peers.admission): window, slot, the
+        sender's bucket and a place in the inbox, given back by the main loop (taken)."""
+        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
+                size = len(payload)
                 payload, why = self.verifier.open(key, payload, self.check_signatures)
                 if why is not None:
                     self.admission.rejected[why] += 1
+                    self.admission.taken(key, size)
                     return
+                self.admission.shrink(size - len(payload))  # the trailer stays here
             self.q.put(("msg", key, payload))
 
     def _missed(self, channel: str, n: int) -> None:
@@ -201,7 +233,8 @@ class Transport:
             keys = [self._scan_key, self.keys.ctl(),
                     *([self.keys.truth()] if self.truth else []),
                     # only the neighbours' estimates: routing filters, not decoding
-                    *(self.keys.estimate(n) for n in self.neighbours)]
+                    *(self.keys.estimate(n) for n in self.neighbours
+                      if n not in self.local)]
             if self.recover:
                 self._recovering = {self._scan_key: "scan",
                                     **{self.keys.estimate(n): "estimate"
@@ -213,9 +246,9 @@ class Transport:
                         session, k, self._on_sample,
                         lambda n, ch=ch: self._missed(ch, n)))
                 else:
-                    self._decl.append(session.declare_subscriber(k, self._on_sample))
+                    self._decl.append(session.declare_subscriber(k, callback(self._on_sample)))
             self._decl.append(session.liveliness().declare_subscriber(
-                self.keys.alive("*"), self._on_live, history=True))
+                self.keys.alive("*"), callback(self._on_live), history=True))
             self._decl.append(session.liveliness().declare_token(self.keys.alive(self.name)))
         except BaseException:
             self.close()
@@ -237,6 +270,8 @@ class Transport:
         enc = zenoh_encoding(payload, self.signer is not None)
         if self.signer is not None:
             payload = self.signer.seal(getattr(self.keys, channel)(self.name), payload)
+        if channel == "estimate" and self.handoff is not None:
+            self.handoff(self.keys.estimate(self.name), payload)
         self._pubs[channel].put(payload, encoding=enc)
 
     def wake(self) -> None:

@@ -17,6 +17,18 @@ keeps the newest stamp it accepted per key, and a copy whose stamp is not newer 
 message reordered after a newer one of the same key) is refused as ``replayed``. (Zenoh keeps
 the order of one publisher's messages on a path: an honest stream never comes out of order.)
 
+What the freshness rule assumes, and how it recovers: the members' clocks agree to within
+:data:`MAX_AHEAD` (NTP does, by milliseconds). A stamp more than that ahead of the receiver's
+clock is refused (``ahead``) and never becomes the bar, so a sender whose clock ran ahead (an
+hour, say) is refused while it is wrong, and taken again as soon as its clock is corrected:
+its signer, seeing its clock more than :data:`MAX_AHEAD` behind its last stamp, follows the
+clock again instead of counting on from the far future. A receiver whose own clock stepped back
+(a bar more than :data:`MAX_AHEAD` after its clock) lowers that bar to its clock minus
+:data:`MAX_AHEAD`. Either way honest messages are taken again at once, or within
+:data:`MAX_AHEAD` where a sender's stamps were less than that ahead, not after the whole skew.
+What that gives up: when a receiver's bar is lowered, a copy of a message stamped in the
+:data:`MAX_AHEAD` before its clock may be taken once more.
+
 The trailer leaves the payload's first bytes where they were: the admission's header peek
 (``peers.admission``) works on a sealed message unchanged.
 
@@ -39,7 +51,10 @@ SIG_BYTES = 64
 TRAILER = _STAMP.size + SIG_BYTES + len(TAG)
 _DOMAIN = b"sensornet-envelope-1\x00"
 WORLD = "world"
-UNAUTHENTICATED, REPLAYED = "unauthenticated", "replayed"
+UNAUTHENTICATED, REPLAYED, AHEAD = "unauthenticated", "replayed", "ahead"
+MAX_AHEAD = 10 * 10**9
+"""Nanoseconds a stamp may be ahead of the receiver's clock (the clock skew the freshness rule
+tolerates, and how long a corrected clock may still be refused)."""
 
 
 def owner(key: str, world: str = WORLD) -> str | None:
@@ -71,14 +86,18 @@ def inner(payload: bytes) -> bytes:
 class Signer:
     """Seals what one member puts (its Ed25519 private key)."""
 
-    def __init__(self, private_key) -> None:
+    def __init__(self, private_key, clock=None) -> None:
         self._key = private_key
         self._last = 0
+        self._clock = clock  # nanoseconds; None: time.time_ns (tests set their own)
         self._lock = threading.Lock()
 
     def stamp(self) -> bytes:
         with self._lock:
-            self._last = max(self._last + 1, time.time_ns())
+            now = self._clock() if self._clock is not None else time.time_ns()
+            # strictly increasing, unless the clock was set back by more than MAX_AHEAD (it
+            # ran ahead and was corrected): then the clock again, which receivers take
+            self._last = now if self._last - now > MAX_AHEAD else max(self._last + 1, now)
             return _STAMP.pack(self._last)
 
     def seal(self, key: str, payload: bytes) -> bytes:
@@ -93,16 +112,18 @@ class Verifier:
     the lock (``cryptography`` releases the GIL for it), only the stamp bookkeeping inside.
     """
 
-    def __init__(self, roster: dict, world: str = WORLD) -> None:
+    def __init__(self, roster: dict, world: str = WORLD, clock=None) -> None:
         self.roster = dict(roster)
         self.world = world
+        self._clock = clock
         self._newest: dict[str, int] = {}
         self._lock = threading.Lock()
 
     def open(self, key: str, payload: bytes, check_signature: bool = True
              ) -> tuple[bytes | None, str | None]:
         """``(payload without the trailer, None)``, or ``(None, reason)``: ``unauthenticated``
-        (no or a bad signature, no roster key for the key's owner) or ``replayed``.
+        (no or a bad signature, no roster key for the key's owner), ``replayed`` or ``ahead``
+        (stamped more than :data:`MAX_AHEAD` after this receiver's clock).
 
         ``check_signature=False``: the trailer and the replay check only, for a message whose
         sender the transport has already proven (a direct mutual-TLS link whose access control
@@ -123,8 +144,14 @@ class Verifier:
             except InvalidSignature:
                 return None, UNAUTHENTICATED
         stamp = _STAMP.unpack(st)[0]
+        limit = (self._clock() if self._clock is not None else time.time_ns()) + MAX_AHEAD
+        if stamp > limit:
+            return None, AHEAD  # the sender's clock is wrong: not a bar for later messages
         with self._lock:
-            if stamp <= self._newest.get(key, 0):
+            bar = self._newest.get(key, 0)
+            if bar > limit:  # our own clock stepped back: that bar came from its future
+                bar = self._newest[key] = limit - 2 * MAX_AHEAD
+            if stamp <= bar:
                 return None, REPLAYED
             self._newest[key] = stamp
         return body, None

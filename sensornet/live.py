@@ -173,20 +173,24 @@ def echo(tap: Tap, count: int | None = None, duration: float | None = None,
     return n
 
 
-def topics(tap: Tap, duration: float = 3.0, stop: threading.Event | None = None) -> str:
-    """Listen for ``duration`` seconds, then a table: per key, messages, rate, bytes, kinds,
-    senders and the newest scan."""
+def topics(tap: Tap, duration: float = 3.0, stop: threading.Event | None = None,
+           count: int | None = None) -> str:
+    """Listen for ``duration`` seconds (or until ``count`` messages), then a table: per key,
+    messages, rate, bytes, kinds, senders and the newest scan."""
     stop = stop or threading.Event()
     t0 = time.monotonic()
     seen: dict[str, Counter] = defaultdict(Counter)
     nbytes: Counter = Counter()
     newest: dict[str, int] = {}
     kinds: dict[str, set] = defaultdict(set)
-    while not stop.is_set() and time.monotonic() - t0 < duration:
+    heard = 0
+    while (not stop.is_set() and time.monotonic() - t0 < duration
+           and (count is None or heard < count)):
         try:
             line = tap.q.get(timeout=0.1)
         except queue.Empty:
             continue
+        heard += 1
         seen[line.key][line.sender] += 1
         nbytes[line.key] += line.nbytes
         kinds[line.key].add(line.kind)

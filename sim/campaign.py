@@ -5,7 +5,7 @@ A campaign file (see ``sim/campaigns/*.toml``)::
     [campaign]
     name = "policy-sweep"
     scenario = "seed000"        # built-in name, or a scenario file (relative to this file)
-    runner = "twin"             # "experiment" | "twin" | "real" | "seed001" (sim/runners.py)
+    runner = "twin"             # a study with a row hook: "experiment", "twin", "real", ...
     runs = 50                   # Monte Carlo runs per cell (runs first_run .. first_run+runs-1)
     first_run = 0
     metrics = ["*"]             # patterns of the metric columns to keep (fnmatch)
@@ -47,11 +47,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+from sim import studies
 from sim.progress import Progress
-from sim.runners import RUNNERS, Task, code_version, scenario_hash
+from sim.runners import Task, code_version, setup_hash
 from sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
 
-FIGURE_KINDS = ("seed000", "seed001", "sweep", "ospa-time")
+DEFAULT_SCENARIO = "seed000"
+"""The scenario of a campaign file that names none (the project's default, as the commands')."""
+
+
+def figure_kinds() -> tuple[str, ...]:
+    """``[[figures]]`` kinds: the campaign-wide ones and each study's per-cell report."""
+    return ("sweep", "ospa-time", *studies.report_kinds())
 
 
 class CampaignError(ScenarioError):
@@ -160,9 +167,11 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(f"{label}: invalid TOML: {exc}") from None
     if "study" in data:  # a study expands into its own cells (scenarios, runners, runs)
-        from sim.fusion_study import study_campaign
-
-        return study_campaign(data, path, runs)
+        kind = data["study"].get("kind") if isinstance(data["study"], dict) else None
+        expanders = [n for n in studies.names() if studies.get(n).expand is not None]
+        _check(kind in expanders, label, f"study.kind must be one of {', '.join(expanders)}, "
+               f"got {kind!r}")
+        return studies.get(kind).expand(data, path, runs)
     unknown = set(data) - {"campaign", "set", "grid", "cells", "figures"}
     _check(not unknown, label, f"unknown table(s) {sorted(unknown)} (known: campaign, set, "
            "grid, cells, figures)")
@@ -171,8 +180,9 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     _check(not unknown, label, f"unknown key(s) {sorted(unknown)} in [campaign]")
     name = str(head.get("name", path.stem))
     runner = head.get("runner", "twin")
-    _check(runner in RUNNERS, label, f"campaign.runner must be one of {', '.join(RUNNERS)}, "
-           f"got {runner!r}")
+    _check(runner in studies.runners(), label, "campaign.runner must be one of "
+           f"{', '.join(studies.runners())}, got {runner!r}")
+    fixed = studies.get(runner).fixed_scenario
     n_runs = runs if runs is not None else head.get("runs", 50)
     _check(isinstance(n_runs, int) and 1 <= n_runs <= MAX_RUNS, label,
            f"campaign.runs must be an integer in 1..{MAX_RUNS:,}, got {n_runs!r}")
@@ -182,11 +192,11 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     metrics = head.get("metrics", ["*"])
     _check(isinstance(metrics, list) and all(isinstance(m, str) for m in metrics) and metrics,
            label, "campaign.metrics must be a list of column patterns, e.g. [\"*\"]")
-    scen = str(head.get("scenario", "seed001" if runner == "seed001" else "seed000"))
+    scen = str(head.get("scenario", fixed or DEFAULT_SCENARIO))
     scen_path = path.parent / scen
-    if runner == "seed001":
-        _check(scen == "seed001", label, "the seed001 runner takes scenario = \"seed001\" "
-               "(its settings are the [set]/[grid] keys geometry, particles, omega, ...)")
+    if fixed is not None:
+        _check(scen == fixed, label, f"the {runner} runner takes scenario = \"{fixed}\" "
+               "(its settings are the study's [set]/[grid] keys)")
         scen_name, scen_text = scen, None
     elif scen_path.is_file():
         scen_name, scen_text = scen_path.name, scen_path.read_text(encoding="utf-8")
@@ -220,21 +230,19 @@ def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:
     version = code_version()
     for c in cells:
         try:
-            if runner == "seed001":
-                from sim.runners import seed001_hash, seed001_setup
-
-                c.hash = seed001_hash(seed001_setup(c.overrides))
-            else:
-                c.hash = scenario_hash(load_scenario(scenario_source(scen_name, scen_text),
-                                                     overrides=c.overrides))
+            make = studies.get(runner).cell_setup
+            source = scenario_source(scen_name, scen_text)
+            c.hash = setup_hash(runner, make(source, c.overrides) if make is not None else
+                                load_scenario(source, overrides=c.overrides))
         except (ScenarioError, ValueError) as exc:
             raise CampaignError(f"{label}, cell {c.label!r}: {exc}") from None
         c.keys = [task_key(c.hash, runner, first + r, version) for r in range(n_runs)]
     figures = data.get("figures", [])
     _check(isinstance(figures, list), label, "[[figures]] must be an array of tables")
     for f in figures:
-        _check(isinstance(f, dict) and f.get("kind") in FIGURE_KINDS, label,
-               f"a [[figures]] entry needs kind = one of {', '.join(FIGURE_KINDS)}, got {f!r}")
+        kinds = figure_kinds()
+        _check(isinstance(f, dict) and f.get("kind") in kinds, label,
+               f"a [[figures]] entry needs kind = one of {', '.join(kinds)}, got {f!r}")
         if f["kind"] == "sweep":
             _check(f.get("x") in grid, label,
                    f"sweep figure: x must be a [grid] key ({', '.join(grid) or 'none'})")

@@ -16,15 +16,14 @@ from __future__ import annotations
 
 import csv
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from sim.build import make_filter, make_reducer
-from sim.progress import Progress
 from sim.scenario import Scenario
+from sim.studies.pool import map_runs
 from sim.world import generate_run
 from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, hybrid_fuse, metropolis_weights
 from tracking.metrics import cardinality_error, ospa
@@ -168,23 +167,14 @@ def run_experiment(scn: Scenario, runs: int, jobs: int = 1, progress: bool = Tru
     """``runs`` Monte Carlo runs of :func:`run_once`, over ``jobs`` worker processes."""
     if runs < 1:
         raise ValueError("runs must be at least 1")
-    methods = method_names(scn)
-    results: list[RunResult | None] = [None] * runs
-    with Progress(runs, f"runs ({scn.name}, births: {scn.birth.model})",
-                  enabled=progress) as bar:
-        if jobs <= 1:
-            for i in range(runs):
-                results[i] = run_once(scn, first_run + i)
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = {pool.submit(run_once, scn, first_run + i): i for i in range(runs)}
-                from concurrent.futures import as_completed
+    done = map_runs(run_once, [(scn, first_run + i) for i in range(runs)], jobs,
+                    f"runs ({scn.name}, births: {scn.birth.model})", progress)
+    return collect(scn, done)
 
-                for fut in as_completed(futures):
-                    results[futures[fut]] = fut.result()
-                    bar.advance()
-    done = [r for r in results if r is not None]
+
+def collect(scn: Scenario, done: list[RunResult]) -> ExperimentResult:
+    """The runs' results stacked (``done`` in run order)."""
+    methods = method_names(scn)
     return ExperimentResult(
         scenario=scn,
         methods=methods,

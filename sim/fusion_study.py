@@ -29,6 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from sim.campaign import Campaign, CampaignError, Cell, task_key
+from sim.runners import code_version, scenario_hash, scenario_source
+from sim.scenario import ScenarioError, load_scenario
+
 STUDY_KIND = "fusion-quality"
 NO_FUSION = "none"
 CENTRALISED = "centralised"
@@ -57,8 +61,6 @@ class Rule:
 
 
 def _fail(label: str, problem: str):
-    from sim.campaign import CampaignError
-
     return CampaignError(f"{label}: {problem}")
 
 
@@ -102,10 +104,6 @@ def _scenario(spec: str, base: Path | None, label: str) -> tuple[str, str | None
 
 def study_campaign(data: dict, path: Path | None, runs: int | None = None):
     """The :class:`sim.campaign.Campaign` of a study file (``runs``: every cell's run count)."""
-    from sim.campaign import Campaign, Cell, task_key
-    from sim.runners import code_version, scenario_hash, scenario_source
-    from sim.scenario import ScenarioError, load_scenario
-
     label = path.name if path is not None else "study"
     unknown = set(data) - {"campaign", "study"}
     if unknown:

@@ -4,18 +4,14 @@ Per-cell tables give every scalar metric's mean over the runs with a 95 % confid
 (Student t, ``mean ± t(0.975, n-1) s / sqrt(n)``). Figures, as the campaign's ``[[figures]]``
 ask (default: OSPA over time per cell):
 
-* ``seed000``: per cell, seed 000's Figs. 4-8: the mean number of estimates against the truth
-  (cardinality), its RMSE over the runs, OSPA over time for each sensor alone, the fused
-  estimate and the centralized filter (95 % band), and the component counts of the fusing
-  sensor before and after level-2 pruning and after fusion;
 * ``sweep``: a metric (``y``, default the fused OSPA) against one grid key (``x``), a line per
   value of ``lines`` (or per combination of the other grid keys), 95 % error bars; optional
   ``baseline`` (another metric drawn dashed beside each line, e.g. ``local_ospa``: each peer
   alone), ``paper = {value = ..., label = "..."}`` (the paper's number, a red line, where the
   paper gives one; ``note`` otherwise, e.g. that it gives none), ``xlabel`` and ``ylabel``;
 * ``ospa-time``: every cell's mean fused OSPA per scan in one plot;
-* ``seed001``: per cell of a ``seed001`` campaign, Table 1 (x-axis RMSE over the runs not lost,
-  lost tracks) beside the paper's numbers, and a bar chart of the position RMSE.
+* a study's kind (e.g. ``seed000``, ``seed001``): per cell, what the study's ``report`` hook
+  draws (:mod:`sim.studies`: seed 000's Figs. 4-8, seed 001's Table 1).
 """
 
 from __future__ import annotations
@@ -26,8 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from sim import studies
 from sim.campaign import _fmt, read_manifest, results_table
+from sim.report_html import markdown_html
+from sim.report_plots import band, plt_module, series
 from sim.results import META_COLUMNS
+
+CAMPAIGN_FIGURES = ("sweep", "ospa-time")
+"""Figure kinds drawn over the whole campaign; any other kind is a study's per-cell report."""
 
 
 def interval(values: np.ndarray) -> tuple[float, float, int]:
@@ -72,149 +74,11 @@ def _by_cell(table, manifest) -> dict[int, dict[str, Any]]:
     return out
 
 
-def _series(rows: list, K: int | None = None) -> np.ndarray:
-    """Runs x scans from a list of per-run lists (None rows dropped)."""
-    rows = [r for r in rows if r is not None]
-    if not rows:
-        return np.zeros((0, K or 0))
-    return np.array(rows, dtype=float)
-
-
 def _headline(scalars: list[str]) -> list[str]:
     keys = [c for c in scalars if c.startswith("mean_ospa.")]
     if not keys:
         keys = [c for c in ("fused_ospa", "local_ospa") if c in scalars]
     return keys or scalars[:3]
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _methods(data: dict[str, Any], prefix: str) -> list[str]:
-    return [c[len(prefix):] for c in data if c.startswith(prefix)]
-
-
-def _band(ax, k, s: np.ndarray, label: str, **kw) -> None:
-    mean = np.nanmean(s, axis=0)
-    line, = ax.plot(k, mean, label=label, **kw)
-    if len(s) > 1:
-        from scipy.stats import t
-
-        half = t.ppf(0.975, len(s) - 1) * np.nanstd(s, axis=0, ddof=1) / math.sqrt(len(s))
-        ax.fill_between(k, mean - half, mean + half, color=line.get_color(), alpha=0.2, lw=0)
-
-
-def seed000_figures(cell: dict, data: dict[str, Any], out: Path) -> list[tuple[str, Path]]:
-    """Figs. 4-8 of seed 000 for one cell of an ``experiment`` campaign."""
-    plt = _plt()
-    if "n_true_k" not in data or not data["n_true_k"]:
-        return []
-    n_true = _series(data["n_true_k"])
-    runs, K = n_true.shape
-    k = np.arange(1, K + 1)
-    methods = _methods(data, "ospa_k.")
-    tag = f"cell{cell['index']}"
-    title = f"{cell['label']} ({runs} runs)"
-    figs: list[tuple[str, Path]] = []
-
-    def save(fig, ax, name: str, ylabel: str, caption: str) -> None:
-        ax.set_xlabel("scan")
-        ax.set_ylabel(ylabel)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        ax.set_title(title, fontsize=10)
-        fig.tight_layout()
-        path = out / f"{tag}-{name}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        figs.append((caption, path))
-
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for m in methods:
-        ax.plot(k, _series(data[f"n_est_k.{m}"]).mean(axis=0), label=m)
-    ax.plot(k, n_true.mean(axis=0), "k--", label="truth")
-    save(fig, ax, "cardinality", "mean number of targets",
-         "Cardinality: mean number of estimated targets against the truth (Fig. 4)")
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for m in methods:
-        err = _series(data[f"n_est_k.{m}"]) - n_true
-        ax.plot(k, np.sqrt((err ** 2).mean(axis=0)), label=m)
-    save(fig, ax, "cardinality-rmse", "cardinality RMSE (targets)",
-         "Cardinality RMSE over the runs per scan (Fig. 5)")
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for m in methods:
-        _band(ax, k, _series(data[f"ospa_k.{m}"]), m,
-              lw=2 if m in ("fused", "centralized") else 1)
-    save(fig, ax, "ospa", "OSPA (m)",
-         "OSPA over time: each sensor alone, GCI-fused, centralized; 95 % bands (Figs. 6-7)")
-    comp = [(c, f"comp_k.{c}") for c in ("local", "level2", "fused") if f"comp_k.{c}" in data]
-    if comp:
-        fig, ax = plt.subplots(figsize=(8, 4))
-        names = {"local": "local filter output (after level-1 pruning)",
-                 "level2": "after level-2 pruning (published)", "fused": "after fusion"}
-        for c, col in comp:
-            ax.plot(k, _series(data[col]).mean(axis=0), label=names[c])
-        save(fig, ax, "components", "mean number of components",
-             "Components at the fusing sensor before and after each pruning level (Fig. 8)")
-    return figs
-
-
-def seed001_table(cell: dict, data: dict[str, Any], out: Path) -> tuple[list[str], Path | None]:
-    """Seed 001's Table 1 for one cell of a ``seed001`` campaign: x-axis RMSE over the runs
-    whose track was not lost, beside the paper's numbers; and a bar chart of the x position
-    RMSE with the paper's values marked."""
-    from sim.seed001 import PAPER_TABLE1
-
-    methods = _methods(data, "msx_pos.")
-    if not methods:
-        return [], None
-    lines = ["| filter | estimate | x pos RMSE (m) | x vel RMSE (m/s) | x acc RMSE (m/s²) | "
-             "lost tracks |", "|---|---|---:|---:|---:|---:|"]
-    pos: dict[str, float] = {}
-    for m in methods:
-        lost = np.array(data[f"lost.{m}"], dtype=float) > 0.5
-        kept = ~lost
-        rmse = [math.sqrt(float(np.mean(np.array(data[f"msx_{q}.{m}"], dtype=float)[kept])))
-                if kept.any() else math.nan for q in ("pos", "vel", "acc")]
-        filt, rule = m.split(".", 1)
-        pos[m] = rmse[0]
-        lines.append(f"| {filt} | {rule.replace('_', ' ')} | {rmse[0]:.3f} | {rmse[1]:.4f} | "
-                     f"{rmse[2]:.4f} | {int(lost.sum())}/{len(lost)} |")
-    for (filt, rule), (p, v, a) in PAPER_TABLE1.items():
-        lines.append(f"| {filt} (paper, 300 runs) | {rule} | {p} | {v} | {a} | – |")
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 4))
-    x = np.arange(len(methods))
-    ax.bar(x, [0.0 if math.isnan(pos[m]) else pos[m] for m in methods], color="tab:blue",
-           label="measured")
-    for i, m in enumerate(methods):
-        if math.isnan(pos[m]):
-            ax.text(i, 0.5, "every track lost", ha="center", va="bottom", fontsize=8)
-    labelled = False
-    for i, m in enumerate(methods):
-        filt, rule = m.split(".", 1)
-        paper = PAPER_TABLE1.get((filt, "fusion")) if "fusion" in rule.lower() else None
-        if paper is not None:
-            ax.plot([i - 0.4, i + 0.4], [paper[0]] * 2, "r-", lw=2,
-                    label=None if labelled else "paper (its fusion row)")
-            labelled = True
-    ax.set_xticks(x, [m.replace(".", "\n").replace("_", " ") for m in methods], fontsize=7)
-    ax.set_ylabel("x position RMSE (m)")
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=8)
-    ax.set_title(f"seed 001 Table 1, {cell['label']} ({len(data['key'])} runs)", fontsize=10)
-    fig.tight_layout()
-    path = out / f"cell{cell['index']}-table1.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return lines, path
 
 
 def _tick_labels(values: list) -> dict[str, str]:
@@ -230,7 +94,7 @@ def _tick_labels(values: list) -> dict[str, str]:
 
 def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
                  n: int) -> tuple[str, Path] | None:
-    plt = _plt()
+    plt = plt_module()
     x = spec["x"]
     y = spec.get("y") or ("mean_ospa.fused" if any(
         "mean_ospa.fused" in d for d in cells.values()) else "fused_ospa")
@@ -295,7 +159,7 @@ def sweep_figure(spec: dict, manifest: dict, cells: dict[int, dict], out: Path,
 
 def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,
                      n: int) -> tuple[str, Path] | None:
-    plt = _plt()
+    plt = plt_module()
     fig, ax = plt.subplots(figsize=(8, 4.5))
     drew = False
     for cell in manifest["cells"]:
@@ -303,8 +167,8 @@ def ospa_time_figure(manifest: dict, cells: dict[int, dict], out: Path,
         col = "ospa_k.fused" if "ospa_k.fused" in data else None
         if col is None or not data[col]:
             continue
-        s = _series(data[col])
-        _band(ax, np.arange(1, s.shape[1] + 1), s, cell["label"])
+        s = series(data[col])
+        band(ax, np.arange(1, s.shape[1] + 1), s, cell["label"])
         drew = True
     if not drew:
         plt.close(fig)
@@ -338,120 +202,6 @@ def overview(table, manifest: dict) -> list[str]:
     return lines
 
 
-_CSS = """body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
-color:#222}table{border-collapse:collapse;margin:1em 0;font-size:.9em}th,td{border:1px solid
-#ccc;padding:.25em .6em}th{background:#f3f3f3}td.r,th.r{text-align:right}figure{margin:1em 0}
-img{max-width:100%}figcaption{font-style:italic;color:#555}code{background:#f3f3f3;padding:0
-.2em}"""
-
-
-def _inline(text: str, folder: Path) -> str:
-    """The report's inline markdown (code, links, italics) as HTML; files linked from the
-    report are embedded as ``data:`` URIs."""
-    import base64
-    import html
-    import re
-
-    parts = re.split(r"(`[^`]*`)", text)
-    out = []
-    for part in parts:
-        if part.startswith("`") and part.endswith("`") and len(part) > 1:
-            out.append(f"<code>{html.escape(part[1:-1])}</code>")
-            continue
-        part = html.escape(part, quote=False)
-
-        def link(m: re.Match) -> str:
-            target = folder / html.unescape(m.group(2))
-            href = html.unescape(m.group(2))
-            if target.is_file():
-                kind = "text/csv" if target.suffix == ".csv" else "application/octet-stream"
-                href = f"data:{kind};base64," + base64.b64encode(target.read_bytes()).decode()
-                return (f'<a href="{href}" download="{html.escape(target.name)}">'
-                        f"{m.group(1)}</a>")
-            return f'<a href="{html.escape(href)}">{m.group(1)}</a>'
-
-        part = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", link, part)
-        part = re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", part)
-        part = re.sub(r"(?<![\w*])\*([^*]+)\*(?![\w*])", r"<em>\1</em>", part)
-        out.append(part)
-    return "".join(out)
-
-
-def _table_html(rows: list[str], folder: Path) -> list[str]:
-    def cells(line: str) -> list[str]:
-        return [c.strip() for c in line.strip().strip("|").split("|")]
-
-    head, align, body = cells(rows[0]), cells(rows[1]), [cells(r) for r in rows[2:]]
-    right = [a.endswith(":") for a in align]
-
-    def tr(tag: str, cs: list[str]) -> str:
-        return "<tr>" + "".join(
-            f'<{tag}{" class=r" if i < len(right) and right[i] else ""}>'
-            f"{_inline(c, folder)}</{tag}>" for i, c in enumerate(cs)) + "</tr>"
-
-    return ["<table>", "<thead>", tr("th", head), "</thead>", "<tbody>",
-            *(tr("td", r) for r in body), "</tbody>", "</table>"]
-
-
-def markdown_html(md: str, folder: Path, title: str) -> str:
-    """The report's markdown (headings, paragraphs, pipe tables, images with a caption line)
-    as one self-contained HTML page: every image embedded as a base64 ``data:`` URI, the
-    per-run CSV as a download link of the same kind; no external file, script or style."""
-    import base64
-    import html
-    import re
-
-    lines = md.splitlines()
-    body: list[str] = []
-    para: list[str] = []
-
-    def flush() -> None:
-        if para:
-            body.append(f"<p>{_inline(' '.join(para), folder)}</p>")
-            para.clear()
-
-    i = 0
-    while i < len(lines):
-        line = lines[i]
-        img = re.fullmatch(r"!\[(.*)\]\(([^)\s]+)\)", line.strip())
-        heading = re.match(r"(#{1,6}) (.*)", line)
-        if heading:
-            flush()
-            n = len(heading.group(1))
-            body.append(f"<h{n}>{_inline(heading.group(2), folder)}</h{n}>")
-        elif line.startswith("|"):
-            flush()
-            rows = []
-            while i < len(lines) and lines[i].startswith("|"):
-                rows.append(lines[i])
-                i += 1
-            body += _table_html(rows, folder)
-            continue
-        elif img:
-            flush()
-            png = folder / img.group(2)
-            alt = html.escape(img.group(1))
-            src = ("data:image/png;base64," + base64.b64encode(png.read_bytes()).decode()
-                   if png.is_file() else html.escape(img.group(2)))
-            caption = ""
-            j = i + 1
-            while j < len(lines) and not lines[j].strip():
-                j += 1
-            if j < len(lines) and lines[j].strip() == f"*{img.group(1)}*":
-                caption = f"<figcaption>{alt}</figcaption>"
-                i = j
-            body.append(f'<figure><img src="{src}" alt="{alt}">{caption}</figure>')
-        elif not line.strip():
-            flush()
-        else:
-            para.append(line.strip())
-        i += 1
-    flush()
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>\n"
-            + "\n".join(body) + "\n</body></html>\n")
-
-
 def write_report(folder: str | Path, out: str | Path | None = None,
                  html: bool = False) -> list[Path]:
     """Write ``report.md`` and its PNGs (default: ``<folder>/report/``); return the files.
@@ -482,6 +232,8 @@ def write_report(folder: str | Path, out: str | Path | None = None,
     lines += ["## Overview", "", *overview(table, manifest), ""]
     figures = manifest.get("figures") or [{"kind": "ospa-time"}]
     campaign_figs: list[tuple[str, Path]] = []
+    cell_reports = [studies.for_report(kind) for kind in
+                    dict.fromkeys(f["kind"] for f in figures) if kind not in CAMPAIGN_FIGURES]
     for n, spec in enumerate(figures):
         got = None
         if spec["kind"] == "sweep":
@@ -511,18 +263,10 @@ def write_report(folder: str | Path, out: str | Path | None = None,
                   else "–")
             lines.append(f"| {s} | {_num(mean)} | {ci} | {k} |")
         lines.append("")
-        if any(f["kind"] == "seed001" for f in figures):
-            table1, png = seed001_table(cell, d, out)
-            if table1:
-                lines += ["Table 1 (x axis; RMSE over the runs not lost):", "", *table1, ""]
-            if png is not None:
-                caption = "x position RMSE per filter and estimate; red: the paper's"
-                lines += [f"![{caption}]({png.name})", "", f"*{caption}*", ""]
-                written.append(png)
-        if any(f["kind"] == "seed000" for f in figures):
-            for caption, path in seed000_figures(cell, d, out):
-                lines += [f"![{caption}]({path.name})", "", f"*{caption}*", ""]
-                written.append(path)
+        for study in cell_reports:
+            more, files = study.report(cell, d, out)
+            lines += more
+            written += files
     csv_path = out / "per_run.csv"
     with csv_path.open("w", newline="") as fh:
         import csv

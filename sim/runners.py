@@ -6,19 +6,9 @@ task carries the scenario *text* (not a path), so a worker on another machine ne
 project installed, not the campaign's files. A worker checks that its code version and its
 reading of the scenario hash to the values the client computed, and refuses otherwise.
 
-Runners (``runner`` in the campaign file):
-
-* ``experiment``: the offline Monte Carlo of :func:`sim.experiment.run_once` (each sensor's
-  local GM-PHD, the fusing sensor's fusion, the centralized filter): per-scan OSPA, estimate
-  counts, component counts before and after level-2 pruning (the seed-000 figures);
-* ``twin``: the peer network on the discrete-event twin (:func:`sim.twin.run_twin`): fused and
-  local OSPA averaged over the peers, out-of-sequence counters, link-fault counts;
-* ``real``: the peers as processes over Zenoh (:mod:`sim.launcher`), as ``sensornet run``;
-* ``seed001``: seed 001's single-target study (:func:`sim.seed001.run_once`: IMM-EKF and IMM-PF
-  peers, each radar alone, GCI fusion and the particle fusion rule); its cells set
-  :data:`SEED001_KEYS` (``geometry = "A"``, ``particles = 800``, ``omega = 0.15``, ...), not
-  scenario-file keys. Per run: mean squared x position / velocity / acceleration error and
-  whether the track was lost, per (filter, estimate): Table 1 from them.
+A task's ``runner`` is a study's name (:mod:`sim.studies`: those with a ``row`` hook, e.g.
+``experiment``, ``twin``, ``real``, ``seed001``): the study makes the cell's setup and computes
+the run's columns; this module never names one.
 """
 
 from __future__ import annotations
@@ -37,14 +27,8 @@ from typing import Any
 
 import numpy as np
 
-RUNNERS = ("experiment", "twin", "real", "seed001")
-
-SEED001_KEYS = ("geometry", "seed", "particles", "jitter", "omega", "filters", "loss_threshold",
-                "loss_after")
-"""What a ``seed001`` campaign's ``[set]``/``[grid]`` may change (sim/seed001.py)."""
-
-_NOT_CODE = {"report.py", "progress.py", "campaign.py", "results.py", "fusion_study.py",
-             "trust_calibration.py"}
+_NOT_CODE = {"report.py", "report_html.py", "report_plots.py", "progress.py", "campaign.py",
+             "results.py", "fusion_study.py", "trust_calibration.py"}
 """Modules of ``sim`` that do not change what a task computes (left out of the code version)."""
 
 
@@ -115,79 +99,48 @@ def scenario_source(name: str, text: str | None) -> str:
     return str(_SCENARIO_DIR[digest] / Path(name).name)
 
 
-def seed001_setup(overrides: dict):
-    """``(Seed001Scenario, ExperimentConfig)`` of a ``seed001`` cell; ``ValueError`` naming the
-    key for anything else."""
-    from dataclasses import replace
-
-    from sim.seed001 import FILTERS, GEOMETRIES, ExperimentConfig, Seed001Scenario
-
-    unknown = sorted(set(overrides) - set(SEED001_KEYS))
-    if unknown:
-        raise ValueError(f"seed001 runner: unknown key(s) {unknown} (known: "
-                         f"{', '.join(SEED001_KEYS)})")
-    o = dict(overrides)
-    geometry = o.get("geometry", "A")
-    if geometry not in GEOMETRIES:
-        raise ValueError(f"seed001 runner: geometry must be one of {sorted(GEOMETRIES)}, "
-                         f"got {geometry!r}")
-    scn = Seed001Scenario(geometry=geometry, seed=int(o.get("seed", 1)))
-    cfg = ExperimentConfig()
-    if "particles" in o or "jitter" in o:
-        cfg = replace(cfg, particle=replace(
-            cfg.particle, n_particles=int(o.get("particles", cfg.particle.n_particles)),
-            jitter=float(o.get("jitter", cfg.particle.jitter))))
-    if "omega" in o:
-        cfg = replace(cfg, gci_omega=o["omega"])
-    if "filters" in o:
-        filters = tuple(o["filters"]) if isinstance(o["filters"], list) else (o["filters"],)
-        if not filters or any(f not in FILTERS for f in filters):
-            raise ValueError(f"seed001 runner: filters must be a list of {FILTERS}, "
-                             f"got {o['filters']!r}")
-        cfg = replace(cfg, filters=filters)
-    for k in ("loss_threshold", "loss_after"):
-        if k in o:
-            cfg = replace(cfg, **{k: type(getattr(cfg, k))(o[k])})
-    return scn, cfg
-
-
-def seed001_hash(setup) -> str:
-    return hashlib.sha256(repr(setup).encode()).hexdigest()[:16]
-
-
 _SCENARIOS: dict[tuple[str, str | None, str], Any] = {}
 
 
 def load_task_scenario(task: Task):
-    """The task's resolved scenario, parsed once per process and cell (scenarios are frozen
-    dataclasses: the runs of a cell share one)."""
+    """The task's resolved setup (a scenario, or what its study's ``cell_setup`` makes),
+    made once per process and cell (setups are frozen: the runs of a cell share one)."""
     import json
 
+    from sim import studies
     from sim.scenario import load_scenario
 
-    key = (task.scenario, task.scenario_text, json.dumps(task.overrides, sort_keys=True,
-                                                         default=repr))
+    key = (task.runner, task.scenario, task.scenario_text,
+           json.dumps(task.overrides, sort_keys=True, default=repr))
     if key not in _SCENARIOS:
-        _SCENARIOS[key] = load_scenario(scenario_source(task.scenario, task.scenario_text),
-                                        overrides=task.overrides)
+        make = studies.get(task.runner).cell_setup
+        source = scenario_source(task.scenario, task.scenario_text)
+        _SCENARIOS[key] = (make(source, task.overrides) if make is not None else
+                           load_scenario(source, overrides=task.overrides))
     return _SCENARIOS[key]
 
 
-_RUNNER_MODULES = {"experiment": ("sim.experiment",), "twin": ("sim.twin",),
-                   "real": ("sim.launcher", "sim.sweep"), "seed001": ("sim.seed001",)}
+def setup_hash(runner: str, setup: Any) -> str:
+    """The hash a cell's setup is checked by on every worker (the study's, or the scenario's)."""
+    from sim import studies
+
+    own = studies.get(runner).setup_hash
+    return own(setup) if own is not None else scenario_hash(setup)
 
 
 def warm(tasks: list[Task]) -> None:
-    """Import what the tasks' runners need and parse each cell's scenario once, here: a
-    process pool forked after this call starts with all of it (its workers neither import
-    nor parse per task or per worker)."""
+    """Import what the tasks' studies need and make each cell's setup once, here: a process
+    pool forked after this call starts with all of it (its workers neither import nor parse
+    per task or per worker)."""
     import importlib
 
-    for name in {m for t in tasks for m in _RUNNER_MODULES.get(t.runner, ())}:
+    from sim import studies
+
+    for name in {m for t in tasks for m in studies.get(t.runner).modules}:
         importlib.import_module(name)
     seen = set()
     for t in tasks:
-        if t.runner != "seed001" and (t.cell, t.scenario) not in seen:
+        if (t.cell, t.scenario) not in seen:
             seen.add((t.cell, t.scenario))
             load_task_scenario(t)
 
@@ -211,26 +164,17 @@ def run_task(task: Task) -> dict[str, Any]:
         raise RuntimeError(f"worker {socket.gethostname()}: code version {code_version()} "
                            f"differs from the client's {task.code_version}: install the same "
                            "sensornet version on every worker")
-    if task.runner == "seed001":
-        setup = seed001_setup(task.overrides)
-        scn, here = setup, seed001_hash(setup)
-    else:
-        scn = load_task_scenario(task)
-        here = scenario_hash(scn)
-    if task.scenario_hash and here != task.scenario_hash:
+    from sim import studies
+
+    study = studies.get(task.runner)
+    if study.row is None:
+        raise ValueError(f"study {task.runner!r} is not a campaign runner")
+    setup = load_task_scenario(task)
+    if task.scenario_hash and setup_hash(task.runner, setup) != task.scenario_hash:
         raise RuntimeError(f"worker {socket.gethostname()}: the scenario of cell "
                            f"{task.cell_label!r} resolves differently here than on the client")
     t0, c0 = time.perf_counter(), time.process_time()
-    if task.runner == "experiment":
-        metrics = _experiment_row(scn, task.run)
-    elif task.runner == "twin":
-        metrics = _twin_row(scn, task.run)
-    elif task.runner == "real":
-        metrics = _real_row(scn, task)
-    elif task.runner == "seed001":
-        metrics = _seed001_row(*scn, task.run)
-    else:
-        raise ValueError(f"unknown runner {task.runner!r} (expected one of {RUNNERS})")
+    metrics = study.row(setup, task)
     row: dict[str, Any] = {
         "key": task.key, "cell": task.cell, "cell_label": task.cell_label, "run": task.run,
         "runner": task.runner, "code_version": code_version(),
@@ -240,112 +184,6 @@ def run_task(task: Task) -> dict[str, Any]:
         if any(fnmatch.fnmatchcase(k, p) for p in task.metrics):
             row[k] = v
     return row
-
-
-def method_key(method: str) -> str:
-    """``"local s1"`` -> ``local_s1``, ``"fused s2 (gci)"`` -> ``fused``, ``centralized``."""
-    if method.startswith("fused"):
-        return "fused"
-    return method.replace(" ", "_")
-
-
-def _experiment_row(scn, run: int) -> dict[str, Any]:
-    from sim.experiment import method_names, run_once
-
-    res = run_once(scn, run)
-    K = scn.num_scans
-    out: dict[str, Any] = {}
-    for m in method_names(scn):
-        k = method_key(m)
-        out[f"mean_ospa.{k}"] = float(res.ospa[m].mean())
-        out[f"mean_card_error.{k}"] = float(res.card_error[m].mean())
-        out[f"ms_per_scan.{k}"] = res.seconds[m] / K * 1e3
-    for m in method_names(scn):
-        k = method_key(m)
-        out[f"ospa_k.{k}"] = res.ospa[m]
-        out[f"n_est_k.{k}"] = res.n_estimates[m]
-    out["n_true_k"] = res.n_true
-    for c, v in res.components.items():
-        out[f"comp_k.{c}"] = v
-    return out
-
-
-def seed001_method(filt: str, rule: str) -> str:
-    """``("IMM-EKF", "GCI fusion")`` -> ``IMM-EKF.GCI_fusion``."""
-    return f"{filt}.{rule.replace(' ', '_')}"
-
-
-def _seed001_row(scn, cfg, run: int) -> dict[str, Any]:
-    from sim.seed001 import run_once
-
-    res = run_once(scn, cfg, run)
-    out: dict[str, Any] = {}
-    for (filt, rule), e in res.errors.items():
-        m = seed001_method(filt, rule)
-        sq = np.mean(np.square(e), axis=0)  # x position, velocity, acceleration
-        out[f"msx_pos.{m}"], out[f"msx_vel.{m}"], out[f"msx_acc.{m}"] = (float(x) for x in sq)
-        pe = res.pos_error[(filt, rule)]
-        out[f"lost.{m}"] = float(pe[cfg.loss_after:].max() > cfg.loss_threshold)
-        out[f"mean_pos_error.{m}"] = float(pe.mean())
-    for filt, sec in res.seconds.items():
-        out[f"ms_per_scan.{filt}"] = sec / scn.num_scans * 1e3
-    return out
-
-
-def _twin_row(scn, run: int) -> dict[str, Any]:
-    from sim.sweep import cost_columns
-    from sim.twin import run_twin
-
-    result = run_twin(scn, run)
-    peers = result.peers
-    out: dict[str, Any] = {
-        "fused_ospa": float(np.mean([p.mean_ospa("fused") for p in peers.values()])),
-        "local_ospa": float(np.mean([p.mean_ospa("local") for p in peers.values()])),
-        "fused_card_error": float(np.mean([p.scorer.mean_cardinality_error("fused")
-                                           for p in peers.values()])),
-        "local_card_error": float(np.mean([p.scorer.mean_cardinality_error("local")
-                                           for p in peers.values()]))}
-    for key in ("late", "redundant", "too_old", "dropped_late"):
-        out[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers.values())
-    out.update(cost_columns([p.cost() for p in peers.values()]))
-    if result.faults is not None:
-        for action, n in sorted(result.faults.counts().items()):
-            out[f"links_{action}"] = n
-    for name in peers:
-        out[f"fused_ospa.{name}"] = float(peers[name].mean_ospa("fused"))
-    K = scn.num_scans
-    for which in ("fused", "local"):
-        per = [result.ospa.get(n, {}).get(which, {}) for n in peers]
-        out[f"ospa_k.{which}"] = [
-            float(np.mean([p[k] for p in per if k in p])) if any(k in p for p in per)
-            else float("nan") for k in range(1, K + 1)]
-    return out
-
-
-def _real_row(scn, task: Task) -> dict[str, Any]:
-    from sim.launcher import read_summaries, start_run, wait_run
-    from sim.sweep import _toml, cost_columns
-
-    source = scenario_source(task.scenario, task.scenario_text)
-    sets = [f"{k}={_toml(v)}" for k, v in task.overrides.items()]
-    with tempfile.TemporaryDirectory(prefix="sensornet-campaign-") as tmp:
-        handle = start_run(scn, source, Path(tmp), overrides=sets, run=task.run, rerun=False)
-        try:
-            wait_run(handle, timeout=scn.num_scans * scn.scan_period / scn.network.speed + 90)
-        finally:
-            handle.stop_all()
-        summaries = read_summaries(Path(tmp), scn.sensor_names)
-    out: dict[str, Any] = {
-        "fused_ospa": float(np.mean([s["mean_ospa_fused"] for s in summaries.values()])),
-        "local_ospa": float(np.mean([s["mean_ospa_local"] for s in summaries.values()]))}
-    for key in ("late", "redundant", "too_old", "dropped_late"):
-        out[key] = sum(s["nale"][key] for s in summaries.values())
-    out.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
-    for name, s in summaries.items():
-        out[f"fused_ospa.{name}"] = float(s["mean_ospa_fused"])
-        if s.get("latency_ms_median") is not None:
-            out[f"ms_latency_median.{name}"] = float(s["latency_ms_median"])
-    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -363,20 +201,18 @@ def run_pool(tasks: list[Task], jobs: int) -> Iterator[dict]:
     if jobs <= 1 or len(tasks) <= 1:
         yield from run_serial(tasks)
         return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from sim.studies.pool import iter_pool
 
     code_version()  # computed once here, inherited by the workers
     # One task per cell is enough to warm a worker (imports, scenarios): sent once, not per task.
     firsts = list({t.cell: t for t in reversed(tasks)}.values())
     warm(firsts)
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=_worker_init,
-                               initargs=(firsts,))
+    rows = iter_pool(run_task, [(t,) for t in tasks], jobs, _worker_init, (firsts,))
     try:
-        futures = [pool.submit(run_task, t) for t in tasks]
-        for fut in as_completed(futures):
-            yield fut.result()
+        for _, row in rows:
+            yield row
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        rows.close()
 
 
 class DaskUnavailable(ImportError):

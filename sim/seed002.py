@@ -31,8 +31,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sim.extended import make_et_filter  # noqa: E402
-from sim.progress import Progress  # noqa: E402
 from sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides  # noqa: E402
+from sim.studies.pool import map_runs  # noqa: E402
 from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
 from tracking.metrics import cardinality_error, ospa  # noqa: E402
 from tracking.partition import adjusted_rand_index  # noqa: E402
@@ -126,16 +126,10 @@ def run_experiment(runs: int, clutters=CLUTTER_LEVELS, partitions=PARTITIONS,
                    base: Scenario | None = None) -> list[RunResult]:
     """Every (clutter, run, partitioner) on the same runs; partitioners alternate per run so
     machine load drifts hit both alike."""
-    out = []
-    with Progress(len(clutters) * runs * len(partitions), "ET-GM-PHD runs",
-                  enabled=progress) as bar:
-        for c in clutters:
-            scn = scenario_at(c, base)
-            for r in range(first_run, first_run + runs):
-                for part in partitions:
-                    out.append(one_run(scn, r, part))
-                    bar.advance()
-    return out
+    calls = [(scn, r, part) for scn in (scenario_at(c, base) for c in clutters)
+             for r in range(first_run, first_run + runs) for part in partitions]
+    # In this process, one run at a time: the partitioners' seconds per scan are the table's.
+    return map_runs(one_run, calls, 1, "ET-GM-PHD runs", progress)
 
 
 def summarise(results: list[RunResult]) -> list[dict]:
@@ -190,13 +184,11 @@ def network_experiment(runs: int, first_run: int = 0, progress: bool = True,
     scn = base or load_scenario("seed002")
     per: dict[str, dict[str, list[float]]] = {n: {"local": [], "fused": []}
                                               for n in scn.sensor_names}
-    with Progress(runs, "twin runs (3 ET-GM-PHD peers)", enabled=progress) as bar:
-        for r in range(first_run, first_run + runs):
-            res = run_twin(scn, r)
-            for n in scn.sensor_names:
-                for kind in ("local", "fused"):
-                    per[n][kind].append(res.mean_ospa(n, kind))
-            bar.advance()
+    for res in map_runs(run_twin, [(scn, r) for r in range(first_run, first_run + runs)], 1,
+                        "twin runs (3 ET-GM-PHD peers)", progress):
+        for n in scn.sensor_names:
+            for kind in ("local", "fused"):
+                per[n][kind].append(res.mean_ospa(n, kind))
     return {n: {k: float(np.mean(v)) for k, v in d.items()} | {
         "fused_better_runs": float(np.mean(np.array(d["fused"]) < np.array(d["local"])))}
         for n, d in per.items()}

@@ -19,259 +19,34 @@ import sys
 import time
 import tomllib
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
-from sim.progress import Progress
-from tracking.fuzzy import weighting_from_config
-from tracking.imm import POS, VEL, constant_acceleration, constant_velocity
-from tracking.pda import ImmPda, LinearSensor
-
-SCENARIO = Path(__file__).with_name("scenarios") / "seed003.toml"
-H6 = np.zeros((2, 6))
-H6[0, POS[0]] = H6[1, POS[1]] = 1.0
-"""Position sensor on the 6-D state ``[px, vx, ax, py, vy, ay]``."""
-G0 = 9.80665
-METHODS = ("PDAF", "IMM-PDAF", "fuzzy PDA", "fuzzy IMM")
-
-
-def load(path: str | Path = SCENARIO, overrides: Mapping | None = None) -> dict:
-    """The scenario as nested dicts; ``overrides`` maps ``"table.key"`` to a value."""
-    cfg = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    for dotted, value in (overrides or {}).items():
-        table, key = dotted.split(".", 1)
-        if table not in cfg or key not in cfg[table]:
-            raise ValueError(f"seed003: unknown setting {dotted!r}")
-        cfg[table][key] = value
-    check_sensor_names(cfg.get("sensors"), f"seed003 ({Path(path).name})")
-    return cfg
-
-
-def check_sensor_names(sensors, label: str) -> None:
-    """The ``[[sensors]]`` of a seed-003 file: a list of tables, at most
-    :data:`sim.scenario.MAX_SENSORS`, each ``name`` following the name rule
-    (:func:`protocol.keys.check_name`) and not repeated. :class:`ValueError` (one line)."""
-    from protocol.keys import check_name
-    from sim.scenario import MAX_SENSORS
-
-    if not isinstance(sensors, list) or not sensors:
-        raise ValueError(f"{label}: 'sensors' must list at least one sensor ([[sensors]])")
-    if len(sensors) > MAX_SENSORS:
-        raise ValueError(f"{label}: {len(sensors):,} sensors, over the limit of {MAX_SENSORS}")
-    seen: set[str] = set()
-    for i, s in enumerate(sensors):
-        name = s.get("name") if isinstance(s, dict) else None
-        try:
-            check_name(name, "sensor name", peer=True)
-        except ValueError as exc:
-            raise ValueError(f"{label}: sensors[{i}].name: {exc}") from None
-        if name.lower() in seen:
-            raise ValueError(f"{label}: sensors[{i}].name repeats the sensor name {name!r}")
-        seen.add(name.lower())
-
-
-# -- truth and measurements -------------------------------------------------------------------
-
-
-def truth(cfg: Mapping) -> np.ndarray:
-    """True 6-D states ``(K + 1, 6)`` at scans 0..K (noise-free, as in the paper)."""
-    s = cfg["scenario"]
-    T, K = float(s["scan_period"]), int(s["num_scans"])
-    first, last = s["turn_scans"]
-    n_turn = last - first + 1
-    x = np.zeros((K + 1, 6))
-    x[0, POS[0]], x[0, POS[1]] = s["start"]
-    x[0, VEL[0]] = s["speed"]
-    omega = (np.pi / 2) / (n_turn * T)  # coordinated: 90 deg over the turn
-    for k in range(1, K + 1):
-        px, vx, _, py, vy, _ = x[k - 1]
-        turning = first <= k <= last
-        if turning and s["manoeuvre"] == "coordinated":
-            c, sn = np.cos(omega * T), np.sin(omega * T)
-            nvx, nvy = c * vx - sn * vy, sn * vx + c * vy
-            npx = px + (sn * vx - (1 - c) * vy) / omega
-            npy = py + ((1 - c) * vx + sn * vy) / omega
-            ax, ay = -omega * nvy, omega * nvx
-        elif turning and s["manoeuvre"] == "literal":
-            ax, ay = 0.0, 5 * G0
-            nvx, nvy = vx, vy + ay * T
-            npx, npy = px + vx * T, py + vy * T + 0.5 * ay * T * T
-        elif s["manoeuvre"] in ("coordinated", "literal"):
-            ax = ay = 0.0
-            nvx, nvy, npx, npy = vx, vy, px + vx * T, py + vy * T
-        else:
-            raise ValueError(f"seed003: unknown manoeuvre {s['manoeuvre']!r}")
-        x[k] = (npx, nvx, ax, npy, nvy, ay)
-    return x
-
-
-def cv_steady_state_S(cfg: Mapping, sigma: float) -> np.ndarray:
-    """Innovation covariance ``(2, 2)`` of the steady-state CV Kalman filter for one sensor."""
-    T = float(cfg["scenario"]["scan_period"])
-    m = constant_velocity(T, float(cfg["filters"]["sigma_cv"]))
-    idx = [0, 1, 3, 4]  # the CV model's acceleration is zeroed: the 4-D part is the filter
-    F, Q, H = m.F[np.ix_(idx, idx)], m.Q[np.ix_(idx, idx)], H6[:, idx]
-    R = sigma**2 * np.eye(2)
-    P = solve_discrete_are(F.T, H.T, Q, R)  # prior covariance at steady state
-    return H @ P @ H.T + R
-
-
-def sensors(cfg: Mapping) -> tuple[LinearSensor, ...]:
-    """The scenario's sensors, each with the clutter density of ``clutter.in_gate`` returns in
-    its steady-state CV gate."""
-    out = []
-    for s in cfg["sensors"]:
-        sigma = float(s["sigma"])
-        base = LinearSensor(H6, sigma**2 * np.eye(2), 1.0, float(s["detection_probability"]),
-                            float(s["gate_probability"]))
-        lam = float(cfg["clutter"]["in_gate"]) / base.gate_volume(cv_steady_state_S(cfg, sigma))
-        out.append(LinearSensor(H6, base.R, lam, base.detection_probability,
-                                base.gate_probability))
-    return tuple(out)
-
-
-def target_returns(X: np.ndarray, sens: Sequence[LinearSensor],
-                   rng: np.random.Generator) -> list[list[np.ndarray]]:
-    """Per scan 1..K, per sensor: the target's return ``(1, 2)`` if detected, else ``(0, 2)``."""
-    out = []
-    for k in range(1, len(X)):
-        pos = X[k, list(POS)]
-        out.append([(pos + rng.multivariate_normal(np.zeros(2), s.R))[None]
-                    if rng.random() < s.detection_probability else np.empty((0, 2))
-                    for s in sens])
-    return out
-
-
-def region_clutter(cfg: Mapping, X: np.ndarray, sens: Sequence[LinearSensor],
-                   rng: np.random.Generator) -> list[list[np.ndarray]]:
-    """``clutter.mode = "region"``: per scan, per sensor, Poisson clutter uniform in the square
-    of half-width ``clutter.halfwidth`` about the truth, of the sensor's density."""
-    hw = float(cfg["clutter"]["halfwidth"])
-    area = (2 * hw) ** 2
-    return [[X[k, list(POS)] + rng.uniform(-hw, hw, size=(rng.poisson(s.clutter_density * area),
-                                                           2))
-             for s in sens] for k in range(1, len(X))]
-
-
-def gate_clutter(zhat: np.ndarray, S: np.ndarray, gamma: float, n: int,
-                 rng: np.random.Generator) -> np.ndarray:
-    """``n`` returns uniform in the gate ``{z: (z - zhat)^T S^-1 (z - zhat) < gamma}``
-    (``clutter.mode = "gate"``, the paper's eq. 3: clutter about the predicted measurement)."""
-    r = np.sqrt(rng.random(n))
-    t = rng.uniform(0.0, 2 * np.pi, n)
-    u = np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
-    return zhat + np.sqrt(gamma) * u @ np.linalg.cholesky(S).T
-
-
-def run_filter(cfg: Mapping, flt: ImmPda, sens: Sequence[LinearSensor],
-               target: Sequence[Sequence[np.ndarray]],
-               region: Sequence[Sequence[np.ndarray]] | None,
-               rng: np.random.Generator, on_update=None,
-               timing: list[float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Run ``flt`` over the scans with the sequential update of ``sens`` in order; clutter from
-    ``region`` (per scan, per sensor) or, when None, drawn in the filter's own gate with
-    ``rng`` (Poisson with mean ``clutter.in_gate``; the PDA's density is that mean over the
-    gate's volume). ``on_update(Z, detected, update)`` sees every sensor update (the target's
-    return, when ``detected``, is ``Z[0]``). Returns estimates ``(K, d)`` and detector flags
-    ``(K,)``. ``timing``: the seconds spent in the filter's predict and update calls (not in
-    drawing the clutter) are appended to it."""
-    in_gate = float(cfg["clutter"]["in_gate"])
-    est = np.empty((len(target), flt.x.shape[1]))
-    fired = np.zeros(len(target), bool)
-    clock, spent = time.perf_counter, 0.0
-    for k, per in enumerate(target):
-        t0 = clock()
-        flt.predict()
-        spent += clock() - t0
-        for i, s in enumerate(sens):
-            if region is not None:
-                Z = np.vstack([per[i], region[k][i]])
-                t0 = clock()
-                up = flt.update(s, Z)
-            else:
-                zhat, S = flt.predicted_measurement(s)
-                Z = np.vstack([per[i], gate_clutter(zhat, S, s.gamma, rng.poisson(in_gate),
-                                                    rng)])
-                density = in_gate / s.gate_volume(S)
-                t0 = clock()
-                up = flt.update(s, Z, density)
-            spent += clock() - t0
-            if on_update is not None:
-                on_update(Z, len(per[i]) > 0, up, flt)
-        est[k] = flt.estimate()[0]
-        if flt.weighting is not None:
-            fired[k] = flt.weighting.detector.fired
-    if timing is not None:
-        timing.append(spent)
-    return est, fired
-
-
-# -- filters ----------------------------------------------------------------------------------
-
-
-def initial_state(cfg: Mapping, x0: np.ndarray,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Initial estimate drawn about the truth with the configured spread, and its covariance."""
-    sp, sv, sa = cfg["filters"]["init_sigma"]
-    P0 = np.diag(np.array([sp, sv, sa, sp, sv, sa], float) ** 2)
-    return x0 + rng.multivariate_normal(np.zeros(6), P0), P0
-
-
-def coordinated_turn(T: float, omega: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinated turn at a known rate ``omega`` (rad/s) on the 6-D state (acceleration
-    zeroed), white acceleration noise ``sigma`` (m/s^2) as in the CV model: ``(F, Q)``."""
-    c, s = np.cos(omega * T), np.sin(omega * T)
-    F = np.zeros((6, 6))
-    j = np.ix_((0, 1, 3, 4), (0, 1, 3, 4))  # px, vx, py, vy
-    F[j] = [[1, s / omega, 0, -(1 - c) / omega], [0, c, 0, -s],
-            [0, (1 - c) / omega, 1, s / omega], [0, s, 0, c]]
-    return F, constant_velocity(T, sigma).Q
-
-
-def imm_models(cfg: Mapping) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray,
-                                      np.ndarray]:
-    """The IMM's models, Markov matrix and initial probabilities. ``filters.model``:
-    ``"ca"``: CV + CA (``transition``, ``initial_probs`` as given); ``"ct"``: CV and
-    coordinated turns at +/- ``turn_rate_deg`` (the CV row and column of ``transition`` split
-    evenly between the two turns)."""
-    f = cfg["filters"]
-    T = float(cfg["scenario"]["scan_period"])
-    cv = constant_velocity(T, float(f["sigma_cv"]))
-    Pi = np.asarray(f["transition"], float)
-    p0 = np.asarray(f["initial_probs"], float)
-    kind = f.get("model", "ca")
-    if kind == "ca":
-        ca = constant_acceleration(T, float(f["sigma_ca"]))
-        return [(cv.F, cv.Q), (ca.F, ca.Q)], Pi, p0
-    if kind == "ct":
-        w = np.deg2rad(float(f["turn_rate_deg"]))
-        sct = float(f["sigma_ct"])
-        stay_cv, stay_ct = Pi[0, 0], Pi[1, 1]
-        P3 = np.array([[stay_cv, (1 - stay_cv) / 2, (1 - stay_cv) / 2],
-                       [1 - stay_ct, stay_ct, 0.0], [1 - stay_ct, 0.0, stay_ct]])
-        return ([(cv.F, cv.Q), coordinated_turn(T, w, sct), coordinated_turn(T, -w, sct)], P3,
-                np.array([p0[0], p0[1] / 2, p0[1] / 2]))
-    raise ValueError(f"seed003: unknown filters.model {kind!r}; expected 'ca' or 'ct'")
-
-
-def make_filter(cfg: Mapping, method: str, m0: np.ndarray, P0: np.ndarray) -> ImmPda:
-    """One of :data:`METHODS`, with the scenario's models and (fuzzy ones) a fresh weighting."""
-    f = cfg["filters"]
-    T = float(cfg["scenario"]["scan_period"])
-    cv = constant_velocity(T, float(f["sigma_cv"]))
-    weighting = (weighting_from_config(cfg["fuzzy"], cfg["detector"])
-                 if method.startswith("fuzzy") else None)
-    if method in ("PDAF", "fuzzy PDA"):
-        return ImmPda([(cv.F, cv.Q)], np.eye(1), m0, P0, weighting=weighting)
-    if method in ("IMM-PDAF", "fuzzy IMM"):
-        models, Pi, p0 = imm_models(cfg)
-        return ImmPda(models, Pi, m0, P0, p0, weighting=weighting)
-    raise ValueError(f"seed003: unknown method {method!r}; expected one of {METHODS}")
-
+from sim.seed003_filters import (  # noqa: F401  (re-exported)
+    METHODS,
+    coordinated_turn,
+    imm_models,
+    initial_state,
+    make_filter,
+    run_filter,
+)
+from sim.seed003_world import (  # noqa: F401  (re-exported)
+    G0,
+    H6,
+    SCENARIO,
+    check_sensor_names,
+    cv_steady_state_S,
+    gate_clutter,
+    load,
+    region_clutter,
+    sensors,
+    target_returns,
+    truth,
+)
+from sim.studies.pool import map_runs
+from tracking.imm import POS, VEL
 
 # -- Monte Carlo ------------------------------------------------------------------------------
 
@@ -422,19 +197,7 @@ def run_experiment(cfg: Mapping, runs: int, jobs: int = 1, first_run: int = 0,
                    progress: bool = True, methods: Sequence[str] = METHODS) -> list[RunResult]:
     """Runs ``first_run .. first_run + runs - 1``, in ``jobs`` processes, in run order."""
     ids = range(first_run, first_run + runs)
-    out: list[RunResult] = []
-    with Progress(runs, "runs", enabled=progress) as bar:
-        if jobs <= 1:
-            for r in ids:
-                out.append(run_once(cfg, r, methods))
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(jobs) as pool:
-                futs = [pool.submit(run_once, cfg, r, methods) for r in ids]
-                for f in as_completed(futs):
-                    out.append(f.result())
-                    bar.advance()
-    return sorted(out, key=lambda r: r.run)
+    return map_runs(run_once, [(cfg, r, methods) for r in ids], jobs, "runs", progress)
 
 
 def format_table(rows: Sequence[dict]) -> str:

@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 
 from peers.contracts import FusionInput
 from peers.pda_parts import CiFuser, PdaEstimator
 from sim import seed003
-from sim.progress import Progress
+from sim.studies.pool import map_runs
 from tracking.imm import POS, VEL
 
 MODES = ("local", "CI", "CI+feedback", "sequential")
@@ -121,19 +120,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     cfg = seed003.load(overrides={"clutter.mode": "region"})
     t0 = time.monotonic()
     ids = range(a.first_run, a.first_run + a.runs)
-    results: dict[int, dict] = {}
-    with Progress(a.runs, "runs", enabled=not a.quiet) as bar:
-        if a.jobs <= 1:
-            for r in ids:
-                results[r] = run_once(cfg, r, a.method)
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(a.jobs) as pool:
-                futs = {pool.submit(run_once, cfg, r, a.method): r for r in ids}
-                for f in as_completed(futs):
-                    results[futs[f]] = f.result()
-                    bar.advance()
-    print(format_table(summarise(cfg, [results[r] for r in sorted(results)])))
+    results = map_runs(run_once, [(cfg, r, a.method) for r in ids], a.jobs, "runs", not a.quiet)
+    print(format_table(summarise(cfg, results)))
     print(f"({a.method}, {a.runs} runs from {a.first_run}, region clutter, "
           f"{time.monotonic() - t0:.0f} s)")
     return 0

@@ -43,19 +43,15 @@ before any run).
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
-import tomllib
 import zlib
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
-from scipy.sparse.csgraph import shortest_path
 
 from peers.faults import FaultInjector
 from peers.flooding import (
@@ -69,314 +65,39 @@ from peers.flooding import (
 from protocol.codec import encode
 from protocol.messages import Estimate, Scan
 from sim.faultplan import FaultPlan, LinkFaults, Uniform
-from sim.progress import Progress
-from sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
+from sim.seed004_output import (  # noqa: F401  (re-exported)
+    REFERENCE_MIXTURE,
+    TABLE_ROWS,
+    format_table,
+    gm_exchange_tuples,
+    read_outputs,
+    reference_comparison,
+    table_rows,
+    table_title,
+    write_outputs,
+)
+from sim.seed004_scenario import (  # noqa: F401  (re-exported)
+    SCENARIO,
+    TUPLES_CARDINALITY,
+    TUPLES_COMPONENT,
+    VARIANTS,
+    ScenarioError,
+    Seed004,
+    from_document,
+    load,
+    measure,
+    network_document,
+    to_plane,
+    truth,
+)
+from sim.studies.pool import map_runs
 from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
-from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
+from tracking.idpc import ftc, idpc
 from tracking.metrics import ospa
 from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from tracking.models import ConstantVelocity
 from tracking.reduction import Reducer, keep_above
-
-SCENARIO = Path(__file__).with_name("scenarios") / "seed004.toml"
-TUPLES_COMPONENT = 15
-"""A 4-D Gaussian component: weight 1, mean 4, covariance 10 (seed 004)."""
-TUPLES_CARDINALITY = 1
-VARIANTS = ("linear", "range-bearing", "mixed")
-
-# -- scenario ---------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Seed004:
-    """The seed-004 scenario (``sim/scenarios/seed004.toml``; every field documented there)."""
-
-    seed: int = 4
-    scan_period: float = 1.0
-    num_scans: int = 60
-    region: tuple[tuple[float, float], tuple[float, float]] = ((-1000.0, 1000.0),
-                                                               (-1000.0, 1000.0))
-    variant: str = "linear"
-    truth_sigma_w: float = 0.0
-    starts: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    detection_probability: float = 0.95
-    clutter_rate: float = 10.0
-    sigma: float = 10.0
-    sigma_range: float = 10.0
-    sigma_bearing_deg: float = 0.5
-    radius: float = 800.0
-    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    sigma_w: float = 2.0
-    survival_probability: float = 0.98
-    birth_weight: float = 0.05
-    birth_cov_diag: tuple[float, ...] = (100.0, 25.0, 100.0, 25.0)
-    prune_threshold: float = 1e-5
-    merge_threshold: float = 4.0
-    max_components: int = 100
-    publish_threshold: float = 0.01
-    cardinality: str = "separate"
-    clustering: ClusterParams = ClusterParams()
-    assumed_scans: str = "held"
-    estimator: str = "idpc"
-    iterations: int = 4
-    rounds: tuple[int, ...] = (1, 2, 3, 4)
-    ospa_cutoff: float = 100.0
-    ospa_order: float = 2.0
-
-    @property
-    def adjacency(self) -> np.ndarray:
-        p = self.positions
-        d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-        return (d <= self.radius) & ~np.eye(len(p), dtype=bool)
-
-    @property
-    def hops(self) -> np.ndarray:
-        return shortest_path(self.adjacency, unweighted=True)
-
-    @property
-    def area(self) -> float:
-        (x0, x1), (y0, y1) = self.region
-        return (x1 - x0) * (y1 - y0)
-
-    def models(self) -> list[LinearPosition | RangeBearing]:
-        """One measurement model per sensor, by ``variant``."""
-        out = []
-        for i, p in enumerate(self.positions):
-            pos = (float(p[0]), float(p[1]))
-            radar = self.variant == "range-bearing" or (self.variant == "mixed" and i % 2 == 1)
-            out.append(RangeBearing(self.sigma_range, float(np.deg2rad(self.sigma_bearing_deg)),
-                                    pos) if radar else LinearPosition(self.sigma, pos))
-        return out
-
-    def r_max(self, position) -> float:
-        """Farthest region corner from ``position`` (range-bearing clutter extent)."""
-        (x0, x1), (y0, y1) = self.region
-        c = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
-        return float(np.linalg.norm(c - np.asarray(position), axis=1).max())
-
-    def sensor_params(self, model) -> SensorParams:
-        if isinstance(model, RangeBearing):
-            kappa = self.clutter_rate / (self.r_max(model.position) * 2 * np.pi)
-        else:
-            kappa = self.clutter_rate / self.area
-        return SensorParams(model, self.detection_probability, kappa)
-
-    def birth(self) -> GaussianMixture:
-        n = len(self.starts)
-        return GaussianMixture(np.full(n, self.birth_weight), self.starts,
-                               np.tile(np.diag(self.birth_cov_diag), (n, 1, 1)))
-
-    def reducer(self) -> Reducer:
-        return Reducer(self.prune_threshold, self.merge_threshold, self.max_components)
-
-
-_KEYS = {
-    "scenario": {"name": None, "study": None, "seed": "seed", "scan_period": "scan_period",
-                 "num_scans": "num_scans", "region": "region", "variant": "variant"},
-    "truth": {"sigma_w": "truth_sigma_w", "starts": "starts"},
-    "sensors": {"detection_probability": "detection_probability",
-                "clutter_rate": "clutter_rate", "sigma": "sigma", "sigma_range": "sigma_range",
-                "sigma_bearing_deg": "sigma_bearing_deg", "radius": "radius",
-                "positions": "positions"},
-    "filter": {k: k for k in ("sigma_w", "survival_probability", "birth_weight",
-                              "birth_cov_diag", "prune_threshold", "merge_threshold",
-                              "max_components", "publish_threshold", "cardinality")},
-    "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
-    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans",
-                 "estimator": "estimator"},
-    "consensus": {"rounds": "rounds"},
-    "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
-}
-
-
-class ScenarioError(ValueError):
-    """A scenario file or ``--set`` value the loader refuses (one line naming the key)."""
-
-
-def load(path: Path = SCENARIO, overrides: Sequence[str] = ()) -> Seed004:
-    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values)."""
-    try:
-        doc = tomllib.loads(Path(path).read_text())
-        for item in overrides:
-            key, _, value = item.partition("=")
-            table, _, name = key.partition(".")
-            if not _ or not name:
-                raise ScenarioError(f"--set {item!r}: expected TABLE.KEY=VALUE")
-            doc.setdefault(table, {})[name] = tomllib.loads(f"v = {value}")["v"]
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path}: {e}") from None
-    return from_document(doc, path)
-
-
-def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
-    """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers)."""
-    kw: dict = {}
-    cluster: dict = {}
-    for table, values in doc.items():
-        if table == "network":
-            continue  # the peers' settings (network_document)
-        if table not in _KEYS:
-            raise ScenarioError(f"{path}: unknown table [{table}]")
-        for k, v in values.items():
-            if k not in _KEYS[table]:
-                raise ScenarioError(f"{path}: unknown key {table}.{k}")
-            if table == "clustering":
-                cluster[k] = float(v)
-            elif _KEYS[table][k] is not None:
-                kw[_KEYS[table][k]] = v
-    for k in ("starts", "positions"):
-        if k in kw:
-            kw[k] = np.asarray(kw[k], dtype=float)
-    for k in ("region", "birth_cov_diag", "rounds"):
-        if k in kw:
-            kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
-    scn = Seed004(**kw)
-    _check_sizes(scn, path)
-    if scn.assumed_scans not in ("held", "all"):
-        raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
-                            f"expected 'held' or 'all'")
-    if scn.estimator not in FLOOD_ESTIMATORS:
-        raise ScenarioError(f"{path}: flooding.estimator {scn.estimator!r}: expected one of "
-                            f"{', '.join(map(repr, FLOOD_ESTIMATORS))}")
-    if scn.variant not in VARIANTS:
-        raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
-    scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
-        scn.detection_probability)))
-    if not np.isfinite(scn.hops).all():
-        raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
-    return scn
-
-
-def _check_sizes(scn: Seed004, path: str | Path) -> None:
-    """The bounds of ``sim.scenario`` (MAX_SENSORS, MAX_ROUNDS, MAX_COORDINATE), checked
-    before anything is built from the sizes (the graph is sensors x sensors)."""
-    n = len(scn.positions)
-    if scn.positions.ndim != 2 or scn.positions.shape[1] != 2:
-        raise ScenarioError(f"{path}: sensors.positions must be a list of [x, y] pairs")
-    if n > MAX_SENSORS:
-        raise ScenarioError(f"{path}: sensors.positions lists {n:,} sensors, over the limit "
-                            f"of {MAX_SENSORS}")
-    rounds = [scn.iterations, *scn.rounds]
-    if not all(isinstance(r, int) and 1 <= r <= MAX_ROUNDS for r in rounds):
-        raise ScenarioError(f"{path}: flooding.iterations and consensus.rounds must be "
-                            f"integers in 1..{MAX_ROUNDS}, got {scn.iterations!r} and "
-                            f"{list(scn.rounds)!r}")
-    try:
-        region = np.asarray(scn.region, dtype=float).reshape(2, 2)
-        coords = np.concatenate([region.ravel(), scn.positions.ravel()])
-    except (TypeError, ValueError):
-        raise ScenarioError(f"{path}: scenario.region must be [[xmin, xmax], [ymin, ymax]] "
-                            f"(m)") from None
-    if not (region[:, 0] < region[:, 1]).all():
-        raise ScenarioError(f"{path}: scenario.region must have xmin < xmax and ymin < ymax "
-                            f"(a non-empty area)")
-    if not (np.isfinite(coords).all() and (np.abs(coords) <= MAX_COORDINATE).all()):
-        raise ScenarioError(f"{path}: scenario.region and sensors.positions must be finite "
-                            f"and within +-{MAX_COORDINATE:g} m")
-
-
-def network_document(doc: dict, label: str = "seed004.toml") -> dict:
-    """The seed-004 document as a network scenario (``sim.scenario``'s format): sensors
-    ``s1..s20`` at the recorded positions, the graph as custom edges, the three straight-line
-    targets over the whole run, the paper's births, and the ``[network]`` table (flooding peers
-    by default: ``filter = "flooding"``, ``rounds`` = the flooding iterations)."""
-    import sim.scenario as sc
-
-    passed = ("faults", "security")  # network-scenario tables, taken as they are
-    try:
-        scn = from_document({k: v for k, v in doc.items() if k not in (*passed, "fusion")},
-                            label)
-    except (ScenarioError, TypeError, ValueError) as e:
-        raise sc.ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") \
-            from None
-    names = [f"s{i + 1}" for i in range(len(scn.positions))]
-    K, T = scn.num_scans, scn.scan_period
-    sensors = []
-    for i, model in enumerate(scn.models()):
-        radar = isinstance(model, RangeBearing)
-        spec = {"name": names[i], "kind": "range-bearing" if radar else "linear",
-                "position": [float(v) for v in scn.positions[i]],
-                "sigma_r": scn.sigma_range if radar else scn.sigma,
-                "detection_probability": scn.detection_probability,
-                "clutter_rate": scn.clutter_rate}
-        if radar:
-            spec["sigma_theta_deg"] = scn.sigma_bearing_deg
-        sensors.append(spec)
-    targets = [{"birth_scan": 1, "death_scan": K, "start": [float(x[0]), float(x[2])],
-                "end": [float(x[0] + x[1] * (K - 1) * T), float(x[2] + x[3] * (K - 1) * T)]}
-               for x in scn.starts]
-    cov = np.diag(scn.birth_cov_diag).tolist()
-    A = scn.adjacency
-    edges = [[names[i], names[j]] for i, j in zip(*np.nonzero(np.triu(A)), strict=True)]
-    network = {"topology": "custom", "edges": edges, "rounds": scn.iterations,
-               "filter": "flooding", "speed": 10.0, "deadline": 0.8, **doc.get("network", {})}
-    c = scn.clustering
-    return {
-        "scenario": {"name": doc.get("scenario", {}).get("name", "seed004"), "seed": scn.seed,
-                     "scan_period": T, "num_scans": K,
-                     "region": [list(r) for r in scn.region],
-                     "truth_sigma_w": scn.truth_sigma_w},
-        "motion": {"model": "cv", "sigma_w": scn.sigma_w,
-                   "survival_probability": scn.survival_probability},
-        "targets": targets,
-        "sensors": sensors,
-        "birth": {"model": "paper", "paper": [
-            {"weight": scn.birth_weight, "mean": [float(v) for v in m], "cov": cov}
-            for m in scn.starts]},
-        "filter": {"prune_threshold": scn.prune_threshold,
-                   "merge_threshold": scn.merge_threshold,
-                   "max_components": scn.max_components, "extraction": "cardinality"},
-        "fusion": {"level2_threshold": scn.publish_threshold,  # the default rule (hybrid)
-                   "cardinality": scn.cardinality, **doc.get("fusion", {})},
-        "metrics": {"ospa_cutoff": scn.ospa_cutoff, "ospa_order": scn.ospa_order},
-        "network": network,
-        **{k: doc[k] for k in passed if k in doc},
-        "clustering": {"cutoff": c.cutoff, "zeta": c.zeta, "radius_factor": c.radius_factor,
-                       "split_factor": c.split_factor, "assumed_scans": scn.assumed_scans,
-                       "estimator": scn.estimator},
-    }
-
-
-# -- truth and scans --------------------------------------------------------------------------
-
-
-def truth(scn: Seed004, rng: np.random.Generator) -> np.ndarray:
-    """``(K, n, 4)`` target states (every target alive at every scan, our reading)."""
-    cv = ConstantVelocity(scn.scan_period, scn.truth_sigma_w)
-    F, Q = cv.transition(1)
-    X = np.empty((scn.num_scans, len(scn.starts), 4))
-    X[0] = scn.starts
-    for k in range(1, scn.num_scans):
-        X[k] = X[k - 1] @ F.T
-        if scn.truth_sigma_w > 0:
-            X[k] += rng.multivariate_normal(np.zeros(4), Q, size=len(scn.starts))
-    return X
-
-
-def measure(scn: Seed004, models, x: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
-    """One scan per sensor ``(m_i, 2)`` in its measurement space: detections, then clutter."""
-    (x0, x1), (y0, y1) = scn.region
-    out = []
-    for model in models:
-        seen = x[rng.random(len(x)) < scn.detection_probability]
-        z, _ = model.predict(seen) if len(seen) else (np.zeros((0, 2)), None)
-        z = z + rng.standard_normal(z.shape) @ np.linalg.cholesky(model.R).T
-        nc = rng.poisson(scn.clutter_rate)
-        if isinstance(model, RangeBearing):
-            c = np.column_stack((rng.uniform(0, scn.r_max(model.position), nc),
-                                 rng.uniform(-np.pi, np.pi, nc)))
-        else:
-            c = np.column_stack((rng.uniform(x0, x1, nc), rng.uniform(y0, y1, nc)))
-        out.append(np.concatenate((z.reshape(-1, 2), c)))
-    return out
-
-
-def to_plane(models, scans: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """Scans projected to plane points (range-bearing converted to Cartesian)."""
-    return [polar_to_cartesian(z, m.position) if isinstance(m, RangeBearing) else z
-            for m, z in zip(models, scans, strict=True)]
-
 
 # -- one run ----------------------------------------------------------------------------------
 
@@ -422,33 +143,6 @@ def _n_bytes(mix: GaussianMixture, k: int, rnd: int = 0) -> int:
 
 def _n_tuples(mix: GaussianMixture) -> int:
     return TUPLES_COMPONENT * len(mix) + TUPLES_CARDINALITY
-
-
-REFERENCE_MIXTURE = (4, 4)
-"""The reference's GM-exchange count (docs/seed004.md): 4-component mixtures, 4 rounds."""
-
-
-def gm_exchange_tuples(adjacency: np.ndarray, components: int, rounds: int) -> float:
-    """Closed form of the tuples per peer per scan of ``rounds`` consensus rounds in which every
-    peer sends a ``components``-component mixture and its cardinality to each neighbour:
-    ``mean_i deg_i (15 components + 1) rounds``."""
-    deg = np.asarray(adjacency, dtype=bool).sum(axis=1)
-    return float(deg.mean() * (TUPLES_COMPONENT * components + TUPLES_CARDINALITY) * rounds)
-
-
-def reference_comparison(result: dict[str, dict[str, float]], adjacency: np.ndarray) -> str:
-    """One line: flooding's tuples against the reference's GM exchange (closed form on this
-    graph) and against the measured GCI/AA rows with as many rounds."""
-    comps, rounds = REFERENCE_MIXTURE
-    gm = gm_exchange_tuples(adjacency, comps, rounds)
-    flood = result["IDPC"]["tuples"]
-    line = (f"flooding {flood:.0f} tuples / peer / scan = {flood / gm:.2f} x the reference's "
-            f"exchange of {comps}-component mixtures over {rounds} rounds ({gm:.0f}, closed "
-            f"form on this graph; reference: about 4,100 against 2,000)")
-    measured = [f"{flood / result[n]['tuples']:.2f} x {n}" for n in (f"GCI L={rounds}",
-                                                                     f"AA L={rounds}")
-                if n in result and result[n]["tuples"] > 0]
-    return line + (f"; measured: {', '.join(measured)}" if measured else "")
 
 
 def iterated_corrector(mix: GaussianMixture, scans: Sequence[np.ndarray],
@@ -632,106 +326,18 @@ def flooding_under_faults(scn: Seed004, plan: FaultPlan, scans: int = 60, seed: 
 def run_experiment(scn: Seed004, runs: Sequence[int], jobs: int = 1, progress: bool = True,
                    consensus: bool = True) -> dict[str, dict[str, float]]:
     """Mean over ``runs`` of every method's per-run means (and the OSPA standard error)."""
-    per_run: list[dict[str, dict[str, float]]] = []
-    with Progress(len(runs), "runs", enabled=progress) as bar:
-        if jobs <= 1:
-            for r in runs:
-                per_run.append(run_once(scn, r, consensus))
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(jobs) as pool:
-                futures = [pool.submit(run_once, scn, r, consensus) for r in runs]
-                for f in as_completed(futures):
-                    per_run.append(f.result())
-                    bar.advance()
+    per_run = map_runs(run_once, [(scn, r, consensus) for r in runs], jobs, "runs", progress)
+    return aggregate(per_run)
+
+
+def aggregate(per_run: list[dict[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
+    """Mean over runs (in run order) of every method's per-run means, and the OSPA s.e."""
     out: dict[str, dict[str, float]] = {}
     for name in per_run[0]:
         rows = [pr[name] for pr in per_run]
         out[name] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
         o = np.array([r["ospa"] for r in rows])
         out[name]["ospa_se"] = float(o.std(ddof=1) / np.sqrt(len(o))) if len(o) > 1 else 0.0
-    return out
-
-
-TABLE_ROWS = ("IDPC", "FTC", "GCI L=1", "GCI L=2", "GCI L=3", "GCI L=4", "AA L=1", "AA L=2",
-              "AA L=3", "AA L=4", "IC", "centralised", "local")
-
-
-def table_rows(result: dict[str, dict[str, float]]) -> list[str]:
-    return [n for n in TABLE_ROWS if n in result]
-
-
-def format_table(result: dict[str, dict[str, float]]) -> str:
-    lines = ["| method | mean OSPA (m) | ± s.e. | card. error | scans card. right | "
-             "tuples / peer / scan | bytes / peer / scan | CPU ms / peer / scan |",
-             "|---|---|---|---|---|---|---|---|"]
-    for n in table_rows(result) + [k for k in result if k.startswith("IDPC t=")]:
-        r = result[n]
-        lines.append(f"| {n} | {r['ospa']:.2f} | {r['ospa_se']:.2f} | {r['card_err']:.3f} | "
-                     f"{100 * r['card_ok']:.1f} % | {r['tuples']:.0f} | "
-                     f"{r.get('bytes', float('nan')):.0f} | {r['cpu_ms']:.2f} |")
-    return "\n".join(lines)
-
-
-def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str) -> list[Path]:
-    """``seed004_table.csv``, ``seed004_iterations.csv``, ``seed004_tradeoff.png``."""
-    folder.mkdir(parents=True, exist_ok=True)
-    keys = ("ospa", "ospa_se", "card_err", "card_ok", "tuples", "cpu_ms", "bytes")
-    table = folder / "seed004_table.csv"
-    with table.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(("method", *keys))
-        for n in table_rows(result):
-            w.writerow((n, *(f"{result[n][k]:.6g}" for k in keys)))
-    iters = sorted((int(k.split("=")[1]), k) for k in result if k.startswith("IDPC t="))
-    it_csv = folder / "seed004_iterations.csv"
-    with it_csv.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(("iterations", *keys))
-        for t, k in iters:
-            w.writerow((t, *(f"{result[k][kk]:.6g}" for kk in keys)))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.8))
-    colours = plt.get_cmap("tab20").colors
-    for i, n in enumerate(table_rows(result)):
-        r = result[n]
-        a.errorbar(max(r["tuples"], 1.0), r["ospa"], yerr=r["ospa_se"], fmt="osD^v"[i % 5],
-                   color=colours[i % len(colours)], label=n, markersize=7)
-    a.legend(fontsize=8, ncol=2, loc="lower left")
-    a.set_xscale("log")
-    a.set_xlabel("tuples per peer per scan (log; local = 1)")
-    a.set_ylabel("mean OSPA (m), c = 100, p = 2")
-    a.set_title("OSPA against communication cost")
-    a.grid(True, which="both", alpha=0.3)
-    ts = [t for t, _ in iters]
-    b.errorbar(ts, [result[k]["ospa"] for _, k in iters],
-               yerr=[result[k]["ospa_se"] for _, k in iters], fmt="o-", label="IDPC")
-    b.set_xticks(ts)
-    b.set_xlabel("flooding iterations completed (diameter 4)")
-    b.set_ylabel("mean OSPA (m)")
-    b.set_title("IDPC against incomplete flooding")
-    b.grid(True, alpha=0.3)
-    fig.suptitle(title)
-    fig.tight_layout()
-    png = folder / "seed004_tradeoff.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return [table, it_csv, png]
-
-
-def read_outputs(folder: Path) -> dict[str, dict[str, float]]:
-    """The result dict back from ``seed004_table.csv`` and ``seed004_iterations.csv``."""
-    out: dict[str, dict[str, float]] = {}
-    for row in csv.DictReader((folder / "seed004_table.csv").open()):
-        name = row.pop("method")
-        out[name] = {k: float(v) for k, v in row.items()}
-    for row in csv.DictReader((folder / "seed004_iterations.csv").open()):
-        t = row.pop("iterations")
-        out[f"IDPC t={t}"] = {k: float(v) for k, v in row.items()}
     return out
 
 
@@ -780,10 +386,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs = range(a.first_run, a.first_run + a.runs)
     t0 = time.monotonic()
     result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)
-    deg = scn.adjacency.sum(axis=1)
-    title = (f"seed 004, {scn.variant}, {len(scn.positions)} sensors (diameter "
-             f"{int(scn.hops.max())}, mean degree {deg.mean():.1f}), clutter "
-             f"{scn.clutter_rate:g}, runs {runs.start}..{runs.stop - 1}")
+    title = table_title(scn, runs)
     print(title)
     print(format_table(result))
     print(reference_comparison(result, scn.adjacency))

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import tempfile
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from sim.launcher import read_summaries, start_run, wait_run
-from sim.progress import Progress
 from sim.scenario import load_scenario
+from sim.studies.pool import map_runs
 from sim.twin import run_twin
 
 
@@ -97,20 +96,9 @@ def sweep(source: str, param: str, values: list, policies: list[str], runs: int,
     for v in values:  # fail fast, with the scenario's one-line error, before any run
         load_scenario(source, overrides=_overrides(base, param, v, policies[0]))
     points = [SweepPoint(v, p, r) for v in values for p in policies for r in range(runs)]
-    rows: list[dict | None] = [None] * len(points)
-    with Progress(len(points), f"runs ({param} x policy)", enabled=progress) as bar:
-        if jobs <= 1 or real:
-            for i, pt in enumerate(points):
-                rows[i] = run_point(source, base, param, pt, real)
-                bar.advance()
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = {pool.submit(run_point, source, base, param, pt, False): i
-                           for i, pt in enumerate(points)}
-                for fut in as_completed(futures):
-                    rows[futures[fut]] = fut.result()
-                    bar.advance()
-    return [r for r in rows if r is not None]
+    # Real runs one at a time: each is a whole network of processes on this machine.
+    return map_runs(run_point, [(source, base, param, pt, real) for pt in points],
+                    1 if real else jobs, f"runs ({param} x policy)", progress)
 
 
 def summarise(rows: list[dict]) -> list[dict]:

@@ -8,7 +8,7 @@ import pytest
 
 SCRIPTS = ["bench_gci", "bench_gmphd_stonesoup", "bench_idle_penalty", "bench_immpf",
            "bench_network", "soak", "bench_idpc", "bench_campaign", "bench_record", "bench_pda",
-           "bench_flooding", "bench_transport_floor"]
+           "bench_flooding", "bench_transport_floor", "bench_flood"]
 
 
 @pytest.mark.parametrize("name", SCRIPTS)

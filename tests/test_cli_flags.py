@@ -233,12 +233,12 @@ def test_run_folders_are_unique_and_failed_ones_removed(tmp_path, monkeypatch, c
     assert a != b and a.is_dir() and b.is_dir()  # the same second: distinct folders
     cli._CREATED.clear()
 
-    import sim.experiment
+    import sim.studies.base
 
     def fail(*args, **kwargs):
         raise cli.UserError("stop here")
 
-    monkeypatch.setattr(sim.experiment, "run_experiment", fail)
+    monkeypatch.setattr(sim.studies.base, "run_study", fail)
     before = set((tmp_path / "runs").iterdir())
     assert main(["experiment", "--runs", "1", "--quiet"]) == 2
     assert set((tmp_path / "runs").iterdir()) == before  # the empty folder went again

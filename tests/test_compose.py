@@ -73,3 +73,27 @@ def test_dockerfile_image_carries_no_sources_or_tests():
     assert not re.search(r"^COPY (?!--from)", final, re.M), final  # no sources in the image
     copies = [ln for ln in text.splitlines() if ln.startswith("COPY ")]
     assert not [ln for ln in copies if "tests" in ln or "benchmarks" in ln or " . " in ln]
+
+
+def test_hosts_variant_is_a_router_the_world_and_hosts_that_hold_every_peer_once():
+    """docker-compose.hosts.yml: a host per service, every process a client of the router;
+    the hosts' peers are the world's, each in one host."""
+    compose = yaml.safe_load((ROOT / "docker-compose.hosts.yml").read_text())
+    services = compose["services"]
+    assert {s["image"] for s in services.values()} == {"sensornet:latest"}
+    parser = build_parser()
+    args = {name: parser.parse_args(s["command"]) for name, s in services.items()}
+    assert args.pop("router").command == "router"
+    world = args.pop("world")
+    assert world.command == "world" and "tcp/router:7447" in world.connect
+    assert args and all(a.command == "host" for a in args.values())
+    held = [p for a in args.values() for p in a.peers.split(",")]
+    assert sorted(held) == sorted(world.peers.split(",")) and len(set(held)) == len(held)
+    scn = load_scenario(world.scenario)
+    assert set(held) <= set(scn.sensor_names)
+    for name, a in args.items():
+        assert a.name == name and a.connect == ["tcp/router:7447"], name
+        assert "router" in services[name]["depends_on"]
+        assert a.out.startswith("/runs")
+    assert len({a.network for a in [world, *args.values()]}) == 1
+    assert len({a.run_id for a in [world, *args.values()]}) == 1

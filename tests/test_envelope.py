@@ -284,3 +284,69 @@ def test_signing_benchmark_runs(capsys):
         "estimate (10 components)", "estimate (100 components)", "tracks (4 targets)"]
     assert all("(+76)" in r for r in rows[1:7])  # the trailer: stamp, signature, tag
     assert "| total |" in out
+
+
+class _Clock:
+    """A wall clock in nanoseconds that a test sets."""
+
+    def __init__(self, t: float) -> None:
+        self.ns = int(t * 1e9)
+
+    def __call__(self) -> int:
+        return self.ns
+
+    def set(self, t: float) -> None:
+        self.ns = int(t * 1e9)
+
+
+HOUR = 3600.0
+
+
+def test_a_sender_whose_clock_ran_an_hour_ahead_is_taken_again_once_corrected(keys):
+    """Before: every honest message after the correction was ``replayed`` for an hour."""
+    sender_clock, receiver_clock = _Clock(1000.0 + HOUR), _Clock(1000.0)
+    sign_key = Security.load(keys, "s2", NET, PEERS).signer()._key
+    signer = Signer(sign_key, clock=sender_clock)
+    verifier = Security.load(keys, "s1", NET, PEERS).verifier()
+    verifier._clock = receiver_clock
+    key = K.estimate("s2")
+    # while its clock is an hour ahead, its messages are refused as such and set no bar
+    assert verifier.open(key, signer.seal(key, _estimate(k=1))) == (None, "ahead")
+    sender_clock.set(1001.0)  # corrected
+    receiver_clock.set(1001.0)
+    sealed = signer.seal(key, _estimate(k=2))
+    assert verifier.open(key, sealed) == (_estimate(k=2), None)  # taken at once
+    assert verifier.open(key, sealed) == (None, "replayed")  # and a copy still refused
+    sender_clock.set(1001.5)
+    receiver_clock.set(1001.5)
+    assert verifier.open(key, signer.seal(key, _estimate(k=3)))[1] is None
+
+
+def test_a_skew_within_max_ahead_is_taken_and_stamps_still_increase(keys):
+    sender_clock, receiver_clock = _Clock(1005.0), _Clock(1000.0)  # 5 s ahead: tolerated
+    signer = Signer(Security.load(keys, "s2", NET, PEERS).signer()._key, clock=sender_clock)
+    verifier = Security.load(keys, "s1", NET, PEERS).verifier()
+    verifier._clock = receiver_clock
+    key = K.estimate("s2")
+    assert verifier.open(key, signer.seal(key, _estimate(k=1)))[1] is None
+    sender_clock.set(1000.0)  # corrected by 5 s (< MAX_AHEAD): stamps go on increasing
+    stamps = [int.from_bytes(signer.stamp(), "big") for _ in range(3)]
+    assert stamps == sorted(stamps) and stamps[0] > int(1000.0 * 1e9)
+    assert verifier.open(key, signer.seal(key, _estimate(k=2)))[1] is None
+
+
+def test_a_receiver_whose_clock_stepped_back_recovers_within_max_ahead(keys):
+    """Both clocks an hour ahead, then both corrected: the receiver's bar (an hour ahead) is
+    lowered to its clock - MAX_AHEAD, so honest messages are taken again at once."""
+    clock = _Clock(1000.0 + HOUR)
+    signer = Signer(Security.load(keys, "s2", NET, PEERS).signer()._key, clock=clock)
+    verifier = Security.load(keys, "s1", NET, PEERS).verifier()
+    verifier._clock = clock
+    key = K.estimate("s2")
+    assert verifier.open(key, signer.seal(key, _estimate(k=1)))[1] is None
+    old = signer.seal(key, _estimate(k=1))  # stamped an hour ahead, captured
+    clock.set(1000.0)
+    sealed = signer.seal(key, _estimate(k=2))
+    assert verifier.open(key, sealed)[1] is None  # at once, not in an hour
+    assert verifier.open(key, sealed)[1] == "replayed"
+    assert verifier.open(key, old)[1] == "ahead"  # nor does the hour-ahead copy come back

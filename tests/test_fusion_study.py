@@ -12,8 +12,9 @@ import pytest
 from sim.campaign import CampaignError, load_campaign, run_campaign, status
 from sim.fusion_study import format_markdown, interval, plot, summarise
 from sim.graphs import network_scenario
-from sim.runners import _experiment_row
 from sim.scenario import load_scenario
+from sim.studies.base import Cell
+from sim.studies.seed000 import row as experiment_row
 from sim.twin import run_twin
 
 STUDY = """
@@ -92,7 +93,8 @@ def test_study_rows_are_the_twin_and_experiment_numbers(study, tmp_path):
     # the centralised reference is the experiment's iterated corrector
     cen = next(r for r in rows if r["graph"] == "full-3" and r["rule"] == "centralised")
     central = load_scenario("seed000", overrides=scn_overrides(c, "full-3", "centralised"))
-    ref = [_experiment_row(central, r)["mean_ospa.centralized"] for r in (0, 1)]
+    ref = [experiment_row(central, Cell(r, "", None, {}))["mean_ospa.centralized"]
+           for r in (0, 1)]
     assert cen["fused_ospa"] == pytest.approx(np.mean(ref))
     table = format_markdown(rows)
     assert table.count("\n") == 2 + len({(r["pd"], r["graph"], r["rule"]) for r in rows})

@@ -46,12 +46,14 @@ def test_bad_arguments_are_one_line(capsys):
 
 @pytest.mark.network
 def test_echo_and_topics_on_a_running_network(tmp_path):
+    # the run lasts 300 s, far longer than the tools need: it is stopped in finally
     port = free_port()
     ep = endpoint(port)
     env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
     run = subprocess.Popen(
         [sys.executable, "-m", "sensornet", "run", "seed000", "--network", "live1",
-         "--listen", ep, "--no-rerun", "--set", "scenario.num_scans=60",
+         "--listen", ep, "--no-rerun", "--set", "scenario.num_scans=3000",
+         "--set", "network.speed=10",
          "--out", str(tmp_path / "run")], cwd=tmp_path, env=env,
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     encodings: set[str] = set()
@@ -86,8 +88,8 @@ def test_echo_and_topics_on_a_running_network(tmp_path):
         assert all(ln.split()[2] == "tracks" for ln in only.stdout.strip().splitlines())
         table = subprocess.run(
             [sys.executable, "-m", "sensornet", "topics", "live1", "--connect", ep,
-             "--duration", "3"], cwd=tmp_path, env=env, capture_output=True, text=True,
-            timeout=180)
+             "--count", "60", "--duration", "170"], cwd=tmp_path, env=env,
+            capture_output=True, text=True, timeout=180)
         assert table.returncode == 0, table.stderr
         assert "| sensornet/live1/estimate/s1 |" in table.stdout, table.stdout
         assert heard.wait(120), encodings

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import sim.seed001 as seed001
+import sim.seed001_tuning as seed001_tuning
 from sim.seed001 import (
     GEOMETRIES,
     TUNE_FIRST_RUN,
@@ -93,7 +94,7 @@ def test_omega_tuning_uses_only_runs_never_evaluated(monkeypatch, capsys):
     def no_table1(*args, **kwargs):
         raise AssertionError("the tuning mode must not run the evaluation experiment")
 
-    monkeypatch.setattr(seed001, "tune_once", fake_tune_once)
+    monkeypatch.setattr(seed001_tuning, "tune_once", fake_tune_once)  # tune_omega's module
     monkeypatch.setattr(seed001, "run_once", no_table1)
     monkeypatch.setattr(seed001, "run_experiment", no_table1)
     assert main(["--tune-omega", "0.2,0.3,0.5,det", "--tune-runs", "5", "--quiet"]) == 0

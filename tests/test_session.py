@@ -12,7 +12,15 @@ import threading
 import pytest
 import zenoh
 
-from peers.session import DEFAULT_LEASE_MS, MAX_MESSAGE_BYTES, free_port, open_session, zenoh_config
+from peers.session import (
+    ACCEPT_PENDING,
+    ACCEPT_TIMEOUT_MS,
+    DEFAULT_LEASE_MS,
+    MAX_MESSAGE_BYTES,
+    free_port,
+    open_session,
+    zenoh_config,
+)
 
 
 def _get(conf: zenoh.Config, key: str):
@@ -24,6 +32,13 @@ def test_defaults_lease_message_size_and_no_shared_memory_pool():
     assert _get(conf, "transport/link/tx/lease") == DEFAULT_LEASE_MS
     assert _get(conf, "transport/link/rx/max_message_size") == MAX_MESSAGE_BYTES
     assert _get(conf, "transport/shared_memory/transport_optimization/enabled") is False
+
+
+def test_room_for_pending_handshakes_each_bounded_in_time():
+    """Idle connections must not lock members out (tests/test_idle_connections.py)."""
+    conf = zenoh_config(listen=["tcp/127.0.0.1:7447"])
+    assert _get(conf, "transport/unicast/accept_pending") == ACCEPT_PENDING >= 1000
+    assert _get(conf, "transport/unicast/accept_timeout") == ACCEPT_TIMEOUT_MS <= 5000
 
 
 def test_a_users_config_file_is_taken_as_written(tmp_path):

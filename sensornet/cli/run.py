@@ -1,0 +1,292 @@
+"""``run`` and ``demo``: a whole run (world and peers as processes, or the twin)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from sensornet.cli.budgets import check_budget
+from sensornet.cli.common import UserError, _check_listen_free, _resolve_viewer, _run_folder
+from sensornet.cli.peer import _load, _run_keys
+from sensornet.cli.results import report_results
+from sensornet.cli.studies import _warn_fusion
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1] if lines else ""
+
+
+def _why_nothing_scored(name: str, s: dict) -> str:
+    rejected = {k: v for k, v in (s.get("rejected") or {}).items() if v}
+    if rejected:
+        parts = ", ".join(f"{v} {k}" for k, v in sorted(rejected.items()))
+        return f"peer {name} scored no scan: it rejected {parts} messages"
+    if s.get("stop_reason"):
+        return f"peer {name} scored no scan (stopped: {s['stop_reason']})"
+    return f"peer {name} scored no scan"
+
+
+def _scored(s: dict) -> bool:
+    vals = [s.get("mean_ospa_local"), s.get("mean_ospa_fused")]
+    return bool(s.get("scans")) and any(v is not None and math.isfinite(v) for v in vals)
+
+
+def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
+    """With hosts (``--per-process N``, N > 1) only ``kill`` (one peer, in its host) and
+    ``killhost`` (a whole host, named h1, h2, ...) of the peers' faults (the router's as
+    ever); ``killhost`` only with hosts."""
+    from sim.launcher import HOSTED_ACTIONS
+
+    for f in pfaults:
+        if f.action == "killhost" and not hosts:
+            raise UserError(f"--fault killhost:{f.peer}@{f.scan} needs hosts: add "
+                            f"--per-process N (N > 1)")
+        if f.action == "killhost" and f.peer not in hosts:
+            raise UserError(f"--fault names unknown host {f.peer!r} (hosts: "
+                            f"{', '.join(hosts)})")
+        if hosts and f.action not in HOSTED_ACTIONS and f.peer != "router":
+            raise UserError(f"--fault {f.action}:{f.peer}@{f.scan} with --per-process: only "
+                            f"{' and '.join(HOSTED_ACTIONS)} so far")
+    if hosts and getattr(args, "sim", False):
+        raise UserError("--per-process needs real processes; drop --sim")
+
+
+def _packing(args: argparse.Namespace, scn, pfaults) -> int:
+    """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
+    from sim.launcher import HOSTED_ACTIONS
+    from sim.packing import choose
+
+    solo = [f"{f.action}:{f.peer}" for f in pfaults
+            if f.action not in HOSTED_ACTIONS and f.peer != "router"]
+    asked = getattr(args, "per_process", None)
+    if getattr(args, "sim", False):  # the twin: no processes to pack
+        return asked or 1
+    why_not = ("secure mode" if args.secure is not None or scn.security else
+               f"--fault {solo[0]}" if solo else "")
+    packing = choose(len(scn.sensors), asked, why_not)
+    if packing.line:
+        print(packing.line, flush=True)
+    return packing.per_process
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from sim.launcher import (
+        ProcessFault,
+        format_summary,
+        host_groups,
+        hosts_line,
+        inject_process_faults,
+        merge_recordings,
+        read_summaries,
+        start_run,
+        wait_run,
+    )
+
+    scn = _load(args, args.scenario)
+    _warn_fusion(scn)
+    try:
+        pfaults = [ProcessFault.parse(f) for f in args.fault or []]
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if scn.network.router and hasattr(args, "router") and not args.router:
+        args.router = "[network] router = true"  # the scenario's routed topology
+    routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
+    per_process = _packing(args, scn, pfaults)
+    hosts = host_groups(scn.sensor_names, per_process)
+    _check_hosted_faults(pfaults, hosts, args)
+    unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
+                     - set(scn.sensor_names) - routed)
+    if unknown:
+        raise UserError(f"--fault names unknown peers {unknown} "
+                        f"(peers: {', '.join(scn.sensor_names)})")
+    late = [f for f in pfaults if f.scan >= scn.num_scans]
+    if late:  # it would be accepted and never fire (or fire as the run ends)
+        f = late[0]
+        raise UserError(f"--fault {f.action}:{f.peer}@{f.scan}: scan {f.scan} is at or after "
+                        f"the run's last scan ({scn.name} has {scn.num_scans} scans); "
+                        f"schedule it before scan {scn.num_scans}")
+    if getattr(args, "sim", False):
+        for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
+            if getattr(args, flag, None):
+                raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
+        if args.secure is not None:
+            raise UserError("--secure needs real processes; drop --sim")
+        if args.router is True:
+            raise UserError("--router needs real processes; drop --sim")
+        check_budget(scn, args)
+        return _run_twin(scn, args)
+    check_budget(scn, args, processes=len(hosts or scn.sensors) + 1, wire=True)
+    _check_listen_free(args.listen or [])
+    _resolve_viewer(args)
+    if args.secure is None and scn.security:  # the scenario's [security] keys
+        args.secure = scn.security
+    if hosts and args.secure is not None:
+        raise UserError("--per-process: a host has one Zenoh session, so one TLS identity: "
+                        "no --secure (run secure peers one per process)")
+    if getattr(args, "router", False):
+        clash = [f for f in ("config", "listen", "sparse") if getattr(args, f, None)]
+        if clash:
+            why = args.router if isinstance(args.router, str) else "--router"
+            raise UserError(f"{why} makes every process a client of the run's router: "
+                            f"drop --{clash[0]}")
+    out = _run_folder(args.out, "run")
+    secure = _run_keys(args, scn, out)
+    speed = args.speed or scn.network.speed
+    expected = scn.num_scans * scn.scan_period / speed
+    how = f"in {len(hosts)} host processes" if hosts else "as processes"
+    print(f"run {scn.name}: world + {len(scn.sensors)} peers {how} over Zenoh on "
+          f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
+          f"few seconds to start {len(hosts or scn.sensors) + 1} processes); output in {out}",
+          flush=True)
+    if hosts:
+        print(hosts_line(hosts), flush=True)
+    if secure is not None:
+        made = " (fresh keys made for this run)" if args.secure == "" else ""
+        print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
+              f"{secure}{made}", flush=True)
+    viewer = args.viewer
+    if viewer == "spawn":  # one viewer for the whole run; every process streams to it
+        from peers.rerun_sink import spawn_viewer
+
+        viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
+    stop = threading.Event()  # SIGINT / SIGTERM: stop the children, then report as usual
+    caught: list[str] = []
+
+    def on_signal(signum, frame) -> None:
+        caught.append(signal.Signals(signum).name)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    injector = None
+    try:
+        handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
+                           viewer=viewer, run=args.run, speed=args.speed,
+                           rerun=not args.no_rerun, lease_ms=args.lease_ms,
+                           sparse=args.sparse, listen=args.listen, connect=args.connect,
+                           config=args.config, run_id=args.run_id, secure=secure,
+                           router=bool(getattr(args, "router", False)),
+                           peer_args={n: ["--record"] for n in scn.sensor_names}
+                           if args.record else None, per_process=per_process)
+        if getattr(args, "router", False):
+            why = f" ({args.router})" if isinstance(args.router, str) else ""
+            print(f"routed{why}: the world and every peer are clients of the run's router "
+                  f"(sensornet router) at {handle.endpoints['router']}", flush=True)
+        if pfaults:
+            injector = threading.Thread(target=inject_process_faults, daemon=True,
+                                        args=(handle, pfaults, scn.sensor_names[0], stop))
+            injector.start()
+        codes = wait_run(handle, timeout=expected + args.timeout, stop=stop)
+    finally:
+        stop.set()
+        if injector is not None:
+            injector.join(timeout=5)
+        for s, h in previous.items():
+            signal.signal(s, h)
+    summaries = read_summaries(out, scn.sensor_names)
+    if summaries:
+        from sim.launcher import trust_note
+
+        print(format_summary(summaries))
+        if trust_note(summaries):
+            print(trust_note(summaries))
+        if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
+            from sim.launcher import realtime_note
+
+            note = realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
+            if note:
+                print(note)
+    faults_file = out / "process-faults.json"
+    if pfaults and faults_file.is_file():
+        from sim.launcher import fault_report
+
+        print(fault_report(json.loads(faults_file.read_text()), summaries))
+    report_results(out)
+    rec = merge_recordings(out)
+    if rec is not None:
+        print(f"recording: {rec}  (view it with: rerun {rec})")
+    elif not args.no_rerun:
+        print(f"recording: {out / 'rerun'} (the .rrd files could not be merged)")
+    if caught:
+        print(f"sensornet: stopped by {caught[0]}; every process stopped, output in {out}",
+              file=sys.stderr)
+        return 0
+    world = codes.get("world")
+    if world not in (0, None):
+        why = _last_line(handle.logs["world"]).removeprefix("sensornet: error: ")
+        print(f"sensornet: error: the world failed (exit {world}): {why} "
+              f"(log: {handle.logs['world']})", file=sys.stderr)
+        return 2 if world == 2 else 1
+    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
+    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
+    bad = {n: c for n, c in codes.items() if c != 0 and n not in killed}
+    if bad:
+        n, c = next(iter(bad.items()))
+        why = _last_line(handle.logs[n]).removeprefix("sensornet: error: ")
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        print(f"sensornet: error: {n} exited with code {c}{more}: {why} "
+              f"(log: {handle.logs[n]})", file=sys.stderr)
+        return 2 if c == 2 else 1
+    missing = sorted(set(scn.sensor_names) - set(summaries) - killed)
+    if missing:
+        print(f"sensornet: error: no summary from {', '.join(missing)} (logs in {out / 'logs'})",
+              file=sys.stderr)
+        return 1
+    unscored = [n for n, s in summaries.items() if not _scored(s) and n not in killed]
+    if unscored:
+        n = unscored[0]
+        print(f"sensornet: error: {_why_nothing_scored(n, summaries[n])}"
+              + (f" (and {len(unscored) - 1} more peers)" if len(unscored) > 1 else ""),
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _run_twin(scn, args: argparse.Namespace) -> int:
+    """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
+    from peers.scan_results import write_part
+    from sim.launcher import format_summary
+    from sim.twin import run_twin
+
+    if args.fault:
+        raise UserError("--fault (process faults) needs real processes; drop --sim")
+    t0 = time.perf_counter()
+    result = run_twin(scn, args.run)
+    summaries = {name: result.summary(name) for name in result.peers}
+    print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
+          f"scans in {time.perf_counter() - t0:.1f} s (bytes: the encoded messages)")
+    print(format_summary(summaries))
+    from sim.launcher import trust_note
+
+    if trust_note(summaries):
+        print(trust_note(summaries))
+    out = _run_folder(args.out, "sim")
+    for name, core in result.peers.items():
+        write_part(core.scorer.results, name, out / f"peer-{name}.scans.msgpack")
+    report_results(out)
+    if result.faults is not None:
+        print(f"injected link faults: {result.faults.counts()}")
+        result.faults.write_log(out / "faults.csv")
+        print(f"fault log: {out / 'faults.csv'}")
+    unscored = [n for n, s in summaries.items() if not _scored(s)]
+    if unscored:
+        print(f"sensornet: error: peer {unscored[0]} scored no scan", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``sensornet run seed000`` with a viewer (``--viewer spawn`` unless told otherwise)."""
+    args.scenario = "seed000"
+    args.sim = False
+    return cmd_run(args)

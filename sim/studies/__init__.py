@@ -1,0 +1,109 @@
+"""The registry of studies: each seed's reproduction and each measurement, found by name.
+
+A *study* is one module under ``sim/studies/`` exposing a :class:`sim.studies.base.Study`
+(load, run once, summarise, table, figures; campaign and report hooks). ``sensornet
+experiment``, campaigns and reports look a study up here and never name one. Adding a study is
+one module and one line in :data:`STUDIES` (or :func:`register` from a test or a plug-in,
+:data:`PLUGINS_ENV` for the processes a campaign starts); ``tests/test_studies.py`` registers
+a small one and runs it through ``experiment`` and a campaign.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from typing import Any
+
+STUDIES: dict[str, str] = {
+    "seed004": "sim.studies.seed004:STUDY",
+    "seed003": "sim.studies.seed003:STUDY",
+    "seed002": "sim.studies.seed002:STUDY",
+    "seed001": "sim.studies.seed001:STUDY",
+    "twin": "sim.studies.network:TWIN",
+    "real": "sim.studies.network:REAL",
+    "fusion-quality": "sim.studies.fusion:STUDY",
+    "experiment": "sim.studies.seed000:STUDY",
+}
+"""Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
+read a scenario (the last, ``experiment``, reads any). Modules are imported on first use."""
+
+PLUGINS_ENV = "SENSORNET_STUDIES"
+"""Comma-separated ``"name=module:attribute"`` entries added to :data:`STUDIES` (a plug-in's
+studies, asked first; inherited by campaign workers)."""
+
+_registered: dict[str, Any] = {}
+"""Studies added with :func:`register` (asked first)."""
+_loaded: dict[str, Any] = {}
+"""Built-in and plug-in studies imported so far."""
+
+
+def _plugins() -> dict[str, str]:
+    out = {}
+    for item in filter(None, (x.strip() for x in os.environ.get(PLUGINS_ENV, "").split(","))):
+        name, sep, target = item.partition("=")
+        if not sep or ":" not in target:
+            raise ValueError(f"{PLUGINS_ENV}: {item!r} is not 'name=module:attribute'")
+        out[name.strip()] = target.strip()
+    return out
+
+
+def names() -> tuple[str, ...]:
+    """Every study name: registered and plug-ins first (they may claim a scenario before a
+    built-in does), then the built-ins in :data:`STUDIES` order."""
+    return tuple(dict.fromkeys([*_registered, *_plugins(), *STUDIES]))
+
+
+def get(name: str):
+    """The study called ``name``; :class:`KeyError` with the known names if there is none."""
+    if name in _registered:
+        return _registered[name]
+    if name in _loaded:
+        return _loaded[name]
+    table = {**STUDIES, **_plugins()}
+    if name not in table:
+        raise KeyError(f"unknown study {name!r}; known: {', '.join(names())}")
+    module, attr = table[name].split(":")
+    study = getattr(importlib.import_module(module), attr)
+    if getattr(study, "name", None) != name:
+        raise TypeError(f"{table[name]} is not the study {name!r}")
+    _loaded[name] = study
+    return study
+
+
+def for_source(source: str, overrides: dict | None = None):
+    """The study ``sensornet experiment SOURCE`` runs: the first that claims it."""
+    for name in names():
+        study = get(name)
+        if study.claims(source, overrides or {}):
+            return study
+    raise KeyError(f"no study reads {source!r}")
+
+
+def runners() -> tuple[str, ...]:
+    """The studies a campaign can run (those with a ``row`` hook)."""
+    return tuple(n for n in names() if get(n).row is not None)
+
+
+def for_report(kind: str):
+    """The study whose ``report`` hook draws ``[[figures]] kind = KIND``."""
+    for name in names():
+        study = get(name)
+        if study.report is not None and (study.report_kind or study.name) == kind:
+            return study
+    raise KeyError(f"no study draws figures of kind {kind!r}")
+
+
+def report_kinds() -> tuple[str, ...]:
+    """Every ``[[figures]]`` kind a study draws."""
+    return tuple(s.report_kind or s.name for s in map(get, names()) if s.report is not None)
+
+
+def register(study):
+    """Add (or replace) a study in this process; returns it."""
+    _registered[study.name] = study
+    return study
+
+
+def unregister(name: str) -> None:
+    """Remove a study added with :func:`register` (tests)."""
+    _registered.pop(name, None)

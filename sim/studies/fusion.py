@@ -1,0 +1,11 @@
+"""The fusion-quality study (:mod:`sim.fusion_study`): a campaign file with a ``[study]`` table
+of ``kind = "fusion-quality"`` expands into twin and experiment cells."""
+
+from __future__ import annotations
+
+from sim import fusion_study as fs
+from sim.studies.base import Study
+
+STUDY = Study(name=fs.STUDY_KIND,
+              about="which fusion rule, how many rounds, on which network (a campaign)",
+              expand=fs.study_campaign)
