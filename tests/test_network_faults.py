@@ -135,6 +135,7 @@ def _watch_liveliness(events: list) -> Callable:
     """``during``: a session of the test's own (the peers' default lease) linked to every
     process of the run, appending ``(peer, "joined"|"left", wall time)`` as Zenoh reports it."""
     def during(handle):
+        handle.wait_listening("world")  # dialled earlier, Zenoh's back-off can outlast a fault
         session = open_session(connect=list(handle.endpoints.values()))
 
         def on_live(sample) -> None:
