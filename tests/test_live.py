@@ -106,3 +106,40 @@ def test_echo_and_topics_on_a_running_network(tmp_path):
         except subprocess.TimeoutExpired:
             run.kill()
             run.wait()
+
+
+@pytest.mark.network
+def test_echo_in_secure_mode_speaks_as_a_member_and_verifies_signatures(tmp_path):
+    """A secure run (mutual TLS, access control, signed messages): echo with s1's keys hears
+    what the access control lets s1 hear (no tracks, no other sensor's scans), each message's
+    signature checked against the roster."""
+    from peers.security import make_keys
+    from sim.launcher import start_run
+    from sim.scenario import load_scenario, parse_overrides
+
+    keys = tmp_path / "keys"
+    keys.mkdir()
+    make_keys("seclive", ["world", "s1", "s2", "s3"], keys)
+    sets = ["scenario.num_scans=3000", "network.speed=10"]
+    scn = load_scenario("seed000", overrides=parse_overrides(sets))
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
+    handle = start_run(scn, "seed000", tmp_path / "run", network="seclive", overrides=sets,
+                       rerun=False, secure=keys)
+    try:
+        ep = handle.endpoints["world"]
+        assert ep.startswith("tls/")
+        echo = subprocess.run(
+            [sys.executable, "-m", "sensornet", "echo", "seclive", "--connect", ep,
+             "--secure", str(keys), "--as", "s1", "--count", "30"], cwd=tmp_path, env=env,
+            capture_output=True, text=True, timeout=180)
+        assert echo.returncode == 0, echo.stderr
+        lines = echo.stdout.strip().splitlines()
+        assert len(lines) == 30
+        assert all(ln.endswith("signature ok") for ln in lines), lines[:3]
+        kinds = {ln.split()[2] for ln in lines}
+        assert "estimate" in kinds and "tracks" not in kinds  # s1 may not hear tracks
+        keys_heard = {ln.split()[1] for ln in lines}
+        assert not any(k.startswith("sensornet/seclive/scan/") and not k.endswith("/s1")
+                       for k in keys_heard), keys_heard
+    finally:
+        handle.stop_all()
