@@ -26,187 +26,30 @@ from pathlib import Path
 
 import numpy as np
 
+from peers.rerun_layout import (  # noqa: F401  (names importers take from here)
+    _CIRCLE,
+    APP,
+    COLOR_NAMES,
+    CUTOFF_COLOR,
+    GRID_COLOR,
+    PALETTE,
+    REGION_COLOR,
+    TICK_GAP,
+    TRUTH_COLOR,
+    TRUTH_PATH_KEEP,
+    color_of,
+    dashed,
+    default_blueprint,
+    ellipses,
+    grid_lines,
+    legend_markdown,
+    lighter,
+    nice_step,
+    north_up,
+    position_columns,
+    region_outline,
+)
 from tracking.mixture import GaussianMixture
-
-APP = "sensornet"
-_CIRCLE = np.stack([np.cos(np.linspace(0, 2 * np.pi, 33)),
-                    np.sin(np.linspace(0, 2 * np.pi, 33))], axis=1)  # (33, 2)
-PALETTE = [(230, 25, 75), (0, 130, 200), (245, 130, 48), (145, 30, 180), (60, 180, 75),
-           (240, 50, 230), (0, 128, 128), (170, 110, 40), (70, 240, 240), (128, 128, 0)]
-"""Peer colours, far apart in hue (no two greens among the first four)."""
-COLOR_NAMES = ["red", "blue", "orange", "purple", "green", "magenta", "teal", "brown", "cyan",
-               "olive"]
-TRUTH_COLOR = (255, 215, 0)
-GRID_COLOR = (90, 90, 90)
-REGION_COLOR = (170, 170, 170)
-CUTOFF_COLOR = (120, 120, 120)
-TICK_GAP = 0.03
-"""Grid labels sit this fraction of the region's larger side outside its frame."""
-TRUTH_PATH_KEEP = 500
-"""Scans of each true target's path drawn (the newest; memory stays flat in long runs)."""
-
-
-def position_columns(dim: int) -> list[int]:
-    """Columns of (px, py): ``[0, 2]`` in ``[px, vx, py, vy]``, ``[0, 3]`` in the 6-D state."""
-    return [0, 3] if dim == 6 else [0, 2]
-
-
-def ellipses(means: np.ndarray, covs: np.ndarray, sigma: float = 2.0) -> np.ndarray:
-    """``sigma``-ellipses of the (px, py) marginals: ``(n, 33, 2)`` polylines, vectorised."""
-    if len(means) == 0:
-        return np.zeros((0, 33, 2))
-    c = position_columns(means.shape[1])
-    P = covs[:, c][:, :, c]  # (n, 2, 2) position block
-    vals, vecs = np.linalg.eigh(P)
-    axes = vecs * (sigma * np.sqrt(np.maximum(vals, 0.0)))[:, None, :]  # (n, 2, 2)
-    return means[:, None, c] + np.einsum("pj,nij->npi", _CIRCLE, axes)
-
-
-def dashed(strips: np.ndarray) -> np.ndarray:
-    """Every other segment of ``(n, m, 2)`` polylines as ``(n * (m // 2), 2, 2)`` two-point
-    strips: Rerun draws no dashed lines, so a dashed ellipse is half its segments."""
-    strips = np.asarray(strips, dtype=float)
-    n, m = strips.shape[:2]
-    if n == 0 or m < 2:
-        return np.zeros((0, 2, 2))
-    half = (m - 1) // 2
-    a, b = strips[:, 0:2 * half:2], strips[:, 1:2 * half + 1:2]
-    return np.stack([a, b], axis=2).reshape(-1, 2, 2)
-
-
-def lighter(color, amount: float = 0.45) -> tuple[int, int, int]:
-    """``color`` blended towards white by ``amount``."""
-    return tuple(int(round(c + (255 - c) * amount)) for c in color[:3])
-
-
-def nice_step(span: float, lines: int = 6) -> float:
-    """A grid step of 1, 2 or 5 x 10^k giving about ``lines`` lines over ``span``."""
-    raw = max(span, 1e-9) / max(lines, 1)
-    base = 10.0 ** np.floor(np.log10(raw))
-    for f in (1.0, 2.0, 5.0, 10.0):
-        if raw <= f * base:
-            return float(f * base)
-    return float(10 * base)
-
-
-def region_outline(region) -> np.ndarray:
-    """The closed rectangle ``((xmin, xmax), (ymin, ymax))`` as a ``(5, 2)`` polyline."""
-    (x0, x1), (y0, y1) = region
-    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]], dtype=float)
-
-
-def grid_lines(region, step: float | None = None) -> tuple[list[np.ndarray], np.ndarray,
-                                                             list[str]]:
-    """Grid lines every ``step`` m over ``region`` and the positions and labels of their ticks
-    (along the bottom and left edges)."""
-    (x0, x1), (y0, y1) = region
-    step = step or nice_step(max(x1 - x0, y1 - y0))
-    xs = np.arange(np.ceil(x0 / step) * step, x1 + 1e-9, step)
-    ys = np.arange(np.ceil(y0 / step) * step, y1 + 1e-9, step)
-    lines = [np.array([[x, y0], [x, y1]]) for x in xs] + [np.array([[x0, y], [x1, y]])
-                                                          for y in ys]
-    # labels just outside the frame (x below it, y left of it): a sensor on the edge or in a
-    # corner keeps its own label clear of the grid's (seed 001's radars sit on the edge)
-    gap = TICK_GAP * max(x1 - x0, y1 - y0)
-    ticks = np.array([[x, y0 - gap] for x in xs] + [[x0 - gap, y] for y in ys],
-                     dtype=float).reshape(-1, 2)
-    labels = [f"x {x:g} m" for x in xs] + [f"y {y:g} m" for y in ys]
-    return lines, ticks, labels
-
-
-def legend_markdown(peers: list[str], single_target: bool = False, imm: bool = False,
-                    follow_radius: float | None = None) -> str:
-    """The legend panel: what each mark on the map and each line in the plots means."""
-    colours = ", ".join(f"**{p}** {COLOR_NAMES[i % len(COLOR_NAMES)]}"
-                        for i, p in enumerate(peers)) or "one colour per peer"
-    local = "particles (a sample) and local estimate" if imm else "local components"
-    lines = [
-        f"**Colours**: {colours} (a peer's marks, its sensor's scans, its plot lines).",
-        "",
-        "**Map** (north up, metres):",
-        "- gold, numbered, with their paths: true targets; big labelled dots: sensors",
-        "- small dots: measurements of this scan (detections and clutter)",
-        f"- dashed 2-sigma ellipses, light dots: {local} (before fusion)",
-        "- solid ellipses: fused; dots with a trail: fused tracks, labelled peer/number (a "
-        "number follows a track from scan to scan by association: for the eye, not scored)",
-        "- grey frame: surveillance region; grid labelled just outside its edges",
-    ]
-    if single_target and follow_radius:
-        lines.append(f"- 'around the target': the same, centred on the true target "
-                     f"(+-{follow_radius:g} m)")
-    lines += ["", "**Plots**: dotted = local, solid = fused, gold = truth. OSPA: error with "
-              "cut-off (the grey line), lower is better."
-              + (" Model probabilities: CV solid, CA dotted." if imm else "")]
-    return "\n".join(lines)
-
-
-def default_blueprint(peers: list[str], *, single_target: bool = False, imm: bool = False,
-                      follow_radius: float = 500.0, ospa_cutoff: float | None = None):
-    """Map and legend beside time series of the health metrics.
-
-    ``single_target``: a second map view centred on the target (the ``follow`` transform the
-    world logs), for scenarios whose region dwarfs the target and its particle cloud;
-    ``imm``: the model probabilities in view instead of the component counts.
-    """
-    import rerun.blueprint as rrb
-
-    hidden = rrb.PlotLegend(visible=False)  # the legend panel names the colours instead
-
-    def series(name: str, origin: str, legend=hidden, y_range=None):
-        axis = rrb.ScalarAxis(range=y_range, zoom_lock=False) if y_range else None
-        return rrb.TimeSeriesView(name=name, origin=origin, plot_legend=legend, axis_y=axis)
-
-    probabilities = series("model probabilities (IMM)", "metrics/model_probability",
-                           y_range=(0.0, 1.0))
-    ospa = series("OSPA (m; grey: cut-off)", "metrics/ospa",
-                  y_range=(0.0, 1.05 * ospa_cutoff) if ospa_cutoff else None)
-
-    map_view = rrb.Spatial2DView(name="map", origin="/", contents=["/world/**", "/peers/**"])
-    if single_target:
-        r = float(follow_radius)
-        maps = rrb.Vertical(
-            map_view,
-            rrb.Spatial2DView(name="around the target", origin="/follow",
-                              contents=["/world/**", "/peers/**"],
-                              visual_bounds=rrb.VisualBounds2D(x_range=[-r, r],
-                                                               y_range=[-r, r])),
-            row_shares=[1, 1])
-    else:
-        maps = map_view
-    third = (probabilities if imm
-             else series("components (fused solid, local dotted)", "metrics/components"))
-    tabs = [
-        series("estimate age (scans)", "metrics/age"),
-        series("late / redundant / too old", "metrics/out_of_sequence"),
-        series("rejected messages", "metrics/rejected"),
-        series("compute per scan (ms)", "metrics/compute_ms"),
-        series("latency (ms)", "metrics/latency_ms"),
-        (series("components", "metrics/components") if imm else probabilities),
-    ]
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            maps,
-            rrb.Vertical(
-                rrb.TextDocumentView(name="legend", origin="legend"),
-                ospa,
-                series("cardinality (truth gold)", "metrics/cardinality"),
-                third,
-                rrb.Tabs(*tabs),
-                row_shares=[1.6, 1, 1, 1, 1],
-            ),
-            column_shares=[3, 2],
-        ),
-        # open on the scan timeline (the other, "sim", is the scenario's seconds)
-        rrb.TimePanel(timeline="scan", state="collapsed"),
-        collapse_panels=True,
-    )
-
-
-def north_up(xy: np.ndarray) -> np.ndarray:
-    """Map coordinates ``(..., 2)`` for Rerun's y-down 2-D views: y negated, so north is up."""
-    out = np.array(xy, dtype=float, copy=True)
-    out[..., 1] *= -1.0
-    return out
 
 
 def viewer_executable() -> str | None:
@@ -497,7 +340,3 @@ class TrackLabels:
                 ids[r], self._next = self._next, self._next + 1
         self._last, self._ids = xy, ids
         return ids
-
-
-def color_of(index: int) -> tuple[int, int, int]:
-    return PALETTE[index % len(PALETTE)]

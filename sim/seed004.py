@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 import sklearn.cluster  # noqa: F401  (FTC's DBSCAN: imported here, not inside a timed call)
 
+from peers.faultplan import FaultPlan, LinkFaults, Uniform
 from peers.faults import FaultInjector
 from peers.flooding import (
     TUPLES_PER_MEASUREMENT,
@@ -64,7 +65,6 @@ from peers.flooding import (
 )
 from protocol.codec import encode
 from protocol.messages import Estimate, Scan
-from sim.faultplan import FaultPlan, LinkFaults, Uniform
 from sim.seed004_output import (  # noqa: F401  (re-exported)
     REFERENCE_MIXTURE,
     TABLE_ROWS,

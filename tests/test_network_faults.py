@@ -135,6 +135,7 @@ def _watch_liveliness(events: list) -> Callable:
     """``during``: a session of the test's own (the peers' default lease) linked to every
     process of the run, appending ``(peer, "joined"|"left", wall time)`` as Zenoh reports it."""
     def during(handle):
+        handle.wait_listening("world")  # dialled earlier, Zenoh's back-off can outlast a fault
         session = open_session(connect=list(handle.endpoints.values()))
 
         def on_live(sample) -> None:
@@ -313,7 +314,9 @@ def test_sigterm_leaves_summary_and_recording(tmp_path):
     s2 = summaries["s2"]
     assert s2["stop_reason"] == "SIGTERM", s2["stop_reason"]
     # everything s2 did before the signal is in its summary, and it stopped before the end
-    assert term["k"] <= s2["scans"] < scn.num_scans, (term, s2["scans"])
+    # (last_k: a peer that fell behind on a loaded machine skips scans to catch up, so it may
+    # have handled fewer scans than the newest one it published tracks for)
+    assert term["k"] <= s2["last_k"] < scn.num_scans, (term, s2["last_k"], s2["scans"])
     rrd = tmp_path / "rerun" / "peer-s2.rrd"
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
     verify = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True,
