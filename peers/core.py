@@ -42,6 +42,9 @@ from protocol.codec import Rejected, decode, encode
 from protocol.keys import Keys
 from protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
+END_GAP = 100_000
+"""Scans a world's "end" may name after this peer's last one (misses to score: bounded)."""
+
 
 class PeerCore:
     """One peer's whole behaviour between bytes and outputs."""
@@ -86,6 +89,7 @@ class PeerCore:
         self.sent_bytes: Counter = Counter()
         """Bytes of every publication, by channel (what the runtime puts on the wire)."""
         self._scan_at: tuple[int, float] | None = None
+        self.end_k: int | None = None  # the world's last scan, from its "end"
         self._last_scan: tuple[int, float] | None = None  # (k, world's send time) accepted
         self._cost_mark = (0, 0, 0)
 
@@ -175,6 +179,10 @@ class PeerCore:
             self.consensus.records.extend(self.consensus.trust.drain_records())
         self.deadlines.clear()
         self._score_deferred()
+        last = self.consensus.last_k
+        if self.end_k is not None and self.end_k > last:  # published, never handled here
+            self.scorer.skipped(range(last + 1, self.end_k + 1))
+            self.end_k = None
         self.scorer.finish()
         return out + self._records()
 
@@ -318,6 +326,9 @@ class PeerCore:
             return []
         if msg.command == "end":
             self.end_requested = True
+            last = msg.params.get("last_k")  # the world's last scan: later ones are misses
+            if type(last) is int and 0 < last - self.consensus.last_k <= END_GAP:
+                self.end_k = last
             if self.world != "left":
                 self.ctl_end_early += 1  # the world is still there: wait for it to leave
             return []

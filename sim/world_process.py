@@ -234,7 +234,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             after_burst(pending[0])
         if not stop.is_set():
             stop.wait(scn.network.deadline * interval + 0.1)
-        ctl_pub.put(encode(Control("end", run_id or network, {}, send_time=time.time())))
+        ctl_pub.put(encode(Control("end", run_id or network,  # its last scan: peers score
+                                   {"last_k": sent["scans_published"]},  # what they missed
+                                   send_time=time.time())))
         time.sleep(0.2)
         token.undeclare()
         live_sub.undeclare()

@@ -101,3 +101,23 @@ def test_a_peer_frozen_past_its_backlog_reports_the_true_ospa(tmp_path):
     assert s2["ospa_misses"]["fused"] == missing, (s2["ospa_misses"], missing)
     assert s2["ospa_scored"]["fused"] + s2["ospa_misses"]["fused"] == n, s2
     assert s2["mean_ospa_fused"] == pytest.approx(recomputed(scn, tracks), abs=1e-6)
+
+
+def test_scans_the_world_published_after_this_peers_last_are_misses():
+    """A peer that got no scans after scan 10 (a link that never came back) while the world
+    went on to 20: the world's "end" names its last scan, and the ten this peer never handled
+    are misses; an "end" naming a scan absurdly far ahead changes nothing."""
+    from protocol.messages import Control
+
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    ctl = Keys("twin").ctl()
+    for last, extra in ((20, 10), (10**9, 0), ("20", 0)):
+        core = make_peer(scn, "s1")
+        dt = core.cfg.interval
+        for k in range(1, 11):
+            _scan(core, k, 100.0 + k * dt, 100.0 + k * dt)
+        core.receive(ctl, encode(Control("end", "r", {"last_k": last})), 102.0)
+        core.finish(102.5)
+        s = core.scorer
+        assert s.counts["fused"] + s.misses["fused"] == 10 + extra, (last, s.misses)
+        assert s.misses["fused"] >= extra and s.misses["local"] >= extra

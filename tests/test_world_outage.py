@@ -44,9 +44,13 @@ def test_a_peer_frozen_5s_with_a_1s_lease_rejoins_and_finishes(tmp_path):
     assert len(s3["world_outages"]) >= 1, s3["world_outages"]  # it was gone, and came back
     saved = np.load(tmp_path / "run" / "tracks-s3.npz")
     ks = sorted(int(name[1:]) for name in saved.files)
-    back = min(k for k in ks if k > 30 + 5)  # the first scan fused after its return
+    # the freeze is the longest gap in its tracks (when SIGSTOP lands depends on the
+    # machine's load: the faults follow s1's scans); after it, every scan to the end
+    i = max(range(1, len(ks)), key=lambda j: ks[j] - ks[j - 1])
+    back = ks[i]  # the first scan fused after its return
+    assert back - ks[i - 1] > 20, ks  # 5 s frozen at 10 scans/s
     assert back <= 80 + 30, ks  # back within 3 s of SIGCONT (relinked, world seen again)
-    assert ks[ks.index(back):] == list(range(back, scn.num_scans + 1)), ks  # then every one
+    assert ks[i:] == list(range(back, scn.num_scans + 1)), ks  # then every one
     n = scn.num_scans
     assert s3["ospa_scored"]["fused"] + s3["ospa_misses"]["fused"] == n, s3
     for name in ("s1", "s2", "s4"):  # the others fused it again after its return
