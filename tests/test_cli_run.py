@@ -172,3 +172,37 @@ def test_realtime_note_only_when_the_peers_fell_behind():
     note = realtime_note(slow_only, 0.1, 10.0, None)
     assert "deadline" not in note and "p99 scan -> tracks 160 ms" in note
     assert realtime_note({"s1": _summary(0, 0, [])}, 0.1, 10.0, 2) is None  # nothing ran
+
+
+def test_signal_during_start_up_says_what_happened(tmp_path):
+    """SIGTERM to the launcher as soon as it has started its processes (they are still
+    importing): exit 0, every child stopped, and one honest line: nothing was tracked (not
+    'the .rrd files could not be merged'); a peer that got as far as its run wrote a summary."""
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out)],
+        cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    children: list[int] = []
+    try:
+        _wait_for(lambda: (out / "commands.json").is_file() and len(_children(launcher.pid)) == 4,
+                  90, "the launcher to start its four processes")
+        children = _children(launcher.pid)
+        launcher.send_signal(signal.SIGTERM)
+        stdout, stderr = launcher.communicate(timeout=120)
+        _wait_for(lambda: not any(_alive(p) for p in children), 60, "the children to end")
+        assert launcher.returncode == 0, stderr
+        assert "Traceback" not in stderr and "could not be merged" not in stdout, stdout
+        summaries = list(out.glob("peer-*.json"))
+        if summaries:  # a peer had begun: its summary says it was stopped
+            assert "SIGTERM" in stderr
+        else:
+            lines = [ln for ln in stderr.splitlines() if ln.strip()]
+            assert len(lines) == 1 and "during start-up" in lines[0], stderr
+            assert "nothing was tracked" in lines[0]
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+        for p in children:
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)

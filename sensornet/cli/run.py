@@ -219,11 +219,19 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(fault_report(json.loads(faults_file.read_text()), summaries))
     report_results(out)
     rec = merge_recordings(out)
+    parts = sorted((out / "rerun").glob("*.rrd")) if (out / "rerun").is_dir() else []
     if rec is not None:
         print(f"recording: {rec}  (view it with: rerun {rec})")
-    elif not args.no_rerun:
+    elif parts:
         print(f"recording: {out / 'rerun'} (the .rrd files could not be merged)")
+    elif not args.no_rerun:
+        print("recording: none (no process got as far as opening its recording)")
     if caught:
+        if not summaries:  # stopped while the processes were still starting
+            print(f"sensornet: stopped by {caught[0]} during start-up, before any peer began "
+                  f"its run: nothing was tracked; every process stopped, logs in {out / 'logs'}",
+                  file=sys.stderr)
+            return 0
         print(f"sensornet: stopped by {caught[0]}; every process stopped, output in {out}",
               file=sys.stderr)
         return 0
