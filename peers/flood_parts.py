@@ -8,8 +8,10 @@ flooded scans (the sensor order from :func:`corrector_order`).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -87,6 +89,45 @@ class FloodEstimator:
         """Nothing: a scan set is not a prior."""
 
 
+@dataclass(frozen=True)
+class ScanBound:
+    """What one origin's scan can plausibly hold: at most ``max_returns`` returns, each inside
+    the sensor's measurement box ``[low, high]`` (its field: the region for a linear sensor,
+    ``[0, r_max] x [-pi, pi]`` for a radar, widened by a margin of measurement noise).
+
+    A forwarded scan is raw data nobody can check against a density; these bounds at least
+    keep a flooding member (or a relay) from injecting a flood of returns or points its
+    origin's sensor cannot produce (issue 24)."""
+
+    low: tuple[float, float]
+    high: tuple[float, float]
+    max_returns: int
+
+    def refusal(self, z: np.ndarray) -> str | None:
+        """None if ``z`` ``(m, 2)`` is plausible, else the reason: ``too_many_returns`` or
+        ``outside_field``."""
+        if len(z) > self.max_returns:
+            return "too_many_returns"
+        if len(z) and (np.any(z < np.asarray(self.low)) or np.any(z > np.asarray(self.high))
+                       or not np.all(np.isfinite(z))):
+            return "outside_field"
+        return None
+
+
+def poisson_bound(mean: float, tail: float = 1e-9) -> int:
+    """The smallest ``m`` with ``P(N > m) < tail`` for ``N ~ Poisson(mean)``: an honest scan
+    (clutter plus at most one return per target) exceeds it about once in ``1/tail`` scans."""
+    if mean <= 0:
+        return 0
+    m, term = 0, math.exp(-mean)
+    cdf = term
+    while 1.0 - cdf >= tail and m < 100_000:
+        m += 1
+        term *= mean / m
+        cdf += term
+    return m
+
+
 class FloodFuser:
     """The flooding of one peer as consensus rounds: round ``l`` takes in what the neighbours
     forwarded in iteration ``l`` (de-duplicated by (origin, scan) in a :class:`Flooder`) and
@@ -96,16 +137,20 @@ class FloodFuser:
     ``counts`` (in the peer summary): ``scans_closed``, ``scans_complete`` (every origin
     held), ``missing`` (origins not held at the close), ``duplicates`` (copies of scans held),
     ``late_absorbed`` (copies after their iteration, before the close: still pooled and
-    forwarded), ``late`` (after the close: dropped).
+    forwarded), ``late`` (after the close: dropped), and ``refused_<reason>`` (a neighbour's
+    forwarded scan outside its origin's :class:`ScanBound`: neither pooled nor forwarded).
     """
 
     kinds = ("posterior",)
     max_rounds = 1 << 30
 
-    def __init__(self, name: str, origins: Sequence[str], rounds: int) -> None:
+    def __init__(self, name: str, origins: Sequence[str], rounds: int,
+                 bounds: Mapping[str, ScanBound] | None = None) -> None:
         self.name = name
         self.index = {o: i for i, o in enumerate(origins)}
         self.rounds = rounds
+        self.bounds = dict(bounds or {})
+        """Per origin, what its scans can plausibly hold (none: not checked)."""
         self.k: int | None = None
         self.flooder = Flooder(self.index.get(name, -1))
         self.counts: Counter = Counter()
@@ -118,8 +163,16 @@ class FloodFuser:
         f = self.flooder
         for origin, z in scans.scans.items():
             o = self.index.get(origin)
-            if o is not None:
-                f.receive(o, k, z)
+            if o is None or (o, k) in f.held:
+                if o is not None:
+                    f.receive(o, k, z)  # a copy: counted a duplicate, never re-checked
+                continue
+            bound = self.bounds.get(origin)
+            reason = bound.refusal(np.asarray(z, float).reshape(-1, 2)) if bound else None
+            if reason is not None:
+                self.counts[f"refused_{reason}"] += 1
+                continue
+            f.receive(o, k, z)
 
     def fuse(self, inp: FusionInput) -> ScanSet:
         f = self.flooder
@@ -262,8 +315,9 @@ class IcFloodFuser(FloodFuser):
     ``fuser`` counts carry both the flooding and the corrector numbers."""
 
     def __init__(self, name: str, origins: Sequence[str], rounds: int,
-                 estimator: IcFloodEstimator) -> None:
-        super().__init__(name, origins, rounds)
+                 estimator: IcFloodEstimator,
+                 bounds: Mapping[str, ScanBound] | None = None) -> None:
+        super().__init__(name, origins, rounds, bounds)
         self.estimator = estimator
         self.counts = estimator.counts
 

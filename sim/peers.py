@@ -85,4 +85,10 @@ def make_peer(scn: Scenario, name: str, run: int = 0, *, network: str = "twin",
     cfg = CoreConfig(name=name, sensor=name, network=network,
                      interval=scn.scan_period / (speed or scn.network.speed),
                      deadline=scn.network.deadline)
-    return PeerCore(cfg, consensus, scorer)
+    core = PeerCore(cfg, consensus, scorer)
+    liar, _, lie = scn.fusion.lie.partition(":")
+    if liar == name:  # the test hook fusion.lie (sim.lying)
+        from sim.lying import LyingCore, make_lie
+
+        core = LyingCore(core, make_lie(lie, scn, est.position_index))
+    return core

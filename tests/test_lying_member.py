@@ -89,3 +89,22 @@ def test_the_lies():
     assert np.allclose(p.means[2:][:, [0, 2]], [[-800, 800], [800, 800], [-800, -800]])
     with pytest.raises(ValueError):
         make_lie("bigger", scn)
+
+
+def test_the_scenario_hook_makes_the_same_liar_as_the_study():
+    """``fusion.lie = "s2:shifted"`` (what a real peer process gets with --set) builds the
+    study's liar: the same honest peers' fused OSPA, scan for scan."""
+    from sim.scenario import load_scenario
+    from sim.twin import run_twin
+
+    hooked = load_scenario("seed000", overrides={"scenario.num_scans": 20,
+                                                 "fusion.lie": "s2:shifted"})
+    res = run_twin(hooked, 8000)
+    assert isinstance(res.peers["s2"], LyingCore) and res.peers["s2"].lies_told > 0
+    assert not isinstance(res.peers["s1"], LyingCore)
+    plain = load_scenario("seed000", overrides={"scenario.num_scans": 20})
+    study = run_with_liar(plain, 8000, "s2", "shifted")
+    for n in HONEST:
+        assert res.peers[n].mean_ospa("fused") == study.peers[n].mean_ospa("fused")
+    assert res.peers["s1"].mean_ospa("fused") != run_twin(plain, 8000).peers["s1"].mean_ospa(
+        "fused")

@@ -157,3 +157,22 @@ def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
     for n in ("s1", "s3"):  # near its own filter (two peers left), far better than the lie
         assert res.mean_ospa(n) < 1.1 * res.mean_ospa(n, "local")
         assert res.mean_ospa(n) < 0.5 * open_door.mean_ospa(n)
+
+
+def test_majority_spread_is_not_held_against_one_neighbour():
+    """When every input disagrees with every other (a birth seen a scan apart), no neighbour
+    is singled out; when the others agree, the one that does not is (W-MSR-style)."""
+    spread = [mix((1.0, A + [dx, 0, 0, 0], P4)) for dx in (0.0, 40.0, 80.0, 120.0)]
+    names = ("n1", "n2", "n3")
+    on = Trust(TrustConfig(), names)
+    off = Trust(TrustConfig(majority=False), names)
+    inputs = dict(zip(names, spread[1:], strict=True))
+    w = {"": 0.25, **{s: 0.25 for s in names}}
+    assert max(on.statistics(spread[0], inputs, w).values()) < 1.0  # 0, 0, 0.56
+    assert min(off.statistics(spread[0], inputs, w).values()) > 3.0  # 3.9, 3.9, 4.6
+    agree = {"n1": spread[0], "n2": spread[0].scaled(1.05), "n3": spread[3]}
+    s = on.statistics(spread[0], agree, w)
+    assert s["n3"] > 5.0 and s["n1"] < 0.5 and s["n2"] < 0.5
+    # with own and one other neighbour only there is no majority: the plain test
+    two = {"n1": spread[0], "n3": spread[3]}
+    assert on.statistics(spread[0], two, w) == off.statistics(spread[0], two, w)

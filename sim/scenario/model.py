@@ -177,6 +177,9 @@ class FusionSpec:
     trust: bool = False
     """Test each neighbour's density before fusing it and down-weight or quarantine the
     inconsistent ones (:mod:`peers.trust`)."""
+    lie: str = ""
+    """Test hook: ``"PEER:KIND"`` makes that peer publish lie KIND of :mod:`sim.lying` in
+    every estimate (a member lying with its own valid key), in the twin and as a process."""
 
 
 @dataclass(frozen=True)

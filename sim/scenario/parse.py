@@ -99,7 +99,7 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
             "extraction_threshold", "extraction", "gate", "refit"])),
         fusion=_fusion(Table(top.raw("fusion", {}), "fusion", ctx, [
             "rule", "omega", "level2_pruning", "level2_threshold", "fusing_sensor",
-            "cardinality", "trust"]), names),
+            "cardinality", "trust", "lie"]), names),
         metrics=_metrics(Table(top.raw("metrics", {}), "metrics", ctx,
                                 ["ospa_cutoff", "ospa_order"])),
         network=_network(Table(top.raw("network", {}), "network", ctx, [
@@ -275,7 +275,24 @@ def _fusion(f: Table, sensor_names: list[str]) -> FusionSpec:
         fusing_sensor=fuser,
         cardinality=f.choice("cardinality", CARDINALITY_RULES, "separate"),
         trust=f.flag("trust", False),
+        lie=_lie(f, sensor_names),
     )
+
+
+def _lie(f: Table, sensor_names: list[str]) -> str:
+    """``fusion.lie = "PEER:KIND"`` (test hook, :mod:`sim.lying`): that peer tells lie KIND."""
+    v = f.raw("lie", "")
+    if v == "":
+        return ""
+    from sim.lying import LIES
+    from sim.scenario.model import listing
+    from sim.scenario.tables import brief
+
+    peer, _, kind = str(v).partition(":")
+    if not isinstance(v, str) or peer not in sensor_names or kind not in LIES:
+        raise f.fail("lie", f"must be \"PEER:KIND\" with a sensor's name and KIND one of "
+                            f"{listing(LIES)}, got {brief(v)}")
+    return v
 
 
 def _network(t: Table, sensor_names: list[str]) -> NetworkSpec:

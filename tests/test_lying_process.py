@@ -1,0 +1,56 @@
+"""A member lying with its own valid key, as real processes in secure mode (issue 24).
+
+World + 3 peers (seed 000, 40 scans at 10 scans/s) over Zenoh on loopback with ``--secure``
+keys; s2 is started with the test hook ``fusion.lie = "s2:shifted"`` (:mod:`sim.lying`: every
+estimate it publishes, signed with its own key, has every component 110 m off and a tight
+covariance), the honest peers run the neighbour test (``fusion.trust``). Secure mode lets every
+lie through (it is s2's own key and s2's own name); the test must catch it: both honest peers
+quarantine s2 within 3 scans, and their fused OSPA is the twin's for the same run.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from peers.security import make_keys
+from sim.launcher import read_summaries, start_run, wait_run
+from sim.scenario import load_scenario, parse_overrides
+from sim.twin import run_twin
+from tests.attacks import SETS
+
+pytestmark = pytest.mark.network
+
+NETWORK = "lienet"
+PEERS = ("s1", "s2", "s3")
+LYING = [*SETS, "fusion.trust=true", "fusion.lie=s2:shifted"]
+
+
+def test_a_member_lying_with_its_own_key_is_quarantined_as_in_the_twin(tmp_path):
+    keys = tmp_path / "keys"
+    make_keys(NETWORK, ["world", *PEERS], keys)
+    scn = load_scenario("seed000", overrides=parse_overrides(LYING))
+    twin = run_twin(scn, 0)
+    out = tmp_path / "run"
+    handle = start_run(scn, "seed000", out, network=NETWORK, overrides=LYING, rerun=False,
+                       secure=keys)
+    try:
+        codes = wait_run(handle, timeout=120)
+    finally:
+        handle.stop_all()
+    summaries = read_summaries(out, scn.sensor_names)
+    assert all(c == 0 for c in codes.values()), codes
+    for name in ("s1", "s3"):
+        s = summaries[name]
+        assert s["internal_errors"] == {}, (name, s["internal_errors"])
+        assert s["scans"] == scn.num_scans and s["stop_reason"] == "end of run", name
+        assert s["rejected_total"] == 0, (name, s["rejected"])  # secure mode passes the lies
+        trust = s["trust"]["neighbours"]
+        assert trust["s2"]["state"] == "quarantined", (name, trust)
+        assert trust["s3" if name == "s1" else "s1"]["state"] == "trusted", (name, trust)
+        first = min(c["k"] for c in s["trust"]["changes"]
+                    if c["neighbour"] == "s2" and c["to"] == "quarantined")
+        assert first <= 3, (name, s["trust"]["changes"])
+        assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (
+            name, s["mean_ospa_fused"], twin.mean_ospa(name))
+    # the liar's estimates really were lies: s2 told one in every estimate it published
+    assert summaries["s2"]["stats"]["estimates_out"] >= scn.num_scans
