@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sim.launcher import read_summaries
@@ -138,3 +139,72 @@ def test_hosts_in_separate_namespaces_through_a_router_equal_the_twin(tmp_path, 
         assert s["scans"] == scn.num_scans and s["internal_errors"] == {}
     assert len({s["pid"] for s in summaries.values()}) == 2
     _assert_tracks_equal_the_twin(out, scn, summaries, run_twin(scn, 0))
+
+
+def test_a_host_cut_off_from_the_world_for_5s_rejoins_and_finishes(tmp_path, namespaces):
+    """A real partition (issue 25): host h2's link to the router goes down for 5 s, five
+    times the 1 s lease, so its three peers lose the world, their neighbours and the router;
+    within the grace (--world-grace 10) they ride it out, relink when the link comes back and
+    fuse every scan after their return to the end of the run. h1 keeps going throughout."""
+    ns = namespaces
+    source = _six(tmp_path / "six.toml", scans=100)  # 5 scans/s: 20 s of scans
+    scn = load_scenario(source)
+    out, network = tmp_path / "run", f"part{os.getpid()}"
+    out.mkdir()
+    config = tmp_path / "client.json5"
+    config.write_text(json.dumps({"mode": "client",
+                                  "scouting": {"multicast": {"enabled": False}}}))
+    common = ["--network", network, "--out", str(out), "--run-id", network, "--no-rerun",
+              "--run", "0", "--config", str(config)]
+    peer_flags = ["--lease-ms", "1000", "--world-grace", "10", "--save-tracks"]
+    via = {"a": f"tcp/10.213.1.1:{ROUTER_PORT}", "b": f"tcp/10.213.2.1:{ROUTER_PORT}"}
+    link_b = f"{ns['r'][:-1]}b0"  # h2's end of its veth pair (the fixture's naming)
+    procs: dict[str, subprocess.Popen] = {}
+    try:
+        log = tmp_path / "router.log"
+        procs["router"] = _start(ns["r"], ["sim.router", "--listen", via["a"], "--listen",
+                                           via["b"], "--network", network], log)
+        _wait_line(procs["router"], log, "router: listening")
+        world_log = tmp_path / "world.log"
+        procs["world"] = _start(ns["a"], ["sensornet", "world", source, *common, "--connect",
+                                          via["a"], "--peers", ",".join(SIX), "--wait", "90"],
+                                world_log)
+        for name, side, peers in (("h1", "a", SIX[:3]), ("h2", "b", SIX[3:])):
+            procs[name] = _start(ns[side], ["sensornet", "host", source, "--peers",
+                                            ",".join(peers), "--name", name, *common,
+                                            "--connect", via[side], *peer_flags],
+                                 tmp_path / f"{name}.log")
+        _wait_line(procs["world"], world_log, "scan 20/", timeout=120)
+        _ip("-n", ns["b"], "link", "set", link_b, "down")
+        try:
+            time.sleep(5.0)  # the fault itself: 5 s without a link
+        finally:
+            _ip("-n", ns["b"], "link", "set", link_b, "up")
+        codes = {n: procs[n].wait(timeout=180) for n in ("world", "h1", "h2")}
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.terminate()
+                try:
+                    p.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+    logs = {n: (tmp_path / f"{n}.log").read_text()[-1500:] for n in ("world", "h1", "h2")}
+    assert codes == {"world": 0, "h1": 0, "h2": 0}, (codes, logs)
+    summaries = read_summaries(out, SIX)
+    n = scn.num_scans
+    for name in SIX[3:]:
+        s = summaries[name]
+        assert s["stop_reason"] == "end of run", (name, s["stop_reason"], logs["h2"])
+        assert s["last_k"] == n and s["internal_errors"] == {}, (name, s["last_k"])
+        assert len(s["world_outages"]) >= 1, (name, s["world_outages"])
+        saved = np.load(out / f"tracks-{name}.npz")
+        ks = sorted(int(k[1:]) for k in saved.files)
+        i = max(range(1, len(ks)), key=lambda j: ks[j] - ks[j - 1])
+        assert ks[i] - ks[i - 1] >= 15, ks  # 5 s cut off at 5 scans/s: about 25 scans
+        assert ks[i:] == list(range(ks[i], n + 1)), ks  # back, then every scan to the end
+        assert s["ospa_scored"]["fused"] + s["ospa_misses"]["fused"] == n, s
+    for name in SIX[:3]:
+        assert summaries[name]["stop_reason"] == "end of run"
+        assert summaries[name]["last_k"] == n
