@@ -18,7 +18,7 @@ import numpy as np
 from peers.contracts import FusionInput, LocalOutput
 from peers.flooder import Flooder
 from protocol.messages import ScanSet
-from tracking.idpc import ClusterParams, ftc, idpc, polar_to_cartesian
+from tracking.idpc import ClusterParams, dbscan_class, ftc, idpc, polar_to_cartesian
 from tracking.models import RangeBearing
 
 
@@ -46,6 +46,8 @@ class FloodEstimator:
             raise ValueError(f"assumed_scans {assumed_scans!r}: expected 'held' or 'all'")
         if method not in ("idpc", "ftc"):
             raise ValueError(f"method {method!r}: expected 'idpc' or 'ftc'")
+        if method == "ftc":
+            dbscan_class()  # scikit-learn is optional: say so when the peer is built
         self.method = method
         self.name = name
         self.roster = dict(roster)

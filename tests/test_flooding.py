@@ -87,3 +87,24 @@ def test_flooder_keeps_one_copy_counts_late_and_missing():
     assert f.close(7, peers=5) == 3  # origins 1, 2, 4 never arrived
     assert not f.receive(4, 7, np.ones((1, 2)))  # after the deadline: late
     assert f.late == 1 and f.pooled(7) == {}
+
+
+def test_without_scikit_learn_the_ftc_baseline_says_what_to_install(monkeypatch, capsys):
+    """scikit-learn is an optional extra ('sensornet[baselines]'): without it an FTC peer,
+    the FTC function and the seed-004 study stop with one line naming the extra; IDPC runs."""
+    import sys
+
+    from peers.flood_parts import FloodEstimator
+    from sensornet.cli import main
+    from tracking.idpc import MissingBaseline, ftc, idpc
+
+    monkeypatch.setitem(sys.modules, "sklearn", None)  # import sklearn -> ImportError
+    monkeypatch.setitem(sys.modules, "sklearn.cluster", None)
+    with pytest.raises(MissingBaseline, match=r"pip install 'sensornet\[baselines\]'"):
+        ftc(np.zeros((3, 2)), 2)
+    with pytest.raises(MissingBaseline):
+        FloodEstimator("s1", {}, method="ftc")
+    assert len(idpc(np.random.default_rng(0).normal(0, 1, (20, 2)), 2).centres) >= 0
+    assert main(["experiment", "seed004", "--runs", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sensornet[baselines]" in err[0], err

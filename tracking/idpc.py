@@ -140,10 +140,27 @@ def _components(adjacent: np.ndarray) -> np.ndarray:
     return comp
 
 
+BASELINE_HINT = "the FTC baseline needs scikit-learn: pip install 'sensornet[baselines]'"
+
+
+class MissingBaseline(ModuleNotFoundError):
+    """An optional baseline's library is not installed (the message says what to install)."""
+
+
+def dbscan_class():
+    """scikit-learn's DBSCAN (an optional dependency: only the FTC baseline uses it), or a
+    one-line :class:`MissingBaseline` saying what to install."""
+    try:
+        from sklearn.cluster import DBSCAN  # optional, heavy: only the baseline needs it
+    except ImportError:
+        raise MissingBaseline(BASELINE_HINT) from None
+    return DBSCAN
+
+
 def ftc(points: np.ndarray, n_sensors: int, params: ClusterParams = ClusterParams(),
         rng: np.random.Generator | None = None) -> Clusters:
     """FTC baseline: scikit-learn DBSCAN (``eps = d_c``), then the k-means split of :func:`idpc`."""
-    from sklearn.cluster import DBSCAN  # imported here: only the baseline needs scikit-learn
+    DBSCAN = dbscan_class()
 
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if len(points) == 0 or n_sensors <= 0:
@@ -188,4 +205,5 @@ def _split_oversized(points: np.ndarray, labels: np.ndarray, n_sensors: int,
     return Clusters(np.concatenate(centres).reshape(-1, 2), out)
 
 
-__all__ = ["ClusterParams", "Clusters", "ftc", "idpc", "local_density", "polar_to_cartesian"]
+__all__ = ["BASELINE_HINT", "ClusterParams", "Clusters", "MissingBaseline", "dbscan_class", "ftc",
+           "idpc", "local_density", "polar_to_cartesian"]

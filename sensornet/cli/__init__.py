@@ -24,6 +24,7 @@ from sensornet.cli.common import (
 from sensornet.cli.parser import build_parser
 from sensornet.cli.peer import _prepare_peer
 from sim.scenario import ScenarioError
+from tracking.idpc import MissingBaseline
 
 __all__ = ["UserError", "_CREATED", "_prepare_peer", "_run_folder", "build_parser", "main",
            "memory_estimate_gb", "points_per_scan", "targets_at_once", "viewer_reachable"]
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         code = int(args.func(args) or 0)
         return code
-    except (ScenarioError, UserError, SessionError) as exc:
+    except (ScenarioError, UserError, SessionError, MissingBaseline) as exc:
         code = 2
         print(f"sensornet: error: {exc}", file=sys.stderr)
         return 2
