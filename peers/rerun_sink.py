@@ -126,6 +126,16 @@ class _Stream:
         self._stream.disconnect()
 
 
+def warm_up(rr) -> None:
+    """Build one of each archetype the sinks log, logging nothing: the SDK's first archetype
+    costs about 0.3 s (its lazy imports), paid here at start-up, not on the first scan's path
+    (a routed peer's first three scans went to their deadline for it)."""
+    rr.Points2D(np.zeros((1, 2)), colors=(0, 0, 0), radii=-1.0, labels=["x"])
+    rr.LineStrips2D([np.zeros((2, 2))], colors=(0, 0, 0), radii=-1.0)
+    rr.Scalars(0.0)
+    rr.TextLog("x", level="INFO")
+
+
 class RerunSink:
     """Logs one process's records; every method is a no-op when disabled.
 
@@ -168,6 +178,7 @@ class RerunSink:
             sinks.append(rr.GrpcSink(viewer))
         blueprint = default_blueprint(peers, **layout) if peers is not None else None
         rr.set_sinks(*sinks, default_blueprint=blueprint)
+        warm_up(rr)
         self.enabled = True
         return self
 
