@@ -29,6 +29,7 @@ from tracking.gaussian import (
     LOG_2PI,
     SYM4_INDEX,
     SYM4_WORK,
+    c_einsum,
     inv_det_spd,
     inv_spd,
     quad_form,
@@ -557,18 +558,21 @@ def hybrid_fuse(
         return GaussianMixture.empty(d)
     n = len(used)
     omegas = np.array([w for _, w in used])
-    union = GaussianMixture.concatenate([D.scaled(w) for D, w in used])  # the AA
-    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
     own_w = np.concatenate([D.weights for D, _ in used])
+    sizes = [len(D) for D, _ in used]
+    union = GaussianMixture.trusted(  # the AA (inputs are validated mixtures: no checks)
+        np.concatenate([D.weights * w for D, w in used]),
+        np.concatenate([D.means for D, _ in used]), np.concatenate([D.covs for D, _ in used]))
+    src = np.repeat(np.arange(n), sizes)
     labels = sweep_labels(union, gate)
     G = int(labels.max()) + 1
     key = labels * n + src  # (group, input) cell of each component
     order = np.argsort(key, kind="stable")
     key_s = key[order]
-    starts = np.flatnonzero(np.r_[True, key_s[1:] != key_s[:-1]])
+    starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
     cells = key_s[starts]  # the occupied cells
     w, m, P = own_w[order], union.means[order], union.covs[order]
-    cnt = np.diff(np.r_[starts, len(w)])
+    cnt = np.diff(np.append(starts, len(w)))
     cell_of = np.repeat(np.arange(len(cells)), cnt)
     W = np.add.reduceat(w, starts)
     with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain average
@@ -581,11 +585,11 @@ def hybrid_fuse(
     present_om = np.zeros((G, n))
     present_om[g, i] = omegas[i]
     om_t = (present_om / present_om.sum(axis=1, keepdims=True))[g, i]  # omega~ per cell
-    gstarts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])  # cells are sorted by group
+    gstarts = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))  # cells are sorted by group
     Ysum = np.add.reduceat(om_t[:, None, None] * Y, gstarts)  # (G, d, d)
-    hsum = np.add.reduceat(om_t[:, None] * np.einsum("cij,cj->ci", Y, mean), gstarts)
+    hsum = np.add.reduceat(om_t[:, None] * c_einsum("cij,cj->ci", Y, mean), gstarts)
     Pf = symmetrise(inv_spd(Ysum))
-    mf = np.einsum("gij,gj->gi", Pf, hsum)
+    mf = c_einsum("gij,gj->gi", Pf, hsum)
     wf = np.bincount(g, weights=omegas[i] * W, minlength=G)
     fused = GaussianMixture.trusted(wf, mf, Pf)
     return reduce(fused) if reduce is not None else fused

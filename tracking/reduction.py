@@ -100,7 +100,10 @@ def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") ->
         centres, members = _greedy_groups(ci, cj)
         sizes = [len(g) for g in members]
         root[np.concatenate(members)] = np.repeat(centres, sizes)
-    _, labels_sorted = np.unique(root, return_inverse=True)  # centres are sorted positions
+    # the roots are the positions with root[i] == i (a centre is its own root), so a root's
+    # rank among them is np.unique's inverse index, without the sort
+    rank = np.cumsum(root == np.arange(n)) - 1
+    labels_sorted = rank[root]
     labels = np.empty(n, dtype=np.intp)
     labels[order] = labels_sorted
     return labels
