@@ -572,14 +572,19 @@ def hybrid_fuse(
     starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
     cells = key_s[starts]  # the occupied cells
     w, m, P = own_w[order], union.means[order], union.covs[order]
-    cnt = np.diff(np.append(starts, len(w)))
-    cell_of = np.repeat(np.arange(len(cells)), cnt)
-    W = np.add.reduceat(w, starts)
-    with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain average
-        wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
-    mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
-    diff = m - mean[cell_of]
-    cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]), starts)
+    if len(cells) == len(w) and (w > 0).all():
+        # one component per cell (the common case): its moment match is itself, exactly
+        W, mean, cov = w, m, P
+    else:
+        cnt = np.diff(np.append(starts, len(w)))
+        cell_of = np.repeat(np.arange(len(cells)), cnt)
+        W = np.add.reduceat(w, starts)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain mean
+            wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
+        mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
+        diff = m - mean[cell_of]
+        cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]),
+                              starts)
     g, i = np.divmod(cells, n)
     Y = inv_spd(symmetrise(cov))  # (cells, d, d)
     present_om = np.zeros((G, n))
@@ -588,7 +593,7 @@ def hybrid_fuse(
     gstarts = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))  # cells are sorted by group
     Ysum = np.add.reduceat(om_t[:, None, None] * Y, gstarts)  # (G, d, d)
     hsum = np.add.reduceat(om_t[:, None] * c_einsum("cij,cj->ci", Y, mean), gstarts)
-    Pf = symmetrise(inv_spd(Ysum))
+    Pf = inv_spd(Ysum)  # exactly symmetric already (inv_spd symmetrises)
     mf = c_einsum("gij,gj->gi", Pf, hsum)
     wf = np.bincount(g, weights=omegas[i] * W, minlength=G)
     fused = GaussianMixture.trusted(wf, mf, Pf)
