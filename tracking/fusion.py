@@ -559,12 +559,16 @@ def hybrid_fuse(
     n = len(used)
     omegas = np.array([w for _, w in used])
     own_w = np.concatenate([D.weights for D, _ in used])
-    sizes = [len(D) for D, _ in used]
+    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
     union = GaussianMixture.trusted(  # the AA (inputs are validated mixtures: no checks)
-        np.concatenate([D.weights * w for D, w in used]),
-        np.concatenate([D.means for D, _ in used]), np.concatenate([D.covs for D, _ in used]))
-    src = np.repeat(np.arange(n), sizes)
-    labels = sweep_labels(union, gate)
+        own_w * omegas[src], np.concatenate([D.means for D, _ in used]),
+        np.concatenate([D.covs for D, _ in used]))
+    # the union's inverses, shared by the sweep and (exactly symmetric covariances, the usual
+    # case: symmetrise is then the identity) the cells of one component
+    Pu = union.covs
+    Yu = inv_spd(Pu)
+    shared = bool((Pu == Pu.swapaxes(1, 2)).all())
+    labels = sweep_labels(union, gate, inv=Yu)
     G = int(labels.max()) + 1
     key = labels * n + src  # (group, input) cell of each component
     order = np.argsort(key, kind="stable")
@@ -572,9 +576,12 @@ def hybrid_fuse(
     starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
     cells = key_s[starts]  # the occupied cells
     w, m, P = own_w[order], union.means[order], union.covs[order]
+    Y = None
     if len(cells) == len(w) and (w > 0).all():
         # one component per cell (the common case): its moment match is itself, exactly
         W, mean, cov = w, m, P
+        if shared:
+            Y = Yu[order]
     else:
         cnt = np.diff(np.append(starts, len(w)))
         cell_of = np.repeat(np.arange(len(cells)), cnt)
@@ -586,7 +593,8 @@ def hybrid_fuse(
         cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]),
                               starts)
     g, i = np.divmod(cells, n)
-    Y = inv_spd(symmetrise(cov))  # (cells, d, d)
+    if Y is None:
+        Y = inv_spd(symmetrise(cov))  # (cells, d, d)
     present_om = np.zeros((G, n))
     present_om[g, i] = omegas[i]
     om_t = (present_om / present_om.sum(axis=1, keepdims=True))[g, i]  # omega~ per cell
