@@ -4,8 +4,9 @@ The twin (``sim/twin.py``) runs every peer's logic (decode, admission, filter, f
 encode, scoring) on a virtual clock without transport, so its CPU is what the logic costs.
 Each measurement runs in a fresh process, alternating the current code ('after') with the
 hot-path modules at the commit before issue 23's per-call work ('before',
-``benchmarks/twin_before.py``); the ratio of medians over ``--repeats`` pairs is printed per
-size, with the fused OSPA of both (equal OSPA: the speed-up did not change the tracks). Then
+``benchmarks/twin_before.py``); per size the medians over ``--repeats`` pairs, the median of
+the pairs' ratios and every pair, with the fused OSPA of both (equal OSPA: the speed-up did
+not change the tracks). Then
 one profiled run of the current code (cProfile), its time split by function group.
 
     python benchmarks/bench_twin_cpu.py                       # 50 peers of degree 4, L = 2
@@ -144,10 +145,12 @@ def main() -> None:
         pairs = [(measure(n, args, True), measure(n, args, False)) for _ in range(args.repeats)]
         b = statistics.median(p[0]["ms"] for p in pairs)
         a = statistics.median(p[1]["ms"] for p in pairs)
+        ratios = statistics.median(p[0]["ms"] / p[1]["ms"] for p in pairs)
         ob, oa = pairs[0][0]["ospa"], pairs[0][1]["ospa"]
         ok = "PASS" if a <= TARGET_MS else "FAIL"
-        print(f"{n:>5} {b:>10.3f} {a:>9.3f} {b / a:>12.2f} {ob:>11.4f} {oa:>10.4f} "
-              f"{ok if n == 50 else '':>7}", flush=True)
+        print(f"{n:>5} {b:>10.3f} {a:>9.3f} {ratios:>12.2f} {ob:>11.4f} {oa:>10.4f} "
+              f"{ok if n == 50 else '':>7}   pairs: "
+              + ", ".join(f"{p[0]['ms']:.2f}/{p[1]['ms']:.2f}" for p in pairs), flush=True)
     n = int(args.sizes.split(",")[-1])
     prof = measure(n, args, False, profile=True)
     print(f"\nwhere it goes at {n} peers (cProfile, {prof['profiled_ms']:.3f} ms per peer per "

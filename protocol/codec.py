@@ -231,7 +231,7 @@ def _index(body: dict, key: str) -> int:
 
 def _time(body: dict) -> float:
     v = float(_get(body, "ts", (float, int)))
-    if not np.isfinite(v):
+    if not math.isfinite(v):  # a Python float: no NumPy scalar call
         raise Rejected("nonfinite", "send time is not finite")
     return v
 
