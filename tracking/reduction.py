@@ -97,8 +97,17 @@ def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma",
         return np.zeros(n, dtype=np.intp)
     order = (-mix.weights).argsort(kind="stable")
     root = np.arange(n)
-    ci, cj = _close_pairs(mix.weights[order], mix.means[order], mix.covs[order], threshold, rule,
-                          None if inv is None else inv[order])
+    if inv is not None and rule == "vo-ma" and n <= _ALL_PAIRS_UP_TO:
+        # _close_pairs' every-pair test, gathering the pairs' rows straight from the unsorted
+        # arrays (m[order][ci] is m[order[ci]]): the same numbers, four gathers fewer
+        cj, ci = _upper_pairs(n)
+        oi, oj = order[ci], order[cj]
+        diff = mix.means[oi] - mix.means[oj]
+        close = _c_einsum("gi,gij,gj->g", diff, inv[oi], diff) <= threshold
+        ci, cj = ci[close], cj[close]
+    else:
+        ci, cj = _close_pairs(mix.weights[order], mix.means[order], mix.covs[order], threshold,
+                              rule, None if inv is None else inv[order])
     if ci.size:
         centres, members = _greedy_groups(ci, cj)
         sizes = [len(g) for g in members]
