@@ -7,7 +7,9 @@ hot-path modules at the commit before issue 23's per-call work ('before',
 ``benchmarks/twin_before.py``); per size the medians over ``--repeats`` pairs, the median of
 the pairs' ratios and every pair, with the fused OSPA of both (equal OSPA: the speed-up did
 not change the tracks). Then
-one profiled run of the current code (cProfile), its time split by function group.
+one profiled run of the current code (cProfile), its time split by function group. Two
+modes: ``receiver`` (the twin as it is: every receiver decodes its copy) and ``host`` (one
+decode shared by all peers, as the co-hosted peers of ``sensornet run --per-process`` do).
 
     python benchmarks/bench_twin_cpu.py                       # 50 peers of degree 4, L = 2
     python benchmarks/bench_twin_cpu.py --sizes 20,50,100 --scans 30 --repeats 3
@@ -77,13 +79,18 @@ def breakdown(stats) -> dict[str, float]:
     return out
 
 
-def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: bool) -> dict:
-    """One twin run in this process: CPU ms per peer per scan and mean fused OSPA."""
+def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: bool,
+          host: bool = False) -> dict:
+    """One twin run in this process: CPU ms per peer per scan and mean fused OSPA. ``host``:
+    every peer decodes through one shared decode, as the peers of one host do
+    (``peers.host.SharedDecode``: an estimate decoded once, not once per receiver)."""
     if before:
         sys.path.insert(0, str(ROOT / "benchmarks"))
         import twin_before
         twin_before.install()
+    from peers.host import SharedDecode
     from sim.graphs import network_scenario
+    from sim.peers import make_peer
     from sim.scenario import load_scenario
     from sim.twin import run_twin
 
@@ -96,8 +103,13 @@ def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: b
         import cProfile
         prof = cProfile.Profile()
         prof.enable()
+    peers = {p: make_peer(scn, p, 0, network="twin") for p in scn.sensor_names}
+    if host:
+        shared = SharedDecode()
+        for core in peers.values():
+            core.decode = shared
     t0 = time.process_time()
-    result = run_twin(scn, 0)
+    result = run_twin(scn, 0, peers=peers)
     cpu = time.process_time() - t0
     out = {"ms": cpu * 1e3 / n / scans,
            "ospa": statistics.fmean(result.mean_ospa(p) for p in scn.sensor_names)}
@@ -112,10 +124,10 @@ def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: b
     return out
 
 
-def measure(n: int, args, before: bool, profile: bool = False) -> dict:
+def measure(n: int, args, before: bool, profile: bool = False, host: bool = False) -> dict:
     cmd = [sys.executable, __file__, "--child", str(n), "--degree", str(args.degree),
            "--scans", str(args.scans), "--rounds", str(args.rounds)]
-    cmd += ["--before"] * before + ["--profile"] * profile
+    cmd += ["--before"] * before + ["--profile"] * profile + ["--host"] * host
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=3600)
     if done.returncode:
         raise SystemExit(f"child failed: {done.stderr.strip().splitlines()[-1:]}")
@@ -132,23 +144,30 @@ def main() -> None:
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--before", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--profile", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--host", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--modes", default="receiver,host",
+                    help="receiver: a decode per receiver (the twin as it is); host: one "
+                         "shared decode, as the co-hosted peers of one host")
     args = ap.parse_args()
     if args.child:
         print(json.dumps(child(args.child, args.degree, args.scans, args.rounds, args.before,
-                               args.profile)))
+                               args.profile, args.host)))
         return
     print(f"twin CPU per peer per scan: degree {args.degree}, L = {args.rounds}, {args.scans} "
           f"scans, median of {args.repeats} before/after pairs; load {os.getloadavg()[0]:.1f}")
-    print(f"{'peers':>5} {'before ms':>10} {'after ms':>9} {'before/after':>12} "
+    print(f"{'peers':>5} {'decode':>8} {'before ms':>10} {'after ms':>9} {'before/after':>12} "
           f"{'OSPA before':>11} {'OSPA after':>10} {'target':>7}")
-    for n in [int(s) for s in args.sizes.split(",")]:
-        pairs = [(measure(n, args, True), measure(n, args, False)) for _ in range(args.repeats)]
+    modes = args.modes.split(",")
+    for n, mode in [(int(s), m) for s in args.sizes.split(",") for m in modes]:
+        host = mode == "host"
+        pairs = [(measure(n, args, True, host=host), measure(n, args, False, host=host))
+                 for _ in range(args.repeats)]
         b = statistics.median(p[0]["ms"] for p in pairs)
         a = statistics.median(p[1]["ms"] for p in pairs)
         ratios = statistics.median(p[0]["ms"] / p[1]["ms"] for p in pairs)
         ob, oa = pairs[0][0]["ospa"], pairs[0][1]["ospa"]
         ok = "PASS" if a <= TARGET_MS else "FAIL"
-        print(f"{n:>5} {b:>10.3f} {a:>9.3f} {ratios:>12.2f} {ob:>11.4f} {oa:>10.4f} "
+        print(f"{n:>5} {mode:>8} {b:>10.3f} {a:>9.3f} {ratios:>12.2f} {ob:>11.4f} {oa:>10.4f} "
               f"{ok if n == 50 else '':>7}   pairs: "
               + ", ".join(f"{p[0]['ms']:.2f}/{p[1]['ms']:.2f}" for p in pairs), flush=True)
     n = int(args.sizes.split(",")[-1])
