@@ -101,6 +101,12 @@ def _tri_to_full(d: int) -> np.ndarray:
     return col.reshape(-1)
 
 
+@lru_cache(maxsize=16)
+def _row_to_full(d: int) -> np.ndarray:
+    """:func:`_tri_to_full` as columns of a whole packed row (weight, mean, triangle)."""
+    return _tri_to_full(d) + 1 + d
+
+
 def pack_mixture(mix: GaussianMixture) -> bytes:
     """``(n, 1 + d + d(d+1)/2)`` float64 rows: weight, mean, upper triangle of covariance."""
     iu = _tri_index(mix.dim)
@@ -257,10 +263,10 @@ def unpack_mixture(blob: bytes, n: int, d: int) -> GaussianMixture:
     """Inverse of :func:`pack_mixture`, validating weights and covariances."""
     t = d * (d + 1) // 2
     rows = _floats(blob, (n, 1 + d + t))
-    w, m, tri = rows[:, 0], rows[:, 1:1 + d], rows[:, 1 + d:]
-    if (w < 0).any():
+    w, m = rows[:, 0], rows[:, 1:1 + d]
+    if n and np.minimum.reduce(w) < 0:  # finite by now: the smallest weight decides
         raise Rejected("weight", "negative component weight")
-    P = tri[:, _tri_to_full(d)].reshape(n, d, d)
+    P = rows.take(_row_to_full(d), axis=1).reshape(n, d, d)
     if n and not _positive_definite(P):
         raise Rejected("not-psd", "a covariance is not positive definite")
     return GaussianMixture.trusted(w, m, P)  # float, (n,), (n, d), (n, d, d) by construction
