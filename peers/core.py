@@ -110,9 +110,7 @@ class PeerCore:
             msg = self.decode(payload, self.cfg.limits)
         except Rejected as exc:
             return self._reject(exc.reason)
-        expected = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,
-                    "ctl": Control}
-        if not isinstance(msg, expected[route.channel]):
+        if not isinstance(msg, _EXPECTED[route.channel]):
             return self._reject("wrong-key")
         if route.channel == "scan":
             return self._scan(route, msg, now)
@@ -387,6 +385,11 @@ class PeerCore:
         """Counts, scores and state for the summary (plain data;
         :func:`peers.core_summary.core_snapshot`)."""
         return core_snapshot(self)
+
+
+_EXPECTED = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,
+             "ctl": Control}
+"""The message types each channel carries (anything else on it is 'wrong-key')."""
 
 
 def positions(states: np.ndarray, index: tuple[int, int]) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
-from tracking.metrics import gospa_parts, ospa
+from tracking.metrics import gospa_parts, ospa_gospa_parts
 
 COLUMNS = ("peer", "scan", "estimate", "scored", "ospa", "gospa", "gospa_localisation",
            "gospa_missed", "gospa_false", "n_estimated", "n_true", "latency_ms", "tracks",
@@ -36,8 +36,8 @@ class ScanResults:
     def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray) -> float:
         """Add an estimate that arrived; its OSPA (the value the summary's mean takes)."""
         est, true = self._xy(states), self._xy(truth)
-        value = ospa(est, true, self.c, self.p)
-        self._add(k, which, True, value, est, true, states, truth)
+        value, parts = ospa_gospa_parts(est, true, self.c, self.p)
+        self._add(k, which, True, value, est, true, states, truth, parts)
         return value
 
     def missed(self, k: int, which: str, truth: np.ndarray | None) -> None:
@@ -49,11 +49,12 @@ class ScanResults:
         return states[:, self.pos] if len(states) else np.zeros((0, 2))
 
     def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
-             true: np.ndarray, states: np.ndarray | None, truth: np.ndarray) -> None:
+             true: np.ndarray, states: np.ndarray | None, truth: np.ndarray,
+             parts: tuple[float, float, int, int] | None = None) -> None:
         if len(self.rows) >= MAX_ROWS:
             self.dropped += 1
             return
-        g, loc, missed, false = gospa_parts(est, true, self.c, self.p)
+        g, loc, missed, false = parts or gospa_parts(est, true, self.c, self.p)
         tracks = [] if states is None else np.asarray(states, float).tolist()
         self.rows.append((int(k), which, scored, float(value), g, loc, missed, false,
                           len(est), len(true), tracks, np.asarray(truth, float).tolist()))

@@ -22,6 +22,11 @@ from typing import Any
 import msgpack
 import numpy as np
 
+try:
+    from numpy.linalg import _umath_linalg as _lapack
+except ImportError:  # pragma: no cover
+    _lapack = None
+
 from protocol.messages import (
     Control,
     Estimate,
@@ -94,6 +99,12 @@ def _tri_to_full(d: int) -> np.ndarray:
     col[r, c] = np.arange(r.size)
     col[c, r] = np.arange(r.size)
     return col.reshape(-1)
+
+
+@lru_cache(maxsize=16)
+def _row_to_full(d: int) -> np.ndarray:
+    """:func:`_tri_to_full` as columns of a whole packed row (weight, mean, triangle)."""
+    return _tri_to_full(d) + 1 + d
 
 
 def pack_mixture(mix: GaussianMixture) -> bytes:
@@ -226,7 +237,7 @@ def _index(body: dict, key: str) -> int:
 
 def _time(body: dict) -> float:
     v = float(_get(body, "ts", (float, int)))
-    if not np.isfinite(v):
+    if not math.isfinite(v):  # a Python float: no NumPy scalar call
         raise Rejected("nonfinite", "send time is not finite")
     return v
 
@@ -252,16 +263,28 @@ def unpack_mixture(blob: bytes, n: int, d: int) -> GaussianMixture:
     """Inverse of :func:`pack_mixture`, validating weights and covariances."""
     t = d * (d + 1) // 2
     rows = _floats(blob, (n, 1 + d + t))
-    w, m, tri = rows[:, 0], rows[:, 1:1 + d], rows[:, 1 + d:]
-    if (w < 0).any():
+    w, m = rows[:, 0], rows[:, 1:1 + d]
+    if n and np.minimum.reduce(w) < 0:  # finite by now: the smallest weight decides
         raise Rejected("weight", "negative component weight")
-    P = tri[:, _tri_to_full(d)].reshape(n, d, d)
-    if n:
+    P = rows.take(_row_to_full(d), axis=1).reshape(n, d, d)
+    if n and not _positive_definite(P):
+        raise Rejected("not-psd", "a covariance is not positive definite")
+    return GaussianMixture.trusted(w, m, P)  # float, (n,), (n, d), (n, d, d) by construction
+
+
+def _positive_definite(P: np.ndarray) -> bool:
+    """Whether every matrix of the finite stack ``P`` has a Cholesky factor: the LAPACK call of
+    ``np.linalg.cholesky`` without its wrapper (which costs more than a few 4x4 factors); a
+    matrix that is not positive definite gives NaN there instead of an exception."""
+    if _lapack is None:  # pragma: no cover (NumPy without the private module)
         try:
             np.linalg.cholesky(P)
         except np.linalg.LinAlgError:
-            raise Rejected("not-psd", "a covariance is not positive definite") from None
-    return GaussianMixture(w, m, P)
+            return False
+        return True
+    with np.errstate(all="ignore"):
+        L = _lapack.cholesky_lo(P, signature="d->d")
+    return bool(np.isfinite(L).all())
 
 
 def _forward(body: dict, limits: Limits) -> Forward:

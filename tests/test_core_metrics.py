@@ -173,3 +173,20 @@ def test_gospa_parts_closed_form():
     total, loc, missed, false = gospa_parts(X, Y, c=10.0, p=2.0)
     assert (loc, missed, false) == (9.0, 1, 1)
     assert total == pytest.approx(np.sqrt(9.0 + 100.0 / 2 * 2))
+
+
+def test_ospa_gospa_parts_equals_each_metric_bit_for_bit():
+    """The shared assignment (and the solver-free single-point case) gives exactly what
+    ospa and gospa_parts give apart, over random sets of 0-4 points with tied and cut pairs."""
+    from tracking.metrics import gospa_parts, ospa_gospa_parts
+
+    rng = np.random.default_rng(7)
+    for t in range(3000):
+        n, m = rng.integers(0, 5, 2)
+        X, Y = rng.normal(0, 150, (n, 2)), rng.normal(0, 150, (m, 2))
+        if t % 3 == 0 and n and m:
+            X[0] = Y[0]  # a zero distance
+        if t % 5 == 0 and m > 1:
+            Y[1] = Y[0] + 1000.0  # beyond the cut-off
+        assert ospa_gospa_parts(X, Y, 200.0, 2.0) == (ospa(X, Y, 200.0, 2.0),
+                                                      gospa_parts(X, Y, 200.0, 2.0))

@@ -42,6 +42,23 @@ def test_sweep_labels_are_the_groups_merge_moment_matches():
     np.testing.assert_allclose(np.array([e[2] for e in expected]), merged.covs, atol=1e-9)
 
 
+def test_sweep_labels_with_given_inverses_are_the_same_labels():
+    """The caller's inverses (hybrid_fuse passes the union's) give the labels the sweep finds
+    computing them itself: every-pair sizes and the candidate path above 48, both rules."""
+    from tracking.gaussian import inv_spd
+
+    rng = np.random.default_rng(11)
+    for n in (2, 5, 12, 30, 48, 49, 80):
+        for rule, threshold in (("vo-ma", 4.0), ("weighted", 2.0)):
+            means = rng.normal(0, 30, (n, 4))
+            covs = np.tile(P0, (n, 1, 1)) * rng.uniform(0.5, 2.0, (n, 1, 1))
+            m = GaussianMixture(rng.uniform(0.05, 1.0, n), means, covs)
+            labels = sweep_labels(m, threshold, rule)
+            assert labels.max() + 1 < n or n < 12  # groups formed
+            np.testing.assert_array_equal(
+                sweep_labels(m, threshold, rule, inv=inv_spd(m.covs)), labels)
+
+
 def test_hybrid_weight_is_the_arithmetic_mean_and_location_the_covariance_intersection():
     # three peers see target A (slightly apart, different covariances); the third missed B
     Pa = [P0, 2.0 * P0, np.diag([50.0, 10.0, 300.0, 40.0])]

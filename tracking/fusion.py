@@ -29,6 +29,7 @@ from tracking.gaussian import (
     LOG_2PI,
     SYM4_INDEX,
     SYM4_WORK,
+    c_einsum,
     inv_det_spd,
     inv_spd,
     quad_form,
@@ -557,35 +558,51 @@ def hybrid_fuse(
         return GaussianMixture.empty(d)
     n = len(used)
     omegas = np.array([w for _, w in used])
-    union = GaussianMixture.concatenate([D.scaled(w) for D, w in used])  # the AA
-    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
     own_w = np.concatenate([D.weights for D, _ in used])
-    labels = sweep_labels(union, gate)
+    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
+    union = GaussianMixture.trusted(  # the AA (inputs are validated mixtures: no checks)
+        own_w * omegas[src], np.concatenate([D.means for D, _ in used]),
+        np.concatenate([D.covs for D, _ in used]))
+    # the union's inverses, shared by the sweep and (exactly symmetric covariances, the usual
+    # case: symmetrise is then the identity) the cells of one component
+    Pu = union.covs
+    Yu = inv_spd(Pu)
+    shared = bool((Pu == Pu.swapaxes(1, 2)).all())
+    labels = sweep_labels(union, gate, inv=Yu)
     G = int(labels.max()) + 1
     key = labels * n + src  # (group, input) cell of each component
     order = np.argsort(key, kind="stable")
     key_s = key[order]
-    starts = np.flatnonzero(np.r_[True, key_s[1:] != key_s[:-1]])
+    starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
     cells = key_s[starts]  # the occupied cells
     w, m, P = own_w[order], union.means[order], union.covs[order]
-    cnt = np.diff(np.r_[starts, len(w)])
-    cell_of = np.repeat(np.arange(len(cells)), cnt)
-    W = np.add.reduceat(w, starts)
-    with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain average
-        wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
-    mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
-    diff = m - mean[cell_of]
-    cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]), starts)
+    Y = None
+    if len(cells) == len(w) and (w > 0).all():
+        # one component per cell (the common case): its moment match is itself, exactly
+        W, mean, cov = w, m, P
+        if shared:
+            Y = Yu[order]
+    else:
+        cnt = np.diff(np.append(starts, len(w)))
+        cell_of = np.repeat(np.arange(len(cells)), cnt)
+        W = np.add.reduceat(w, starts)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain mean
+            wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
+        mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
+        diff = m - mean[cell_of]
+        cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]),
+                              starts)
     g, i = np.divmod(cells, n)
-    Y = inv_spd(symmetrise(cov))  # (cells, d, d)
+    if Y is None:
+        Y = inv_spd(symmetrise(cov))  # (cells, d, d)
     present_om = np.zeros((G, n))
     present_om[g, i] = omegas[i]
     om_t = (present_om / present_om.sum(axis=1, keepdims=True))[g, i]  # omega~ per cell
-    gstarts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])  # cells are sorted by group
+    gstarts = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))  # cells are sorted by group
     Ysum = np.add.reduceat(om_t[:, None, None] * Y, gstarts)  # (G, d, d)
-    hsum = np.add.reduceat(om_t[:, None] * np.einsum("cij,cj->ci", Y, mean), gstarts)
-    Pf = symmetrise(inv_spd(Ysum))
-    mf = np.einsum("gij,gj->gi", Pf, hsum)
+    hsum = np.add.reduceat(om_t[:, None] * c_einsum("cij,cj->ci", Y, mean), gstarts)
+    Pf = inv_spd(Ysum)  # exactly symmetric already (inv_spd symmetrises)
+    mf = c_einsum("gij,gj->gi", Pf, hsum)
     wf = np.bincount(g, weights=omegas[i] * W, minlength=G)
     fused = GaussianMixture.trusted(wf, mf, Pf)
     return reduce(fused) if reduce is not None else fused

@@ -12,6 +12,11 @@ import numpy as np
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 try:
+    from numpy.linalg import _umath_linalg as _lapack
+except ImportError:  # pragma: no cover
+    _lapack = None
+
+try:
     from numpy._core.multiarray import c_einsum
 except ImportError:  # pragma: no cover (NumPy 1.x)
     c_einsum = np.einsum
@@ -175,9 +180,22 @@ def inv_det_spd(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def inv_spd(P: np.ndarray) -> np.ndarray:
     """The inverse part of :func:`inv_det_spd` (the same numbers), without the determinant."""
     if _generic_inverse(P):
-        inv = np.linalg.inv(P)
+        inv = _lapack_inv(P) if P.dtype == np.float64 else None
+        if inv is None:  # singular, non-finite or not float64: np.linalg.inv and its errors
+            inv = np.linalg.inv(P)
         return 0.5 * (inv + np.swapaxes(inv, -1, -2))
     return inv_det_spd(P)[0]
+
+
+def _lapack_inv(P: np.ndarray) -> np.ndarray | None:
+    """``np.linalg.inv(P)`` (the same LAPACK call, so the same numbers) without its Python
+    wrapper, which costs more than inverting a few 4x4 matrices; None where a matrix is
+    singular or the result is not finite."""
+    if _lapack is None:  # pragma: no cover (NumPy without the private module)
+        return None
+    with np.errstate(all="ignore"):
+        inv = _lapack.inv(P, signature="d->d")
+    return inv if np.isfinite(inv).all() else None
 
 
 def _generic_inverse(P: np.ndarray) -> bool:

@@ -76,6 +76,32 @@ def gospa_parts(X: np.ndarray, Y: np.ndarray, c: float = 200.0,
     return float((loc + c**p / 2 * (missed + false)) ** (1.0 / p)), loc, missed, false
 
 
+def ospa_gospa_parts(X: np.ndarray, Y: np.ndarray, c: float = 200.0, p: float = 2.0
+                     ) -> tuple[float, tuple[float, float, int, int]]:
+    """:func:`ospa` and :func:`gospa_parts` of the same sets from one cost matrix and one
+    assignment (both minimise ``sum min(c, d)^p``; the same numbers as calling each). With one
+    point on either side the assignment is the cheapest pair (any optimal pair gives the same
+    sums: tied costs below ``c`` are tied distances), so the solver is not called."""
+    X, Y = np.atleast_2d(X), np.atleast_2d(Y)
+    n, m = X.shape[0] if X.size else 0, Y.shape[0] if Y.size else 0
+    if n == 0 or m == 0:
+        return ospa(X, Y, c, p), gospa_parts(X, Y, c, p)
+    D = np.linalg.norm(X[:, None, :] - Y[None, :, :], axis=-1)
+    C = np.minimum(D, c) ** p
+    if n == 1 or m == 1:
+        j = int(C.argmin())
+        r, k = np.array([j // m]), np.array([j % m])
+    else:
+        r, k = linear_sum_assignment(C)
+    Crk = C[r, k]
+    o = float(((Crk.sum() + c**p * abs(m - n)) / max(n, m)) ** (1.0 / p))
+    close = D[r, k] < c
+    loc = float(Crk[close].sum())
+    paired = int(close.sum())
+    missed, false = m - paired, n - paired
+    return o, (float((loc + c**p / 2 * (missed + false)) ** (1.0 / p)), loc, missed, false)
+
+
 def cardinality_error(X: np.ndarray, Y: np.ndarray) -> int:
     """``|n - m|``: the difference in the number of estimated and true targets."""
     n = np.atleast_2d(X).shape[0] if np.size(X) else 0

@@ -81,12 +81,14 @@ def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> Gaussi
     return _merge_in_order(mix, (-mix.weights).argsort(kind="stable"), threshold, rule)
 
 
-def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> np.ndarray:
+def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma",
+                 inv: np.ndarray | None = None) -> np.ndarray:
     """The group each component joins in :func:`merge`'s sweep: ``(n,)`` labels ``0..G-1``.
 
     The same close pairs and greedy groups as :func:`merge` (heaviest first), so a group here is
     exactly the set of components :func:`merge` would moment-match into one. Label ``g`` is the
-    ``g``-th group in sweep order (its heaviest member first).
+    ``g``-th group in sweep order (its heaviest member first). ``inv``: ``inv_spd(mix.covs)``
+    if the caller has it already (the same numbers the sweep would compute).
     """
     if rule not in MERGE_RULES:
         raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
@@ -95,12 +97,25 @@ def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") ->
         return np.zeros(n, dtype=np.intp)
     order = (-mix.weights).argsort(kind="stable")
     root = np.arange(n)
-    ci, cj = _close_pairs(mix.weights[order], mix.means[order], mix.covs[order], threshold, rule)
+    if inv is not None and rule == "vo-ma" and n <= _ALL_PAIRS_UP_TO:
+        # _close_pairs' every-pair test, gathering the pairs' rows straight from the unsorted
+        # arrays (m[order][ci] is m[order[ci]]): the same numbers, four gathers fewer
+        cj, ci = _upper_pairs(n)
+        oi, oj = order[ci], order[cj]
+        diff = mix.means[oi] - mix.means[oj]
+        close = _c_einsum("gi,gij,gj->g", diff, inv[oi], diff) <= threshold
+        ci, cj = ci[close], cj[close]
+    else:
+        ci, cj = _close_pairs(mix.weights[order], mix.means[order], mix.covs[order], threshold,
+                              rule, None if inv is None else inv[order])
     if ci.size:
         centres, members = _greedy_groups(ci, cj)
         sizes = [len(g) for g in members]
         root[np.concatenate(members)] = np.repeat(centres, sizes)
-    _, labels_sorted = np.unique(root, return_inverse=True)  # centres are sorted positions
+    # the roots are the positions with root[i] == i (a centre is its own root), so a root's
+    # rank among them is np.unique's inverse index, without the sort
+    rank = np.cumsum(root == np.arange(n)) - 1
+    labels_sorted = rank[root]
     labels = np.empty(n, dtype=np.intp)
     labels[order] = labels_sorted
     return labels
@@ -123,7 +138,7 @@ def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
 
 
 def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
-                 rule: str) -> tuple[np.ndarray, np.ndarray]:
+                 rule: str, inv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pairs ``(i, j)``, ``i > j`` (``w`` sorted decreasing), where ``i`` merges into centre ``j``.
 
     Returned sorted by ``(j, i)``. Up to :data:`_ALL_PAIRS_UP_TO` components every pair is
@@ -132,7 +147,8 @@ def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
     vo-ma needs ``(m_i - m_j)_k^2 <= U (P_i)_kk`` and the weighted rule ``(m_i - m_j)_k^2
     w_i w_j <= eta (P_j)_kk (w_i + w_j)`` on every coordinate ``k``; the two positions are
     tested, with the bound widened by 0.1 % (far above round-off), so no close pair is lost.
-    The exact test uses the sweep's own inverses (:func:`inv_spd` of the whole stack).
+    The exact test uses the sweep's own inverses (:func:`inv_spd` of the whole stack, or
+    ``inv`` if given).
     """
     n = len(w)
     if n <= _ALL_PAIRS_UP_TO:
@@ -141,7 +157,8 @@ def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
         ci, cj = _candidate_pairs(w, m, P, threshold * (1.0 + 1e-3), rule)
         if ci.size == 0:
             return ci, cj
-    inv = _inv_spd(P)
+    if inv is None:
+        inv = _inv_spd(P)
     diff = m[ci] - m[cj]
     if rule == "vo-ma":
         close = _c_einsum("gi,gij,gj->g", diff, inv[ci], diff) <= threshold
