@@ -18,6 +18,8 @@ import time
 import uuid
 from pathlib import Path
 
+import numpy as np
+
 from peers.security import tls_endpoint
 from peers.session import (
     DEFAULT_LEASE_MS,
@@ -26,6 +28,7 @@ from peers.session import (
     free_port,
 )
 from sim.build import adjacency
+from sim.packing import groups_for
 from sim.process_faults import (  # noqa: F401  (the names other modules import from here)
     HOSTED_ACTIONS,
     PROCESS_ACTIONS,
@@ -78,7 +81,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
     names = scn.sensor_names
-    groups = host_groups(names, per_process)
+    groups = host_groups(names, per_process, adjacency(scn)[1])
     if groups and secure:
         raise ValueError("a host has one Zenoh session, so one TLS identity: no --secure "
                          "with more than one peer per process")
@@ -152,15 +155,18 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     return handle
 
 
-def host_groups(names: list[str], per_process: int) -> dict[str, list[str]]:
-    """``h1``, ``h2``, ...: ``per_process`` peers each, in the scenario's order (the last
-    host may hold fewer); empty for ``per_process`` 1 (every peer a process of its own)."""
+def host_groups(names: list[str], per_process: int,
+                adjacency: np.ndarray | None = None) -> dict[str, list[str]]:
+    """``h1``, ``h2``, ...: at most ``per_process`` peers each, in the scenario's order (the
+    last host may hold fewer), or, given the peer graph's ``adjacency``, grouped so that fewer
+    graph edges run between hosts when a spectral partition finds such a grouping
+    (:func:`sim.packing.groups_for`); empty for ``per_process`` 1 (a process per peer)."""
     if per_process < 1:
         raise ValueError(f"per_process must be >= 1, not {per_process}")
     if per_process == 1:
         return {}
-    return {f"h{j + 1}": names[i:i + per_process]
-            for j, i in enumerate(range(0, len(names), per_process))}
+    groups = groups_for(adjacency, len(names), per_process)
+    return {f"h{j + 1}": [names[i] for i in g] for j, g in enumerate(groups)}
 
 
 def hosts_line(hosts: dict[str, list[str]]) -> str:

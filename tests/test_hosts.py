@@ -361,3 +361,22 @@ def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp
         for p in children:
             if _alive(p):
                 os.kill(p, signal.SIGKILL)
+
+
+def test_hosts_are_grouped_to_cut_few_graph_edges():
+    """Given the peer graph, hosts hold peers that are neighbours: on a circulant graph of
+    degree 3 (each peer also linked to its antipode) the scenario's order would cut 27 of 75
+    edges at 50 peers in 2 hosts; the spectral grouping cuts 5. A ring keeps its arcs."""
+    from sim.graphs import circulant
+    from sim.packing import contiguous, cut_edges, groups_for
+
+    A = circulant(50, 3)
+    names = [f"p{i:02d}" for i in range(50)]
+    hosts = host_groups(names, 25, A)
+    groups = [[names.index(n) for n in peers] for peers in hosts.values()]
+    assert sorted(i for g in groups for i in g) == list(range(50))  # each peer once
+    assert all(len(g) <= 25 for g in groups) and len(groups) == 2
+    assert cut_edges(A, contiguous(50, 25)) == 27 and cut_edges(A, groups) <= 6
+    ring = circulant(6, 2)
+    assert host_groups(SIX, 3, ring) == {"h1": SIX[:3], "h2": SIX[3:]}
+    assert groups_for(circulant(100, 3), 100, 50) != contiguous(100, 50)

@@ -87,6 +87,7 @@ def _packing(args: argparse.Namespace, scn, pfaults) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from sim.build import adjacency
     from sim.launcher import (
         ProcessFault,
         format_summary,
@@ -109,7 +110,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
     per_process = _packing(args, scn, pfaults)
-    hosts = host_groups(scn.sensor_names, per_process)
+    hosts = host_groups(scn.sensor_names, per_process, adjacency(scn)[1])
     _check_hosted_faults(pfaults, hosts, args)
     unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
                      - set(scn.sensor_names) - routed)
