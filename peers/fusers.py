@@ -12,7 +12,8 @@ import numpy as np
 
 from peers.contracts import FusionInput
 from peers.estimators import ImmEstimator, step_imm
-from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, hybrid_fuse
+from tracking.fusion import gci_fuse
+from tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse
 from tracking.imm import IMMGaussianState, model_posterior
 from tracking.mixture import GaussianMixture
 from tracking.particles import (

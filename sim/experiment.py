@@ -25,7 +25,8 @@ from sim.build import make_filter, make_reducer
 from sim.scenario import Scenario
 from sim.studies.pool import map_runs
 from sim.world import generate_run
-from tracking.fusion import aa_fuse, gci_fuse, gci_fuse_optimised, hybrid_fuse, metropolis_weights
+from tracking.fusion import gci_fuse
+from tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse, metropolis_weights
 from tracking.metrics import cardinality_error, ospa
 from tracking.mixture import GaussianMixture
 from tracking.reduction import keep_above

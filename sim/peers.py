@@ -17,6 +17,7 @@ from peers.scoring import Scorer
 from peers.trust import TrustConfig
 from sim.build import adjacency
 from sim.kinds import kind_of
+from sim.lies import LyingCore, make_lie
 from sim.scenario import Scenario, ScenarioError
 from sim.world import generate_truth, truth_rng
 
@@ -88,7 +89,5 @@ def make_peer(scn: Scenario, name: str, run: int = 0, *, network: str = "twin",
     core = PeerCore(cfg, consensus, scorer)
     liar, _, lie = scn.fusion.lie.partition(":")
     if liar == name:  # the test hook fusion.lie (sim.lying)
-        from sim.lying import LyingCore, make_lie
-
         core = LyingCore(core, make_lie(lie, scn, est.position_index))
     return core

@@ -96,7 +96,8 @@ from sim.seed004_scenario import (  # noqa: F401  (re-exported)
     truth,
 )
 from sim.studies.pool import map_runs
-from tracking.fusion import aa_fuse, gci_fuse, metropolis_weights
+from tracking.fusion import gci_fuse
+from tracking.fusion_rules import aa_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
 from tracking.idpc import MissingBaseline, dbscan_class, ftc, idpc
 from tracking.metrics import ospa

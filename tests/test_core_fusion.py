@@ -10,14 +10,8 @@ import pytest
 from scipy.stats import multivariate_normal
 
 import tracking.fusion as fusion
-from tracking.fusion import (
-    aa_fuse,
-    gci_fuse,
-    gci_pair,
-    gci_product,
-    metropolis_weights,
-    optimal_omega,
-)
+from tracking.fusion import gci_fuse, gci_pair, gci_product
+from tracking.fusion_rules import aa_fuse, metropolis_weights, optimal_omega
 from tracking.mixture import GaussianMixture
 from tracking.reduction import Reducer
 

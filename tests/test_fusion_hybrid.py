@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from tracking.fusion import aa_fuse, gci_fuse, gci_product, hybrid_fuse, metropolis_weights
+from tracking.fusion import gci_fuse, gci_product
+from tracking.fusion_rules import aa_fuse, hybrid_fuse, metropolis_weights
 from tracking.mixture import GaussianMixture
 from tracking.reduction import Reducer, keep_above, merge, moment_match, sweep_labels
 

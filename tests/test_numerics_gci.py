@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from tracking import fusion
+from tracking import gci_product as product_module
 from tracking.fusion import gci_pair, gci_product
 from tracking.mixture import GaussianMixture
 
@@ -161,7 +161,7 @@ def product_path(request, monkeypatch):
     """Run a test through each of ``gci_product``'s two evaluation paths (few combinations are
     gathered into flat arrays, many summed on the combination grid)."""
     limit = 10**9 if request.param == "gathered" else 0
-    monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", limit)
+    monkeypatch.setattr(product_module, "_SMALL_COMBINATIONS", limit)
     return request.param
 
 
@@ -230,9 +230,9 @@ def test_gci_product_paths_agree(d, monkeypatch):
             dens.append(GaussianMixture(rng.uniform(0.1, 1.0, k), rng.normal(size=(k, d)) * 2,
                                         L @ np.swapaxes(L, 1, 2) + np.eye(d)))
         omegas = rng.dirichlet(np.ones(len(sizes)))
-        monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 10**9)
+        monkeypatch.setattr(product_module, "_SMALL_COMBINATIONS", 10**9)
         gathered = gci_product(dens, omegas)
-        monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 0)
+        monkeypatch.setattr(product_module, "_SMALL_COMBINATIONS", 0)
         grid = gci_product(dens, omegas)
         np.testing.assert_allclose(gathered.weights, grid.weights, rtol=1e-12)
         np.testing.assert_allclose(gathered.means, grid.means, rtol=1e-12, atol=1e-12)
@@ -261,15 +261,15 @@ def test_gated_product_keeps_every_combination_that_matters(d, monkeypatch):
     them together less than 1e-14 of the kept mass, the kept ones equal the
     full product's (gathered evaluation, to the last bits), and far-apart targets are not
     combined at all."""
-    monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 0)
+    monkeypatch.setattr(product_module, "_SMALL_COMBINATIONS", 0)
     rng = np.random.default_rng(7 + d)
     for sizes in [(3, 4, 3, 4, 3), (5, 5, 5, 5), (3, 6, 3)]:
         dens = _spread(rng, sizes, d, n_targets=3, sep=300.0, sigma=5.0)
         omegas = rng.dirichlet(np.ones(len(sizes)))
-        comps = fusion._Components(dens, omegas)
-        rows, left_out = fusion._gated_rows(comps)
+        comps = product_module._Components(dens, omegas)
+        rows, left_out = product_module._gated_rows(comps)
         everything = np.indices(sizes).reshape(len(sizes), -1) + comps.start[:, None]
-        full = fusion._centred_gathered(comps, everything)
+        full = product_module._centred_gathered(comps, everything)
         kept = {tuple(c) for c in rows.T}
         assert len(kept) < math.prod(sizes)  # the gate does leave combinations out
         is_kept = np.array([tuple(c) in kept for c in everything.T])
@@ -286,13 +286,14 @@ def test_gated_product_keeps_every_combination_that_matters(d, monkeypatch):
 def test_gated_product_falls_back_when_what_is_left_out_could_matter(monkeypatch):
     """Densities that barely overlap: the kept mass is tiny, the bound on what the gate left out
     is not negligible beside it, so every combination is formed (same as ``gate=False``)."""
-    monkeypatch.setattr(fusion, "_SMALL_COMBINATIONS", 0)
+    monkeypatch.setattr(product_module, "_SMALL_COMBINATIONS", 0)
     rng = np.random.default_rng(3)
     dens = _spread(rng, (3, 3, 3), 2, n_targets=3, sep=300.0, sigma=5.0)
-    assert fusion._gated_rows(fusion._Components(dens, np.array([0.3, 0.3, 0.4]))) is not None
+    comps = product_module._Components(dens, np.array([0.3, 0.3, 0.4]))
+    assert product_module._gated_rows(comps) is not None
     dens[2] = GaussianMixture(dens[2].weights, dens[2].means + 60.0, dens[2].covs)
     omegas = np.array([0.3, 0.3, 0.4])
-    monkeypatch.setattr(fusion, "_GATE", 4.0)  # a gate this tight leaves out real mass
+    monkeypatch.setattr(product_module, "_GATE", 4.0)  # a gate this tight leaves out real mass
     plain, gated = gci_product(dens, omegas), gci_product(dens, omegas, gate=True)
     assert len(gated) == len(plain) == 27
     np.testing.assert_array_equal(gated.weights, plain.weights)

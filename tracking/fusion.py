@@ -1,6 +1,8 @@
-"""Fusion of Gaussian-mixture intensities: GCI, AA, Metropolis weights.
+"""Fusion of Gaussian-mixture intensities by GCI: pairwise, and n-ary by pairs or at once.
 
-Formulas and our readings: docs/algorithms.md "GCI fusion".
+Formulas and our readings: docs/algorithms.md "GCI fusion". The n-ary product in one step is
+:mod:`tracking.gci_product`; the other rules (AA, the hybrid, Metropolis weights, the choice of
+omega) are :mod:`tracking.fusion_rules`.
 
 The GCI formula lives here, once. For two mixtures ``D_i = sum_a``, ``D_j = sum_b`` and weight
 ``omega`` (seed 000 eq. 14-17; Uney, Clark & Julier 2013), with ``C = omega P_a + (1-omega) P_b``:
@@ -23,21 +25,17 @@ import threading
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from tracking.gaussian import (
     LOG_2PI,
     SYM4_INDEX,
     SYM4_WORK,
-    c_einsum,
     inv_det_spd,
-    inv_spd,
-    quad_form,
     sym4_inverse_into,
     symmetrise,
 )
+from tracking.gci_product import CARDINALITY_RULES, MIN_OVERLAP, gci_product
 from tracking.mixture import GaussianMixture
-from tracking.reduction import sweep_labels
 
 Reduce = Callable[[GaussianMixture], GaussianMixture]
 
@@ -241,9 +239,6 @@ def _scratch(size: int) -> np.ndarray:
     return buf[:size]
 
 
-CARDINALITY_RULES = ("emd", "separate")
-MIN_OVERLAP = 1e-12
-"""Below this ``int p_i^(1-omega) p_j^omega`` the location densities are taken as disjoint."""
 
 
 def gci_combine(Di: GaussianMixture, Dj: GaussianMixture, omega: float,
@@ -291,7 +286,7 @@ def gci_fuse(
     (single-target densities; with one Gaussian each this is covariance intersection).
     ``cardinality``: see :func:`gci_combine`.
     """
-    densities, weights = _check_weights(densities, weights)
+    densities, weights = check_weights(densities, weights)
     used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0]
     if len(used) > 1 and math.prod(len(D) for D, _ in used) <= NARY_MAX_COMBINATIONS:
         acc = gci_product([D for D, _ in used], [w for _, w in used], cardinality,
@@ -318,297 +313,7 @@ NARY_MAX_COMBINATIONS = 4096
 """Up to this many component combinations :func:`gci_fuse` forms the n-ary product at once."""
 
 
-def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
-                cardinality: str = "emd", gate: bool = False) -> GaussianMixture:
-    """``prod_i D_i^(omega_i)`` (``sum omega_i = 1``) in one step: a component per combination.
-
-    The power of a mixture drops cross terms (§3; seed 000 eq. 14-17), so the product is, over
-    the combinations ``c = (c_1, ..., c_n)`` of one component per density,
-    ``prod_i (w_ic N_ic)^(omega_i)``: in information form ``Y = sum_i omega_i Y_ic``,
-    ``P = Y^-1``, ``m = P sum_i omega_i Y_ic m_ic``, and weight ``prod_i w_ic^(omega_i)`` times
-    ``int prod_i N_ic^(omega_i) = exp(-1/2 [sum_i omega_i log det P_ic + log det Y
-    + sum_i omega_i (m_ic - m)' Y_ic (m_ic - m)])`` (the ``2 pi`` factors cancel as the weights
-    sum to 1). Every term is taken about the combination's own points (:func:`_centred_terms`):
-    no large numbers cancel, so the result stays within about ``eps * cond(P)`` of exact
-    arithmetic (tested to condition number 1e12). This is what sequential :func:`gci_combine`
-    steps give before any reduction (the same equations, regrouped); combinations are ordered
-    with the first density's component slowest. ``cardinality``: ``"emd"`` or ``"separate"`` (see
-    :func:`gci_combine`). ``gate``: leave out the combinations that two far-apart components
-    make negligible (:func:`_gated_rows`; for a reduced result: a pruning reducer drops them).
-    """
-    if cardinality not in CARDINALITY_RULES:
-        raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
-    densities = list(densities)
-    omegas = np.asarray(weights, dtype=float)
-    d = densities[0].dim
-    if any(len(D) == 0 for D in densities):
-        return GaussianMixture.empty(d)
-    masses = np.array([D.mass for D in densities])
-    if cardinality == "separate":
-        if np.any(masses <= 0):
-            return GaussianMixture.empty(d)
-        densities = [D.scaled(1.0 / N) for D, N in zip(densities, masses, strict=True)]
-    log_w, means, covs = _centred_terms(densities, omegas, gate)
-    fused = GaussianMixture(np.exp(log_w), means, covs)
-    if cardinality == "emd":
-        return fused
-    c = fused.mass
-    if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
-        return GaussianMixture.empty(d)
-    return fused.scaled(float(np.prod(masses ** omegas)) / c)
-
-
-class _Components:
-    """Per-component inputs of :func:`gci_product`, all densities' components concatenated:
-    ``wY = omega_i Y_i (K, d, d)``, ``wc = omega_i (log w_i - 1/2 log det P_i) (K,)``, means
-    ``(K, d)``, and ``start[i]`` (density ``i``'s first row)."""
-
-    def __init__(self, densities: list[GaussianMixture], omegas: np.ndarray) -> None:
-        self.sizes = [len(D) for D in densities]
-        self.start = np.cumsum(self.sizes) - self.sizes
-        Yall, det_all = inv_det_spd(np.concatenate([D.covs for D in densities]))
-        om = np.repeat(omegas, self.sizes)
-        with np.errstate(divide="ignore", invalid="ignore"):  # zero weights: zero-weight combos
-            self.wc = om * (np.log(np.concatenate([D.weights for D in densities]))
-                            - 0.5 * np.log(det_all))
-        self.wY = om[:, None, None] * Yall
-        self.means = np.concatenate([D.means for D in densities])
-        self.densities, self.omegas = densities, omegas
-
-    def part(self, i: int) -> slice:
-        """Density ``i``'s rows."""
-        return slice(self.start[i], self.start[i] + self.sizes[i])
-
-
-def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray, gate: bool = False
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`gci_product`'s ``log w (C,)``, means ``(C, d)`` and covariances ``(C, d, d)``.
-
-    Combination ``c`` is computed about ``r = m_(1 c_1)``, its first density's mean: with
-    ``u_i = m_ic - r``, ``m = r + delta``, ``delta = P sum_i omega_i Y_ic u_i``, and the
-    quadratic term from the residuals ``e_i = m_ic - m = u_i - delta`` themselves. That term
-    is the minimum over ``x`` of ``sum_i omega_i (m_ic - x)' Y_ic (m_ic - x)``, so a round-off
-    error in ``m`` changes it only to second order. (The information form
-    ``sum_i omega_i m_ic' Y_ic m_ic - h' m`` subtracts numbers of size ``|m - ref|^2 / lambda_min
-    (P)``: relative weight errors up to 7e-3 at condition number 1e6, overflow at 1e9.)
-    Up to :data:`_SMALL_COMBINATIONS` combinations are gathered into flat arrays (fewest NumPy
-    calls); more are summed on the ``(*sizes)`` grid by broadcasting (least memory traffic), or
-    with ``gate`` only those :func:`_gated_rows` keeps, gathered, when what it leaves out carries
-    at most :data:`_GATE_TOLERANCE` of the kept mass.
-    """
-    comps = _Components(densities, omegas)
-    if math.prod(comps.sizes) <= _SMALL_COMBINATIONS:
-        return _centred_gathered(comps)
-    if gate:
-        gated = _gated_rows(comps)
-        if gated is not None:
-            rows, left_out = gated
-            terms = _centred_gathered(comps, rows)
-            if left_out <= _GATE_TOLERANCE * np.exp(terms[0]).sum():
-                return terms  # else what was left out might matter: form every combination
-    return _centred_on_grid(comps)
-
-
-_SMALL_COMBINATIONS = 64
-"""Up to this many combinations :func:`_centred_terms` gathers per-combination arrays (the
-level-2-pruned inputs of a peer's fusion are usually this few)."""
-
-
-_GATE = 2.0 * math.log(1e20)
-"""Pair term above which :func:`_gated_rows` leaves a combination out (its weight is then at
-most ``1e-20`` times the largest product of its components' weights)."""
-
-_GATE_TOLERANCE = 1e-14
-"""Largest share of the fused mass the combinations left out may carry (else: all of them)."""
-
-
-def _gated_rows(comps: _Components) -> tuple[np.ndarray, float] | None:
-    """The combinations worth forming, as ``(n, C_kept)`` component rows, and a bound on the
-    mass of those left out; None if none is kept.
-
-    A combination's quadratic term is ``min_x sum_i omega_i |m_ic - x|^2_(Y_ic)``, at least the
-    same minimum over two of its components, its first density's ``a`` and density ``i``'s
-    ``b``: ``(m_a - m_b)' (P_a / omega_1 + P_b / omega_i)^-1 (m_a - m_b)``; and its determinant
-    factor is at most 1 (log det is concave), so its weight is at most ``prod_i w_ic^(omega_i)
-    exp(-pair / 2)``. Combinations with a pair term above :data:`_GATE` are left out, densities
-    added one at a time (a PHD's components for different targets never combine).
-    """
-    sizes, start, n = comps.sizes, comps.start, len(comps.sizes)
-    om = np.repeat(comps.omegas, sizes)
-    S = np.concatenate([D.covs for D in comps.densities]) / om[:, None, None]  # P / omega
-    first = comps.part(0)
-    # pair terms of each first-density component with every other component: (N_1, K)
-    diff = comps.means[None, :, :] - comps.means[first, None, :]
-    pair = quad_form(diff, inv_spd(S[first, None] + S[None, :]))
-    rows = np.arange(sizes[0])[:, None] + start[0]  # (M, i) kept partial combinations
-    for i in range(1, n):
-        new = np.arange(sizes[i]) + start[i]
-        mi, ni = np.nonzero(pair[rows[:, 0]][:, new] <= _GATE)
-        rows = np.concatenate([rows[mi], new[ni, None]], axis=1)
-    if not len(rows):
-        return None
-    log_wmax = sum(o * math.log(D.weights.max()) if D.weights.max() > 0 else -math.inf
-                   for D, o in zip(comps.densities, comps.omegas, strict=True))
-    dropped = math.prod(sizes) - len(rows)
-    return rows.T, dropped * math.exp(min(700.0, log_wmax - 0.5 * _GATE))
-
-
-def _centred_gathered(comps: _Components, idx: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_centred_terms` with every density's term gathered to ``(n, C, ...)``, over all
-    combinations or the ``(n, C)`` component rows ``idx``."""
-    n, sizes = len(comps.sizes), comps.sizes
-    if idx is None:
-        idx = np.indices(sizes).reshape(n, -1) + comps.start[:, None]  # (n, C) component rows
-    wY = comps.wY[idx]  # (n, C, d, d)
-    ref = comps.means[idx[0]]  # (C, d)
-    u = comps.means[idx] - ref  # (n, C, d)
-    g = np.einsum("ncjk,nck->cj", wY, u)
-    P, det_y = inv_det_spd(wY.sum(axis=0))
-    delta = np.einsum("cij,cj->ci", P, g)
-    e = u - delta  # m_ic - m
-    quad = np.einsum("ncj,ncjk,nck->c", e, wY, e)
-    log_w = comps.wc[idx].sum(axis=0) - 0.5 * (np.log(det_y) + quad)
-    return log_w, ref + delta, P
-
-
-def _centred_on_grid(comps: _Components) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_centred_terms` on the ``(*sizes)`` grid, one axis per density: the sums over
-    densities are built one axis at a time (the grid reaches full size at the last density),
-    the quadratic terms by one batched matrix product per density."""
-    sizes, d = comps.sizes, comps.means.shape[1]
-    parts = [comps.part(i) for i in range(len(sizes))]
-    wY, wc, ref = comps.wY, comps.wc, comps.means[parts[0]]
-    U = comps.means[None, :, :] - ref[:, None, :]  # u for every (first-density, any) pair
-    wYU = np.einsum("bjk,abk->abj", wY, U)  # (N_1, K, d)
-    Y, log_c, g = wY[parts[0]], wc[parts[0]], np.zeros((sizes[0], d))
-    for i in range(1, len(sizes)):
-        part, lead = parts[i], (1,) * (i - 1)
-        Y = Y[..., None, :, :] + wY[part].reshape(*lead, 1, sizes[i], d, d)
-        log_c = log_c[..., None] + wc[part].reshape(*lead, 1, sizes[i])
-        g = g[..., None, :] + wYU[:, part].reshape(sizes[0], *lead, sizes[i], d)
-    C = math.prod(sizes)
-    P, det_y = inv_det_spd(Y.reshape(C, d, d))  # exactly symmetric, as Y is
-    delta = np.einsum("cij,cj->ci", P, g.reshape(C, d)).reshape(*sizes, d)
-    quad = _quad_along(-delta, wY[parts[0]], 0)  # e_1 = -delta
-    for i in range(1, len(sizes)):
-        e = U[:, parts[i]].reshape(*_axes(sizes, 0, i), d) - delta  # m_ic - m
-        quad += _quad_along(e, wY[parts[i]], i)
-    log_w = log_c.reshape(C) - 0.5 * (np.log(det_y) + quad.reshape(C))
-    means = (ref.reshape(*_axes(sizes, 0), d) + delta).reshape(C, d)
-    return log_w, means, P
-
-
-def _quad_along(e: np.ndarray, Y: np.ndarray, axis: int) -> np.ndarray:
-    """``e' Y_k e`` over a grid ``e (*sizes, d)`` whose axis ``axis`` indexes ``Y (N, d, d)``,
-    as one batched matrix product ``(pre, N, post, d) (1, N, d, d)`` (no copies; several times
-    faster than a broadcasting einsum)."""
-    shape = e.shape[:-1]
-    E = e.reshape(math.prod(shape[:axis]), shape[axis], -1, e.shape[-1])
-    return np.einsum("pkmj,pkmj->pkm", E @ Y, E).reshape(shape)
-
-
-def _axes(sizes: list[int], *which: int) -> list[int]:
-    """Broadcast shape of a per-density array over the combination grid: ``sizes[i]`` on the
-    axes ``which``, 1 elsewhere."""
-    return [s if i in which else 1 for i, s in enumerate(sizes)]
-
-
-def aa_fuse(
-    densities: Sequence[GaussianMixture],
-    weights: Sequence[float],
-    reduce: Reduce | None = None,
-) -> GaussianMixture:
-    """Arithmetic average ``sum_i omega_i D_i`` (seed 004 baseline): union, scaled, reduced."""
-    densities, weights = _check_weights(densities, weights)
-    fused = GaussianMixture.concatenate([D.scaled(w) for D, w in zip(densities, weights,
-                                                                       strict=True)])
-    return reduce(fused) if reduce is not None else fused
-
-
-HYBRID_GATE = 26.0
-"""Default association gate of :func:`hybrid_fuse`: ``(m_i - m_j)' P_i^-1 (m_i - m_j)``. Two
-consistent estimates of one target differ by about ``2 P``, so the form is about twice a
-chi-square with ``d`` degrees of freedom: 26 keeps 99 % of same-target pairs in 4-D (twice the
-99 % point 13.3)."""
-
-
-def hybrid_fuse(
-    densities: Sequence[GaussianMixture],
-    weights: Sequence[float],
-    reduce: Reduce | None = None,
-    gate: float = HYBRID_GATE,
-) -> GaussianMixture:
-    """Arithmetic average for how many targets, geometric average for where they are.
-
-    The hybrid of Li, Fan, Herrero & Corchado 2019 (Inf. Fusion 51, §5: "GA for localisation,
-    AA for cardinality"): the inputs' components are grouped by target (the sweep of
-    :func:`tracking.reduction.sweep_labels` on the union, association gate ``gate``); a group's
-    weight is the AA ``sum_i omega_i W_gi`` of every input's mass in it, so an input that missed
-    or pruned the target lowers it by ``omega_i W`` instead of zeroing it (GCI's product); its
-    Gaussian is the covariance intersection (GCI of one Gaussian each, seed 000 eq. 15-16) of the
-    inputs present, each first moment-matched within the group:
-    ``Y_g = sum_i omega~_gi P_gi^-1``, ``m_g = Y_g^-1 sum_i omega~_gi P_gi^-1 m_gi``,
-    ``omega~_gi = omega_i / sum_(present) omega``. Then ``reduce``.
-    """
-    densities, weights = _check_weights(densities, weights)
-    d = densities[0].dim
-    used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0 and len(D)]
-    if not used:
-        return GaussianMixture.empty(d)
-    n = len(used)
-    omegas = np.array([w for _, w in used])
-    own_w = np.concatenate([D.weights for D, _ in used])
-    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
-    union = GaussianMixture.trusted(  # the AA (inputs are validated mixtures: no checks)
-        own_w * omegas[src], np.concatenate([D.means for D, _ in used]),
-        np.concatenate([D.covs for D, _ in used]))
-    # the union's inverses, shared by the sweep and (exactly symmetric covariances, the usual
-    # case: symmetrise is then the identity) the cells of one component
-    Pu = union.covs
-    Yu = inv_spd(Pu)
-    shared = bool((Pu == Pu.swapaxes(1, 2)).all())
-    labels = sweep_labels(union, gate, inv=Yu)
-    G = int(labels.max()) + 1
-    key = labels * n + src  # (group, input) cell of each component
-    order = np.argsort(key, kind="stable")
-    key_s = key[order]
-    starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
-    cells = key_s[starts]  # the occupied cells
-    w, m, P = own_w[order], union.means[order], union.covs[order]
-    Y = None
-    if len(cells) == len(w) and (w > 0).all():
-        # one component per cell (the common case): its moment match is itself, exactly
-        W, mean, cov = w, m, P
-        if shared:
-            Y = Yu[order]
-    else:
-        cnt = np.diff(np.append(starts, len(w)))
-        cell_of = np.repeat(np.arange(len(cells)), cnt)
-        W = np.add.reduceat(w, starts)
-        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain mean
-            wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
-        mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
-        diff = m - mean[cell_of]
-        cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]),
-                              starts)
-    g, i = np.divmod(cells, n)
-    if Y is None:
-        Y = inv_spd(symmetrise(cov))  # (cells, d, d)
-    present_om = np.zeros((G, n))
-    present_om[g, i] = omegas[i]
-    om_t = (present_om / present_om.sum(axis=1, keepdims=True))[g, i]  # omega~ per cell
-    gstarts = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))  # cells are sorted by group
-    Ysum = np.add.reduceat(om_t[:, None, None] * Y, gstarts)  # (G, d, d)
-    hsum = np.add.reduceat(om_t[:, None] * c_einsum("cij,cj->ci", Y, mean), gstarts)
-    Pf = inv_spd(Ysum)  # exactly symmetric already (inv_spd symmetrises)
-    mf = c_einsum("gij,gj->gi", Pf, hsum)
-    wf = np.bincount(g, weights=omegas[i] * W, minlength=G)
-    fused = GaussianMixture.trusted(wf, mf, Pf)
-    return reduce(fused) if reduce is not None else fused
-
-
-def _check_weights(densities, weights):
+def check_weights(densities, weights):
     densities, weights = list(densities), [float(w) for w in weights]
     if not densities or len(densities) != len(weights):
         raise ValueError(f"need one weight per density ({len(densities)} vs {len(weights)})")
@@ -616,65 +321,3 @@ def _check_weights(densities, weights):
                                                        abs_tol=1e-8):
         raise ValueError(f"fusion weights must be non-negative and sum to 1, got {weights}")
     return densities, weights
-
-
-def metropolis_weights(adjacency: np.ndarray) -> np.ndarray:
-    """Metropolis weights ``omega_ij = 1/(1 + max(deg_i, deg_j))`` on edges, ``omega_ii = 1 - sum``.
-
-    ``adjacency (n, n)`` symmetric boolean without self-loops; returns a doubly stochastic
-    ``(n, n)`` matrix (Battistelli et al. 2013, the consensus of seed 000 ref. [13]).
-    """
-    A = np.asarray(adjacency, dtype=bool)
-    if A.ndim != 2 or A.shape[0] != A.shape[1] or not np.array_equal(A, A.T):
-        raise ValueError("adjacency must be a symmetric square matrix")
-    A = A & ~np.eye(len(A), dtype=bool)
-    deg = A.sum(axis=1)
-    W = np.where(A, 1.0 / (1.0 + np.maximum(deg[:, None], deg[None, :])), 0.0)
-    W[np.diag_indices_from(W)] = 1.0 - W.sum(axis=1)
-    return W
-
-
-def optimal_omega(Di: GaussianMixture, Dj: GaussianMixture, criterion: str = "det") -> float:
-    """The ``omega`` in [0, 1] chosen per fusion (§3, our reading).
-
-    ``"det"``: minimise the determinant of the fused (normalised, moment-matched) covariance.
-    ``"chernoff"``: minimise the mass of ``p_i^(1-omega) p_j^omega`` of the normalised inputs
-    (the Chernoff point).
-    """
-    if len(Di) == 0 or len(Dj) == 0:
-        return 0.5
-    pi, pj = Di.normalised(), Dj.normalised()
-
-    def cost(omega: float) -> float:
-        fused = gci_pair(pi, pj, omega)
-        if fused.mass <= 0 or not np.isfinite(fused.mass):
-            return np.inf
-        if criterion == "det":
-            _, cov = fused.moments()
-            return float(np.linalg.slogdet(cov)[1])
-        if criterion == "chernoff":
-            return fused.mass
-        raise ValueError(f"unknown omega criterion {criterion!r}; expected 'det' or 'chernoff'")
-
-    res = minimize_scalar(cost, bounds=(1e-3, 1 - 1e-3), method="bounded",
-                          options={"xatol": 1e-3})
-    return float(res.x)
-
-
-def gci_fuse_optimised(
-    densities: Sequence[GaussianMixture],
-    criterion: str = "det",
-    reduce: Reduce | None = None,
-    cardinality: str = "emd",
-) -> GaussianMixture:
-    """Sequential GCI where each step's ``omega`` is chosen by :func:`optimal_omega`."""
-    densities = list(densities)
-    if not densities:
-        raise ValueError("need at least one density to fuse")
-    acc = densities[0]
-    for D in densities[1:]:
-        acc = gci_combine(acc, D, optimal_omega(acc, D, criterion), cardinality)
-        if reduce is not None:
-            acc = reduce(acc)
-    return acc
-

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracking.fusion import gci_fuse, optimal_omega
+from tracking.fusion import gci_fuse
+from tracking.fusion_rules import optimal_omega
 from tracking.gaussian import symmetrise
 from tracking.imm import POS
 from tracking.mixture import GaussianMixture

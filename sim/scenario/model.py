@@ -26,6 +26,8 @@ PEER_FILTERS = kind_names()
 """The peer kinds known at import (:mod:`sim.kinds`; the loader asks the registry, which also
 knows plug-ins registered later)."""
 FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
+LIE_KINDS = ("empty", "shifted", "inflated", "phantoms", "biased", "stuck")
+"""The lies ``fusion.lie`` names (the test hook; what each does: :mod:`sim.lies`)."""
 """What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
 FTC baseline, or the iterated-corrector GM-PHD (``clustering.estimator``)."""
 PARTITIONS = ("distance", "grid-spectral")

@@ -20,6 +20,7 @@ from sim.scenario.model import (
     EXTRACTION_RULES,
     FLOOD_ESTIMATORS,
     FUSION_RULES,
+    LIE_KINDS,
     MAX_COORDINATE,
     MAX_ROUNDS,
     MAX_SENSORS,
@@ -47,6 +48,7 @@ from sim.scenario.model import (
     Scenario,
     SensorSpec,
     TargetSpec,
+    listing,
 )
 from sim.scenario.tables import Context, Table, brief
 from tracking.reduction import MERGE_RULES
@@ -284,14 +286,10 @@ def _lie(f: Table, sensor_names: list[str]) -> str:
     v = f.raw("lie", "")
     if v == "":
         return ""
-    from sim.lying import LIES
-    from sim.scenario.model import listing
-    from sim.scenario.tables import brief
-
     peer, _, kind = str(v).partition(":")
-    if not isinstance(v, str) or peer not in sensor_names or kind not in LIES:
+    if not isinstance(v, str) or peer not in sensor_names or kind not in LIE_KINDS:
         raise f.fail("lie", f"must be \"PEER:KIND\" with a sensor's name and KIND one of "
-                            f"{listing(LIES)}, got {brief(v)}")
+                            f"{listing(LIE_KINDS)}, got {brief(v)}")
     return v
 
 

@@ -1,0 +1,177 @@
+"""Fusion rules besides GCI: the arithmetic average (AA), the hybrid (AA target weights, GCI
+locations), Metropolis consensus weights and the choice of the GCI weight omega.
+
+Formulas and our readings: docs/algorithms.md "GCI fusion"; the GCI formula itself is
+:mod:`tracking.fusion`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from tracking.fusion import Reduce, check_weights, gci_combine, gci_pair
+from tracking.gaussian import (
+    c_einsum,
+    inv_spd,
+    symmetrise,
+)
+from tracking.mixture import GaussianMixture
+from tracking.reduction import sweep_labels
+
+
+def aa_fuse(
+    densities: Sequence[GaussianMixture],
+    weights: Sequence[float],
+    reduce: Reduce | None = None,
+) -> GaussianMixture:
+    """Arithmetic average ``sum_i omega_i D_i`` (seed 004 baseline): union, scaled, reduced."""
+    densities, weights = check_weights(densities, weights)
+    fused = GaussianMixture.concatenate([D.scaled(w) for D, w in zip(densities, weights,
+                                                                       strict=True)])
+    return reduce(fused) if reduce is not None else fused
+
+
+HYBRID_GATE = 26.0
+"""Default association gate of :func:`hybrid_fuse`: ``(m_i - m_j)' P_i^-1 (m_i - m_j)``. Two
+consistent estimates of one target differ by about ``2 P``, so the form is about twice a
+chi-square with ``d`` degrees of freedom: 26 keeps 99 % of same-target pairs in 4-D (twice the
+99 % point 13.3)."""
+
+
+def hybrid_fuse(
+    densities: Sequence[GaussianMixture],
+    weights: Sequence[float],
+    reduce: Reduce | None = None,
+    gate: float = HYBRID_GATE,
+) -> GaussianMixture:
+    """Arithmetic average for how many targets, geometric average for where they are.
+
+    The hybrid of Li, Fan, Herrero & Corchado 2019 (Inf. Fusion 51, §5: "GA for localisation,
+    AA for cardinality"): the inputs' components are grouped by target (the sweep of
+    :func:`tracking.reduction.sweep_labels` on the union, association gate ``gate``); a group's
+    weight is the AA ``sum_i omega_i W_gi`` of every input's mass in it, so an input that missed
+    or pruned the target lowers it by ``omega_i W`` instead of zeroing it (GCI's product); its
+    Gaussian is the covariance intersection (GCI of one Gaussian each, seed 000 eq. 15-16) of the
+    inputs present, each first moment-matched within the group:
+    ``Y_g = sum_i omega~_gi P_gi^-1``, ``m_g = Y_g^-1 sum_i omega~_gi P_gi^-1 m_gi``,
+    ``omega~_gi = omega_i / sum_(present) omega``. Then ``reduce``.
+    """
+    densities, weights = check_weights(densities, weights)
+    d = densities[0].dim
+    used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0 and len(D)]
+    if not used:
+        return GaussianMixture.empty(d)
+    n = len(used)
+    omegas = np.array([w for _, w in used])
+    own_w = np.concatenate([D.weights for D, _ in used])
+    src = np.repeat(np.arange(n), [len(D) for D, _ in used])
+    union = GaussianMixture.trusted(  # the AA (inputs are validated mixtures: no checks)
+        own_w * omegas[src], np.concatenate([D.means for D, _ in used]),
+        np.concatenate([D.covs for D, _ in used]))
+    # the union's inverses, shared by the sweep and (exactly symmetric covariances, the usual
+    # case: symmetrise is then the identity) the cells of one component
+    Pu = union.covs
+    Yu = inv_spd(Pu)
+    shared = bool((Pu == Pu.swapaxes(1, 2)).all())
+    labels = sweep_labels(union, gate, inv=Yu)
+    G = int(labels.max()) + 1
+    key = labels * n + src  # (group, input) cell of each component
+    order = np.argsort(key, kind="stable")
+    key_s = key[order]
+    starts = np.flatnonzero(np.concatenate(([True], key_s[1:] != key_s[:-1])))
+    cells = key_s[starts]  # the occupied cells
+    w, m, P = own_w[order], union.means[order], union.covs[order]
+    Y = None
+    if len(cells) == len(w) and (w > 0).all():
+        # one component per cell (the common case): its moment match is itself, exactly
+        W, mean, cov = w, m, P
+        if shared:
+            Y = Yu[order]
+    else:
+        cnt = np.diff(np.append(starts, len(w)))
+        cell_of = np.repeat(np.arange(len(cells)), cnt)
+        W = np.add.reduceat(w, starts)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-mass cell: plain mean
+            wn = np.where(W[cell_of] > 0, w / W[cell_of], 1.0 / cnt[cell_of])
+        mean = np.add.reduceat(wn[:, None] * m, starts)  # moment match per cell
+        diff = m - mean[cell_of]
+        cov = np.add.reduceat(wn[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]),
+                              starts)
+    g, i = np.divmod(cells, n)
+    if Y is None:
+        Y = inv_spd(symmetrise(cov))  # (cells, d, d)
+    present_om = np.zeros((G, n))
+    present_om[g, i] = omegas[i]
+    om_t = (present_om / present_om.sum(axis=1, keepdims=True))[g, i]  # omega~ per cell
+    gstarts = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))  # cells are sorted by group
+    Ysum = np.add.reduceat(om_t[:, None, None] * Y, gstarts)  # (G, d, d)
+    hsum = np.add.reduceat(om_t[:, None] * c_einsum("cij,cj->ci", Y, mean), gstarts)
+    Pf = inv_spd(Ysum)  # exactly symmetric already (inv_spd symmetrises)
+    mf = c_einsum("gij,gj->gi", Pf, hsum)
+    wf = np.bincount(g, weights=omegas[i] * W, minlength=G)
+    fused = GaussianMixture.trusted(wf, mf, Pf)
+    return reduce(fused) if reduce is not None else fused
+
+
+def metropolis_weights(adjacency: np.ndarray) -> np.ndarray:
+    """Metropolis weights ``omega_ij = 1/(1 + max(deg_i, deg_j))`` on edges, ``omega_ii = 1 - sum``.
+
+    ``adjacency (n, n)`` symmetric boolean without self-loops; returns a doubly stochastic
+    ``(n, n)`` matrix (Battistelli et al. 2013, the consensus of seed 000 ref. [13]).
+    """
+    A = np.asarray(adjacency, dtype=bool)
+    if A.ndim != 2 or A.shape[0] != A.shape[1] or not np.array_equal(A, A.T):
+        raise ValueError("adjacency must be a symmetric square matrix")
+    A = A & ~np.eye(len(A), dtype=bool)
+    deg = A.sum(axis=1)
+    W = np.where(A, 1.0 / (1.0 + np.maximum(deg[:, None], deg[None, :])), 0.0)
+    W[np.diag_indices_from(W)] = 1.0 - W.sum(axis=1)
+    return W
+
+
+def optimal_omega(Di: GaussianMixture, Dj: GaussianMixture, criterion: str = "det") -> float:
+    """The ``omega`` in [0, 1] chosen per fusion (§3, our reading).
+
+    ``"det"``: minimise the determinant of the fused (normalised, moment-matched) covariance.
+    ``"chernoff"``: minimise the mass of ``p_i^(1-omega) p_j^omega`` of the normalised inputs
+    (the Chernoff point).
+    """
+    if len(Di) == 0 or len(Dj) == 0:
+        return 0.5
+    pi, pj = Di.normalised(), Dj.normalised()
+
+    def cost(omega: float) -> float:
+        fused = gci_pair(pi, pj, omega)
+        if fused.mass <= 0 or not np.isfinite(fused.mass):
+            return np.inf
+        if criterion == "det":
+            _, cov = fused.moments()
+            return float(np.linalg.slogdet(cov)[1])
+        if criterion == "chernoff":
+            return fused.mass
+        raise ValueError(f"unknown omega criterion {criterion!r}; expected 'det' or 'chernoff'")
+
+    res = minimize_scalar(cost, bounds=(1e-3, 1 - 1e-3), method="bounded",
+                          options={"xatol": 1e-3})
+    return float(res.x)
+
+
+def gci_fuse_optimised(
+    densities: Sequence[GaussianMixture],
+    criterion: str = "det",
+    reduce: Reduce | None = None,
+    cardinality: str = "emd",
+) -> GaussianMixture:
+    """Sequential GCI where each step's ``omega`` is chosen by :func:`optimal_omega`."""
+    densities = list(densities)
+    if not densities:
+        raise ValueError("need at least one density to fuse")
+    acc = densities[0]
+    for D in densities[1:]:
+        acc = gci_combine(acc, D, optimal_omega(acc, D, criterion), cardinality)
+        if reduce is not None:
+            acc = reduce(acc)
+    return acc
