@@ -90,7 +90,9 @@ def test_a_flood_of_large_messages_costs_a_receiver_little_memory():
         out, _ = proc.communicate(timeout=90)
         n, base, after = out.split()
         assert int(n) == 300
-        assert float(after) - float(base) < 8.0, (base, after)
+        # a few MB (0.6-5.6 in 12 runs alone, 9.95 once inside the full suite: the allocator's
+        # arenas vary); Zenoh's shared-memory pool, which this guards against, adds 20 MB
+        assert float(after) - float(base) < 12.0, (base, after)
     finally:
         if proc.poll() is None:
             proc.kill()
