@@ -94,12 +94,14 @@ def test_a_frozen_peer_catches_up_and_fuses_again(tmp_path):
     # newest: which one depends on how fast its queue refills; either way every scan is
     # accounted for, and it fuses with its neighbours again
     n = scn.num_scans
-    assert s2["stats"]["scans"] == n - s2["scans_skipped_behind"], s2
+    # every scan was handled or is a miss: skipped to catch up, or refused as stale once the
+    # peer had jumped ahead (which of these, and how many, depends on how the backlog arrived)
+    assert s2["stats"]["scans"] + s2["ospa_misses"]["fused"] == n, s2
     # and fused with its neighbours again right to the end, both ways
     for name in ("s1", "s3"):
         assert s2["stats"]["last_fused_from"][name] >= n - 1, s2["stats"]
         assert summaries[name]["stats"]["last_fused_from"]["s2"] >= n - 1, summaries[name]
     # the skipped scans have no output and are scored as misses, not left out of the mean
     skipped = s2["scans_skipped_behind"]
-    assert s2["ospa_misses"]["fused"] == skipped and s2["ospa_misses"]["local"] == skipped, s2
+    assert s2["ospa_misses"]["fused"] >= skipped and s2["ospa_misses"]["local"] >= skipped, s2
     assert s2["ospa_scored"]["fused"] + s2["ospa_misses"]["fused"] == n, s2
