@@ -32,6 +32,7 @@ def core_snapshot(core) -> dict:
         "mean_ospa_fused": s.mean("fused"),
         "mean_gospa_local": s.results.mean("local"),
         "mean_gospa_fused": s.results.mean("fused"),
+        "results_rows_dropped": s.results.dropped,
         "ospa_misses": dict(s.misses),
         "ospa_scored": dict(s.counts),
         "ospa_unscored": s.unscored,

@@ -32,6 +32,8 @@ class ScanResults:
         self.pos = list(position_index)
         self.rows: list[tuple] = []
         self.dropped = 0
+        self._gospa_sum: dict[str, float] = {}
+        self._gospa_n: dict[str, int] = {}
 
     def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray) -> float:
         """Add an estimate that arrived; its OSPA (the value the summary's mean takes)."""
@@ -51,20 +53,23 @@ class ScanResults:
     def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
              true: np.ndarray, states: np.ndarray | None, truth: np.ndarray,
              parts: tuple[float, float, int, int] | None = None) -> None:
+        g, loc, missed, false = parts or gospa_parts(est, true, self.c, self.p)
+        # the summary's GOSPA mean counts every estimate, kept as a row or not
+        self._gospa_sum[which] = self._gospa_sum.get(which, 0.0) + g
+        self._gospa_n[which] = self._gospa_n.get(which, 0) + 1
         if len(self.rows) >= MAX_ROWS:
             self.dropped += 1
             return
-        g, loc, missed, false = parts or gospa_parts(est, true, self.c, self.p)
         tracks = [] if states is None else np.asarray(states, float).tolist()
         self.rows.append((int(k), which, scored, float(value), g, loc, missed, false,
                           len(est), len(true), tracks, np.asarray(truth, float).tolist()))
 
-    def mean(self, which: str, column: str = "gospa") -> float:
-        """Mean of a metric column over this peer's ``which`` rows (misses included, as the
-        summary's OSPA means count them); NaN with no rows."""
-        i = COLUMNS.index(column) - 1  # rows hold the columns after "peer"
-        values = [r[i] for r in self.rows if r[1] == which]
-        return float(np.mean(values)) if values else float("nan")
+    def mean(self, which: str) -> float:
+        """Mean GOSPA of this peer's ``which`` estimates, misses included (as the summary's
+        OSPA means count them), over every estimate, also those past :data:`MAX_ROWS` that
+        the table no longer keeps; NaN with none."""
+        n = self._gospa_n.get(which, 0)
+        return self._gospa_sum[which] / n if n else float("nan")
 
     def meta(self) -> dict:
         """What a reader needs besides the rows: where the position sits in a state row, and
