@@ -78,6 +78,7 @@ def _progress_lines(err: str) -> list[str]:
     return [ln for ln in err.splitlines() if ln.startswith("[")]
 
 
+@pytest.mark.network  # starts worker processes
 def test_pool_gives_results_in_call_order_whatever_the_workers():
     calls = [(Toy(2.0), r) for r in range(9)]
     serial = map_runs(toy_once, calls, jobs=1, progress=False)
@@ -102,6 +103,7 @@ def test_registry_finds_each_seeds_study_by_what_it_reads():
         studies.get("nope")
 
 
+@pytest.mark.network  # starts worker processes
 def test_a_registered_study_runs_through_experiment(toy, tmp_path, capsys):
     rc = main(["experiment", NAME, "--runs", "5", "--jobs", "2", "--set", "scale=3",
                "--out", str(tmp_path / "out")])
@@ -119,6 +121,7 @@ def test_a_registered_study_runs_through_experiment(toy, tmp_path, capsys):
     assert outcome.results == want and outcome.runs == range(5)
 
 
+@pytest.mark.network  # starts worker processes
 def test_a_registered_study_runs_as_a_campaign_and_reports(toy, tmp_path, capsys):
     pytest.importorskip("pyarrow", reason="campaign results need pyarrow")
     path = tmp_path / "toy.toml"
