@@ -90,8 +90,12 @@ class ResultStore:
         path = self.folder / f"{row['key']}.parquet"
         tmp = self.folder / f".{row['key']}.{uuid.uuid4().hex}.tmp"
         table = pa.Table.from_pylist([_normalise(row)])
-        pq.write_table(table, tmp)
-        os.replace(tmp, path)
+        try:
+            pq.write_table(table, tmp)
+            os.replace(tmp, path)
+        except BaseException:  # an interrupt mid-write leaves no half-written file behind
+            tmp.unlink(missing_ok=True)
+            raise
         if len(self._written) < self.KEEP:
             self._written[path] = table
         return path
@@ -124,8 +128,12 @@ class ResultStore:
         return table.take(pa.array(idx, pa.int64()))
 
     def compact(self) -> Path | None:
-        """Fold the one-row files into one ``part-*.parquet`` (then remove them)."""
+        """Fold the one-row files into one ``part-*.parquet`` (then remove them), and remove
+        temporary files a killed writer left (the campaign's lock makes this the only writer)."""
         pa, pq = need_pyarrow()
+        if self.folder.is_dir():
+            for p in self.folder.glob(".*.tmp"):
+                p.unlink(missing_ok=True)
         loose = [p for p in self._files() if not p.name.startswith("part-")]
         if len(loose) < 2:
             return None

@@ -514,3 +514,30 @@ def test_compaction_from_memory_equals_reading_the_files_back(tmp_path, monkeypa
         tables.append(sorted(zip(*(t.column(c).to_pylist() for c in sorted(t.column_names)),
                                  strict=True)))
     assert tables[0] == tables[1] == tables[2] and len(tables[0]) == 6
+
+
+def test_an_interrupted_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    """SIGTERM during a row's write (the campaign's interrupt) removes the half-written file;
+    compaction removes what a SIGKILLed writer left, so the folder holds only stored rows."""
+    import pyarrow.parquet as pq
+
+    row = {"key": "k0", "cell": 0, "run": 0, "fused_ospa": 1.0}
+    store = ResultStore(tmp_path)
+    store.write(row)
+    real = pq.write_table
+
+    def interrupted(table, where, **kw):
+        real(table, where, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pq, "write_table", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        store.write({**row, "key": "k1"})
+    monkeypatch.setattr(pq, "write_table", real)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k0.parquet"]
+    (tmp_path / ".k2.dead.tmp").write_bytes(b"half")  # a killed writer's leftover
+    store.write({**row, "key": "k3"})
+    assert store.compact() is not None
+    files = [p.name for p in tmp_path.iterdir()]
+    assert len(files) == 1 and files[0].startswith("part-"), files
+    assert store.done_keys() == {"k0", "k3"}

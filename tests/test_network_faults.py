@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from peers.scan_results import read_part
 from peers.session import open_session
 from protocol.codec import VERSION, decode, encode, pack_mixture
 from protocol.keys import Keys
@@ -257,6 +258,12 @@ def test_ten_thousand_fuzzed_messages(tmp_path):
     assert 20 < n < scn.num_scans and summaries["s3"]["scans"] == n, summaries
     twin = run_twin(load_scenario("seed000", overrides=parse_overrides(
         [*base, f"scenario.num_scans={n}"])), 0)
+    fused = {}  # per peer: scan -> OSPA of each scored fused output (its per-scan results)
+    for name in ("s2", "s3"):
+        t, _ = read_part(tmp_path / f"peer-{name}.scans.msgpack")
+        fused[name] = {k: v for k, est, ok, v in zip(t["scan"], t["estimate"], t["scored"],
+                                                     t["ospa"], strict=True)
+                       if est == "fused" and ok}
     for name in ("s2", "s3"):  # they subscribe to s1's estimate key
         s = summaries[name]
         assert s["stop_reason"] == "end of run" and s["internal_errors"] == {}, s
@@ -270,7 +277,18 @@ def test_ten_thousand_fuzzed_messages(tmp_path):
         assert s["rejected_total"] - early + decoded_ok >= got - 5, s
         # s1's genuine estimates still got through: fused as in the clean twin run
         assert s["nale"]["accepted"] >= n - 2
-        assert abs(s["mean_ospa_fused"] - twin.peers[name].mean_ospa("fused")) < 5.0
+        # the run was ended by stopping the world mid-flight, and on a busy machine a scan or
+        # two may go to its deadline or be skipped to catch up: those are misses, counted here
+        # and bounded; every scan the peer did score is compared with the same scan of the twin
+        assert s["ospa_misses"]["fused"] <= 3, s["ospa_misses"]
+        mine = fused[name]
+        t = twin.peers[name].scorer.results.table(name)
+        ref = {k: v for k, est, v in zip(t["scan"], t["estimate"], t["ospa"], strict=True)
+               if est == "fused"}
+        both = sorted(set(mine) & set(ref))
+        assert len(both) >= n - 3, (len(both), n)
+        gap = np.mean([mine[k] - ref[k] for k in both])
+        assert abs(gap) < 5.0, (gap, s["ospa_misses"])
 
 
 @pytest.mark.network
