@@ -203,6 +203,8 @@ class PeerCore:
         if msg.sensor != route.name:
             return self._reject("spoofed")
         c, k, h = self.consensus, msg.k, self.cfg.horizon
+        if self.cfg.last_scan is not None and k > self.cfg.last_scan:
+            return self._reject("future")  # past the run's end: no world sends it
         closed: list[Output] = []  # the scan a pause interrupted, fused on return
         quiet = (self.last_accept is None
                  or now - self.last_accept > self.cfg.quiet * self.cfg.interval)

@@ -61,6 +61,11 @@ class CoreConfig:
     quiet: float = 3.0
     """Intervals without an accepted scan after which a scan outside the horizon is taken as
     a new start of the scan numbering (a late join, a restarted world)."""
+    last_scan: int | None = None
+    """The run's last scan index (the scenario's ``num_scans``), or None if open-ended. A scan
+    stamped after it is refused as ``future`` even after a quiet spell: a restarted world
+    numbers within the run, so such a scan is forged (in plain mode anyone can put one) and,
+    followed as a new numbering, would leave the peer refusing every real scan as stale."""
     rate_factor: float = 4.0
     """Messages per sender allowed per scan, as a multiple of what an honest one sends."""
     world_grace: float | None = None

@@ -85,7 +85,7 @@ def make_peer(scn: Scenario, name: str, run: int = 0, *, network: str = "twin",
                     truth_function(scn, run) if score_truth else None)
     cfg = CoreConfig(name=name, sensor=name, network=network,
                      interval=scn.scan_period / (speed or scn.network.speed),
-                     deadline=scn.network.deadline)
+                     deadline=scn.network.deadline, last_scan=scn.num_scans)
     core = PeerCore(cfg, consensus, scorer)
     liar, _, lie = scn.fusion.lie.partition(":")
     if liar == name:  # the test hook fusion.lie (sim.lying)

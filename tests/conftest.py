@@ -45,3 +45,14 @@ def _no_processes_unless_marked(request, monkeypatch):
     else:
         monkeypatch.setattr(zenoh, "open", refuse("a Zenoh session"))
     yield
+
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (``-n 2 --dist loadgroup``, pyproject's default options) the tests
+    that start processes form one group, run one after another on one worker, so two process
+    runs never compete for the machine's two cores; the fast tests go to whichever worker is
+    free, and their CPU work overlaps the process tests' waiting (scans come at 10 a second)."""
+    for item in items:
+        if item.get_closest_marker("network") is not None:
+            item.add_marker(pytest.mark.xdist_group("processes"))

@@ -78,7 +78,9 @@ def test_every_process_finished_cleanly(network_run):
     assert set(summaries) == {"s1", "s2", "s3"}
     for s in summaries.values():
         assert s["stop_reason"] == "end of run"
-        assert s["scans"] == SCANS
+        # every scan handled, or (a peer behind on a busy machine skips to catch up) a miss
+        assert s["scans"] + s["ospa_misses"]["fused"] == SCANS, s
+        assert s["ospa_misses"]["fused"] <= 3, s
 
 
 def test_peers_received_and_fused_each_others_estimates(network_run):
@@ -86,9 +88,9 @@ def test_peers_received_and_fused_each_others_estimates(network_run):
     for name, s in summaries.items():
         # two neighbours, one estimate per scan each (a few may miss a deadline)
         assert s["received_by_kind"]["estimate"] >= 2 * SCANS - 10, name
-        assert s["stats"]["fusions"] == SCANS
+        assert s["stats"]["fusions"] == s["scans"]
         assert s["stats"]["fused_inputs"] >= 2 * SCANS - 10, name
-        assert s["messages_sent"] == 2 * SCANS  # an estimate and the tracks per scan
+        assert s["messages_sent"] == 2 * s["scans"]  # an estimate and the tracks per scan
 
 
 def test_fused_ospa_beats_local_ospa(network_run):
