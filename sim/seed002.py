@@ -31,8 +31,10 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sim.extended import make_et_filter  # noqa: E402
+from sim.report_plots import plt_module
 from sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides  # noqa: E402
 from sim.studies.pool import map_runs  # noqa: E402
+from sim.twin import run_twin
 from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
 from tracking.metrics import cardinality_error, ospa  # noqa: E402
 from tracking.partition import adjusted_rand_index  # noqa: E402
@@ -179,8 +181,6 @@ def network_experiment(runs: int, first_run: int = 0, progress: bool = True,
                        base: Scenario | None = None) -> dict[str, dict[str, float]]:
     """The 3-peer network of seed002.toml on the twin (same peers as the processes): mean
     OSPA of each peer's local ET-GM-PHD and of its GCI-fused estimate over ``runs`` runs."""
-    from sim.twin import run_twin
-
     scn = base or load_scenario("seed002")
     per: dict[str, dict[str, list[float]]] = {n: {"local": [], "fused": []}
                                               for n in scn.sensor_names}
@@ -197,10 +197,7 @@ def network_experiment(runs: int, first_run: int = 0, progress: bool = True,
 def write_png(rows: list[dict], path: str) -> None:
     """Fig. 6 and Table 3 side by side: mean OSPA and partition time per clutter level, ours
     (solid) and the paper's times (dashed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for part, color in zip(PARTITIONS, ("tab:blue", "tab:orange"), strict=True):

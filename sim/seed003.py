@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.report_plots import plt_module
 from sim.seed003_filters import (  # noqa: F401  (re-exported)
     METHODS,
     coordinated_turn,
@@ -46,6 +47,7 @@ from sim.seed003_world import (  # noqa: F401  (re-exported)
     truth,
 )
 from sim.studies.pool import map_runs
+from tracking.fuzzy import FuzzySystem, fit, to_config
 from tracking.imm import POS, VEL
 
 # -- Monte Carlo ------------------------------------------------------------------------------
@@ -127,8 +129,6 @@ def training_samples(cfg: Mapping, run: int, n_sensors: int = 2
 def train_fuzzy(cfg: Mapping, runs: int, first_run: int = 10000, what: str = "all") -> dict:
     """Fit the fuzzy system on training runs ``first_run..`` (never the evaluation runs) and
     return the fitted ``[fuzzy]`` table."""
-    from tracking.fuzzy import FuzzySystem, fit, to_config
-
     parts = [training_samples(cfg, r) for r in range(first_run, first_run + runs)]
     g, d, t = (np.concatenate(c) for c in zip(*parts, strict=True))
     fis = fit(FuzzySystem.from_config(cfg["fuzzy"]), g, d, t, what)
@@ -242,10 +242,7 @@ def write_csv(rows: Sequence[dict], over_time: Mapping, folder: Path) -> list[Pa
 def plot_rmse(over_time: Mapping, cfg: Mapping, path: Path) -> Path:
     """Position RMSE per scan (all runs, lost tracks included, log scale) as a PNG, the turn
     shaded."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     fig, ax = plt.subplots(figsize=(8, 4.5))
     first, last = cfg["scenario"]["turn_scans"]

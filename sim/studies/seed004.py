@@ -29,15 +29,15 @@ def load(req: Request) -> list[s4.Seed004]:
 
 
 def run_once(scn: s4.Seed004, run: int) -> dict[str, dict[str, float]]:
-    # sim.seed004 imports sklearn (FTC's DBSCAN), 1-3 s: not for every 'experiment' that asks
-    # this study whether it reads a scenario
+    # heavy optional dependency: sklearn (sim.seed004 imports it for FTC's DBSCAN, 1-3 s: not
+    # for every 'experiment' that asks this study whether it reads a scenario)
     from sim import seed004
 
     return seed004.run_once(scn, run, True)
 
 
 def summarise(scn: s4.Seed004, per_run: list) -> dict[str, dict[str, float]]:
-    from sim import seed004  # sklearn, as above
+    from sim import seed004  # heavy optional dependency: sklearn, as above
 
     return seed004.aggregate(per_run)
 
