@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from sensornet.cli import budgets, build_parser, common, main
+from sensornet.cli import COMMANDS, budgets, build_parser, common, main
 from sensornet.cli.commands.peer import _prepare_peer
 from sim.scenario import load_scenario, scenario_text
 
@@ -188,8 +188,9 @@ def test_demo_is_run_seed000_with_a_viewer():
     demo, run = vars(parser.parse_args(["demo"])), vars(parser.parse_args(["run", "seed000"]))
     assert demo.pop("viewer") == "spawn" and run.pop("viewer") is None
     for d in (demo, run):
-        d.pop("func"), d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
+        d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
     assert demo == run
+    assert COMMANDS["demo"].split(":")[0] == COMMANDS["run"].split(":")[0]  # one module
     assert load_scenario("seed000").birth.model == "truth"  # chosen in the scenario file
 
 
