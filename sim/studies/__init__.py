@@ -102,6 +102,16 @@ def report_kinds() -> tuple[str, ...]:
     return tuple(s.report_kind or s.name for s in map(get, names()) if s.report is not None)
 
 
+def main(name: str, argv: list[str] | None = None) -> int:
+    """``python -m sim.<module>`` of study ``name``: its ``command`` hook (the module's
+    ``__main__`` block calls this, so the study module, which imports the computation, is
+    loaded by name and the computation never imports its study)."""
+    study = get(name)
+    if study.command is None:
+        raise KeyError(f"study {name!r} has no command line; use: sensornet experiment")
+    return study.command(argv)
+
+
 def register(study):
     """Add (or replace) a study in this process; returns it."""
     _registered[study.name] = study
