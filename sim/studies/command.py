@@ -20,17 +20,19 @@ from tracking.idpc import MissingBaseline
 
 
 def parser(name: str, doc: str | None, runs: int, jobs: bool = True,
-           set_help: str = "override a scenario value (TOML value), e.g. fusion.rule=aa "
-                           "(repeatable)") -> argparse.ArgumentParser:
+           set_help: str | None = "override a scenario value (TOML value), e.g. "
+                                  "fusion.rule=aa (repeatable)") -> argparse.ArgumentParser:
     """``--runs``, ``--first-run``, ``--jobs`` (unless the study times its methods in one
-    process), ``--set`` and ``--quiet``."""
+    process), ``--set`` (unless ``set_help`` is None: no scenario file) and ``--quiet``."""
     ap = argparse.ArgumentParser(prog=f"python -m sim.{name}",
                                  description=(doc or "").split("\n")[0])
     ap.add_argument("--runs", type=int, default=runs, help=f"Monte Carlo runs (default {runs})")
     ap.add_argument("--first-run", type=int, default=0, help="index of the first run")
     if jobs:
         ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=set_help)
+    if set_help is not None:
+        ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help=set_help)
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     return ap
 
