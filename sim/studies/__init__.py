@@ -17,6 +17,7 @@ from typing import Any
 STUDIES: dict[str, str] = {
     "seed004": "sim.studies.seed004:STUDY",
     "seed003": "sim.studies.seed003:STUDY",
+    "seed003-peers": "sim.studies.seed003_peers:STUDY",
     "seed002": "sim.studies.seed002:STUDY",
     "seed001": "sim.studies.seed001:STUDY",
     "twin": "sim.studies.network:TWIN",
