@@ -10,9 +10,9 @@ a small one and runs it through ``experiment`` and a campaign.
 
 from __future__ import annotations
 
-import importlib
-import os
 from typing import Any
+
+from sim import plugins
 
 STUDIES: dict[str, str] = {
     "seed004": "sim.studies.seed004:STUDY",
@@ -43,13 +43,7 @@ _loaded: dict[str, Any] = {}
 
 
 def _plugins() -> dict[str, str]:
-    out = {}
-    for item in filter(None, (x.strip() for x in os.environ.get(PLUGINS_ENV, "").split(","))):
-        name, sep, target = item.partition("=")
-        if not sep or ":" not in target:
-            raise ValueError(f"{PLUGINS_ENV}: {item!r} is not 'name=module:attribute'")
-        out[name.strip()] = target.strip()
-    return out
+    return plugins.from_env(PLUGINS_ENV)
 
 
 def names() -> tuple[str, ...]:
@@ -67,8 +61,7 @@ def get(name: str):
     table = {**STUDIES, **_plugins()}
     if name not in table:
         raise KeyError(f"unknown study {name!r}; known: {', '.join(names())}")
-    module, attr = table[name].split(":")
-    study = getattr(importlib.import_module(module), attr)
+    study = plugins.load(table[name])
     if getattr(study, "name", None) != name:
         raise TypeError(f"{table[name]} is not the study {name!r}")
     _loaded[name] = study
