@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -225,6 +225,7 @@ def corrector_order(adjacency: np.ndarray) -> np.ndarray:
     """The iterated corrector's sensor order (seed 004, docs/seed004.md): depth-first over the
     graph from sensor 0, the order in which the offline IC (``sim.seed004``) passes the density
     along; sensors it does not reach (a disconnected graph) follow in index order."""
+    # heavy dependency: scipy.sparse (only the iterated corrector's order needs it)
     from scipy.sparse.csgraph import depth_first_order
 
     A = np.asarray(adjacency, dtype=bool)
@@ -288,8 +289,6 @@ class IcFloodEstimator(FloodEstimator):
         """This scan's prediction corrected sensor by sensor with the held scans of ``scans``,
         in ``order`` (absent sensors skipped); ``commit``: keep it as the carried posterior
         and count. A :class:`~tracking.mixture.GaussianMixture`."""
-        from dataclasses import replace
-
         if self.prior is None:
             raise ValueError("posterior before the first scan")
         held = [o for o in self.order if o in scans.scans]

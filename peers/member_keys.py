@@ -16,12 +16,14 @@ folder in secure mode is :class:`peers.security.Security`.
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import datetime
 import ipaddress
 import json
 import os
 import stat
+import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -41,6 +43,7 @@ DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 
 # -- keys and certificates --------------------------------------------------------------------
 def _name(cn: str, org: str | None = None):
+    # heavy dependency: cryptography (its OpenSSL bindings load only for secure runs)
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -56,8 +59,6 @@ def _write(path: Path, data: bytes, private: bool = False) -> None:
     ``os.replace``. No fixed ``NAME.tmp`` name, so neither a leftover file (its mode kept by
     ``O_TRUNC``) nor a planted symlink there decides where or how a key is written. Public
     files (certificates, the roster) are made 0644 before they take their name."""
-    import tempfile
-
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -99,6 +100,7 @@ def _read_private(path: Path) -> bytes:
 
 
 def _san(hosts: Iterable[str]):
+    # heavy dependency: cryptography, as above
     from cryptography import x509
 
     names = []
@@ -121,6 +123,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
     member also gets a message-signing key ``NAME.ed25519`` (made where missing, new with
     ``overwrite``), whose public half goes into the roster, ``members.json``.
     """
+    # heavy dependency: cryptography, as above
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -215,8 +218,7 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
 def _public_b64(public_key) -> str:
     """An Ed25519 public key as the base64 of its DER SubjectPublicKeyInfo: the one line
     between the PEM markers of ``openssl pkey -in NAME.ed25519 -pubout``."""
-    import base64
-
+    # heavy dependency: cryptography, as in _name
     from cryptography.hazmat.primitives import serialization
 
     der = public_key.public_bytes(serialization.Encoding.DER,
@@ -226,8 +228,7 @@ def _public_b64(public_key) -> str:
 
 def load_roster(folder: str | Path) -> dict:
     """The members' message-signing public keys from ``members.json`` (name -> key)."""
-    import base64
-
+    # heavy dependency: cryptography, as in _name
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
     from cryptography.hazmat.primitives.serialization import load_der_public_key
 
@@ -245,6 +246,7 @@ def load_roster(folder: str | Path) -> dict:
 
 def keys_network(folder: str | Path) -> str:
     """The network a keys folder was made for (its CA's organisation name)."""
+    # heavy dependency: cryptography, as above
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -260,6 +262,7 @@ def keys_network(folder: str | Path) -> str:
 
 
 def common_name(cert_path: Path) -> str:
+    # heavy dependency: cryptography, as above
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 

@@ -47,6 +47,7 @@ class Recorder:
     """Writes one peer's core inputs (and its published tracks) to an MCAP file."""
 
     def __init__(self, path: Path, meta: dict[str, str]) -> None:
+        # heavy dependency: mcap (only --record and replay need it)
         from mcap.writer import CompressionType, Writer
 
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -112,6 +113,7 @@ def _record(topic: str, encoding: str, data: bytes) -> list:
 def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
     """The metadata and the records ``(topic, record)`` of a recording, in order; a file that
     is not a complete MCAP file is a one-line :class:`ValueError`."""
+    # heavy dependency: mcap, as in Recorder
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 

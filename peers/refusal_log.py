@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 import threading
+
+import zenoh
 
 ACL_LOG = "zenoh::net::routing::interceptor::access_control=trace"
 """Zenoh reports each refusal only as a trace line of its access-control module (the
@@ -40,9 +43,6 @@ class RefusalLog:
 
     def start(self) -> RefusalLog:
         global _log_started
-        import sys
-
-        import zenoh
 
         sys.stdout.flush()
         r, w = os.pipe()
@@ -109,8 +109,6 @@ class RefusalLog:
 
     def stop(self) -> None:
         """Point descriptor 1 back at the real stdout and pass on what is left."""
-        import sys
-
         if self._saved is None:
             return
         try:

@@ -126,6 +126,7 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
     world logs), for scenarios whose region dwarfs the target and its particle cloud;
     ``imm``: the model probabilities in view instead of the component counts.
     """
+    # heavy dependency: rerun (runs without a recording never load it)
     import rerun.blueprint as rrb
 
     hidden = rrb.PlotLegend(visible=False)  # the legend panel names the colours instead

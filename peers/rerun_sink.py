@@ -22,6 +22,11 @@ layout whatever order the processes connect in.
 from __future__ import annotations
 
 import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -54,9 +59,6 @@ from tracking.mixture import GaussianMixture
 
 def viewer_executable() -> str | None:
     """The ``rerun`` viewer installed with the SDK (next to this Python), else from PATH."""
-    import shutil
-    import sys
-
     here = Path(sys.executable).with_name("rerun")
     return str(here) if here.is_file() else shutil.which("rerun")
 
@@ -67,11 +69,6 @@ def spawn_viewer(port: int = 9876) -> bool:
     Without a display or without the viewer binary it prints one line and returns False: the
     recording still goes to the ``.rrd`` files. A viewer already on ``port`` is reused.
     """
-    import socket
-    import subprocess
-    import sys
-    import time
-
     with socket.socket() as probe:
         if probe.connect_ex(("127.0.0.1", port)) == 0:
             return True  # a viewer (or server) is already listening
@@ -159,6 +156,7 @@ class RerunSink:
         if path is None and not viewer:
             return self
         os.environ.setdefault("RERUN_ANALYTICS", "0")
+        # heavy dependency: rerun (runs without a recording never load it)
         import rerun as rr
 
         if self.own_stream:
@@ -336,6 +334,7 @@ class TrackLabels:
         self._next = 0
 
     def assign(self, xy: np.ndarray) -> list[int]:
+        # heavy dependency: scipy.optimize (only the viewer's colour matching needs it)
         from scipy.optimize import linear_sum_assignment
 
         xy = np.asarray(xy, float).reshape(-1, 2)

@@ -136,7 +136,7 @@ def merge_parts(parts: list[Path], path: Path) -> Path | None:
 def write_parquet(columns: dict[str, list], meta: dict, path: Path) -> Path:
     """Write a results table (:data:`COLUMNS`, ``meta`` as the file's key-value metadata)
     atomically (temporary name, then rename)."""
-    import pyarrow as pa  # heavy optional dependency: loaded only when a run writes results
+    import pyarrow as pa  # heavy optional dependency: pyarrow (only writing results)
     import pyarrow.parquet as pq
 
     path = Path(path)
@@ -150,7 +150,7 @@ def write_parquet(columns: dict[str, list], meta: dict, path: Path) -> Path:
 
 def read_table(path: Path) -> tuple[dict[str, list], dict]:
     """``(columns, meta)`` of a ``results.parquet``; ``ValueError`` if it is not one."""
-    import pyarrow.parquet as pq  # heavy optional dependency, see write_parquet
+    import pyarrow.parquet as pq  # heavy optional dependency: pyarrow
 
     table = pq.read_table(path)
     raw = (table.schema.metadata or {}).get(b"sensornet")
@@ -161,7 +161,7 @@ def read_table(path: Path) -> tuple[dict[str, list], dict]:
 
 def schema():
     """The pyarrow schema of a results table."""
-    import pyarrow as pa  # heavy optional dependency, see write_parquet
+    import pyarrow as pa  # heavy optional dependency: pyarrow
 
     rows = pa.list_(pa.list_(pa.float64()))
     return pa.schema([("peer", pa.string()), ("scan", pa.int64()), ("estimate", pa.string()),

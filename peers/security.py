@@ -100,6 +100,7 @@ class Security:
     def signer(self):
         """This member's :class:`protocol.envelope.Signer` (its ``NAME.ed25519`` key), checked
         against the roster's public key for it."""
+        # heavy dependency: cryptography (peers.member_keys: secure runs only)
         from cryptography.hazmat.primitives.serialization import load_pem_private_key
 
         path = self.folder / f"{self.member}{SIGN_KEY}"

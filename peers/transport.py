@@ -13,6 +13,7 @@ import queue
 import time
 
 import zenoh
+import zenoh.ext as zx
 
 from peers.admission import Admission, parse_key
 from peers.refusal_log import RefusalLog
@@ -41,8 +42,6 @@ def recovering_publisher(session, key: str, express: bool = True):
     :data:`RECOVER_CACHE` and heartbeats, so a subscriber that missed some (a router's outage)
     gets them from the cache. Replies to such queries are not ``express``: the subscriber
     tells a recovered message from a live one by that (``express`` must be true here)."""
-    import zenoh.ext as zx
-
     return zx.declare_advanced_publisher(
         session, key, congestion_control=zenoh.CongestionControl.BLOCK, express=express,
         cache=zx.CacheConfig(RECOVER_CACHE, replies_config=zx.RepliesConfig(express=False)),
@@ -53,8 +52,6 @@ def recovering_subscriber(session, key: str, callback, on_miss):
     """Zenoh's advanced subscriber on ``key``: asks a :func:`recovering_publisher` for what it
     missed (on a gap in the numbers or a heartbeat ahead of it) and delivers in order;
     ``on_miss(n)`` for ``n`` messages the publisher's cache no longer held."""
-    import zenoh.ext as zx
-
     sub = zx.declare_advanced_subscriber(session, key, callback,
                                          recovery=zx.RecoveryConfig(heartbeat=True))
     listener = sub.sample_miss_listener(lambda miss: on_miss(miss.nb))

@@ -128,6 +128,7 @@ class Verifier:
         ``check_signature=False``: the trailer and the replay check only, for a message whose
         sender the transport has already proven (a direct mutual-TLS link whose access control
         lets only the key's owner put on it: see ``peers.transport``)."""
+        # heavy dependency: cryptography (its OpenSSL bindings load only where messages are signed)
         from cryptography.exceptions import InvalidSignature
 
         if not is_sealed(payload):

@@ -97,7 +97,7 @@ class Run:
 
     def to_pandas(self):
         """The per-scan table as a pandas DataFrame (``pip install pandas``)."""
-        import pandas as pd  # optional: only this method needs pandas
+        import pandas as pd  # heavy optional dependency: pandas
 
         return pd.DataFrame({name: self.columns[name] for name in COLUMNS})
 

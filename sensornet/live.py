@@ -19,6 +19,9 @@ from collections import Counter, defaultdict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import zenoh
+
+from peers.session import open_session
 from protocol.codec import Rejected, decode
 from protocol.encodings import parse
 from protocol.envelope import inner, is_sealed
@@ -110,8 +113,6 @@ class Tap:
     dropped: int = 0
 
     def open(self) -> None:
-        from peers.session import open_session  # Zenoh: the pure modules above stay I/O-free
-
         keys = Keys(self.network)
         self.verifier = self.security.verifier() if self.security is not None else None
         self.session = open_session((), list(self.connect), self.config,
@@ -147,8 +148,6 @@ class Tap:
 
 def _overlaps(a: str, b: str) -> bool:
     """Whether key expressions ``a`` and ``b`` can match a common key (Zenoh's rule)."""
-    import zenoh  # only here: this module's describe() is used without Zenoh too
-
     return zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,8 +79,6 @@ class Campaign:
 
 
 def task_key(cell_hash: str, runner: str, run: int, version: str) -> str:
-    import hashlib
-
     return hashlib.sha256(f"{cell_hash}/{runner}/{run}/{version}".encode()).hexdigest()[:24]
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 from sim.campaign_model import Campaign, CampaignError, Cell
 from sim.campaign_run import lock_alive, read_lock
-from sim.results import ResultStore, is_timing
+from sim.results import ResultStore, is_timing, need_pyarrow
 
 # --------------------------------------------------------------------------------------------
 # Status and progress
@@ -105,8 +105,7 @@ def results_table(folder: Path, manifest: dict[str, Any] | None = None,
                   complete_only: bool = False):
     """The campaign's rows in (cell, run) order, from the manifest's keys (rows not yet
     computed are absent). Columns ``cell``/``cell_label`` are the manifest's."""
-    import pyarrow as pa
-
+    pa, _ = need_pyarrow()
     manifest = manifest or read_manifest(folder)
     order = [(cell["index"], cell["label"], k) for cell in manifest["cells"]
              for k in cell["keys"]]

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -69,9 +71,6 @@ def read_lock(folder: Path) -> dict[str, Any] | None:
 
 def lock_alive(lock: dict[str, Any]) -> bool:
     """Whether the process that wrote ``lock`` still runs (one on another host: assumed)."""
-    import os
-    import socket
-
     if lock.get("host") != socket.gethostname():
         return True  # cannot be checked from here
     pid = lock.get("pid")
@@ -89,9 +88,6 @@ def lock_alive(lock: dict[str, Any]) -> bool:
 
 def _claim(folder: Path) -> Path:
     """Write the folder's lock (refused while another live process holds it)."""
-    import os
-    import socket
-
     held = read_lock(folder)
     if held is not None and held.get("pid") != os.getpid() and lock_alive(held):
         raise CampaignError(f"{folder}: the campaign is running already (pid {held.get('pid')} "

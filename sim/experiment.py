@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.build import make_filter, make_reducer
+from sim.report_plots import plt_module
 from sim.scenario import Scenario
 from sim.studies.pool import map_runs
 from sim.world import generate_run
@@ -235,10 +236,7 @@ def write_outputs(result: ExperimentResult, folder: Path) -> list[Path]:
 
 
 def _plot(result: ExperimentResult, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     K = result.scenario.num_scans
     k = np.arange(1, K + 1)

@@ -20,6 +20,7 @@ communication cost.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 import sys
@@ -30,8 +31,11 @@ from typing import Any
 import numpy as np
 
 from sim.campaign import Campaign, CampaignError, Cell, task_key
+from sim.graphs import network_scenario
+from sim.report_plots import plt_module
+from sim.results import ResultStore
 from sim.runners import code_version, scenario_hash, scenario_source
-from sim.scenario import ScenarioError, load_scenario
+from sim.scenario import ScenarioError, builtin_scenarios, load_scenario
 
 STUDY_KIND = "fusion-quality"
 NO_FUSION = "none"
@@ -80,9 +84,6 @@ def _table_list(data: dict, key: str, label: str, required: tuple[str, ...],
 
 def _scenario(spec: str, base: Path | None, label: str) -> tuple[str, str | None]:
     """``(name, text)`` of a graph's scenario, as campaign tasks carry it."""
-    from sim.graphs import network_scenario
-    from sim.scenario import builtin_scenarios
-
     if spec.startswith("circulant:"):
         try:
             _, n, d = spec.split(":")
@@ -208,6 +209,7 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
 
 def interval(x: np.ndarray) -> tuple[float, float]:
     """Mean and the half-width of its 95 % Student-t interval over the runs (nan for one run)."""
+    # heavy dependency: scipy.stats (only the summary's intervals need it)
     from scipy.stats import t
 
     x = np.asarray(x, float)
@@ -220,8 +222,6 @@ def interval(x: np.ndarray) -> tuple[float, float]:
 def summarise(folder: Path) -> list[dict]:
     """One row per cell of the study in ``folder``: its values, runs, and each metric's mean
     and 95 % half-width over the runs (a cell's missing runs are reported, never averaged)."""
-    from sim.results import ResultStore
-
     manifest = json.loads((folder / "manifest.json").read_text())
     table = ResultStore(folder / "results").read().to_pylist()
     by_key = {r["key"]: r for r in table}
@@ -277,10 +277,7 @@ def format_markdown(rows: list[dict]) -> str:
 def plot(rows: list[dict], out: Path) -> list[Path]:
     """``fusion-study-rounds.png`` (OSPA against L per rule, a panel per graph, at the first
     condition) and ``fusion-study-cost.png`` (OSPA against tuples per peer per scan)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     out.mkdir(parents=True, exist_ok=True)
     first = (rows[0]["pd"], rows[0]["clutter"])
@@ -368,8 +365,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.md:
         Path(a.md).write_text(text)
     if a.csv:
-        import csv
-
         with open(a.csv, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader()

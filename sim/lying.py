@@ -49,6 +49,7 @@ from sim.lies import (  # noqa: F401  (the lies live in sim.lies; named here as 
     phantom_positions,
 )
 from sim.peers import make_peer
+from sim.report_plots import plt_module
 from sim.scenario import Scenario, ScenarioError, load_scenario
 from sim.studies.base import Outcome, Request, Study, experiment
 from sim.studies.pool import map_runs
@@ -241,10 +242,7 @@ def write(rows: list[dict], summary: list[dict], folder: Path) -> list[Path]:
 
 
 def _plot(summary: list[dict], path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     setups = list(dict.fromkeys(s["setup"] for s in summary))
     fig, axes = plt.subplots(len(setups), 1, figsize=(9, 3.6 * len(setups)), squeeze=False)

@@ -16,6 +16,7 @@ ask (default: OSPA over time per cell):
 
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from sim import studies
 from sim.campaign import _fmt, read_manifest, results_table
 from sim.report_html import markdown_html
 from sim.report_plots import axis_label, band, plt_module, series
-from sim.results import META_COLUMNS
+from sim.results import META_COLUMNS, need_pyarrow
 from sim.scenario import ScenarioError, load_scenario
 
 CAMPAIGN_FIGURES = ("sweep", "ospa-time")
@@ -42,6 +43,7 @@ def interval(values: np.ndarray) -> tuple[float, float, int]:
         return math.nan, math.nan, 0
     if n == 1:
         return float(v[0]), math.nan, 1
+    # heavy dependency: scipy.stats (only intervals over two runs or more need it)
     from scipy.stats import t
 
     return float(v.mean()), float(t.ppf(0.975, n - 1) * v.std(ddof=1) / math.sqrt(n)), n
@@ -55,8 +57,7 @@ def _num(x: float) -> str:
 
 def _columns(table) -> tuple[list[str], list[str]]:
     """(scalar metric columns, per-scan series columns)."""
-    import pyarrow as pa
-
+    pa, _ = need_pyarrow()
     scalars, series = [], []
     for f in table.schema:
         if f.name in META_COLUMNS:
@@ -313,8 +314,6 @@ def write_report(folder: str | Path, out: str | Path | None = None,
             written += files
     csv_path = out / "per_run.csv"
     with csv_path.open("w", newline="") as fh:
-        import csv
-
         w = csv.writer(fh)
         cols = ["cell", "cell_label", "run", *scalars]
         w.writerow(cols)

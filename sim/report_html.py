@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import base64
+import html
+import re
 from pathlib import Path
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
@@ -14,10 +17,6 @@ img{max-width:100%}figcaption{font-style:italic;color:#555}code{background:#f3f3
 def _inline(text: str, folder: Path) -> str:
     """The report's inline markdown (code, links, italics) as HTML; files linked from the
     report are embedded as ``data:`` URIs."""
-    import base64
-    import html
-    import re
-
     parts = re.split(r"(`[^`]*`)", text)
     out = []
     for part in parts:
@@ -63,10 +62,6 @@ def markdown_html(md: str, folder: Path, title: str) -> str:
     """The report's markdown (headings, paragraphs, pipe tables, images with a caption line)
     as one self-contained HTML page: every image embedded as a base64 ``data:`` URI, the
     per-run CSV as a download link of the same kind; no external file, script or style."""
-    import base64
-    import html
-    import re
-
     lines = md.splitlines()
     body: list[str] = []
     para: list[str] = []

@@ -17,10 +17,13 @@ def series(rows: list, K: int | None = None) -> np.ndarray:
 
 
 def plt_module():
+    """``matplotlib.pyplot`` on the Agg backend (files, no display): the one place the
+    project's figures load it."""
+    # heavy dependency: matplotlib (commands that draw nothing never load it)
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy dependency: matplotlib, as above
 
     return plt
 
@@ -36,6 +39,7 @@ def band(ax, k, s: np.ndarray, label: str, lo: float | None = None, hi: float | 
     mean = np.nanmean(s, axis=0)
     line, = ax.plot(k, mean, label=label, **kw)
     if len(s) > 1:
+        # heavy dependency: scipy.stats (a campaign's workers draw nothing and never load it)
         from scipy.stats import t
 
         half = t.ppf(0.975, len(s) - 1) * np.nanstd(s, axis=0, ddof=1) / math.sqrt(len(s))

@@ -32,7 +32,7 @@ on the computation (left out when results are compared bit for bit)."""
 def need_pyarrow():
     """``pyarrow`` and ``pyarrow.parquet``, or a one-line :class:`ImportError` saying what to
     install."""
-    try:
+    try:  # heavy optional dependency: pyarrow (the one place the campaign code loads it)
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:

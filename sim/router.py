@@ -11,8 +11,10 @@ router's).
 
 from __future__ import annotations
 
+import argparse
 import json
 import signal
+import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -85,9 +87,6 @@ def serve(listen: list[str], connect: list[str], config: str | None, secure: str
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sim.router``: ``sensornet router`` without the CLI's imports (SciPy and the
     rest take seconds to load on a busy machine: a routed run restarts its router this way)."""
-    import argparse
-    import sys
-
     ap = argparse.ArgumentParser(prog="python -m sim.router", description=__doc__)
     ap.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
     ap.add_argument("--connect", action="append", metavar="ENDPOINT")

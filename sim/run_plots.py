@@ -15,6 +15,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from peers.scan_results import merge_parts, read_table
+from sim.report_plots import plt_module
 
 
 class PlotError(ValueError):
@@ -72,10 +73,7 @@ def truth_paths(scans: np.ndarray, truths: list, pos: list[int], gate: float) ->
 def plot_run(run: Path, out: Path | None = None) -> list[Path]:
     """Draw ``tracks.png`` and ``metrics.png`` for a run folder into ``out`` (default: the
     run folder); the paths written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     cols, meta = load_results(run)
     out = Path(out) if out is not None else Path(run)

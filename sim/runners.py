@@ -13,9 +13,13 @@ the run's columns; this module never names one.
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import functools
 import hashlib
+import importlib
+import json
+import logging
 import os
 import socket
 import tempfile
@@ -26,10 +30,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy
 
 from sim import studies
 from sim.scenario import load_scenario
 from sim.studies.pool import iter_pool
+
+try:  # optional dependency: threadpoolctl (without it a pool worker keeps BLAS's threads)
+    from threadpoolctl import threadpool_limits
+except ImportError:
+    threadpool_limits = None
 
 _NOT_CODE = {"report.py", "report_html.py", "report_plots.py", "progress.py", "campaign.py",
              "campaign_model.py", "campaign_run.py", "campaign_results.py", "results.py",
@@ -49,8 +59,6 @@ def code_version() -> str:
 
 @functools.cache
 def _source_hash() -> str:
-    import scipy
-
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
     for pkg in ("tracking", "peers", "protocol", "sim"):
@@ -65,8 +73,6 @@ def _source_hash() -> str:
 def scenario_hash(scn: Any) -> str:
     """A hash of a fully resolved scenario (every value after overrides and validation; the
     informational ``source`` left out)."""
-    import dataclasses
-
     return hashlib.sha256(repr(dataclasses.replace(scn, source="")).encode()).hexdigest()[:16]
 
 
@@ -110,8 +116,6 @@ _SCENARIOS: dict[tuple[str, str | None, str], Any] = {}
 def load_task_scenario(task: Task):
     """The task's resolved setup (a scenario, or what its study's ``cell_setup`` makes),
     made once per process and cell (setups are frozen: the runs of a cell share one)."""
-    import json
-
     key = (task.runner, task.scenario, task.scenario_text,
            json.dumps(task.overrides, sort_keys=True, default=repr))
     if key not in _SCENARIOS:
@@ -132,8 +136,6 @@ def warm(tasks: list[Task]) -> None:
     """Import what the tasks' studies need and make each cell's setup once, here: a process
     pool forked after this call starts with all of it (its workers neither import nor parse
     per task or per worker)."""
-    import importlib
-
     for name in {m for t in tasks for m in studies.get(t.runner).modules}:
         importlib.import_module(name)
     seen = set()
@@ -147,12 +149,8 @@ def _worker_init(tasks: list[Task]) -> None:
     """Pool worker start: one BLAS thread (two workers with a BLAS pool each would
     oversubscribe the cores the pool already fills), and the imports when the pool does not
     fork (spawn/forkserver start methods)."""
-    try:
-        from threadpoolctl import threadpool_limits
-
+    if threadpool_limits is not None:
         threadpool_limits(1)
-    except ImportError:
-        pass
     warm(tasks)
 
 
@@ -214,9 +212,9 @@ class DaskUnavailable(ImportError):
 
 
 def _need_dask():
-    try:
+    try:  # heavy optional dependency: dask (only --dask/--scheduler campaigns need it)
         import dask
-        import distributed
+        import distributed  # heavy optional dependency: distributed (Dask's cluster)
     except ImportError:
         raise DaskUnavailable("--dask/--scheduler need Dask: pip install 'sensornet[campaign]' "
                               "(or pip install 'dask[distributed]')") from None
@@ -230,8 +228,6 @@ def run_dask(tasks: list[Task], scheduler: str | None = None, jobs: int = 2,
              on_start=None) -> Iterator[dict]:
     """Tasks on a Dask cluster: ``scheduler`` (``tcp://HOST:8786``) or, when ``None``, a
     ``LocalCluster`` of ``jobs`` single-threaded worker processes."""
-    import logging
-
     _, distributed = _need_dask()
     cluster = None
     if scheduler is None:

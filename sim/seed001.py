@@ -17,14 +17,13 @@ weights on runs 10000..10039, which the table never evaluates.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from peers.estimators import SingleTargetConfig
+from sim import studies
 from sim.seed001_model import (  # noqa: F401  (re-exported)
     FILTERS,
     GEOMETRIES,
@@ -48,7 +47,6 @@ from sim.seed001_tuning import (  # noqa: F401  (re-exported)
     tune_once,
 )
 from sim.studies.pool import map_runs
-from tracking.particles import ParticleParams, RatioConfig
 
 
 @dataclass(frozen=True)
@@ -119,69 +117,8 @@ def format_table(result: ExperimentResult) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed001 --runs N --geometry A|G|close|near [--jobs J]`` prints Table 1;
-    ``--tune-omega 0.2,0.3,det --tune-runs N`` compares GCI weights on runs 10000.. instead."""
-    ap = argparse.ArgumentParser(prog="python -m sim.seed001", description=__doc__.split("\n")[0])
-    ap.add_argument("--runs", type=int, default=10)
-    ap.add_argument("--geometry", choices=sorted(GEOMETRIES), default="A")
-    ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--particles", type=int, default=800, help="particles per model")
-    ap.add_argument("--jitter", type=float, default=0.3)
-    ap.add_argument("--jitter-kind", choices=("add", "shrink"), default="add")
-    ap.add_argument("--ratio-space", choices=("position", "full"), default="position")
-    ap.add_argument("--no-clip", action="store_true", help="keep negative information")
-    default_omega = omega_label(SingleTargetConfig.gci_omega)
-    ap.add_argument("--omega", default=default_omega,
-                    help="GCI weight of the other peer: a number in [0, 1], 'det' or 'chernoff' "
-                         f"(default {default_omega})")
-    ap.add_argument("--filters", default="IMM-EKF,IMM-PF")
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--first-run", type=int, default=0)
-    ap.add_argument("--tune-omega", metavar="W1,W2,...",
-                    help="instead of Table 1: the GCI-fused x-position RMSE for each candidate "
-                         "weight (numbers, 'det', 'chernoff') on runs "
-                         f"{TUNE_FIRST_RUN}.. only (never evaluated runs), and the best")
-    ap.add_argument("--tune-runs", type=int, default=40,
-                    help=f"tuning runs {TUNE_FIRST_RUN}..{TUNE_FIRST_RUN}+N-1 (default 40)")
-    ap.add_argument("--quiet", action="store_true")
-    a = ap.parse_args(argv)
-    if a.runs < 1:
-        ap.error("--runs must be at least 1")
-    omega: float | str = a.omega
-    if a.omega not in ("det", "chernoff"):
-        try:
-            omega = float(a.omega)
-        except ValueError:
-            ap.error(f"--omega: expected a number, 'det' or 'chernoff', got {a.omega!r}")
-    filters = tuple(f.strip() for f in a.filters.split(",") if f.strip())
-    if any(f not in FILTERS for f in filters):
-        ap.error(f"--filters: expected a comma list of {FILTERS}")
-    scn = Seed001Scenario(geometry=a.geometry, seed=a.seed)
-    cfg = ExperimentConfig(
-        particle=ParticleParams(n_particles=a.particles, jitter=a.jitter,
-                                jitter_kind=a.jitter_kind),
-        ratio=RatioConfig(space=a.ratio_space, clip=not a.no_clip),
-        gci_omega=omega, filters=filters)
-    if a.tune_omega is not None:
-        if a.first_run != 0:
-            ap.error(f"--first-run does not apply to --tune-omega (tuning runs start at "
-                     f"{TUNE_FIRST_RUN})")
-        if a.tune_runs < 2:
-            ap.error("--tune-runs must be at least 2")
-        try:
-            omegas = parse_omegas(a.tune_omega)
-        except ValueError as exc:
-            ap.error(f"--tune-omega: {exc}")
-        t = tune_omega(scn, cfg, omegas, a.tune_runs, jobs=a.jobs, progress=not a.quiet)
-        print(format_tuning(t))
-        return 0
-    if a.first_run + a.runs > TUNE_FIRST_RUN:
-        print(f"note: runs >= {TUNE_FIRST_RUN} are the GCI weight's tuning runs",
-              file=sys.stderr)
-    res = run_experiment(scn, cfg, a.runs, jobs=a.jobs, progress=not a.quiet,
-                         first_run=a.first_run)
-    print(format_table(res))
-    return 0
+    """``python -m sim.seed001``: the study's command line (:func:`sim.studies.seed001.main`)."""
+    return studies.main("seed001", None if argv is None else list(argv))
 
 
 __all__ = [

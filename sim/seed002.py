@@ -22,17 +22,17 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small eigenproblems: threads only hurt
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
 import dataclasses  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from sim import studies  # noqa: E402
 from sim.extended import make_et_filter  # noqa: E402
-from sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides  # noqa: E402
+from sim.report_plots import plt_module
+from sim.scenario import Scenario, load_scenario  # noqa: E402
 from sim.studies.pool import map_runs  # noqa: E402
+from sim.twin import run_twin
 from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
 from tracking.metrics import cardinality_error, ospa  # noqa: E402
 from tracking.partition import adjusted_rand_index  # noqa: E402
@@ -179,8 +179,6 @@ def network_experiment(runs: int, first_run: int = 0, progress: bool = True,
                        base: Scenario | None = None) -> dict[str, dict[str, float]]:
     """The 3-peer network of seed002.toml on the twin (same peers as the processes): mean
     OSPA of each peer's local ET-GM-PHD and of its GCI-fused estimate over ``runs`` runs."""
-    from sim.twin import run_twin
-
     scn = base or load_scenario("seed002")
     per: dict[str, dict[str, list[float]]] = {n: {"local": [], "fused": []}
                                               for n in scn.sensor_names}
@@ -197,10 +195,7 @@ def network_experiment(runs: int, first_run: int = 0, progress: bool = True,
 def write_png(rows: list[dict], path: str) -> None:
     """Fig. 6 and Table 3 side by side: mean OSPA and partition time per clutter level, ours
     (solid) and the paper's times (dashed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for part, color in zip(PARTITIONS, ("tab:blue", "tab:orange"), strict=True):
@@ -223,52 +218,8 @@ def write_png(rows: list[dict], path: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sim.seed002", description=__doc__.split("\n")[0])
-    ap.add_argument("--runs", type=int, default=20, help="Monte Carlo runs per clutter level")
-    ap.add_argument("--first-run", type=int, default=0, help="index of the first run")
-    ap.add_argument("--clutter", type=float, nargs="+", default=list(CLUTTER_LEVELS),
-                    help="clutter rates (mean points per scan)")
-    ap.add_argument("--csv", help="write the summary table here")
-    ap.add_argument("--png", help="plot OSPA and partition time per clutter level here")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    ap.add_argument("--scenario", default="seed002",
-                    help="a scenario with an [extended] table (default: seed002)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="scenario override, e.g. fusion.rule=aa (repeatable)")
-    ap.add_argument("--network", action="store_true",
-                    help="instead: the 3-peer GCI network on the twin, fused vs local OSPA")
-    a = ap.parse_args(argv)
-    if a.runs < 1 or a.first_run < 0 or any(c < 0 or c > 10_000 for c in a.clutter):
-        print("seed002: --runs must be >= 1, --first-run >= 0, --clutter in [0, 10000]",
-              file=sys.stderr)
-        return 2
-    try:
-        base = load_scenario(a.scenario, parse_overrides(a.set))
-        if base.extended is None:
-            raise ScenarioError(f"{base.name}: no [extended] table (extended targets)")
-    except ScenarioError as exc:
-        print(f"seed002: {exc}", file=sys.stderr)
-        return 2
-    if a.network:
-        res = network_experiment(a.runs, a.first_run, progress=not a.quiet, base=base)
-        print(f"{'peer':<5} {'local OSPA':>10} {'fused OSPA':>10} {'runs fused better':>17}")
-        for n, d in res.items():
-            print(f"{n:<5} {d['local']:>10.2f} {d['fused']:>10.2f} "
-                  f"{100 * d['fused_better_runs']:>16.0f}%")
-        return 0
-    clutters = [int(c) if float(c).is_integer() else c for c in a.clutter]
-    results = run_experiment(a.runs, clutters, first_run=a.first_run, progress=not a.quiet,
-                             base=base)
-    rows = summarise(results)
-    print(format_table(rows))
-    if a.csv:
-        with open(a.csv, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-    if a.png:
-        write_png(rows, a.png)
-    return 0
+    """``python -m sim.seed002``: the study's command line (:func:`sim.studies.seed002.main`)."""
+    return studies.main("seed002", argv)
 
 
 if __name__ == "__main__":

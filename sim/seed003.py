@@ -13,17 +13,14 @@ fixed in the TOML before any evaluation run (nothing is tuned on runs 0..N-1).
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import time
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from sim import studies
+from sim.report_plots import plt_module
 from sim.seed003_filters import (  # noqa: F401  (re-exported)
     METHODS,
     coordinated_turn,
@@ -46,6 +43,7 @@ from sim.seed003_world import (  # noqa: F401  (re-exported)
     truth,
 )
 from sim.studies.pool import map_runs
+from tracking.fuzzy import FuzzySystem, fit, to_config
 from tracking.imm import POS, VEL
 
 # -- Monte Carlo ------------------------------------------------------------------------------
@@ -127,8 +125,6 @@ def training_samples(cfg: Mapping, run: int, n_sensors: int = 2
 def train_fuzzy(cfg: Mapping, runs: int, first_run: int = 10000, what: str = "all") -> dict:
     """Fit the fuzzy system on training runs ``first_run..`` (never the evaluation runs) and
     return the fitted ``[fuzzy]`` table."""
-    from tracking.fuzzy import FuzzySystem, fit, to_config
-
     parts = [training_samples(cfg, r) for r in range(first_run, first_run + runs)]
     g, d, t = (np.concatenate(c) for c in zip(*parts, strict=True))
     fis = fit(FuzzySystem.from_config(cfg["fuzzy"]), g, d, t, what)
@@ -242,10 +238,7 @@ def write_csv(rows: Sequence[dict], over_time: Mapping, folder: Path) -> list[Pa
 def plot_rmse(over_time: Mapping, cfg: Mapping, path: Path) -> Path:
     """Position RMSE per scan (all runs, lost tracks included, log scale) as a PNG, the turn
     shaded."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     fig, ax = plt.subplots(figsize=(8, 4.5))
     first, last = cfg["scenario"]["turn_scans"]
@@ -263,61 +256,8 @@ def plot_rmse(over_time: Mapping, cfg: Mapping, path: Path) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.seed003", description=__doc__.split("\n")[0])
-    p.add_argument("--runs", type=int, default=200, help="Monte Carlo runs (0..N-1)")
-    p.add_argument("--first-run", type=int, default=0, help="first run index")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes")
-    p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
-                   help="override a scenario setting (TOML value), e.g. clutter.in_gate=1")
-    p.add_argument("--methods", default=",".join(METHODS),
-                   help=f"comma-separated subset of {', '.join(METHODS)}")
-    p.add_argument("--csv", type=Path,
-                   help="write the table and RMSE-over-time CSVs and the RMSE PNG here")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--scenario", type=Path, default=SCENARIO,
-                   help="scenario file (default sim/scenarios/seed003.toml)")
-    p.add_argument("--train-fuzzy", type=int, metavar="N", default=0,
-                   help="fit the fuzzy system on training runs 10000..10000+N-1, print the "
-                        "fitted [fuzzy] table as JSON and exit")
-    p.add_argument("--fuzzy", type=Path, metavar="JSON",
-                   help="use this [fuzzy] table (e.g. a --train-fuzzy result) instead of the "
-                        "scenario's")
-    a = p.parse_args(argv)
-    overrides = {}
-    for item in a.set:
-        if "=" not in item:
-            p.error(f"--set {item!r}: expected TABLE.KEY=VALUE")
-        k, v = item.split("=", 1)
-        try:
-            overrides[k] = tomllib.loads(f"v = {v}")["v"]
-        except tomllib.TOMLDecodeError:
-            overrides[k] = v  # a bare word is a string
-    try:
-        cfg = load(a.scenario, overrides)
-    except (ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if a.fuzzy:
-        mode = cfg["fuzzy"].get("mode")
-        cfg["fuzzy"] = json.loads(a.fuzzy.read_text(encoding="utf-8"))
-        cfg["fuzzy"]["mode"] = overrides.get("fuzzy.mode", mode)
-    if a.train_fuzzy:
-        print(json.dumps(train_fuzzy(cfg, a.train_fuzzy), indent=1))
-        return 0
-    methods = tuple(m.strip() for m in a.methods.split(","))
-    if unknown := [m for m in methods if m not in METHODS]:
-        p.error(f"--methods: unknown {unknown}; expected some of {', '.join(METHODS)}")
-    t0 = time.monotonic()
-    results = run_experiment(cfg, a.runs, a.jobs, a.first_run, not a.quiet, methods)
-    rows = summarise(cfg, results)
-    print(format_table(rows))
-    print(footer(cfg, range(a.first_run, a.first_run + a.runs), time.monotonic() - t0))
-    if a.csv:
-        over_time = rmse_over_time(results)
-        for path in [*write_csv(rows, over_time, a.csv),
-                     plot_rmse(over_time, cfg, a.csv / "seed003_rmse.png")]:
-            print(f"wrote {path}")
-    return 0
+    """``python -m sim.seed003``: the study's command line (:func:`sim.studies.seed003.main`)."""
+    return studies.main("seed003", None if argv is None else list(argv))
 
 
 if __name__ == "__main__":

@@ -43,6 +43,7 @@ from sim.launcher import read_summaries, start_run, wait_run
 from sim.peers import make_peer
 from sim.scenario import Scenario, ScenarioError, apply_overrides, load_document
 from sim.twin import run_twin
+from sim.world import Truth
 from tracking.imm import POS
 
 MODES = ("meas", "ci")
@@ -104,8 +105,6 @@ def draws(cfg: Mapping, run: int):
 def run_data(cfg: Mapping, run: int):
     """``(truth, scans)`` of run ``run`` as :func:`sim.world.generate_run` returns them (the
     target's return first in each scan, then the clutter: the order the offline filters use)."""
-    from sim.world import Truth
-
     X, sens, target, region, _, _ = draws(cfg, run)
     K = len(X) - 1
     truth = Truth(states=[X[k][None] for k in range(1, K + 1)],

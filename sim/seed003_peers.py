@@ -22,16 +22,13 @@ for every mode, as sensors in a network see it), not drawn in each filter's gate
 
 from __future__ import annotations
 
-import argparse
-import time
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from peers.contracts import FusionInput
 from peers.pda_parts import CiFuser, PdaEstimator
-from sim import seed003
-from sim.studies.pool import map_runs
+from sim import seed003, studies
 from tracking.imm import POS, VEL
 
 MODES = ("local", "CI", "CI+feedback", "sequential")
@@ -109,22 +106,9 @@ def format_table(rows: Sequence[dict]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.seed003_peers",
-                                description=__doc__.split("\n")[0])
-    p.add_argument("--runs", type=int, default=200)
-    p.add_argument("--first-run", type=int, default=0)
-    p.add_argument("--jobs", type=int, default=1)
-    p.add_argument("--method", default="IMM-PDAF", choices=seed003.METHODS)
-    p.add_argument("--quiet", action="store_true")
-    a = p.parse_args(argv)
-    cfg = seed003.load(overrides={"clutter.mode": "region"})
-    t0 = time.monotonic()
-    ids = range(a.first_run, a.first_run + a.runs)
-    results = map_runs(run_once, [(cfg, r, a.method) for r in ids], a.jobs, "runs", not a.quiet)
-    print(format_table(summarise(cfg, results)))
-    print(f"({a.method}, {a.runs} runs from {a.first_run}, region clutter, "
-          f"{time.monotonic() - t0:.0f} s)")
-    return 0
+    """``python -m sim.seed003_peers``: the study's command line
+    (:func:`sim.studies.seed003_peers.main`)."""
+    return studies.main("seed003-peers", None if argv is None else list(argv))
 
 
 if __name__ == "__main__":

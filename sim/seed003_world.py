@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
+from protocol.keys import check_name
+from sim.bounds import MAX_SENSORS
 from tracking.imm import POS, VEL, constant_velocity
 from tracking.pda import LinearSensor
 
@@ -36,9 +38,6 @@ def check_sensor_names(sensors, label: str) -> None:
     """The ``[[sensors]]`` of a seed-003 file: a list of tables, at most
     :data:`sim.scenario.MAX_SENSORS`, each ``name`` following the name rule
     (:func:`protocol.keys.check_name`) and not repeated. :class:`ValueError` (one line)."""
-    from protocol.keys import check_name
-    from sim.scenario import MAX_SENSORS
-
     if not isinstance(sensors, list) or not sensors:
         raise ValueError(f"{label}: 'sensors' must list at least one sensor ([[sensors]])")
     if len(sensors) > MAX_SENSORS:

@@ -42,13 +42,11 @@ before any run).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -57,7 +55,7 @@ try:  # FTC's DBSCAN: imported here, not inside a timed call (optional: 'sensorn
 except ImportError:  # the FTC rows then say what to install (tracking.idpc.dbscan_class)
     pass
 
-from peers.faultplan import FaultPlan, LinkFaults, Uniform
+from peers.faultplan import FaultPlan
 from peers.faults import FaultInjector
 from peers.flooding import (
     TUPLES_PER_MEASUREMENT,
@@ -69,6 +67,7 @@ from peers.flooding import (
 )
 from protocol.codec import encode
 from protocol.messages import Estimate, Scan
+from sim import studies
 from sim.seed004_output import (  # noqa: F401  (re-exported)
     REFERENCE_MIXTURE,
     TABLE_ROWS,
@@ -99,7 +98,7 @@ from sim.studies.pool import map_runs
 from tracking.fusion import gci_fuse
 from tracking.fusion_rules import aa_fuse, metropolis_weights
 from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
-from tracking.idpc import MissingBaseline, dbscan_class, ftc, idpc
+from tracking.idpc import dbscan_class, ftc, idpc
 from tracking.metrics import ospa
 from tracking.mixture import GaussianMixture
 from tracking.models import ConstantVelocity
@@ -349,59 +348,8 @@ def aggregate(per_run: list[dict[str, dict[str, float]]]) -> dict[str, dict[str,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    doc = (__doc__ or "").split("\n")[0]
-    p = argparse.ArgumentParser(prog="python -m sim.seed004", description=doc)
-    p.add_argument("--runs", type=int, default=20, help="Monte Carlo runs")
-    p.add_argument("--first-run", type=int, default=0, help="first run index")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes")
-    p.add_argument("--scenario", type=Path, default=SCENARIO)
-    p.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE",
-                   help="override a scenario value (TOML syntax), e.g. scenario.variant='mixed'")
-    p.add_argument("--out", type=Path, help="write the CSVs and the PNG here")
-    p.add_argument("--no-consensus", action="store_true",
-                   help="leave out GCI and AA (fast: flooding, IC, centralised, local only)")
-    p.add_argument("--flood-loss", metavar="P1,P2,...",
-                   help="only measure flooding completion under these link-loss probabilities "
-                        "(fault layer, 0-20 ms uniform delay, deadline 0.5 scan)")
-    p.add_argument("--replot", metavar="TITLE",
-                   help="redraw the PNG in --out from its CSVs (no runs) with this title")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    a = p.parse_args(argv)
-    if a.replot is not None:
-        if a.out is None:
-            p.error("--replot needs --out")
-        print(f"wrote {write_outputs(read_outputs(a.out), a.out, a.replot)[-1]}")
-        return 0
-    try:
-        scn = load(a.scenario, a.set)
-    except (ScenarioError, OSError) as e:
-        print(f"seed004: {e}", file=sys.stderr)
-        return 2
-    if a.runs < 1 or a.jobs < 1:
-        print("seed004: --runs and --jobs must be at least 1", file=sys.stderr)
-        return 2
-    if a.flood_loss:
-        print("| link loss | (peer, scan) complete | missing / peer / scan | duplicates | late |")
-        print("|---|---|---|---|---|")
-        for p_loss in (float(x) for x in a.flood_loss.split(",")):
-            plan = FaultPlan(LinkFaults(delay=Uniform(0.0, 0.02), loss=p_loss),
-                             interval=scn.scan_period)
-            r = flooding_under_faults(scn, plan, scn.num_scans, a.first_run)
-            print(f"| {p_loss:g} | {100 * r['complete']:.1f} % | {r['missing']:.3f} | "
-                  f"{r['duplicates']:.1f} | {r['late']:.3f} |")
-        return 0
-    runs = range(a.first_run, a.first_run + a.runs)
-    t0 = time.monotonic()
-    try:
-        result = run_experiment(scn, runs, a.jobs, not a.quiet, not a.no_consensus)
-    except MissingBaseline as e:
-        print(f"seed004: {e}", file=sys.stderr)
-        return 2
-    print(report_text(scn, runs, result, time.monotonic() - t0))
-    if a.out:
-        for path in write_outputs(result, a.out, table_title(scn, runs)):
-            print(f"wrote {path}")
-    return 0
+    """``python -m sim.seed004``: the study's command line (:func:`sim.studies.seed004.main`)."""
+    return studies.main("seed004", None if argv is None else list(argv))
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.report_plots import plt_module
 from sim.seed004_scenario import TUPLES_CARDINALITY, TUPLES_COMPONENT, Seed004
 
 REFERENCE_MIXTURE = (4, 4)
@@ -89,10 +90,7 @@ def write_outputs(result: dict[str, dict[str, float]], folder: Path, title: str)
         w.writerow(("iterations", *keys))
         for t, k in iters:
             w.writerow((t, *(f"{result[k][kk]:.6g}" for kk in keys)))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.8))
     colours = plt.get_cmap("tab20").colors

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
 
+import sim.scenario as sc
 from sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
 from tracking.gmphd import SensorParams
 from tracking.idpc import ClusterParams, polar_to_cartesian
@@ -226,8 +227,6 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
     ``s1..s20`` at the recorded positions, the graph as custom edges, the three straight-line
     targets over the whole run, the paper's births, and the ``[network]`` table (flooding peers
     by default: ``filter = "flooding"``, ``rounds`` = the flooding iterations)."""
-    import sim.scenario as sc
-
     passed = ("faults", "security")  # network-scenario tables, taken as they are
     try:
         scn = from_document({k: v for k, v in doc.items() if k not in (*passed, "fusion")},

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from sim.launcher import read_summaries, start_run, wait_run
+from sim.report_plots import plt_module
 from sim.scenario import load_scenario
 from sim.studies.pool import map_runs
 from sim.twin import run_twin
@@ -138,10 +139,7 @@ def write_outputs(rows: list[dict], param: str, folder: Path) -> list[Path]:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_module()
 
     summary = summarise(rows)
     labels = {repr(s["value"]): str(s["value"]) for s in summary}

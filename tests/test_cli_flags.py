@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from sensornet import cli
-from sensornet.cli import build_parser, main
+from sensornet.cli import COMMANDS, budgets, build_parser, common, main
+from sensornet.cli.commands.peer import _prepare_peer
 from sim.scenario import load_scenario, scenario_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -171,13 +171,13 @@ def test_too_many_peers_is_refused(tmp_path):
 
 def test_memory_estimate_grows_with_the_work():
     scn = load_scenario("seed000")
-    base = cli.memory_estimate_gb(scn)
+    base = budgets.memory_estimate_gb(scn)
     assert 0.1 < base < 1.0
-    assert cli.memory_estimate_gb(scn, workers=4) > 3 * base
+    assert budgets.memory_estimate_gb(scn, workers=4) > 3 * base
     big = load_scenario("seed000", {"sensors.s1.clutter_rate": 4000})
-    assert cli.memory_estimate_gb(big) > base
-    assert cli.targets_at_once(scn) == 4  # 1-100, 20-60, 40-80, 40-80: four at scans 40-60
-    assert cli.points_per_scan(scn)["s1"] == pytest.approx(10 + 4 * 0.99)
+    assert budgets.memory_estimate_gb(big) > base
+    assert budgets.targets_at_once(scn) == 4  # 1-100, 20-60, 40-80, 40-80: four at scans 40-60
+    assert budgets.points_per_scan(scn)["s1"] == pytest.approx(10 + 4 * 0.99)
 
 
 # --- run seed000 and the demo agree -----------------------------------------------------
@@ -188,8 +188,9 @@ def test_demo_is_run_seed000_with_a_viewer():
     demo, run = vars(parser.parse_args(["demo"])), vars(parser.parse_args(["run", "seed000"]))
     assert demo.pop("viewer") == "spawn" and run.pop("viewer") is None
     for d in (demo, run):
-        d.pop("func"), d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
+        d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
     assert demo == run
+    assert COMMANDS["demo"].split(":")[0] == COMMANDS["run"].split(":")[0]  # one module
     assert load_scenario("seed000").birth.model == "truth"  # chosen in the scenario file
 
 
@@ -229,14 +230,14 @@ def test_run_that_scored_nothing_exits_nonzero(tmp_path, monkeypatch, capsys):
 
 def test_run_folders_are_unique_and_failed_ones_removed(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    a, b = cli._run_folder(None, "run"), cli._run_folder(None, "run")
+    a, b = common._run_folder(None, "run"), common._run_folder(None, "run")
     assert a != b and a.is_dir() and b.is_dir()  # the same second: distinct folders
-    cli._CREATED.clear()
+    common._CREATED.clear()
 
     import sim.studies.base
 
     def fail(*args, **kwargs):
-        raise cli.UserError("stop here")
+        raise common.UserError("stop here")
 
     monkeypatch.setattr(sim.studies.base, "run_study", fail)
     before = set((tmp_path / "runs").iterdir())
@@ -251,8 +252,8 @@ def test_viewer_probe(tmp_path):
         s.bind(("127.0.0.1", 0))
         s.listen()
         url = f"rerun+http://127.0.0.1:{s.getsockname()[1]}/proxy"
-        assert cli.viewer_reachable(url)
-    assert not cli.viewer_reachable(url, timeout=0.5)
+        assert common.viewer_reachable(url)
+    assert not common.viewer_reachable(url, timeout=0.5)
 
 
 # --- files ------------------------------------------------------------------------------
@@ -271,5 +272,5 @@ def test_a_peer_started_by_hand_takes_its_sensors_colour():
     """Four terminals: each peer gets the colour the world's legend and plots give it."""
     args = build_parser().parse_args(["peer", "s2", "--network", "lab"])
     assert args.color is None
-    cli._prepare_peer(args, load_scenario("seed000"))
+    _prepare_peer(args, load_scenario("seed000"))
     assert args.color == 1

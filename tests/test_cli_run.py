@@ -14,51 +14,10 @@ from pathlib import Path
 import pytest
 
 from peers.session import free_port
+from tests.processes import alive, children, env, rerun_exe, sensornet, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.network
-
-
-def _env() -> dict:
-    return {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
-
-
-def _children(pid: int) -> list[int]:
-    """Processes whose parent is ``pid`` (from /proc)."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            found.append(int(entry.name))
-    return found
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:  # a zombie is gone for our purposes
-        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
-def _wait_for(predicate, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.05)
-
-
-def _rerun_exe() -> str:
-    return str(Path(sys.executable).with_name("rerun"))
 
 
 def test_run_flags_reach_every_process(tmp_path):
@@ -75,7 +34,7 @@ def test_run_flags_reach_every_process(tmp_path):
          "--config", str(config), "--run-id", "rid-16", "--network", "net16",
          "--viewer", dead_viewer, "--set", "scenario.num_scans=12", "--no-rerun",
          "--out", str(out)], capture_output=True, text=True, timeout=180, cwd=tmp_path,
-        env=_env())
+        env=env())
     assert proc.returncode == 0, proc.stderr + proc.stdout
     err = proc.stderr.strip().splitlines()
     assert len(err) == 1 and "warning" in err[0] and dead_viewer in err[0], proc.stderr
@@ -104,7 +63,7 @@ def test_a_peer_with_no_world_says_so_and_prints_no_nan(tmp_path):
         [sys.executable, "-m", "sensornet", "peer", "s1", "--network", network,
          "--listen", f"tcp/127.0.0.1:{free_port()}", "--config", str(config),
          "--idle-timeout", "2", "--no-rerun", "--out", str(tmp_path / "out")],
-        capture_output=True, text=True, timeout=120, cwd=tmp_path, env=_env())
+        capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env())
     assert proc.returncode == 1, proc.stderr + proc.stdout
     last = proc.stdout.strip().splitlines()[-1]
     assert last == (f"peer s1: no world on network {network} within 2 s: nothing was "
@@ -118,22 +77,19 @@ def test_a_peer_with_no_world_says_so_and_prints_no_nan(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_path, sig):
     out = tmp_path / "run"
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--speed", "5",
-         "--out", str(out)], cwd=tmp_path, env=_env(), stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE, text=True)
-    children: list[int] = []
-    try:
+    with sensornet(["run", "--viewer", "none", "--speed", "5", "--out", str(out)],
+                   tmp_path) as launch:
+        launcher = launch.proc
         world_log = out / "logs" / "world.log"
-        _wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
-                  "the world's scan 10")
-        children = _children(launcher.pid)
-        assert len(children) == 4, children  # the world and three peers
+        wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
+                 "the world's scan 10")
+        kids = launch.find_children()
+        assert len(kids) == 4, kids  # the world and three peers
         launcher.send_signal(sig)
         stdout, stderr = launcher.communicate(timeout=60)
         ended = time.monotonic()
-        _wait_for(lambda: not any(_alive(p) for p in children), 5.0,
-                  "the children to end (at most 5 s after the launcher)")
+        wait_for(lambda: not any(alive(p) for p in kids), 5.0,
+                 "the children to end (at most 5 s after the launcher)")
         assert time.monotonic() - ended < 5.0
         assert launcher.returncode == 0, stderr
         assert "Traceback" not in stderr
@@ -141,16 +97,9 @@ def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_p
         assert "| s1 |" in stdout and "recording:" in stdout
         rec = out / "recording.rrd"
         assert rec.is_file()
-        check = subprocess.run([_rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
-                               text=True, timeout=120, env=_env())
+        check = subprocess.run([rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
+                               text=True, timeout=120, env=env())
         assert check.returncode == 0, check.stderr
-    finally:
-        if launcher.poll() is None:
-            launcher.kill()
-            launcher.wait()
-        for p in children:
-            if _alive(p):
-                os.kill(p, signal.SIGKILL)
 
 
 def _summary(fusions: int, late: int, lat: list[float]) -> dict:
@@ -179,17 +128,14 @@ def test_signal_during_start_up_says_what_happened(tmp_path):
     importing): exit 0, every child stopped, and one honest line: nothing was tracked (not
     'the .rrd files could not be merged'); a peer that got as far as its run wrote a summary."""
     out = tmp_path / "run"
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out)],
-        cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    children: list[int] = []
-    try:
-        _wait_for(lambda: (out / "commands.json").is_file() and len(_children(launcher.pid)) == 4,
-                  90, "the launcher to start its four processes")
-        children = _children(launcher.pid)
+    with sensornet(["run", "--viewer", "none", "--out", str(out)], tmp_path) as launch:
+        launcher = launch.proc
+        wait_for(lambda: (out / "commands.json").is_file() and len(children(launcher.pid)) == 4,
+                 90, "the launcher to start its four processes")
+        kids = launch.find_children()
         launcher.send_signal(signal.SIGTERM)
         stdout, stderr = launcher.communicate(timeout=120)
-        _wait_for(lambda: not any(_alive(p) for p in children), 60, "the children to end")
+        wait_for(lambda: not any(alive(p) for p in kids), 60, "the children to end")
         assert launcher.returncode == 0, stderr
         assert "Traceback" not in stderr and "could not be merged" not in stdout, stdout
         summaries = list(out.glob("peer-*.json"))
@@ -199,10 +145,3 @@ def test_signal_during_start_up_says_what_happened(tmp_path):
             lines = [ln for ln in stderr.splitlines() if ln.strip()]
             assert len(lines) == 1 and "during start-up" in lines[0], stderr
             assert "nothing was tracked" in lines[0]
-    finally:
-        if launcher.poll() is None:
-            launcher.kill()
-            launcher.wait()
-        for p in children:
-            if _alive(p):
-                os.kill(p, signal.SIGKILL)

@@ -313,33 +313,28 @@ def test_a_killed_host_takes_its_peers_the_other_host_finishes(tmp_path, capsys)
 def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp_path):
     """SIGTERM to `sensornet run --per-process 2` (h1 = s1,s2; h2 = s3): both hosts end, each
     peer wrote its summary (SIGTERM) and its own .rrd, and the recording merges and verifies."""
-    import os
     import signal
     import subprocess
-    import sys
     import time
 
-    from tests.test_cli_run import _alive, _children, _env, _rerun_exe, _wait_for
+    from tests.processes import alive, env, rerun_exe, sensornet, wait_for
 
     out = tmp_path / "run"
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "sensornet", "run", "--per-process", "2", "--viewer", "none",
-         "--speed", "5", "--out", str(out)], cwd=tmp_path, env=_env(),
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    children: list[int] = []
-    try:
+    with sensornet(["run", "--per-process", "2", "--viewer", "none", "--speed", "5",
+                    "--out", str(out)], tmp_path) as launch:
+        launcher = launch.proc
         world_log = out / "logs" / "world.log"
         # the world's progress line past the 10 scans every peer must have processed: under
         # load a peer can be a scan behind the world (s3 was at 9 at the world's 10)
-        _wait_for(lambda: world_log.is_file() and "scan 20/" in world_log.read_text(), 90,
-                  "the world's scan 20")
-        children = _children(launcher.pid)
-        assert len(children) == 3, children  # the world and two hosts
+        wait_for(lambda: world_log.is_file() and "scan 20/" in world_log.read_text(), 90,
+                 "the world's scan 20")
+        kids = launch.find_children()
+        assert len(kids) == 3, kids  # the world and two hosts
         launcher.send_signal(signal.SIGTERM)
         stdout, stderr = launcher.communicate(timeout=60)
         ended = time.monotonic()
-        _wait_for(lambda: not any(_alive(p) for p in children), 5.0,
-                  "the children to end (at most 5 s after the launcher)")
+        wait_for(lambda: not any(alive(p) for p in kids), 5.0,
+                 "the children to end (at most 5 s after the launcher)")
         assert time.monotonic() - ended < 5.0
         assert launcher.returncode == 0 and "Traceback" not in stderr, stderr
         assert "hosts: h1 = s1,s2; h2 = s3" in stdout
@@ -348,19 +343,12 @@ def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp
             assert s["stop_reason"] == "SIGTERM" and s["scans"] >= 10, (name, s["stop_reason"])
             assert (out / "rerun" / f"peer-{name}.rrd").is_file()
         rec = out / "recording.rrd"
-        check = subprocess.run([_rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
-                               text=True, timeout=120, env=_env())
+        check = subprocess.run([rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
+                               text=True, timeout=120, env=env())
         assert check.returncode == 0, check.stderr
-        text = subprocess.run([_rerun_exe(), "rrd", "print", str(out / "rerun" / "peer-s2.rrd")],
-                              capture_output=True, text=True, timeout=120, env=_env()).stdout
+        text = subprocess.run([rerun_exe(), "rrd", "print", str(out / "rerun" / "peer-s2.rrd")],
+                              capture_output=True, text=True, timeout=120, env=env()).stdout
         assert "/metrics/ospa/s2/fused" in text and "/metrics/ospa/s1/fused" not in text
-    finally:
-        if launcher.poll() is None:
-            launcher.kill()
-            launcher.wait()
-        for p in children:
-            if _alive(p):
-                os.kill(p, signal.SIGKILL)
 
 
 def test_hosts_are_grouped_to_cut_few_graph_edges():

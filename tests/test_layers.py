@@ -5,6 +5,8 @@ heavy import it saves (docs/architecture.md, "Layers")."""
 from __future__ import annotations
 
 import ast
+import re
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,20 +103,141 @@ def test_no_import_circles():
     assert [c for c in _circles(edges) if c not in KNOWN_CIRCLES] == []
 
 
-def test_inner_imports_below_sim_say_why():
-    """In tracking/, protocol/ and peers/ a project import inside a function carries a
-    comment (on its line or the lines just above) naming the heavy import it avoids."""
-    _, inner = _graph()
-    bare = []
-    for m, found in inner.items():
-        if m.split(".")[0] not in ("tracking", "protocol", "peers"):
-            continue
-        lines = _modules()[m].read_text(encoding="utf-8").splitlines()
-        for t, line in found:
-            near = lines[max(0, line - 4):line]
-            if not any("#" in ln for ln in near):
-                bare.append(f"{m}:{line} imports {t}")
-    assert bare == []
+WHY = re.compile(r"#.*\b(?:heavy|optional)\b[\w ]*dependency: *([A-Za-z_][\w.]*)")
+"""The comment an import inside a function carries: ``# heavy optional dependency: pyarrow``
+(or ``# heavy dependency: NAME`` for a required but slow library, ``# optional dependency:
+NAME`` for one that may be missing), naming the third-party module it delays."""
+
+
+def _statement_lists(tree: ast.AST):
+    for node in ast.walk(tree):
+        for field in ("body", "orelse", "finalbody", "handlers"):
+            stmts = getattr(node, field, None)
+            if isinstance(stmts, list) and stmts and isinstance(stmts[0], ast.stmt):
+                yield node, stmts
+
+
+def unexplained_inner_imports(source: str, name: str = "<module>") -> list[str]:
+    """Every import inside a function (or class) of ``source`` that has no :data:`WHY` comment
+    naming a module outside the project (on its line, the lines of the group of imports it
+    starts or belongs to, or the three lines above that group), or whose comment names a module
+    other than the third-party one it imports; a standard-library module is never a reason."""
+    tree = ast.parse(source)
+    lines = source.splitlines()
+    module_level = {id(n) for n in tree.body}
+    for n in tree.body:  # `try: import x / except ImportError:` at module level is module level
+        if isinstance(n, (ast.If, ast.Try)):
+            module_level |= {id(m) for m in ast.walk(n)}
+    bad = []
+    for _, stmts in _statement_lists(tree):
+        group_start = None
+        for st in stmts:
+            if not isinstance(st, (ast.Import, ast.ImportFrom)) or id(st) in module_level:
+                group_start = None
+                continue
+            if group_start is None:
+                group_start = st.lineno
+            if isinstance(st, ast.ImportFrom) and st.level:
+                bad.append(f"{name}:{st.lineno} relative import inside a function")
+                continue
+            target = st.module if isinstance(st, ast.ImportFrom) else st.names[0].name
+            top = target.split(".")[0]
+            window = lines[max(0, group_start - 4):st.end_lineno]
+            named = [m.group(1) for ln in window if (m := WHY.search(ln))]
+            if top in sys.stdlib_module_names:
+                bad.append(f"{name}:{st.lineno} imports {target} (standard library: at the top)")
+            elif not named or any(n.split(".")[0] in LAYERS or
+                                  n.split(".")[0] in sys.stdlib_module_names for n in named):
+                bad.append(f"{name}:{st.lineno} imports {target} with no comment naming the "
+                           "heavy dependency it delays")
+            elif top not in LAYERS and top not in {n.split(".")[0] for n in named}:
+                bad.append(f"{name}:{st.lineno} imports {target} but its comment names "
+                           f"{named[0]}")
+    return bad
+
+
+def test_every_inner_import_names_the_heavy_dependency_it_delays():
+    """An import inside a function exists only to delay a heavy third-party module (rule:
+    docs/architecture.md, "Layers"): every other import is at its module's top, where the
+    import graph above sees it. The command line keeps start-up quick by loading each
+    command's module only when it runs (sensornet.cli.parser.COMMANDS), not by hiding imports."""
+    bad = []
+    for m, f in _modules().items():
+        bad += unexplained_inner_imports(f.read_text(encoding="utf-8"), m)
+    assert bad == []
+
+
+def test_the_inner_import_check_catches_a_bare_one():
+    """The check itself: a bare project import, a stdlib one, a comment naming a project
+    module and a comment naming the wrong library are caught; a named heavy one passes."""
+    src = """
+def a():
+    from sim.scenario import load_scenario
+def b():
+    import json
+def c():
+    from sim import seed004  # heavy dependency: sim.seed004
+def d():
+    import pyarrow  # heavy optional dependency: matplotlib
+def e():
+    # heavy optional dependency: sklearn (the baseline)
+    from sim import seed004
+    from sim.seed004 import run_once
+def f():
+    import matplotlib  # heavy dependency: matplotlib
+"""
+    found = unexplained_inner_imports(src)
+    assert [ln.split(" ")[0] for ln in found] == ["<module>:3", "<module>:5", "<module>:7",
+                                                   "<module>:9"]
+
+
+def _loaded_at_import(start: str) -> set[str]:
+    """The modules ``import start`` loads, read from the sources: module-level imports
+    (packages' ``__init__`` included), followed through the project; third-party and standard
+    library modules by the name imported."""
+    mods = _modules()
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        name = todo.pop()
+        parts = name.split(".")
+        for i in range(1, len(parts) + 1):  # a package's __init__ runs first
+            m = ".".join(parts[:i])
+            if m in seen:
+                continue
+            seen.add(m)
+            if m not in mods:
+                continue
+            tree = ast.parse(mods[m].read_text(encoding="utf-8"))
+            for node in tree.body:
+                if isinstance(node, ast.Import):
+                    todo += [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                    todo.append(node.module)
+                    todo += [f"{node.module}.{a.name}" for a in node.names
+                             if f"{node.module}.{a.name}" in mods]
+    return seen
+
+
+def test_the_command_line_loads_a_command_only_when_it_runs():
+    """``import sensornet.cli`` (main, the parser and the table) loads no command module and
+    nothing heavy; each command in the table is a module under ``sensornet/cli/commands/``
+    with its function, and the parser offers exactly the table's commands."""
+    loaded = _loaded_at_import("sensornet.cli")
+    heavy = sorted(m for m in loaded if m.split(".")[0] in ("numpy", "scipy", "matplotlib",
+                                                             "pyarrow", "rerun", "cryptography")
+                   or m.startswith(("sensornet.cli.commands.", "sim.scenario", "tracking.")))
+    assert heavy == []
+    from sensornet.cli.parser import COMMANDS, build_parser
+
+    commands = set(build_parser()._subparsers._group_actions[0].choices)
+    assert commands == set(COMMANDS)
+    for target in COMMANDS.values():
+        module, _, func = target.partition(":")
+        tree = ast.parse((ROOT / "sensornet/cli/commands" / f"{module}.py").read_text())
+        assert func in {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}, target
+    assert "sensornet.cli.commands.run" in _loaded_at_import("sensornet.cli.commands.run")
+    assert "numpy" in _loaded_at_import("sensornet.cli.commands.run")  # the check sees them
 
 
 def test_the_checks_see_an_arrow_up_and_a_circle():

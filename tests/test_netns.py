@@ -13,6 +13,8 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +23,7 @@ import pytest
 from sim.launcher import read_summaries
 from sim.scenario import load_scenario
 from sim.twin import run_twin
+from tests.processes import stop_all
 from tests.test_hosts import SIX, _six
 from tests.test_network_faults import _assert_tracks_equal_the_twin
 
@@ -86,20 +89,12 @@ def _wait_line(proc: subprocess.Popen, log: Path, text: str, timeout: float = 60
         time.sleep(0.05)  # polling the process's log for its one ready line
 
 
-def test_hosts_in_separate_namespaces_through_a_router_equal_the_twin(tmp_path, namespaces):
-    ns = namespaces
-    # the namespaces of the two hosts have no route to each other: only through the router
-    for side, router, other in (("a", "10.213.1.1", "10.213.2.2"),
-                                ("b", "10.213.2.1", "10.213.1.2")):
-        _ip("-n", ns[side], "route", "get", router)  # its own link to the router: there
-        unreachable = subprocess.run(["ip", "-n", ns[side], "route", "get", other],
-                                     capture_output=True, text=True, timeout=30)
-        assert unreachable.returncode != 0 and "unreachable" in unreachable.stderr, (
-            unreachable.stdout, unreachable.stderr)
-    source = _six(tmp_path / "six.toml", scans=20)
-    scn = load_scenario(source)
-    out, network = tmp_path / "run", f"netns{os.getpid()}"
-    out.mkdir()
+@contextmanager
+def _routed_hosts(tmp_path: Path, ns: dict[str, str], source: str, out: Path, network: str,
+                  host_flags: list[str]) -> Iterator[dict[str, subprocess.Popen]]:
+    """The run both tests make: a router in namespace ``r`` listening on both veth links, the
+    world and host h1 (SIX[:3]) in ``a``, host h2 (SIX[3:]) in ``b``, every process a client
+    of the router (each log in ``tmp_path``); stopped on the way out, whatever happened."""
     config = tmp_path / "client.json5"  # what a routed run's processes use (sim.launcher)
     config.write_text(json.dumps({"mode": "client",
                                   "scouting": {"multicast": {"enabled": False}}}))
@@ -118,18 +113,29 @@ def test_hosts_in_separate_namespaces_through_a_router_equal_the_twin(tmp_path, 
         for name, side, peers in (("h1", "a", SIX[:3]), ("h2", "b", SIX[3:])):
             procs[name] = _start(ns[side], ["sensornet", "host", source, "--peers",
                                             ",".join(peers), "--name", name, *common,
-                                            "--connect", via[side], "--save-tracks"],
+                                            "--connect", via[side], *host_flags],
                                  tmp_path / f"{name}.log")
-        codes = {n: procs[n].wait(timeout=180) for n in ("world", "h1", "h2")}
+        yield procs
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+        stop_all(procs.values())
+
+
+def test_hosts_in_separate_namespaces_through_a_router_equal_the_twin(tmp_path, namespaces):
+    ns = namespaces
+    # the namespaces of the two hosts have no route to each other: only through the router
+    for side, router, other in (("a", "10.213.1.1", "10.213.2.2"),
+                                ("b", "10.213.2.1", "10.213.1.2")):
+        _ip("-n", ns[side], "route", "get", router)  # its own link to the router: there
+        unreachable = subprocess.run(["ip", "-n", ns[side], "route", "get", other],
+                                     capture_output=True, text=True, timeout=30)
+        assert unreachable.returncode != 0 and "unreachable" in unreachable.stderr, (
+            unreachable.stdout, unreachable.stderr)
+    source = _six(tmp_path / "six.toml", scans=20)
+    scn = load_scenario(source)
+    out, network = tmp_path / "run", f"netns{os.getpid()}"
+    out.mkdir()
+    with _routed_hosts(tmp_path, ns, source, out, network, ["--save-tracks"]) as procs:
+        codes = {n: procs[n].wait(timeout=180) for n in ("world", "h1", "h2")}
     logs = {n: (tmp_path / f"{n}.log").read_text()[-1500:] for n in ("world", "h1", "h2")}
     assert codes == {"world": 0, "h1": 0, "h2": 0}, (codes, logs)
     summaries = read_summaries(out, SIX)
@@ -151,45 +157,16 @@ def test_a_host_cut_off_from_the_world_for_5s_rejoins_and_finishes(tmp_path, nam
     scn = load_scenario(source)
     out, network = tmp_path / "run", f"part{os.getpid()}"
     out.mkdir()
-    config = tmp_path / "client.json5"
-    config.write_text(json.dumps({"mode": "client",
-                                  "scouting": {"multicast": {"enabled": False}}}))
-    common = ["--network", network, "--out", str(out), "--run-id", network, "--no-rerun",
-              "--run", "0", "--config", str(config)]
     peer_flags = ["--lease-ms", "1000", "--world-grace", "10", "--save-tracks"]
-    via = {"a": f"tcp/10.213.1.1:{ROUTER_PORT}", "b": f"tcp/10.213.2.1:{ROUTER_PORT}"}
     link_b = f"{ns['r'][:-1]}b0"  # h2's end of its veth pair (the fixture's naming)
-    procs: dict[str, subprocess.Popen] = {}
-    try:
-        log = tmp_path / "router.log"
-        procs["router"] = _start(ns["r"], ["sim.router", "--listen", via["a"], "--listen",
-                                           via["b"], "--network", network], log)
-        _wait_line(procs["router"], log, "router: listening")
-        world_log = tmp_path / "world.log"
-        procs["world"] = _start(ns["a"], ["sensornet", "world", source, *common, "--connect",
-                                          via["a"], "--peers", ",".join(SIX), "--wait", "90"],
-                                world_log)
-        for name, side, peers in (("h1", "a", SIX[:3]), ("h2", "b", SIX[3:])):
-            procs[name] = _start(ns[side], ["sensornet", "host", source, "--peers",
-                                            ",".join(peers), "--name", name, *common,
-                                            "--connect", via[side], *peer_flags],
-                                 tmp_path / f"{name}.log")
-        _wait_line(procs["world"], world_log, "scan 20/", timeout=120)
+    with _routed_hosts(tmp_path, ns, source, out, network, peer_flags) as procs:
+        _wait_line(procs["world"], tmp_path / "world.log", "scan 20/", timeout=120)
         _ip("-n", ns["b"], "link", "set", link_b, "down")
         try:
             time.sleep(5.0)  # the fault itself: 5 s without a link
         finally:
             _ip("-n", ns["b"], "link", "set", link_b, "up")
         codes = {n: procs[n].wait(timeout=180) for n in ("world", "h1", "h2")}
-    finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
     logs = {n: (tmp_path / f"{n}.log").read_text()[-1500:] for n in ("world", "h1", "h2")}
     assert codes == {"world": 0, "h1": 0, "h2": 0}, (codes, logs)
     summaries = read_summaries(out, SIX)

@@ -179,6 +179,7 @@ def fit(fis: FuzzySystem, g: np.ndarray, d: np.ndarray, target: np.ndarray,
     ``"outputs"`` fits the output centres only, ``"all"`` also the input centres and widths.
     At most ``max_samples`` returns (a random subset). Fit on training runs only
     (``sim.seed003 --train-fuzzy``), never on the runs a table reports."""
+    # heavy dependency: scipy.optimize (only fitting needs it, not the fuzzy system's use)
     from scipy.optimize import minimize
 
     g, d, t = (np.asarray(a, float) for a in (g, d, target))

@@ -151,7 +151,7 @@ def dbscan_class():
     """scikit-learn's DBSCAN (an optional dependency: only the FTC baseline uses it), or a
     one-line :class:`MissingBaseline` saying what to install."""
     try:
-        from sklearn.cluster import DBSCAN  # optional, heavy: only the baseline needs it
+        from sklearn.cluster import DBSCAN  # heavy optional dependency: sklearn
     except ImportError:
         raise MissingBaseline(BASELINE_HINT) from None
     return DBSCAN

@@ -4,34 +4,22 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 
-from sensornet.cli.common import UserError
+from protocol.codec import DEFAULT_LIMITS
+from sensornet.cli.common import (
+    DEFAULT_MAX_PEERS,
+    DEFAULT_MAX_POINTS,
+    DEFAULT_MAX_TARGETS,
+    UserError,
+    default_memory_gb,
+)
 
 # --------------------------------------------------------------------------------------------
 # Budgets: a scenario over one refuses to start, naming the limit and the flag that lifts it
 # --------------------------------------------------------------------------------------------
 
-DEFAULT_MAX_POINTS = 5000
-"""Expected measurements per scan of one sensor (clutter + targets)."""
-DEFAULT_MAX_TARGETS = 500
-"""True targets alive at once."""
-DEFAULT_MAX_PEERS = 32
-"""Peer processes one ``sensornet run`` starts on this machine."""
 PROCESS_MB = 200.0
 """Resident memory of one peer or world process with Rerun recording (measured 95-185 MB)."""
-
-
-def _machine_memory_gb() -> float:
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
-    except (ValueError, OSError, AttributeError):
-        return 8.0
-
-
-def default_memory_gb() -> float:
-    """Half of this machine's memory."""
-    return round(_machine_memory_gb() / 2, 1)
 
 
 def points_per_scan(scn) -> dict[str, float]:
@@ -79,8 +67,6 @@ def check_budget(scn, args: argparse.Namespace, workers: int = 1, processes: int
         raise UserError(f"{targets} true targets at once, over the budget of {max_targets} "
                         f"(--max-targets N lifts it)")
     if wire:
-        from protocol.codec import DEFAULT_LIMITS
-
         for name, n in points_per_scan(scn).items():
             high = n + 6 * math.sqrt(n)
             if high > DEFAULT_LIMITS.max_measurements:

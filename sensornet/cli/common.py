@@ -1,4 +1,7 @@
-"""What every command shares: user errors, run folders, flag types and checks."""
+"""What every command shares: user errors, run folders, flag types, defaults and checks.
+
+Light on purpose (the standard library and small project modules only): the parser imports it,
+and ``sensornet --help`` should not wait for NumPy."""
 
 from __future__ import annotations
 
@@ -13,10 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-from sim.scenario import (
-    MAX_ROUNDS,
-    MAX_RUNS,
-)
+from protocol.keys import ROUTER_PREFIX, check_name, check_run_id
+from sim.bounds import MAX_ROUNDS, MAX_RUNS
 from sim.studies import DEFAULT_SCENARIO  # noqa: F401  (the parser's and demo's)
 
 
@@ -69,6 +70,30 @@ def _remove_empty_run_folders() -> None:
             pass
 
 
+# --------------------------------------------------------------------------------------------
+# Defaults of the budget flags (the checks: sensornet.cli.budgets)
+# --------------------------------------------------------------------------------------------
+
+DEFAULT_MAX_POINTS = 5000
+"""Expected measurements per scan of one sensor (clutter + targets)."""
+DEFAULT_MAX_TARGETS = 500
+"""True targets alive at once."""
+DEFAULT_MAX_PEERS = 32
+"""Peer processes one ``sensornet run`` starts on this machine."""
+
+
+def _machine_memory_gb() -> float:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    except (ValueError, OSError, AttributeError):
+        return 8.0
+
+
+def default_memory_gb() -> float:
+    """Half of this machine's memory."""
+    return round(_machine_memory_gb() / 2, 1)
+
+
 def _default_jobs() -> int:
     return max(1, min(os.cpu_count() or 1, 4))
 
@@ -108,8 +133,6 @@ ROUNDS = _number(int, 0, strict=True, maximum=MAX_ROUNDS)
 
 
 def _network_name(text: str) -> str:
-    from protocol.keys import check_name
-
     try:
         return check_name(text, "network name")
     except ValueError as exc:
@@ -117,8 +140,6 @@ def _network_name(text: str) -> str:
 
 
 def _router_name(text: str) -> str:
-    from protocol.keys import ROUTER_PREFIX, check_name
-
     try:
         check_name(text, "router name")
     except ValueError as exc:
@@ -130,8 +151,6 @@ def _router_name(text: str) -> str:
 
 
 def _run_id(text: str) -> str:
-    from protocol.keys import check_run_id
-
     try:
         return check_run_id(text)
     except ValueError as exc:

@@ -1,18 +1,21 @@
-"""The argument parser of every command (options, help, one-line errors)."""
+"""The argument parser of every command (options, help, one-line errors) and the table of
+which module runs each command.
+
+Light on purpose: it imports no command module and nothing heavy (NumPy, SciPy, Zenoh's
+peers); :func:`sensornet.cli.main` imports the one module of the command given, from
+:data:`COMMANDS`, after parsing. So ``sensornet --help`` and ``sensornet run --help`` answer
+without loading what a run needs.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from peers.session import PEER_WAIT  # noqa: E402
-from sensornet.cli.admin import cmd_keys, cmd_router, cmd_scenario
-from sensornet.cli.budgets import (
+from peers.session import PEER_WAIT
+from sensornet.cli.common import (
     DEFAULT_MAX_PEERS,
     DEFAULT_MAX_POINTS,
     DEFAULT_MAX_TARGETS,
-    default_memory_gb,
-)
-from sensornet.cli.common import (
     DEFAULT_SCENARIO,
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
@@ -26,14 +29,30 @@ from sensornet.cli.common import (
     _router_name,
     _run_id,
     _viewer,
+    default_memory_gb,
 )
-from sensornet.cli.peer import cmd_host, cmd_peer, cmd_replay, cmd_world
-from sensornet.cli.results import add_parsers as add_result_parsers
-from sensornet.cli.run import cmd_demo, cmd_run
-from sensornet.cli.studies import cmd_campaign, cmd_experiment, cmd_report, cmd_sweep
-from sim.scenario import (
-    MAX_ROUNDS,
-)
+from sim.bounds import MAX_ROUNDS
+
+COMMANDS: dict[str, str] = {
+    "experiment": "experiment:cmd_experiment",
+    "peer": "peer:cmd_peer",
+    "host": "peer:cmd_host",
+    "world": "world:cmd_world",
+    "run": "run:cmd_run",
+    "demo": "run:cmd_demo",
+    "replay": "replay:cmd_replay",
+    "sweep": "sweep:cmd_sweep",
+    "campaign": "campaign:cmd_campaign",
+    "report": "report:cmd_report",
+    "echo": "live:cmd_live",
+    "topics": "live:cmd_live",
+    "plot": "plot:cmd_plot",
+    "scenario": "scenario:cmd_scenario",
+    "router": "router:cmd_router",
+    "keys": "keys:cmd_keys",
+}
+"""Command -> ``"module:function"`` under :mod:`sensornet.cli.commands`; the function takes
+the parsed arguments and returns the exit code."""
 
 # --------------------------------------------------------------------------------------------
 # The parser
@@ -89,7 +108,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "or --set sensors.s1.clutter_rate=50 (repeatable)")
     add_mc_flags(e, 50)
     add_budget_flags(e)
-    e.set_defaults(func=cmd_experiment)
 
     def add_net_flags(sp: argparse.ArgumentParser, network_required: bool,
                       launcher: bool = False) -> None:
@@ -188,7 +206,6 @@ def build_parser() -> argparse.ArgumentParser:
     pe.add_argument("name", help="the sensor this peer filters (its name in the scenario)")
     pe.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario file or built-in name")
     add_peer_flags(pe)
-    pe.set_defaults(func=cmd_peer)
 
     ho = sub.add_parser("host", help="run several sensor peers in one process over one Zenoh "
                         "session (a peer host)")
@@ -199,7 +216,6 @@ def build_parser() -> argparse.ArgumentParser:
     ho.add_argument("--name", type=_network_name, default="h1",
                     help="the host's name in its log lines (default h1)")
     add_peer_flags(ho)
-    ho.set_defaults(func=cmd_host)
 
     w = sub.add_parser("world", help="play a scenario's truth and scans over Zenoh")
     w.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
@@ -213,7 +229,6 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--progress-every", type=POSITIVE_INT, default=10, metavar="N",
                    help="print a progress line every N scans (default 10)")
     add_budget_flags(w)
-    w.set_defaults(func=cmd_world)
 
     def add_run_flags(sp: argparse.ArgumentParser) -> None:
         add_net_flags(sp, network_required=False, launcher=True)
@@ -249,12 +264,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_run_flags(r)
     r.add_argument("--sim", action="store_true",
                    help="run the discrete-event twin instead of processes (fast, no network)")
-    r.set_defaults(func=cmd_run)
 
     d = sub.add_parser("demo", help=f"'run {DEFAULT_SCENARIO}' with a live Rerun viewer: world "
                        "+ 3 peers over Zenoh, summary")
     add_run_flags(d)
-    d.set_defaults(func=cmd_demo, viewer="spawn")
+    d.set_defaults(viewer="spawn")
 
     rp = sub.add_parser("replay", help="feed a recorded run through the peers offline: the "
                         "same fused tracks bit for bit, or a what-if with --set")
@@ -263,7 +277,6 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--set", action="append", metavar="KEY=VALUE",
                     help="change a setting for the replay (what-if), e.g. fusion.cardinality=emd "
                          "(not network.rounds: the recording holds only the rounds it had)")
-    rp.set_defaults(func=cmd_replay)
 
     sw = sub.add_parser("sweep", help="sweep a fault parameter x out-of-sequence policy "
                         "over Monte Carlo runs (twin by default): CSV and plot")
@@ -279,7 +292,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="base scenario overrides (repeatable)")
     add_mc_flags(sw, 50)
     add_budget_flags(sw, peers=True)
-    sw.set_defaults(func=cmd_sweep)
 
     ca = sub.add_parser("campaign", help="run an experiment campaign file (cells x Monte "
                         "Carlo runs; resumable; local pool or Dask)")
@@ -297,7 +309,6 @@ def build_parser() -> argparse.ArgumentParser:
     ca.add_argument("--quiet", action="store_true", help="no progress bar")
     ca.add_argument("--stop-after", type=POSITIVE_INT, help=argparse.SUPPRESS)  # tests:
     # stop as an interrupt would once this many runs have finished
-    ca.set_defaults(func=cmd_campaign)
 
     rp = sub.add_parser("report", help="markdown + PNG report of a campaign folder")
     rp.add_argument("dir", help="campaign folder (runs/campaign-<name>)")
@@ -305,14 +316,12 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--html", action="store_true",
                     help="also report.html beside report.md: one self-contained file (tables, "
                          "every figure embedded)")
-    rp.set_defaults(func=cmd_report)
 
-    add_result_parsers(sub)
+    _add_live_and_plot(sub)
 
     s = sub.add_parser("scenario", help="list or print built-in scenario files")
     s.add_argument("action", choices=["list", "show"])
     s.add_argument("name", nargs="?", default=DEFAULT_SCENARIO)
-    s.set_defaults(func=cmd_scenario)
 
     ro = sub.add_parser("router", help="a Zenoh router for members that cannot all reach "
                         "each other (clients connect to it)")
@@ -327,7 +336,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the router's member name (default router; must start with 'router')")
     ro.add_argument("--network", type=_network_name,
                     help="check that the keys are this network's")
-    ro.set_defaults(func=cmd_router)
 
     k = sub.add_parser("keys", help="make a network's CA and each member's key and "
                        "certificate (for --secure)")
@@ -343,5 +351,40 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--days", type=POSITIVE_INT, default=365, help="validity (default 365)")
     k.add_argument("--rotate", action="store_true",
                    help="issue new keys for the named members (same CA)")
-    k.set_defaults(func=cmd_keys, set=None)
+    k.set_defaults(set=None)
     return p
+
+
+def _add_live_and_plot(sub) -> None:
+    """The ``echo``, ``topics`` and ``plot`` subcommands."""
+    for name, helptext in (("echo", "print every message on a running network, decoded, one "
+                                     "line each (sender, kind, scan, contents, bytes)"),
+                           ("topics", "listen to a running network for a while, then a table "
+                                      "of its keys: messages, rate, bytes, kinds, newest scan")):
+        ec = sub.add_parser(name, help=helptext)
+        ec.add_argument("network", help="the network's name (sensornet run --network; default "
+                                        "of run: the scenario's name)")
+        if name == "echo":
+            ec.add_argument("key", nargs="?", default="**",
+                            help="key expression under sensornet/NETWORK/ (default **: "
+                                 "everything; e.g. 'estimate/*', 'scan/s1', 'tracks/**')")
+            ec.add_argument("--count", type=int, help="stop after this many messages")
+        else:
+            ec.add_argument("--count", type=int,
+                            help="table as soon as this many messages were heard")
+            ec.set_defaults(key="**")
+        ec.add_argument("--duration", type=float, default=None if name == "echo" else 3.0,
+                        help="seconds to listen (echo: until Ctrl-C or --count)")
+        ec.add_argument("--connect", action="append",
+                        help="a Zenoh endpoint of the network (e.g. the world's --listen)")
+        ec.add_argument("--config", help="Zenoh JSON5 config file")
+        ec.add_argument("--secure", metavar="DIR",
+                        help="a keys folder: speak as --as MEMBER over mutual TLS and verify "
+                             "every signature")
+        ec.add_argument("--as", dest="member", help="the member the tool speaks as (--secure)")
+        ec.set_defaults(command_name=name)
+
+    pl = sub.add_parser("plot", help="track map and metrics over time (PNG) of one run from "
+                                     "its per-scan results")
+    pl.add_argument("dir", help="run folder (what 'sensornet run' printed: runs/<time>-run)")
+    pl.add_argument("--out", help="figure folder (default: DIR)")

@@ -14,11 +14,11 @@ test or a plug-in); ``tests/test_kinds.py`` registers a small one and runs it th
 
 from __future__ import annotations
 
-import importlib
-import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+from sim import plugins
 
 Scenario = Any
 """A :class:`sim.scenario.Scenario` (the registry imports nothing of the project, so the loader
@@ -89,13 +89,7 @@ kinds; inherited by every process a run starts)."""
 
 
 def _plugins() -> dict[str, str]:
-    out = {}
-    for item in filter(None, (x.strip() for x in os.environ.get(PLUGINS_ENV, "").split(","))):
-        name, sep, target = item.partition("=")
-        if not sep or ":" not in target:
-            raise ValueError(f"{PLUGINS_ENV}: {item!r} is not 'name=module:attribute'")
-        out[name.strip()] = target.strip()
-    return out
+    return plugins.from_env(PLUGINS_ENV)
 
 
 def _table() -> dict[str, str]:
@@ -114,8 +108,7 @@ def kind(name: str) -> PeerKind:
     table = _table()
     if name not in table:
         raise KeyError(f"unknown peer kind {name!r}; known: {', '.join(names())}")
-    module, attr = table[name].split(":")
-    k = getattr(importlib.import_module(module), attr)
+    k = plugins.load(table[name])
     if not isinstance(k, PeerKind) or k.name != name:
         raise TypeError(f"{table[name]} is not the PeerKind {name!r}")
     _registered[name] = k

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from peers.faultplan import (
     FaultPlan,
 )
+from sim.bounds import MAX_COORDINATE, MAX_ROUNDS, MAX_RUNS, MAX_SENSORS  # noqa: F401 (re-exported)
 from sim.kinds import names as kind_names
 from sim.truths import names as truth_names
 
@@ -42,19 +43,6 @@ FAULT_KEYS = ("delay", "loss", "duplicate", "reorder", "reorder_delay", "partiti
 DELAY_KINDS = {"constant": ("value",), "uniform": ("low", "high"), "exponential": ("mean",),
                "scans": ("low", "high"), "short": (), "one-step": (), "multi-step": ("max_steps",)}
 """Delay kinds and the parameters each needs."""
-MAX_SENSORS = 256
-"""Sensors (= peers) a scenario may list: a flooding forward carries at most this many scans
-(protocol.codec.Limits.max_entries), and a peer's work per scan grows with its neighbours."""
-MAX_ROUNDS = 16
-"""``network.rounds``: consensus (or flooding) rounds per scan. Every round is a message per
-peer and link held until the scan is done, so the twin's memory grows with it."""
-MAX_RUNS = 100_000
-"""Monte Carlo runs one command or campaign cell may ask for (``--runs``, ``campaign.runs``):
-each run's results are held until the table is written."""
-MAX_COORDINATE = 1e7
-"""Largest ``|x|`` or ``|y|`` in metres of the region (and of sensor and target positions):
-10,000 km, well past any surveillance area; areas and distances stay far from overflow."""
-
 Matrix = tuple[tuple[float, ...], ...]
 
 

@@ -332,8 +332,8 @@ def _network(t: Table, sensor_names: list[str]) -> NetworkSpec:
 
 
 def _extended(t: Table) -> ExtendedSpec:
-    # in-function: tracking.partition pulls in scipy.stats and scipy.ndimage (about 1 s of
-    # start-up on 2 busy cores), which only extended-target scenarios need
+    # heavy dependency: scipy.stats (tracking.partition pulls in scipy.stats and scipy.ndimage,
+    # about 1 s of start-up on 2 busy cores, which only extended-target scenarios need)
     from tracking.partition import DistancePartitioner, GridSpectralPartitioner
 
     spec = ExtendedSpec(

@@ -10,13 +10,14 @@ a small one and runs it through ``experiment`` and a campaign.
 
 from __future__ import annotations
 
-import importlib
-import os
 from typing import Any
+
+from sim import plugins
 
 STUDIES: dict[str, str] = {
     "seed004": "sim.studies.seed004:STUDY",
     "seed003": "sim.studies.seed003:STUDY",
+    "seed003-peers": "sim.studies.seed003_peers:STUDY",
     "seed002": "sim.studies.seed002:STUDY",
     "seed001": "sim.studies.seed001:STUDY",
     "twin": "sim.studies.network:TWIN",
@@ -42,13 +43,7 @@ _loaded: dict[str, Any] = {}
 
 
 def _plugins() -> dict[str, str]:
-    out = {}
-    for item in filter(None, (x.strip() for x in os.environ.get(PLUGINS_ENV, "").split(","))):
-        name, sep, target = item.partition("=")
-        if not sep or ":" not in target:
-            raise ValueError(f"{PLUGINS_ENV}: {item!r} is not 'name=module:attribute'")
-        out[name.strip()] = target.strip()
-    return out
+    return plugins.from_env(PLUGINS_ENV)
 
 
 def names() -> tuple[str, ...]:
@@ -66,8 +61,7 @@ def get(name: str):
     table = {**STUDIES, **_plugins()}
     if name not in table:
         raise KeyError(f"unknown study {name!r}; known: {', '.join(names())}")
-    module, attr = table[name].split(":")
-    study = getattr(importlib.import_module(module), attr)
+    study = plugins.load(table[name])
     if getattr(study, "name", None) != name:
         raise TypeError(f"{table[name]} is not the study {name!r}")
     _loaded[name] = study
@@ -100,6 +94,16 @@ def for_report(kind: str):
 def report_kinds() -> tuple[str, ...]:
     """Every ``[[figures]]`` kind a study draws."""
     return tuple(s.report_kind or s.name for s in map(get, names()) if s.report is not None)
+
+
+def main(name: str, argv: list[str] | None = None) -> int:
+    """``python -m sim.<module>`` of study ``name``: its ``command`` hook (the module's
+    ``__main__`` block calls this, so the study module, which imports the computation, is
+    loaded by name and the computation never imports its study)."""
+    study = get(name)
+    if study.command is None:
+        raise KeyError(f"study {name!r} has no command line; use: sensornet experiment")
+    return study.command(argv)
 
 
 def register(study):

@@ -109,6 +109,10 @@ class Study:
     when the campaign file asks for ``[[figures]] kind = report_kind``."""
     report_kind: str | None = None
     """The ``[[figures]]`` kind that asks for ``report`` (default: the study's name)."""
+    command: Callable[[Sequence[str] | None], int] | None = None
+    """The study's own command line, ``python -m sim.<module>`` (argv -> exit code): flags
+    made into a :class:`Request` and run through :func:`experiment` like ``sensornet
+    experiment`` (:mod:`sim.studies.command`)."""
 
 
 def run_study(study: Study, setup: Setup, runs: Sequence[int], jobs: int = 1,

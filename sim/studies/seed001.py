@@ -4,29 +4,33 @@ fusion and the particle fusion rule (:mod:`sim.seed001`). A campaign cell of its
 keys; ``[[figures]] kind = "seed001"`` draws Table 1 per cell beside the paper's numbers.
 
 ``sensornet experiment seed001`` is the one-model experiment (:mod:`sim.studies.seed000`);
-this study is ``python -m sim.seed001`` and the ``seed001`` campaign runner.
+this study is ``python -m sim.seed001`` (:func:`main`, with the GCI weight's tuning beside it)
+and the ``seed001`` campaign runner.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
+import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from peers.estimators import SingleTargetConfig
 from sim import seed001 as s1
 from sim.report_plots import methods as methods_of
 from sim.report_plots import plt_module
 from sim.scenario import ScenarioError
 from sim.seed001 import PAPER_TABLE1
+from sim.studies import command
 from sim.studies.base import Cell, Outcome, Request, Study
 
-KEYS = ("geometry", "seed", "particles", "jitter", "omega", "filters", "loss_threshold",
-        "loss_after")
+KEYS = ("geometry", "seed", "particles", "jitter", "jitter_kind", "ratio_space", "clip", "omega",
+        "filters", "loss_threshold", "loss_after")
 """What a ``seed001`` cell (or request) may set."""
 
 Setup = tuple  # (Seed001Scenario, ExperimentConfig)
@@ -45,10 +49,15 @@ def setup(source: str, overrides: Mapping[str, Any]) -> Setup:
                          f"got {geometry!r}")
     scn = s1.Seed001Scenario(geometry=geometry, seed=int(o.get("seed", 1)))
     cfg = s1.ExperimentConfig()
-    if "particles" in o or "jitter" in o:
+    if "particles" in o or "jitter" in o or "jitter_kind" in o:
         cfg = replace(cfg, particle=replace(
             cfg.particle, n_particles=int(o.get("particles", cfg.particle.n_particles)),
-            jitter=float(o.get("jitter", cfg.particle.jitter))))
+            jitter=float(o.get("jitter", cfg.particle.jitter)),
+            jitter_kind=str(o.get("jitter_kind", cfg.particle.jitter_kind))))
+    if "ratio_space" in o or "clip" in o:
+        cfg = replace(cfg, ratio=replace(
+            cfg.ratio, space=str(o.get("ratio_space", cfg.ratio.space)),
+            clip=bool(o.get("clip", cfg.ratio.clip))))
     if "omega" in o:
         cfg = replace(cfg, gci_omega=o["omega"])
     if "filters" in o:
@@ -171,10 +180,68 @@ def report(cell: dict, data: dict[str, Any], out: Path) -> tuple[list[str], list
     return lines + [f"![{caption}]({png.name})", "", f"*{caption}*", ""], [png]
 
 
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m sim.seed001 --runs N --geometry A|G|close|near [--jobs J]`` prints Table 1;
+    ``--tune-omega 0.2,0.3,det --tune-runs N`` compares GCI weights on runs 10000.. instead."""
+    ap = command.parser("seed001", s1.__doc__, runs=10, set_help=None)
+    ap.add_argument("--geometry", choices=sorted(s1.GEOMETRIES), default="A")
+    ap.add_argument("--particles", type=int, default=800, help="particles per model")
+    ap.add_argument("--jitter", type=float, default=0.3)
+    ap.add_argument("--jitter-kind", choices=("add", "shrink"), default="add")
+    ap.add_argument("--ratio-space", choices=("position", "full"), default="position")
+    ap.add_argument("--no-clip", action="store_true", help="keep negative information")
+    default_omega = s1.omega_label(SingleTargetConfig.gci_omega)
+    ap.add_argument("--omega", default=default_omega,
+                    help="GCI weight of the other peer: a number in [0, 1], 'det' or 'chernoff' "
+                         f"(default {default_omega})")
+    ap.add_argument("--filters", default="IMM-EKF,IMM-PF")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--tune-omega", metavar="W1,W2,...",
+                    help="instead of Table 1: the GCI-fused x-position RMSE for each candidate "
+                         "weight (numbers, 'det', 'chernoff') on runs "
+                         f"{s1.TUNE_FIRST_RUN}.. only (never evaluated runs), and the best")
+    ap.add_argument("--tune-runs", type=int, default=40,
+                    help=f"tuning runs {s1.TUNE_FIRST_RUN}..{s1.TUNE_FIRST_RUN}+N-1 (default 40)")
+    a = ap.parse_args(argv)
+    if a.runs < 1:
+        ap.error("--runs must be at least 1")
+    omega: float | str = a.omega
+    if a.omega not in ("det", "chernoff"):
+        try:
+            omega = float(a.omega)
+        except ValueError:
+            ap.error(f"--omega: expected a number, 'det' or 'chernoff', got {a.omega!r}")
+    filters = [f.strip() for f in a.filters.split(",") if f.strip()]
+    if any(f not in s1.FILTERS for f in filters):
+        ap.error(f"--filters: expected a comma list of {s1.FILTERS}")
+    keys = {"geometry": a.geometry, "seed": a.seed, "particles": a.particles,
+            "jitter": a.jitter, "jitter_kind": a.jitter_kind, "ratio_space": a.ratio_space,
+            "clip": not a.no_clip, "omega": omega, "filters": filters}
+    req = command.request(a, "seed001", keys)
+    if a.tune_omega is not None:
+        if a.first_run != 0:
+            ap.error(f"--first-run does not apply to --tune-omega (tuning runs start at "
+                     f"{s1.TUNE_FIRST_RUN})")
+        if a.tune_runs < 2:
+            ap.error("--tune-runs must be at least 2")
+        try:
+            omegas = s1.parse_omegas(a.tune_omega)
+        except ValueError as exc:
+            ap.error(f"--tune-omega: {exc}")
+        scn, cfg = load(req)[0]
+        print(s1.format_tuning(s1.tune_omega(scn, cfg, omegas, a.tune_runs, jobs=a.jobs,
+                                             progress=not a.quiet)))
+        return 0
+    if a.first_run + a.runs > s1.TUNE_FIRST_RUN:
+        print(f"note: runs >= {s1.TUNE_FIRST_RUN} are the GCI weight's tuning runs",
+              file=sys.stderr)
+    return command.drive(STUDY, req)
+
+
 STUDY = Study(
     name="seed001",
     about="seed 001 Table 1: IMM-EKF / IMM-PF, each radar alone, GCI and particle fusion",
     load=load, run_once=run_once, summarise=summarise, table=table,
     label=lambda s: f"runs (seed001, geometry {s[0].geometry})",
     row=row, cell_setup=setup, setup_hash=setup_hash, fixed_scenario="seed001",
-    modules=("sim.seed001",), report=report)
+    modules=("sim.seed001",), report=report, command=main)

@@ -12,6 +12,8 @@ import threading
 import time
 from pathlib import Path
 
+from peers.rerun_sink import spawn_viewer
+from peers.scan_results import merge_parts, write_part
 from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import (
     DEFAULT_SCENARIO,
@@ -20,9 +22,24 @@ from sensornet.cli.common import (
     _resolve_viewer,
     _run_folder,
 )
-from sensornet.cli.peer import _load, _run_keys
-from sensornet.cli.results import report_results
-from sensornet.cli.studies import _warn_fusion
+from sensornet.cli.scenarios import load, warn_fusion
+from sensornet.cli.security import run_keys
+from sim import launcher
+from sim.build import adjacency
+from sim.packing import choose
+from sim.twin import run_twin
+
+
+def report_results(out: Path) -> Path | None:
+    """Merge the peers' per-scan parts into ``<out>/results.parquet`` and say where it is."""
+    try:
+        table = merge_parts(sorted(out.glob("*.scans.msgpack")), out / "results.parquet")
+    except ImportError:
+        print("per-scan results: not merged (needs pyarrow: pip install pyarrow)")
+        return None
+    if table is not None:
+        print(f"per-scan results: {table}  (plots: sensornet plot {out})")
+    return table
 
 
 def _last_line(path: Path) -> str:
@@ -52,8 +69,6 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
     """With hosts (``--per-process N``, N > 1) only ``kill`` (one peer, in its host) and
     ``killhost`` (a whole host, named h1, h2, ...) of the peers' faults (the router's as
     ever); ``killhost`` only with hosts."""
-    from sim.launcher import HOSTED_ACTIONS
-
     for f in pfaults:
         if f.action == "killhost" and not hosts:
             raise UserError(f"--fault killhost:{f.peer}@{f.scan} needs hosts: add "
@@ -61,20 +76,17 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
         if f.action == "killhost" and f.peer not in hosts:
             raise UserError(f"--fault names unknown host {f.peer!r} (hosts: "
                             f"{', '.join(hosts)})")
-        if hosts and f.action not in HOSTED_ACTIONS and f.peer != "router":
+        if hosts and f.action not in launcher.HOSTED_ACTIONS and f.peer != "router":
             raise UserError(f"--fault {f.action}:{f.peer}@{f.scan} with --per-process: only "
-                            f"{' and '.join(HOSTED_ACTIONS)} so far")
+                            f"{' and '.join(launcher.HOSTED_ACTIONS)} so far")
     if hosts and getattr(args, "sim", False):
         raise UserError("--per-process needs real processes; drop --sim")
 
 
 def _packing(args: argparse.Namespace, scn, pfaults) -> int:
     """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
-    from sim.launcher import HOSTED_ACTIONS
-    from sim.packing import choose
-
     solo = [f"{f.action}:{f.peer}" for f in pfaults
-            if f.action not in HOSTED_ACTIONS and f.peer != "router"]
+            if f.action not in launcher.HOSTED_ACTIONS and f.peer != "router"]
     asked = getattr(args, "per_process", None)
     if getattr(args, "sim", False):  # the twin: no processes to pack
         return asked or 1
@@ -87,30 +99,17 @@ def _packing(args: argparse.Namespace, scn, pfaults) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sim.build import adjacency
-    from sim.launcher import (
-        ProcessFault,
-        format_summary,
-        host_groups,
-        hosts_line,
-        inject_process_faults,
-        merge_recordings,
-        read_summaries,
-        start_run,
-        wait_run,
-    )
-
-    scn = _load(args, args.scenario)
-    _warn_fusion(scn)
+    scn = load(args, args.scenario)
+    warn_fusion(scn)
     try:
-        pfaults = [ProcessFault.parse(f) for f in args.fault or []]
+        pfaults = [launcher.ProcessFault.parse(f) for f in args.fault or []]
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if scn.network.router and hasattr(args, "router") and not args.router:
         args.router = "[network] router = true"  # the scenario's routed topology
     routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
     per_process = _packing(args, scn, pfaults)
-    hosts = host_groups(scn.sensor_names, per_process, adjacency(scn)[1])
+    hosts = launcher.host_groups(scn.sensor_names, per_process, adjacency(scn)[1])
     _check_hosted_faults(pfaults, hosts, args)
     unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
                      - set(scn.sensor_names) - routed)
@@ -148,7 +147,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UserError(f"{why} makes every process a client of the run's router: "
                             f"drop --{clash[0]}")
     out = _run_folder(args.out, "run")
-    secure = _run_keys(args, scn, out)
+    secure = run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
     how = f"in {len(hosts)} host processes" if hosts else "as processes"
@@ -157,15 +156,13 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"few seconds to start {len(hosts or scn.sensors) + 1} processes); output in {out}",
           flush=True)
     if hosts:
-        print(hosts_line(hosts), flush=True)
+        print(launcher.hosts_line(hosts), flush=True)
     if secure is not None:
         made = " (fresh keys made for this run)" if args.secure == "" else ""
         print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
               f"{secure}{made}", flush=True)
     viewer = args.viewer
     if viewer == "spawn":  # one viewer for the whole run; every process streams to it
-        from peers.rerun_sink import spawn_viewer
-
         viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
     stop = threading.Event()  # SIGINT / SIGTERM: stop the children, then report as usual
     caught: list[str] = []
@@ -177,49 +174,42 @@ def cmd_run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     injector = None
     try:
-        handle = start_run(scn, args.scenario, out, network=args.network, overrides=args.set,
-                           viewer=viewer, run=args.run, speed=args.speed,
-                           rerun=not args.no_rerun, lease_ms=args.lease_ms,
-                           sparse=args.sparse, listen=args.listen, connect=args.connect,
-                           config=args.config, run_id=args.run_id, secure=secure,
-                           router=bool(getattr(args, "router", False)),
-                           peer_args={n: ["--record"] for n in scn.sensor_names}
-                           if args.record else None, per_process=per_process)
+        handle = launcher.start_run(
+            scn, args.scenario, out, network=args.network, overrides=args.set, viewer=viewer,
+            run=args.run, speed=args.speed, rerun=not args.no_rerun, lease_ms=args.lease_ms,
+            sparse=args.sparse, listen=args.listen, connect=args.connect, config=args.config,
+            run_id=args.run_id, secure=secure, router=bool(getattr(args, "router", False)),
+            peer_args={n: ["--record"] for n in scn.sensor_names} if args.record else None,
+            per_process=per_process)
         if getattr(args, "router", False):
             why = f" ({args.router})" if isinstance(args.router, str) else ""
             print(f"routed{why}: the world and every peer are clients of the run's router "
                   f"(sensornet router) at {handle.endpoints['router']}", flush=True)
         if pfaults:
-            injector = threading.Thread(target=inject_process_faults, daemon=True,
+            injector = threading.Thread(target=launcher.inject_process_faults, daemon=True,
                                         args=(handle, pfaults, scn.sensor_names[0], stop))
             injector.start()
-        codes = wait_run(handle, timeout=expected + args.timeout, stop=stop)
+        codes = launcher.wait_run(handle, timeout=expected + args.timeout, stop=stop)
     finally:
         stop.set()
         if injector is not None:
             injector.join(timeout=5)
         for s, h in previous.items():
             signal.signal(s, h)
-    summaries = read_summaries(out, scn.sensor_names)
+    summaries = launcher.read_summaries(out, scn.sensor_names)
     if summaries:
-        from sim.launcher import trust_note
-
-        print(format_summary(summaries))
-        if trust_note(summaries):
-            print(trust_note(summaries))
+        print(launcher.format_summary(summaries))
+        if launcher.trust_note(summaries):
+            print(launcher.trust_note(summaries))
         if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
-            from sim.launcher import realtime_note
-
-            note = realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
+            note = launcher.realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
             if note:
                 print(note)
     faults_file = out / "process-faults.json"
     if pfaults and faults_file.is_file():
-        from sim.launcher import fault_report
-
-        print(fault_report(json.loads(faults_file.read_text()), summaries))
+        print(launcher.fault_report(json.loads(faults_file.read_text()), summaries))
     report_results(out)
-    rec = merge_recordings(out)
+    rec = launcher.merge_recordings(out)
     parts = sorted((out / "rerun").glob("*.rrd")) if (out / "rerun").is_dir() else []
     if rec is not None:
         print(f"recording: {rec}  (view it with: rerun {rec})")
@@ -269,10 +259,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run_twin(scn, args: argparse.Namespace) -> int:
     """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
-    from peers.scan_results import write_part
-    from sim.launcher import format_summary
-    from sim.twin import run_twin
-
     if args.fault:
         raise UserError("--fault (process faults) needs real processes; drop --sim")
     t0 = time.perf_counter()
@@ -280,11 +266,9 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
     summaries = {name: result.summary(name) for name in result.peers}
     print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
           f"scans in {time.perf_counter() - t0:.1f} s (bytes: the encoded messages)")
-    print(format_summary(summaries))
-    from sim.launcher import trust_note
-
-    if trust_note(summaries):
-        print(trust_note(summaries))
+    print(launcher.format_summary(summaries))
+    if launcher.trust_note(summaries):
+        print(launcher.trust_note(summaries))
     out = _run_folder(args.out, "sim")
     for name, core in result.peers.items():
         write_part(core.scorer.results, name, out / f"peer-{name}.scans.msgpack")
