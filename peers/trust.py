@@ -92,6 +92,28 @@ class TrustConfig:
     apart, misses at Pd 0.9). The W-MSR idea (LeBlanc, Zhang, Koutsoukos & Sundaram 2013,
     "Resilient asymptotic consensus in robust networks", IEEE JSAC 31(4)) of discarding only
     values extreme against the others, as a soft score."""
+    median_test: bool = True
+    """With the majority term: a neighbour's test is its median test against the other inputs
+    (own and the trusted neighbours but it), not the smaller of its tests against own and
+    against their average. Two liars telling the same lie make the average look like them
+    (each one's phantoms are in the other's reference); the median of the pair tests is
+    moved by neither while the honest inputs are the majority (W-MSR's premise)."""
+    repeat: bool = True
+    """A neighbour whose non-empty density at a scan is, to the last bit, the one it sent at an
+    earlier scan is quarantined at once (statistic ``quarantine + drift``): a filter's
+    posterior changes every scan (the prediction adds the process noise ``Q`` to every
+    covariance, the update takes information away), so an exact repeat is a stuck sensor or a
+    replayed estimate, never noise. The same object handed in again (a stale input reused by
+    the out-of-sequence policy) is not a repeat, nor is a density with no component of weight
+    :attr:`repeat_weight` (the birth intensity alone is the same every scan: an honest peer
+    that saw nothing publishes it again under link faults, 5 times on a training run)."""
+    repeat_weight: float = 0.5
+    """Smallest heaviest-component weight of a density the repeat test looks at (the
+    extraction threshold: a repeated *target*)."""
+    renormalise: bool = True
+    """What a neighbour loses is shared over own and the trusted neighbours in proportion to
+    their consensus weights (the weights renormalised over the trusted set); False: all of it
+    to own (as if the edge were cut)."""
     warmup: int = 0
     """Scans at the start with no test (0: a lie told from the first scan is caught at once;
     filters that start empty agree on nothing, which the cardinality term alone scores)."""
@@ -115,6 +137,9 @@ class NeighbourTrust:
     """Largest statistic of the scan being fused."""
     last_statistic: float = float("nan")
     last_weight: float = 1.0
+    last_mix: GaussianMixture | None = None
+    """Its last round-0 density (the repeat test) and the scan it came at."""
+    last_k: int = -1
     scans_in: Counter = field(default_factory=Counter)
     """Scans spent in each state."""
 
@@ -164,7 +189,8 @@ class Trust:
             others = np.flatnonzero(wo > 0) if pair is not None else ()
             if len(others) >= 3:  # own and at least two other trusted neighbours
                 sub = pair[np.ix_(others, others)][np.triu_indices(len(others), 1)]
-                out[s] = max(0.0, out[s] - float(np.median(sub)))
+                base = float(np.median(pair[j, others])) if self.cfg.median_test else out[s]
+                out[s] = max(0.0, base - float(np.median(sub)))
         return out
 
     def _pair_tests(self, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
@@ -197,9 +223,13 @@ class Trust:
         return min(cfg.cap, d + card)
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
-              inputs: dict[str, GaussianMixture], weights: list[float]) -> list[float]:
+              inputs: dict[str, GaussianMixture], weights: list[float],
+              drop_suspects: bool = False) -> list[float]:
         """Weights for ``[own, *sorted(inputs)]`` after the test: each neighbour's consensus
-        weight times its trust, the rest to own."""
+        weight times its trust, what is taken renormalised over the trusted set (or given to
+        own, :attr:`TrustConfig.renormalise`). ``drop_suspects`` (product rules such as GCI,
+        where any weight above 0 lets a confident lie veto the product): a neighbour below
+        full trust gets weight 0."""
         names = sorted(inputs)
         if not self.cfg.enabled or not names:
             return list(weights)
@@ -209,6 +239,10 @@ class Trust:
             return list(weights)
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
         stats = self.statistics(own, inputs, wmap)
+        if rnd == 0 and self.cfg.repeat:
+            for s in names:
+                if self._repeated(self.n[s], k, inputs[s]):
+                    stats[s] = self.cfg.quarantine + self.cfg.drift
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -216,6 +250,8 @@ class Trust:
             rec.last_statistic = stats[s]
             score = self._next(rec.score, rec.scan_max)
             t = self._trust(rec, score)
+            if drop_suspects and t < 1.0:
+                t = 0.0
             rec.last_weight = t
             if self.history is not None:
                 self.history.append((k, s, stats[s], score))
@@ -223,8 +259,25 @@ class Trust:
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(stats[s], 4), "score": round(score, 4),
                                  "weight": round(t, 4), "state": rec.state})
-        out[0] = 1.0 - sum(out[1:])
+        kept = sum(out[1:])
+        if self.cfg.renormalise and kept + wmap[""] > 0:
+            scale = 1.0 / (kept + wmap[""])
+            out = [wmap[""] * scale] + [w * scale for w in out[1:]]
+        else:
+            out[0] = 1.0 - kept
         return out
+
+    def _repeated(self, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:
+        """Whether ``mix`` (round 0 of scan ``k``) repeats, bit for bit, the non-empty density
+        the neighbour sent at an earlier scan (:attr:`TrustConfig.repeat`); remembers it."""
+        prev, prev_k = rec.last_mix, rec.last_k
+        if k <= prev_k:
+            return False
+        rec.last_mix, rec.last_k = mix, k
+        return (prev is not None and prev is not mix and len(mix) > 0 and len(mix) == len(prev)
+                and float(mix.weights.max()) >= self.cfg.repeat_weight
+                and np.array_equal(mix.weights, prev.weights)
+                and np.array_equal(mix.means, prev.means) and np.array_equal(mix.covs, prev.covs))
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)
