@@ -57,6 +57,8 @@ from tracking.mixture import GaussianMixture
 
 STATES = ("trusted", "suspect", "quarantined")
 MAX_LOG = 200
+LOW = 0.1
+"""A neighbour at or under this trust counts as detected (issue 24's target)."""
 """State changes kept for the summary (a flapping neighbour cannot grow it)."""
 
 
@@ -137,6 +139,10 @@ class NeighbourTrust:
     """Largest statistic of the scan being fused."""
     last_statistic: float = float("nan")
     last_weight: float = 1.0
+    first_k: int | None = None
+    """The first scan it was tested at."""
+    low_k: int | None = None
+    """The first scan its weight was at most :data:`LOW` (detected)."""
     last_mix: GaussianMixture | None = None
     """Its last round-0 density (the repeat test) and the scan it came at."""
     last_k: int = -1
@@ -253,6 +259,10 @@ class Trust:
             if drop_suspects and t < 1.0:
                 t = 0.0
             rec.last_weight = t
+            if rec.first_k is None:
+                rec.first_k = k
+            if rec.low_k is None and t <= LOW:
+                rec.low_k = k
             if self.history is not None:
                 self.history.append((k, s, stats[s], score))
             out.append(wmap[s] * t)
@@ -329,7 +339,8 @@ class Trust:
 
     def summary(self) -> dict:
         return {"neighbours": {s: {"state": r.state, "score": round(r.score, 3),
-                                   "scans": dict(r.scans_in)} for s, r in self.n.items()},
+                                   "scans": dict(r.scans_in), "first_scan": r.first_k,
+                                   "low_scan": r.low_k} for s, r in self.n.items()},
                 "changes": list(self.log)}
 
     def drain_records(self) -> list[dict]:

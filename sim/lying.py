@@ -73,11 +73,34 @@ def honest_scores(result: TwinResult, liar: str) -> dict[str, float]:
     liars = liar.split(",")
     honest = [n for n in peers if n not in liars]
     near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)]
-    return {"fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
+    return {**trust_scores(result, liars, honest),
+            "fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
             "local": float(np.mean([peers[n].mean_ospa("local") for n in honest])),
             "fused_neighbours": float(np.mean([peers[n].mean_ospa("fused") for n in near])),
             "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars])),
             "rejected": float(sum(sum(peers[n].rejected.values()) for n in honest))}
+
+
+def trust_scores(result: TwinResult, liars: list[str], honest: list[str]) -> dict[str, float]:
+    """With the defence on (else NaN): ``honest_quarantined``, the share of (honest peer,
+    honest neighbour, scan) triples in quarantine; ``detect_scans``, the most scans any honest
+    neighbour took from its first test of a liar to a weight of at most 0.1, counting both
+    (1: at once; NaN if one never did)."""
+    seen = quarantined = 0
+    delays: list[float] = []
+    for n in honest:
+        trust = result.peers[n].consensus.trust
+        if trust is None:
+            return {"honest_quarantined": math.nan, "detect_scans": math.nan}
+        for s, rec in trust.n.items():
+            if s in liars:
+                delays.append(math.nan if rec.low_k is None or rec.first_k is None
+                              else rec.low_k - rec.first_k + 1)
+            else:
+                seen += sum(rec.scans_in.values())
+                quarantined += rec.scans_in["quarantined"]
+    return {"honest_quarantined": quarantined / max(seen, 1),
+            "detect_scans": max(delays) if delays else math.nan}
 
 
 @dataclass(frozen=True)
@@ -177,7 +200,10 @@ def table(o: Outcome) -> str:
     return (f"Honest peers' mean OSPA over {len(runs)} runs ({runs.start}..{runs.stop - 1}); "
             "liars: " + ", ".join(f"{s.label} {s.liar}" for s in plan.setups) + "\n\n"
             + markdown(o.summary[1]) + "\n\nCompact (honest peers' fused OSPA, m, mean ± sd "
-            "over runs):\n\n" + compact(o.summary[1]))
+            "over runs):\n\n" + compact(o.summary[1]) + "\n\nThe defence (rules with "
+            "+trust): scans to detect the liar (weight <= 0.1; the worst honest neighbour and "
+            "run) / honest neighbours quarantined (% of (peer, neighbour, scan)):\n\n"
+            + defence(o.summary[1]))
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -194,7 +220,9 @@ def summarise(rows: list[dict]) -> list[dict]:
                "fused_neighbours": np.mean([r["fused_neighbours"] for r in sel]),
                "local": np.mean([r["local"] for r in sel]),
                "clean": np.mean([r["fused"] for r in clean]) if clean else math.nan,
-               "rejected": sum(r["rejected"] for r in sel)}
+               "rejected": sum(r["rejected"] for r in sel),
+               "honest_quarantined": np.mean([r["honest_quarantined"] for r in sel]),
+               "detect_scans": np.max([r["detect_scans"] for r in sel])}
         row["change"] = row["fused"] - row["clean"]
         out.append(row)
     return out
@@ -223,6 +251,26 @@ def compact(summary: list[dict]) -> str:
                  for lie in lies]
         local = np.mean([s["local"] for s in sel.values()])
         lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + f" | {local:.1f} |")
+    return "\n".join(lines)
+
+
+def defence(summary: list[dict]) -> str:
+    """Per graph and rule with the defence on, per lie: the scans to detect (the worst
+    neighbour and run; "never" if one did not) and the honest quarantines (% of triples)."""
+    sel_all = [s for s in summary if not math.isnan(s["honest_quarantined"])]
+    lies = list(dict.fromkeys(s["lie"] for s in sel_all))
+    lines = ["| graph | rule | " + " | ".join(lies) + " |", "|---|---|" + "---|" * len(lies)]
+    for setup, rule in dict.fromkeys((s["setup"], s["rule"]) for s in sel_all):
+        sel = {s["lie"]: s for s in sel_all if (s["setup"], s["rule"]) == (setup, rule)}
+        cells = []
+        for lie in lies:
+            if lie not in sel:
+                cells.append("")
+                continue
+            d = sel[lie]["detect_scans"]
+            det = "–" if lie == "clean" else ("never" if math.isnan(d) else f"{d:.0f}")
+            cells.append(f"{det} / {100 * sel[lie]['honest_quarantined']:.2f} %")
+        lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
