@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -66,18 +66,36 @@ def run_with_liar(scn: Scenario, run: int, liar: str, lie: str | None) -> TwinRe
     return run_twin(scn, run, peers=peers)
 
 
+ABSENT = "absent"
+"""Not a lie: the liars' sensors taken out of the network (their edges with them), the best
+any defence that leaves a liar out can give (a perfect, instant quarantine)."""
+
+
+def without(scn: Scenario, liar: str) -> Scenario:
+    """``scn`` with the sensors of ``liar`` (``"a,b"``) and their edges removed."""
+    gone = set(liar.split(","))
+    sensors = tuple(s for s in scn.sensors if s.name not in gone)
+    fusion = scn.fusion
+    if fusion.fusing_sensor in gone:
+        fusion = replace(fusion, fusing_sensor=sensors[0].name)
+    edges = tuple(e for e in scn.network.edges if not gone & set(e))
+    return replace(scn, sensors=sensors, fusion=fusion,
+                   network=replace(scn.network, edges=edges))
+
+
 def honest_scores(result: TwinResult, liar: str) -> dict[str, float]:
     """Mean OSPA over the honest peers (fused, local) and over the liar's honest neighbours
     (fused); each peer's mean counts a scan without output as a miss at the cut-off."""
     peers = result.peers
-    liars = liar.split(",")
+    liars = [s for s in liar.split(",") if s in peers]
     honest = [n for n in peers if n not in liars]
-    near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)]
+    near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)] or honest
     return {**trust_scores(result, liars, honest),
             "fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
             "local": float(np.mean([peers[n].mean_ospa("local") for n in honest])),
             "fused_neighbours": float(np.mean([peers[n].mean_ospa("fused") for n in near])),
-            "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars])),
+            "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars]))
+            if liars else math.nan,
             "rejected": float(sum(sum(peers[n].rejected.values()) for n in honest))}
 
 
@@ -149,7 +167,10 @@ def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:
 
 def lie_once(scn: Scenario, run: int, setup: Setup, rule: str, lie: str) -> dict:
     """One row: run ``run`` of ``scn`` with ``setup``'s liar telling ``lie`` (``"clean"``: none)."""
-    res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
+    if lie == ABSENT:
+        res = run_with_liar(without(scn, setup.liar), run, "", None)
+    else:
+        res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
     return {"setup": setup.label, "liar": setup.liar, "rule": rule, "lie": lie, "run": run,
             **honest_scores(res, setup.liar)}
 
@@ -178,9 +199,11 @@ def plan_of(req: Request) -> list[Plan]:
     o = req.options
     setups = tuple(s for s in SETUPS if s.label in o.get("setups", [s.label for s in SETUPS]))
     rules = tuple(o.get("rules", RULES))
-    if not setups or any(r not in RULES for r in rules):
-        raise ScenarioError("lying: need a known setup and known rules")
-    return [Plan(setups, rules, LIES, o.get("scans"))]
+    lies = tuple(o.get("lies", LIES))
+    if not setups or any(r not in RULES for r in rules) or any(
+            lie not in (*LIES, ABSENT) for lie in lies):
+        raise ScenarioError("lying: need a known setup, known rules and known lies")
+    return [Plan(setups, rules, lies, o.get("scans"))]
 
 
 def run_plan(plan: Plan, run: int) -> list[dict]:
@@ -335,9 +358,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rules", default=",".join(RULES), help="comma-separated: " + ", ".join(RULES))
     p.add_argument("--scans", type=int, default=None, help="scans per run (default: scenario's)")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--lies", default=",".join(LIES),
+                   help=f"comma-separated, of: {', '.join(LIES)}, {ABSENT} (the liars' sensors "
+                        "taken out: the best a defence that leaves them out can give)")
     a = p.parse_args(argv)
     req = Request("lying", runs=a.runs, jobs=max(a.jobs, 1), first_run=a.first_run, out=a.out,
-                  options={"setups": a.setups.split(","),
+                  options={"setups": a.setups.split(","), "lies": a.lies.split(","),
                            "rules": [r for r in a.rules.split(",") if r], "scans": a.scans})
     try:
         plans = plan_of(req)
