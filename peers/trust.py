@@ -15,12 +15,20 @@ neighbour's score is a leaky CUSUM of its per-scan statistic (the largest of its
 persistent one accumulates, an honest peer's few bad scans (a track that died a scan early, a
 birth picked up late) fade. Its weight falls linearly from 1 at ``suspect`` to 0 at
 ``quarantine``, where it is quarantined until its score stays under ``suspect`` for ``readmit``
-scans in a row. A dropped weight goes to this peer's own density (as if the edge were cut,
-Metropolis-style), so the weights still sum to one.
+scans in a row. What a neighbour loses is shared over own and the trusted neighbours (the
+consensus weights renormalised over the trusted set), so the weights still sum to one. Under a
+product rule (GCI: ``drop_suspects``) a neighbour below full trust is dropped, not
+down-weighted: any weight above 0 lets a confident lie veto the product.
 
-With own and at least two other trusted neighbours, the median test between those others is
-subtracted first (:attr:`TrustConfig.majority`, W-MSR-style): a neighbour is scored for
-disagreeing with a majority that agrees, not for a scan where everyone disagrees.
+With own and at least two other trusted neighbours (:attr:`TrustConfig.majority`,
+W-MSR-style) the statistic is instead the neighbour's median test against those others less
+the median test between them: a neighbour is scored for disagreeing with a majority that
+agrees, not for a scan where everyone disagrees, and two liars telling the same lie do not
+cover for each other (each one's lie would be in the other's leave-one-out average).
+
+A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
+earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
+every scan, so that is a stuck sensor or a replay.
 
 Calibration (``python -m sim.trust_calibration --runs 2``, training runs 9000-9001 only; the
 lying study evaluates on 7000..): seed 000, seed 004's graph with GM-PHD peers and the 20-peer
