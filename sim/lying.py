@@ -22,7 +22,11 @@ under each GM-PHD fusion rule (:data:`RULES`) on seed 000 (3 peers, ``s2`` lies)
 seed-004 graph with GM-PHD peers (20 peers, one round, ``s15`` lies: 14 honest neighbours),
 prints a markdown table of the honest peers' mean fused OSPA (their local OSPA, which no lie can
 touch, is the no-fusion baseline) and writes ``lying-runs.csv``, ``lying-summary.csv`` and
-``lying.png`` into ``--out`` (default ``runs/lying``). Missing output is scored as a miss (the
+``lying.png`` into ``--out`` (default ``runs/lying``). With the defence on (``+trust`` rules) it
+also prints, per cell, the scans until every honest neighbour has the liar at weight <= 0.1 and
+the share of (honest peer, honest neighbour, scan) triples in quarantine. ``--lies absent``
+takes the liars' sensors out of the network instead: the best any defence that leaves a liar
+out can give. Missing output is scored as a miss (the
 scorer's cut-off), never dropped. The default runs 7000.. are used by nothing else: no setting
 here was chosen on them.
 """
