@@ -305,7 +305,8 @@ class Consensus:
         mixes = {s: inputs[s]["posterior"] for s in senders}
         if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
             return inputs, senders, weights  # raw scans: not densities
-        weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights))
+        weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights),
+                                   drop_suspects=self.fuser_hooks.product)
         self.records.extend(self.trust.drain_records())
         kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]
         if len(kept) == len(senders):

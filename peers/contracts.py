@@ -137,6 +137,9 @@ class FuserHooks(_Hooks):
     """What of a fused payload the next round sends (else all of it)."""
     model_probabilities: Callable[[], np.ndarray] | None = None
     """The fused model probabilities (to plot), if it fuses a model mixture."""
+    product: bool = False
+    """Whether it is a product rule (GCI): any weight above 0 of an input lets that input veto
+    a target, so the trust test drops a suspect neighbour instead of down-weighting it."""
 
 
 def metropolis_weights(own: str, senders: Sequence[str], degrees: Mapping[str, int],

@@ -35,6 +35,8 @@ class GciFuser:
 
     kinds = ("posterior",)
     max_rounds = 1 << 30
+    product = True
+    """A product of the inputs: a suspect neighbour is dropped, not down-weighted."""
 
     def __init__(self, reducer: Reducer, cardinality: str = "separate",
                  omega: str = "metropolis") -> None:

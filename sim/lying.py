@@ -22,7 +22,11 @@ under each GM-PHD fusion rule (:data:`RULES`) on seed 000 (3 peers, ``s2`` lies)
 seed-004 graph with GM-PHD peers (20 peers, one round, ``s15`` lies: 14 honest neighbours),
 prints a markdown table of the honest peers' mean fused OSPA (their local OSPA, which no lie can
 touch, is the no-fusion baseline) and writes ``lying-runs.csv``, ``lying-summary.csv`` and
-``lying.png`` into ``--out`` (default ``runs/lying``). Missing output is scored as a miss (the
+``lying.png`` into ``--out`` (default ``runs/lying``). With the defence on (``+trust`` rules) it
+also prints, per cell, the scans until every honest neighbour has the liar at weight <= 0.1 and
+the share of (honest peer, honest neighbour, scan) triples in quarantine. ``--lies absent``
+takes the liars' sensors out of the network instead: the best any defence that leaves a liar
+out can give. Missing output is scored as a miss (the
 scorer's cut-off), never dropped. The default runs 7000.. are used by nothing else: no setting
 here was chosen on them.
 """
@@ -32,7 +36,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -67,18 +71,59 @@ def run_with_liar(scn: Scenario, run: int, liar: str, lie: str | None) -> TwinRe
     return run_twin(scn, run, peers=peers)
 
 
+ABSENT = "absent"
+"""Not a lie: the liars' sensors taken out of the network (their edges with them), the best
+any defence that leaves a liar out can give (a perfect, instant quarantine)."""
+
+
+def without(scn: Scenario, liar: str) -> Scenario:
+    """``scn`` with the sensors of ``liar`` (``"a,b"``) and their edges removed."""
+    gone = set(liar.split(","))
+    sensors = tuple(s for s in scn.sensors if s.name not in gone)
+    fusion = scn.fusion
+    if fusion.fusing_sensor in gone:
+        fusion = replace(fusion, fusing_sensor=sensors[0].name)
+    edges = tuple(e for e in scn.network.edges if not gone & set(e))
+    return replace(scn, sensors=sensors, fusion=fusion,
+                   network=replace(scn.network, edges=edges))
+
+
 def honest_scores(result: TwinResult, liar: str) -> dict[str, float]:
     """Mean OSPA over the honest peers (fused, local) and over the liar's honest neighbours
     (fused); each peer's mean counts a scan without output as a miss at the cut-off."""
     peers = result.peers
-    liars = liar.split(",")
+    liars = [s for s in liar.split(",") if s in peers]
     honest = [n for n in peers if n not in liars]
-    near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)]
-    return {"fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
+    near = [n for n in honest if set(liars) & set(peers[n].consensus.o.neighbours)] or honest
+    return {**trust_scores(result, liars, honest),
+            "fused": float(np.mean([peers[n].mean_ospa("fused") for n in honest])),
             "local": float(np.mean([peers[n].mean_ospa("local") for n in honest])),
             "fused_neighbours": float(np.mean([peers[n].mean_ospa("fused") for n in near])),
-            "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars])),
+            "liar_fused": float(np.mean([peers[n].mean_ospa("fused") for n in liars]))
+            if liars else math.nan,
             "rejected": float(sum(sum(peers[n].rejected.values()) for n in honest))}
+
+
+def trust_scores(result: TwinResult, liars: list[str], honest: list[str]) -> dict[str, float]:
+    """With the defence on (else NaN): ``honest_quarantined``, the share of (honest peer,
+    honest neighbour, scan) triples in quarantine; ``detect_scans``, the most scans any honest
+    neighbour took from its first test of a liar to a weight of at most 0.1, counting both
+    (1: at once; NaN if one never did)."""
+    seen = quarantined = 0
+    delays: list[float] = []
+    for n in honest:
+        trust = result.peers[n].consensus.trust
+        if trust is None:
+            return {"honest_quarantined": math.nan, "detect_scans": math.nan}
+        for s, rec in trust.n.items():
+            if s in liars:
+                delays.append(math.nan if rec.low_k is None or rec.first_k is None
+                              else rec.low_k - rec.first_k + 1)
+            else:
+                seen += sum(rec.scans_in.values())
+                quarantined += rec.scans_in["quarantined"]
+    return {"honest_quarantined": quarantined / max(seen, 1),
+            "detect_scans": max(delays) if delays else math.nan}
 
 
 @dataclass(frozen=True)
@@ -127,7 +172,10 @@ def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:
 
 def lie_once(scn: Scenario, run: int, setup: Setup, rule: str, lie: str) -> dict:
     """One row: run ``run`` of ``scn`` with ``setup``'s liar telling ``lie`` (``"clean"``: none)."""
-    res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
+    if lie == ABSENT:
+        res = run_with_liar(without(scn, setup.liar), run, "", None)
+    else:
+        res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
     return {"setup": setup.label, "liar": setup.liar, "rule": rule, "lie": lie, "run": run,
             **honest_scores(res, setup.liar)}
 
@@ -156,9 +204,11 @@ def plan_of(req: Request) -> list[Plan]:
     o = req.options
     setups = tuple(s for s in SETUPS if s.label in o.get("setups", [s.label for s in SETUPS]))
     rules = tuple(o.get("rules", RULES))
-    if not setups or any(r not in RULES for r in rules):
-        raise ScenarioError("lying: need a known setup and known rules")
-    return [Plan(setups, rules, LIES, o.get("scans"))]
+    lies = tuple(o.get("lies", LIES))
+    if not setups or any(r not in RULES for r in rules) or any(
+            lie not in (*LIES, ABSENT) for lie in lies):
+        raise ScenarioError("lying: need a known setup, known rules and known lies")
+    return [Plan(setups, rules, lies, o.get("scans"))]
 
 
 def run_plan(plan: Plan, run: int) -> list[dict]:
@@ -178,7 +228,10 @@ def table(o: Outcome) -> str:
     return (f"Honest peers' mean OSPA over {len(runs)} runs ({runs.start}..{runs.stop - 1}); "
             "liars: " + ", ".join(f"{s.label} {s.liar}" for s in plan.setups) + "\n\n"
             + markdown(o.summary[1]) + "\n\nCompact (honest peers' fused OSPA, m, mean ± sd "
-            "over runs):\n\n" + compact(o.summary[1]))
+            "over runs):\n\n" + compact(o.summary[1]) + "\n\nThe defence (rules with "
+            "+trust): scans to detect the liar (weight <= 0.1; the worst honest neighbour and "
+            "run) / honest neighbours quarantined (% of (peer, neighbour, scan)):\n\n"
+            + defence(o.summary[1]))
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -195,7 +248,9 @@ def summarise(rows: list[dict]) -> list[dict]:
                "fused_neighbours": np.mean([r["fused_neighbours"] for r in sel]),
                "local": np.mean([r["local"] for r in sel]),
                "clean": np.mean([r["fused"] for r in clean]) if clean else math.nan,
-               "rejected": sum(r["rejected"] for r in sel)}
+               "rejected": sum(r["rejected"] for r in sel),
+               "honest_quarantined": np.mean([r["honest_quarantined"] for r in sel]),
+               "detect_scans": np.max([r["detect_scans"] for r in sel])}
         row["change"] = row["fused"] - row["clean"]
         out.append(row)
     return out
@@ -224,6 +279,26 @@ def compact(summary: list[dict]) -> str:
                  for lie in lies]
         local = np.mean([s["local"] for s in sel.values()])
         lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + f" | {local:.1f} |")
+    return "\n".join(lines)
+
+
+def defence(summary: list[dict]) -> str:
+    """Per graph and rule with the defence on, per lie: the scans to detect (the worst
+    neighbour and run; "never" if one did not) and the honest quarantines (% of triples)."""
+    sel_all = [s for s in summary if not math.isnan(s["honest_quarantined"])]
+    lies = list(dict.fromkeys(s["lie"] for s in sel_all))
+    lines = ["| graph | rule | " + " | ".join(lies) + " |", "|---|---|" + "---|" * len(lies)]
+    for setup, rule in dict.fromkeys((s["setup"], s["rule"]) for s in sel_all):
+        sel = {s["lie"]: s for s in sel_all if (s["setup"], s["rule"]) == (setup, rule)}
+        cells = []
+        for lie in lies:
+            if lie not in sel:
+                cells.append("")
+                continue
+            d = sel[lie]["detect_scans"]
+            det = "–" if lie == "clean" else ("never" if math.isnan(d) else f"{d:.0f}")
+            cells.append(f"{det} / {100 * sel[lie]['honest_quarantined']:.2f} %")
+        lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -285,9 +360,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rules", default=",".join(RULES), help="comma-separated: " + ", ".join(RULES))
     p.add_argument("--scans", type=int, default=None, help="scans per run (default: scenario's)")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--lies", default=",".join(LIES),
+                   help=f"comma-separated, of: {', '.join(LIES)}, {ABSENT} (the liars' sensors "
+                        "taken out: the best a defence that leaves them out can give)")
     a = p.parse_args(argv)
     req = Request("lying", runs=a.runs, jobs=max(a.jobs, 1), first_run=a.first_run, out=a.out,
-                  options={"setups": a.setups.split(","),
+                  options={"setups": a.setups.split(","), "lies": a.lies.split(","),
                            "rules": [r for r in a.rules.split(",") if r], "scans": a.scans})
     try:
         plans = plan_of(req)

@@ -108,3 +108,17 @@ def test_the_scenario_hook_makes_the_same_liar_as_the_study():
         assert res.peers[n].mean_ospa("fused") == study.peers[n].mean_ospa("fused")
     assert res.peers["s1"].mean_ospa("fused") != run_twin(plain, 8000).peers["s1"].mean_ospa(
         "fused")
+
+
+def test_absent_takes_the_liars_sensors_and_edges_out():
+    from sim.lying import without
+    from sim.scenario import load_scenario
+
+    scn = without(scenario_for(SETUPS[0], "hybrid"), "s2")
+    assert list(scn.sensor_names) == ["s1", "s3"]
+    assert scn.fusion.fusing_sensor == "s1"  # s2 was the fusing sensor
+    custom = load_scenario("seed004")
+    two = without(custom, "s15,s19")
+    assert all({"s15", "s19"}.isdisjoint(e) for e in two.network.edges)
+    assert len(two.network.edges) < len(custom.network.edges)
+    assert len(two.sensors) == len(custom.sensors) - 2

@@ -114,12 +114,69 @@ def test_score_weight_quarantine_and_readmission():
     assert not [c for c in changes if c["neighbour"] == "h"]
 
 
-def test_own_weight_takes_what_is_taken_from_a_neighbour():
-    t = Trust(TrustConfig(warmup=0), ("a", "b"))
+def test_what_is_taken_from_a_neighbour_is_renormalised_over_the_trusted_set():
     own = mix((1.0, A, P4))
-    w = t.weigh(1, 0, own, {"a": mix((1.0, A, P4)), "b": mix((1.0, A + 200.0, np.eye(4)))},
-                [0.4, 0.3, 0.3])
-    assert w[1] == 0.3 and w[2] < 0.3 and w[0] == pytest.approx(1.0 - w[1] - w[2])
+    inputs = {"a": mix((1.0, A, P4)), "b": mix((1.0, A + 200.0, np.eye(4)))}
+    w = Trust(TrustConfig(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3])
+    assert w[2] < 0.3 and sum(w) == pytest.approx(1.0)
+    trust_b = w[2] / 0.3 * (w[0] / 0.4)  # b's trust: its share before the renormalisation
+    assert 0.0 < trust_b < 1.0
+    # own and a keep their ratio 0.4 : 0.3, together 1 - w_b
+    assert w[0] / w[1] == pytest.approx(0.4 / 0.3)
+    assert w[0] + w[1] == pytest.approx(1.0 - w[2])
+    to_own = Trust(TrustConfig(renormalise=False), ("a", "b")).weigh(1, 0, own, inputs,
+                                                                     [0.4, 0.3, 0.3])
+    assert to_own[1] == 0.3 and to_own[2] < 0.3
+    assert to_own[0] == pytest.approx(1.0 - to_own[1] - to_own[2])
+    # under a product rule the suspect is dropped, not down-weighted
+    drop = Trust(TrustConfig(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3],
+                                                  drop_suspects=True)
+    assert drop[2] == 0.0 and drop[0] == pytest.approx(0.4 / 0.7)
+
+
+def test_an_exact_repeat_is_quarantined_at_once_and_a_birth_only_density_is_not():
+    rng = np.random.default_rng(3)
+    t = Trust(TrustConfig(), ("h", "stuck"))
+    held = _honest(rng)
+    births = mix((0.1, A, P4), (0.1, B, P4))  # the birth intensity: the same every scan
+    weights = {}
+    for k in (1, 2, 3):
+        own = _honest(rng)
+        w = t.weigh(k, 0, own, {"h": births, "stuck": held.copy()}, [0.4, 0.3, 0.3])
+        weights[k] = w
+    t.finish()
+    # scan 1 agrees with own (nothing to compare it with yet); scan 2 repeats scan 1 exactly
+    assert weights[1][2] == pytest.approx(weights[1][0] * 0.75, rel=0.5)
+    assert weights[2][2] == 0.0 and weights[3][2] == 0.0
+    assert t.n["stuck"].state == "quarantined"
+    assert t.n["h"].last_statistic < t.cfg.quarantine  # births alone repeat honestly
+    # the same object again (a stale input reused) is no repeat; nor is a second round
+    t2 = Trust(TrustConfig(), ("x",))
+    same = _honest(rng)
+    t2.weigh(1, 0, same, {"x": same}, [0.5, 0.5])
+    assert t2.weigh(2, 0, same, {"x": same}, [0.5, 0.5])[1] == 0.5
+    assert t2.weigh(2, 1, same, {"x": same.copy()}, [0.5, 0.5])[1] == 0.5
+    off = Trust(TrustConfig(repeat=False), ("x",))
+    for k in (1, 2, 3):
+        w = off.weigh(k, 0, same, {"x": same.copy()}, [0.5, 0.5])
+    assert w[1] == 0.5
+
+
+def test_two_liars_telling_the_same_lie_do_not_cover_for_each_other():
+    """Phantoms told by two neighbours are in each one's leave-one-out average, so the old
+    statistic (smaller of own and the average) let both through; the median test does not."""
+    rng = np.random.default_rng(21)
+    own = _honest(rng)
+    phantoms = mix((1.0, [-800.0, 0, 800.0, 0], np.eye(4)), (1.0, [800.0, 0, 800.0, 0],
+                                                                np.eye(4)))
+    names = ("h1", "h2", "h3", "h4", "l1", "l2")
+    inputs = {s: _honest(rng) for s in names[:4]}
+    inputs |= {s: GaussianMixture.concatenate([_honest(rng), phantoms]) for s in names[4:]}
+    w = {"": 1 / 7, **{s: 1 / 7 for s in names}}
+    med = Trust(TrustConfig(), names).statistics(own, inputs, w)
+    old = Trust(TrustConfig(median_test=False), names).statistics(own, inputs, w)
+    assert min(med["l1"], med["l2"]) > 4.0 and max(med[s] for s in names[:4]) < 1.0
+    assert max(old["l1"], old["l2"]) < 1.0  # what the average reference gave
 
 
 def test_disabled_or_warming_up_changes_nothing():
@@ -168,7 +225,13 @@ def test_majority_spread_is_not_held_against_one_neighbour():
     off = Trust(TrustConfig(majority=False), names)
     inputs = dict(zip(names, spread[1:], strict=True))
     w = {"": 0.25, **{s: 0.25 for s in names}}
-    assert max(on.statistics(spread[0], inputs, w).values()) < 1.0  # 0, 0, 0.56
+    loo = Trust(TrustConfig(median_test=False), names)  # the leave-one-out reference
+    assert max(loo.statistics(spread[0], inputs, w).values()) < 1.0  # 0, 0, 0.56
+    # the median test: the end of the line is the odd one, by half the cap at most (one such
+    # scan leaves the score at 2 after the drift, under `suspect`); the others not at all
+    s = on.statistics(spread[0], inputs, w)
+    assert s["n1"] == s["n2"] == 0.0 and 0.0 < s["n3"] <= on.cfg.cap / 2
+    assert s["n3"] - on.cfg.drift < on.cfg.suspect
     assert min(off.statistics(spread[0], inputs, w).values()) > 3.0  # 3.9, 3.9, 4.6
     agree = {"n1": spread[0], "n2": spread[0].scaled(1.05), "n3": spread[3]}
     s = on.statistics(spread[0], agree, w)
@@ -176,3 +239,13 @@ def test_majority_spread_is_not_held_against_one_neighbour():
     # with own and one other neighbour only there is no majority: the plain test
     two = {"n1": spread[0], "n3": spread[3]}
     assert on.statistics(spread[0], two, w) == off.statistics(spread[0], two, w)
+
+
+def test_only_product_rules_drop_their_suspects():
+    from peers.contracts import FuserHooks
+    from peers.fusers import AaFuser, GciFuser, HybridFuser
+    from tracking.reduction import Reducer
+
+    r = Reducer()
+    assert FuserHooks.of(GciFuser(r)).product
+    assert not FuserHooks.of(HybridFuser(r)).product and not FuserHooks.of(AaFuser(r)).product
