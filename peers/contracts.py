@@ -137,6 +137,13 @@ class FuserHooks(_Hooks):
     """What of a fused payload the next round sends (else all of it)."""
     model_probabilities: Callable[[], np.ndarray] | None = None
     """The fused model probabilities (to plot), if it fuses a model mixture."""
+    fuse_many: Callable[[Sequence[FusionInput]], list[GaussianMixture]] | None = None
+    """``[fuse(i) for i in inputs]`` computed together, for inputs of fusers with the same
+    :attr:`batch_key` (a host's co-hosted peers: :mod:`peers.batching`); the same results
+    to round-off."""
+    batch_key: object = None
+    """Fusers whose ``batch_key`` is equal (hashable, not None) compute the same rule with
+    the same settings, so one's ``fuse_many`` may fuse the others' inputs."""
 
 
 def metropolis_weights(own: str, senders: Sequence[str], degrees: Mapping[str, int],

@@ -30,6 +30,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
+from peers.batching import FusionBatch
 from peers.core import PeerCore
 from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from peers.session import open_session
@@ -39,6 +40,10 @@ from protocol.codec import decode
 from protocol.messages import Estimate
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
+BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"
+"""Fuse the consensus rounds that become ready in one pass of the loop together, at its end
+(:mod:`peers.batching`; default), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
+``bench_network.py --batch``). A peer that records its inputs for replay fuses at once."""
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
 Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py --handoff``).
 """
@@ -117,6 +122,13 @@ class PeerHost:
             self.decode = SharedDecode()
             for rt in self.peers:
                 rt.core.decode = self.decode
+        self.batch: FusionBatch | None = None
+        if BATCH_FUSIONS and len(self.peers) > 1:
+            self.batch = FusionBatch()
+            for rt in self.peers:
+                if rt.o.record is None:  # replay fuses each round at once: record that way
+                    rt.core.consensus.batch = self.batch
+        self._slot = {id(rt.core.consensus): i for i, rt in enumerate(self.peers)}
         self.session = None
         self.stop_reason = ""
         self._stop = False
@@ -214,6 +226,7 @@ class PeerHost:
         rt = self.peers[i]
         self._active.remove(i)
         self._backlog[i].clear()
+        rt.core.consensus.cancel_pending()  # killed: its last round is not fused
         rt.kill(at_scan if at_scan is not None else rt.core.consensus.last_k)
         self.say(f"host {self.name}: killed peer {name} at scan {rt.killed_at}")
         return True
@@ -260,6 +273,7 @@ class PeerHost:
                 elif slot in self._active:
                     backlog[slot].append((now, item))
             self._work(time.time(), time.monotonic())
+            self._fuse()
             for i in [i for i in self._active if self.peers[i].idle_expired()]:
                 self._end(i)
 
@@ -283,6 +297,29 @@ class PeerHost:
             rt.step(items, lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
+
+    def _fuse(self) -> None:
+        """The rounds that became ready in this pass, fused together; each peer then
+        publishes and records what its completed rounds give (its next round's estimate,
+        its tracks), as its own step would have. The stacked computation's CPU is split
+        evenly between the peers it served (their "estimate" CPU, where fusing was)."""
+        batch = self.batch
+        while batch is not None and batch.jobs and not self._stop:
+            t0 = time.thread_time()
+            done = batch.run(time.time())
+            share = (time.thread_time() - t0) * 1e3 / max(1, len(done))
+            for c in done:
+                i = self._slot[id(c)]
+                rt = self.peers[i]
+                rt.telemetry.cpu_ms["estimate"] = rt.telemetry.cpu_ms.get("estimate", 0.0) + share
+                if i not in self._active:
+                    continue
+                try:
+                    rt._carry_out("estimate", rt.core.completed, time.time())
+                except Exception as exc:  # as in PeerRuntime.step: not the host's end
+                    rt._internal_error(exc)
+                if rt._stop:
+                    self._end(i)
 
 
 def rt_line(rt: PeerRuntime) -> str:
