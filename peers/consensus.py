@@ -202,18 +202,28 @@ class Consensus:
         st = self._scan
         if st is None or st.k != k or st.done:
             return []
-        if self.batch is not None and self.batchable:  # the remaining rounds through the batch
-            if st.pending is not None:
-                if not st.pending.forced:
-                    st.pending.forced = True
-                    self.stats.deadline_fusions += 1
-                return []
-            self.stats.deadline_fusions += 1
-            return self._fuse_round(st, now, forced=True)
+        if self.close(now):  # the remaining rounds through the batch
+            return []
         if self.o.round_deadlines:  # this round's deadline: run it, then what is complete
             self.stats.deadline_fusions += 1
             return self._fuse_round(self._scan, now) + self._advance(now)
         return self.finish(now)
+
+    def close(self, now: float) -> bool:
+        """With a batch: the current scan's remaining rounds go through it, forced (its
+        deadline passed, or a newer scan waits), counted as :meth:`finish` counts; False
+        (nothing done) without a batch or a scan being fused."""
+        st = self._scan
+        if self.batch is None or not self.batchable or st is None or st.done:
+            return False
+        if st.pending is not None:
+            if not st.pending.forced:
+                st.pending.forced = True
+                self.stats.deadline_fusions += 1
+            return True
+        self.stats.deadline_fusions += 1
+        self._fuse_round(st, now, forced=True)
+        return True
 
     def forced(self) -> bool:
         """Whether the scan's remaining rounds go through the batch already, its deadline

@@ -30,6 +30,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
+from peers.admission import peek
 from peers.batching import FusionBatch
 from peers.core import PeerCore
 from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
@@ -98,6 +99,9 @@ class PeerHost:
 
     ``session_args``: ``(listen, connect, config_file, lease_ms, gossip)`` of the host's one
     session (each peer's ``RuntimeOptions`` connection fields are not used)."""
+
+    batch: FusionBatch | None = None
+    """The peers' consensus fusions of one pass, fused together (:data:`BATCH_FUSIONS`)."""
 
     def __init__(self, name: str, peers: list[tuple[PeerCore, RuntimeOptions]],
                  session_args: tuple, say: Callable[[str], None] | None = None) -> None:
@@ -289,14 +293,43 @@ class PeerHost:
                 when.append(wall + d)
             if when:
                 due.append((min(when), i))
-        for _, i in sorted(due):
+        due.sort()
+        if self.batch is not None and self._close_rounds(due):
+            self._fuse()
+        for _, i in due:
             if self._stop:
                 return
+            if i not in self._active:  # ended in _close_rounds
+                continue
             rt, mine = self.peers[i], self._backlog[i]
             items = [mine.popleft()[1] for _ in range(min(BATCH, len(mine)))]
             rt.step(items, lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
+
+    def _close_rounds(self, due: list[tuple[float, int]]) -> bool:
+        """A peer still fusing a scan with a newer scan in its backlog would fuse that scan's
+        remaining rounds one by one when the newer scan comes (:meth:`Consensus.finish`, on
+        a host behind): instead it takes what came before the newer scan, then its remaining
+        rounds go to the batch, fused with the other peers' at once (:meth:`_fuse`) before
+        the newer scan is handled. True if any did."""
+        closed = False
+        for _, i in due:
+            rt, mine = self.peers[i], self._backlog[i]
+            c = rt.core.consensus
+            if c.batch is None or not c.busy():
+                continue
+            j = next((n for n, (_, item) in enumerate(mine)
+                      if item[0] == "msg" and "/scan/" in item[1]), None)
+            if j is None or j >= BATCH or (peek(mine[j][1][2]) or ("", -1))[1] <= c.last_k:
+                continue  # no newer scan within this step's reach
+            if j:
+                rt.step([mine.popleft()[1] for _ in range(j)], lambda: False)
+                if rt._stop:
+                    self._end(i)
+                    continue
+            closed = c.close(time.time()) or closed
+        return closed
 
     def _fuse(self) -> None:
         """The rounds that became ready in this pass, fused together; each peer then
