@@ -102,6 +102,8 @@ class PeerHost:
 
     batch: FusionBatch | None = None
     """The peers' consensus fusions of one pass, fused together (:data:`BATCH_FUSIONS`)."""
+    _batched: frozenset[int] = frozenset()
+    """The peers whose fusions go through :attr:`batch`."""
 
     def __init__(self, name: str, peers: list[tuple[PeerCore, RuntimeOptions]],
                  session_args: tuple, say: Callable[[str], None] | None = None) -> None:
@@ -132,6 +134,9 @@ class PeerHost:
             for rt in self.peers:
                 if rt.o.record is None:  # replay fuses each round at once: record that way
                     rt.core.consensus.batch = self.batch
+            self._batched = frozenset(i for i, rt in enumerate(self.peers)
+                                      if rt.core.consensus.batch is not None
+                                      and rt.core.consensus.batchable)
         self._slot = {id(rt.core.consensus): i for i, rt in enumerate(self.peers)}
         self.session = None
         self.stop_reason = ""
@@ -302,10 +307,33 @@ class PeerHost:
             if i not in self._active:  # ended in _close_rounds
                 continue
             rt, mine = self.peers[i], self._backlog[i]
-            items = [mine.popleft()[1] for _ in range(min(BATCH, len(mine)))]
-            rt.step(items, lambda mine=mine: not mine)
+            entries = [mine.popleft() for _ in range(min(BATCH, len(mine)))]
+            if i in self._batched:
+                entries = self._one_scan(rt, entries, mine)
+            rt.step([item for _, item in entries], lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
+
+    @staticmethod
+    def _one_scan(rt: PeerRuntime, entries: list, mine: deque) -> list:
+        """A batched peer's step holds at most one scan: the scans far behind are skipped
+        first (:meth:`PeerRuntime._catch_up`, as its step would), then what follows a second
+        scan goes back to the front of its backlog, so that scan finds its predecessor's
+        rounds fused through the batch (:meth:`_close_rounds`), not one by one inside it."""
+        items = [item for _, item in entries]
+        kept = rt._catch_up(items)
+        if len(kept) < len(items):
+            ids = {id(item) for item in kept}
+            for tag, key, payload in (item for item in items if id(item) not in ids):
+                if tag == "msg":
+                    rt.core.admission.taken(key, len(payload))  # out of the inbox
+            entries = [e for e in entries if id(e[1]) in ids]
+        scans = [n for n, (_, (tag, key, _)) in enumerate(entries)
+                 if tag == "msg" and "/scan/" in key]
+        if len(scans) > 1:
+            mine.extendleft(reversed(entries[scans[1]:]))
+            entries = entries[:scans[1]]
+        return entries
 
     def _close_rounds(self, due: list[tuple[float, int]]) -> bool:
         """A peer still fusing a scan with a newer scan in its backlog would fuse that scan's
@@ -317,7 +345,7 @@ class PeerHost:
         for _, i in due:
             rt, mine = self.peers[i], self._backlog[i]
             c = rt.core.consensus
-            if c.batch is None or not c.busy():
+            if i not in self._batched or not c.busy():
                 continue
             j = next((n for n, (_, item) in enumerate(mine)
                       if item[0] == "msg" and "/scan/" in item[1]), None)
