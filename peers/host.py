@@ -157,11 +157,12 @@ class PeerHost:
                 lambda key, payload, subs=tuple(subs): self._hand_over(subs, key, payload))
 
     def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
-        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running."""
-        active = self._active
+        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running
+        (its header read once for all of them; each admits it on its own)."""
+        active, head = self._active, peek(payload)
         for j in subs:
             if j in active:
-                self.peers[j].transport.deliver(key, payload)
+                self.peers[j].transport.deliver(key, payload, head)
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
