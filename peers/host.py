@@ -14,8 +14,11 @@ One loop thread does every peer's work: at each wake-up it moves what has arrive
 peers' own backlogs, then gives each peer with due work (a message waiting, a held message or
 a core deadline due) one step of at most :data:`peers.runtime.BATCH` messages, earliest due
 first; a peer with a long backlog or a slow step thus delays the others by one bounded step,
-not by its whole backlog. Commands on standard input (one per line): ``kill PEER [SCAN]``
-stops that peer as if its process had been killed (``sensornet run --fault kill:PEER@K``).
+not by its whole backlog. The consensus rounds that became ready in the pass are then fused
+together (:mod:`peers.batching`, :data:`BATCH_FUSIONS`; a batched peer's step holds at most
+one scan, see :meth:`PeerHost._one_scan`). Commands on standard input (one per line):
+``kill PEER [SCAN]`` stops that peer as if its process had been killed (``sensornet run
+--fault kill:PEER@K``).
 """
 
 from __future__ import annotations
