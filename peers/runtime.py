@@ -201,9 +201,10 @@ class PeerRuntime(RunOutputs):
             if self.recorder is not None and due is not None and due <= now:
                 self.recorder.tick(now)  # a deadline fires: replay must tick here too
             self._carry_out("tick", self.core.tick, now)
-            t0 = time.thread_time()
-            self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
-            self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
+            if self.observer.enabled:  # else nothing was deferred to draw
+                t0 = time.thread_time()
+                self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
+                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
         except Exception as exc:  # a bug must not take the peer (and the run) down
             self._internal_error(exc)
 
