@@ -101,8 +101,6 @@ class PeerRuntime(RunOutputs):
         self._stop = False
         self._last_input = time.monotonic()
         self.recorder = None
-        self._span: tuple[float, float] | None = None
-        self._walls: dict[str, float] = {}
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
@@ -183,48 +181,10 @@ class PeerRuntime(RunOutputs):
             wait = held - mono if wait is None else min(wait, held - mono)
         return wait
 
-    def _cpu_span(self) -> bool:
-        """Open a span of this thread's CPU (False: one is open already). The thread CPU
-        clock is a system call that costs this machine 3-15 us under load (py-spy put a
-        quarter of a host's loop in its reads when every core step and publication read it
-        twice), so a span reads it twice in all and splits what it measured between the
-        channels it ran by their wall time (``time.perf_counter``, no system call): each
-        span's CPU is exact, the split between channels within it an estimate; what the span
-        did outside them stays unattributed (the loop's)."""
-        if self._span is not None:
-            return False
-        self._span = (time.thread_time(), time.perf_counter())
-        self._walls = {}
-        return True
-
-    def _cpu_close(self) -> None:
-        if self._span is None:
-            return
-        cpu0, wall0 = self._span
-        cpu, wall = time.thread_time() - cpu0, time.perf_counter() - wall0
-        self._span = None
-        if wall <= 0 or not self._walls:
-            return
-        per = min(1.0, cpu / wall) * 1e3  # ms of CPU per second of wall in this span
-        ms = self.telemetry.cpu_ms
-        for channel, w in self._walls.items():
-            ms[channel] = ms.get(channel, 0.0) + w * per
-
-    def _wall(self, channel: str, seconds: float) -> None:
-        self._walls[channel] = self._walls.get(channel, 0.0) + seconds
-
     def step(self, items: list[tuple], queue_empty) -> None:
         """One wake-up's work: ``items`` (at most :data:`BATCH`), the held messages now due,
         the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
         peer, so the observer may flush)."""
-        opened = self._cpu_span()
-        try:
-            self._step(items, queue_empty)
-        finally:
-            if opened:
-                self._cpu_close()
-
-    def _step(self, items: list[tuple], queue_empty) -> None:
         try:
             taken = self.core.admission.taken
             for tag, key, payload in items:  # out of the inbox (handled or skipped below)
@@ -242,9 +202,9 @@ class PeerRuntime(RunOutputs):
                 self.recorder.tick(now)  # a deadline fires: replay must tick here too
             self._carry_out("tick", self.core.tick, now)
             if self.observer.enabled:  # else nothing was deferred to draw
-                t0 = time.perf_counter()
+                t0 = time.thread_time()
                 self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
-                self._wall("rerun", time.perf_counter() - t0)
+                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
         except Exception as exc:  # a bug must not take the peer (and the run) down
             self._internal_error(exc)
 
@@ -303,20 +263,12 @@ class PeerRuntime(RunOutputs):
                                                                admitted=True), now)
 
     def _carry_out(self, channel: str, step, now: float) -> None:
-        """Run one core step at wall time ``now``; publish and record what it returns (its
-        CPU by channel: :meth:`_cpu_span`)."""
-        opened = self._cpu_span()
-        try:
-            self._carry_out_in_span(channel, step, now)
-        finally:
-            if opened:
-                self._cpu_close()
-
-    def _carry_out_in_span(self, channel: str, step, now: float) -> None:
-        wall = time.perf_counter
-        t0 = wall()
+        """Run one core step at wall time ``now``; publish and record what it returns."""
+        cpu = self.telemetry.cpu_ms
+        t0 = time.thread_time()
         outputs = step(now)
-        self._wall(channel, wall() - t0)
+        t1 = time.thread_time()
+        cpu[channel] = cpu.get(channel, 0.0) + (t1 - t0) * 1e3
         leave = time.time()
         if channel in ("scan", "estimate", "tick") and outputs:
             self.telemetry.handled(channel, now, leave, outputs)
@@ -324,24 +276,24 @@ class PeerRuntime(RunOutputs):
         drawing = self.observer.enabled  # no Rerun stream: nothing to draw, nothing to time
         for out in outputs:
             if isinstance(out, Publish):
-                sent = time.time()
-                t0 = wall()
+                wall = time.time()
+                t0 = time.thread_time()
                 self.transport.publish(out.channel, out.payload)
-                self._wall("publish", wall() - t0)
-                lat = self.telemetry.published(out, sent, len(out.payload))
+                cpu["publish"] += (time.thread_time() - t0) * 1e3
+                lat = self.telemetry.published(out, wall, len(out.payload))
                 if out.channel == "tracks" and self.saved_tracks is not None:
                     self.saved_tracks[out.k] = out.message.states
                 if out.channel == "tracks" and self.recorder is not None:
-                    self.recorder.tracks(sent, out.k, out.payload)
+                    self.recorder.tracks(wall, out.k, out.payload)
                 if drawing:
-                    t0 = wall()
+                    t0 = time.thread_time()
                     self.observer.published(out, lat)
-                    self._wall("rerun", wall() - t0)
+                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
             elif isinstance(out, Record):
                 if drawing:
-                    t0 = wall()
+                    t0 = time.thread_time()
                     self.observer.record(out, scan_ms)
-                    self._wall("rerun", wall() - t0)
+                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
                 if out.kind == "error":
                     self._report_error(out)
                 if out.kind == "scan" and out.k % 1000 == 0:
