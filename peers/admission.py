@@ -25,6 +25,7 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import msgpack
 
@@ -62,8 +63,23 @@ class Route:
 
 
 def parse_key(key: str, network: str) -> Route | None:
-    """``sensornet/<network>/<channel>[/<name>]`` -> Route, or None if it is not one of ours."""
-    parts = str(key).split("/")
+    """``sensornet/<network>/<channel>[/<name>]`` -> Route, or None if it is not one of ours.
+
+    A peer parses each message's key a few times on its way (admission, inbox, runtime, core)
+    and sees the same few dozen keys all run: the answers for string keys are kept (bounded,
+    least recently used first out; a :class:`Route` is immutable, so sharing it is safe)."""
+    if type(key) is str:
+        return _parse_key_kept(key, network)
+    return _parse_key(str(key), network)
+
+
+@lru_cache(maxsize=4096)
+def _parse_key_kept(key: str, network: str) -> Route | None:
+    return _parse_key(key, network)
+
+
+def _parse_key(key: str, network: str) -> Route | None:
+    parts = key.split("/")
     if len(parts) < 3 or parts[0] != ROOT or parts[1] != network:
         return None
     channel = parts[2]
@@ -189,11 +205,14 @@ class Admission:
         with self._lock:
             return self._admit(route, now, payload, inbox=False)
 
-    def arrive(self, route: Route | None, now: float, payload: bytes = b"") -> bool:
+    def arrive(self, route: Route | None, now: float, payload: bytes = b"",
+               head: tuple | None = None) -> bool:
         """:meth:`admit`, and a place in the inbox for it: call :meth:`taken` with its key
-        when the main loop takes it off the queue (or when it is dropped before that)."""
+        when the main loop takes it off the queue (or when it is dropped before that).
+        ``head``: ``peek(payload)`` if the caller has it (a host peeks an estimate it hands
+        to several co-hosted receivers once)."""
         with self._lock:
-            return self._admit(route, now, payload, inbox=True)
+            return self._admit(route, now, payload, inbox=True, head=head)
 
     def taken(self, key: str, size: int) -> None:
         """A message :meth:`arrive` let in has left the inbox (handled, skipped or refused)."""
@@ -217,11 +236,15 @@ class Admission:
         with self._lock:
             self.queued_bytes -= n
 
-    def _admit(self, route: Route | None, now: float, payload: bytes, inbox: bool) -> bool:
+    def _admit(self, route: Route | None, now: float, payload: bytes, inbox: bool,
+               head: tuple | None = None) -> bool:
         if route is None:
             self.rejected["wrong-key"] += 1
             return False
-        head = peek(payload) if self.window is not None and route.channel != "ctl" else None
+        if self.window is None or route.channel == "ctl":
+            head = None
+        elif head is None:
+            head = peek(payload)
         slot = self._slot(route, head) if head is not None else None
         if slot is False:
             return False

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from peers.batching import FusionBatch, FusionJob
 from peers.contracts import (
     EstimatorHooks,
     Fuser,
@@ -94,6 +95,8 @@ class _ScanState:
     current: GaussianMixture | None = None
     local: GaussianMixture | None = None
     done: bool = False
+    pending: FusionJob | None = None
+    """The round waiting in a host's :class:`~peers.batching.FusionBatch` (its inputs taken)."""
 
 
 def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
@@ -139,6 +142,13 @@ class Consensus:
         self.trust = (Trust(options.trust, options.neighbours)
                       if self.fusing and options.trust is not None and options.trust.enabled
                       else None)
+        self.batch: FusionBatch | None = None
+        """A host's batch: ready rounds wait there to be fused with the other peers'
+        (:mod:`peers.batching`); None: each round fused when it is ready."""
+        self.batchable = (self.fusing and self.fuser_hooks.fuse_many is not None
+                          and self.fuser_hooks.batch_key is not None
+                          and not options.round_deadlines)
+        self._completed: list = []  # messages of rounds the batch completed, not yet taken
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -189,12 +199,37 @@ class Consensus:
 
     def on_deadline(self, k: int, now: float) -> list:
         """The fusion deadline of scan ``k``: run the remaining rounds with what arrived."""
-        if self._scan is None or self._scan.k != k or self._scan.done:
+        st = self._scan
+        if st is None or st.k != k or st.done:
+            return []
+        if self.close(now):  # the remaining rounds through the batch
             return []
         if self.o.round_deadlines:  # this round's deadline: run it, then what is complete
             self.stats.deadline_fusions += 1
             return self._fuse_round(self._scan, now) + self._advance(now)
         return self.finish(now)
+
+    def close(self, now: float) -> bool:
+        """With a batch: the current scan's remaining rounds go through it, forced (its
+        deadline passed, or a newer scan waits), counted as :meth:`finish` counts; False
+        (nothing done) without a batch or a scan being fused."""
+        st = self._scan
+        if self.batch is None or not self.batchable or st is None or st.done:
+            return False
+        if st.pending is not None:
+            if not st.pending.forced:
+                st.pending.forced = True
+                self.stats.deadline_fusions += 1
+            return True
+        self.stats.deadline_fusions += 1
+        self._fuse_round(st, now, forced=True)
+        return True
+
+    def forced(self) -> bool:
+        """Whether the scan's remaining rounds go through the batch already, its deadline
+        passed (no deadline left to fire for it)."""
+        st = self._scan
+        return st is not None and st.pending is not None and st.pending.forced
 
     def round_of(self, k: int) -> int | None:
         """Rounds of scan ``k`` already run (None: not the scan being fused, or done)."""
@@ -206,9 +241,11 @@ class Consensus:
         out: list = []
         st = self._scan
         if st is not None and not st.done:
-            self.stats.deadline_fusions += 1
+            if st.pending is None or not st.pending.forced:  # a forced one counted already
+                self.stats.deadline_fusions += 1
+            out += self._settle(st, now)
             while not st.done:
-                out += self._fuse_round(st, now)
+                out += self._fuse_round(st, now, now_only=True)
         return out
 
     def peer_left(self, name: str) -> bool:
@@ -234,7 +271,15 @@ class Consensus:
         self._inbox.clear()
         for name in list(self.nale.stored):
             self.nale.forget(name)
+        self.cancel_pending()
         self._scan = None
+
+    def cancel_pending(self) -> None:
+        """Forget the round waiting in the batch (its scan is gone, or the peer stopped)."""
+        st = self._scan
+        if st is not None and st.pending is not None:
+            st.pending.settled = True
+            st.pending = None
 
     # -- rounds -----------------------------------------------------------------------------
     def _inputs(self, k: int, rnd: int) -> dict[str, dict[str, GaussianMixture]]:
@@ -256,12 +301,16 @@ class Consensus:
     def _advance(self, now: float) -> list:
         out: list = []
         st = self._scan
-        while st is not None and not st.done and self._ready(st.k, st.round):
+        while (st is not None and not st.done and st.pending is None
+               and self._ready(st.k, st.round)):
             out += self._fuse_round(st, now)
         return out
 
-    def _fuse_round(self, st: _ScanState, now: float) -> list:
-        """Consensus round ``st.round + 1`` of scan ``st.k``."""
+    def _fuse_round(self, st: _ScanState, now: float, forced: bool = False,
+                    now_only: bool = False) -> list:
+        """Consensus round ``st.round + 1`` of scan ``st.k``: fused now, or (with a batch,
+        unless ``now_only``) queued there as a job, ``forced`` if the scan's deadline passed
+        (then its remaining rounds follow it through the batch)."""
         if not self.fusing:
             st.done = True
             return self._tracks(st.k, st.local, now)
@@ -271,13 +320,62 @@ class Consensus:
                                      uniform=self.o.omega == "uniform")
         if self.trust is not None and senders and isinstance(st.current, GaussianMixture):
             inputs, senders, weights = self._trusted(st, inputs, senders, weights)
-        try:
-            fused = self.fuser.fuse(FusionInput(st.k, st.round, st.current, inputs, weights,
-                                                st.z))
-        except Exception as exc:  # a bug must not stop the peer: no tracks, scored a miss
-            self._error(st.k, exc)
-            st.done = True
+        inp = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
+        if self.batch is not None and self.batchable and not now_only:
+            st.pending = FusionJob(self, st, inp, senders, forced)
+            self.batch.add(st.pending)
             return []
+        try:
+            fused = self.fuser.fuse(inp)
+        except Exception as exc:  # a bug must not stop the peer: no tracks, scored a miss
+            return self._failed(st, exc)
+        return self._fused(st, fused, senders, now)
+
+    def _failed(self, st: _ScanState, exc: Exception) -> list:
+        self._error(st.k, exc)
+        st.done = True
+        return []
+
+    def _settle(self, st: _ScanState, now: float) -> list:
+        """The round waiting in the batch, fused now (its result is needed at once)."""
+        job = st.pending
+        if job is None:
+            return []
+        job.settled, st.pending = True, None
+        try:
+            fused = self.fuser.fuse(job.input)
+        except Exception as exc:
+            return self._failed(st, exc)
+        return self._fused(st, fused, job.senders, now)
+
+    def complete(self, job: FusionJob, fused: GaussianMixture | None,
+                 exc: Exception | None, now: float) -> None:
+        """The batch fused ``job`` (``fused``, or raised ``exc``): finish its round and go on
+        as :meth:`_advance` would (a forced scan: its remaining rounds, queued again). The
+        messages wait for :meth:`take_completed`."""
+        st = job.state
+        job.settled = True
+        if st.pending is not job or self._scan is not st:
+            return  # settled or cancelled meanwhile
+        st.pending = None
+        out = self._failed(st, exc) if exc is not None else self._fused(st, fused,
+                                                                         job.senders, now)
+        if job.forced:
+            while not st.done and st.pending is None:
+                out += self._fuse_round(st, now, forced=True)
+        else:
+            out += self._advance(now)
+        self._completed.extend(out)
+
+    def take_completed(self) -> list:
+        """The messages of the rounds the batch completed since the last call."""
+        out, self._completed = self._completed, []
+        return out
+
+    def _fused(self, st: _ScanState, fused: GaussianMixture, senders: list[str],
+               now: float) -> list:
+        """The rest of a round once fused: counts, records, the next round's estimate or
+        the tracks."""
         self.stats.fusions += 1
         self.stats.fused_inputs += len(senders)
         for s in senders:

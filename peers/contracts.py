@@ -140,6 +140,13 @@ class FuserHooks(_Hooks):
     product: bool = False
     """Whether it is a product rule (GCI): any weight above 0 of an input lets that input veto
     a target, so the trust test drops a suspect neighbour instead of down-weighting it."""
+    fuse_many: Callable[[Sequence[FusionInput]], list[GaussianMixture]] | None = None
+    """``[fuse(i) for i in inputs]`` computed together, for inputs of fusers with the same
+    :attr:`batch_key` (a host's co-hosted peers: :mod:`peers.batching`); the same results
+    to round-off."""
+    batch_key: object = None
+    """Fusers whose ``batch_key`` is equal (hashable, not None) compute the same rule with
+    the same settings, so one's ``fuse_many`` may fuse the others' inputs."""
 
 
 def metropolis_weights(own: str, senders: Sequence[str], degrees: Mapping[str, int],

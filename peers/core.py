@@ -137,6 +137,11 @@ class PeerCore:
         self._score_deferred()
         return out + self._records()
 
+    def completed(self, now: float) -> list[Output]:
+        """What the consensus rounds a host's batch fused since the last call publish and
+        record (:mod:`peers.batching`; call after :meth:`peers.batching.FusionBatch.run`)."""
+        return self._wrap(self.consensus.take_completed()) + self._records()
+
     def liveliness(self, name: str, joined: bool, now: float) -> list[Output]:
         """A liveliness token appeared or went away (``alive/<name>``)."""
         if name == self.name:
@@ -265,7 +270,7 @@ class PeerCore:
         """The next fusion deadline of scan ``k`` while it is being fused: the scan's, or with
         ``round_deadlines`` the next round's (its share of the scan's deadline)."""
         c = self.consensus
-        if not c.busy() or self._scan_at is None or self._scan_at[0] != k:
+        if not c.busy() or c.forced() or self._scan_at is None or self._scan_at[0] != k:
             return None
         span = self.cfg.deadline * self.cfg.interval
         if c.o.round_deadlines:

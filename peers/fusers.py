@@ -13,6 +13,7 @@ import numpy as np
 from peers.contracts import FusionInput
 from peers.estimators import ImmEstimator, step_imm
 from tracking.fusion import gci_fuse
+from tracking.fusion_batch import hybrid_fuse_many
 from tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse
 from tracking.imm import IMMGaussianState, model_posterior
 from tracking.mixture import GaussianMixture
@@ -78,6 +79,17 @@ class HybridFuser(_MixtureFuser):
     (:func:`tracking.fusion.hybrid_fuse`): robust to neighbours that missed or pruned a target."""
 
     rule = staticmethod(hybrid_fuse)
+
+    @property
+    def batch_key(self) -> tuple:
+        """Hybrid fusers with equal reducers compute the same thing (:meth:`fuse_many`)."""
+        return ("hybrid", self.reducer)
+
+    def fuse_many(self, inputs: list[FusionInput]) -> list[GaussianMixture]:
+        """:meth:`fuse` of each input, stacked (:func:`tracking.fusion_batch.hybrid_fuse_many`:
+        the same numbers, one array computation for all)."""
+        return hybrid_fuse_many([(_densities(inp), list(inp.weights)) for inp in inputs],
+                                self.reducer)
 
 
 class NoFuser:

@@ -14,8 +14,11 @@ One loop thread does every peer's work: at each wake-up it moves what has arrive
 peers' own backlogs, then gives each peer with due work (a message waiting, a held message or
 a core deadline due) one step of at most :data:`peers.runtime.BATCH` messages, earliest due
 first; a peer with a long backlog or a slow step thus delays the others by one bounded step,
-not by its whole backlog. Commands on standard input (one per line): ``kill PEER [SCAN]``
-stops that peer as if its process had been killed (``sensornet run --fault kill:PEER@K``).
+not by its whole backlog. The consensus rounds that became ready in the pass are then fused
+together (:mod:`peers.batching`, :data:`BATCH_FUSIONS`; a batched peer's step holds at most
+one scan, see :meth:`PeerHost._one_scan`). Commands on standard input (one per line):
+``kill PEER [SCAN]`` stops that peer as if its process had been killed (``sensornet run
+--fault kill:PEER@K``).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
+from peers.admission import peek
+from peers.batching import FusionBatch
 from peers.core import PeerCore
 from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from peers.session import open_session
@@ -39,6 +44,10 @@ from protocol.codec import decode
 from protocol.messages import Estimate
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
+BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"
+"""Fuse the consensus rounds that become ready in one pass of the loop together, at its end
+(:mod:`peers.batching`; default), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
+``bench_network.py --batch``). A peer that records its inputs for replay fuses at once."""
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
 Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py --handoff``).
 """
@@ -94,6 +103,11 @@ class PeerHost:
     ``session_args``: ``(listen, connect, config_file, lease_ms, gossip)`` of the host's one
     session (each peer's ``RuntimeOptions`` connection fields are not used)."""
 
+    batch: FusionBatch | None = None
+    """The peers' consensus fusions of one pass, fused together (:data:`BATCH_FUSIONS`)."""
+    _batched: frozenset[int] = frozenset()
+    """The peers whose fusions go through :attr:`batch`."""
+
     def __init__(self, name: str, peers: list[tuple[PeerCore, RuntimeOptions]],
                  session_args: tuple, say: Callable[[str], None] | None = None) -> None:
         if not peers:
@@ -117,6 +131,16 @@ class PeerHost:
             self.decode = SharedDecode()
             for rt in self.peers:
                 rt.core.decode = self.decode
+        self.batch: FusionBatch | None = None
+        if BATCH_FUSIONS and len(self.peers) > 1:
+            self.batch = FusionBatch()
+            for rt in self.peers:
+                if rt.o.record is None:  # replay fuses each round at once: record that way
+                    rt.core.consensus.batch = self.batch
+            self._batched = frozenset(i for i, rt in enumerate(self.peers)
+                                      if rt.core.consensus.batch is not None
+                                      and rt.core.consensus.batchable)
+        self._slot = {id(rt.core.consensus): i for i, rt in enumerate(self.peers)}
         self.session = None
         self.stop_reason = ""
         self._stop = False
@@ -136,11 +160,12 @@ class PeerHost:
                 lambda key, payload, subs=tuple(subs): self._hand_over(subs, key, payload))
 
     def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
-        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running."""
-        active = self._active
+        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running
+        (its header read once for all of them; each admits it on its own)."""
+        active, head = self._active, peek(payload)
         for j in subs:
             if j in active:
-                self.peers[j].transport.deliver(key, payload)
+                self.peers[j].transport.deliver(key, payload, head)
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
@@ -214,6 +239,7 @@ class PeerHost:
         rt = self.peers[i]
         self._active.remove(i)
         self._backlog[i].clear()
+        rt.core.consensus.cancel_pending()  # killed: its last round is not fused
         rt.kill(at_scan if at_scan is not None else rt.core.consensus.last_k)
         self.say(f"host {self.name}: killed peer {name} at scan {rt.killed_at}")
         return True
@@ -260,6 +286,7 @@ class PeerHost:
                 elif slot in self._active:
                     backlog[slot].append((now, item))
             self._work(time.time(), time.monotonic())
+            self._fuse()
             for i in [i for i in self._active if self.peers[i].idle_expired()]:
                 self._end(i)
 
@@ -275,14 +302,89 @@ class PeerHost:
                 when.append(wall + d)
             if when:
                 due.append((min(when), i))
-        for _, i in sorted(due):
+        due.sort()
+        if self.batch is not None and self._close_rounds(due):
+            self._fuse()
+        for _, i in due:
             if self._stop:
                 return
+            if i not in self._active:  # ended in _close_rounds
+                continue
             rt, mine = self.peers[i], self._backlog[i]
-            items = [mine.popleft()[1] for _ in range(min(BATCH, len(mine)))]
-            rt.step(items, lambda mine=mine: not mine)
+            entries = [mine.popleft() for _ in range(min(BATCH, len(mine)))]
+            if i in self._batched:
+                entries = self._one_scan(rt, entries, mine)
+            rt.step([item for _, item in entries], lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
+
+    @staticmethod
+    def _one_scan(rt: PeerRuntime, entries: list, mine: deque) -> list:
+        """A batched peer's step holds at most one scan: the scans far behind are skipped
+        first (:meth:`PeerRuntime._catch_up`, as its step would), then what follows a second
+        scan goes back to the front of its backlog, so that scan finds its predecessor's
+        rounds fused through the batch (:meth:`_close_rounds`), not one by one inside it."""
+        items = [item for _, item in entries]
+        kept = rt._catch_up(items)
+        if len(kept) < len(items):
+            ids = {id(item) for item in kept}
+            for tag, key, payload in (item for item in items if id(item) not in ids):
+                if tag == "msg":
+                    rt.core.admission.taken(key, len(payload))  # out of the inbox
+            entries = [e for e in entries if id(e[1]) in ids]
+        scans = [n for n, (_, (tag, key, _)) in enumerate(entries)
+                 if tag == "msg" and "/scan/" in key]
+        if len(scans) > 1:
+            mine.extendleft(reversed(entries[scans[1]:]))
+            entries = entries[:scans[1]]
+        return entries
+
+    def _close_rounds(self, due: list[tuple[float, int]]) -> bool:
+        """A peer still fusing a scan with a newer scan in its backlog would fuse that scan's
+        remaining rounds one by one when the newer scan comes (:meth:`Consensus.finish`, on
+        a host behind): instead it takes what came before the newer scan, then its remaining
+        rounds go to the batch, fused with the other peers' at once (:meth:`_fuse`) before
+        the newer scan is handled. True if any did."""
+        closed = False
+        for _, i in due:
+            rt, mine = self.peers[i], self._backlog[i]
+            c = rt.core.consensus
+            if i not in self._batched or not c.busy():
+                continue
+            j = next((n for n, (_, item) in enumerate(mine)
+                      if item[0] == "msg" and "/scan/" in item[1]), None)
+            if j is None or j >= BATCH or (peek(mine[j][1][2]) or ("", -1))[1] <= c.last_k:
+                continue  # no newer scan within this step's reach
+            if j:
+                rt.step([mine.popleft()[1] for _ in range(j)], lambda: False)
+                if rt._stop:
+                    self._end(i)
+                    continue
+            closed = c.close(time.time()) or closed
+        return closed
+
+    def _fuse(self) -> None:
+        """The rounds that became ready in this pass, fused together; each peer then
+        publishes and records what its completed rounds give (its next round's estimate,
+        its tracks), as its own step would have. The stacked computation's CPU is split
+        evenly between the peers it served (their "estimate" CPU, where fusing was)."""
+        batch = self.batch
+        while batch is not None and batch.jobs and not self._stop:
+            t0 = time.thread_time()
+            done = batch.run(time.time())
+            share = (time.thread_time() - t0) * 1e3 / max(1, len(done))
+            for c in done:
+                i = self._slot[id(c)]
+                rt = self.peers[i]
+                rt.telemetry.cpu_ms["estimate"] = rt.telemetry.cpu_ms.get("estimate", 0.0) + share
+                if i not in self._active:
+                    continue
+                try:
+                    rt._carry_out("estimate", rt.core.completed, time.time())
+                except Exception as exc:  # as in PeerRuntime.step: not the host's end
+                    rt._internal_error(exc)
+                if rt._stop:
+                    self._end(i)
 
 
 def rt_line(rt: PeerRuntime) -> str:

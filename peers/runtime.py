@@ -201,9 +201,10 @@ class PeerRuntime(RunOutputs):
             if self.recorder is not None and due is not None and due <= now:
                 self.recorder.tick(now)  # a deadline fires: replay must tick here too
             self._carry_out("tick", self.core.tick, now)
-            t0 = time.thread_time()
-            self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
-            self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
+            if self.observer.enabled:  # else nothing was deferred to draw
+                t0 = time.thread_time()
+                self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
+                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
         except Exception as exc:  # a bug must not take the peer (and the run) down
             self._internal_error(exc)
 
@@ -272,6 +273,7 @@ class PeerRuntime(RunOutputs):
         if channel in ("scan", "estimate", "tick") and outputs:
             self.telemetry.handled(channel, now, leave, outputs)
         scan_ms = (leave - now) * 1e3 if channel == "scan" else None
+        drawing = self.observer.enabled  # no Rerun stream: nothing to draw, nothing to time
         for out in outputs:
             if isinstance(out, Publish):
                 wall = time.time()
@@ -283,13 +285,15 @@ class PeerRuntime(RunOutputs):
                     self.saved_tracks[out.k] = out.message.states
                 if out.channel == "tracks" and self.recorder is not None:
                     self.recorder.tracks(wall, out.k, out.payload)
-                t0 = time.thread_time()
-                self.observer.published(out, lat)
-                cpu["rerun"] += (time.thread_time() - t0) * 1e3
+                if drawing:
+                    t0 = time.thread_time()
+                    self.observer.published(out, lat)
+                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
             elif isinstance(out, Record):
-                t0 = time.thread_time()
-                self.observer.record(out, scan_ms)
-                cpu["rerun"] += (time.thread_time() - t0) * 1e3
+                if drawing:
+                    t0 = time.thread_time()
+                    self.observer.record(out, scan_ms)
+                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
                 if out.kind == "error":
                     self._report_error(out)
                 if out.kind == "scan" and out.k % 1000 == 0:

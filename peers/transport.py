@@ -152,12 +152,14 @@ class Transport:
             self.recovered[self._recovering[key]] += 1
         self.deliver(key, sample.payload.to_bytes())
 
-    def deliver(self, key: str, payload: bytes) -> None:
+    def deliver(self, key: str, payload: bytes, head: tuple | None = None) -> None:
         """What arrived on ``key``, from Zenoh or handed over by a co-hosted neighbour
         (:mod:`peers.host`): the same admission (per sender) and signature check either way.
         Bounded before anything is decoded or verified (peers.admission): window, slot, the
-        sender's bucket and a place in the inbox, given back by the main loop (taken)."""
-        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload):
+        sender's bucket and a place in the inbox, given back by the main loop (taken).
+        ``head``: the payload's :func:`peers.admission.peek`, if the caller has it."""
+        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload,
+                                 head):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
                 size = len(payload)
                 payload, why = self.verifier.open(key, payload, self.check_signatures)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from peers.batching import FusionBatch
 from peers.core import PeerCore, Publish, Record, Stop
 from peers.faults import FaultInjector
 from peers.session import MAX_MESSAGE_BYTES
@@ -99,7 +100,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
              peers: dict[str, PeerCore] | None = None,
              faults: FaultInjector | None = None, network: str = "twin",
              inject: Iterable[Inject] = (), events: Iterable[Liveliness] = (),
-             data=None) -> TwinResult:
+             data=None, batch: bool = False) -> TwinResult:
     """One run of the scenario's network on the virtual clock.
 
     Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
@@ -107,6 +108,10 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     scenario's ``[faults]`` table, else instant delivery. ``inject``: raw messages (attacks);
     ``events``: liveliness changes (departures, returns). ``data``: the run's ``(truth,
     scans)`` for scenarios that draw their own (as :func:`sim.world.generate_run` returns them).
+    ``batch``: as the peers of one host (:mod:`peers.batching`), the consensus rounds that
+    become ready at one virtual instant are fused together once every event of that instant
+    has been handled (the same fused numbers; what a completed round publishes then goes out
+    at that instant, as events after it).
     """
     truth, scans = data if data is not None else generate_run(scn, run)
     names = scn.sensor_names
@@ -162,23 +167,13 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         push(end, "live", n, "world", False)
     scheduled: dict[str, float] = {}
     truth_key = keys.truth()
-    while queue:
-        t, _, kind, target, payload = heapq.heappop(queue)
-        if target in result.stops:
-            continue
-        core = peers[target]
-        if kind == "msg" and payload[0] == truth_key and not core.wants_truth:
-            continue  # not subscribed (peers.transport): Zenoh does not deliver it
-        if kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
-            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
-            out = []  # the transport drops it before assembling it (peers.session)
-        elif kind == "msg":
-            out = core.receive(payload[0], payload[1], t)
-        elif kind == "live":
-            out = core.liveliness(payload[0], payload[1], t)
-        else:
-            scheduled.pop(target, None)
-            out = []
+    fusions = FusionBatch() if batch else None
+    if fusions is not None:
+        for core in peers.values():
+            core.consensus.batch = fusions
+    name_of = {id(core.consensus): n for n, core in peers.items()}
+
+    def handle(t: float, target: str, core: PeerCore, out: list) -> None:
         out += core.tick(t)
         carry_out(t, target, out)
         for o in out:
@@ -193,4 +188,27 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         if due is not None and scheduled.get(target) != due:
             scheduled[target] = due
             push(max(due, t), "tick", target)
+
+    while queue:
+        t, _, kind, target, payload = heapq.heappop(queue)
+        if target in result.stops:
+            pass
+        elif kind == "msg" and payload[0] == truth_key and not peers[target].wants_truth:
+            pass  # not subscribed (peers.transport): Zenoh does not deliver it
+        elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
+            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
+            handle(t, target, peers[target], [])  # the transport drops it (peers.session)
+        elif kind == "msg":
+            handle(t, target, peers[target], peers[target].receive(payload[0], payload[1], t))
+        elif kind == "live":
+            handle(t, target, peers[target],
+                   peers[target].liveliness(payload[0], payload[1], t))
+        else:
+            scheduled.pop(target, None)
+            handle(t, target, peers[target], [])
+        while fusions is not None and fusions.jobs and (not queue or queue[0][0] != t):
+            for c in fusions.run(t):  # the instant's events are handled: its rounds fused
+                name = name_of[id(c)]
+                if name not in result.stops:
+                    handle(t, name, peers[name], peers[name].completed(t))
     return result

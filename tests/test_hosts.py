@@ -170,6 +170,40 @@ def test_one_busy_peer_does_not_hold_the_others_back():
     assert log[2:] == [("busy", BATCH)]
 
 
+def test_a_batched_peers_step_holds_one_scan(tmp_path):
+    """A peer whose fusions go through the host's batch gets at most one scan per step: what
+    follows a second scan goes back to the front of its backlog, in order; scans far behind
+    are skipped first, as the peer's own step would (PeerRuntime._catch_up)."""
+    import numpy as np
+
+    from peers.runtime import BACKLOG, RuntimeOptions
+    from protocol.codec import encode
+    from protocol.messages import Estimate, Scan
+    from sim.peers import make_peer
+    from sim.scenario import load_scenario
+    from tracking.mixture import GaussianMixture
+
+    scn = load_scenario(_six(tmp_path / "six.toml"))
+    host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
+                           for n in SIX[:2]], ((), (), None, None, False))
+    assert host._batched == {0, 1}
+    rt, keys = host.peers[0], host.peers[0].core.keys
+
+    def scan(k: int) -> tuple:
+        return ("msg", keys.scan("p00"), encode(Scan("p00", k, np.zeros((0, 2)), seq=k)))
+
+    mix = GaussianMixture(np.ones(1), np.zeros((1, 4)), np.eye(4)[None])
+    est = ("msg", keys.estimate("p01"), encode(Estimate("p01", 1, mix)))
+    entries = [(0.0, est), (0.1, scan(1)), (0.2, est), (0.3, scan(2)), (0.4, est)]
+    mine = deque([(0.5, est)])
+    assert PeerHost._one_scan(rt, list(entries), mine) == entries[:3]
+    assert list(mine) == [*entries[3:], (0.5, est)]
+    behind = [(float(k), scan(k)) for k in range(1, BACKLOG + 4)]  # 3 scans far behind
+    mine = deque()
+    assert PeerHost._one_scan(rt, list(behind), mine) == [behind[3]]
+    assert list(mine) == behind[4:] and rt.telemetry.scans_skipped_behind == 3
+
+
 def test_host_commands_reach_the_loop():
     host = PeerHost.__new__(PeerHost)
     import queue
