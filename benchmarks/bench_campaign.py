@@ -55,7 +55,7 @@ runs = {runs}
 
 
 def timed(c, folder: Path, **kw) -> dict:
-    from sim.campaign import canonical_rows, results_table, run_campaign
+    from sensornet.sim.campaign import canonical_rows, results_table, run_campaign
 
     t0 = time.perf_counter()
     s = run_campaign(c, folder, progress=False, **kw)
@@ -80,8 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.runs, args.scans = 4, args.scans or 10
 
-    from sim.campaign import load_campaign
-    from sim.runners import code_version
+    from sensornet.sim.campaign import load_campaign
+    from sensornet.sim.runners import code_version
 
     # One code version for every worker, whatever is edited in the tree while this runs.
     os.environ.setdefault("SENSORNET_CODE_VERSION", f"bench-{code_version()}")

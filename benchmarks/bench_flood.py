@@ -38,12 +38,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import msgpack  # noqa: E402
 import numpy as np  # noqa: E402
 import zenoh  # noqa: E402
-
-from protocol.codec import decode, encode  # noqa: E402
-from protocol.envelope import inner  # noqa: E402
-from protocol.keys import Keys  # noqa: E402
-from protocol.messages import Estimate  # noqa: E402
-from tracking.mixture import GaussianMixture  # noqa: E402
+from sensornet.protocol.codec import decode, encode  # noqa: E402
+from sensornet.protocol.envelope import inner  # noqa: E402
+from sensornet.protocol.keys import Keys  # noqa: E402
+from sensornet.protocol.messages import Estimate  # noqa: E402
+from sensornet.tracking.mixture import GaussianMixture  # noqa: E402
 
 K0 = 10
 NETWORK = "benchflood"
@@ -82,10 +81,10 @@ def _flood(session, keys: Keys, count: int, components: int, interval: float, si
 
 def one_run(out: Path, scans: int, speed: float, mode: str, count: int,
             mixed: bool = False) -> tuple[dict, dict]:
-    from peers.security import Security, make_keys
-    from peers.session import open_session
-    from sim.launcher import read_summaries, start_run, wait_run
-    from sim.scenario import load_scenario, parse_overrides
+    from sensornet.peers.security import Security, make_keys
+    from sensornet.peers.session import open_session
+    from sensornet.sim.launcher import read_summaries, start_run, wait_run
+    from sensornet.sim.scenario import load_scenario, parse_overrides
 
     sets = ["birth.model=truth", f"scenario.num_scans={scans}", f"network.speed={speed}"]
     scn = load_scenario("seed000", overrides=parse_overrides(sets))

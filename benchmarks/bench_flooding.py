@@ -24,11 +24,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from peers.session import PEER_WAIT
-from peers.telemetry import percentile
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario, parse_overrides
-from sim.twin import run_twin
+from sensornet.peers.session import PEER_WAIT
+from sensornet.peers.telemetry import percentile
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.twin import run_twin
 
 
 def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],

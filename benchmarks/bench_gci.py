@@ -17,9 +17,8 @@ import sys
 import time
 
 import numpy as np
-
-from tracking.fusion import gci_pair
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.fusion import gci_pair
+from sensornet.tracking.mixture import GaussianMixture
 
 CASES = ((50, 0.6), (100, 2.0))  # (components per mixture, target ms)
 OMEGA = 0.5

@@ -39,11 +39,11 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_gmphd_stonesoup.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tracking.gmphd import GMPHDFilter, SensorParams, extract
-from tracking.metrics import ospa
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition
-from tracking.reduction import Reducer
+from sensornet.tracking.gmphd import GMPHDFilter, SensorParams, extract
+from sensornet.tracking.metrics import ospa
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition
+from sensornet.tracking.reduction import Reducer
 
 # -- the seed-000 scenario (docs/algorithms.md "Seed-000 scenario") ----------------------------
 REGION = (-1000.0, 1000.0)

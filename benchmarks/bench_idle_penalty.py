@@ -17,9 +17,9 @@ import statistics
 import sys
 import time
 
-from sim.peers import make_parts
-from sim.scenario import load_scenario, parse_overrides
-from sim.world import generate_run
+from sensornet.sim.peers import make_parts
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.world import generate_run
 
 
 def step_times(pause: float, scans: int) -> list[float]:

@@ -17,8 +17,7 @@ import sys
 import time
 
 import numpy as np
-
-from tracking.idpc import ClusterParams, ftc, idpc
+from sensornet.tracking.idpc import ClusterParams, ftc, idpc
 
 TARGET_MS = 0.5
 SENSORS = 20

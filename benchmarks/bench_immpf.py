@@ -31,11 +31,12 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_immpf.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sensornet.sim.seed001 import Seed001Scenario, measure, truth
+from sensornet.tracking.imm import IMMEKF, IMMParams, mixing, radar_log_likelihood
+from sensornet.tracking.particles import IMMParticleFilter, ParticleParams
+
 from benchmarks.filters_before import IMMEKFBefore, IMMParticleFilterBefore
 from benchmarks.filters_before import radar_log_likelihood as radar_log_likelihood_before
-from sim.seed001 import Seed001Scenario, measure, truth
-from tracking.imm import IMMEKF, IMMParams, mixing, radar_log_likelihood
-from tracking.particles import IMMParticleFilter, ParticleParams
 
 
 def loop_step(X: np.ndarray, probs: np.ndarray, params: IMMParams, sensor, z,

@@ -41,10 +41,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from peers.telemetry import percentile
-from sim.graphs import circulant, network_scenario  # noqa: F401 (circulant: re-exported)
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario
+from sensornet.peers.telemetry import percentile
+from sensornet.sim.graphs import circulant, network_scenario  # noqa: F401 (circulant: re-exported)
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario
 
 TARGETS = {"latency_median_ms": 5.0, "wire_ratio": 1.1, "peers": 20, "rss_mb": 200.0,
            "flood_rss_ratio": 1.2, "cpu_ms": 2.0}
@@ -67,7 +67,7 @@ PER_PROCESS = 1
 
 def run_network(source: str, out: Path, overrides: list[str], timeout: float,
                 sparse: bool = False) -> dict:
-    from sim.scenario import parse_overrides
+    from sensornet.sim.scenario import parse_overrides
 
     scn = load_scenario(source, overrides=parse_overrides(overrides))
     handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse,
@@ -85,13 +85,12 @@ def part_flood(tmp: Path, clean: dict, seconds: float = 10.0) -> list[str]:
 
     import numpy as np
     import zenoh
-
-    from peers.session import open_session
-    from protocol.codec import encode
-    from protocol.keys import Keys
-    from protocol.messages import Estimate
-    from sim.scenario import parse_overrides
-    from tracking.mixture import GaussianMixture
+    from sensornet.peers.session import open_session
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.keys import Keys
+    from sensornet.protocol.messages import Estimate
+    from sensornet.sim.scenario import parse_overrides
+    from sensornet.tracking.mixture import GaussianMixture
 
     sets = ["birth.model=truth", "scenario.num_scans=150", "network.speed=10"]
     scn = load_scenario("seed000", overrides=parse_overrides(sets))
@@ -262,7 +261,7 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
 def packing_of(n: int, packing: str) -> int:
     """Peers per process for ``packing``: a number, or ``auto`` (what ``sensornet run``
     chooses without ``--per-process``: sim.packing)."""
-    from sim.packing import choose
+    from sensornet.sim.packing import choose
 
     return choose(n, None).per_process if packing == "auto" else int(packing)
 

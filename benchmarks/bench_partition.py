@@ -22,11 +22,10 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-
-from sim.extended import make_et_filter, make_partitioner  # noqa: E402
-from sim.seed002 import CLUTTER_LEVELS, PAPER_PARTITION_TIME, PARTITIONS, scenario_at  # noqa: E402
-from sim.world import generate_run  # noqa: E402
-from tracking.partition import ScanTooLarge, all_pairs_partitions  # noqa: E402
+from sensornet.sim.extended import make_et_filter, make_partitioner  # noqa: E402
+from sensornet.sim.seed002 import CLUTTER_LEVELS, PAPER_PARTITION_TIME, PARTITIONS, scenario_at  # noqa: E402
+from sensornet.sim.world import generate_run  # noqa: E402
+from sensornet.tracking.partition import ScanTooLarge, all_pairs_partitions  # noqa: E402
 
 
 def scans_at(clutter: float, runs: int) -> list[np.ndarray]:

@@ -28,8 +28,9 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_pda.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sensornet.sim import seed003
+
 from benchmarks.pda_before import ImmPdaBefore
-from sim import seed003
 
 
 def record(cfg: dict, method: str, run: int, n_sensors: int):

@@ -22,8 +22,7 @@ if __package__ in (None, ""):  # run as a file: the repository root on the path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import msgpack  # noqa: E402
-
-from peers.recording import TOPICS, Recorder, read  # noqa: E402
+from sensornet.peers.recording import TOPICS, Recorder, read  # noqa: E402
 
 
 def write_msgpack(path: Path, meta: dict, records: list) -> None:

@@ -15,8 +15,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 SETS = ["birth.model=truth"]
 
@@ -26,7 +26,7 @@ def once(out: Path, scans: int, recover: bool, secure: bool) -> list[float]:
     scn = load_scenario("seed000", overrides=parse_overrides(sets))
     keys = None
     if secure:
-        from peers.security import make_keys
+        from sensornet.peers.security import make_keys
 
         keys = out / "keys"
         make_keys(f"bench-{out.name}", ["world", *scn.sensor_names, "router"], keys)

@@ -22,12 +22,11 @@ import time
 
 import numpy as np
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
-
-from protocol.codec import decode, encode
-from protocol.envelope import Signer, Verifier
-from protocol.keys import Keys
-from protocol.messages import Estimate, Scan, Tracks, Truth
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.envelope import Signer, Verifier
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate, Scan, Tracks, Truth
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def _median_us(fn, n: int) -> float:

@@ -43,15 +43,15 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_transport_floor.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sensornet.peers.telemetry import percentile
+
 from benchmarks.bench_network import circulant
-from peers.telemetry import percentile
 
 
 def child(i: int, folder: Path) -> None:
     """One bare process: link, report ready, publish on the plan's clock, count, report."""
     import zenoh
-
-    from peers.session import endpoint, zenoh_config
+    from sensornet.peers.session import endpoint, zenoh_config
 
     plan = json.loads((folder / "plan.json").read_text())
     A = np.array(plan["adjacency"], dtype=bool)
@@ -150,7 +150,7 @@ def child(i: int, folder: Path) -> None:
 def run(A: np.ndarray, rate: float, per_scan: int, nbytes: int, scans: int, folder: Path,
         handler: str = "callback", timeout: float = 180.0) -> dict:
     """Start one process per node of ``A``, run them, collect their results."""
-    from peers.session import free_port
+    from sensornet.peers.session import free_port
 
     n = len(A)
     folder.mkdir(parents=True, exist_ok=True)
@@ -224,8 +224,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     graphs = []
     if a.graph == "seed004":
-        from sim.build import adjacency
-        from sim.scenario import load_scenario
+        from sensornet.sim.build import adjacency
+        from sensornet.sim.scenario import load_scenario
 
         graphs.append(("seed004", adjacency(load_scenario("seed004"))[1]))
     else:

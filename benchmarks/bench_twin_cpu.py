@@ -96,11 +96,11 @@ def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: b
         sys.path.insert(0, str(ROOT / "benchmarks"))
         import twin_before
         twin_before.install()
-    from peers.host import SharedDecode
-    from sim.graphs import network_scenario
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario
-    from sim.twin import run_twin
+    from sensornet.peers.host import SharedDecode
+    from sensornet.sim.graphs import network_scenario
+    from sensornet.sim.peers import make_peer
+    from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.twin import run_twin
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"net{n}d{degree}.toml"

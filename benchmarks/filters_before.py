@@ -9,9 +9,8 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-
-from tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
-from tracking.imm import (
+from sensornet.tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
+from sensornet.tracking.imm import (
     IMMEKF,
     STATE_DIM,
     IMMGaussianState,
@@ -19,8 +18,8 @@ from tracking.imm import (
     model_posterior,
     radar_jacobian,
 )
-from tracking.models import RangeBearing, wrap_angle
-from tracking.particles import (
+from sensornet.tracking.models import RangeBearing, wrap_angle
+from sensornet.tracking.particles import (
     IMMParticleFilter,
     ParticlePrediction,
     ParticleState,

@@ -5,9 +5,8 @@ is shared, so the ratio of the two, timed interleaved in one process, is what co
 from __future__ import annotations
 
 import numpy as np
-
-from tracking.imm import mixing
-from tracking.pda import ImmPda, LinearSensor, _quadratic_form
+from sensornet.tracking.imm import mixing
+from sensornet.tracking.pda import ImmPda, LinearSensor, _quadratic_form
 
 
 def pda_weights(g: np.ndarray, det2piS: np.ndarray, sensor: LinearSensor,

@@ -17,8 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 
 def main(argv: list[str] | None = None) -> int:

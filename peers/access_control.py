@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from protocol.keys import ROUTER_PREFIX, WORLD, Keys, check_name
+from sensornet.protocol.keys import ROUTER_PREFIX, WORLD, Keys, check_name
 
 __all__ = ["ROUTER_PREFIX", "acl_rules"]
 

@@ -28,8 +28,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import msgpack
-
-from protocol.keys import ROOT
+from sensornet.protocol.keys import ROOT
 
 SLOT_ATTEMPTS = 4
 """Messages per (sender, scan, round, kind) let through to decoding: a duplicated delivery

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from peers.contracts import FusionInput
+from sensornet.peers.contracts import FusionInput
 
 
 @dataclass(eq=False)

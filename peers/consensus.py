@@ -16,9 +16,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from peers.batching import FusionBatch, FusionJob
-from peers.contracts import (
+from sensornet.peers.batching import FusionBatch, FusionJob
+from sensornet.peers.contracts import (
     EstimatorHooks,
     Fuser,
     FuserHooks,
@@ -26,11 +25,11 @@ from peers.contracts import (
     LocalEstimator,
     metropolis_weights,
 )
-from peers.fusers import NoFuser
-from peers.trust import Trust, TrustConfig
-from protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
-from tracking.mixture import GaussianMixture
-from tracking.nale import NaleBuffer
+from sensornet.peers.fusers import NoFuser
+from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.nale import NaleBuffer
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 
 @dataclass(frozen=True)

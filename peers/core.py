@@ -32,15 +32,14 @@ from __future__ import annotations
 from collections import Counter, deque
 
 import numpy as np
-
-from peers.admission import Admission, Route, parse_key
-from peers.consensus import Consensus
-from peers.core_summary import core_cost, core_snapshot, cost_per_scan
-from peers.core_types import CoreConfig, Output, Publish, Record, Stop
-from peers.scoring import Scorer
-from protocol.codec import Rejected, decode, encode
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
+from sensornet.peers.admission import Admission, Route, parse_key
+from sensornet.peers.consensus import Consensus
+from sensornet.peers.core_summary import core_cost, core_snapshot, cost_per_scan
+from sensornet.peers.core_types import CoreConfig, Output, Publish, Record, Stop
+from sensornet.peers.scoring import Scorer
+from sensornet.protocol.codec import Rejected, decode, encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
 END_GAP = 100_000
 """Scans a world's "end" may name after this peer's last one (misses to score: bounded)."""

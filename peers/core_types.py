@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from protocol.codec import DEFAULT_LIMITS, Limits
-from protocol.messages import Estimate, Forward, Returns, Tracks
+from sensornet.protocol.codec import DEFAULT_LIMITS, Limits
+from sensornet.protocol.messages import Estimate, Forward, Returns, Tracks
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from peers.errors import SecurityError
+from sensornet.peers.errors import SecurityError
 
 
 def tls_endpoint(port: int, host: str = "127.0.0.1") -> str:

@@ -5,14 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from peers.contracts import LocalOutput
-from tracking.gmphd import GMPHDFilter
-from tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
-from tracking.mixture import GaussianMixture
-from tracking.models import RangeBearing
-from tracking.particles import IMMParticleFilter, ParticleParams, RatioConfig, floored
-from tracking.reduction import keep_above
+from sensornet.peers.contracts import LocalOutput
+from sensornet.tracking.gmphd import GMPHDFilter
+from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import RangeBearing
+from sensornet.tracking.particles import IMMParticleFilter, ParticleParams, RatioConfig, floored
+from sensornet.tracking.reduction import keep_above
 
 
 @dataclass(frozen=True)

@@ -7,10 +7,9 @@ level-2 pruned posterior mixture and fuses with the same :class:`peers.fusers.Gc
 from __future__ import annotations
 
 import numpy as np
-
-from peers.contracts import LocalOutput
-from peers.estimators import GmphdEstimator
-from tracking.etgmphd import ETGMPHDFilter
+from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.estimators import GmphdEstimator
+from sensornet.tracking.etgmphd import ETGMPHDFilter
 
 
 class EtGmphdEstimator(GmphdEstimator):

@@ -44,8 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from peers.faultplan import (
+from sensornet.peers.faultplan import (
     Constant,
     Delay,
     Exponential,

@@ -14,12 +14,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-
-from peers.contracts import FusionInput, LocalOutput
-from peers.flooder import Flooder
-from protocol.messages import ScanSet
-from tracking.idpc import ClusterParams, dbscan_class, ftc, idpc, polar_to_cartesian
-from tracking.models import RangeBearing
+from sensornet.peers.contracts import FusionInput, LocalOutput
+from sensornet.peers.flooder import Flooder
+from sensornet.protocol.messages import ScanSet
+from sensornet.tracking.idpc import ClusterParams, dbscan_class, ftc, idpc, polar_to_cartesian
+from sensornet.tracking.models import RangeBearing
 
 
 class FloodEstimator:

@@ -19,9 +19,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from protocol.codec import encode
-from protocol.messages import Forward, ScanSet
+from sensornet.protocol.codec import encode
+from sensornet.protocol.messages import Forward, ScanSet
 
 TUPLES_PER_MEASUREMENT = 2
 """A 2-D measurement is 2 tuples (seed 004)."""

@@ -10,14 +10,14 @@
 
 from __future__ import annotations
 
-from peers.flood_parts import (
+from sensornet.peers.flood_parts import (
     FloodEstimator,
     FloodFuser,
     IcFloodEstimator,
     IcFloodFuser,
     corrector_order,
 )
-from peers.flooder import (
+from sensornet.peers.flooder import (
     TUPLES_PER_MEASUREMENT,
     Deliver,
     Flooder,

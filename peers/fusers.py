@@ -9,22 +9,21 @@ from __future__ import annotations
 from collections import Counter
 
 import numpy as np
-
-from peers.contracts import FusionInput
-from peers.estimators import ImmEstimator, step_imm
-from tracking.fusion import gci_fuse
-from tracking.fusion_batch import hybrid_fuse_many
-from tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse
-from tracking.imm import IMMGaussianState, model_posterior
-from tracking.mixture import GaussianMixture
-from tracking.particles import (
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.estimators import ImmEstimator, step_imm
+from sensornet.tracking.fusion import gci_fuse
+from sensornet.tracking.fusion_batch import hybrid_fuse_many
+from sensornet.tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse
+from sensornet.tracking.imm import IMMGaussianState, model_posterior
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.particles import (
     GaussianRatio,
     RatioConfig,
     collapse_to_models,
     floored,
     gci_summaries,
 )
-from tracking.reduction import Reducer
+from sensornet.tracking.reduction import Reducer
 
 
 def _densities(inp: FusionInput) -> list[GaussianMixture]:

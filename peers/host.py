@@ -33,15 +33,15 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
-from peers.admission import peek
-from peers.batching import FusionBatch
-from peers.core import PeerCore
-from peers.runtime import BATCH, PeerRuntime, RuntimeOptions
-from peers.session import open_session
-from peers.telemetry import SharedCpu
-from peers.transport import settle
-from protocol.codec import decode
-from protocol.messages import Estimate
+from sensornet.peers.admission import peek
+from sensornet.peers.batching import FusionBatch
+from sensornet.peers.core import PeerCore
+from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
+from sensornet.peers.session import open_session
+from sensornet.peers.telemetry import SharedCpu
+from sensornet.peers.transport import settle
+from sensornet.protocol.codec import decode
+from sensornet.protocol.messages import Estimate
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
 BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"

@@ -27,8 +27,8 @@ import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from peers.errors import SecurityError
-from protocol.keys import WORLD, check_name  # noqa: F401  (WORLD: re-exported)
+from sensornet.peers.errors import SecurityError
+from sensornet.protocol.keys import WORLD, check_name  # noqa: F401  (WORLD: re-exported)
 
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 SIGN_KEY = ".ed25519"

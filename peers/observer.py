@@ -11,9 +11,8 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-
-from peers.core import PeerCore, Publish, Record
-from peers.rerun_sink import RerunSink, TrackLabels, color_of, ellipses, position_columns
+from sensornet.peers.core import PeerCore, Publish, Record
+from sensornet.peers.rerun_sink import RerunSink, TrackLabels, color_of, ellipses, position_columns
 
 
 class Observer:

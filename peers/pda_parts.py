@@ -33,10 +33,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-
-from peers.contracts import FusionInput, LocalOutput
-from tracking.mixture import GaussianMixture
-from tracking.pda import ImmPda, LinearSensor, SensorUpdate, _quadratic_form
+from sensornet.peers.contracts import FusionInput, LocalOutput
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.pda import ImmPda, LinearSensor, SensorUpdate, _quadratic_form
 
 
 def covariance_intersection(means: np.ndarray, covs: np.ndarray,

@@ -21,8 +21,7 @@ from pathlib import Path
 
 import msgpack
 import numpy as np
-
-from peers.core import PeerCore, Publish
+from sensornet.peers.core import PeerCore, Publish
 
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
 META = "sensornet"

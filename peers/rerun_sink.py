@@ -30,8 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from peers.rerun_layout import (  # noqa: F401  (names importers take from here)
+from sensornet.peers.rerun_layout import (  # noqa: F401  (names importers take from here)
     _CIRCLE,
     APP,
     COLOR_NAMES,
@@ -54,7 +53,7 @@ from peers.rerun_layout import (  # noqa: F401  (names importers take from here)
     position_columns,
     region_outline,
 )
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def viewer_executable() -> str | None:

@@ -11,8 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from peers.scan_results import write_part
+from sensornet.peers.scan_results import write_part
 
 
 def output_stem(out_dir: Path, name: str) -> str:

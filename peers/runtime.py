@@ -18,18 +18,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-from peers.admission import parse_key, peek
-from peers.core import PeerCore, Publish, Record, Stop
-from peers.faults import FaultInjector, HoldQueue
-from peers.observer import Observer
-from peers.recording import Recorder
-from peers.rerun_sink import RerunSink
-from peers.run_output import RunOutputs, output_stem
-from peers.telemetry import SharedCpu, Telemetry
-from peers.transport import Transport
-from protocol.codec import Rejected
-from protocol.messages import Estimate, Forward, Returns
+from sensornet.peers.admission import parse_key, peek
+from sensornet.peers.core import PeerCore, Publish, Record, Stop
+from sensornet.peers.faults import FaultInjector, HoldQueue
+from sensornet.peers.observer import Observer
+from sensornet.peers.recording import Recorder
+from sensornet.peers.rerun_sink import RerunSink
+from sensornet.peers.run_output import RunOutputs, output_stem
+from sensornet.peers.telemetry import SharedCpu, Telemetry
+from sensornet.peers.transport import Transport
+from sensornet.protocol.codec import Rejected
+from sensornet.protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
 """At most this many queued messages are handled per wake-up before deadlines are checked."""

@@ -12,8 +12,7 @@ from pathlib import Path
 
 import msgpack
 import numpy as np
-
-from tracking.metrics import gospa_parts, ospa_gospa_parts
+from sensornet.tracking.metrics import gospa_parts, ospa_gospa_parts
 
 COLUMNS = ("peer", "scan", "estimate", "scored", "ospa", "gospa", "gospa_localisation",
            "gospa_missed", "gospa_false", "n_estimated", "n_true", "latency_ms", "tracks",

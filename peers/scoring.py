@@ -16,8 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-
-from peers.scan_results import ScanResults
+from sensornet.peers.scan_results import ScanResults
 
 WHICH = ("local", "fused")
 TruthFn = Callable[[int], "np.ndarray | None"]

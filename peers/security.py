@@ -28,9 +28,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from peers.access_control import ROUTER_PREFIX, acl_rules
-from peers.endpoints import check_endpoints, tls_endpoint
-from peers.member_keys import (
+from sensornet.peers.access_control import ROUTER_PREFIX, acl_rules
+from sensornet.peers.endpoints import check_endpoints, tls_endpoint
+from sensornet.peers.member_keys import (
     CA_CERT,
     CA_KEY,
     DEFAULT_HOSTS,
@@ -45,8 +45,8 @@ from peers.member_keys import (
     load_roster,
     make_keys,
 )
-from peers.refusal_log import ACL_LOG, RefusalLog
-from protocol.envelope import Signer, Verifier
+from sensornet.peers.refusal_log import ACL_LOG, RefusalLog
+from sensornet.protocol.envelope import Signer, Verifier
 
 
 @dataclass(frozen=True)

@@ -14,9 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
-
-from peers.endpoints import check_endpoints
-from peers.errors import SessionError
+from sensornet.peers.endpoints import check_endpoints
+from sensornet.peers.errors import SessionError
 
 DEFAULT_LEASE_MS = 1500
 """Zenoh link lease: a frozen (SIGSTOP) process is noticed within about this long (Zenoh's own

@@ -15,7 +15,7 @@ import statistics
 import time
 from collections import Counter, deque
 
-from peers.core import Publish, Record
+from sensornet.peers.core import Publish, Record
 
 BREAKDOWN = ("transit", "local", "fusion_wait", "neighbours", "fusing")
 _KEEP = 4096  # samples kept per series (memory stays flat in long runs)

@@ -14,12 +14,11 @@ import time
 
 import zenoh
 import zenoh.ext as zx
-
-from peers.admission import Admission, parse_key
-from peers.refusal_log import RefusalLog
-from peers.session import SessionError, open_session
-from protocol.encodings import encoding_text, letter_of
-from protocol.keys import Keys
+from sensornet.peers.admission import Admission, parse_key
+from sensornet.peers.refusal_log import RefusalLog
+from sensornet.peers.session import SessionError, open_session
+from sensornet.protocol.encodings import encoding_text, letter_of
+from sensornet.protocol.keys import Keys
 
 RECOVER_CACHE = 64
 """Messages each publisher keeps per key for subscribers that missed them (``recover``): at

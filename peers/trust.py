@@ -66,9 +66,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from tracking.divergence import cs_from_log_overlaps, log_overlaps
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
+from sensornet.tracking.mixture import GaussianMixture
 
 STATES = ("trusted", "suspect", "quarantined")
 MAX_LOG = 200

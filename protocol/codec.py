@@ -27,7 +27,7 @@ try:
 except ImportError:  # pragma: no cover
     _lapack = None
 
-from protocol.messages import (
+from sensornet.protocol.messages import (
     Control,
     Estimate,
     Forward,
@@ -38,7 +38,7 @@ from protocol.messages import (
     Tracks,
     Truth,
 )
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 VERSION = 1
 _F8 = np.dtype("<f8")

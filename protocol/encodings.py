@@ -8,7 +8,7 @@ decoded: ``[version, "<letter>", ...]`` (protocol.codec).
 
 from __future__ import annotations
 
-from protocol.codec import VERSION
+from sensornet.protocol.codec import VERSION
 
 MIME = "application/msgpack"
 TYPES = {"E": "estimate", "S": "scan", "K": "tracks", "T": "truth", "F": "forward",

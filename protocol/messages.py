@@ -11,8 +11,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 
 @dataclass(frozen=True)

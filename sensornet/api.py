@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from peers.scan_results import COLUMNS
-from sim.scenario import Scenario, builtin_scenarios, load_scenario
-from sim.twin import TwinResult, run_twin
+from sensornet.peers.scan_results import COLUMNS
+from sensornet.sim.scenario import Scenario, builtin_scenarios, load_scenario
+from sensornet.sim.twin import TwinResult, run_twin
 
 __all__ = ["Run", "builtin_scenarios", "scenario", "simulate"]
 

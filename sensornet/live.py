@@ -21,12 +21,12 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from peers.session import open_session
-from protocol.codec import Rejected, decode
-from protocol.encodings import parse
-from protocol.envelope import inner, is_sealed
-from protocol.keys import ROOT, Keys
-from protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
+from sensornet.peers.session import open_session
+from sensornet.protocol.codec import Rejected, decode
+from sensornet.protocol.encodings import parse
+from sensornet.protocol.envelope import inner, is_sealed
+from sensornet.protocol.keys import ROOT, Keys
+from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
 
 @dataclass(frozen=True)

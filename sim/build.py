@@ -12,13 +12,12 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-
-from peers.faults import FaultInjector
-from sim.scenario import Scenario, ScenarioError, SensorSpec
-from tracking.gmphd import GMPHDFilter, SensorParams
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
-from tracking.reduction import Reducer
+from sensornet.peers.faults import FaultInjector
+from sensornet.sim.scenario import Scenario, ScenarioError, SensorSpec
+from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from sensornet.tracking.reduction import Reducer
 
 
 def motion_model(scn: Scenario) -> ConstantVelocity:

@@ -41,8 +41,8 @@ import itertools
 import tomllib
 from pathlib import Path
 
-from sim import studies
-from sim.campaign_model import (
+from sensornet.sim import studies
+from sensornet.sim.campaign_model import (
     Campaign,
     CampaignError,
     Cell,
@@ -52,7 +52,7 @@ from sim.campaign_model import (
     figure_kinds,
     task_key,
 )
-from sim.campaign_results import (  # noqa: F401  (re-exported)
+from sensornet.sim.campaign_results import (  # noqa: F401  (re-exported)
     Status,
     canonical_rows,
     format_status,
@@ -61,7 +61,7 @@ from sim.campaign_results import (  # noqa: F401  (re-exported)
     results_table,
     status,
 )
-from sim.campaign_run import (  # noqa: F401  (re-exported)
+from sensornet.sim.campaign_run import (  # noqa: F401  (re-exported)
     LOCK,
     CampaignProgress,
     RunSummary,
@@ -70,9 +70,9 @@ from sim.campaign_run import (  # noqa: F401  (re-exported)
     read_lock,
     run_campaign,
 )
-from sim.runners import code_version, scenario_source, setup_hash
-from sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
-from sim.studies import DEFAULT_SCENARIO
+from sensornet.sim.runners import code_version, scenario_source, setup_hash
+from sensornet.sim.scenario import MAX_RUNS, ScenarioError, builtin_scenarios, load_scenario
+from sensornet.sim.studies import DEFAULT_SCENARIO
 
 
 def load_campaign(source: str | Path, runs: int | None = None) -> Campaign:

@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sim import studies
-from sim.runners import Task
-from sim.scenario import ScenarioError
-from sim.sweep import _toml
+from sensornet.sim import studies
+from sensornet.sim.runners import Task
+from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.sweep import _toml
 
 
 def figure_kinds() -> tuple[str, ...]:

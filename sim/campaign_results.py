@@ -7,9 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sim.campaign_model import Campaign, CampaignError, Cell
-from sim.campaign_run import lock_alive, read_lock
-from sim.results import ResultStore, is_timing, need_pyarrow
+from sensornet.sim.campaign_model import Campaign, CampaignError, Cell
+from sensornet.sim.campaign_run import lock_alive, read_lock
+from sensornet.sim.results import ResultStore, is_timing, need_pyarrow
 
 # --------------------------------------------------------------------------------------------
 # Status and progress

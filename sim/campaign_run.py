@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from sim.campaign_model import Campaign, CampaignError
-from sim.progress import Progress
-from sim.results import ResultStore, need_pyarrow
-from sim.runners import run_dask, run_pool
+from sensornet.sim.campaign_model import Campaign, CampaignError
+from sensornet.sim.progress import Progress
+from sensornet.sim.results import ResultStore, need_pyarrow
+from sensornet.sim.runners import run_dask, run_pool
 
 
 class CampaignProgress(Progress):

@@ -20,17 +20,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-from sim.build import make_filter, make_reducer
-from sim.report_plots import plt_module
-from sim.scenario import Scenario
-from sim.studies.pool import map_runs
-from sim.world import generate_run
-from tracking.fusion import gci_fuse
-from tracking.fusion_rules import aa_fuse, gci_fuse_optimised, hybrid_fuse, metropolis_weights
-from tracking.metrics import cardinality_error, ospa
-from tracking.mixture import GaussianMixture
-from tracking.reduction import keep_above
+from sensornet.sim.build import make_filter, make_reducer
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.studies.pool import map_runs
+from sensornet.sim.world import generate_run
+from sensornet.tracking.fusion import gci_fuse
+from sensornet.tracking.fusion_rules import (
+    aa_fuse,
+    gci_fuse_optimised,
+    hybrid_fuse,
+    metropolis_weights,
+)
+from sensornet.tracking.metrics import cardinality_error, ospa
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import keep_above
 
 
 def fusion_weights(scn: Scenario, order: list[str]) -> list[float]:

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from sim.build import birth_mixture, clutter_intensity, make_reducer, motion_model
-from sim.scenario import Scenario, ScenarioError
-from tracking.etgmphd import ETGMPHDFilter, ExtendedSensor
-from tracking.partition import DistancePartitioner, GridSpectralPartitioner
+from sensornet.sim.build import birth_mixture, clutter_intensity, make_reducer, motion_model
+from sensornet.sim.scenario import Scenario, ScenarioError
+from sensornet.tracking.etgmphd import ETGMPHDFilter, ExtendedSensor
+from sensornet.tracking.partition import DistancePartitioner, GridSpectralPartitioner
 
 
 def _extended(scn: Scenario):

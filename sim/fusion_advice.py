@@ -6,7 +6,7 @@ the measurements behind each).
 
 from __future__ import annotations
 
-from sim.scenario import Scenario
+from sensornet.sim.scenario import Scenario
 
 GCI_SAFE_PEERS = 3
 """Above this many peers (or with more than one round) plain GCI was measured worse than no

@@ -29,13 +29,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from sim.campaign import Campaign, CampaignError, Cell, task_key
-from sim.graphs import network_scenario
-from sim.report_plots import plt_module
-from sim.results import ResultStore
-from sim.runners import code_version, scenario_hash, scenario_source
-from sim.scenario import ScenarioError, builtin_scenarios, load_scenario
+from sensornet.sim.campaign import Campaign, CampaignError, Cell, task_key
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.results import ResultStore
+from sensornet.sim.runners import code_version, scenario_hash, scenario_source
+from sensornet.sim.scenario import ScenarioError, builtin_scenarios, load_scenario
 
 STUDY_KIND = "fusion-quality"
 NO_FUSION = "none"
@@ -343,7 +342,7 @@ def plot(rows: list[dict], out: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sim.fusion_study",
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.fusion_study",
                                  description="the fusion-quality study's table and figures "
                                  "(run it with: sensornet campaign "
                                  "sim/campaigns/fusion-quality.toml --jobs 2)")

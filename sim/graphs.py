@@ -8,8 +8,7 @@ noise and clutter, on a circulant graph (a ring is degree 2).
 from __future__ import annotations
 
 import numpy as np
-
-from sim.scenario import load_scenario
+from sensornet.sim.scenario import load_scenario
 
 
 def circulant(n: int, degree: int) -> np.ndarray:

@@ -19,25 +19,24 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-
-from peers.security import tls_endpoint
-from peers.session import (
+from sensornet.peers.security import tls_endpoint
+from sensornet.peers.session import (
     DEFAULT_LEASE_MS,
     MAX_MESSAGE_BYTES,
     endpoint,
     free_port,
 )
-from sim.build import adjacency
-from sim.packing import groups_for
-from sim.process_faults import (  # noqa: F401  (the names other modules import from here)
+from sensornet.sim.build import adjacency
+from sensornet.sim.packing import groups_for
+from sensornet.sim.process_faults import (  # noqa: F401  (the names other modules import from here)
     HOSTED_ACTIONS,
     PROCESS_ACTIONS,
     ProcessFault,
     fault_report,
     inject_process_faults,
 )
-from sim.run_handle import ROUTER, ROUTER_GRACE, RunHandle  # noqa: F401
-from sim.run_summary import (  # noqa: F401  (the names other modules import from here)
+from sensornet.sim.run_handle import ROUTER, ROUTER_GRACE, RunHandle  # noqa: F401
+from sensornet.sim.run_summary import (  # noqa: F401  (the names other modules import from here)
     REALTIME_DEADLINE_SHARE,
     format_summary,
     merge_recordings,
@@ -46,7 +45,7 @@ from sim.run_summary import (  # noqa: F401  (the names other modules import fro
     summary_files,
     trust_note,
 )
-from sim.scenario import Scenario
+from sensornet.sim.scenario import Scenario
 
 
 def _cli() -> list[str]:
@@ -236,7 +235,7 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
         "mode": "client", "scouting": {"multicast": {"enabled": False}},
         "transport": {"link": {"tx": {"lease": DEFAULT_LEASE_MS},
                                "rx": {"max_message_size": MAX_MESSAGE_BYTES}}}}, indent=1))
-    handle.router_command = [sys.executable, "-m", "sim.router", "--listen", router_ep,
+    handle.router_command = [sys.executable, "-m", "sensornet.sim.router", "--listen", router_ep,
                              "--network", handle.network]  # sensornet router, started faster
     if handle.secure:
         handle.router_command += ["--secure", str(handle.secure), "--name", ROUTER]

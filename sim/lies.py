@@ -11,12 +11,11 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-
-from peers.core import Output, PeerCore
-from protocol.messages import Estimate
-from sim.scenario import Scenario
-from sim.scenario.model import LIE_KINDS
-from tracking.mixture import GaussianMixture
+from sensornet.peers.core import Output, PeerCore
+from sensornet.protocol.messages import Estimate
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.scenario.model import LIE_KINDS
+from sensornet.tracking.mixture import GaussianMixture
 
 SHIFT = 110.0
 """Metres the ``shifted`` lie moves every component along x."""

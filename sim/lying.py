@@ -40,8 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-
-from sim.lies import (  # noqa: F401  (the lies live in sim.lies; named here as before)
+from sensornet.sim.lies import (  # noqa: F401  (the lies live in sim.lies; named here as before)
     BIAS,
     INFLATE,
     LIES,
@@ -52,12 +51,12 @@ from sim.lies import (  # noqa: F401  (the lies live in sim.lies; named here as 
     make_lie,
     phantom_positions,
 )
-from sim.peers import make_peer
-from sim.report_plots import plt_module
-from sim.scenario import Scenario, ScenarioError, load_scenario
-from sim.studies.base import Outcome, Request, Study, experiment
-from sim.studies.pool import map_runs
-from sim.twin import TwinResult, run_twin
+from sensornet.sim.peers import make_peer
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.scenario import Scenario, ScenarioError, load_scenario
+from sensornet.sim.studies.base import Outcome, Request, Study, experiment
+from sensornet.sim.studies.pool import map_runs
+from sensornet.sim.twin import TwinResult, run_twin
 
 
 def run_with_liar(scn: Scenario, run: int, liar: str, lie: str | None) -> TwinResult:
@@ -350,7 +349,8 @@ def _liar(label: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.lying", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m sensornet.sim.lying", description=__doc__.split("\n")[0])
     p.add_argument("--runs", type=int, default=5, help="Monte Carlo runs per cell (default 5)")
     p.add_argument("--first-run", type=int, default=7000,
                    help="first run index (default 7000: runs no tuning used)")

@@ -10,16 +10,15 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-
-from peers.consensus import Consensus, ConsensusOptions
-from peers.core import CoreConfig, PeerCore
-from peers.scoring import Scorer
-from peers.trust import TrustConfig
-from sim.build import adjacency
-from sim.kinds import kind_of
-from sim.lies import LyingCore, make_lie
-from sim.scenario import Scenario, ScenarioError
-from sim.world import generate_truth, truth_rng
+from sensornet.peers.consensus import Consensus, ConsensusOptions
+from sensornet.peers.core import CoreConfig, PeerCore
+from sensornet.peers.scoring import Scorer
+from sensornet.peers.trust import TrustConfig
+from sensornet.sim.build import adjacency
+from sensornet.sim.kinds import kind_of
+from sensornet.sim.lies import LyingCore, make_lie
+from sensornet.sim.scenario import Scenario, ScenarioError
+from sensornet.sim.world import generate_truth, truth_rng
 
 
 def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:

@@ -9,15 +9,15 @@ import threading
 import time
 from dataclasses import dataclass
 
-from peers.security import WORLD, Security
-from peers.session import (
+from sensornet.peers.security import WORLD, Security
+from sensornet.peers.session import (
     SessionError,
     open_session,
 )
-from protocol.codec import Rejected, decode
-from protocol.envelope import inner
-from protocol.keys import Keys
-from sim.run_handle import ROUTER, RunHandle
+from sensornet.protocol.codec import Rejected, decode
+from sensornet.protocol.envelope import inner
+from sensornet.protocol.keys import Keys
+from sensornet.sim.run_handle import ROUTER, RunHandle
 
 PROCESS_ACTIONS = ("kill", "stop", "cont", "restart", "term", "killhost")
 HOSTED_ACTIONS = ("kill", "killhost")

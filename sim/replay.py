@@ -7,10 +7,10 @@ import json
 import tempfile
 from pathlib import Path
 
-from peers.core import PeerCore
-from peers.recording import Replay, replay_with
-from sim.peers import make_peer
-from sim.scenario import load_scenario, parse_overrides
+from sensornet.peers.core import PeerCore
+from sensornet.peers.recording import Replay, replay_with
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 
 def _builder(overrides: list[str]):

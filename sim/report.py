@@ -22,13 +22,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from sim import studies
-from sim.campaign import _fmt, read_manifest, results_table
-from sim.report_html import markdown_html
-from sim.report_plots import axis_label, band, plt_module, series
-from sim.results import META_COLUMNS, need_pyarrow
-from sim.scenario import ScenarioError, load_scenario
+from sensornet.sim import studies
+from sensornet.sim.campaign import _fmt, read_manifest, results_table
+from sensornet.sim.report_html import markdown_html
+from sensornet.sim.report_plots import axis_label, band, plt_module, series
+from sensornet.sim.results import META_COLUMNS, need_pyarrow
+from sensornet.sim.scenario import ScenarioError, load_scenario
 
 CAMPAIGN_FIGURES = ("sweep", "ospa-time")
 """Figure kinds drawn over the whole campaign; any other kind is a study's per-cell report."""

@@ -20,8 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
-
-from peers.security import (
+from sensornet.peers.security import (
     ROUTER_PREFIX,
     WORLD,
     Security,
@@ -29,7 +28,7 @@ from peers.security import (
     check_endpoints,
     keys_network,
 )
-from peers.session import SessionError, zenoh_config
+from sensornet.peers.session import SessionError, zenoh_config
 
 
 def router_security(folder: str | Path, name: str, network: str | None = None):
@@ -87,7 +86,7 @@ def serve(listen: list[str], connect: list[str], config: str | None, secure: str
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sim.router``: ``sensornet router`` without the CLI's imports (SciPy and the
     rest take seconds to load on a busy machine: a routed run restarts its router this way)."""
-    ap = argparse.ArgumentParser(prog="python -m sim.router", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.router", description=__doc__)
     ap.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")
     ap.add_argument("--connect", action="append", metavar="ENDPOINT")
     ap.add_argument("--config")

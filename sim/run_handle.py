@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from peers.session import (
+from sensornet.peers.session import (
     SessionError,
     free_port,
 )

@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-
-from peers.scan_results import merge_parts, read_table
-from sim.report_plots import plt_module
+from sensornet.peers.scan_results import merge_parts, read_table
+from sensornet.sim.report_plots import plt_module
 
 
 class PlotError(ValueError):

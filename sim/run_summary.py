@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from peers.telemetry import percentile
+from sensornet.peers.telemetry import percentile
 
 
 def summary_files(out: Path, name: str) -> list[Path]:

@@ -31,10 +31,9 @@ from typing import Any
 
 import numpy as np
 import scipy
-
-from sim import studies
-from sim.scenario import load_scenario
-from sim.studies.pool import iter_pool
+from sensornet.sim import studies
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.studies.pool import iter_pool
 
 try:  # optional dependency: threadpoolctl (without it a pool worker keeps BLAS's threads)
     from threadpoolctl import threadpool_limits

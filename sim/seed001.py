@@ -22,9 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from sim import studies
-from sim.seed001_model import (  # noqa: F401  (re-exported)
+from sensornet.sim import studies
+from sensornet.sim.seed001_model import (  # noqa: F401  (re-exported)
     FILTERS,
     GEOMETRIES,
     RULES,
@@ -37,7 +36,7 @@ from sim.seed001_model import (  # noqa: F401  (re-exported)
     run_streams,
     truth,
 )
-from sim.seed001_tuning import (  # noqa: F401  (re-exported)
+from sensornet.sim.seed001_tuning import (  # noqa: F401  (re-exported)
     TUNE_FIRST_RUN,
     OmegaTuning,
     format_tuning,
@@ -46,7 +45,7 @@ from sim.seed001_tuning import (  # noqa: F401  (re-exported)
     tune_omega,
     tune_once,
 )
-from sim.studies.pool import map_runs
+from sensornet.sim.studies.pool import map_runs
 
 
 @dataclass(frozen=True)

@@ -8,11 +8,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from peers.contracts import FusionInput
-from peers.estimators import ImmEstimator, SingleTargetConfig
-from peers.fusers import ImmFuser
-from tracking.models import RangeBearing
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.estimators import ImmEstimator, SingleTargetConfig
+from sensornet.peers.fusers import ImmFuser
+from sensornet.tracking.models import RangeBearing
 
 # -- scenario ---------------------------------------------------------------------------------
 

@@ -6,15 +6,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from sim.seed001_model import (
+from sensornet.sim.seed001_model import (
     ExperimentConfig,
     Seed001Scenario,
     _run_fusers,
     _run_inputs,
     run_streams,
 )
-from sim.studies.pool import map_runs
+from sensornet.sim.studies.pool import map_runs
 
 # -- GCI weight tuning (on runs that Table 1 never evaluates) ---------------------------------
 

@@ -26,16 +26,15 @@ import dataclasses  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-
-from sim import studies  # noqa: E402
-from sim.extended import make_et_filter  # noqa: E402
-from sim.report_plots import plt_module
-from sim.scenario import Scenario, load_scenario  # noqa: E402
-from sim.studies.pool import map_runs  # noqa: E402
-from sim.twin import run_twin
-from sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
-from tracking.metrics import cardinality_error, ospa  # noqa: E402
-from tracking.partition import adjusted_rand_index  # noqa: E402
+from sensornet.sim import studies  # noqa: E402
+from sensornet.sim.extended import make_et_filter  # noqa: E402
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.scenario import Scenario, load_scenario  # noqa: E402
+from sensornet.sim.studies.pool import map_runs  # noqa: E402
+from sensornet.sim.twin import run_twin
+from sensornet.sim.world import generate_truth, labelled_sensor_scans, sensor_rng, truth_rng  # noqa: E402
+from sensornet.tracking.metrics import cardinality_error, ospa  # noqa: E402
+from sensornet.tracking.partition import adjusted_rand_index  # noqa: E402
 
 CLUTTER_LEVELS = (10, 15, 20, 25)
 PARTITIONS = ("distance", "grid-spectral")

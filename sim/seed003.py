@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-from sim import studies
-from sim.report_plots import plt_module
-from sim.seed003_filters import (  # noqa: F401  (re-exported)
+from sensornet.sim import studies
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.seed003_filters import (  # noqa: F401  (re-exported)
     METHODS,
     coordinated_turn,
     imm_models,
@@ -29,7 +28,7 @@ from sim.seed003_filters import (  # noqa: F401  (re-exported)
     make_filter,
     run_filter,
 )
-from sim.seed003_world import (  # noqa: F401  (re-exported)
+from sensornet.sim.seed003_world import (  # noqa: F401  (re-exported)
     G0,
     H6,
     SCENARIO,
@@ -42,9 +41,9 @@ from sim.seed003_world import (  # noqa: F401  (re-exported)
     target_returns,
     truth,
 )
-from sim.studies.pool import map_runs
-from tracking.fuzzy import FuzzySystem, fit, to_config
-from tracking.imm import POS, VEL
+from sensornet.sim.studies.pool import map_runs
+from sensornet.tracking.fuzzy import FuzzySystem, fit, to_config
+from sensornet.tracking.imm import POS, VEL
 
 # -- Monte Carlo ------------------------------------------------------------------------------
 

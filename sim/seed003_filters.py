@@ -7,11 +7,10 @@ import time
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-
-from sim.seed003_world import gate_clutter
-from tracking.fuzzy import weighting_from_config
-from tracking.imm import constant_acceleration, constant_velocity
-from tracking.pda import ImmPda, LinearSensor
+from sensornet.sim.seed003_world import gate_clutter
+from sensornet.tracking.fuzzy import weighting_from_config
+from sensornet.tracking.imm import constant_acceleration, constant_velocity
+from sensornet.tracking.pda import ImmPda, LinearSensor
 
 METHODS = ("PDAF", "IMM-PDAF", "fuzzy PDA", "fuzzy IMM")
 

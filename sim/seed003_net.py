@@ -34,17 +34,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-from peers.core import PeerCore
-from peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
-from sim import seed003
-from sim.build import fault_injector
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.peers import make_peer
-from sim.scenario import Scenario, ScenarioError, apply_overrides, load_document
-from sim.twin import run_twin
-from sim.world import Truth
-from tracking.imm import POS
+from sensornet.peers.core import PeerCore
+from sensornet.peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
+from sensornet.sim import seed003
+from sensornet.sim.build import fault_injector
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import Scenario, ScenarioError, apply_overrides, load_document
+from sensornet.sim.twin import run_twin
+from sensornet.sim.world import Truth
+from sensornet.tracking.imm import POS
 
 MODES = ("meas", "ci")
 LABELS = {"meas": "measurement sharing", "ci": "estimate sharing (CI)"}
@@ -331,7 +330,7 @@ def run_mode(a: argparse.Namespace, cfg: dict, mode: str, out: Path) -> tuple[li
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m sim.seed003_net",
+    p = argparse.ArgumentParser(prog="python -m sensornet.sim.seed003_net",
                                 description="seed 003: the two PDA peer modes compared")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="both modes as processes (or twins), one table")

@@ -25,11 +25,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-
-from peers.contracts import FusionInput
-from peers.pda_parts import CiFuser, PdaEstimator
-from sim import seed003, studies
-from tracking.imm import POS, VEL
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.pda_parts import CiFuser, PdaEstimator
+from sensornet.sim import seed003, studies
+from sensornet.tracking.imm import POS, VEL
 
 MODES = ("local", "CI", "CI+feedback", "sequential")
 

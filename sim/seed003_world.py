@@ -9,11 +9,10 @@ from pathlib import Path
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
-
-from protocol.keys import check_name
-from sim.bounds import MAX_SENSORS
-from tracking.imm import POS, VEL, constant_velocity
-from tracking.pda import LinearSensor
+from sensornet.protocol.keys import check_name
+from sensornet.sim.bounds import MAX_SENSORS
+from sensornet.tracking.imm import POS, VEL, constant_velocity
+from sensornet.tracking.pda import LinearSensor
 
 SCENARIO = Path(__file__).with_name("scenarios") / "seed003.toml"
 H6 = np.zeros((2, 6))

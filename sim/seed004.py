@@ -55,9 +55,9 @@ try:  # FTC's DBSCAN: imported here, not inside a timed call (optional: 'sensorn
 except ImportError:  # the FTC rows then say what to install (tracking.idpc.dbscan_class)
     pass
 
-from peers.faultplan import FaultPlan
-from peers.faults import FaultInjector
-from peers.flooding import (
+from sensornet.peers.faultplan import FaultPlan
+from sensornet.peers.faults import FaultInjector
+from sensornet.peers.flooding import (
     TUPLES_PER_MEASUREMENT,
     Deliver,
     corrector_order,
@@ -65,10 +65,10 @@ from peers.flooding import (
     flooding_bytes,
     flooding_tuples,
 )
-from protocol.codec import encode
-from protocol.messages import Estimate, Scan
-from sim import studies
-from sim.seed004_output import (  # noqa: F401  (re-exported)
+from sensornet.protocol.codec import encode
+from sensornet.protocol.messages import Estimate, Scan
+from sensornet.sim import studies
+from sensornet.sim.seed004_output import (  # noqa: F401  (re-exported)
     REFERENCE_MIXTURE,
     TABLE_ROWS,
     format_table,
@@ -80,7 +80,7 @@ from sim.seed004_output import (  # noqa: F401  (re-exported)
     table_title,
     write_outputs,
 )
-from sim.seed004_scenario import (  # noqa: F401  (re-exported)
+from sensornet.sim.seed004_scenario import (  # noqa: F401  (re-exported)
     SCENARIO,
     TUPLES_CARDINALITY,
     TUPLES_COMPONENT,
@@ -94,15 +94,15 @@ from sim.seed004_scenario import (  # noqa: F401  (re-exported)
     to_plane,
     truth,
 )
-from sim.studies.pool import map_runs
-from tracking.fusion import gci_fuse
-from tracking.fusion_rules import aa_fuse, metropolis_weights
-from tracking.gmphd import GMPHDFilter, SensorParams, extract, update
-from tracking.idpc import dbscan_class, ftc, idpc
-from tracking.metrics import ospa
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity
-from tracking.reduction import Reducer, keep_above
+from sensornet.sim.studies.pool import map_runs
+from sensornet.tracking.fusion import gci_fuse
+from sensornet.tracking.fusion_rules import aa_fuse, metropolis_weights
+from sensornet.tracking.gmphd import GMPHDFilter, SensorParams, extract, update
+from sensornet.tracking.idpc import dbscan_class, ftc, idpc
+from sensornet.tracking.metrics import ospa
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity
+from sensornet.tracking.reduction import Reducer, keep_above
 
 # -- one run ----------------------------------------------------------------------------------
 

@@ -7,9 +7,8 @@ import csv
 from pathlib import Path
 
 import numpy as np
-
-from sim.report_plots import plt_module
-from sim.seed004_scenario import TUPLES_CARDINALITY, TUPLES_COMPONENT, Seed004
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.seed004_scenario import TUPLES_CARDINALITY, TUPLES_COMPONENT, Seed004
 
 REFERENCE_MIXTURE = (4, 4)
 """The reference's GM-exchange count (docs/seed004.md): 4-component mixtures, 4 rounds."""

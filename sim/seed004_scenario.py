@@ -11,15 +11,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sensornet.sim.scenario as sc
 from scipy.sparse.csgraph import shortest_path
-
-import sim.scenario as sc
-from sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
-from tracking.gmphd import SensorParams
-from tracking.idpc import ClusterParams, polar_to_cartesian
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
-from tracking.reduction import Reducer
+from sensornet.sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
+from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.idpc import ClusterParams, polar_to_cartesian
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from sensornet.tracking.reduction import Reducer
 
 SCENARIO = Path(__file__).with_name("scenarios") / "seed004.toml"
 TUPLES_COMPONENT = 15

@@ -15,12 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.report_plots import plt_module
-from sim.scenario import load_scenario
-from sim.studies.pool import map_runs
-from sim.twin import run_twin
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.studies.pool import map_runs
+from sensornet.sim.twin import run_twin
 
 
 @dataclass(frozen=True)

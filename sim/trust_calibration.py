@@ -17,13 +17,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
-from peers.trust import NeighbourTrust, Trust, TrustConfig
-from sim.graphs import network_scenario
-from sim.lying import LyingCore, make_lie
-from sim.peers import make_peer
-from sim.scenario import load_scenario
-from sim.twin import run_twin
+from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.lying import LyingCore, make_lie
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9)
 """The test runs, nothing is down-weighted."""
@@ -115,7 +114,7 @@ def simulate(seqs: list[np.ndarray], cfg: TrustConfig) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sim.trust_calibration",
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.trust_calibration",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--first-run", type=int, default=9000)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-
-from sim import seed003, seed003_net
-from sim.scenario import Scenario
-from sim.seed001 import Seed001Scenario, truth
-from sim.truths import TruthModel
-from sim.world import Truth
+from sensornet.sim import seed003, seed003_net
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.seed001 import Seed001Scenario, truth
+from sensornet.sim.truths import TruthModel
+from sensornet.sim.world import Truth
 
 
 def _one_target(X: np.ndarray, num_scans: int, what: str) -> Truth:

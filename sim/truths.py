@@ -22,9 +22,9 @@ Array = Any
 """A NumPy array."""
 
 TRUTHS: dict[str, str] = {
-    "straight": "sim.world:STRAIGHT",
-    "seed001": "sim.truth_models:SEED001",
-    "seed003": "sim.truth_models:SEED003",
+    "straight": "sensornet.sim.world:STRAIGHT",
+    "seed001": "sensornet.sim.truth_models:SEED001",
+    "seed003": "sensornet.sim.truth_models:SEED003",
 }
 """``truth`` value -> ``"module:attribute"`` of its :class:`TruthModel`."""
 

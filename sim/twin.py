@@ -17,18 +17,17 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from peers.batching import FusionBatch
-from peers.core import PeerCore, Publish, Record, Stop
-from peers.faults import FaultInjector
-from peers.session import MAX_MESSAGE_BYTES
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan, Truth
-from sim.build import fault_injector
-from sim.peers import make_peer
-from sim.scenario import Scenario
-from sim.world import generate_run
+from sensornet.peers.batching import FusionBatch
+from sensornet.peers.core import PeerCore, Publish, Record, Stop
+from sensornet.peers.faults import FaultInjector
+from sensornet.peers.session import MAX_MESSAGE_BYTES
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan, Truth
+from sensornet.sim.build import fault_injector
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world import generate_run
 
 LinkDelay = Callable[[str, str, Estimate], float | None]
 """``(sender, receiver, message) -> delay in virtual seconds, or None to drop it``."""

@@ -17,11 +17,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from sim.build import measurement_box, sensor_model
-from sim.scenario import Scenario, SensorSpec
-from sim.truths import TruthModel, truth_model
-from tracking.models import ConstantVelocity
+from sensornet.sim.build import measurement_box, sensor_model
+from sensornet.sim.scenario import Scenario, SensorSpec
+from sensornet.sim.truths import TruthModel, truth_model
+from sensornet.tracking.models import ConstantVelocity
 
 
 @dataclass(frozen=True)

@@ -16,22 +16,21 @@ from pathlib import Path
 
 import numpy as np
 import zenoh
-
-from peers.rerun_sink import (
+from sensornet.peers.rerun_sink import (
     TRUTH_COLOR,
     RerunSink,
     TruthPaths,
     color_of,
     position_columns,
 )
-from peers.session import PEER_WAIT, open_session
-from peers.transport import recovering_publisher, zenoh_encoding
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Control, Scan, Truth
-from sim.kinds import kind_of
-from sim.scenario import Scenario
-from sim.world import generate_run
+from sensornet.peers.session import PEER_WAIT, open_session
+from sensornet.peers.transport import recovering_publisher, zenoh_encoding
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Scan, Truth
+from sensornet.sim.kinds import kind_of
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world import generate_run
 
 TRUTH_DELAY = 0.5
 """The truth of scan ``k`` is published this fraction of a scan interval after its scans.

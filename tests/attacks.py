@@ -14,11 +14,10 @@ from dataclasses import dataclass, field
 
 import msgpack
 import numpy as np
-
-from protocol.codec import VERSION, encode
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan, Truth
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import VERSION, encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan, Truth
+from sensornet.tracking.mixture import GaussianMixture
 
 SETS = ["birth.model=truth", "scenario.num_scans=40", "network.deadline=0.9"]
 """Scenario overrides of every attacked run (seed 000, 3 peers, 10 scans/s)."""

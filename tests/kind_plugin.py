@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.distance import cdist
-
-from peers.contracts import LocalOutput
-from peers.fusers import AaFuser
-from sim.kinds import PeerKind
-from tracking.mixture import GaussianMixture
-from tracking.reduction import Reducer
+from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.fusers import AaFuser
+from sensornet.sim.kinds import PeerKind
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer
 
 SIGMA = 20.0
 """Position spread of a confirmed point, metres."""

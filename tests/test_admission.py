@@ -4,8 +4,7 @@ token bucket's allowance, however the messages are stamped, and the inbox stays 
 from __future__ import annotations
 
 import numpy as np
-
-from peers.admission import (
+from sensornet.peers.admission import (
     INBOX_BYTES,
     INBOX_MIN,
     INBOX_SCANS,
@@ -14,9 +13,9 @@ from peers.admission import (
     Admission,
     Route,
 )
-from protocol.codec import encode
-from protocol.messages import Estimate
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import encode
+from sensornet.protocol.messages import Estimate
+from sensornet.tracking.mixture import GaussianMixture
 
 MIX = GaussianMixture(np.ones(1), np.zeros((1, 4)), np.eye(4)[None])
 S2 = Route("estimate", "s2")

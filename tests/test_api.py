@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sensornet.sim.scenario import ScenarioError
+from sensornet.tracking.metrics import ospa
 
 from sensornet.api import scenario, simulate
-from sim.scenario import ScenarioError
-from tracking.metrics import ospa
 
 ROOT = Path(__file__).resolve().parents[1]
 

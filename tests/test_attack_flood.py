@@ -11,14 +11,14 @@ import time
 import numpy as np
 import pytest
 import zenoh
+from sensornet.peers.admission import Admission, Route
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.messages import Estimate
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.tracking.mixture import GaussianMixture
 
-from peers.admission import Admission, Route
-from protocol.codec import decode, encode
-from protocol.messages import Estimate
-from sim.scenario import load_scenario, parse_overrides
 from tests.attacks import K0, Attack
 from tests.test_attacks import REAL, _attacked_run
-from tracking.mixture import GaussianMixture
 
 pytestmark = pytest.mark.network
 

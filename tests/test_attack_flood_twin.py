@@ -7,13 +7,12 @@ last bit."""
 from __future__ import annotations
 
 import numpy as np
-
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Estimate
-from sim.scenario import load_scenario, parse_overrides
-from sim.twin import Inject, run_twin
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.twin import Inject, run_twin
+from sensornet.tracking.mixture import GaussianMixture
 
 FLOOD = 6000
 

@@ -20,17 +20,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
+from sensornet.peers.security import Security, make_keys
+from sensornet.peers.session import open_session
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.envelope import inner
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.tracking.mixture import GaussianMixture
 
-from peers.security import Security, make_keys
-from peers.session import open_session
-from protocol.codec import decode, encode
-from protocol.envelope import inner
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario, parse_overrides
 from tests.attacks import K0, SETS
-from tracking.mixture import GaussianMixture
 
 pytestmark = pytest.mark.network
 

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sensornet.protocol.keys import Keys
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.twin import Inject, Liveliness, run_twin
+from sensornet.sim.world import generate_run
 
-from protocol.keys import Keys
-from sim.scenario import load_scenario, parse_overrides
-from sim.twin import Inject, Liveliness, run_twin
-from sim.world import generate_run
 from tests.attacks import ATTACKS, K0, SETS, Attack, only_attack_counts
 
 
@@ -79,9 +79,9 @@ def test_a_departed_neighbour_is_forgotten(scn):
 
 def test_replayed_flood_is_refused_from_the_first_bytes(scn):
     """10,000 replays of one genuine estimate: stale or duplicate, never decoded."""
-    from protocol.codec import encode
-    from protocol.messages import Estimate
-    from tracking.mixture import GaussianMixture
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.messages import Estimate
+    from sensornet.tracking.mixture import GaussianMixture
 
     interval = scn.scan_period / scn.network.speed
     mix = GaussianMixture(np.ones(2), np.zeros((2, 4)), np.tile(np.eye(4), (2, 1, 1)))

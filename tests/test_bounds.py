@@ -7,9 +7,7 @@ import time
 from pathlib import Path
 
 import pytest
-
-from sensornet.cli import main
-from sim.scenario import (
+from sensornet.sim.scenario import (
     MAX_COORDINATE,
     MAX_ROUNDS,
     MAX_RUNS,
@@ -18,6 +16,8 @@ from sim.scenario import (
     load_scenario,
     scenario_text,
 )
+
+from sensornet.cli import main
 
 
 def _one_line(err: str) -> str:
@@ -79,7 +79,7 @@ def test_cli_refuses_too_many_runs_or_rounds(tmp_path, monkeypatch, capsys, argv
 
 
 def test_a_campaign_file_over_the_runs_bound_is_refused(tmp_path):
-    from sim.campaign import load_campaign
+    from sensornet.sim.campaign import load_campaign
 
     path = tmp_path / "c.toml"
     path.write_text(f'[campaign]\nname = "c"\nscenario = "seed000"\nrunner = "twin"\n'
@@ -139,7 +139,7 @@ def test_seed004_sizes_are_bounded(overrides, needle):
 
 
 def test_seed004_offline_sizes_are_bounded():
-    from sim import seed004
+    from sensornet.sim import seed004
 
     with pytest.raises(seed004.ScenarioError, match="flooding.iterations"):
         seed004.load(overrides=[f"flooding.iterations={MAX_ROUNDS + 1}"])
@@ -147,7 +147,7 @@ def test_seed004_offline_sizes_are_bounded():
 
 
 def test_seed003_sensor_count_is_bounded():
-    from sim.seed003 import check_sensor_names
+    from sensornet.sim.seed003 import check_sensor_names
 
     check_sensor_names([{"name": f"p{i}"} for i in range(MAX_SENSORS)], "seed003")
     with pytest.raises(ValueError, match="over the limit"):

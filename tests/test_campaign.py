@@ -10,9 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
-
-from sensornet.cli import main
-from sim.campaign import (
+from sensornet.sim.campaign import (
     LOCK,
     CampaignError,
     canonical_rows,
@@ -22,7 +20,9 @@ from sim.campaign import (
     run_campaign,
     status,
 )
-from sim.results import ResultStore
+from sensornet.sim.results import ResultStore
+
+from sensornet.cli import main
 
 TWIN = """
 [campaign]
@@ -215,7 +215,7 @@ def test_status_says_running_only_while_a_live_process_holds_the_lock(tmp_path):
     import json
     import socket
 
-    from sim.campaign import _claim
+    from sensornet.sim.campaign import _claim
 
     c = load_campaign(_file(tmp_path, TWIN.replace("runs = 6", "runs = 2")))
     out = tmp_path / "camp"
@@ -275,13 +275,13 @@ def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):
     assert "4 stored runs belong to other code versions or cells" in capsys.readouterr().out
     assert run_campaign(c, out, jobs=1, progress=False).ran == 4
     monkeypatch.delenv("SENSORNET_CODE_VERSION")
-    from sim.runners import code_version
+    from sensornet.sim.runners import code_version
 
     assert len(code_version()) == 16 and code_version() != "test-other"
 
 
 def test_seed001_runner_reproduces_the_table1_rows(tmp_path, capsys):
-    from sim.seed001 import ExperimentConfig, Seed001Scenario, run_experiment
+    from sensornet.sim.seed001 import ExperimentConfig, Seed001Scenario, run_experiment
 
     path = _file(tmp_path, """
 [campaign]

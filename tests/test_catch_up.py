@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.runtime import PeerRuntime
-from peers.telemetry import Telemetry
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Estimate, Scan
-from tracking.mixture import GaussianMixture
+from sensornet.peers.runtime import PeerRuntime
+from sensornet.peers.telemetry import Telemetry
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate, Scan
+from sensornet.tracking.mixture import GaussianMixture
 
 
 class _Core:

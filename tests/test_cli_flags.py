@@ -13,10 +13,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from sensornet.sim.scenario import load_scenario, scenario_text
 
 from sensornet.cli import COMMANDS, budgets, build_parser, common, main
 from sensornet.cli.commands.peer import _prepare_peer
-from sim.scenario import load_scenario, scenario_text
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -207,7 +207,7 @@ def test_run_seed000_fused_beats_every_local(capsys):
 
 
 def test_run_that_scored_nothing_exits_nonzero(tmp_path, monkeypatch, capsys):
-    import sim.launcher as launcher
+    import sensornet.sim.launcher as launcher
 
     class Handle:
         logs = {n: tmp_path / f"{n}.log" for n in ("world", "s1", "s2", "s3")}
@@ -234,12 +234,12 @@ def test_run_folders_are_unique_and_failed_ones_removed(tmp_path, monkeypatch, c
     assert a != b and a.is_dir() and b.is_dir()  # the same second: distinct folders
     common._CREATED.clear()
 
-    import sim.studies.base
+    import sensornet.sim.studies.base
 
     def fail(*args, **kwargs):
         raise common.UserError("stop here")
 
-    monkeypatch.setattr(sim.studies.base, "run_study", fail)
+    monkeypatch.setattr(sensornet.sim.studies.base, "run_study", fail)
     before = set((tmp_path / "runs").iterdir())
     assert main(["experiment", "--runs", "1", "--quiet"]) == 2
     assert set((tmp_path / "runs").iterdir()) == before  # the empty folder went again

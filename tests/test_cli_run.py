@@ -12,8 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
+from sensornet.peers.session import free_port
 
-from peers.session import free_port
 from tests.processes import alive, children, env, rerun_exe, sensornet, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,7 +107,7 @@ def _summary(fusions: int, late: int, lat: list[float]) -> dict:
 
 
 def test_realtime_note_only_when_the_peers_fell_behind():
-    from sim.launcher import realtime_note
+    from sensornet.sim.launcher import realtime_note
 
     kept = {"s1": _summary(100, 5, [4.0] * 99 + [90.0]), "s2": _summary(100, 0, [5.0] * 100)}
     assert realtime_note(kept, 0.1, 10.0, 2) is None  # 2.5 % at the deadline, p99 90 ms

@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from peers import rerun_sink
-from peers.rerun_sink import (
+from sensornet.peers import rerun_sink
+from sensornet.peers.rerun_sink import (
     COLOR_NAMES,
     PALETTE,
     RerunSink,
@@ -97,7 +96,7 @@ def test_blueprint_opens_on_scans_and_fixes_the_axes_that_need_it():
 
 
 def test_track_labels_follow_tracks_and_truth_paths_join_ids():
-    from peers.rerun_sink import TrackLabels, TruthPaths
+    from sensornet.peers.rerun_sink import TrackLabels, TruthPaths
 
     labels = TrackLabels(gate=50.0)
     assert labels.assign(np.array([[0.0, 0.0], [500.0, 0.0]])) == [0, 1]

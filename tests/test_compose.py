@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 import yaml
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 from sensornet.cli import build_parser
-from sim.scenario import load_scenario, parse_overrides
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,13 +7,12 @@ from itertools import permutations
 
 import numpy as np
 import pytest
+import sensornet.tracking.fusion as fusion
 from scipy.stats import multivariate_normal
-
-import tracking.fusion as fusion
-from tracking.fusion import gci_fuse, gci_pair, gci_product
-from tracking.fusion_rules import aa_fuse, metropolis_weights, optimal_omega
-from tracking.mixture import GaussianMixture
-from tracking.reduction import Reducer
+from sensornet.tracking.fusion import gci_fuse, gci_pair, gci_product
+from sensornet.tracking.fusion_rules import aa_fuse, metropolis_weights, optimal_omega
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer
 
 
 def random_spd(rng, d, scale=1.0):

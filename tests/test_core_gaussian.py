@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from tracking.gaussian import (
+from sensornet.tracking.gaussian import (
     SYM4_INDEX,
     gaussian_pdf_points,
     inv_det_2x2,

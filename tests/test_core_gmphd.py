@@ -5,12 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
-
-from sim.scenario import FilterSpec
-from tracking.gmphd import DEFAULT_EXTRACTION, GMPHDFilter, SensorParams, extract, predict, update
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition, RangeBearing
-from tracking.reduction import Reducer
+from sensornet.sim.scenario import FilterSpec
+from sensornet.tracking.gmphd import (
+    DEFAULT_EXTRACTION,
+    GMPHDFilter,
+    SensorParams,
+    extract,
+    predict,
+    update,
+)
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from sensornet.tracking.reduction import Reducer
 
 # ---------------------------------------------------------------------------------------------
 # helpers (independent of the code under test)
@@ -358,7 +364,7 @@ def test_filter_tracks_single_target():
 
 def test_sensor_models_share_one_protocol():
     """No attribute probing: every model says which state entries it picks (or None)."""
-    from tracking.models import LinearPosition, MeasurementModel, RangeBearing
+    from sensornet.tracking.models import LinearPosition, MeasurementModel, RangeBearing
 
     lin, rb = LinearPosition(), RangeBearing()
     assert isinstance(lin, MeasurementModel) and isinstance(rb, MeasurementModel)

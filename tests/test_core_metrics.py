@@ -6,8 +6,7 @@ from itertools import combinations, permutations
 
 import numpy as np
 import pytest
-
-from tracking.metrics import cardinality_error, gospa, ospa, rmse
+from sensornet.tracking.metrics import cardinality_error, gospa, ospa, rmse
 
 
 def random_set(rng, max_size=5, box=10.0, d=2):
@@ -149,7 +148,7 @@ def test_rmse():
 @pytest.mark.parametrize("p", [1.0, 2.0])
 def test_gospa_parts_add_up_to_gospa_and_count_points(p):
     """The decomposition reproduces gospa() and its counts obey n - false = m - missed."""
-    from tracking.metrics import gospa_parts
+    from sensornet.tracking.metrics import gospa_parts
 
     rng = np.random.default_rng(7)
     c = 20.0
@@ -166,7 +165,7 @@ def test_gospa_parts_add_up_to_gospa_and_count_points(p):
 def test_gospa_parts_closed_form():
     """One estimate 3 m from a target and one far from the other target: loc 3^2, and the far
     pair counts as one missed target and one false estimate."""
-    from tracking.metrics import gospa_parts
+    from sensornet.tracking.metrics import gospa_parts
 
     X = np.array([[0.0, 3.0], [500.0, 500.0]])
     Y = np.array([[0.0, 0.0], [100.0, 0.0]])
@@ -178,7 +177,7 @@ def test_gospa_parts_closed_form():
 def test_ospa_gospa_parts_equals_each_metric_bit_for_bit():
     """The shared assignment (and the solver-free single-point case) gives exactly what
     ospa and gospa_parts give apart, over random sets of 0-4 points with tied and cut pairs."""
-    from tracking.metrics import gospa_parts, ospa_gospa_parts
+    from sensornet.tracking.metrics import gospa_parts, ospa_gospa_parts
 
     rng = np.random.default_rng(7)
     for t in range(3000):

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from tracking.mixture import GaussianMixture
-from tracking.nale import NaleBuffer
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.nale import NaleBuffer
 
 SENDERS = ("a", "b", "c", 7)
 
@@ -122,8 +121,8 @@ def test_collect_follows_policy(offers, k, max_age, policy):
 
 
 def test_collect_predicts_with_gmphd_predict_by_age():
-    from tracking.gmphd import predict
-    from tracking.models import ConstantVelocity
+    from sensornet.tracking.gmphd import predict
+    from sensornet.tracking.models import ConstantVelocity
 
     motion = ConstantVelocity(T=1.0, sigma_w=1.0)
     birth = GaussianMixture(np.array([0.1]), np.zeros((1, 4)), 100 * np.eye(4)[None])

@@ -5,9 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
-
-from tracking.mixture import GaussianMixture
-from tracking.reduction import Reducer, cap, ise_refit, keep_above, merge, moment_match, prune
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import (
+    Reducer,
+    cap,
+    ise_refit,
+    keep_above,
+    merge,
+    moment_match,
+    prune,
+)
 
 
 def random_spd(rng, d, scale=1.0):

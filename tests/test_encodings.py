@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from protocol.codec import VERSION, encode
-from protocol.encodings import encoding_text, letter_of, parse
-from protocol.messages import Control, Scan, Tracks, Truth
+from sensornet.protocol.codec import VERSION, encode
+from sensornet.protocol.encodings import encoding_text, letter_of, parse
+from sensornet.protocol.messages import Control, Scan, Tracks, Truth
 
 MESSAGES = {
     "scan": Scan("s1", 3, np.zeros((2, 2)), send_time=1.0),
@@ -28,8 +27,8 @@ def test_the_encoding_names_the_message_type(name):
 
 
 def test_every_codec_type_letter_is_read_without_decoding():
-    from protocol.codec import _FIELDS
-    from protocol.encodings import TYPES
+    from sensornet.protocol.codec import _FIELDS
+    from sensornet.protocol.encodings import TYPES
 
     assert set(TYPES) == set(_FIELDS)
     for letter in _FIELDS:

@@ -12,17 +12,16 @@ import json
 import numpy as np
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
-
-from peers.security import Security, SecurityError, load_roster, make_keys
-from peers.transport import Transport
-from protocol import envelope
-from protocol.codec import decode, encode
-from protocol.envelope import TRAILER, Signer, inner, owner
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Scan
-from sim.peers import make_peer
-from sim.scenario import load_scenario
-from tracking.mixture import GaussianMixture
+from sensornet.peers.security import Security, SecurityError, load_roster, make_keys
+from sensornet.peers.transport import Transport
+from sensornet.protocol import envelope
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.envelope import TRAILER, Signer, inner, owner
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.mixture import GaussianMixture
 
 NET = "signet"
 PEERS = ("s1", "s2", "s3")

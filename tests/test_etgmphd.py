@@ -3,14 +3,13 @@
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
-
-from tracking.etgmphd import ETGMPHDFilter, ExtendedSensor, update
-from tracking.gmphd import SensorParams
-from tracking.gmphd import update as gmphd_update
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, LinearPosition
-from tracking.partition import DistancePartitioner, ScanTooLarge
-from tracking.reduction import Reducer
+from sensornet.tracking.etgmphd import ETGMPHDFilter, ExtendedSensor, update
+from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.gmphd import update as gmphd_update
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition
+from sensornet.tracking.partition import DistancePartitioner, ScanTooLarge
+from sensornet.tracking.reduction import Reducer
 
 H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
 

@@ -15,9 +15,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from peers.faults import FaultInjector, default_msg_id, message_key
-from sim.scenario import load_scenario, parse_faults, scenario_text
+from sensornet.peers.faults import FaultInjector, default_msg_id, message_key
+from sensornet.sim.scenario import load_scenario, parse_faults, scenario_text
 
 INTERVAL = 0.1
 PEERS = ["s1", "s2", "s3"]
@@ -160,8 +159,8 @@ def _rows(paths: list[Path]) -> list[list[str]]:
 @pytest.mark.network
 @pytest.mark.timeout(180)
 def test_twin_and_real_processes_write_the_same_fault_log(tmp_path) -> None:
-    from sim.launcher import start_run, wait_run
-    from sim.twin import run_twin
+    from sensornet.sim.launcher import start_run, wait_run
+    from sensornet.sim.twin import run_twin
 
     source = tmp_path / "faulty.toml"
     source.write_text(scenario_text("seed000") + FAULTS)

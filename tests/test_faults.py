@@ -13,8 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from peers.faultplan import (
+from sensornet.peers.faultplan import (
     Constant,
     Exponential,
     FaultPlan,
@@ -26,8 +25,8 @@ from peers.faultplan import (
     ShortDelay,
     Uniform,
 )
-from peers.faults import ACTIONS, FaultInjector, HoldQueue
-from sim.scenario import ScenarioError, parse_faults
+from sensornet.peers.faults import ACTIONS, FaultInjector, HoldQueue
+from sensornet.sim.scenario import ScenarioError, parse_faults
 
 N = 20_000
 INTERVAL = 0.1
@@ -297,8 +296,8 @@ def test_link_delay_and_deliveries_for_the_twin() -> None:
 
 
 def test_twin_runs_with_the_injector() -> None:
-    from sim.scenario import load_scenario
-    from sim.twin import run_twin
+    from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.twin import run_twin
 
     scn = load_scenario("seed000", overrides={"birth.model": "truth"})
     scn = dataclasses.replace(scn, num_scans=8)

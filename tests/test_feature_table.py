@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from sensornet.sim.scenario import builtin_scenarios, load_scenario, parse_overrides
 
 from sensornet.cli import main
-from sim.scenario import builtin_scenarios, load_scenario, parse_overrides
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = "feat"

@@ -7,13 +7,12 @@ import math
 
 import numpy as np
 import pytest
-
-from peers.contracts import FusionInput
-from peers.flood_parts import FloodFuser, ScanBound, poisson_bound
-from protocol.messages import ScanSet
-from sim.kinds.flooding import scan_bounds
-from sim.scenario import load_scenario
-from sim.twin import run_twin
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.flood_parts import FloodFuser, ScanBound, poisson_bound
+from sensornet.protocol.messages import ScanSet
+from sensornet.sim.kinds.flooding import scan_bounds
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
 
 LINE = {"sensors.positions": [[-900, 0], [-450, 0], [0, 0], [450, 0], [900, 0]],
         "sensors.radius": 500.0, "scenario.num_scans": 12}

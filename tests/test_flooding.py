@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.sparse.csgraph import shortest_path
-
-from peers.flooding import Flooder, flood, flooding_tuples
+from sensornet.peers.flooding import Flooder, flood, flooding_tuples
 
 
 def _geometric(seed=3, n=20, radius=800.0):
@@ -94,9 +93,10 @@ def test_without_scikit_learn_the_ftc_baseline_says_what_to_install(monkeypatch,
     the FTC function and the seed-004 study stop with one line naming the extra; IDPC runs."""
     import sys
 
-    from peers.flood_parts import FloodEstimator
+    from sensornet.peers.flood_parts import FloodEstimator
+    from sensornet.tracking.idpc import MissingBaseline, ftc, idpc
+
     from sensornet.cli import main
-    from tracking.idpc import MissingBaseline, ftc, idpc
 
     monkeypatch.setitem(sys.modules, "sklearn", None)  # import sklearn -> ImportError
     monkeypatch.setitem(sys.modules, "sklearn.cluster", None)

@@ -5,20 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import sensornet.sim.seed004 as seed004
 from scipy.sparse.csgraph import depth_first_order
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
+from sensornet.protocol.messages import ScanSet
+from sensornet.sim.build import adjacency, make_filter
+from sensornet.sim.peers import make_parts
+from sensornet.sim.scenario import ScenarioError, load_scenario
+from sensornet.sim.twin import run_twin
+from sensornet.sim.world import generate_run
+from sensornet.tracking.gmphd import GMPHDFilter
+from sensornet.tracking.models import ConstantVelocity
 
-import sim.seed004 as seed004
-from peers.contracts import FusionInput
-from peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
-from protocol.messages import ScanSet
-from sim.build import adjacency, make_filter
-from sim.peers import make_parts
-from sim.scenario import ScenarioError, load_scenario
-from sim.twin import run_twin
-from sim.world import generate_run
 from tests.test_flooding_peers import LINE, SCANS, run_line_processes
-from tracking.gmphd import GMPHDFilter
-from tracking.models import ConstantVelocity
 
 IC = {"flooding.estimator": "ic"}
 

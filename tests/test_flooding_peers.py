@@ -7,19 +7,18 @@ import msgpack
 import numpy as np
 import pytest
 from scipy.sparse.csgraph import shortest_path
-
-from peers.contracts import FusionInput
-from peers.flooding import FloodFuser, flooding_tuples
-from protocol.codec import VERSION, Limits, Rejected, decode, encode
-from protocol.keys import Keys
-from protocol.messages import Estimate, Forward, ScanSet
-from sim.build import adjacency
-from sim.launcher import format_summary, read_summaries, start_run, wait_run
-from sim.peers import make_peer
-from sim.scenario import load_scenario
-from sim.twin import run_twin
-from sim.world import generate_run
-from tracking.mixture import GaussianMixture
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.flooding import FloodFuser, flooding_tuples
+from sensornet.protocol.codec import VERSION, Limits, Rejected, decode, encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate, Forward, ScanSet
+from sensornet.sim.build import adjacency
+from sensornet.sim.launcher import format_summary, read_summaries, start_run, wait_run
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
+from sensornet.sim.world import generate_run
+from sensornet.tracking.mixture import GaussianMixture
 
 # five sensors on a line 450 m apart, linked within 500 m: diameter 4, four iterations
 LINE = {"sensors.positions": [[-900, 0], [-450, 0], [0, 0], [450, 0], [900, 0]],
@@ -105,7 +104,7 @@ def test_core_refuses_foreign_origins_and_the_other_payload():
 
 
 def encode_scan(name, k):
-    from protocol.messages import Scan
+    from sensornet.protocol.messages import Scan
 
     return encode(Scan(name, k, np.zeros((0, 2)), seq=k, send_time=0.0))
 
@@ -248,7 +247,7 @@ def test_five_flooding_processes_over_zenoh_hold_every_scan(tmp_path):
 
 
 def test_offline_flooding_bytes_match_what_the_twin_peers_put_on_the_wire():
-    from peers.flooding import flooding_bytes
+    from sensornet.peers.flooding import flooding_bytes
 
     scn = _line()
     res = run_twin(scn, 0)
@@ -275,8 +274,8 @@ class _RecordingSink:
 
 
 def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
-    from peers.core import Publish, Record
-    from peers.observer import Observer
+    from sensornet.peers.core import Publish, Record
+    from sensornet.peers.observer import Observer
 
     scn = _line(**{"scenario.num_scans": 3})
     sink = _RecordingSink()

@@ -5,19 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.batching import FusionBatch
-from peers.consensus import Consensus, ConsensusOptions
-from peers.contracts import LocalOutput
-from peers.fusers import HybridFuser
-from protocol.messages import Estimate, Tracks
-from sim.graphs import network_scenario
-from sim.scenario import load_scenario
-from sim.twin import run_twin
-from tracking.fusion_batch import hybrid_fuse_many
-from tracking.fusion_rules import hybrid_fuse
-from tracking.mixture import GaussianMixture
-from tracking.reduction import Reducer
+from sensornet.peers.batching import FusionBatch
+from sensornet.peers.consensus import Consensus, ConsensusOptions
+from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.fusers import HybridFuser
+from sensornet.protocol.messages import Estimate, Tracks
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
+from sensornet.tracking.fusion_batch import hybrid_fuse_many
+from sensornet.tracking.fusion_rules import hybrid_fuse
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer
 
 
 def _random_spd(rng, n: int) -> np.ndarray:

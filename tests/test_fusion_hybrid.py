@@ -7,11 +7,10 @@ import math
 
 import numpy as np
 import pytest
-
-from tracking.fusion import gci_fuse, gci_product
-from tracking.fusion_rules import aa_fuse, hybrid_fuse, metropolis_weights
-from tracking.mixture import GaussianMixture
-from tracking.reduction import Reducer, keep_above, merge, moment_match, sweep_labels
+from sensornet.tracking.fusion import gci_fuse, gci_product
+from sensornet.tracking.fusion_rules import aa_fuse, hybrid_fuse, metropolis_weights
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer, keep_above, merge, moment_match, sweep_labels
 
 P0 = np.diag([100.0, 25.0, 100.0, 25.0])
 A = np.array([0.0, 1.0, 0.0, -1.0])
@@ -46,7 +45,7 @@ def test_sweep_labels_are_the_groups_merge_moment_matches():
 def test_sweep_labels_with_given_inverses_are_the_same_labels():
     """The caller's inverses (hybrid_fuse passes the union's) give the labels the sweep finds
     computing them itself: every-pair sizes and the candidate path above 48, both rules."""
-    from tracking.gaussian import inv_spd
+    from sensornet.tracking.gaussian import inv_spd
 
     rng = np.random.default_rng(11)
     for n in (2, 5, 12, 30, 48, 49, 80):

@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from sim.fusion_advice import fusion_warnings
-from sim.graphs import network_scenario
-from sim.scenario import load_scenario
-from sim.twin import run_twin
+from sensornet.sim.fusion_advice import fusion_warnings
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
 
 
 @pytest.fixture(scope="module")

@@ -8,14 +8,13 @@ import json
 
 import numpy as np
 import pytest
-
-from sim.campaign import CampaignError, load_campaign, run_campaign, status
-from sim.fusion_study import format_markdown, interval, plot, summarise
-from sim.graphs import network_scenario
-from sim.scenario import load_scenario
-from sim.studies.base import Cell
-from sim.studies.seed000 import row as experiment_row
-from sim.twin import run_twin
+from sensornet.sim.campaign import CampaignError, load_campaign, run_campaign, status
+from sensornet.sim.fusion_study import format_markdown, interval, plot, summarise
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.studies.base import Cell
+from sensornet.sim.studies.seed000 import row as experiment_row
+from sensornet.sim.twin import run_twin
 
 STUDY = """
 [campaign]

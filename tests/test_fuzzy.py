@@ -9,9 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.stats import chi2
-
-from tracking.fuzzy import FuzzySystem, FuzzyWeighting, ManoeuvreDetector
-from tracking.pda import ImmPda, LinearSensor
+from sensornet.tracking.fuzzy import FuzzySystem, FuzzyWeighting, ManoeuvreDetector
+from sensornet.tracking.pda import ImmPda, LinearSensor
 
 SCENARIO = Path(__file__).parents[1] / "sim" / "scenarios" / "seed003.toml"
 
@@ -108,7 +107,7 @@ def test_detector_false_alarm_rate_on_manoeuvre_free_runs():
 
 
 def test_fit_recovers_known_outputs_and_round_trips_through_config():
-    from tracking.fuzzy import fit, to_config
+    from sensornet.tracking.fuzzy import fit, to_config
 
     rng = np.random.default_rng(5)
     true = FuzzySystem(np.array([[0.0, 1.0], [8.0, 1.0], [4.0, 4.0]]),

@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.core import PeerCore
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Scan
-from sim.peers import make_peer, truth_function
-from sim.scenario import load_scenario, parse_overrides
-from tracking.metrics import ospa
+from sensornet.peers.core import PeerCore
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Scan
+from sensornet.sim.peers import make_peer, truth_function
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.tracking.metrics import ospa
 
 SETS = ["birth.model=truth", "scenario.num_scans=60"]
 
@@ -107,7 +106,7 @@ def test_scans_the_world_published_after_this_peers_last_are_misses():
     """A peer that got no scans after scan 10 (a link that never came back) while the world
     went on to 20: the world's "end" names its last scan, and the ten this peer never handled
     are misses; an "end" naming a scan absurdly far ahead changes nothing."""
-    from protocol.messages import Control
+    from sensornet.protocol.messages import Control
 
     scn = load_scenario("seed000", overrides=parse_overrides(SETS))
     ctl = Keys("twin").ctl()

@@ -12,15 +12,15 @@ from collections import deque
 from pathlib import Path
 
 import pytest
+from sensornet.peers.host import CONTROL, PeerHost
+from sensornet.peers.runtime import BATCH
+from sensornet.peers.telemetry import SharedCpu, Telemetry
+from sensornet.sim.graphs import network_scenario
+from sensornet.sim.launcher import ProcessFault, _host_commands, host_groups, hosts_line
+from sensornet.sim.packing import PACK_ABOVE, Packing, choose
+from sensornet.sim.twin import run_twin
 
-from peers.host import CONTROL, PeerHost
-from peers.runtime import BATCH
-from peers.telemetry import SharedCpu, Telemetry
 from sensornet.cli import main
-from sim.graphs import network_scenario
-from sim.launcher import ProcessFault, _host_commands, host_groups, hosts_line
-from sim.packing import PACK_ABOVE, Packing, choose
-from sim.twin import run_twin
 from tests.test_network_faults import _assert_tracks_equal_the_twin, _run
 
 SIX = [f"p{i:02d}" for i in range(6)]
@@ -175,13 +175,12 @@ def test_a_batched_peers_step_holds_one_scan(tmp_path):
     follows a second scan goes back to the front of its backlog, in order; scans far behind
     are skipped first, as the peer's own step would (PeerRuntime._catch_up)."""
     import numpy as np
-
-    from peers.runtime import BACKLOG, RuntimeOptions
-    from protocol.codec import encode
-    from protocol.messages import Estimate, Scan
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario
-    from tracking.mixture import GaussianMixture
+    from sensornet.peers.runtime import BACKLOG, RuntimeOptions
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.messages import Estimate, Scan
+    from sensornet.sim.peers import make_peer
+    from sensornet.sim.scenario import load_scenario
+    from sensornet.tracking.mixture import GaussianMixture
 
     scn = load_scenario(_six(tmp_path / "six.toml"))
     host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
@@ -228,14 +227,13 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     but not admission: each receiver counts its own duplicates, a killed peer gets nothing,
     a peer outside the host is still subscribed to through Zenoh."""
     import numpy as np
-
-    from peers.admission import SLOT_ATTEMPTS
-    from peers.runtime import RuntimeOptions
-    from protocol.codec import Rejected, encode
-    from protocol.messages import Estimate
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario
-    from tracking.mixture import GaussianMixture
+    from sensornet.peers.admission import SLOT_ATTEMPTS
+    from sensornet.peers.runtime import RuntimeOptions
+    from sensornet.protocol.codec import Rejected, encode
+    from sensornet.protocol.messages import Estimate
+    from sensornet.sim.peers import make_peer
+    from sensornet.sim.scenario import load_scenario
+    from sensornet.tracking.mixture import GaussianMixture
 
     scn = load_scenario(_six(tmp_path / "six.toml"))
     host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
@@ -389,8 +387,8 @@ def test_hosts_are_grouped_to_cut_few_graph_edges():
     """Given the peer graph, hosts hold peers that are neighbours: on a circulant graph of
     degree 3 (each peer also linked to its antipode) the scenario's order would cut 27 of 75
     edges at 50 peers in 2 hosts; the spectral grouping cuts 5. A ring keeps its arcs."""
-    from sim.graphs import circulant
-    from sim.packing import contiguous, cut_edges, groups_for
+    from sensornet.sim.graphs import circulant
+    from sensornet.sim.packing import contiguous, cut_edges, groups_for
 
     A = circulant(50, 3)
     names = [f"p{i:02d}" for i in range(50)]

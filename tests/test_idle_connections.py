@@ -13,9 +13,8 @@ import sys
 import threading
 
 import pytest
-
-from peers.session import ACCEPT_PENDING, endpoint, free_port, open_session
-from protocol.keys import Keys
+from sensornet.peers.session import ACCEPT_PENDING, endpoint, free_port, open_session
+from sensornet.protocol.keys import Keys
 
 pytestmark = pytest.mark.network
 

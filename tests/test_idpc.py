@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from tracking.idpc import ClusterParams, ftc, idpc, local_density, polar_to_cartesian
-from tracking.models import RangeBearing
+from sensornet.tracking.idpc import ClusterParams, ftc, idpc, local_density, polar_to_cartesian
+from sensornet.tracking.models import RangeBearing
 
 S = 20  # sensors whose scans are pooled
 PARAMS = ClusterParams(cutoff=25.0, zeta=0.3, radius_factor=1.25, detection_probability=0.95)
@@ -101,8 +100,7 @@ def test_polar_to_cartesian_inverts_the_radar_model():
 
 def test_components_match_scipy():
     from scipy.sparse.csgraph import connected_components
-
-    from tracking.idpc import _components
+    from sensornet.tracking.idpc import _components
 
     rng = np.random.default_rng(9)
     for k in (1, 2, 5, 12):

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from tracking.imm import (
+from sensornet.tracking.imm import (
     IMMEKF,
     IMMParams,
     constant_acceleration,
@@ -14,9 +13,9 @@ from tracking.imm import (
     radar_jacobian,
     radar_log_likelihood,
 )
-from tracking.mixture import GaussianMixture
-from tracking.models import RangeBearing
-from tracking.particles import (
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import RangeBearing
+from sensornet.tracking.particles import (
     GaussianRatio,
     IMMParticleFilter,
     ParticleParams,

@@ -9,9 +9,9 @@ import stat
 from pathlib import Path
 
 import pytest
+from sensornet.peers.member_keys import SecurityError, check_private, make_keys
+from sensornet.peers.security import Security
 
-from peers.member_keys import SecurityError, check_private, make_keys
-from peers.security import Security
 from sensornet.cli import main
 
 MEMBERS = ["world", "s1", "s2", "s3"]

@@ -13,12 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from sim import kinds, seed003_net
-from sim.peers import make_parts
-from sim.scenario import ScenarioError, builtin_scenarios, load_scenario
-from sim.truths import truth_model
-from sim.twin import run_twin
+from sensornet.sim import kinds, seed003_net
+from sensornet.sim.peers import make_parts
+from sensornet.sim.scenario import ScenarioError, builtin_scenarios, load_scenario
+from sensornet.sim.truths import truth_model
+from sensornet.sim.twin import run_twin
 
 ROOT = Path(__file__).resolve().parents[1]
 TOY = "toy=kind_plugin:TOY"
@@ -127,11 +126,11 @@ def test_readme_kind_example_runs():
     """README's two code blocks (the estimator, then its kind) register and run as they are."""
     import re
 
-    from peers.contracts import LocalOutput
-    from peers.fusers import AaFuser
-    from sim.kinds import PeerKind
-    from tracking.mixture import GaussianMixture
-    from tracking.reduction import Reducer
+    from sensornet.peers.contracts import LocalOutput
+    from sensornet.peers.fusers import AaFuser
+    from sensornet.sim.kinds import PeerKind
+    from sensornet.tracking.mixture import GaussianMixture
+    from sensornet.tracking.reduction import Reducer
 
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)

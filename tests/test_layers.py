@@ -25,11 +25,19 @@ def _modules() -> dict[str, Path]:
     return mods
 
 
+def _short(name: str) -> str:
+    """A module's name in :func:`_modules` (``peers.core``) from its installed name
+    (``sensornet.peers.core``)."""
+    head, _, rest = name.partition(".")
+    return rest if head == "sensornet" and rest.split(".")[0] in LAYERS[:-1] else name
+
+
 def _graph() -> tuple[dict[str, set[str]], dict[str, list[tuple[str, int]]]]:
     """Every module's project imports, and those made inside a function (target, line)."""
     mods = _modules()
 
     def resolve(name: str) -> str | None:
+        name = _short(name)
         while name and name not in mods:
             name = name.rpartition(".")[0]
         return name or None
@@ -206,16 +214,16 @@ def _loaded_at_import(start: str) -> set[str]:
             if m in seen:
                 continue
             seen.add(m)
-            if m not in mods:
+            if _short(m) not in mods:
                 continue
-            tree = ast.parse(mods[m].read_text(encoding="utf-8"))
+            tree = ast.parse(mods[_short(m)].read_text(encoding="utf-8"))
             for node in tree.body:
                 if isinstance(node, ast.Import):
                     todo += [a.name for a in node.names]
                 elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
                     todo.append(node.module)
                     todo += [f"{node.module}.{a.name}" for a in node.names
-                             if f"{node.module}.{a.name}" in mods]
+                             if _short(f"{node.module}.{a.name}") in mods]
     return seen
 
 
@@ -226,7 +234,8 @@ def test_the_command_line_loads_a_command_only_when_it_runs():
     loaded = _loaded_at_import("sensornet.cli")
     heavy = sorted(m for m in loaded if m.split(".")[0] in ("numpy", "scipy", "matplotlib",
                                                              "pyarrow", "rerun", "cryptography")
-                   or m.startswith(("sensornet.cli.commands.", "sim.scenario", "tracking.")))
+                   or m.startswith(("sensornet.cli.commands.", "sensornet.sim.scenario",
+                                     "sensornet.tracking.")))
     assert heavy == []
     from sensornet.cli.parser import COMMANDS, build_parser
 
@@ -244,3 +253,38 @@ def test_the_checks_see_an_arrow_up_and_a_circle():
     """The checks themselves: a made-up graph with one of each is caught."""
     edges = {"peers.a": {"sim.b"}, "sim.b": {"sim.c"}, "sim.c": {"sim.b"}}
     assert _circles(edges) == [["sim.b", "sim.c"]]
+
+
+def test_imports_use_the_installed_names():
+    """Every project import names ``sensornet.<folder>`` (the installed name), never the bare
+    folder (``peers``, ``sim``, ...): a bare import would load a second copy of a module, and
+    an installed wheel has no such top-level package."""
+    bare = []
+    for folder in (*LAYERS, "tests", "benchmarks"):
+        for f in (ROOT / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    names = [node.module]
+                else:
+                    continue
+                bare += [(str(f.relative_to(ROOT)), node.lineno, n) for n in names
+                         if n.split(".")[0] in LAYERS[:-1]]
+    assert bare == []
+
+
+def test_the_wheel_holds_every_package_under_its_installed_name():
+    """pyproject's package list is every folder with an ``__init__.py`` under its installed
+    name, and each of the four folders is mapped to ``sensornet.<folder>`` (a package left
+    out would be missing from an installed wheel, not from a checkout)."""
+    import tomllib
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    found = set()
+    for layer in LAYERS:
+        for init in (ROOT / layer).rglob("__init__.py"):
+            parts = init.parent.relative_to(ROOT).parts
+            found.add(".".join(parts if parts[0] == "sensornet" else ("sensornet", *parts)))
+    assert set(cfg["packages"]) == found
+    assert cfg["package-dir"] == {f"sensornet.{d}": d for d in LAYERS[:-1]}

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sensornet.peers.session import endpoint, free_port, open_session
+from sensornet.protocol.codec import encode
+from sensornet.protocol.encodings import parse
+from sensornet.protocol.messages import Scan, Tracks
 
-from peers.session import endpoint, free_port, open_session
-from protocol.codec import encode
-from protocol.encodings import parse
-from protocol.messages import Scan, Tracks
 from sensornet.cli import main
 from sensornet.live import describe
 
@@ -113,9 +113,9 @@ def test_echo_in_secure_mode_speaks_as_a_member_and_verifies_signatures(tmp_path
     """A secure run (mutual TLS, access control, signed messages): echo with s1's keys hears
     what the access control lets s1 hear (no tracks, no other sensor's scans), each message's
     signature checked against the roster."""
-    from peers.security import make_keys
-    from sim.launcher import start_run
-    from sim.scenario import load_scenario, parse_overrides
+    from sensornet.peers.security import make_keys
+    from sensornet.sim.launcher import start_run
+    from sensornet.sim.scenario import load_scenario, parse_overrides
 
     keys = tmp_path / "keys"
     keys.mkdir()

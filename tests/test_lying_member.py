@@ -8,9 +8,16 @@ inflated/phantoms +0.9 m, AA inflated/phantoms +79/+118 m, AA empty/shifted 57/3
 
 import numpy as np
 import pytest
-
-from sim.lying import LIES, SETUPS, LyingCore, honest_scores, make_lie, run_with_liar, scenario_for
-from tracking.mixture import GaussianMixture
+from sensornet.sim.lying import (
+    LIES,
+    SETUPS,
+    LyingCore,
+    honest_scores,
+    make_lie,
+    run_with_liar,
+    scenario_for,
+)
+from sensornet.tracking.mixture import GaussianMixture
 
 RUNS = (8000, 8001)
 SCANS = 30
@@ -94,8 +101,8 @@ def test_the_lies():
 def test_the_scenario_hook_makes_the_same_liar_as_the_study():
     """``fusion.lie = "s2:shifted"`` (what a real peer process gets with --set) builds the
     study's liar: the same honest peers' fused OSPA, scan for scan."""
-    from sim.scenario import load_scenario
-    from sim.twin import run_twin
+    from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.twin import run_twin
 
     hooked = load_scenario("seed000", overrides={"scenario.num_scans": 20,
                                                  "fusion.lie": "s2:shifted"})
@@ -111,8 +118,8 @@ def test_the_scenario_hook_makes_the_same_liar_as_the_study():
 
 
 def test_absent_takes_the_liars_sensors_and_edges_out():
-    from sim.lying import without
-    from sim.scenario import load_scenario
+    from sensornet.sim.lying import without
+    from sensornet.sim.scenario import load_scenario
 
     scn = without(scenario_for(SETUPS[0], "hybrid"), "s2")
     assert list(scn.sensor_names) == ["s1", "s3"]

@@ -11,11 +11,11 @@ quarantine s2 within 3 scans, and their fused OSPA is the twin's for the same ru
 from __future__ import annotations
 
 import pytest
+from sensornet.peers.security import make_keys
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.twin import run_twin
 
-from peers.security import make_keys
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.scenario import load_scenario, parse_overrides
-from sim.twin import run_twin
 from tests.attacks import SETS
 
 pytestmark = pytest.mark.network

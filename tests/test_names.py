@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from sensornet.protocol.keys import NAME_MAX, check_name
+from sensornet.sim.scenario import ScenarioError, load_scenario, scenario_text
 
-from protocol.keys import NAME_MAX, check_name
 from sensornet.cli import main
-from sim.scenario import ScenarioError, load_scenario, scenario_text
 
 BAD = ["../../evil", "a/b", "*", "**", "", "-x", "a b", "s1.key", "x" * (NAME_MAX + 1), "é"]
 RESERVED = ["world", "World", "ca", "router", "router-2"]
@@ -112,7 +112,7 @@ def test_the_longest_names_make_keys_and_run(tmp_path, capsys):
     """NAME_MAX fits every place a name goes: a 32-character network in the CA's common name
     (``sensornet <network> CA``, X.509 allows 64), a 32-character member, and a
     32-character sensor whose scans and estimates the twin's peers accept."""
-    from peers.member_keys import common_name
+    from sensornet.peers.member_keys import common_name
 
     net, member = "n" * NAME_MAX, "m" * NAME_MAX
     assert main(["keys", net, "--out", str(tmp_path / "k"), "--members", f"world,{member}"]) == 0
@@ -130,11 +130,10 @@ def test_a_longest_name_fits_the_admission_head():
     """A receiver reads a message's first fields from its first 192 bytes (peers.admission):
     a 32-character sender leaves room for all of them."""
     import numpy as np
-
-    from peers.admission import peek
-    from protocol.codec import encode
-    from protocol.messages import Estimate, Scan
-    from tracking.mixture import GaussianMixture
+    from sensornet.peers.admission import peek
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.messages import Estimate, Scan
+    from sensornet.tracking.mixture import GaussianMixture
 
     name = "s" * NAME_MAX
     scan = encode(Scan(name, 7, np.zeros((3, 2)), seq=2**40, send_time=1e9))

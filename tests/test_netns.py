@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sensornet.sim.launcher import read_summaries
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.twin import run_twin
 
-from sim.launcher import read_summaries
-from sim.scenario import load_scenario
-from sim.twin import run_twin
 from tests.processes import stop_all
 from tests.test_hosts import SIX, _six
 from tests.test_network_faults import _assert_tracks_equal_the_twin
@@ -104,7 +104,7 @@ def _routed_hosts(tmp_path: Path, ns: dict[str, str], source: str, out: Path, ne
     procs: dict[str, subprocess.Popen] = {}
     try:
         log = tmp_path / "router.log"
-        procs["router"] = _start(ns["r"], ["sim.router", "--listen", via["a"], "--listen",
+        procs["router"] = _start(ns["r"], ["sensornet.sim.router", "--listen", via["a"], "--listen",
                                            via["b"], "--network", network], log)
         _wait_line(procs["router"], log, "router: listening")
         procs["world"] = _start(ns["a"], ["sensornet", "world", source, *common, "--connect",

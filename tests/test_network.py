@@ -11,13 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from protocol.codec import decode, encode
-from protocol.keys import Keys
-from protocol.messages import Estimate
-from sim.launcher import merge_recordings, read_summaries, start_run, wait_run
-from sim.scenario import load_scenario
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate
+from sensornet.sim.launcher import merge_recordings, read_summaries, start_run, wait_run
+from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.mixture import GaussianMixture
 
 pytestmark = pytest.mark.network
 
@@ -36,8 +35,7 @@ def network_run(tmp_path_factory):
     try:
         # publish junk on a peer's estimate key from an outside session while the run goes on
         import zenoh
-
-        from peers.session import open_session
+        from sensornet.peers.session import open_session
 
         session = open_session(connect=list(handle.endpoints.values()))
         try:

@@ -23,22 +23,21 @@ import msgpack
 import numpy as np
 import pytest
 import zenoh
-
-from peers.scan_results import read_part
-from peers.session import open_session
-from protocol.codec import VERSION, decode, encode, pack_mixture
-from protocol.keys import Keys
-from protocol.messages import Estimate, Scan
-from sim.launcher import (
+from sensornet.peers.scan_results import read_part
+from sensornet.peers.session import open_session
+from sensornet.protocol.codec import VERSION, decode, encode, pack_mixture
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate, Scan
+from sensornet.sim.launcher import (
     ProcessFault,
     inject_process_faults,
     read_summaries,
     start_run,
     wait_run,
 )
-from sim.scenario import load_scenario, parse_overrides, scenario_text
-from sim.twin import run_twin
-from tracking.mixture import GaussianMixture
+from sensornet.sim.scenario import load_scenario, parse_overrides, scenario_text
+from sensornet.sim.twin import run_twin
+from sensornet.tracking.mixture import GaussianMixture
 
 FOUR = scenario_text("seed000") + """
 [[sensors]]

@@ -18,10 +18,9 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from scipy.linalg import expm
-
-from tracking import gci_product as product_module
-from tracking.fusion import gci_pair, gci_product
-from tracking.mixture import GaussianMixture
+from sensornet.tracking import gci_product as product_module
+from sensornet.tracking.fusion import gci_pair, gci_product
+from sensornet.tracking.mixture import GaussianMixture
 
 EPS = float(np.finfo(float).eps)
 CONDS = (1e6, 1e9, 1e12)
@@ -301,8 +300,8 @@ def test_gated_product_falls_back_when_what_is_left_out_could_matter(monkeypatch
 
 def test_gci_fuse_with_a_reducer_equals_the_ungated_product_reduced():
     """What a peer's fusion returns (n-ary GCI, then prune/merge) does not change with the gate."""
-    from tracking.fusion import gci_fuse
-    from tracking.reduction import Reducer
+    from sensornet.tracking.fusion import gci_fuse
+    from sensornet.tracking.reduction import Reducer
 
     rng = np.random.default_rng(11)
     reduce = Reducer()

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from tracking.particles import GaussianRatio
+from sensornet.tracking.particles import GaussianRatio
 
 DIMS = (0, 3)
 GRID = 1201

@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-
-from tracking.partition import (
+from sensornet.tracking.partition import (
     DistancePartitioner,
     ScanTooLarge,
     all_pairs_partitions,
@@ -50,7 +49,7 @@ def test_parameters_and_cap_fail_in_one_line():
         DistancePartitioner(max_measurements=100)(np.zeros((101, 2)))
 
 
-from tracking.partition import GridSpectralPartitioner, adjusted_rand_index  # noqa: E402
+from sensornet.tracking.partition import GridSpectralPartitioner, adjusted_rand_index  # noqa: E402
 
 
 def _clusters(rng, centres, per=10, clutter=10, sigma=20.0):

@@ -7,8 +7,7 @@ import math
 
 import numpy as np
 import pytest
-
-from tracking.pda import ImmPda, LinearSensor
+from sensornet.tracking.pda import ImmPda, LinearSensor
 
 H4 = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
 

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.contracts import Fuser, FusionInput, LocalEstimator
-from peers.pda_parts import CiFuser, PdaEstimator, ci_det_weight, covariance_intersection
-from sim import seed003, seed003_peers
-from tracking.mixture import GaussianMixture
+from sensornet.peers.contracts import Fuser, FusionInput, LocalEstimator
+from sensornet.peers.pda_parts import CiFuser, PdaEstimator, ci_det_weight, covariance_intersection
+from sensornet.sim import seed003, seed003_peers
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def test_covariance_intersection_closed_form():

@@ -4,19 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.admission import SLOT_ATTEMPTS, Admission, Route, TokenBucket, parse_key, peek
-from peers.consensus import Consensus
-from peers.contracts import Fuser, FusionInput, LocalEstimator, LocalOutput
-from peers.core import CoreConfig, PeerCore, Publish
-from peers.fusers import NoFuser
-from peers.scoring import Scorer
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Control, Estimate, Forward, Returns, Scan, ScanSet, Truth
-from sim.peers import consensus_options, make_peer
-from sim.scenario import load_scenario, parse_overrides
-from tracking.mixture import GaussianMixture
+from sensornet.peers.admission import SLOT_ATTEMPTS, Admission, Route, TokenBucket, parse_key, peek
+from sensornet.peers.consensus import Consensus
+from sensornet.peers.contracts import Fuser, FusionInput, LocalEstimator, LocalOutput
+from sensornet.peers.core import CoreConfig, PeerCore, Publish
+from sensornet.peers.fusers import NoFuser
+from sensornet.peers.scoring import Scorer
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, ScanSet, Truth
+from sensornet.sim.peers import consensus_options, make_peer
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.tracking.mixture import GaussianMixture
 
 KEYS = Keys("twin")
 MIX = GaussianMixture(np.ones(1), np.zeros((1, 4)), np.eye(4)[None])
@@ -205,8 +204,8 @@ def test_fusion_input_carries_weights_in_sorted_order():
 
 
 def test_a_restarted_peer_never_overwrites_its_earlier_files(tmp_path):
-    from peers.runtime import output_stem
-    from sim.launcher import read_summaries
+    from sensornet.peers.runtime import output_stem
+    from sensornet.sim.launcher import read_summaries
 
     assert output_stem(tmp_path, "s2") == "peer-s2"
     (tmp_path / "rerun").mkdir()
@@ -238,7 +237,7 @@ def test_tracks_closed_by_a_scan_far_ahead_are_scored_not_missed(scn):
 
 
 def test_skipped_scans_count_in_the_cardinality_error_as_no_target():
-    from peers.scoring import Scorer
+    from sensornet.peers.scoring import Scorer
 
     truth = {k: np.zeros((k, 4)) for k in range(1, 6)}  # k targets at scan k
     s = Scorer(100.0, 2.0, (0, 2), truth=truth.get)
@@ -252,9 +251,9 @@ def test_skipped_scans_count_in_the_cardinality_error_as_no_target():
 def test_optional_hooks_are_declared_with_defaults():
     """The core, the consensus and the observer call a part's optional hooks through the
     contracts' declarations: a part without them gets the defaults, one with them its own."""
-    from peers.contracts import EstimatorHooks, FuserHooks
-    from sim.peers import make_parts
-    from sim.scenario import load_scenario
+    from sensornet.peers.contracts import EstimatorHooks, FuserHooks
+    from sensornet.sim.peers import make_parts
+    from sensornet.sim.scenario import load_scenario
 
     plain = EstimatorHooks.of(object())
     assert plain.payload == "mixture" and plain.plane is None and plain.model_names == ()

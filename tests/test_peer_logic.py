@@ -6,16 +6,15 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from protocol.codec import encode
-from protocol.keys import Keys
-from protocol.messages import Estimate, Scan
-from sim.build import adjacency
-from sim.experiment import run_once
-from sim.peers import consensus_options, make_peer
-from sim.scenario import load_scenario, with_birth_model
-from sim.twin import run_twin
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Estimate, Scan
+from sensornet.sim.build import adjacency
+from sensornet.sim.experiment import run_once
+from sensornet.sim.peers import consensus_options, make_peer
+from sensornet.sim.scenario import load_scenario, with_birth_model
+from sensornet.sim.twin import run_twin
+from sensornet.tracking.mixture import GaussianMixture
 
 KEYS = Keys("twin")
 

@@ -7,11 +7,19 @@ import hashlib
 import msgpack
 import numpy as np
 import pytest
-
-from protocol.codec import VERSION, Limits, Rejected, decode, encode, pack_mixture
-from protocol.keys import Keys, check_name
-from protocol.messages import Control, Estimate, Forward, Returns, Scan, ScanSet, Tracks, Truth
-from tracking.mixture import GaussianMixture
+from sensornet.protocol.codec import VERSION, Limits, Rejected, decode, encode, pack_mixture
+from sensornet.protocol.keys import Keys, check_name
+from sensornet.protocol.messages import (
+    Control,
+    Estimate,
+    Forward,
+    Returns,
+    Scan,
+    ScanSet,
+    Tracks,
+    Truth,
+)
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def random_mixture(rng: np.random.Generator, n: int, d: int = 4) -> GaussianMixture:
@@ -174,7 +182,7 @@ def _returns_fields(z: np.ndarray) -> list:
 
 
 def test_returns_round_trip_is_exact_and_compact(rng):
-    from protocol.messages import Returns
+    from sensornet.protocol.messages import Returns
 
     for n in (0, 1, 7):
         z = rng.normal(size=(n, 2)) * 1e4
@@ -190,7 +198,7 @@ def test_returns_round_trip_is_exact_and_compact(rng):
 
 
 def test_hostile_returns_rejected(rng):
-    from protocol.messages import Returns
+    from sensornet.protocol.messages import Returns
 
     z = rng.normal(size=(4, 2))
     good = _returns_fields(z)

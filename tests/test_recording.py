@@ -6,11 +6,10 @@ import subprocess
 import sys
 
 import pytest
-
-from peers.recording import read
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.replay import replay
-from sim.scenario import load_scenario, parse_overrides
+from sensornet.peers.recording import read
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.replay import replay
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 pytestmark = pytest.mark.network
 

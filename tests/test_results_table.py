@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sensornet.peers.scan_results import COLUMNS, ScanResults, read_table, write_part
+from sensornet.peers.scoring import Scorer
+from sensornet.tracking.metrics import gospa, ospa
 
-from peers.scan_results import COLUMNS, ScanResults, read_table, write_part
-from peers.scoring import Scorer
 from sensornet.cli import main
-from tracking.metrics import gospa, ospa
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,7 +44,7 @@ def test_missing_outputs_are_rows_at_the_cut_off_and_means_agree(tmp_path):
     s.skipped(range(3, 5))
     s.finish()  # scan 5's fused and every local output never came
     write_part(s.results, "s9", tmp_path / "p.scans.msgpack")
-    from peers.scan_results import merge_parts
+    from sensornet.peers.scan_results import merge_parts
 
     merge_parts([tmp_path / "p.scans.msgpack"], tmp_path / "results.parquet")
     cols, meta = read_table(tmp_path / "results.parquet")

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from sensornet.peers.security import make_keys
+from sensornet.peers.session import free_port
+from sensornet.sim.launcher import read_summaries
 
-from peers.security import make_keys
-from peers.session import free_port
 from sensornet.cli import build_parser, main
-from sim.launcher import read_summaries
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "docker-compose.secure.yml"
@@ -200,8 +200,8 @@ def test_compose_commands_run_as_processes_on_loopback(compose, tmp_path, peer_t
 def _core(grace: float):
     from dataclasses import replace
 
-    from sim.peers import make_peer
-    from sim.scenario import load_scenario
+    from sensornet.sim.peers import make_peer
+    from sensornet.sim.scenario import load_scenario
 
     core = make_peer(load_scenario("seed000"), "s1", 0, network="grace")
     core.cfg = replace(core.cfg, world_grace=grace)
@@ -209,7 +209,7 @@ def _core(grace: float):
 
 
 def test_world_grace_turns_a_short_absence_into_a_counted_outage():
-    from peers.core import Stop
+    from sensornet.peers.core import Stop
 
     core = _core(5.0)
     assert core.liveliness("world", True, 0.0) == []
@@ -228,10 +228,10 @@ def test_world_grace_turns_a_short_absence_into_a_counted_outage():
 
 
 def test_without_grace_or_after_end_the_world_leaving_stops_at_once():
-    from peers.core import Stop
-    from protocol.codec import encode
-    from protocol.keys import Keys
-    from protocol.messages import Control
+    from sensornet.peers.core import Stop
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.keys import Keys
+    from sensornet.protocol.messages import Control
 
     core = _core(0.0)
     core.liveliness("world", True, 0.0)
@@ -292,8 +292,8 @@ def test_a_routed_run_survives_a_router_restart(tmp_path, capsys):
 def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys):
     """``[network] router = true`` in a scenario file is ``--router``; flags that a routed run
     replaces are refused in one line naming the option."""
-    import sim.launcher
-    from sim.scenario import ScenarioError, load_scenario
+    import sensornet.sim.launcher
+    from sensornet.sim.scenario import ScenarioError, load_scenario
 
     text = (ROOT / "sim" / "scenarios" / "seed000.toml").read_text()
     assert "\nrouter = false" in text and load_scenario("seed000").network.router is False
@@ -320,7 +320,7 @@ def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys
         started.update(kw)
         raise Started
 
-    monkeypatch.setattr(sim.launcher, "start_run", fake_start_run)
+    monkeypatch.setattr(sensornet.sim.launcher, "start_run", fake_start_run)
     for source, sets in ((str(path), []), ("seed000", ["--set", "network.router=true"])):
         started.clear()
         with pytest.raises(Started):  # restart:router@K is a fault of a routed run only
@@ -341,13 +341,12 @@ def test_recovering_pub_sub_get_what_a_router_outage_held_back():
     import time
 
     import zenoh
-
-    from peers.transport import recovering_publisher, recovering_subscriber
+    from sensornet.peers.transport import recovering_publisher, recovering_subscriber
 
     ep = f"tcp/127.0.0.1:{free_port()}"
 
     def router():
-        proc = subprocess.Popen([sys.executable, "-m", "sim.router", "--listen", ep],
+        proc = subprocess.Popen([sys.executable, "-m", "sensornet.sim.router", "--listen", ep],
                                 cwd=ROOT, stdout=subprocess.PIPE, text=True)
         assert "router: listening" in proc.stdout.readline()
         return proc

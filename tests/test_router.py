@@ -16,10 +16,9 @@ import time
 
 import pytest
 import zenoh
-
-from peers.security import Security, make_keys, tls_endpoint
-from peers.session import free_port
-from protocol.keys import Keys
+from sensornet.peers.security import Security, make_keys, tls_endpoint
+from sensornet.peers.session import free_port
+from sensornet.protocol.keys import Keys
 
 pytestmark = pytest.mark.network
 PEERS = ("s1", "s2", "s3")

@@ -7,9 +7,8 @@ import tomllib
 
 import numpy as np
 import pytest
-
-from sim.build import birth_mixture, clutter_intensity, make_filter, sensor_params
-from sim.scenario import (
+from sensornet.sim.build import birth_mixture, clutter_intensity, make_filter, sensor_params
+from sensornet.sim.scenario import (
     Scenario,
     ScenarioError,
     builtin_scenarios,
@@ -219,7 +218,7 @@ loss = 0.3
 
 
 def test_faults_table_becomes_a_typed_plan(seed000: Scenario, tmp_path) -> None:
-    from peers.faultplan import FaultPlan, Scans
+    from sensornet.peers.faultplan import FaultPlan, Scans
 
     assert seed000.faults is None
     path = tmp_path / "faulty.toml"

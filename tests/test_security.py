@@ -14,8 +14,7 @@ import pytest
 import zenoh
 from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID
-
-from peers.security import (
+from sensornet.peers.security import (
     Security,
     SecurityError,
     acl_rules,
@@ -24,8 +23,9 @@ from peers.security import (
     make_keys,
     tls_endpoint,
 )
-from peers.session import SessionError, free_port, open_session, zenoh_config
-from protocol.keys import Keys
+from sensornet.peers.session import SessionError, free_port, open_session, zenoh_config
+from sensornet.protocol.keys import Keys
+
 from sensornet.cli import main
 
 PEERS = ("s1", "s2", "s3")
@@ -294,7 +294,7 @@ def test_secure_flags_are_refused_in_one_line(keys, tmp_path, capsys):
 @pytest.mark.network
 def test_a_scenario_security_table_runs_secure(keys, tmp_path):
     """``[security] keys = "DIR"`` (relative to the scenario file) is ``--secure DIR``."""
-    from sim.scenario import ScenarioError, load_scenario, scenario_text
+    from sensornet.sim.scenario import ScenarioError, load_scenario, scenario_text
 
     folder = tmp_path / "scn"
     folder.mkdir()

@@ -6,10 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-import sim.seed001 as seed001
-import sim.seed001_tuning as seed001_tuning
-from sim.seed001 import (
+import sensornet.sim.seed001 as seed001
+import sensornet.sim.seed001_tuning as seed001_tuning
+from sensornet.sim.seed001 import (
     GEOMETRIES,
     TUNE_FIRST_RUN,
     ExperimentConfig,
@@ -24,7 +23,7 @@ from sim.seed001 import (
     tune_omega,
     tune_once,
 )
-from tracking.particles import ParticleParams
+from sensornet.tracking.particles import ParticleParams
 
 
 def test_truth_matches_the_published_trajectory():

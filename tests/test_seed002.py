@@ -2,15 +2,14 @@
 
 import numpy as np
 import pytest
-
-from peers.extended import EtGmphdEstimator
-from peers.fusers import GciFuser, HybridFuser
-from sim.extended import make_et_filter, with_partition
-from sim.peers import consensus_options, make_parts
-from sim.scenario import ScenarioError, load_scenario
-from sim.world import generate_run, labelled_sensor_scans, sensor_rng
-from tracking.metrics import ospa
-from tracking.partition import DistancePartitioner, GridSpectralPartitioner
+from sensornet.peers.extended import EtGmphdEstimator
+from sensornet.peers.fusers import GciFuser, HybridFuser
+from sensornet.sim.extended import make_et_filter, with_partition
+from sensornet.sim.peers import consensus_options, make_parts
+from sensornet.sim.scenario import ScenarioError, load_scenario
+from sensornet.sim.world import generate_run, labelled_sensor_scans, sensor_rng
+from sensornet.tracking.metrics import ospa
+from sensornet.tracking.partition import DistancePartitioner, GridSpectralPartitioner
 
 
 def test_scenario_loads_with_extended_table():
@@ -87,7 +86,7 @@ def test_et_filter_tracks_the_seed002_targets(partition):
 
 
 def test_experiment_smoke_and_table(tmp_path, capsys):
-    from sim import seed002
+    from sensornet.sim import seed002
 
     base = load_scenario("seed002", {"scenario.num_scans": 15})
     res = seed002.run_experiment(1, clutters=(10,), first_run=3, progress=False, base=base)
@@ -104,7 +103,7 @@ def test_experiment_smoke_and_table(tmp_path, capsys):
 
 
 def test_experiment_cli_refuses_bad_flags(capsys):
-    from sim import seed002
+    from sensornet.sim import seed002
 
     assert seed002.main(["--runs", "0"]) == 2
     assert "--runs" in capsys.readouterr().err
@@ -133,8 +132,8 @@ class _Sink:
 
 
 def test_rerun_view_colours_cells_and_greys_one_point_cells():
-    from peers.observer import Observer
-    from sim.peers import make_peer
+    from sensornet.peers.observer import Observer
+    from sensornet.sim.peers import make_peer
 
     scn = load_scenario("seed002", {"extended.partition": "grid-spectral"})
     core = make_peer(scn, "s1")

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from sim import seed003
-from tracking.imm import POS, VEL
+from sensornet.sim import seed003
+from sensornet.tracking.imm import POS, VEL
 
 
 def test_truth_is_the_coordinated_90_degree_turn():
@@ -44,7 +43,7 @@ def test_clutter_density_puts_in_gate_returns_in_the_steady_state_gate():
     S = seed003.cv_steady_state_S(cfg, 50.0)
     assert s1.clutter_density * s1.gate_volume(S) == pytest.approx(2.0)
     # the DARE solution is the fixed point of the Riccati recursion
-    from tracking.imm import constant_velocity
+    from sensornet.tracking.imm import constant_velocity
     m = constant_velocity(1.0, cfg["filters"]["sigma_cv"])
     i = [0, 1, 3, 4]
     F, Q, H = m.F[np.ix_(i, i)], m.Q[np.ix_(i, i)], seed003.H6[:, i]
@@ -97,7 +96,7 @@ def test_unknown_setting_is_refused_in_one_line(capsys):
 
 def test_network_loader_builds_pda_peers_from_the_seed_file():
     """seed003 is a plain scenario file of the one model: its peers are PDA peers."""
-    from sim.scenario import load_scenario
+    from sensornet.sim.scenario import load_scenario
 
     scenario = load_scenario("seed003")
     assert scenario.network.filter == "pda"

@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.contracts import FusionInput
-from peers.pda_parts import CiFuser, PdaEstimator
-from protocol.codec import decode, encode
-from protocol.messages import Estimate, Returns
-from sim import seed003, seed003_net
-from tracking.imm import POS
-from tracking.mixture import GaussianMixture
+from sensornet.peers.contracts import FusionInput
+from sensornet.peers.pda_parts import CiFuser, PdaEstimator
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.messages import Estimate, Returns
+from sensornet.sim import seed003, seed003_net
+from sensornet.tracking.imm import POS
+from sensornet.tracking.mixture import GaussianMixture
 
 RUN = 1
 
@@ -203,7 +202,7 @@ def test_cli_run_seed003_refuses_bad_settings_in_one_line(capsys):
 
 def _received(scn) -> dict[str, int]:
     """Per peer, the neighbour inputs its fusions had over the run (the twin)."""
-    from sim.twin import run_twin
+    from sensornet.sim.twin import run_twin
 
     res = run_twin(scn, RUN)
     return {n: res.summary(n)["stats"]["fused_inputs"] for n in res.peers}
@@ -213,8 +212,9 @@ def test_cli_run_seed003_takes_link_faults_from_set_and_from_the_file(tmp_path, 
     """Link faults as for the other scenarios: ``--set faults....`` or the file's [faults]
     table (``run path/seed003.toml``). A lost link s2 -> s1 leaves s1 without s2's returns at
     every scan and s2 with all of s1's; the twin counts the losses."""
+    from sensornet.sim.scenario import load_scenario
+
     from sensornet.cli import main
-    from sim.scenario import load_scenario
 
     lost = '[{from = "s2", to = "s1", loss = 1.0}]'
     assert main(["run", "seed003", "--sim", "--set", "scenario.num_scans=12",

@@ -7,10 +7,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from peers.flooding import flood
-from sim import seed004
-from tracking.mixture import GaussianMixture
+from sensornet.peers.flooding import flood
+from sensornet.sim import seed004
+from sensornet.tracking.mixture import GaussianMixture
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +104,7 @@ def test_gm_exchange_closed_form_and_the_reference_ratio(scn):
 
 
 def test_flooding_through_the_fault_layer(scn):
-    from peers.faultplan import Constant, FaultPlan, LinkFaults
+    from sensornet.peers.faultplan import Constant, FaultPlan, LinkFaults
 
     clean = seed004.flooding_under_faults(scn, FaultPlan(interval=1.0), scans=2)
     assert clean["complete"] == 1.0 and clean["late"] == 0.0

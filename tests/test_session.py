@@ -11,8 +11,7 @@ import threading
 
 import pytest
 import zenoh
-
-from peers.session import (
+from sensornet.peers.session import (
     ACCEPT_PENDING,
     ACCEPT_TIMEOUT_MS,
     DEFAULT_LEASE_MS,
@@ -103,7 +102,7 @@ def test_a_flood_of_large_messages_costs_a_receiver_little_memory():
 def test_free_port_never_hands_out_a_port_twice(monkeypatch):
     """The ports of a run are chosen before any is bound: two draws must differ even when the
     generator repeats itself (a loaded pass once gave the world and s1 the same port)."""
-    import peers.session as session
+    import sensornet.peers.session as session
 
     draws = iter([23456, 23456, 23456, 24567])
     monkeypatch.setattr(session._RANDOM, "randrange", lambda lo, hi: next(draws))
@@ -116,7 +115,7 @@ def test_free_port_never_hands_out_a_port_twice(monkeypatch):
 def test_free_ports_come_from_below_the_ephemeral_range():
     """Outgoing connections take their local ports from the ephemeral range: a listening port
     chosen there could be taken before the listener binds it (a run failed so, loaded)."""
-    from peers.session import _LISTEN_LOW, _ephemeral_low
+    from sensornet.peers.session import _LISTEN_LOW, _ephemeral_low
 
     low = _ephemeral_low()
     ports = {free_port() for _ in range(20)}

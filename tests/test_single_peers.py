@@ -10,11 +10,10 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.peers import make_peer
-from sim.scenario import ScenarioError, load_scenario, parse_overrides
-from sim.twin import run_twin
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import ScenarioError, load_scenario, parse_overrides
+from sensornet.sim.twin import run_twin
 
 
 @pytest.mark.parametrize("rule", ["ratio", "gci"])

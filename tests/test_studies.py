@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sensornet.sim import studies
+from sensornet.sim.campaign import load_campaign, results_table, run_campaign
+from sensornet.sim.report import write_report
+from sensornet.sim.studies.base import Cell, Outcome, Request, Study, run_study
+from sensornet.sim.studies.pool import iter_pool, map_runs
 
 from sensornet.cli import main
-from sim import studies
-from sim.campaign import load_campaign, results_table, run_campaign
-from sim.report import write_report
-from sim.studies.base import Cell, Outcome, Request, Study, run_study
-from sim.studies.pool import iter_pool, map_runs
 
 NAME = "toy-study"
 
@@ -156,7 +156,7 @@ kind = "{NAME}"
 
 
 def test_an_unknown_runner_or_figure_kind_names_the_studies(toy, tmp_path):
-    from sim.campaign import CampaignError
+    from sensornet.sim.campaign import CampaignError
 
     path = tmp_path / "bad.toml"
     path.write_text('[campaign]\nrunner = "nope"\n')

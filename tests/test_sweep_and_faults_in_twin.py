@@ -5,11 +5,10 @@ from __future__ import annotations
 import csv
 
 import pytest
-
-from sim.build import fault_injector
-from sim.scenario import ScenarioError, load_scenario
-from sim.sweep import summarise, sweep, write_outputs
-from sim.twin import run_twin
+from sensornet.sim.build import fault_injector
+from sensornet.sim.scenario import ScenarioError, load_scenario
+from sensornet.sim.sweep import summarise, sweep, write_outputs
+from sensornet.sim.twin import run_twin
 
 BASE = {"birth.model": "truth", "scenario.num_scans": 30}
 

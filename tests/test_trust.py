@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from peers.trust import Trust, TrustConfig
-from tracking.divergence import cs_divergence, log_overlaps
-from tracking.mixture import GaussianMixture
+from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.tracking.divergence import cs_divergence, log_overlaps
+from sensornet.tracking.mixture import GaussianMixture
 
 P4 = np.diag([100.0, 25.0, 100.0, 25.0])
 
@@ -191,9 +190,9 @@ def test_disabled_or_warming_up_changes_nothing():
 
 
 def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
-    from sim.launcher import trust_note
-    from sim.lying import run_with_liar
-    from sim.scenario import load_scenario
+    from sensornet.sim.launcher import trust_note
+    from sensornet.sim.lying import run_with_liar
+    from sensornet.sim.scenario import load_scenario
 
     # plain GCI: a confident wrong estimate erases every target the honest peers fuse, unless
     # the liar is left out
@@ -242,9 +241,9 @@ def test_majority_spread_is_not_held_against_one_neighbour():
 
 
 def test_only_product_rules_drop_their_suspects():
-    from peers.contracts import FuserHooks
-    from peers.fusers import AaFuser, GciFuser, HybridFuser
-    from tracking.reduction import Reducer
+    from sensornet.peers.contracts import FuserHooks
+    from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser
+    from sensornet.tracking.reduction import Reducer
 
     r = Reducer()
     assert FuserHooks.of(GciFuser(r)).product

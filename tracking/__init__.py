@@ -1,5 +1,5 @@
 """Pure estimation core: Gaussian mixtures, GM-PHD, fusion, NALE, metrics. No I/O."""
 
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 __all__ = ["GaussianMixture"]

@@ -14,9 +14,8 @@ compares *where* the targets are; how many is compared apart (the masses).
 from __future__ import annotations
 
 import numpy as np
-
-from tracking.gaussian import inv_det_spd, log_gaussian
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.gaussian import inv_det_spd, log_gaussian
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:

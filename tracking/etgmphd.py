@@ -35,13 +35,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import logsumexp
-
-from tracking.gaussian import inv_det_2x2, quad_form, symmetrise
-from tracking.gmphd import DEFAULT_EXTRACTION, extract, predict
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity
-from tracking.partition import ScanTooLarge
-from tracking.reduction import Reducer
+from sensornet.tracking.gaussian import inv_det_2x2, quad_form, symmetrise
+from sensornet.tracking.gmphd import DEFAULT_EXTRACTION, extract, predict
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity
+from sensornet.tracking.partition import ScanTooLarge
+from sensornet.tracking.reduction import Reducer
 
 POSITION = (0, 2)
 """State columns the linear sensor measures."""

@@ -25,8 +25,7 @@ import threading
 from collections.abc import Callable, Sequence
 
 import numpy as np
-
-from tracking.gaussian import (
+from sensornet.tracking.gaussian import (
     LOG_2PI,
     SYM4_INDEX,
     SYM4_WORK,
@@ -34,8 +33,8 @@ from tracking.gaussian import (
     sym4_inverse_into,
     symmetrise,
 )
-from tracking.gci_product import CARDINALITY_RULES, MIN_OVERLAP, gci_product
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.gci_product import CARDINALITY_RULES, MIN_OVERLAP, gci_product
+from sensornet.tracking.mixture import GaussianMixture
 
 Reduce = Callable[[GaussianMixture], GaussianMixture]
 

@@ -23,12 +23,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-
-from tracking.fusion import check_weights
-from tracking.fusion_rules import HYBRID_GATE, hybrid_fuse
-from tracking.gaussian import c_einsum, inv_spd, symmetrise
-from tracking.mixture import GaussianMixture
-from tracking.reduction import (
+from sensornet.tracking.fusion import check_weights
+from sensornet.tracking.fusion_rules import HYBRID_GATE, hybrid_fuse
+from sensornet.tracking.gaussian import c_einsum, inv_spd, symmetrise
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import (
     _ALL_PAIRS_UP_TO,
     Reducer,
     _greedy_groups,

@@ -11,15 +11,14 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-
-from tracking.fusion import Reduce, check_weights, gci_combine, gci_pair
-from tracking.gaussian import (
+from sensornet.tracking.fusion import Reduce, check_weights, gci_combine, gci_pair
+from sensornet.tracking.gaussian import (
     c_einsum,
     inv_spd,
     symmetrise,
 )
-from tracking.mixture import GaussianMixture
-from tracking.reduction import sweep_labels
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import sweep_labels
 
 
 def aa_fuse(

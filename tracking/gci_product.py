@@ -10,13 +10,12 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-
-from tracking.gaussian import (
+from sensornet.tracking.gaussian import (
     inv_det_spd,
     inv_spd,
     quad_form,
 )
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 CARDINALITY_RULES = ("emd", "separate")
 MIN_OVERLAP = 1e-12

@@ -12,12 +12,11 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-
-from tracking.gaussian import c_einsum as _c_einsum
-from tracking.gaussian import inv_det_spd
-from tracking.mixture import GaussianMixture
-from tracking.models import ConstantVelocity, MeasurementModel
-from tracking.reduction import Reducer
+from sensornet.tracking.gaussian import c_einsum as _c_einsum
+from sensornet.tracking.gaussian import inv_det_spd
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, MeasurementModel
+from sensornet.tracking.reduction import Reducer
 
 SensorModel = MeasurementModel
 """Any sensor behind :class:`tracking.models.MeasurementModel` (linear, range-bearing)."""

@@ -26,10 +26,9 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-
-from tracking.gaussian import LOG_2PI, c_einsum, inv_det_2x2
-from tracking.mixture import GaussianMixture
-from tracking.models import RangeBearing
+from sensornet.tracking.gaussian import LOG_2PI, c_einsum, inv_det_2x2
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import RangeBearing
 
 POS = (0, 3)
 """Indices of (px, py) in the 6-D state."""

@@ -11,8 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from tracking.gaussian import gaussian_pdf_points
+from sensornet.tracking.gaussian import gaussian_pdf_points
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.mixture import GaussianMixture
 
 POLICIES = ("nale", "drop-late", "as-is")
 Predictor = Callable[[GaussianMixture, int], GaussianMixture]

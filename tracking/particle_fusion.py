@@ -10,13 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from tracking.fusion import gci_fuse
-from tracking.fusion_rules import optimal_omega
-from tracking.gaussian import symmetrise
-from tracking.imm import POS
-from tracking.mixture import GaussianMixture
-from tracking.particle_ops import weighted_moments
+from sensornet.tracking.fusion import gci_fuse
+from sensornet.tracking.fusion_rules import optimal_omega
+from sensornet.tracking.gaussian import symmetrise
+from sensornet.tracking.imm import POS
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.particle_ops import weighted_moments
 
 # -- mixture summaries of a particle posterior --------------------------------------------------
 

@@ -7,8 +7,7 @@ summaries (:mod:`tracking.particle_fusion`). Array code: no Python loop over par
 from __future__ import annotations
 
 import numpy as np
-
-from tracking.gaussian import symmetrise
+from sensornet.tracking.gaussian import symmetrise
 
 
 def systematic_counts(weights: np.ndarray, n: np.ndarray | int, u: np.ndarray) -> np.ndarray:

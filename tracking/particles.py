@@ -28,11 +28,10 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-
-from tracking.gaussian import symmetrise
-from tracking.imm import STATE_DIM, IMMParams, ModelConditioned, mixing, model_posterior
-from tracking.mixture import GaussianMixture
-from tracking.particle_fusion import (  # re-exported: tracking.particles.X keeps working
+from sensornet.tracking.gaussian import symmetrise
+from sensornet.tracking.imm import STATE_DIM, IMMParams, ModelConditioned, mixing, model_posterior
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.particle_fusion import (  # re-exported: tracking.particles.X keeps working
     GaussianRatio,
     RatioConfig,
     collapse_to_models,
@@ -42,7 +41,7 @@ from tracking.particle_fusion import (  # re-exported: tracking.particles.X keep
     marginal,
     moment_summary,
 )
-from tracking.particle_ops import (
+from sensornet.tracking.particle_ops import (
     counts_to_indices,
     interaction_indices,
     residual_counts,

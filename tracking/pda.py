@@ -42,8 +42,7 @@ from typing import Protocol
 
 import numpy as np
 from scipy.stats import chi2
-
-from tracking.imm import mixing
+from sensornet.tracking.imm import mixing
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,9 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
-
-from tracking.gaussian import _generic_inverse, inv_det_spd, inv_spd, log_gaussian
-from tracking.gaussian import c_einsum as _c_einsum
-from tracking.mixture import GaussianMixture
+from sensornet.tracking.gaussian import _generic_inverse, inv_det_spd, inv_spd, log_gaussian
+from sensornet.tracking.gaussian import c_einsum as _c_einsum
+from sensornet.tracking.mixture import GaussianMixture
 
 try:  # the ufunc np.linalg.inv calls (NumPy 1.x and 2.x)
     from numpy.linalg import _umath_linalg as _lapack

@@ -15,15 +15,15 @@ import importlib
 import os
 import sys
 
-from peers.errors import SessionError
 from sensornet.cli.common import _CREATED, UserError, _remove_empty_run_folders
 from sensornet.cli.parser import COMMANDS, build_parser
+from sensornet.peers.errors import SessionError
 
 __all__ = ["COMMANDS", "UserError", "build_parser", "command", "main"]
 
 USER_ERRORS: tuple[tuple[str, str], ...] = (
-    ("sim.scenario.model", "ScenarioError"),
-    ("tracking.idpc", "MissingBaseline"),
+    ("sensornet.sim.scenario.model", "ScenarioError"),
+    ("sensornet.tracking.idpc", "MissingBaseline"),
 )
 """Errors of modules a command may load that are the user's to fix (one line, exit code 2),
 besides :class:`UserError` and :class:`SessionError`. Named, not imported: an error of a

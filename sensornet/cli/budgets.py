@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 
-from protocol.codec import DEFAULT_LIMITS
 from sensornet.cli.common import (
     DEFAULT_MAX_PEERS,
     DEFAULT_MAX_POINTS,
@@ -13,6 +12,7 @@ from sensornet.cli.common import (
     UserError,
     default_memory_gb,
 )
+from sensornet.protocol.codec import DEFAULT_LIMITS
 
 # --------------------------------------------------------------------------------------------
 # Budgets: a scenario over one refuses to start, naming the limit and the flag that lifts it

@@ -16,9 +16,9 @@ import sys
 import time
 from pathlib import Path
 
-from protocol.keys import ROUTER_PREFIX, check_name, check_run_id
-from sim.bounds import MAX_ROUNDS, MAX_RUNS
-from sim.studies import DEFAULT_SCENARIO  # noqa: F401  (the parser's and demo's)
+from sensornet.protocol.keys import ROUTER_PREFIX, check_name, check_run_id
+from sensornet.sim.bounds import MAX_ROUNDS, MAX_RUNS
+from sensornet.sim.studies import DEFAULT_SCENARIO  # noqa: F401  (the parser's and demo's)
 
 
 class UserError(Exception):

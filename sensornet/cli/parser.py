@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 
-from peers.session import PEER_WAIT
 from sensornet.cli.common import (
     DEFAULT_MAX_PEERS,
     DEFAULT_MAX_POINTS,
@@ -31,7 +30,8 @@ from sensornet.cli.common import (
     _viewer,
     default_memory_gb,
 )
-from sim.bounds import MAX_ROUNDS
+from sensornet.peers.session import PEER_WAIT
+from sensornet.sim.bounds import MAX_ROUNDS
 
 COMMANDS: dict[str, str] = {
     "experiment": "experiment:cmd_experiment",

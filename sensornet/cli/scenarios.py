@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sim.fusion_advice import fusion_warnings
-from sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.fusion_advice import fusion_warnings
+from sensornet.sim.scenario import load_scenario, parse_overrides
 
 
 def load(args: argparse.Namespace, source: str):

@@ -6,7 +6,8 @@ import argparse
 import os
 from pathlib import Path
 
-from peers.security import (
+from sensornet.cli.common import UserError
+from sensornet.peers.security import (
     SIGN_KEY,
     WORLD,
     Security,
@@ -15,7 +16,6 @@ from peers.security import (
     keys_network,
     make_keys,
 )
-from sensornet.cli.common import UserError
 
 
 def member_security(args: argparse.Namespace, member: str, scn):

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim import plugins
+from sensornet.sim import plugins
 
 Scenario = Any
 """A :class:`sim.scenario.Scenario` (the registry imports nothing of the project, so the loader
@@ -28,12 +28,12 @@ Parts = tuple[Any, Any]
 :class:`peers.contracts.Fuser`."""
 
 KINDS: dict[str, str] = {
-    "gmphd": "sim.kinds.gmphd:GMPHD",
-    "et-gmphd": "sim.kinds.extended:ET_GMPHD",
-    "imm-pf": "sim.kinds.imm:IMM_PF",
-    "imm-ekf": "sim.kinds.imm:IMM_EKF",
-    "flooding": "sim.kinds.flooding:FLOODING",
-    "pda": "sim.kinds.pda:PDA",
+    "gmphd": "sensornet.sim.kinds.gmphd:GMPHD",
+    "et-gmphd": "sensornet.sim.kinds.extended:ET_GMPHD",
+    "imm-pf": "sensornet.sim.kinds.imm:IMM_PF",
+    "imm-ekf": "sensornet.sim.kinds.imm:IMM_EKF",
+    "flooding": "sensornet.sim.kinds.flooding:FLOODING",
+    "pda": "sensornet.sim.kinds.pda:PDA",
 }
 """Kind name (``network.filter``) -> ``"module:attribute"`` of its :class:`PeerKind`. The
 module is imported when the kind is first used, so the loader can list the names without

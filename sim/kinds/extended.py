@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from peers.extended import EtGmphdEstimator
-from sim.extended import make_et_filter
-from sim.kinds import PeerKind
-from sim.kinds.gmphd import MIXTURE_RULES, mixture_fuser
-from sim.scenario import Scenario
+from sensornet.peers.extended import EtGmphdEstimator
+from sensornet.sim.extended import make_et_filter
+from sensornet.sim.kinds import PeerKind
+from sensornet.sim.kinds.gmphd import MIXTURE_RULES, mixture_fuser
+from sensornet.sim.scenario import Scenario
 
 
 def build(scn: Scenario, name: str, run: int = 0):

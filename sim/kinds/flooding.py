@@ -7,19 +7,18 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-
-from peers.flood_parts import ScanBound, poisson_bound
-from peers.flooding import (
+from sensornet.peers.flood_parts import ScanBound, poisson_bound
+from sensornet.peers.flooding import (
     FloodEstimator,
     FloodFuser,
     IcFloodEstimator,
     IcFloodFuser,
     corrector_order,
 )
-from sim.build import adjacency, make_filter, measurement_box, sensor_model
-from sim.kinds import PeerKind
-from sim.scenario import FUSION_RULES, Scenario
-from tracking.idpc import ClusterParams
+from sensornet.sim.build import adjacency, make_filter, measurement_box, sensor_model
+from sensornet.sim.kinds import PeerKind
+from sensornet.sim.scenario import FUSION_RULES, Scenario
+from sensornet.tracking.idpc import ClusterParams
 
 MARGIN_SIGMAS = 6.0
 """A target's return may fall this many noise standard deviations outside the sensor's field."""

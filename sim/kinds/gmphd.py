@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from peers.estimators import GmphdEstimator
-from peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
-from sim.build import make_filter
-from sim.kinds import PeerKind
-from sim.scenario import Scenario
+from sensornet.peers.estimators import GmphdEstimator
+from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
+from sensornet.sim.build import make_filter
+from sensornet.sim.kinds import PeerKind
+from sensornet.sim.scenario import Scenario
 
 MIXTURE_RULES = ("hybrid", "gci", "aa", "none")
 """The rules that combine multi-target Gaussian mixtures (:mod:`peers.fusers`)."""

@@ -6,13 +6,12 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-
-from peers.estimators import ImmEstimator, SingleTargetConfig
-from peers.fusers import ImmFuser, NoFuser
-from sim.build import sensor_model
-from sim.kinds import PeerKind, View
-from sim.scenario import Scenario
-from sim.world import initial_state
+from sensornet.peers.estimators import ImmEstimator, SingleTargetConfig
+from sensornet.peers.fusers import ImmFuser, NoFuser
+from sensornet.sim.build import sensor_model
+from sensornet.sim.kinds import PeerKind, View
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world import initial_state
 
 
 def _builder(filter_name: str):

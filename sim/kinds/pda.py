@@ -4,9 +4,9 @@ estimates (covariance intersection) by ``pda.mode``."""
 
 from __future__ import annotations
 
-from sim import seed003_net
-from sim.kinds import PeerKind, View
-from sim.scenario import FUSION_RULES, Scenario
+from sensornet.sim import seed003_net
+from sensornet.sim.kinds import PeerKind, View
+from sensornet.sim.scenario import FUSION_RULES, Scenario
 
 
 def build(scn: Scenario, name: str, run: int = 0):

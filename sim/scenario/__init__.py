@@ -16,9 +16,14 @@ comparable and cheap to pickle to worker processes.
 
 from __future__ import annotations
 
-from sim.scenario.faults import parse_faults
-from sim.scenario.loader import builtin_scenarios, load_document, load_scenario, scenario_text
-from sim.scenario.model import (
+from sensornet.sim.scenario.faults import parse_faults
+from sensornet.sim.scenario.loader import (
+    builtin_scenarios,
+    load_document,
+    load_scenario,
+    scenario_text,
+)
+from sensornet.sim.scenario.model import (
     BIRTH_MODELS,
     CARDINALITY_RULES,
     DELAY_KINDS,
@@ -58,7 +63,7 @@ from sim.scenario.model import (
     TargetSpec,
     with_birth_model,
 )
-from sim.scenario.overrides import apply_overrides, parse_overrides
+from sensornet.sim.scenario.overrides import apply_overrides, parse_overrides
 
 __all__ = [
     "BIRTH_MODELS",

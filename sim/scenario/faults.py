@@ -6,7 +6,7 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from peers.faultplan import (
+from sensornet.peers.faultplan import (
     Constant,
     Delay,
     Exponential,
@@ -19,8 +19,8 @@ from peers.faultplan import (
     ShortDelay,
     Uniform,
 )
-from sim.scenario.model import DELAY_KINDS, FAULT_KEYS, ScenarioError
-from sim.scenario.tables import Context, Table, brief
+from sensornet.sim.scenario.model import DELAY_KINDS, FAULT_KEYS, ScenarioError
+from sensornet.sim.scenario.tables import Context, Table, brief
 
 # --------------------------------------------------------------------------------------------
 # [faults]: the link-fault plan

@@ -8,11 +8,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from sim.formats import adapt_document
-from sim.scenario.model import Scenario, ScenarioError
-from sim.scenario.overrides import apply_overrides
-from sim.scenario.parse import parse_document
-from sim.scenario.tables import Context
+from sensornet.sim.formats import adapt_document
+from sensornet.sim.scenario.model import Scenario, ScenarioError
+from sensornet.sim.scenario.overrides import apply_overrides
+from sensornet.sim.scenario.parse import parse_document
+from sensornet.sim.scenario.tables import Context
 
 # --------------------------------------------------------------------------------------------
 # Built-in scenarios
@@ -20,7 +20,7 @@ from sim.scenario.tables import Context
 
 
 def _builtin_dir():
-    return resources.files("sim").joinpath("scenarios")
+    return resources.files("sensornet.sim").joinpath("scenarios")
 
 
 def builtin_scenarios() -> list[str]:

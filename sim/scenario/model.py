@@ -8,12 +8,12 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from peers.faultplan import (
+from sensornet.peers.faultplan import (
     FaultPlan,
 )
-from sim.bounds import MAX_COORDINATE, MAX_ROUNDS, MAX_RUNS, MAX_SENSORS  # noqa: F401 (re-exported)
-from sim.kinds import names as kind_names
-from sim.truths import names as truth_names
+from sensornet.sim.bounds import MAX_COORDINATE, MAX_ROUNDS, MAX_RUNS, MAX_SENSORS  # noqa: F401 (re-exported)
+from sensornet.sim.kinds import names as kind_names
+from sensornet.sim.truths import names as truth_names
 
 STATE_DIM = 4
 """State ``[px, vx, py, vy]``."""

@@ -8,7 +8,7 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from sim.scenario.model import ScenarioError
+from sensornet.sim.scenario.model import ScenarioError
 
 
 def parse_overrides(items: Iterable[str]) -> dict[str, Any]:

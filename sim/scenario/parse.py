@@ -9,12 +9,11 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-
-from protocol.keys import check_name
-from sim.kinds import kind as peer_kind
-from sim.kinds import names as kind_names
-from sim.scenario.faults import _faults
-from sim.scenario.model import (
+from sensornet.protocol.keys import check_name
+from sensornet.sim.kinds import kind as peer_kind
+from sensornet.sim.kinds import names as kind_names
+from sensornet.sim.scenario.faults import _faults
+from sensornet.sim.scenario.model import (
     BIRTH_MODELS,
     CARDINALITY_RULES,
     EXTRACTION_RULES,
@@ -50,8 +49,8 @@ from sim.scenario.model import (
     TargetSpec,
     listing,
 )
-from sim.scenario.tables import Context, Table, brief
-from tracking.reduction import MERGE_RULES
+from sensornet.sim.scenario.tables import Context, Table, brief
+from sensornet.tracking.reduction import MERGE_RULES
 
 
 def _diag(values: Iterable[float]) -> Matrix:
@@ -334,7 +333,7 @@ def _network(t: Table, sensor_names: list[str]) -> NetworkSpec:
 def _extended(t: Table) -> ExtendedSpec:
     # heavy dependency: scipy.stats (tracking.partition pulls in scipy.stats and scipy.ndimage,
     # about 1 s of start-up on 2 busy cores, which only extended-target scenarios need)
-    from tracking.partition import DistancePartitioner, GridSpectralPartitioner
+    from sensornet.tracking.partition import DistancePartitioner, GridSpectralPartitioner
 
     spec = ExtendedSpec(
         rate=t.number("rate", 10.0, positive=True),

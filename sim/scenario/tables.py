@@ -11,8 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from sim.scenario.model import MAX_COORDINATE, Matrix, ScenarioError, listing
+from sensornet.sim.scenario.model import MAX_COORDINATE, Matrix, ScenarioError, listing
 
 # --------------------------------------------------------------------------------------------
 # Validation

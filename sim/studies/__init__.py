@@ -12,19 +12,19 @@ from __future__ import annotations
 
 from typing import Any
 
-from sim import plugins
+from sensornet.sim import plugins
 
 STUDIES: dict[str, str] = {
-    "seed004": "sim.studies.seed004:STUDY",
-    "seed003": "sim.studies.seed003:STUDY",
-    "seed003-peers": "sim.studies.seed003_peers:STUDY",
-    "seed002": "sim.studies.seed002:STUDY",
-    "seed001": "sim.studies.seed001:STUDY",
-    "twin": "sim.studies.network:TWIN",
-    "real": "sim.studies.network:REAL",
-    "fusion-quality": "sim.studies.fusion:STUDY",
-    "lying": "sim.lying:STUDY",
-    "experiment": "sim.studies.seed000:STUDY",
+    "seed004": "sensornet.sim.studies.seed004:STUDY",
+    "seed003": "sensornet.sim.studies.seed003:STUDY",
+    "seed003-peers": "sensornet.sim.studies.seed003_peers:STUDY",
+    "seed002": "sensornet.sim.studies.seed002:STUDY",
+    "seed001": "sensornet.sim.studies.seed001:STUDY",
+    "twin": "sensornet.sim.studies.network:TWIN",
+    "real": "sensornet.sim.studies.network:REAL",
+    "fusion-quality": "sensornet.sim.studies.fusion:STUDY",
+    "lying": "sensornet.sim.lying:STUDY",
+    "experiment": "sensornet.sim.studies.seed000:STUDY",
 }
 """Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
 read a scenario (the last, ``experiment``, reads any). Modules are imported on first use."""

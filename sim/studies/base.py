@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sim.studies import pool
+from sensornet.sim.studies import pool
 
 Setup = Any
 """What a study's ``load`` returns: a resolved scenario or configuration (picklable: it goes to

@@ -14,9 +14,9 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from sim.scenario import ScenarioError
-from sim.studies.base import Outcome, Request, Study, experiment
-from tracking.idpc import MissingBaseline
+from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.studies.base import Outcome, Request, Study, experiment
+from sensornet.tracking.idpc import MissingBaseline
 
 
 def parser(name: str, doc: str | None, runs: int, jobs: bool = True,

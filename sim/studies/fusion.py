@@ -3,8 +3,8 @@ of ``kind = "fusion-quality"`` expands into twin and experiment cells."""
 
 from __future__ import annotations
 
-from sim import fusion_study as fs
-from sim.studies.base import Study
+from sensornet.sim import fusion_study as fs
+from sensornet.sim.studies.base import Study
 
 STUDY = Study(name=fs.STUDY_KIND,
               about="which fusion rule, how many rounds, on which network (a campaign)",

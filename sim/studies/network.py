@@ -10,13 +10,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from sim.launcher import read_summaries, start_run, wait_run
-from sim.runners import scenario_source
-from sim.scenario import Scenario, load_scenario
-from sim.studies.base import Cell, Outcome, Request, Study
-from sim.sweep import _toml, cost_columns
-from sim.twin import run_twin
+from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.runners import scenario_source
+from sensornet.sim.scenario import Scenario, load_scenario
+from sensornet.sim.studies.base import Cell, Outcome, Request, Study
+from sensornet.sim.sweep import _toml, cost_columns
+from sensornet.sim.twin import run_twin
 
 
 def load(req: Request) -> list[Scenario]:
@@ -101,9 +100,9 @@ def table(o: Outcome) -> str:
 TWIN = Study(
     name="twin", about="the peers on the discrete-event twin (fused and local OSPA, costs)",
     load=load, run_once=twin_once, summarise=summarise, table=table, scenario=True,
-    row=twin_row, modules=("sim.twin",))
+    row=twin_row, modules=("sensornet.sim.twin",))
 
 REAL = Study(
     name="real", about="the peers as processes over Zenoh, one run at a time",
     load=load, run_once=real_once, summarise=summarise, table=table, scenario=True,
-    parallel=False, row=real_row, modules=("sim.launcher", "sim.sweep"))
+    parallel=False, row=real_row, modules=("sensornet.sim.launcher", "sensornet.sim.sweep"))

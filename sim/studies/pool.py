@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, TextIO
 
-from sim.progress import Progress
+from sensornet.sim.progress import Progress
 
 
 def iter_pool(fn: Callable[..., Any], calls: Sequence[tuple], jobs: int = 1,

@@ -12,12 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from sim import experiment as ex
-from sim.report_plots import band, plt_module, series
-from sim.report_plots import methods as methods_of
-from sim.scenario import Scenario, load_scenario, with_birth_model
-from sim.studies.base import Cell, Outcome, Request, Study
+from sensornet.sim import experiment as ex
+from sensornet.sim.report_plots import band, plt_module, series
+from sensornet.sim.report_plots import methods as methods_of
+from sensornet.sim.scenario import Scenario, load_scenario, with_birth_model
+from sensornet.sim.studies.base import Cell, Outcome, Request, Study
 
 
 def load(req: Request) -> list[Scenario]:
@@ -141,4 +140,4 @@ STUDY = Study(
     about="local vs fused vs centralized GM-PHD, offline Monte Carlo (seed 000 §4)",
     load=load, run_once=ex.run_once, summarise=ex.collect, table=table, figures=figures,
     claims=lambda source, overrides: True, label=label, scenario=True,
-    row=row, modules=("sim.experiment",), report=report, report_kind="seed000")
+    row=row, modules=("sensornet.sim.experiment",), report=report, report_kind="seed000")

@@ -19,15 +19,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from peers.estimators import SingleTargetConfig
-from sim import seed001 as s1
-from sim.report_plots import methods as methods_of
-from sim.report_plots import plt_module
-from sim.scenario import ScenarioError
-from sim.seed001 import PAPER_TABLE1
-from sim.studies import command
-from sim.studies.base import Cell, Outcome, Request, Study
+from sensornet.peers.estimators import SingleTargetConfig
+from sensornet.sim import seed001 as s1
+from sensornet.sim.report_plots import methods as methods_of
+from sensornet.sim.report_plots import plt_module
+from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.seed001 import PAPER_TABLE1
+from sensornet.sim.studies import command
+from sensornet.sim.studies.base import Cell, Outcome, Request, Study
 
 KEYS = ("geometry", "seed", "particles", "jitter", "jitter_kind", "ratio_space", "clip", "omega",
         "filters", "loss_threshold", "loss_after")
@@ -244,4 +243,4 @@ STUDY = Study(
     load=load, run_once=run_once, summarise=summarise, table=table,
     label=lambda s: f"runs (seed001, geometry {s[0].geometry})",
     row=row, cell_setup=setup, setup_hash=setup_hash, fixed_scenario="seed001",
-    modules=("sim.seed001",), report=report, command=main)
+    modules=("sensornet.sim.seed001",), report=report, command=main)

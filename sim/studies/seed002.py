@@ -12,10 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sim import seed002 as s2
-from sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides
-from sim.studies import command
-from sim.studies.base import Outcome, Request, Study
+from sensornet.sim import seed002 as s2
+from sensornet.sim.scenario import Scenario, ScenarioError, load_scenario, parse_overrides
+from sensornet.sim.studies import command
+from sensornet.sim.studies.base import Outcome, Request, Study
 
 MAX_CLUTTER = 10_000
 """Largest clutter rate (mean points per scan) a request may ask for."""

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sim import seed003 as s3
-from sim.scenario import ScenarioError, parse_overrides
-from sim.studies import command
-from sim.studies.base import Outcome, Request, Study
+from sensornet.sim import seed003 as s3
+from sensornet.sim.scenario import ScenarioError, parse_overrides
+from sensornet.sim.studies import command
+from sensornet.sim.studies.base import Outcome, Request, Study
 
 
 @dataclass(frozen=True)

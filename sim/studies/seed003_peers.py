@@ -9,10 +9,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sim import seed003, seed003_peers
-from sim.scenario import ScenarioError, parse_overrides
-from sim.studies import command
-from sim.studies.base import Outcome, Request, Study
+from sensornet.sim import seed003, seed003_peers
+from sensornet.sim.scenario import ScenarioError, parse_overrides
+from sensornet.sim.studies import command
+from sensornet.sim.studies.base import Outcome, Request, Study
 
 
 @dataclass(frozen=True)

@@ -10,12 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from peers.faultplan import FaultPlan, LinkFaults, Uniform
-from sim import seed004_output as out
-from sim import seed004_scenario as s4
-from sim.scenario import ScenarioError, parse_overrides
-from sim.studies import command
-from sim.studies.base import Outcome, Request, Study
+from sensornet.peers.faultplan import FaultPlan, LinkFaults, Uniform
+from sensornet.sim import seed004_output as out
+from sensornet.sim import seed004_scenario as s4
+from sensornet.sim.scenario import ScenarioError, parse_overrides
+from sensornet.sim.studies import command
+from sensornet.sim.studies.base import Outcome, Request, Study
 
 
 @dataclass(frozen=True)
@@ -45,13 +45,13 @@ def load(req: Request) -> list[Setup]:
 def run_once(s: Setup, run: int) -> dict[str, dict[str, float]]:
     # heavy optional dependency: sklearn (sim.seed004 imports it for FTC's DBSCAN, 1-3 s: not
     # for every 'experiment' that asks this study whether it reads a scenario)
-    from sim import seed004
+    from sensornet.sim import seed004
 
     return seed004.run_once(s.scn, run, s.consensus)
 
 
 def summarise(s: Setup, per_run: list) -> dict[str, dict[str, float]]:
-    from sim import seed004  # heavy optional dependency: sklearn, as above
+    from sensornet.sim import seed004  # heavy optional dependency: sklearn, as above
 
     return seed004.aggregate(per_run)
 
@@ -67,7 +67,7 @@ def figures(o: Outcome, folder: Path) -> list[Path]:
 def flood_loss_table(scn: s4.Seed004, losses: Sequence[float], first_run: int) -> str:
     """Flooding's completion under link loss (fault layer, 0-20 ms uniform delay, deadline
     half a scan), one row per loss probability."""
-    from sim import seed004  # heavy optional dependency: sklearn, as above
+    from sensornet.sim import seed004  # heavy optional dependency: sklearn, as above
 
     lines = ["| link loss | (peer, scan) complete | missing / peer / scan | duplicates | late |",
              "|---|---|---|---|---|"]

@@ -8,7 +8,7 @@ import signal
 from pathlib import Path
 
 from sensornet.cli.common import UserError
-from sim.campaign import (
+from sensornet.sim.campaign import (
     default_folder,
     format_status,
     load_campaign,

@@ -9,9 +9,9 @@ from dataclasses import replace
 from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import _run_folder
 from sensornet.cli.scenarios import warn_fusion
-from sim import studies
-from sim.scenario import parse_overrides
-from sim.studies.base import Request, experiment
+from sensornet.sim import studies
+from sensornet.sim.scenario import parse_overrides
+from sensornet.sim.studies.base import Request, experiment
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:

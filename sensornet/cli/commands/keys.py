@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from peers.security import WORLD, SecurityError, make_keys
 from sensornet.cli.common import UserError
 from sensornet.cli.scenarios import load
+from sensornet.peers.security import WORLD, SecurityError, make_keys
 
 
 def cmd_keys(args: argparse.Namespace) -> int:

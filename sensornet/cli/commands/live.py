@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from peers.security import Security, SecurityError, load_roster
-from peers.session import SessionError
-from protocol.keys import check_name
 from sensornet.cli.common import UserError
 from sensornet.live import Tap, main_echo, topics
+from sensornet.peers.security import Security, SecurityError, load_roster
+from sensornet.peers.session import SessionError
+from sensornet.protocol.keys import check_name
 
 
 def cmd_live(args: argparse.Namespace) -> int:

@@ -9,16 +9,16 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from peers.host import PeerHost
-from peers.runtime import PeerRuntime, RuntimeOptions
-from peers.transport import DuplicatePeer
 from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import UserError, _existing_file, _resolve_viewer
 from sensornet.cli.scenarios import load
 from sensornet.cli.security import member_security
-from sim.build import fault_injector
-from sim.peers import make_peer
-from sim.scenario import scenario_text
+from sensornet.peers.host import PeerHost
+from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
+from sensornet.peers.transport import DuplicatePeer
+from sensornet.sim.build import fault_injector
+from sensornet.sim.peers import make_peer
+from sensornet.sim.scenario import scenario_text
 
 
 def _prepare_peer(args: argparse.Namespace, scn) -> None:

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from sensornet.cli.common import UserError
-from sim.replay import replay
-from sim.scenario import ScenarioError
+from sensornet.sim.replay import replay
+from sensornet.sim.scenario import ScenarioError
 
 
 def cmd_replay(args: argparse.Namespace) -> int:

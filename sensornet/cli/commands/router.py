@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sim.router import serve
+from sensornet.sim.router import serve
 
 
 def cmd_router(args: argparse.Namespace) -> int:

@@ -12,8 +12,6 @@ import threading
 import time
 from pathlib import Path
 
-from peers.rerun_sink import spawn_viewer
-from peers.scan_results import merge_parts, write_part
 from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import (
     DEFAULT_SCENARIO,
@@ -24,10 +22,12 @@ from sensornet.cli.common import (
 )
 from sensornet.cli.scenarios import load, warn_fusion
 from sensornet.cli.security import run_keys
-from sim import launcher
-from sim.build import adjacency
-from sim.packing import choose
-from sim.twin import run_twin
+from sensornet.peers.rerun_sink import spawn_viewer
+from sensornet.peers.scan_results import merge_parts, write_part
+from sensornet.sim import launcher
+from sensornet.sim.build import adjacency
+from sensornet.sim.packing import choose
+from sensornet.sim.twin import run_twin
 
 
 def report_results(out: Path) -> Path | None:

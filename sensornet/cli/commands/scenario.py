@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from sensornet.cli.common import UserError
-from sim.scenario import builtin_scenarios, scenario_text
+from sensornet.sim.scenario import builtin_scenarios, scenario_text
 
 
 def cmd_scenario(args: argparse.Namespace) -> int:
