@@ -26,6 +26,17 @@ the median test between them: a neighbour is scored for disagreeing with a major
 agrees, not for a scan where everyone disagrees, and two liars telling the same lie do not
 cover for each other (each one's lie would be in the other's leave-one-out average).
 
+A biased sensor (every estimate a fixed distance off under an honest covariance) is, scan by
+scan, within an honest neighbour's scatter; its offset, though, is the same every scan
+(:attr:`TrustConfig.bias`): the neighbour's target components are matched to own's nearest,
+and the chi-square of the information-weighted mean position difference over the last 3 and
+16 scans (``y' I^-1 y``, ``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``, ``S_i`` the summed
+position covariances: the generalised-least-squares offset) grows linearly with the window
+under a bias while honest errors average out. Above 35 (3 scans) or 50 (16 scans) the
+neighbour is quarantined at once. The thresholds sit above the largest honest values on the
+training runs 9000-9001 (30.5 and 41.9, every graph and condition below), so the test adds no
+honest quarantine there.
+
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
