@@ -138,7 +138,8 @@ class Consensus:
         self.records: list[dict] = []
         self.last_local: GaussianMixture | None = None
         self.last_fused: GaussianMixture | None = None
-        self.trust = (Trust(options.trust, options.neighbours)
+        self.trust = (Trust(options.trust, options.neighbours,
+                            tuple(getattr(estimator, "position_index", (0, 2))))
                       if self.fusing and options.trust is not None and options.trust.enabled
                       else None)
         self.batch: FusionBatch | None = None

@@ -26,6 +26,17 @@ the median test between them: a neighbour is scored for disagreeing with a major
 agrees, not for a scan where everyone disagrees, and two liars telling the same lie do not
 cover for each other (each one's lie would be in the other's leave-one-out average).
 
+A biased sensor (every estimate a fixed distance off under an honest covariance) is, scan by
+scan, within an honest neighbour's scatter; its offset, though, is the same every scan
+(:attr:`TrustConfig.bias`): the neighbour's target components are matched to own's nearest,
+and the chi-square of the information-weighted mean position difference over the last 3 and
+16 scans (``y' I^-1 y``, ``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``, ``S_i`` the summed
+position covariances: the generalised-least-squares offset) grows linearly with the window
+under a bias while honest errors average out. Above 35 (3 scans) or 50 (16 scans) the
+neighbour is quarantined at once. The thresholds sit above the largest honest values on the
+training runs 9000-9001 (30.5 and 41.9, every graph and condition below), so the test adds no
+honest quarantine there.
+
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
@@ -62,7 +73,7 @@ fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules).
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,6 +141,26 @@ class TrustConfig:
     """What a neighbour loses is shared over own and the trusted neighbours in proportion to
     their consensus weights (the weights renormalised over the trusted set); False: all of it
     to own (as if the edge were cut)."""
+    bias: bool = True
+    """The offset test: a biased sensor (every estimate a fixed distance off, its covariance
+    honest) is, scan by scan, within an honest neighbour's scatter, but its offset is the same
+    every scan while honest errors average out. Each target-weight component of the neighbour
+    (weight :attr:`repeat_weight`) is matched to own's nearest one within :attr:`bias_gate`
+    metres; the position differences ``d_i`` with summed covariances ``S_i`` of the last
+    scans of each window of :attr:`bias_windows` give the information-weighted mean offset
+    ``b = I^-1 y`` (``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``) and its chi-square
+    ``y' I^-1 y`` (2 degrees of freedom), which grows linearly with the window under a
+    constant offset. Above its window's :attr:`bias_thresholds` the scan's statistic is at
+    least ``quarantine + drift``."""
+    bias_windows: tuple[int, ...] = (3, 16)
+    """Scans in the offset test's windows (a short one for an offset large against the
+    covariances, a long one for a small one)."""
+    bias_gate: float = 60.0
+    """Largest position distance (m) of a matched pair (farther: another target or a lie the
+    divergence test already sees)."""
+    bias_thresholds: tuple[float, ...] = (35.0, 50.0)
+    """Per window: the chi-square of its mean offset above which the neighbour is
+    quarantined (above the largest honest value on the training runs, see the module doc)."""
     warmup: int = 0
     """Scans at the start with no test (0: a lie told from the first scan is caught at once;
     filters that start empty agree on nothing, which the cardinality term alone scores)."""
@@ -137,7 +168,9 @@ class TrustConfig:
     def __post_init__(self) -> None:
         if not (0 < self.leak <= 1 and 0 <= self.suspect < self.quarantine and self.cap > 0
                 and self.readmit >= 1 and self.kappa >= 0 and self.warmup >= 0
-                and self.drift >= 0 and self.empty_penalty >= 0):
+                and self.drift >= 0 and self.empty_penalty >= 0
+                and len(self.bias_windows) == len(self.bias_thresholds)
+                and all(w >= 1 for w in self.bias_windows)):
             raise ValueError(f"invalid trust settings {self}")
 
 
@@ -160,6 +193,10 @@ class NeighbourTrust:
     last_mix: GaussianMixture | None = None
     """Its last round-0 density (the repeat test) and the scan it came at."""
     last_k: int = -1
+    offsets: deque = field(default_factory=deque)
+    """The offset test's window: per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
+    last_offset_chi2: tuple[float, ...] = ()
+    """Per window of :attr:`TrustConfig.bias_windows`: the last chi-square of the offset."""
     scans_in: Counter = field(default_factory=Counter)
     """Scans spent in each state."""
 
@@ -167,8 +204,10 @@ class NeighbourTrust:
 class Trust:
     """Per-neighbour consistency tests and weights for one peer."""
 
-    def __init__(self, cfg: TrustConfig, neighbours: tuple[str, ...]) -> None:
+    def __init__(self, cfg: TrustConfig, neighbours: tuple[str, ...],
+                 position_index: tuple[int, int] = (0, 2)) -> None:
         self.cfg = cfg
+        self.pos = list(position_index)
         self.n = {s: NeighbourTrust() for s in neighbours}
         self.scans = 0
         self._k: int | None = None
@@ -177,8 +216,9 @@ class Trust:
         self.records: list[dict] = []
         self.log: list[dict] = []
         """Every state change (bounded: the first :data:`MAX_LOG`), for the summary."""
-        self.history: list[tuple[int, str, float, float]] | None = None
-        """When a list: every ``(k, neighbour, statistic, score)`` (calibration)."""
+        self.history: list[tuple[int, str, float, float, float]] | None = None
+        """When a list: every ``(k, neighbour, statistic, score, offset chi-square)``
+        (calibration; the statistic without the offset test's part)."""
 
     # -- one round ----------------------------------------------------------------------------
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
@@ -263,6 +303,12 @@ class Trust:
             for s in names:
                 if self._repeated(self.n[s], k, inputs[s]):
                     stats[s] = self.cfg.quarantine + self.cfg.drift
+        raw = dict(stats)
+        if rnd == 0 and self.cfg.bias:
+            for s in names:
+                chi2 = self._offset(self.n[s], own, inputs[s])
+                if any(c > t for c, t in zip(chi2, self.cfg.bias_thresholds, strict=True)):
+                    stats[s] = max(stats[s], self.cfg.quarantine + self.cfg.drift)
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -278,7 +324,7 @@ class Trust:
             if rec.low_k is None and t <= LOW:
                 rec.low_k = k
             if self.history is not None:
-                self.history.append((k, s, stats[s], score))
+                self.history.append((k, s, raw[s], score, rec.last_offset_chi2))
             out.append(wmap[s] * t)
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(stats[s], 4), "score": round(score, 4),
@@ -302,6 +348,28 @@ class Trust:
                 and float(mix.weights.max()) >= self.cfg.repeat_weight
                 and np.array_equal(mix.weights, prev.weights)
                 and np.array_equal(mix.means, prev.means) and np.array_equal(mix.covs, prev.covs))
+
+    def _offset(self, rec: NeighbourTrust, own: GaussianMixture,
+                mix: GaussianMixture) -> tuple[float, ...]:
+        """Add this scan's matched position differences of ``mix`` against ``own`` to the
+        neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
+        chi-square of its mean offset (:attr:`TrustConfig.bias`)."""
+        cfg = self.cfg
+        rec.offsets.appendleft(offset_information(own, mix, self.pos, cfg.repeat_weight,
+                                                  cfg.bias_gate))
+        while len(rec.offsets) > max(cfg.bias_windows):
+            rec.offsets.pop()
+        info = np.cumsum([i for i, _ in rec.offsets], axis=0)  # (n, 2, 2): newest first
+        y = np.cumsum([v for _, v in rec.offsets], axis=0)  # (n, 2)
+        last = np.minimum(np.array(cfg.bias_windows), len(rec.offsets)) - 1
+        info, y = info[last], y[last]
+        ok = np.linalg.det(info) > 1e-12
+        chi2 = np.zeros(len(last))
+        if ok.any():
+            b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # (w, 2): mean offsets
+            chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
+        rec.last_offset_chi2 = tuple(float(c) for c in chi2)
+        return rec.last_offset_chi2
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)
@@ -361,6 +429,37 @@ class Trust:
         out = self.records + [{"kind": "trust-event", **e} for e in self.events]
         self.records, self.events = [], []
         return out
+
+
+def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int],
+                       min_weight: float, gate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Information ``I = sum S_i^-1`` (``(2, 2)``) and ``y = sum S_i^-1 d_i`` (``(2,)``) of the
+    position differences ``d_i = m_i - r_(i)`` between each component of ``mix`` of weight at
+    least ``min_weight`` and the nearest such component of ``ref`` within ``gate`` metres
+    (``S_i``: the sum of the two position covariances): the generalised-least-squares
+    estimate of a common offset is ``I^-1 y``, its chi-square ``y' I^-1 y``."""
+    zero = (np.zeros((2, 2)), np.zeros(2))
+    if len(ref) == 0 or len(mix) == 0:
+        return zero
+    a = mix.weights >= min_weight
+    b = ref.weights >= min_weight
+    if not a.any() or not b.any():
+        return zero
+    ix = np.ix_(pos, pos)
+    ma, mb = mix.means[a][:, pos], ref.means[b][:, pos]  # (n, 2), (m, 2)
+    Pa = mix.covs[a][:, ix[0], ix[1]]  # (n, 2, 2)
+    Pb = ref.covs[b][:, ix[0], ix[1]]  # (m, 2, 2)
+    diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
+    dist = np.linalg.norm(diff, axis=2)
+    near = np.argmin(dist, axis=1)
+    rows = np.arange(len(ma))
+    ok = dist[rows, near] <= gate
+    if not ok.any():
+        return zero
+    d = diff[rows, near][ok]  # (p, 2)
+    S = Pa[ok] + Pb[near[ok]]  # (p, 2, 2)
+    Si = np.linalg.inv(S)
+    return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
 
 
 def _log(w: np.ndarray) -> np.ndarray:

@@ -24,8 +24,33 @@ from sensornet.sim.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.sim.twin import run_twin
 
-OPEN = TrustConfig(suspect=1e9, quarantine=2e9)
+OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf))
 """The test runs, nothing is down-weighted."""
+
+Seq = tuple[np.ndarray, np.ndarray]
+"""Per scan: the statistic without the offset test (``(n,)``), and the offset test's
+chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows` (``(n, windows)``)."""
+
+
+def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
+    """Per neighbour (or only ``who``): the largest statistic of each scan's rounds and the
+    scan's offset chi-square (computed at round 0), in scan order."""
+    per: dict[str, dict[int, list[float]]] = {}
+    for k, s, stat, _, chi2 in history:
+        if who is not None and s != who:
+            continue
+        d = per.setdefault(s, {})
+        chi2 = np.array(chi2 or [0.0] * len(OPEN.bias_windows))  # none yet: no round 0 so far
+        if k in d:
+            d[k] = [max(d[k][0], stat), np.maximum(d[k][1], chi2)]
+        else:
+            d[k] = [stat, chi2]
+    out = {}
+    for s, d in per.items():
+        ks = sorted(d)
+        out[s] = (np.array([d[k][0] for k in ks]),
+                  np.array([d[k][1] for k in ks]).reshape(len(ks), len(OPEN.bias_windows)))
+    return out
 
 CONDITIONS = {
     "clean": {},
@@ -43,7 +68,7 @@ def setups(tmp: Path) -> dict[str, tuple[str, dict]]:
             "circ4-20": (str(circ), {"network.rounds": 2})}
 
 
-def sequences(source: str, overrides: dict, run: int) -> list[np.ndarray]:
+def sequences(source: str, overrides: dict, run: int) -> list[Seq]:
     """Per (peer, neighbour): the per-scan statistic (largest of the scan's rounds) of one
     clean twin run with the test open, in scan order."""
     scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
@@ -54,16 +79,12 @@ def sequences(source: str, overrides: dict, run: int) -> list[np.ndarray]:
     run_twin(scn, run, peers=peers)
     out = []
     for p in peers.values():
-        per: dict[str, dict[int, float]] = {}
-        for k, s, stat, _ in p.consensus.trust.history:
-            d = per.setdefault(s, {})
-            d[k] = max(d.get(k, 0.0), stat)
-        out += [np.array([d[k] for k in sorted(d)]) for d in per.values()]
+        out += list(_per_scan(p.consensus.trust.history).values())
     return out
 
 
 def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
-                   run: int) -> list[np.ndarray]:
+                   run: int) -> list[Seq]:
     """Per honest neighbour of ``liar``: the liar's per-scan statistic (test open), training
     runs only (for the detection delay the thresholds give; :mod:`sim.lying`'s lies)."""
     scn = load_scenario(scenario, overrides={**overrides, "fusion.trust": True})
@@ -78,27 +99,31 @@ def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
     for n, p in peers.items():
         if n == liar or liar not in p.consensus.o.neighbours:
             continue
-        d: dict[int, float] = {}
-        for k, s, stat, _ in p.consensus.trust.history:
-            if s == liar:
-                d[k] = max(d.get(k, 0.0), stat)
-        out.append(np.array([d[k] for k in sorted(d)]))
+        out += list(_per_scan(p.consensus.trust.history, liar).values())
     return out
 
 
-def simulate(seqs: list[np.ndarray], cfg: TrustConfig) -> dict[str, float]:
+def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     """The scores :class:`peers.trust.Trust` would reach on these statistics: the share of
     (pair, scan) triples at weight < 1 (suspect) and at weight 0 (quarantined, with the
-    hysteresis), and the scores' quantiles."""
+    hysteresis), and the scores' quantiles; ``first_low``: per sequence, the first scan (1:
+    the first) at weight <= 0.1, or None."""
     t = Trust(cfg, ())
-    scores, low, zero, n = [], 0, 0, 0
-    for seq in seqs:
+    scores, low, zero, n, first_low = [], 0, 0, 0, []
+    for raw, chi2 in seqs:
+        seq = raw.copy()
+        if cfg.bias and len(seq):
+            hit = (chi2 > np.array(cfg.bias_thresholds)).any(axis=1)
+            seq[hit] = np.maximum(seq[hit], cfg.quarantine + cfg.drift)
         rec = NeighbourTrust()
-        for stat in seq:
+        first = None
+        for i, stat in enumerate(seq):
             score = t._next(rec.score, stat)
             w = t._trust(rec, score)
             low += w < 1.0
             zero += w == 0.0
+            if first is None and w <= 0.1:
+                first = i + 1
             n += 1
             rec.score = score
             if score >= cfg.quarantine:
@@ -108,9 +133,10 @@ def simulate(seqs: list[np.ndarray], cfg: TrustConfig) -> dict[str, float]:
                 if rec.streak >= cfg.readmit:
                     rec.state = "trusted"
             scores.append(score)
+        first_low.append(first)
     q = np.quantile(scores, [0.99, 0.995, 0.999]) if scores else [np.nan] * 3
     return {"triples": n, "down": low / max(n, 1), "quarantined": zero / max(n, 1),
-            "q99": q[0], "q99.5": q[1], "q99.9": q[2]}
+            "q99": q[0], "q99.5": q[1], "q99.9": q[2], "first_low": first_low}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -129,15 +155,18 @@ def main(argv: list[str] | None = None) -> int:
                 seqs = [q for r in range(a.first_run, a.first_run + a.runs)
                         for q in sequences(source, {**over, **extra}, r)]
                 pooled += seqs
-                stat = np.concatenate(seqs)
+                stat = np.concatenate([q[0] for q in seqs])
+                chi2 = np.concatenate([q[1] for q in seqs if len(q[0])])
                 sim = simulate(seqs, TrustConfig())
                 print(f"{label:14s} {cond:7s} statistic q50 {np.quantile(stat, 0.5):.2f} "
                       f"q90 {np.quantile(stat, 0.9):.2f} q99 {np.quantile(stat, 0.99):.2f}; "
                       f"score q99 {sim['q99']:.2f} q99.9 {sim['q99.9']:.2f}; down "
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
-                      f" of {sim['triples']}", flush=True)
+                      f" of {sim['triples']}; offset chi2 per window q99.9 "
+                      f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
+                      f"{np.round(chi2.max(axis=0), 1)}", flush=True)
         if a.save:
-            np.savez_compressed(a.save, *pooled)
+            np.savez_compressed(a.save, *[x for q in pooled for x in q])
         sim = simulate(pooled, TrustConfig())
         print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
               f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.peers.trust import Trust, TrustConfig, offset_information
 from sensornet.tracking.divergence import cs_divergence, log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -159,6 +159,55 @@ def test_an_exact_repeat_is_quarantined_at_once_and_a_birth_only_density_is_not(
     for k in (1, 2, 3):
         w = off.weigh(k, 0, same, {"x": same.copy()}, [0.5, 0.5])
     assert w[1] == 0.5
+
+
+def test_offset_information_is_the_least_squares_offset_of_the_matched_pairs():
+    rng = np.random.default_rng(5)
+    ref = mix((0.9, A, P4), (0.8, B, 2.0 * P4), (0.2, [50.0, 0, 50.0, 0], P4))
+    b = np.array([12.0, -7.0])
+    shift = np.array([b[0], 0.0, b[1], 0.0])
+    noise = [rng.normal(0, 3, 4) * [1, 0, 1, 0] for _ in range(2)]
+    nb = mix((0.95, A + shift + noise[0], 3.0 * P4), (0.7, B + shift + noise[1], P4),
+             (0.9, [900.0, 0, 900.0, 0], P4))  # out of the gate: left out
+    info, y = offset_information(ref, nb, [0, 2], 0.5, 60.0)
+    # brute force: the pairs (nb 0, ref 0) and (nb 1, ref 1); ref 2 is under the weight
+    S = [np.diag([400.0, 400.0]), np.diag([300.0, 300.0])]
+    d = [(nb.means[i] - ref.means[i])[[0, 2]] for i in range(2)]
+    np.testing.assert_allclose(info, sum(np.linalg.inv(x) for x in S))
+    np.testing.assert_allclose(y, sum(np.linalg.solve(x, v) for x, v in zip(S, d, strict=True)))
+    gls = np.linalg.solve(info, y)  # the weighted mean offset, near b
+    assert np.linalg.norm(gls - b) < 6.0
+    zero_i, zero_y = offset_information(ref, GaussianMixture.empty(4), [0, 2], 0.5, 60.0)
+    assert not zero_i.any() and not zero_y.any()
+
+
+def test_a_biased_neighbour_is_caught_by_its_offset_within_three_scans():
+    """40 m off along x with an honest covariance (8 m position deviation): per scan within
+    the divergence test's allowance, but the same offset every scan; honest neighbours'
+    scatter averages out. (Gate 100 m: the test's scatter is drawn independently per peer.)"""
+    P = np.diag([64.0, 25.0, 64.0, 25.0])
+    L = np.linalg.cholesky(P)
+
+    def honest(rng, off=0.0):
+        return mix((0.95, A + L @ rng.standard_normal(4) + [off, 0, 0, 0], P),
+                   (0.9, B + L @ rng.standard_normal(4) + [off, 0, 0, 0], P))
+
+    def run(cfg, scans):
+        rng = np.random.default_rng(8)
+        t = Trust(cfg, ("h1", "h2", "biased"))
+        low, honest_weights = None, []
+        for k in range(1, scans + 1):
+            w = t.weigh(k, 0, honest(rng), {"h1": honest(rng), "h2": honest(rng),
+                                            "biased": honest(rng, 40.0)}, [0.25] * 4)
+            honest_weights += w[2:4]  # [own, biased, h1, h2]: sorted names
+            if low is None and w[1] <= 0.1:
+                low = k
+        return low, min(honest_weights)
+
+    low, least = run(TrustConfig(bias_gate=100.0), 40)
+    assert low is not None and low <= 3 and least >= 0.25  # theirs grows: the liar's share
+    low_off, _ = run(TrustConfig(bias=False, bias_gate=100.0), 40)
+    assert low_off is None or low_off > 3  # the divergence test alone is slower
 
 
 def test_two_liars_telling_the_same_lie_do_not_cover_for_each_other():
