@@ -90,7 +90,7 @@ class FusionBatch:
         return done
 
 
-def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> int:
+def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> list:
     """The local steps of several co-hosted peers' coming scans, computed together.
 
     ``scans``: ``(core, key, payload)`` of scan messages about to be handled, each by its
@@ -98,9 +98,10 @@ def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> int:
     (``prepare_many``, e.g. :class:`peers.estimators.GmphdEstimator`: one stacked GM-PHD
     predict, update and reduction) get them prepared; their own step then takes the prepared
     result if it is the step they make (:meth:`PeerCore.scan_step` guesses it). Nothing else
-    changes: the messages are handled as before, in the same order. Returns the steps prepared.
+    changes: the messages are handled as before, in the same order. Returns the cores whose
+    steps were prepared.
     """
-    groups: dict[type, tuple[list, list, list]] = {}
+    groups: dict[type, tuple[list, list, list, list]] = {}
     seen: set[int] = set()
     for core, key, payload in scans:
         est = core.consensus.estimator
@@ -111,13 +112,14 @@ def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> int:
         if step is None:
             continue
         seen.add(id(core))
-        ests, steps, zs = groups.setdefault(type(est), ([], [], []))
+        cores, ests, steps, zs = groups.setdefault(type(est), ([], [], [], []))
+        cores.append(core)
         ests.append(est)
         steps.append(step[0])
         zs.append(step[1])
-    n = 0
-    for cls, (ests, steps, zs) in groups.items():
+    done: list = []
+    for cls, (cores, ests, steps, zs) in groups.items():
         if len(ests) > 1:
             cls.prepare_many(ests, steps, zs)
-            n += len(ests)
-    return n
+            done += cores
+    return done
