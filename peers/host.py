@@ -49,6 +49,10 @@ BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"
 """Fuse the consensus rounds that become ready in one pass of the loop together, at its end
 (:mod:`peers.batching`; default), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
 ``bench_network.py --batch``). A peer that records its inputs for replay fuses at once."""
+BATCH_STEPS = os.environ.get("SENSORNET_HOST_BATCH", "1") not in ("0", "fusions")
+"""With :data:`BATCH_FUSIONS`, also compute the local steps of the scans a pass will handle
+together (:meth:`PeerHost._prepare_scans`; default), or each in its peer's step
+(``SENSORNET_HOST_BATCH=fusions``: to compare, ``bench_network.py --batch fusions``)."""
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
 Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py --handoff``).
 """
@@ -306,7 +310,7 @@ class PeerHost:
         due.sort()
         if self.batch is not None and self._close_rounds(due):
             self._fuse()
-        if self.batch is not None:
+        if self.batch is not None and BATCH_STEPS:
             self._prepare_scans(due)
         for _, i in due:
             if self._stop:
