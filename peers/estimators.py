@@ -71,7 +71,7 @@ class GmphdEstimator:
         if not estimators:
             return
         posts = step_many([e.filter for e in estimators], [e.mix for e in estimators],
-                          steps, scans)
+                          steps, scans)  # raises before any estimator is touched
         for e, s, z, post in zip(estimators, steps, scans, posts, strict=True):
             e._prepared = (e.mix, int(s), z, post)
 

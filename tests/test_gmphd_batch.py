@@ -79,3 +79,39 @@ def test_estimator_uses_a_prepared_step_only_when_it_matches():
             _same(a.published["posterior"], b.published["posterior"])
         assert ests[0].prepared_hits == k + 1
         assert ests[1].prepared_hits == 0 and ests[2].prepared_hits == 0
+
+
+def test_a_failing_stack_prepares_nothing_and_the_peers_step_on_their_own(monkeypatch):
+    """A stacked step that raises must not stop a host: nothing is prepared, and each peer's
+    own step runs (its errors counted by its consensus as always)."""
+    import sensornet.peers.estimators as estimators
+    from sensornet.peers.batching import prepare_local_steps
+
+    rng = np.random.default_rng(9)
+    centres = rng.uniform(-300, 300, (2, 4))
+    motion, reducer = ConstantVelocity(1.0, 2.0), Reducer(merge_threshold=4.0)
+    ests = [GmphdEstimator(_filter(rng, centres, motion, reducer)) for _ in range(2)]
+    z = centres[:, [0, 2]]
+
+    class Core:  # what prepare_local_steps reads of a PeerCore
+        def __init__(self, est):
+            self.consensus = type("C", (), {"estimator": est})()
+
+        def scan_step(self, key, payload):
+            return 1, z
+
+    def broken(*args):
+        raise FloatingPointError("stack")
+
+    monkeypatch.setattr(estimators, "step_many", broken)
+    assert prepare_local_steps([(Core(e), "k", b"") for e in ests]) == []
+    for e in ests:  # nothing prepared: its own step
+        want = e.filter.correct(e.filter.predict(e.mix, 1), [z])
+        _same(e.step(1, z).density, want)
+        assert e.prepared_hits == 0
+    monkeypatch.undo()
+    assert len(prepare_local_steps([(Core(e), "k", b"") for e in ests])) == 2
+    for e in ests:
+        want = e.filter.correct(e.filter.predict(e.mix, 1), [z])
+        _same(e.step(1, z).density, want)
+        assert e.prepared_hits == 1
