@@ -339,10 +339,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--callbacks", choices=("direct", "thread"), default="thread",
                    help="Zenoh callbacks on a Python thread per subscriber (Zenoh's default) "
                         "or on Zenoh's own threads (to compare)")
-    p.add_argument("--batch", choices=("on", "off"), default="on",
+    p.add_argument("--batch", choices=("on", "off", "fusions"), default="on",
                    help="a host's consensus fusions: the rounds ready in one pass of its loop "
-                        "fused together (default, peers.batching) or each at once (to "
-                        "compare)")
+                        "fused together and the local steps of its scans computed together "
+                        "(default, peers.batching), or each at once (to compare); 'fusions': "
+                        "the fusions together, each local step on its own")
     p.add_argument("--targets", action="store_true",
                    help="only the targets table: --sizes (default 20,50,100) x --degrees x "
                         "--packings, every combination run (no early stop)")
@@ -352,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     os.environ["SENSORNET_HOST_HANDOFF"] = args.handoff  # read by the peer processes
     os.environ["SENSORNET_ZENOH_CALLBACKS"] = args.callbacks
-    os.environ["SENSORNET_HOST_BATCH"] = "1" if args.batch == "on" else "0"
+    os.environ["SENSORNET_HOST_BATCH"] = {"on": "1", "off": "0", "fusions": "fusions"}[args.batch]
     if args.per_process < 1:
         p.error("--per-process must be >= 1")
     global ZENOH_CONFIG, PER_PROCESS
@@ -368,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         sizes = [int(x) for x in (args.sizes if args.sizes != SIZES else "20,50,100").split(",")]
         with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
             print(f"## targets: 10 scans/s, 2 consensus rounds, {scale_scans} scans, links "
-                  f"along the graph, hosts' fusions batched: {args.batch}; load average "
+                  f"along the graph, hosts' batching: {args.batch}; load average "
                   f"{load_average()} at the start\n", flush=True)
             part_targets(Path(tmp), sizes, degrees, args.packings.split(","), scale_scans,
                          args.deadline)

@@ -88,3 +88,44 @@ class FusionBatch:
                 seen.add(id(j.consensus))
                 done.append(j.consensus)
         return done
+
+
+def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> list:
+    """The local steps of several co-hosted peers' coming scans, computed together.
+
+    ``scans``: ``(core, key, payload)`` of scan messages about to be handled, each by its
+    :class:`peers.core.PeerCore`. The peers whose estimator can prepare steps together
+    (``prepare_many``, e.g. :class:`peers.estimators.GmphdEstimator`: one stacked GM-PHD
+    predict, update and reduction) get them prepared; their own step then takes the prepared
+    result if it is the step they make (:meth:`PeerCore.scan_step` guesses it). Nothing else
+    changes: the messages are handled as before, in the same order. Returns the cores whose
+    steps were prepared.
+    """
+    groups: dict[type, tuple[list, list, list, list]] = {}
+    seen: set[int] = set()
+    for core, key, payload in scans:
+        est = core.consensus.estimator
+        prep = getattr(type(est), "prepare_many", None)
+        if prep is None or id(core) in seen:
+            continue
+        try:
+            step = core.scan_step(key, payload)
+        except Exception:  # noqa: BLE001 - the peer's own receive meets it, as always
+            step = None
+        if step is None:
+            continue
+        seen.add(id(core))
+        cores, ests, steps, zs = groups.setdefault(type(est), ([], [], [], []))
+        cores.append(core)
+        ests.append(est)
+        steps.append(step[0])
+        zs.append(step[1])
+    done: list = []
+    for cls, (cores, ests, steps, zs) in groups.items():
+        if len(ests) > 1:
+            try:
+                cls.prepare_many(ests, steps, zs)
+            except Exception:  # noqa: BLE001 - nothing prepared: each peer's own step runs
+                continue       # (and meets, counts and scores its own error, as always)
+            done += cores
+    return done

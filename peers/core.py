@@ -61,6 +61,7 @@ class PeerCore:
         self.keys = Keys(cfg.network)
         self.decode = decode
         """Bytes -> message (a host shares one read-only decode between its peers)."""
+        self._predecoded: tuple[bytes, Scan] | None = None  # (payload, msg): scan_step's
         kinds = max(1, len(consensus.kinds))
         self.admission = Admission(cfg.network, cfg.interval, {
             "scan": 1.0, "truth": 1.0, "ctl": 0.5,
@@ -105,8 +106,10 @@ class PeerCore:
             return self._reject("wrong-key")
         self.received[route.channel] += 1
         self.received_bytes[route.channel] += len(payload)
+        pre, self._predecoded = self._predecoded, None
         try:
-            msg = self.decode(payload, self.cfg.limits)
+            msg = (pre[1] if pre is not None and pre[0] is payload
+                   else self.decode(payload, self.cfg.limits))
         except Rejected as exc:
             return self._reject(exc.reason)
         if not isinstance(msg, _EXPECTED[route.channel]):
@@ -118,6 +121,30 @@ class PeerCore:
         if route.channel == "truth":
             return self._truth(msg)
         return self._control(msg, now)
+
+    def scan_step(self, key: str, payload: bytes) -> tuple[int, np.ndarray] | None:
+        """``(steps, z)``: the local step this scan message would make if it came next, for a
+        host to compute its peers' steps together (``peers.batching.prepare_local_steps``);
+        None if it would not make one plainly (not a scan of ours, a fusion to finish first).
+        The message is decoded here once: :meth:`receive` of the same bytes object reuses it
+        (after its admission, as always). A guess only: the estimator uses a prepared step
+        solely when it is the very step asked for."""
+        route = parse_key(key, self.cfg.network)
+        if route is None or route.channel != "scan" or route.name != self.cfg.sensor:
+            return None
+        c = self.consensus
+        if c.busy() or self.first_k is None:
+            return None
+        try:
+            msg = self.decode(payload, self.cfg.limits)
+        except Rejected:
+            return None
+        if type(msg) is not Scan or msg.sensor != route.name:
+            return None
+        self._predecoded = (payload, msg)
+        if not c.last_k < msg.k <= c.last_k + self.cfg.horizon:
+            return None
+        return msg.k - c.last_k, msg.z
 
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""

@@ -54,6 +54,7 @@ def core_snapshot(core) -> dict:
         "nale": asdict(c.nale.counts),
         "fuser": dict(getattr(c.fuser, "counts", {})),
         "internal_errors": dict(c.errors),
+        "prepared_steps": getattr(c.estimator, "prepared_hits", 0),
         "trust": c.trust.summary() if c.trust is not None else None,
     }
 

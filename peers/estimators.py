@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.tracking.gmphd import GMPHDFilter
+from sensornet.tracking.gmphd_batch import step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
@@ -53,9 +55,34 @@ class GmphdEstimator:
         self.level2_threshold = level2_threshold
         self.mix = filt.initial()
         self.dim = self.mix.dim
+        self._prepared: tuple | None = None
+        """``(prior, steps, z, posterior)`` from :meth:`prepare_many`, for the next step."""
+        self.prepared_hits = 0
+        """Steps that used a prepared posterior (for the summary and tests)."""
+
+    @staticmethod
+    def prepare_many(estimators: Sequence[GmphdEstimator], steps: Sequence[int],
+                     scans: Sequence[np.ndarray]) -> None:
+        """The next step of each estimator (``steps`` ahead, with scan ``z``) computed for
+        all at once (:func:`tracking.gmphd_batch.step_many`: a peer host's co-hosted peers);
+        each :meth:`step` then takes its result if it is asked exactly that step from the same
+        prior (anything else, and it computes its own: a prepared step never changes what a
+        step gives, only where its arithmetic is done)."""
+        if not estimators:
+            return
+        posts = step_many([e.filter for e in estimators], [e.mix for e in estimators],
+                          steps, scans)  # raises before any estimator is touched
+        for e, s, z, post in zip(estimators, steps, scans, posts, strict=True):
+            e._prepared = (e.mix, int(s), z, post)
 
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
-        self.mix = self.filter.correct(self.filter.predict(self.mix, steps), [z])
+        prep, self._prepared = self._prepared, None
+        if (prep is not None and prep[0] is self.mix and prep[1] == steps
+                and (prep[2] is z or np.array_equal(prep[2], z))):
+            self.mix = prep[3]
+            self.prepared_hits += 1
+        else:
+            self.mix = self.filter.correct(self.filter.predict(self.mix, steps), [z])
         pub = keep_above(self.mix, self.level2_threshold) if self.level2 else self.mix
         return LocalOutput(self.mix, {"posterior": pub},
                            {"n_components": len(self.mix), "n_published": len(pub)})

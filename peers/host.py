@@ -24,6 +24,7 @@ one scan, see :meth:`PeerHost._one_scan`). Commands on standard input (one per l
 from __future__ import annotations
 
 import gc
+import itertools
 import os
 import queue
 import signal
@@ -34,7 +35,7 @@ from collections.abc import Callable
 from typing import TextIO
 
 from sensornet.peers.admission import peek
-from sensornet.peers.batching import FusionBatch
+from sensornet.peers.batching import FusionBatch, prepare_local_steps
 from sensornet.peers.core import PeerCore
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.session import open_session
@@ -48,6 +49,10 @@ BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"
 """Fuse the consensus rounds that become ready in one pass of the loop together, at its end
 (:mod:`peers.batching`; default), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
 ``bench_network.py --batch``). A peer that records its inputs for replay fuses at once."""
+BATCH_STEPS = os.environ.get("SENSORNET_HOST_BATCH", "1") not in ("0", "fusions")
+"""With :data:`BATCH_FUSIONS`, also compute the local steps of the scans a pass will handle
+together (:meth:`PeerHost._prepare_scans`; default), or each in its peer's step
+(``SENSORNET_HOST_BATCH=fusions``: to compare, ``bench_network.py --batch fusions``)."""
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
 Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py --handoff``).
 """
@@ -305,6 +310,8 @@ class PeerHost:
         due.sort()
         if self.batch is not None and self._close_rounds(due):
             self._fuse()
+        if self.batch is not None and BATCH_STEPS:
+            self._prepare_scans(due)
         for _, i in due:
             if self._stop:
                 return
@@ -317,6 +324,30 @@ class PeerHost:
             rt.step([item for _, item in entries], lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
+
+    def _prepare_scans(self, due: list[tuple[float, int]]) -> None:
+        """The local steps of the scans this pass's steps will handle (a batched peer's first
+        scan within its step's reach), computed together (:func:`peers.batching.
+        prepare_local_steps`: one stacked GM-PHD step); each peer's step then takes its own
+        result, or computes it if the step it makes is another. The stacked computation's CPU
+        is split evenly between the peers it served (their "scan" CPU, where the step was)."""
+        scans = []
+        for _, i in due:
+            if i not in self._batched:
+                continue
+            item = next((item for _, item in itertools.islice(self._backlog[i], BATCH)
+                         if item[0] == "msg" and "/scan/" in item[1]), None)
+            if item is not None:
+                scans.append((self.peers[i].core, item[1], item[2]))
+        if len(scans) < 2:
+            return
+        t0 = time.thread_time()
+        cores = prepare_local_steps(scans)
+        served = cores or [c for c, _, _ in scans]  # none prepared: the guesses' cost
+        share = (time.thread_time() - t0) * 1e3 / len(served)
+        for core in served:
+            cpu = self.peers[self._slot[id(core.consensus)]].telemetry.cpu_ms
+            cpu["scan"] = cpu.get("scan", 0.0) + share
 
     @staticmethod
     def _one_scan(rt: PeerRuntime, entries: list, mine: deque) -> list:

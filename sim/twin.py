@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
-from sensornet.peers.batching import FusionBatch
+from sensornet.peers.batching import FusionBatch, prepare_local_steps
 from sensornet.peers.core import PeerCore, Publish, Record, Stop
 from sensornet.peers.faults import FaultInjector
 from sensornet.peers.session import MAX_MESSAGE_BYTES
@@ -171,6 +171,8 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         for core in peers.values():
             core.consensus.batch = fusions
     name_of = {id(core.consensus): n for n, core in peers.items()}
+    scan_keys = {keys.scan(n) for n in names}
+    prepared_at: float | None = None
 
     def handle(t: float, target: str, core: PeerCore, out: list) -> None:
         out += core.tick(t)
@@ -198,6 +200,12 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
             result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
             handle(t, target, peers[target], [])  # the transport drops it (peers.session)
         elif kind == "msg":
+            if fusions is not None and prepared_at != t and payload[0] in scan_keys:
+                # as a host: the instant's scans, their local steps computed together first
+                prepared_at = t
+                prepare_local_steps([(peers[target], *payload)] + [
+                    (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
+                    and q[4][0] in scan_keys and q[3] not in result.stops])
             handle(t, target, peers[target], peers[target].receive(payload[0], payload[1], t))
         elif kind == "live":
             handle(t, target, peers[target],

@@ -189,7 +189,8 @@ def test_consensus_through_a_batch_gives_what_it_gives_alone():
 
 def test_the_twin_with_batched_fusions_is_the_twin(tmp_path):
     """Eight peers of degree 4, two rounds, delayed and lost links (fusions at the deadline
-    too): stacking each instant's fusions (as a host does) changes no track and no count."""
+    too): stacking each instant's fusions and local GM-PHD steps (as a host does) changes no
+    track and no count."""
     path = tmp_path / "net8.toml"
     path.write_text(network_scenario(8, 4, 12, rounds=2, speed=10.0))
     scn = load_scenario(str(path), overrides={
@@ -199,6 +200,9 @@ def test_the_twin_with_batched_fusions_is_the_twin(tmp_path):
     many = run_twin(scn, 0, batch=True)
     batch = many.peers["p00"].consensus.batch
     assert batch is not None and batch.stacked > 0
+    hits = [many.peers[n].consensus.estimator.prepared_hits for n in scn.sensor_names]
+    assert min(hits) >= 10  # 12 scans: every one after the first from the stacked steps
+    assert all(one.peers[n].consensus.estimator.prepared_hits == 0 for n in scn.sensor_names)
     for name in scn.sensor_names:
         a, b = one.summary(name)["stats"], many.summary(name)["stats"]
         assert a == b, name

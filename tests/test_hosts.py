@@ -292,6 +292,8 @@ def test_two_hosts_of_three_equal_the_twin(tmp_path):
         assert sum(s["injected_faults"].values()) == 2 * scn.num_scans, s["injected_faults"]
     pids = {s["pid"] for s in summaries.values()}
     assert len(pids) == 2  # two processes
+    # the hosts stacked their peers' local GM-PHD steps (peers.batching.prepare_local_steps)
+    assert sum(s["prepared_steps"] for s in summaries.values()) > 0
     _assert_tracks_equal_the_twin(tmp_path / "run", scn, summaries, run_twin(scn, 0))
 
 

@@ -1,0 +1,169 @@
+"""Many GM-PHD local steps (predict, update, level-1 reduction) as one stacked array computation.
+
+A peer host steps the local filters of many peers at one instant (every peer's scan ``k``
+arrives together). Each step is a few components times a few measurements, so one costs the
+~50 NumPy calls' overhead of :func:`tracking.gmphd.predict`, :func:`tracking.gmphd.update`
+and the :class:`~tracking.reduction.Reducer`, not arithmetic. Here ``P`` steps are laid side
+by side: every component of every problem in one stack (its problem's id beside it), every
+(measurement, component) pair of every problem in one flat array (Vo & Ma 2006, Table I,
+steps 3-4, the same equations as :func:`tracking.gmphd.update`), the reductions through
+:func:`tracking.fusion_batch.reduce_many`. Problems never mix: a pair lies inside one problem
+and the PHD denominator ``kappa + Pd sum_l w_l q_l(z)`` sums over its own components only, so
+problem ``p``'s result is ``filt.correct(filt.predict(mix, steps), [z])`` for it alone (equal
+to round-off; ``tests/test_gmphd_batch.py`` checks it on random mixtures and scans).
+
+Stacked together: filters with one linear sensor that picks state entries
+(``MeasurementModel.selected``), the same motion model, survival probability, reducer (no ISE
+re-fit), gate and step count. ``Pd``, clutter intensity, ``R`` and the birth intensity may
+differ per problem. Anything else goes through the filter's own ``correct(predict(...))``.
+Arrays: ``N`` components of all problems ``(N,)``, ``(N, d)``, ``(N, d, d)``; ``T`` pairs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from sensornet.tracking.fusion_batch import reduce_many
+from sensornet.tracking.gaussian import c_einsum, inv_det_spd
+from sensornet.tracking.gmphd import _LOG_2PI, GMPHDFilter, _inv_det_2x2, _selected_columns
+from sensornet.tracking.mixture import GaussianMixture
+
+
+def batch_key(filt: GMPHDFilter, steps: int) -> tuple | None:
+    """What must be equal for two steps to be stacked together; None: not stackable."""
+    if len(filt.sensors) != 1 or steps < 1 or filt.reducer.refit:
+        return None
+    model = filt.sensors[0].model
+    if model.selected is None:
+        return None
+    return (type(model), tuple(model.selected), model.dim, filt.motion,
+            filt.survival_probability, filt.reducer, filt.gate, int(steps))
+
+
+def step_many(filters: Sequence[GMPHDFilter], mixes: Sequence[GaussianMixture],
+              steps: Sequence[int], scans: Sequence[np.ndarray]) -> list[GaussianMixture]:
+    """``[f.correct(f.predict(mix, s), [z]) for f, mix, s, z in ...]``, stacked where the
+    filters allow it (:func:`batch_key`), each problem on its own otherwise."""
+    out: list[GaussianMixture | None] = [None] * len(filters)
+    groups: dict[tuple, list[int]] = {}
+    for p, (f, s) in enumerate(zip(filters, steps, strict=True)):
+        key = batch_key(f, s)
+        if key is None:
+            out[p] = f.correct(f.predict(mixes[p], s), [scans[p]])
+        else:
+            groups.setdefault(key, []).append(p)
+    for ps in groups.values():
+        if len(ps) == 1:
+            p = ps[0]
+            out[p] = filters[p].correct(filters[p].predict(mixes[p], steps[p]), [scans[p]])
+            continue
+        res = _step_stacked([filters[p] for p in ps], [mixes[p] for p in ps], steps[ps[0]],
+                            [scans[p] for p in ps])
+        for p, r in zip(ps, res, strict=True):
+            out[p] = r
+    return out  # type: ignore[return-value]
+
+
+def _segments(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
+    """Indices ``starts[0] .. starts[0] + lens[0] - 1, starts[1] ..`` as one array."""
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.intp)
+    before = np.cumsum(lens) - lens
+    return np.repeat(starts - before, lens) + np.arange(total)
+
+
+def _interleave(a_lens: np.ndarray, b_lens: np.ndarray) -> np.ndarray:
+    """Index into ``concat(A, B)`` (``A`` of blocks ``a_lens``, ``B`` of ``b_lens``) giving
+    ``A_0, B_0, A_1, B_1, ..``: each problem's own block of A, then its block of B."""
+    a_start = np.cumsum(a_lens) - a_lens
+    b_start = a_lens.sum() + np.cumsum(b_lens) - b_lens
+    starts = np.stack((a_start, b_start), axis=1).ravel()
+    lens = np.stack((a_lens, b_lens), axis=1).ravel()
+    return _segments(starts, lens)
+
+
+def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], steps: int,
+                  scans: list[np.ndarray]) -> list[GaussianMixture]:
+    f0 = filters[0]
+    n_prob = len(filters)
+    model = f0.sensors[0].model
+    dim = model.dim
+    # -- predict (tracking.gmphd.predict): survivors, then each problem's births -----------
+    F, Q = f0.motion.transition(steps)
+    ps_pow = f0.survival_probability**steps
+    w = np.concatenate([m.weights for m in mixes]) * ps_pow
+    mean = np.concatenate([m.means for m in mixes]) @ F.T
+    P = F @ np.concatenate([m.covs for m in mixes]) @ F.T + Q
+    births = [f.birth if f.birth is not None else GaussianMixture.empty(f0.motion.dim)
+              for f in filters]
+    b_lens = np.array([len(b) for b in births])
+    s_lens = np.array([len(m) for m in mixes])
+    if b_lens.any():
+        idx = _interleave(s_lens, b_lens)
+        w = np.concatenate((w, *[b.weights for b in births]))[idx]
+        mean = np.concatenate((mean, *[b.means for b in births]))[idx]
+        P = np.concatenate((P, *[b.covs for b in births]))[idx]
+    n_lens = s_lens + b_lens  # components per problem after the prediction
+    prob = np.repeat(np.arange(n_prob), n_lens)  # (N,)
+    # -- update (tracking.gmphd.update) over every problem's (z, j) pairs ---------------------
+    Pd = np.array([f.sensors[0].detection_probability for f in filters])
+    kappa = np.array([f.sensors[0].clutter_intensity for f in filters])
+    R = np.stack([f.sensors[0].model.R for f in filters])  # (P, dim, dim)
+    Z = [np.asarray(z, dtype=float).reshape(-1, dim) for z in scans]
+    m_lens = np.array([len(z) for z in Z])
+    scan = np.concatenate(Z) if len(Z) else np.zeros((0, dim))
+    missed_w = w * (1.0 - Pd[prob])
+    pair_lens = m_lens * n_lens
+    n_pairs = int(pair_lens.sum())
+    if n_pairs == 0:
+        det_w, det_m, det_P = w[:0], mean[:0], P[:0]
+        det_lens = np.zeros(n_prob, dtype=np.intp)
+    else:
+        cols = _selected_columns(model)
+        zhat = mean[:, cols]  # (N, dim)
+        PHt = P[:, :, cols]  # (N, d, dim)
+        S = PHt[:, cols, :] + R[prob]  # (N, dim, dim)
+        S_inv, S_det = (_inv_det_2x2(S) if dim == 2 else inv_det_spd(S))
+        K = PHt @ S_inv  # (N, d, dim)
+        P_upd = P - K @ PHt.swapaxes(1, 2)
+        P_upd = P_upd + P_upd.swapaxes(1, 2)
+        P_upd *= 0.5
+        # the pairs, problem by problem, measurement-major (update's (m, n) array row by row)
+        pp = np.repeat(np.arange(n_prob), pair_lens)  # (T,)
+        local = np.arange(n_pairs) - np.repeat(np.cumsum(pair_lens) - pair_lens, pair_lens)
+        n_of = n_lens[pp]
+        j_local = local % n_of
+        zi = (np.cumsum(m_lens) - m_lens)[pp] + local // n_of  # into scan
+        ji = (np.cumsum(n_lens) - n_lens)[pp] + j_local  # into the components
+        nu = model.residual(scan[zi], zhat[ji])  # (T, dim)
+        d2 = c_einsum("...i,...ij,...j->...", nu, S_inv[ji], nu)  # (T,)
+        num = d2 + np.log(S_det)[ji]
+        num += dim * _LOG_2PI
+        num *= -0.5
+        np.exp(num, out=num)
+        num *= Pd[pp] * w[ji]
+        if f0.gate is not None:
+            num = np.where(d2 <= f0.gate, num, 0.0)
+        first = j_local == 0  # each (problem, z) row starts here
+        row = np.cumsum(first) - 1  # (T,): the row of each pair
+        denom = np.add.reduceat(num, np.flatnonzero(first))
+        denom += kappa[pp[first]]
+        num /= denom[row]
+        min_weight = f0.reducer.prune_threshold
+        keep = num > min_weight if min_weight > 0 else num >= 0
+        det_w = num[keep]
+        kj = ji[keep]
+        det_m = mean[kj] + c_einsum("kij,kj->ki", K[kj], nu[keep])
+        det_P = P_upd[kj]
+        det_lens = np.bincount(pp[keep], minlength=n_prob)
+    idx = _interleave(n_lens, det_lens)
+    w_all = np.concatenate((missed_w, det_w))[idx]
+    m_all = np.concatenate((mean, det_m))[idx]
+    P_all = np.concatenate((P, det_P))[idx]
+    prob_all = np.repeat(np.arange(n_prob), n_lens + det_lens)
+    return reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob)
+
+
+__all__ = ["batch_key", "step_many"]
