@@ -41,7 +41,8 @@ A neighbour whose non-empty density at a scan repeats, bit for bit, the one it s
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
 
-Calibration (``python -m sim.trust_calibration --runs 2``, training runs 9000-9001 only; the
+Calibration (``python -m sensornet.sim.trust_calibration --runs 2``, training runs 9000-9001 only;
+the
 lying study evaluates on 7000..): seed 000, seed 004's graph with GM-PHD peers and the 20-peer
 circulant graph of degree 4, each clean, at Pd 0.9 and with link faults (30 ms latency, 20 %
 loss, 20 % reordering): 108,288 (peer, neighbour, scan) triples. ``cap = 8``, ``drift = 2``,
@@ -65,7 +66,7 @@ scans 3-8 of run 9000) is, for four scans, what a liar is; no setting of the sco
 (``leak`` 0.6-0.8, ``readmit`` 1-5, ``quarantine`` 8.6-14, no empty penalty) brings seed 000
 under 0.5 % while a lie still reaches weight 0.1 within a few scans (at 0 % there, *biased*
 is never caught and *empty* only after 40 scans). How soon each lie reaches weight <= 0.1 on
-the evaluation runs is in docs/security.md (``python -m sim.lying``'s defence table).
+the evaluation runs is in docs/security.md (``python -m sensornet.sim.lying``'s defence table).
 
 Pure logic (no I/O): :class:`peers.consensus.Consensus` calls :meth:`Trust.weigh` before each
 fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules).

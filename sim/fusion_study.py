@@ -12,7 +12,8 @@ into campaign cells, run by :func:`sim.campaign.run_campaign` (resumable, any wo
   geometric graph of 20) or generated circulant networks (``"circulant:N:D"``, a ring is
   ``D = 2``: :func:`sim.graphs.network_scenario`).
 
-``python -m sim.fusion_study report FOLDER`` writes the table (mean and 95 % interval over the
+``python -m sensornet.sim.fusion_study report FOLDER`` writes the table (mean and 95 % interval
+over the
 runs of each cell) and the figures: OSPA against ``L`` per rule and graph, and OSPA against
 communication cost.
 """

@@ -17,7 +17,8 @@ The lies (:data:`LIES`), each a well-formed message the core accepts:
 - ``phantoms``: the real estimate plus three components of weight 1 at fixed points inside the
   region (10 % in from three of its corners), at rest, with the tight covariance.
 
-``python -m sim.lying [--runs N] [--first-run R] [--out DIR]`` runs every lie and the clean run
+``python -m sensornet.sim.lying [--runs N] [--first-run R] [--out DIR]`` runs every lie and the
+clean run
 under each GM-PHD fusion rule (:data:`RULES`) on seed 000 (3 peers, ``s2`` lies) and on the
 seed-004 graph with GM-PHD peers (20 peers, one round, ``s15`` lies: 14 honest neighbours),
 prints a markdown table of the honest peers' mean fused OSPA (their local OSPA, which no lie can

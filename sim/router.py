@@ -75,7 +75,7 @@ def run_router(listen: Sequence[str], connect: Sequence[str] = (),
 def serve(listen: list[str], connect: list[str], config: str | None, secure: str | None,
           name: str = "router", network: str | None = None) -> None:
     """Run a router from command-line values (``secure``: the keys folder), printing its
-    lines; what ``sensornet router`` and ``python -m sim.router`` both do."""
+    lines; what ``sensornet router`` and ``python -m sensornet.sim.router`` both do."""
     security = None
     if secure:
         security = router_security(secure, name, network)
@@ -84,7 +84,8 @@ def serve(listen: list[str], connect: list[str], config: str | None, secure: str
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.router``: ``sensornet router`` without the CLI's imports (SciPy and the
+    """``python -m sensornet.sim.router``: ``sensornet router`` without the CLI's imports (SciPy
+    and the
     rest take seconds to load on a busy machine: a routed run restarts its router this way)."""
     ap = argparse.ArgumentParser(prog="python -m sensornet.sim.router", description=__doc__)
     ap.add_argument("--listen", action="append", required=True, metavar="ENDPOINT")

@@ -10,8 +10,9 @@ the fusing filter runs on radar 1 and at every scan fuses radar 2's published su
 (posterior, and for the ratio rule also prediction). The fusion calls are the ones a peer
 would make with a received message (``tracking.particles``).
 
-``python -m sim.seed001 --runs 300 --geometry A --jobs 2`` prints the table (runs 0..299);
-``python -m sim.seed001 --tune-omega 0.2,0.3,0.4,det --tune-runs 40 --jobs 2`` compares GCI
+``python -m sensornet.sim.seed001 --runs 300 --geometry A --jobs 2`` prints the table (runs 0..299);
+``python -m sensornet.sim.seed001 --tune-omega 0.2,0.3,0.4,det --tune-runs 40 --jobs 2`` compares
+GCI
 weights on runs 10000..10039, which the table never evaluates.
 """
 
@@ -116,7 +117,8 @@ def format_table(result: ExperimentResult) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed001``: the study's command line (:func:`sim.studies.seed001.main`)."""
+    """``python -m sensornet.sim.seed001``: the study's command line
+    (:func:`sim.studies.seed001.main`)."""
     return studies.main("seed001", None if argv is None else list(argv))
 
 

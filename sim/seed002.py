@@ -1,6 +1,7 @@
 """Seed-002 Monte Carlo: distance vs grid-density + spectral partitioning in the ET-GM-PHD.
 
-``python -m sim.seed002 --runs 20`` runs the paper's single-sensor experiment (sensor ``s1`` of
+``python -m sensornet.sim.seed002 --runs 20`` runs the paper's single-sensor experiment (sensor
+``s1`` of
 ``sim/scenarios/seed002.toml``) at clutter 10 / 15 / 20 / 25 for both partitioners on the same
 runs (common random numbers) and prints, per clutter level and partitioner: partition time per
 scan, whole ET-GM-PHD step time per scan (predict, partition, update, reduce), mean OSPA
@@ -217,7 +218,8 @@ def write_png(rows: list[dict], path: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m sim.seed002``: the study's command line (:func:`sim.studies.seed002.main`)."""
+    """``python -m sensornet.sim.seed002``: the study's command line
+    (:func:`sim.studies.seed002.main`)."""
     return studies.main("seed002", argv)
 
 

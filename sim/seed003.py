@@ -4,7 +4,7 @@ The scenario (``sim/scenarios/seed003.toml``), the Monte Carlo comparison of PDA
 fuzzy PDA and fuzzy IMM with one sensor and with the sequential two-sensor update, and the
 filters a peer runs (:func:`make_filter`, the same objects as the table's).
 
-``python -m sim.seed003 --runs 200 --jobs 2`` evaluates runs 0..199 and prints the table:
+``python -m sensornet.sim.seed003 --runs 200 --jobs 2`` evaluates runs 0..199 and prints the table:
 track-loss count and rate with a 95 % Wilson interval, position and velocity RMSE over the
 kept tracks, detector hit and false-alarm rates. Every run draws its measurements and clutter
 from ``default_rng([seed, run])``; all eight filters see the same draws. Filter settings are
@@ -255,7 +255,8 @@ def plot_rmse(over_time: Mapping, cfg: Mapping, path: Path) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed003``: the study's command line (:func:`sim.studies.seed003.main`)."""
+    """``python -m sensornet.sim.seed003``: the study's command line
+    (:func:`sim.studies.seed003.main`)."""
     return studies.main("seed003", None if argv is None else list(argv))
 
 

@@ -16,7 +16,8 @@ run seed003`` (world + one PDA peer process per sensor over Zenoh, ``--sim``, ``
   (:class:`peers.pda_parts.PdaEstimator`, :class:`~peers.pda_parts.CiFuser`; no feedback).
 
 Every peer starts from the run's one initial estimate (drawn as in :mod:`sim.seed003_peers`),
-so measurement-sharing peers hold the same estimate. ``python -m sim.seed003_net run`` compares
+so measurement-sharing peers hold the same estimate. ``python -m sensornet.sim.seed003_net run``
+compares
 the two modes in one table: each mode a common run (:func:`sim.launcher.start_run`) beside its
 twin (``--sim``: the twins only); with every message in time the processes compute what the
 twin computes (the table's "max diff to twin" column; the tests check it).

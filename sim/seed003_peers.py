@@ -17,7 +17,7 @@ what the modes can do, not of the network; the process peers are ``sensornet run
 (:mod:`sim.seed003_net`). Clutter is the world's (``clutter.mode = "region"``: the same clutter
 for every mode, as sensors in a network see it), not drawn in each filter's gate.
 
-``python -m sim.seed003_peers --runs 200 --jobs 2``.
+``python -m sensornet.sim.seed003_peers --runs 200 --jobs 2``.
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def format_table(rows: Sequence[dict]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed003_peers``: the study's command line
+    """``python -m sensornet.sim.seed003_peers``: the study's command line
     (:func:`sim.studies.seed003_peers.main`)."""
     return studies.main("seed003-peers", None if argv is None else list(argv))
 

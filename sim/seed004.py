@@ -34,7 +34,8 @@ process CPU time (``time.process_time``, so a loaded machine does not inflate it
 method's own computation per peer per scan in this single-threaded worker; for GCI and AA it
 includes the peer's local GM-PHD step.
 
-``python -m sim.seed004 --runs 20 --jobs 2 --out runs/seed004`` prints the table and writes
+``python -m sensornet.sim.seed004 --runs 20 --jobs 2 --out runs/seed004`` prints the table and
+writes
 ``seed004_table.csv``, ``seed004_iterations.csv`` and ``seed004_tradeoff.png``. Runs are
 0..N-1 from ``--first-run``; nothing here is tuned on them (the parameters in the TOML were set
 before any run).
@@ -348,7 +349,8 @@ def aggregate(per_run: list[dict[str, dict[str, float]]]) -> dict[str, dict[str,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed004``: the study's command line (:func:`sim.studies.seed004.main`)."""
+    """``python -m sensornet.sim.seed004``: the study's command line
+    (:func:`sim.studies.seed004.main`)."""
     return studies.main("seed004", None if argv is None else list(argv))
 
 

@@ -7,7 +7,7 @@ loss, reordering). Every (peer, neighbour, scan) score is kept; the printed quan
 :class:`peers.trust.TrustConfig`'s ``suspect`` and ``quarantine`` were set from. Training runs
 9000.. are used here only (the lying study evaluates on 7000..).
 
-    python -m sim.trust_calibration --runs 4
+    python -m sensornet.sim.trust_calibration --runs 4
 """
 
 from __future__ import annotations

@@ -97,7 +97,7 @@ def report_kinds() -> tuple[str, ...]:
 
 
 def main(name: str, argv: list[str] | None = None) -> int:
-    """``python -m sim.<module>`` of study ``name``: its ``command`` hook (the module's
+    """``python -m sensornet.sim.<module>`` of study ``name``: its ``command`` hook (the module's
     ``__main__`` block calls this, so the study module, which imports the computation, is
     loaded by name and the computation never imports its study)."""
     study = get(name)

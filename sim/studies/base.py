@@ -110,7 +110,7 @@ class Study:
     report_kind: str | None = None
     """The ``[[figures]]`` kind that asks for ``report`` (default: the study's name)."""
     command: Callable[[Sequence[str] | None], int] | None = None
-    """The study's own command line, ``python -m sim.<module>`` (argv -> exit code): flags
+    """The study's own command line, ``python -m sensornet.sim.<module>`` (argv -> exit code): flags
     made into a :class:`Request` and run through :func:`experiment` like ``sensornet
     experiment`` (:mod:`sim.studies.command`)."""
 

@@ -4,7 +4,8 @@ fusion and the particle fusion rule (:mod:`sim.seed001`). A campaign cell of its
 keys; ``[[figures]] kind = "seed001"`` draws Table 1 per cell beside the paper's numbers.
 
 ``sensornet experiment seed001`` is the one-model experiment (:mod:`sim.studies.seed000`);
-this study is ``python -m sim.seed001`` (:func:`main`, with the GCI weight's tuning beside it)
+this study is ``python -m sensornet.sim.seed001`` (:func:`main`, with the GCI weight's tuning
+beside it)
 and the ``seed001`` campaign runner.
 """
 
@@ -180,7 +181,8 @@ def report(cell: dict, data: dict[str, Any], out: Path) -> tuple[list[str], list
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed001 --runs N --geometry A|G|close|near [--jobs J]`` prints Table 1;
+    """``python -m sensornet.sim.seed001 --runs N --geometry A|G|close|near [--jobs J]`` prints
+    Table 1;
     ``--tune-omega 0.2,0.3,det --tune-runs N`` compares GCI weights on runs 10000.. instead."""
     ap = command.parser("seed001", s1.__doc__, runs=10, set_help=None)
     ap.add_argument("--geometry", choices=sorted(s1.GEOMETRIES), default="A")

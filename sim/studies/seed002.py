@@ -1,6 +1,7 @@
 """Seed 002's partitioner comparison as a study: the ET-GM-PHD with distance and grid-spectral
 partitioning at four clutter levels (:mod:`sim.seed002`). ``sensornet experiment`` runs it for
-any scenario with an ``[extended]`` table; ``python -m sim.seed002`` (:func:`main`) is the same
+any scenario with an ``[extended]`` table; ``python -m sensornet.sim.seed002`` (:func:`main`) is
+the same
 path with its own flags (clutter levels, a CSV and a PNG file, the twin network instead).
 """
 
@@ -78,7 +79,8 @@ def figures(o: Outcome, folder: Path) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed002``: the partitioner table (``--csv FILE``, ``--png FILE``), or
+    """``python -m sensornet.sim.seed002``: the partitioner table (``--csv FILE``, ``--png FILE``),
+    or
     ``--network``: the 3-peer GCI network on the twin, fused against local OSPA."""
     ap = command.parser("seed002", s2.__doc__, runs=20, jobs=False,
                         set_help="scenario override, e.g. fusion.rule=aa (repeatable)")

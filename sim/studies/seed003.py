@@ -1,6 +1,7 @@
 """Seed 003's reproduction as a study: PDAF, IMM-PDAF, fuzzy PDA and fuzzy IMM, one and two
 sensors, on the manoeuvring target (:mod:`sim.seed003`); ``sensornet experiment seed003`` (or a
-file named ``seed003.toml``: its settings), and ``python -m sim.seed003`` (:func:`main`: the
+file named ``seed003.toml``: its settings), and ``python -m sensornet.sim.seed003`` (:func:`main`:
+the
 same path, with the choice of methods, a trained ``[fuzzy]`` table and the training)."""
 
 from __future__ import annotations
@@ -70,7 +71,8 @@ def figures(o: Outcome, folder: Path) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed003``: the study's table (``--csv DIR``: its CSVs and figure), or
+    """``python -m sensornet.sim.seed003``: the study's table (``--csv DIR``: its CSVs and figure),
+    or
     ``--train-fuzzy N``: the fitted ``[fuzzy]`` table as JSON."""
     p = command.parser("seed003", s3.__doc__, runs=200,
                        set_help="override a scenario setting (TOML value), e.g. "

@@ -1,5 +1,5 @@
 """Seed 003's peer modes as a study: local, CI, CI + feedback and sequential, on the peers' own
-parts, offline (:mod:`sim.seed003_peers`); ``python -m sim.seed003_peers`` (:func:`main`).
+parts, offline (:mod:`sim.seed003_peers`); ``python -m sensornet.sim.seed003_peers`` (:func:`main`).
 It reads no scenario of its own (the shipped ``seed003`` file with the world's region clutter),
 so ``sensornet experiment`` never picks it."""
 
@@ -50,7 +50,7 @@ def table(o: Outcome) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed003_peers --runs 200 --jobs 2``: the peer modes' table."""
+    """``python -m sensornet.sim.seed003_peers --runs 200 --jobs 2``: the peer modes' table."""
     p = command.parser("seed003_peers", seed003_peers.__doc__, runs=200,
                        set_help="override a setting of the seed003 file (TOML value)")
     p.add_argument("--method", default="IMM-PDAF", choices=seed003.METHODS)

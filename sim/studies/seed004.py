@@ -81,7 +81,7 @@ def flood_loss_table(scn: s4.Seed004, losses: Sequence[float], first_run: int) -
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sim.seed004``: the table (``--out DIR``: its CSVs and PNG), or
+    """``python -m sensornet.sim.seed004``: the table (``--out DIR``: its CSVs and PNG), or
     ``--flood-loss``: flooding's completion under link loss, or ``--replot``: the PNG again."""
     p = command.parser("seed004", s4.__doc__, runs=20,
                        set_help="override a scenario value (TOML syntax), e.g. "
