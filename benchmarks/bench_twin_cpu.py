@@ -50,7 +50,7 @@ GROUPS: dict[str, list[tuple[str, str]]] = {
                         ("tracking/fusion_batch.py", "reduce_many")],
     "extraction": [("tracking/gmphd.py", "extract")],
     "scoring": [("peers/scoring.py", "*"), ("peers/scan_results.py", "*")],
-    "trust": [("peers/trust.py", "*")],
+    "trust": [("peers/trust.py", "*"), ("peers/trust_checks.py", "*")],
     "admission": [("peers/admission.py", "*")],
 }
 """Function groups: ``(file suffix, function name or *)`` entry points. A group's time is its

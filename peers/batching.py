@@ -29,7 +29,7 @@ class FusionJob:
     consensus: Any
     """The :class:`peers.consensus.Consensus` it belongs to."""
     state: Any
-    """Its scan state (``peers.consensus._ScanState``) when the round was queued."""
+    """Its scan state (:class:`peers.consensus_types.ScanState`) when the round was queued."""
     input: FusionInput
     senders: list[str]
     forced: bool = False

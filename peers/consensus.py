@@ -8,15 +8,24 @@ deadline with whatever arrived. After round ``L`` the tracks go out.
 
 Inputs here are decoded, already validated messages (:class:`peers.core.PeerCore` checks keys,
 senders, dimensions, scan windows and rates first); outputs are messages to publish.
+
+The options, counters and per-scan state are in :mod:`peers.consensus_types`, the rounds'
+passage through a host's fusion batch in :mod:`peers.consensus_batch`.
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
 
 import numpy as np
 from sensornet.peers.batching import FusionBatch, FusionJob
+from sensornet.peers.consensus_batch import BatchedRounds
+from sensornet.peers.consensus_types import (
+    ConsensusOptions,
+    ConsensusStats,
+    ScanState,
+    payload_tuples,
+)
 from sensornet.peers.contracts import (
     EstimatorHooks,
     Fuser,
@@ -26,91 +35,13 @@ from sensornet.peers.contracts import (
     metropolis_weights,
 )
 from sensornet.peers.fusers import NoFuser
-from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
 
 
-@dataclass(frozen=True)
-class ConsensusOptions:
-    """How one peer exchanges and fuses."""
-
-    name: str
-    neighbours: tuple[str, ...] = ()
-    degrees: tuple[tuple[str, int], ...] = ()
-    """Degree of this peer and of each neighbour (Metropolis weights)."""
-    rounds: int = 1
-    """Consensus rounds ``L`` per scan."""
-    omega: str = "metropolis"
-    """``"metropolis"`` or ``"uniform"`` weights (optimised rules live in the fuser)."""
-    max_age: int | None = 5
-    """Neighbour estimates older than this many scans are not fused."""
-    policy: str = "nale"
-    """Out-of-sequence policy: ``"nale"``, ``"drop-late"`` or ``"as-is"``."""
-    feedback: bool = False
-    """Use the fused density as the local filter's prior for the next scan."""
-    round_deadlines: bool = False
-    """One deadline per round (the scan's deadline split evenly over the rounds) instead of
-    one per scan: a round then runs with what arrived by its own deadline (scans forwarded
-    in rounds)."""
-    trust: TrustConfig | None = None
-    """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
-    None: every neighbour fused at its consensus weight."""
-
-    def __post_init__(self) -> None:
-        if self.rounds < 1:
-            raise ValueError("consensus rounds must be at least 1")
-        if self.name in self.neighbours:
-            raise ValueError("a peer cannot be its own neighbour")
-
-
-@dataclass
-class ConsensusStats:
-    """Counters reported in the summary."""
-
-    scans: int = 0
-    estimates_in: int = 0
-    estimates_out: int = 0
-    tuples_out: int = 0
-    """Numbers published in estimates (15 per 4-D component, 2 per 2-D measurement:
-    docs/seed004.md), once per publication."""
-    tuples_to_neighbours: int = 0
-    """The same, once per neighbour it goes to (the seed's count: a publication reaches every
-    live neighbour over its own link)."""
-    old_round_estimates: int = 0
-    fusions: int = 0
-    fused_inputs: int = 0
-    deadline_fusions: int = 0
-    tracks_out: int = 0
-    last_fused_from: dict[str, int] = field(default_factory=dict)
-
-
-@dataclass
-class _ScanState:
-    k: int
-    z: np.ndarray
-    round: int = 0
-    current: GaussianMixture | None = None
-    local: GaussianMixture | None = None
-    done: bool = False
-    pending: FusionJob | None = None
-    """The round waiting in a host's :class:`~peers.batching.FusionBatch` (its inputs taken)."""
-
-
-def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
-    """The seed's tuples in one published payload: a ``d``-dimensional Gaussian component
-    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (docs/seed004.md); an array is
-    shared returns ``(m, 2)`` (:class:`~protocol.messages.Returns`)."""
-    if isinstance(payload, ScanSet):
-        return payload.tuples()
-    if isinstance(payload, np.ndarray):
-        return payload.size
-    d = payload.dim
-    return len(payload) * (1 + d + d * (d + 1) // 2)
-
-
-class Consensus:
+class Consensus(BatchedRounds):
     """Drives a :class:`LocalEstimator` and a :class:`Fuser` through the rounds of each scan."""
 
     def __init__(self, options: ConsensusOptions, estimator: LocalEstimator,
@@ -129,7 +60,7 @@ class Consensus:
         self.alive: set[str] = set(options.neighbours)
         self._deg = dict(options.degrees)
         self._inbox: dict[tuple[int, int, str], dict[str, GaussianMixture]] = {}
-        self._scan: _ScanState | None = None
+        self._scan: ScanState | None = None
         self._seq = 0
         self.last_k = 0
         self.stats = ConsensusStats()
@@ -170,7 +101,7 @@ class Consensus:
             return out
         self.last_local = local.density
         self.stats.scans += 1
-        self._scan = _ScanState(k, z, 0, local.published["posterior"], local.density)
+        self._scan = ScanState(k, z, 0, local.published["posterior"], local.density)
         self._record(k, "local", **local.info)
         if self.fusing:
             for kind in self.kinds:
@@ -208,28 +139,6 @@ class Consensus:
             self.stats.deadline_fusions += 1
             return self._fuse_round(self._scan, now) + self._advance(now)
         return self.finish(now)
-
-    def close(self, now: float) -> bool:
-        """With a batch: the current scan's remaining rounds go through it, forced (its
-        deadline passed, or a newer scan waits), counted as :meth:`finish` counts; False
-        (nothing done) without a batch or a scan being fused."""
-        st = self._scan
-        if self.batch is None or not self.batchable or st is None or st.done:
-            return False
-        if st.pending is not None:
-            if not st.pending.forced:
-                st.pending.forced = True
-                self.stats.deadline_fusions += 1
-            return True
-        self.stats.deadline_fusions += 1
-        self._fuse_round(st, now, forced=True)
-        return True
-
-    def forced(self) -> bool:
-        """Whether the scan's remaining rounds go through the batch already, its deadline
-        passed (no deadline left to fire for it)."""
-        st = self._scan
-        return st is not None and st.pending is not None and st.pending.forced
 
     def round_of(self, k: int) -> int | None:
         """Rounds of scan ``k`` already run (None: not the scan being fused, or done)."""
@@ -274,13 +183,6 @@ class Consensus:
         self.cancel_pending()
         self._scan = None
 
-    def cancel_pending(self) -> None:
-        """Forget the round waiting in the batch (its scan is gone, or the peer stopped)."""
-        st = self._scan
-        if st is not None and st.pending is not None:
-            st.pending.settled = True
-            st.pending = None
-
     # -- rounds -----------------------------------------------------------------------------
     def _inputs(self, k: int, rnd: int) -> dict[str, dict[str, GaussianMixture]]:
         got: dict[str, dict[str, GaussianMixture]] = {}
@@ -306,7 +208,7 @@ class Consensus:
             out += self._fuse_round(st, now)
         return out
 
-    def _fuse_round(self, st: _ScanState, now: float, forced: bool = False,
+    def _fuse_round(self, st: ScanState, now: float, forced: bool = False,
                     now_only: bool = False) -> list:
         """Consensus round ``st.round + 1`` of scan ``st.k``: fused now, or (with a batch,
         unless ``now_only``) queued there as a job, ``forced`` if the scan's deadline passed
@@ -331,48 +233,12 @@ class Consensus:
             return self._failed(st, exc)
         return self._fused(st, fused, senders, now)
 
-    def _failed(self, st: _ScanState, exc: Exception) -> list:
+    def _failed(self, st: ScanState, exc: Exception) -> list:
         self._error(st.k, exc)
         st.done = True
         return []
 
-    def _settle(self, st: _ScanState, now: float) -> list:
-        """The round waiting in the batch, fused now (its result is needed at once)."""
-        job = st.pending
-        if job is None:
-            return []
-        job.settled, st.pending = True, None
-        try:
-            fused = self.fuser.fuse(job.input)
-        except Exception as exc:
-            return self._failed(st, exc)
-        return self._fused(st, fused, job.senders, now)
-
-    def complete(self, job: FusionJob, fused: GaussianMixture | None,
-                 exc: Exception | None, now: float) -> None:
-        """The batch fused ``job`` (``fused``, or raised ``exc``): finish its round and go on
-        as :meth:`_advance` would (a forced scan: its remaining rounds, queued again). The
-        messages wait for :meth:`take_completed`."""
-        st = job.state
-        job.settled = True
-        if st.pending is not job or self._scan is not st:
-            return  # settled or cancelled meanwhile
-        st.pending = None
-        out = self._failed(st, exc) if exc is not None else self._fused(st, fused,
-                                                                         job.senders, now)
-        if job.forced:
-            while not st.done and st.pending is None:
-                out += self._fuse_round(st, now, forced=True)
-        else:
-            out += self._advance(now)
-        self._completed.extend(out)
-
-    def take_completed(self) -> list:
-        """The messages of the rounds the batch completed since the last call."""
-        out, self._completed = self._completed, []
-        return out
-
-    def _fused(self, st: _ScanState, fused: GaussianMixture, senders: list[str],
+    def _fused(self, st: ScanState, fused: GaussianMixture, senders: list[str],
                now: float) -> list:
         """The rest of a round once fused: counts, records, the next round's estimate or
         the tracks."""
@@ -396,7 +262,7 @@ class Consensus:
             self.estimator.adopt(fused)
         return self._tracks(st.k, fused, now)
 
-    def _trusted(self, st: _ScanState, inputs: dict, senders: list[str], weights: list[float]):
+    def _trusted(self, st: ScanState, inputs: dict, senders: list[str], weights: list[float]):
         """The round's inputs and weights after the trust test: a neighbour's weight scaled by
         its trust (the rest to own); a neighbour at weight 0 is left out (fusers that do not
         use the weights, e.g. the single-target rules, must not see it)."""

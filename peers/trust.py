@@ -69,7 +69,9 @@ is never caught and *empty* only after 40 scans). How soon each lie reaches weig
 the evaluation runs is in docs/security.md (``python -m sensornet.sim.lying``'s defence table).
 
 Pure logic (no I/O): :class:`peers.consensus.Consensus` calls :meth:`Trust.weigh` before each
-fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules).
+fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules). This module keeps
+each neighbour's score, state and weight over the scans; the tests of one scan are in
+:mod:`peers.trust_checks`, the settings in :mod:`peers.trust_config`.
 """
 
 from __future__ import annotations
@@ -77,102 +79,20 @@ from __future__ import annotations
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
-import numpy as np
-from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
+from sensornet.peers.trust_checks import (
+    is_repeat,
+    neighbour_statistics,
+    offset_chi2,
+    offset_information,
+)
+from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.mixture import GaussianMixture
 
 STATES = ("trusted", "suspect", "quarantined")
 MAX_LOG = 200
+"""State changes kept for the summary (a flapping neighbour cannot grow it)."""
 LOW = 0.1
 """A neighbour at or under this trust counts as detected (issue 24's target)."""
-"""State changes kept for the summary (a flapping neighbour cannot grow it)."""
-
-
-@dataclass(frozen=True)
-class TrustConfig:
-    """How neighbours are tested and weighted (defaults: calibrated, see the module doc)."""
-
-    enabled: bool = True
-    kappa: float = 1.0
-    """Weight of the cardinality term."""
-    cap: float = 8.0
-    """Largest per-round statistic: one scan of total disagreement (an honest peer whose
-    track died a scan before the others') cannot quarantine on its own; a lie keeps it up."""
-    empty_penalty: float = 5.0
-    """Statistic added when exactly one side is empty (where cannot be compared; an honest
-    peer that missed its only target publishes nothing after level-2 pruning)."""
-    drift: float = 2.0
-    """Per-scan allowance of the score: ``S_k = max(0, leak S_(k-1) + T_k - drift)`` (a leaky
-    CUSUM: a strong lie is caught at once, a mild persistent one accumulates)."""
-    leak: float = 0.8
-    """Fraction of the score carried to the next scan (old evidence fades: re-admission)."""
-    suspect: float = 3.5
-    """Score above which a neighbour's weight is reduced: the 99th percentile of honest
-    neighbours' scores on the training runs (see the module doc)."""
-    quarantine: float = 8.6
-    """Score at which its weight is 0 and it is quarantined: their 99.9th percentile."""
-    readmit: int = 5
-    """Scans in a row under ``suspect`` before a quarantined neighbour is trusted again."""
-    majority: bool = True
-    """Subtract the median test between the other inputs (own and the trusted neighbours but
-    the tested one, when there are at least three): a neighbour is scored for disagreeing
-    with a majority that agrees, not for a scan where everybody disagrees (a birth seen a scan
-    apart, misses at Pd 0.9). The W-MSR idea (LeBlanc, Zhang, Koutsoukos & Sundaram 2013,
-    "Resilient asymptotic consensus in robust networks", IEEE JSAC 31(4)) of discarding only
-    values extreme against the others, as a soft score."""
-    median_test: bool = True
-    """With the majority term: a neighbour's test is its median test against the other inputs
-    (own and the trusted neighbours but it), not the smaller of its tests against own and
-    against their average. Two liars telling the same lie make the average look like them
-    (each one's phantoms are in the other's reference); the median of the pair tests is
-    moved by neither while the honest inputs are the majority (W-MSR's premise)."""
-    repeat: bool = True
-    """A neighbour whose non-empty density at a scan is, to the last bit, the one it sent at an
-    earlier scan is quarantined at once (statistic ``quarantine + drift``): a filter's
-    posterior changes every scan (the prediction adds the process noise ``Q`` to every
-    covariance, the update takes information away), so an exact repeat is a stuck sensor or a
-    replayed estimate, never noise. The same object handed in again (a stale input reused by
-    the out-of-sequence policy) is not a repeat, nor is a density with no component of weight
-    :attr:`repeat_weight` (the birth intensity alone is the same every scan: an honest peer
-    that saw nothing publishes it again under link faults, 5 times on a training run)."""
-    repeat_weight: float = 0.5
-    """Smallest heaviest-component weight of a density the repeat test looks at (the
-    extraction threshold: a repeated *target*)."""
-    renormalise: bool = True
-    """What a neighbour loses is shared over own and the trusted neighbours in proportion to
-    their consensus weights (the weights renormalised over the trusted set); False: all of it
-    to own (as if the edge were cut)."""
-    bias: bool = True
-    """The offset test: a biased sensor (every estimate a fixed distance off, its covariance
-    honest) is, scan by scan, within an honest neighbour's scatter, but its offset is the same
-    every scan while honest errors average out. Each target-weight component of the neighbour
-    (weight :attr:`repeat_weight`) is matched to own's nearest one within :attr:`bias_gate`
-    metres; the position differences ``d_i`` with summed covariances ``S_i`` of the last
-    scans of each window of :attr:`bias_windows` give the information-weighted mean offset
-    ``b = I^-1 y`` (``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``) and its chi-square
-    ``y' I^-1 y`` (2 degrees of freedom), which grows linearly with the window under a
-    constant offset. Above its window's :attr:`bias_thresholds` the scan's statistic is at
-    least ``quarantine + drift``."""
-    bias_windows: tuple[int, ...] = (3, 16)
-    """Scans in the offset test's windows (a short one for an offset large against the
-    covariances, a long one for a small one)."""
-    bias_gate: float = 60.0
-    """Largest position distance (m) of a matched pair (farther: another target or a lie the
-    divergence test already sees)."""
-    bias_thresholds: tuple[float, ...] = (35.0, 50.0)
-    """Per window: the chi-square of its mean offset above which the neighbour is
-    quarantined (above the largest honest value on the training runs, see the module doc)."""
-    warmup: int = 0
-    """Scans at the start with no test (0: a lie told from the first scan is caught at once;
-    filters that start empty agree on nothing, which the cardinality term alone scores)."""
-
-    def __post_init__(self) -> None:
-        if not (0 < self.leak <= 1 and 0 <= self.suspect < self.quarantine and self.cap > 0
-                and self.readmit >= 1 and self.kappa >= 0 and self.warmup >= 0
-                and self.drift >= 0 and self.empty_penalty >= 0
-                and len(self.bias_windows) == len(self.bias_thresholds)
-                and all(w >= 1 for w in self.bias_windows)):
-            raise ValueError(f"invalid trust settings {self}")
 
 
 @dataclass
@@ -225,63 +145,10 @@ class Trust:
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
                    weights: dict[str, float]) -> dict[str, float]:
         """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
-        average of the other trusted inputs (weights ``weights``, own's under ``""``)."""
-        names = sorted(inputs)
-        mixes = [own] + [inputs[s] for s in names]
-        L = log_overlaps(mixes)
-        mass = np.array([D.mass for D in mixes])
-        trusted = np.array([1.0] + [0.0 if self.n[s].state == "quarantined" else 1.0
-                                    for s in names])
-        w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
-        pair = self._pair_tests(L, mass) if self.cfg.majority else None
-        out = {}
-        for j, s in enumerate(names, start=1):
-            t_own = self._test(L[j, j], L[j, 0], L[0, 0], mass[j], mass[0])
-            wo = w.copy()
-            wo[j] = 0.0
-            if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
-                wo = wo / wo.sum()
-                l_jr = _lse(L[j] + _log(wo))
-                l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
-                t_loo = self._test(L[j, j], l_jr, l_rr, mass[j], float(wo @ mass))
-                out[s] = min(t_own, t_loo)
-            else:
-                out[s] = t_own
-            others = np.flatnonzero(wo > 0) if pair is not None else ()
-            if len(others) >= 3:  # own and at least two other trusted neighbours
-                sub = pair[np.ix_(others, others)][np.triu_indices(len(others), 1)]
-                base = float(np.median(pair[j, others])) if self.cfg.median_test else out[s]
-                out[s] = max(0.0, base - float(np.median(sub)))
-        return out
-
-    def _pair_tests(self, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
-        """The test between every two inputs (``(n, n)``; the majority's own spread)."""
-        cfg = self.cfg
-        d = np.diag(L)
-        a, b = mass[:, None], mass[None, :]
-        card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
-        card = np.minimum(card, card.T)  # symmetric: the smaller of the two directions
-        ea, eb = a <= 1e-9, b <= 1e-9
-        cs = np.asarray(cs_from_log_overlaps(L, np.broadcast_to(d[:, None], L.shape),
-                                             np.broadcast_to(d[None, :], L.shape)))
-        cs = np.where(np.isfinite(cs), cs, cfg.cap)
-        one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
-        P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
-        P = np.minimum(P, cfg.cap)
-        np.fill_diagonal(P, 0.0)
-        return P
-
-    def _test(self, l_jj: float, l_jr: float, l_rr: float, n_j: float, n_r: float) -> float:
-        cfg = self.cfg
-        card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
-        if n_j <= 1e-9 and n_r <= 1e-9:
-            return min(card, cfg.cap)
-        if n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
-            return min(cfg.cap, card + cfg.empty_penalty * min(1.0, max(n_j, n_r)))
-        d = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj), np.float64(l_rr)))
-        if not np.isfinite(d):
-            d = cfg.cap
-        return min(cfg.cap, d + card)
+        average of the other trusted inputs (weights ``weights``, own's under ``""``):
+        :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours left out."""
+        quarantined = {s for s in inputs if self.n[s].state == "quarantined"}
+        return neighbour_statistics(self.cfg, own, inputs, weights, quarantined)
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
               inputs: dict[str, GaussianMixture], weights: list[float],
@@ -345,10 +212,7 @@ class Trust:
         if k <= prev_k:
             return False
         rec.last_mix, rec.last_k = mix, k
-        return (prev is not None and prev is not mix and len(mix) > 0 and len(mix) == len(prev)
-                and float(mix.weights.max()) >= self.cfg.repeat_weight
-                and np.array_equal(mix.weights, prev.weights)
-                and np.array_equal(mix.means, prev.means) and np.array_equal(mix.covs, prev.covs))
+        return is_repeat(prev, mix, self.cfg.repeat_weight)
 
     def _offset(self, rec: NeighbourTrust, own: GaussianMixture,
                 mix: GaussianMixture) -> tuple[float, ...]:
@@ -360,16 +224,7 @@ class Trust:
                                                   cfg.bias_gate))
         while len(rec.offsets) > max(cfg.bias_windows):
             rec.offsets.pop()
-        info = np.cumsum([i for i, _ in rec.offsets], axis=0)  # (n, 2, 2): newest first
-        y = np.cumsum([v for _, v in rec.offsets], axis=0)  # (n, 2)
-        last = np.minimum(np.array(cfg.bias_windows), len(rec.offsets)) - 1
-        info, y = info[last], y[last]
-        ok = np.linalg.det(info) > 1e-12
-        chi2 = np.zeros(len(last))
-        if ok.any():
-            b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # (w, 2): mean offsets
-            chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
-        rec.last_offset_chi2 = tuple(float(c) for c in chi2)
+        rec.last_offset_chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
         return rec.last_offset_chi2
 
     def _next(self, score: float, statistic: float) -> float:
@@ -430,46 +285,3 @@ class Trust:
         out = self.records + [{"kind": "trust-event", **e} for e in self.events]
         self.records, self.events = [], []
         return out
-
-
-def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int],
-                       min_weight: float, gate: float) -> tuple[np.ndarray, np.ndarray]:
-    """Information ``I = sum S_i^-1`` (``(2, 2)``) and ``y = sum S_i^-1 d_i`` (``(2,)``) of the
-    position differences ``d_i = m_i - r_(i)`` between each component of ``mix`` of weight at
-    least ``min_weight`` and the nearest such component of ``ref`` within ``gate`` metres
-    (``S_i``: the sum of the two position covariances): the generalised-least-squares
-    estimate of a common offset is ``I^-1 y``, its chi-square ``y' I^-1 y``."""
-    zero = (np.zeros((2, 2)), np.zeros(2))
-    if len(ref) == 0 or len(mix) == 0:
-        return zero
-    a = mix.weights >= min_weight
-    b = ref.weights >= min_weight
-    if not a.any() or not b.any():
-        return zero
-    ix = np.ix_(pos, pos)
-    ma, mb = mix.means[a][:, pos], ref.means[b][:, pos]  # (n, 2), (m, 2)
-    Pa = mix.covs[a][:, ix[0], ix[1]]  # (n, 2, 2)
-    Pb = ref.covs[b][:, ix[0], ix[1]]  # (m, 2, 2)
-    diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
-    dist = np.linalg.norm(diff, axis=2)
-    near = np.argmin(dist, axis=1)
-    rows = np.arange(len(ma))
-    ok = dist[rows, near] <= gate
-    if not ok.any():
-        return zero
-    d = diff[rows, near][ok]  # (p, 2)
-    S = Pa[ok] + Pb[near[ok]]  # (p, 2, 2)
-    Si = np.linalg.inv(S)
-    return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
-
-
-def _log(w: np.ndarray) -> np.ndarray:
-    with np.errstate(divide="ignore"):
-        return np.log(w)
-
-
-def _lse(x: np.ndarray) -> float:
-    top = np.max(x)
-    if not np.isfinite(top):
-        return -np.inf
-    return float(top + np.log(np.exp(x - top).sum()))

@@ -1,0 +1,97 @@
+"""What :class:`peers.consensus.Consensus` is configured with and keeps per scan.
+
+:class:`ConsensusOptions` is how one peer exchanges and fuses, :class:`ConsensusStats` the
+counters of its summary (with :func:`payload_tuples`, the communication cost it counts) and
+:class:`ScanState` the scan being fused (its round, current density and the round waiting in
+a host's batch).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from sensornet.peers.batching import FusionJob
+from sensornet.peers.trust_config import TrustConfig
+from sensornet.protocol.messages import ScanSet
+from sensornet.tracking.mixture import GaussianMixture
+
+
+@dataclass(frozen=True)
+class ConsensusOptions:
+    """How one peer exchanges and fuses."""
+
+    name: str
+    neighbours: tuple[str, ...] = ()
+    degrees: tuple[tuple[str, int], ...] = ()
+    """Degree of this peer and of each neighbour (Metropolis weights)."""
+    rounds: int = 1
+    """Consensus rounds ``L`` per scan."""
+    omega: str = "metropolis"
+    """``"metropolis"`` or ``"uniform"`` weights (optimised rules live in the fuser)."""
+    max_age: int | None = 5
+    """Neighbour estimates older than this many scans are not fused."""
+    policy: str = "nale"
+    """Out-of-sequence policy: ``"nale"``, ``"drop-late"`` or ``"as-is"``."""
+    feedback: bool = False
+    """Use the fused density as the local filter's prior for the next scan."""
+    round_deadlines: bool = False
+    """One deadline per round (the scan's deadline split evenly over the rounds) instead of
+    one per scan: a round then runs with what arrived by its own deadline (scans forwarded
+    in rounds)."""
+    trust: TrustConfig | None = None
+    """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
+    None: every neighbour fused at its consensus weight."""
+
+    def __post_init__(self) -> None:
+        if self.rounds < 1:
+            raise ValueError("consensus rounds must be at least 1")
+        if self.name in self.neighbours:
+            raise ValueError("a peer cannot be its own neighbour")
+
+
+@dataclass
+class ConsensusStats:
+    """Counters reported in the summary."""
+
+    scans: int = 0
+    estimates_in: int = 0
+    estimates_out: int = 0
+    tuples_out: int = 0
+    """Numbers published in estimates (15 per 4-D component, 2 per 2-D measurement:
+    docs/seed004.md), once per publication."""
+    tuples_to_neighbours: int = 0
+    """The same, once per neighbour it goes to (the seed's count: a publication reaches every
+    live neighbour over its own link)."""
+    old_round_estimates: int = 0
+    fusions: int = 0
+    fused_inputs: int = 0
+    deadline_fusions: int = 0
+    tracks_out: int = 0
+    last_fused_from: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class ScanState:
+    """The scan being fused: scan ``k``, its returns ``z`` and the rounds run so far."""
+
+    k: int
+    z: np.ndarray
+    round: int = 0
+    current: GaussianMixture | None = None
+    local: GaussianMixture | None = None
+    done: bool = False
+    pending: FusionJob | None = None
+    """The round waiting in a host's :class:`~peers.batching.FusionBatch` (its inputs taken)."""
+
+
+def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
+    """The seed's tuples in one published payload: a ``d``-dimensional Gaussian component
+    ``1 + d + d(d+1)/2`` (15 in 4-D), a 2-D measurement 2 (docs/seed004.md); an array is
+    shared returns ``(m, 2)`` (:class:`~protocol.messages.Returns`)."""
+    if isinstance(payload, ScanSet):
+        return payload.tuples()
+    if isinstance(payload, np.ndarray):
+        return payload.size
+    d = payload.dim
+    return len(payload) * (1 + d + d * (d + 1) // 2)

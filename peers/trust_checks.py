@@ -1,0 +1,159 @@
+"""The per-neighbour tests of :mod:`peers.trust`: divergence, median, repeat and offset.
+
+Each function scores one scan's densities and keeps no state; :class:`peers.trust.Trust`
+turns their statistics into scores, states and weights over time (the tests, their
+references and their calibration are in :mod:`peers.trust`'s docstring).
+
+- :func:`neighbour_statistics`: ``T_j`` of every neighbour, the smaller of its divergence
+  tests against own and the leave-one-out average, or (W-MSR-style majority) its median test
+  against the other inputs less their own median test (:func:`pair_tests`,
+  :func:`divergence_test`).
+- :func:`is_repeat`: a non-empty density repeated bit for bit (a stuck sensor or a replay).
+- :func:`offset_information` and :func:`offset_chi2`: the generalised-least-squares offset
+  of a biased sensor over windows of scans.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from sensornet.peers.trust_config import TrustConfig
+from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
+from sensornet.tracking.mixture import GaussianMixture
+
+
+def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
+                         inputs: dict[str, GaussianMixture], weights: dict[str, float],
+                         quarantined: set[str]) -> dict[str, float]:
+    """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
+    average of the other trusted inputs (weights ``weights``, own's under ``""``; the
+    neighbours in ``quarantined`` are left out of every reference)."""
+    names = sorted(inputs)
+    mixes = [own] + [inputs[s] for s in names]
+    L = log_overlaps(mixes)
+    mass = np.array([D.mass for D in mixes])
+    trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
+    w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
+    pair = pair_tests(cfg, L, mass) if cfg.majority else None
+    out = {}
+    for j, s in enumerate(names, start=1):
+        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0])
+        wo = w.copy()
+        wo[j] = 0.0
+        if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
+            wo = wo / wo.sum()
+            l_jr = _lse(L[j] + _log(wo))
+            l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
+            t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass))
+            out[s] = min(t_own, t_loo)
+        else:
+            out[s] = t_own
+        others = np.flatnonzero(wo > 0) if pair is not None else ()
+        if len(others) >= 3:  # own and at least two other trusted neighbours
+            sub = pair[np.ix_(others, others)][np.triu_indices(len(others), 1)]
+            base = float(np.median(pair[j, others])) if cfg.median_test else out[s]
+            out[s] = max(0.0, base - float(np.median(sub)))
+    return out
+
+
+def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """The test between every two inputs (``(n, n)``; the majority's own spread) from their
+    log overlaps ``L`` (``(n, n)``) and masses ``mass`` (``(n,)``)."""
+    d = np.diag(L)
+    a, b = mass[:, None], mass[None, :]
+    card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
+    card = np.minimum(card, card.T)  # symmetric: the smaller of the two directions
+    ea, eb = a <= 1e-9, b <= 1e-9
+    cs = np.asarray(cs_from_log_overlaps(L, np.broadcast_to(d[:, None], L.shape),
+                                         np.broadcast_to(d[None, :], L.shape)))
+    cs = np.where(np.isfinite(cs), cs, cfg.cap)
+    one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
+    P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
+    P = np.minimum(P, cfg.cap)
+    np.fill_diagonal(P, 0.0)
+    return P
+
+
+def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
+                    n_r: float) -> float:
+    """``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` from the log overlaps of a
+    density ``D_j`` and a reference ``R`` and their masses, capped at
+    :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is empty)."""
+    card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
+    if n_j <= 1e-9 and n_r <= 1e-9:
+        return min(card, cfg.cap)
+    if n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
+        return min(cfg.cap, card + cfg.empty_penalty * min(1.0, max(n_j, n_r)))
+    d = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj), np.float64(l_rr)))
+    if not np.isfinite(d):
+        d = cfg.cap
+    return min(cfg.cap, d + card)
+
+
+def is_repeat(prev: GaussianMixture | None, mix: GaussianMixture, min_weight: float) -> bool:
+    """Whether ``mix`` repeats, bit for bit, the earlier density ``prev`` (another object,
+    non-empty, its heaviest component at least ``min_weight``: :attr:`TrustConfig.repeat`)."""
+    return (prev is not None and prev is not mix and len(mix) > 0 and len(mix) == len(prev)
+            and float(mix.weights.max()) >= min_weight
+            and np.array_equal(mix.weights, prev.weights)
+            and np.array_equal(mix.means, prev.means) and np.array_equal(mix.covs, prev.covs))
+
+
+def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
+    """Per window of ``windows`` scans: the chi-square ``y' I^-1 y`` of the mean offset over
+    the newest scans of ``offsets`` (per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``, newest
+    first: :func:`offset_information`); 0 where ``I`` is singular."""
+    info = np.cumsum([i for i, _ in offsets], axis=0)  # (n, 2, 2): newest first
+    y = np.cumsum([v for _, v in offsets], axis=0)  # (n, 2)
+    last = np.minimum(np.array(windows), len(offsets)) - 1
+    info, y = info[last], y[last]
+    ok = np.linalg.det(info) > 1e-12
+    chi2 = np.zeros(len(last))
+    if ok.any():
+        b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # (w, 2): mean offsets
+        chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
+    return tuple(float(c) for c in chi2)
+
+
+def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int],
+                       min_weight: float, gate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Information ``I = sum S_i^-1`` (``(2, 2)``) and ``y = sum S_i^-1 d_i`` (``(2,)``) of the
+    position differences ``d_i = m_i - r_(i)`` between each component of ``mix`` of weight at
+    least ``min_weight`` and the nearest such component of ``ref`` within ``gate`` metres
+    (``S_i``: the sum of the two position covariances): the generalised-least-squares
+    estimate of a common offset is ``I^-1 y``, its chi-square ``y' I^-1 y``."""
+    zero = (np.zeros((2, 2)), np.zeros(2))
+    if len(ref) == 0 or len(mix) == 0:
+        return zero
+    a = mix.weights >= min_weight
+    b = ref.weights >= min_weight
+    if not a.any() or not b.any():
+        return zero
+    ix = np.ix_(pos, pos)
+    ma, mb = mix.means[a][:, pos], ref.means[b][:, pos]  # (n, 2), (m, 2)
+    Pa = mix.covs[a][:, ix[0], ix[1]]  # (n, 2, 2)
+    Pb = ref.covs[b][:, ix[0], ix[1]]  # (m, 2, 2)
+    diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
+    dist = np.linalg.norm(diff, axis=2)
+    near = np.argmin(dist, axis=1)
+    rows = np.arange(len(ma))
+    ok = dist[rows, near] <= gate
+    if not ok.any():
+        return zero
+    d = diff[rows, near][ok]  # (p, 2)
+    S = Pa[ok] + Pb[near[ok]]  # (p, 2, 2)
+    Si = np.linalg.inv(S)
+    return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
+
+
+def _log(w: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore"):
+        return np.log(w)
+
+
+def _lse(x: np.ndarray) -> float:
+    top = np.max(x)
+    if not np.isfinite(top):
+        return -np.inf
+    return float(top + np.log(np.exp(x - top).sum()))

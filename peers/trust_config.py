@@ -1,0 +1,93 @@
+"""How a peer tests and weights its neighbours: :class:`TrustConfig` (the settings of
+:class:`peers.trust.Trust`; the defaults' calibration is in :mod:`peers.trust`'s docstring)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class TrustConfig:
+    """How neighbours are tested and weighted (defaults: calibrated, see :mod:`peers.trust`)."""
+
+    enabled: bool = True
+    kappa: float = 1.0
+    """Weight of the cardinality term."""
+    cap: float = 8.0
+    """Largest per-round statistic: one scan of total disagreement (an honest peer whose
+    track died a scan before the others') cannot quarantine on its own; a lie keeps it up."""
+    empty_penalty: float = 5.0
+    """Statistic added when exactly one side is empty (where cannot be compared; an honest
+    peer that missed its only target publishes nothing after level-2 pruning)."""
+    drift: float = 2.0
+    """Per-scan allowance of the score: ``S_k = max(0, leak S_(k-1) + T_k - drift)`` (a leaky
+    CUSUM: a strong lie is caught at once, a mild persistent one accumulates)."""
+    leak: float = 0.8
+    """Fraction of the score carried to the next scan (old evidence fades: re-admission)."""
+    suspect: float = 3.5
+    """Score above which a neighbour's weight is reduced: the 99th percentile of honest
+    neighbours' scores on the training runs (see :mod:`peers.trust`)."""
+    quarantine: float = 8.6
+    """Score at which its weight is 0 and it is quarantined: their 99.9th percentile."""
+    readmit: int = 5
+    """Scans in a row under ``suspect`` before a quarantined neighbour is trusted again."""
+    majority: bool = True
+    """Subtract the median test between the other inputs (own and the trusted neighbours but
+    the tested one, when there are at least three): a neighbour is scored for disagreeing
+    with a majority that agrees, not for a scan where everybody disagrees (a birth seen a scan
+    apart, misses at Pd 0.9). The W-MSR idea (LeBlanc, Zhang, Koutsoukos & Sundaram 2013,
+    "Resilient asymptotic consensus in robust networks", IEEE JSAC 31(4)) of discarding only
+    values extreme against the others, as a soft score."""
+    median_test: bool = True
+    """With the majority term: a neighbour's test is its median test against the other inputs
+    (own and the trusted neighbours but it), not the smaller of its tests against own and
+    against their average. Two liars telling the same lie make the average look like them
+    (each one's phantoms are in the other's reference); the median of the pair tests is
+    moved by neither while the honest inputs are the majority (W-MSR's premise)."""
+    repeat: bool = True
+    """A neighbour whose non-empty density at a scan is, to the last bit, the one it sent at an
+    earlier scan is quarantined at once (statistic ``quarantine + drift``): a filter's
+    posterior changes every scan (the prediction adds the process noise ``Q`` to every
+    covariance, the update takes information away), so an exact repeat is a stuck sensor or a
+    replayed estimate, never noise. The same object handed in again (a stale input reused by
+    the out-of-sequence policy) is not a repeat, nor is a density with no component of weight
+    :attr:`repeat_weight` (the birth intensity alone is the same every scan: an honest peer
+    that saw nothing publishes it again under link faults, 5 times on a training run)."""
+    repeat_weight: float = 0.5
+    """Smallest heaviest-component weight of a density the repeat test looks at (the
+    extraction threshold: a repeated *target*)."""
+    renormalise: bool = True
+    """What a neighbour loses is shared over own and the trusted neighbours in proportion to
+    their consensus weights (the weights renormalised over the trusted set); False: all of it
+    to own (as if the edge were cut)."""
+    bias: bool = True
+    """The offset test: a biased sensor (every estimate a fixed distance off, its covariance
+    honest) is, scan by scan, within an honest neighbour's scatter, but its offset is the same
+    every scan while honest errors average out. Each target-weight component of the neighbour
+    (weight :attr:`repeat_weight`) is matched to own's nearest one within :attr:`bias_gate`
+    metres; the position differences ``d_i`` with summed covariances ``S_i`` of the last
+    scans of each window of :attr:`bias_windows` give the information-weighted mean offset
+    ``b = I^-1 y`` (``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``) and its chi-square
+    ``y' I^-1 y`` (2 degrees of freedom), which grows linearly with the window under a
+    constant offset. Above its window's :attr:`bias_thresholds` the scan's statistic is at
+    least ``quarantine + drift``."""
+    bias_windows: tuple[int, ...] = (3, 16)
+    """Scans in the offset test's windows (a short one for an offset large against the
+    covariances, a long one for a small one)."""
+    bias_gate: float = 60.0
+    """Largest position distance (m) of a matched pair (farther: another target or a lie the
+    divergence test already sees)."""
+    bias_thresholds: tuple[float, ...] = (35.0, 50.0)
+    """Per window: the chi-square of its mean offset above which the neighbour is
+    quarantined (above the largest honest value on the training runs, see :mod:`peers.trust`)."""
+    warmup: int = 0
+    """Scans at the start with no test (0: a lie told from the first scan is caught at once;
+    filters that start empty agree on nothing, which the cardinality term alone scores)."""
+
+    def __post_init__(self) -> None:
+        if not (0 < self.leak <= 1 and 0 <= self.suspect < self.quarantine and self.cap > 0
+                and self.readmit >= 1 and self.kappa >= 0 and self.warmup >= 0
+                and self.drift >= 0 and self.empty_penalty >= 0
+                and len(self.bias_windows) == len(self.bias_thresholds)
+                and all(w >= 1 for w in self.bias_windows)):
+            raise ValueError(f"invalid trust settings {self}")
