@@ -94,8 +94,8 @@ def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: b
     (``peers.host.SharedDecode``: an estimate decoded once, not once per receiver);
     ``batch``: the rounds ready at one instant fused together (``run_twin(batch=True)``)."""
     if before:
-        sys.path.insert(0, str(ROOT / "benchmarks"))
-        import twin_before
+        sys.path.insert(0, str(ROOT))
+        from benchmarks import twin_before
         twin_before.install()
     from sensornet.peers.host import SharedDecode
     from sensornet.sim.graphs import network_scenario

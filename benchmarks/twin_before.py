@@ -8,30 +8,20 @@ from __future__ import annotations
 
 import importlib.abc
 import importlib.util
-import re
-import subprocess
 import sys
-from pathlib import Path
+
+from benchmarks.history import old_source
 
 COMMIT = "d7f97c4"
 MODULES = ("sensornet.tracking.fusion", "sensornet.tracking.reduction",
            "sensornet.tracking.gaussian", "sensornet.tracking.mixture",
            "sensornet.protocol.codec", "sensornet.peers.core", "sensornet.peers.scoring")
 """The modules the speed work changes (the rest of the tree is shared by both sides)."""
-_OLD_IMPORT = re.compile(r"^(\s*)(from|import) (tracking|protocol|peers|sim)\b", re.M)
-"""Imports of the old tree, which had no ``sensornet.`` prefix yet."""
-_ROOT = Path(__file__).resolve().parents[1]
 
 
 def _source(name: str) -> str:
-    path = name.removeprefix("sensornet.").replace(".", "/") + ".py"
-    try:
-        text = subprocess.run(["git", "-C", str(_ROOT), "show", f"{COMMIT}:{path}"],
-                              capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise ImportError(f"twin_before needs git and commit {COMMIT} in this clone's history "
-                          f"({exc})") from None
-    return _OLD_IMPORT.sub(r"\1\2 sensornet.\3", text)
+    return old_source(COMMIT, name.removeprefix("sensornet.").replace(".", "/") + ".py",
+                      "twin_before")
 
 
 class _Before(importlib.abc.MetaPathFinder, importlib.abc.Loader):

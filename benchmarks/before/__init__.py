@@ -6,24 +6,19 @@ No copy is kept in the tree; ``git`` and the clone's history are needed."""
 from __future__ import annotations
 
 import importlib.util
-import subprocess
 import sys
-from pathlib import Path
+
+from benchmarks.history import old_source
 
 COMMIT = "fea5bab"
 MODULES = ("mixture", "reduction", "gmphd")  # in dependency order
-_ROOT = Path(__file__).resolve().parents[2]
 
 
 def _source(name: str) -> str:
-    try:
-        text = subprocess.run(["git", "-C", str(_ROOT), "show", f"{COMMIT}:tracking/{name}.py"],
-                              capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise ImportError(f"benchmarks.before needs git and commit {COMMIT} in this clone's "
-                          f"history ({exc})") from None
+    text = old_source(COMMIT, f"tracking/{name}.py", "benchmarks.before")
     for dep in MODULES:
-        text = text.replace(f"from tracking.{dep} import", f"from {__name__}.{dep} import")
+        text = text.replace(f"from sensornet.tracking.{dep} import",
+                            f"from {__name__}.{dep} import")
     return text
 
 
