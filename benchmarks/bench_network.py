@@ -321,7 +321,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="short runs, one small scaling step")
     p.add_argument("--sizes", default=SIZES, help="peer counts to try (ascending)")
     p.add_argument("--degrees", default="2,3,4", help="graph degrees to try")
-    p.add_argument("--scans", type=int, default=100, help="scans per run")
+    p.add_argument("--scans", type=int, default=100,
+                   help="scans per run (the scaling part: at most 50)")
     p.add_argument("--full-mesh", action="store_true",
                    help="let Zenoh link every peer to every other (default: links only along "
                         "the peer graph, gossip off)")
@@ -368,10 +369,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.targets:
         sizes = [int(x) for x in (args.sizes if args.sizes != SIZES else "20,50,100").split(",")]
         with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
-            print(f"## targets: 10 scans/s, 2 consensus rounds, {scale_scans} scans, links "
+            print(f"## targets: 10 scans/s, 2 consensus rounds, {scans} scans, links "
                   f"along the graph, hosts' batching: {args.batch}; load average "
                   f"{load_average()} at the start\n", flush=True)
-            part_targets(Path(tmp), sizes, degrees, args.packings.split(","), scale_scans,
+            part_targets(Path(tmp), sizes, degrees, args.packings.split(","), scans,
                          args.deadline)
         return 0
     with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:

@@ -102,6 +102,18 @@ class _Inbox:
         self._q.put((self._slot, item))
 
 
+class _Backlog:
+    """A hand-off's inbox: the peer's backlog itself, stamped now. The hand-off runs on the
+    loop's thread, so it needs neither the thread-safe queue nor another wake-up (the loop
+    sees a non-empty backlog and comes straight back)."""
+
+    def __init__(self, backlog: deque) -> None:
+        self._backlog = backlog
+
+    def put(self, item) -> None:
+        self._backlog.append((time.time(), item))
+
+
 class PeerHost(HostBatching):
     """Runs several peers in one process until every one has stopped (or SIGINT/SIGTERM).
 
@@ -127,7 +139,12 @@ class PeerHost(HostBatching):
         self.cpu = SharedCpu()
         self.peers = [PeerRuntime(core, o, inbox=_Inbox(self.q, i), shared_cpu=self.cpu)
                       for i, (core, o) in enumerate(peers)]
-        info = {"name": name, "peers": [rt.name for rt in self.peers]}
+        self.counts = {"wakes": 0, "fusion_batches": 0, "fusions_batched": 0,
+                       "step_batches": 0, "steps_prepared": 0}
+        """The host loop's work so far (every hosted peer's summary shows it under ``host``):
+        wake-ups, passes that fused rounds together and the rounds fused so, stacked local
+        steps and the steps they prepared."""
+        info = {"name": name, "peers": [rt.name for rt in self.peers], "loop": self.counts}
         for rt in self.peers:
             rt.host = info
         self.by_name = {rt.name: i for i, rt in enumerate(self.peers)}
@@ -151,6 +168,7 @@ class PeerHost(HostBatching):
         self._stop = False
         self._active: list[int] = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
+        self._inboxes = [_Backlog(b) for b in self._backlog]
 
     def _wire_handoff(self) -> None:
         """Each peer's co-hosted neighbours: not subscribed to through Zenoh, handed over."""
@@ -170,7 +188,7 @@ class PeerHost(HostBatching):
         active, head = self._active, peek(payload)
         for j in subs:
             if j in active:
-                self.peers[j].transport.deliver(key, payload, head)
+                self.peers[j].transport.deliver(key, payload, head, self._inboxes[j])
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
@@ -231,10 +249,11 @@ class PeerHost(HostBatching):
         try:
             rt._finish()
         finally:
-            rt.close()
-            self._active.remove(i)
-            self._backlog[i].clear()
-            self.say(rt_line(rt))
+            with self.cpu.aside():  # after its last fusion: not the others' CPU per scan
+                rt.close()
+                self._active.remove(i)
+                self._backlog[i].clear()
+                self.say(rt_line(rt))
 
     def kill(self, name: str, at_scan: int | None = None) -> bool:
         """Stop peer ``name`` as if killed (no last fusion); False if it is not running."""
@@ -269,13 +288,16 @@ class PeerHost(HostBatching):
         for rt in self.peers:
             rt.telemetry.start_cpu()
         q, backlog = self.q, self._backlog
+        idle_check = 0.0
         while self._active and not self._stop:
             wall, mono = time.time(), time.monotonic()
             wait = 0.0 if any(backlog[i] for i in self._active) else 0.25
+            wakes = {}  # each peer's next wake (monotonic); nothing changes them until _work
             for i in self._active:
                 w = self.peers[i].next_wake(wall, mono)
                 if w is not None:
                     wait = min(wait, w)
+                    wakes[i] = mono + w
             try:
                 first = q.get(timeout=max(0.0, wait))
             except queue.Empty:
@@ -290,23 +312,28 @@ class PeerHost(HostBatching):
                     self._control(item)
                 elif slot in self._active:
                     backlog[slot].append((now, item))
-            self._work(time.time(), time.monotonic())
+            self.counts["wakes"] += 1
+            self._work(time.time(), time.monotonic(), wakes)
             self._fuse()
-            for i in [i for i in self._active if self.peers[i].idle_expired()]:
-                self._end(i)
+            if time.monotonic() >= idle_check:  # idle timeouts are seconds: look 4 times a second
+                idle_check = time.monotonic() + 0.25
+                for i in [i for i in self._active if self.peers[i].idle_expired()]:
+                    self._end(i)
 
-    def _work(self, wall: float, mono: float) -> None:
-        """One step for each peer with due work, the earliest due first."""
+    def _work(self, wall: float, mono: float, wakes: dict[int, float] | None = None) -> None:
+        """One step for each peer with due work, the earliest due first (``wakes``: each
+        peer's next wake on the monotonic clock, if the caller has them)."""
         due = []
         for i in self._active:
-            rt, when = self.peers[i], []
-            if self._backlog[i]:
-                when.append(self._backlog[i][0][0])
-            d = rt.next_wake(wall, mono)
+            if wakes is None:
+                d = self.peers[i].next_wake(wall, mono)
+            else:
+                d = wakes[i] - mono if i in wakes else None
+            first = self._backlog[i][0][0] if self._backlog[i] else None
             if d is not None and d <= 0:
-                when.append(wall + d)
-            if when:
-                due.append((min(when), i))
+                due.append((wall + d if first is None else min(first, wall + d), i))
+            elif first is not None:
+                due.append((first, i))
         due.sort()
         if self.batch is not None and self._close_rounds(due):
             self._fuse()

@@ -16,7 +16,8 @@ from sensornet.peers.runtime import BATCH, PeerRuntime
 
 class HostBatching:
     """What :class:`~peers.host.PeerHost` does with its batch; it uses the host's ``peers``,
-    ``_backlog``, ``_batched``, ``_slot``, ``_active``, ``batch``, ``_stop`` and ``_end``."""
+    ``_backlog``, ``_batched``, ``_slot``, ``_active``, ``batch``, ``_stop``, ``_end`` and
+    ``counts``."""
 
     def _prepare_scans(self, due: list[tuple[float, int]]) -> None:
         """The local steps of the scans this pass's steps will handle (a batched peer's first
@@ -36,6 +37,9 @@ class HostBatching:
             return
         t0 = time.thread_time()
         cores = prepare_local_steps(scans)
+        if cores:
+            self.counts["step_batches"] += 1
+            self.counts["steps_prepared"] += len(cores)
         served = cores or [c for c, _, _ in scans]  # none prepared: the guesses' cost
         share = (time.thread_time() - t0) * 1e3 / len(served)
         for core in served:
@@ -95,7 +99,10 @@ class HostBatching:
         batch = self.batch
         while batch is not None and batch.jobs and not self._stop:
             t0 = time.thread_time()
+            jobs = len(batch.jobs)
             done = batch.run(time.time())
+            self.counts["fusion_batches"] += 1
+            self.counts["fusions_batched"] += jobs
             share = (time.thread_time() - t0) * 1e3 / max(1, len(done))
             for c in done:
                 i = self._slot[id(c)]

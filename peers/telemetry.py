@@ -14,6 +14,8 @@ import resource
 import statistics
 import time
 from collections import Counter, deque
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from sensornet.peers.core import Publish, Record
 
@@ -56,11 +58,32 @@ class SharedCpu:
 
     def start(self) -> None:
         self._cpu0, self._thread0 = time.process_time(), time.thread_time()
+        self._aside_main = self._aside_total = 0.0
+        self._open: tuple[float, float] | None = None
+
+    @contextmanager
+    def aside(self) -> Iterator[None]:
+        """CPU spent inside is not the run's: a peer writing its files after its last scan
+        (one-off work, not a cost per scan; the other peers' shares must not carry it)."""
+        if self._open is not None:  # nested: the outer one sets it all aside
+            yield
+            return
+        self._open = (time.thread_time(), time.process_time())
+        try:
+            yield
+        finally:
+            t0, c0 = self._open
+            self._open = None
+            self._aside_main += time.thread_time() - t0
+            self._aside_total += time.process_time() - c0
 
     def shares(self) -> tuple[float, float]:
         """One peer's share (ms) of the loop's own work and of the other threads'."""
-        main = (time.thread_time() - self._thread0) * 1e3
-        total = (time.process_time() - self._cpu0) * 1e3
+        thread, process = time.thread_time(), time.process_time()
+        if self._open is not None:  # read from inside aside(): stop the clocks at its start
+            thread, process = self._open
+        main = (thread - self._thread0 - self._aside_main) * 1e3
+        total = (process - self._cpu0 - self._aside_total) * 1e3
         own = sum(sum(t.cpu_ms.values()) for t in self.peers)
         n = max(1, len(self.peers))
         return max(0.0, main - own) / n, max(0.0, total - main) / n
@@ -144,7 +167,28 @@ class Telemetry:
     def start_cpu(self) -> None:
         """CPU from here on is the run's (start-up, imports and session set-up excluded)."""
         self._cpu0, self._thread0 = time.process_time(), time.thread_time()
+        self._frozen = None
         self.cpu_ms = dict.fromkeys(self.cpu_ms, 0.0)
+
+    _frozen: tuple[float, float] | None = None
+
+    @contextmanager
+    def after_run(self) -> Iterator[None]:
+        """The run is over (last fusion done): what follows (writing the summary, results,
+        tracks and fault log) is one-off work, not CPU per scan. A peer of its own process
+        stops its clocks here; a hosted peer's work inside is set aside from the host's shared
+        CPU (:meth:`SharedCpu.aside`), so no peer's share carries another's file writing."""
+        if self.shared is not None:
+            with self.shared.aside():
+                yield
+            return
+        if self._frozen is None:
+            self._frozen = (time.process_time(), time.thread_time())
+        yield
+
+    def _clocks(self) -> tuple[float, float]:
+        """(process, thread) CPU seconds now, or when the run ended (:meth:`after_run`)."""
+        return self._frozen or (time.process_time(), time.thread_time())
 
     def cpu_breakdown(self) -> dict[str, float]:
         """Process CPU (ms) since :meth:`start_cpu`, split: the main thread's core steps by channel,
@@ -156,8 +200,9 @@ class Telemetry:
             loop, transport = self.shared.shares()
             out["loop"], out["transport"] = round(loop, 3), round(transport, 3)
             return out
-        main = (time.thread_time() - self._thread0) * 1e3
-        total = (time.process_time() - self._cpu0) * 1e3
+        process, thread = self._clocks()
+        main = (thread - self._thread0) * 1e3
+        total = (process - self._cpu0) * 1e3
         out["loop"] = round(max(0.0, main - sum(self.cpu_ms.values())), 3)
         out["transport"] = round(max(0.0, total - main), 3)
         return out
@@ -166,7 +211,7 @@ class Telemetry:
         """Process CPU (s) since :meth:`start_cpu`; a hosted peer's: its part of it."""
         if self.shared is not None:
             return sum(self.cpu_breakdown().values()) / 1e3
-        return time.process_time() - self._cpu0
+        return self._clocks()[0] - self._cpu0
 
     def summary(self, last_k: int) -> dict:
         lat = sorted(self.latency_ms)

@@ -151,12 +151,15 @@ class Transport:
             self.recovered[self._recovering[key]] += 1
         self.deliver(key, sample.payload.to_bytes())
 
-    def deliver(self, key: str, payload: bytes, head: tuple | None = None) -> None:
+    def deliver(self, key: str, payload: bytes, head: tuple | None = None,
+                inbox=None) -> None:
         """What arrived on ``key``, from Zenoh or handed over by a co-hosted neighbour
         (:mod:`peers.host`): the same admission (per sender) and signature check either way.
         Bounded before anything is decoded or verified (peers.admission): window, slot, the
         sender's bucket and a place in the inbox, given back by the main loop (taken).
-        ``head``: the payload's :func:`peers.admission.peek`, if the caller has it."""
+        ``head``: the payload's :func:`peers.admission.peek`, if the caller has it;
+        ``inbox``: where to put it instead of :attr:`q` (a host's hand-off, on its loop's
+        thread, straight into the peer's backlog)."""
         if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload,
                                  head):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
@@ -167,7 +170,7 @@ class Transport:
                     self.admission.taken(key, size)
                     return
                 self.admission.shrink(size - len(payload))  # the trailer stays here
-            self.q.put(("msg", key, payload))
+            (self.q if inbox is None else inbox).put(("msg", key, payload))
 
     def _missed(self, channel: str, n: int) -> None:
         self.unrecovered[channel] += n

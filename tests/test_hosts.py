@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from collections import deque
 from pathlib import Path
 
@@ -139,6 +140,31 @@ def test_shared_cpu_splits_what_the_peers_share():
     assert a.cpu_s_running() > b.cpu_s_running() + 2e-3  # its step on top of the same share
 
 
+def test_work_after_the_run_is_not_cpu_per_scan():
+    """Writing files after the last scan is set aside: a hosted peer's share does not carry
+    it (the others' shares neither), and a peer of its own process stops its clocks there."""
+    shared = SharedCpu()
+    a, _ = Telemetry(shared), Telemetry(shared)  # two peers share the host
+    shared.start()
+    sum(i * i for i in range(100_000))
+    before = shared.shares()[0]
+    with a.after_run():
+        sum(i * i for i in range(2_000_000))  # a's files: far more than the run's loop
+        inside = shared.shares()[0]
+    after = shared.shares()[0]
+    assert inside == pytest.approx(before, abs=0.5) and after == pytest.approx(before, abs=0.5)
+    sum(i * i for i in range(300_000))  # the run goes on for b: counted again
+    assert shared.shares()[0] > after + 0.2
+    alone, t_start = Telemetry(), time.thread_time()
+    alone.start_cpu()
+    sum(i * i for i in range(100_000))
+    with alone.after_run():
+        run_cpu, parts = alone.cpu_s_running(), alone.cpu_breakdown()
+        sum(i * i for i in range(2_000_000))
+    assert alone.cpu_s_running() == run_cpu and alone.cpu_breakdown() == parts
+    assert run_cpu < 0.5 * (time.thread_time() - t_start)  # the 2,000,000 squares: not in it
+
+
 class _FakePeer:
     """What the host loop asks of a peer: when its work is due, one step, stop, idle."""
 
@@ -246,9 +272,13 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     payload = encode(Estimate("p01", 0, mix))
     for _ in range(SLOT_ATTEMPTS + 1):  # the same slot once too often
         t[1].handoff(t[1].keys.estimate("p01"), payload)
-    got = [host.q.get_nowait() for _ in range(host.q.qsize())]
+    # straight into the receivers' backlogs (the loop's thread: no queue, no wake-up)
+    got = [(i, item) for i, b in enumerate(host._backlog) for _, item in b]
+    assert host.q.empty()
     assert sorted(slot for slot, _ in got) == [0] * SLOT_ATTEMPTS + [2] * SLOT_ATTEMPTS
     assert all(item == ("msg", t[1].keys.estimate("p01"), payload) for _, item in got)
+    for b in host._backlog:
+        b.clear()
     assert t[0].admission.rejected["duplicate"] == 1 == t[2].admission.rejected["duplicate"]
     assert all(rt.core.decode is host.decode for rt in host.peers)  # one decode per estimate
     msgs = [rt.core.decode(payload, rt.core.cfg.limits) for rt in host.peers]
@@ -266,11 +296,11 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     assert host.decode(big_payload, limits) is not host.decode(big_payload, limits)
     # a round the network does not have is refused per receiver before decoding (admission)
     t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 0, mix, round=1)))
-    assert host.q.empty()
+    assert not any(host._backlog)
     assert t[0].admission.rejected["round"] == 1 == t[2].admission.rejected["round"]
     host._active = [0, 1]  # p02 killed
     t[1].handoff(t[1].keys.estimate("p01"), encode(Estimate("p01", 1, mix)))
-    assert [slot for slot, _ in [host.q.get_nowait()]] == [0] and host.q.empty()
+    assert [len(b) for b in host._backlog] == [1, 0, 0] and host.q.empty()
 
 
 # -- real processes ------------------------------------------------------------------------

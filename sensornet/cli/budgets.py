@@ -77,12 +77,12 @@ def check_budget(scn, args: argparse.Namespace, workers: int = 1, processes: int
             raise UserError(f"{targets} true targets at once: more than one truth message "
                             f"carries ({DEFAULT_LIMITS.max_components - 1}); run it offline "
                             f"with 'sensornet experiment'")
-    if processes:
+    if processes:  # the world's and the peers' (one each, or hosts of several)
         max_peers = getattr(args, "max_peers", DEFAULT_MAX_PEERS)
-        if len(scn.sensors) > max_peers:
-            raise UserError(f"{len(scn.sensors)} sensors would start {len(scn.sensors)} peer "
+        if processes - 1 > max_peers:
+            raise UserError(f"{len(scn.sensors)} sensors would start {processes - 1} peer "
                             f"processes on this machine, over the budget of {max_peers} "
-                            f"(--max-peers N lifts it)")
+                            f"(--max-peers N lifts it; --per-process N packs peers in hosts)")
     max_gb = getattr(args, "max_memory_gb", None) or default_memory_gb()
     need = memory_estimate_gb(scn, workers, processes)
     if need > max_gb:
