@@ -132,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{p99:.1f} ms (interval {r['interval_ms']:.0f} ms; ratio p99/interval "
               f"{p99 / r['interval_ms']:.2f})")
         print(f"  per peer per scan: {r['tuples']:.0f} tuples, {r['bytes']:.0f} bytes to the "
-              f"neighbours, {r['cpu_ms']:.2f} ms CPU (process, from its loop's start to the run's end)")
+              f"neighbours, {r['cpu_ms']:.2f} ms CPU (process, from its loop's start to the "
+              f"run's end)")
         print(f"  mean fused OSPA {r['ospa']:.2f} m (twin on the same draws {r['ospa_twin']:.2f})")
         ok = ok and r["complete"] >= 0.99 and r["scans_handled"] == r["scans"]
     return 0 if ok else 1

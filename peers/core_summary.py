@@ -23,6 +23,7 @@ def core_cost(core) -> dict:
 def core_snapshot(core) -> dict:
     """A :class:`~peers.core.PeerCore`'s counts, scores and state for the summary (plain data)."""
     c, s = core.consensus, core.scorer
+    s.flush()  # a host's batched scores: all in before anything is read
     rejected = core.rejected + core.admission.rejected
     return {
         "peer": core.name,

@@ -38,6 +38,7 @@ from sensornet.peers.batching import FusionBatch
 from sensornet.peers.core import PeerCore
 from sensornet.peers.host_batching import HostBatching
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
+from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
 from sensornet.peers.telemetry import SharedCpu
 from sensornet.peers.transport import settle
@@ -50,7 +51,8 @@ Zenoh session (``SENSORNET_HOST_HANDOFF=zenoh``: to compare, ``bench_network.py 
 """
 BATCH_FUSIONS = os.environ.get("SENSORNET_HOST_BATCH", "1") != "0"
 """Fuse the consensus rounds that become ready in one pass of the loop together, at its end
-(:mod:`peers.batching`; default), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
+(:mod:`peers.batching`; default), and score the peers' estimates together
+(:class:`peers.scoring.ScoreBatch`), or each at once (``SENSORNET_HOST_BATCH=0``: to compare,
 ``bench_network.py --batch``). A peer that records its inputs for replay fuses at once."""
 BATCH_STEPS = os.environ.get("SENSORNET_HOST_BATCH", "1") not in ("0", "fusions")
 """With :data:`BATCH_FUSIONS`, also compute the local steps of the scans a pass will handle
@@ -163,6 +165,13 @@ class PeerHost(HostBatching):
                                       if rt.core.consensus.batch is not None
                                       and rt.core.consensus.batchable)
         self._slot = {id(rt.core.consensus): i for i, rt in enumerate(self.peers)}
+        self.scores: ScoreBatch | None = None
+        """The peers' OSPA scores of a pass, computed together at its end."""
+        if BATCH_FUSIONS and len(self.peers) > 1:
+            self.scores = ScoreBatch()
+            for rt in self.peers:
+                rt.core.scorer.batch = self.scores
+        self._scorer_slot = {id(rt.core.scorer): i for i, rt in enumerate(self.peers)}
         self.session = None
         self.stop_reason = ""
         self._stop = False
@@ -315,10 +324,23 @@ class PeerHost(HostBatching):
             self.counts["wakes"] += 1
             self._work(time.time(), time.monotonic(), wakes)
             self._fuse()
+            self._score()
             if time.monotonic() >= idle_check:  # idle timeouts are seconds: look 4 times a second
                 idle_check = time.monotonic() + 0.25
                 for i in [i for i in self._active if self.peers[i].idle_expired()]:
                     self._end(i)
+
+    def _score(self) -> None:
+        """The pass's scores, computed together; their CPU split evenly between the peers
+        served (their "tick" CPU, where scoring was)."""
+        if self.scores is None or not self.scores.items:
+            return
+        t0 = time.thread_time()
+        served = self.scores.flush()
+        share = (time.thread_time() - t0) * 1e3 / max(1, len(served))
+        for sc in served:
+            cpu = self.peers[self._scorer_slot[id(sc)]].telemetry.cpu_ms
+            cpu["tick"] = cpu.get("tick", 0.0) + share
 
     def _work(self, wall: float, mono: float, wakes: dict[int, float] | None = None) -> None:
         """One step for each peer with due work, the earliest due first (``wakes``: each

@@ -17,9 +17,44 @@ from collections.abc import Callable
 
 import numpy as np
 from sensornet.peers.scan_results import ScanResults
+from sensornet.tracking.metrics import ospa_gospa_parts_many
 
 WHICH = ("local", "fused")
 TruthFn = Callable[[int], "np.ndarray | None"]
+
+
+class ScoreBatch:
+    """The scores several peers of one process owe, computed together at the end of a pass
+    of their host's loop (:func:`tracking.metrics.ospa_gospa_parts_many`: the same numbers as
+    one by one, in fewer NumPy calls). A scorer with a batch hands its scores here; anything
+    that reads a score (means, the summary, the end of the run) flushes first."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple] = []
+
+    def add(self, scorer: Scorer, which: str, k: int, states: np.ndarray,
+            truth: np.ndarray) -> None:
+        self.items.append((scorer, which, k, states, truth))
+
+    def flush(self) -> list[Scorer]:
+        """Score everything waiting; the scorers served (each once, in order)."""
+        items, self.items = self.items, []
+        if not items:
+            return []
+        groups: dict[tuple[float, float], list[tuple]] = {}
+        for it in items:
+            groups.setdefault((it[0].c, it[0].p), []).append(it)
+        for (c, p), group in groups.items():
+            pos = [(sc.results.xy(states), sc.results.xy(truth))
+                   for sc, _, _, states, truth in group]
+            for (sc, which, k, states, truth), (est, true), (value, parts) in zip(
+                    group, pos, ospa_gospa_parts_many(pos, c, p), strict=True):
+                sc.results.scored_as(k, which, states, truth, est, true, value, parts)
+                sc._count(which, k, states, truth, value)
+        served: dict[int, Scorer] = {}
+        for it in items:
+            served.setdefault(id(it[0]), it[0])
+        return list(served.values())
 
 
 class Scorer:
@@ -44,6 +79,8 @@ class Scorer:
         self.records: list[dict] = []
         self.results = ScanResults(cutoff, order, position_index)
         """Every scored estimate and miss, row by row (the run's per-scan results table)."""
+        self.batch: ScoreBatch | None = None
+        """Where scores go to be computed with other peers' (a host's); None: at once."""
 
     # -- truth ------------------------------------------------------------------------------
     def truth(self, k: int) -> np.ndarray | None:
@@ -100,6 +137,7 @@ class Scorer:
 
     def finish(self) -> None:
         """End of the run: every output still missing is a miss."""
+        self.flush()
         self._settle(lambda k: True)
 
     def _settle(self, old: Callable[[int], bool]) -> None:
@@ -122,7 +160,18 @@ class Scorer:
 
     def _score(self, which: str, k: int, states: np.ndarray) -> None:
         X = self.truth(k)
-        value = self.results.scored(k, which, states, X)
+        if self.batch is not None:
+            self.batch.add(self, which, k, states, X)
+            return
+        self._count(which, k, states, X, self.results.scored(k, which, states, X))
+
+    def flush(self) -> None:
+        """Scores handed to a batch are computed now (before anything reads them)."""
+        if self.batch is not None:
+            self.batch.flush()
+
+    def _count(self, which: str, k: int, states: np.ndarray, X: np.ndarray,
+               value: float) -> None:
         self.sums[which] += value
         self.card_sums[which] += abs(len(states) - len(X))
         self.counts[which] += 1
@@ -130,12 +179,14 @@ class Scorer:
 
     def mean(self, which: str) -> float:
         """Mean OSPA over scored estimates and misses (a miss counts ``c``)."""
+        self.flush()
         n = self.counts[which] + self.misses[which]
         return (self.sums[which] + self.c * self.misses[which]) / n if n else float("nan")
 
     def mean_cardinality_error(self, which: str) -> float:
         """Mean ``|estimated - true|`` target number over the same scans as :meth:`mean` (a
         missing output counts as no target estimated)."""
+        self.flush()
         n = self.counts[which] + self.misses[which]
         return self.card_sums[which] / n if n else float("nan")
 

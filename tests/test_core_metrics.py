@@ -189,3 +189,29 @@ def test_ospa_gospa_parts_equals_each_metric_bit_for_bit():
             Y[1] = Y[0] + 1000.0  # beyond the cut-off
         assert ospa_gospa_parts(X, Y, 200.0, 2.0) == (ospa(X, Y, 200.0, 2.0),
                                                       gospa_parts(X, Y, 200.0, 2.0))
+
+
+def test_batched_scores_equal_one_by_one():
+    """ospa_gospa_parts_many (every assignment tried at once for up to 6 points a side, the
+    solver beyond) gives each problem's ospa_gospa_parts to rounding, for random batches with
+    empty sides, cut and exactly cut-off pairs, p = 1 and 2, and problems too big to permute."""
+    from sensornet.tracking.metrics import PERMUTED_UP_TO, ospa_gospa_parts, ospa_gospa_parts_many
+
+    rng = np.random.default_rng(11)
+    for p, c in ((2.0, 200.0), (1.0, 50.0)):
+        problems = []
+        for t in range(600):
+            n, m = rng.integers(0, PERMUTED_UP_TO + 3, 2)
+            X, Y = rng.normal(0, 150, (n, 2)), rng.normal(0, 150, (m, 2))
+            if t % 4 == 0 and n and m:
+                X[0] = Y[0] + [c, 0.0]  # exactly at the cut-off: not a close pair
+            problems.append((X, Y))
+        for i in range(0, len(problems), 25):  # batches as a host's pass makes them
+            batch = problems[i:i + 25]
+            for (X, Y), (o, parts) in zip(batch, ospa_gospa_parts_many(batch, c, p),
+                                          strict=True):
+                ro, rparts = ospa_gospa_parts(X, Y, c, p)
+                assert o == pytest.approx(ro, rel=1e-12, abs=1e-12)
+                assert parts[0] == pytest.approx(rparts[0], rel=1e-12, abs=1e-12)
+                assert parts[1] == pytest.approx(rparts[1], rel=1e-12, abs=1e-9)
+                assert parts[2:] == rparts[2:]  # missed and false counts: the same

@@ -123,6 +123,40 @@ def test_host_refuses_unknown_or_repeated_peers(capsys):
     assert "twice" in capsys.readouterr().err
 
 
+def test_batched_scores_are_the_scores_one_by_one():
+    """Scorers sharing a host's ScoreBatch owe their scores until the pass ends; flushed, the
+    means, rows and records are those of scoring at once, and a mean read flushes first."""
+    import numpy as np
+    from sensornet.peers.scoring import ScoreBatch, Scorer
+
+    rng = np.random.default_rng(3)
+    truth = {k: rng.normal(0, 100, (int(rng.integers(0, 4)), 4)) for k in range(1, 30)}
+    batch = ScoreBatch()
+    alone = [Scorer(150.0, 2.0, (0, 2), truth.get) for _ in range(3)]
+    shared = [Scorer(150.0, 2.0, (0, 2), truth.get) for _ in range(3)]
+    for sc in shared:
+        sc.batch = batch
+    seen = 0
+    for k in range(1, 30):
+        for a, b in zip(alone, shared, strict=True):
+            for which in ("local", "fused"):
+                states = rng.normal(0, 100, (int(rng.integers(0, 5)), 4))
+                for sc in (a, b):
+                    sc.expect(k)
+                    sc.output(which, k, states)
+        if k % 4 == 0:
+            assert batch.items and len(shared[0].records) == seen  # owed until the pass ends
+            assert set(map(id, batch.flush())) == set(map(id, shared))
+            seen = len(shared[0].records)
+    for a, b in zip(alone, shared, strict=True):
+        for which in ("local", "fused"):
+            assert b.mean(which) == pytest.approx(a.mean(which), rel=1e-12)  # flushes
+        assert not batch.items
+        assert b.counts == a.counts and b.card_sums == a.card_sums
+        assert [r[:4] + r[6:] for r in b.results.rows] == [r[:4] + r[6:] for r in a.results.rows]
+        assert [r["k"] for r in b.drain_records()] == [r["k"] for r in a.drain_records()]
+
+
 def test_shared_cpu_splits_what_the_peers_share():
     shared = SharedCpu()
     a, b = Telemetry(shared), Telemetry(shared)
