@@ -274,22 +274,45 @@ def load_average() -> str:
         return "?"
 
 
+def speed_probe(repeats: int = 3) -> float:
+    """CPU ms of a fixed workload like the peers' (small NumPy calls and Python bookkeeping),
+    the best of ``repeats``: this machine's speed when a run starts. On a shared VM it drifts
+    (the same code measured 1.49-1.93 ms per peer per scan within ten quiet minutes); a row
+    whose probe is slower ran on a slower machine."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(8, 4, 4))
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        acc, d = 0.0, {}
+        for i in range(4000):
+            B = A @ A.swapaxes(1, 2) + np.eye(4)
+            acc += float(np.linalg.inv(B).sum())
+            d[i % 97] = d.get(i % 97, 0) + 1
+        best = min(best, (time.process_time() - t0) * 1e3)
+    return best
+
+
 def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list[str],
                  scans: int, deadline: float) -> list[str]:
     """The issue's targets table: every size x graph x packing, one row each (no early stop):
     CPU per peer per scan with its breakdown, p99 scan -> fused, deadline fusions, scans
-    processed, and the load average at the run's end."""
+    processed, the load average at the run's end and the machine's speed before the run
+    (:func:`speed_probe`)."""
     cols = [*CPU_PARTS, "other"]
     rows = ["| graph | peers | per process | real time | CPU ms/peer/scan | "
             + " | ".join(cols) + " | p99 scan->fused (ms) | deadline fusions (worst peer) "
-            "| scans processed | load avg |",
-            "|---|---:|---:|---|---:|" + "---:|" * len(cols) + "---:|---:|---:|---:|"]
+            "| scans processed | load avg | probe (ms) |",
+            "|---|---:|---:|---|---:|" + "---:|" * len(cols) + "---:|---:|---:|---:|---:|"]
     print("\n".join(rows), flush=True)
     global PER_PROCESS
     for n in sizes:
         for degree in degrees:
             for packing in packings:
                 PER_PROCESS = per = packing_of(n, packing)
+                probe = speed_probe()
                 path = tmp / f"t-{n}-{degree}-{per}.toml"
                 path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0,
                                               deadline=deadline))
@@ -311,7 +334,7 @@ def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list
                             f"{total:.2f} | "
                             + " | ".join(f"{parts.get(c, 0.0):.2f}" for c in cols)
                             + f" | {pooled(s)[1]:.1f} | {100 * worst:.1f} % | "
-                            f"{100 * done:.1f} % | {load_average()} |")
+                            f"{100 * done:.1f} % | {load_average()} | {probe:.0f} |")
                 print(rows[-1], flush=True)
     return rows
 
