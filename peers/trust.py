@@ -80,12 +80,15 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 from sensornet.peers.trust_checks import (
+    divergence_test,
     is_repeat,
     neighbour_statistics,
     offset_chi2,
     offset_information,
+    target_mass,
 )
 from sensornet.peers.trust_config import TrustConfig
+from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 STATES = ("trusted", "suspect", "quarantined")
@@ -114,6 +117,9 @@ class NeighbourTrust:
     last_mix: GaussianMixture | None = None
     """Its last round-0 density (the repeat test) and the scan it came at."""
     last_k: int = -1
+    tested: int = -1
+    """The newest scan whose estimate from this neighbour was tested
+    (:attr:`TrustConfig.same_scan`)."""
     offsets: deque = field(default_factory=deque)
     """The offset test's window: per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
     last_offset_chi2: tuple[float, ...] = ()
@@ -132,6 +138,9 @@ class Trust:
         self.n = {s: NeighbourTrust() for s in neighbours}
         self.scans = 0
         self._k: int | None = None
+        self.own_at: dict[int, GaussianMixture] = {}
+        """Own's round-0 density of the last :attr:`TrustConfig.keep_own` scans (late
+        estimates are tested against the scan they were made at)."""
         self.events: list[dict] = []
         """State changes ``{"k", "neighbour", "from", "to", "score"}`` (drained by records)."""
         self.records: list[dict] = []
@@ -143,40 +152,63 @@ class Trust:
 
     # -- one round ----------------------------------------------------------------------------
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
-                   weights: dict[str, float]) -> dict[str, float]:
+                   weights: dict[str, float], left_out: set[str] = frozenset()
+                   ) -> dict[str, float]:
         """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
         average of the other trusted inputs (weights ``weights``, own's under ``""``):
-        :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours left out."""
-        quarantined = {s for s in inputs if self.n[s].state == "quarantined"}
-        return neighbour_statistics(self.cfg, own, inputs, weights, quarantined)
+        :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours and
+        ``left_out`` (stale inputs) left out of the references."""
+        out = {s for s in inputs if self.n[s].state == "quarantined"} | set(left_out)
+        return neighbour_statistics(self.cfg, own, inputs, weights, out)
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
               inputs: dict[str, GaussianMixture], weights: list[float],
-              drop_suspects: bool = False) -> list[float]:
+              drop_suspects: bool = False,
+              late: dict[str, tuple[int, GaussianMixture]] | None = None) -> list[float]:
         """Weights for ``[own, *sorted(inputs)]`` after the test: each neighbour's consensus
         weight times its trust, what is taken renormalised over the trusted set (or given to
         own, :attr:`TrustConfig.renormalise`). ``drop_suspects`` (product rules such as GCI,
         where any weight above 0 lets a confident lie veto the product): a neighbour below
-        full trust gets weight 0."""
+        full trust gets weight 0. ``late`` (round 0): the neighbours whose input was made at
+        an earlier scan (predicted forward), with that scan and the density as received
+        (:attr:`TrustConfig.same_scan`)."""
         names = sorted(inputs)
-        if not self.cfg.enabled or not names:
+        if not self.cfg.enabled:
+            return list(weights)
+        if rnd == 0:
+            self._keep_own(k, own)
+        if not names:
             return list(weights)
         if self._k != k:
             self._start_scan(k)
         if self.scans <= self.cfg.warmup:
             return list(weights)
+        cfg = self.cfg
+        late = (late or {}) if rnd == 0 and cfg.same_scan else {}
+        late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
-        stats = self.statistics(own, inputs, wmap)
-        if rnd == 0 and self.cfg.repeat:
-            for s in names:
-                if self._repeated(self.n[s], k, inputs[s]):
-                    stats[s] = self.cfg.quarantine + self.cfg.drift
+        stats = self.statistics(own, inputs, wmap, set(late))
+        tested = {s: (k, inputs[s], own) for s in names if s not in late}
+        for s, (a, mix) in late.items():  # each estimate once, against own of its scan
+            ref = self.own_at.get(a)
+            if a <= self.n[s].tested or ref is None:
+                stats[s] = 0.0  # no new evidence
+            else:
+                stats[s] = self._single(ref, mix)
+                tested[s] = (a, mix, ref)
+        if rnd == 0:
+            for s, (a, _, _) in tested.items():
+                self.n[s].tested = max(self.n[s].tested, a)
+        if rnd == 0 and cfg.repeat:
+            for s, (a, mix, _) in tested.items():
+                if self._repeated(self.n[s], a, mix):
+                    stats[s] = cfg.quarantine + cfg.drift
         raw = dict(stats)
-        if rnd == 0 and self.cfg.bias:
-            for s in names:
-                chi2 = self._offset(self.n[s], own, inputs[s])
-                if any(c > t for c, t in zip(chi2, self.cfg.bias_thresholds, strict=True)):
-                    stats[s] = max(stats[s], self.cfg.quarantine + self.cfg.drift)
+        if rnd == 0 and cfg.bias:
+            for s, (_, mix, ref) in tested.items():
+                chi2 = self._offset(self.n[s], ref, mix)
+                if any(c > t for c, t in zip(chi2, cfg.bias_thresholds, strict=True)):
+                    stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -192,7 +224,8 @@ class Trust:
             if rec.low_k is None and t <= LOW:
                 rec.low_k = k
             if self.history is not None:
-                self.history.append((k, s, raw[s], score, rec.last_offset_chi2))
+                self.history.append((k, s, raw[s], score,
+                                     rec.last_offset_chi2 if s in tested else ()))
             out.append(wmap[s] * t)
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(stats[s], 4), "score": round(score, 4),
@@ -204,6 +237,19 @@ class Trust:
         else:
             out[0] = 1.0 - kept
         return out
+
+    def _keep_own(self, k: int, own: GaussianMixture) -> None:
+        self.own_at[k] = own
+        for a in [a for a in self.own_at if a < k - self.cfg.keep_own]:
+            del self.own_at[a]
+
+    def _single(self, ref: GaussianMixture, mix: GaussianMixture) -> float:
+        """The divergence test of ``mix`` against ``ref`` alone (a late estimate against own's
+        density of its scan)."""
+        L = log_overlaps([ref, mix])
+        w = self.cfg.repeat_weight
+        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
+                               target_mass(mix, w), target_mass(ref, w))
 
     def _repeated(self, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:
         """Whether ``mix`` (round 0 of scan ``k``) repeats, bit for bit, the non-empty density

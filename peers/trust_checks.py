@@ -8,6 +8,8 @@ references and their calibration are in :mod:`peers.trust`'s docstring).
   tests against own and the leave-one-out average, or (W-MSR-style majority) its median test
   against the other inputs less their own median test (:func:`pair_tests`,
   :func:`divergence_test`).
+- :func:`miss_cost`: the evidence needed to explain a whole disagreement by missed
+  detections (or births seen a scan apart), which bounds every divergence test.
 - :func:`is_repeat`: a non-empty density repeated bit for bit (a stuck sensor or a replay).
 - :func:`offset_information` and :func:`offset_chi2`: the generalised-least-squares offset
   of a biased sensor over windows of scans.
@@ -33,19 +35,21 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     mixes = [own] + [inputs[s] for s in names]
     L = log_overlaps(mixes)
     mass = np.array([D.mass for D in mixes])
+    tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
-    pair = pair_tests(cfg, L, mass) if cfg.majority else None
+    pair = pair_tests(cfg, L, mass, tm) if cfg.majority else None
     out = {}
     for j, s in enumerate(names, start=1):
-        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0])
+        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0])
         wo = w.copy()
         wo[j] = 0.0
         if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
             wo = wo / wo.sum()
             l_jr = _lse(L[j] + _log(wo))
             l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
-            t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass))
+            t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass),
+                                    tm[j], float(wo @ tm))
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own
@@ -57,9 +61,11 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     return out
 
 
-def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
+def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
+               targets: np.ndarray | None = None) -> np.ndarray:
     """The test between every two inputs (``(n, n)``; the majority's own spread) from their
-    log overlaps ``L`` (``(n, n)``) and masses ``mass`` (``(n,)``)."""
+    log overlaps ``L`` (``(n, n)``), masses ``mass`` (``(n,)``) and target masses
+    ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound)."""
     d = np.diag(L)
     a, b = mass[:, None], mass[None, :]
     card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
@@ -71,15 +77,52 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
     one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
     P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
     P = np.minimum(P, cfg.cap)
+    if targets is not None:
+        P = np.minimum(P, miss_cost(cfg, targets[:, None], targets[None, :]))
     np.fill_diagonal(P, 0.0)
     return P
 
 
+def target_mass(mix: GaussianMixture, min_weight: float) -> float:
+    """The summed weight of the components of ``mix`` of weight at least ``min_weight``
+    (the targets a level-2 pruned density shows)."""
+    if len(mix) == 0:
+        return 0.0
+    w = mix.weights
+    return float(w[w >= min_weight].sum())
+
+
+def miss_cost(cfg: TrustConfig, m_j, m_r):
+    """``-log(1 - Pd) (m_j + m_r)``: the evidence (nats) that two densities with target
+    masses ``m_j`` and ``m_r`` disagree entirely because each missed the other's targets.
+
+    An honest peer misses a target with probability ``1 - Pd`` per scan, after which its
+    level-2 pruned posterior lacks it (its weight falls to about ``(1 - Pd) w``, under the
+    publishing threshold), and a target born a scan apart is the same to the peer that has
+    not confirmed it; a density that lacks a target has likelihood ratio ``1 / (1 - Pd)``
+    lying against honest, so the log-likelihood ratio of the whole disagreement is at most
+    this sum (the smaller of it and the divergence test is the statistic: a disagreement
+    that misses explain costs no more than they do). Inf when
+    :attr:`TrustConfig.detection_probability` is None. Broadcasts."""
+    if cfg.detection_probability is None:
+        return np.inf * np.ones(np.broadcast(m_j, m_r).shape)
+    return -np.log1p(-cfg.detection_probability) * (np.asarray(m_j) + np.asarray(m_r))
+
+
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
-                    n_r: float) -> float:
+                    n_r: float, t_j: float | None = None, t_r: float | None = None) -> float:
     """``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` from the log overlaps of a
     density ``D_j`` and a reference ``R`` and their masses, capped at
-    :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is empty)."""
+    :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is empty), and
+    at most :func:`miss_cost` of their target masses ``t_j``, ``t_r`` when given."""
+    t = _divergence_test(cfg, l_jj, l_jr, l_rr, n_j, n_r)
+    if t_j is None or t_r is None:
+        return t
+    return min(t, float(miss_cost(cfg, t_j, t_r)))
+
+
+def _divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
+                     n_r: float) -> float:
     card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
     if n_j <= 1e-9 and n_r <= 1e-9:
         return min(card, cfg.cap)

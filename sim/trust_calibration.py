@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,13 @@ from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf))
 """The test runs, nothing is down-weighted."""
+
+
+def open_like(cfg: TrustConfig) -> TrustConfig:
+    """``cfg`` (a peer's, with its scenario's detection probability) with :data:`OPEN`'s
+    thresholds."""
+    return replace(cfg, suspect=OPEN.suspect, quarantine=OPEN.quarantine,
+                   bias_thresholds=OPEN.bias_thresholds)
 
 Seq = tuple[np.ndarray, np.ndarray]
 """Per scan: the statistic without the offset test (``(n,)``), and the offset test's
@@ -74,7 +82,7 @@ def sequences(source: str, overrides: dict, run: int) -> list[Seq]:
     scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     for p in peers.values():
-        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
     run_twin(scn, run, peers=peers)
     out = []
@@ -92,7 +100,7 @@ def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
     core = peers[liar]
     peers[liar] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
     for p in peers.values():
-        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
     run_twin(scn, run, peers=peers)
     out = []

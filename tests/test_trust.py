@@ -297,3 +297,77 @@ def test_only_product_rules_drop_their_suspects():
     r = Reducer()
     assert FuserHooks.of(GciFuser(r)).product
     assert not FuserHooks.of(HybridFuser(r)).product and not FuserHooks.of(AaFuser(r)).product
+
+
+def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
+    """At Pd 0.9 an honest neighbour that missed its only target publishes nothing (level-2
+    pruning); one that picked up a new target a scan before own disagrees with own entirely.
+    The statistic is at most ``-log(1 - Pd)`` per target on either side (the closed form),
+    so four such scans in a row do not quarantine; without the Pd nothing changes."""
+    from sensornet.peers.trust_checks import miss_cost, pair_tests
+
+    pd = 0.9
+    cfg = TrustConfig(detection_probability=pd)
+    own = mix((0.95, A, P4))
+    missed = GaussianMixture.empty(4)
+    born = mix((0.8, B, P4))  # a target own has not confirmed yet, own's far from it
+    per = -np.log(1.0 - pd)
+    assert float(miss_cost(cfg, 0.95, 0.0)) == pytest.approx(per * 0.95)
+    for other, cost in ((missed, per * 0.95), (born, per * (0.95 + 0.8))):
+        t = Trust(cfg, ("x",))
+        old = Trust(TrustConfig(), ("x",))
+        for k in (1, 2, 3, 4):
+            t.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
+            old.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
+            assert t.n["x"].last_statistic == pytest.approx(cost)
+            assert old.n["x"].last_statistic > cost  # the divergence test alone
+        t.finish()
+        old.finish()
+        assert t.n["x"].state != "quarantined" and old.n["x"].state == "quarantined"
+    # the majority's pair tests take the same bound, elementwise
+    mixes = [own, missed, born]
+    L = log_overlaps(mixes)
+    mass = np.array([m.mass for m in mixes])
+    targets = np.array([0.95, 0.0, 0.8])
+    P = pair_tests(cfg, L, mass, targets)
+    free = pair_tests(cfg, L, mass)
+    expect = np.minimum(free, per * (targets[:, None] + targets[None, :]))
+    np.fill_diagonal(expect, 0.0)
+    np.testing.assert_allclose(P, expect)
+    # where misses are rare (Pd 0.99) hiding two targets costs more than the divergence
+    # test's value, which stays the statistic
+    two = _honest(np.random.default_rng(1))
+    t, old = Trust(TrustConfig(detection_probability=0.99), ("x",)), Trust(TrustConfig(), ("x",))
+    t.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
+    old.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
+    assert -np.log(0.01) * two.mass > t.n["x"].last_statistic
+    assert t.n["x"].last_statistic == old.n["x"].last_statistic > 5.0
+
+
+def test_an_estimate_is_tested_once_against_own_of_its_scan():
+    """A neighbour's estimate of scan 1 used again at scans 2 and 3 (its later ones lost,
+    predicted forward) adds nothing; one that arrives late is tested against own's density
+    of its scan, not of the scan at hand."""
+    far = A + [300.0, 0, 0, 0]
+    own1, own2 = mix((0.95, A, P4)), mix((0.95, far, P4))
+    stale = mix((0.95, A + [5.0, 0, 0, 0], P4))  # scan 1's estimate, near own1
+    t = Trust(TrustConfig(), ("x",))
+    t.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
+    first = t.n["x"].last_statistic
+    assert first < 1.0
+    # used again at scans 2 and 3 (against own2 it would be a total disagreement)
+    for k in (2, 3):
+        w = t.weigh(k, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
+        assert t.n["x"].last_statistic == 0.0 and w[1] == 0.5
+    plain = Trust(TrustConfig(same_scan=False), ("x",))
+    plain.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
+    plain.weigh(2, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
+    assert plain.n["x"].last_statistic >= TrustConfig().cap
+    # a late first use: scan 4's estimate reaches the fusion of scan 5 and is tested
+    # against own's density of scan 4 (kept though nothing came at scan 4), not of scan 5
+    t.weigh(4, 0, own1, {}, [1.0])
+    t.weigh(5, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (4, stale)})
+    assert t.n["x"].last_statistic == pytest.approx(first)
+    t.weigh(6, 0, own2, {}, [1.0])
+    t.weigh(7, 0, own1, {"x": stale.copy()}, [0.5, 0.5], late={"x": (6, stale)})
+    assert t.n["x"].last_statistic >= TrustConfig().cap  # against own2, its scan's
