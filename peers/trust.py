@@ -86,6 +86,7 @@ from sensornet.peers.trust_checks import (
     offset_chi2,
     offset_information,
     target_mass,
+    unmatched_weights,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.divergence import log_overlaps
@@ -159,7 +160,8 @@ class Trust:
         :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours and
         ``left_out`` (stale inputs) left out of the references."""
         out = {s for s in inputs if self.n[s].state == "quarantined"} | set(left_out)
-        return neighbour_statistics(self.cfg, own, inputs, weights, out)
+        return neighbour_statistics(self.cfg, own, inputs, weights, out,
+                                    (self.pos[0], self.pos[1]))
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
               inputs: dict[str, GaussianMixture], weights: list[float],
@@ -247,9 +249,14 @@ class Trust:
         """The divergence test of ``mix`` against ``ref`` alone (a late estimate against own's
         density of its scan)."""
         L = log_overlaps([ref, mix])
-        w = self.cfg.repeat_weight
-        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
-                               target_mass(mix, w), target_mass(ref, w))
+        cfg = self.cfg
+        w = cfg.repeat_weight
+        u = None
+        if cfg.unmatched and cfg.detection_probability is not None:
+            U, _ = unmatched_weights([ref, mix], self.pos, w, cfg.bias_gate)
+            u = U[0, 1] + U[1, 0]
+        return divergence_test(cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
+                               target_mass(mix, w), target_mass(ref, w), u)
 
     def _repeated(self, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:
         """Whether ``mix`` (round 0 of scan ``k``) repeats, bit for bit, the non-empty density

@@ -27,10 +27,12 @@ from sensornet.tracking.mixture import GaussianMixture
 
 def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                          inputs: dict[str, GaussianMixture], weights: dict[str, float],
-                         quarantined: set[str]) -> dict[str, float]:
+                         quarantined: set[str], pos: tuple[int, int] = (0, 2)
+                         ) -> dict[str, float]:
     """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
     average of the other trusted inputs (weights ``weights``, own's under ``""``; the
-    neighbours in ``quarantined`` are left out of every reference)."""
+    neighbours in ``quarantined`` are left out of every reference; ``pos``: the position
+    entries of the state, for :func:`unmatched_weights`)."""
     names = sorted(inputs)
     mixes = [own] + [inputs[s] for s in names]
     L = log_overlaps(mixes)
@@ -38,18 +40,26 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
-    pair = pair_tests(cfg, L, mass, tm) if cfg.majority else None
+    U, near = (unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate)
+               if cfg.unmatched and cfg.detection_probability is not None else (None, None))
+    pair = pair_tests(cfg, L, mass, tm, U) if cfg.majority else None
     out = {}
     for j, s in enumerate(names, start=1):
-        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0])
+        u_own = None if U is None else U[j, 0] + U[0, j]
+        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
+                                u_own)
         wo = w.copy()
         wo[j] = 0.0
         if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
             wo = wo / wo.sum()
             l_jr = _lse(L[j] + _log(wo))
             l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
+            u_loo = None
+            if U is not None:  # j's targets no other has, and theirs j lacks (weighted)
+                alone = near[0][:, wo > 0].sum(axis=1) == 0  # (C,)
+                u_loo = float(near[1][alone & (near[2] == j)].sum() + wo @ U[:, j])
             t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass),
-                                    tm[j], float(wo @ tm))
+                                    tm[j], float(wo @ tm), u_loo)
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own
@@ -62,10 +72,13 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
 
 
 def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
-               targets: np.ndarray | None = None) -> np.ndarray:
+               targets: np.ndarray | None = None,
+               unmatched: np.ndarray | None = None) -> np.ndarray:
     """The test between every two inputs (``(n, n)``; the majority's own spread) from their
-    log overlaps ``L`` (``(n, n)``), masses ``mass`` (``(n,)``) and target masses
-    ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound)."""
+    log overlaps ``L`` (``(n, n)``), masses ``mass`` (``(n,)``), target masses
+    ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound) and
+    unmatched target weights ``unmatched`` (``(n, n)``, :func:`unmatched_weights`; None:
+    not used)."""
     d = np.diag(L)
     a, b = mass[:, None], mass[None, :]
     card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
@@ -76,11 +89,35 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
     cs = np.where(np.isfinite(cs), cs, cfg.cap)
     one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
     P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
+    if unmatched is not None:
+        P = np.maximum(P, cfg.unmatched_cost * (unmatched + unmatched.T))
     P = np.minimum(P, cfg.cap)
     if targets is not None:
         P = np.minimum(P, miss_cost(cfg, targets[:, None], targets[None, :]))
     np.fill_diagonal(P, 0.0)
     return P
+
+
+def unmatched_weights(mixes: list[GaussianMixture], pos: list[int], min_weight: float,
+                      gate: float) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """``U`` (``(n, n)``): ``U[a, b]`` the summed weight of the target components of
+    ``mixes[a]`` (weight at least ``min_weight``) with no target component of ``mixes[b]``
+    within ``gate`` metres: the targets ``a`` shows that ``b`` does not (a birth or a miss
+    on one side, or a phantom). Also ``(near, w, owner)``: per target component (``C`` in
+    all) whether each input has one within the gate (``(C, n)``), its weight and its input."""
+    n = len(mixes)
+    sel = [D.weights >= min_weight if len(D) else np.zeros(0, bool) for D in mixes]
+    owner = np.concatenate([np.full(int(m.sum()), i) for i, m in enumerate(sel)])
+    if len(owner) == 0:
+        return np.zeros((n, n)), (np.zeros((0, n), bool), np.zeros(0), owner)
+    w = np.concatenate([D.weights[m] for D, m in zip(mixes, sel, strict=True)])
+    X = np.concatenate([D.means[m][:, pos] for D, m in zip(mixes, sel, strict=True)])
+    G = np.zeros((len(owner), n))
+    G[np.arange(len(owner)), owner] = 1.0  # (C, n): which input a component is of
+    close = np.linalg.norm(X[:, None, :] - X[None, :, :], axis=2) <= gate  # (C, C)
+    near = (close.astype(float) @ G) > 0  # (C, n)
+    U = G.T @ (w[:, None] * ~near)  # (n, n)
+    return U, (near, w, owner)
 
 
 def target_mass(mix: GaussianMixture, min_weight: float) -> float:
@@ -110,12 +147,17 @@ def miss_cost(cfg: TrustConfig, m_j, m_r):
 
 
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
-                    n_r: float, t_j: float | None = None, t_r: float | None = None) -> float:
+                    n_r: float, t_j: float | None = None, t_r: float | None = None,
+                    unmatched: float | None = None) -> float:
     """``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` from the log overlaps of a
-    density ``D_j`` and a reference ``R`` and their masses, capped at
-    :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is empty), and
-    at most :func:`miss_cost` of their target masses ``t_j``, ``t_r`` when given."""
+    density ``D_j`` and a reference ``R`` and their masses, at least the miss cost of the
+    ``unmatched`` target weight on both sides (:func:`unmatched_weights`) when given,
+    capped at :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is
+    empty), and at most :func:`miss_cost` of their target masses ``t_j``, ``t_r`` when
+    given."""
     t = _divergence_test(cfg, l_jj, l_jr, l_rr, n_j, n_r)
+    if unmatched is not None:
+        t = min(cfg.cap, max(t, cfg.unmatched_cost * float(unmatched)))
     if t_j is None or t_r is None:
         return t
     return min(t, float(miss_cost(cfg, t_j, t_r)))

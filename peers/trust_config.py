@@ -90,6 +90,15 @@ class TrustConfig:
     disagreement by misses, ``-log(1 - Pd)`` per target on either side
     (:func:`peers.trust_checks.miss_cost`: the log-likelihood ratio of a density that lacks
     a target, lying against honest)."""
+    unmatched: bool = True
+    """With :attr:`detection_probability`: the statistic is at least ``-log(1 - Pd)`` per
+    target one side shows and the other has nothing within :attr:`bias_gate` metres of
+    (:func:`peers.trust_checks.unmatched_weights`): the log-likelihood ratio of targets one
+    honest peer lacks, a miss or a birth a scan apart at rate ``1 - Pd`` (phantoms are
+    that every scan). The divergence alone counts an extra target next to a matched one
+    for little (the overlap of the matched ones dominates)."""
+    unmatched_cost: float = 2.0
+    """Statistic per unit of unmatched target weight (:attr:`unmatched`)."""
     same_scan: bool = True
     """Test each neighbour estimate once, against own's density of the scan it was made
     at: an estimate used again at a later scan (its successor late or lost, predicted

@@ -371,3 +371,39 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
     t.weigh(6, 0, own2, {}, [1.0])
     t.weigh(7, 0, own1, {"x": stale.copy()}, [0.5, 0.5], late={"x": (6, stale)})
     assert t.n["x"].last_statistic >= TrustConfig().cap  # against own2, its scan's
+
+
+def test_unmatched_target_weights_against_brute_force_and_phantoms():
+    """``U[a, b]``: the target weight of ``a`` with nothing of ``b`` within the gate, against
+    a loop over components; phantoms next to honest targets score ``unmatched_cost`` each,
+    an honest density with one extra target no more than the allowance ``drift``."""
+    from sensornet.peers.trust_checks import unmatched_weights
+
+    rng = np.random.default_rng(21)
+    mixes = [mix(*[(w, [x, 0.0, y, 0.0], P4) for w, x, y in zip(
+        rng.uniform(0.2, 1.5, n), rng.uniform(0, 300, n), rng.uniform(0, 300, n),
+        strict=True)]) if n else GaussianMixture.empty(4) for n in (4, 0, 6, 3, 1)]
+    U, _ = unmatched_weights(mixes, [0, 2], 0.5, 60.0)
+    for a, Da in enumerate(mixes):
+        for b, Db in enumerate(mixes):
+            brute = 0.0
+            for w, m in zip(Da.weights, Da.means, strict=True):
+                if w < 0.5:
+                    continue
+                if not any(v >= 0.5 and np.hypot(*(m - q)[[0, 2]]) <= 60.0
+                           for v, q in zip(Db.weights, Db.means, strict=True)):
+                    brute += w
+            assert U[a, b] == pytest.approx(brute), (a, b)
+    cfg = TrustConfig(detection_probability=0.99)
+    own = _honest(rng)
+    phantoms = GaussianMixture.concatenate([_honest(rng), mix(  # honest-looking covariances
+        (1.0, [-800.0, 0, 800.0, 0], P4), (1.0, [800.0, 0, 800.0, 0], P4),
+        (1.0, [-800.0, 0, -800.0, 0], P4))])
+    extra = GaussianMixture.concatenate([_honest(rng), mix((0.9, [0.0, 0, 800.0, 0], P4))])
+    t = Trust(cfg, ("p", "e"))
+    t.weigh(1, 0, own, {"p": phantoms, "e": extra}, [0.4, 0.3, 0.3])
+    assert t.n["p"].last_statistic >= cfg.unmatched_cost * 3.0
+    off = Trust(TrustConfig(detection_probability=0.99, unmatched=False), ("p", "e"))
+    off.weigh(1, 0, own, {"p": phantoms, "e": extra}, [0.4, 0.3, 0.3])
+    assert off.n["p"].last_statistic < t.n["p"].last_statistic
+    assert t.n["e"].last_statistic <= max(cfg.drift, off.n["e"].last_statistic) + 1e-9
