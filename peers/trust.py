@@ -85,6 +85,7 @@ from sensornet.peers.trust_checks import (
     neighbour_statistics,
     offset_chi2,
     offset_information,
+    relative_offsets,
     target_mass,
     unmatched_weights,
 )
@@ -207,8 +208,14 @@ class Trust:
                     stats[s] = cfg.quarantine + cfg.drift
         raw = dict(stats)
         if rnd == 0 and cfg.bias:
-            for s, (_, mix, ref) in tested.items():
-                chi2 = self._offset(self.n[s], ref, mix)
+            infos = {s: offset_information(ref, mix, self.pos, cfg.repeat_weight,
+                                           cfg.bias_gate)
+                     for s, (_, mix, ref) in tested.items()}
+            if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
+                infos = relative_offsets(infos, [s for s in infos if s not in late
+                                                 and self.n[s].state != "quarantined"])
+            for s, info in infos.items():
+                chi2 = self._offset(self.n[s], info)
                 if any(c > t for c, t in zip(chi2, cfg.bias_thresholds, strict=True)):
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
@@ -267,14 +274,12 @@ class Trust:
         rec.last_mix, rec.last_k = mix, k
         return is_repeat(prev, mix, self.cfg.repeat_weight)
 
-    def _offset(self, rec: NeighbourTrust, own: GaussianMixture,
-                mix: GaussianMixture) -> tuple[float, ...]:
-        """Add this scan's matched position differences of ``mix`` against ``own`` to the
+    def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:
+        """Add this scan's ``(I, y)`` (:func:`peers.trust_checks.offset_information`) to the
         neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
         chi-square of its mean offset (:attr:`TrustConfig.bias`)."""
         cfg = self.cfg
-        rec.offsets.appendleft(offset_information(own, mix, self.pos, cfg.repeat_weight,
-                                                  cfg.bias_gate))
+        rec.offsets.appendleft(info)
         while len(rec.offsets) > max(cfg.bias_windows):
             rec.offsets.pop()
         rec.last_offset_chi2 = offset_chi2(rec.offsets, cfg.bias_windows)

@@ -88,12 +88,12 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
                                          np.broadcast_to(d[None, :], L.shape)))
     cs = np.where(np.isfinite(cs), cs, cfg.cap)
     one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
-    P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
+    where = np.where(ea & eb, 0.0, np.where(ea | eb, one, cs))
     if unmatched is not None:
-        P = np.maximum(P, cfg.unmatched_cost * (unmatched + unmatched.T))
-    P = np.minimum(P, cfg.cap)
+        where = np.maximum(where, cfg.unmatched_cost * (unmatched + unmatched.T))
     if targets is not None:
-        P = np.minimum(P, miss_cost(cfg, targets[:, None], targets[None, :]))
+        where = np.minimum(where, miss_cost(cfg, targets[:, None], targets[None, :]))
+    P = np.minimum(where + card, cfg.cap)
     np.fill_diagonal(P, 0.0)
     return P
 
@@ -149,31 +149,27 @@ def miss_cost(cfg: TrustConfig, m_j, m_r):
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
                     n_r: float, t_j: float | None = None, t_r: float | None = None,
                     unmatched: float | None = None) -> float:
-    """``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` from the log overlaps of a
-    density ``D_j`` and a reference ``R`` and their masses, at least the miss cost of the
-    ``unmatched`` target weight on both sides (:func:`unmatched_weights`) when given,
-    capped at :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is
-    empty), and at most :func:`miss_cost` of their target masses ``t_j``, ``t_r`` when
-    given."""
-    t = _divergence_test(cfg, l_jj, l_jr, l_rr, n_j, n_r)
-    if unmatched is not None:
-        t = min(cfg.cap, max(t, cfg.unmatched_cost * float(unmatched)))
-    if t_j is None or t_r is None:
-        return t
-    return min(t, float(miss_cost(cfg, t_j, t_r)))
-
-
-def _divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
-                     n_r: float) -> float:
+    """``T = W + kappa (N_j - N_R)^2 / (N_R + 1)``, capped at :attr:`TrustConfig.cap`, from
+    the log overlaps of a density ``D_j`` and a reference ``R`` and their masses. ``W``,
+    where the targets are: ``D_CS(D_j, R)`` (:attr:`TrustConfig.empty_penalty` when one
+    side is empty), at least ``unmatched_cost`` times the ``unmatched`` target weight on
+    both sides (:func:`unmatched_weights`) and at most :func:`miss_cost` of their target
+    masses ``t_j``, ``t_r`` (each when given)."""
     card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
     if n_j <= 1e-9 and n_r <= 1e-9:
-        return min(card, cfg.cap)
-    if n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
-        return min(cfg.cap, card + cfg.empty_penalty * min(1.0, max(n_j, n_r)))
-    d = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj), np.float64(l_rr)))
-    if not np.isfinite(d):
-        d = cfg.cap
-    return min(cfg.cap, d + card)
+        where = 0.0
+    elif n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
+        where = cfg.empty_penalty * min(1.0, max(n_j, n_r))
+    else:
+        where = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj),
+                                           np.float64(l_rr)))
+        if not np.isfinite(where):
+            where = cfg.cap
+    if unmatched is not None:
+        where = max(where, cfg.unmatched_cost * float(unmatched))
+    if t_j is not None and t_r is not None:
+        where = min(where, float(miss_cost(cfg, t_j, t_r)))
+    return min(cfg.cap, where + card)
 
 
 def is_repeat(prev: GaussianMixture | None, mix: GaussianMixture, min_weight: float) -> bool:
@@ -230,6 +226,28 @@ def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int
     S = Pa[ok] + Pb[near[ok]]  # (p, 2, 2)
     Si = np.linalg.inv(S)
     return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
+
+
+def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],
+                     among: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each of ``among``'s scan offsets against own made relative to the others':
+    ``y_j = I_j (b_j - med_h b_h)`` with ``b = I^-1 y`` and the coordinate-wise median over
+    the other neighbours of ``among`` with an offset (at least two; else ``y_j`` is kept).
+    Own's estimation error is in every neighbour's offset against own (an honest own that
+    re-acquires a target 70 m off moves them all); the median of the others' takes it out,
+    and a biased neighbour's offset is its own (W-MSR's premise: the others are mostly
+    honest). ``infos``: per neighbour ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
+    names = [s for s in among if np.linalg.det(infos[s][0]) > 1e-12]
+    if len(names) < 3:
+        return infos
+    b = np.linalg.solve(np.array([infos[s][0] for s in names]),
+                        np.array([infos[s][1] for s in names])[..., None])[..., 0]  # (n, 2)
+    out = dict(infos)
+    for i, s in enumerate(names):
+        med = np.median(np.delete(b, i, axis=0), axis=0)
+        info = infos[s][0]
+        out[s] = (info, info @ (b[i] - med))
+    return out
 
 
 def _log(w: np.ndarray) -> np.ndarray:

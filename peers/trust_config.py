@@ -71,13 +71,16 @@ class TrustConfig:
     ``y' I^-1 y`` (2 degrees of freedom), which grows linearly with the window under a
     constant offset. Above its window's :attr:`bias_thresholds` the scan's statistic is at
     least ``quarantine + drift``."""
+    bias_relative: bool = True
+    """With three or more neighbours offset against own at a scan: each one's offset taken
+    relative to the median of the others' (:func:`peers.trust_checks.relative_offsets`)."""
     bias_windows: tuple[int, ...] = (3, 16)
     """Scans in the offset test's windows (a short one for an offset large against the
     covariances, a long one for a small one)."""
     bias_gate: float = 60.0
     """Largest position distance (m) of a matched pair (farther: another target or a lie the
     divergence test already sees)."""
-    bias_thresholds: tuple[float, ...] = (35.0, 50.0)
+    bias_thresholds: tuple[float, ...] = (32.0, 40.0)
     """Per window: the chi-square of its mean offset above which the neighbour is
     quarantined (above the largest honest value on the training runs, see :mod:`peers.trust`)."""
     detection_probability: float | None = None

@@ -313,7 +313,12 @@ def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
     born = mix((0.8, B, P4))  # a target own has not confirmed yet, own's far from it
     per = -np.log(1.0 - pd)
     assert float(miss_cost(cfg, 0.95, 0.0)) == pytest.approx(per * 0.95)
-    for other, cost in ((missed, per * 0.95), (born, per * (0.95 + 0.8))):
+
+    def card(n_j, n_r):
+        return (n_j - n_r) ** 2 / (n_r + 1.0)  # kappa = 1: the cardinality term stays
+
+    for other, cost in ((missed, per * 0.95 + card(0.0, 0.95)),
+                        (born, per * (0.95 + 0.8) + card(0.8, 0.95))):
         t = Trust(cfg, ("x",))
         old = Trust(TrustConfig(), ("x",))
         for k in (1, 2, 3, 4):
@@ -330,9 +335,17 @@ def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
     mass = np.array([m.mass for m in mixes])
     targets = np.array([0.95, 0.0, 0.8])
     P = pair_tests(cfg, L, mass, targets)
-    free = pair_tests(cfg, L, mass)
-    expect = np.minimum(free, per * (targets[:, None] + targets[None, :]))
-    np.fill_diagonal(expect, 0.0)
+    expect = np.zeros((3, 3))
+    for a in range(3):
+        for b in range(3):
+            if a == b:
+                continue
+            if min(mass[a], mass[b]) <= 1e-9:
+                where = 5.0 * min(1.0, max(mass[a], mass[b]))  # the empty penalty
+            else:
+                where = min(8.0, -L[a, b] + 0.5 * (L[a, a] + L[b, b]))
+            where = min(where, per * (targets[a] + targets[b]))
+            expect[a, b] = min(8.0, where + min(card(mass[a], mass[b]), card(mass[b], mass[a])))
     np.testing.assert_allclose(P, expect)
     # where misses are rare (Pd 0.99) hiding two targets costs more than the divergence
     # test's value, which stays the statistic
@@ -376,7 +389,7 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
 def test_unmatched_target_weights_against_brute_force_and_phantoms():
     """``U[a, b]``: the target weight of ``a`` with nothing of ``b`` within the gate, against
     a loop over components; phantoms next to honest targets score ``unmatched_cost`` each,
-    an honest density with one extra target no more than the allowance ``drift``."""
+    an honest density with one extra target its weight's worth (plus the cardinality)."""
     from sensornet.peers.trust_checks import unmatched_weights
 
     rng = np.random.default_rng(21)
@@ -406,4 +419,33 @@ def test_unmatched_target_weights_against_brute_force_and_phantoms():
     off = Trust(TrustConfig(detection_probability=0.99, unmatched=False), ("p", "e"))
     off.weigh(1, 0, own, {"p": phantoms, "e": extra}, [0.4, 0.3, 0.3])
     assert off.n["p"].last_statistic < t.n["p"].last_statistic
-    assert t.n["e"].last_statistic <= max(cfg.drift, off.n["e"].last_statistic) + 1e-9
+    extra_card = (extra.mass - own.mass) ** 2 / (own.mass + 1.0)
+    assert t.n["e"].last_statistic <= cfg.unmatched_cost * 0.9 + extra_card + 1e-9
+
+
+def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
+    """Own 70 m off (re-acquired from a birth) moves every neighbour's offset against own by
+    the same amount; the median of the others' takes it out, a biased one keeps its 30 m."""
+    from sensornet.peers.trust_checks import relative_offsets
+
+    rng = np.random.default_rng(4)
+    own_err = np.array([-70.0, 20.0])
+    infos, true = {}, {}
+    for s in ("a", "b", "c", "d", "biased"):
+        info = np.linalg.inv(np.diag(rng.uniform(150.0, 400.0, 2)))  # (2, 2)
+        off = -own_err + rng.normal(0.0, 5.0, 2) + ([30.0, 0.0] if s == "biased" else 0.0)
+        infos[s], true[s] = (info, info @ off), off
+    infos["late"] = (np.eye(2), np.array([3.0, 4.0]))  # not among: untouched
+    out = relative_offsets(infos, ["a", "b", "c", "d", "biased"])
+    for s in ("a", "b", "c", "d", "biased"):
+        others = np.array([true[h] for h in ("a", "b", "c", "d", "biased") if h != s])
+        np.testing.assert_allclose(out[s][1], infos[s][0] @ (true[s] - np.median(others, 0)))
+        np.testing.assert_array_equal(out[s][0], infos[s][0])
+    assert out["late"] is infos["late"]
+    chi2 = {s: out[s][1] @ np.linalg.solve(out[s][0], out[s][1]) for s in out if s != "late"}
+    raw = {s: infos[s][1] @ np.linalg.solve(*infos[s]) for s in chi2}
+    assert max(chi2[s] for s in "abcd") < 1.0 < min(raw[s] for s in "abcd")  # own's error out
+    assert chi2["biased"] > 2.0  # 30 m against a 12-20 m deviation: its own
+    # with fewer than three offsets nothing changes
+    two = relative_offsets({s: infos[s] for s in ("a", "b")}, ["a", "b"])
+    assert all(two[s] is infos[s] for s in two)
