@@ -449,3 +449,19 @@ def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
     # with fewer than three offsets nothing changes
     two = relative_offsets({s: infos[s] for s in ("a", "b")}, ["a", "b"])
     assert all(two[s] is infos[s] for s in two)
+
+
+def test_calibration_counts_which_test_began_each_quarantine():
+    from sensornet.sim.trust_calibration import simulate
+
+    cfg = TrustConfig()
+    none = np.zeros((6, 2))
+    hit = none.copy()
+    hit[2, 0] = cfg.bias_thresholds[0] + 1.0
+    seqs = [(np.array([0.5, 8.0, 8.0, 0.0, 0.0, 0.0]), none),  # divergence: 6, then 10.8
+            (np.array([0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), hit),  # the offset at scan 3
+            (np.array([0.5, cfg.quarantine + cfg.drift, 0.0, 0.0, 0.0, 0.0]), none),
+            (np.full(6, 1.0), none)]  # honest: never
+    sim = simulate(seqs, cfg)
+    assert sim["causes"] == {"divergence": 1, "offset": 1, "repeat": 1}
+    assert sim["first_low"] == [3, 3, 2, None]
