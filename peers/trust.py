@@ -26,16 +26,35 @@ the median test between them: a neighbour is scored for disagreeing with a major
 agrees, not for a scan where everyone disagrees, and two liars telling the same lie do not
 cover for each other (each one's lie would be in the other's leave-one-out average).
 
+Faults are not lies (:attr:`TrustConfig.same_scan`, :attr:`TrustConfig.detection_probability`):
+each neighbour estimate is tested once, against own's density of the scan it was made at. An
+estimate used again at a later scan (its successor late or lost, predicted forward by the
+out-of-sequence policy) adds statistic 0 and is no reference for the others; one that
+arrives after its scan is tested at its first use against own's density of that scan. The
+location part of every test (the divergence, or the empty penalty) is at most the evidence
+needed to explain the whole disagreement by missed detections, ``-log(1 - Pd)`` per unit of
+target weight on either side (:func:`peers.trust_checks.miss_cost`, Pd the smallest of the
+peer's and its neighbours' sensors): a target missed at a scan falls under the publishing
+threshold (level-2 pruning), and a target born a scan apart looks the same, so an honest
+density lacks a target at rate ``1 - Pd`` and the log-likelihood ratio of that, lying
+against honest, is ``-log(1 - Pd)``. It is at least ``unmatched_cost = drift`` per unit of
+target weight that one side shows and the other has nothing within 60 m of
+(:func:`peers.trust_checks.unmatched_weights`): one extra target that a neighbour keeps
+alone never accumulates, three phantoms do (the divergence alone counts an extra target
+next to matched ones for little). The cardinality term stays.
+
 A biased sensor (every estimate a fixed distance off under an honest covariance) is, scan by
 scan, within an honest neighbour's scatter; its offset, though, is the same every scan
 (:attr:`TrustConfig.bias`): the neighbour's target components are matched to own's nearest,
 and the chi-square of the information-weighted mean position difference over the last 3 and
 16 scans (``y' I^-1 y``, ``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``, ``S_i`` the summed
 position covariances: the generalised-least-squares offset) grows linearly with the window
-under a bias while honest errors average out. Above 35 (3 scans) or 50 (16 scans) the
-neighbour is quarantined at once. The thresholds sit above the largest honest values on the
-training runs 9000-9001 (30.5 and 41.9, every graph and condition below), so the test adds no
-honest quarantine there.
+under a bias while honest errors average out. With three or more neighbours offset against
+own at a scan, each one's offset is taken relative to the median of the others'
+(:attr:`TrustConfig.bias_relative`): own's own error is in all of them and is taken out.
+Above 32 (3 scans) or 40 (16 scans) the neighbour is quarantined at once. The thresholds sit
+above the largest honest values on the training runs 9000-9001 (28.2 and 33.2, every graph
+and condition below; 30.5 and 41.9 before the relative offset, with thresholds 35 and 50).
 
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
@@ -87,7 +106,6 @@ from sensornet.peers.trust_checks import (
     offset_information,
     relative_offsets,
     target_mass,
-    unmatched_weights,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.divergence import log_overlaps
@@ -256,14 +274,9 @@ class Trust:
         """The divergence test of ``mix`` against ``ref`` alone (a late estimate against own's
         density of its scan)."""
         L = log_overlaps([ref, mix])
-        cfg = self.cfg
-        w = cfg.repeat_weight
-        u = None
-        if cfg.unmatched and cfg.detection_probability is not None:
-            U, _ = unmatched_weights([ref, mix], self.pos, w, cfg.bias_gate)
-            u = U[0, 1] + U[1, 0]
-        return divergence_test(cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
-                               target_mass(mix, w), target_mass(ref, w), u)
+        w = self.cfg.repeat_weight
+        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
+                               target_mass(mix, w), target_mass(ref, w))
 
     def _repeated(self, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:
         """Whether ``mix`` (round 0 of scan ``k``) repeats, bit for bit, the non-empty density

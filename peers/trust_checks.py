@@ -40,26 +40,21 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
-    U, near = (unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate)
-               if cfg.unmatched and cfg.detection_probability is not None else (None, None))
+    U = None
+    if cfg.majority and cfg.unmatched and cfg.detection_probability is not None:
+        U, _ = unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate)
     pair = pair_tests(cfg, L, mass, tm, U) if cfg.majority else None
     out = {}
     for j, s in enumerate(names, start=1):
-        u_own = None if U is None else U[j, 0] + U[0, j]
-        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
-                                u_own)
+        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0])
         wo = w.copy()
         wo[j] = 0.0
         if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
             wo = wo / wo.sum()
             l_jr = _lse(L[j] + _log(wo))
             l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
-            u_loo = None
-            if U is not None:  # j's targets no other has, and theirs j lacks (weighted)
-                alone = near[0][:, wo > 0].sum(axis=1) == 0  # (C,)
-                u_loo = float(near[1][alone & (near[2] == j)].sum() + wo @ U[:, j])
             t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass),
-                                    tm[j], float(wo @ tm), u_loo)
+                                    tm[j], float(wo @ tm))
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own

@@ -388,9 +388,11 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
 
 def test_unmatched_target_weights_against_brute_force_and_phantoms():
     """``U[a, b]``: the target weight of ``a`` with nothing of ``b`` within the gate, against
-    a loop over components; phantoms next to honest targets score ``unmatched_cost`` each,
-    an honest density with one extra target its weight's worth (plus the cardinality)."""
-    from sensornet.peers.trust_checks import unmatched_weights
+    a loop over components; in the pair tests (the majority's) phantoms next to honest
+    targets score ``unmatched_cost`` each, more than one extra target does."""
+    from dataclasses import replace
+
+    from sensornet.peers.trust_checks import pair_tests, unmatched_weights
 
     rng = np.random.default_rng(21)
     mixes = [mix(*[(w, [x, 0.0, y, 0.0], P4) for w, x, y in zip(
@@ -413,14 +415,34 @@ def test_unmatched_target_weights_against_brute_force_and_phantoms():
         (1.0, [-800.0, 0, 800.0, 0], P4), (1.0, [800.0, 0, 800.0, 0], P4),
         (1.0, [-800.0, 0, -800.0, 0], P4))])
     extra = GaussianMixture.concatenate([_honest(rng), mix((0.9, [0.0, 0, 800.0, 0], P4))])
-    t = Trust(cfg, ("p", "e"))
-    t.weigh(1, 0, own, {"p": phantoms, "e": extra}, [0.4, 0.3, 0.3])
-    assert t.n["p"].last_statistic >= cfg.unmatched_cost * 3.0
-    off = Trust(TrustConfig(detection_probability=0.99, unmatched=False), ("p", "e"))
-    off.weigh(1, 0, own, {"p": phantoms, "e": extra}, [0.4, 0.3, 0.3])
-    assert off.n["p"].last_statistic < t.n["p"].last_statistic
-    extra_card = (extra.mass - own.mass) ** 2 / (own.mass + 1.0)
-    assert t.n["e"].last_statistic <= cfg.unmatched_cost * 0.9 + extra_card + 1e-9
+    # the pair tests: the location part at least unmatched_cost per unmatched target weight
+    mixes = [own, phantoms, extra]
+    L = log_overlaps(mixes)
+    mass = np.array([m.mass for m in mixes])
+    U, _ = unmatched_weights(mixes, [0, 2], 0.5, 60.0)
+    np.testing.assert_allclose(U, [[0, 0, 0], [3.0, 0, 3.0], [0.9, 0.9, 0]])
+    P = pair_tests(cfg, L, mass, None, U)
+    for a in range(3):
+        for b in range(3):
+            if a != b:
+                where = max(-L[a, b] + 0.5 * (L[a, a] + L[b, b]), 2.0 * (U[a, b] + U[b, a]))
+                card = min((mass[a] - mass[b]) ** 2 / (mass[b] + 1.0),
+                           (mass[b] - mass[a]) ** 2 / (mass[a] + 1.0))
+                assert P[a, b] == pytest.approx(min(8.0, where + card))
+    # with a majority (own and three others) phantoms stand out, one extra target does not
+    names = ("h1", "h2", "e", "p")
+    inputs = {"h1": _honest(rng), "h2": _honest(rng), "e": extra, "p": phantoms}
+    on, off = Trust(cfg, names), Trust(replace(cfg, unmatched=False), names)
+    on.weigh(1, 0, own, inputs, [0.2] * 5)
+    off.weigh(1, 0, own, inputs, [0.2] * 5)
+    assert on.n["p"].last_statistic > off.n["p"].last_statistic + 1.0
+    assert on.n["p"].last_statistic > cfg.drift + 2.0 > on.n["e"].last_statistic
+    # without a majority (two neighbours) the term is not used
+    two = Trust(cfg, ("e", "p"))
+    two.weigh(1, 0, own, {"e": extra, "p": phantoms}, [0.4, 0.3, 0.3])
+    plain = Trust(replace(cfg, unmatched=False), ("e", "p"))
+    plain.weigh(1, 0, own, {"e": extra, "p": phantoms}, [0.4, 0.3, 0.3])
+    assert two.n["p"].last_statistic == plain.n["p"].last_statistic
 
 
 def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
