@@ -237,11 +237,13 @@ def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],
         return infos
     b = np.linalg.solve(np.array([infos[s][0] for s in names]),
                         np.array([infos[s][1] for s in names])[..., None])[..., 0]  # (n, 2)
+    n = len(names)
+    others = np.array([[h for h in range(n) if h != i] for i in range(n)])  # (n, n-1)
+    med = np.median(b[others], axis=1)  # (n, 2): each one's leave-one-out median
+    info = np.array([infos[s][0] for s in names])  # (n, 2, 2)
+    y = np.einsum("nij,nj->ni", info, b - med)
     out = dict(infos)
-    for i, s in enumerate(names):
-        med = np.median(np.delete(b, i, axis=0), axis=0)
-        info = infos[s][0]
-        out[s] = (info, info @ (b[i] - med))
+    out.update({s: (infos[s][0], y[i]) for i, s in enumerate(names)})
     return out
 
 
