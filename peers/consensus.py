@@ -220,7 +220,7 @@ class Consensus(BatchedRounds):
         senders = sorted(inputs)
         weights = metropolis_weights(self.o.name, senders, self._deg,
                                      uniform=self.o.omega == "uniform")
-        if self.trust is not None and senders and isinstance(st.current, GaussianMixture):
+        if self.trust is not None and isinstance(st.current, GaussianMixture):
             inputs, senders, weights = self._trusted(st, inputs, senders, weights)
         inp = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
         if self.batch is not None and self.batchable and not now_only:
@@ -269,8 +269,12 @@ class Consensus(BatchedRounds):
         mixes = {s: inputs[s]["posterior"] for s in senders}
         if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
             return inputs, senders, weights  # raw scans: not densities
+        late = None
+        if st.round == 0:  # made at an earlier scan, predicted forward: as received
+            late = {s: self.nale.stored[s] for s in senders
+                    if s in self.nale.stored and self.nale.stored[s][0] < st.k}
         weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights),
-                                   drop_suspects=self.fuser_hooks.product)
+                                   drop_suspects=self.fuser_hooks.product, late=late)
         self.records.extend(self.trust.drain_records())
         kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]
         if len(kept) == len(senders):

@@ -8,6 +8,8 @@ references and their calibration are in :mod:`peers.trust`'s docstring).
   tests against own and the leave-one-out average, or (W-MSR-style majority) its median test
   against the other inputs less their own median test (:func:`pair_tests`,
   :func:`divergence_test`).
+- :func:`miss_cost`: the evidence needed to explain a whole disagreement by missed
+  detections (or births seen a scan apart), which bounds every divergence test.
 - :func:`is_repeat`: a non-empty density repeated bit for bit (a stuck sensor or a replay).
 - :func:`offset_information` and :func:`offset_chi2`: the generalised-least-squares offset
   of a biased sensor over windows of scans.
@@ -25,27 +27,34 @@ from sensornet.tracking.mixture import GaussianMixture
 
 def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                          inputs: dict[str, GaussianMixture], weights: dict[str, float],
-                         quarantined: set[str]) -> dict[str, float]:
+                         quarantined: set[str], pos: tuple[int, int] = (0, 2)
+                         ) -> dict[str, float]:
     """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
     average of the other trusted inputs (weights ``weights``, own's under ``""``; the
-    neighbours in ``quarantined`` are left out of every reference)."""
+    neighbours in ``quarantined`` are left out of every reference; ``pos``: the position
+    entries of the state, for :func:`unmatched_weights`)."""
     names = sorted(inputs)
     mixes = [own] + [inputs[s] for s in names]
     L = log_overlaps(mixes)
     mass = np.array([D.mass for D in mixes])
+    tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
-    pair = pair_tests(cfg, L, mass) if cfg.majority else None
+    U = None
+    if cfg.majority and cfg.unmatched and cfg.detection_probability is not None:
+        U, _ = unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate)
+    pair = pair_tests(cfg, L, mass, tm, U) if cfg.majority else None
     out = {}
     for j, s in enumerate(names, start=1):
-        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0])
+        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0])
         wo = w.copy()
         wo[j] = 0.0
         if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
             wo = wo / wo.sum()
             l_jr = _lse(L[j] + _log(wo))
             l_rr = _lse((L + _log(wo)[:, None] + _log(wo)[None, :]).ravel())
-            t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass))
+            t_loo = divergence_test(cfg, L[j, j], l_jr, l_rr, mass[j], float(wo @ mass),
+                                    tm[j], float(wo @ tm))
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own
@@ -57,9 +66,14 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     return out
 
 
-def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
+def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
+               targets: np.ndarray | None = None,
+               unmatched: np.ndarray | None = None) -> np.ndarray:
     """The test between every two inputs (``(n, n)``; the majority's own spread) from their
-    log overlaps ``L`` (``(n, n)``) and masses ``mass`` (``(n,)``)."""
+    log overlaps ``L`` (``(n, n)``), masses ``mass`` (``(n,)``), target masses
+    ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound) and
+    unmatched target weights ``unmatched`` (``(n, n)``, :func:`unmatched_weights`; None:
+    not used)."""
     d = np.diag(L)
     a, b = mass[:, None], mass[None, :]
     card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
@@ -69,26 +83,88 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray) -> np.ndarray:
                                          np.broadcast_to(d[None, :], L.shape)))
     cs = np.where(np.isfinite(cs), cs, cfg.cap)
     one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
-    P = np.where(ea & eb, card, np.where(ea | eb, card + one, cs + card))
-    P = np.minimum(P, cfg.cap)
+    where = np.where(ea & eb, 0.0, np.where(ea | eb, one, cs))
+    if unmatched is not None:
+        where = np.maximum(where, cfg.unmatched_cost * (unmatched + unmatched.T))
+    if targets is not None:
+        where = np.minimum(where, miss_cost(cfg, targets[:, None], targets[None, :]))
+    P = np.minimum(where + card, cfg.cap)
     np.fill_diagonal(P, 0.0)
     return P
 
 
+def unmatched_weights(mixes: list[GaussianMixture], pos: list[int], min_weight: float,
+                      gate: float) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """``U`` (``(n, n)``): ``U[a, b]`` the summed weight of the target components of
+    ``mixes[a]`` (weight at least ``min_weight``) with no target component of ``mixes[b]``
+    within ``gate`` metres: the targets ``a`` shows that ``b`` does not (a birth or a miss
+    on one side, or a phantom). Also ``(near, w, owner)``: per target component (``C`` in
+    all) whether each input has one within the gate (``(C, n)``), its weight and its input."""
+    n = len(mixes)
+    sel = [D.weights >= min_weight if len(D) else np.zeros(0, bool) for D in mixes]
+    owner = np.concatenate([np.full(int(m.sum()), i) for i, m in enumerate(sel)])
+    if len(owner) == 0:
+        return np.zeros((n, n)), (np.zeros((0, n), bool), np.zeros(0), owner)
+    w = np.concatenate([D.weights[m] for D, m in zip(mixes, sel, strict=True)])
+    X = np.concatenate([D.means[m][:, pos] for D, m in zip(mixes, sel, strict=True)])
+    G = np.zeros((len(owner), n))
+    G[np.arange(len(owner)), owner] = 1.0  # (C, n): which input a component is of
+    close = np.linalg.norm(X[:, None, :] - X[None, :, :], axis=2) <= gate  # (C, C)
+    near = (close.astype(float) @ G) > 0  # (C, n)
+    U = G.T @ (w[:, None] * ~near)  # (n, n)
+    return U, (near, w, owner)
+
+
+def target_mass(mix: GaussianMixture, min_weight: float) -> float:
+    """The summed weight of the components of ``mix`` of weight at least ``min_weight``
+    (the targets a level-2 pruned density shows)."""
+    if len(mix) == 0:
+        return 0.0
+    w = mix.weights
+    return float(w[w >= min_weight].sum())
+
+
+def miss_cost(cfg: TrustConfig, m_j, m_r):
+    """``-log(1 - Pd) (m_j + m_r)``: the evidence (nats) that two densities with target
+    masses ``m_j`` and ``m_r`` disagree entirely because each missed the other's targets.
+
+    An honest peer misses a target with probability ``1 - Pd`` per scan, after which its
+    level-2 pruned posterior lacks it (its weight falls to about ``(1 - Pd) w``, under the
+    publishing threshold), and a target born a scan apart is the same to the peer that has
+    not confirmed it; a density that lacks a target has likelihood ratio ``1 / (1 - Pd)``
+    lying against honest, so the log-likelihood ratio of the whole disagreement is at most
+    this sum (the smaller of it and the divergence test is the statistic: a disagreement
+    that misses explain costs no more than they do). Inf when
+    :attr:`TrustConfig.detection_probability` is None. Broadcasts."""
+    if cfg.detection_probability is None:
+        return np.inf * np.ones(np.broadcast(m_j, m_r).shape)
+    return -np.log1p(-cfg.detection_probability) * (np.asarray(m_j) + np.asarray(m_r))
+
+
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
-                    n_r: float) -> float:
-    """``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` from the log overlaps of a
-    density ``D_j`` and a reference ``R`` and their masses, capped at
-    :attr:`TrustConfig.cap` (:attr:`TrustConfig.empty_penalty` when one side is empty)."""
+                    n_r: float, t_j: float | None = None, t_r: float | None = None,
+                    unmatched: float | None = None) -> float:
+    """``T = W + kappa (N_j - N_R)^2 / (N_R + 1)``, capped at :attr:`TrustConfig.cap`, from
+    the log overlaps of a density ``D_j`` and a reference ``R`` and their masses. ``W``,
+    where the targets are: ``D_CS(D_j, R)`` (:attr:`TrustConfig.empty_penalty` when one
+    side is empty), at least ``unmatched_cost`` times the ``unmatched`` target weight on
+    both sides (:func:`unmatched_weights`) and at most :func:`miss_cost` of their target
+    masses ``t_j``, ``t_r`` (each when given)."""
     card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
     if n_j <= 1e-9 and n_r <= 1e-9:
-        return min(card, cfg.cap)
-    if n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
-        return min(cfg.cap, card + cfg.empty_penalty * min(1.0, max(n_j, n_r)))
-    d = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj), np.float64(l_rr)))
-    if not np.isfinite(d):
-        d = cfg.cap
-    return min(cfg.cap, d + card)
+        where = 0.0
+    elif n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
+        where = cfg.empty_penalty * min(1.0, max(n_j, n_r))
+    else:
+        where = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj),
+                                           np.float64(l_rr)))
+        if not np.isfinite(where):
+            where = cfg.cap
+    if unmatched is not None:
+        where = max(where, cfg.unmatched_cost * float(unmatched))
+    if t_j is not None and t_r is not None:
+        where = min(where, float(miss_cost(cfg, t_j, t_r)))
+    return min(cfg.cap, where + card)
 
 
 def is_repeat(prev: GaussianMixture | None, mix: GaussianMixture, min_weight: float) -> bool:
@@ -145,6 +221,30 @@ def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int
     S = Pa[ok] + Pb[near[ok]]  # (p, 2, 2)
     Si = np.linalg.inv(S)
     return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
+
+
+def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],
+                     among: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each of ``among``'s scan offsets against own made relative to the others':
+    ``y_j = I_j (b_j - med_h b_h)`` with ``b = I^-1 y`` and the coordinate-wise median over
+    the other neighbours of ``among`` with an offset (at least two; else ``y_j`` is kept).
+    Own's estimation error is in every neighbour's offset against own (an honest own that
+    re-acquires a target 70 m off moves them all); the median of the others' takes it out,
+    and a biased neighbour's offset is its own (W-MSR's premise: the others are mostly
+    honest). ``infos``: per neighbour ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
+    names = [s for s in among if np.linalg.det(infos[s][0]) > 1e-12]
+    if len(names) < 3:
+        return infos
+    b = np.linalg.solve(np.array([infos[s][0] for s in names]),
+                        np.array([infos[s][1] for s in names])[..., None])[..., 0]  # (n, 2)
+    n = len(names)
+    others = np.array([[h for h in range(n) if h != i] for i in range(n)])  # (n, n-1)
+    med = np.median(b[others], axis=1)  # (n, 2): each one's leave-one-out median
+    info = np.array([infos[s][0] for s in names])  # (n, 2, 2)
+    y = np.einsum("nij,nj->ni", info, b - med)
+    out = dict(infos)
+    out.update({s: (infos[s][0], y[i]) for i, s in enumerate(names)})
+    return out
 
 
 def _log(w: np.ndarray) -> np.ndarray:

@@ -71,15 +71,47 @@ class TrustConfig:
     ``y' I^-1 y`` (2 degrees of freedom), which grows linearly with the window under a
     constant offset. Above its window's :attr:`bias_thresholds` the scan's statistic is at
     least ``quarantine + drift``."""
+    bias_relative: bool = True
+    """With three or more neighbours offset against own at a scan: each one's offset taken
+    relative to the median of the others' (:func:`peers.trust_checks.relative_offsets`)."""
     bias_windows: tuple[int, ...] = (3, 16)
     """Scans in the offset test's windows (a short one for an offset large against the
     covariances, a long one for a small one)."""
     bias_gate: float = 60.0
     """Largest position distance (m) of a matched pair (farther: another target or a lie the
     divergence test already sees)."""
-    bias_thresholds: tuple[float, ...] = (35.0, 50.0)
+    bias_thresholds: tuple[float, ...] = (32.0, 40.0)
     """Per window: the chi-square of its mean offset above which the neighbour is
     quarantined (above the largest honest value on the training runs, see :mod:`peers.trust`)."""
+    detection_probability: float | None = None
+    """The smallest detection probability of this peer's and its neighbours' sensors (set
+    from the scenario); None: no missed-detection explanation. Two honest densities that
+    disagree completely (one side empty, or its targets far from the other's) are what a
+    missed detection does to a level-2 pruned posterior (a target missed this scan falls
+    under the publishing threshold) or what a target born a scan apart does; the statistic
+    is the smaller of the divergence test and the evidence needed to explain the whole
+    disagreement by misses, ``-log(1 - Pd)`` per target on either side
+    (:func:`peers.trust_checks.miss_cost`: the log-likelihood ratio of a density that lacks
+    a target, lying against honest)."""
+    unmatched: bool = True
+    """With :attr:`detection_probability`: the statistic is at least ``-log(1 - Pd)`` per
+    target one side shows and the other has nothing within :attr:`bias_gate` metres of
+    (:func:`peers.trust_checks.unmatched_weights`): the log-likelihood ratio of targets one
+    honest peer lacks, a miss or a birth a scan apart at rate ``1 - Pd`` (phantoms are
+    that every scan). The divergence alone counts an extra target next to a matched one
+    for little (the overlap of the matched ones dominates)."""
+    unmatched_cost: float = 2.0
+    """Statistic per unit of unmatched target weight (:attr:`unmatched`)."""
+    same_scan: bool = True
+    """Test each neighbour estimate once, against own's density of the scan it was made
+    at: an estimate used again at a later scan (its successor late or lost, predicted
+    forward by the out-of-sequence policy) adds no evidence (statistic 0) and is no
+    reference for the others; one that arrives after its scan is tested, at its first use,
+    against own's density of its scan (kept for :attr:`keep_own` scans). Without this a
+    single missed detection followed by a lost estimate counted two or three times."""
+    keep_own: int = 5
+    """Scans of own's round-0 densities kept for late estimates (the out-of-sequence
+    window)."""
     warmup: int = 0
     """Scans at the start with no test (0: a lie told from the first scan is caught at once;
     filters that start empty agree on nothing, which the cardinality term alone scores)."""
@@ -87,7 +119,9 @@ class TrustConfig:
     def __post_init__(self) -> None:
         if not (0 < self.leak <= 1 and 0 <= self.suspect < self.quarantine and self.cap > 0
                 and self.readmit >= 1 and self.kappa >= 0 and self.warmup >= 0
-                and self.drift >= 0 and self.empty_penalty >= 0
+                and self.drift >= 0 and self.empty_penalty >= 0 and self.keep_own >= 0
+                and (self.detection_probability is None
+                     or 0.0 < self.detection_probability < 1.0)
                 and len(self.bias_windows) == len(self.bias_thresholds)
                 and all(w >= 1 for w in self.bias_windows)):
             raise ValueError(f"invalid trust settings {self}")

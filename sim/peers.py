@@ -43,7 +43,9 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         policy="drop-late" if single else net.policy,
         feedback=net.feedback and not single,
         round_deadlines=kind.round_deadlines,
-        trust=TrustConfig() if scn.fusion.trust and kind.trust else None,
+        trust=(TrustConfig(detection_probability=min(
+            scn.sensor(n).detection_probability for n in [name, *(names[j] for j in nb)]))
+            if scn.fusion.trust and kind.trust else None),
     )
     return replace(opts, **changes)
 

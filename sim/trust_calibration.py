@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,13 @@ from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf))
 """The test runs, nothing is down-weighted."""
+
+
+def open_like(cfg: TrustConfig) -> TrustConfig:
+    """``cfg`` (a peer's, with its scenario's detection probability) with :data:`OPEN`'s
+    thresholds."""
+    return replace(cfg, suspect=OPEN.suspect, quarantine=OPEN.quarantine,
+                   bias_thresholds=OPEN.bias_thresholds)
 
 Seq = tuple[np.ndarray, np.ndarray]
 """Per scan: the statistic without the offset test (``(n,)``), and the offset test's
@@ -74,7 +82,7 @@ def sequences(source: str, overrides: dict, run: int) -> list[Seq]:
     scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     for p in peers.values():
-        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
     run_twin(scn, run, peers=peers)
     out = []
@@ -92,7 +100,7 @@ def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
     core = peers[liar]
     peers[liar] = LyingCore(core, make_lie(lie, scn, core.estimator.position_index))
     for p in peers.values():
-        p.consensus.trust.cfg = OPEN
+        p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
     run_twin(scn, run, peers=peers)
     out = []
@@ -107,11 +115,15 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     """The scores :class:`peers.trust.Trust` would reach on these statistics: the share of
     (pair, scan) triples at weight < 1 (suspect) and at weight 0 (quarantined, with the
     hysteresis), and the scores' quantiles; ``first_low``: per sequence, the first scan (1:
-    the first) at weight <= 0.1, or None."""
+    the first) at weight <= 0.1, or None; ``causes``: the quarantines begun, by the test
+    that fired at that scan (``offset``, ``repeat``, else ``divergence``: the divergence,
+    miss and unmatched terms' score)."""
     t = Trust(cfg, ())
     scores, low, zero, n, first_low = [], 0, 0, 0, []
+    causes = {"divergence": 0, "offset": 0, "repeat": 0}
     for raw, chi2 in seqs:
         seq = raw.copy()
+        hit = np.zeros(len(seq), bool)
         if cfg.bias and len(seq):
             hit = (chi2 > np.array(cfg.bias_thresholds)).any(axis=1)
             seq[hit] = np.maximum(seq[hit], cfg.quarantine + cfg.drift)
@@ -126,6 +138,9 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
                 first = i + 1
             n += 1
             rec.score = score
+            if score >= cfg.quarantine and rec.state != "quarantined":
+                causes["offset" if hit[i] else "repeat"
+                       if raw[i] == cfg.quarantine + cfg.drift else "divergence"] += 1
             if score >= cfg.quarantine:
                 rec.state, rec.streak = "quarantined", 0
             elif rec.state == "quarantined":
@@ -136,7 +151,8 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
         first_low.append(first)
     q = np.quantile(scores, [0.99, 0.995, 0.999]) if scores else [np.nan] * 3
     return {"triples": n, "down": low / max(n, 1), "quarantined": zero / max(n, 1),
-            "q99": q[0], "q99.5": q[1], "q99.9": q[2], "first_low": first_low}
+            "q99": q[0], "q99.5": q[1], "q99.9": q[2], "first_low": first_low,
+            "causes": causes}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -162,7 +178,9 @@ def main(argv: list[str] | None = None) -> int:
                       f"q90 {np.quantile(stat, 0.9):.2f} q99 {np.quantile(stat, 0.99):.2f}; "
                       f"score q99 {sim['q99']:.2f} q99.9 {sim['q99.9']:.2f}; down "
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
-                      f" of {sim['triples']}; offset chi2 per window q99.9 "
+                      f" of {sim['triples']} (begun by: "
+                      + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
+                      + "); offset chi2 per window q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
                       f"{np.round(chi2.max(axis=0), 1)}", flush=True)
         if a.save:

@@ -297,3 +297,193 @@ def test_only_product_rules_drop_their_suspects():
     r = Reducer()
     assert FuserHooks.of(GciFuser(r)).product
     assert not FuserHooks.of(HybridFuser(r)).product and not FuserHooks.of(AaFuser(r)).product
+
+
+def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
+    """At Pd 0.9 an honest neighbour that missed its only target publishes nothing (level-2
+    pruning); one that picked up a new target a scan before own disagrees with own entirely.
+    The statistic is at most ``-log(1 - Pd)`` per target on either side (the closed form),
+    so four such scans in a row do not quarantine; without the Pd nothing changes."""
+    from sensornet.peers.trust_checks import miss_cost, pair_tests
+
+    pd = 0.9
+    cfg = TrustConfig(detection_probability=pd)
+    own = mix((0.95, A, P4))
+    missed = GaussianMixture.empty(4)
+    born = mix((0.8, B, P4))  # a target own has not confirmed yet, own's far from it
+    per = -np.log(1.0 - pd)
+    assert float(miss_cost(cfg, 0.95, 0.0)) == pytest.approx(per * 0.95)
+
+    def card(n_j, n_r):
+        return (n_j - n_r) ** 2 / (n_r + 1.0)  # kappa = 1: the cardinality term stays
+
+    for other, cost in ((missed, per * 0.95 + card(0.0, 0.95)),
+                        (born, per * (0.95 + 0.8) + card(0.8, 0.95))):
+        t = Trust(cfg, ("x",))
+        old = Trust(TrustConfig(), ("x",))
+        for k in (1, 2, 3, 4):
+            t.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
+            old.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
+            assert t.n["x"].last_statistic == pytest.approx(cost)
+            assert old.n["x"].last_statistic > cost  # the divergence test alone
+        t.finish()
+        old.finish()
+        assert t.n["x"].state != "quarantined" and old.n["x"].state == "quarantined"
+    # the majority's pair tests take the same bound, elementwise
+    mixes = [own, missed, born]
+    L = log_overlaps(mixes)
+    mass = np.array([m.mass for m in mixes])
+    targets = np.array([0.95, 0.0, 0.8])
+    P = pair_tests(cfg, L, mass, targets)
+    expect = np.zeros((3, 3))
+    for a in range(3):
+        for b in range(3):
+            if a == b:
+                continue
+            if min(mass[a], mass[b]) <= 1e-9:
+                where = 5.0 * min(1.0, max(mass[a], mass[b]))  # the empty penalty
+            else:
+                where = min(8.0, -L[a, b] + 0.5 * (L[a, a] + L[b, b]))
+            where = min(where, per * (targets[a] + targets[b]))
+            expect[a, b] = min(8.0, where + min(card(mass[a], mass[b]), card(mass[b], mass[a])))
+    np.testing.assert_allclose(P, expect)
+    # where misses are rare (Pd 0.99) hiding two targets costs more than the divergence
+    # test's value, which stays the statistic
+    two = _honest(np.random.default_rng(1))
+    t, old = Trust(TrustConfig(detection_probability=0.99), ("x",)), Trust(TrustConfig(), ("x",))
+    t.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
+    old.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
+    assert -np.log(0.01) * two.mass > t.n["x"].last_statistic
+    assert t.n["x"].last_statistic == old.n["x"].last_statistic > 5.0
+
+
+def test_an_estimate_is_tested_once_against_own_of_its_scan():
+    """A neighbour's estimate of scan 1 used again at scans 2 and 3 (its later ones lost,
+    predicted forward) adds nothing; one that arrives late is tested against own's density
+    of its scan, not of the scan at hand."""
+    far = A + [300.0, 0, 0, 0]
+    own1, own2 = mix((0.95, A, P4)), mix((0.95, far, P4))
+    stale = mix((0.95, A + [5.0, 0, 0, 0], P4))  # scan 1's estimate, near own1
+    t = Trust(TrustConfig(), ("x",))
+    t.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
+    first = t.n["x"].last_statistic
+    assert first < 1.0
+    # used again at scans 2 and 3 (against own2 it would be a total disagreement)
+    for k in (2, 3):
+        w = t.weigh(k, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
+        assert t.n["x"].last_statistic == 0.0 and w[1] == 0.5
+    plain = Trust(TrustConfig(same_scan=False), ("x",))
+    plain.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
+    plain.weigh(2, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
+    assert plain.n["x"].last_statistic >= TrustConfig().cap
+    # a late first use: scan 4's estimate reaches the fusion of scan 5 and is tested
+    # against own's density of scan 4 (kept though nothing came at scan 4), not of scan 5
+    t.weigh(4, 0, own1, {}, [1.0])
+    t.weigh(5, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (4, stale)})
+    assert t.n["x"].last_statistic == pytest.approx(first)
+    t.weigh(6, 0, own2, {}, [1.0])
+    t.weigh(7, 0, own1, {"x": stale.copy()}, [0.5, 0.5], late={"x": (6, stale)})
+    assert t.n["x"].last_statistic >= TrustConfig().cap  # against own2, its scan's
+
+
+def test_unmatched_target_weights_against_brute_force_and_phantoms():
+    """``U[a, b]``: the target weight of ``a`` with nothing of ``b`` within the gate, against
+    a loop over components; in the pair tests (the majority's) phantoms next to honest
+    targets score ``unmatched_cost`` each, more than one extra target does."""
+    from dataclasses import replace
+
+    from sensornet.peers.trust_checks import pair_tests, unmatched_weights
+
+    rng = np.random.default_rng(21)
+    mixes = [mix(*[(w, [x, 0.0, y, 0.0], P4) for w, x, y in zip(
+        rng.uniform(0.2, 1.5, n), rng.uniform(0, 300, n), rng.uniform(0, 300, n),
+        strict=True)]) if n else GaussianMixture.empty(4) for n in (4, 0, 6, 3, 1)]
+    U, _ = unmatched_weights(mixes, [0, 2], 0.5, 60.0)
+    for a, Da in enumerate(mixes):
+        for b, Db in enumerate(mixes):
+            brute = 0.0
+            for w, m in zip(Da.weights, Da.means, strict=True):
+                if w < 0.5:
+                    continue
+                if not any(v >= 0.5 and np.hypot(*(m - q)[[0, 2]]) <= 60.0
+                           for v, q in zip(Db.weights, Db.means, strict=True)):
+                    brute += w
+            assert U[a, b] == pytest.approx(brute), (a, b)
+    cfg = TrustConfig(detection_probability=0.99)
+    own = _honest(rng)
+    phantoms = GaussianMixture.concatenate([_honest(rng), mix(  # honest-looking covariances
+        (1.0, [-800.0, 0, 800.0, 0], P4), (1.0, [800.0, 0, 800.0, 0], P4),
+        (1.0, [-800.0, 0, -800.0, 0], P4))])
+    extra = GaussianMixture.concatenate([_honest(rng), mix((0.9, [0.0, 0, 800.0, 0], P4))])
+    # the pair tests: the location part at least unmatched_cost per unmatched target weight
+    mixes = [own, phantoms, extra]
+    L = log_overlaps(mixes)
+    mass = np.array([m.mass for m in mixes])
+    U, _ = unmatched_weights(mixes, [0, 2], 0.5, 60.0)
+    np.testing.assert_allclose(U, [[0, 0, 0], [3.0, 0, 3.0], [0.9, 0.9, 0]])
+    P = pair_tests(cfg, L, mass, None, U)
+    for a in range(3):
+        for b in range(3):
+            if a != b:
+                where = max(-L[a, b] + 0.5 * (L[a, a] + L[b, b]), 2.0 * (U[a, b] + U[b, a]))
+                card = min((mass[a] - mass[b]) ** 2 / (mass[b] + 1.0),
+                           (mass[b] - mass[a]) ** 2 / (mass[a] + 1.0))
+                assert P[a, b] == pytest.approx(min(8.0, where + card))
+    # with a majority (own and three others) phantoms stand out, one extra target does not
+    names = ("h1", "h2", "e", "p")
+    inputs = {"h1": _honest(rng), "h2": _honest(rng), "e": extra, "p": phantoms}
+    on, off = Trust(cfg, names), Trust(replace(cfg, unmatched=False), names)
+    on.weigh(1, 0, own, inputs, [0.2] * 5)
+    off.weigh(1, 0, own, inputs, [0.2] * 5)
+    assert on.n["p"].last_statistic > off.n["p"].last_statistic + 1.0
+    assert on.n["p"].last_statistic > cfg.drift + 2.0 > on.n["e"].last_statistic
+    # without a majority (two neighbours) the term is not used
+    two = Trust(cfg, ("e", "p"))
+    two.weigh(1, 0, own, {"e": extra, "p": phantoms}, [0.4, 0.3, 0.3])
+    plain = Trust(replace(cfg, unmatched=False), ("e", "p"))
+    plain.weigh(1, 0, own, {"e": extra, "p": phantoms}, [0.4, 0.3, 0.3])
+    assert two.n["p"].last_statistic == plain.n["p"].last_statistic
+
+
+def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
+    """Own 70 m off (re-acquired from a birth) moves every neighbour's offset against own by
+    the same amount; the median of the others' takes it out, a biased one keeps its 30 m."""
+    from sensornet.peers.trust_checks import relative_offsets
+
+    rng = np.random.default_rng(4)
+    own_err = np.array([-70.0, 20.0])
+    infos, true = {}, {}
+    for s in ("a", "b", "c", "d", "biased"):
+        info = np.linalg.inv(np.diag(rng.uniform(150.0, 400.0, 2)))  # (2, 2)
+        off = -own_err + rng.normal(0.0, 5.0, 2) + ([30.0, 0.0] if s == "biased" else 0.0)
+        infos[s], true[s] = (info, info @ off), off
+    infos["late"] = (np.eye(2), np.array([3.0, 4.0]))  # not among: untouched
+    out = relative_offsets(infos, ["a", "b", "c", "d", "biased"])
+    for s in ("a", "b", "c", "d", "biased"):
+        others = np.array([true[h] for h in ("a", "b", "c", "d", "biased") if h != s])
+        np.testing.assert_allclose(out[s][1], infos[s][0] @ (true[s] - np.median(others, 0)))
+        np.testing.assert_array_equal(out[s][0], infos[s][0])
+    assert out["late"] is infos["late"]
+    chi2 = {s: out[s][1] @ np.linalg.solve(out[s][0], out[s][1]) for s in out if s != "late"}
+    raw = {s: infos[s][1] @ np.linalg.solve(*infos[s]) for s in chi2}
+    assert max(chi2[s] for s in "abcd") < 1.0 < min(raw[s] for s in "abcd")  # own's error out
+    assert chi2["biased"] > 2.0  # 30 m against a 12-20 m deviation: its own
+    # with fewer than three offsets nothing changes
+    two = relative_offsets({s: infos[s] for s in ("a", "b")}, ["a", "b"])
+    assert all(two[s] is infos[s] for s in two)
+
+
+def test_calibration_counts_which_test_began_each_quarantine():
+    from sensornet.sim.trust_calibration import simulate
+
+    cfg = TrustConfig()
+    none = np.zeros((6, 2))
+    hit = none.copy()
+    hit[2, 0] = cfg.bias_thresholds[0] + 1.0
+    seqs = [(np.array([0.5, 8.0, 8.0, 0.0, 0.0, 0.0]), none),  # divergence: 6, then 10.8
+            (np.array([0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), hit),  # the offset at scan 3
+            (np.array([0.5, cfg.quarantine + cfg.drift, 0.0, 0.0, 0.0, 0.0]), none),
+            (np.full(6, 1.0), none)]  # honest: never
+    sim = simulate(seqs, cfg)
+    assert sim["causes"] == {"divergence": 1, "offset": 1, "repeat": 1}
+    assert sim["first_low"] == [3, 3, 2, None]
