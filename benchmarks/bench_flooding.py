@@ -32,7 +32,7 @@ from pathlib import Path
 from sensornet.peers.session import PEER_WAIT
 from sensornet.peers.telemetry import percentile
 from sensornet.sim.launcher import read_summaries, start_run, wait_run
-from sensornet.sim.packing import choose
+from sensornet.sim.packing import choose, scenario_load
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.twin import run_twin
 
@@ -41,8 +41,8 @@ def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
             startup: float, packing: str = "auto") -> dict:
     sets = [f"scenario.num_scans={scans}", f"network.speed={speed}", *extra]
     scn = load_scenario("seed004", overrides=parse_overrides(sets))
-    per = (choose(len(scn.sensors), None).per_process if packing == "auto"
-           else int(packing))
+    per = (choose(len(scn.sensors), None, load=scenario_load(scn)).per_process
+           if packing == "auto" else int(packing))
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="bench-flooding-") as tmp:
         out = Path(tmp)

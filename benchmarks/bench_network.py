@@ -258,12 +258,15 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
     return rows
 
 
-def packing_of(n: int, packing: str) -> int:
+def packing_of(n: int, packing: str, scans_per_s: float = 10.0) -> int:
     """Peers per process for ``packing``: a number, or ``auto`` (what ``sensornet run``
-    chooses without ``--per-process``: sim.packing)."""
-    from sensornet.sim.packing import choose
+    chooses without ``--per-process`` for these GM-PHD peers at ``scans_per_s``:
+    sim.packing)."""
+    from sensornet.sim.packing import choose, peer_load
 
-    return choose(n, None).per_process if packing == "auto" else int(packing)
+    if packing != "auto":
+        return int(packing)
+    return choose(n, None, load=peer_load(n, "gmphd", scans_per_s)).per_process
 
 
 def load_average() -> str:

@@ -3,7 +3,10 @@
 A process per peer is the default: it is what makes ``kill -9`` of a peer real. It stops
 keeping real time at about 20 peers on 2 cores (``benchmarks/bench_network.py``: 20 peers of
 degree 4 kept real time in 1 run of 4, every process paying its own interpreter and Zenoh
-session), so above :data:`PACK_ABOVE` peers the run packs them into one peer host per core.
+session), so above :data:`PACK_ABOVE` peers the run packs them into peer hosts: as few as keep
+each host's loop thread at most :data:`HOST_SHARE` busy, from what a peer of its kind costs
+(:data:`PEER_COST_MS`; a host runs its peers one after another, so its busy share is its
+latency), at most one per core; a host per core (at least 2) for a kind not measured.
 """
 
 from __future__ import annotations
@@ -17,6 +20,30 @@ from scipy.sparse.csgraph import laplacian
 
 PACK_ABOVE = 16
 """Largest network run as one process per peer when ``--per-process`` is not given."""
+
+
+HOST_SHARE = 0.5
+"""Cores a host's loop thread may be kept busy by its peers' work (the rest is headroom for
+its latency: the last of its peers' tracks come after everything before it)."""
+
+PEER_COST_MS = {"gmphd": 2.0, "flooding": 5.0}
+"""CPU ms per peer per scan of a hosted peer, by kind (``network.filter``), rounded up from
+the benchmarks (benchmarks/README.md, 2026-12-03): GM-PHD consensus peers of degree 2-4,
+two rounds, 1.3-1.9 ms in hosts of 20-50 (2.6 in hosts of 10); seed-004 flooding peers 3.7-4.8
+ms in hosts of 10. Kinds not here are packed a host per core."""
+
+
+def peer_load(n_peers: int, kind: str, scans_per_s: float) -> float | None:
+    """Cores the peers' work needs (``n`` peers of ``kind`` at ``scans_per_s``), or None for
+    a kind whose cost was not measured."""
+    cost = PEER_COST_MS.get(kind)
+    return None if cost is None else n_peers * cost * scans_per_s / 1e3
+
+
+def scenario_load(scn) -> float | None:
+    """:func:`peer_load` of a scenario's peers at its scan rate (``scan_period / speed``)."""
+    interval = scn.scan_period / scn.network.speed
+    return peer_load(len(scn.sensors), scn.network.filter, 1.0 / interval)
 
 
 @dataclass(frozen=True)
@@ -36,11 +63,13 @@ def cores() -> int:
 
 
 def choose(n_peers: int, asked: int | None, why_not: str = "",
-           n_cores: int | None = None) -> Packing:
+           n_cores: int | None = None, load: float | None = None) -> Packing:
     """``asked`` (``--per-process N``) wins; else a process per peer up to
     :data:`PACK_ABOVE` peers or when ``why_not`` (what the run needs that hosts cannot do:
-    secure mode, a fault of one process), else a host per core (at least 2 hosts, so one busy
-    loop thread does not carry the whole network)."""
+    secure mode, a fault of one process); else, given ``load`` (:func:`peer_load`: cores the
+    peers' work needs), the fewest hosts that keep each under :data:`HOST_SHARE` of a core, at
+    most one per core; without it a host per core (at least 2 hosts, so one busy loop thread
+    does not carry a network of unknown cost)."""
     if asked is not None:
         return Packing(asked)
     if n_peers <= PACK_ABOVE:
@@ -48,12 +77,21 @@ def choose(n_peers: int, asked: int | None, why_not: str = "",
     if why_not:
         return Packing(1, f"packing: {n_peers} peers one per process ({why_not}); above "
                           f"{PACK_ABOVE} they may not keep real time")
-    hosts = min(n_peers, max(2, n_cores or cores()))
+    n_cores = n_cores or cores()
+    if load is None:
+        hosts = min(n_peers, max(2, n_cores))
+        why = "one per core"
+    else:
+        hosts = min(n_peers, n_cores, max(1, math.ceil(load / HOST_SHARE - 1e-9)))
+        why = (f"about {load:.2f} cores of peer work, at most {HOST_SHARE:g} a host and one "
+               f"host per core")
     per = math.ceil(n_peers / hosts)
     hosts = math.ceil(n_peers / per)
-    return Packing(per, f"packing: {n_peers} peers into {hosts} host processes of up to {per} "
-                        f"(one per core; a process per peer stops keeping real time above "
-                        f"{PACK_ABOVE}); --per-process 1 for a process per peer")
+    what = (f"1 host process of {per}" if hosts == 1
+            else f"{hosts} host processes of up to {per}")
+    return Packing(per, f"packing: {n_peers} peers into {what} ({why}; a process per peer "
+                        f"stops keeping real time above {PACK_ABOVE}); --per-process 1 for a "
+                        f"process per peer")
 
 
 def cut_edges(A: np.ndarray, groups: list[list[int]]) -> int:

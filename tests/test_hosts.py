@@ -76,17 +76,39 @@ def test_packing_is_a_process_per_peer_up_to_the_threshold_then_a_host_per_core(
     assert stay.per_process == 1 and "(secure mode)" in stay.line
 
 
+def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_half_a_core():
+    """GM-PHD peers at 10 scans/s cost about 2 ms a scan: 20 of them (0.4 cores) fit one host,
+    26 (0.52) need two, 100 (2.0) get one host per core; seed 004's flooding peers (5 ms, 1.0
+    cores) two; a kind not measured, a host per core as before."""
+    from sensornet.sim.packing import HOST_SHARE, PEER_COST_MS, peer_load, scenario_load
+    from sensornet.sim.scenario import load_scenario
+
+    assert peer_load(20, "gmphd", 10.0) == pytest.approx(20 * PEER_COST_MS["gmphd"] / 100)
+    assert peer_load(20, "pda", 10.0) is None
+    one = choose(20, None, n_cores=2, load=peer_load(20, "gmphd", 10.0))
+    assert one.per_process == 20 and "into 1 host process of 20" in one.line
+    assert choose(26, None, n_cores=2, load=peer_load(26, "gmphd", 10.0)).per_process == 13
+    assert choose(100, None, n_cores=2, load=peer_load(100, "gmphd", 10.0)).per_process == 50
+    assert choose(100, None, n_cores=8, load=peer_load(100, "gmphd", 10.0)).per_process == 25
+    assert choose(20, None, n_cores=2, load=HOST_SHARE * 0.99).per_process == 20
+    assert choose(20, None, n_cores=2, load=HOST_SHARE * 1.01).per_process == 10
+    assert choose(20, None, n_cores=2, load=None).per_process == 10  # unknown: per core
+    assert choose(20, 4, n_cores=2, load=0.1).per_process == 4  # --per-process wins
+    seed004 = load_scenario("seed004")
+    assert choose(20, None, n_cores=2, load=scenario_load(seed004)).per_process == 10
+
+
 def test_run_packs_a_large_network_and_says_so_in_one_line(tmp_path, capsys):
-    """20 peers without --per-process: two hosts (a killhost of h3 is refused naming h1 and
-    h2, before anything starts); --per-process 1 keeps a process per peer, without the line."""
+    """20 GM-PHD peers without --per-process: one host (a killhost of h3 is refused naming
+    h1, before anything starts); --per-process 1 keeps a process per peer, without the line."""
     path = tmp_path / "twenty.toml"
     path.write_text(network_scenario(20, 4, scans=10, rounds=2))
     out = tmp_path / "o"
     assert main(["run", str(path), "--out", str(out), "--fault", "killhost:h3@5"]) == 2
     cap = capsys.readouterr()
     lines = [x for x in cap.out.splitlines() if x.startswith("packing:")]
-    assert len(lines) == 1 and "20 peers into 2 host processes of up to" in lines[0], cap.out
-    assert "unknown host 'h3' (hosts: h1, h2)" in cap.err
+    assert len(lines) == 1 and "20 peers into 1 host process of 20" in lines[0], cap.out
+    assert "unknown host 'h3' (hosts: h1)" in cap.err
     assert main(["run", str(path), "--out", str(out), "--per-process", "1",
                  "--fault", "killhost:h1@5"]) == 2
     cap = capsys.readouterr()

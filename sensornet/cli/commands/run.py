@@ -26,7 +26,7 @@ from sensornet.peers.rerun_sink import spawn_viewer
 from sensornet.peers.scan_results import merge_parts, write_part
 from sensornet.sim import launcher
 from sensornet.sim.build import adjacency
-from sensornet.sim.packing import choose
+from sensornet.sim.packing import choose, scenario_load
 from sensornet.sim.twin import run_twin
 
 
@@ -92,7 +92,7 @@ def _packing(args: argparse.Namespace, scn, pfaults) -> int:
         return asked or 1
     why_not = ("secure mode" if args.secure is not None or scn.security else
                f"--fault {solo[0]}" if solo else "")
-    packing = choose(len(scn.sensors), asked, why_not)
+    packing = choose(len(scn.sensors), asked, why_not, load=scenario_load(scn))
     if packing.line:
         print(packing.line, flush=True)
     return packing.per_process
