@@ -36,7 +36,7 @@ class ScanResults:
 
     def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray) -> float:
         """Add an estimate that arrived; its OSPA (the value the summary's mean takes)."""
-        est, true = self._xy(states), self._xy(truth)
+        est, true = self.xy(states), self.xy(truth)
         value, parts = ospa_gospa_parts(est, true, self.c, self.p)
         self._add(k, which, True, value, est, true, states, truth, parts)
         return value
@@ -45,19 +45,16 @@ class ScanResults:
                   est: np.ndarray, true: np.ndarray, value: float,
                   parts: tuple[float, float, int, int]) -> None:
         """:meth:`scored` with the score computed elsewhere (a host's batch, from the same
-        positions ``est = _xy(states)``, ``true = _xy(truth)``)."""
+        positions ``est = xy(states)``, ``true = xy(truth)``)."""
         self._add(k, which, True, value, est, true, states, truth, parts)
 
     def missed(self, k: int, which: str, truth: np.ndarray | None) -> None:
         """Add an output that never came: OSPA at the cut-off, every true target missed."""
         truth = np.zeros((0, 0)) if truth is None else truth
-        self._add(k, which, False, self.c, np.zeros((0, 2)), self._xy(truth), None, truth)
+        self._add(k, which, False, self.c, np.zeros((0, 2)), self.xy(truth), None, truth)
 
     def xy(self, states: np.ndarray) -> np.ndarray:
         """``(n, 2)`` positions of state rows ``(n, d)`` (empty-safe)."""
-        return self._xy(states)
-
-    def _xy(self, states: np.ndarray) -> np.ndarray:
         return states[:, self.pos] if len(states) else np.zeros((0, 2))
 
     def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
