@@ -47,7 +47,8 @@ class RuntimeOptions:
     connect: tuple[str, ...] = ()
     config_file: str | None = None
     lease_ms: int | None = None
-    gossip: bool = True
+    gossip: bool | str = True
+    """See :func:`peers.session.zenoh_config`."""
     out_dir: Path | None = None
     run_id: str | None = None
     viewer: str | None = None

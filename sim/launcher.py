@@ -130,7 +130,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
                    "--color", str(i), "--run", str(run),
                    *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
-                   *(["--no-gossip"] if sparse else []), *extra] \
+                   *(["--no-gossip"] if sparse else [] if router else ["--no-autoconnect"]),
+                   *extra] \
             + (["--speed", str(speed)] if speed else [])
     if groups:  # the hosts instead of the peers' processes
         cmds = {"world": cmds["world"], **_host_commands(

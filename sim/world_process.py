@@ -23,7 +23,7 @@ from sensornet.peers.rerun_sink import (
     color_of,
     position_columns,
 )
-from sensornet.peers.session import PEER_WAIT, open_session
+from sensornet.peers.session import ANNOUNCE, PEER_WAIT, open_session
 from sensornet.peers.transport import recovering_publisher, zenoh_encoding
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
@@ -129,7 +129,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                   **layout)
         sink.decorate(scn.sensor_names, region=scn.region, **layout)
     signer = security.signer() if security is not None else None  # before any socket
-    session = open_session(listen, connect, config_file, security=security)
+    # peers dial the world (every one has its endpoint): it dials nobody it hears of by
+    # gossip, so each of its links is dialled again by the peer that made it (ANNOUNCE)
+    session = open_session(listen, connect, config_file, gossip=ANNOUNCE, security=security)
     alive: set[str] = set()
     cond = threading.Condition()
 

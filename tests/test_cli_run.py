@@ -46,6 +46,8 @@ def test_run_flags_reach_every_process(tmp_path):
         assert f"--config {config}" in text
         assert f"--connect {world}" in text
         assert "--viewer" not in text
+    for n in ("s1", "s2", "s3"):  # each link has one configured dialler (peers.session.ANNOUNCE)
+        assert "--no-autoconnect" in commands[n] and "--no-gossip" not in commands[n]
     assert commands["world"][commands["world"].index("--listen") + 1] == world
     world_log = (out / "logs" / "world.log").read_text()
     assert "world: scan 10/12 published" in world_log and "world: scan 12/12" in world_log

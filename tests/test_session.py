@@ -14,6 +14,7 @@ import zenoh
 from sensornet.peers.session import (
     ACCEPT_PENDING,
     ACCEPT_TIMEOUT_MS,
+    ANNOUNCE,
     DEFAULT_LEASE_MS,
     MAX_MESSAGE_BYTES,
     free_port,
@@ -31,6 +32,18 @@ def test_defaults_lease_message_size_and_no_shared_memory_pool():
     assert _get(conf, "transport/link/tx/lease") == DEFAULT_LEASE_MS
     assert _get(conf, "transport/link/rx/max_message_size") == MAX_MESSAGE_BYTES
     assert _get(conf, "transport/shared_memory/transport_optimization/enabled") is False
+
+
+def test_announce_keeps_gossip_but_dials_only_the_configured_endpoints():
+    """Launched processes gossip (a peer started by hand still finds them) but never dial
+    what gossip names: each link is made, and after a loss made again, by its configured
+    side (peers.session.ANNOUNCE)."""
+    conf = zenoh_config(connect=["tcp/127.0.0.1:7447"], gossip=ANNOUNCE)
+    assert _get(conf, "scouting/gossip/autoconnect") == {"router": [], "peer": []}
+    assert _get(conf, "scouting/gossip/enabled") in (None, True)
+    default = zenoh_config(connect=["tcp/127.0.0.1:7447"])
+    assert _get(default, "scouting/gossip/autoconnect") != {"router": [], "peer": []}
+    assert _get(zenoh_config(gossip=False), "scouting/gossip/enabled") is False
 
 
 def test_room_for_pending_handshakes_each_bounded_in_time():

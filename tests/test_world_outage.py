@@ -55,4 +55,6 @@ def test_a_peer_frozen_5s_with_a_1s_lease_rejoins_and_finishes(tmp_path):
     assert s3["ospa_scored"]["fused"] + s3["ospa_misses"]["fused"] == n, s3
     for name in ("s1", "s2", "s4"):  # the others fused it again after its return
         assert summaries[name]["stop_reason"] == "end of run"
-        assert summaries[name]["stats"]["last_fused_from"]["s3"] >= n - 1, summaries[name]
+        got = summaries[name]
+        assert got["stats"]["last_fused_from"]["s3"] >= n - 1, (
+            name, got["stats"]["last_fused_from"], got["peer_events"], got["admitted_by_sender"])

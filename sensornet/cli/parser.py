@@ -190,6 +190,9 @@ def build_parser() -> argparse.ArgumentParser:
         # the sensor's index in the scenario, the colour the world's legend and plots give it
         sp.add_argument("--no-gossip", action="store_true",
                         help="link only to the --connect endpoints (no Zenoh gossip discovery)")
+        sp.add_argument("--no-autoconnect", action="store_true",
+                        help="dial only the --connect endpoints; others still learn of this "
+                             "process by gossip and may link to it")
         sp.add_argument("--save-tracks", action="store_true",
                         help="write every scan's fused tracks to <out>/tracks-<peer>.npz")
         sp.add_argument("--record", action="store_true",

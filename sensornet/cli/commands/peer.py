@@ -15,6 +15,7 @@ from sensornet.cli.scenarios import load
 from sensornet.cli.security import member_security
 from sensornet.peers.host import PeerHost
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
+from sensornet.peers.session import ANNOUNCE
 from sensornet.peers.transport import DuplicatePeer
 from sensornet.sim.build import fault_injector
 from sensornet.sim.peers import make_peer
@@ -43,6 +44,13 @@ def _peer_scenario(args: argparse.Namespace):
         level2_pruning=scn.fusion.level2_pruning if args.level2 is None else args.level2))
 
 
+def _gossip(args: argparse.Namespace) -> bool | str:
+    """The session's gossip mode from ``--no-gossip`` / ``--no-autoconnect``."""
+    if args.no_gossip:
+        return False
+    return ANNOUNCE if args.no_autoconnect else True
+
+
 def _peer_parts(args: argparse.Namespace, scn, name: str, color: int, security=None):
     """Peer ``name``'s core and runtime options from the command line."""
     speed = args.speed or scn.network.speed
@@ -51,7 +59,7 @@ def _peer_parts(args: argparse.Namespace, scn, name: str, color: int, security=N
         core.cfg = replace(core.cfg, world_grace=args.world_grace)
     options = RuntimeOptions(security=security,
         listen=tuple(args.listen or ()), connect=tuple(args.connect or ()),
-        config_file=args.config, lease_ms=args.lease_ms, gossip=not args.no_gossip,
+        config_file=args.config, lease_ms=args.lease_ms, gossip=_gossip(args),
         out_dir=Path(args.out) if args.out else None, run_id=args.run_id, viewer=args.viewer,
         color_index=color, idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
         save_tracks=args.save_tracks, scan_period=scn.scan_period,
@@ -131,7 +139,7 @@ def cmd_host(args: argparse.Namespace) -> int:
         _existing_file(args.config)
     parts = [_peer_parts(args, scn, n, scn.sensor_names.index(n)) for n in names]
     host = PeerHost(args.name, parts, (list(args.listen or ()), list(args.connect or ()),
-                                       args.config, args.lease_ms, not args.no_gossip))
+                                       args.config, args.lease_ms, _gossip(args)))
     print(f"host {args.name}: network {args.network}, peers {', '.join(names)} (pid "
           f"{os.getpid()})", flush=True)
     for core, _ in parts:
