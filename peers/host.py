@@ -41,8 +41,9 @@ from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
 from sensornet.peers.telemetry import SharedCpu
-from sensornet.peers.transport import settle
-from sensornet.protocol.codec import decode
+from sensornet.peers.transport import callback, settle
+from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.messages import Estimate
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
@@ -176,6 +177,12 @@ class PeerHost(HostBatching):
         self.stop_reason = ""
         self._stop = False
         self._active: list[int] = []
+        self._remote = self._share_remote()
+        self._by_sensor = {rt.core.cfg.sensor: i for i, rt in enumerate(self.peers)}
+        self.bundles = {"received": 0, "rejected": 0, "unknown_sensor": 0, "why": {}}
+        """Scan bundles this host received and refused (see :meth:`_unbundle`)."""
+        info["bundles"] = self.bundles
+        self._remote_subs: list = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
         self._inboxes = [_Backlog(b) for b in self._backlog]
 
@@ -190,6 +197,54 @@ class PeerHost(HostBatching):
         for name, subs in listeners.items():
             self.peers[self.by_name[name]].transport.handoff = (
                 lambda key, payload, subs=tuple(subs): self._hand_over(subs, key, payload))
+
+    def _share_remote(self) -> dict[str, tuple[int, ...]]:
+        """Remote neighbours' estimate keys -> the peers that listen to them: one Zenoh
+        subscriber each for the whole host (:meth:`_fan_out`), not one per listening peer (a
+        subscriber per peer made Zenoh call back, copy and queue each remote estimate once per
+        co-hosted listener). Not with recovery (each peer's advanced subscriber keeps its own
+        cache state) or a recording (each peer records what its own transport received)."""
+        if any(rt.o.recover or rt.o.record is not None for rt in self.peers):
+            return {}
+        listeners: dict[str, list[int]] = {}
+        for i, rt in enumerate(self.peers):
+            t = rt.transport
+            t.shared = frozenset(n for n in t.neighbours if n not in t.local)
+            for n in t.shared:
+                listeners.setdefault(t.keys.estimate(n), []).append(i)
+        return {k: tuple(v) for k, v in listeners.items()}
+
+    def _unbundle(self, sample) -> None:
+        """A scan bundle from the world (Zenoh's callback thread, :mod:`protocol.bundle`):
+        each scan to the peer of its sensor, through that peer's own admission, as if it had
+        come on the peer's ``scan/<sensor>`` key. A malformed bundle, or an entry for a sensor
+        not hosted here, is counted (``host.bundles`` in the summaries), never delivered."""
+        payload = sample.payload.to_bytes()
+        try:
+            bundle = unpack_bundle(payload)
+        except Rejected as exc:
+            self.bundles["rejected"] += 1
+            self.bundles["why"][exc.reason] = self.bundles["why"].get(exc.reason, 0) + 1
+            return
+        self.bundles["received"] += 1
+        active = self._active
+        for sensor, data in bundle.entries:
+            j = self._by_sensor.get(sensor)
+            if j is None:
+                self.bundles["unknown_sensor"] += 1
+                continue
+            if j in active:
+                t = self.peers[j].transport
+                t.deliver(t.keys.scan(sensor), data)
+
+    def _fan_out(self, subs: tuple[int, ...], sample) -> None:
+        """A remote estimate (Zenoh's callback thread) to each co-hosted peer listening to it,
+        through each one's own admission, as if each had its own subscriber."""
+        key, payload = str(sample.key_expr), sample.payload.to_bytes()
+        head, active = peek(payload), self._active
+        for j in subs:
+            if j in active:
+                self.peers[j].transport.deliver(key, payload, head)
 
     def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
         """An estimate published on ``key`` to the co-hosted peers ``subs`` still running
@@ -231,16 +286,27 @@ class PeerHost(HostBatching):
         try:
             if self.session_args[1]:  # endpoints to connect to: let the links come up first
                 settle(self.session)
+            keys = self.peers[0].transport.keys
+            self._remote_subs.append(self.session.declare_subscriber(  # the world's bundles
+                keys.scans(self.name), callback(self._unbundle)))
+            for key, subs in self._remote.items():  # before any peer says it is ready
+                self._remote_subs.append(self.session.declare_subscriber(
+                    key, callback(lambda sample, subs=subs: self._fan_out(subs, sample))))
             for i, rt in enumerate(self.peers):
                 rt.open(session=self.session)  # DuplicatePeer before this peer writes a file
                 opened.append(i)
-            self._active = list(opened)
+                self._active.append(i)  # from now on, what arrives for it is delivered
             try:
                 self._loop()
             finally:
                 for i in list(self._active):  # SIGTERM, or a bug in the loop: finish them all
                     self._end(i)
         finally:
+            for sub in self._remote_subs:
+                try:
+                    sub.undeclare()
+                except Exception:
+                    pass
             for i in opened:
                 try:
                     self.peers[i].close()  # idempotent: already closed when it ended

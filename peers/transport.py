@@ -139,6 +139,9 @@ class Transport:
         self.local: frozenset[str] = frozenset()
         """Neighbours whose estimates are handed over in-process (co-hosted peers): not
         subscribed to through Zenoh, so nothing arrives twice."""
+        self.shared: frozenset[str] = frozenset()
+        """Remote neighbours whose estimates the host subscribes to once for all its peers
+        (:meth:`peers.host.PeerHost._fan_out`): not subscribed to here."""
         self.handoff = None
         """``handoff(key, payload)``: called with each estimate this peer publishes (a host's
         direct hand-off to co-hosted neighbours), before it is put on Zenoh for the others."""
@@ -235,7 +238,7 @@ class Transport:
                     *([self.keys.truth()] if self.truth else []),
                     # only the neighbours' estimates: routing filters, not decoding
                     *(self.keys.estimate(n) for n in self.neighbours
-                      if n not in self.local)]
+                      if n not in self.local and n not in self.shared)]
             if self.recover:
                 self._recovering = {self._scan_key: "scan",
                                     **{self.keys.estimate(n): "estimate"

@@ -1,6 +1,7 @@
 """Zenoh key expressions, one namespace per network name (keeps concurrent runs apart).
 
-``sensornet/<network>/scan/<sensor>``, ``.../estimate/<peer>``, ``.../tracks/<peer>``,
+``sensornet/<network>/scan/<sensor>``, ``.../scans/<host>`` (a host's scan bundles),
+``.../estimate/<peer>``, ``.../tracks/<peer>``,
 ``.../truth``, ``.../alive/<peer>`` (liveliness), ``.../ready/<peer>`` (liveliness, once a
 peer sees all its neighbours), ``.../ctl``.
 """
@@ -74,6 +75,10 @@ class Keys:
 
     def scan(self, sensor: str = "*") -> str:
         return f"{self.base}/scan/{sensor}"
+
+    def scans(self, host: str = "*") -> str:
+        """A peer host's scan bundles (:mod:`protocol.bundle`)."""
+        return f"{self.base}/scans/{host}"
 
     def estimate(self, peer: str = "*") -> str:
         return f"{self.base}/estimate/{peer}"

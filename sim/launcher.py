@@ -110,7 +110,10 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     if router:  # recover: what a router's outage held back comes from the publishers' caches
         extra_connect = ["--connect", eps["router"], *extra_connect,
                          *(["--recover"] if recover else [])]
-    cmds = {"world": [*_cli(), "world", source, *common,
+    # a host's scans in one message per scan (protocol.bundle); recovery keeps one per sensor
+    bundles = [] if not groups or (router and recover) else [
+        a for h, members in groups.items() for a in ("--bundle", f"{h}={','.join(members)}")]
+    cmds = {"world": [*_cli(), "world", source, *common, *bundles,
                       *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
                       "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
             + (["--speed", str(speed)] if speed else [])}

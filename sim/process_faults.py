@@ -14,6 +14,7 @@ from sensornet.peers.session import (
     SessionError,
     open_session,
 )
+from sensornet.protocol.bundle import unpack_bundle
 from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.envelope import inner
 from sensornet.protocol.keys import Keys
@@ -82,7 +83,9 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
 
     def on_scan(sample) -> None:
         try:
-            k = decode(unseal(sample.payload.to_bytes())).k
+            data = unseal(sample.payload.to_bytes())
+            k = (unpack_bundle(data).k if "/scans/" in str(sample.key_expr)
+                 else decode(data).k)
         except (Rejected, AttributeError):
             return
         with cond:
@@ -98,7 +101,11 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
     session = open_session(connect=[handle.endpoints.get("router")
                                     or handle.endpoints["world"]], security=security)
     try:
-        sub = session.declare_subscriber(Keys(handle.network).scan(sensor), on_scan)
+        keys = Keys(handle.network)
+        subs = [session.declare_subscriber(keys.scan(sensor), on_scan)]
+        host = handle.host_of(sensor)
+        if host is not None:  # its scans may come in its host's bundles (protocol.bundle)
+            subs.append(session.declare_subscriber(keys.scans(host), on_scan))
         while pending and not stop.is_set():
             with cond:
                 cond.wait(timeout=0.05)
@@ -121,7 +128,8 @@ def inject_process_faults(handle: RunHandle, faults: list[ProcessFault], sensor:
                              **({"host": hosted} if hosted else {}),
                              **({"peers": handle.hosts[f.peer]} if f.action == "killhost"
                                 else {})})
-        sub.undeclare()
+        for sub in subs:
+            sub.undeclare()
     finally:
         session.close()
     (handle.out / "process-faults.json").write_text(json.dumps(done, indent=2))

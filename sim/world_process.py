@@ -25,6 +25,7 @@ from sensornet.peers.rerun_sink import (
 )
 from sensornet.peers.session import ANNOUNCE, PEER_WAIT, open_session
 from sensornet.peers.transport import recovering_publisher, zenoh_encoding
+from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Scan, Truth
@@ -96,7 +97,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               wait_timeout: float = PEER_WAIT, out_dir: Path | None = None,
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
-              say=None, security=None, data=None, recover: bool = False) -> dict:
+              say=None, security=None, data=None, recover: bool = False,
+              bundles: dict[str, list[str]] | None = None) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
 
     ``data``: the run's ``(truth, scans)`` (default :func:`sim.world.generate_run`'s).
@@ -104,8 +106,17 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     ``progress(k)`` is called after scan ``k`` is published; ``say(line)`` gets the status
     lines (waiting for the peers, starting). ``recover``: scans through Zenoh's advanced
     publisher (:func:`peers.transport.recovering_publisher`), so a peer that missed some (a
-    router's outage) gets them from the world's cache.
+    router's outage) gets them from the world's cache. ``bundles``: peer host -> its sensors,
+    whose scans go to the host in one message per scan (:mod:`protocol.bundle`) instead of
+    one per sensor (plain mode only: not with ``security`` or ``recover``).
     """
+    if bundles and (security is not None or recover):
+        raise WorldError("scan bundles are for plain runs (no --secure, no --recover)")
+    bundles = {h: list(ss) for h, ss in (bundles or {}).items()}
+    unknown = sorted({s for ss in bundles.values() for s in ss} - set(scn.sensor_names))
+    if unknown:
+        raise WorldError(f"--bundle names unknown sensors {unknown}")
+    bundled = {s for ss in bundles.values() for s in ss}
     say = say or (lambda line: None)
     keys = Keys(network)
     speed = speed or scn.network.speed
@@ -144,7 +155,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 alive.discard(name)
             cond.notify_all()
 
-    sent = {"scans": 0, "bytes": 0, "scans_published": 0}
+    sent = {"scans": 0, "bytes": 0, "scans_published": 0, "bundles": 0}
     try:
         live_sub = session.liveliness().declare_subscriber(keys.ready("*"), on_live,
                                                            history=True)
@@ -155,6 +166,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         probes = pubs  # matching_status: an advanced publisher has none, a plain one does
         if recover:
             pubs = {n: recovering_publisher(session, keys.scan(n)) for n in scn.sensor_names}
+        bundle_pubs = {h: session.declare_publisher(keys.scans(h), congestion_control=block,
+                                                    express=True) for h in bundles}
         truth_pub = session.declare_publisher(keys.truth(), congestion_control=block,
                                         express=True)
         ctl_pub = session.declare_publisher(keys.ctl(), congestion_control=block)
@@ -178,7 +191,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))
             time.sleep(0.2)  # let the peers' subscriptions settle on every link
-            _await_subscribers([probes[n] for n in wait_for if n in probes], stop, 5.0)
+            _await_subscribers([*(probes[n] for n in wait_for if n in probes),
+                                *bundle_pubs.values()], stop, 5.0)
         say(f"world: starting {scn.num_scans} scans, one every {interval:g} s")
         ctl_pub.put(encode(Control("start", run_id or network, {"speed": speed},
                                    send_time=time.time())))
@@ -220,12 +234,20 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                 _wait_until(stop, pending[1])
                 after_burst(pending[0])
             _wait_until(stop, due)
+            parts = {}
             for i, s in enumerate(sensors):
                 z = scans[i][k - 1]
                 data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
-                pubs[s.name].put(data)
+                if s.name in bundled:
+                    parts[s.name] = data
+                else:
+                    pubs[s.name].put(data)
                 sent["scans"] += 1
                 sent["bytes"] += len(data)
+            for h, members in bundles.items():
+                for b in pack_bundles(k, [(m, parts[m]) for m in members]):
+                    bundle_pubs[h].put(b, encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM)
+                    sent["bundles"] += 1
             pending = (k, due + TRUTH_DELAY * interval)
             sent["scans_published"] = k
             if progress is not None:

@@ -364,7 +364,9 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
 @pytest.mark.network
 def test_two_hosts_of_three_equal_the_twin(tmp_path):
     """Six peers in two hosts: every summary, every scan's tracks as in the twin; a small
-    constant link delay on every link, co-hosted ones too, goes through the fault layer."""
+    constant link delay on every link, co-hosted ones too, goes through the fault layer. The
+    world sent each host its peers' scans in one bundle per scan (protocol.bundle), and each
+    peer admitted every one of its scans from it."""
     source = _six(tmp_path / "six.toml")
     sets = ["faults.default.delay=0.01"]
     scn, codes, summaries = _run(source, tmp_path / "run", sets, rerun=False, per_process=3,
@@ -374,6 +376,9 @@ def test_two_hosts_of_three_equal_the_twin(tmp_path):
     for name, s in summaries.items():
         assert s["host"]["name"] == ("h1" if name in SIX[:3] else "h2"), s["host"]
         assert s["scans"] == scn.num_scans and s["internal_errors"] == {}
+        assert s["host"]["bundles"] == {"received": scn.num_scans, "rejected": 0,
+                                        "unknown_sensor": 0, "why": {}}, s["host"]
+        assert s["admitted_by_sender"][f"scan/{name}"] == scn.num_scans
         # one fault decision per estimate from each of its two ring neighbours
         assert sum(s["injected_faults"].values()) == 2 * scn.num_scans, s["injected_faults"]
     pids = {s["pid"] for s in summaries.values()}

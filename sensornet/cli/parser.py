@@ -229,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as soon as they are ready)")
     w.add_argument("--run", type=NONNEGATIVE_INT, default=0,
                    help="Monte Carlo run index (random draws)")
+    w.add_argument("--bundle", action="append", metavar="HOST=S1,S2,...",
+                   help="send these sensors' scans to peer host HOST in one message per scan "
+                        "(repeatable; sensornet run does this for its hosts)")
     w.add_argument("--progress-every", type=POSITIVE_INT, default=10, metavar="N",
                    help="print a progress line every N scans (default 10)")
     add_budget_flags(w)

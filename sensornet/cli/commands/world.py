@@ -34,9 +34,22 @@ def cmd_world(args: argparse.Namespace) -> int:
                          wait_timeout=args.wait, out_dir=out, run_id=args.run_id,
                          viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun,
                          progress=progress, say=lambda line: print(line, flush=True),
-                         security=member_security(args, "world", scn), recover=args.recover)
+                         security=member_security(args, "world", scn), recover=args.recover,
+                         bundles=_bundles(args.bundle))
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
           f"({sent['bytes'] / 1e3:.1f} kB)", flush=True)
     return 0
+
+
+def _bundles(flags: list[str] | None) -> dict[str, list[str]]:
+    """``--bundle HOST=S1,S2`` flags as ``{host: [sensors]}`` (a bad one: a one-line error)."""
+    out: dict[str, list[str]] = {}
+    for f in flags or []:
+        host, sep, names = f.partition("=")
+        sensors = [n for n in names.split(",") if n]
+        if not sep or not host or not sensors:
+            raise UserError(f"--bundle {f!r}: expected HOST=SENSOR,SENSOR,...")
+        out.setdefault(host, []).extend(sensors)
+    return out
