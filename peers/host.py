@@ -37,6 +37,7 @@ from sensornet.peers.admission import peek
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.core import PeerCore
 from sensornet.peers.host_batching import HostBatching
+from sensornet.peers.idle_gc import IdleCollector
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
@@ -182,6 +183,10 @@ class PeerHost(HostBatching):
         self.bundles = {"received": 0, "rejected": 0, "unknown_sensor": 0, "why": {}}
         """Scan bundles this host received and refused (see :meth:`_unbundle`)."""
         info["bundles"] = self.bundles
+        self.gc = IdleCollector()
+        self.gc_counts: dict = self.gc.counts()
+        """Full collections taken between scans (:mod:`peers.idle_gc`), in the summaries."""
+        info["gc"] = self.gc_counts
         self._remote_subs: list = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
         self._inboxes = [_Backlog(b) for b in self._backlog]
@@ -359,20 +364,34 @@ class PeerHost(HostBatching):
     def _loop(self) -> None:
         gc.collect()  # as PeerRuntime._loop: the start-up heap out of the collector's view
         gc.freeze()
+        self.gc.start()  # full collections between scans (peers.idle_gc)
+        try:
+            self._run_loop()
+        finally:
+            self.gc.stop()
+
+    def _run_loop(self) -> None:
         self.cpu.start()
         for rt in self.peers:
             rt.telemetry.start_cpu()
         q, backlog = self.q, self._backlog
         idle_check = 0.0
+        interval = min(rt.core.cfg.interval for rt in self.peers)
+        scan_at = time.monotonic()  # the last scan's arrival: the next comes an interval on
         while self._active and not self._stop:
             wall, mono = time.time(), time.monotonic()
-            wait = 0.0 if any(backlog[i] for i in self._active) else 0.25
+            busy = any(backlog[i] for i in self._active)
+            wait = 0.0 if busy else 0.25
             wakes = {}  # each peer's next wake (monotonic); nothing changes them until _work
             for i in self._active:
                 w = self.peers[i].next_wake(wall, mono)
                 if w is not None:
                     wait = min(wait, w)
                     wakes[i] = mono + w
+            gap = 0.0 if busy or not q.empty() else min(wait, scan_at + interval - mono)
+            if self.gc.idle(gap * 1e3):
+                self.gc_counts.update(self.gc.counts())
+                continue  # time has passed: look again
             try:
                 first = q.get(timeout=max(0.0, wait))
             except queue.Empty:
@@ -387,6 +406,8 @@ class PeerHost(HostBatching):
                     self._control(item)
                 elif slot in self._active:
                     backlog[slot].append((now, item))
+                    if item[0] == "msg" and "/scan/" in item[1]:
+                        scan_at = time.monotonic()
             self.counts["wakes"] += 1
             self._work(time.time(), time.monotonic(), wakes)
             self._fuse()
