@@ -133,7 +133,7 @@ class PeerCore:
         if route is None or route.channel != "scan" or route.name != self.cfg.sensor:
             return None
         c = self.consensus
-        if c.busy() or self.first_k is None:
+        if c.busy():  # (the first scan too: its steps count from scan 0, as in _scan)
             return None
         try:
             msg = self.decode(payload, self.cfg.limits)
