@@ -76,9 +76,9 @@ def test_packing_is_a_process_per_peer_up_to_the_threshold_then_a_host_per_core(
     assert stay.per_process == 1 and "(secure mode)" in stay.line
 
 
-def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_half_a_core():
-    """GM-PHD peers at 10 scans/s cost about 2 ms a scan: 20 of them (0.4 cores) fit one host,
-    26 (0.52) need two, 100 (2.0) get one host per core; seed 004's flooding peers (5 ms, 1.0
+def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_their_share():
+    """GM-PHD peers at 10 scans/s cost about 1.5 ms a scan: 50 of them (0.75 cores) fit one
+    host, 51 need two, 100 (1.5) get one host per core; seed 004's flooding peers (5 ms, 1.0
     cores) two; a kind not measured, a host per core as before."""
     from sensornet.sim.packing import HOST_SHARE, PEER_COST_MS, peer_load, scenario_load
     from sensornet.sim.scenario import load_scenario
@@ -87,9 +87,11 @@ def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_half_a_core():
     assert peer_load(20, "pda", 10.0) is None
     one = choose(20, None, n_cores=2, load=peer_load(20, "gmphd", 10.0))
     assert one.per_process == 20 and "into 1 host process of 20" in one.line
-    assert choose(26, None, n_cores=2, load=peer_load(26, "gmphd", 10.0)).per_process == 13
+    assert choose(50, None, n_cores=2, load=peer_load(50, "gmphd", 10.0)).per_process == 50
+    assert choose(51, None, n_cores=2, load=peer_load(51, "gmphd", 10.0)).per_process == 26
     assert choose(100, None, n_cores=2, load=peer_load(100, "gmphd", 10.0)).per_process == 50
-    assert choose(100, None, n_cores=8, load=peer_load(100, "gmphd", 10.0)).per_process == 25
+    assert choose(100, None, n_cores=8, load=peer_load(100, "gmphd", 10.0)).per_process == 50
+    assert choose(200, None, n_cores=8, load=peer_load(200, "gmphd", 10.0)).per_process == 50
     assert choose(20, None, n_cores=2, load=HOST_SHARE * 0.99).per_process == 20
     assert choose(20, None, n_cores=2, load=HOST_SHARE * 1.01).per_process == 10
     assert choose(20, None, n_cores=2, load=None).per_process == 10  # unknown: per core
