@@ -105,11 +105,14 @@ from __future__ import annotations
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
+import numpy as np
 from sensornet.peers.trust_checks import (
+    cusum_directions,
     divergence_test,
     is_repeat,
     neighbour_statistics,
     offset_chi2,
+    offset_cusum,
     offset_information,
     relative_offsets,
     target_mass,
@@ -123,6 +126,13 @@ MAX_LOG = 200
 """State changes kept for the summary (a flapping neighbour cannot grow it)."""
 LOW = 0.1
 """A neighbour at or under this trust counts as detected (issue 24's target)."""
+
+
+def offset_limits(cfg: TrustConfig) -> tuple[float, ...]:
+    """The limits of :meth:`Trust._offset`'s values: per window of
+    :attr:`TrustConfig.bias_windows` its chi-square threshold, then (with
+    :attr:`TrustConfig.bias_cusum`) the CUSUM's."""
+    return (*cfg.bias_thresholds, *((cfg.bias_cusum_threshold,) if cfg.bias_cusum else ()))
 
 
 @dataclass
@@ -150,7 +160,10 @@ class NeighbourTrust:
     offsets: deque = field(default_factory=deque)
     """The offset test's window: per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
     last_offset_chi2: tuple[float, ...] = ()
-    """Per window of :attr:`TrustConfig.bias_windows`: the last chi-square of the offset."""
+    """Per window of :attr:`TrustConfig.bias_windows`: the last chi-square of the offset;
+    then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
+    cusum: np.ndarray | None = None
+    """The offset CUSUM's charts, ``(directions,)`` (:func:`peers.trust_checks.offset_cusum`)."""
     scans_in: Counter = field(default_factory=Counter)
     """Scans spent in each state."""
 
@@ -241,7 +254,7 @@ class Trust:
                                                  and self.n[s].state != "quarantined"])
             for s, info in infos.items():
                 chi2 = self._offset(self.n[s], info)
-                if any(c > t for c, t in zip(chi2, cfg.bias_thresholds, strict=True)):
+                if any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True)):
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
@@ -302,8 +315,15 @@ class Trust:
         rec.offsets.appendleft(info)
         while len(rec.offsets) > max(cfg.bias_windows):
             rec.offsets.pop()
-        rec.last_offset_chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
-        return rec.last_offset_chi2
+        chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
+        if cfg.bias_cusum:
+            if rec.cusum is None:
+                rec.cusum = np.zeros(cfg.bias_cusum_directions)
+            rec.cusum = offset_cusum(rec.cusum, info, cfg.bias_cusum_offset,
+                                     cusum_directions(cfg.bias_cusum_directions))
+            chi2 = (*chi2, float(rec.cusum.max()))
+        rec.last_offset_chi2 = chi2
+        return chi2
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)
