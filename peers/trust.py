@@ -164,6 +164,9 @@ class NeighbourTrust:
     then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
     cusum: np.ndarray | None = None
     """The offset CUSUM's charts, ``(directions,)`` (:func:`peers.trust_checks.offset_cusum`)."""
+    registered: np.ndarray | None = None
+    """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
+    or None."""
     scans_in: Counter = field(default_factory=Counter)
     """Scans spent in each state."""
 
@@ -228,14 +231,15 @@ class Trust:
         late = (late or {}) if rnd == 0 and cfg.same_scan else {}
         late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
-        stats = self.statistics(own, inputs, wmap, set(late))
+        shown = {s: self.shift(s, m) for s, m in inputs.items()}  # registered, if any
+        stats = self.statistics(own, shown, wmap, set(late))
         tested = {s: (k, inputs[s], own) for s in names if s not in late}
         for s, (a, mix) in late.items():  # each estimate once, against own of its scan
             ref = self.own_at.get(a)
             if a <= self.n[s].tested or ref is None:
                 stats[s] = 0.0  # no new evidence
             else:
-                stats[s] = self._single(ref, mix)
+                stats[s] = self._single(ref, self.shift(s, mix))
                 tested[s] = (a, mix, ref)
         if rnd == 0:
             for s, (a, _, _) in tested.items():
@@ -253,8 +257,12 @@ class Trust:
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
             for s, info in infos.items():
-                chi2 = self._offset(self.n[s], info)
-                if any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True)):
+                rec = self.n[s]
+                chi2 = self._offset(rec, info)
+                alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
+                if cfg.register:
+                    self._register(rec, alarm)
+                elif alarm:
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
@@ -324,6 +332,29 @@ class Trust:
             chi2 = (*chi2, float(rec.cusum.max()))
         rec.last_offset_chi2 = chi2
         return chi2
+
+    def shift(self, s: str, mix: GaussianMixture) -> GaussianMixture:
+        """``mix`` of neighbour ``s`` with its registered offset subtracted from every
+        component's position (:attr:`TrustConfig.register`); ``mix`` itself if none."""
+        rec = self.n.get(s)
+        if rec is None or rec.registered is None or len(mix) == 0:
+            return mix
+        means = mix.means.copy()
+        means[:, self.pos] -= rec.registered
+        return GaussianMixture(mix.weights, means, mix.covs)
+
+    def _register(self, rec: NeighbourTrust, alarm: bool) -> None:
+        """Registration (:attr:`TrustConfig.register`): from an offset alarm on, the
+        neighbour's offset is its generalised-least-squares estimate over the window kept,
+        re-estimated each scan, until its CUSUM is back at 0."""
+        if not alarm and (rec.registered is None
+                          or (rec.cusum is not None and float(rec.cusum.max()) <= 0.0)):
+            rec.registered = None
+            return
+        I = np.sum([i for i, _ in rec.offsets], axis=0)
+        y = np.sum([v for _, v in rec.offsets], axis=0)
+        if np.linalg.det(I) > 1e-12:
+            rec.registered = np.linalg.solve(I, y)
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)

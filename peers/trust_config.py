@@ -102,6 +102,14 @@ class TrustConfig:
     bias_cusum_threshold: float = 20.0
     """CUSUM value (nats, before correlation) at which the neighbour is quarantined: above
     the largest honest value on the training runs 9000-9001 (19.7)."""
+    register: bool = False
+    """Prototype (off by default): a neighbour the offset test fires on is repaired instead
+    of quarantined (registration): its offset, the generalised-least-squares estimate
+    ``I^-1 y`` over the longest window of :attr:`bias_windows` (against own, or relative
+    to the others' median, :attr:`bias_relative`), is subtracted from its position means
+    before it is tested and fused, and re-estimated every scan until its CUSUM
+    (:attr:`bias_cusum`) falls back to 0. A biased sensor still carries its measurements;
+    leaving it out loses them."""
     detection_probability: float | None = None
     """The smallest detection probability of this peer's and its neighbours' sensors (set
     from the scenario); None: no missed-detection explanation. Two honest densities that

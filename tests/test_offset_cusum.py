@@ -138,3 +138,27 @@ def test_trust_quarantines_a_biased_neighbour_by_the_cusum_alone():
         lie = GaussianMixture(np.array([1.0]), (m + [30.0, 0, 0, 0])[None], P[None])
         w = off.weigh(k, 0, own, {"biased": lie, "h": own}, [1 / 3] * 3)
         assert w[1] > 0.1  # without the CUSUM (and the long window) never
+
+
+def test_registration_repairs_a_biased_neighbour_instead_of_leaving_it_out():
+    """:attr:`TrustConfig.register`: once the CUSUM crosses, the neighbour's offset (its
+    least-squares estimate over the window) is subtracted from its density, which is then
+    fused at full weight; before the crossing it is passed as received."""
+    P = np.diag([105.0, 25.0, 105.0, 25.0])
+    m = np.zeros(4)
+    one = np.array([1.0])
+    own = GaussianMixture(one, m[None], P[None])
+    cfg = TrustConfig(bias_windows=(3, 32), bias_thresholds=(32.0, 1e9), repeat=False,
+                      register=True)
+    t = Trust(cfg, ("biased", "h"))
+    cross = int(np.ceil(cfg.bias_cusum_threshold / (0.5 * 900.0 / 210.0)))
+    for k in range(1, 20):
+        lie = GaussianMixture(one, (m + [30.0, 0, -12.0, 0])[None], P[None])
+        w = t.weigh(k, 0, own, {"biased": lie, "h": own}, [1 / 3] * 3)
+        fixed = t.shift("biased", lie)
+        assert w[1] > 0.1  # never left out
+        if k < cross:
+            assert fixed is lie
+        else:
+            np.testing.assert_allclose(fixed.means, own.means, atol=1e-9)
+            np.testing.assert_allclose(fixed.covs, lie.covs)
