@@ -12,7 +12,8 @@ references and their calibration are in :mod:`peers.trust`'s docstring).
   detections (or births seen a scan apart), which bounds every divergence test.
 - :func:`is_repeat`: a non-empty density repeated bit for bit (a stuck sensor or a replay).
 - :func:`offset_information` and :func:`offset_chi2`: the generalised-least-squares offset
-  of a biased sensor over windows of scans.
+  of a biased sensor over windows of scans; :func:`offset_cusum`: Page's CUSUM of its
+  log-likelihood ratio against a 30 m-class bias, over all scans.
 """
 
 from __future__ import annotations
@@ -190,6 +191,37 @@ def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
         b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # (w, 2): mean offsets
         chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
     return tuple(float(c) for c in chi2)
+
+
+def cusum_directions(n: int) -> np.ndarray:
+    """``(n, 2)`` unit vectors at angles ``2 pi m / n`` (the charts of :func:`offset_cusum`)."""
+    a = 2.0 * np.pi * np.arange(n) / n
+    return np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
+def offset_increments(info: tuple[np.ndarray, np.ndarray], offset: float,
+                      directions: np.ndarray) -> np.ndarray:
+    """Per direction ``u`` (``directions``, ``(m, 2)``): the log-likelihood ratio of one
+    scan's offset information ``(I, y)`` (:func:`offset_information`) under a bias
+    ``beta = offset u`` against none, ``beta' y - beta' I beta / 2`` (the position
+    differences ``d_i ~ N(beta, S_i)``, independent: ``sum_i log N(d_i; beta, S_i) -
+    log N(d_i; 0, S_i)``). ``(m,)``; 0 where ``I`` is singular (nothing matched)."""
+    I, y = info
+    if np.linalg.det(I) <= 1e-12:
+        return np.zeros(len(directions))
+    beta = offset * directions  # (m, 2)
+    return beta @ y - 0.5 * np.einsum("mi,ij,mj->m", beta, I, beta)
+
+
+def offset_cusum(g: np.ndarray, info: tuple[np.ndarray, np.ndarray], offset: float,
+                 directions: np.ndarray) -> np.ndarray:
+    """Page's CUSUM (Page 1954, "Continuous inspection schemes", Biometrika 41) of the bias
+    log-likelihood ratios (:func:`offset_increments`), one chart per direction:
+    ``g_k = max(0, g_(k-1) + l_k)``, ``(m,)``, which equals the largest sum of the
+    increments over the windows ending at scan ``k`` (or 0): a generalised likelihood ratio
+    over when the bias began. The neighbour's CUSUM is ``max(g)``
+    (:attr:`TrustConfig.bias_cusum`)."""
+    return np.maximum(0.0, g + offset_increments(info, offset, directions))
 
 
 def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int],

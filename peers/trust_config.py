@@ -83,6 +83,33 @@ class TrustConfig:
     bias_thresholds: tuple[float, ...] = (32.0, 40.0)
     """Per window: the chi-square of its mean offset above which the neighbour is
     quarantined (above the largest honest value on the training runs, see :mod:`peers.trust`)."""
+    bias_cusum: bool = True
+    """A sequential offset test besides the windows: per neighbour, Page's CUSUM (Page 1954,
+    "Continuous inspection schemes", Biometrika 41(1/2)) of the log-likelihood ratio of a
+    bias of :attr:`bias_cusum_offset` metres against none, one chart per direction of
+    :attr:`bias_cusum_directions` (:func:`peers.trust_checks.offset_cusum`); above
+    :attr:`bias_cusum_threshold` the scan's statistic is at least ``quarantine + drift``.
+    Honest offsets are correlated over scans (lag-1 correlation 0.5-0.7 on seed 000's
+    training runs), which the increments, written for independent scans, ignore: the
+    threshold, not a whitening, absorbs it (set above the largest honest value on the
+    training runs, see :mod:`peers.trust`)."""
+    bias_cusum_offset: float = 30.0
+    """The alternative's offset (m): a 30 m-class biased sensor (the reference value of the
+    CUSUM is half of it along each chart's direction)."""
+    bias_cusum_directions: int = 8
+    """Charts, one per direction ``2 pi m / directions`` (a bias between two loses at most a
+    factor ``cos(pi / directions)`` of its increment)."""
+    bias_cusum_threshold: float = 20.0
+    """CUSUM value (nats, before correlation) at which the neighbour is quarantined: above
+    the largest honest value on the training runs 9000-9001 (19.7)."""
+    register: bool = False
+    """Prototype (off by default): a neighbour the offset test fires on is repaired instead
+    of quarantined (registration): its offset, the generalised-least-squares estimate
+    ``I^-1 y`` over the longest window of :attr:`bias_windows` (against own, or relative
+    to the others' median, :attr:`bias_relative`), is subtracted from its position means
+    before it is tested and fused, and re-estimated every scan until its CUSUM
+    (:attr:`bias_cusum`) falls back to 0. A biased sensor still carries its measurements;
+    leaving it out loses them."""
     detection_probability: float | None = None
     """The smallest detection probability of this peer's and its neighbours' sensors (set
     from the scenario); None: no missed-detection explanation. Two honest densities that
@@ -123,5 +150,6 @@ class TrustConfig:
                 and (self.detection_probability is None
                      or 0.0 < self.detection_probability < 1.0)
                 and len(self.bias_windows) == len(self.bias_thresholds)
-                and all(w >= 1 for w in self.bias_windows)):
+                and all(w >= 1 for w in self.bias_windows)
+                and self.bias_cusum_offset > 0 and self.bias_cusum_directions >= 1):
             raise ValueError(f"invalid trust settings {self}")

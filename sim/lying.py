@@ -152,13 +152,18 @@ RULES: dict[str, dict] = {
     "hybrid+trust": {"fusion.rule": "hybrid", "fusion.trust": True},
     "gci": {"fusion.rule": "gci"},
     "gci+trust": {"fusion.rule": "gci", "fusion.trust": True},
+    "hybrid+register": {"fusion.rule": "hybrid", "fusion.trust": True,
+                        "fusion.trust_register": True},
+    "gci+register": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True},
     "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
     "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
     "aa": {"fusion.rule": "aa"},
     "aa+trust": {"fusion.rule": "aa", "fusion.trust": True},
 }
 """The GM-PHD peers' fusion rules, each without and (``+trust``) with the neighbour test of
-:mod:`peers.trust`: the hybrid (the default), GCI with Metropolis weights and the cardinality
+:mod:`peers.trust` (``+register``: with it, a neighbour the offset test fires on repaired,
+not quarantined, :attr:`peers.trust_config.TrustConfig.register`, a prototype): the hybrid
+(the default), GCI with Metropolis weights and the cardinality
 fused apart, GCI with the exact Poisson EMD mass, GCI with each pair's weight chosen at the
 Chernoff point, and the arithmetic average (AA)."""
 

@@ -44,7 +44,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         feedback=net.feedback and not single,
         round_deadlines=kind.round_deadlines,
         trust=(TrustConfig(detection_probability=min(
-            scn.sensor(n).detection_probability for n in [name, *(names[j] for j in nb)]))
+            scn.sensor(n).detection_probability for n in [name, *(names[j] for j in nb)]),
+            register=scn.fusion.trust_register)
             if scn.fusion.trust and kind.trust else None),
     )
     return replace(opts, **changes)

@@ -18,14 +18,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig
+from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig, offset_limits
 from sensornet.sim.graphs import network_scenario
 from sensornet.sim.lying import LyingCore, make_lie
 from sensornet.sim.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.sim.twin import run_twin
 
-OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf))
+OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf),
+                   bias_cusum_threshold=np.inf)
 """The test runs, nothing is down-weighted."""
 
 
@@ -33,11 +34,14 @@ def open_like(cfg: TrustConfig) -> TrustConfig:
     """``cfg`` (a peer's, with its scenario's detection probability) with :data:`OPEN`'s
     thresholds."""
     return replace(cfg, suspect=OPEN.suspect, quarantine=OPEN.quarantine,
-                   bias_thresholds=OPEN.bias_thresholds)
+                   bias_thresholds=OPEN.bias_thresholds,
+                   bias_cusum_threshold=OPEN.bias_cusum_threshold)
 
 Seq = tuple[np.ndarray, np.ndarray]
 """Per scan: the statistic without the offset test (``(n,)``), and the offset test's
-chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows` (``(n, windows)``)."""
+chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows` then its CUSUM
+(``(n, windows + 1)``: :func:`peers.trust.offset_limits`)."""
+LIMITS = len(offset_limits(OPEN))
 
 
 def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
@@ -48,7 +52,7 @@ def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
         if who is not None and s != who:
             continue
         d = per.setdefault(s, {})
-        chi2 = np.array(chi2 or [0.0] * len(OPEN.bias_windows))  # none yet: no round 0 so far
+        chi2 = np.array(chi2 or [0.0] * LIMITS)  # none yet: no round 0 so far
         if k in d:
             d[k] = [max(d[k][0], stat), np.maximum(d[k][1], chi2)]
         else:
@@ -57,7 +61,7 @@ def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
     for s, d in per.items():
         ks = sorted(d)
         out[s] = (np.array([d[k][0] for k in ks]),
-                  np.array([d[k][1] for k in ks]).reshape(len(ks), len(OPEN.bias_windows)))
+                  np.array([d[k][1] for k in ks]).reshape(len(ks), LIMITS))
     return out
 
 CONDITIONS = {
@@ -125,7 +129,9 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
         seq = raw.copy()
         hit = np.zeros(len(seq), bool)
         if cfg.bias and len(seq):
-            hit = (chi2 > np.array(cfg.bias_thresholds)).any(axis=1)
+            lim = np.array(offset_limits(cfg))
+            m = min(chi2.shape[1], len(lim))  # the columns both have
+            hit = (chi2[:, :m] > lim[:m]).any(axis=1)
             seq[hit] = np.maximum(seq[hit], cfg.quarantine + cfg.drift)
         rec = NeighbourTrust()
         first = None
@@ -180,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
                       f" of {sim['triples']} (begun by: "
                       + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
-                      + "); offset chi2 per window q99.9 "
+                      + "); offset chi2 per window and CUSUM q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
                       f"{np.round(chi2.max(axis=0), 1)}", flush=True)
         if a.save:

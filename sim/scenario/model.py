@@ -167,6 +167,9 @@ class FusionSpec:
     trust: bool = False
     """Test each neighbour's density before fusing it and down-weight or quarantine the
     inconsistent ones (:mod:`peers.trust`)."""
+    trust_register: bool = False
+    """With :attr:`trust`: repair a neighbour the offset test fires on (registration,
+    :attr:`peers.trust_config.TrustConfig.register`, a prototype) instead of quarantining it."""
     lie: str = ""
     """Test hook: ``"PEER:KIND"`` makes that peer publish lie KIND of :mod:`sim.lying` in
     every estimate (a member lying with its own valid key), in the twin and as a process."""
