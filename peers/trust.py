@@ -437,7 +437,10 @@ class Trust:
     def summary(self) -> dict:
         return {"neighbours": {s: {"state": r.state, "score": round(r.score, 3),
                                    "scans": dict(r.scans_in), "first_scan": r.first_k,
-                                   "low_scan": r.low_k} for s, r in self.n.items()},
+                                   "low_scan": r.low_k,
+                                   "registered": (None if r.registered is None else
+                                                  [round(float(x), 2) for x in r.registered])}
+                               for s, r in self.n.items()},
                 "changes": list(self.log)}
 
     def drain_records(self) -> list[dict]:

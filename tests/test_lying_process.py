@@ -54,3 +54,35 @@ def test_a_member_lying_with_its_own_key_is_quarantined_as_in_the_twin(tmp_path)
             name, s["mean_ospa_fused"], twin.mean_ospa(name))
     # the liar's estimates really were lies: s2 told one in every estimate it published
     assert summaries["s2"]["stats"]["estimates_out"] >= scn.num_scans
+
+
+def test_a_biased_member_is_repaired_not_excluded_as_in_the_twin(tmp_path):
+    """Registration (``fusion.trust_register``, a prototype): s2's every estimate 30 m off
+    along x (``s2:biased``; plain mode); once the offset test fires, each honest peer subtracts
+    s2's estimated offset and keeps fusing it: at the end s2 is trusted with an offset of about
+    30 m along x in both honest peers' summaries, as on the twin, and their fused OSPA is the
+    twin's."""
+    sets = [*SETS, "scenario.num_scans=60", "fusion.trust=true", "fusion.lie=s2:biased",
+            "fusion.trust_register=true"]
+    scn = load_scenario("seed000", overrides=parse_overrides(sets))
+    twin = run_twin(scn, 0)
+    out = tmp_path / "run"
+    handle = start_run(scn, "seed000", out, overrides=sets, rerun=False)
+    try:
+        codes = wait_run(handle, timeout=120)
+    finally:
+        handle.stop_all()
+    summaries = read_summaries(out, scn.sensor_names)
+    assert all(c == 0 for c in codes.values()), codes
+    for name in ("s1", "s3"):
+        s = summaries[name]
+        assert s["internal_errors"] == {} and s["stop_reason"] == "end of run", name
+        got = s["trust"]["neighbours"]["s2"]
+        want = twin.peers[name].consensus.trust.n["s2"].registered
+        assert got["state"] == "trusted" and got["registered"] is not None, (name, got)
+        dx, dy = got["registered"]
+        assert 15.0 < dx < 45.0 and abs(dy) < 15.0, (name, got)  # the lie: +30 m along x
+        assert want is not None and abs(dx - want[0]) < 5.0 and abs(dy - want[1]) < 5.0, (
+            name, got["registered"], want)
+        assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (
+            name, s["mean_ospa_fused"], twin.mean_ospa(name))
