@@ -117,6 +117,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     if unknown:
         raise WorldError(f"--bundle names unknown sensors {unknown}")
     bundled = {s for ss in bundles.values() for s in ss}
+    if len(bundled) < sum(len(ss) for ss in bundles.values()):
+        twice = sorted({s for ss in bundles.values() for s in ss
+                        if sum(s in other for other in bundles.values()) > 1 or ss.count(s) > 1})
+        raise WorldError(f"--bundle names sensors {twice} more than once (a sensor's scans go "
+                         "to one host)")
     say = say or (lambda line: None)
     keys = Keys(network)
     speed = speed or scn.network.speed

@@ -9,6 +9,8 @@ import pytest
 from sensornet.protocol.bundle import MAX_ENTRIES, pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
 from sensornet.protocol.messages import Scan
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.world_process import WorldError, run_world
 
 
 def _scan(name: str, k: int, n: int) -> bytes:
@@ -47,3 +49,15 @@ def test_a_bad_bundle_is_a_rejection_not_a_crash(data, reason):
     with pytest.raises(Rejected) as exc:
         unpack_bundle(data)
     assert exc.value.reason == reason
+
+
+@pytest.mark.parametrize("bundles, kw, says", [
+    ({"h1": ["s1", "s9"]}, {}, "unknown sensors ['s9']"),
+    ({"h1": ["s1", "s2"], "h2": ["s2"]}, {}, "more than once"),
+    ({"h1": ["s1", "s1"]}, {}, "more than once"),
+    ({"h1": ["s1"]}, {"recover": True}, "plain runs"),
+])
+def test_the_world_refuses_bundles_it_cannot_send(bundles, kw, says):
+    """Before any session opens: each a one-line error."""
+    with pytest.raises(WorldError, match=says.replace("[", r"\[").replace("]", r"\]")):
+        run_world(load_scenario("seed000"), "bundlenet", bundles=bundles, **kw)
