@@ -388,7 +388,9 @@ class PeerHost(HostBatching):
                 if w is not None:
                     wait = min(wait, w)
                     wakes[i] = mono + w
-            gap = 0.0 if busy or not q.empty() else min(wait, scan_at + interval - mono)
+            gap = 0.0 if busy or not q.empty() or any(  # between scans, not between rounds
+                self.peers[i].core.consensus.busy() for i in self._active) else min(
+                wait, scan_at + interval - mono)
             if self.gc.idle(gap * 1e3):
                 self.gc_counts.update(self.gc.counts())
                 continue  # time has passed: look again
