@@ -33,7 +33,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
-from sensornet.peers.admission import peek
+from sensornet.peers.admission import TokenBucket, peek
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.core import PeerCore
 from sensornet.peers.host_batching import HostBatching
@@ -183,6 +183,12 @@ class PeerHost(HostBatching):
         self.bundles = {"received": 0, "rejected": 0, "unknown_sensor": 0, "why": {}}
         """Scan bundles this host received and refused (see :meth:`_unbundle`)."""
         info["bundles"] = self.bundles
+        interval = min(rt.core.cfg.interval for rt in self.peers)
+        n = len(self.peers)  # an honest world: one bundle a scan, one a sensor at the most
+        self._bundle_rate = TokenBucket(4.0 * n / interval, 8.0 * n)
+        """Bundles taken before unpacking: what the hosted sensors' own scan messages were
+        allowed (peers.admission: 4 a scan interval on average, bursts of 8)."""
+        self._bundle_lock = threading.Lock()
         self.gc = IdleCollector()
         self.gc_counts: dict = self.gc.counts()
         """Full collections taken between scans (:mod:`peers.idle_gc`), in the summaries."""
@@ -222,42 +228,51 @@ class PeerHost(HostBatching):
     def _unbundle(self, sample) -> None:
         """A scan bundle from the world (Zenoh's callback thread, :mod:`protocol.bundle`):
         each scan to the peer of its sensor, through that peer's own admission, as if it had
-        come on the peer's ``scan/<sensor>`` key. A malformed bundle, or an entry for a sensor
-        not hosted here, is counted (``host.bundles`` in the summaries), never delivered."""
+        come on the peer's ``scan/<sensor>`` key. Bounded before it is unpacked: at most as
+        many bundles as the hosted sensors' own scan messages were allowed (:attr:`_bundle_rate`)
+        and at most one entry per hosted peer in each. A refused bundle, or an entry for a
+        sensor not hosted here, is counted (``host.bundles`` in the summaries), never
+        delivered."""
         payload = sample.payload.to_bytes()
-        try:
-            bundle = unpack_bundle(payload)
-        except Rejected as exc:
-            self.bundles["rejected"] += 1
-            self.bundles["why"][exc.reason] = self.bundles["why"].get(exc.reason, 0) + 1
-            return
-        self.bundles["received"] += 1
-        active = self._active
-        for sensor, data in bundle.entries:
-            j = self._by_sensor.get(sensor)
-            if j is None:
-                self.bundles["unknown_sensor"] += 1
-                continue
-            if j in active:
+        with self._bundle_lock:  # Zenoh may call back on several threads
+            why = None if self._bundle_rate.take(time.monotonic()) else "rate"
+            if why is None:
+                try:
+                    bundle = unpack_bundle(payload, max_entries=len(self.peers))
+                except Rejected as exc:
+                    why = exc.reason
+            if why is not None:
+                self.bundles["rejected"] += 1
+                self.bundles["why"][why] = self.bundles["why"].get(why, 0) + 1
+                return
+            self.bundles["received"] += 1
+            hosted = [(self._by_sensor.get(sensor), sensor, data)
+                      for sensor, data in bundle.entries]
+            self.bundles["unknown_sensor"] += sum(j is None for j, _, _ in hosted)
+        for j, sensor, data in hosted:
+            if j is not None and j in self._active:
                 t = self.peers[j].transport
                 t.deliver(t.keys.scan(sensor), data)
 
     def _fan_out(self, subs: tuple[int, ...], sample) -> None:
         """A remote estimate (Zenoh's callback thread) to each co-hosted peer listening to it,
         through each one's own admission, as if each had its own subscriber."""
-        key, payload = str(sample.key_expr), sample.payload.to_bytes()
-        head, active = peek(payload), self._active
-        for j in subs:
-            if j in active:
-                self.peers[j].transport.deliver(key, payload, head)
+        self._deliver(subs, str(sample.key_expr), sample.payload.to_bytes(), backlog=False)
 
     def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
-        """An estimate published on ``key`` to the co-hosted peers ``subs`` still running
-        (its header read once for all of them; each admits it on its own)."""
+        """An estimate published on ``key`` to the co-hosted peers ``subs`` (the loop's
+        thread: straight into their backlogs)."""
+        self._deliver(subs, key, payload, backlog=True)
+
+    def _deliver(self, subs: tuple[int, ...], key: str, payload: bytes, backlog: bool) -> None:
+        """``payload`` to each of the peers ``subs`` still running, its header read once for
+        all of them; each admits it on its own (``backlog``: into the peer's backlog, from
+        the loop's thread; else onto the host's queue)."""
         active, head = self._active, peek(payload)
         for j in subs:
             if j in active:
-                self.peers[j].transport.deliver(key, payload, head, self._inboxes[j])
+                self.peers[j].transport.deliver(key, payload, head,
+                                                self._inboxes[j] if backlog else None)
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:

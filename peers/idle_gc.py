@@ -5,12 +5,10 @@ the program is: in a peer host of 50 peers a full collection took up to 30 ms (4
 100-scan run, measured with ``gc.callbacks``), and one falling inside a scan delays every
 peer's tracks of that scan, which alone is 1 % of the run's samples: the p99 latency. The
 young generations (in the same run: generation 0 at most 1.4 ms, generation 1 at most 6 ms)
-stay automatic; the full one is taken when the loop
-is idle between scans (no consensus in progress: a peer waiting for its neighbours' next
-round is not idle) and the next scan is far enough away (:meth:`IdleCollector.idle`), or, if
-the loop is
-never idle long enough, once it is :data:`OVERDUE` times later than CPython would have been
-(memory stays bounded).
+stay automatic; the full one is taken when the loop is idle between scans (no consensus in
+progress: a peer waiting for its neighbours' next round is not idle) and the next scan is far
+enough away (:meth:`IdleCollector.idle`), or, if the loop is never idle long enough, once it
+is :data:`OVERDUE` times later than CPython would have been (memory stays bounded).
 """
 
 from __future__ import annotations

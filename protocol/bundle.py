@@ -47,15 +47,18 @@ def pack_bundles(k: int, entries: list[tuple[str, bytes]],
     return out
 
 
-def unpack_bundle(data: bytes, max_bytes: int = 2 * BUNDLE_BYTES) -> Bundle:
+def unpack_bundle(data: bytes, max_bytes: int = 2 * BUNDLE_BYTES,
+                  max_entries: int = MAX_ENTRIES) -> Bundle:
     """A bundle's entries, or :class:`Rejected` (``too-large``, ``malformed``): bounded in
-    size and entries before anything is built; the entries themselves are checked by each
-    receiving peer as any scan is."""
+    size and entries (``max_entries``: a host's, its number of peers) before anything is
+    built; the entries themselves are checked by each receiving peer as any scan is."""
     if len(data) > max_bytes:
         raise Rejected("too-large", f"bundle of {len(data)} bytes > {max_bytes}")
     try:
         body = msgpack.unpackb(bytes(data), raw=False, max_bin_len=max_bytes,
-                               max_str_len=256, max_array_len=MAX_ENTRIES, max_map_len=0)
+                               max_str_len=256, max_array_len=max(2, min(max_entries,
+                                                                         MAX_ENTRIES)),
+                               max_map_len=0)
     except Exception as exc:  # msgpack raises several unrelated types on bad input
         raise Rejected("malformed", f"not a msgpack bundle ({type(exc).__name__})") from None
     if (not isinstance(body, list) or len(body) != 2 or type(body[0]) is not int

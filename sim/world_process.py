@@ -12,6 +12,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -117,9 +118,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     if unknown:
         raise WorldError(f"--bundle names unknown sensors {unknown}")
     bundled = {s for ss in bundles.values() for s in ss}
-    if len(bundled) < sum(len(ss) for ss in bundles.values()):
-        twice = sorted({s for ss in bundles.values() for s in ss
-                        if sum(s in other for other in bundles.values()) > 1 or ss.count(s) > 1})
+    named = Counter(s for ss in bundles.values() for s in ss)
+    twice = sorted(s for s, n in named.items() if n > 1)
+    if twice:
         raise WorldError(f"--bundle names sensors {twice} more than once (a sensor's scans go "
                          "to one host)")
     say = say or (lambda line: None)

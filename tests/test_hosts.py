@@ -495,3 +495,47 @@ def test_hosts_are_grouped_to_cut_few_graph_edges():
     ring = circulant(6, 2)
     assert host_groups(SIX, 3, ring) == {"h1": SIX[:3], "h2": SIX[3:]}
     assert groups_for(circulant(100, 3), 100, 50) != contiguous(100, 50)
+
+
+def test_a_hosts_bundles_are_bounded_before_they_are_unpacked(tmp_path):
+    """The bundle callback: each hosted sensor's scan to its peer's own admission (on the
+    host's queue), an unknown sensor counted, more entries than hosted peers refused unread,
+    and a flood of bundles cut to what the hosted sensors' own scan messages were allowed."""
+    import numpy as np
+    from sensornet.peers.runtime import RuntimeOptions
+    from sensornet.protocol.bundle import pack_bundles
+    from sensornet.protocol.codec import encode
+    from sensornet.protocol.messages import Scan
+    from sensornet.sim.peers import make_peer
+    from sensornet.sim.scenario import load_scenario
+
+    scn = load_scenario(_six(tmp_path / "six.toml"))
+    host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
+                           for n in SIX[:3]], ((), (), None, None, False))
+    host._active = [0, 1, 2]
+
+    class Sample:  # what Zenoh hands the callback
+        def __init__(self, data: bytes) -> None:
+            self.payload = type("P", (), {"to_bytes": lambda _self: data})()
+
+    def scan(name: str, k: int) -> bytes:
+        return encode(Scan(name, k, np.zeros((1, 2)), seq=k, send_time=1.0))
+
+    (ok,) = pack_bundles(1, [(n, scan(n, 1)) for n in (SIX[0], SIX[2], "p05")])
+    host._unbundle(Sample(ok))
+    got = [host.q.get_nowait() for _ in range(2)]
+    assert host.q.empty()
+    assert sorted(slot for slot, _ in got) == [0, 2]
+    assert all(item[1] == host.peers[slot].transport.keys.scan(SIX[slot]) for slot, item in got)
+    assert host.bundles == {"received": 1, "rejected": 0, "unknown_sensor": 1, "why": {}}
+    (wide,) = pack_bundles(2, [(n, scan(n, 2)) for n in SIX[:4]])  # 4 entries, 3 peers here
+    host._unbundle(Sample(wide))
+    assert host.q.empty() and host.bundles["why"] == {"malformed": 1}
+    interval = scn.scan_period / scn.network.speed  # the hosted sensors' own scan allowance
+    assert host._bundle_rate.rate == pytest.approx(4 * 3 / interval)
+    host._bundle_rate.rate = 0.0  # no refill while the flood comes: the count is exact
+    for _ in range(200):
+        host._unbundle(Sample(ok))
+    # a burst of 8 x 3 bundles in all, two of them taken above
+    assert host.bundles["received"] == 1 + (8 * 3 - 2)
+    assert host.bundles["why"] == {"malformed": 1, "rate": 200 - (8 * 3 - 2)}

@@ -25,14 +25,14 @@ PEERS = ("s1", "s2", "s3")
 LYING = [*SETS, "fusion.trust=true", "fusion.lie=s2:shifted"]
 
 
-def test_a_member_lying_with_its_own_key_is_quarantined_as_in_the_twin(tmp_path):
-    keys = tmp_path / "keys"
-    make_keys(NETWORK, ["world", *PEERS], keys)
-    scn = load_scenario("seed000", overrides=parse_overrides(LYING))
+def _run(tmp_path, sets: list[str], **kw):
+    """Seed 000 with ``sets`` as processes and on the twin (run 0): the scenario, the twin's
+    result and the summaries; every process ended cleanly and both honest peers ran to the
+    end without an internal error."""
+    scn = load_scenario("seed000", overrides=parse_overrides(sets))
     twin = run_twin(scn, 0)
     out = tmp_path / "run"
-    handle = start_run(scn, "seed000", out, network=NETWORK, overrides=LYING, rerun=False,
-                       secure=keys)
+    handle = start_run(scn, "seed000", out, overrides=sets, rerun=False, **kw)
     try:
         codes = wait_run(handle, timeout=120)
     finally:
@@ -43,6 +43,15 @@ def test_a_member_lying_with_its_own_key_is_quarantined_as_in_the_twin(tmp_path)
         s = summaries[name]
         assert s["internal_errors"] == {}, (name, s["internal_errors"])
         assert s["scans"] == scn.num_scans and s["stop_reason"] == "end of run", name
+    return scn, twin, summaries
+
+
+def test_a_member_lying_with_its_own_key_is_quarantined_as_in_the_twin(tmp_path):
+    keys = tmp_path / "keys"
+    make_keys(NETWORK, ["world", *PEERS], keys)
+    scn, twin, summaries = _run(tmp_path, LYING, network=NETWORK, secure=keys)
+    for name in ("s1", "s3"):
+        s = summaries[name]
         assert s["rejected_total"] == 0, (name, s["rejected"])  # secure mode passes the lies
         trust = s["trust"]["neighbours"]
         assert trust["s2"]["state"] == "quarantined", (name, trust)
@@ -64,19 +73,9 @@ def test_a_biased_member_is_repaired_not_excluded_as_in_the_twin(tmp_path):
     twin's."""
     sets = [*SETS, "scenario.num_scans=60", "fusion.trust=true", "fusion.lie=s2:biased",
             "fusion.trust_register=true"]
-    scn = load_scenario("seed000", overrides=parse_overrides(sets))
-    twin = run_twin(scn, 0)
-    out = tmp_path / "run"
-    handle = start_run(scn, "seed000", out, overrides=sets, rerun=False)
-    try:
-        codes = wait_run(handle, timeout=120)
-    finally:
-        handle.stop_all()
-    summaries = read_summaries(out, scn.sensor_names)
-    assert all(c == 0 for c in codes.values()), codes
+    scn, twin, summaries = _run(tmp_path, sets)
     for name in ("s1", "s3"):
         s = summaries[name]
-        assert s["internal_errors"] == {} and s["stop_reason"] == "end of run", name
         got = s["trust"]["neighbours"]["s2"]
         want = twin.peers[name].consensus.trust.n["s2"].registered
         assert got["state"] == "trusted" and got["registered"] is not None, (name, got)
