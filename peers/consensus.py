@@ -276,8 +276,8 @@ class Consensus(BatchedRounds):
         weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights),
                                    drop_suspects=self.fuser_hooks.product, late=late)
         self.records.extend(self.trust.drain_records())
-        if self.trust.cfg.register:  # registered neighbours fused with their offset removed
-            inputs = {s: {**inputs[s], "posterior": self.trust.shift(s, mixes[s])}
+        if self.trust.cfg.register or self.trust.cfg.repair:  # repaired / registered
+            inputs = {s: {**inputs[s], "posterior": self.trust.fused_input(s, mixes[s])}
                       if s in mixes else inputs[s] for s in inputs}
         kept = [i for i, w in enumerate(weights[1:]) if w > 0.0]
         if len(kept) == len(senders):

@@ -89,6 +89,17 @@ and fused, re-estimated each scan until its CUSUM is back at 0. On the evaluatio
 brings seed 000's biased liar under the hybrid from 22.3 to 17.3 m (clean 16.3; the liar
 left out, 24.2): docs/security.md.
 
+So can lies that add to the liar's real density (:attr:`TrustConfig.repair`,
+``fusion.trust_repair``, a prototype off by default; :mod:`peers.trust_repair`): a
+neighbour whose statistic would make it suspect is tested again with its components that
+no target of own or another trusted neighbour corroborates dropped (phantoms) and its
+weights scaled by the median, over the last 16 scans, of what own weighs the same targets
+per unit of its weight (inflated weights); where that statistic is smaller, the repaired
+density is scored and fused in its place, and it is offered a repair at every scan that
+would accumulate while its repairs keep components. A repair keeps only what others
+already show a target at and never adds mass, so a lie without the liar's measurements
+(empty, shifted by more than the gate, stuck) is not repaired and is caught as before.
+
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
@@ -148,6 +159,7 @@ from sensornet.peers.trust_checks import (
     target_mass,
 )
 from sensornet.peers.trust_config import TrustConfig
+from sensornet.peers.trust_repair import corroborated_part, scan_factor
 from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -197,6 +209,17 @@ class NeighbourTrust:
     registered: np.ndarray | None = None
     """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
     or None."""
+    rounds: int = 0
+    """Rounds it was tested in."""
+    repairs: int = 0
+    """Rounds its repaired (:attr:`TrustConfig.repair`) or registered
+    (:attr:`TrustConfig.register`) density was fused in."""
+    factors: deque = field(default_factory=deque)
+    """Log mass factors of its repairs' last scans (:attr:`TrustConfig.repair_window`)."""
+    kept_k: int | None = None
+    """The last scan a repair of it kept a component."""
+    repaired_k: int | None = None
+    """The first scan its repaired or registered density was fused at."""
     scans_in: Counter = field(default_factory=Counter)
     """Scans spent in each state."""
 
@@ -219,6 +242,9 @@ class Trust:
         self.records: list[dict] = []
         self.log: list[dict] = []
         """Every state change (bounded: the first :data:`MAX_LOG`), for the summary."""
+        self.fused_in: dict[str, GaussianMixture] = {}
+        """The repaired densities the last round fuses in place of the neighbours' own
+        (:attr:`TrustConfig.repair`)."""
         self.history: list[tuple[int, str, float, float, float]] | None = None
         """When a list: every ``(k, neighbour, statistic, score, offset chi-square)``
         (calibration; the statistic without the offset test's part)."""
@@ -263,6 +289,9 @@ class Trust:
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
         shown = {s: self.shift(s, m) for s, m in inputs.items()}  # registered, if any
         stats = self.statistics(own, shown, wmap, set(late))
+        self.fused_in = {}
+        if cfg.repair:
+            stats = self._repair(k, own, shown, wmap, stats, set(late))
         tested = {s: (k, inputs[s], own) for s in names if s not in late}
         for s, (a, mix) in late.items():  # each estimate once, against own of its scan
             ref = self.own_at.get(a)
@@ -304,6 +333,12 @@ class Trust:
             if drop_suspects and t < 1.0:
                 t = 0.0
             rec.last_weight = t
+            rec.rounds += 1
+            if t > 0.0 and (s in self.fused_in or rec.registered is not None):
+                rec.repairs += 1  # a repaired (or registered) density fused
+                rec.repaired_k = k if rec.repaired_k is None else rec.repaired_k
+            elif s in self.fused_in:
+                del self.fused_in[s]
             if rec.first_k is None:
                 rec.first_k = k
             if rec.low_k is None and t <= LOW:
@@ -322,6 +357,55 @@ class Trust:
         else:
             out[0] = 1.0 - kept
         return out
+
+    def _repair(self, k: int, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                wmap: dict[str, float], stats: dict[str, float], late: set[str]
+                ) -> dict[str, float]:
+        """:attr:`TrustConfig.repair`: each fresh neighbour whose statistic would take its
+        score above ``repair_from`` (or, within ``repair_window`` scans of a repair that
+        kept a component, above ``drift``) is tested again with its repaired density: its
+        components own and the other trusted fresh neighbours do not corroborate dropped
+        (all of them, while its repairs keep components: a miss), its weights scaled by its
+        median mass factor (:mod:`peers.trust_repair`). Where that statistic is smaller it
+        replaces the neighbour's and the repaired density is fused (:meth:`fused_input`)."""
+        cfg = self.cfg
+        out = dict(stats)
+        for s in sorted(shown):
+            rec = self.n[s]
+            recent = rec.kept_k is not None and k - rec.kept_k <= cfg.repair_window
+            if s in late or stats[s] <= cfg.drift or (
+                    not recent and self._next(rec.score, stats[s]) <= cfg.repair_from):
+                continue  # it would not accumulate, or not become suspect
+            others = [own] + [m for t, m in shown.items() if t != s and t not in late
+                              and self.n[t].state != "quarantined"]
+            kept = corroborated_part(shown[s], others, self.pos, cfg.repeat_weight,
+                                     cfg.bias_gate)
+            if kept is None:  # nothing corroborated: a miss, if its repairs keep things
+                if rec.kept_k is None or k - rec.kept_k > cfg.repair_window:
+                    continue
+                kept = GaussianMixture.empty(shown[s].dim)
+            f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
+            if f is not None and f > 0:
+                rec.factors.appendleft(np.log(f))
+                while len(rec.factors) > cfg.repair_window:
+                    rec.factors.pop()
+            if not rec.factors:
+                continue
+            rep = kept.scaled(float(np.exp(np.median(rec.factors))))
+            t = self.statistics(own, {**shown, s: rep}, wmap, late)[s]
+            if t < stats[s]:
+                out[s] = t
+                self.fused_in[s] = rep
+                if len(rep):
+                    rec.kept_k = k
+        return out
+
+    def fused_input(self, s: str, mix: GaussianMixture) -> GaussianMixture:
+        """What of neighbour ``s``'s density ``mix`` the last round fuses: its repaired
+        density (:attr:`TrustConfig.repair`) if the round used one, else ``mix`` less its
+        registered offset (:meth:`shift`)."""
+        rep = self.fused_in.get(s)
+        return self.shift(s, mix) if rep is None else rep
 
     def _keep_own(self, k: int, own: GaussianMixture) -> None:
         self.own_at[k] = own
@@ -438,6 +522,8 @@ class Trust:
         return {"neighbours": {s: {"state": r.state, "score": round(r.score, 3),
                                    "scans": dict(r.scans_in), "first_scan": r.first_k,
                                    "low_scan": r.low_k,
+                                   "rounds": r.rounds, "repairs": r.repairs,
+                                   "repaired_scan": r.repaired_k,
                                    "registered": (None if r.registered is None else
                                                   [round(float(x), 2) for x in r.registered])}
                                for s, r in self.n.items()},

@@ -110,6 +110,25 @@ class TrustConfig:
     before it is tested and fused, and re-estimated every scan until its CUSUM
     (:attr:`bias_cusum`) falls back to 0. A biased sensor still carries its measurements;
     leaving it out loses them."""
+    repair: bool = False
+    """Prototype (off by default): a neighbour whose statistic at a scan would take its score
+    above :attr:`repair_from` is offered a repaired density instead
+    (:mod:`peers.trust_repair`): its components that no target of own or of another trusted
+    neighbour corroborates (within :attr:`bias_gate`) dropped, and its weights scaled by the
+    median over :attr:`repair_window` scans of what own (or, with three or more, the
+    others' median) weighs the same targets per unit of its weight. Where the repaired
+    density's statistic is smaller, it is scored and fused in the neighbour's place. An
+    *inflated* or *phantoms* liar still carries its measurements; leaving it out loses
+    them."""
+    repair_from: float = 3.5
+    """The score a neighbour's statistic would take it above before it is first offered a
+    repair (:attr:`suspect`'s value; kept apart so the calibration, which opens
+    :attr:`suspect`, repairs as a real run does); once a repair kept a component it is
+    offered one at every scan that would accumulate, for :attr:`repair_window` scans."""
+    repair_window: int = 16
+    """Scans of mass factors (:func:`peers.trust_repair.scan_factor`) whose median scales a
+    repaired density: an inflated liar's factor is the same every scan, an honest one's
+    scatters about 1 (one scan's would replace the neighbour's weights with own's)."""
     detection_probability: float | None = None
     """The smallest detection probability of this peer's and its neighbours' sensors (set
     from the scenario); None: no missed-detection explanation. Two honest densities that

@@ -108,22 +108,42 @@ def trust_scores(result: TwinResult, liars: list[str], honest: list[str]) -> dic
     """With the defence on (else NaN): ``honest_quarantined``, the share of (honest peer,
     honest neighbour, scan) triples in quarantine; ``detect_scans``, the most scans any honest
     neighbour took from its first test of a liar to a weight of at most 0.1, counting both
-    (1: at once; NaN if one never did)."""
+    (1: at once; NaN if one never did); with repair (:attr:`TrustConfig.repair`),
+    ``repair_scans`` the same to its first repaired density (NaN if one never repaired it),
+    and ``liar_repaired`` / ``honest_repaired`` the share of tested rounds of the liars /
+    of the honest neighbours fused repaired."""
     seen = quarantined = 0
     delays: list[float] = []
+    repair_delays: list[float] = []
+    rounds = {"liar": [0, 0], "honest": [0, 0]}
+    nan = {"honest_quarantined": math.nan, "detect_scans": math.nan,
+           "repair_scans": math.nan, "liar_repaired": math.nan, "honest_repaired": math.nan}
+    repairing = False
     for n in honest:
         trust = result.peers[n].consensus.trust
         if trust is None:
-            return {"honest_quarantined": math.nan, "detect_scans": math.nan}
+            return nan
+        repairing = trust.cfg.repair
         for s, rec in trust.n.items():
+            side = rounds["liar" if s in liars else "honest"]
+            side[0] += rec.repairs
+            side[1] += rec.rounds
             if s in liars:
                 delays.append(math.nan if rec.low_k is None or rec.first_k is None
                               else rec.low_k - rec.first_k + 1)
+                repair_delays.append(math.nan if rec.repaired_k is None or rec.first_k is None
+                                     else rec.repaired_k - rec.first_k + 1)
             else:
                 seen += sum(rec.scans_in.values())
                 quarantined += rec.scans_in["quarantined"]
-    return {"honest_quarantined": quarantined / max(seen, 1),
-            "detect_scans": max(delays) if delays else math.nan}
+    out = {**nan, "honest_quarantined": quarantined / max(seen, 1),
+           "detect_scans": max(delays) if delays else math.nan}
+    if repairing:
+        out |= {"repair_scans": max(repair_delays) if repair_delays else math.nan,
+                "liar_repaired": rounds["liar"][0] / max(rounds["liar"][1], 1)
+                if liars else math.nan,
+                "honest_repaired": rounds["honest"][0] / max(rounds["honest"][1], 1)}
+    return out
 
 
 @dataclass(frozen=True)
@@ -155,6 +175,10 @@ RULES: dict[str, dict] = {
     "hybrid+register": {"fusion.rule": "hybrid", "fusion.trust": True,
                         "fusion.trust_register": True},
     "gci+register": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True},
+    "hybrid+repair": {"fusion.rule": "hybrid", "fusion.trust": True,
+                      "fusion.trust_register": True, "fusion.trust_repair": True},
+    "gci+repair": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True,
+                   "fusion.trust_repair": True},
     "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
     "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
     "aa": {"fusion.rule": "aa"},
@@ -255,7 +279,10 @@ def summarise(rows: list[dict]) -> list[dict]:
                "clean": np.mean([r["fused"] for r in clean]) if clean else math.nan,
                "rejected": sum(r["rejected"] for r in sel),
                "honest_quarantined": np.mean([r["honest_quarantined"] for r in sel]),
-               "detect_scans": np.max([r["detect_scans"] for r in sel])}
+               "detect_scans": np.max([r["detect_scans"] for r in sel]),
+               "repair_scans": np.max([r.get("repair_scans", math.nan) for r in sel]),
+               "liar_repaired": np.mean([r.get("liar_repaired", math.nan) for r in sel]),
+               "honest_repaired": np.mean([r.get("honest_repaired", math.nan) for r in sel])}
         row["change"] = row["fused"] - row["clean"]
         out.append(row)
     return out
@@ -289,7 +316,9 @@ def compact(summary: list[dict]) -> str:
 
 def defence(summary: list[dict]) -> str:
     """Per graph and rule with the defence on, per lie: the scans to detect (the worst
-    neighbour and run; "never" if one did not) and the honest quarantines (% of triples)."""
+    neighbour and run; "never" if one did not) and the honest quarantines (% of triples);
+    with repair, the scans to the liar's first repair and the share of its rounds repaired
+    (clean: the share of honest neighbours' rounds repaired)."""
     sel_all = [s for s in summary if not math.isnan(s["honest_quarantined"])]
     lies = list(dict.fromkeys(s["lie"] for s in sel_all))
     lines = ["| graph | rule | " + " | ".join(lies) + " |", "|---|---|" + "---|" * len(lies)]
@@ -302,7 +331,14 @@ def defence(summary: list[dict]) -> str:
                 continue
             d = sel[lie]["detect_scans"]
             det = "–" if lie == "clean" else ("never" if math.isnan(d) else f"{d:.0f}")
-            cells.append(f"{det} / {100 * sel[lie]['honest_quarantined']:.2f} %")
+            cell = f"{det} / {100 * sel[lie]['honest_quarantined']:.2f} %"
+            if not math.isnan(sel[lie]["honest_repaired"]):  # with repair
+                r = sel[lie]["repair_scans"]
+                cell += (f"; honest repaired {100 * sel[lie]['honest_repaired']:.1f} %"
+                         if lie == "clean" else
+                         f"; repaired {'never' if math.isnan(r) else f'{r:.0f}'}, "
+                         f"{100 * sel[lie]['liar_repaired']:.0f} % of rounds")
+            cells.append(cell)
         lines.append(f"| {setup} | {rule} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

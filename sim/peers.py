@@ -45,7 +45,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         round_deadlines=kind.round_deadlines,
         trust=(TrustConfig(detection_probability=min(
             scn.sensor(n).detection_probability for n in [name, *(names[j] for j in nb)]),
-            register=scn.fusion.trust_register)
+            register=scn.fusion.trust_register, repair=scn.fusion.trust_repair)
             if scn.fusion.trust and kind.trust else None),
     )
     return replace(opts, **changes)

@@ -23,6 +23,7 @@ from sensornet.sim.graphs import network_scenario
 from sensornet.sim.lying import LyingCore, make_lie
 from sensornet.sim.peers import make_peer
 from sensornet.sim.scenario import load_scenario
+from sensornet.sim.scenario.overrides import parse_overrides
 from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf),
@@ -128,7 +129,7 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     for raw, chi2 in seqs:
         seq = raw.copy()
         hit = np.zeros(len(seq), bool)
-        if cfg.bias and len(seq):
+        if cfg.bias and not cfg.register and len(seq):  # registered, not quarantined
             lim = np.array(offset_limits(cfg))
             m = min(chi2.shape[1], len(lim))  # the columns both have
             hit = (chi2[:, :m] > lim[:m]).any(axis=1)
@@ -167,7 +168,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--first-run", type=int, default=9000)
     ap.add_argument("--save", help="write the statistics here (.npz)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="scenario override for every run, e.g. fusion.trust_repair=true "
+                         "(repeatable)")
     a = ap.parse_args(argv)
+    try:
+        sets = parse_overrides(a.set)
+    except ValueError as e:
+        ap.error(str(e))
+    cfg = TrustConfig(register=bool(sets.get("fusion.trust_register", False)),
+                      repair=bool(sets.get("fusion.trust_repair", False)))
     with tempfile.TemporaryDirectory() as tmp:
         pooled = []
         for label, (source, over) in setups(Path(tmp)).items():
@@ -175,11 +185,11 @@ def main(argv: list[str] | None = None) -> int:
                 if label.startswith("seed004") and cond == "pd0.9":
                     extra = {"sensors.detection_probability": 0.9}
                 seqs = [q for r in range(a.first_run, a.first_run + a.runs)
-                        for q in sequences(source, {**over, **extra}, r)]
+                        for q in sequences(source, {**over, **extra, **sets}, r)]
                 pooled += seqs
                 stat = np.concatenate([q[0] for q in seqs])
                 chi2 = np.concatenate([q[1] for q in seqs if len(q[0])])
-                sim = simulate(seqs, TrustConfig())
+                sim = simulate(seqs, cfg)
                 print(f"{label:14s} {cond:7s} statistic q50 {np.quantile(stat, 0.5):.2f} "
                       f"q90 {np.quantile(stat, 0.9):.2f} q99 {np.quantile(stat, 0.99):.2f}; "
                       f"score q99 {sim['q99']:.2f} q99.9 {sim['q99.9']:.2f}; down "
@@ -191,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{np.round(chi2.max(axis=0), 1)}", flush=True)
         if a.save:
             np.savez_compressed(a.save, *[x for q in pooled for x in q])
-        sim = simulate(pooled, TrustConfig())
+        sim = simulate(pooled, cfg)
         print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
               f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "
               f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan)")

@@ -85,3 +85,25 @@ def test_a_biased_member_is_repaired_not_excluded_as_in_the_twin(tmp_path):
             name, got["registered"], want)
         assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (
             name, s["mean_ospa_fused"], twin.mean_ospa(name))
+
+
+def test_a_member_telling_phantoms_is_repaired_not_excluded_as_in_the_twin(tmp_path):
+    """Repair (``fusion.trust_repair``, a prototype): s2 adds three confident phantom targets
+    to every estimate (``s2:phantoms``; plain mode); each honest peer drops what nobody
+    else corroborates and keeps fusing s2's real targets: s2 ends trusted, fused repaired in
+    most rounds in both honest peers, as on the twin, and their fused OSPA is the twin's and
+    better than with s2 left out."""
+    sets = [*SETS, "fusion.trust=true", "fusion.lie=s2:phantoms", "fusion.trust_repair=true"]
+    scn, twin, summaries = _run(tmp_path, sets)
+    excluded = run_twin(load_scenario("seed000", overrides=parse_overrides(
+        [*SETS, "fusion.trust=true", "fusion.lie=s2:phantoms"])), 0)
+    for name in ("s1", "s3"):
+        s = summaries[name]
+        got = s["trust"]["neighbours"]["s2"]
+        want = twin.peers[name].consensus.trust.n["s2"]
+        assert got["state"] == "trusted" and got["repaired_scan"] is not None, (name, got)
+        assert got["repairs"] >= 0.7 * got["rounds"], (name, got)
+        assert want.repairs >= 0.7 * want.rounds, (name, want.repairs, want.rounds)
+        assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (
+            name, s["mean_ospa_fused"], twin.mean_ospa(name))
+        assert twin.mean_ospa(name) < excluded.mean_ospa(name), name

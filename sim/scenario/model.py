@@ -170,6 +170,10 @@ class FusionSpec:
     trust_register: bool = False
     """With :attr:`trust`: repair a neighbour the offset test fires on (registration,
     :attr:`peers.trust_config.TrustConfig.register`, a prototype) instead of quarantining it."""
+    trust_repair: bool = False
+    """With :attr:`trust`: fuse a failing neighbour's repaired density (its uncorroborated
+    components dropped, its mass the others' median) where that passes the test
+    (:attr:`peers.trust_config.TrustConfig.repair`, a prototype)."""
     lie: str = ""
     """Test hook: ``"PEER:KIND"`` makes that peer publish lie KIND of :mod:`sim.lying` in
     every estimate (a member lying with its own valid key), in the twin and as a process."""

@@ -100,7 +100,7 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
             "extraction_threshold", "extraction", "gate", "refit"])),
         fusion=_fusion(Table(top.raw("fusion", {}), "fusion", ctx, [
             "rule", "omega", "level2_pruning", "level2_threshold", "fusing_sensor",
-            "cardinality", "trust", "trust_register", "lie"]), names),
+            "cardinality", "trust", "trust_register", "trust_repair", "lie"]), names),
         metrics=_metrics(Table(top.raw("metrics", {}), "metrics", ctx,
                                 ["ospa_cutoff", "ospa_order"])),
         network=_network(Table(top.raw("network", {}), "network", ctx, [
@@ -277,6 +277,7 @@ def _fusion(f: Table, sensor_names: list[str]) -> FusionSpec:
         cardinality=f.choice("cardinality", CARDINALITY_RULES, "separate"),
         trust=f.flag("trust", False),
         trust_register=f.flag("trust_register", False),
+        trust_repair=f.flag("trust_repair", False),
         lie=_lie(f, sensor_names),
     )
 

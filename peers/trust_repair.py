@@ -1,0 +1,74 @@
+"""Repair of a neighbour's density instead of its exclusion (issue 24, :attr:`TrustConfig.repair`).
+
+A lie that still carries the liar's measurements loses them when the liar is left out: on
+seed 000 the two honest sensors alone fuse to 24 m, the three together to 16 m. Two such lies
+keep the liar's real components and add to them: weights scaled up (*inflated*) and targets
+nobody else has (*phantoms*). A neighbour whose test fails is offered a repaired density
+(:meth:`peers.trust.Trust._repair` decides when): the components that no target of own or
+of another trusted neighbour corroborates dropped (:func:`corroborated_part`), and the
+weights scaled by a mass factor (:func:`scan_factor`, its median over scans kept by the
+trust record): what own weighs the same targets per unit of the neighbour's weight. It is
+used only where the repaired density's statistic is smaller. What a repair keeps is what
+others already show a target at: a lie can add position information there, but no target
+and no mass.
+
+Pure functions (no state).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensornet.tracking.mixture import GaussianMixture
+
+
+def corroborated(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],
+                 min_weight: float, gate: float) -> np.ndarray:
+    """``(n,)`` bool: the components of ``mix`` with a target component (weight at least
+    ``min_weight``) of some density in ``others`` within ``gate`` metres (position entries
+    ``pos`` of the state)."""
+    if len(mix) == 0:
+        return np.zeros(0, bool)
+    refs = [D.means[D.weights >= min_weight][:, pos] for D in others if len(D)]
+    if not refs or sum(len(r) for r in refs) == 0:
+        return np.zeros(len(mix), bool)
+    R = np.concatenate(refs)  # (m, 2)
+    X = mix.means[:, pos]  # (n, 2)
+    d2 = ((X[:, None, :] - R[None, :, :]) ** 2).sum(axis=2)  # (n, m)
+    return (d2 <= gate * gate).any(axis=1)
+
+
+def mass_factor(mix: GaussianMixture, ref: GaussianMixture, pos: list[int],
+                min_weight: float, gate: float) -> float | None:
+    """How much ``ref`` weighs what ``mix`` shows, per unit of ``mix``'s weight: each target
+    component of ``ref`` (weight at least ``min_weight``) goes to ``mix``'s nearest
+    component within ``gate`` metres, and the factor is their summed weight over the summed
+    weight of the components of ``mix`` they went to (None: nothing matched). An honest
+    pair's is about 1; an inflated density's, 1 over its inflation."""
+    sel = ref.weights >= min_weight if len(ref) else np.zeros(0, bool)
+    if len(mix) == 0 or not sel.any():
+        return None
+    R = ref.means[sel][:, pos]  # (m, 2)
+    d2 = ((R[:, None, :] - mix.means[None, :, pos]) ** 2).sum(axis=2)  # (m, n)
+    j = d2.argmin(axis=1)
+    hit = d2[np.arange(len(R)), j] <= gate * gate
+    if not hit.any():
+        return None
+    return float(ref.weights[sel][hit].sum() / mix.weights[np.unique(j[hit])].sum())
+
+
+def corroborated_part(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],
+                      min_weight: float, gate: float) -> GaussianMixture | None:
+    """``mix`` less its components no density of ``others`` corroborates
+    (:func:`corroborated`); None if none is left."""
+    keep = corroborated(mix, others, pos, min_weight, gate)
+    return mix.select(np.flatnonzero(keep)) if keep.any() else None
+
+
+def scan_factor(kept: GaussianMixture, others: list[GaussianMixture], pos: list[int],
+                min_weight: float, gate: float) -> float | None:
+    """The median :func:`mass_factor` of ``kept`` against each of ``others`` (against
+    ``others[0]``, own, alone with fewer than three: a median of two is their mean, which
+    one liar among them sets); None if no reference matched it."""
+    refs = others if len(others) >= 3 else others[:1]
+    factors = [f for D in refs if (f := mass_factor(kept, D, pos, min_weight, gate)) is not None]
+    return float(np.median(factors)) if factors else None
