@@ -159,7 +159,7 @@ from sensornet.peers.trust_checks import (
     target_mass,
 )
 from sensornet.peers.trust_config import TrustConfig
-from sensornet.peers.trust_repair import corroborated_part, scan_factor
+from sensornet.peers.trust_repair import corroborated_part, moved_to_own, scan_factor
 from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -216,6 +216,9 @@ class NeighbourTrust:
     (:attr:`TrustConfig.register`) density was fused in."""
     factors: deque = field(default_factory=deque)
     """Log mass factors of its repairs' last scans (:attr:`TrustConfig.repair_window`)."""
+    moves: deque = field(default_factory=deque)
+    """Per scan with nothing corroborated, its ``(I, y)`` against own up to
+    :attr:`TrustConfig.repair_offset_gate` apart (:meth:`Trust._moved`)."""
     kept_k: int | None = None
     """The last scan a repair of it kept a component."""
     repaired_k: int | None = None
@@ -291,7 +294,7 @@ class Trust:
         stats = self.statistics(own, shown, wmap, set(late))
         self.fused_in = {}
         if cfg.repair:
-            stats = self._repair(k, own, shown, wmap, stats, set(late))
+            stats = self._repair(k, rnd, own, shown, wmap, stats, set(late))
         tested = {s: (k, inputs[s], own) for s in names if s not in late}
         for s, (a, mix) in late.items():  # each estimate once, against own of its scan
             ref = self.own_at.get(a)
@@ -358,7 +361,8 @@ class Trust:
             out[0] = 1.0 - kept
         return out
 
-    def _repair(self, k: int, own: GaussianMixture, shown: dict[str, GaussianMixture],
+    def _repair(self, k: int, rnd: int, own: GaussianMixture,
+                shown: dict[str, GaussianMixture],
                 wmap: dict[str, float], stats: dict[str, float], late: set[str]
                 ) -> dict[str, float]:
         """:attr:`TrustConfig.repair`: each fresh neighbour whose statistic would take its
@@ -380,6 +384,8 @@ class Trust:
                               and self.n[t].state != "quarantined"]
             kept = corroborated_part(shown[s], others, self.pos, cfg.repeat_weight,
                                      cfg.bias_gate)
+            if kept is None and cfg.repair_offset_gate > cfg.bias_gate:
+                kept = self._moved(rec, rnd, own, shown[s], others)
             if kept is None:  # nothing corroborated: a miss, if its repairs keep things
                 if rec.kept_k is None or k - rec.kept_k > cfg.repair_window:
                     continue
@@ -399,6 +405,30 @@ class Trust:
                 if len(rep):
                     rec.kept_k = k
         return out
+
+    def _moved(self, rec: NeighbourTrust, rnd: int, own: GaussianMixture,
+               mix: GaussianMixture, others: list[GaussianMixture]) -> GaussianMixture | None:
+        """A neighbour none of whose components is corroborated, registered
+        (:attr:`TrustConfig.repair_offset_gate`): its generalised-least-squares offset
+        against own over the scans of :attr:`TrustConfig.repair_window` it was in this case,
+        pairs up to the wider gate apart (at least two scans: one scan's nearest pairs may be
+        any), subtracted, and each component's covariance at least own's nearest one's (by
+        determinant: a neighbour caught with a constant offset is not taken to be more
+        precise than own); then its corroborated part, or None."""
+        cfg = self.cfg
+        if rnd == 0:
+            rec.moves.appendleft(offset_information(own, mix, self.pos, cfg.repeat_weight,
+                                                    cfg.repair_offset_gate))
+            while len(rec.moves) > cfg.repair_window:
+                rec.moves.pop()
+        if len(rec.moves) < 2 or len(own) == 0 or len(mix) == 0:
+            return None
+        I = np.sum([i for i, _ in rec.moves], axis=0)
+        if np.linalg.det(I) <= 1e-12:
+            return None
+        moved = moved_to_own(mix, own, np.linalg.solve(I, np.sum([v for _, v in rec.moves],
+                                                                 axis=0)), self.pos)
+        return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
 
     def fused_input(self, s: str, mix: GaussianMixture) -> GaussianMixture:
         """What of neighbour ``s``'s density ``mix`` the last round fuses: its repaired

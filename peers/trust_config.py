@@ -120,6 +120,12 @@ class TrustConfig:
     density's statistic is smaller, it is scored and fused in the neighbour's place. An
     *inflated* or *phantoms* liar still carries its measurements; leaving it out loses
     them."""
+    repair_offset_gate: float = 250.0
+    """With :attr:`repair`: a neighbour none of whose components is corroborated is
+    registered (:meth:`peers.trust.Trust._moved`): its offset against own, pairs up to this
+    many metres apart (the largest constant offset repaired; at most :attr:`bias_gate`:
+    none), subtracted over the scans it was in this case, and its covariances at least own's
+    nearest component's; then repaired as any other."""
     repair_from: float = 3.5
     """The score a neighbour's statistic would take it above before it is first offered a
     repair (:attr:`suspect`'s value; kept apart so the calibration, which opens

@@ -72,3 +72,18 @@ def scan_factor(kept: GaussianMixture, others: list[GaussianMixture], pos: list[
     refs = others if len(others) >= 3 else others[:1]
     factors = [f for D in refs if (f := mass_factor(kept, D, pos, min_weight, gate)) is not None]
     return float(np.median(factors)) if factors else None
+
+
+def moved_to_own(mix: GaussianMixture, own: GaussianMixture, offset: np.ndarray,
+                 pos: list[int]) -> GaussianMixture:
+    """``mix`` with ``offset`` (``(2,)``) subtracted from every component's position and each
+    covariance replaced by that of own's nearest component (after the move) where that one's
+    determinant is larger: a registered neighbour is not taken to be more precise than own
+    (a confident lie claims any covariance)."""
+    means = mix.means.copy()
+    means[:, pos] -= offset
+    d2 = ((means[:, None, pos] - own.means[None, :, pos]) ** 2).sum(axis=2)  # (n, m)
+    near = own.covs[d2.argmin(axis=1)]  # (n, d, d)
+    wider = np.linalg.det(near) > np.linalg.det(mix.covs)
+    covs = np.where(wider[:, None, None], near, mix.covs)
+    return GaussianMixture(mix.weights.copy(), means, covs)

@@ -129,3 +129,20 @@ def test_absent_takes_the_liars_sensors_and_edges_out():
     assert all({"s15", "s19"}.isdisjoint(e) for e in two.network.edges)
     assert len(two.network.edges) < len(custom.network.edges)
     assert len(two.sensors) == len(custom.sensors) - 2
+
+
+def test_the_circulant_setup_is_the_calibrations_graph_and_not_in_the_default_study():
+    from sensornet.sim.graphs import circulant
+    from sensornet.sim.lying import CIRCULANT, plan_of
+    from sensornet.sim.studies.base import Request
+
+    scn = scenario_for(CIRCULANT, "hybrid+repair")
+    assert len(scn.sensor_names) == 20 and scn.network.rounds == 2
+    assert scn.fusion.trust and scn.fusion.trust_repair and scn.fusion.trust_register
+    deg = {n: sum(n in e for e in scn.network.edges) for n in scn.sensor_names}
+    assert set(deg.values()) == {4} and int(circulant(20, 4).sum()) == 2 * len(scn.network.edges)
+    assert CIRCULANT.liar in scn.sensor_names
+    default = plan_of(Request("lying", runs=1, options={}))[0]
+    assert CIRCULANT not in default.setups
+    chosen = plan_of(Request("lying", runs=1, options={"setups": ["circ4-20"]}))[0]
+    assert chosen.setups == (CIRCULANT,)

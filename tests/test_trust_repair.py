@@ -55,11 +55,11 @@ def test_mass_factor_is_one_over_the_inflation_and_one_for_the_same_targets():
     assert corroborated_part(phantoms_only, [own], POS, 0.5, 60.0) is None
 
 
-def _scans(lie, n=6, repair=True, seed=7):
+def _scans(lie, n=6, repair=True, seed=7, **cfg):
     """n scans of one peer with two honest neighbours and a liar telling ``lie``; per scan
     the liar's statistic and what is fused of it."""
     rng = np.random.default_rng(seed)
-    t = Trust(TrustConfig(repair=repair, detection_probability=0.95), ("h1", "liar"))
+    t = Trust(TrustConfig(repair=repair, detection_probability=0.95, **cfg), ("h1", "liar"))
     out = []
     for k in range(1, n + 1):
         own, real = _honest(rng), _honest(rng)
@@ -101,12 +101,40 @@ def test_phantoms_are_dropped_and_the_real_targets_kept():
     assert t.n["liar"].state == "trusted"
 
 
-def test_lies_without_the_liars_measurements_are_not_repaired():
-    empty = _scans(lambda m: GaussianMixture.empty(4))[0]
-    shifted = _scans(lambda m: GaussianMixture(m.weights, m.means + [110.0, 0, 0, 0],
-                                               np.broadcast_to(np.eye(4), (2, 4, 4)).copy()))[0]
-    for t in (empty, shifted):
-        assert t.n["liar"].repairs == 0 and t.n["liar"].state == "quarantined"
+def test_an_empty_liar_is_not_repaired():
+    t = _scans(lambda m: GaussianMixture.empty(4))[0]
+    assert t.n["liar"].repairs == 0 and t.n["liar"].state == "quarantined"
+
+
+def test_a_shifted_confident_liar_is_moved_back_with_owns_covariances():
+    """Every component 110 m off along x with a 1 m^2 covariance: nothing is corroborated
+    within the gate, so from the second such scan its offset against own (pairs up to 250 m
+    apart, over the scans so far) is subtracted and its covariances are own's."""
+    def shifted(m):
+        return GaussianMixture(m.weights, m.means + [110.0, 0, 0, 0],
+                               np.broadcast_to(np.eye(4), (2, 4, 4)).copy())
+    t, scans = _scans(shifted, n=8)
+    assert t.n["liar"].repaired_k == 2 and t.n["liar"].state == "trusted"
+    for real, _, w, fused in scans[2:]:
+        assert len(fused) == 2 and w > 0.3
+        # own's and the liar's errors are each of covariance P4: the registered offset is
+        # within a few of their standard deviations (10 m) of the true 110 m
+        np.testing.assert_allclose(fused.means[:, POS], real.means[:, POS], atol=25.0)
+        np.testing.assert_allclose(fused.covs, np.broadcast_to(P4, (2, 4, 4)))
+    off = _scans(shifted, n=8, repair_offset_gate=0.0)[0]  # no registration of large offsets
+    assert off.n["liar"].repairs == 0 and off.n["liar"].state == "quarantined"
+
+
+def test_moved_to_own_subtracts_the_offset_and_floors_covariances_at_owns():
+    from sensornet.peers.trust_repair import moved_to_own
+    own = mix((1.0, A, P4), (1.0, B, 4 * P4))
+    liar = mix((1.0, A + [100.0, 0, 50.0, 0], np.eye(4)), (1.0, B + [100.0, 0, 50.0, 0],
+                                                            9 * P4))
+    moved = moved_to_own(liar, own, np.array([100.0, 50.0]), POS)
+    np.testing.assert_allclose(moved.means, own.means)
+    np.testing.assert_allclose(moved.covs[0], P4)  # 1 m^2 claimed: own's, wider
+    np.testing.assert_allclose(moved.covs[1], 9 * P4)  # its own is wider than own's: kept
+    np.testing.assert_allclose(liar.means[0], A + [100.0, 0, 50.0, 0])  # not changed in place
 
 
 def test_an_honest_neighbour_within_the_drift_is_fused_as_it_is():
