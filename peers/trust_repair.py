@@ -24,17 +24,19 @@ from sensornet.tracking.mixture import GaussianMixture
 def corroborated(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],
                  min_weight: float, gate: float) -> np.ndarray:
     """``(n,)`` bool: the components of ``mix`` with a target component (weight at least
-    ``min_weight``) of some density in ``others`` within ``gate`` metres (position entries
-    ``pos`` of the state)."""
+    ``min_weight``, within ``gate`` metres; position entries ``pos`` of the state) in
+    ``others[0]`` (own), or in at least two of the other densities of ``others`` (in the one
+    other, with only one): two liars telling the same lie do not corroborate each other."""
     if len(mix) == 0:
         return np.zeros(0, bool)
-    refs = [D.means[D.weights >= min_weight][:, pos] for D in others if len(D)]
-    if not refs or sum(len(r) for r in refs) == 0:
-        return np.zeros(len(mix), bool)
-    R = np.concatenate(refs)  # (m, 2)
     X = mix.means[:, pos]  # (n, 2)
-    d2 = ((X[:, None, :] - R[None, :, :]) ** 2).sum(axis=2)  # (n, m)
-    return (d2 <= gate * gate).any(axis=1)
+    hits = np.zeros((len(others), len(mix)), bool)  # (references, n)
+    for r, D in enumerate(others):
+        R = D.means[D.weights >= min_weight][:, pos] if len(D) else np.zeros((0, 2))
+        if len(R):
+            hits[r] = (((X[:, None, :] - R[None, :, :]) ** 2).sum(axis=2) <= gate * gate).any(1)
+    need = 1 if len(others) <= 2 else 2
+    return hits[0] | (hits[1:].sum(axis=0) >= need)
 
 
 def mass_factor(mix: GaussianMixture, ref: GaussianMixture, pos: list[int],

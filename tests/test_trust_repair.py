@@ -38,6 +38,21 @@ def test_corroborated_is_the_brute_force_gate_over_the_others_targets():
     assert corroborated(mixes[0], [GaussianMixture.empty(4)], POS, 0.5, 80.0).sum() == 0
 
 
+def test_with_three_references_a_component_needs_own_or_two_others():
+    """Two liars adding the same phantoms must not corroborate each other."""
+    target, phantom = mix((1.0, A, P4)), mix((1.0, FAR, np.eye(4)))
+    liar = GaussianMixture.concatenate([target, phantom])
+    empty = GaussianMixture.empty(4)
+    other_liar, honest = phantom, target
+    assert corroborated(liar, [target, other_liar, honest], POS, 0.5, 60.0).tolist() == [
+        True, False]  # the phantom: one other only
+    assert corroborated(liar, [empty, other_liar, phantom], POS, 0.5, 60.0).tolist() == [
+        False, True]  # two others show it
+    assert corroborated(liar, [phantom, empty, empty], POS, 0.5, 60.0).tolist() == [
+        False, True]  # own shows it
+    assert corroborated(liar, [empty, other_liar], POS, 0.5, 60.0).tolist() == [False, True]
+
+
 def test_mass_factor_is_one_over_the_inflation_and_one_for_the_same_targets():
     rng = np.random.default_rng(5)
     own = _honest(rng)
