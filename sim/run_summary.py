@@ -106,7 +106,8 @@ network benchmark's criterion, with a p99 scan -> tracks latency under one scan 
 
 def trust_note(summaries: dict[str, dict]) -> str | None:
     """Who was quarantined by whom and when (peers with ``fusion.trust``), one line per
-    neighbour; None if nobody was."""
+    neighbour, then who was fused repaired or registered by whom, from when and how often
+    (``fusion.trust_repair``, ``fusion.trust_register``); None if nobody was either."""
     by: dict[str, list[str]] = {}
     for peer, s in sorted(summaries.items()):
         for ch in ((s.get("trust") or {}).get("changes") or []):
@@ -115,9 +116,16 @@ def trust_note(summaries: dict[str, dict]) -> str | None:
             elif ch["from"] == "quarantined":
                 by.setdefault(ch["neighbour"], []).append(f"readmitted by {peer} at scan "
                                                           f"{ch['k']}")
-    if not by:
-        return None
-    return "\n".join(f"quarantined: {n} by " + ", ".join(v) for n, v in sorted(by.items()))
+    fixed: dict[str, list[str]] = {}
+    for peer, s in sorted(summaries.items()):
+        for n, rec in ((s.get("trust") or {}).get("neighbours") or {}).items():
+            if rec.get("repairs"):
+                fixed.setdefault(n, []).append(
+                    f"{peer} from scan {rec['repaired_scan']} ({rec['repairs']} of "
+                    f"{rec['rounds']} rounds)")
+    lines = [f"quarantined: {n} by " + ", ".join(v) for n, v in sorted(by.items())]
+    lines += [f"repaired: {n} by " + ", ".join(v) for n, v in sorted(fixed.items())]
+    return "\n".join(lines) if lines else None
 
 
 def realtime_note(summaries: dict[str, dict], interval_s: float, speed: float,

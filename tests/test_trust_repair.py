@@ -158,3 +158,21 @@ def test_an_honest_neighbour_within_the_drift_is_fused_as_it_is():
     own, h1, h2 = _honest(rng), _honest(rng), _honest(rng)
     t.weigh(1, 0, own, {"h1": h1, "h2": h2}, [1 / 3] * 3)
     assert t.n["h1"].repairs == 0 and t.fused_input("h1", h1) is h1
+
+
+def test_a_phantoms_liar_on_the_twin_is_repaired_and_run_says_so():
+    from sensornet.sim.launcher import trust_note
+    from sensornet.sim.lying import run_with_liar
+    from sensornet.sim.scenario import load_scenario
+
+    base = {"scenario.num_scans": 25, "fusion.trust": True}
+    res = run_with_liar(load_scenario("seed000", overrides={**base, "fusion.trust_repair": True}),
+                        8100, "s2", "phantoms")
+    out = run_with_liar(load_scenario("seed000", overrides=base), 8100, "s2", "phantoms")
+    for n in ("s1", "s3"):
+        rec = res.summary(n)["trust"]["neighbours"]["s2"]
+        assert rec["state"] == "trusted" and rec["repairs"] >= 0.7 * rec["rounds"], rec
+        assert out.summary(n)["trust"]["neighbours"]["s2"]["state"] == "quarantined"
+        assert res.mean_ospa(n) < out.mean_ospa(n)  # its real targets kept
+    note = trust_note({n: res.summary(n) for n in ("s1", "s3")})
+    assert "repaired: s2 by s1 from scan 1 (" in note and ", s3 from scan 1 (" in note
