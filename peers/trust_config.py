@@ -102,24 +102,25 @@ class TrustConfig:
     bias_cusum_threshold: float = 20.0
     """CUSUM value (nats, before correlation) at which the neighbour is quarantined: above
     the largest honest value on the training runs 9000-9001 (19.7)."""
-    register: bool = False
-    """Prototype (off by default): a neighbour the offset test fires on is repaired instead
-    of quarantined (registration): its offset, the generalised-least-squares estimate
-    ``I^-1 y`` over the longest window of :attr:`bias_windows` (against own, or relative
-    to the others' median, :attr:`bias_relative`), is subtracted from its position means
-    before it is tested and fused, and re-estimated every scan until its CUSUM
-    (:attr:`bias_cusum`) falls back to 0. A biased sensor still carries its measurements;
-    leaving it out loses them."""
-    repair: bool = False
-    """Prototype (off by default): a neighbour whose statistic at a scan would take its score
-    above :attr:`repair_from` is offered a repaired density instead
-    (:mod:`peers.trust_repair`): its components that no target of own or of another trusted
-    neighbour corroborates (within :attr:`bias_gate`) dropped, and its weights scaled by the
-    median over :attr:`repair_window` scans of what own (or, with three or more, the
-    others' median) weighs the same targets per unit of its weight. Where the repaired
-    density's statistic is smaller, it is scored and fused in the neighbour's place. An
-    *inflated* or *phantoms* liar still carries its measurements; leaving it out loses
-    them."""
+    register: bool = True
+    """A neighbour the offset test fires on is repaired instead of quarantined
+    (registration; on by default, :mod:`peers.trust` says why): its offset, the
+    generalised-least-squares estimate ``I^-1 y`` over the longest window of
+    :attr:`bias_windows` (against own, or relative to the others' median,
+    :attr:`bias_relative`), is subtracted from its position means before it is tested and
+    fused, and re-estimated every scan until its CUSUM (:attr:`bias_cusum`) falls back to
+    0. A biased sensor still carries its measurements; leaving it out loses them."""
+    repair: bool = True
+    """A neighbour whose statistic at a scan would take its score above :attr:`repair_from`
+    is offered a repaired density instead (:mod:`peers.trust_repair`; on by default,
+    :mod:`peers.trust` says why): its components that neither own nor two other trusted
+    neighbours (the one other, with one) show a target near (within :attr:`bias_gate`)
+    dropped, its weights scaled by the median over :attr:`repair_window` scans of what own
+    (or, with three or more, the others' median) weighs the same targets per unit of its
+    weight, and when nothing is corroborated its offset registered
+    (:attr:`repair_offset_gate`). Where the repaired density's statistic is smaller, it is
+    scored and fused in the neighbour's place. An *inflated*, *phantoms* or *shifted* liar
+    still carries its measurements; leaving it out loses them."""
     repair_offset_gate: float = 250.0
     """With :attr:`repair`: a neighbour none of whose components is corroborated is
     registered (:meth:`peers.trust.Trust._moved`): its offset against own, pairs up to this

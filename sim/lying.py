@@ -192,14 +192,16 @@ def _source(name: str) -> str:
     return str(path)
 
 
+_EXCLUDE = {"fusion.trust": True, "fusion.trust_register": False, "fusion.trust_repair": False}
 RULES: dict[str, dict] = {
     "hybrid": {"fusion.rule": "hybrid"},
     "hybrid+trust": {"fusion.rule": "hybrid", "fusion.trust": True},
+    "hybrid+exclude": {"fusion.rule": "hybrid", **_EXCLUDE},
     "gci": {"fusion.rule": "gci"},
     "gci+trust": {"fusion.rule": "gci", "fusion.trust": True},
-    "hybrid+register": {"fusion.rule": "hybrid", "fusion.trust": True,
-                        "fusion.trust_register": True},
-    "gci+register": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True},
+    "gci+exclude": {"fusion.rule": "gci", **_EXCLUDE},
+    "hybrid+register": {"fusion.rule": "hybrid", **_EXCLUDE, "fusion.trust_register": True},
+    "gci+register": {"fusion.rule": "gci", **_EXCLUDE, "fusion.trust_register": True},
     "hybrid+repair": {"fusion.rule": "hybrid", "fusion.trust": True,
                       "fusion.trust_register": True, "fusion.trust_repair": True},
     "gci+repair": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True,
@@ -209,11 +211,13 @@ RULES: dict[str, dict] = {
     "aa": {"fusion.rule": "aa"},
     "aa+trust": {"fusion.rule": "aa", "fusion.trust": True},
 }
-"""The GM-PHD peers' fusion rules, each without and (``+trust``) with the neighbour test of
-:mod:`peers.trust` (``+register``: with it, a neighbour the offset test fires on repaired,
-not quarantined, :attr:`peers.trust_config.TrustConfig.register`, a prototype): the hybrid
-(the default), GCI with Metropolis weights and the cardinality
-fused apart, GCI with the exact Poisson EMD mass, GCI with each pair's weight chosen at the
+"""The GM-PHD peers' fusion rules, each without and (``+trust``) with the neighbour defence
+of :mod:`peers.trust` as it is by default (the test, registration of offsets and repair of
+densities that still carry the liar's measurements); ``+exclude``: the test with neither
+(a failing neighbour is only down-weighted and quarantined); ``+register``: with
+registration only; ``+repair``: registration and repair named explicitly (= ``+trust``).
+The rules: the hybrid (the default), GCI with Metropolis weights and the cardinality fused
+apart, GCI with the exact Poisson EMD mass, GCI with each pair's weight chosen at the
 Chernoff point, and the arithmetic average (AA)."""
 
 

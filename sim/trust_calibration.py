@@ -176,8 +176,8 @@ def main(argv: list[str] | None = None) -> int:
         sets = parse_overrides(a.set)
     except ValueError as e:
         ap.error(str(e))
-    cfg = TrustConfig(register=bool(sets.get("fusion.trust_register", False)),
-                      repair=bool(sets.get("fusion.trust_repair", False)))
+    cfg = TrustConfig(register=bool(sets.get("fusion.trust_register", True)),
+                      repair=bool(sets.get("fusion.trust_repair", True)))
     with tempfile.TemporaryDirectory() as tmp:
         pooled = []
         for label, (source, over) in setups(Path(tmp)).items():

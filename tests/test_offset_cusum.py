@@ -10,7 +10,14 @@ from sensornet.peers.trust import Trust, TrustConfig
 from sensornet.peers.trust_checks import cusum_directions, offset_cusum, offset_increments
 from sensornet.tracking.mixture import GaussianMixture
 
-CFG = TrustConfig()
+
+def _cfg(**kw) -> TrustConfig:
+    """The test alone (no registration, no repair: both on by default), which these
+    tests are about; :mod:`tests.test_trust_repair` has the repairs."""
+    return TrustConfig(**{"register": False, "repair": False, **kw})
+
+
+CFG = _cfg()
 S = np.diag([210.0, 210.0])
 """Summed position covariance of one matched pair, seed 000-like (13-15 m honest offset
 deviation per axis on the training runs, normalised variance about 0.8)."""
@@ -121,7 +128,7 @@ def test_trust_quarantines_a_biased_neighbour_by_the_cusum_alone():
     m = np.array([0.0, 0.0, 0.0, 0.0])
     own = GaussianMixture(np.array([1.0]), m[None], P[None])
     # repeat=False: these hand-made densities are the same every scan
-    cfg = TrustConfig(bias_windows=(3, 32), bias_thresholds=(32.0, 1e9), repeat=False)
+    cfg = _cfg(bias_windows=(3, 32), bias_thresholds=(32.0, 1e9), repeat=False)
     t = Trust(cfg, ("biased", "h"))
     low = None
     for k in range(1, 30):
@@ -132,7 +139,7 @@ def test_trust_quarantines_a_biased_neighbour_by_the_cusum_alone():
             low = k
     per_scan = 0.5 * 900.0 / 210.0
     assert low == int(np.ceil(cfg.bias_cusum_threshold / per_scan))
-    off = Trust(TrustConfig(bias_cusum=False, bias_windows=(3, 32),
+    off = Trust(_cfg(bias_cusum=False, bias_windows=(3, 32),
                             bias_thresholds=(32.0, 1e9), repeat=False), ("biased", "h"))
     for k in range(1, 30):
         lie = GaussianMixture(np.array([1.0]), (m + [30.0, 0, 0, 0])[None], P[None])
@@ -148,7 +155,7 @@ def test_registration_repairs_a_biased_neighbour_instead_of_leaving_it_out():
     m = np.zeros(4)
     one = np.array([1.0])
     own = GaussianMixture(one, m[None], P[None])
-    cfg = TrustConfig(bias_windows=(3, 32), bias_thresholds=(32.0, 1e9), repeat=False,
+    cfg = _cfg(bias_windows=(3, 32), bias_thresholds=(32.0, 1e9), repeat=False,
                       register=True)
     t = Trust(cfg, ("biased", "h"))
     cross = int(np.ceil(cfg.bias_cusum_threshold / (0.5 * 900.0 / 210.0)))

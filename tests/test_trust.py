@@ -9,6 +9,13 @@ from sensornet.peers.trust import Trust, TrustConfig, offset_information
 from sensornet.tracking.divergence import cs_divergence, log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
+
+def _cfg(**kw) -> TrustConfig:
+    """The test alone (no registration, no repair: both on by default), which these
+    tests are about; :mod:`tests.test_trust_repair` has the repairs."""
+    return TrustConfig(**{"register": False, "repair": False, **kw})
+
+
 P4 = np.diag([100.0, 25.0, 100.0, 25.0])
 
 
@@ -72,7 +79,7 @@ def _honest(rng, n=4):
 
 def test_statistic_is_small_for_honest_neighbours_and_large_for_lies():
     rng = np.random.default_rng(11)
-    t = Trust(TrustConfig(), ("h1", "h2", "liar"))
+    t = Trust(_cfg(), ("h1", "h2", "liar"))
     own = _honest(rng)
     lies = {
         "shifted": mix((0.95, A + [110.0, 0, 0, 0], np.eye(4)), (0.9, B + [110.0, 0, 0, 0],
@@ -90,7 +97,7 @@ def test_statistic_is_small_for_honest_neighbours_and_large_for_lies():
 
 
 def test_score_weight_quarantine_and_readmission():
-    cfg = TrustConfig(warmup=0)
+    cfg = _cfg(warmup=0)
     t = Trust(cfg, ("h", "liar"))
     rng = np.random.default_rng(5)
     shifted = mix((0.95, A + [150.0, 0, 0, 0], np.eye(4)))
@@ -116,26 +123,26 @@ def test_score_weight_quarantine_and_readmission():
 def test_what_is_taken_from_a_neighbour_is_renormalised_over_the_trusted_set():
     own = mix((1.0, A, P4))
     inputs = {"a": mix((1.0, A, P4)), "b": mix((1.0, A + 200.0, np.eye(4)))}
-    w = Trust(TrustConfig(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3])
+    w = Trust(_cfg(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3])
     assert w[2] < 0.3 and sum(w) == pytest.approx(1.0)
     trust_b = w[2] / 0.3 * (w[0] / 0.4)  # b's trust: its share before the renormalisation
     assert 0.0 < trust_b < 1.0
     # own and a keep their ratio 0.4 : 0.3, together 1 - w_b
     assert w[0] / w[1] == pytest.approx(0.4 / 0.3)
     assert w[0] + w[1] == pytest.approx(1.0 - w[2])
-    to_own = Trust(TrustConfig(renormalise=False), ("a", "b")).weigh(1, 0, own, inputs,
+    to_own = Trust(_cfg(renormalise=False), ("a", "b")).weigh(1, 0, own, inputs,
                                                                      [0.4, 0.3, 0.3])
     assert to_own[1] == 0.3 and to_own[2] < 0.3
     assert to_own[0] == pytest.approx(1.0 - to_own[1] - to_own[2])
     # under a product rule the suspect is dropped, not down-weighted
-    drop = Trust(TrustConfig(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3],
+    drop = Trust(_cfg(), ("a", "b")).weigh(1, 0, own, inputs, [0.4, 0.3, 0.3],
                                                   drop_suspects=True)
     assert drop[2] == 0.0 and drop[0] == pytest.approx(0.4 / 0.7)
 
 
 def test_an_exact_repeat_is_quarantined_at_once_and_a_birth_only_density_is_not():
     rng = np.random.default_rng(3)
-    t = Trust(TrustConfig(), ("h", "stuck"))
+    t = Trust(_cfg(), ("h", "stuck"))
     held = _honest(rng)
     births = mix((0.1, A, P4), (0.1, B, P4))  # the birth intensity: the same every scan
     weights = {}
@@ -150,12 +157,12 @@ def test_an_exact_repeat_is_quarantined_at_once_and_a_birth_only_density_is_not(
     assert t.n["stuck"].state == "quarantined"
     assert t.n["h"].last_statistic < t.cfg.quarantine  # births alone repeat honestly
     # the same object again (a stale input reused) is no repeat; nor is a second round
-    t2 = Trust(TrustConfig(), ("x",))
+    t2 = Trust(_cfg(), ("x",))
     same = _honest(rng)
     t2.weigh(1, 0, same, {"x": same}, [0.5, 0.5])
     assert t2.weigh(2, 0, same, {"x": same}, [0.5, 0.5])[1] == 0.5
     assert t2.weigh(2, 1, same, {"x": same.copy()}, [0.5, 0.5])[1] == 0.5
-    off = Trust(TrustConfig(repeat=False), ("x",))
+    off = Trust(_cfg(repeat=False), ("x",))
     for k in (1, 2, 3):
         w = off.weigh(k, 0, same, {"x": same.copy()}, [0.5, 0.5])
     assert w[1] == 0.5
@@ -204,9 +211,9 @@ def test_a_biased_neighbour_is_caught_by_its_offset_within_three_scans():
                 low = k
         return low, min(honest_weights)
 
-    low, least = run(TrustConfig(bias_gate=100.0), 40)
+    low, least = run(_cfg(bias_gate=100.0), 40)
     assert low is not None and low <= 3 and least >= 0.25  # theirs grows: the liar's share
-    low_off, _ = run(TrustConfig(bias=False, bias_gate=100.0), 40)
+    low_off, _ = run(_cfg(bias=False, bias_gate=100.0), 40)
     assert low_off is None or low_off > 3  # the divergence test alone is slower
 
 
@@ -221,8 +228,8 @@ def test_two_liars_telling_the_same_lie_do_not_cover_for_each_other():
     inputs = {s: _honest(rng) for s in names[:4]}
     inputs |= {s: GaussianMixture.concatenate([_honest(rng), phantoms]) for s in names[4:]}
     w = {"": 1 / 7, **{s: 1 / 7 for s in names}}
-    med = Trust(TrustConfig(), names).statistics(own, inputs, w)
-    old = Trust(TrustConfig(median_test=False), names).statistics(own, inputs, w)
+    med = Trust(_cfg(), names).statistics(own, inputs, w)
+    old = Trust(_cfg(median_test=False), names).statistics(own, inputs, w)
     assert min(med["l1"], med["l2"]) > 4.0 and max(med[s] for s in names[:4]) < 1.0
     assert max(old["l1"], old["l2"]) < 1.0  # what the average reference gave
 
@@ -230,12 +237,12 @@ def test_two_liars_telling_the_same_lie_do_not_cover_for_each_other():
 def test_disabled_or_warming_up_changes_nothing():
     own = mix((1.0, A, P4))
     bad = {"x": mix((1.0, A + 500.0, np.eye(4)))}
-    assert Trust(TrustConfig(enabled=False), ("x",)).weigh(1, 0, own, bad, [0.5, 0.5]) == [0.5,
+    assert Trust(_cfg(enabled=False), ("x",)).weigh(1, 0, own, bad, [0.5, 0.5]) == [0.5,
                                                                                          0.5]
-    warm = Trust(TrustConfig(warmup=2), ("x",))
+    warm = Trust(_cfg(warmup=2), ("x",))
     assert warm.weigh(1, 0, own, bad, [0.5, 0.5]) == [0.5, 0.5]
     with pytest.raises(ValueError):
-        TrustConfig(suspect=5.0, quarantine=4.0)
+        _cfg(suspect=5.0, quarantine=4.0)
 
 
 def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
@@ -246,7 +253,9 @@ def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
     # plain GCI: a confident wrong estimate erases every target the honest peers fuse, unless
     # the liar is left out
     base = {"fusion.rule": "gci", "scenario.num_scans": 25}
-    scn = load_scenario("seed000", overrides={**base, "fusion.trust": True})
+    scn = load_scenario("seed000", overrides={**base, "fusion.trust": True,
+                                              "fusion.trust_register": False,
+                                              "fusion.trust_repair": False})
     res = run_with_liar(scn, 8100, "s2", "shifted")
     for n in ("s1", "s3"):
         trust = res.peers[n].snapshot()["trust"]
@@ -269,11 +278,11 @@ def test_majority_spread_is_not_held_against_one_neighbour():
     is singled out; when the others agree, the one that does not is (W-MSR-style)."""
     spread = [mix((1.0, A + [dx, 0, 0, 0], P4)) for dx in (0.0, 40.0, 80.0, 120.0)]
     names = ("n1", "n2", "n3")
-    on = Trust(TrustConfig(), names)
-    off = Trust(TrustConfig(majority=False), names)
+    on = Trust(_cfg(), names)
+    off = Trust(_cfg(majority=False), names)
     inputs = dict(zip(names, spread[1:], strict=True))
     w = {"": 0.25, **{s: 0.25 for s in names}}
-    loo = Trust(TrustConfig(median_test=False), names)  # the leave-one-out reference
+    loo = Trust(_cfg(median_test=False), names)  # the leave-one-out reference
     assert max(loo.statistics(spread[0], inputs, w).values()) < 1.0  # 0, 0, 0.56
     # the median test: the end of the line is the odd one, by half the cap at most (one such
     # scan leaves the score at 2 after the drift, under `suspect`); the others not at all
@@ -307,7 +316,7 @@ def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
     from sensornet.peers.trust_checks import miss_cost, pair_tests
 
     pd = 0.9
-    cfg = TrustConfig(detection_probability=pd)
+    cfg = _cfg(detection_probability=pd)
     own = mix((0.95, A, P4))
     missed = GaussianMixture.empty(4)
     born = mix((0.8, B, P4))  # a target own has not confirmed yet, own's far from it
@@ -320,7 +329,7 @@ def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
     for other, cost in ((missed, per * 0.95 + card(0.0, 0.95)),
                         (born, per * (0.95 + 0.8) + card(0.8, 0.95))):
         t = Trust(cfg, ("x",))
-        old = Trust(TrustConfig(), ("x",))
+        old = Trust(_cfg(), ("x",))
         for k in (1, 2, 3, 4):
             t.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
             old.weigh(k, 0, own, {"x": other}, [0.5, 0.5])
@@ -350,7 +359,7 @@ def test_a_missed_or_newly_born_target_costs_what_a_miss_explains():
     # where misses are rare (Pd 0.99) hiding two targets costs more than the divergence
     # test's value, which stays the statistic
     two = _honest(np.random.default_rng(1))
-    t, old = Trust(TrustConfig(detection_probability=0.99), ("x",)), Trust(TrustConfig(), ("x",))
+    t, old = Trust(_cfg(detection_probability=0.99), ("x",)), Trust(_cfg(), ("x",))
     t.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
     old.weigh(1, 0, two, {"x": missed}, [0.5, 0.5])
     assert -np.log(0.01) * two.mass > t.n["x"].last_statistic
@@ -364,7 +373,7 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
     far = A + [300.0, 0, 0, 0]
     own1, own2 = mix((0.95, A, P4)), mix((0.95, far, P4))
     stale = mix((0.95, A + [5.0, 0, 0, 0], P4))  # scan 1's estimate, near own1
-    t = Trust(TrustConfig(), ("x",))
+    t = Trust(_cfg(), ("x",))
     t.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
     first = t.n["x"].last_statistic
     assert first < 1.0
@@ -372,10 +381,10 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
     for k in (2, 3):
         w = t.weigh(k, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
         assert t.n["x"].last_statistic == 0.0 and w[1] == 0.5
-    plain = Trust(TrustConfig(same_scan=False), ("x",))
+    plain = Trust(_cfg(same_scan=False), ("x",))
     plain.weigh(1, 0, own1, {"x": stale}, [0.5, 0.5])
     plain.weigh(2, 0, own2, {"x": stale.copy()}, [0.5, 0.5], late={"x": (1, stale)})
-    assert plain.n["x"].last_statistic >= TrustConfig().cap
+    assert plain.n["x"].last_statistic >= _cfg().cap
     # a late first use: scan 4's estimate reaches the fusion of scan 5 and is tested
     # against own's density of scan 4 (kept though nothing came at scan 4), not of scan 5
     t.weigh(4, 0, own1, {}, [1.0])
@@ -383,7 +392,7 @@ def test_an_estimate_is_tested_once_against_own_of_its_scan():
     assert t.n["x"].last_statistic == pytest.approx(first)
     t.weigh(6, 0, own2, {}, [1.0])
     t.weigh(7, 0, own1, {"x": stale.copy()}, [0.5, 0.5], late={"x": (6, stale)})
-    assert t.n["x"].last_statistic >= TrustConfig().cap  # against own2, its scan's
+    assert t.n["x"].last_statistic >= _cfg().cap  # against own2, its scan's
 
 
 def test_unmatched_target_weights_against_brute_force_and_phantoms():
@@ -409,7 +418,7 @@ def test_unmatched_target_weights_against_brute_force_and_phantoms():
                            for v, q in zip(Db.weights, Db.means, strict=True)):
                     brute += w
             assert U[a, b] == pytest.approx(brute), (a, b)
-    cfg = TrustConfig(detection_probability=0.99)
+    cfg = _cfg(detection_probability=0.99)
     own = _honest(rng)
     phantoms = GaussianMixture.concatenate([_honest(rng), mix(  # honest-looking covariances
         (1.0, [-800.0, 0, 800.0, 0], P4), (1.0, [800.0, 0, 800.0, 0], P4),
@@ -476,7 +485,7 @@ def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
 def test_calibration_counts_which_test_began_each_quarantine():
     from sensornet.sim.trust_calibration import simulate
 
-    cfg = TrustConfig()
+    cfg = _cfg()
     none = np.zeros((6, 2))
     hit = none.copy()
     hit[2, 0] = cfg.bias_thresholds[0] + 1.0

@@ -167,13 +167,13 @@ class FusionSpec:
     trust: bool = False
     """Test each neighbour's density before fusing it and down-weight or quarantine the
     inconsistent ones (:mod:`peers.trust`)."""
-    trust_register: bool = False
+    trust_register: bool = True
     """With :attr:`trust`: repair a neighbour the offset test fires on (registration,
-    :attr:`peers.trust_config.TrustConfig.register`, a prototype) instead of quarantining it."""
-    trust_repair: bool = False
+    :attr:`peers.trust_config.TrustConfig.register`; on by default) instead of quarantining it."""
+    trust_repair: bool = True
     """With :attr:`trust`: fuse a failing neighbour's repaired density (its uncorroborated
     components dropped, its mass the others' median) where that passes the test
-    (:attr:`peers.trust_config.TrustConfig.repair`, a prototype)."""
+    (:attr:`peers.trust_config.TrustConfig.repair`; on by default)."""
     lie: str = ""
     """Test hook: ``"PEER:KIND"`` makes that peer publish lie KIND of :mod:`sim.lying` in
     every estimate (a member lying with its own valid key), in the twin and as a process."""

@@ -276,8 +276,8 @@ def _fusion(f: Table, sensor_names: list[str]) -> FusionSpec:
         fusing_sensor=fuser,
         cardinality=f.choice("cardinality", CARDINALITY_RULES, "separate"),
         trust=f.flag("trust", False),
-        trust_register=f.flag("trust_register", False),
-        trust_repair=f.flag("trust_repair", False),
+        trust_register=f.flag("trust_register", True),
+        trust_repair=f.flag("trust_repair", True),
         lie=_lie(f, sensor_names),
     )
 
