@@ -146,6 +146,8 @@ from sensornet.peers.trust_checks import (
     offset_information,
     relative_offsets,
     target_mass,
+    unmatched_weights,
+    withheld_increments,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.divergence import log_overlaps
@@ -163,6 +165,12 @@ def offset_limits(cfg: TrustConfig) -> tuple[float, ...]:
     :attr:`TrustConfig.bias_windows` its chi-square threshold, then (with
     :attr:`TrustConfig.bias_cusum`) the CUSUM's."""
     return (*cfg.bias_thresholds, *((cfg.bias_cusum_threshold,) if cfg.bias_cusum else ()))
+
+
+def alarm_limits(cfg: TrustConfig) -> tuple[float, ...]:
+    """The limits of the values in :attr:`Trust.history`'s last field: :func:`offset_limits`,
+    then (with :attr:`TrustConfig.withhold`) the withheld-target CUSUM's."""
+    return (*offset_limits(cfg), *((cfg.withhold_threshold,) if cfg.withhold else ()))
 
 
 @dataclass
@@ -194,6 +202,8 @@ class NeighbourTrust:
     then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
     cusum: np.ndarray | None = None
     """The offset CUSUM's charts, ``(directions,)`` (:func:`peers.trust_checks.offset_cusum`)."""
+    withheld: float = 0.0
+    """The withheld-target CUSUM (:attr:`TrustConfig.withhold`)."""
     registered: np.ndarray | None = None
     """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
     or None."""
@@ -220,8 +230,9 @@ class Trust:
         self.log: list[dict] = []
         """Every state change (bounded: the first :data:`MAX_LOG`), for the summary."""
         self.history: list[tuple[int, str, float, float, float]] | None = None
-        """When a list: every ``(k, neighbour, statistic, score, offset chi-square)``
-        (calibration; the statistic without the offset test's part)."""
+        """When a list: every ``(k, neighbour, statistic, score, values)``, ``values`` those
+        of :func:`alarm_limits` (calibration; the statistic without the offset and
+        withheld-target tests' parts)."""
 
     # -- one round ----------------------------------------------------------------------------
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
@@ -294,6 +305,9 @@ class Trust:
                     self._register(rec, alarm)
                 elif alarm:
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
+        if rnd == 0 and cfg.withhold and cfg.detection_probability is not None:
+            for s in self._withheld(own, shown, [s for s in names if s not in late]):
+                stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -309,8 +323,9 @@ class Trust:
             if rec.low_k is None and t <= LOW:
                 rec.low_k = k
             if self.history is not None:
-                self.history.append((k, s, raw[s], score,
-                                     rec.last_offset_chi2 if s in tested else ()))
+                self.history.append((k, s, raw[s], score, (
+                    *rec.last_offset_chi2, *((rec.withheld,) if cfg.withhold else ()))
+                    if s in tested and rec.last_offset_chi2 else ()))
             out.append(wmap[s] * t)
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(stats[s], 4), "score": round(score, 4),
@@ -344,6 +359,23 @@ class Trust:
             return False
         rec.last_mix, rec.last_k = mix, k
         return is_repeat(prev, mix, self.cfg.repeat_weight)
+
+    def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                  fresh: list[str]) -> list[str]:
+        """Add this scan's increment to each ``fresh`` neighbour's withheld-target CUSUM
+        (:attr:`TrustConfig.withhold`; references: own and the other fresh neighbours not
+        quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
+        cfg = self.cfg
+        mixes = [own] + [shown[s] for s in fresh]
+        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate)
+        tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
+        ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
+        refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
+        inc = withheld_increments(U, tm, refs, cfg.detection_probability,
+                                  cfg.withhold_alternative, cfg.withhold_cap)
+        for s, v in zip(fresh, inc[1:], strict=True):
+            self.n[s].withheld = max(0.0, self.n[s].withheld + float(v))
+        return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
     def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:
         """Add this scan's ``(I, y)`` (:func:`peers.trust_checks.offset_information`) to the

@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig, offset_limits
+from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig, alarm_limits
 from sensornet.sim.graphs import network_scenario
 from sensornet.sim.lying import LyingCore, make_lie
 from sensornet.sim.peers import make_peer
@@ -26,7 +26,7 @@ from sensornet.sim.scenario import load_scenario
 from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf),
-                   bias_cusum_threshold=np.inf)
+                   bias_cusum_threshold=np.inf, withhold_threshold=np.inf)
 """The test runs, nothing is down-weighted."""
 
 
@@ -35,13 +35,14 @@ def open_like(cfg: TrustConfig) -> TrustConfig:
     thresholds."""
     return replace(cfg, suspect=OPEN.suspect, quarantine=OPEN.quarantine,
                    bias_thresholds=OPEN.bias_thresholds,
-                   bias_cusum_threshold=OPEN.bias_cusum_threshold)
+                   bias_cusum_threshold=OPEN.bias_cusum_threshold,
+                   withhold_threshold=OPEN.withhold_threshold)
 
 Seq = tuple[np.ndarray, np.ndarray]
-"""Per scan: the statistic without the offset test (``(n,)``), and the offset test's
-chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows` then its CUSUM
-(``(n, windows + 1)``: :func:`peers.trust.offset_limits`)."""
-LIMITS = len(offset_limits(OPEN))
+"""Per scan: the statistic without the offset and withheld-target tests (``(n,)``), and the
+offset test's chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows`, its
+CUSUM, then the withheld-target CUSUM (``(n, windows + 2)``: :func:`peers.trust.alarm_limits`)."""
+LIMITS = len(alarm_limits(OPEN))
 
 
 def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
@@ -121,18 +122,21 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     hysteresis), and the scores' quantiles; ``first_low``: per sequence, the first scan (1:
     the first) at weight <= 0.1, or None; ``causes``: the quarantines begun, by the test
     that fired at that scan (``offset``, ``repeat``, else ``divergence``: the divergence,
-    miss and unmatched terms' score)."""
+    miss and unmatched terms' score; ``withhold``: the withheld-target CUSUM)."""
     t = Trust(cfg, ())
     scores, low, zero, n, first_low = [], 0, 0, 0, []
-    causes = {"divergence": 0, "offset": 0, "repeat": 0}
+    causes = {"divergence": 0, "offset": 0, "repeat": 0, "withhold": 0}
+    lim = np.array(alarm_limits(cfg))
     for raw, chi2 in seqs:
         seq = raw.copy()
         hit = np.zeros(len(seq), bool)
+        held = np.zeros(len(seq), bool)
         if cfg.bias and len(seq):
-            lim = np.array(offset_limits(cfg))
-            m = min(chi2.shape[1], len(lim))  # the columns both have
+            m = min(chi2.shape[1], len(lim) - cfg.withhold)  # the offset columns both have
             hit = (chi2[:, :m] > lim[:m]).any(axis=1)
-            seq[hit] = np.maximum(seq[hit], cfg.quarantine + cfg.drift)
+        if cfg.withhold and len(seq) and chi2.shape[1] == len(lim):
+            held = chi2[:, -1] > lim[-1]
+        seq[hit | held] = np.maximum(seq[hit | held], cfg.quarantine + cfg.drift)
         rec = NeighbourTrust()
         first = None
         for i, stat in enumerate(seq):
@@ -145,7 +149,7 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
             n += 1
             rec.score = score
             if score >= cfg.quarantine and rec.state != "quarantined":
-                causes["offset" if hit[i] else "repeat"
+                causes["offset" if hit[i] else "withhold" if held[i] else "repeat"
                        if raw[i] == cfg.quarantine + cfg.drift else "divergence"] += 1
             if score >= cfg.quarantine:
                 rec.state, rec.streak = "quarantined", 0
@@ -186,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
                       f" of {sim['triples']} (begun by: "
                       + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
-                      + "); offset chi2 per window and CUSUM q99.9 "
+                      + "); offset chi2 per window, offset CUSUM, withheld CUSUM q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
                       f"{np.round(chi2.max(axis=0), 1)}", flush=True)
         if a.save:
