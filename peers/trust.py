@@ -89,6 +89,34 @@ and fused, re-estimated each scan until its CUSUM is back at 0. On the evaluatio
 brings seed 000's biased liar under the hybrid from 22.3 to 17.3 m (clean 16.3; the liar
 left out, 24.2): docs/security.md.
 
+Withheld targets have a sequential test of their own (:attr:`TrustConfig.withhold`): the
+leaky score's drift and leak slow a neighbour that publishes nothing (its statistic is about
+5 a scan with one target, weight 0.1 at the fourth scan at best), and a scan at which own
+is briefly empty too (statistic 0) lets the score fade. Per
+neighbour, Page's CUSUM of the log-likelihood ratio that it withholds the targets its
+references show against an honest filter that missed them (a Bernoulli miss per unit of
+target weight, Wald's SPRT increment: ``log(0.99 / (1 - Pd))`` per unit withheld,
+``log(0.01 / Pd)`` per unit shown, :func:`peers.trust_checks.withheld_increments`; the
+median over own and the other trusted fresh neighbours, the smallest with fewer than three)
+has no drift and no leak: a scan with nothing to compare holds it, a matched target resets
+it. Honest misses are not independent across targets: a filter drops every track at once
+(a whole loss: the neighbour shows no target while its references show one or more) on
+1.15 % of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition
+below). So one scan's increment is at most ``-log 0.0115 = 4.47`` (two lost targets are
+no more evidence than one scan of a whole loss) and the threshold, 10, lies between two
+scans of a whole loss (8.94) and three (13.4). At Pd 0.99 (the training runs clean and
+with link faults) honest whole losses lasted two scans 97 times (per tester and
+neighbour) and three once (seed 000 clean, s2 at scans 81-83 of run 9000, seen by both
+its testers); at Pd 0.9 they last longer (three or four scans 54 times) but a unit of
+target weight is worth less (``log(0.99 / 0.1) = 2.3``) and four reached 10 (circulant).
+So a neighbour that withholds everything is quarantined at its third scan, an honest one
+that loses everything for two is not, and the honest three-scan loss is quarantined like
+a liar: seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2),
+circulant at Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged
+(``python -m sensornet.sim.trust_calibration --runs 2``). On the training runs' lies it
+takes seed 000's *empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3.
+The parameters (alternative 0.99, cap, threshold) were set on the training runs only.
+
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
@@ -105,7 +133,9 @@ percentiles of the honest scores before the majority term, which lowered them to
 pooled 99th / 99.9th percentiles were 2.38 / 7.38, with the same-scan test, the
 missed-detection bound and the unmatched term 2.05 / 5.52 (thresholds kept). Honest
 neighbours quarantined, clean / Pd 0.9 / link faults: seed 000 2.67 / 0 / 2.85 %, seed 004
-0 / 0 / 0 %, circulant 0.13 / 0.09 / 0.06 % (before the same-scan test and the
+0 / 0 / 0 %, circulant 0.13 / 0.09 / 0.06 %; with the withheld-target test seed 000
+4.33 / 0 / 2.85 %, seed 004 0 / 0 / 0 %, circulant 0.13 / 0.30 / 0.06 % (its largest honest
+values 13.3, seed 000 clean, and 13.4, circulant at Pd 0.9) (before the same-scan test and the
 missed-detection bound: 3.58 / 0.67 / 3.94, 0 / 0 / 0 and 0.21 / 0.29 / 0.50 %; the
 instrumented counts, ``begun by``, showed every one begun by the divergence test: under link
 faults a neighbour's empty estimate after a miss, reused and predicted forward for two or
