@@ -105,3 +105,21 @@ def test_an_empty_neighbour_is_out_by_the_third_scan_and_an_honest_loss_of_two_i
         assert t.n["x"].withheld <= 2 * per + 1e-9
     t.finish()
     assert t.n["x"].state != "quarantined" and t.n["x"].withheld == 0.0
+
+
+def test_a_late_or_reused_estimate_adds_no_increment_and_quarantined_ones_are_no_reference():
+    cfg = TrustConfig(detection_probability=0.99)
+    per = min(np.log(0.99 / 0.01) * 0.95, cfg.withhold_cap)
+    target = mix((0.95, A, P4))
+    t = Trust(cfg, ("h", "x"))
+    t.weigh(1, 0, target, {"h": target, "x": EMPTY}, [1 / 3, 1 / 3, 1 / 3])
+    assert t.n["x"].withheld == pytest.approx(per)
+    # scan 2: x's input is its scan-1 estimate again (late): no new evidence
+    t.weigh(2, 0, target, {"h": target, "x": EMPTY}, [1 / 3, 1 / 3, 1 / 3],
+            late={"x": (1, EMPTY)})
+    assert t.n["x"].withheld == pytest.approx(per)
+    # a quarantined neighbour is no reference: x empty against own empty alone adds 0, and
+    # h's targets (h quarantined) do not count against it
+    t.n["h"].state = "quarantined"
+    t.weigh(3, 0, EMPTY, {"h": target, "x": EMPTY}, [1 / 3, 1 / 3, 1 / 3])
+    assert t.n["x"].withheld == pytest.approx(per)
