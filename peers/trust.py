@@ -177,6 +177,7 @@ from sensornet.peers.trust_checks import (
     relative_offsets,
     target_mass,
     unmatched_weights,
+    whole_losses,
     withheld_increments,
 )
 from sensornet.peers.trust_config import TrustConfig
@@ -259,6 +260,12 @@ class Trust:
         self.records: list[dict] = []
         self.log: list[dict] = []
         """Every state change (bounded: the first :data:`MAX_LOG`), for the summary."""
+        self.losses: Counter | None = None
+        """When a Counter (calibration): fresh neighbour estimates whose references showed a
+        target (``"compared"``), those that showed none (``"lost"``), and per length ``n``
+        the runs of ``n`` such scans in a row that ended (:func:`peers.trust_checks.
+        whole_losses`; what :attr:`TrustConfig.withhold_cap` was set from)."""
+        self._loss_runs: dict[str, int] = {}
         self.history: list[tuple[int, str, float, float, float]] | None = None
         """When a list: every ``(k, neighbour, statistic, score, values)``, ``values`` those
         of :func:`alarm_limits` (calibration; the statistic without the offset and
@@ -405,6 +412,16 @@ class Trust:
                                   cfg.withhold_alternative, cfg.withhold_cap)
         for s, v in zip(fresh, inc[1:], strict=True):
             self.n[s].withheld = max(0.0, self.n[s].withheld + float(v))
+        if self.losses is not None:
+            for s, lost in zip(fresh, whole_losses(tm, refs, cfg.repeat_weight)[1:],
+                               strict=True):
+                if lost == 1.0:
+                    self._loss_runs[s] = self._loss_runs.get(s, 0) + 1
+                elif lost == 0.0 and self._loss_runs.get(s):
+                    self.losses[self._loss_runs.pop(s)] += 1
+                if not np.isnan(lost):
+                    self.losses["compared"] += 1
+                    self.losses["lost"] += int(lost)
         return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
     def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:

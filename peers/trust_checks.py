@@ -327,3 +327,20 @@ def withheld_increments(U: np.ndarray, targets: np.ndarray, refs: np.ndarray,
         elif len(r):
             out[j] = float(L[r, j].min())
     return out
+
+
+def whole_losses(targets: np.ndarray, refs: np.ndarray, min_weight: float) -> np.ndarray:
+    """Per input ``j`` (``(n,)``): 1 where it shows no target while its references do (their
+    target weight, median with three or more, else smallest, at least ``min_weight``: a
+    whole loss, or *empty*), 0 where it shows some, NaN where the references show none (or
+    it has none; own, index 0, NaN). What :attr:`TrustConfig.withhold_cap` was set from;
+    ``targets`` and ``refs`` as in :func:`withheld_increments`."""
+    out = np.full(len(targets), np.nan)
+    for j in range(1, len(targets)):
+        r = np.flatnonzero(refs[j])
+        if len(r) == 0:
+            continue
+        ref = float(np.median(targets[r])) if len(r) >= 3 else float(targets[r].min())
+        if ref >= min_weight:
+            out[j] = float(targets[j] <= 0.0)
+    return out

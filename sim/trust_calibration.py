@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
@@ -81,19 +82,32 @@ def setups(tmp: Path) -> dict[str, tuple[str, dict]]:
             "circ4-20": (str(circ), {"network.rounds": 2})}
 
 
-def sequences(source: str, overrides: dict, run: int) -> list[Seq]:
+def sequences(source: str, overrides: dict, run: int,
+              losses: Counter | None = None) -> list[Seq]:
     """Per (peer, neighbour): the per-scan statistic (largest of the scan's rounds) of one
-    clean twin run with the test open, in scan order."""
+    clean twin run with the test open, in scan order. ``losses``: the peers' whole-loss
+    counts (:attr:`peers.trust.Trust.losses`) are added to it."""
     scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     for p in peers.values():
         p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
+        p.consensus.trust.losses = Counter()
     run_twin(scn, run, peers=peers)
     out = []
     for p in peers.values():
         out += list(_per_scan(p.consensus.trust.history).values())
+        if losses is not None:
+            losses.update(p.consensus.trust.losses)
     return out
+
+
+def loss_line(c: Counter) -> str:
+    """Whole losses (:func:`peers.trust_checks.whole_losses`): their share of the compared
+    triples and the runs of each length that ended."""
+    runs = {n: m for n, m in sorted((k, v) for k, v in c.items() if isinstance(k, int))}
+    return (f"whole losses {c['lost']} of {c['compared']} "
+            f"({100 * c['lost'] / max(c['compared'], 1):.2f} %), runs {runs}")
 
 
 def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
@@ -173,13 +187,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", help="write the statistics here (.npz)")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        pooled = []
+        pooled, all_losses = [], Counter()
         for label, (source, over) in setups(Path(tmp)).items():
             for cond, extra in CONDITIONS.items():
                 if label.startswith("seed004") and cond == "pd0.9":
                     extra = {"sensors.detection_probability": 0.9}
+                losses = Counter()
                 seqs = [q for r in range(a.first_run, a.first_run + a.runs)
-                        for q in sequences(source, {**over, **extra}, r)]
+                        for q in sequences(source, {**over, **extra}, r, losses)]
+                all_losses.update(losses)
                 pooled += seqs
                 stat = np.concatenate([q[0] for q in seqs])
                 chi2 = np.concatenate([q[1] for q in seqs if len(q[0])])
@@ -192,13 +208,15 @@ def main(argv: list[str] | None = None) -> int:
                       + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
                       + "); offset chi2 per window, offset CUSUM, withheld CUSUM q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
-                      f"{np.round(chi2.max(axis=0), 1)}", flush=True)
+                      f"{np.round(chi2.max(axis=0), 1)}; " + loss_line(losses), flush=True)
         if a.save:
             np.savez_compressed(a.save, *[x for q in pooled for x in q])
         sim = simulate(pooled, TrustConfig())
         print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
               f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "
-              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan)")
+              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan); "
+              + loss_line(all_losses) + ", -log of the rate "
+              f"{-np.log(max(all_losses['lost'], 1) / max(all_losses['compared'], 1)):.2f}")
     return 0
 
 

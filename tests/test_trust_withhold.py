@@ -123,3 +123,29 @@ def test_a_late_or_reused_estimate_adds_no_increment_and_quarantined_ones_are_no
     t.n["h"].state = "quarantined"
     t.weigh(3, 0, EMPTY, {"h": target, "x": EMPTY}, [1 / 3, 1 / 3, 1 / 3])
     assert t.n["x"].withheld == pytest.approx(per)
+
+
+def test_whole_losses_and_their_runs_are_counted_for_the_calibration():
+    from collections import Counter
+
+    from sensornet.peers.trust_checks import whole_losses
+
+    targets = np.array([0.9, 0.0, 0.0, 1.2, 0.0])
+    refs = ~np.eye(5, dtype=bool)
+    refs[2] = refs[3] = [True, False, False, False, False]  # inputs 2, 3: own alone
+    refs[4, 0] = False  # input 4: references 1, 2, 3, median 0
+    got = whole_losses(targets, refs, 0.5)
+    # 1: median of (0.9, 0, 1.2, 0) = 0.45 < 0.5, not compared; 2: own's 0.9, lost;
+    # 3: shows 1.2 against own's 0.9; 4: median of (0, 0, 1.2) = 0, not compared
+    np.testing.assert_array_equal(got, [np.nan, np.nan, 1.0, 0.0, np.nan])
+    t = Trust(TrustConfig(detection_probability=0.99), ("h", "x"))
+    t.losses = Counter()
+    target = mix((0.95, A, P4))
+    for k in range(1, 10):  # x loses everything at scans 2-3 and 5-7, own too at scan 6
+        x = EMPTY if k in (2, 3, 5, 6, 7) else target
+        t.weigh(k, 0, EMPTY if k == 6 else target, {"h": target, "x": x},
+                [1 / 3, 1 / 3, 1 / 3])
+    # compared (the smaller of two references at least 0.5): h at scans 1, 4, 8, 9 (else
+    # x or own empty), x at every scan but 6 (own empty); x's runs: 2-3 and 5, 7 (scan 6
+    # not compared, so no break), two scans each
+    assert t.losses == Counter({"compared": 4 + 8, "lost": 4, 2: 2})
