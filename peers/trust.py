@@ -99,23 +99,24 @@ target weight, Wald's SPRT increment: ``log(0.99 / (1 - Pd))`` per unit withheld
 ``log(0.01 / Pd)`` per unit shown, :func:`peers.trust_checks.withheld_increments`; the
 median over own and the other trusted fresh neighbours, the smallest with fewer than three)
 has no drift and no leak: a scan with nothing to compare holds it, a matched target resets
-it. Honest misses are not independent across targets: a filter drops every track at once
-(a whole loss: the neighbour shows no target while its references show one or more) on
-1.15 % of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition
-below). So one scan's increment is at most ``-log 0.0115 = 4.47`` (two lost targets are
-no more evidence than one scan of a whole loss) and the threshold, 10, lies between two
-scans of a whole loss (8.94) and three (13.4). At Pd 0.99 (the training runs clean and
-with link faults) honest whole losses lasted two scans 97 times (per tester and
-neighbour) and three once (seed 000 clean, s2 at scans 81-83 of run 9000, seen by both
-its testers); at Pd 0.9 they last longer (three or four scans 54 times) but a unit of
-target weight is worth less (``log(0.99 / 0.1) = 2.3``) and four reached 10 (circulant).
-So a neighbour that withholds everything is quarantined at its third scan, an honest one
-that loses everything for two is not, and the honest three-scan loss is quarantined like
-a liar: seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2),
-circulant at Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged
-(``python -m sensornet.sim.trust_calibration --runs 2``). On the training runs' lies it
-takes seed 000's *empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3.
-The parameters (alternative 0.99, cap, threshold) were set on the training runs only.
+it. Honest misses are not independent across targets: a filter drops every track at once (a
+whole loss: the neighbour shows no target while its references show one or more) on 1.15 %
+of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition below;
+``python -m sensornet.sim.trust_calibration --runs 2`` prints them and the runs of each
+length, :attr:`Trust.losses`). So one scan's increment is at most ``-log 0.0115 = 4.47``
+(two lost targets are no more evidence than one scan of a whole loss) and the threshold, 10,
+lies between two scans of a whole loss (8.94) and three (13.4). At Pd 0.99 (the training
+runs clean and with link faults) honest whole losses lasted two scans 92 times (per tester
+and neighbour) and three once (seed 000 clean, s2 at scans 81-83 of run 9000, seen by both
+its testers); at Pd 0.9 they last longer (three or four scans 51 times) but a unit of target
+weight is worth less (``log(0.99 / 0.1) = 2.3``) and four reached 10 (circulant). So a
+neighbour that withholds everything is quarantined at its third scan, an honest one that
+loses everything for two is not, and the honest three-scan loss is quarantined like a liar:
+seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2), circulant at
+Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged (``python -m
+sensornet.sim.trust_calibration --runs 2``). On the training runs' lies it takes seed 000's
+*empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3. The parameters
+(alternative 0.99, cap, threshold) were set on the training runs only.
 
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes

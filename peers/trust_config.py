@@ -153,7 +153,7 @@ class TrustConfig:
     is as much evidence as a liar's four scans of one."""
     withhold_threshold: float = 10.0
     """CUSUM value (nats) at which the neighbour is quarantined: above two scans of a whole
-    loss (``2 x 4.47 = 8.94``; 97 honest two-scan losses at Pd 0.99 on the training runs)
+    loss (``2 x 4.47 = 8.94``; 92 honest two-scan losses at Pd 0.99 on the training runs)
     and below three (13.4; one honest three-scan loss there, seed 000 clean run 9000), set
     on the training runs 9000-9001 (see :mod:`peers.trust`)."""
     same_scan: bool = True
