@@ -100,6 +100,35 @@ caught as before. Both are on by default: on the training runs 9000-9002 (seed 0
 alone or equal in every cell, clean runs and honest quarantines unchanged or lower. The
 evaluation runs: docs/security.md.
 
+Withheld targets have a sequential test of their own (:attr:`TrustConfig.withhold`): the
+leaky score's drift and leak slow a neighbour that publishes nothing (its statistic is about
+5 a scan with one target, weight 0.1 at the fourth scan at best), and a scan at which own
+is briefly empty too (statistic 0) lets the score fade. Per
+neighbour, Page's CUSUM of the log-likelihood ratio that it withholds the targets its
+references show against an honest filter that missed them (a Bernoulli miss per unit of
+target weight, Wald's SPRT increment: ``log(0.99 / (1 - Pd))`` per unit withheld,
+``log(0.01 / Pd)`` per unit shown, :func:`peers.trust_checks.withheld_increments`; the
+median over own and the other trusted fresh neighbours, the smallest with fewer than three)
+has no drift and no leak: a scan with nothing to compare holds it, a matched target resets
+it. Honest misses are not independent across targets: a filter drops every track at once (a
+whole loss: the neighbour shows no target while its references show one or more) on 1.15 %
+of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition below;
+``python -m sensornet.sim.trust_calibration --runs 2`` prints them and the runs of each
+length, :attr:`Trust.losses`). So one scan's increment is at most ``-log 0.0115 = 4.47``
+(two lost targets are no more evidence than one scan of a whole loss) and the threshold, 10,
+lies between two scans of a whole loss (8.94) and three (13.4). At Pd 0.99 (the training
+runs clean and with link faults) honest whole losses lasted two scans 92 times (per tester
+and neighbour) and three once (seed 000 clean, s2 at scans 81-83 of run 9000, seen by both
+its testers); at Pd 0.9 they last longer (three or four scans 51 times) but a unit of target
+weight is worth less (``log(0.99 / 0.1) = 2.3``) and four reached 10 (circulant). So a
+neighbour that withholds everything is quarantined at its third scan, an honest one that
+loses everything for two is not, and the honest three-scan loss is quarantined like a liar:
+seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2), circulant at
+Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged (``python -m
+sensornet.sim.trust_calibration --runs 2``). On the training runs' lies it takes seed 000's
+*empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3. The parameters
+(alternative 0.99, cap, threshold) were set on the training runs only.
+
 A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
@@ -116,7 +145,9 @@ percentiles of the honest scores before the majority term, which lowered them to
 pooled 99th / 99.9th percentiles were 2.38 / 7.38, with the same-scan test, the
 missed-detection bound and the unmatched term 2.05 / 5.52 (thresholds kept). Honest
 neighbours quarantined, clean / Pd 0.9 / link faults: seed 000 2.67 / 0 / 2.85 %, seed 004
-0 / 0 / 0 %, circulant 0.13 / 0.09 / 0.06 % (before the same-scan test and the
+0 / 0 / 0 %, circulant 0.13 / 0.09 / 0.06 %; with the withheld-target test seed 000
+4.33 / 0 / 2.85 %, seed 004 0 / 0 / 0 %, circulant 0.13 / 0.30 / 0.06 % (its largest honest
+values 13.3, seed 000 clean, and 13.4, circulant at Pd 0.9) (before the same-scan test and the
 missed-detection bound: 3.58 / 0.67 / 3.94, 0 / 0 / 0 and 0.21 / 0.29 / 0.50 %; the
 instrumented counts, ``begun by``, showed every one begun by the divergence test: under link
 faults a neighbour's empty estimate after a miss, reused and predicted forward for two or
@@ -157,6 +188,9 @@ from sensornet.peers.trust_checks import (
     offset_information,
     relative_offsets,
     target_mass,
+    unmatched_weights,
+    whole_losses,
+    withheld_increments,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.peers.trust_repair import corroborated_part, moved_to_own, scan_factor
@@ -175,6 +209,12 @@ def offset_limits(cfg: TrustConfig) -> tuple[float, ...]:
     :attr:`TrustConfig.bias_windows` its chi-square threshold, then (with
     :attr:`TrustConfig.bias_cusum`) the CUSUM's."""
     return (*cfg.bias_thresholds, *((cfg.bias_cusum_threshold,) if cfg.bias_cusum else ()))
+
+
+def alarm_limits(cfg: TrustConfig) -> tuple[float, ...]:
+    """The limits of the values in :attr:`Trust.history`'s last field: :func:`offset_limits`,
+    then (with :attr:`TrustConfig.withhold`) the withheld-target CUSUM's."""
+    return (*offset_limits(cfg), *((cfg.withhold_threshold,) if cfg.withhold else ()))
 
 
 @dataclass
@@ -206,6 +246,8 @@ class NeighbourTrust:
     then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
     cusum: np.ndarray | None = None
     """The offset CUSUM's charts, ``(directions,)`` (:func:`peers.trust_checks.offset_cusum`)."""
+    withheld: float = 0.0
+    """The withheld-target CUSUM (:attr:`TrustConfig.withhold`)."""
     registered: np.ndarray | None = None
     """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
     or None."""
@@ -248,9 +290,16 @@ class Trust:
         self.fused_in: dict[str, GaussianMixture] = {}
         """The repaired densities the last round fuses in place of the neighbours' own
         (:attr:`TrustConfig.repair`)."""
+        self.losses: Counter | None = None
+        """When a Counter (calibration): fresh neighbour estimates whose references showed a
+        target (``"compared"``), those that showed none (``"lost"``), and per length ``n``
+        the runs of ``n`` such scans in a row that ended (:func:`peers.trust_checks.
+        whole_losses`; what :attr:`TrustConfig.withhold_cap` was set from)."""
+        self._loss_runs: dict[str, int] = {}
         self.history: list[tuple[int, str, float, float, float]] | None = None
-        """When a list: every ``(k, neighbour, statistic, score, offset chi-square)``
-        (calibration; the statistic without the offset test's part)."""
+        """When a list: every ``(k, neighbour, statistic, score, values)``, ``values`` those
+        of :func:`alarm_limits` (calibration; the statistic without the offset and
+        withheld-target tests' parts)."""
 
     # -- one round ----------------------------------------------------------------------------
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
@@ -326,6 +375,9 @@ class Trust:
                     self._register(rec, alarm)
                 elif alarm:
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
+        if rnd == 0 and cfg.withhold and cfg.detection_probability is not None:
+            for s in self._withheld(own, shown, [s for s in names if s not in late]):
+                stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -347,8 +399,9 @@ class Trust:
             if rec.low_k is None and t <= LOW:
                 rec.low_k = k
             if self.history is not None:
-                self.history.append((k, s, raw[s], score,
-                                     rec.last_offset_chi2 if s in tested else ()))
+                self.history.append((k, s, raw[s], score, (
+                    *rec.last_offset_chi2, *((rec.withheld,) if cfg.withhold else ()))
+                    if s in tested and rec.last_offset_chi2 else ()))
             out.append(wmap[s] * t)
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(stats[s], 4), "score": round(score, 4),
@@ -458,6 +511,33 @@ class Trust:
             return False
         rec.last_mix, rec.last_k = mix, k
         return is_repeat(prev, mix, self.cfg.repeat_weight)
+
+    def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                  fresh: list[str]) -> list[str]:
+        """Add this scan's increment to each ``fresh`` neighbour's withheld-target CUSUM
+        (:attr:`TrustConfig.withhold`; references: own and the other fresh neighbours not
+        quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
+        cfg = self.cfg
+        mixes = [own] + [shown[s] for s in fresh]
+        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate)
+        tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
+        ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
+        refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
+        inc = withheld_increments(U, tm, refs, cfg.detection_probability,
+                                  cfg.withhold_alternative, cfg.withhold_cap)
+        for s, v in zip(fresh, inc[1:], strict=True):
+            self.n[s].withheld = max(0.0, self.n[s].withheld + float(v))
+        if self.losses is not None:
+            for s, lost in zip(fresh, whole_losses(tm, refs, cfg.repeat_weight)[1:],
+                               strict=True):
+                if lost == 1.0:
+                    self._loss_runs[s] = self._loss_runs.get(s, 0) + 1
+                elif lost == 0.0 and self._loss_runs.get(s):
+                    self.losses[self._loss_runs.pop(s)] += 1
+                if not np.isnan(lost):
+                    self.losses["compared"] += 1
+                    self.losses["lost"] += int(lost)
+        return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
     def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:
         """Add this scan's ``(I, y)`` (:func:`peers.trust_checks.offset_information`) to the

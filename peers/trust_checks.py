@@ -14,6 +14,8 @@ references and their calibration are in :mod:`peers.trust`'s docstring).
 - :func:`offset_information` and :func:`offset_chi2`: the generalised-least-squares offset
   of a biased sensor over windows of scans; :func:`offset_cusum`: Page's CUSUM of its
   log-likelihood ratio against a 30 m-class bias, over all scans.
+- :func:`withheld_increments`: one scan's log-likelihood ratio that a neighbour withholds
+  the targets its references show (Page's CUSUM of it: :attr:`TrustConfig.withhold`).
 """
 
 from __future__ import annotations
@@ -289,3 +291,56 @@ def _lse(x: np.ndarray) -> float:
     if not np.isfinite(top):
         return -np.inf
     return float(top + np.log(np.exp(x - top).sum()))
+
+
+def withheld_increments(U: np.ndarray, targets: np.ndarray, refs: np.ndarray,
+                        detection_probability: float, alternative: float,
+                        cap: float) -> np.ndarray:
+    """Per input ``j`` (``(n,)``; 0 for own, index 0): one scan's log-likelihood ratio that
+    ``j`` withholds the targets its references show (a lie such as *empty*) against an
+    honest filter that missed them (:attr:`TrustConfig.withhold`).
+
+    Against a reference ``r`` (a Bernoulli miss model per unit of target weight, Wald 1945,
+    "Sequential tests of statistical hypotheses", Ann. Math. Stat. 16(2)): ``d`` of ``r``'s
+    target weight has no target of ``j`` within the gate beyond what ``j`` shows unmatched
+    itself (``max(0, U[r, j] - U[j, r])``: a track re-acquired elsewhere is not withheld),
+    ``m = targets[r] - U[r, j]`` is matched. An honest ``j`` lacks a target at rate
+    ``1 - Pd`` (a miss, or a birth a scan apart), the withholding one at rate
+    ``alternative``, so ``l = min(d log(alternative / (1 - Pd)), cap) + m log((1 -
+    alternative) / Pd)``. ``cap``: honest filters lose all their tracks at once (the misses
+    of one scan are not independent), so one scan is no more evidence than such a loss,
+    ``-log`` of its honest rate. Over the references (``refs``, ``(n, n)`` bool: ``refs[j,
+    r]`` whether ``r`` is a reference of ``j``): the median with three or more (W-MSR's
+    majority), else the smallest (no majority to outvote a reference that lies itself); 0
+    with none. ``U`` (``(n, n)``): :func:`unmatched_weights`; ``targets`` (``(n,)``):
+    :func:`target_mass`."""
+    a = np.log(alternative) - np.log1p(-detection_probability)
+    b = np.log1p(-alternative) - np.log(detection_probability)
+    d = np.maximum(0.0, U - U.T)  # [r, j]: r's target weight j lacks, net of j's own extras
+    m = np.maximum(0.0, targets[:, None] - U)  # [r, j]: r's target weight j shows too
+    L = np.minimum(a * d, cap) + b * m  # [r, j]
+    out = np.zeros(len(targets))
+    for j in range(1, len(targets)):  # per neighbour (not per component)
+        r = np.flatnonzero(refs[j])
+        if len(r) >= 3:
+            out[j] = float(np.median(L[r, j]))
+        elif len(r):
+            out[j] = float(L[r, j].min())
+    return out
+
+
+def whole_losses(targets: np.ndarray, refs: np.ndarray, min_weight: float) -> np.ndarray:
+    """Per input ``j`` (``(n,)``): 1 where it shows no target while its references do (their
+    target weight, median with three or more, else smallest, at least ``min_weight``: a
+    whole loss, or *empty*), 0 where it shows some, NaN where the references show none (or
+    it has none; own, index 0, NaN). What :attr:`TrustConfig.withhold_cap` was set from;
+    ``targets`` and ``refs`` as in :func:`withheld_increments`."""
+    out = np.full(len(targets), np.nan)
+    for j in range(1, len(targets)):
+        r = np.flatnonzero(refs[j])
+        if len(r) == 0:
+            continue
+        ref = float(np.median(targets[r])) if len(r) >= 3 else float(targets[r].min())
+        if ref >= min_weight:
+            out[j] = float(targets[j] <= 0.0)
+    return out

@@ -155,6 +155,33 @@ class TrustConfig:
     for little (the overlap of the matched ones dominates)."""
     unmatched_cost: float = 2.0
     """Statistic per unit of unmatched target weight (:attr:`unmatched`)."""
+    withhold: bool = True
+    """With :attr:`detection_probability`: a sequential test for withheld targets (a
+    neighbour that shows less than its references, *empty* at the extreme). Per neighbour,
+    Page's CUSUM (Page 1954, "Continuous inspection schemes", Biometrika 41(1/2)) of the
+    per-scan log-likelihood ratio of withholding against honest misses,
+    :func:`peers.trust_checks.withheld_increments` (a Bernoulli miss per unit of target
+    weight, Wald's SPRT increment), ``g_k = max(0, g_(k-1) + l_k)``: no drift and no leak,
+    so a scan where nothing can be compared (own briefly empty too) holds it instead of
+    letting it fade, and a matched target takes it back to 0 at once. Each fresh estimate
+    (:attr:`same_scan`) adds one increment; late and stale ones add none. Above
+    :attr:`withhold_threshold` the scan's statistic is at least ``quarantine + drift``."""
+    withhold_alternative: float = 0.99
+    """The alternative's rate of lacking a target (a withholding neighbour lacks nearly all;
+    one matched target then costs as much as a missing one gains, ``log((1 - 0.99) / Pd)``
+    against ``log(0.99 / (1 - Pd))``)."""
+    withhold_cap: float = 4.47
+    """Largest increment of one scan (nats): ``-log`` of the rate at which an honest
+    neighbour showed no target while its references showed some (a whole loss: its
+    filter dropping every track at once), 1,107 of 96,632 (peer, neighbour, scan) triples
+    (1.15 %) on the training runs 9000-9001 (every graph and condition of
+    :mod:`sim.trust_calibration`). Without it a filter that loses two targets for two scans
+    is as much evidence as a liar's four scans of one."""
+    withhold_threshold: float = 10.0
+    """CUSUM value (nats) at which the neighbour is quarantined: above two scans of a whole
+    loss (``2 x 4.47 = 8.94``; 92 honest two-scan losses at Pd 0.99 on the training runs)
+    and below three (13.4; one honest three-scan loss there, seed 000 clean run 9000), set
+    on the training runs 9000-9001 (see :mod:`peers.trust`)."""
     same_scan: bool = True
     """Test each neighbour estimate once, against own's density of the scan it was made
     at: an estimate used again at a later scan (its successor late or lost, predicted
@@ -177,5 +204,6 @@ class TrustConfig:
                      or 0.0 < self.detection_probability < 1.0)
                 and len(self.bias_windows) == len(self.bias_thresholds)
                 and all(w >= 1 for w in self.bias_windows)
-                and self.bias_cusum_offset > 0 and self.bias_cusum_directions >= 1):
+                and self.bias_cusum_offset > 0 and self.bias_cusum_directions >= 1
+                and 0.0 < self.withhold_alternative < 1.0 and self.withhold_cap > 0):
             raise ValueError(f"invalid trust settings {self}")

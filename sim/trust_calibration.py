@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig, offset_limits
+from sensornet.peers.trust import NeighbourTrust, Trust, TrustConfig, alarm_limits
 from sensornet.sim.graphs import network_scenario
 from sensornet.sim.lying import LyingCore, make_lie
 from sensornet.sim.peers import make_peer
@@ -27,7 +28,7 @@ from sensornet.sim.scenario.overrides import parse_overrides
 from sensornet.sim.twin import run_twin
 
 OPEN = TrustConfig(suspect=1e9, quarantine=2e9, bias_thresholds=(np.inf, np.inf),
-                   bias_cusum_threshold=np.inf)
+                   bias_cusum_threshold=np.inf, withhold_threshold=np.inf)
 """The test runs, nothing is down-weighted."""
 
 
@@ -36,13 +37,14 @@ def open_like(cfg: TrustConfig) -> TrustConfig:
     thresholds."""
     return replace(cfg, suspect=OPEN.suspect, quarantine=OPEN.quarantine,
                    bias_thresholds=OPEN.bias_thresholds,
-                   bias_cusum_threshold=OPEN.bias_cusum_threshold)
+                   bias_cusum_threshold=OPEN.bias_cusum_threshold,
+                   withhold_threshold=OPEN.withhold_threshold)
 
 Seq = tuple[np.ndarray, np.ndarray]
-"""Per scan: the statistic without the offset test (``(n,)``), and the offset test's
-chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows` then its CUSUM
-(``(n, windows + 1)``: :func:`peers.trust.offset_limits`)."""
-LIMITS = len(offset_limits(OPEN))
+"""Per scan: the statistic without the offset and withheld-target tests (``(n,)``), and the
+offset test's chi-square per window of :attr:`peers.trust.TrustConfig.bias_windows`, its
+CUSUM, then the withheld-target CUSUM (``(n, windows + 2)``: :func:`peers.trust.alarm_limits`)."""
+LIMITS = len(alarm_limits(OPEN))
 
 
 def _per_scan(history: list, who: str | None = None) -> dict[str, Seq]:
@@ -81,19 +83,32 @@ def setups(tmp: Path) -> dict[str, tuple[str, dict]]:
             "circ4-20": (str(circ), {"network.rounds": 2})}
 
 
-def sequences(source: str, overrides: dict, run: int) -> list[Seq]:
+def sequences(source: str, overrides: dict, run: int,
+              losses: Counter | None = None) -> list[Seq]:
     """Per (peer, neighbour): the per-scan statistic (largest of the scan's rounds) of one
-    clean twin run with the test open, in scan order."""
+    clean twin run with the test open, in scan order. ``losses``: the peers' whole-loss
+    counts (:attr:`peers.trust.Trust.losses`) are added to it."""
     scn = load_scenario(source, overrides={**overrides, "fusion.trust": True})
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     for p in peers.values():
         p.consensus.trust.cfg = open_like(p.consensus.trust.cfg)
         p.consensus.trust.history = []
+        p.consensus.trust.losses = Counter()
     run_twin(scn, run, peers=peers)
     out = []
     for p in peers.values():
         out += list(_per_scan(p.consensus.trust.history).values())
+        if losses is not None:
+            losses.update(p.consensus.trust.losses)
     return out
+
+
+def loss_line(c: Counter) -> str:
+    """Whole losses (:func:`peers.trust_checks.whole_losses`): their share of the compared
+    triples and the runs of each length that ended."""
+    runs = {n: m for n, m in sorted((k, v) for k, v in c.items() if isinstance(k, int))}
+    return (f"whole losses {c['lost']} of {c['compared']} "
+            f"({100 * c['lost'] / max(c['compared'], 1):.2f} %), runs {runs}")
 
 
 def liar_sequences(scenario: str, overrides: dict, liar: str, lie: str,
@@ -122,18 +137,21 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     hysteresis), and the scores' quantiles; ``first_low``: per sequence, the first scan (1:
     the first) at weight <= 0.1, or None; ``causes``: the quarantines begun, by the test
     that fired at that scan (``offset``, ``repeat``, else ``divergence``: the divergence,
-    miss and unmatched terms' score)."""
+    miss and unmatched terms' score; ``withhold``: the withheld-target CUSUM)."""
     t = Trust(cfg, ())
     scores, low, zero, n, first_low = [], 0, 0, 0, []
-    causes = {"divergence": 0, "offset": 0, "repeat": 0}
+    causes = {"divergence": 0, "offset": 0, "repeat": 0, "withhold": 0}
+    lim = np.array(alarm_limits(cfg))
     for raw, chi2 in seqs:
         seq = raw.copy()
         hit = np.zeros(len(seq), bool)
+        held = np.zeros(len(seq), bool)
         if cfg.bias and not cfg.register and len(seq):  # registered, not quarantined
-            lim = np.array(offset_limits(cfg))
-            m = min(chi2.shape[1], len(lim))  # the columns both have
+            m = min(chi2.shape[1], len(lim) - cfg.withhold)  # the offset columns both have
             hit = (chi2[:, :m] > lim[:m]).any(axis=1)
-            seq[hit] = np.maximum(seq[hit], cfg.quarantine + cfg.drift)
+        if cfg.withhold and len(seq) and chi2.shape[1] == len(lim):
+            held = chi2[:, -1] > lim[-1]
+        seq[hit | held] = np.maximum(seq[hit | held], cfg.quarantine + cfg.drift)
         rec = NeighbourTrust()
         first = None
         for i, stat in enumerate(seq):
@@ -146,7 +164,7 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
             n += 1
             rec.score = score
             if score >= cfg.quarantine and rec.state != "quarantined":
-                causes["offset" if hit[i] else "repeat"
+                causes["offset" if hit[i] else "withhold" if held[i] else "repeat"
                        if raw[i] == cfg.quarantine + cfg.drift else "divergence"] += 1
             if score >= cfg.quarantine:
                 rec.state, rec.streak = "quarantined", 0
@@ -179,13 +197,15 @@ def main(argv: list[str] | None = None) -> int:
     cfg = TrustConfig(register=bool(sets.get("fusion.trust_register", True)),
                       repair=bool(sets.get("fusion.trust_repair", True)))
     with tempfile.TemporaryDirectory() as tmp:
-        pooled = []
+        pooled, all_losses = [], Counter()
         for label, (source, over) in setups(Path(tmp)).items():
             for cond, extra in CONDITIONS.items():
                 if label.startswith("seed004") and cond == "pd0.9":
                     extra = {"sensors.detection_probability": 0.9}
+                losses = Counter()
                 seqs = [q for r in range(a.first_run, a.first_run + a.runs)
-                        for q in sequences(source, {**over, **extra, **sets}, r)]
+                        for q in sequences(source, {**over, **extra, **sets}, r, losses)]
+                all_losses.update(losses)
                 pooled += seqs
                 stat = np.concatenate([q[0] for q in seqs])
                 chi2 = np.concatenate([q[1] for q in seqs if len(q[0])])
@@ -196,15 +216,17 @@ def main(argv: list[str] | None = None) -> int:
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
                       f" of {sim['triples']} (begun by: "
                       + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
-                      + "); offset chi2 per window and CUSUM q99.9 "
+                      + "); offset chi2 per window, offset CUSUM, withheld CUSUM q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
-                      f"{np.round(chi2.max(axis=0), 1)}", flush=True)
+                      f"{np.round(chi2.max(axis=0), 1)}; " + loss_line(losses), flush=True)
         if a.save:
             np.savez_compressed(a.save, *[x for q in pooled for x in q])
         sim = simulate(pooled, cfg)
         print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
               f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "
-              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan)")
+              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan); "
+              + loss_line(all_losses) + ", -log of the rate "
+              f"{-np.log(max(all_losses['lost'], 1) / max(all_losses['compared'], 1)):.2f}")
     return 0
 
 

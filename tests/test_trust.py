@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.peers.trust import Trust, TrustConfig, offset_information
+from sensornet.peers.trust import Trust, TrustConfig, alarm_limits, offset_information
 from sensornet.tracking.divergence import cs_divergence, log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -494,5 +494,12 @@ def test_calibration_counts_which_test_began_each_quarantine():
             (np.array([0.5, cfg.quarantine + cfg.drift, 0.0, 0.0, 0.0, 0.0]), none),
             (np.full(6, 1.0), none)]  # honest: never
     sim = simulate(seqs, cfg)
-    assert sim["causes"] == {"divergence": 1, "offset": 1, "repeat": 1}
+    assert sim["causes"] == {"divergence": 1, "offset": 1, "repeat": 1, "withhold": 0}
     assert sim["first_low"] == [3, 3, 2, None]
+    # the withheld-target CUSUM is the last column of alarm_limits
+    full = np.zeros((6, len(alarm_limits(cfg))))
+    held = full.copy()
+    held[3:, -1] = cfg.withhold_threshold + 1.0
+    sim = simulate([(np.full(6, 0.5), held), (np.full(6, 0.5), full)], cfg)
+    assert sim["causes"] == {"divergence": 0, "offset": 0, "repeat": 0, "withhold": 1}
+    assert sim["first_low"] == [4, None]
