@@ -376,7 +376,8 @@ class Trust:
                 elif alarm:
                     stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         if rnd == 0 and cfg.withhold and cfg.detection_probability is not None:
-            for s in self._withheld(own, shown, [s for s in names if s not in late]):
+            fused = {**shown, **self.fused_in}  # a repaired density is what is tested
+            for s in self._withheld(own, fused, [s for s in names if s not in late]):
                 stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
         out = [0.0]
         for s in names:
