@@ -55,7 +55,9 @@ def mass_factor(mix: GaussianMixture, ref: GaussianMixture, pos: list[int],
     hit = d2[np.arange(len(R)), j] <= gate * gate
     if not hit.any():
         return None
-    return float(ref.weights[sel][hit].sum() / mix.weights[np.unique(j[hit])].sum())
+    den = float(mix.weights[np.unique(j[hit])].sum())
+    f = float(ref.weights[sel][hit].sum()) / den if den > 0.0 else np.inf
+    return f if np.isfinite(f) else None  # zero-weight components: nothing to scale
 
 
 def corroborated_part(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],

@@ -62,6 +62,8 @@ def test_mass_factor_is_one_over_the_inflation_and_one_for_the_same_targets():
     only_a = mix((0.8, A, P4))
     assert np.isclose(mass_factor(own, only_a, POS, 0.5, 60.0), 0.8 / own.weights[0])
     assert mass_factor(own, mix((0.9, FAR, P4)), POS, 0.5, 60.0) is None
+    zero = mix((0.0, A, P4), (0.0, B, P4))  # hostile: weightless components matched
+    assert mass_factor(zero, own, POS, 0.5, 60.0) is None
     # with fewer than three references only the first (own) counts: one liar is not a median
     liar_ref = own.scaled(9.0)
     assert scan_factor(own, [own, liar_ref], POS, 0.5, 60.0) == 1.0
