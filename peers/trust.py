@@ -181,6 +181,7 @@ import numpy as np
 from sensornet.peers.trust_checks import (
     cusum_directions,
     divergence_test,
+    gls_offset,
     is_repeat,
     neighbour_statistics,
     offset_chi2,
@@ -477,11 +478,10 @@ class Trust:
                 rec.moves.pop()
         if len(rec.moves) < 2 or len(own) == 0 or len(mix) == 0:
             return None
-        I = np.sum([i for i, _ in rec.moves], axis=0)
-        if np.linalg.det(I) <= 1e-12:
+        offset = gls_offset(rec.moves)
+        if offset is None:
             return None
-        moved = moved_to_own(mix, own, np.linalg.solve(I, np.sum([v for _, v in rec.moves],
-                                                                 axis=0)), self.pos)
+        moved = moved_to_own(mix, own, offset, self.pos)
         return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
 
     def fused_input(self, s: str, mix: GaussianMixture) -> GaussianMixture:
@@ -576,10 +576,9 @@ class Trust:
                           or (rec.cusum is not None and float(rec.cusum.max()) <= 0.0)):
             rec.registered = None
             return
-        I = np.sum([i for i, _ in rec.offsets], axis=0)
-        y = np.sum([v for _, v in rec.offsets], axis=0)
-        if np.linalg.det(I) > 1e-12:
-            rec.registered = np.linalg.solve(I, y)
+        offset = gls_offset(rec.offsets)
+        if offset is not None:
+            rec.registered = offset
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)

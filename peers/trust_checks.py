@@ -195,6 +195,18 @@ def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
     return tuple(float(c) for c in chi2)
 
 
+def gls_offset(window) -> np.ndarray | None:
+    """The generalised-least-squares offset ``I^-1 y`` (``(2,)``) of the per-scan
+    ``(I, y)`` in ``window`` (:func:`offset_information`), summed; None when they do not
+    determine it (``det I`` at most 1e-12)."""
+    if not window:
+        return None
+    I = np.sum([i for i, _ in window], axis=0)
+    if np.linalg.det(I) <= 1e-12:
+        return None
+    return np.linalg.solve(I, np.sum([v for _, v in window], axis=0))
+
+
 def cusum_directions(n: int) -> np.ndarray:
     """``(n, 2)`` unit vectors at angles ``2 pi m / n`` (the charts of :func:`offset_cusum`)."""
     a = 2.0 * np.pi * np.arange(n) / n
