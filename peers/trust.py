@@ -254,6 +254,9 @@ class NeighbourTrust:
     or None."""
     rounds: int = 0
     """Rounds it was tested in."""
+    holds: int = 0
+    """Rounds its weight was held at 0 by the withheld-target test
+    (:attr:`TrustConfig.withhold_hold`)."""
     repairs: int = 0
     """Rounds its repaired (:attr:`TrustConfig.repair`) or registered
     (:attr:`TrustConfig.register`) density was fused in."""
@@ -380,6 +383,7 @@ class Trust:
             fused = {**shown, **self.fused_in}  # a repaired density is what is tested
             for s in self._withheld(own, fused, [s for s in names if s not in late]):
                 stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
+        held = {s for s in names if self._held(self.n[s])}
         out = [0.0]
         for s in names:
             rec = self.n[s]
@@ -387,6 +391,9 @@ class Trust:
             rec.last_statistic = stats[s]
             score = self._next(rec.score, rec.scan_max)
             t = self._trust(rec, score)
+            if s in held:
+                t = 0.0
+                rec.holds += 1
             if drop_suspects and t < 1.0:
                 t = 0.0
             rec.last_weight = t
@@ -540,6 +547,15 @@ class Trust:
                     self.losses["lost"] += int(lost)
         return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
+    def _held(self, rec: NeighbourTrust) -> bool:
+        """Whether the neighbour's withheld-target CUSUM holds its weight at 0 this scan
+        (:attr:`TrustConfig.withhold_hold`; every round of the scan, as its round-0 test
+        left it)."""
+        cfg = self.cfg
+        return (cfg.withhold and cfg.withhold_hold is not None
+                and cfg.detection_probability is not None
+                and rec.withheld > cfg.withhold_hold)
+
     def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:
         """Add this scan's ``(I, y)`` (:func:`peers.trust_checks.offset_information`) to the
         neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
@@ -632,7 +648,7 @@ class Trust:
         return {"neighbours": {s: {"state": r.state, "score": round(r.score, 3),
                                    "scans": dict(r.scans_in), "first_scan": r.first_k,
                                    "low_scan": r.low_k,
-                                   "rounds": r.rounds, "repairs": r.repairs,
+                                   "rounds": r.rounds, "repairs": r.repairs, "holds": r.holds,
                                    "repaired_scan": r.repaired_k,
                                    "registered": (None if r.registered is None else
                                                   [round(float(x), 2) for x in r.registered])}

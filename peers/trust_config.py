@@ -177,11 +177,24 @@ class TrustConfig:
     (1.15 %) on the training runs 9000-9001 (every graph and condition of
     :mod:`sim.trust_calibration`). Without it a filter that loses two targets for two scans
     is as much evidence as a liar's four scans of one."""
-    withhold_threshold: float = 10.0
-    """CUSUM value (nats) at which the neighbour is quarantined: above two scans of a whole
-    loss (``2 x 4.47 = 8.94``; 92 honest two-scan losses at Pd 0.99 on the training runs)
-    and below three (13.4; one honest three-scan loss there, seed 000 clean run 9000), set
-    on the training runs 9000-9001 (see :mod:`peers.trust`)."""
+    withhold_threshold: float = 14.0
+    """CUSUM value (nats) at which the neighbour is quarantined: above three scans of a whole
+    loss (``3 x 4.47 = 13.4``; the largest honest value on the training runs 9000-9001 was
+    13.4, circulant graph at Pd 0.9, and 13.3, seed 000 clean) and below four (17.9). It was
+    10 (between two scans and three) before the hold (:attr:`withhold_hold`), which now
+    takes a withholding neighbour's weight to 0 from its second scan: at 10, honest
+    neighbours whose filters lost every track for three scans were quarantined (seed 000
+    clean training runs: 2 of its 4 honest quarantines; circulant Pd 0.9: all 4)."""
+    withhold_hold: float | None = 4.47
+    """CUSUM value (nats) above which the neighbour's weight is 0 for the scan (held), not
+    quarantined: more than one scan's evidence (:attr:`withhold_cap`), so a single scan's
+    whole loss never holds and two scans of withholding do. A held neighbour is fused again
+    at the first scan its CUSUM is back under it (each scan it shows its references'
+    targets takes ``log(Pd / 0.01)``, 4.6 at Pd 0.99, per unit of their weight off: one
+    scan after a loss of two, two after a loss of three), with no hysteresis and no state
+    change; it stays a reference. What it costs an honest neighbour: its weight while it
+    shows less than its references, which is what a filter that lost its tracks should
+    weigh. None: no hold (quarantine at :attr:`withhold_threshold` only)."""
     same_scan: bool = True
     """Test each neighbour estimate once, against own's density of the scan it was made
     at: an estimate used again at a later scan (its successor late or lost, predicted
@@ -205,5 +218,6 @@ class TrustConfig:
                 and len(self.bias_windows) == len(self.bias_thresholds)
                 and all(w >= 1 for w in self.bias_windows)
                 and self.bias_cusum_offset > 0 and self.bias_cusum_directions >= 1
-                and 0.0 < self.withhold_alternative < 1.0 and self.withhold_cap > 0):
+                and 0.0 < self.withhold_alternative < 1.0 and self.withhold_cap > 0
+                and (self.withhold_hold is None or self.withhold_hold >= 0)):
             raise ValueError(f"invalid trust settings {self}")

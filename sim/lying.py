@@ -27,7 +27,10 @@ touch, is the no-fusion baseline) and writes ``lying-runs.csv``, ``lying-summary
 also prints, per cell, the scans until every honest neighbour has the liar at weight <= 0.1 and
 the share of (honest peer, honest neighbour, scan) triples in quarantine. ``--lies absent``
 takes the liars' sensors out of the network instead: the best any defence that leaves a liar
-out can give. Missing output is scored as a miss (the
+out can give with the rule at hand; ``--lies central`` processes the honest sensors' scans
+centrally (offline, the iterated-corrector GM-PHD of :mod:`sim.experiment`): what their
+measurements can give, the reference for whether an *absent* cell's gap is the information's
+or the fusion design's. Missing output is scored as a miss (the
 scorer's cut-off), never dropped. The default runs 7000.. are used by nothing else: no setting
 here was chosen on them.
 """
@@ -79,6 +82,13 @@ ABSENT = "absent"
 any defence that leaves a liar out can give (a perfect, instant quarantine)."""
 
 
+CENTRAL = "central"
+"""Not a lie: the honest sensors' scans processed centrally (the iterated-corrector
+multi-sensor GM-PHD of :mod:`sim.experiment`, offline, no network), the usual reference for
+what the honest sensors' measurements can give (the *absent* cell's distributed fusion
+against it shows what the fusion design, not the information, loses)."""
+
+
 def without(scn: Scenario, liar: str) -> Scenario:
     """``scn`` with the sensors of ``liar`` (``"a,b"``) and their edges removed."""
     gone = set(liar.split(","))
@@ -114,13 +124,20 @@ def trust_scores(result: TwinResult, liars: list[str], honest: list[str]) -> dic
     (1: at once; NaN if one never did); with repair (:attr:`TrustConfig.repair`),
     ``repair_scans`` the same to its first repaired density (NaN if one never repaired it),
     and ``liar_repaired`` / ``honest_repaired`` the share of tested rounds of the liars /
-    of the honest neighbours fused repaired."""
+    of the honest neighbours fused repaired; ``caught_scans``, the most scans any honest
+    neighbour took to stop fusing a liar's density as told (the first of weight <= 0.1 and
+    its first repaired density); ``honest_held``, the share of the honest neighbours'
+    tested rounds whose weight the withheld-target test held at 0
+    (:attr:`TrustConfig.withhold_hold`: not a quarantine, but not fused either)."""
     seen = quarantined = 0
     delays: list[float] = []
     repair_delays: list[float] = []
+    caught: list[float] = []
     rounds = {"liar": [0, 0], "honest": [0, 0]}
+    held = 0
     nan = {"honest_quarantined": math.nan, "detect_scans": math.nan,
-           "repair_scans": math.nan, "liar_repaired": math.nan, "honest_repaired": math.nan}
+           "repair_scans": math.nan, "liar_repaired": math.nan, "honest_repaired": math.nan,
+           "caught_scans": math.nan, "honest_held": math.nan}
     repairing = False
     for n in honest:
         trust = result.peers[n].consensus.trust
@@ -132,17 +149,24 @@ def trust_scores(result: TwinResult, liars: list[str], honest: list[str]) -> dic
             side[0] += rec.repairs
             side[1] += rec.rounds
             if s in liars:
-                delays.append(math.nan if rec.low_k is None or rec.first_k is None
-                              else rec.low_k - rec.first_k + 1)
-                repair_delays.append(math.nan if rec.repaired_k is None or rec.first_k is None
-                                     else rec.repaired_k - rec.first_k + 1)
+                low = (math.nan if rec.low_k is None or rec.first_k is None
+                       else rec.low_k - rec.first_k + 1)
+                rep = (math.nan if rec.repaired_k is None or rec.first_k is None
+                       else rec.repaired_k - rec.first_k + 1)
+                delays.append(low)
+                repair_delays.append(rep)
+                caught.append(math.nan if math.isnan(low) and math.isnan(rep)
+                              else float(np.nanmin([low, rep])))
             else:
+                held += rec.holds
                 seen += sum(rec.scans_in.values())
                 quarantined += rec.scans_in["quarantined"]
     out = {**nan, "honest_quarantined": quarantined / max(seen, 1),
-           "detect_scans": max(delays) if delays else math.nan}
+           "detect_scans": float(np.max(delays)) if delays else math.nan,
+           "caught_scans": float(np.max(caught)) if caught else math.nan,
+           "honest_held": held / max(rounds["honest"][1], 1)}
     if repairing:
-        out |= {"repair_scans": max(repair_delays) if repair_delays else math.nan,
+        out |= {"repair_scans": float(np.max(repair_delays)) if repair_delays else math.nan,
                 "liar_repaired": rounds["liar"][0] / max(rounds["liar"][1], 1)
                 if liars else math.nan,
                 "honest_repaired": rounds["honest"][0] / max(rounds["honest"][1], 1)}
@@ -206,6 +230,9 @@ RULES: dict[str, dict] = {
                       "fusion.trust_register": True, "fusion.trust_repair": True},
     "gci+repair": {"fusion.rule": "gci", "fusion.trust": True, "fusion.trust_register": True,
                    "fusion.trust_repair": True},
+    "hybrid+trust+feedback": {"fusion.rule": "hybrid", "fusion.trust": True,
+                              "network.feedback": True},
+    "gci+trust+feedback": {"fusion.rule": "gci", "fusion.trust": True, "network.feedback": True},
     "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
     "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
     "aa": {"fusion.rule": "aa"},
@@ -230,12 +257,31 @@ def scenario_for(setup: Setup, rule: str, scans: int | None = None) -> Scenario:
 
 def lie_once(scn: Scenario, run: int, setup: Setup, rule: str, lie: str) -> dict:
     """One row: run ``run`` of ``scn`` with ``setup``'s liar telling ``lie`` (``"clean"``: none)."""
+    if lie == CENTRAL:
+        return {"setup": setup.label, "liar": setup.liar, "rule": rule, "lie": lie, "run": run,
+                **central_scores(without(scn, setup.liar), run)}
     if lie == ABSENT:
         res = run_with_liar(without(scn, setup.liar), run, "", None)
     else:
         res = run_with_liar(scn, run, setup.liar, None if lie == "clean" else lie)
     return {"setup": setup.label, "liar": setup.liar, "rule": rule, "lie": lie, "run": run,
             **honest_scores(res, setup.liar)}
+
+
+def central_scores(scn: Scenario, run: int) -> dict:
+    """A :data:`CENTRAL` row: the centralised filter's mean OSPA over ``scn``'s sensors as
+    ``fused`` (and ``fused_neighbours``), their local filters' mean as ``local``; the
+    defence's figures NaN (no peers, no network)."""
+    from sensornet.sim.experiment import run_once
+
+    res = run_once(replace(scn, fusion=replace(scn.fusion, rule="none")), run)
+    central = float(np.mean(res.ospa["centralized"]))
+    local = float(np.mean([np.mean(v) for m, v in res.ospa.items() if m.startswith("local")]))
+    nan = math.nan
+    return {"honest_quarantined": nan, "detect_scans": nan, "repair_scans": nan,
+            "liar_repaired": nan, "honest_repaired": nan, "caught_scans": nan,
+            "honest_held": nan, "fused": central, "local": local, "fused_neighbours": central,
+            "liar_fused": nan, "rejected": 0.0}
 
 
 def measure(setups=SETUPS, rules=tuple(RULES), lies=LIES, runs: int = 5, first_run: int = 7000,
@@ -265,7 +311,7 @@ def plan_of(req: Request) -> list[Plan]:
     rules = tuple(o.get("rules", RULES))
     lies = tuple(o.get("lies", LIES))
     if not setups or any(r not in RULES for r in rules) or any(
-            lie not in (*LIES, ABSENT) for lie in lies):
+            lie not in (*LIES, ABSENT, CENTRAL) for lie in lies):
         raise ScenarioError("lying: need a known setup, known rules and known lies")
     return [Plan(setups, rules, lies, o.get("scans"))]
 
@@ -289,7 +335,10 @@ def table(o: Outcome) -> str:
             + markdown(o.summary[1]) + "\n\nCompact (honest peers' fused OSPA, m, mean ± sd "
             "over runs):\n\n" + compact(o.summary[1]) + "\n\nThe defence (rules with "
             "+trust): scans to detect the liar (weight <= 0.1; the worst honest neighbour and "
-            "run) / honest neighbours quarantined (% of (peer, neighbour, scan)):\n\n"
+            "run) / honest neighbours quarantined (% of (peer, neighbour, scan)); caught: "
+            "scans until its density is no longer fused as told (weight <= 0.1 or repaired); "
+            "honest held: % of honest neighbours' rounds at weight 0 by the withheld-target "
+            "hold:\n\n"
             + defence(o.summary[1]))
 
 
@@ -310,6 +359,8 @@ def summarise(rows: list[dict]) -> list[dict]:
                "rejected": sum(r["rejected"] for r in sel),
                "honest_quarantined": np.mean([r["honest_quarantined"] for r in sel]),
                "detect_scans": np.max([r["detect_scans"] for r in sel]),
+               "caught_scans": np.max([r.get("caught_scans", math.nan) for r in sel]),
+               "honest_held": np.mean([r.get("honest_held", math.nan) for r in sel]),
                "repair_scans": np.max([r.get("repair_scans", math.nan) for r in sel]),
                "liar_repaired": np.mean([r.get("liar_repaired", math.nan) for r in sel]),
                "honest_repaired": np.mean([r.get("honest_repaired", math.nan) for r in sel])}
@@ -362,6 +413,11 @@ def defence(summary: list[dict]) -> str:
             d = sel[lie]["detect_scans"]
             det = "–" if lie == "clean" else ("never" if math.isnan(d) else f"{d:.0f}")
             cell = f"{det} / {100 * sel[lie]['honest_quarantined']:.2f} %"
+            c, h = sel[lie].get("caught_scans", math.nan), sel[lie].get("honest_held")
+            if lie != "clean" and not (math.isnan(c) and math.isnan(d)):
+                cell += f"; caught {'never' if math.isnan(c) else f'{c:.0f}'}"
+            if h is not None and not math.isnan(h):
+                cell += f"; honest held {100 * h:.2f} %"
             if not math.isnan(sel[lie]["honest_repaired"]):  # with repair
                 r = sel[lie]["repair_scans"]
                 cell += (f"; honest repaired {100 * sel[lie]['honest_repaired']:.1f} %"
@@ -435,7 +491,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--lies", default=",".join(LIES),
                    help=f"comma-separated, of: {', '.join(LIES)}, {ABSENT} (the liars' sensors "
-                        "taken out: the best a defence that leaves them out can give)")
+                        "taken out: the best a defence that leaves them out can give with "
+                        f"this fusion), {CENTRAL} (the honest sensors' scans processed "
+                        "centrally, offline: what their measurements can give)")
     a = p.parse_args(argv)
     req = Request("lying", runs=a.runs, jobs=max(a.jobs, 1), first_run=a.first_run, out=a.out,
                   options={"setups": a.setups.split(","), "lies": a.lies.split(","),

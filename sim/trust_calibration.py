@@ -137,9 +137,11 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
     hysteresis), and the scores' quantiles; ``first_low``: per sequence, the first scan (1:
     the first) at weight <= 0.1, or None; ``causes``: the quarantines begun, by the test
     that fired at that scan (``offset``, ``repeat``, else ``divergence``: the divergence,
-    miss and unmatched terms' score; ``withhold``: the withheld-target CUSUM)."""
+    miss and unmatched terms' score; ``withhold``: the withheld-target CUSUM); ``held``: the
+    share of triples whose weight the withheld-target hold alone takes to 0
+    (:attr:`TrustConfig.withhold_hold`: not quarantined, the score below it)."""
     t = Trust(cfg, ())
-    scores, low, zero, n, first_low = [], 0, 0, 0, []
+    scores, low, zero, n, first_low, held_only = [], 0, 0, 0, [], 0
     causes = {"divergence": 0, "offset": 0, "repeat": 0, "withhold": 0}
     lim = np.array(alarm_limits(cfg))
     for raw, chi2 in seqs:
@@ -149,16 +151,21 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
         if cfg.bias and not cfg.register and len(seq):  # registered, not quarantined
             m = min(chi2.shape[1], len(lim) - cfg.withhold)  # the offset columns both have
             hit = (chi2[:, :m] > lim[:m]).any(axis=1)
+        hold = np.zeros(len(seq), bool)
         if cfg.withhold and len(seq) and chi2.shape[1] == len(lim):
             held = chi2[:, -1] > lim[-1]
+            if cfg.withhold_hold is not None:
+                hold = chi2[:, -1] > cfg.withhold_hold
         seq[hit | held] = np.maximum(seq[hit | held], cfg.quarantine + cfg.drift)
         rec = NeighbourTrust()
         first = None
         for i, stat in enumerate(seq):
             score = t._next(rec.score, stat)
-            w = t._trust(rec, score)
+            w0 = t._trust(rec, score)  # the score's weight; the hold may take it to 0
+            held_only += bool(hold[i]) and w0 > 0.0
+            w = 0.0 if hold[i] else w0
             low += w < 1.0
-            zero += w == 0.0
+            zero += w0 == 0.0
             if first is None and w <= 0.1:
                 first = i + 1
             n += 1
@@ -176,6 +183,7 @@ def simulate(seqs: list[Seq], cfg: TrustConfig) -> dict[str, float]:
         first_low.append(first)
     q = np.quantile(scores, [0.99, 0.995, 0.999]) if scores else [np.nan] * 3
     return {"triples": n, "down": low / max(n, 1), "quarantined": zero / max(n, 1),
+            "held": held_only / max(n, 1),
             "q99": q[0], "q99.5": q[1], "q99.9": q[2], "first_low": first_low,
             "causes": causes}
 
@@ -214,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"q90 {np.quantile(stat, 0.9):.2f} q99 {np.quantile(stat, 0.99):.2f}; "
                       f"score q99 {sim['q99']:.2f} q99.9 {sim['q99.9']:.2f}; down "
                       f"{100 * sim['down']:.2f} %, quarantined {100 * sim['quarantined']:.2f} %"
-                      f" of {sim['triples']} (begun by: "
+                      f" of {sim['triples']}, held {100 * sim['held']:.2f} % (begun by: "
                       + ", ".join(f"{c} {m}" for c, m in sim["causes"].items())
                       + "); offset chi2 per window, offset CUSUM, withheld CUSUM q99.9 "
                       f"{np.round(np.quantile(chi2, 0.999, axis=0), 1)} max "
@@ -224,7 +232,8 @@ def main(argv: list[str] | None = None) -> int:
         sim = simulate(pooled, cfg)
         print(f"pooled: score q99 {sim['q99']:.2f} q99.5 {sim['q99.5']:.2f} q99.9 "
               f"{sim['q99.9']:.2f}; down {100 * sim['down']:.2f} %, quarantined "
-              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan); "
+              f"{100 * sim['quarantined']:.2f} % of {sim['triples']} (peer, neighbour, scan), "
+              f"held {100 * sim['held']:.2f} %; "
               + loss_line(all_losses) + ", -log of the rate "
               f"{-np.log(max(all_losses['lost'], 1) / max(all_losses['compared'], 1)):.2f}")
     return 0

@@ -146,3 +146,34 @@ def test_the_circulant_setup_is_the_calibrations_graph_and_not_in_the_default_st
     assert CIRCULANT not in default.setups
     chosen = plan_of(Request("lying", runs=1, options={"setups": ["circ4-20"]}))[0]
     assert chosen.setups == (CIRCULANT,)
+
+
+def test_central_is_the_offline_centralised_filter_over_the_honest_sensors():
+    """The *central* cell is sim.experiment's iterated-corrector GM-PHD over the honest
+    sensors' scans of the same run (not the twin): the same number computed directly."""
+    from sensornet.sim.experiment import run_once
+    from sensornet.sim.lying import CENTRAL, lie_once, without
+
+    scn = scenario_for(SETUPS[0], "hybrid+trust", 12)
+    row = lie_once(scn, 8000, SETUPS[0], "hybrid+trust", CENTRAL)
+    two = without(scn, "s2")
+    direct = run_once(two, 8000)
+    assert row["fused"] == pytest.approx(float(np.mean(direct.ospa["centralized"])))
+    assert row["local"] == pytest.approx(float(np.mean(
+        [np.mean(direct.ospa[f"local {s}"]) for s in HONEST])))
+    assert np.isnan(row["caught_scans"]) and np.isnan(row["honest_quarantined"])
+
+
+def test_an_empty_liar_is_caught_by_the_hold_and_honest_holds_are_counted():
+    """With the defence on, the empty liar is at weight 0 within 3 scans of its first test
+    (the withheld-target hold), and the study reports it and the honest neighbours' held
+    share, which is what their records hold."""
+    scn = scenario_for(SETUPS[0], "hybrid+trust", SCANS)
+    res = run_with_liar(scn, 8000, "s2", "empty")
+    sc = honest_scores(res, "s2")
+    assert sc["caught_scans"] <= 3 and sc["detect_scans"] <= 3
+    recs = [res.peers[n].consensus.trust.n for n in HONEST]
+    assert all(r["s2"].holds > 0 for r in recs)
+    honest = [r[s] for r, s in zip(recs, ("s3", "s1"), strict=True)]
+    assert sc["honest_held"] == pytest.approx(
+        sum(h.holds for h in honest) / sum(h.rounds for h in honest))

@@ -3,6 +3,8 @@ statistic and score on hand-made mixtures, and the consensus leaving out what it
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from sensornet.peers.trust import Trust, TrustConfig, alarm_limits, offset_information
@@ -503,3 +505,19 @@ def test_calibration_counts_which_test_began_each_quarantine():
     sim = simulate([(np.full(6, 0.5), held), (np.full(6, 0.5), full)], cfg)
     assert sim["causes"] == {"divergence": 0, "offset": 0, "repeat": 0, "withhold": 1}
     assert sim["first_low"] == [4, None]
+
+
+def test_calibration_counts_holds_apart_from_quarantines():
+    """A withheld-target CUSUM above the hold but under the quarantine threshold takes the
+    weight to 0 (first_low) without a quarantine; the share of such triples is ``held``."""
+    from sensornet.sim.trust_calibration import simulate
+
+    cfg = TrustConfig(detection_probability=0.99)
+    col = np.zeros((6, len(alarm_limits(cfg))))
+    col[2:4, -1] = cfg.withhold_hold + 1.0  # two scans above the hold, under quarantine
+    sim = simulate([(np.full(6, 0.5), col), (np.full(6, 0.5), np.zeros_like(col))], cfg)
+    assert sim["held"] == pytest.approx(2 / 12)
+    assert sim["quarantined"] == 0.0 and sim["causes"]["withhold"] == 0
+    assert sim["first_low"] == [3, None]
+    off = simulate([(np.full(6, 0.5), col)], replace(cfg, withhold_hold=None))
+    assert off["held"] == 0.0 and off["first_low"] == [None]

@@ -80,31 +80,58 @@ def test_references_combine_by_median_with_a_majority_and_minimum_without_brute_
             assert got[j] == pytest.approx(expect), (j, refs[j])
 
 
-def test_an_empty_neighbour_is_out_by_the_third_scan_and_an_honest_loss_of_two_is_not():
+def test_an_empty_neighbour_is_held_at_its_second_scan_and_out_at_its_fourth():
     """Own and an honest neighbour each show one target; ``x`` publishes nothing. The
     leaky score alone needs four scans (statistic about 5 a scan); the withheld CUSUM,
-    ``min(-log(1 - Pd) w + log 0.99, 4.47)`` a scan with no drift, passes 10 at the third.
-    An honest neighbour that loses its target for two scans and comes back is not out."""
+    ``min(-log(1 - Pd) w + log 0.99, 4.47)`` a scan with no drift, passes the hold (4.47:
+    more than one scan's evidence) at the second, which holds x's weight at 0 without a
+    quarantine, and the quarantine threshold (14) at the fourth."""
     cfg = TrustConfig(detection_probability=0.99)
     per = min(np.log(0.99 / 0.01) * 0.95, cfg.withhold_cap)
-    assert 2 * per < cfg.withhold_threshold < 3 * per
+    assert per <= cfg.withhold_hold < 2 * per
+    assert 3 * per < cfg.withhold_threshold < 4 * per
     target = mix((0.95, A, P4))
-    low = {}
+    low, states = {}, []
     for on in (True, False):
         t = Trust(TrustConfig(detection_probability=0.99, withhold=on), ("h", "x"))
         for k in range(1, 7):
             w = t.weigh(k, 0, target, {"h": target, "x": EMPTY}, [1 / 3, 1 / 3, 1 / 3])
             if w[2] <= 0.1 * (1 / 3):
                 low.setdefault(on, k)
+            if on:
+                states.append(t.n["x"].state)  # as the previous scan closed it
         assert t.n["x"].withheld == (pytest.approx(6 * per) if on else 0.0)
-    assert low == {True: 3, False: 4}
+        assert t.n["x"].holds == (5 if on else 0)
+    assert low == {True: 2, False: 4}
+    # held from scan 2, but quarantined only after scan 4 (shown from scan 5 on)
+    assert "quarantined" not in states[:4] and states[4:] == ["quarantined"] * 2
+
+
+def test_an_honest_loss_of_three_scans_is_held_and_fused_again_at_once_not_quarantined():
+    cfg = TrustConfig(detection_probability=0.99)
+    per = min(np.log(0.99 / 0.01) * 0.95, cfg.withhold_cap)
+    target = mix((0.95, A, P4))
     t = Trust(cfg, ("h", "x"))
+    weights = {}
     for k in range(1, 12):
-        x = EMPTY if k in (4, 5) else target
-        w = t.weigh(k, 0, target, {"h": target, "x": x}, [1 / 3, 1 / 3, 1 / 3])
-        assert t.n["x"].withheld <= 2 * per + 1e-9
+        x = EMPTY if k in (4, 5, 6) else target
+        weights[k] = t.weigh(k, 0, target, {"h": target, "x": x}, [1 / 3, 1 / 3, 1 / 3])[2]
+        assert t.n["x"].withheld <= 3 * per + 1e-9
+        assert t.n["x"].state != "quarantined"
     t.finish()
-    assert t.n["x"].state != "quarantined" and t.n["x"].withheld == 0.0
+    # the first lost scan is fused, the next two are held; each scan showing the target
+    # again takes 0.95 log(Pd / 0.01) = 4.37 off: 13.1 -> 8.7 (held) -> 4.4 (fused at full
+    # weight again, no hysteresis)
+    assert [k for k, w in weights.items() if w == 0.0] == [5, 6, 7]
+    assert weights[8] == pytest.approx(1 / 3)
+    assert t.n["x"].state == "trusted" and t.n["x"].withheld == 0.0
+
+
+def test_without_a_hold_the_weight_falls_only_with_the_score():
+    target = mix((0.95, A, P4))
+    t = Trust(TrustConfig(detection_probability=0.99, withhold_hold=None), ("h", "x"))
+    w = [t.weigh(k, 0, target, {"h": target, "x": EMPTY}, [1 / 3] * 3)[2] for k in (1, 2)]
+    assert w[1] > 0.1 / 3 and t.n["x"].holds == 0
 
 
 def test_a_late_or_reused_estimate_adds_no_increment_and_quarantined_ones_are_no_reference():
