@@ -113,6 +113,8 @@ class Observer:
             j = r.values["neighbour"]
             self.sink.scalar(f"metrics/trust/{n}/{j}/statistic", r.values["statistic"])
             self.sink.scalar(f"metrics/trust/{n}/{j}/weight", r.values["weight"])
+            if "withheld" in r.values:  # the withheld-target CUSUM (held above 4.47)
+                self.sink.scalar(f"metrics/trust/{n}/{j}/withheld", r.values["withheld"])
         elif r.kind == "trust-event":
             v = r.values
             self.sink.text(f"peers/{n}/events", f"{v['neighbour']} {v['from']} -> {v['to']} "

@@ -107,7 +107,8 @@ network benchmark's criterion, with a p99 scan -> tracks latency under one scan 
 def trust_note(summaries: dict[str, dict]) -> str | None:
     """Who was quarantined by whom and when (peers with ``fusion.trust``), one line per
     neighbour, then who was fused repaired or registered by whom, from when and how often
-    (``fusion.trust_repair``, ``fusion.trust_register``); None if nobody was either."""
+    (``fusion.trust_repair``, ``fusion.trust_register``), then whose weight the
+    withheld-target test held at 0 by whom and how often; None if nobody was any."""
     by: dict[str, list[str]] = {}
     for peer, s in sorted(summaries.items()):
         for ch in ((s.get("trust") or {}).get("changes") or []):
@@ -123,8 +124,16 @@ def trust_note(summaries: dict[str, dict]) -> str | None:
                 fixed.setdefault(n, []).append(
                     f"{peer} from scan {rec['repaired_scan']} ({rec['repairs']} of "
                     f"{rec['rounds']} rounds)")
+    held: dict[str, list[str]] = {}
+    for peer, s in sorted(summaries.items()):
+        for n, rec in ((s.get("trust") or {}).get("neighbours") or {}).items():
+            if rec.get("holds"):
+                held.setdefault(n, []).append(f"{peer} ({rec['holds']} of {rec['rounds']} "
+                                              "rounds)")
     lines = [f"quarantined: {n} by " + ", ".join(v) for n, v in sorted(by.items())]
     lines += [f"repaired: {n} by " + ", ".join(v) for n, v in sorted(fixed.items())]
+    lines += [f"held (withholding targets): {n} by " + ", ".join(v)
+              for n, v in sorted(held.items())]
     return "\n".join(lines) if lines else None
 
 

@@ -177,3 +177,7 @@ def test_an_empty_liar_is_caught_by_the_hold_and_honest_holds_are_counted():
     honest = [r[s] for r, s in zip(recs, ("s3", "s1"), strict=True)]
     assert sc["honest_held"] == pytest.approx(
         sum(h.holds for h in honest) / sum(h.rounds for h in honest))
+    from sensornet.sim.launcher import trust_note
+
+    note = trust_note({n: res.summary(n) for n in HONEST})
+    assert "held (withholding targets): s2 by s1 (" in note and ", s3 (" in note

@@ -102,6 +102,9 @@ def test_an_empty_neighbour_is_held_at_its_second_scan_and_out_at_its_fourth():
                 states.append(t.n["x"].state)  # as the previous scan closed it
         assert t.n["x"].withheld == (pytest.approx(6 * per) if on else 0.0)
         assert t.n["x"].holds == (5 if on else 0)
+        # the per-round records (Rerun, CSVs) say so
+        held = [(r["k"], r["held"]) for r in t.records if r["neighbour"] == "x"]
+        assert held == [(k, on and k >= 2) for k in range(1, 7)]
     assert low == {True: 2, False: 4}
     # held from scan 2, but quarantined only after scan 4 (shown from scan 5 on)
     assert "quarantined" not in states[:4] and states[4:] == ["quarantined"] * 2
