@@ -46,6 +46,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from sensornet.sim.experiment import run_once
 from sensornet.sim.graphs import network_scenario
 from sensornet.sim.lies import (  # noqa: F401  (the lies live in sim.lies; named here as before)
     BIAS,
@@ -273,8 +274,6 @@ def central_scores(scn: Scenario, run: int) -> dict:
     """A :data:`CENTRAL` row: the centralised filter's mean OSPA over ``scn``'s sensors as
     ``fused`` (and ``fused_neighbours``), their local filters' mean as ``local``; the
     defence's figures NaN (no peers, no network)."""
-    from sensornet.sim.experiment import run_once
-
     res = run_once(replace(scn, fusion=replace(scn.fusion, rule="none")), run)
     central = float(np.mean(res.ospa["centralized"]))
     local = float(np.mean([np.mean(v) for m, v in res.ospa.items() if m.startswith("local")]))
