@@ -269,7 +269,7 @@ class NeighbourTrust:
     """Rounds it was tested in."""
     holds: int = 0
     """Rounds its weight was held at 0 by the withheld-target test
-    (:attr:`TrustConfig.withhold_hold`)."""
+    (:attr:`TrustConfig.withhold_hold`) where its score alone left it above 0."""
     repairs: int = 0
     """Rounds its repaired (:attr:`TrustConfig.repair`) or registered
     (:attr:`TrustConfig.register`) density was fused in."""
@@ -405,8 +405,8 @@ class Trust:
             score = self._next(rec.score, rec.scan_max)
             t = self._trust(rec, score)
             if s in held:
+                rec.holds += t > 0.0  # counted where the hold, not the score, zeroes it
                 t = 0.0
-                rec.holds += 1
             if drop_suspects and t < 1.0:
                 t = 0.0
             rec.last_weight = t
