@@ -116,7 +116,10 @@ def test_attack_against_real_processes(tmp_path, clean, attack):
             assert "truth" not in s["received_by_kind"], name  # not subscribed to it
     if attack.name == "forged-end":
         for s in summaries.values():
-            assert s["ctl_end_while_world_alive"] == 2  # the forged "end" and the world's own
+            # the forged "end" (mid-run) always; the world's own too when it arrives before
+            # its liveliness token goes (two channels, no order between them: on a busy
+            # machine the token's loss can come first, 1 in 2 runs with both cores busy)
+            assert s["ctl_end_while_world_alive"] in (1, 2), s["ctl_end_while_world_alive"]
     rss = {name: s["max_rss_mb"] for name, s in summaries.items()}
     if attack.name == "future-estimates":
         for name in ("s1", "s3"):  # kept whole by nobody: memory as the unattacked s2's
