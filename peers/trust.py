@@ -231,6 +231,14 @@ def alarm_limits(cfg: TrustConfig) -> tuple[float, ...]:
     return (*offset_limits(cfg), *((cfg.withhold_threshold,) if cfg.withhold else ()))
 
 
+def _push(window: deque, item, n: int) -> None:
+    """Add ``item`` as the newest of ``window`` (newest first), keeping the ``n`` newest: the
+    per-neighbour windows are bounded whatever a neighbour sends."""
+    window.appendleft(item)
+    while len(window) > n:
+        window.pop()
+
+
 @dataclass
 class NeighbourTrust:
     """One neighbour's record."""
@@ -468,9 +476,7 @@ class Trust:
                 kept = GaussianMixture.empty(shown[s].dim)
             f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
             if f is not None and f > 0:
-                rec.factors.appendleft(np.log(f))
-                while len(rec.factors) > cfg.repair_window:
-                    rec.factors.pop()
+                _push(rec.factors, np.log(f), cfg.repair_window)
             if not rec.factors:
                 continue
             rep = kept.scaled(float(np.exp(np.median(rec.factors))))
@@ -493,10 +499,8 @@ class Trust:
         precise than own); then its corroborated part, or None."""
         cfg = self.cfg
         if rnd == 0:
-            rec.moves.appendleft(offset_information(own, mix, self.pos, cfg.repeat_weight,
-                                                    cfg.repair_offset_gate))
-            while len(rec.moves) > cfg.repair_window:
-                rec.moves.pop()
+            _push(rec.moves, offset_information(own, mix, self.pos, cfg.repeat_weight,
+                                                cfg.repair_offset_gate), cfg.repair_window)
         if len(rec.moves) < 2 or len(own) == 0 or len(mix) == 0:
             return None
         offset = gls_offset(rec.moves)
@@ -575,9 +579,7 @@ class Trust:
         neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
         chi-square of its mean offset (:attr:`TrustConfig.bias`)."""
         cfg = self.cfg
-        rec.offsets.appendleft(info)
-        while len(rec.offsets) > max(cfg.bias_windows):
-            rec.offsets.pop()
+        _push(rec.offsets, info, max(cfg.bias_windows))
         chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
         if cfg.bias_cusum:
             if rec.cusum is None:

@@ -331,14 +331,25 @@ def withheld_increments(U: np.ndarray, targets: np.ndarray, refs: np.ndarray,
     d = np.maximum(0.0, U - U.T)  # [r, j]: r's target weight j lacks, net of j's own extras
     m = np.maximum(0.0, targets[:, None] - U)  # [r, j]: r's target weight j shows too
     L = np.minimum(a * d, cap) + b * m  # [r, j]
-    out = np.zeros(len(targets))
-    for j in range(1, len(targets)):  # per neighbour (not per component)
-        r = np.flatnonzero(refs[j])
-        if len(r) >= 3:
-            out[j] = float(np.median(L[r, j]))
-        elif len(r):
-            out[j] = float(L[r, j].min())
-    return out
+    out = over_references(L, refs)
+    out[0] = 0.0
+    return np.nan_to_num(out, nan=0.0)
+
+
+def over_references(values: np.ndarray, refs: np.ndarray) -> np.ndarray:
+    """Per input ``j`` (``(n,)``): ``values[r, j]`` (``(n, n)``) over its references
+    ``r`` (``refs[j, r]``): the median with three or more (W-MSR's majority), else the
+    smallest (no majority to outvote a reference that lies itself); NaN with none. The
+    rule of :func:`withheld_increments` and :func:`whole_losses`."""
+    refs = np.asarray(refs, bool)
+    count = refs.sum(axis=1)
+    V = np.where(refs.T, values, np.inf)  # [r, j], non-references last when sorted
+    V.sort(axis=0)
+    cols = np.arange(len(count))
+    lo, hi = np.maximum(count - 1, 0) // 2, count // 2  # the median's two middle entries
+    med = 0.5 * (V[lo, cols] + V[hi, cols]) if len(count) else np.zeros(0)
+    out = np.where(count >= 3, med, V[0] if len(count) else np.zeros(0))
+    return np.where(count > 0, out, np.nan)
 
 
 def whole_losses(targets: np.ndarray, refs: np.ndarray, min_weight: float) -> np.ndarray:
@@ -347,12 +358,8 @@ def whole_losses(targets: np.ndarray, refs: np.ndarray, min_weight: float) -> np
     whole loss, or *empty*), 0 where it shows some, NaN where the references show none (or
     it has none; own, index 0, NaN). What :attr:`TrustConfig.withhold_cap` was set from;
     ``targets`` and ``refs`` as in :func:`withheld_increments`."""
-    out = np.full(len(targets), np.nan)
-    for j in range(1, len(targets)):
-        r = np.flatnonzero(refs[j])
-        if len(r) == 0:
-            continue
-        ref = float(np.median(targets[r])) if len(r) >= 3 else float(targets[r].min())
-        if ref >= min_weight:
-            out[j] = float(targets[j] <= 0.0)
+    n = len(targets)
+    ref = over_references(np.repeat(np.asarray(targets, float)[:, None], n, axis=1), refs)
+    out = np.where(ref >= min_weight, (np.asarray(targets) <= 0.0).astype(float), np.nan)
+    out[:1] = np.nan  # own
     return out

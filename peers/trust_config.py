@@ -183,8 +183,9 @@ class TrustConfig:
     13.4, circulant graph at Pd 0.9, and 13.3, seed 000 clean) and below four (17.9). It was
     10 (between two scans and three) before the hold (:attr:`withhold_hold`), which now
     takes a withholding neighbour's weight to 0 from its second scan: at 10, honest
-    neighbours whose filters lost every track for three scans were quarantined (seed 000
-    clean training runs: 2 of its 4 honest quarantines; circulant Pd 0.9: all 4)."""
+    neighbours whose filters lost their tracks for three scans or more were quarantined
+    (training runs: 2 of seed 000's 4 honest quarantines, clean; all 4 of the circulant
+    graph's at Pd 0.9)."""
     withhold_hold: float | None = 4.47
     """CUSUM value (nats) above which the neighbour's weight is 0 for the scan (held), not
     quarantined: more than one scan's evidence (:attr:`withhold_cap`), so a single scan's

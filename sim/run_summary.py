@@ -118,15 +118,13 @@ def trust_note(summaries: dict[str, dict]) -> str | None:
                 by.setdefault(ch["neighbour"], []).append(f"readmitted by {peer} at scan "
                                                           f"{ch['k']}")
     fixed: dict[str, list[str]] = {}
+    held: dict[str, list[str]] = {}
     for peer, s in sorted(summaries.items()):
         for n, rec in ((s.get("trust") or {}).get("neighbours") or {}).items():
             if rec.get("repairs"):
                 fixed.setdefault(n, []).append(
                     f"{peer} from scan {rec['repaired_scan']} ({rec['repairs']} of "
                     f"{rec['rounds']} rounds)")
-    held: dict[str, list[str]] = {}
-    for peer, s in sorted(summaries.items()):
-        for n, rec in ((s.get("trust") or {}).get("neighbours") or {}).items():
             if rec.get("holds"):
                 held.setdefault(n, []).append(f"{peer} ({rec['holds']} of {rec['rounds']} "
                                               "rounds)")

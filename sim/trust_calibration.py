@@ -198,12 +198,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="scenario override for every run, e.g. fusion.trust_repair=true "
                          "(repeatable)")
     a = ap.parse_args(argv)
-    try:
+    try:  # the scenario's own checks: fusion.trust_register=False is refused, not truthy
         sets = parse_overrides(a.set)
+        fusion = load_scenario("seed000", overrides={**sets, "fusion.trust": True}).fusion
     except ValueError as e:
         ap.error(str(e))
-    cfg = TrustConfig(register=bool(sets.get("fusion.trust_register", True)),
-                      repair=bool(sets.get("fusion.trust_repair", True)))
+    cfg = TrustConfig(register=fusion.trust_register, repair=fusion.trust_repair)
     with tempfile.TemporaryDirectory() as tmp:
         pooled, all_losses = [], Counter()
         for label, (source, over) in setups(Path(tmp)).items():

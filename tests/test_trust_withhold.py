@@ -181,3 +181,30 @@ def test_whole_losses_and_their_runs_are_counted_for_the_calibration():
     # x or own empty), x at every scan but 6 (own empty); x's runs: 2-3 and 5, 7 (scan 6
     # not compared, so no break), two scans each
     assert t.losses == Counter({"compared": 4 + 8, "lost": 4, 2: 2})
+
+
+def test_the_reference_rule_is_the_median_of_three_or_more_else_the_smallest():
+    """:func:`over_references` (shared by the withheld increments and the whole losses)
+    against the rule computed reference by reference."""
+    from sensornet.peers.trust_checks import over_references
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        n = int(rng.integers(1, 8))
+        V, R = rng.normal(size=(n, n)), rng.random((n, n)) < 0.6
+        got = over_references(V, R)
+        for j in range(n):
+            r = np.flatnonzero(R[j])
+            if len(r) == 0:
+                assert np.isnan(got[j])
+            else:
+                want = np.median(V[r, j]) if len(r) >= 3 else V[r, j].min()
+                assert got[j] == pytest.approx(want)
+
+
+def test_the_calibration_refuses_a_setting_the_scenario_refuses():
+    from sensornet.sim.trust_calibration import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--runs", "1", "--set", "fusion.trust_register=False"])
+    assert e.value.code == 2
