@@ -70,13 +70,27 @@ def update(
     ``min_weight``: detection terms lighter than this are not materialised (equivalent to
     pruning them afterwards; keeps heavy clutter cheap).
     """
+    return update_parents(mix, scan, sensor, gate, min_weight)[0]
+
+
+def update_parents(
+    mix: GaussianMixture,
+    scan: np.ndarray,
+    sensor: SensorParams,
+    gate: float | None = None,
+    min_weight: float = 0.0,
+) -> tuple[GaussianMixture, np.ndarray]:
+    """:func:`update` (the same numbers) and the parent of each detection term: ``(p,)``
+    indices into ``mix``. The result's first ``len(mix)`` components are the missed-detection
+    terms of ``mix`` in order, the next ``p`` are the detection terms of ``mix[parents]``
+    (what tag propagation needs: Panta, Clark & Vo 2009, §IV; tracking.labels)."""
     Pd = sensor.detection_probability
     w, mean, P = mix.weights, mix.means, mix.covs
     missed_w = w * (1.0 - Pd)
     scan = np.asarray(scan, dtype=float).reshape(-1, sensor.model.dim)
     n, m = len(mix), len(scan)
     if n == 0 or m == 0:
-        return GaussianMixture.trusted(missed_w, mean, P)
+        return GaussianMixture.trusted(missed_w, mean, P), np.zeros(0, dtype=np.intp)
     cols = _selected_columns(sensor.model)
     R = sensor.model.R
     if cols is not None:  # H picks state entries: H P H^T and P H^T are sub-blocks of P
@@ -112,7 +126,7 @@ def update(
         np.concatenate((missed_w, num[zi, ji])),
         np.concatenate((mean, means_upd)),
         np.concatenate((P, P_upd[ji])),
-    )
+    ), ji
 
 
 _LOG_2PI = float(np.log(2 * np.pi))
@@ -157,15 +171,21 @@ def extract(mix: GaussianMixture, threshold: float = 0.5,
     returned, as in cardinality-first extraction for CPHD filters (our reading; it suits
     fused intensities whose mass is spread unevenly over the targets).
     """
+    return mix.means[extract_index(mix, threshold, rule)]
+
+
+def extract_index(mix: GaussianMixture, threshold: float = 0.5,
+                  rule: str = DEFAULT_EXTRACTION) -> np.ndarray:
+    """The components :func:`extract` reports, as ``(n,)`` indices into ``mix`` (a component
+    repeated ``round(w)`` times under ``"round"``): ``extract`` is ``mix.means[index]``."""
     if rule == "round":
-        keep = mix.weights > threshold
+        keep = np.flatnonzero(mix.weights > threshold)
         counts = np.maximum(np.rint(mix.weights[keep]).astype(int), 1)
-        return np.repeat(mix.means[keep], counts, axis=0)
+        return np.repeat(keep, counts)
     if rule == "cardinality":
         n = int(np.floor(mix.mass + 0.5))
         order = np.argsort(-mix.weights, kind="stable")[:n]
-        order = order[mix.weights[order] > threshold / 10]
-        return mix.means[order]
+        return order[mix.weights[order] > threshold / 10]
     raise ValueError(f"unknown extraction rule {rule!r}; expected {EXTRACTION_RULES}")
 
 
@@ -214,5 +234,6 @@ class GMPHDFilter:
         return extract(mix, self.extraction_threshold, self.extraction)
 
 
-__all__ = ["DEFAULT_EXTRACTION", "GMPHDFilter", "SensorParams", "extract", "predict", "update"]
+__all__ = ["DEFAULT_EXTRACTION", "GMPHDFilter", "SensorParams", "extract", "extract_index",
+           "predict", "update", "update_parents"]
 

@@ -51,8 +51,14 @@ def cap(mix: GaussianMixture, max_components: int) -> GaussianMixture:
     """Keep the ``max_components`` heaviest components."""
     if len(mix) <= max_components:
         return mix
-    order = np.argsort(-mix.weights, kind="stable")[:max_components]
-    return mix.select(np.sort(order))
+    return mix.select(cap_index(mix.weights, max_components))
+
+
+def cap_index(weights: np.ndarray, max_components: int) -> np.ndarray:
+    """The components :func:`cap` keeps, as sorted indices ``(k,)``."""
+    if len(weights) <= max_components:
+        return np.arange(len(weights))
+    return np.sort(np.argsort(-weights, kind="stable")[:max_components])
 
 
 def moment_match(weights: np.ndarray, means: np.ndarray, covs: np.ndarray):
@@ -77,7 +83,21 @@ def merge(mix: GaussianMixture, threshold: float, rule: str = "vo-ma") -> Gaussi
         raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
     if len(mix) <= 1:
         return mix
-    return _merge_in_order(mix, (-mix.weights).argsort(kind="stable"), threshold, rule)
+    return _merge_in_order(mix, (-mix.weights).argsort(kind="stable"), threshold, rule)[0]
+
+
+def merge_sources(mix: GaussianMixture, threshold: float,
+                  rule: str = "vo-ma") -> tuple[GaussianMixture, np.ndarray]:
+    """:func:`merge` (the same numbers) and, for each output component, the index into ``mix``
+    of the heaviest member of its group (the sweep's centre): ``(n_out,)``. A merged
+    component's tag is that member's (Panta, Clark & Vo 2009, §IV; tracking.labels)."""
+    if rule not in MERGE_RULES:
+        raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
+    if len(mix) <= 1:
+        return mix, np.arange(len(mix))
+    order = (-mix.weights).argsort(kind="stable")
+    out, kept = _merge_in_order(mix, order, threshold, rule)
+    return out, order if kept is None else order[kept]
 
 
 def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma",
@@ -121,19 +141,21 @@ def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma",
 
 
 def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
-                    rule: str) -> GaussianMixture:
-    """:func:`merge` of the components ``order`` (at least two indices, heaviest first)."""
+                    rule: str) -> tuple[GaussianMixture, np.ndarray | None]:
+    """:func:`merge` of the components ``order`` (at least two indices, heaviest first), and
+    which positions of ``order`` the output rows come from (a boolean mask over ``order``;
+    None: all of them). Each output row sits at its group's centre, the heaviest member."""
     n = len(order)
     w, m, P = mix.weights[order], mix.means[order], mix.covs[order]  # heaviest first
     ci, cj = _close_pairs(w, m, P, threshold, rule)
     if ci.size == 0:
-        return GaussianMixture.trusted(w, m, P)
+        return GaussianMixture.trusted(w, m, P), None
     centres, members = _greedy_groups(ci, cj)
     out_w, out_m, out_P = w.copy(), m.copy(), P.copy()
     _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P)
     keep = np.ones(n, dtype=bool)
     keep[[i for g in members for i in g]] = False
-    return GaussianMixture.trusted(out_w[keep], out_m[keep], out_P[keep])
+    return GaussianMixture.trusted(out_w[keep], out_m[keep], out_P[keep]), keep
 
 
 def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
@@ -341,32 +363,58 @@ class Reducer:
             raise ValueError(f"unknown merge rule {self.merge_rule!r}; expected {MERGE_RULES}")
 
     def __call__(self, mix: GaussianMixture) -> GaussianMixture:
+        return self._reduce(mix, False)[0]
+
+    def with_sources(self, mix: GaussianMixture) -> tuple[GaussianMixture, np.ndarray]:
+        """The reduction (the same numbers as calling the reducer) and, for each output
+        component, the index into ``mix`` of the heaviest member of its merge group: ``(k,)``
+        (pruning and capping drop rows; tag propagation, tracking.labels, reads this)."""
+        out, src = self._reduce(mix, True)
+        return out, src  # type: ignore[return-value]
+
+    def _reduce(self, mix: GaussianMixture,
+                sources: bool) -> tuple[GaussianMixture, np.ndarray | None]:
+        """The reduction; with ``sources``, also each output's heaviest input member."""
+        src = None
         if self.refit:
-            pruned = prune(mix, self.prune_threshold)
-            reduced = cap(merge(pruned, self.merge_threshold, self.merge_rule),
-                          self.max_components)
-            reduced = ise_refit(pruned, reduced)
+            kept = np.flatnonzero(mix.weights >= self.prune_threshold)
+            pruned = mix.select(kept) if len(mix) else mix
+            merged, msrc = merge_sources(pruned, self.merge_threshold, self.merge_rule)
+            ci = cap_index(merged.weights, self.max_components)
+            reduced = ise_refit(pruned, merged.select(ci) if len(ci) < len(merged) else merged)
+            if sources:
+                src = kept[msrc[ci]]
         else:  # prune then merge, with one gather: the kept indices in merge's order
             w = mix.weights
             kept = np.flatnonzero(w >= self.prune_threshold)
             if len(kept) <= 1:
                 reduced = mix.select(kept)
+                src = kept
             else:
                 order = kept[(-w[kept]).argsort(kind="stable")]
-                reduced = _merge_in_order(mix, order, self.merge_threshold, self.merge_rule)
-            reduced = cap(reduced, self.max_components)
+                reduced, rows = _merge_in_order(mix, order, self.merge_threshold,
+                                                self.merge_rule)
+                if sources:
+                    src = order if rows is None else order[rows]
+            if len(reduced) > self.max_components:
+                ci = cap_index(reduced.weights, self.max_components)
+                reduced = reduced.select(ci)
+                if sources:
+                    src = src[ci]
         P = reduced.covs
         return GaussianMixture.trusted(reduced.weights, reduced.means,
-                                       0.5 * (P + P.swapaxes(-1, -2)))  # symmetrise
+                                       0.5 * (P + P.swapaxes(-1, -2))), src  # symmetrise
 
 
 __all__ = [
     "MERGE_RULES",
     "Reducer",
     "cap",
+    "cap_index",
     "ise_refit",
     "keep_above",
     "merge",
+    "merge_sources",
     "moment_match",
     "prune",
     "sweep_labels",
