@@ -41,6 +41,10 @@ from sensornet.protocol.messages import (
 from sensornet.tracking.mixture import GaussianMixture
 
 VERSION = 1
+"""The protocol version of every message type: the first element of ``[version, type, ...]``."""
+TRACKS_VERSION = 2
+"""Protocol 2 exists for one type, Tracks (``"K"``) with identities, covariances, existence
+and status; a Tracks message without them is still written (and read) as protocol 1."""
 _F8 = np.dtype("<f8")
 _I8 = np.dtype("<i8")
 
@@ -131,6 +135,14 @@ _FIELDS = {
     "F": ("s", "k", "r", "q", "ts", "o", "n", "x"),
     "R": ("s", "k", "r", "q", "ts", "x"),
 }
+_FIELDS_V2 = {
+    # Tracks with identities: ids "i" (n, 3) int64, covariances "c" (n, d(d+1)/2) upper
+    # triangles, existence "e" (n,) float64, status "u" (n,) int8; each bytes or nil (not
+    # sent). The states "x" stay last, as in protocol 1.
+    "K": ("s", "k", "q", "ts", "d", "i", "c", "e", "u", "x"),
+}
+VERSIONS = {VERSION: _FIELDS, TRACKS_VERSION: _FIELDS_V2}
+"""Protocol version -> the message types it has -> their field names in wire order."""
 
 
 def _estimate(msg: Estimate) -> dict:
@@ -151,9 +163,38 @@ def _states(states) -> np.ndarray:
 
 
 def _tracks(msg: Tracks) -> dict:
+    """Protocol 1 (states only) when no optional field is set, byte for byte what it always
+    was; protocol 2 (``"v": 2`` here) otherwise."""
     x = _states(msg.states)
-    return {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+    body = {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
             "d": x.shape[1], "x": _array(x)}
+    if not msg.labelled:
+        return body
+    n, d = x.shape
+    body["v"] = TRACKS_VERSION
+    body["i"] = body["c"] = body["e"] = body["u"] = None
+    if msg.ids is not None:
+        ids = np.asarray(msg.ids)
+        if ids.shape != (n, 3) or (n and ids.dtype.kind not in "iu"):
+            raise ValueError(f"Tracks.ids must be ({n}, 3) integers, got {ids.shape} {ids.dtype}")
+        body["i"] = np.ascontiguousarray(ids, dtype=_I8).tobytes()
+    if msg.covs is not None:
+        P = np.asarray(msg.covs, dtype=float)
+        if P.shape != (n, d, d):
+            raise ValueError(f"Tracks.covs must be ({n}, {d}, {d}), got {P.shape}")
+        iu = _tri_index(d)
+        body["c"] = _array(P[:, iu[0], iu[1]])
+    if msg.existence is not None:
+        r = np.asarray(msg.existence, dtype=float)
+        if r.shape != (n,):
+            raise ValueError(f"Tracks.existence must be ({n},), got {r.shape}")
+        body["e"] = _array(r)
+    if msg.status is not None:
+        u = np.asarray(msg.status)
+        if u.shape != (n,):
+            raise ValueError(f"Tracks.status must be ({n},), got {u.shape}")
+        body["u"] = np.ascontiguousarray(u, dtype=np.int8).tobytes()
+    return body
 
 
 def _truth(msg: Truth) -> dict:
@@ -196,7 +237,9 @@ def encode(msg: Message) -> bytes:
     if entry is None:
         raise TypeError(f"cannot encode {type(msg).__name__}")
     t, body = entry[0], entry[1](msg)
-    return msgpack.packb([VERSION, t, *(body[f] for f in _FIELDS[t])], use_bin_type=True)
+    version = body.get("v", VERSION)
+    return msgpack.packb([version, t, *(body[f] for f in VERSIONS[version][t])],
+                         use_bin_type=True)
 
 
 def _rows(blob: bytes, width: int, limit: int, what: str) -> int:
@@ -287,6 +330,52 @@ def _positive_definite(P: np.ndarray) -> bool:
     return bool(np.isfinite(L).all())
 
 
+def _optional(body: dict, key: str, nbytes: int, what: str) -> bytes | None:
+    """Field ``key``: nil (not sent) or exactly ``nbytes`` bytes (checked before decoding)."""
+    blob = body[key]
+    if blob is None:
+        return None
+    if not isinstance(blob, bytes):
+        raise Rejected("field", f"field {key!r} has type {type(blob).__name__}")
+    if len(blob) != nbytes:
+        raise Rejected("shape", f"{len(blob)} bytes of {what} ({nbytes} expected)")
+    return blob
+
+
+def _tracks_v2(body: dict, limits: Limits) -> Tracks:
+    """Tracks with identities: the row count comes from the states and is checked against
+    ``max_components``, and every optional block's length against it, before any decoding."""
+    d = _count(body, "d", limits.max_dim)
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, d, limits.max_components, "tracks") if d else 0
+    t = d * (d + 1) // 2
+    ib = _optional(body, "i", 24 * n, "track ids")
+    cb = _optional(body, "c", 8 * n * t, "track covariances")
+    eb = _optional(body, "e", 8 * n, "existence probabilities")
+    ub = _optional(body, "u", n, "track status")
+    sender, k, seq, ts = _name(body, "s", limits), _index(body, "k"), _index(body, "q"), _time(body)
+    states = _floats(blob, (n, d))
+    ids = covs = existence = status = None
+    if ib is not None:
+        ids = np.frombuffer(ib, dtype=_I8).reshape(n, 3).astype(np.int64)
+        if n and ids.min() < 0:
+            raise Rejected("field", "a track id is negative")
+    if cb is not None:
+        covs = _floats(cb, (n, t)).take(_tri_to_full(d), axis=1).reshape(n, d, d)
+        if n and not _positive_definite(covs):
+            raise Rejected("not-psd", "a track covariance is not positive definite")
+    if eb is not None:
+        existence = _floats(eb, (n,))
+        if n and (existence.min() < 0.0 or existence.max() > 1.0):
+            raise Rejected("field", "an existence probability is outside [0, 1]")
+    if ub is not None:
+        status = np.frombuffer(ub, dtype=np.int8).copy()
+        if n and not np.isin(status, (Tracks.TENTATIVE, Tracks.CONFIRMED)).all():
+            raise Rejected("field", "a track status is not 0 (tentative) or 1 (confirmed)")
+    return Tracks(sender=sender, k=k, states=states, seq=seq, send_time=ts, ids=ids, covs=covs,
+                  existence=existence, status=status)
+
+
 def _forward(body: dict, limits: Limits) -> Forward:
     """A flooding forward: origin names (unique), points per origin, one block of points."""
     origins = _get(body, "o", list)
@@ -331,12 +420,16 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
         raise Rejected("malformed", f"not a msgpack message ({type(exc).__name__})") from None
     if not isinstance(body, list) or len(body) < 2:
         raise Rejected("malformed", f"top level is {type(body).__name__}, not a message array")
-    if body[0] != VERSION or isinstance(body[0], bool):
-        raise Rejected("version", f"protocol version {body[0]!r}, expected {VERSION}")
+    version = body[0]
+    if type(version) is not int or version not in VERSIONS:
+        raise Rejected("version", f"protocol version {version!r}, expected one of "
+                                  f"{sorted(VERSIONS)}")
     kind = body[1]
     if not isinstance(kind, str) or kind not in _FIELDS:
         raise Rejected("type", f"unknown message type {kind!r}")
-    names = _FIELDS[kind]
+    if kind not in VERSIONS[version]:
+        raise Rejected("version", f"protocol version {version} has no message type {kind!r}")
+    names = VERSIONS[version][kind]
     if len(body) != 2 + len(names):
         raise Rejected("field", f"{len(body) - 2} fields for type {kind}, {len(names)} expected")
     body = dict(zip(names, body[2:], strict=True))
@@ -360,7 +453,9 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
             n = _rows(blob, 2, limits.max_measurements, "measurements")
             return Scan(sensor=_name(body, "s", limits), k=_index(body, "k"),
                         z=_floats(blob, (n, 2)), seq=_index(body, "q"), send_time=_time(body))
-        if kind == "K":
+        if kind == "K" and version == TRACKS_VERSION:
+            return _tracks_v2(body, limits)
+        if kind == "K":  # protocol 1: states only, the optional fields None
             d = _count(body, "d", limits.max_dim)
             blob = _get(body, "x", bytes)
             n = _rows(blob, d, limits.max_components, "tracks") if d else 0

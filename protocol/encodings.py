@@ -8,7 +8,7 @@ decoded: ``[version, "<letter>", ...]`` (protocol.codec).
 
 from __future__ import annotations
 
-from sensornet.protocol.codec import VERSION
+from sensornet.protocol.codec import VERSION, VERSIONS
 
 MIME = "application/msgpack"
 TYPES = {"E": "estimate", "S": "scan", "K": "tracks", "T": "truth", "F": "forward",
@@ -16,22 +16,25 @@ TYPES = {"E": "estimate", "S": "scan", "K": "tracks", "T": "truth", "F": "forwar
 """Message type letters (protocol.codec) and the names their encodings carry."""
 
 
-def schema(letter: str, sealed: bool = False) -> str:
+def schema(letter: str, sealed: bool = False, version: int = VERSION) -> str:
     """``sensornet/<type>/v<version>[+sealed]`` of a message type letter."""
-    return f"sensornet/{TYPES.get(letter, 'unknown')}/v{VERSION}{'+sealed' if sealed else ''}"
+    return f"sensornet/{TYPES.get(letter, 'unknown')}/v{version}{'+sealed' if sealed else ''}"
 
 
 def encoding_text(payload: bytes, sealed: bool = False) -> str:
     """The encoding string of an encoded message (``.../unknown/...`` if its head is not a
     message's: the bytes are sent as they are, the receiver's decode decides)."""
-    return f"{MIME};{schema(letter_of(payload), sealed)}"
+    letter = letter_of(payload)
+    version = payload[1] if letter != "?" else VERSION
+    return f"{MIME};{schema(letter, sealed, version)}"
 
 
 def letter_of(payload: bytes) -> str:
     """The type letter of ``[version, "<letter>", ...]`` from its first 4 bytes, or ``"?"``:
-    a fixarray, the version as a positive fixint, a one-character fixstr."""
-    if (len(payload) >= 4 and 0x90 <= payload[0] <= 0x9F and payload[1] == VERSION
-            and payload[2] == 0xA1):
+    a fixarray, a version the codec has (a positive fixint), a one-character fixstr naming a
+    type of that version (protocol 2 has Tracks only)."""
+    if (len(payload) >= 4 and 0x90 <= payload[0] <= 0x9F and payload[1] in VERSIONS
+            and payload[2] == 0xA1 and chr(payload[3]) in VERSIONS[payload[1]]):
         return chr(payload[3])
     return "?"
 

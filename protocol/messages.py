@@ -43,13 +43,33 @@ class Estimate:
 
 @dataclass(frozen=True)
 class Tracks:
-    """A peer's extracted (fused) target states at scan ``k``: ``states (n, d)``."""
+    """A peer's extracted (fused) target states at scan ``k``: ``states (n, d)``, with optional
+    identities and uncertainty (None: not sent; a protocol-1 message never has them).
+
+    ids:       (n, 3) int64 track labels ``(origin, birth_scan, index)`` (tracking.labels).
+    covs:      (n, d, d) state covariances (symmetric positive definite).
+    existence: (n,) probabilities in [0, 1] (a PHD weight clipped to 1, an LMB ``r``).
+    status:    (n,) int8, :data:`TENTATIVE` or :data:`CONFIRMED`.
+    """
 
     sender: str
     k: int
     states: np.ndarray
     seq: int = 0
     send_time: float = 0.0
+    ids: np.ndarray | None = None
+    covs: np.ndarray | None = None
+    existence: np.ndarray | None = None
+    status: np.ndarray | None = None
+
+    TENTATIVE: ClassVar[int] = 0
+    CONFIRMED: ClassVar[int] = 1
+
+    @property
+    def labelled(self) -> bool:
+        """Whether any optional field is set (the codec then writes protocol 2)."""
+        return not (self.ids is None and self.covs is None and self.existence is None
+                    and self.status is None)
 
 
 @dataclass(frozen=True)
