@@ -9,12 +9,15 @@ import itertools
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.messages import Tracks
 from sensornet.tracking.gmphd import GMPHDFilter, SensorParams, update
 from sensornet.tracking.labels import (
     Confirmation,
     LabelledGMPHD,
     LabelledMixture,
     adopt_labels,
+    extract_tracks,
     match_labels,
     new_labels,
     precedes,
@@ -362,3 +365,21 @@ def test_adoption_skips_a_label_another_of_our_targets_holds():
     assert match.as_dict() == {(1, 3, 0): (1, 3, 1)}
     # (1,3,1) -> (1,3,0) would give our two targets one label: left as it is
     assert np.array_equal(adopt_labels(own_tracks, match), own_tracks)
+
+
+def test_extracted_tracks_travel_in_a_tracks_message():
+    filt = make_filter(2, 0.98)
+    lf = LabelledGMPHD(filt, origin=4)
+    conf = Confirmation(scans=3)
+    lm = lf.initial()
+    for k, (_, Z) in enumerate(simulate(1, 12, 2, 0.98)):
+        lm = lf.step(lm, k, Z)
+        conf.observe(lm)
+    ex = extract_tracks(lm, filt.extraction_threshold, filt.extraction, conf)
+    states, labels = lf.extract(lm)
+    assert np.array_equal(ex.states, states) and np.array_equal(ex.ids, labels)
+    assert ex.status.tolist() == [1, 1, 1] and ((ex.existence > 0.5) & (ex.existence <= 1)).all()
+    out = decode(encode(Tracks("s4", 11, ex.states, ids=ex.ids, covs=ex.covs,
+                               existence=ex.existence, status=ex.status)))
+    assert np.array_equal(out.ids, ex.ids) and np.array_equal(out.status, ex.status)
+    np.testing.assert_allclose(out.covs, ex.covs, rtol=0, atol=1e-9)

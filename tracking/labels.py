@@ -172,6 +172,31 @@ def extract_labelled(lm: LabelledMixture, threshold: float = 0.5,
     return lm.mixture.means[idx], lm.labels[idx]
 
 
+@dataclass(frozen=True)
+class ExtractedTracks:
+    """What a labelled extraction reports, in the shapes of ``protocol.messages.Tracks``:
+    ``states (p, d)``, ``ids (p, 3)`` int64, ``covs (p, d, d)``, ``existence (p,)`` (the
+    component weight clipped to [0, 1]) and ``status (p,)`` int8 (1 confirmed, 0 tentative)."""
+
+    states: np.ndarray
+    ids: np.ndarray
+    covs: np.ndarray
+    existence: np.ndarray
+    status: np.ndarray
+
+
+def extract_tracks(lm: LabelledMixture, threshold: float = 0.5, rule: str = "cardinality",
+                   confirmation: Confirmation | None = None) -> ExtractedTracks:
+    """:func:`extract_labelled` with each state's covariance, existence and status (all
+    tentative without a ``confirmation``), ready for a ``Tracks`` message."""
+    idx = extract_index(lm.mixture, threshold, rule)
+    ids = lm.labels[idx]
+    status = (np.zeros(len(idx), dtype=np.int8) if confirmation is None
+              else confirmation.status(ids))
+    return ExtractedTracks(lm.mixture.means[idx], ids, lm.mixture.covs[idx],
+                           np.clip(lm.mixture.weights[idx], 0.0, 1.0), status)
+
+
 @dataclass
 class LabelledGMPHD:
     """A :class:`~tracking.gmphd.GMPHDFilter` whose components carry labels: the same numbers
@@ -356,12 +381,14 @@ def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
 __all__ = [
     "LABEL_COLUMNS",
     "Confirmation",
+    "ExtractedTracks",
     "LabelMatch",
     "LabelledGMPHD",
     "LabelledMixture",
     "adopt_labels",
     "as_labels",
     "extract_labelled",
+    "extract_tracks",
     "label_keys",
     "match_labels",
     "new_labels",
