@@ -44,7 +44,7 @@ def fusion_weights(scn: Scenario, order: list[str]) -> list[float]:
     of the star graph it forms with the others (seed 000: sensors 1 and 3 send to sensor 2).
     """
     n = len(order)
-    if scn.fusion.omega == "metropolis":
+    if scn.fusion.fusing_omega == "metropolis":
         A = np.zeros((n, n), dtype=bool)
         A[0, 1:] = A[1:, 0] = True
         return list(metropolis_weights(A)[0])
@@ -60,8 +60,9 @@ def fuse_estimates(scn: Scenario, densities: list[GaussianMixture]) -> GaussianM
         return aa_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce)
     if scn.fusion.rule == "hybrid":
         return hybrid_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce)
-    if scn.fusion.omega in ("det", "chernoff"):
-        return gci_fuse_optimised(densities, scn.fusion.omega, reduce, scn.fusion.cardinality)
+    if scn.fusion.fusing_omega in ("det", "chernoff"):
+        return gci_fuse_optimised(densities, scn.fusion.fusing_omega, reduce,
+                                  scn.fusion.cardinality)
     return gci_fuse(densities, fusion_weights(scn, [""] * len(densities)), reduce,
                     cardinality=scn.fusion.cardinality)
 

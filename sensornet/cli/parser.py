@@ -32,6 +32,14 @@ from sensornet.cli.common import (
 )
 from sensornet.peers.session import PEER_WAIT
 from sensornet.sim.bounds import MAX_ROUNDS
+from sensornet.sim.choices import (
+    BIRTH_MODELS,
+    FUSION_RULES,
+    MIXTURE_RULES,
+    OMEGA_RULES,
+    OOS_POLICIES,
+)
+from sensornet.sim.kinds import names as kind_names
 
 COMMANDS: dict[str, str] = {
     "experiment": "experiment:cmd_experiment",
@@ -99,9 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("experiment", help="offline Monte Carlo: local vs fused vs centralized")
     e.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                    help=f"scenario file (.toml) or built-in name (default {DEFAULT_SCENARIO})")
-    e.add_argument("--birth", choices=["paper", "truth", "both"],
+    e.add_argument("--birth", choices=[*BIRTH_MODELS, "both"],
                    help="birth model (default: the scenario's)")
-    e.add_argument("--fusion", choices=["gci", "aa", "hybrid", "none"],
+    e.add_argument("--fusion", choices=MIXTURE_RULES,
                    help="override the fusion rule")
     e.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set fusion.level2_pruning=false "
@@ -173,14 +181,16 @@ def build_parser() -> argparse.ArgumentParser:
                         help="keep running this long when the world's liveliness goes away, in "
                              "case it comes back (a router restart); counted as an outage "
                              "(default: 8 scan intervals, at least 3 s)")
-        sp.add_argument("--filter", choices=["gmphd", "imm-pf", "imm-ekf"],
+        sp.add_argument("--filter", choices=kind_names(),
                         help="local filter (default: the scenario's network.filter)")
-        sp.add_argument("--fusion", choices=["gci", "aa", "hybrid", "ratio", "none"],
+        sp.add_argument("--fusion", choices=FUSION_RULES,
                         help="fusion rule ('ratio': the particle fusion rule, IMM peers only)")
         sp.add_argument("--rounds", type=ROUNDS,
                         help=f"consensus rounds per scan (1..{MAX_ROUNDS})")
-        sp.add_argument("--omega", choices=["metropolis", "uniform", "det", "chernoff"])
-        sp.add_argument("--policy", choices=["nale", "drop-late", "as-is"])
+        sp.add_argument("--omega", choices=OMEGA_RULES,
+                        help="the peers' fusion weights (network.omega)")
+        sp.add_argument("--policy", choices=OOS_POLICIES,
+                        help="out-of-sequence policy (network.policy)")
         sp.add_argument("--level2", dest="level2", action="store_true", default=None,
                         help="level-2 pruning before publishing")
         sp.add_argument("--no-level2", dest="level2", action="store_false")

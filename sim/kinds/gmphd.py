@@ -5,11 +5,9 @@ from __future__ import annotations
 from sensornet.peers.estimators import GmphdEstimator
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
 from sensornet.sim.build import make_filter
+from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import Scenario
-
-MIXTURE_RULES = ("hybrid", "gci", "aa", "none")
-"""The rules that combine multi-target Gaussian mixtures (:mod:`peers.fusers`)."""
 
 
 def mixture_fuser(scn: Scenario, reducer):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -73,6 +74,18 @@ class Table:
 
     def has(self, name: str) -> bool:
         return name in self.data
+
+    def renamed(self, old: str, new: str) -> str:
+        """The key to read for an option renamed ``old`` -> ``new``: ``new``, or ``old`` (with a
+        one-line :class:`FutureWarning`) when only the old name is given."""
+        if not self.has(old):
+            return new
+        if self.has(new):
+            raise self.fail(old, f"is the old name of '{self.key(new)}', which is given too; "
+                                 f"drop '{self.key(old)}'")
+        warnings.warn(f"{self.ctx.label}: key '{self.key(old)}' is now '{self.key(new)}' (the "
+                      f"old name will stop working)", FutureWarning, stacklevel=2)
+        return old
 
     # typed getters ---------------------------------------------------------------------------
     def integer(self, name: str, default: Any = REQUIRED, minimum: int | None = None,
