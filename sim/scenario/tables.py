@@ -83,8 +83,9 @@ class Table:
         if self.has(new):
             raise self.fail(old, f"is the old name of '{self.key(new)}', which is given too; "
                                  f"drop '{self.key(old)}'")
-        warnings.warn(f"{self.ctx.label}: key '{self.key(old)}' is now '{self.key(new)}' (the "
-                      f"old name will stop working)", FutureWarning, stacklevel=2)
+        # shown as one line "FILE:0: FutureWarning: ..." (no source line to quote)
+        warnings.warn_explicit(f"key '{self.key(old)}' is now '{self.key(new)}' (the old name "
+                               f"will stop working)", FutureWarning, self.ctx.label, 0)
         return old
 
     # typed getters ---------------------------------------------------------------------------
