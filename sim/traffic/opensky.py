@@ -133,7 +133,9 @@ def _format_of(path: Path) -> str:
 
 
 def _read_json(path: Path) -> dict[str, np.ndarray]:
-    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    with open(path, "rb") as f:
+        gzipped = f.read(2) == b"\x1f\x8b"  # by content: a .json may be gzipped all the same
+    opener = gzip.open if gzipped else open
     try:
         with opener(path, "rt", encoding="utf-8") as f:
             records = json.load(f)
