@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         args.runs, args.scans = 4, args.scans or 10
 
     from sensornet.sim.campaign import load_campaign
-    from sensornet.sim.runners import code_version
+    from sensornet.sim.campaign.runners import code_version
 
     # One code version for every worker, whatever is edited in the tree while this runs.
     os.environ.setdefault("SENSORNET_CODE_VERSION", f"bench-{code_version()}")

@@ -83,7 +83,7 @@ def one_run(out: Path, scans: int, speed: float, mode: str, count: int,
             mixed: bool = False) -> tuple[dict, dict]:
     from sensornet.peers.security import Security, make_keys
     from sensornet.peers.session import open_session
-    from sensornet.sim.launcher import read_summaries, start_run, wait_run
+    from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
     from sensornet.sim.scenario import load_scenario, parse_overrides
 
     sets = ["birth.model=truth", f"scenario.num_scans={scans}", f"network.speed={speed}"]

@@ -15,7 +15,7 @@ peer holds every scan in >= 99 % of scans, in real time, 4 iterations per scan):
         [--per-process auto|N]
 
 ``--per-process``: peers per process as ``sensornet run`` packs them (``auto``, the default:
-:func:`sensornet.sim.packing.choose`, two hosts of 10 on 2 cores), or ``1`` for a process per
+:func:`sensornet.sim.run.packing.choose`, two hosts of 10 on 2 cores), or ``1`` for a process per
 peer.
 """
 
@@ -31,10 +31,10 @@ from pathlib import Path
 
 from sensornet.peers.session import PEER_WAIT
 from sensornet.peers.telemetry import percentile
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
-from sensornet.sim.packing import choose, scenario_load
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.packing import choose, scenario_load
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import run_twin
 
 
 def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],

@@ -17,7 +17,7 @@ import statistics
 import sys
 import time
 
-from sensornet.sim.peers import make_parts
+from sensornet.sim.run.peers import make_parts
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.world import generate_run
 

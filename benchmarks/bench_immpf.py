@@ -31,7 +31,7 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_immpf.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sensornet.sim.seed001 import Seed001Scenario, measure, truth
+from sensornet.sim.studies.seed001.montecarlo import Seed001Scenario, measure, truth
 from sensornet.tracking.imm import IMMEKF, IMMParams, mixing, radar_log_likelihood
 from sensornet.tracking.particles import IMMParticleFilter, ParticleParams
 

@@ -42,9 +42,9 @@ import time
 from pathlib import Path
 
 from sensornet.peers.telemetry import percentile
-from sensornet.sim.graphs import circulant, network_scenario  # noqa: F401 (circulant: re-exported)
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario
+from sensornet.sim.world.graphs import circulant, network_scenario  # noqa: F401 (circulant: re-exported)
 
 TARGETS = {"latency_median_ms": 5.0, "wire_ratio": 1.1, "peers": 20, "rss_mb": 200.0,
            "flood_rss_ratio": 1.2, "cpu_ms": 2.0}
@@ -261,8 +261,8 @@ def part_scaling(tmp: Path, sizes: list[int], degrees: list[int], scans: int,
 def packing_of(n: int, packing: str, scans_per_s: float = 10.0) -> int:
     """Peers per process for ``packing``: a number, or ``auto`` (what ``sensornet run``
     chooses without ``--per-process`` for these GM-PHD peers at ``scans_per_s``:
-    sim.packing)."""
-    from sensornet.sim.packing import choose, peer_load
+    sim.run.packing)."""
+    from sensornet.sim.run.packing import choose, peer_load
 
     if packing != "auto":
         return int(packing)

@@ -22,9 +22,14 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from sensornet.sim.extended import make_et_filter, make_partitioner  # noqa: E402
-from sensornet.sim.seed002 import CLUTTER_LEVELS, PAPER_PARTITION_TIME, PARTITIONS, scenario_at  # noqa: E402
+from sensornet.sim.studies.seed002.montecarlo import (  # noqa: E402
+    CLUTTER_LEVELS,
+    PAPER_PARTITION_TIME,
+    PARTITIONS,
+    scenario_at,
+)
 from sensornet.sim.world import generate_run  # noqa: E402
+from sensornet.sim.world.extended import make_et_filter, make_partitioner  # noqa: E402
 from sensornet.tracking.partition import ScanTooLarge, all_pairs_partitions  # noqa: E402
 
 

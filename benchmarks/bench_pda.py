@@ -5,7 +5,8 @@ Target (issue 12): one step of the two-sensor fuzzy IMM (IMM mixing and predicti
 PDA update with sensor 1's returns and with sensor 2's) at most 0.2 ms; before: about 0.38 ms.
 The machine is shared, so the current step and the one before (``benchmarks/pda_before.py``)
 are timed interleaved on the same recorded scans, and their ratio is the number to compare
-across runs. The scans are recorded from ``sim.seed003`` runs (default: clutter in each
+across runs. The scans are recorded from ``sim.studies.seed003.montecarlo`` runs (default: clutter
+in each
 filter's gate, 2 on average, the paper's setting; ``--region``: the region clutter a peer
 network sees, where the IMM's wide CA gate holds hundreds of returns); both filters replay the
 same returns, and the table says how far their final estimates differ. Medians over every
@@ -28,7 +29,7 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_pda.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sensornet.sim import seed003
+from sensornet.sim.studies.seed003 import montecarlo as seed003
 
 from benchmarks.pda_before import ImmPdaBefore
 

@@ -31,7 +31,7 @@ TARGETS = {"latency_ratio": 1.05, "size_mb": 20.0}
 
 def one_run(out: Path, scans: int, record: bool) -> dict:
     """One run: its pooled latency median, recording bytes and exit codes."""
-    from sensornet.sim.launcher import read_summaries, start_run, wait_run
+    from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
     from sensornet.sim.scenario import load_scenario, parse_overrides
 
     sets = ["birth.model=truth", f"scenario.num_scans={scans}", "network.speed=10"]
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         last = runs[True][-1]
         identical, replayed = 0, 0
         if last["files"]:
-            from sensornet.sim.replay import replay
+            from sensornet.sim.run.replay import replay
 
             for f in last["files"]:
                 replayed += 1

@@ -15,7 +15,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario, parse_overrides
 
 SETS = ["birth.model=truth"]

@@ -24,10 +24,10 @@ import tempfile
 from pathlib import Path
 
 from scipy import stats
-from sensornet.sim.graphs import network_scenario
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import run_twin
+from sensornet.sim.world.graphs import network_scenario
 
 FAULTS = ["faults.default.delay=0.01", "faults.default.loss=0.05"]
 

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_network import cpu_per_scan, pooled  # noqa: E402
 from sensornet.peers.security import make_keys  # noqa: E402
-from sensornet.sim.launcher import read_summaries, start_run, wait_run  # noqa: E402
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run  # noqa: E402
 from sensornet.sim.scenario import load_scenario, parse_overrides  # noqa: E402
 
 TARGET = 1.2

@@ -224,8 +224,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     graphs = []
     if a.graph == "seed004":
-        from sensornet.sim.build import adjacency
         from sensornet.sim.scenario import load_scenario
+        from sensornet.sim.world.build import adjacency
 
         graphs.append(("seed004", adjacency(load_scenario("seed004"))[1]))
     else:

@@ -1,6 +1,6 @@
 """CPU of the peer logic per peer per scan: the twin of an ``n``-peer circulant network.
 
-The twin (``sim/twin.py``) runs every peer's logic (decode, admission, filter, fusion,
+The twin (``sim/run/twin.py``) runs every peer's logic (decode, admission, filter, fusion,
 encode, scoring) on a virtual clock without transport, so its CPU is what the logic costs.
 Each measurement runs in a fresh process, alternating the current code ('after') with the
 hot-path modules at the commit before issue 23's per-call work ('before',
@@ -98,10 +98,10 @@ def child(n: int, degree: int, scans: int, rounds: int, before: bool, profile: b
         from benchmarks import twin_before
         twin_before.install()
     from sensornet.peers.host import SharedDecode
-    from sensornet.sim.graphs import network_scenario
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
+    from sensornet.sim.run.twin import run_twin
     from sensornet.sim.scenario import load_scenario
-    from sensornet.sim.twin import run_twin
+    from sensornet.sim.world.graphs import network_scenario
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"net{n}d{degree}.toml"

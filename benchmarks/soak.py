@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario, parse_overrides
 
 

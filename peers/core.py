@@ -3,7 +3,7 @@
 ``receive(key, payload, now)``, ``tick(now)``, ``liveliness(name, joined, now)`` and
 ``finish(now)`` return :class:`Publish`, :class:`Record` and :class:`Stop` outputs that a driver
 carries out: the Zenoh runtime (``peers.runtime``) with sockets, clocks and files, the twin
-(``sim.twin``) on a virtual clock. Everything between the bytes and the outputs lives here:
+(``sim.run.twin``) on a virtual clock. Everything between the bytes and the outputs lives here:
 key and sender checks, decoding, every bound on what one message may cost, rejection counters
 by reason code, deadlines, departures, scoring. Its configuration (:class:`CoreConfig`)
 and output types are in ``peers.core_types``, what it reports for the summary in

@@ -30,7 +30,8 @@ class SingleTargetConfig:
     """GCI weight of the other peer: a number, None (0.5), or "det" (minimum fused determinant,
     chosen per scan). The fusing filter's own density already carries the fused history
     (feedback), so the other peer's single-radar estimate gets much less than half. 0.15 was
-    chosen with ``python -m sensornet.sim.seed001 --tune-omega ...`` on geometry A tuning runs
+    chosen with ``python -m sensornet.sim.studies.seed001.montecarlo --tune-omega ...`` on geometry
+    A tuning runs
     10000.. only
     (Table 1 evaluates runs 0..N-1), by the GCI-fused x-position RMSE, the same for the IMM-EKF
     and the IMM-PF (both had the same best weight). Runs 10000-10079: 0.2: 2.203 / 2.294 m

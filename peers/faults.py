@@ -1,6 +1,6 @@
 """Link faults injected: keyed, logged delay, loss, duplication, reordering and partitions.
 
-One model, two drivers. The discrete-event twin (``sim.twin``) asks
+One model, two drivers. The discrete-event twin (``sim.run.twin``) asks
 :meth:`FaultInjector.deliveries` when a peer's estimate leaves for another peer and schedules
 one delivery per returned delay; the Zenoh runtime asks the same question when the estimate
 arrives and holds it that long (:class:`HoldQueue`) before handing it on. Nothing here imports

@@ -222,7 +222,8 @@ class FloodFuser:
 # -- the iterated-corrector baseline as a flooding peer (seed 004) ---------------------------
 def corrector_order(adjacency: np.ndarray) -> np.ndarray:
     """The iterated corrector's sensor order (seed 004, docs/seed004.md): depth-first over the
-    graph from sensor 0, the order in which the offline IC (``sim.seed004``) passes the density
+    graph from sensor 0, the order in which the offline IC (``sim.studies.seed004.montecarlo``)
+    passes the density
     along; sensors it does not reach (a disconnected graph) follow in index order."""
     # heavy dependency: scipy.sparse (only the iterated corrector's order needs it)
     from scipy.sparse.csgraph import depth_first_order

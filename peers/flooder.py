@@ -114,7 +114,8 @@ def flood(adjacency: np.ndarray, scans: Sequence[np.ndarray], iterations: int, s
 
     ``scans[i]`` is peer i's own ``(m_i, 2)`` scan. Each (sender, receiver, scan) message is lost
     with probability ``loss`` (one draw from ``rng`` each, in a fixed order), or ``deliver``
-    decides (e.g. the fault layer: ``sim.seed004.fault_delivery``). After the last iteration
+    decides (e.g. the fault layer: ``sim.studies.seed004.montecarlo.fault_delivery``). After the
+    last iteration
     every peer closes the scan: a copy still in flight then counts as late at its receiver.
     """
     A = np.asarray(adjacency, dtype=bool)

@@ -9,7 +9,8 @@ into every peer's filter creates. With two inputs ``w`` minimises ``log det P`` 
 choice, ``omega="det"``); otherwise the consensus weights are used.
 
 Measurement sharing (each peer applies every peer's returns in a fixed sensor order, the
-paper's sequential scheme, :func:`sim.seed003.run_filter` with two sensors) is the pair
+paper's sequential scheme, :func:`sim.studies.seed003.montecarlo.run_filter` with two sensors) is
+the pair
 :class:`SequentialPdaEstimator` / :class:`SequentialFuser`: a peer predicts, publishes the
 returns of its own scan that fall in a wide pre-gate (``pregate`` times the gate threshold, on
 the union of the models' gates) in the consensus slot ``"returns"``, and, once every peer's

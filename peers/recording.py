@@ -6,7 +6,7 @@ changes, the clock at which deadlines fired, and the end of the run. A recording
 that, in an MCAP file (the robotics tools' container; JSON records with a JSON Schema per
 topic, :data:`SCHEMAS`, so standard tools decode them; zstd chunks),
 plus the tracks the peer published, so a replay can check itself. :func:`replay_with` feeds
-the same calls to the same peer, which its caller builds (:func:`sim.replay.replay` rebuilds it
+the same calls to the same peer, which its caller builds (:func:`sim.run.replay.replay` rebuilds it
 from the scenario stored in the file): the fused tracks come out identical to the last bit.
 With changed settings (``--set``) it is a what-if run of one peer on the inputs it really had.
 """

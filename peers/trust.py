@@ -114,7 +114,8 @@ target weight takes ``log(Pd / 0.01)`` off. Honest misses are not independent ac
 targets: a filter drops every track at once (a whole loss: the neighbour shows no target
 while its references show one or more) on 1.15 %
 of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition below;
-``python -m sensornet.sim.trust_calibration --runs 2`` prints them and the runs of each
+``python -m sensornet.sim.studies.lying.trust_calibration --runs 2`` prints them and the runs of
+each
 length, :attr:`Trust.losses`). So one scan's increment is at most ``-log 0.0115 = 4.47``
 (two lost targets are no more evidence than one scan of a whole loss). Above one scan's
 worth (:attr:`TrustConfig.withhold_hold`, 4.47) the neighbour's weight is held at 0 for the
@@ -132,13 +133,14 @@ neighbour that withholds everything is quarantined at its third scan, an honest 
 loses everything for two is not, and the honest three-scan loss is quarantined like a liar:
 seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2), circulant at
 Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged (``python -m
-sensornet.sim.trust_calibration --runs 2``). On the training runs' lies it takes seed 000's
+sensornet.sim.studies.lying.trust_calibration --runs 2``). On the training runs' lies it takes seed
+000's
 *empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3. The parameters
 (alternative 0.99, cap, threshold) were set on the training runs only. With the hold
-(training runs 9000-9002, ``python -m sensornet.sim.lying --runs 3 --setups seed000
+(training runs 9000-9002, ``python -m sensornet.sim.studies.lying.study --runs 3 --setups seed000
 --first-run 9000``): seed 000's *empty* at weight 0 at its second scan (3 before), every
 honest peer's fused OSPA equal or lower (hybrid clean 14.14 -> 14.10 m), honest
-neighbours held on 0.17 % of their rounds; ``python -m sensornet.sim.trust_calibration
+neighbours held on 0.17 % of their rounds; ``python -m sensornet.sim.studies.lying.trust_calibration
 --runs 2``: no quarantine begun by the withheld test (seed 000 clean 4.08 -> 2.42 %,
 circulant Pd 0.9 0.26 -> 0.05 %).
 
@@ -146,13 +148,15 @@ A neighbour whose non-empty density at a scan repeats, bit for bit, the one it s
 earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
 every scan, so that is a stuck sensor or a replay.
 
-Calibration (``python -m sensornet.sim.trust_calibration --runs 2``, training runs 9000-9001 only;
+Calibration (``python -m sensornet.sim.studies.lying.trust_calibration --runs 2``, training runs
+9000-9001 only;
 the
 lying study evaluates on 7000..): seed 000, seed 004's graph with GM-PHD peers and the 20-peer
 circulant graph of degree 4, each clean, at Pd 0.9 and with link faults (30 ms latency, 20 %
 loss, 20 % reordering): 108,288 (peer, neighbour, scan) triples. ``cap = 8``, ``drift = 2``,
 ``leak = 0.8`` were chosen on the same training runs with the training runs' lies of
-:mod:`sim.lying`; ``suspect`` and ``quarantine`` (3.5 and 8.6) were the 99th and 99.9th
+:mod:`sim.studies.lying.study`; ``suspect`` and ``quarantine`` (3.5 and 8.6) were the 99th and
+99.9th
 percentiles of the honest scores before the majority term, which lowered them to 2.05 and 6.59
 (kept: the target is per condition, not pooled); with the median test and the repeat test the
 pooled 99th / 99.9th percentiles were 2.38 / 7.38, with the same-scan test, the
@@ -177,7 +181,7 @@ setting of the score tried (``leak`` 0.6-0.8, ``readmit`` 1-5, ``quarantine`` 8.
 empty penalty) brings seed 000 under 0.5 % while a lie still reaches weight 0.1 within a
 few scans (at 0 % there, *biased* is never caught and *empty* only after 40 scans). How
 soon each lie reaches weight <= 0.1 on the evaluation runs is in docs/security.md
-(``python -m sensornet.sim.lying``'s defence table).
+(``python -m sensornet.sim.studies.lying.study``'s defence table).
 
 Pure logic (no I/O): :class:`peers.consensus.Consensus` calls :meth:`Trust.weigh` before each
 fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules). This module keeps

@@ -175,7 +175,8 @@ class TrustConfig:
     neighbour showed no target while its references showed some (a whole loss: its
     filter dropping every track at once), 1,107 of 96,632 (peer, neighbour, scan) triples
     (1.15 %) on the training runs 9000-9001 (every graph and condition of
-    :mod:`sim.trust_calibration`). Without it a filter that loses two targets for two scans
+    :mod:`sim.studies.lying.trust_calibration`). Without it a filter that loses two targets for two
+    scans
     is as much evidence as a liar's four scans of one."""
     withhold_threshold: float = 14.0
     """CUSUM value (nats) at which the neighbour is quarantined: above three scans of a whole

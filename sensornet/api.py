@@ -8,7 +8,7 @@
     run.tracks("s1")                      # {scan: (n, d) fused states}
     run.to_pandas()                       # the same table as a DataFrame (needs pandas)
 
-The run is the discrete-event twin (:func:`sim.twin.run_twin`): the peers' own code on a virtual
+The run is the discrete-event twin (:func:`sim.run.twin.run_twin`): the peers' own code on a virtual
 clock, the same bytes as the processes exchange. docs/notebooks/quickstart.ipynb is an example,
 executed by tests/test_api.py.
 """
@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from sensornet.peers.scan_results import COLUMNS
+from sensornet.sim.run.twin import TwinResult, run_twin
 from sensornet.sim.scenario import Scenario, builtin_scenarios, load_scenario
-from sensornet.sim.twin import TwinResult, run_twin
 
 __all__ = ["Run", "builtin_scenarios", "scenario", "simulate"]
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import importlib
 
 FORMATS: dict[str, str] = {
-    "seed003": "sensornet.sim.seed003_net:network_document",
-    "seed004": "sensornet.sim.seed004_scenario:network_document",
+    "seed003": "sensornet.sim.studies.seed003.network:network_document",
+    "seed004": "sensornet.sim.studies.seed004.scenario:network_document",
 }
 """``study`` value -> ``"module:function"`` taking ``(document, label)``."""
 

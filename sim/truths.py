@@ -2,7 +2,7 @@
 
 A truth model gives the true states per scan (:class:`sim.world.Truth`); one that also draws
 its sensors' returns itself (a study whose published numbers come from its own draws) gives
-whole runs. The world (:mod:`sim.world`), the peers' scoring (:mod:`sim.peers`) and the
+whole runs. The world (:mod:`sim.world`), the peers' scoring (:mod:`sim.run.peers`) and the
 single-target kinds' initialisation look a model up here by name and never name one.
 Adding a model is one function and one line in :data:`TRUTHS`.
 """
@@ -23,8 +23,8 @@ Array = Any
 
 TRUTHS: dict[str, str] = {
     "straight": "sensornet.sim.world:STRAIGHT",
-    "seed001": "sensornet.sim.truth_models:SEED001",
-    "seed003": "sensornet.sim.truth_models:SEED003",
+    "seed001": "sensornet.sim.studies.truth_models:SEED001",
+    "seed003": "sensornet.sim.studies.truth_models:SEED003",
 }
 """``truth`` value -> ``"module:attribute"`` of its :class:`TruthModel`."""
 

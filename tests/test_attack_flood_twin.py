@@ -10,8 +10,8 @@ import numpy as np
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate
+from sensornet.sim.run.twin import Inject, run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import Inject, run_twin
 from sensornet.tracking.mixture import GaussianMixture
 
 FLOOD = 6000

@@ -24,9 +24,9 @@ import zenoh
 from sensornet.peers.session import open_session
 from sensornet.protocol.codec import decode
 from sensornet.protocol.keys import Keys
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import run_twin
 from sensornet.sim.world import generate_run
 
 from tests.attacks import ATTACKS, BY_NAME, K0, SETS, Attack, only_attack_counts

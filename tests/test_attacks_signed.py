@@ -24,7 +24,7 @@ from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.envelope import inner
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.tracking.mixture import GaussianMixture
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from sensornet.protocol.keys import Keys
+from sensornet.sim.run.twin import Inject, Liveliness, run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import Inject, Liveliness, run_twin
 from sensornet.sim.world import generate_run
 
 from tests.attacks import ATTACKS, K0, SETS, Attack, only_attack_counts

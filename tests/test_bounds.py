@@ -139,7 +139,7 @@ def test_seed004_sizes_are_bounded(overrides, needle):
 
 
 def test_seed004_offline_sizes_are_bounded():
-    from sensornet.sim import seed004
+    from sensornet.sim.studies.seed004 import montecarlo as seed004
 
     with pytest.raises(seed004.ScenarioError, match="flooding.iterations"):
         seed004.load(overrides=[f"flooding.iterations={MAX_ROUNDS + 1}"])
@@ -147,7 +147,7 @@ def test_seed004_offline_sizes_are_bounded():
 
 
 def test_seed003_sensor_count_is_bounded():
-    from sensornet.sim.seed003 import check_sensor_names
+    from sensornet.sim.studies.seed003.montecarlo import check_sensor_names
 
     check_sensor_names([{"name": f"p{i}"} for i in range(MAX_SENSORS)], "seed003")
     with pytest.raises(ValueError, match="over the limit"):

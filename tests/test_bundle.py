@@ -9,8 +9,8 @@ import pytest
 from sensornet.protocol.bundle import MAX_ENTRIES, pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
 from sensornet.protocol.messages import Scan
+from sensornet.sim.run.world_process import WorldError, run_world
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.world_process import WorldError, run_world
 
 
 def _scan(name: str, k: int, n: int) -> bytes:

@@ -20,7 +20,7 @@ from sensornet.sim.campaign import (
     run_campaign,
     status,
 )
-from sensornet.sim.results import ResultStore
+from sensornet.sim.campaign.results import ResultStore
 
 from sensornet.cli import main
 
@@ -275,13 +275,17 @@ def test_results_of_other_code_are_not_reused(tmp_path, monkeypatch, capsys):
     assert "4 stored runs belong to other code versions or cells" in capsys.readouterr().out
     assert run_campaign(c, out, jobs=1, progress=False).ran == 4
     monkeypatch.delenv("SENSORNET_CODE_VERSION")
-    from sensornet.sim.runners import code_version
+    from sensornet.sim.campaign.runners import code_version
 
     assert len(code_version()) == 16 and code_version() != "test-other"
 
 
 def test_seed001_runner_reproduces_the_table1_rows(tmp_path, capsys):
-    from sensornet.sim.seed001 import ExperimentConfig, Seed001Scenario, run_experiment
+    from sensornet.sim.studies.seed001.montecarlo import (
+        ExperimentConfig,
+        Seed001Scenario,
+        run_experiment,
+    )
 
     path = _file(tmp_path, """
 [campaign]

@@ -89,7 +89,7 @@ def test_run_says_at_start_when_it_is_secure_or_routed(flags, secure, routed, tm
     listens, each in one line at start; a plain run says neither."""
     import types
 
-    import sensornet.sim.launcher
+    import sensornet.sim.run.launcher
 
     def fake_start_run(*a, **kw):  # the processes are not started: only what cmd_run says
         ep = ("tls" if kw["secure"] else "tcp") + "/127.0.0.1:7999"
@@ -98,8 +98,8 @@ def test_run_says_at_start_when_it_is_secure_or_routed(flags, secure, routed, tm
     def fake_wait_run(*a, **kw):
         raise _Started
 
-    monkeypatch.setattr(sensornet.sim.launcher, "start_run", fake_start_run)
-    monkeypatch.setattr(sensornet.sim.launcher, "wait_run", fake_wait_run)
+    monkeypatch.setattr(sensornet.sim.run.launcher, "start_run", fake_start_run)
+    monkeypatch.setattr(sensornet.sim.run.launcher, "wait_run", fake_wait_run)
     out = tmp_path / "run"
     with pytest.raises(_Started):
         main(["run", "seed000", "--no-rerun", "--out", str(out), *flags])
@@ -130,7 +130,7 @@ def test_scenario_show_round_trips(capsys):
 
 
 def test_run_summary_table_shows_where_the_latency_goes():
-    from sensornet.sim.launcher import format_summary
+    from sensornet.sim.run.launcher import format_summary
 
     base = {"scans": 10, "mean_ospa_local": 30.0, "mean_ospa_fused": 20.0, "messages_sent": 20,
             "messages_received": 40, "bytes_sent": 4000, "bytes_received": 8000,

@@ -167,7 +167,7 @@ def test_too_many_peers_is_refused(tmp_path):
              "43 peer processes", "--max-peers")
     _refused(_cli("run", str(path), "--max-peers", "50", "--max-memory-gb", "0.5",
                   "--per-process", "1", cwd=tmp_path), "memory", "--max-memory-gb")
-    # packed in hosts (the default above sim.packing.PACK_ABOVE peers): a few processes, so
+    # packed in hosts (the default above sim.run.packing.PACK_ABOVE peers): a few processes, so
     # the peer budget passes and the next check (memory, squeezed here) is the one that speaks
     _refused(_cli("run", str(path), "--max-memory-gb", "0.5", cwd=tmp_path), "memory")
     _no_run_folders(tmp_path)
@@ -211,7 +211,7 @@ def test_run_seed000_fused_beats_every_local(capsys):
 
 
 def test_run_that_scored_nothing_exits_nonzero(tmp_path, monkeypatch, capsys):
-    import sensornet.sim.launcher as launcher
+    import sensornet.sim.run.launcher as launcher
 
     class Handle:
         logs = {n: tmp_path / f"{n}.log" for n in ("world", "s1", "s2", "s3")}

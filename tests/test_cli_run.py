@@ -109,7 +109,7 @@ def _summary(fusions: int, late: int, lat: list[float]) -> dict:
 
 
 def test_realtime_note_only_when_the_peers_fell_behind():
-    from sensornet.sim.launcher import realtime_note
+    from sensornet.sim.run.launcher import realtime_note
 
     kept = {"s1": _summary(100, 5, [4.0] * 99 + [90.0]), "s2": _summary(100, 0, [5.0] * 100)}
     assert realtime_note(kept, 0.1, 10.0, 2) is None  # 2.5 % at the deadline, p99 90 ms

@@ -19,7 +19,7 @@ from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.envelope import TRAILER, Signer, inner, owner
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Scan
-from sensornet.sim.peers import make_peer
+from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
 

@@ -159,8 +159,8 @@ def _rows(paths: list[Path]) -> list[list[str]]:
 @pytest.mark.network
 @pytest.mark.timeout(180)
 def test_twin_and_real_processes_write_the_same_fault_log(tmp_path) -> None:
-    from sensornet.sim.launcher import start_run, wait_run
-    from sensornet.sim.twin import run_twin
+    from sensornet.sim.run.launcher import start_run, wait_run
+    from sensornet.sim.run.twin import run_twin
 
     source = tmp_path / "faulty.toml"
     source.write_text(scenario_text("seed000") + FAULTS)

@@ -296,8 +296,8 @@ def test_link_delay_and_deliveries_for_the_twin() -> None:
 
 
 def test_twin_runs_with_the_injector() -> None:
+    from sensornet.sim.run.twin import run_twin
     from sensornet.sim.scenario import load_scenario
-    from sensornet.sim.twin import run_twin
 
     scn = load_scenario("seed000", overrides={"birth.model": "truth"})
     scn = dataclasses.replace(scn, num_scans=8)

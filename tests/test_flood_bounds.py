@@ -11,8 +11,8 @@ from sensornet.peers.contracts import FusionInput
 from sensornet.peers.flood_parts import FloodFuser, ScanBound, poisson_bound
 from sensornet.protocol.messages import ScanSet
 from sensornet.sim.kinds.flooding import scan_bounds
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
 
 LINE = {"sensors.positions": [[-900, 0], [-450, 0], [0, 0], [450, 0], [900, 0]],
         "sensors.radius": 500.0, "scenario.num_scans": 12}

@@ -1,20 +1,21 @@
 """The iterated-corrector PHD as a flooding peer (seed 004, docs/seed004.md): the estimator
-against the offline IC of sim/seed004.py, skipped scans, the twin, and 5 real processes."""
+against the offline IC of sim/studies/seed004/montecarlo.py, skipped scans, the twin, and 5 real
+processes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import sensornet.sim.seed004 as seed004
+import sensornet.sim.studies.seed004.montecarlo as seed004
 from scipy.sparse.csgraph import depth_first_order
 from sensornet.peers.contracts import FusionInput
 from sensornet.peers.flooding import IcFloodEstimator, IcFloodFuser, corrector_order
 from sensornet.protocol.messages import ScanSet
-from sensornet.sim.build import adjacency, make_filter
-from sensornet.sim.peers import make_parts
+from sensornet.sim.run.peers import make_parts
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import ScenarioError, load_scenario
-from sensornet.sim.twin import run_twin
 from sensornet.sim.world import generate_run
+from sensornet.sim.world.build import adjacency, make_filter
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.models import ConstantVelocity
 
@@ -28,7 +29,8 @@ def _line(**more):
 
 
 def _offline(variant: str = "linear"):
-    """The offline study's pieces (sim/seed004.py run_once): scenario, models, sensors, the IC
+    """The offline study's pieces (sim/studies/seed004/montecarlo.py run_once): scenario, models,
+    sensors, the IC
     order, the predictor, and the scans of run 0 scan by scan."""
     off = seed004.load(overrides=[f"scenario.variant='{variant}'"])
     models = off.models()

@@ -12,12 +12,12 @@ from sensornet.peers.flooding import FloodFuser, flooding_tuples
 from sensornet.protocol.codec import VERSION, Limits, Rejected, decode, encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate, Forward, ScanSet
-from sensornet.sim.build import adjacency
-from sensornet.sim.launcher import format_summary, read_summaries, start_run, wait_run
-from sensornet.sim.peers import make_peer
+from sensornet.sim.run.launcher import format_summary, read_summaries, start_run, wait_run
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
 from sensornet.sim.world import generate_run
+from sensornet.sim.world.build import adjacency
 from sensornet.tracking.mixture import GaussianMixture
 
 # five sensors on a line 450 m apart, linked within 500 m: diameter 4, four iterations

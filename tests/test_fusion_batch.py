@@ -10,9 +10,9 @@ from sensornet.peers.consensus import Consensus, ConsensusOptions
 from sensornet.peers.contracts import LocalOutput
 from sensornet.peers.fusers import HybridFuser
 from sensornet.protocol.messages import Estimate, Tracks
-from sensornet.sim.graphs import network_scenario
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
+from sensornet.sim.world.graphs import network_scenario
 from sensornet.tracking.fusion_batch import hybrid_fuse_many
 from sensornet.tracking.fusion_rules import hybrid_fuse
 from sensornet.tracking.mixture import GaussianMixture

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.sim.fusion_advice import fusion_warnings
-from sensornet.sim.graphs import network_scenario
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
+from sensornet.sim.studies.fusion.advice import fusion_warnings
+from sensornet.sim.world.graphs import network_scenario
 
 
 @pytest.fixture(scope="module")

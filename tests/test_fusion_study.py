@@ -9,12 +9,12 @@ import json
 import numpy as np
 import pytest
 from sensornet.sim.campaign import CampaignError, load_campaign, run_campaign, status
-from sensornet.sim.fusion_study import format_markdown, interval, plot, summarise
-from sensornet.sim.graphs import network_scenario
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
 from sensornet.sim.studies.base import Cell
-from sensornet.sim.studies.seed000 import row as experiment_row
-from sensornet.sim.twin import run_twin
+from sensornet.sim.studies.fusion.quality import format_markdown, interval, plot, summarise
+from sensornet.sim.studies.seed000.study import row as experiment_row
+from sensornet.sim.world.graphs import network_scenario
 
 STUDY = """
 [campaign]

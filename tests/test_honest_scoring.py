@@ -14,7 +14,7 @@ from sensornet.peers.core import PeerCore
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Scan
-from sensornet.sim.peers import make_peer, truth_function
+from sensornet.sim.run.peers import make_peer, truth_function
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.tracking.metrics import ospa
 

@@ -16,10 +16,10 @@ import pytest
 from sensornet.peers.host import CONTROL, PeerHost
 from sensornet.peers.runtime import BATCH
 from sensornet.peers.telemetry import SharedCpu, Telemetry
-from sensornet.sim.graphs import network_scenario
-from sensornet.sim.launcher import ProcessFault, _host_commands, host_groups, hosts_line
-from sensornet.sim.packing import PACK_ABOVE, Packing, choose
-from sensornet.sim.twin import run_twin
+from sensornet.sim.run.launcher import ProcessFault, _host_commands, host_groups, hosts_line
+from sensornet.sim.run.packing import PACK_ABOVE, Packing, choose
+from sensornet.sim.run.twin import run_twin
+from sensornet.sim.world.graphs import network_scenario
 
 from sensornet.cli import main
 from tests.test_network_faults import _assert_tracks_equal_the_twin, _run
@@ -80,7 +80,7 @@ def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_their_share():
     """GM-PHD peers at 10 scans/s cost about 1.5 ms a scan: 50 of them (0.75 cores) fit one
     host, 51 need two, 100 (1.5) get one host per core; seed 004's flooding peers (5 ms, 1.0
     cores) two; a kind not measured, a host per core as before."""
-    from sensornet.sim.packing import HOST_SHARE, PEER_COST_MS, peer_load, scenario_load
+    from sensornet.sim.run.packing import HOST_SHARE, PEER_COST_MS, peer_load, scenario_load
     from sensornet.sim.scenario import load_scenario
 
     assert peer_load(20, "gmphd", 10.0) == pytest.approx(20 * PEER_COST_MS["gmphd"] / 100)
@@ -262,7 +262,7 @@ def test_a_batched_peers_step_holds_one_scan(tmp_path):
     from sensornet.peers.runtime import BACKLOG, RuntimeOptions
     from sensornet.protocol.codec import encode
     from sensornet.protocol.messages import Estimate, Scan
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
     from sensornet.sim.scenario import load_scenario
     from sensornet.tracking.mixture import GaussianMixture
 
@@ -315,7 +315,7 @@ def test_co_hosted_estimates_are_handed_over_with_admission_per_receiver(tmp_pat
     from sensornet.peers.runtime import RuntimeOptions
     from sensornet.protocol.codec import Rejected, encode
     from sensornet.protocol.messages import Estimate
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
     from sensornet.sim.scenario import load_scenario
     from sensornet.tracking.mixture import GaussianMixture
 
@@ -482,8 +482,8 @@ def test_hosts_are_grouped_to_cut_few_graph_edges():
     """Given the peer graph, hosts hold peers that are neighbours: on a circulant graph of
     degree 3 (each peer also linked to its antipode) the scenario's order would cut 27 of 75
     edges at 50 peers in 2 hosts; the spectral grouping cuts 5. A ring keeps its arcs."""
-    from sensornet.sim.graphs import circulant
-    from sensornet.sim.packing import contiguous, cut_edges, groups_for
+    from sensornet.sim.run.packing import contiguous, cut_edges, groups_for
+    from sensornet.sim.world.graphs import circulant
 
     A = circulant(50, 3)
     names = [f"p{i:02d}" for i in range(50)]
@@ -506,7 +506,7 @@ def test_a_hosts_bundles_are_bounded_before_they_are_unpacked(tmp_path):
     from sensornet.protocol.bundle import pack_bundles
     from sensornet.protocol.codec import encode
     from sensornet.protocol.messages import Scan
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
     from sensornet.sim.scenario import load_scenario
 
     scn = load_scenario(_six(tmp_path / "six.toml"))

@@ -13,11 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sensornet.sim import kinds, seed003_net
-from sensornet.sim.peers import make_parts
+from sensornet.sim import kinds
+from sensornet.sim.run.peers import make_parts
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import ScenarioError, builtin_scenarios, load_scenario
+from sensornet.sim.studies.seed003 import network as seed003_net
 from sensornet.sim.truths import truth_model
-from sensornet.sim.twin import run_twin
 
 ROOT = Path(__file__).resolve().parents[1]
 TOY = "toy=kind_plugin:TOY"
@@ -70,7 +71,7 @@ def test_bad_plugin_entry_is_a_clear_error(monkeypatch):
 @pytest.mark.parametrize("mode", ["meas", "ci"])
 def test_seed003_from_the_scenario_loader_is_the_seeds_own_peers(mode):
     """`sensornet run seed003` now builds its PDA peers from the one loader: the twin's tracks
-    equal those of sim/seed003_net.py's own builder, scan for scan, bit for bit."""
+    equal those of sim/studies/seed003/network.py's own builder, scan for scan, bit for bit."""
     scn = load_scenario("seed003", {"pda.mode": mode, "scenario.num_scans": 40})
     assert scn.network.filter == "pda" and scn.truth == "seed003"
     ours = run_twin(scn, 2)

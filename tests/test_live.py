@@ -114,7 +114,7 @@ def test_echo_in_secure_mode_speaks_as_a_member_and_verifies_signatures(tmp_path
     what the access control lets s1 hear (no tracks, no other sensor's scans), each message's
     signature checked against the roster."""
     from sensornet.peers.security import make_keys
-    from sensornet.sim.launcher import start_run
+    from sensornet.sim.run.launcher import start_run
     from sensornet.sim.scenario import load_scenario, parse_overrides
 
     keys = tmp_path / "keys"

@@ -1,4 +1,5 @@
-"""A member lying about its own estimate (sim.lying, docs/security.md "What is not protected").
+"""A member lying about its own estimate (sim.studies.lying.study, docs/security.md "What is not
+protected").
 
 Seed 000 on the twin, 30 scans, runs 8000-8001 (neither the measurement's runs 7000.. nor the
 runs its thresholds were read from). s2 lies; s1 and s3 are honest. The margins below were read
@@ -8,7 +9,7 @@ inflated/phantoms +0.9 m, AA inflated/phantoms +79/+118 m, AA empty/shifted 57/3
 
 import numpy as np
 import pytest
-from sensornet.sim.lying import (
+from sensornet.sim.studies.lying.study import (
     LIES,
     SETUPS,
     LyingCore,
@@ -101,8 +102,8 @@ def test_the_lies():
 def test_the_scenario_hook_makes_the_same_liar_as_the_study():
     """``fusion.lie = "s2:shifted"`` (what a real peer process gets with --set) builds the
     study's liar: the same honest peers' fused OSPA, scan for scan."""
+    from sensornet.sim.run.twin import run_twin
     from sensornet.sim.scenario import load_scenario
-    from sensornet.sim.twin import run_twin
 
     hooked = load_scenario("seed000", overrides={"scenario.num_scans": 20,
                                                  "fusion.lie": "s2:shifted"})
@@ -118,8 +119,8 @@ def test_the_scenario_hook_makes_the_same_liar_as_the_study():
 
 
 def test_absent_takes_the_liars_sensors_and_edges_out():
-    from sensornet.sim.lying import without
     from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.studies.lying.study import without
 
     scn = without(scenario_for(SETUPS[0], "hybrid"), "s2")
     assert list(scn.sensor_names) == ["s1", "s3"]
@@ -132,9 +133,9 @@ def test_absent_takes_the_liars_sensors_and_edges_out():
 
 
 def test_the_circulant_setup_is_the_calibrations_graph_and_not_in_the_default_study():
-    from sensornet.sim.graphs import circulant
-    from sensornet.sim.lying import CIRCULANT, plan_of
     from sensornet.sim.studies.base import Request
+    from sensornet.sim.studies.lying.study import CIRCULANT, plan_of
+    from sensornet.sim.world.graphs import circulant
 
     scn = scenario_for(CIRCULANT, "hybrid+repair")
     assert len(scn.sensor_names) == 20 and scn.network.rounds == 2
@@ -149,10 +150,11 @@ def test_the_circulant_setup_is_the_calibrations_graph_and_not_in_the_default_st
 
 
 def test_central_is_the_offline_centralised_filter_over_the_honest_sensors():
-    """The *central* cell is sim.experiment's iterated-corrector GM-PHD over the honest
+    """The *central* cell is sim.studies.seed000.montecarlo's iterated-corrector GM-PHD over the
+    honest
     sensors' scans of the same run (not the twin): the same number computed directly."""
-    from sensornet.sim.experiment import run_once
-    from sensornet.sim.lying import CENTRAL, lie_once, without
+    from sensornet.sim.studies.lying.study import CENTRAL, lie_once, without
+    from sensornet.sim.studies.seed000.montecarlo import run_once
 
     scn = scenario_for(SETUPS[0], "hybrid+trust", 12)
     row = lie_once(scn, 8000, SETUPS[0], "hybrid+trust", CENTRAL)
@@ -177,7 +179,7 @@ def test_an_empty_liar_is_caught_by_the_hold_and_honest_holds_are_counted():
     honest = [r[s] for r, s in zip(recs, ("s3", "s1"), strict=True)]
     assert sc["honest_held"] == pytest.approx(
         sum(h.holds for h in honest) / sum(h.rounds for h in honest))
-    from sensornet.sim.launcher import trust_note
+    from sensornet.sim.run.launcher import trust_note
 
     note = trust_note({n: res.summary(n) for n in HONEST})
     assert "held (withholding targets): s2 by s1 (" in note and ", s3 (" in note

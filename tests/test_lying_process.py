@@ -1,7 +1,8 @@
 """A member lying with its own valid key, as real processes in secure mode (issue 24).
 
 World + 3 peers (seed 000, 40 scans at 10 scans/s) over Zenoh on loopback with ``--secure``
-keys; s2 is started with the test hook ``fusion.lie = "s2:shifted"`` (:mod:`sim.lying`: every
+keys; s2 is started with the test hook ``fusion.lie = "s2:shifted"``
+(:mod:`sim.studies.lying.study`: every
 estimate it publishes, signed with its own key, has every component 110 m off and a tight
 covariance), the honest peers run the neighbour defence (``fusion.trust``, with its default
 registration and repair). Secure mode lets every lie through (it is s2's own key and s2's
@@ -15,9 +16,9 @@ from __future__ import annotations
 
 import pytest
 from sensornet.peers.security import make_keys
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.twin import run_twin
 
 from tests.attacks import SETS
 

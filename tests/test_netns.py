@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sensornet.sim.launcher import read_summaries
+from sensornet.sim.run.launcher import read_summaries
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
 
 from tests.processes import stop_all
 from tests.test_hosts import SIX, _six
@@ -95,7 +95,7 @@ def _routed_hosts(tmp_path: Path, ns: dict[str, str], source: str, out: Path, ne
     """The run both tests make: a router in namespace ``r`` listening on both veth links, the
     world and host h1 (SIX[:3]) in ``a``, host h2 (SIX[3:]) in ``b``, every process a client
     of the router (each log in ``tmp_path``); stopped on the way out, whatever happened."""
-    config = tmp_path / "client.json5"  # what a routed run's processes use (sim.launcher)
+    config = tmp_path / "client.json5"  # what a routed run's processes use (sim.run.launcher)
     config.write_text(json.dumps({"mode": "client",
                                   "scouting": {"multicast": {"enabled": False}}}))
     common = ["--network", network, "--out", str(out), "--run-id", network, "--no-rerun",
@@ -104,7 +104,8 @@ def _routed_hosts(tmp_path: Path, ns: dict[str, str], source: str, out: Path, ne
     procs: dict[str, subprocess.Popen] = {}
     try:
         log = tmp_path / "router.log"
-        procs["router"] = _start(ns["r"], ["sensornet.sim.router", "--listen", via["a"], "--listen",
+        procs["router"] = _start(ns["r"], ["sensornet.sim.run.router", "--listen", via["a"],
+        "--listen",
                                            via["b"], "--network", network], log)
         _wait_line(procs["router"], log, "router: listening")
         procs["world"] = _start(ns["a"], ["sensornet", "world", source, *common, "--connect",

@@ -14,7 +14,7 @@ import pytest
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate
-from sensornet.sim.launcher import merge_recordings, read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import merge_recordings, read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
 

@@ -28,15 +28,15 @@ from sensornet.peers.session import open_session
 from sensornet.protocol.codec import VERSION, decode, encode, pack_mixture
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate, Scan
-from sensornet.sim.launcher import (
+from sensornet.sim.run.launcher import (
     ProcessFault,
     inject_process_faults,
     read_summaries,
     start_run,
     wait_run,
 )
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides, scenario_text
-from sensornet.sim.twin import run_twin
 from sensornet.tracking.mixture import GaussianMixture
 
 FOUR = scenario_text("seed000") + """

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from sensornet.peers.contracts import Fuser, FusionInput, LocalEstimator
 from sensornet.peers.pda_parts import CiFuser, PdaEstimator, ci_det_weight, covariance_intersection
-from sensornet.sim import seed003, seed003_peers
+from sensornet.sim.studies.seed003 import montecarlo as seed003
+from sensornet.sim.studies.seed003 import peers as seed003_peers
 from sensornet.tracking.mixture import GaussianMixture
 
 

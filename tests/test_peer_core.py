@@ -13,7 +13,7 @@ from sensornet.peers.scoring import Scorer
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, ScanSet, Truth
-from sensornet.sim.peers import consensus_options, make_peer
+from sensornet.sim.run.peers import consensus_options, make_peer
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -205,7 +205,7 @@ def test_fusion_input_carries_weights_in_sorted_order():
 
 def test_a_restarted_peer_never_overwrites_its_earlier_files(tmp_path):
     from sensornet.peers.runtime import output_stem
-    from sensornet.sim.launcher import read_summaries
+    from sensornet.sim.run.launcher import read_summaries
 
     assert output_stem(tmp_path, "s2") == "peer-s2"
     (tmp_path / "rerun").mkdir()
@@ -252,7 +252,7 @@ def test_optional_hooks_are_declared_with_defaults():
     """The core, the consensus and the observer call a part's optional hooks through the
     contracts' declarations: a part without them gets the defaults, one with them its own."""
     from sensornet.peers.contracts import EstimatorHooks, FuserHooks
-    from sensornet.sim.peers import make_parts
+    from sensornet.sim.run.peers import make_parts
     from sensornet.sim.scenario import load_scenario
 
     plain = EstimatorHooks.of(object())

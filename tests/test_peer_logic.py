@@ -9,11 +9,11 @@ import pytest
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate, Scan
-from sensornet.sim.build import adjacency
-from sensornet.sim.experiment import run_once
-from sensornet.sim.peers import consensus_options, make_peer
+from sensornet.sim.run.peers import consensus_options, make_peer
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, with_birth_model
-from sensornet.sim.twin import run_twin
+from sensornet.sim.studies.seed000.montecarlo import run_once
+from sensornet.sim.world.build import adjacency
 from sensornet.tracking.mixture import GaussianMixture
 
 KEYS = Keys("twin")

@@ -7,8 +7,8 @@ import sys
 
 import pytest
 from sensornet.peers.recording import read
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
-from sensornet.sim.replay import replay
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.replay import replay
 from sensornet.sim.scenario import load_scenario, parse_overrides
 
 pytestmark = pytest.mark.network

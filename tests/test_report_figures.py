@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from sensornet.sim.report import ospa_time_figure, sweep_figure
+from sensornet.sim.campaign.report import ospa_time_figure, sweep_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,7 +19,7 @@ import pytest
 import yaml
 from sensornet.peers.security import make_keys
 from sensornet.peers.session import free_port
-from sensornet.sim.launcher import read_summaries
+from sensornet.sim.run.launcher import read_summaries
 
 from sensornet.cli import build_parser, main
 
@@ -200,7 +200,7 @@ def test_compose_commands_run_as_processes_on_loopback(compose, tmp_path, peer_t
 def _core(grace: float):
     from dataclasses import replace
 
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
     from sensornet.sim.scenario import load_scenario
 
     core = make_peer(load_scenario("seed000"), "s1", 0, network="grace")
@@ -292,7 +292,7 @@ def test_a_routed_run_survives_a_router_restart(tmp_path, capsys):
 def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys):
     """``[network] router = true`` in a scenario file is ``--router``; flags that a routed run
     replaces are refused in one line naming the option."""
-    import sensornet.sim.launcher
+    import sensornet.sim.run.launcher
     from sensornet.sim.scenario import ScenarioError, load_scenario
 
     text = (ROOT / "sim" / "scenarios" / "seed000.toml").read_text()
@@ -320,7 +320,7 @@ def test_scenario_router_option_makes_a_routed_run(tmp_path, monkeypatch, capsys
         started.update(kw)
         raise Started
 
-    monkeypatch.setattr(sensornet.sim.launcher, "start_run", fake_start_run)
+    monkeypatch.setattr(sensornet.sim.run.launcher, "start_run", fake_start_run)
     for source, sets in ((str(path), []), ("seed000", ["--set", "network.router=true"])):
         started.clear()
         with pytest.raises(Started):  # restart:router@K is a fault of a routed run only
@@ -346,7 +346,7 @@ def test_recovering_pub_sub_get_what_a_router_outage_held_back():
     ep = f"tcp/127.0.0.1:{free_port()}"
 
     def router():
-        proc = subprocess.Popen([sys.executable, "-m", "sensornet.sim.router", "--listen", ep],
+        proc = subprocess.Popen([sys.executable, "-m", "sensornet.sim.run.router", "--listen", ep],
                                 cwd=ROOT, stdout=subprocess.PIPE, text=True)
         assert "router: listening" in proc.stdout.readline()
         return proc

@@ -7,7 +7,6 @@ import tomllib
 
 import numpy as np
 import pytest
-from sensornet.sim.build import birth_mixture, clutter_intensity, make_filter, sensor_params
 from sensornet.sim.scenario import (
     Scenario,
     ScenarioError,
@@ -17,6 +16,7 @@ from sensornet.sim.scenario import (
     scenario_text,
     with_birth_model,
 )
+from sensornet.sim.world.build import birth_mixture, clutter_intensity, make_filter, sensor_params
 
 
 @pytest.fixture(scope="module")

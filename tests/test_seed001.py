@@ -6,9 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
-import sensornet.sim.seed001 as seed001
-import sensornet.sim.seed001_tuning as seed001_tuning
-from sensornet.sim.seed001 import (
+import sensornet.sim.studies.seed001.montecarlo as seed001
+import sensornet.sim.studies.seed001.tuning as seed001_tuning
+from sensornet.sim.studies.seed001.montecarlo import (
     GEOMETRIES,
     TUNE_FIRST_RUN,
     ExperimentConfig,

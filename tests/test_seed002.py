@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from sensornet.peers.extended import EtGmphdEstimator
 from sensornet.peers.fusers import GciFuser, HybridFuser
-from sensornet.sim.extended import make_et_filter, with_partition
-from sensornet.sim.peers import consensus_options, make_parts
+from sensornet.sim.run.peers import consensus_options, make_parts
 from sensornet.sim.scenario import ScenarioError, load_scenario
 from sensornet.sim.world import generate_run, labelled_sensor_scans, sensor_rng
+from sensornet.sim.world.extended import make_et_filter, with_partition
 from sensornet.tracking.metrics import ospa
 from sensornet.tracking.partition import DistancePartitioner, GridSpectralPartitioner
 
@@ -86,7 +86,7 @@ def test_et_filter_tracks_the_seed002_targets(partition):
 
 
 def test_experiment_smoke_and_table(tmp_path, capsys):
-    from sensornet.sim import seed002
+    from sensornet.sim.studies.seed002 import montecarlo as seed002
 
     base = load_scenario("seed002", {"scenario.num_scans": 15})
     res = seed002.run_experiment(1, clutters=(10,), first_run=3, progress=False, base=base)
@@ -103,7 +103,7 @@ def test_experiment_smoke_and_table(tmp_path, capsys):
 
 
 def test_experiment_cli_refuses_bad_flags(capsys):
-    from sensornet.sim import seed002
+    from sensornet.sim.studies.seed002 import montecarlo as seed002
 
     assert seed002.main(["--runs", "0"]) == 2
     assert "--runs" in capsys.readouterr().err
@@ -133,7 +133,7 @@ class _Sink:
 
 def test_rerun_view_colours_cells_and_greys_one_point_cells():
     from sensornet.peers.observer import Observer
-    from sensornet.sim.peers import make_peer
+    from sensornet.sim.run.peers import make_peer
 
     scn = load_scenario("seed002", {"extended.partition": "grid-spectral"})
     core = make_peer(scn, "s1")

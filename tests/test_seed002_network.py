@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.sim.twin import run_twin
 
 SCANS = 30
 SETS = [f"scenario.num_scans={SCANS}", "network.speed=10"]

@@ -1,10 +1,10 @@
-"""Seed 003 scenario and Monte Carlo plumbing (sim/seed003.py)."""
+"""Seed 003 scenario and Monte Carlo plumbing (sim/studies/seed003/montecarlo.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.sim import seed003
+from sensornet.sim.studies.seed003 import montecarlo as seed003
 from sensornet.tracking.imm import POS, VEL
 
 

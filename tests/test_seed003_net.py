@@ -1,4 +1,5 @@
-"""Seed 003 peers over the peer core (sim/seed003_net.py): the twin against the offline filters,
+"""Seed 003 peers over the peer core (sim/studies/seed003/network.py): the twin against the offline
+filters,
 the late-sensor fallback, the returns on the wire, and (network) real processes against the twin."""
 
 from __future__ import annotations
@@ -9,7 +10,8 @@ from sensornet.peers.contracts import FusionInput
 from sensornet.peers.pda_parts import CiFuser, PdaEstimator
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.messages import Estimate, Returns
-from sensornet.sim import seed003, seed003_net
+from sensornet.sim.studies.seed003 import montecarlo as seed003
+from sensornet.sim.studies.seed003 import network as seed003_net
 from sensornet.tracking.imm import POS
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -202,7 +204,7 @@ def test_cli_run_seed003_refuses_bad_settings_in_one_line(capsys):
 
 def _received(scn) -> dict[str, int]:
     """Per peer, the neighbour inputs its fusions had over the run (the twin)."""
-    from sensornet.sim.twin import run_twin
+    from sensornet.sim.run.twin import run_twin
 
     res = run_twin(scn, RUN)
     return {n: res.summary(n)["stats"]["fused_inputs"] for n in res.peers}

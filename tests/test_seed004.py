@@ -1,4 +1,5 @@
-"""Seed-004 scenario and offline Monte Carlo (sim/seed004.py): geometry, tuple counts, outputs."""
+"""Seed-004 scenario and offline Monte Carlo (sim/studies/seed004/montecarlo.py): geometry, tuple
+counts, outputs."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from sensornet.peers.flooding import flood
-from sensornet.sim import seed004
+from sensornet.sim.studies.seed004 import montecarlo as seed004
 from sensornet.tracking.mixture import GaussianMixture
 
 

@@ -10,10 +10,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from sensornet.sim.launcher import read_summaries, start_run, wait_run
-from sensornet.sim.peers import make_peer
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import ScenarioError, load_scenario, parse_overrides
-from sensornet.sim.twin import run_twin
 
 
 @pytest.mark.parametrize("rule", ["ratio", "gci"])

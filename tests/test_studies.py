@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from sensornet.sim import studies
 from sensornet.sim.campaign import load_campaign, results_table, run_campaign
-from sensornet.sim.report import write_report
+from sensornet.sim.campaign.report import write_report
+from sensornet.sim.run.pool import iter_pool, map_runs
 from sensornet.sim.studies.base import Cell, Outcome, Request, Study, run_study
-from sensornet.sim.studies.pool import iter_pool, map_runs
 
 from sensornet.cli import main
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import csv
 
 import pytest
-from sensornet.sim.build import fault_injector
+from sensornet.sim.campaign.sweep import summarise, sweep, write_outputs
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import ScenarioError, load_scenario
-from sensornet.sim.sweep import summarise, sweep, write_outputs
-from sensornet.sim.twin import run_twin
+from sensornet.sim.world.build import fault_injector
 
 BASE = {"birth.model": "truth", "scenario.num_scans": 30}
 

@@ -248,9 +248,9 @@ def test_disabled_or_warming_up_changes_nothing():
 
 
 def test_consensus_leaves_a_quarantined_neighbour_out_and_the_summary_says_so():
-    from sensornet.sim.launcher import trust_note
-    from sensornet.sim.lying import run_with_liar
+    from sensornet.sim.run.launcher import trust_note
     from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.studies.lying.study import run_with_liar
 
     # plain GCI: a confident wrong estimate erases every target the honest peers fuse, unless
     # the liar is left out
@@ -485,7 +485,7 @@ def test_relative_offsets_take_own_error_out_of_every_neighbours_offset():
 
 
 def test_calibration_counts_which_test_began_each_quarantine():
-    from sensornet.sim.trust_calibration import simulate
+    from sensornet.sim.studies.lying.trust_calibration import simulate
 
     cfg = _cfg()
     none = np.zeros((6, 2))
@@ -510,7 +510,7 @@ def test_calibration_counts_which_test_began_each_quarantine():
 def test_calibration_counts_holds_apart_from_quarantines():
     """A withheld-target CUSUM above the hold but under the quarantine threshold takes the
     weight to 0 (first_low) without a quarantine; the share of such triples is ``held``."""
-    from sensornet.sim.trust_calibration import simulate
+    from sensornet.sim.studies.lying.trust_calibration import simulate
 
     cfg = TrustConfig(detection_probability=0.99)
     col = np.zeros((6, len(alarm_limits(cfg))))

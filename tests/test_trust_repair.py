@@ -164,9 +164,9 @@ def test_an_honest_neighbour_within_the_drift_is_fused_as_it_is():
 
 
 def test_a_phantoms_liar_on_the_twin_is_repaired_and_run_says_so():
-    from sensornet.sim.launcher import trust_note
-    from sensornet.sim.lying import run_with_liar
+    from sensornet.sim.run.launcher import trust_note
     from sensornet.sim.scenario import load_scenario
+    from sensornet.sim.studies.lying.study import run_with_liar
 
     base = {"scenario.num_scans": 25, "fusion.trust": True}
     res = run_with_liar(load_scenario("seed000", overrides=base), 8100, "s2", "phantoms")

@@ -203,7 +203,7 @@ def test_the_reference_rule_is_the_median_of_three_or_more_else_the_smallest():
 
 
 def test_the_calibration_refuses_a_setting_the_scenario_refuses():
-    from sensornet.sim.trust_calibration import main
+    from sensornet.sim.studies.lying.trust_calibration import main
 
     with pytest.raises(SystemExit) as e:
         main(["--runs", "1", "--set", "fusion.trust_register=False"])

@@ -6,9 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
-from sensornet.sim.build import measurement_box
 from sensornet.sim.scenario import Scenario, SensorSpec, load_scenario
 from sensornet.sim.world import generate_run, generate_scans, generate_truth, sensor_rng
+from sensornet.sim.world.build import measurement_box
 
 LONG_TARGETS = [
     {"birth_scan": 1, "death_scan": 1000, "start": [-500.0, -500.0], "end": [500.0, 500.0]},

@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 from sensornet.peers.core_types import WORLD_GRACE_MIN, WORLD_GRACE_SCANS, CoreConfig
-from sensornet.sim.peers import make_peer
+from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 
 from tests.test_network_faults import FOUR, _run

@@ -21,7 +21,7 @@ no-manoeuvre model's PDA-combined NIS ``nubar^T S^-1 nubar`` summed over the sen
 (no clutter) ``D_L ~ chi2(L n_z)``, so the Neyman-Pearson threshold for false-alarm rate
 ``pf`` is ``chi2.isf(pf, L n_z)``. In clutter the combined innovation is smaller than a
 single return's, so the realised false-alarm rate is lower than ``pf`` (measured, not
-assumed, in ``sim.seed003``).
+assumed, in ``sim.studies.seed003.montecarlo``).
 
 :class:`FuzzyWeighting` joins them into the :class:`tracking.pda.ReturnWeighting` the PDA
 filters take: mode ``"switched"`` applies ``W_j = mu_j beta_j / c`` only while the detector
@@ -178,7 +178,7 @@ def fit(fis: FuzzySystem, g: np.ndarray, d: np.ndarray, target: np.ndarray,
     NIS centres in [0, 20], D centres in [0, 10], widths in [0.3, 10]). ``what``:
     ``"outputs"`` fits the output centres only, ``"all"`` also the input centres and widths.
     At most ``max_samples`` returns (a random subset). Fit on training runs only
-    (``sim.seed003 --train-fuzzy``), never on the runs a table reports."""
+    (``sim.studies.seed003.montecarlo --train-fuzzy``), never on the runs a table reports."""
     # heavy dependency: scipy.optimize (only fitting needs it, not the fuzzy system's use)
     from scipy.optimize import minimize
 

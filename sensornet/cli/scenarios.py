@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sensornet.sim.fusion_advice import fusion_warnings
 from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.studies.fusion.advice import fusion_warnings
 
 
 def load(args: argparse.Namespace, source: str):

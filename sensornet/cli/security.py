@@ -35,7 +35,7 @@ def run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     if args.secure is None:
         return None
     check_endpoints([*(args.listen or []), *(args.connect or [])])
-    router = ["router"] if getattr(args, "router", False) else []  # sim.launcher.ROUTER
+    router = ["router"] if getattr(args, "router", False) else []  # sim.run.launcher.ROUTER
     if args.secure == "":
         args.network = args.network or f"run-{os.urandom(4).hex()}"
         folder = out / "keys"

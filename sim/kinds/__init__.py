@@ -4,7 +4,7 @@ A *kind* is one module under ``sim/kinds/`` that exposes a :class:`PeerKind`: ho
 that kind is built from a scenario (its local estimator and fuser, see
 :mod:`peers.contracts`), which fusion rules it takes, how it takes part in the consensus, how
 Rerun draws it, and, for scenarios that draw their own runs, how the world does. The loader,
-the peer builder (:mod:`sim.peers`), the world, the launcher, the twin, recording and replay,
+the peer builder (:mod:`sim.run.peers`), the world, the launcher, the twin, recording and replay,
 secure mode, faults and campaigns look a kind up here and never name one.
 
 Adding a kind is one module and one line in :data:`KINDS` (or :func:`register` from a

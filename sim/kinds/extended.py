@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from sensornet.peers.extended import EtGmphdEstimator
-from sensornet.sim.extended import make_et_filter
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.kinds.gmphd import MIXTURE_RULES, mixture_fuser
 from sensornet.sim.scenario import Scenario
+from sensornet.sim.world.extended import make_et_filter
 
 
 def build(scn: Scenario, name: str, run: int = 0):

@@ -15,9 +15,9 @@ from sensornet.peers.flooding import (
     IcFloodFuser,
     corrector_order,
 )
-from sensornet.sim.build import adjacency, make_filter, measurement_box, sensor_model
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import FUSION_RULES, Scenario
+from sensornet.sim.world.build import adjacency, make_filter, measurement_box, sensor_model
 from sensornet.tracking.idpc import ClusterParams
 
 MARGIN_SIGMAS = 6.0

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from sensornet.peers.estimators import GmphdEstimator
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
-from sensornet.sim.build import make_filter
 from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import Scenario
+from sensornet.sim.world.build import make_filter
 
 
 def mixture_fuser(scn: Scenario, reducer):

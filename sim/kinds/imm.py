@@ -8,10 +8,10 @@ import zlib
 import numpy as np
 from sensornet.peers.estimators import ImmEstimator, SingleTargetConfig
 from sensornet.peers.fusers import ImmFuser, NoFuser
-from sensornet.sim.build import sensor_model
 from sensornet.sim.kinds import PeerKind, View
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world import initial_state
+from sensornet.sim.world.build import sensor_model
 
 
 def _builder(filter_name: str):

@@ -1,6 +1,7 @@
 """The registry of studies: each seed's reproduction and each measurement, found by name.
 
-A *study* is one module under ``sim/studies/`` exposing a :class:`sim.studies.base.Study`
+A *study* is a package under ``sim/studies/`` whose ``study`` module exposes a
+:class:`sim.studies.base.Study`
 (load, run once, summarise, table, figures; campaign and report hooks). ``sensornet
 experiment``, campaigns and reports look a study up here and never name one. Adding a study is
 one module and one line in :data:`STUDIES` (or :func:`register` from a test or a plug-in,
@@ -15,16 +16,16 @@ from typing import Any
 from sensornet.sim import plugins
 
 STUDIES: dict[str, str] = {
-    "seed004": "sensornet.sim.studies.seed004:STUDY",
-    "seed003": "sensornet.sim.studies.seed003:STUDY",
-    "seed003-peers": "sensornet.sim.studies.seed003_peers:STUDY",
-    "seed002": "sensornet.sim.studies.seed002:STUDY",
-    "seed001": "sensornet.sim.studies.seed001:STUDY",
-    "twin": "sensornet.sim.studies.network:TWIN",
-    "real": "sensornet.sim.studies.network:REAL",
-    "fusion-quality": "sensornet.sim.studies.fusion:STUDY",
-    "lying": "sensornet.sim.lying:STUDY",
-    "experiment": "sensornet.sim.studies.seed000:STUDY",
+    "seed004": "sensornet.sim.studies.seed004.study:STUDY",
+    "seed003": "sensornet.sim.studies.seed003.study:STUDY",
+    "seed003-peers": "sensornet.sim.studies.seed003.peers_study:STUDY",
+    "seed002": "sensornet.sim.studies.seed002.study:STUDY",
+    "seed001": "sensornet.sim.studies.seed001.study:STUDY",
+    "twin": "sensornet.sim.studies.network.study:TWIN",
+    "real": "sensornet.sim.studies.network.study:REAL",
+    "fusion-quality": "sensornet.sim.studies.fusion.study:STUDY",
+    "lying": "sensornet.sim.studies.lying.study:STUDY",
+    "experiment": "sensornet.sim.studies.seed000.study:STUDY",
 }
 """Study name -> ``"module:attribute"``, in the order ``experiment`` asks them whether they
 read a scenario (the last, ``experiment``, reads any). Modules are imported on first use."""

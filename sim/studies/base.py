@@ -1,9 +1,9 @@
 """The Study contract: load, run once, summarise, table, figures; and the one driver of it.
 
 A study is a reproduction or a measurement with seeded, independent runs. The ``experiment``
-command, campaigns (:mod:`sim.campaign`) and reports (:mod:`sim.report`) drive every study
+command, campaigns (:mod:`sim.campaign`) and reports (:mod:`sim.campaign.report`) drive every study
 through the hooks below and never name one; :func:`run_study` is the one loop that runs them
-(over :func:`sim.studies.pool.map_runs`, one progress line).
+(over :func:`sim.run.pool.map_runs`, one progress line).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sensornet.sim.studies import pool
+from sensornet.sim.run import pool
 
 Setup = Any
 """What a study's ``load`` returns: a resolved scenario or configuration (picklable: it goes to
@@ -53,7 +53,8 @@ class Outcome:
 
 @dataclass(frozen=True)
 class Cell:
-    """What a campaign task gives a study's ``row`` hook (a :class:`sim.runners.Task` is one)."""
+    """What a campaign task gives a study's ``row`` hook (a :class:`sim.campaign.runners.Task` is
+    one)."""
 
     run: int
     scenario: str
@@ -97,7 +98,7 @@ class Study:
     cell_setup: Callable[[str, Mapping[str, Any]], Setup] | None = None
     """``(scenario source, overrides) -> setup`` of a campaign cell (None: the scenario)."""
     setup_hash: Callable[[Setup], str] | None = None
-    """A hash of a cell's resolved setup (None: :func:`sim.runners.scenario_hash`)."""
+    """A hash of a cell's resolved setup (None: :func:`sim.campaign.runners.scenario_hash`)."""
     fixed_scenario: str | None = None
     """A runner that reads no scenario file: the ``scenario`` its campaigns must name."""
     modules: tuple[str, ...] = ()

@@ -17,9 +17,9 @@ from sensornet.peers.host import PeerHost
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
 from sensornet.peers.session import ANNOUNCE
 from sensornet.peers.transport import DuplicatePeer
-from sensornet.sim.build import fault_injector
-from sensornet.sim.peers import make_peer
+from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import scenario_text
+from sensornet.sim.world.build import fault_injector
 
 
 def _prepare_peer(args: argparse.Namespace, scn) -> None:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from sensornet.cli.common import UserError
-from sensornet.sim.run_plots import PlotError, plot_run
+from sensornet.sim.report.run_plots import PlotError, plot_run
 
 
 def cmd_plot(args: argparse.Namespace) -> int:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from sensornet.cli.common import UserError
-from sensornet.sim.replay import replay
+from sensornet.sim.run.replay import replay
 from sensornet.sim.scenario import ScenarioError
 
 

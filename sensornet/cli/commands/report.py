@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from sensornet.cli.common import UserError
-from sensornet.sim.report import write_report
+from sensornet.sim.campaign.report import write_report
 
 
 def cmd_report(args: argparse.Namespace) -> int:

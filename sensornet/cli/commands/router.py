@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from sensornet.sim.router import serve
+from sensornet.sim.run.router import serve
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    """``sensornet router``: a Zenoh router (see :mod:`sim.router`)."""
+    """``sensornet router``: a Zenoh router (see :mod:`sim.run.router`)."""
     serve(args.listen, args.connect or [], args.config, args.secure, args.name, args.network)
     return 0

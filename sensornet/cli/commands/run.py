@@ -24,10 +24,10 @@ from sensornet.cli.scenarios import load, warn_fusion
 from sensornet.cli.security import run_keys
 from sensornet.peers.rerun_sink import spawn_viewer
 from sensornet.peers.scan_results import merge_parts, write_part
-from sensornet.sim import launcher
-from sensornet.sim.build import adjacency
-from sensornet.sim.packing import choose, scenario_load
-from sensornet.sim.twin import run_twin
+from sensornet.sim.run import launcher
+from sensornet.sim.run.packing import choose, scenario_load
+from sensornet.sim.run.twin import run_twin
+from sensornet.sim.world.build import adjacency
 
 
 def report_results(out: Path) -> Path | None:
@@ -84,7 +84,7 @@ def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
 
 
 def _packing(args: argparse.Namespace, scn, pfaults) -> int:
-    """``--per-process``, or the automatic packing (sim.packing), saying so in one line."""
+    """``--per-process``, or the automatic packing (sim.run.packing), saying so in one line."""
     solo = [f"{f.action}:{f.peer}" for f in pfaults
             if f.action not in launcher.HOSTED_ACTIONS and f.peer != "router"]
     asked = getattr(args, "per_process", None)

@@ -6,8 +6,8 @@ import argparse
 
 from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import UserError, _run_folder
+from sensornet.sim.campaign.sweep import format_summary, summarise, sweep, write_outputs
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.sim.sweep import format_summary, summarise, sweep, write_outputs
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

@@ -9,7 +9,7 @@ from sensornet.cli.budgets import check_budget
 from sensornet.cli.common import UserError, _resolve_viewer
 from sensornet.cli.scenarios import load
 from sensornet.cli.security import member_security
-from sensornet.sim.world_process import WorldError, run_world
+from sensornet.sim.run.world_process import WorldError, run_world
 
 
 def cmd_world(args: argparse.Namespace) -> int:

@@ -1,0 +1,1 @@
+"""The shipped campaign files (package data: ``sensornet campaign NAME``)."""

@@ -1,0 +1,291 @@
+"""Start a whole network run as separate OS processes: the world and one peer per sensor.
+
+Every process is ``python -m sensornet world|peer ...`` with explicit loopback endpoints on
+free ports, its log in ``<run>/logs/``, its summary and ``.rrd`` in the run folder. Whatever
+happens (an error, Ctrl-C, SIGTERM, a timeout), every child is stopped before this returns:
+:func:`wait_run` takes a ``stop`` event that the caller sets from its signal handler, and then
+sends SIGTERM to every child (SIGKILL after a grace period), so the peers still write their
+summaries and ``.rrd`` files and the recording can be merged.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+from sensornet.peers.security import tls_endpoint
+from sensornet.peers.session import (
+    DEFAULT_LEASE_MS,
+    MAX_MESSAGE_BYTES,
+    endpoint,
+    free_port,
+)
+from sensornet.sim.run.packing import groups_for
+from sensornet.sim.run.process_faults import (  # noqa: F401  (the names other modules import from here)
+    HOSTED_ACTIONS,
+    PROCESS_ACTIONS,
+    ProcessFault,
+    fault_report,
+    inject_process_faults,
+)
+from sensornet.sim.run.run_handle import ROUTER, ROUTER_GRACE, RunHandle  # noqa: F401
+from sensornet.sim.run.run_summary import (  # noqa: F401  (the names other modules import from here)
+    REALTIME_DEADLINE_SHARE,
+    format_summary,
+    merge_recordings,
+    read_summaries,
+    realtime_note,
+    summary_files,
+    trust_note,
+)
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world.build import adjacency
+
+
+def _cli() -> list[str]:
+    return [sys.executable, "-m", "sensornet"]
+
+
+def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
+              overrides: list[str] | None = None, viewer: str | None = None,
+              run: int = 0, speed: float | None = None, peer_args: dict | None = None,
+              lease_ms: int | None = None, rerun: bool = True,
+              sparse: bool = False, listen: list[str] | None = None,
+              connect: list[str] | None = None, config: str | None = None,
+              run_id: str | None = None, secure: Path | None = None,
+              router: bool = False, recover: bool = True,
+              world_args: list[str] | None = None, per_process: int = 1) -> RunHandle:
+    """Start the world and the peers; returns at once (see :func:`wait_run`).
+
+    ``listen``: the world's endpoints (the peers connect to the first; default a free
+    loopback port); ``connect``: endpoints every process connects to as well (a router, say);
+    ``config``: a Zenoh JSON5 file for every process; ``run_id``: the Rerun recording id;
+    ``secure``: a folder of the network's keys (``sensornet keys``): every process then speaks
+    mutual TLS on ``tls/`` endpoints under the network's access control. ``router``: start a
+    router first (``sensornet router``, with the folder's ``router`` key in secure mode) and make
+    every process its Zenoh client (a config file ``<out>/zenoh-client.json5``; nobody else
+    listens): the routed topology of several machines, on loopback; ``recover`` (routed runs):
+    estimates and scans through Zenoh's advanced publisher/subscriber (``--recover``);
+    ``world_args``: more arguments for the world (``--wait 150``, say), as ``peer_args`` for
+    the peers; ``per_process``: peers per process (``sensornet host``, one Zenoh session
+    each; hosts ``h1``, ``h2``, ... take the peers in the scenario's order, see
+    :func:`host_groups`); 1, the default: every peer a process of its own. Returns at once.
+    """
+    network = network or f"run-{uuid.uuid4().hex[:8]}"
+    run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
+    names = scn.sensor_names
+    groups = host_groups(names, per_process, adjacency(scn)[1])
+    if groups and secure:
+        raise ValueError("a host has one Zenoh session, so one TLS identity: no --secure "
+                         "with more than one peer per process")
+    ep = tls_endpoint if secure else endpoint
+    eps = {n: ep(free_port()) for n in (groups or names)}
+    world_listen = list(listen or []) or [ep(free_port())]
+    eps = {"world": world_listen[0], **eps}
+    sets = [a for item in (overrides or []) for a in ("--set", item)]
+    common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
+    if viewer:
+        common += ["--viewer", viewer]
+    if not rerun:
+        common += ["--no-rerun"]
+    if config:
+        common += ["--config", str(config)]
+    if secure:
+        common += ["--secure", str(secure)]
+    extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure, hosts=groups)
+    if router:
+        if config or listen or sparse:
+            raise ValueError("a routed run makes its own client config and endpoints: "
+                             "no --config, --listen or --sparse with --router")
+        common, eps = _routed(handle, common, ep(free_port()), list(groups or names))
+        world_listen = []
+    if router:  # recover: what a router's outage held back comes from the publishers' caches
+        extra_connect = ["--connect", eps["router"], *extra_connect,
+                         *(["--recover"] if recover else [])]
+    # a host's scans in one message per scan (protocol.bundle); recovery keeps one per sensor
+    bundles = [] if not groups or (router and recover) else [
+        a for h, members in groups.items() for a in ("--bundle", f"{h}={','.join(members)}")]
+    cmds = {"world": [*_cli(), "world", source, *common, *bundles,
+                      *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
+                      "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
+            + (["--speed", str(speed)] if speed else [])}
+    if sparse:  # each peer links to the world and its graph neighbours only, gossip off
+        _, A = adjacency(scn)
+    for i, n in enumerate(names):
+        if router or groups:  # a host's links: _host_commands
+            links = []  # the router, in extra_connect like every process
+        elif sparse:
+            links = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
+        else:
+            links = [eps["world"], *(eps[m] for m in names[:i])]
+        extra = (peer_args or {}).get(n, [])
+        cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common,
+                   *(["--listen", eps.get(n, "")] if not router else
+                     ["--world-grace", str(ROUTER_GRACE)]),
+                   "--color", str(i), "--run", str(run),
+                   *[a for c in links for a in ("--connect", c)], *extra_connect,
+                   *(["--lease-ms", str(lease_ms)] if lease_ms else []),
+                   *(["--no-gossip"] if sparse else [] if router else ["--no-autoconnect"]),
+                   *extra] \
+            + (["--speed", str(speed)] if speed else [])
+    if groups:  # the hosts instead of the peers' processes
+        cmds = {"world": cmds["world"], **_host_commands(
+            groups, cmds, names, eps, extra_connect, router, sparse, A if sparse else None)}
+    handle.commands = cmds
+    (out / "commands.json").write_text(json.dumps(
+        {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
+    try:
+        if router:
+            handle.start_router()
+        for name, cmd in cmds.items():
+            log = out / "logs" / f"{name}.log"
+            handle.logs[name] = log
+            with log.open("w") as fh:  # a host reads its commands (kill PEER) on stdin
+                handle.procs[name] = subprocess.Popen(
+                    cmd, stdout=fh, stderr=subprocess.STDOUT,
+                    stdin=subprocess.PIPE if name in groups else subprocess.DEVNULL)
+    except BaseException:
+        handle.stop_all(grace=1.0)
+        raise
+    return handle
+
+
+def host_groups(names: list[str], per_process: int,
+                adjacency: np.ndarray | None = None) -> dict[str, list[str]]:
+    """``h1``, ``h2``, ...: at most ``per_process`` peers each, in the scenario's order (the
+    last host may hold fewer), or, given the peer graph's ``adjacency``, grouped so that fewer
+    graph edges run between hosts when a spectral partition finds such a grouping
+    (:func:`sim.run.packing.groups_for`); empty for ``per_process`` 1 (a process per peer)."""
+    if per_process < 1:
+        raise ValueError(f"per_process must be >= 1, not {per_process}")
+    if per_process == 1:
+        return {}
+    groups = groups_for(adjacency, len(names), per_process)
+    return {f"h{j + 1}": [names[i] for i in g] for j, g in enumerate(groups)}
+
+
+def hosts_line(hosts: dict[str, list[str]]) -> str:
+    """One line: which peers each host holds."""
+    return "hosts: " + "; ".join(f"{h} = {','.join(p)}" for h, p in hosts.items())
+
+
+def _host_commands(groups: dict[str, list[str]], peer_cmds: dict[str, list[str]],
+                   names: list[str], eps: dict[str, str], extra_connect: list[str],
+                   router: bool, sparse: bool, A) -> dict[str, list[str]]:
+    """Each host's ``sensornet host`` command, made from its peers' commands: their shared
+    flags, the host's own endpoint, links to the world and the earlier hosts (with
+    ``sparse`` only those that hold a neighbour of one of its peers)."""
+    index = {n: i for i, n in enumerate(names)}
+    order = list(groups)
+    cmds = {}
+    for j, (h, members) in enumerate(groups.items()):
+        first = peer_cmds[members[0]]
+        for m in members[1:]:
+            if _without_own(peer_cmds[m]) != _without_own(first):
+                raise ValueError(f"the peers of host {h} need the same peer flags "
+                                 f"({members[0]}: {first[len(_cli()) + 2:]}; {m}: "
+                                 f"{peer_cmds[m][len(_cli()) + 2:]})")
+        rest = _without_own(first)
+        if router:
+            links = []
+        else:
+            earlier = order[:j]
+            if sparse:
+                earlier = [g for g in earlier if any(A[index[a], index[b]] for a in members
+                                                     for b in groups[g])]
+            links = [eps["world"], *(eps[g] for g in earlier)]
+        source = rest[rest.index("--scenario") + 1]
+        rest = _drop(rest, "--scenario", 1)
+        cmds[h] = [*_cli(), "host", source, "--peers", ",".join(members), "--name", h,
+                   *(["--listen", eps[h]] if not router else []),
+                   *[a for c in links for a in ("--connect", c)], *extra_connect, *rest]
+    return cmds
+
+
+def _drop(cmd: list[str], flag: str, values: int) -> list[str]:
+    """``cmd`` without every ``flag`` and the ``values`` arguments after it."""
+    out, i = [], 0
+    while i < len(cmd):
+        if cmd[i] == flag:
+            i += 1 + values
+            continue
+        out.append(cmd[i])
+        i += 1
+    return out
+
+
+def _without_own(cmd: list[str]) -> list[str]:
+    """A peer's command without what is its own (name, endpoint, links, colour)."""
+    rest = cmd[len(_cli()) + 2:]  # after "peer NAME"
+    for flag in ("--listen", "--connect", "--color"):
+        rest = _drop(rest, flag, 1)
+    return rest
+
+
+def _routed(handle: RunHandle, common: list[str], router_ep: str,
+            names: list[str]) -> tuple[list[str], dict[str, str]]:
+    """A routed run: the router's command, the clients' config file, every endpoint the
+    router's."""
+    config = handle.out / "zenoh-client.json5"
+    config.write_text(json.dumps({
+        "mode": "client", "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {"tx": {"lease": DEFAULT_LEASE_MS},
+                               "rx": {"max_message_size": MAX_MESSAGE_BYTES}}}}, indent=1))
+    handle.router_command = [sys.executable, "-m", "sensornet.sim.run.router", "--listen",
+                             router_ep,
+                             "--network", handle.network]  # sensornet router, started faster
+    if handle.secure:
+        handle.router_command += ["--secure", str(handle.secure), "--name", ROUTER]
+    handle.endpoints = {"router": router_ep}
+    return [*common, "--config", str(config)], {"router": router_ep, "world": router_ep,
+                                               **{n: router_ep for n in names}}
+
+
+def wait_run(handle: RunHandle, timeout: float,
+             stop: threading.Event | None = None) -> dict[str, int]:
+    """Wait for the world to finish and the peers to exit; returns every exit code.
+
+    Everything is stopped (SIGTERM, then SIGKILL after a grace period) when the run outlives
+    ``timeout`` (``handle.timed_out``), when ``stop`` is set (``handle.stopped``: the caller's
+    SIGINT/SIGTERM handler), when the world fails, or when a peer exits with an error code (a
+    crash or a bad flag; peers stopped by a signal, as process faults do, exit with a negative
+    code and do not count). Peers get 15 s after the world to finish.
+    """
+    end = time.monotonic() + timeout
+    world = handle.procs["world"]
+    peers_end = None
+    try:
+        while True:
+            if stop is not None and stop.is_set():
+                handle.stopped = True
+                break
+            now = time.monotonic()
+            if now >= end or (peers_end is not None and now >= peers_end):
+                handle.timed_out = now >= end
+                break
+            if all(p.poll() is not None for p in handle.procs.values()):
+                break
+            code = world.poll()
+            if code is not None:
+                if code != 0:
+                    break
+                if peers_end is None:
+                    peers_end = min(end, now + 15.0)
+            if any((p.poll() or 0) > 0 for n, p in handle.procs.items() if n != "world"):
+                break
+            if stop is not None:
+                stop.wait(0.05)
+            else:
+                time.sleep(0.05)
+    finally:
+        handle.stop_all()
+    return {name: p.returncode for name, p in handle.procs.items()}
+

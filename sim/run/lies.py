@@ -1,0 +1,109 @@
+"""The lies of a member that lies about its own estimate (issue 24, docs/security.md): what each
+does to the liar's real mixture, and a peer core that tells one in every estimate it sends.
+
+Used by the lying study (:mod:`sim.studies.lying.study`) and by the test-only scenario key
+``fusion.lie``
+(:func:`sim.run.peers.make_peer`), so the twin, the study and a real process tell the same lie.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+from sensornet.peers.core import Output, PeerCore
+from sensornet.protocol.messages import Estimate
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.scenario.model import LIE_KINDS
+from sensornet.tracking.mixture import GaussianMixture
+
+SHIFT = 110.0
+"""Metres the ``shifted`` lie moves every component along x."""
+TIGHT = 1.0
+"""Variance (m^2, (m/s)^2) on the diagonal of the lies' covariances: confident."""
+INFLATE = 5.0
+"""The ``inflated`` lie's weight factor."""
+BIAS = 30.0
+"""Metres the ``biased`` sensor's estimates sit off along x (its covariance stays honest)."""
+
+Lie = Callable[[GaussianMixture], GaussianMixture]
+
+
+def _tight(n: int, d: int) -> np.ndarray:
+    return np.broadcast_to(TIGHT * np.eye(d), (n, d, d)).copy()
+
+
+def phantom_positions(scn: Scenario) -> np.ndarray:
+    """The ``phantoms`` lie's three fixed points: 10 % in from the region's top-left,
+    top-right and bottom-left corners (far from every seed-000 and seed-004 track)."""
+    (x0, x1), (y0, y1) = scn.region
+    dx, dy = 0.1 * (x1 - x0), 0.1 * (y1 - y0)
+    return np.array([[x0 + dx, y1 - dy], [x1 - dx, y1 - dy], [x0 + dx, y0 + dy]])
+
+
+def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2)) -> Lie:
+    """The function that turns the liar's real mixture into lie ``kind`` (:data:`LIES`)."""
+    ix, iy = position_index
+
+    def empty(mix: GaussianMixture) -> GaussianMixture:
+        return GaussianMixture.empty(mix.dim)
+
+    def shifted(mix: GaussianMixture) -> GaussianMixture:
+        means = mix.means.copy()
+        means[:, ix] += SHIFT
+        return GaussianMixture(mix.weights.copy(), means, _tight(len(mix), mix.dim))
+
+    def inflated(mix: GaussianMixture) -> GaussianMixture:
+        return mix.scaled(INFLATE)
+
+    def phantoms(mix: GaussianMixture) -> GaussianMixture:
+        pos = phantom_positions(scn)
+        means = np.zeros((len(pos), mix.dim))
+        means[:, ix], means[:, iy] = pos[:, 0], pos[:, 1]
+        extra = GaussianMixture(np.ones(len(pos)), means, _tight(len(pos), mix.dim))
+        return GaussianMixture.concatenate([mix, extra])
+
+    def biased(mix: GaussianMixture) -> GaussianMixture:
+        means = mix.means.copy()
+        means[:, ix] += BIAS
+        return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
+
+    held: list[GaussianMixture] = []
+
+    def stuck(mix: GaussianMixture) -> GaussianMixture:
+        if not held and len(mix):
+            held.append(mix.copy())
+        return held[0].copy() if held else mix
+
+    lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms,
+            "biased": biased, "stuck": stuck}
+    if kind not in lies:
+        raise ValueError(f"unknown lie {kind!r}; expected one of {', '.join(lies)}")
+    return lies[kind]
+
+
+LIES = LIE_KINDS
+
+
+class LyingCore(PeerCore):
+    """A peer that publishes ``lie(its real mixture)`` in every estimate it sends (twin only).
+
+    Built from a peer made by :func:`sim.run.peers.make_peer` (same parts, same settings); the lie
+    is applied to each outgoing :class:`Estimate` before the core encodes it, so the bytes are
+    as well-formed as an honest peer's. ``lies_told`` counts them.
+    """
+
+    def __init__(self, core: PeerCore, lie: Lie) -> None:
+        super().__init__(core.cfg, core.consensus, core.scorer)
+        self.lie = lie
+        self.lies_told = 0
+
+    def _wrap(self, messages: list) -> list[Output]:
+        told = []
+        for m in messages:
+            if type(m) is Estimate:
+                m = replace(m, mixture=self.lie(m.mixture))
+                self.lies_told += 1
+            told.append(m)
+        return super()._wrap(told)

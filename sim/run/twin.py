@@ -1,0 +1,221 @@
+"""Discrete-event twin of the peer network: the same sans-I/O peers on a virtual clock.
+
+No processes and no sockets, but the same bytes: every scan, truth and estimate is encoded and
+handed to :meth:`peers.core.PeerCore.receive` exactly as the Zenoh runtime does, liveliness
+changes go through :meth:`~peers.core.PeerCore.liveliness`, and deadlines through
+:meth:`~peers.core.PeerCore.tick`; so decoding, validation, bounds and departures are covered
+here too. Every estimate a peer publishes reaches each peer that fuses it after the link's
+delay (``None`` drops it). With zero delays and generous deadlines it computes what the real
+processes compute, which the tests check.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+from sensornet.peers.batching import FusionBatch, prepare_local_steps
+from sensornet.peers.core import PeerCore, Publish, Record, Stop
+from sensornet.peers.faults import FaultInjector
+from sensornet.peers.session import MAX_MESSAGE_BYTES
+from sensornet.protocol.codec import encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan, Truth
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world import generate_run
+from sensornet.sim.world.build import fault_injector
+
+LinkDelay = Callable[[str, str, Estimate], float | None]
+"""``(sender, receiver, message) -> delay in virtual seconds, or None to drop it``."""
+
+TRUTH_DELAY = 0.5
+"""The world publishes the truth of a scan half an interval after it (as the real world)."""
+
+
+def no_delay(sender: str, receiver: str, msg: Estimate) -> float | None:
+    return 0.0
+
+
+@dataclass(frozen=True)
+class Inject:
+    """A raw message put on ``key`` at virtual time ``t`` and delivered to ``target``."""
+
+    t: float
+    target: str
+    key: str
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class Liveliness:
+    """Peer ``name``'s liveliness token appears (``joined``) or goes away, as seen by
+    ``target`` at virtual time ``t``."""
+
+    t: float
+    target: str
+    name: str
+    joined: bool
+
+
+@dataclass
+class TwinResult:
+    """What a twin run produced, per peer."""
+
+    peers: dict[str, PeerCore]
+    tracks: dict[str, dict[int, np.ndarray]] = field(default_factory=dict)
+    """``tracks[peer][k]``: the fused states ``(n, d)`` the peer published for scan ``k``."""
+    faults: FaultInjector | None = None
+    """The fault injector used (its ``log`` says what was done to each message)."""
+    stops: dict[str, str] = field(default_factory=dict)
+    ages: dict[str, list[int]] = field(default_factory=dict)
+    """Ages (scans) of the neighbour estimates each peer fused."""
+    transport_drops: dict[str, int] = field(default_factory=dict)
+    """Messages over the transport's size limit, dropped before they reached each peer."""
+    ospa: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
+    """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
+
+    def mean_ospa(self, peer: str, kind: str = "fused") -> float:
+        return self.peers[peer].mean_ospa(kind)
+
+    def summary(self, peer: str) -> dict:
+        """The peer's summary as the real process writes it (no wall-clock figures; bytes
+        are the encoded messages the core published, as the runtime counts them)."""
+        s = self.peers[peer].snapshot()
+        st = s["stats"]
+        ages = self.ages.get(peer, [])
+        sent = self.peers[peer].sent_bytes
+        s.update(messages_sent=st["estimates_out"] + st["tracks_out"],
+                 bytes_sent=sum(sent.values()), estimate_bytes_sent=sent["estimate"],
+                 mean_estimate_age=sum(ages) / len(ages) if ages else None,
+                 latency_ms_median=None, latency_ms_p99=None, stop_reason=self.stops.get(peer))
+        return s
+
+
+def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
+             peers: dict[str, PeerCore] | None = None,
+             faults: FaultInjector | None = None, network: str = "twin",
+             inject: Iterable[Inject] = (), events: Iterable[Liveliness] = (),
+             data=None, batch: bool = False) -> TwinResult:
+    """One run of the scenario's network on the virtual clock.
+
+    Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
+    duplication, reordering, partitions) if given, else ``delay`` if given, else the
+    scenario's ``[faults]`` table, else instant delivery. ``inject``: raw messages (attacks);
+    ``events``: liveliness changes (departures, returns). ``data``: the run's ``(truth,
+    scans)`` for scenarios that draw their own (as :func:`sim.world.generate_run` returns them).
+    ``batch``: as the peers of one host (:mod:`peers.batching`), the consensus rounds that
+    become ready at one virtual instant are fused together once every event of that instant
+    has been handled (the same fused numbers; what a completed round publishes then goes out
+    at that instant, as events after it).
+    """
+    truth, scans = data if data is not None else generate_run(scn, run)
+    names = scn.sensor_names
+    keys = Keys(network)
+    peers = peers if peers is not None else {
+        n: make_peer(scn, n, run, network=network) for n in names}
+    if faults is None and delay is None:
+        faults = fault_injector(scn, run)
+    link_delay = delay or no_delay
+    # like the runtime, a peer subscribes to its neighbours' estimate keys only
+    listeners = {n: [m for m in names if n in peers[m].consensus.o.neighbours] for n in names}
+    interval = scn.scan_period / scn.network.speed
+    result = TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults)
+    queue: list = []
+    order = itertools.count()
+
+    def push(t: float, kind: str, target: str, *payload) -> None:
+        heapq.heappush(queue, (t, next(order), kind, target, payload))
+
+    def carry_out(t: float, sender: str, outputs: list) -> None:
+        for o in outputs:
+            if not isinstance(o, Publish):
+                continue
+            if o.channel == "tracks":
+                result.tracks[sender][o.k] = o.message.states
+                continue
+            for other in listeners[sender]:
+                ds = (faults.deliveries(sender, other, t, o.message) if faults is not None
+                      else [d for d in [link_delay(sender, other, o.message)] if d is not None])
+                for d in ds:
+                    push(t + d, "msg", other, keys.estimate(sender), o.payload)
+
+    start = encode(Control("start", network, {"speed": scn.network.speed}, send_time=0.0))
+    for n in names:
+        push(0.0, "live", n, "world", True)
+        push(0.0, "msg", n, keys.ctl(), start)
+    for k in range(1, scn.num_scans + 1):
+        t = k * interval
+        x = truth.states[k - 1]
+        t_msg = encode(Truth(k, truth.ids[k - 1], x, send_time=t + TRUTH_DELAY * interval))
+        for i, n in enumerate(names):
+            push(t, "msg", n, keys.scan(n), encode(Scan(n, k, scans[i][k - 1], seq=k,
+                                                        send_time=t)))
+            push(t + TRUTH_DELAY * interval, "msg", n, keys.truth(), t_msg)
+    for m in inject:
+        push(m.t, "msg", m.target, m.key, m.payload)
+    for e in events:
+        push(e.t, "live", e.target, e.name, e.joined)
+    end = (scn.num_scans + 1) * interval + 1.0
+    stop = encode(Control("end", network, {}, send_time=end))
+    for n in names:
+        push(end - 0.5, "msg", n, keys.ctl(), stop)  # as the world: "end", then it leaves
+        push(end, "live", n, "world", False)
+    scheduled: dict[str, float] = {}
+    truth_key = keys.truth()
+    fusions = FusionBatch() if batch else None
+    if fusions is not None:
+        for core in peers.values():
+            core.consensus.batch = fusions
+    name_of = {id(core.consensus): n for n, core in peers.items()}
+    scan_keys = {keys.scan(n) for n in names}
+    prepared_at: float | None = None
+
+    def handle(t: float, target: str, core: PeerCore, out: list) -> None:
+        out += core.tick(t)
+        carry_out(t, target, out)
+        for o in out:
+            if isinstance(o, Stop):
+                result.stops[target] = o.reason
+            elif isinstance(o, Record) and o.kind == "fusion":
+                result.ages.setdefault(target, []).extend(o.values["ages"].values())
+            elif isinstance(o, Record) and o.kind == "ospa":
+                per = result.ospa.setdefault(target, {"local": {}, "fused": {}})
+                per[o.values["which"]][o.k] = o.values["value"]
+        due = core.next_due()
+        if due is not None and scheduled.get(target) != due:
+            scheduled[target] = due
+            push(max(due, t), "tick", target)
+
+    while queue:
+        t, _, kind, target, payload = heapq.heappop(queue)
+        if target in result.stops:
+            pass
+        elif kind == "msg" and payload[0] == truth_key and not peers[target].wants_truth:
+            pass  # not subscribed (peers.transport): Zenoh does not deliver it
+        elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
+            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
+            handle(t, target, peers[target], [])  # the transport drops it (peers.session)
+        elif kind == "msg":
+            if fusions is not None and prepared_at != t and payload[0] in scan_keys:
+                # as a host: the instant's scans, their local steps computed together first
+                prepared_at = t
+                prepare_local_steps([(peers[target], *payload)] + [
+                    (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
+                    and q[4][0] in scan_keys and q[3] not in result.stops])
+            handle(t, target, peers[target], peers[target].receive(payload[0], payload[1], t))
+        elif kind == "live":
+            handle(t, target, peers[target],
+                   peers[target].liveliness(payload[0], payload[1], t))
+        else:
+            scheduled.pop(target, None)
+            handle(t, target, peers[target], [])
+        while fusions is not None and fusions.jobs and (not queue or queue[0][0] != t):
+            for c in fusions.run(t):  # the instant's events are handled: its rounds fused
+                name = name_of[id(c)]
+                if name not in result.stops:
+                    handle(t, name, peers[name], peers[name].completed(t))
+    return result

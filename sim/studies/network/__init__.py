@@ -1,0 +1,1 @@
+"""The peer network as studies: on the twin (``twin``) or as processes (``real``)."""

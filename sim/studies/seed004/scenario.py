@@ -1,0 +1,321 @@
+"""Seed 004's scenario file (its own format: sensors on a random geometric graph, the flooding and
+consensus settings), its checks, its network document for the peers, and its truth and
+measurements."""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sensornet.sim.scenario as sc
+from scipy.sparse.csgraph import shortest_path
+from sensornet.sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
+from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.idpc import ClusterParams, polar_to_cartesian
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
+from sensornet.tracking.reduction import Reducer
+
+SCENARIO = Path(__file__).parents[2] / "scenarios" / "seed004.toml"
+TUPLES_COMPONENT = 15
+"""A 4-D Gaussian component: weight 1, mean 4, covariance 10 (seed 004)."""
+TUPLES_CARDINALITY = 1
+VARIANTS = ("linear", "range-bearing", "mixed")
+
+# -- scenario ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Seed004:
+    """The seed-004 scenario (``sim/scenarios/seed004.toml``; every field documented there)."""
+
+    seed: int = 4
+    scan_period: float = 1.0
+    num_scans: int = 60
+    region: tuple[tuple[float, float], tuple[float, float]] = ((-1000.0, 1000.0),
+                                                               (-1000.0, 1000.0))
+    variant: str = "linear"
+    truth_sigma_w: float = 0.0
+    starts: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    detection_probability: float = 0.95
+    clutter_rate: float = 10.0
+    sigma: float = 10.0
+    sigma_range: float = 10.0
+    sigma_bearing_deg: float = 0.5
+    radius: float = 800.0
+    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    sigma_w: float = 2.0
+    survival_probability: float = 0.98
+    birth_weight: float = 0.05
+    birth_cov_diag: tuple[float, ...] = (100.0, 25.0, 100.0, 25.0)
+    prune_threshold: float = 1e-5
+    merge_threshold: float = 4.0
+    max_components: int = 100
+    publish_threshold: float = 0.01
+    cardinality: str = "separate"
+    clustering: ClusterParams = ClusterParams()
+    assumed_scans: str = "held"
+    estimator: str = "idpc"
+    iterations: int = 4
+    rounds: tuple[int, ...] = (1, 2, 3, 4)
+    ospa_cutoff: float = 100.0
+    ospa_order: float = 2.0
+
+    @property
+    def adjacency(self) -> np.ndarray:
+        p = self.positions
+        d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        return (d <= self.radius) & ~np.eye(len(p), dtype=bool)
+
+    @property
+    def hops(self) -> np.ndarray:
+        return shortest_path(self.adjacency, unweighted=True)
+
+    @property
+    def area(self) -> float:
+        (x0, x1), (y0, y1) = self.region
+        return (x1 - x0) * (y1 - y0)
+
+    def models(self) -> list[LinearPosition | RangeBearing]:
+        """One measurement model per sensor, by ``variant``."""
+        out = []
+        for i, p in enumerate(self.positions):
+            pos = (float(p[0]), float(p[1]))
+            radar = self.variant == "range-bearing" or (self.variant == "mixed" and i % 2 == 1)
+            out.append(RangeBearing(self.sigma_range, float(np.deg2rad(self.sigma_bearing_deg)),
+                                    pos) if radar else LinearPosition(self.sigma, pos))
+        return out
+
+    def r_max(self, position) -> float:
+        """Farthest region corner from ``position`` (range-bearing clutter extent)."""
+        (x0, x1), (y0, y1) = self.region
+        c = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
+        return float(np.linalg.norm(c - np.asarray(position), axis=1).max())
+
+    def sensor_params(self, model) -> SensorParams:
+        if isinstance(model, RangeBearing):
+            kappa = self.clutter_rate / (self.r_max(model.position) * 2 * np.pi)
+        else:
+            kappa = self.clutter_rate / self.area
+        return SensorParams(model, self.detection_probability, kappa)
+
+    def birth(self) -> GaussianMixture:
+        n = len(self.starts)
+        return GaussianMixture(np.full(n, self.birth_weight), self.starts,
+                               np.tile(np.diag(self.birth_cov_diag), (n, 1, 1)))
+
+    def reducer(self) -> Reducer:
+        return Reducer(self.prune_threshold, self.merge_threshold, self.max_components)
+
+
+_KEYS = {
+    "scenario": {"name": None, "study": None, "seed": "seed", "scan_period": "scan_period",
+                 "num_scans": "num_scans", "region": "region", "variant": "variant"},
+    "truth": {"sigma_w": "truth_sigma_w", "starts": "starts"},
+    "sensors": {"detection_probability": "detection_probability",
+                "clutter_rate": "clutter_rate", "sigma": "sigma", "sigma_range": "sigma_range",
+                "sigma_bearing_deg": "sigma_bearing_deg", "radius": "radius",
+                "positions": "positions"},
+    "filter": {k: k for k in ("sigma_w", "survival_probability", "birth_weight",
+                              "birth_cov_diag", "prune_threshold", "merge_threshold",
+                              "max_components", "publish_threshold", "cardinality")},
+    "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
+    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans",
+                 "estimator": "estimator"},
+    "consensus": {"rounds": "rounds"},
+    "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
+}
+
+
+class ScenarioError(ValueError):
+    """A scenario file or ``--set`` value the loader refuses (one line naming the key)."""
+
+
+def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = ()) -> Seed004:
+    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values) or
+    ``{"TABLE.KEY": value}`` (already parsed)."""
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+        items = (overrides.items() if isinstance(overrides, Mapping) else
+                 ((k, v) for k, _, v in (item.partition("=") for item in overrides)))
+        for key, value in items:
+            table, dot, name = key.partition(".")
+            if not dot or not name:
+                raise ScenarioError(f"--set {key!r}: expected TABLE.KEY=VALUE")
+            if not isinstance(overrides, Mapping):
+                value = tomllib.loads(f"v = {value}")["v"]
+            doc.setdefault(table, {})[name] = value
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: {e}") from None
+    return from_document(doc, path)
+
+
+def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
+    """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers)."""
+    kw: dict = {}
+    cluster: dict = {}
+    for table, values in doc.items():
+        if table == "network":
+            continue  # the peers' settings (network_document)
+        if table not in _KEYS:
+            raise ScenarioError(f"{path}: unknown table [{table}]")
+        for k, v in values.items():
+            if k not in _KEYS[table]:
+                raise ScenarioError(f"{path}: unknown key {table}.{k}")
+            if table == "clustering":
+                cluster[k] = float(v)
+            elif _KEYS[table][k] is not None:
+                kw[_KEYS[table][k]] = v
+    for k in ("starts", "positions"):
+        if k in kw:
+            kw[k] = np.asarray(kw[k], dtype=float)
+    for k in ("region", "birth_cov_diag", "rounds"):
+        if k in kw:
+            kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
+    scn = Seed004(**kw)
+    _check_sizes(scn, path)
+    if scn.assumed_scans not in ("held", "all"):
+        raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
+                            f"expected 'held' or 'all'")
+    if scn.estimator not in FLOOD_ESTIMATORS:
+        raise ScenarioError(f"{path}: flooding.estimator {scn.estimator!r}: expected one of "
+                            f"{', '.join(map(repr, FLOOD_ESTIMATORS))}")
+    if scn.variant not in VARIANTS:
+        raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
+    scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
+        scn.detection_probability)))
+    if not np.isfinite(scn.hops).all():
+        raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
+    return scn
+
+
+def _check_sizes(scn: Seed004, path: str | Path) -> None:
+    """The bounds of ``sim.scenario`` (MAX_SENSORS, MAX_ROUNDS, MAX_COORDINATE), checked
+    before anything is built from the sizes (the graph is sensors x sensors)."""
+    n = len(scn.positions)
+    if scn.positions.ndim != 2 or scn.positions.shape[1] != 2:
+        raise ScenarioError(f"{path}: sensors.positions must be a list of [x, y] pairs")
+    if n > MAX_SENSORS:
+        raise ScenarioError(f"{path}: sensors.positions lists {n:,} sensors, over the limit "
+                            f"of {MAX_SENSORS}")
+    rounds = [scn.iterations, *scn.rounds]
+    if not all(isinstance(r, int) and 1 <= r <= MAX_ROUNDS for r in rounds):
+        raise ScenarioError(f"{path}: flooding.iterations and consensus.rounds must be "
+                            f"integers in 1..{MAX_ROUNDS}, got {scn.iterations!r} and "
+                            f"{list(scn.rounds)!r}")
+    try:
+        region = np.asarray(scn.region, dtype=float).reshape(2, 2)
+        coords = np.concatenate([region.ravel(), scn.positions.ravel()])
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{path}: scenario.region must be [[xmin, xmax], [ymin, ymax]] "
+                            f"(m)") from None
+    if not (region[:, 0] < region[:, 1]).all():
+        raise ScenarioError(f"{path}: scenario.region must have xmin < xmax and ymin < ymax "
+                            f"(a non-empty area)")
+    if not (np.isfinite(coords).all() and (np.abs(coords) <= MAX_COORDINATE).all()):
+        raise ScenarioError(f"{path}: scenario.region and sensors.positions must be finite "
+                            f"and within +-{MAX_COORDINATE:g} m")
+
+
+def network_document(doc: dict, label: str = "seed004.toml") -> dict:
+    """The seed-004 document as a network scenario (``sim.scenario``'s format): sensors
+    ``s1..s20`` at the recorded positions, the graph as custom edges, the three straight-line
+    targets over the whole run, the paper's births, and the ``[network]`` table (flooding peers
+    by default: ``filter = "flooding"``, ``rounds`` = the flooding iterations)."""
+    passed = ("faults", "security")  # network-scenario tables, taken as they are
+    try:
+        scn = from_document({k: v for k, v in doc.items() if k not in (*passed, "fusion")},
+                            label)
+    except (ScenarioError, TypeError, ValueError) as e:
+        raise sc.ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") \
+            from None
+    names = [f"s{i + 1}" for i in range(len(scn.positions))]
+    K, T = scn.num_scans, scn.scan_period
+    sensors = []
+    for i, model in enumerate(scn.models()):
+        radar = isinstance(model, RangeBearing)
+        spec = {"name": names[i], "kind": "range-bearing" if radar else "linear",
+                "position": [float(v) for v in scn.positions[i]],
+                "sigma_r": scn.sigma_range if radar else scn.sigma,
+                "detection_probability": scn.detection_probability,
+                "clutter_rate": scn.clutter_rate}
+        if radar:
+            spec["sigma_theta_deg"] = scn.sigma_bearing_deg
+        sensors.append(spec)
+    targets = [{"birth_scan": 1, "death_scan": K, "start": [float(x[0]), float(x[2])],
+                "end": [float(x[0] + x[1] * (K - 1) * T), float(x[2] + x[3] * (K - 1) * T)]}
+               for x in scn.starts]
+    cov = np.diag(scn.birth_cov_diag).tolist()
+    A = scn.adjacency
+    edges = [[names[i], names[j]] for i, j in zip(*np.nonzero(np.triu(A)), strict=True)]
+    network = {"topology": "custom", "edges": edges, "rounds": scn.iterations,
+               "filter": "flooding", "speed": 10.0, "deadline": 0.8, **doc.get("network", {})}
+    c = scn.clustering
+    return {
+        "scenario": {"name": doc.get("scenario", {}).get("name", "seed004"), "seed": scn.seed,
+                     "scan_period": T, "num_scans": K,
+                     "region": [list(r) for r in scn.region],
+                     "truth_sigma_w": scn.truth_sigma_w},
+        "motion": {"model": "cv", "sigma_w": scn.sigma_w,
+                   "survival_probability": scn.survival_probability},
+        "targets": targets,
+        "sensors": sensors,
+        "birth": {"model": "paper", "paper": [
+            {"weight": scn.birth_weight, "mean": [float(v) for v in m], "cov": cov}
+            for m in scn.starts]},
+        "filter": {"prune_threshold": scn.prune_threshold,
+                   "merge_threshold": scn.merge_threshold,
+                   "max_components": scn.max_components, "extraction": "cardinality"},
+        "fusion": {"level2_threshold": scn.publish_threshold,  # the default rule (hybrid)
+                   "cardinality": scn.cardinality, **doc.get("fusion", {})},
+        "metrics": {"ospa_cutoff": scn.ospa_cutoff, "ospa_order": scn.ospa_order},
+        "network": network,
+        **{k: doc[k] for k in passed if k in doc},
+        "clustering": {"cutoff": c.cutoff, "zeta": c.zeta, "radius_factor": c.radius_factor,
+                       "split_factor": c.split_factor, "assumed_scans": scn.assumed_scans,
+                       "estimator": scn.estimator},
+    }
+
+
+# -- truth and scans --------------------------------------------------------------------------
+
+
+def truth(scn: Seed004, rng: np.random.Generator) -> np.ndarray:
+    """``(K, n, 4)`` target states (every target alive at every scan, our reading)."""
+    cv = ConstantVelocity(scn.scan_period, scn.truth_sigma_w)
+    F, Q = cv.transition(1)
+    X = np.empty((scn.num_scans, len(scn.starts), 4))
+    X[0] = scn.starts
+    for k in range(1, scn.num_scans):
+        X[k] = X[k - 1] @ F.T
+        if scn.truth_sigma_w > 0:
+            X[k] += rng.multivariate_normal(np.zeros(4), Q, size=len(scn.starts))
+    return X
+
+
+def measure(scn: Seed004, models, x: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+    """One scan per sensor ``(m_i, 2)`` in its measurement space: detections, then clutter."""
+    (x0, x1), (y0, y1) = scn.region
+    out = []
+    for model in models:
+        seen = x[rng.random(len(x)) < scn.detection_probability]
+        z, _ = model.predict(seen) if len(seen) else (np.zeros((0, 2)), None)
+        z = z + rng.standard_normal(z.shape) @ np.linalg.cholesky(model.R).T
+        nc = rng.poisson(scn.clutter_rate)
+        if isinstance(model, RangeBearing):
+            c = np.column_stack((rng.uniform(0, scn.r_max(model.position), nc),
+                                 rng.uniform(-np.pi, np.pi, nc)))
+        else:
+            c = np.column_stack((rng.uniform(x0, x1, nc), rng.uniform(y0, y1, nc)))
+        out.append(np.concatenate((z.reshape(-1, 2), c)))
+    return out
+
+
+def to_plane(models, scans: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Scans projected to plane points (range-bearing converted to Cartesian)."""
+    return [polar_to_cartesian(z, m.position) if isinstance(m, RangeBearing) else z
+            for m, z in zip(models, scans, strict=True)]
