@@ -12,7 +12,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("tracking", "protocol", "peers", "sim", "sensornet")
 KNOWN_CIRCLES: list[list[str]] = []
-"""Circles left for their owners; none may be added (sim.campaign <-> sim.fusion_study is gone:
+"""Circles left for their owners; none may be added (sim.campaign <-> sim.studies.fusion.quality is
+gone:
 the campaign asks the study registry)."""
 
 
@@ -96,6 +97,67 @@ def _circles(edges: dict[str, set[str]]) -> list[list[str]]:
         if v not in index:
             visit(v)
     return out
+
+
+SIM_LAYERS: tuple[tuple[str, ...], ...] = (
+    # the ground: standard library only; the registries (kinds, studies, truth models, study
+    # formats: the rest finds each by name) and what the command line's parser shows
+    ("sim", "sim.bounds", "sim.choices", "sim.plugins", "sim.kinds", "sim.studies",
+     "sim.truths", "sim.formats", "sim.scenarios", "sim.campaigns"),
+    ("sim.scenario", "sim.scenario."),  # the scenario model and its files
+    ("sim.world", "sim.world.", "sim.traffic", "sim.traffic."),  # the world, recorded traffic
+    ("sim.kinds.",),  # the peer kinds (the registry's face is on the ground)
+    ("sim.run", "sim.run."),  # peers built, twin, processes, launcher, replay, pool
+    ("sim.report", "sim.report."),  # plot helpers, one run's figures, HTML
+    ("sim.campaign", "sim.campaign."),  # campaigns, sweeps, their results and report
+    ("sim.studies.",),  # each seed's reproduction and each measurement, one package each
+)
+"""The sub-layers of ``sim/``, ground first: a module may import its own sub-layer and those
+below, never one above (docs/architecture.md, "Layers"). An entry ending in ``.`` holds the
+modules under that package; any other names one module (a package's ``__init__``): a registry
+package's face stands on the ground, below the modules it names."""
+
+
+def _sim_layer(module: str) -> int:
+    """The index in :data:`SIM_LAYERS` of a ``sim`` module: an exact entry first, else the
+    longest package prefix; :class:`LookupError` for a module no entry places."""
+    for i, entries in enumerate(SIM_LAYERS):
+        if module in entries:
+            return i
+    found = [(len(e), i) for i, entries in enumerate(SIM_LAYERS) for e in entries
+             if e.endswith(".") and module.startswith(e)]
+    if not found:
+        raise LookupError(f"{module} is on no sub-layer of SIM_LAYERS")
+    return max(found)[1]
+
+
+def test_every_sim_module_stands_on_one_sub_layer():
+    unplaced = []
+    for m in _modules():
+        if m.split(".")[0] == "sim":
+            try:
+                _sim_layer(m)
+            except LookupError:
+                unplaced.append(m)
+    assert unplaced == []
+
+
+def test_no_import_inside_sim_points_up():
+    """No ``sim`` module imports one on a higher sub-layer of :data:`SIM_LAYERS` (a kind never
+    imports a study, the world never a run, a campaign never a study, ...)."""
+    edges, _ = _graph()
+    up = sorted((m, t) for m, ts in edges.items() if m.split(".")[0] == "sim" for t in ts
+                if t.split(".")[0] == "sim" and _sim_layer(t) > _sim_layer(m))
+    assert up == []
+
+
+def test_the_sub_layer_check_sees_an_arrow_up():
+    """The sub-layer order itself: a kind importing a study, the world importing the run and the
+    ground importing the scenario are each higher; a study importing a kind is lower."""
+    assert _sim_layer("sim.studies.seed003.network") > _sim_layer("sim.kinds.pda")
+    assert _sim_layer("sim.run.twin") > _sim_layer("sim.world.build") == _sim_layer("sim.world")
+    assert _sim_layer("sim.scenario.model") > _sim_layer("sim.kinds") == _sim_layer("sim.bounds")
+    assert _sim_layer("sim.campaign") < _sim_layer("sim.studies.fusion.quality")
 
 
 def test_no_import_points_up():
@@ -184,13 +246,13 @@ def a():
 def b():
     import json
 def c():
-    from sim import seed004  # heavy dependency: sim.seed004
+    from sim import seed004  # heavy dependency: sim.studies.seed004.montecarlo
 def d():
     import pyarrow  # heavy optional dependency: matplotlib
 def e():
     # heavy optional dependency: sklearn (the baseline)
     from sim import seed004
-    from sim.seed004 import run_once
+    from sim.studies.seed004.montecarlo import run_once
 def f():
     import matplotlib  # heavy dependency: matplotlib
 """
