@@ -1,10 +1,14 @@
-"""The ``network`` marker, enforced: with ``-m "not network"`` nothing may start a process.
+"""The ``network`` marker, enforced: with ``-m "not network"`` nothing may start a process,
+and the tests that do start processes run one at a time.
 
 Tests that start OS processes or open Zenoh sessions carry ``@pytest.mark.network`` (or a
 module-level ``pytestmark``). When the marker is deselected (``python -m pytest -m "not
 network"``, the fast tests), a test that still starts a subprocess, a multiprocessing worker or
 a Zenoh session fails at once with a message naming the missing marker, so the fast run stays
-free of processes and sessions (and fast) as tests are added.
+free of processes and sessions (and fast) as tests are added. Under pytest-xdist the marked
+tests form one group on one worker (:func:`pytest_collection_modifyitems`), and each holds the
+session's process slot while it runs (``tests/process_guard.py``): a second one starting at
+the same moment fails, saying which test holds it.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import multiprocessing.process
 import subprocess
 
 import pytest
+
+from tests.process_guard import SlotTaken, lock_path, process_slot
 
 
 def _network_deselected(config: pytest.Config) -> bool:
@@ -23,7 +29,14 @@ def _network_deselected(config: pytest.Config) -> bool:
 @pytest.fixture(autouse=True)
 def _no_processes_unless_marked(request, monkeypatch):
     if request.node.get_closest_marker("network") is not None:
-        yield
+        taken = None
+        try:  # one process test at a moment (SlotTaken comes only from taking the slot)
+            with process_slot(lock_path(request.config), request.node.nodeid):
+                yield
+        except SlotTaken as exc:
+            taken = str(exc)
+        if taken is not None:
+            pytest.fail(taken, pytrace=False)
         return
     if not _network_deselected(request.config):
         yield
@@ -47,12 +60,37 @@ def _no_processes_unless_marked(request, monkeypatch):
     yield
 
 
+def _group_suffix(item: pytest.Item, group: str) -> None:
+    """Add ``@group`` to a worker's node id, as xdist's loadgroup does: pytest 9.2 keeps node ids
+    in ``item._id`` (a structured id), and xdist 3.8 still writes the old ``item._nodeid``, which
+    nothing reads any more (pytest-xdist issue 1386, open: the group is lost silently)."""
+    new = f"{item.nodeid}@{group}"
+    if hasattr(item, "_id"):
+        item._id = type(item._id).parse(new)  # noqa: SLF001
+    else:
+        item._nodeid = new  # noqa: SLF001
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+
+@pytest.hookimpl(wrapper=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]):
     """Under pytest-xdist (``-n 2 --dist loadgroup``, pyproject's default options) the tests
     that start processes form one group, run one after another on one worker, so two process
     runs never compete for the machine's two cores; the fast tests go to whichever worker is
-    free, and their CPU work overlaps the process tests' waiting (scans come at 10 a second)."""
+    free, and their CPU work overlaps the process tests' waiting (scans come at 10 a second).
+
+    A worker's xdist plugin turns each item's ``xdist_group`` marks into an ``@processes``
+    suffix of its node id in its own ``pytest_collection_modifyitems``, and the scheduler groups
+    by that suffix: the marks are added before every plain implementation runs (this wrapper's
+    first half), and the suffix checked after them all (its second half): added here where
+    xdist's did not take (:func:`_group_suffix`). Before both, two process tests ran at once on
+    two workers; the process slot (``tests/process_guard.py``) now fails such a test."""
     for item in items:
         if item.get_closest_marker("network") is not None:
             item.add_marker(pytest.mark.xdist_group("processes"))
+    result = yield
+    if getattr(config.option, "loadgroup", False):  # set on an xdist worker under loadgroup
+        for item in items:
+            if item.get_closest_marker("network") is not None and "@" not in item.nodeid.rsplit(
+                    "]", 1)[-1]:
+                _group_suffix(item, "processes")
+    return result
