@@ -20,7 +20,9 @@ Other columns (speeds, track, squawk) are ignored: velocities come from the posi
 
 Rows without a latitude or longitude are dropped (OpenSky writes a row per contact, with or
 without position); rows are sorted per aircraft by time and a repeated (icao24, time) keeps
-the first row in file order. The barometric altitude is used as the height above the
+the first row in file order. A report repeating its aircraft's previous position exactly is
+OpenSky's stale copy of the last decoded position and is dropped before interpolation
+(``trajectories(drop_stale=...)``). The barometric altitude is used as the height above the
 ellipsoid (a bias of tens of metres in height, none in the horizontal plane).
 
 Gaps: each aircraft's reports are cut into pieces wherever two consecutive reports are more
@@ -41,6 +43,7 @@ import json
 import math
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -401,12 +404,22 @@ class Trajectories:
         """First and last report time."""
         return float(self.t.min()), float(self.t.max())
 
+    @cached_property
     def _gaps(self) -> np.ndarray:
         """(N,) True where segment ``k -> k + 1`` is not interpolated (gap or next aircraft)."""
         gap = np.ones(len(self.t), bool)
         gap[:-1] = np.diff(self.t) > self.max_gap_s
         gap[self.starts[1:] - 1] = True
         return gap
+
+    @cached_property
+    def _keys(self) -> tuple[float, float, np.ndarray]:
+        """Origin, band width and ``(N,)`` sorted search keys: each aircraft's times live in
+        their own band, so one ``searchsorted`` serves all aircraft."""
+        t0 = float(self.t.min())
+        width = float(self.t.max() - t0) + 2.0
+        owner = np.repeat(np.arange(len(self.ids)), np.diff(self.starts))
+        return t0, width, owner * width + (self.t - t0)
 
     def evaluate(self, aircraft: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """States ``(K, 6)`` (NaN where absent) and presence ``(K,)`` of aircraft indices
@@ -418,14 +431,12 @@ class Trajectories:
         if n_all < 2 or len(a) == 0:
             return out, np.zeros(len(a), bool)
         lo, hi = self.starts[a], self.starts[a + 1]
-        t0 = self.t.min()
-        width = (self.t.max() - t0) + 2.0  # each aircraft's times live in their own band
-        key = np.repeat(np.arange(len(self.ids)), np.diff(self.starts)) * width + (self.t - t0)
+        t0, width, key = self._keys
         q = a * width + np.clip(tq - t0, -0.5, width - 1.0)
         i = np.clip(np.searchsorted(key, q, side="right") - 1, lo, np.maximum(hi - 2, lo))
         i = np.clip(i, 0, n_all - 2)
         inside = (hi - lo >= 2) & (tq >= self.t[lo]) & (tq <= self.t[np.maximum(hi - 1, lo)])
-        gap = self._gaps()
+        gap = self._gaps
         back = (tq == self.t[i]) & gap[i] & (i > lo) & ~gap[np.maximum(i - 1, 0)]
         i = np.where(back, i - 1, i)
         present = inside & ~gap[i]

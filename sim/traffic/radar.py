@@ -7,10 +7,9 @@ site, clockwise from north) is illuminated at ``phase + (k + a / 360) * period``
 plot's time. The time is found by fixed-point iteration from mid-rotation (the aircraft moves
 while the beam turns; three steps put a 250 m/s aircraft at 20 km within 0.1 ms of the beam,
 each step shrinking the error by the ratio of its angular rate to the beam's); an aircraft
-absent from the truth
-at mid-rotation or at its beam time is not seen in that rotation. The rotation's plots are
-delivered together at its end, ``phase + (k + 1) * period`` (the scan time); ``sweep=False``
-makes them all at the scan time instead (a snapshot radar).
+absent from the truth at mid-rotation or at its beam time is not seen in that rotation. The
+rotation's plots are delivered together at its end, ``phase + (k + 1) * period`` (the scan
+time); ``sweep=False`` makes them all at the scan time instead (a snapshot radar).
 
 Detection: ``Pd(r) = pd_max * Pfa ** (1 / (1 + SNR(r)))`` (Swerling I target in a
 square-law detector, Skolnik, Introduction to Radar Systems, 3rd ed., §2.8) with
