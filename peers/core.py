@@ -360,6 +360,11 @@ class PeerCore:
             last = msg.params.get("last_k")  # the world's last scan: later ones are misses
             if type(last) is int and 0 < last - self.consensus.last_k <= END_GAP:
                 self.end_k = last
+            if self.world_gone is not None:  # its token went first (Zenoh sends declarations
+                # at a higher priority than data, so a starved world's "end" can come after):
+                # the world has ended the run, as if it had left now
+                self.world_gone, self.world = None, "left"
+                return self.finish(now) + [Stop("end of run")]
             if self.world != "left":
                 self.ctl_end_early += 1  # the world is still there: wait for it to leave
             return []
