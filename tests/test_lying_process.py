@@ -95,8 +95,11 @@ def test_a_member_telling_phantoms_is_repaired_not_excluded_as_in_the_twin(tmp_p
     to every estimate (``s2:phantoms``; plain mode); each honest peer drops what nobody
     else corroborates and keeps fusing s2's real targets: s2 ends trusted, fused repaired in
     most rounds in both honest peers, as on the twin, and their fused OSPA is the twin's and
-    better than with s2 left out."""
-    sets = [*SETS, "fusion.trust=true", "fusion.lie=s2:phantoms"]
+    better than with s2 left out. At 4 scans/s (the twin's numbers are the same at any
+    speed): a round fused at its deadline without a neighbour's estimate is not the twin's,
+    and at 10 scans/s the 90 ms deadline was missed on a machine at load 5-10 (18.07 against
+    11.34); a round closes when every neighbour's estimate is in, the deadline is a backstop."""
+    sets = [*SETS, "fusion.trust=true", "fusion.lie=s2:phantoms", "network.speed=4"]
     scn, twin, summaries = _run(tmp_path, sets)
     excluded = run_twin(load_scenario("seed000", overrides=parse_overrides(
         [*sets, "fusion.trust_repair=false"])), 0)
@@ -108,5 +111,6 @@ def test_a_member_telling_phantoms_is_repaired_not_excluded_as_in_the_twin(tmp_p
         assert got["repairs"] >= 0.7 * got["rounds"], (name, got)
         assert want.repairs >= 0.7 * want.rounds, (name, want.repairs, want.rounds)
         assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (
-            name, s["mean_ospa_fused"], twin.mean_ospa(name))
+            name, s["mean_ospa_fused"], twin.mean_ospa(name), s["stats"]["deadline_fusions"],
+            s["scans_skipped_behind"], s["latency_ms_p99"])
         assert twin.mean_ospa(name) < excluded.mean_ospa(name), name
