@@ -250,34 +250,42 @@ class RerunSink:
         rr.log("metrics/ospa/cutoff",
                rr.SeriesLines(colors=CUTOFF_COLOR, widths=1.0, names="cut-off c"), static=True)
         for i, p in enumerate(peers):
-            c = color_of(i)
-            solid = {"colors": c, "widths": 2.0}
-            for q in ("ospa", "cardinality"):
-                rr.log(f"metrics/{q}/{p}/fused", rr.SeriesLines(**solid, names=f"{p} fused"),
-                       static=True)
-                rr.log(f"metrics/{q}/{p}/local",
-                       rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
-                                       names=f"{p} local"), static=True)
-            rr.log(f"metrics/components/{p}/fused",
-                   rr.SeriesLines(**solid, names=f"{p} fused"), static=True)
-            for what, marker in (("before_level2", "circle"), ("after_level2", "cross")):
-                rr.log(f"metrics/components/{p}/{what}",
-                       rr.SeriesPoints(colors=c, markers=marker, marker_sizes=1.5,
-                                       names=f"{p} local {what.replace('_', ' ')}"),
-                       static=True)
-            for q in ("age", "rejected", "latency_ms"):
-                rr.log(f"metrics/{q}/{p}", rr.SeriesLines(**solid, names=p), static=True)
-            rr.log(f"metrics/compute_ms/{p}/filter",
-                   rr.SeriesLines(**solid, names=f"{p} filter step"), static=True)
-            rr.log(f"metrics/compute_ms/{p}/fusion",
+            self.decorate_peer(p, i, imm, models)
+
+    def decorate_peer(self, p: str, i: int, imm: bool = False,
+                      models: tuple[str, ...] = ("CV", "CA")) -> None:
+        """Peer ``p``'s series styles in colour ``i`` (a view adds each peer it first hears)."""
+        if not self.enabled:
+            return
+        rr = self.rr
+        c = color_of(i)
+        solid = {"colors": c, "widths": 2.0}
+        for q in ("ospa", "cardinality"):
+            rr.log(f"metrics/{q}/{p}/fused", rr.SeriesLines(**solid, names=f"{p} fused"),
+                   static=True)
+            rr.log(f"metrics/{q}/{p}/local",
                    rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
-                                   names=f"{p} fusion"), static=True)
-            if imm:
-                for j, model in enumerate(models):
-                    style = (rr.SeriesLines(**solid, names=f"{p} {model}") if j == 0 else
-                             rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
-                                             names=f"{p} {model}"))
-                    rr.log(f"metrics/model_probability/{p}/{model}", style, static=True)
+                                   names=f"{p} local"), static=True)
+        rr.log(f"metrics/components/{p}/fused",
+               rr.SeriesLines(**solid, names=f"{p} fused"), static=True)
+        for what, marker in (("before_level2", "circle"), ("after_level2", "cross")):
+            rr.log(f"metrics/components/{p}/{what}",
+                   rr.SeriesPoints(colors=c, markers=marker, marker_sizes=1.5,
+                                   names=f"{p} local {what.replace('_', ' ')}"),
+                   static=True)
+        for q in ("age", "rejected", "latency_ms"):
+            rr.log(f"metrics/{q}/{p}", rr.SeriesLines(**solid, names=p), static=True)
+        rr.log(f"metrics/compute_ms/{p}/filter",
+               rr.SeriesLines(**solid, names=f"{p} filter step"), static=True)
+        rr.log(f"metrics/compute_ms/{p}/fusion",
+               rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
+                               names=f"{p} fusion"), static=True)
+        if imm:
+            for j, model in enumerate(models):
+                style = (rr.SeriesLines(**solid, names=f"{p} {model}") if j == 0 else
+                         rr.SeriesPoints(colors=c, markers="circle", marker_sizes=1.5,
+                                         names=f"{p} {model}"))
+                rr.log(f"metrics/model_probability/{p}/{model}", style, static=True)
 
     def labelled_points(self, path: str, xy: np.ndarray, color, labels: list[str],
                         radius: float = 5.0) -> None:

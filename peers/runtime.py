@@ -3,8 +3,9 @@
 Nothing here decides anything about tracking or trust: the core gets every message as bytes
 (``receive``), every liveliness change (``liveliness``) and the clock (``tick``), and returns
 what to publish and record. The driver carries that out (:mod:`peers.transport`), measures it
-(:mod:`peers.telemetry`), draws it (:mod:`peers.observer`), injects the configured link faults,
-and writes the summary, recording and tracks, never over an earlier run's files.
+(:mod:`peers.telemetry`), reports it to live views (:mod:`peers.observer`; no Rerun here),
+injects the configured link faults, and writes the summary, recording and tracks, never over
+an earlier run's files.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from sensornet.peers.core import PeerCore, Publish, Record, Stop
 from sensornet.peers.faults import FaultInjector, HoldQueue
 from sensornet.peers.observer import Observer
 from sensornet.peers.recording import Recorder
-from sensornet.peers.rerun_sink import RerunSink
 from sensornet.peers.run_output import RunOutputs, output_stem
 from sensornet.peers.telemetry import SharedCpu, Telemetry
 from sensornet.peers.transport import Transport
@@ -88,8 +88,7 @@ class PeerRuntime(RunOutputs):
                                    security=self.o.security, truth=core.wants_truth,
                                    recover=self.o.recover, inbox=inbox)
         self.telemetry = Telemetry(shared_cpu)
-        self.sink = RerunSink(own_stream=inbox is not None)  # a host's peers: one .rrd each
-        self.observer = Observer(core, self.sink, self.o.color_index, self.o.scan_period)
+        self.observer = Observer(core, self.o.scan_period, self.telemetry)
         self.held = HoldQueue()
         self.saved_tracks: dict[int, np.ndarray] | None = {} if self.o.save_tracks else None
         self.live_events: list[tuple[str, str, float, int]] = []
@@ -129,19 +128,18 @@ class PeerRuntime(RunOutputs):
             if o.record is not None and o.out_dir is not None:
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
-            if o.out_dir is not None and o.rerun or o.viewer:
-                rrd = o.out_dir / "rerun" / f"{self.stem}.rrd" if o.out_dir and o.rerun else None
-                self.sink.open(o.run_id or self.core.cfg.network, rrd, o.viewer)
+            if o.security is None:  # live views' telemetry (the access control has no rule)
+                self.observer.open(self.transport.session, self.core.keys)
         except BaseException:
             self.close()
             raise
 
     def close(self) -> None:
-        """Undeclare everything on the transport (the token goes), close the sink and recorder."""
+        """Undeclare everything on the transport (the token goes), the telemetry and recorder."""
         try:
+            self.observer.close()
             self.transport.close()
         finally:
-            self.sink.close()
             if self.recorder is not None:
                 self.recorder.close()
                 self.recorder = None
@@ -161,7 +159,7 @@ class PeerRuntime(RunOutputs):
             except Exception:  # queue.Empty
                 item = None
             # what has queued up meanwhile is handled before the deferred work (one tick
-            # and one Rerun flush per wake-up instead of per message; bounded)
+            # and one telemetry flush per wake-up instead of per message; bounded)
             items = [item] if item is not None else []
             while items and len(items) < BATCH and not q.empty():
                 items.append(q.get_nowait())
@@ -183,7 +181,7 @@ class PeerRuntime(RunOutputs):
 
     def step(self, items: list[tuple], queue_empty) -> None:
         """One wake-up's work: ``items`` (at most :data:`BATCH`), the held messages now due,
-        the core's tick and a Rerun flush (``queue_empty()``: nothing more waiting for this
+        the core's tick and a telemetry flush (``queue_empty()``: nothing more waiting for this
         peer, so the observer may flush)."""
         try:
             taken = self.core.admission.taken
@@ -204,7 +202,7 @@ class PeerRuntime(RunOutputs):
             if self.observer.enabled:  # else nothing was deferred to draw
                 t0 = time.thread_time()
                 self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
-                self.telemetry.cpu_ms["rerun"] += (time.thread_time() - t0) * 1e3
+                self.telemetry.cpu_ms["telemetry"] += (time.thread_time() - t0) * 1e3
         except Exception as exc:  # a bug must not take the peer (and the run) down
             self._internal_error(exc)
 
@@ -273,7 +271,7 @@ class PeerRuntime(RunOutputs):
         if channel in ("scan", "estimate", "tick") and outputs:
             self.telemetry.handled(channel, now, leave, outputs)
         scan_ms = (leave - now) * 1e3 if channel == "scan" else None
-        drawing = self.observer.enabled  # no Rerun stream: nothing to draw, nothing to time
+        drawing = self.observer.enabled  # no telemetry: nothing to gather, nothing to time
         published = False
         for out in outputs:
             if isinstance(out, Publish):
@@ -293,12 +291,12 @@ class PeerRuntime(RunOutputs):
                 if drawing:
                     t0 = time.thread_time()
                     self.observer.published(out, lat)
-                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
+                    cpu["telemetry"] += (time.thread_time() - t0) * 1e3
             elif isinstance(out, Record):
                 if drawing:
                     t0 = time.thread_time()
                     self.observer.record(out, scan_ms)
-                    cpu["rerun"] += (time.thread_time() - t0) * 1e3
+                    cpu["telemetry"] += (time.thread_time() - t0) * 1e3
                 if out.kind == "error":
                     self._report_error(out)
                 if out.kind == "scan" and out.k % 1000 == 0:

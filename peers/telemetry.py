@@ -47,7 +47,7 @@ def _median(v) -> float | None:
 class SharedCpu:
     """The CPU of one process that several peers share (a :class:`peers.host.PeerHost`).
 
-    Each peer's own steps (its core, publishing, Rerun) are measured as in a process of its
+    Each peer's own steps (its core, publishing, telemetry) are measured as in a process of its
     own; what the peers share is split evenly between them: the rest of the host loop's thread
     ("loop") and every other thread ("transport": Zenoh's threads and the callbacks), so the
     hosted peers' ``cpu_s_running`` add up to the process's. Read from the loop's thread."""
@@ -108,9 +108,9 @@ class Telemetry:
         self.rss_samples: list[tuple[int, float]] = []
         self.internal_errors: Counter = Counter()
         self.scans_skipped_behind = 0  # scans left out to catch up (see PeerRuntime._catch_up)
-        self.cpu_ms: dict[str, float] = {"publish": 0.0, "rerun": 0.0}
-        """Main-thread CPU (ms) by what it did: core steps by channel, publishing, Rerun (the
-        observer's drawing and logging)."""
+        self.cpu_ms: dict[str, float] = {"publish": 0.0, "telemetry": 0.0}
+        """Main-thread CPU (ms) by what it did: core steps by channel, publishing, telemetry
+        (the observer's per-scan report for live views; peers log nothing to Rerun)."""
         self._thread0 = time.thread_time()
         self._scan_sent: dict[int, float] = {}
         self._local_done: dict[int, float] = {}
@@ -192,7 +192,7 @@ class Telemetry:
 
     def cpu_breakdown(self) -> dict[str, float]:
         """Process CPU (ms) since :meth:`start_cpu`, split: the main thread's core steps by channel,
-        publishing, Rerun and the rest of its loop ("loop": queue, liveliness, telemetry), and
+        publishing, telemetry and the rest of its loop ("loop": queue, liveliness, telemetry), and
         every other thread ("transport": Zenoh's threads and the callbacks that admit messages).
         A core step includes decoding what it received and encoding what it publishes."""
         out = {k: round(v, 3) for k, v in self.cpu_ms.items()}

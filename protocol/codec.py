@@ -35,6 +35,7 @@ from sensornet.protocol.messages import (
     Returns,
     Scan,
     ScanSet,
+    Telemetry,
     Tracks,
     Truth,
 )
@@ -134,6 +135,10 @@ _FIELDS = {
     "C": ("c", "id", "pa", "ts"),
     "F": ("s", "k", "r", "q", "ts", "o", "n", "x"),
     "R": ("s", "k", "r", "q", "ts", "x"),
+    # Telemetry (live views only): value names "vn" and their float64 "vx", event lines
+    # "ev", point sets' names "pn", row counts "pc" and (m, 2) float64 rows "px", the fused
+    # mixture's dimension "d" (0: none) and packed rows "x"
+    "Y": ("s", "k", "ts", "vn", "vx", "ev", "pn", "pc", "px", "d", "x"),
 }
 _FIELDS_V2 = {
     # Tracks with identities: ids "i" (n, 3) int64, covariances "c" (n, d(d+1)/2) upper
@@ -223,10 +228,23 @@ def _control(msg: Control) -> dict:
             "ts": float(msg.send_time)}
 
 
+def _telemetry(msg: Telemetry) -> dict:
+    names = list(msg.points)
+    pts = [np.asarray(msg.points[n], dtype=float).reshape(-1, 2) for n in names]
+    mix = msg.mixture
+    return {"s": msg.sender, "k": int(msg.k), "ts": float(msg.send_time),
+            "vn": list(msg.values), "vx": _array(np.fromiter(msg.values.values(), float,
+                                                              len(msg.values))),
+            "ev": list(msg.events), "pn": names, "pc": [len(z) for z in pts],
+            "px": _array(np.concatenate(pts) if pts else np.zeros((0, 2))),
+            "d": 0 if mix is None else mix.dim,
+            "x": b"" if mix is None else pack_mixture(mix)}
+
+
 _ENCODERS: dict[type, tuple[str, Callable[[Any], dict]]] = {
     Estimate: ("E", _estimate), Scan: ("S", _scan), Tracks: ("K", _tracks),
     Truth: ("T", _truth), Forward: ("F", _forward), Returns: ("R", _returns),
-    Control: ("C", _control),
+    Control: ("C", _control), Telemetry: ("Y", _telemetry),
 }
 """Message type -> (wire type letter, the fields of its body by name); ``_FIELDS`` orders them."""
 
@@ -406,6 +424,45 @@ def _forward(body: dict, limits: Limits) -> Forward:
                    send_time=_time(body))
 
 
+def _names(body: dict, key: str, limits: Limits, most: int) -> list[str]:
+    """A list of at most ``most`` names of 1-``max_name`` characters."""
+    names = _get(body, key, list)
+    if len(names) > most:
+        raise Rejected("too-many", f"{len(names)} entries in {key!r} > {most}")
+    if not all(type(n) is str and 0 < len(n) <= limits.max_name for n in names):
+        raise Rejected("field", f"{key!r} must hold names of 1-{limits.max_name} characters")
+    return names
+
+
+def _telemetry_msg(body: dict, limits: Limits) -> Telemetry:
+    """A peer's per-scan telemetry: every list and block checked before decoding."""
+    vn = _names(body, "vn", limits, 4 * limits.max_entries)
+    vx = _floats(_get(body, "vx", bytes), (len(vn),))
+    events = _get(body, "ev", list)
+    if len(events) > 64 or not all(type(e) is str and len(e) <= 400 for e in events):
+        raise Rejected("field", "events must be at most 64 lines of at most 400 characters")
+    pn = _names(body, "pn", limits, 16)
+    pc = _get(body, "pc", list)
+    if len(pc) != len(pn) or not all(type(c) is int and 0 <= c for c in pc):
+        raise Rejected("shape", f"{len(pc)} point counts for {len(pn)} point sets")
+    blob = _get(body, "px", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "points")
+    if sum(pc) != n:
+        raise Rejected("shape", f"{n} points for counts summing to {sum(pc)}")
+    z, points, a = _floats(blob, (n, 2)), {}, 0
+    for name, c in zip(pn, pc, strict=True):
+        points[name], a = z[a:a + c], a + c
+    d = _count(body, "d", limits.max_dim)
+    mixture = None
+    if d:
+        xb = _get(body, "x", bytes)
+        mixture = unpack_mixture(xb, _rows(xb, 1 + d + d * (d + 1) // 2,
+                                           limits.max_components, "components"), d)
+    return Telemetry(sender=_name(body, "s", limits), k=_index(body, "k"),
+                     values=dict(zip(vn, vx.tolist(), strict=True)), events=tuple(events),
+                     points=points, mixture=mixture, send_time=_time(body))
+
+
 def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
     """Parse and validate bytes into a message, or raise :class:`Rejected`."""
     if not isinstance(data, bytes | bytearray | memoryview):
@@ -474,6 +531,8 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
             return Truth(k=_index(body, "k"), ids=ids, states=x, send_time=_time(body))
         if kind == "F":
             return _forward(body, limits)
+        if kind == "Y":
+            return _telemetry_msg(body, limits)
         if kind == "R":
             sender, k, rnd = _name(body, "s", limits), _index(body, "k"), _index(body, "r")
             seq, ts = _index(body, "q"), _time(body)

@@ -12,7 +12,7 @@ from sensornet.protocol.codec import VERSION, VERSIONS
 
 MIME = "application/msgpack"
 TYPES = {"E": "estimate", "S": "scan", "K": "tracks", "T": "truth", "F": "forward",
-         "R": "returns", "C": "control"}
+         "R": "returns", "C": "control", "Y": "telemetry"}
 """Message type letters (protocol.codec) and the names their encodings carry."""
 
 

@@ -1,7 +1,8 @@
 """Zenoh key expressions, one namespace per network name (keeps concurrent runs apart).
 
 ``sensornet/<network>/scan/<sensor>``, ``.../scans/<host>`` (a host's scan bundles),
-``.../estimate/<peer>``, ``.../tracks/<peer>``,
+``.../estimate/<peer>``, ``.../tracks/<peer>``, ``.../telemetry/<peer>`` (a peer's per-scan
+report for live views),
 ``.../truth``, ``.../alive/<peer>`` (liveliness), ``.../ready/<peer>`` (liveliness, once a
 peer sees all its neighbours), ``.../ctl``.
 """
@@ -85,6 +86,10 @@ class Keys:
 
     def tracks(self, peer: str = "*") -> str:
         return f"{self.base}/tracks/{peer}"
+
+    def telemetry(self, peer: str = "*") -> str:
+        """A peer's per-scan telemetry for live views (``sensornet view``): no peer reads it."""
+        return f"{self.base}/telemetry/{peer}"
 
     def truth(self) -> str:
         return f"{self.base}/truth"

@@ -144,4 +144,26 @@ class Returns:
     """The consensus slot it fills."""
 
 
-Message = Scan | Estimate | Tracks | Truth | Control | Forward | Returns
+@dataclass(frozen=True)
+class Telemetry:
+    """A peer's compact report of scan ``k`` for live views (``sensornet view``), never an
+    input of a filter: what the Rerun health tabs show (counts, timings, component numbers,
+    trust state) and a few marks no other message carries.
+
+    values:  named scalars, ``"components/fused"`` -> 12.0 (the view plots
+             ``metrics/components/<sender>/fused``; ``"age"``: ``metrics/age/<sender>``).
+    events:  text lines (a neighbour joined, a trust state changed).
+    points:  named ``(m, 2)`` map points (a sample of particles).
+    mixture: the fused Gaussian mixture (the heaviest components), or None.
+    """
+
+    sender: str
+    k: int
+    values: Mapping[str, float] = field(default_factory=dict)
+    events: tuple[str, ...] = ()
+    points: Mapping[str, np.ndarray] = field(default_factory=dict)
+    mixture: GaussianMixture | None = None
+    send_time: float = 0.0
+
+
+Message = Scan | Estimate | Tracks | Truth | Control | Forward | Returns | Telemetry

@@ -54,6 +54,7 @@ COMMANDS: dict[str, str] = {
     "report": "report:cmd_report",
     "echo": "live:cmd_live",
     "topics": "live:cmd_live",
+    "view": "view:cmd_view",
     "plot": "plot:cmd_plot",
     "scenario": "scenario:cmd_scenario",
     "router": "router:cmd_router",
@@ -399,6 +400,25 @@ def _add_live_and_plot(sub) -> None:
                              "every signature")
         ec.add_argument("--as", dest="member", help="the member the tool speaks as (--secure)")
         ec.set_defaults(command_name=name)
+
+    vw = sub.add_parser("view", help="attach a live Rerun view to a running network: it only "
+                        "subscribes (peers pay nothing for it); Ctrl-C detaches")
+    vw.add_argument("network", type=_network_name, help="the network's name")
+    vw.add_argument("--connect", action="append", metavar="ENDPOINT", type=_endpoint,
+                    help="a process of the network to join, e.g. the world's --listen "
+                         "endpoint (repeatable)")
+    vw.add_argument("--config", type=_existing_file, help="a Zenoh JSON5 config file")
+    vw.add_argument("--scenario", help="the scenario the network plays (peer order and "
+                    "colours, region, sensors, layout); without it peers are coloured as heard")
+    vw.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="the scenario overrides of the run (repeatable)")
+    vw.add_argument("--out", help="write the recording here (an .rrd file)")
+    vw.add_argument("--viewer", type=_viewer,
+                    help="'spawn' a Rerun viewer, 'none', or a rerun+http://HOST:PORT/proxy URL")
+    vw.add_argument("--run-id", type=_run_id, help="Rerun recording id")
+    vw.add_argument("--duration", type=float, help="seconds to watch (default: until Ctrl-C)")
+    vw.add_argument("--until-end", action="store_true",
+                    help="stop a few seconds after the run's end message")
 
     pl = sub.add_parser("plot", help="track map and metrics over time (PNG) of one run from "
                                      "its per-scan results")

@@ -1,7 +1,9 @@
 """Start a whole network run as separate OS processes: the world and one peer per sensor.
 
 Every process is ``python -m sensornet world|peer ...`` with explicit loopback endpoints on
-free ports, its log in ``<run>/logs/``, its summary and ``.rrd`` in the run folder. Whatever
+free ports, its log in ``<run>/logs/``, its summary in the run folder. The Rerun recording is
+built by a view process of its own (``sensornet view``, :mod:`sensornet.view`) that only
+subscribes: the world and the peers log nothing to Rerun (issue 38). Whatever
 happens (an error, Ctrl-C, SIGTERM, a timeout), every child is stopped before this returns:
 :func:`wait_run` takes a ``stop`` event that the caller sets from its signal handler, and then
 sends SIGTERM to every child (SIGKILL after a grace period), so the peers still write their
@@ -90,9 +92,10 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
     common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
-    if viewer:
-        common += ["--viewer", viewer]
-    if not rerun:
+    view = bool(rerun or viewer) and not secure  # the view subscribes; nobody else logs
+    if secure and (rerun or viewer):  # no view in secure mode: the world logs as before
+        common += ["--viewer", viewer] if viewer else []
+    else:
         common += ["--no-rerun"]
     if config:
         common += ["--config", str(config)]
@@ -101,6 +104,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure, hosts=groups)
+    handle.views = {}  # the view process: not a member of the run (its end or failure is its own)
     if router:
         if config or listen or sparse:
             raise ValueError("a routed run makes its own client config and endpoints: "
@@ -139,6 +143,13 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     if groups:  # the hosts instead of the peers' processes
         cmds = {"world": cmds["world"], **_host_commands(
             groups, cmds, names, eps, extra_connect, router, sparse, A if sparse else None)}
+    if view:  # started first: it hears the run from its first scan
+        cfg = common[common.index("--config") + 1] if "--config" in common else None
+        cmds = {"view": [*_cli(), "view", network, "--connect", eps["world"], *extra_connect,
+                         "--scenario", source, *sets, "--run-id", run_id, "--until-end",
+                         *(["--config", cfg] if cfg else []),
+                         *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),
+                         *(["--viewer", viewer] if viewer else [])], **cmds}
     handle.commands = cmds
     (out / "commands.json").write_text(json.dumps(
         {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
@@ -149,11 +160,13 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
             log = out / "logs" / f"{name}.log"
             handle.logs[name] = log
             with log.open("w") as fh:  # a host reads its commands (kill PEER) on stdin
-                handle.procs[name] = subprocess.Popen(
+                procs = handle.views if name == "view" else handle.procs
+                procs[name] = subprocess.Popen(
                     cmd, stdout=fh, stderr=subprocess.STDOUT,
                     stdin=subprocess.PIPE if name in groups else subprocess.DEVNULL)
     except BaseException:
         handle.stop_all(grace=1.0)
+        stop_views(handle, 0.0)
         raise
     return handle
 
@@ -287,5 +300,20 @@ def wait_run(handle: RunHandle, timeout: float,
                 time.sleep(0.05)
     finally:
         handle.stop_all()
+        stop_views(handle, 0.0 if handle.stopped or handle.timed_out else 15.0)
     return {name: p.returncode for name, p in handle.procs.items()}
+
+
+def stop_views(handle: RunHandle, wait: float = 15.0) -> None:
+    """The view ends by itself a few seconds after the run's end message; given ``wait``
+    seconds for that, then SIGTERM (it writes its recording), then SIGKILL."""
+    for proc in getattr(handle, "views", {}).values():
+        for action, grace in ((None, wait), ("terminate", 10.0), ("kill", 5.0)):
+            if action is not None:
+                getattr(proc, action)()
+            try:
+                proc.wait(timeout=grace)
+                break
+            except subprocess.TimeoutExpired:
+                continue
 

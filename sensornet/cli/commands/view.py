@@ -1,0 +1,113 @@
+"""``sensornet view``: attach a live Rerun view to a running network (it only subscribes)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sensornet.cli.common import UserError
+from sensornet.peers.rerun_layout import legend_markdown
+from sensornet.peers.rerun_sink import RerunSink, color_of
+from sensornet.peers.session import SessionError
+from sensornet.protocol.keys import check_name
+from sensornet.sim.kinds import kind_of
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.view import LiveView, ViewState, cpu_seconds
+
+FOLLOW_RADIUS = 400.0
+"""The "around the target" view's half-width (m), as the world drew it."""
+
+
+def _scenario(args: argparse.Namespace):
+    """The scenario the network plays (``--scenario``, ``--set``), or None."""
+    if not args.scenario:
+        return None
+    try:
+        scn = load_scenario(args.scenario, overrides=parse_overrides(args.set or []))
+    except (OSError, ValueError, KeyError) as exc:
+        raise UserError(f"scenario {args.scenario!r}: {exc}") from None
+    return scn, kind_of(scn).view.layout()
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """Subscribe to NETWORK and build its Rerun recording (``--out``) and/or stream it to a
+    viewer (``--viewer``) until Ctrl-C, ``--duration`` or (``--until-end``) the run's end."""
+    try:
+        check_name(args.network, "network name")
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if not args.connect:
+        raise UserError("--connect ENDPOINT: a process of the network to join (the world's "
+                        "--listen endpoint, say)")
+    if args.duration is not None and not args.duration > 0:
+        raise UserError("--duration must be positive")
+    viewer = None if args.viewer in (None, "none") else args.viewer
+    out = Path(args.out) if args.out else None
+    if out is None and viewer is None:
+        raise UserError("nothing to show to: give --out FILE.rrd and/or --viewer")
+    found = _scenario(args)
+    peers: list[str] = []
+    layout = {"single_target": False, "imm": False}
+    sensors, region, period, cutoff = {}, None, 1.0, None
+    if found is not None:
+        scn, layout = found
+        layout = {**layout, "single_target": layout["single_target"] or len(scn.targets) == 1}
+        peers = list(scn.sensor_names)
+        sensors = {s.name: (s.kind, s.position) for s in scn.sensors}
+        region, period, cutoff = scn.region, scn.scan_period, scn.metrics.ospa_cutoff
+    sink = RerunSink().open(args.run_id or args.network, out, viewer, peers=peers,
+                            ospa_cutoff=cutoff, follow_radius=FOLLOW_RADIUS, **layout)
+    sink.decorate(peers, region=region, follow_radius=FOLLOW_RADIUS, **layout)
+    if sensors:
+        sink.time(0, 0.0)
+        sink.points("world/sensors", np.array([p for _, p in sensors.values()]),
+                    [color_of(i) for i in range(len(sensors))], radius=8.0,
+                    labels=list(sensors))
+    known = list(peers)
+
+    def new_peer(name: str, i: int) -> None:  # heard, not in the scenario: style and legend
+        known.append(name)
+        sink.decorate_peer(name, i, layout["imm"])
+        rr = sink.rr
+        rr.log("legend", rr.TextDocument(legend_markdown(known, layout["single_target"],
+                                                         layout["imm"], FOLLOW_RADIUS),
+                                         media_type=rr.MediaType.MARKDOWN), static=True)
+
+    def state(batcher):
+        return ViewState(batcher, peers, period, sensors, layout["single_target"], cutoff,
+                         on_new_peer=new_peer)
+
+    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect, args.config)
+
+    def on_signal(signum, frame) -> None:
+        view.stop.set()
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, on_signal)
+    cpu0 = cpu_seconds()
+    try:
+        view.open()
+    except SessionError as exc:
+        sink.close()
+        raise UserError(str(exc)) from None
+    print(f"view: network {args.network} via {', '.join(args.connect)} -> "
+          f"{out or ''}{' + ' if out and viewer else ''}{viewer or ''} (Ctrl-C to detach)",
+          file=sys.stderr, flush=True)
+    try:
+        view.run(args.duration, until_end=args.until_end)
+    finally:
+        view.close()
+        sink.close()
+    st, b = view.state, view.batcher
+    cpu = cpu_seconds() - cpu0
+    scans = max(1, st.newest_k)
+    print(f"view: {st.handled} messages drawn ({st.rejected} undecodable), {view.dropped} "
+          f"dropped, {view.skipped} estimates skipped, {b.decimated} map frames decimated; "
+          f"{b.calls} send_columns calls for {b.rows_sent} rows; CPU {cpu:.2f} s "
+          f"({cpu / scans * 1e3:.1f} ms per scan over {st.newest_k} scans)",
+          file=sys.stderr, flush=True)
+    return 0
