@@ -13,6 +13,10 @@ thread), reading only the first bytes of the message (a few microseconds):
 - every message that would go on to be decoded (or, in secure mode, have its signature
   verified) is charged to its sender's token bucket (``rate``), a few times what an honest sender
   needs: however a member stamps its messages, what it costs a receiver is bounded;
+- an estimate's bytes are charged to its sender's byte budget (``bytes``, with
+  ``estimate_bytes``): ``factor`` times what the receiver itself would send per scan at its
+  component limit (:mod:`peers.budget`), so a member that sends few but huge estimates is
+  bounded by size, not only by count (issue 36);
 - what the callbacks hand to the main loop waits in an inbox bounded per sender
   (:data:`INBOX_SCANS` scans' worth, ``inbox``) and in total (:data:`INBOX_TOTAL` messages,
   :data:`INBOX_BYTES` bytes, ``inbox-total``): a main loop that falls behind drops, it does not
@@ -149,21 +153,51 @@ class TokenBucket:
         return False
 
 
+class ByteBudget:
+    """``rate`` bytes per second, at most ``capacity`` saved up; a message is let in while the
+    balance is not negative and then charged its size, at most ``capacity`` (it may go into
+    debt: a message larger than the capacity is not refused for ever, its sender waits until
+    the debt is paid; and one message, say a forger's 50 MB in a member's name, never shuts
+    the member out for longer than ``capacity / rate`` seconds)."""
+
+    __slots__ = ("rate", "capacity", "balance", "last")
+
+    def __init__(self, rate: float, capacity: float) -> None:
+        self.rate, self.capacity = rate, capacity
+        self.balance, self.last = capacity, None
+
+    def open(self, now: float) -> bool:
+        """Refill to ``now`` and say whether a message may be let in."""
+        if self.last is not None and now > self.last:
+            self.balance = min(self.capacity, self.balance + (now - self.last) * self.rate)
+        self.last = now if self.last is None else max(self.last, now)
+        return self.balance >= 0.0
+
+    def charge(self, n: int) -> None:
+        self.balance -= min(n, self.capacity)
+
+
 class Admission:
     """Per-sender rate limits, sized from what an honest sender sends per scan.
 
     An honest world sends one scan per sensor and one truth per scan interval; an honest
     neighbour ``rounds x kinds`` estimates. Each sender may send ``factor`` times that on
     average, with bursts of ``burst`` scans' worth (duplicates, catching up after a pause).
-    Over the limit a message is dropped and counted as ``rate``.
+    Over the limit a message is dropped and counted as ``rate``. With ``estimate_bytes`` (the
+    bytes of the largest estimate the receiver itself would send, :mod:`peers.budget`), each
+    sender's estimates also draw on a :class:`ByteBudget` of ``factor`` times that per
+    estimate it may send per scan (bursts of ``burst`` scans' worth): over it, ``bytes``,
+    counted per sender in :attr:`over_budget`.
     """
 
     def __init__(self, network: str, interval: float, per_scan: dict[str, float],
                  factor: float = 4.0, burst: float = 8.0, max_senders: int = 256,
                  window: Callable[[str], tuple[int, int]] | None = None,
-                 rounds: int | None = None, kinds: Iterable[str] | None = None) -> None:
+                 rounds: int | None = None, kinds: Iterable[str] | None = None,
+                 estimate_bytes: int | None = None) -> None:
         """``rounds``: consensus rounds the peer runs (estimates of round ``0 <= r < rounds``
-        are taken); ``kinds``: estimate kinds it fuses (None: no check before decoding)."""
+        are taken); ``kinds``: estimate kinds it fuses (None: no check before decoding);
+        ``estimate_bytes``: the unit of the per-sender byte budget of estimates (None: none)."""
         self.network = network
         self.window = window
         """``channel -> (lo, hi)``: scan indices the peer keeps for that channel now."""
@@ -186,6 +220,14 @@ class Admission:
         self.max_senders = max_senders
         self._buckets: dict[tuple[str, str], TokenBucket] = {}
         self.rejected: Counter = Counter()
+        if estimate_bytes is not None and estimate_bytes <= 0:
+            raise ValueError(f"estimate_bytes must be positive, got {estimate_bytes}")
+        self.estimate_bytes = estimate_bytes
+        self._budgets: dict[str, ByteBudget] = {}
+        self.over_budget: Counter = Counter()
+        """Estimates refused for their size (``bytes``), by ``estimate/sender``."""
+        self.over_budget_bytes: Counter = Counter()
+        """Their bytes, by ``estimate/sender``."""
 
     def _bucket(self, route: Route) -> TokenBucket | None:
         key = (route.channel, route.name)
@@ -256,10 +298,18 @@ class Admission:
                     or self.queued_bytes + len(payload) > INBOX_BYTES):
                 self.rejected["inbox-total"] += 1
                 return False
+        budget = self._budget(route, head, payload)
+        if budget is not None and not budget.open(now):
+            self.rejected["bytes"] += 1
+            self.over_budget[f"{route.channel}/{route.name}"] += 1
+            self.over_budget_bytes[f"{route.channel}/{route.name}"] += len(payload)
+            return False
         b = self._bucket(route)
         if b is None or not b.take(now):
             self.rejected["rate"] += 1
             return False
+        if budget is not None:
+            budget.charge(len(payload))
         if slot is not None:
             slots, key = slot
             slots[key] = slots.get(key, 0) + 1
@@ -270,6 +320,25 @@ class Admission:
             self.queued_bytes += len(payload)
             self.inbox_peak = max(self.inbox_peak, self.queued_total)
         return True
+
+    def _budget(self, route: Route, head: tuple | None, payload: bytes) -> ByteBudget | None:
+        """The sender's byte budget if this message draws on it: estimates (``E``, or
+        anything on the estimate key whose header does not parse), not scan forwards or
+        returns (``F``/``R``: measurements, sized by clutter, not by the receiver's limit)."""
+        if self.estimate_bytes is None or route.channel != "estimate":
+            return None
+        if head is None and self.window is None:
+            head = peek(payload)
+        if head is not None and head[0] != "E":
+            return None
+        b = self._budgets.get(route.name)
+        if b is None:
+            if len(self._budgets) >= self.max_senders:
+                return None  # the message bucket refuses unknown names past the bound
+            n = self.per_scan.get("estimate", 1.0) * self.estimate_bytes
+            b = ByteBudget(self.factor * n / self.interval, self.burst * n)
+            self._budgets[route.name] = b
+        return b
 
     def _inbox_bound(self, channel: str) -> int:
         return max(INBOX_MIN, int(INBOX_SCANS * self.per_scan.get(channel, 1.0)))

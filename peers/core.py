@@ -33,6 +33,7 @@ from collections import Counter, deque
 
 import numpy as np
 from sensornet.peers.admission import Admission, Route, parse_key
+from sensornet.peers.budget import EstimateBudget
 from sensornet.peers.consensus import Consensus
 from sensornet.peers.core_summary import core_cost, core_snapshot, cost_per_scan
 from sensornet.peers.core_types import CoreConfig, Output, Publish, Record, Stop
@@ -63,11 +64,15 @@ class PeerCore:
         """Bytes -> message (a host shares one read-only decode between its peers)."""
         self._predecoded: tuple[bytes, Scan] | None = None  # (payload, msg): scan_step's
         kinds = max(1, len(consensus.kinds))
+        self.budget = EstimateBudget.of(self.estimator)
+        """What one neighbour's estimate may cost (peers.budget): its bytes before decoding,
+        its components after."""
         self.admission = Admission(cfg.network, cfg.interval, {
             "scan": 1.0, "truth": 1.0, "ctl": 0.5,
             "estimate": float(consensus.rounds * kinds)}, factor=cfg.rate_factor,
             window=self.window_for, rounds=consensus.rounds,
-            kinds=consensus.kinds or ("posterior",))
+            kinds=consensus.kinds or ("posterior",),
+            estimate_bytes=None if self.budget is None else self.budget.message_bytes)
         self.rejected: Counter = Counter()
         self.received: Counter = Counter()
         self.received_bytes: Counter = Counter()
@@ -343,6 +348,8 @@ class PeerCore:
             return self._reject(why)
         out: list[Output] = [Record("estimate", msg.k, {"sender": msg.sender,
                                                         "round": msg.round})]
+        if self.budget is not None and isinstance(msg, Estimate):
+            msg = self.budget.bound_estimate(msg)  # at most J components on (peers.budget)
         return out + self._wrap(c.on_estimate(msg, now))
 
     def _truth(self, msg: Truth) -> list[Output]:

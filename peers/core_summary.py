@@ -57,7 +57,41 @@ def core_snapshot(core) -> dict:
         "internal_errors": dict(c.errors),
         "prepared_steps": getattr(c.estimator, "prepared_hits", 0),
         "trust": c.trust.summary() if c.trust is not None else None,
+        "budget": core_budget(core),
     }
+
+
+def core_budget(core) -> dict:
+    """Per member, what its size cost it (issue 36, :mod:`peers.budget`): estimates refused
+    before decoding for their bytes (``refused``, ``refused_bytes``, by ``estimate/<name>``)
+    and estimates reduced after (``reduced``, ``components_dropped``, ``largest``: by
+    sender)."""
+    a, b = core.admission, core.budget
+    return {"refused": dict(a.over_budget), "refused_bytes": dict(a.over_budget_bytes),
+            **(b.counts() if b is not None else
+               {"reduced": {}, "components_dropped": {}, "largest": {}})}
+
+
+def budget_lines(summaries: dict[str, dict]) -> list[str]:
+    """One line per member that something was refused or reduced of, for the note under
+    ``sensornet run``'s table: ``budget: s2 refused 40 estimates (9.6 MB) by s1, ...``."""
+    by: dict[str, list[str]] = {}
+    for peer, s in sorted(summaries.items()):
+        b = s.get("budget") or {}
+        names = {k.removeprefix("estimate/") for k in b.get("refused") or {}}
+        names |= set(b.get("reduced") or {})
+        for n in sorted(names):
+            refused = (b.get("refused") or {}).get(f"estimate/{n}", 0)
+            nbytes = (b.get("refused_bytes") or {}).get(f"estimate/{n}", 0)
+            reduced = (b.get("reduced") or {}).get(n, 0)
+            dropped = (b.get("components_dropped") or {}).get(n, 0)
+            what = []
+            if refused:
+                what.append(f"{refused} refused for size ({nbytes / 1e6:.1f} MB)")
+            if reduced:
+                what.append(f"{reduced} reduced ({dropped} components cut)")
+            by.setdefault(n, []).append(f"{peer}: " + ", ".join(what))
+    return [f"over budget: {n}'s estimates, by " + "; ".join(v) for n, v in sorted(by.items())]
 
 
 def cost_per_scan(stats: dict, sent_bytes: int, neighbours: int) -> dict:

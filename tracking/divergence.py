@@ -17,36 +17,76 @@ import numpy as np
 from sensornet.tracking.gaussian import inv_det_spd, log_gaussian
 from sensornet.tracking.mixture import GaussianMixture
 
+BLOCK_PAIRS = 1 << 18
+"""Component pairs formed at once (262,144: about 30 MB of ``d = 4`` covariance sums): up to
+this many pairs in all, one block as before; beyond, rows in blocks of this many pairs, so
+memory stays linear in the components whatever a neighbour sends (issue 36: 2.18 GB at
+2,000 components in one block)."""
+
 
 def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:
     """``L[i, j] = log int D_i D_j`` for every pair of the (unnormalised) mixtures: ``(n, n)``.
 
     One matrix of component terms ``log a_a + log b_b + log N(m_a; m_b, P_a + P_b)`` over all
     components, log-sum-exp'ed in blocks (far-apart tight components underflow nothing); an
-    empty mixture has ``-inf`` rows and columns.
+    empty mixture has ``-inf`` rows and columns. Time is quadratic in the total number of
+    components ``C``, memory ``O(C * BLOCK_PAIRS / C)``: bound the components first
+    (:mod:`peers.budget`).
     """
     n = len(mixtures)
     sizes = np.array([len(D) for D in mixtures], dtype=int)
     L = np.full((n, n), -np.inf)
-    if sizes.sum() == 0:
+    C = int(sizes.sum())
+    if C == 0:
         return L
     w = np.concatenate([D.weights for D in mixtures if len(D)])
     m = np.concatenate([D.means for D in mixtures if len(D)])
     P = np.concatenate([D.covs for D in mixtures if len(D)])
-    inv, det = inv_det_spd(P[:, None] + P[None, :])
     with np.errstate(divide="ignore"):
         lw = np.log(w)
-    G = lw[:, None] + lw[None, :] + log_gaussian(m[:, None] - m[None, :], inv, det)
     present = np.flatnonzero(sizes)
     starts = np.r_[0, np.cumsum(sizes[present])[:-1]]
-    blk = np.repeat(np.arange(len(present)), sizes[present])  # block of each component
-    top = np.maximum.reduceat(np.maximum.reduceat(G, starts, axis=0), starts, axis=1)
-    safe = np.where(np.isfinite(top), top, 0.0)
-    S = np.add.reduceat(np.add.reduceat(np.exp(G - safe[blk][:, blk]), starts, axis=0),
-                        starts, axis=1)
-    with np.errstate(divide="ignore"):
-        L[np.ix_(present, present)] = np.where(np.isfinite(top), safe + np.log(S), -np.inf)
+    if C * C <= BLOCK_PAIRS:
+        inv, det = inv_det_spd(P[:, None] + P[None, :])
+        G = lw[:, None] + lw[None, :] + log_gaussian(m[:, None] - m[None, :], inv, det)
+        blk = np.repeat(np.arange(len(present)), sizes[present])  # block of each component
+        top = np.maximum.reduceat(np.maximum.reduceat(G, starts, axis=0), starts, axis=1)
+        safe = np.where(np.isfinite(top), top, 0.0)
+        S = np.add.reduceat(np.add.reduceat(np.exp(G - safe[blk][:, blk]), starts, axis=0),
+                            starts, axis=1)
+        with np.errstate(divide="ignore"):
+            L[np.ix_(present, present)] = np.where(np.isfinite(top), safe + np.log(S),
+                                                   -np.inf)
+        return L
+    L[np.ix_(present, present)] = _blocked(lw, m, P, starts, max(1, BLOCK_PAIRS // C))
     return L
+
+
+def _blocked(lw: np.ndarray, m: np.ndarray, P: np.ndarray, starts: np.ndarray,
+             rows: int) -> np.ndarray:
+    """:func:`log_overlaps` of the non-empty mixtures (``starts``: their first components
+    in ``lw (C,)``, ``m (C, d)``, ``P (C, d, d)``), ``rows`` components against all at a
+    time: per component, the log-sum-exp over each mixture's components ``(C, k)``, then per
+    mixture over its rows."""
+    C = len(lw)
+    R = np.empty((C, len(starts)))
+    for a in range(0, C, rows):
+        b = min(C, a + rows)
+        inv, det = inv_det_spd(P[a:b, None] + P[None, :])
+        G = lw[a:b, None] + lw[None, :] + log_gaussian(m[a:b, None] - m[None, :], inv, det)
+        R[a:b] = _lse_reduceat(G, starts, axis=1)
+    return _lse_reduceat(R, starts, axis=0)
+
+
+def _lse_reduceat(G: np.ndarray, starts: np.ndarray, axis: int) -> np.ndarray:
+    """``log sum exp`` of ``G`` over the segments of ``axis`` beginning at ``starts``
+    (``-inf`` where a segment is all ``-inf``)."""
+    top = np.maximum.reduceat(G, starts, axis=axis)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    idx = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, G.shape[axis]]))
+    S = np.add.reduceat(np.exp(G - np.take(safe, idx, axis=axis)), starts, axis=axis)
+    with np.errstate(divide="ignore"):
+        return np.where(np.isfinite(top), safe + np.log(S), -np.inf)
 
 
 def cs_from_log_overlaps(lpq: np.ndarray, lpp: np.ndarray, lqq: np.ndarray) -> np.ndarray:
@@ -64,4 +104,4 @@ def cs_divergence(p: GaussianMixture, q: GaussianMixture) -> float:
     return float(cs_from_log_overlaps(L[0, 1], L[0, 0], L[1, 1]))
 
 
-__all__ = ["cs_divergence", "cs_from_log_overlaps", "log_overlaps"]
+__all__ = ["BLOCK_PAIRS", "cs_divergence", "cs_from_log_overlaps", "log_overlaps"]

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from sensornet.peers.core_summary import budget_lines
 from sensornet.peers.telemetry import percentile
 
 
@@ -108,7 +109,9 @@ def trust_note(summaries: dict[str, dict]) -> str | None:
     """Who was quarantined by whom and when (peers with ``fusion.trust``), one line per
     neighbour, then who was fused repaired or registered by whom, from when and how often
     (``fusion.trust_repair``, ``fusion.trust_register``), then whose weight the
-    withheld-target test held at 0 by whom and how often; None if nobody was any."""
+    withheld-target test held at 0 by whom and how often, then whose estimates were refused
+    for their size or reduced by whom (:func:`peers.core_summary.budget_lines`); None if
+    nobody was any."""
     by: dict[str, list[str]] = {}
     for peer, s in sorted(summaries.items()):
         for ch in ((s.get("trust") or {}).get("changes") or []):
@@ -132,6 +135,7 @@ def trust_note(summaries: dict[str, dict]) -> str | None:
     lines += [f"repaired: {n} by " + ", ".join(v) for n, v in sorted(fixed.items())]
     lines += [f"held (withholding targets): {n} by " + ", ".join(v)
               for n, v in sorted(held.items())]
+    lines += budget_lines(summaries)
     return "\n".join(lines) if lines else None
 
 

@@ -1,0 +1,238 @@
+"""What one member's estimate may cost a receiver (issue 36 items 1-2, peers.budget): a byte
+budget per member before decoding, a reduction to the receiver's own limits after, and a
+divergence whose memory stays linear. Costs are counted (components reaching the trust test's
+divergence and the fusion), never timed: benchmarks/bench_padding.py prints the times."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sensornet.peers.trust as trust_mod
+import sensornet.peers.trust_checks as checks_mod
+import sensornet.tracking.divergence as divergence
+from scipy.stats import multivariate_normal
+from sensornet.peers.admission import Admission, ByteBudget, Route
+from sensornet.peers.budget import EstimateBudget, heaviest, row_bytes
+from sensornet.peers.core_summary import budget_lines
+from sensornet.protocol.codec import encode
+from sensornet.protocol.messages import Estimate, Forward, ScanSet
+from sensornet.sim.run.lies import LyingCore
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.run.twin import run_twin
+from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer
+
+PAD = 2000
+"""The codec's component limit: what the padding lie fills an estimate to."""
+
+
+def _mix(n: int, rng: np.random.Generator, w: float | None = None, d: int = 4,
+         spread: float = 1000.0) -> GaussianMixture:
+    weights = rng.uniform(0.6, 1.0, n) if w is None else np.full(n, w)
+    return GaussianMixture(weights, rng.uniform(-spread, spread, (n, d)),
+                           np.tile(25.0 * np.eye(d), (n, 1, 1)))
+
+
+def padded(rng: np.random.Generator, n: int = PAD):
+    """The padding lie: the real estimate plus negligible-weight components up to ``n``."""
+    def lie(mix: GaussianMixture) -> GaussianMixture:
+        extra = _mix(max(0, n - len(mix)), rng, w=1e-4, d=mix.dim)
+        return GaussianMixture.concatenate([mix, extra])
+    return lie
+
+
+# -- before decoding: bytes per member ---------------------------------------------------------
+def test_byte_budget_lets_a_message_into_debt_then_waits_for_it():
+    b = ByteBudget(rate=100.0, capacity=200.0)
+    assert b.open(0.0)
+    b.charge(150)
+    assert b.open(0.0)  # 50 left
+    b.charge(10**9)  # larger than the capacity: let in once, charged at most the capacity
+    assert not b.open(0.0) and not b.open(1.4)
+    assert b.open(1.51)  # the debt (150) paid at 100 B/s
+
+
+def _admission(estimate_bytes=12_000):
+    return Admission("net", 1.0, {"estimate": 1.0}, factor=4.0, burst=8.0,
+                     estimate_bytes=estimate_bytes)
+
+
+def test_a_member_sending_huge_estimates_is_bounded_by_size_an_honest_one_never():
+    rng = np.random.default_rng(0)
+    big = encode(Estimate("liar", 1, _mix(PAD, rng)))  # 240 kB
+    small = encode(Estimate("honest", 1, _mix(10, rng)))
+    adm = _admission()
+    liar, honest = Route("estimate", "liar"), Route("estimate", "honest")
+    got = {"liar": 0, "honest": 0}
+    for k in range(200):  # one estimate per scan each, 1 s apart
+        got["liar"] += adm.admit(liar, float(k), big)
+        got["honest"] += adm.admit(honest, float(k), small)
+    assert got["honest"] == 200
+    # 4 x 12 kB a scan, each 240 kB message charged the 96 kB capacity: one scan in two
+    assert 200 * 48 / 96 - 3 <= got["liar"] <= 200 * 48 / 96 + 3
+    assert adm.rejected["bytes"] == 200 - got["liar"]
+    assert adm.over_budget == {"estimate/liar": 200 - got["liar"]}
+    assert adm.over_budget_bytes["estimate/liar"] == (200 - got["liar"]) * len(big)
+    assert all(adm.admit(honest, 200.0 + k, small) for k in range(50))
+    # without a byte budget the same messages all pass (one per scan is within the rate)
+    free = _admission(None)
+    assert sum(free.admit(liar, float(k), big) for k in range(200)) == 200
+
+
+def test_scan_forwards_are_not_charged_to_the_estimate_budget():
+    fwd = encode(Forward("s", 1, ScanSet({"a": np.zeros((5000, 2))})))
+    adm = _admission(1000)
+    assert all(adm.admit(Route("estimate", "s"), float(k), fwd) for k in range(20))
+    assert adm.rejected["bytes"] == 0
+    with pytest.raises(ValueError, match="estimate_bytes"):
+        _admission(0)
+
+
+# -- after decoding: the reduction -------------------------------------------------------------
+def _budget(level2=0.5, J=100):
+    return EstimateBudget(J, 4, level2, Reducer(max_components=J))
+
+
+def test_an_honest_estimate_passes_untouched():
+    rng = np.random.default_rng(1)
+    mix = _mix(12, rng)
+    b = _budget()
+    assert b.bound("s2", mix, pruning=2) is mix
+    msg = Estimate("s2", 3, mix, pruning=2)
+    assert b.bound_estimate(msg) is msg
+    assert b.counts()["reduced"] == {} and b.counts()["largest"] == {"s2": 12}
+
+
+def test_padding_of_a_level2_estimate_is_cut_to_the_real_estimate():
+    rng = np.random.default_rng(2)
+    real = _mix(9, rng)
+    lie = padded(rng)(real)
+    b = _budget()
+    for pruning in (1, 2):  # round 0 is level-2 pruned whatever the sender declares
+        out = b.bound("liar", lie, pruning=pruning, rnd=0)
+        assert len(out) == 9
+        assert np.array_equal(out.means, real.means) and np.array_equal(out.weights,
+                                                                        real.weights)
+    assert b.reduced["liar"] == 2 and b.dropped["liar"] == 2 * (PAD - 9)
+
+
+def test_a_later_round_is_cut_to_the_receivers_limit_keeping_the_heaviest():
+    rng = np.random.default_rng(3)
+    mix = _mix(PAD, rng, spread=1e5)  # far apart: nothing merges
+    mix = GaussianMixture(rng.permutation(np.linspace(0.01, 1.0, PAD)), mix.means, mix.covs)
+    b = _budget(J=50)
+    out = b.bound("s2", mix, pruning=1, rnd=1)
+    assert len(out) == 50
+    top = np.sort(mix.weights)[-50:]  # brute force: the 50 heaviest weights
+    assert np.allclose(np.sort(out.weights), top)
+    # components that merge are merged with the receiver's reducer, as its own would be
+    near = GaussianMixture(np.full(300, 0.4), np.zeros((300, 4)) + rng.normal(0, 0.01, (300, 4)),
+                           np.tile(25.0 * np.eye(4), (300, 1, 1)))
+    merged = b.bound("s3", near, pruning=1, rnd=1)
+    assert len(merged) == 1 and np.isclose(merged.mass, 0.4 * 100)  # the 2 J kept, merged
+
+
+def test_heaviest_is_the_sorted_top_n():
+    w = np.random.default_rng(4).uniform(size=1000)
+    assert np.array_equal(heaviest(w, 10), np.sort(np.argsort(-w)[:10]))
+    assert np.array_equal(heaviest(w[:5], 10), np.arange(5))
+
+
+def test_bad_budgets_are_refused():
+    with pytest.raises(ValueError, match="max_components"):
+        EstimateBudget(0, 4)
+    with pytest.raises(ValueError, match="dim"):
+        EstimateBudget(10, 0)
+    assert _budget().message_bytes == 100 * row_bytes(4) + 256 and row_bytes(4) == 120
+
+
+# -- the divergence: same numbers, memory linear -----------------------------------------------
+def test_blocked_log_overlaps_match_a_brute_force_reference(monkeypatch):
+    rng = np.random.default_rng(5)
+    mixes = []
+    for n in (7, 0, 11, 4):
+        A = rng.normal(size=(n, 4, 4))
+        mixes.append(GaussianMixture(rng.uniform(0.1, 1.0, n), rng.normal(0, 3, (n, 4)),
+                                     A @ A.transpose(0, 2, 1) + 2 * np.eye(4)))
+    ref = np.full((4, 4), -np.inf)
+    for i, p in enumerate(mixes):
+        for j, q in enumerate(mixes):
+            s = sum(a * b * multivariate_normal(mb, Pa + Pb).pdf(ma)
+                    for a, ma, Pa in zip(p.weights, p.means, p.covs, strict=True)
+                    for b, mb, Pb in zip(q.weights, q.means, q.covs, strict=True))
+            if s > 0:
+                ref[i, j] = np.log(s)
+    one = divergence.log_overlaps(mixes)
+    monkeypatch.setattr(divergence, "BLOCK_PAIRS", 30)  # 22 components: rows of 1
+    blocked = divergence.log_overlaps(mixes)
+    for L in (one, blocked):
+        assert np.array_equal(np.isfinite(L), np.isfinite(ref))
+        assert np.allclose(L[np.isfinite(L)], ref[np.isfinite(ref)], rtol=1e-10)
+
+
+# -- the whole receiver, trust on: counted cost of a padded member -----------------------------
+SCANS = 15
+
+
+@pytest.fixture(scope="module")
+def runs():
+    scn = load_scenario("seed000", overrides={"fusion.rule": "hybrid", "fusion.trust": True,
+                                              "scenario.num_scans": SCANS})
+    out = {}
+    for case in ("honest", "padded"):
+        calls: list[int] = []
+
+        def counted(mixes, _orig=divergence.log_overlaps, _calls=calls):
+            _calls.append(sum(len(m) for m in mixes))
+            return _orig(mixes)
+
+        mp = pytest.MonkeyPatch()
+        mp.setattr(checks_mod, "log_overlaps", counted)
+        mp.setattr(trust_mod, "log_overlaps", counted)
+        try:
+            peers = {n: make_peer(scn, n, 0) for n in scn.sensor_names}
+            fused: list[int] = []
+            for n in ("s1", "s3"):
+                fuser = peers[n].consensus.fuser
+                fuse = fuser.fuse
+
+                def fuse_counted(inp, _fuse=fuse, _fused=fused):
+                    _fused.append(sum(len(v["posterior"]) for v in inp.neighbours.values()))
+                    return _fuse(inp)
+                fuser.fuse = fuse_counted
+            if case == "padded":
+                peers["s2"] = LyingCore(peers["s2"], padded(np.random.default_rng(6)))
+            res = run_twin(scn, 0, peers=peers)
+        finally:
+            mp.undo()
+        out[case] = (res, calls, fused)
+    return out
+
+
+def test_a_padded_member_costs_its_neighbours_no_more_than_an_honest_one(runs):
+    (hon, hcalls, hfused), (pad, pcalls, pfused) = runs["honest"], runs["padded"]
+    assert pad.peers["s2"].lies_told >= SCANS - 1
+    assert hcalls and pcalls and hfused and pfused
+    # components reaching the divergence and the fusion, per call and in all: a small multiple
+    # of the honest run's (the padding never gets there: refused for its size, or cut on
+    # arrival; what is left is s2's real estimate, predicted forward with the births when
+    # its newer one was refused), far from the 2,000 sent
+    assert max(pcalls) <= 2 * max(hcalls) and sum(pcalls) <= 2 * sum(hcalls)
+    assert max(pfused) <= 2 * max(hfused) and sum(pfused) <= 3 * sum(hfused)
+    for n in ("s1", "s3"):
+        b = pad.summary(n)["budget"]
+        refused = b["refused"].get("estimate/s2", 0)
+        assert refused + b["reduced"].get("s2", 0) >= SCANS - 1  # every padded one
+        assert b["components_dropped"]["s2"] >= b["reduced"]["s2"] * (PAD - 100)
+        assert b["largest"]["s2"] == PAD
+        assert hon.summary(n)["budget"]["reduced"] == {}  # honest: nothing cut
+        assert hon.summary(n)["budget"]["refused"] == {}
+        # every scan processed, and tracked as well as with an honest neighbour
+        assert pad.summary(n)["scans"] == hon.summary(n)["scans"]
+        assert pad.summary(n)["internal_errors"] == {}
+        assert pad.mean_ospa(n) <= 1.1 * hon.mean_ospa(n)
+    lines = budget_lines({n: pad.summary(n) for n in ("s1", "s3")})
+    assert len(lines) == 1 and lines[0].startswith("over budget: s2's estimates, by s1: ")
+    assert "refused for size" in lines[0] or "reduced" in lines[0]
+
