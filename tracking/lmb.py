@@ -1,0 +1,321 @@
+"""Labelled multi-Bernoulli (LMB) filter with Gaussian-mixture track densities.
+
+Reuter, Vo, Vo & Dietmayer, "The labeled multi-Bernoulli filter", IEEE TSP 62(12), 2014.
+Each track is a Bernoulli component: a label, an existence probability ``r`` and a spatial
+density, a Gaussian mixture of at most ``J`` components. All tracks' components are stored flat
+(``weights (c,)``, ``means (c, d)``, ``covs (c, d, d)``, ``owner (c,)``), so prediction, the
+Kalman updates and the likelihoods are array operations over every component and measurement.
+
+Labels are int64 rows ``(origin, birth_scan, index)`` as in :mod:`tracking.labels`: the peer
+whose filter gave birth to the track, the scan of the birth and its index among that scan's
+births (the fixed birth model's components first, then the measurement-driven births).
+
+One scan: predict (``r+ = Ps r``, components through the motion model; Reuter eqs. 9-12),
+add births (a fixed birth model, and adaptive births from the last scan's measurements that
+no track explained: Reuter Sec. IV-C, eq. 31), correct (marginal association probabilities by
+:mod:`tracking.lmb_association`, then the LMB approximation of the GLMB posterior, Reuter
+eqs. 20-21), reduce each track's mixture, prune unlikely tracks and count confirmations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd, inv_spd
+from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, marginals
+from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity
+
+
+def predict(tracks: LabelledBernoulliSet, motion: ConstantVelocity, survival_probability: float,
+            steps: int = 1) -> LabelledBernoulliSet:
+    """Survivors: ``r+ = Ps^steps r``, each component ``F m``, ``F P F^T + Q`` (Reuter eqs. 9-12
+    with a state-independent ``Ps``)."""
+    if steps == 0 or len(tracks) == 0:
+        return tracks
+    F, Q = motion.transition(steps)
+    return LabelledBernoulliSet.trusted(
+        tracks.labels, tracks.existence * survival_probability**steps, tracks.weights,
+        tracks.means @ F.T, F @ tracks.covs @ F.T + Q, tracks.owner)
+
+
+def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
+           method: str = "auto", gate: float | None = None, min_weight: float = 0.0,
+           exact_limit: int = EXACT_LIMIT,
+           tol: float = 1e-9) -> tuple[LabelledBernoulliSet, np.ndarray]:
+    """The LMB posterior after scan ``Z (m, dz)`` (Reuter eqs. 20-21) and ``r_U (m,)``, each
+    measurement's probability of belonging to a track (the adaptive birth's input, eq. 31).
+
+    ``eta_i(z) = sum_k w_ik N(z; H m_ik, S_ik)``; association weights ``1 - r_i Pd`` (miss)
+    and ``r_i Pd eta_i(z_j) / kappa`` (detect) give the marginals ``p_miss``, ``p``; then
+    ``r_i' = p_miss_i r_i (1 - Pd) / (1 - r_i Pd) + sum_j p_ij`` and the track's density is
+    its prior (weight of the first term) plus one Kalman-updated copy per measurement (weight
+    ``p_ij``), normalised by ``r_i'``. ``gate``: pairs with ``nu^T S^-1 nu`` above it get
+    likelihood 0. ``min_weight``: detection components lighter than this within their track
+    are not materialised (pruning them early). No reduction here: see :func:`reduce_components`.
+    """
+    Pd, kappa = sensor.detection_probability, sensor.clutter_intensity
+    n, dz = len(tracks), sensor.model.dim
+    scan = np.asarray(scan, dtype=float).reshape(-1, dz)
+    m = len(scan)
+    r, w, mean, P, owner = (tracks.existence, tracks.weights, tracks.means, tracks.covs,
+                            tracks.owner)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        stay = np.where(1.0 - r * Pd > 0, r * (1.0 - Pd) / (1.0 - r * Pd), 0.0)
+    if n == 0 or m == 0:
+        return LabelledBernoulliSet.trusted(tracks.labels, stay, w, mean, P, owner), np.zeros(m)
+    cols = sensor.model.selected
+    if cols is not None:  # H picks state entries: H P H^T and P H^T are sub-blocks of P
+        cols = list(cols)
+        zhat, PHt = mean[:, cols], P[:, :, cols]  # (c, dz), (c, d, dz)
+        S = PHt[:, cols, :] + sensor.model.R
+    else:
+        zhat, H = sensor.model.predict(mean)
+        PHt = P @ H.swapaxes(1, 2)
+        S = H @ PHt + sensor.model.R
+    S_inv, S_det = inv_det_spd(S)
+    nu = sensor.model.residual(scan[None, :, :], zhat[:, None, :])  # (c, m, dz)
+    d2 = np.einsum("cmi,cij,cmj->cm", nu, S_inv, nu)
+    wq = np.exp(-0.5 * (d2 + (np.log(S_det) + dz * LOG_2PI)[:, None])) * w[:, None]  # (c, m)
+    if gate is not None:
+        wq[d2 > gate] = 0.0
+    starts = tracks.starts()
+    eta = np.add.reduceat(wq, starts, axis=0)  # (n, m)
+    p_miss, p = marginals(1.0 - r * Pd, (r * Pd)[:, None] * eta / kappa, method, exact_limit,
+                          tol)
+    exist_miss = p_miss * stay
+    r_post = exist_miss + p.sum(axis=1)
+    inv_r = np.divide(1.0, r_post, out=np.zeros(n), where=r_post > 0)
+    coef = np.divide(p, eta, out=np.zeros((n, m)), where=eta > 0) * inv_r[:, None]
+    rel = wq * coef[owner]  # (c, m): each detection component's weight within its track
+    ci, zj = np.nonzero(rel > min_weight) if min_weight > 0 else np.nonzero(rel >= 0)
+    K = PHt @ inv_spd(S) if S.shape[-1] != 2 else PHt @ S_inv  # (c, d, dz)
+    P_upd = P - K @ PHt.swapaxes(1, 2)
+    P_upd = 0.5 * (P_upd + P_upd.swapaxes(1, 2))
+    means_upd = mean[ci] + np.einsum("kij,kj->ki", K[ci], nu[ci, zj])
+    all_owner = np.concatenate((owner, owner[ci]))
+    order = np.argsort(all_owner, kind="stable")
+    post = LabelledBernoulliSet.trusted(
+        tracks.labels, r_post,
+        np.concatenate((w * (exist_miss * inv_r)[owner], rel[ci, zj]))[order],
+        np.concatenate((mean, means_upd))[order],
+        np.concatenate((P, P_upd[ci]))[order], all_owner[order])
+    return post, p.sum(axis=0)
+
+
+def adaptive_birth_existence(r_u: np.ndarray, birth_rate: float,
+                             max_existence: float) -> np.ndarray:
+    """Reuter et al. 2014 eq. 31, ``r_B(z) = min(r_B,max, lambda_B (1 - r_U(z)) /
+    sum_xi (1 - r_U(xi)))`` per measurement ``(m,)``, with the sum floored at 1 (our change):
+    as printed, a scan whose every measurement is explained (``r_U = 1 - 1e-4``, say) still
+    spawns ``lambda_B`` births at them, duplicates that then steal existence from the tracks;
+    with the floor such a scan spawns ``lambda_B (1 - r_U)`` and the expected number of
+    births stays at most ``lambda_B``."""
+    unexplained = np.clip(1.0 - r_u, 0.0, 1.0)
+    return np.minimum(max_existence, birth_rate * unexplained / max(unexplained.sum(), 1.0))
+
+
+def map_cardinality(existence: np.ndarray) -> int:
+    """The most probable number of tracks of an LMB: the mode of the Poisson-binomial
+    distribution of independent Bernoullis ``existence (n,)`` (Reuter Sec. IV-D)."""
+    dist = np.ones(1)
+    for r in existence.tolist():  # one convolution per track: O(n^2) in all
+        dist = np.concatenate((dist * (1.0 - r), [0.0])) + np.concatenate(([0.0], dist * r))
+    return int(np.argmax(dist))
+
+
+@dataclass(frozen=True)
+class LmbTracks:
+    """What :meth:`LmbFilter.extract` reports, one row per extracted track:
+    ``labels (p, 3)`` int64, ``states (p, d)`` and ``covs (p, d, d)`` (the heaviest component of
+    the track's mixture), ``existence (p,)`` and ``status (p,)`` int8 (0 tentative, 1
+    confirmed)."""
+
+    labels: np.ndarray
+    states: np.ndarray
+    covs: np.ndarray
+    existence: np.ndarray
+    status: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.existence.shape[0])
+
+
+@dataclass(frozen=True)
+class LmbState:
+    """The filter's state between scans.
+
+    tracks:  the LMB (posterior after scan ``k``, or predicted to ``k``).
+    hits:    (n,) int64 per track, scans in which its ``r`` reached the confirmation level.
+    k:       the scan the tracks refer to (-1 before the first).
+    pending: adaptive births from scan ``k``'s measurements, to join at the next prediction:
+             one component each, its weight the birth existence ``r_B``.
+    """
+
+    tracks: LabelledBernoulliSet
+    hits: np.ndarray
+    k: int
+    pending: GaussianMixture
+
+
+EXTRACTION_RULES = ("threshold", "map")
+
+
+@dataclass
+class LmbFilter:
+    """An LMB filter for one sensor: ``step(state, scan) -> state``, ``extract(state)``."""
+
+    motion: ConstantVelocity
+    sensor: SensorParams
+    """Measurement model, ``Pd`` and clutter intensity ``kappa`` (must be > 0)."""
+    survival_probability: float = 0.99
+    birth: GaussianMixture | None = None
+    """Fixed birth model: each component is one birth Bernoulli, ``r = weight`` (<= 1)."""
+    adaptive_birth: bool = True
+    """Measurement-driven births (Reuter Sec. IV-C); needs a model with ``selected`` columns."""
+    birth_rate: float = 0.1
+    """``lambda_B``: expected adaptive births per scan."""
+    birth_max_existence: float = 0.1
+    """``r_B,max``."""
+    birth_velocity_std: float = 30.0
+    """Std (m/s) of the unmeasured state entries of an adaptive birth (mean 0)."""
+    method: str = "auto"
+    """Association: ``"auto"``, ``"exact"`` or ``"lbp"`` (:func:`lmb_association.marginals`)."""
+    exact_limit: int = EXACT_LIMIT
+    lbp_tol: float = 1e-9
+    gate: float | None = None
+    """Optional gate on ``nu^T S^-1 nu``."""
+    max_components: int = 5
+    """``J``: components kept per track."""
+    component_prune: float = 1e-4
+    """Components lighter than this (within their track) are dropped."""
+    merge_threshold: float = 4.0
+    """Vo-Ma merge threshold ``U`` within a track."""
+    existence_prune: float = 1e-3
+    """Tracks (and births) with ``r`` below this are deleted."""
+    extraction: str = "threshold"
+    """``"threshold"`` (``r >= extraction_threshold``) or ``"map"`` (MAP cardinality)."""
+    extraction_threshold: float = 0.5
+    confirm_existence: float = 0.8
+    """A scan counts toward confirmation when ``r`` is at least this."""
+    confirm_scans: int = 3
+    """Counted scans (not necessarily consecutive) after which a track is confirmed."""
+    origin: int = 0
+    """This peer's id: the first column of its tracks' labels."""
+    _birth_cov: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"unknown association method {self.method!r}; expected {METHODS}")
+        if self.extraction not in EXTRACTION_RULES:
+            raise ValueError(f"unknown extraction {self.extraction!r}; "
+                             f"expected {EXTRACTION_RULES}")
+        for name in ("survival_probability", "birth_max_existence", "existence_prune",
+                     "confirm_existence"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"LmbFilter.{name} must be in [0, 1], got {getattr(self, name)}")
+        if not 0.0 < self.sensor.detection_probability <= 1.0:
+            raise ValueError("sensor detection_probability must be in (0, 1]")
+        if not self.sensor.clutter_intensity > 0:
+            raise ValueError("sensor clutter_intensity must be > 0 (use a tiny value for none)")
+        if self.max_components < 1:
+            raise ValueError(f"LmbFilter.max_components must be >= 1, got {self.max_components}")
+        if self.birth is not None and (self.birth.weights.max(initial=0) > 1
+                                       or self.birth.dim != self.motion.dim):
+            raise ValueError("LmbFilter.birth needs weights <= 1 and the motion model's dim")
+        if self.adaptive_birth:
+            cols = self.sensor.model.selected
+            if cols is None:
+                raise ValueError("adaptive_birth needs a linear position model (selected columns)")
+            d = self.motion.dim
+            cov = np.eye(d) * self.birth_velocity_std**2
+            cov[np.ix_(cols, cols)] = self.sensor.model.R
+            self._birth_cov = cov
+
+    def initial(self) -> LmbState:
+        """No tracks, scan -1 (births arrive at the first prediction)."""
+        d = self.motion.dim
+        return LmbState(LabelledBernoulliSet.empty(d), np.zeros(0, dtype=np.int64), -1,
+                        GaussianMixture.empty(d))
+
+    def predict(self, state: LmbState, k: int | None = None) -> LmbState:
+        """Survivors and births at scan ``k`` (default ``state.k + 1``): the fixed births get
+        labels ``(origin, k, 0..nb-1)``, the pending adaptive ones ``nb..``; the pending births
+        move through the motion model over the same steps."""
+        k = state.k + 1 if k is None else int(k)
+        if k <= state.k:
+            raise ValueError(f"cannot predict from scan {state.k} to scan {k}")
+        steps = k - state.k if state.k >= 0 else 1
+        parts = [predict(state.tracks, self.motion, self.survival_probability, steps)]
+        born = [GaussianMixture.empty(self.motion.dim) if self.birth is None else self.birth]
+        if len(state.pending):
+            F, Q = self.motion.transition(steps)
+            pend = state.pending
+            born.append(GaussianMixture.trusted(pend.weights, pend.means @ F.T,
+                                                F @ pend.covs @ F.T + Q))
+        births = GaussianMixture.concatenate(born)
+        if len(births):
+            parts.append(LabelledBernoulliSet.births(births, self.origin, k))
+        hits = np.concatenate((state.hits, np.zeros(len(births), dtype=np.int64)))
+        return LmbState(LabelledBernoulliSet.concatenate(parts), hits, k,
+                        GaussianMixture.empty(self.motion.dim))
+
+    def correct(self, state: LmbState, scan: np.ndarray) -> LmbState:
+        """Update with scan ``Z (m, dz)``, reduce each track's mixture, delete tracks below
+        ``existence_prune``, count confirmations and queue the adaptive births."""
+        scan = check_scan(scan, self.sensor.model.dim)
+        post, r_u = update(state.tracks, scan, self.sensor, self.method, self.gate,
+                           self.component_prune, self.exact_limit, self.lbp_tol)
+        post = reduce_components(post, self.component_prune, self.merge_threshold,
+                                 self.max_components)
+        keep = post.existence >= self.existence_prune
+        hits = state.hits[keep] + (post.existence[keep] >= self.confirm_existence)
+        pending = GaussianMixture.empty(self.motion.dim)
+        if self.adaptive_birth and len(scan):
+            r_b = adaptive_birth_existence(r_u, self.birth_rate, self.birth_max_existence)
+            born = r_b >= self.existence_prune
+            nb = int(born.sum())
+            means = np.zeros((nb, self.motion.dim))
+            means[:, list(self.sensor.model.selected)] = scan[born]
+            pending = GaussianMixture.trusted(r_b[born], means,
+                                              np.broadcast_to(self._birth_cov, (nb,) +
+                                                              self._birth_cov.shape).copy())
+        return LmbState(post.select(keep), hits.astype(np.int64), state.k, pending)
+
+    def step(self, state: LmbState, scan: np.ndarray, k: int | None = None) -> LmbState:
+        """Predict to scan ``k`` (default the next), then correct with its scan."""
+        return self.correct(self.predict(state, k), scan)
+
+    def extract(self, state: LmbState) -> LmbTracks:
+        """Tracks with ``r >= extraction_threshold`` (or the MAP-cardinality most likely ones),
+        each reported by its heaviest component, in label order."""
+        t = state.tracks
+        r = t.existence
+        if self.extraction == "threshold":
+            idx = np.flatnonzero(r >= self.extraction_threshold)
+        else:
+            idx = np.sort(np.argsort(-r, kind="stable")[:map_cardinality(r)])
+        top = t.heaviest()[idx]
+        status = (state.hits[idx] >= self.confirm_scans).astype(np.int8)
+        return LmbTracks(t.labels[idx], t.means[top], t.covs[top], r[idx], status)
+
+
+def check_scan(scan: np.ndarray, dim: int) -> np.ndarray:
+    """``scan`` as a float ``(m, dim)`` array, or a one-line ValueError naming the problem."""
+    z = np.asarray(scan, dtype=float)
+    if z.size == 0:
+        return z.reshape(0, dim)
+    if z.ndim != 2 or z.shape[1] != dim:
+        raise ValueError(f"scan has shape {z.shape}, expected (m, {dim})")
+    if not np.isfinite(z).all():
+        row = int(np.flatnonzero(~np.isfinite(z).all(axis=1))[0])
+        raise ValueError(f"scan row {row} is not finite: {z[row].tolist()}")
+    return z
+
+
+__all__ = ["EXTRACTION_RULES", "LabelledBernoulliSet", "LmbFilter", "LmbState", "LmbTracks",
+           "adaptive_birth_existence", "check_scan", "map_cardinality", "predict",
+           "reduce_components", "update"]
