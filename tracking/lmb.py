@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd, inv_spd
+from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, marginals
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
@@ -92,7 +92,7 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     coef = np.divide(p, eta, out=np.zeros((n, m)), where=eta > 0) * inv_r[:, None]
     rel = wq * coef[owner]  # (c, m): each detection component's weight within its track
     ci, zj = np.nonzero(rel > min_weight) if min_weight > 0 else np.nonzero(rel >= 0)
-    K = PHt @ inv_spd(S) if S.shape[-1] != 2 else PHt @ S_inv  # (c, d, dz)
+    K = PHt @ S_inv  # (c, d, dz)
     P_upd = P - K @ PHt.swapaxes(1, 2)
     P_upd = 0.5 * (P_upd + P_upd.swapaxes(1, 2))
     means_upd = mean[ci] + np.einsum("kij,kj->ki", K[ci], nu[ci, zj])

@@ -21,8 +21,6 @@ from functools import lru_cache
 from itertools import combinations, permutations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 METHODS = ("auto", "exact", "lbp")
 """Association methods :func:`marginals` accepts."""
@@ -88,6 +86,13 @@ def marginals_exact(miss: np.ndarray, detect: np.ndarray) -> tuple[np.ndarray, n
     return pm[0], pd[0]
 
 
+@lru_cache(maxsize=64)
+def _cells(n: int, m: int) -> np.ndarray:
+    """``i (m + 1) + A[h, i]`` for :func:`hypotheses` ``A``: each choice's cell in
+    ``(n, m + 1)``, ``(H, n)``."""
+    return hypotheses(n, m) + np.arange(n) * (m + 1)
+
+
 def _enumerate(miss: np.ndarray, detect: np.ndarray,
                A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`marginals_exact` of ``C`` problems of one shape at once: ``miss (C, n)``,
@@ -101,9 +106,9 @@ def _enumerate(miss: np.ndarray, detect: np.ndarray,
     logw -= logw.max(axis=1, keepdims=True)
     w = np.exp(logw)
     w /= w.sum(axis=1, keepdims=True)
-    onehot = np.zeros((A.shape[0], n, m + 1))
-    onehot[np.arange(A.shape[0])[:, None], np.arange(n)[None, :], A] = 1.0
-    P = (w @ onehot.reshape(A.shape[0], -1)).reshape(C, n, m + 1)
+    cell = _cells(n, m)  # (H, n): flat index i (m + 1) + A[h, i] of each choice
+    flat = (np.arange(C)[:, None, None] * (n * (m + 1)) + cell[None]).ravel()
+    P = np.bincount(flat, np.repeat(w.ravel(), n), C * n * (m + 1)).reshape(C, n, m + 1)
     return P[:, :, 0], P[:, :, 1:]
 
 
@@ -142,9 +147,11 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     """Marginal association probabilities ``p_miss (n,)``, ``p (n, m)`` (rows sum to 1).
 
     ``"exact"``: every hypothesis of the whole problem; ``"lbp"``: :func:`marginals_lbp`;
-    ``"auto"``: the connected clusters of the links above :data:`LINK_EPS` (a cluster's
-    marginals do not depend on the others), each solved exactly if it has at most
-    ``exact_limit`` hypotheses (clusters of one shape enumerated together), the rest by LBP.
+    ``"auto"``: links below :data:`LINK_EPS` dropped, LBP over the whole problem (exact on
+    every cluster of the bipartite track-measurement graph that is a tree: Williams & Lau 2014,
+    Sec. III), then each cluster with a cycle (a cluster's marginals do not depend on the
+    others) enumerated exactly if it has at most ``exact_limit`` hypotheses (clusters of one
+    shape together); larger ones keep LBP's answer.
     """
     if method not in METHODS:
         raise ValueError(f"unknown association method {method!r}; expected one of {METHODS}")
@@ -156,52 +163,59 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     if method == "lbp" or n == 0 or m == 0:
         return marginals_lbp(miss, detect, tol, max_iter)
     miss, detect = _row_scaled(miss, detect)
-    ti, zj = np.nonzero(detect > LINK_EPS)
-    p_miss, p = np.ones(n), np.zeros((n, m))
-    if ti.size == 0:
+    link = detect > LINK_EPS
+    detect = np.where(link, detect, 0.0)
+    p_miss, p = marginals_lbp(miss, detect, tol, max_iter)
+    ti, zj = np.nonzero(link)
+    if ti.size < 4:  # a cycle needs 2 tracks and 2 measurements with 4 links
         return p_miss, p
-    graph = coo_matrix((np.ones(ti.size), (ti, n + zj)), shape=(n + m, n + m))
-    _, comp = connected_components(graph, directed=False)
-    # clusters: tracks with links (a linkless track keeps p_miss = 1) and their measurements
-    tcomp, zcomp = comp[:n], comp[n:]
-    linked_t = np.zeros(n, bool)
-    linked_t[ti] = True
-    linked_z = np.zeros(m, bool)
-    linked_z[zj] = True
-    labels, nt = np.unique(tcomp[linked_t], return_counts=True)
-    nz = np.bincount(zcomp[linked_z], minlength=comp.max() + 1)[labels]
-    big = []
+    tcomp, zcomp = _clusters(link)
+    ncomp = n
+    linked_t, linked_z = link.any(axis=1), link.any(axis=0)
+    nt = np.bincount(tcomp[linked_t], minlength=ncomp)
+    nz = np.bincount(zcomp[linked_z], minlength=ncomp)
+    edges = np.bincount(tcomp[ti], minlength=ncomp)
+    loopy = np.flatnonzero((edges > 0) & (edges >= nt + nz))  # a tree has nodes - 1 edges
+    if loopy.size == 0:
+        return p_miss, p
+    t_sorted, t_start = _by_cluster(tcomp, linked_t, ncomp)
+    z_sorted, z_start = _by_cluster(zcomp, linked_z, ncomp)
     by_shape: dict[tuple[int, int], list[int]] = {}
-    for c, a, b in zip(labels.tolist(), nt.tolist(), nz.tolist(), strict=True):
+    for c in loopy.tolist():
+        a, b = int(nt[c]), int(nz[c])
         if hypothesis_count(a, b) <= exact_limit:
             by_shape.setdefault((a, b), []).append(c)
-        else:
-            big.append(c)
     for (a, b), cs in by_shape.items():
-        cs_arr = np.asarray(cs)
-        rows = _members(tcomp, linked_t, cs_arr, a)  # (C, a)
-        cols = _members(zcomp, linked_z, cs_arr, b)  # (C, b)
-        d = np.where(detect[rows[:, :, None], cols[:, None, :]] > LINK_EPS,
-                     detect[rows[:, :, None], cols[:, None, :]], 0.0)
-        pm, pd = _enumerate(miss[rows], d, hypotheses(a, b))
+        rows = t_sorted[t_start[cs][:, None] + np.arange(a)]  # (C, a)
+        cols = z_sorted[z_start[cs][:, None] + np.arange(b)]  # (C, b)
+        pm, pd = _enumerate(miss[rows], detect[rows[:, :, None], cols[:, None, :]],
+                            hypotheses(a, b))
         p_miss[rows] = pm
         p[rows[:, :, None], cols[:, None, :]] = pd
-    if big:
-        t_rows = np.flatnonzero(linked_t & np.isin(tcomp, big))
-        z_cols = np.flatnonzero(linked_z & np.isin(zcomp, big))
-        sub = detect[np.ix_(t_rows, z_cols)]
-        pm, pd = marginals_lbp(miss[t_rows], np.where(sub > LINK_EPS, sub, 0.0), tol, max_iter)
-        p_miss[t_rows] = pm
-        p[np.ix_(t_rows, z_cols)] = pd
     return p_miss, p
 
 
-def _members(comp: np.ndarray, linked: np.ndarray, clusters: np.ndarray,
-             size: int) -> np.ndarray:
-    """Indices ``(C, size)`` of the linked nodes of each cluster, in index order."""
-    idx = np.flatnonzero(linked & np.isin(comp, clusters))
-    order = np.argsort(comp[idx], kind="stable")
-    return idx[order].reshape(len(clusters), size)
+def _clusters(link: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Connected components of the bipartite graph ``link (n, m)``: each node labelled by the
+    smallest track index in its component (a measurement without links: ``n``). Min-label
+    propagation over the dense matrix, one sweep per step of the graph's diameter."""
+    n, m = link.shape
+    t = np.arange(n)
+    while True:
+        z = np.where(link, t[:, None], n).min(axis=0)
+        new = np.minimum(t, np.where(link, z[None, :], n).min(axis=1))
+        if np.array_equal(new, t):
+            return t, z
+        t = new
+
+
+def _by_cluster(comp: np.ndarray, linked: np.ndarray,
+                ncomp: int) -> tuple[np.ndarray, np.ndarray]:
+    """The linked nodes sorted by cluster ``(k,)`` and each cluster's first position
+    ``(ncomp,)`` in that order."""
+    idx = np.flatnonzero(linked)
+    idx = idx[np.argsort(comp[idx], kind="stable")]
+    return idx, np.searchsorted(comp[idx], np.arange(ncomp))
 
 
 __all__ = ["EXACT_LIMIT", "METHODS", "hypotheses", "hypothesis_count", "marginals",
