@@ -35,8 +35,10 @@ from sensornet.peers.contracts import (
     metropolis_weights,
 )
 from sensornet.peers.fusers import NoFuser
+from sensornet.peers.labelling import label_fused
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
+from sensornet.tracking.labels import Confirmation, LabelledMixture
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
 
@@ -80,6 +82,19 @@ class Consensus(BatchedRounds):
                           and self.fuser_hooks.batch_key is not None
                           and not options.round_deadlines)
         self._completed: list = []  # messages of rounds the batch completed, not yet taken
+        # -- identities (peers.labelling): a labelled estimator's labels through the rounds
+        self.labelled = self.hooks.origin is not None
+        """Whether the estimator labels its components (its tracks then carry ids)."""
+        self.last_local_labels: np.ndarray | None = None
+        self.last_fused_labels: np.ndarray | None = None
+        self.confirm_local = Confirmation(options.confirm_scans)
+        self.confirm_fused = Confirmation(options.confirm_scans)
+        """Confirmation of the local and the fused tracks' labels (tracking.labels)."""
+        self._in_labels: dict[tuple[int, int, str, str], tuple[object, np.ndarray]] = {}
+        """(k, round, kind, sender) -> (payload, its labels) of labelled estimates."""
+        self._nale_labels: dict[str, tuple[object, np.ndarray]] = {}
+        """sender -> (the NALE buffer's stored payload, its labels)."""
+        self._fresh = 0  # fresh labels this peer's fusions created (their index offsets)
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -94,6 +109,7 @@ class Consensus(BatchedRounds):
             out += self.finish(now)
         self.last_k = k
         try:
+            self.hooks.begin_scan(k)
             local = self.estimator.step(steps, z)
         except Exception as exc:  # a bug must not stop the scans: no output, scored a miss
             self._error(k, exc)
@@ -102,10 +118,17 @@ class Consensus(BatchedRounds):
         self.last_local = local.density
         self.stats.scans += 1
         self._scan = ScanState(k, z, 0, local.published["posterior"], local.density)
+        labels = local.labels if self.labelled and local.labels is not None else {}
+        if self.labelled:
+            self._scan.labels = labels.get("posterior")
+            self._scan.local_labels = self.last_local_labels = local.density_labels
+            if local.density_labels is not None:
+                self.confirm_local.observe(LabelledMixture(local.density, local.density_labels))
         self._record(k, "local", **local.info)
         if self.fusing:
             for kind in self.kinds:
-                out.append(self._estimate(k, 0, local.published[kind], now, kind))
+                out.append(self._estimate(k, 0, local.published[kind], now, kind,
+                                          labels.get(kind)))
         out += self._advance(now)
         self._drop_old(k)
         return out
@@ -120,12 +143,21 @@ class Consensus(BatchedRounds):
                 est.k < st.k or (est.k == st.k and (st.done or est.round < st.round))):
             late(est.sender, payload, est.k)  # after its round: the fuser's hook decides
             return []
+        labels = getattr(est, "labels", None)
+        if labels is not None and (not self.labelled or len(labels) != len(payload)):
+            labels = None  # not ours to use, or a receiver's bound cut its rows
         if est.round == 0 and est.kind == "posterior":
-            self.nale.offer(est.sender, est.k, payload)
+            if self.nale.offer(est.sender, est.k, payload):
+                if labels is not None:
+                    self._nale_labels[est.sender] = (payload, labels)
+                else:
+                    self._nale_labels.pop(est.sender, None)
         if self._scan is not None and est.k < self._scan.k and est.round > 0:
             self.stats.old_round_estimates += 1
             return []
         self._inbox.setdefault((est.k, est.round, est.kind), {})[est.sender] = payload
+        if labels is not None:
+            self._in_labels[(est.k, est.round, est.kind, est.sender)] = (payload, labels)
         return self._advance(now)
 
     def on_deadline(self, k: int, now: float) -> list:
@@ -163,6 +195,7 @@ class Consensus(BatchedRounds):
             return False
         self.alive.discard(name)
         self.nale.forget(name)
+        self._nale_labels.pop(name, None)
         return True
 
     def resume(self, now: float) -> list:
@@ -178,6 +211,8 @@ class Consensus(BatchedRounds):
     def reset_window(self) -> None:
         """Forget every stored estimate (the scan numbering restarted)."""
         self._inbox.clear()
+        self._in_labels.clear()
+        self._nale_labels.clear()
         for name in list(self.nale.stored):
             self.nale.forget(name)
         self.cancel_pending()
@@ -215,7 +250,7 @@ class Consensus(BatchedRounds):
         (then its remaining rounds follow it through the batch)."""
         if not self.fusing:
             st.done = True
-            return self._tracks(st.k, st.local, now)
+            return self._tracks(st.k, st.local, now, st.local_labels)
         inputs = self._inputs(st.k, st.round)
         senders = sorted(inputs)
         weights = metropolis_weights(self.o.name, senders, self._deg,
@@ -223,6 +258,7 @@ class Consensus(BatchedRounds):
         if self.trust is not None and isinstance(st.current, GaussianMixture):
             inputs, senders, weights = self._trusted(st, inputs, senders, weights)
         inp = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
+        st.inputs = inp
         if self.batch is not None and self.batchable and not now_only:
             st.pending = FusionJob(self, st, inp, senders, forced)
             self.batch.add(st.pending)
@@ -247,20 +283,55 @@ class Consensus(BatchedRounds):
         for s in senders:
             self.stats.last_fused_from[s] = st.k
         ages = self.nale.ages(st.k) if st.round == 0 else {}
+        labelling = self._label(st, fused) if self.labelled else None
         st.round += 1
         st.current = fused
+        st.labels = None if labelling is None else labelling.labels
         self.last_fused = fused
+        self.last_fused_labels = st.labels
         self._record(st.k, "fusion", round=st.round, n_inputs=len(senders), n_fused=len(fused),
                      ages={s: ages.get(s, 0) for s in senders})
         if st.round < self.rounds:
             outgoing = self.fuser_hooks.outgoing  # e.g. only the scans not sent before
             return [self._estimate(st.k, st.round,
                                    fused if outgoing is None else outgoing(fused), now,
-                                   "posterior")]
+                                   "posterior", st.labels if outgoing is None else None)]
         st.done = True
         if self.o.feedback:
             self.estimator.adopt(fused)
-        return self._tracks(st.k, fused, now)
+            if st.labels is not None:
+                self.hooks.adopt_labels(st.labels)
+        elif labelling is not None:
+            self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
+        return self._tracks(st.k, fused, now, st.labels)
+
+    def _label(self, st: ScanState, fused):
+        """The labels of a round's fused density (peers.labelling.label_fused), from the
+        round's labelled inputs: the own density's, then each neighbour's whose estimate
+        carried labels for the very payload fused (round 0: the one the NALE buffer holds,
+        maybe predicted: its labels fit its first rows). None if ``fused`` is no mixture."""
+        if not isinstance(fused, GaussianMixture):
+            return None
+        inp = st.inputs
+        pairs = [(st.current, st.labels)] if isinstance(st.current, GaussianMixture) else []
+        if inp is not None:
+            for s in sorted(inp.neighbours):
+                mix = inp.neighbours[s].get("posterior")
+                held = (self._nale_labels.get(s) if st.round == 0
+                        else self._in_labels.get((st.k, st.round, "posterior", s)))
+                if not isinstance(mix, GaussianMixture) or held is None:
+                    continue
+                payload, labels = held
+                stored = self.nale.stored.get(s) if st.round == 0 else None
+                if st.round == 0 and (stored is None or stored[1] is not payload):
+                    continue
+                if st.round > 0 and mix is not payload:
+                    continue
+                if len(labels) <= len(mix):
+                    pairs.append((mix, labels))
+        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh)
+        self._fresh += out.fresh
+        return out
 
     def _trusted(self, st: ScanState, inputs: dict, senders: list[str], weights: list[float]):
         """The round's inputs and weights after the trust test: a neighbour's weight scaled by
@@ -292,7 +363,7 @@ class Consensus(BatchedRounds):
         return self._seq
 
     def _estimate(self, k: int, rnd: int, mix: GaussianMixture, now: float,
-                  kind: str) -> Estimate:
+                  kind: str, labels: np.ndarray | None = None) -> Estimate:
         self.stats.estimates_out += 1
         tuples = payload_tuples(mix)
         self.stats.tuples_out += tuples
@@ -302,12 +373,30 @@ class Consensus(BatchedRounds):
         if isinstance(mix, np.ndarray):
             return Returns(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
         return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
-                        send_time=now, pruning=2 if rnd == 0 else 1, kind=kind)
+                        send_time=now, pruning=2 if rnd == 0 else 1, kind=kind,
+                        labels=labels if self.labelled else None)
 
-    def _tracks(self, k: int, fused: GaussianMixture, now: float) -> list:
-        states = self.estimator.extract(fused)
+    def _tracks(self, k: int, fused: GaussianMixture, now: float,
+                labels: np.ndarray | None = None) -> list:
+        """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
+        with ids, covariances, existence and confirmation status (protocol 2)."""
         self.stats.tracks_out += 1
-        return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
+        if labels is None or self.hooks.extract_tracks is None:
+            states = self.estimator.extract(fused)
+            return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
+        self.confirm_fused.observe(LabelledMixture(fused, labels))
+        t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
+        return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
+                       ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
+
+    def local_tracks(self):
+        """The last local density's tracks (tracking.labels.ExtractedTracks, with ids and
+        status), or None if unlabelled."""
+        if (self.last_local is None or self.last_local_labels is None
+                or self.hooks.extract_tracks is None):
+            return None
+        return self.hooks.extract_tracks(self.last_local, self.last_local_labels,
+                                         self.confirm_local)
 
     def _error(self, k: int, exc: Exception) -> None:
         self.errors[type(exc).__name__] += 1
@@ -324,3 +413,5 @@ class Consensus(BatchedRounds):
         """Bound memory: forget inbox entries of scans before ``k``."""
         for key in [key for key in self._inbox if key[0] < k]:
             del self._inbox[key]
+        for key in [key for key in self._in_labels if key[0] < k]:
+            del self._in_labels[key]

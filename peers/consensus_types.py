@@ -42,6 +42,10 @@ class ConsensusOptions:
     trust: TrustConfig | None = None
     """Test and weight each neighbour's density before fusing it (:mod:`peers.trust`);
     None: every neighbour fused at its consensus weight."""
+    confirm_scans: int = 3
+    """A track's label is confirmed once a component carrying it weighed more than the
+    extraction threshold in this many scans (tracking.labels.Confirmation; labelled
+    estimators only)."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
@@ -83,6 +87,12 @@ class ScanState:
     done: bool = False
     pending: FusionJob | None = None
     """The round waiting in a host's :class:`~peers.batching.FusionBatch` (its inputs taken)."""
+    labels: np.ndarray | None = None
+    """``(n, 3)`` labels of :attr:`current` (a labelled estimator's: peers.labelling)."""
+    local_labels: np.ndarray | None = None
+    """Labels of :attr:`local`."""
+    inputs: object = None
+    """The last round's :class:`~peers.contracts.FusionInput` (its labels are looked up)."""
 
 
 def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:

@@ -30,6 +30,11 @@ class LocalOutput:
     ``published["posterior"]`` is also this peer's own input to the first consensus round."""
     info: Mapping[str, float] = field(default_factory=dict)
     """Numbers for the records (e.g. components before pruning)."""
+    labels: Mapping[str, np.ndarray] | None = None
+    """A labelled estimator's ``(n, 3)`` int64 labels of each published density's rows, by
+    kind (tracking.labels); None: unlabelled."""
+    density_labels: np.ndarray | None = None
+    """The labels of :attr:`density`'s rows (its local tracks' ids), or None."""
 
 
 @runtime_checkable
@@ -124,6 +129,19 @@ class EstimatorHooks(_Hooks):
     """The last update's gates, weighted returns and detector state to draw, or None."""
     model_names: tuple[str, ...] = ()
     """Names of its motion models (labels of :attr:`FuserHooks.model_probabilities`)."""
+    # -- identities (a labelled estimator: peers.labelling) ---------------------------------
+    origin: int | None = None
+    """Its label origin (not None: it labels its components, and its output carries the
+    labels in :attr:`LocalOutput.labels`; the consensus then labels the fused density)."""
+    begin_scan: Callable[[int], None] = _nothing
+    """Told the scan index of the next step (births are stamped with it)."""
+    extract_tracks: Callable[..., Any] | None = None
+    """``(mix, labels, confirmation) -> tracking.labels.ExtractedTracks``: ``extract``'s
+    states with their ids, covariances, existence and status."""
+    relabel: Callable[[Any], None] = _nothing
+    """Takes a :class:`tracking.labels.LabelMatch` (own label -> the network's winner)."""
+    adopt_labels: Callable[[np.ndarray], None] = _nothing
+    """The labels of the fused density ``adopt`` just took (feedback)."""
 
 
 @dataclass(frozen=True)

@@ -88,7 +88,7 @@ class PeerCore:
         self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
         self.stopped: str | None = None
         self._pending_local: list[int] = []
-        self._pending_fused: list[tuple[int, np.ndarray]] = []  # (k, states), to score
+        self._pending_fused: list[Tracks] = []  # published tracks, to score
         self.world_gone: float | None = None  # when the world's token went (in the grace)
         self.world_outages: list[tuple[int, float]] = []  # (last scan before, seconds)
         self.sent_bytes: Counter = Counter()
@@ -355,7 +355,7 @@ class PeerCore:
     def _truth(self, msg: Truth) -> list[Output]:
         why = self._window(msg.k) if self.first_k is not None else None
         if why is None:
-            why = self.scorer.truth_message(msg.k, msg.states)
+            why = self.scorer.truth_message(msg.k, msg.states, msg.ids)
         return self._reject(why) if why else self._records()
 
     def _control(self, msg: Control, now: float) -> list[Output]:
@@ -388,7 +388,7 @@ class PeerCore:
                 out.append(Publish("tracks", m.k, encode(m), m))
                 self.sent_bytes["tracks"] += len(out[-1].payload)
                 out.append(self._scan_cost(m.k))
-                self._pending_fused.append((m.k, m.states))  # scored after publishing
+                self._pending_fused.append(m)  # scored after publishing
         return out
 
     def _scan_cost(self, k: int) -> Record:
@@ -404,14 +404,18 @@ class PeerCore:
     def _score_deferred(self) -> None:
         """Score the fused tracks published since the last call, then extract and score the
         local estimate: both kept off the path from scan to published tracks."""
-        for k, states in self._pending_fused:
-            self.scorer.output("fused", k, states)
+        for m in self._pending_fused:
+            self.scorer.output("fused", m.k, m.states, m.ids, m.status)
         self._pending_fused.clear()
         c = self.consensus
         while self._pending_local:
             k = self._pending_local.pop()
             if k == c.last_k and c.last_local is not None:
-                self.scorer.output("local", k, self.estimator.extract(c.last_local))
+                t = c.local_tracks()  # a labelled kind's: the same states, with ids
+                if t is None:
+                    self.scorer.output("local", k, self.estimator.extract(c.last_local))
+                else:
+                    self.scorer.output("local", k, t.states, t.ids, t.status)
         self._pending_local.clear()
 
     def _records(self) -> list[Output]:

@@ -8,12 +8,22 @@ from dataclasses import dataclass, field
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.tracking.gmphd import GMPHDFilter
-from sensornet.tracking.gmphd_batch import step_many
+from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
+from sensornet.tracking.labels import (
+    Confirmation,
+    ExtractedTracks,
+    LabelledMixture,
+    LabelMatch,
+    adopt_labels,
+    as_labels,
+    extract_tracks,
+    new_labels,
+    split_duplicates,
+)
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
 from sensornet.tracking.particles import IMMParticleFilter, ParticleParams, RatioConfig, floored
-from sensornet.tracking.reduction import keep_above
 
 
 @dataclass(frozen=True)
@@ -44,21 +54,36 @@ class SingleTargetConfig:
 
 
 class GmphdEstimator:
-    """A GM-PHD filter on one sensor (seed 000); publishes the level-2 pruned posterior."""
+    """A GM-PHD filter on one sensor (seed 000); publishes the level-2 pruned posterior.
+
+    With an ``origin`` (this peer's label origin: :func:`peers.labelling.origin_of`) its
+    components carry labels beside the mixture (tracking.labels: Panta, Clark & Vo 2009 tag
+    propagation, then Panta's duplicate rule) and what it publishes carries them: the labels
+    only gather rows by the indices the filter's own steps return, so every number is what the
+    unlabelled filter computes. ``origin=None``: no labels (``labels`` stays None)."""
 
     kinds = ("posterior",)
     position_index = (0, 2)
 
     def __init__(self, filt: GMPHDFilter, level2: bool = True,
-                 level2_threshold: float = 0.5) -> None:
+                 level2_threshold: float = 0.5, origin: int | None = None) -> None:
         self.filter = filt
         self.reducer = filt.reducer
         self.level2 = level2
         self.level2_threshold = level2_threshold
         self.mix = filt.initial()
         self.dim = self.mix.dim
+        if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
+            raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
+        self.origin = None if origin is None else int(origin)
+        """The first column of the labels of this peer's births; None: unlabelled."""
+        self.labels = None if origin is None else np.zeros((0, 3), dtype=np.int64)
+        """``(n, 3)`` int64, one label per component of :attr:`mix` (None: unlabelled)."""
+        self.k = 0
+        """The scan of the last step (births are stamped with it)."""
+        self._next_k: int | None = None
         self._prepared: tuple | None = None
-        """``(prior, steps, z, posterior)`` from :meth:`prepare_many`, for the next step."""
+        """``(prior, steps, z, posterior, parents)`` from :meth:`prepare_many`."""
         self.prepared_hits = 0
         """Steps that used a prepared posterior (for the summary and tests)."""
 
@@ -69,35 +94,86 @@ class GmphdEstimator:
         all at once (:func:`tracking.gmphd_batch.step_many`: a peer host's co-hosted peers);
         each :meth:`step` then takes its result if it is asked exactly that step from the same
         prior (anything else, and it computes its own: a prepared step never changes what a
-        step gives, only where its arithmetic is done)."""
+        step gives, only where its arithmetic is done). The parents of each posterior
+        component come along, so a labelled estimator's labels follow without a second step."""
         if not estimators:
             return
         posts = step_many([e.filter for e in estimators], [e.mix for e in estimators],
-                          steps, scans)  # raises before any estimator is touched
-        for e, s, z, post in zip(estimators, steps, scans, posts, strict=True):
-            e._prepared = (e.mix, int(s), z, post)
+                          steps, scans, parents=True)  # raises before any is touched
+        for e, s, z, (post, par) in zip(estimators, steps, scans, posts, strict=True):
+            e._prepared = (e.mix, int(s), z, post, par)
+
+    def begin_scan(self, k: int) -> None:
+        """The scan index of the next :meth:`step` (a consensus calls it first; without it
+        the index counts the steps)."""
+        self._next_k = int(k)
 
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
         prep, self._prepared = self._prepared, None
+        k = self.k + steps if self._next_k is None else self._next_k
+        self._next_k = None
+        par = None
         if (prep is not None and prep[0] is self.mix and prep[1] == steps
                 and (prep[2] is z or np.array_equal(prep[2], z))):
-            self.mix = prep[3]
+            post, par = prep[3], prep[4]
             self.prepared_hits += 1
+        elif self.labels is None:
+            post = self.filter.correct(self.filter.predict(self.mix, steps), [z])
         else:
-            self.mix = self.filter.correct(self.filter.predict(self.mix, steps), [z])
-        pub = keep_above(self.mix, self.level2_threshold) if self.level2 else self.mix
+            post, par = correct_parents(self.filter, self.filter.predict(self.mix, steps), [z])
+        if self.labels is not None:
+            self.labels = self._step_labels(post, par, k)
+        self.mix, self.k = post, k
+        keep = (self.mix.weights > self.level2_threshold if self.level2 and len(self.mix)
+                else None)
+        pub = self.mix.select(keep) if keep is not None else self.mix
+        labels = None
+        if self.labels is not None:
+            labels = {"posterior": self.labels[keep] if keep is not None else self.labels}
         return LocalOutput(self.mix, {"posterior": pub},
-                           {"n_components": len(self.mix), "n_published": len(pub)})
+                           {"n_components": len(self.mix), "n_published": len(pub)},
+                           labels=labels, density_labels=self.labels)
+
+    def _step_labels(self, post: GaussianMixture, parents: np.ndarray, k: int) -> np.ndarray:
+        """Labels of the posterior: each component its parent's (survivors keep theirs,
+        births get ``(origin, k, i)``), then the duplicate rule (tracking.labels)."""
+        f = self.filter
+        nb = 0 if f.birth is None else len(f.birth)
+        pred = np.concatenate((self.labels, new_labels(self.origin, k, nb)))
+        lm = LabelledMixture(post, pred[parents])
+        return split_duplicates(lm, f.extraction_threshold, self.origin, k, nb).labels
 
     def predict(self, mix: GaussianMixture, steps: int) -> GaussianMixture:
-        """NALE multi-step prediction (births added once), seed 000 §3.2."""
+        """NALE multi-step prediction (births added once), seed 000 §3.2. Components keep
+        their order (births are appended), so a neighbour's labels still fit its rows."""
         return self.filter.predict(mix, steps) if steps > 0 else mix
 
     def extract(self, mix: GaussianMixture) -> np.ndarray:
         return self.filter.extract(mix)
 
+    def extract_tracks(self, mix: GaussianMixture, labels: np.ndarray,
+                       confirmation: Confirmation | None = None) -> ExtractedTracks:
+        """:meth:`extract`'s states (the same rows) with their labels, covariances,
+        existence (weight clipped to 1) and status (tracking.labels.extract_tracks)."""
+        return extract_tracks(LabelledMixture(mix, labels), self.filter.extraction_threshold,
+                              self.filter.extraction, confirmation)
+
     def adopt(self, fused: GaussianMixture) -> None:
         self.mix = fused
+        if self.labels is not None:  # until adopt_labels: one fresh label per component
+            self.labels = new_labels(self.origin, self.k, len(fused), 1 << 40)
+
+    def adopt_labels(self, labels: np.ndarray) -> None:
+        """The labels of the fused density :meth:`adopt` took (feedback)."""
+        if self.labels is not None:
+            self.labels = as_labels(labels, len(self.mix), "adopted labels")
+
+    def relabel(self, match: LabelMatch) -> None:
+        """Take the network's labels for our own (tracking.labels.adopt_labels: each matched
+        own label becomes the winner of the fusion it went into, on every component that
+        carries it)."""
+        if self.labels is not None:
+            self.labels = adopt_labels(self.labels, match)
 
 
 class ImmEstimator:

@@ -14,10 +14,21 @@ import msgpack
 import numpy as np
 from sensornet.tracking.metrics import gospa_parts, ospa_gospa_parts
 
-COLUMNS = ("peer", "scan", "estimate", "scored", "ospa", "gospa", "gospa_localisation",
-           "gospa_missed", "gospa_false", "n_estimated", "n_true", "latency_ms", "tracks",
-           "truth")
+COLUMNS_V1 = ("peer", "scan", "estimate", "scored", "ospa", "gospa", "gospa_localisation",
+              "gospa_missed", "gospa_false", "n_estimated", "n_true", "latency_ms", "tracks",
+              "truth")
+"""The columns of tables written before track identities (still read: the new ones empty)."""
+ID_COLUMNS = ("track_ids", "track_status", "truth_ids")
+"""Track identities: ``[origin, birth_scan, index]`` per row of ``tracks`` (empty when the
+peer's kind has no labels), 0/1 tentative/confirmed per row, the true target ids per row of
+``truth``."""
+COLUMNS = COLUMNS_V1 + ID_COLUMNS
 """The table's columns, in order (docs/results.md says what each holds)."""
+LIST_COLUMNS = ("tracks", "truth", *ID_COLUMNS)
+"""Columns whose rows are lists of varying length (readers keep them as lists)."""
+
+Ids = tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None] | None
+"""``(track ids (n, 3), status (n,), truth ids (m,))`` of one row, any of them None."""
 
 MAX_ROWS = 500_000
 """Rows kept per peer (a 10 scans/s run of about 7 hours); later rows are counted, not kept."""
@@ -34,24 +45,28 @@ class ScanResults:
         self._gospa_sum: dict[str, float] = {}
         self._gospa_n: dict[str, int] = {}
 
-    def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray) -> float:
-        """Add an estimate that arrived; its OSPA (the value the summary's mean takes)."""
+    def scored(self, k: int, which: str, states: np.ndarray, truth: np.ndarray,
+               ids: Ids = None) -> float:
+        """Add an estimate that arrived; its OSPA (the value the summary's mean takes).
+        ``ids``: ``(track ids (n, 3), status (n,), truth ids (m,))``, any of them None."""
         est, true = self.xy(states), self.xy(truth)
         value, parts = ospa_gospa_parts(est, true, self.c, self.p)
-        self._add(k, which, True, value, est, true, states, truth, parts)
+        self._add(k, which, True, value, est, true, states, truth, parts, ids)
         return value
 
     def scored_as(self, k: int, which: str, states: np.ndarray, truth: np.ndarray,
                   est: np.ndarray, true: np.ndarray, value: float,
-                  parts: tuple[float, float, int, int]) -> None:
+                  parts: tuple[float, float, int, int], ids: Ids = None) -> None:
         """:meth:`scored` with the score computed elsewhere (a host's batch, from the same
         positions ``est = xy(states)``, ``true = xy(truth)``)."""
-        self._add(k, which, True, value, est, true, states, truth, parts)
+        self._add(k, which, True, value, est, true, states, truth, parts, ids)
 
-    def missed(self, k: int, which: str, truth: np.ndarray | None) -> None:
+    def missed(self, k: int, which: str, truth: np.ndarray | None,
+               truth_ids: np.ndarray | None = None) -> None:
         """Add an output that never came: OSPA at the cut-off, every true target missed."""
         truth = np.zeros((0, 0)) if truth is None else truth
-        self._add(k, which, False, self.c, np.zeros((0, 2)), self.xy(truth), None, truth)
+        self._add(k, which, False, self.c, np.zeros((0, 2)), self.xy(truth), None, truth,
+                  ids=(None, None, truth_ids))
 
     def xy(self, states: np.ndarray) -> np.ndarray:
         """``(n, 2)`` positions of state rows ``(n, d)`` (empty-safe)."""
@@ -59,7 +74,7 @@ class ScanResults:
 
     def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
              true: np.ndarray, states: np.ndarray | None, truth: np.ndarray,
-             parts: tuple[float, float, int, int] | None = None) -> None:
+             parts: tuple[float, float, int, int] | None = None, ids: Ids = None) -> None:
         g, loc, missed, false = parts or gospa_parts(est, true, self.c, self.p)
         # the summary's GOSPA mean counts every estimate, kept as a row or not
         self._gospa_sum[which] = self._gospa_sum.get(which, 0.0) + g
@@ -68,8 +83,12 @@ class ScanResults:
             self.dropped += 1
             return
         tracks = [] if states is None else np.asarray(states, float).tolist()
+        tid, status, truth_ids = ids or (None, None, None)
         self.rows.append((int(k), which, scored, float(value), g, loc, missed, false,
-                          len(est), len(true), tracks, np.asarray(truth, float).tolist()))
+                          len(est), len(true), tracks, np.asarray(truth, float).tolist(),
+                          [] if tid is None else np.asarray(tid, np.int64).tolist(),
+                          [] if status is None else np.asarray(status, np.int64).tolist(),
+                          [] if truth_ids is None else np.asarray(truth_ids, np.int64).tolist()))
 
     def mean(self, which: str) -> float:
         """Mean GOSPA of this peer's ``which`` estimates, misses included (as the summary's
@@ -97,6 +116,8 @@ class ScanResults:
                                       else np.nan)
             cols["tracks"].append(r[10])
             cols["truth"].append(r[11])
+            for name, v in zip(ID_COLUMNS, r[12:15], strict=True):
+                cols[name].append(v)
         return cols
 
 
@@ -117,9 +138,19 @@ def read_part(path: Path) -> tuple[dict[str, list], dict]:
     not one."""
     part = msgpack.unpackb(Path(path).read_bytes(), raw=False, strict_map_key=False)
     if (not isinstance(part, dict) or not isinstance(part.get("columns"), dict)
-            or tuple(part["columns"]) != COLUMNS or not isinstance(part.get("meta"), dict)):
+            or tuple(part["columns"]) not in (COLUMNS, COLUMNS_V1)
+            or not isinstance(part.get("meta"), dict)):
         raise ValueError("not a per-scan results part")
-    return part["columns"], part["meta"]
+    return with_id_columns(part["columns"]), part["meta"]
+
+
+def with_id_columns(cols: dict[str, list]) -> dict[str, list]:
+    """A table of :data:`COLUMNS_V1` (written before track identities) with the identity
+    columns added, empty lists in every row; a current table as it is."""
+    if tuple(cols) == COLUMNS:
+        return cols
+    n = len(cols["peer"])
+    return {**cols, **{name: [[] for _ in range(n)] for name in ID_COLUMNS}}
 
 
 def merge_parts(parts: list[Path], path: Path) -> Path | None:
@@ -161,9 +192,10 @@ def read_table(path: Path) -> tuple[dict[str, list], dict]:
 
     table = pq.read_table(path)
     raw = (table.schema.metadata or {}).get(b"sensornet")
-    if raw is None or tuple(table.column_names) != COLUMNS:
+    if raw is None or tuple(table.column_names) not in (COLUMNS, COLUMNS_V1):
         raise ValueError(f"{path}: not a sensornet per-scan results table")
-    return table.to_pydict(), msgpack.unpackb(bytes.fromhex(raw.decode()))
+    return (with_id_columns(table.to_pydict()),
+            msgpack.unpackb(bytes.fromhex(raw.decode())))
 
 
 def schema():
@@ -176,4 +208,6 @@ def schema():
                       ("gospa_localisation", pa.float64()), ("gospa_missed", pa.int64()),
                       ("gospa_false", pa.int64()), ("n_estimated", pa.int64()),
                       ("n_true", pa.int64()), ("latency_ms", pa.float64()), ("tracks", rows),
-                      ("truth", rows)])
+                      ("truth", rows), ("track_ids", pa.list_(pa.list_(pa.int64()))),
+                      ("track_status", pa.list_(pa.int8())),
+                      ("truth_ids", pa.list_(pa.int64()))])

@@ -49,7 +49,8 @@ class ScoreBatch:
                    for sc, _, _, states, truth in group]
             for (sc, which, k, states, truth), (est, true), (value, parts) in zip(
                     group, pos, ospa_gospa_parts_many(pos, c, p), strict=True):
-                sc.results.scored_as(k, which, states, truth, est, true, value, parts)
+                sc.results.scored_as(k, which, states, truth, est, true, value, parts,
+                                     sc._ids(which, k))
                 sc._count(which, k, states, truth, value)
         served: dict[int, Scorer] = {}
         for it in items:
@@ -67,6 +68,10 @@ class Scorer:
         self.truth_fn = truth
         self.window = window
         self._truth: dict[int, np.ndarray] = {}
+        self._truth_ids: dict[int, np.ndarray] = {}
+        """True target ids of the truth messages taken, by scan."""
+        self._track_ids: dict[tuple[str, int], tuple] = {}
+        """(which, k) -> (track ids (n, 3), status (n,)) of outputs not yet in the table."""
         self._waiting: dict[str, dict[int, np.ndarray]] = {w: {} for w in WHICH}
         self._expected: dict[str, set[int]] = {w: set() for w in WHICH}
         self.sums = dict.fromkeys(WHICH, 0.0)
@@ -88,8 +93,21 @@ class Scorer:
             return self.truth_fn(k)
         return self._truth.get(k)
 
-    def truth_message(self, k: int, states: np.ndarray) -> str | None:
-        """Take a ``Truth`` message; the rejection reason, or None if it was used."""
+    def truth_ids(self, k: int) -> np.ndarray | None:
+        """The true target ids of scan ``k`` (``(n,)``, rows of :meth:`truth`): the truth
+        function's ``ids`` attribute (a function of ``k``, if it has one), else the ids of the
+        truth message taken; None if unknown."""
+        fn = getattr(self.truth_fn, "ids", None) if self.truth_fn is not None else None
+        return fn(k) if fn is not None else self._truth_ids.get(k)
+
+    def _ids(self, which: str, k: int) -> tuple:
+        tid, status = self._track_ids.pop((which, k), (None, None))
+        return tid, status, self.truth_ids(k)
+
+    def truth_message(self, k: int, states: np.ndarray,
+                      ids: np.ndarray | None = None) -> str | None:
+        """Take a ``Truth`` message (its target ``ids`` kept for the table); the rejection
+        reason, or None if it was used."""
         states = np.asarray(states, float)
         if self.truth_fn is not None:
             mine = self.truth_fn(k)
@@ -101,6 +119,8 @@ class Scorer:
             same = held.shape == states.shape and np.allclose(held, states)
             return None if same else "truth-conflict"
         self._truth[k] = states
+        if ids is not None and len(ids) == len(states):
+            self._truth_ids[k] = np.asarray(ids, np.int64)
         for which in WHICH:
             if k in self._waiting[which]:
                 self._score(which, k, self._waiting[which].pop(k))
@@ -120,12 +140,17 @@ class Scorer:
             self.misses[which] += len(ks)
             self.card_sums[which] += card
             for k in ks:
-                self.results.missed(k, which, self.truth(k))
+                self.results.missed(k, which, self.truth(k), self.truth_ids(k))
 
-    def output(self, which: str, k: int, states: np.ndarray) -> None:
+    def output(self, which: str, k: int, states: np.ndarray, ids: np.ndarray | None = None,
+               status: np.ndarray | None = None) -> None:
+        """Score estimate ``which`` of scan ``k``: ``states (n, d)``, with a labelled kind's
+        track ``ids (n, 3)`` and ``status (n,)`` for the table (not scored by OSPA)."""
         if k not in self._expected[which]:
             return  # already scored, or not a scan this peer accepted
         self._expected[which].discard(k)
+        if ids is not None:
+            self._track_ids[(which, k)] = (ids, status)
         if self.truth(k) is not None:
             self._score(which, k, states)
         else:
@@ -148,22 +173,26 @@ class Scorer:
                 self.misses[which] += 1
                 X = self.truth(k)
                 self.card_sums[which] += len(X) if X is not None else 0
-                self.results.missed(k, which, X)
+                self.results.missed(k, which, X, self.truth_ids(k))
+                self._track_ids.pop((which, k), None)
                 self.records.append({"k": k, "kind": "ospa", "which": which, "value": self.c,
                                      "miss": True})
             late = [k for k in self._waiting[which] if old(k)]
             for k in late:
                 del self._waiting[which][k]
+                self._track_ids.pop((which, k), None)
                 self.unscored += 1
         for k in [k for k in self._truth if old(k)]:
             del self._truth[k]
+            self._truth_ids.pop(k, None)
 
     def _score(self, which: str, k: int, states: np.ndarray) -> None:
         X = self.truth(k)
         if self.batch is not None:
             self.batch.add(self, which, k, states, X)
             return
-        self._count(which, k, states, X, self.results.scored(k, which, states, X))
+        self._count(which, k, states, X, self.results.scored(k, which, states, X,
+                                                              self._ids(which, k)))
 
     def flush(self) -> None:
         """Scores handed to a batch are computed now (before anything reads them)."""

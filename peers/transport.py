@@ -88,13 +88,16 @@ def callback(fn):
     return zenoh.handlers.Callback(fn, indirect=False)
 
 
-_ENCODINGS: dict[tuple[str, bool], zenoh.Encoding] = {}
+_ENCODINGS: dict[tuple[str, int, bool], zenoh.Encoding] = {}
 
 
 def zenoh_encoding(payload: bytes, sealed: bool = False) -> zenoh.Encoding:
     """The Zenoh encoding a put of ``payload`` declares (protocol.encodings; cached per
-    message type: about a microsecond a put)."""
-    key = (letter_of(payload), sealed)
+    message type and protocol version, ``payload[1]``: protocol 1 and 2 of one type, e.g. a
+    labelled and an unlabelled estimate, declare different encodings; about a microsecond a
+    put)."""
+    letter = letter_of(payload)
+    key = (letter, payload[1] if letter != "?" else 0, sealed)
     enc = _ENCODINGS.get(key)
     if enc is None:
         enc = _ENCODINGS[key] = zenoh.Encoding(encoding_text(payload, sealed))

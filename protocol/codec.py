@@ -44,8 +44,11 @@ from sensornet.tracking.mixture import GaussianMixture
 VERSION = 1
 """The protocol version of every message type: the first element of ``[version, type, ...]``."""
 TRACKS_VERSION = 2
-"""Protocol 2 exists for one type, Tracks (``"K"``) with identities, covariances, existence
-and status; a Tracks message without them is still written (and read) as protocol 1."""
+"""Protocol 2 exists for two types: Tracks (``"K"``) with identities, covariances, existence
+and status, and Estimate (``"E"``) with component labels; a message without them is still
+written (and read) as protocol 1, byte for byte."""
+LABELS_VERSION = TRACKS_VERSION
+"""The protocol of a labelled Estimate."""
 _F8 = np.dtype("<f8")
 _I8 = np.dtype("<i8")
 
@@ -145,15 +148,27 @@ _FIELDS_V2 = {
     # triangles, existence "e" (n,) float64, status "u" (n,) int8; each bytes or nil (not
     # sent). The states "x" stay last, as in protocol 1.
     "K": ("s", "k", "q", "ts", "d", "i", "c", "e", "u", "x"),
+    # Estimate with component labels: "i" (n, 3) int64 bytes, one row per component of "x"
+    "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "i", "x"),
 }
 VERSIONS = {VERSION: _FIELDS, TRACKS_VERSION: _FIELDS_V2}
 """Protocol version -> the message types it has -> their field names in wire order."""
 
 
 def _estimate(msg: Estimate) -> dict:
-    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+    """Protocol 1 without labels (byte for byte as always), protocol 2 with them."""
+    body = {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
             "ts": float(msg.send_time), "p": int(msg.pruning), "o": _KINDS.index(msg.kind),
             "d": msg.mixture.dim, "x": pack_mixture(msg.mixture)}
+    if msg.labels is not None:
+        n = len(msg.mixture)
+        lab = np.asarray(msg.labels)
+        if lab.shape != (n, 3) or (n and lab.dtype.kind not in "iu"):
+            raise ValueError(f"Estimate.labels must be ({n}, 3) integers, got {lab.shape} "
+                             f"{lab.dtype}")
+        body["v"] = LABELS_VERSION
+        body["i"] = np.ascontiguousarray(lab, dtype=_I8).tobytes()
+    return body
 
 
 def _scan(msg: Scan) -> dict:
@@ -497,6 +512,15 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
                 raise Rejected("field", "dimension must be at least 1")
             blob = _get(body, "x", bytes)
             n = _rows(blob, 1 + d + d * (d + 1) // 2, limits.max_components, "components")
+            labels = None
+            if version == LABELS_VERSION:  # checked before the mixture is decoded
+                ib = _get(body, "i", bytes)
+                if len(ib) != 24 * n:
+                    raise Rejected("shape", f"{len(ib)} bytes of labels for {n} components "
+                                            f"({24 * n} expected)")
+                labels = np.frombuffer(ib, dtype=_I8).reshape(n, 3).astype(np.int64)
+                if n and labels.min() < 0:
+                    raise Rejected("field", "a component label is negative")
             mix = unpack_mixture(blob, n, d)
             pruning = _get(body, "p", int)
             kind_i = _get(body, "o", int)
@@ -504,7 +528,8 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
                 raise Rejected("field", f"unknown estimate kind {kind_i!r}")
             return Estimate(sender=_name(body, "s", limits), k=_index(body, "k"),
                             mixture=mix, round=_index(body, "r"), seq=_index(body, "q"),
-                            send_time=_time(body), pruning=pruning, kind=_KINDS[kind_i])
+                            send_time=_time(body), pruning=pruning, kind=_KINDS[kind_i],
+                            labels=labels)
         if kind == "S":
             blob = _get(body, "x", bytes)
             n = _rows(blob, 2, limits.max_measurements, "measurements")

@@ -32,7 +32,7 @@ def encoding_text(payload: bytes, sealed: bool = False) -> str:
 def letter_of(payload: bytes) -> str:
     """The type letter of ``[version, "<letter>", ...]`` from its first 4 bytes, or ``"?"``:
     a fixarray, a version the codec has (a positive fixint), a one-character fixstr naming a
-    type of that version (protocol 2 has Tracks only)."""
+    type of that version (protocol 2 has Tracks and Estimate)."""
     if (len(payload) >= 4 and 0x90 <= payload[0] <= 0x9F and payload[1] in VERSIONS
             and payload[2] == 0xA1 and chr(payload[3]) in VERSIONS[payload[1]]):
         return chr(payload[3])

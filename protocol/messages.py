@@ -39,6 +39,9 @@ class Estimate:
     """Pruning level applied before publishing: 1 (filter reduction only) or 2 (``w > W0``)."""
     kind: str = "posterior"
     """``"posterior"`` or ``"prediction"`` (single-target particle fusion needs both)."""
+    labels: np.ndarray | None = None
+    """``(n, 3)`` int64 component labels ``(origin, birth_scan, index)`` of a labelled
+    estimator (tracking.labels), one per mixture row; None: unlabelled (protocol 1)."""
 
 
 @dataclass(frozen=True)

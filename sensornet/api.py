@@ -6,6 +6,7 @@
     run.mean_ospa("s1", "fused")          # the summary's number
     run.columns["ospa"]                   # per-scan results as NumPy arrays (docs/results.md)
     run.tracks("s1")                      # {scan: (n, d) fused states}
+    run.tracks_by_id("s1")                # {(origin, birth_scan, index): (scans, states)}
     run.to_pandas()                       # the same table as a DataFrame (needs pandas)
 
 The run is the discrete-event twin (:func:`sim.run.twin.run_twin`): the peers' own code on a virtual
@@ -22,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from sensornet.peers.scan_results import COLUMNS
+from sensornet.peers.scan_results import COLUMNS, LIST_COLUMNS
 from sensornet.sim.run.twin import TwinResult, run_twin
 from sensornet.sim.scenario import Scenario, builtin_scenarios, load_scenario
 
@@ -43,7 +44,7 @@ class Run:
     scenario: Scenario
     twin: TwinResult
     columns: dict[str, np.ndarray | list]
-    """The per-scan table (docs/results.md): NumPy arrays, ``tracks``/``truth`` lists."""
+    """The per-scan table (docs/results.md): NumPy arrays, the :data:`LIST_COLUMNS` lists."""
     meta: dict
     """``position_index``, ``cutoff`` and ``order`` of the table."""
 
@@ -76,6 +77,49 @@ class Run:
         return {int(self.columns["scan"][i]): np.asarray(self.columns["tracks"][i],
                                                          float).reshape(-1, d)
                 for i in self.select(peer, which)}
+
+    def tracks_by_id(self, peer: str, which: str = "fused"
+                     ) -> dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]]:
+        """``{id: (scans (T,), states (T, d))}``: one peer's tracks by their id ``(origin,
+        birth_scan, index)``, each in scan order (a peer kind without ids gives ``{}``; an id
+        twice in one scan keeps its first, heaviest row)."""
+        d = self.scenario_dim
+        by: dict[tuple[int, int, int], tuple[list, list]] = {}
+        for i in self.select(peer, which):
+            k = int(self.columns["scan"][i])
+            seen = set()
+            for x, lab in zip(self.columns["tracks"][i], self.columns["track_ids"][i],
+                              strict=False):
+                key = tuple(int(v) for v in lab)
+                if key in seen:
+                    continue
+                seen.add(key)
+                scans, states = by.setdefault(key, ([], []))
+                scans.append(k)
+                states.append(x)
+        return {key: (np.asarray(s, dtype=np.int64), np.asarray(x, float).reshape(-1, d))
+                for key, (s, x) in sorted(by.items())}
+
+    def truth_by_id(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """``{true target id: (scans (T,), states (T, d))}`` (the ``truth_ids`` column)."""
+        d = self.scenario_dim
+        by: dict[int, tuple[list, list]] = {}
+        done: set[int] = set()
+        for k, t, ids in zip(self.columns["scan"].tolist(), self.columns["truth"],
+                             self.columns["truth_ids"], strict=True):
+            if k in done or len(ids) != len(t):
+                continue
+            done.add(k)
+            for x, i in zip(t, ids, strict=True):
+                scans, states = by.setdefault(int(i), ([], []))
+                scans.append(k)
+                states.append(x)
+        out = {}
+        for i, (s, x) in sorted(by.items()):
+            order = np.argsort(s, kind="stable")
+            out[i] = (np.asarray(s, dtype=np.int64)[order],
+                      np.asarray(x, float).reshape(-1, d)[order])
+        return out
 
     def truth(self) -> dict[int, np.ndarray]:
         """``{scan: (m, d) true states}``."""
@@ -114,5 +158,5 @@ def simulate(scn: Scenario, run: int = 0) -> Run:
             cols[c].extend(part[c])
         meta = core.scorer.results.meta()
     arrays: dict[str, np.ndarray | list] = {
-        c: (cols[c] if c in ("tracks", "truth") else np.asarray(cols[c])) for c in COLUMNS}
+        c: (cols[c] if c in LIST_COLUMNS else np.asarray(cols[c])) for c in COLUMNS}
     return Run(scenario=scn, twin=result, columns=arrays, meta=meta)

@@ -34,6 +34,7 @@ from sensornet.tracking.reduction import (
     _moment_match_groups,
     _upper_pairs,
     cap,
+    cap_index,
 )
 
 try:  # the ufunc np.linalg.inv calls (NumPy 1.x and 2.x)
@@ -197,13 +198,18 @@ def _pairs(sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
-                prob: np.ndarray, n_problems: int) -> list[GaussianMixture]:
+                prob: np.ndarray, n_problems: int, sources: bool = False) -> list:
     """``reduce`` of each problem's mixture (the components of problem ``p`` are those with
     ``prob == p``, ``prob`` non-decreasing), stacked as :meth:`Reducer.__call__` without the
-    ISE re-fit: prune, merge (each problem's sweep in its order of decreasing weight), cap."""
+    ISE re-fit: prune, merge (each problem's sweep in its order of decreasing weight), cap.
+
+    ``sources``: each problem's ``(mixture, src)`` instead, ``src (k,)`` for each output
+    component the index (inside its problem's block) of the heaviest member of its merge
+    group, as :meth:`Reducer.with_sources` (the same numbers; tag propagation reads it)."""
     parts = _split(w, m, P, prob, n_problems)
+    own = reduce.with_sources if sources else reduce
     if reduce.refit:
-        return [reduce(mix) for mix in parts]
+        return [own(mix) for mix in parts]
     keep = np.flatnonzero(w >= reduce.prune_threshold)
     kp = prob[keep]
     counts = np.bincount(kp, minlength=n_problems)
@@ -212,16 +218,17 @@ def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
         small = ~big
         sel = small[prob]
         rest = reduce_many(reduce, w[sel], m[sel], P[sel],
-                           np.cumsum(small)[prob[sel]] - 1, int(small.sum()))
+                           np.cumsum(small)[prob[sel]] - 1, int(small.sum()), sources)
         it = iter(rest)
-        return [reduce(parts[p]) if big[p] else next(it) for p in range(n_problems)]
+        return [own(parts[p]) if big[p] else next(it) for p in range(n_problems)]
     order = keep[np.lexsort((-w[keep], kp))]  # kept, by problem, heaviest first
     wo, mo, Po, po = w[order], m[order], P[order], prob[order]
+    src = order  # each row's index into the stacked input
     ci, cj = _pairs(counts)
     if ci.size:
         inv = _inv_exact(Po)
         if inv is None:
-            return [reduce(mix) for mix in parts]
+            return [own(mix) for mix in parts]
         diff = mo[ci] - mo[cj]
         if reduce.merge_rule == "vo-ma":
             close = c_einsum("gi,gij,gj->g", diff, inv[ci], diff) <= reduce.merge_threshold
@@ -235,10 +242,21 @@ def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
         _moment_match_groups(wo, mo, Po, centres, members, out_w, out_m, out_P)
         kept = np.ones(len(wo), dtype=bool)
         kept[np.concatenate(members)] = False
-        wo, mo, Po, po = out_w[kept], out_m[kept], out_P[kept], po[kept]
+        wo, mo, Po, po, src = out_w[kept], out_m[kept], out_P[kept], po[kept], src[kept]
     Po = 0.5 * (Po + Po.swapaxes(-1, -2))  # symmetrise
     out = _split(wo, mo, Po, po, n_problems)
-    return [cap(mix, reduce.max_components) for mix in out]
+    if not sources:
+        return [cap(mix, reduce.max_components) for mix in out]
+    starts = np.searchsorted(prob, np.arange(n_problems))  # each problem's first input row
+    bounds = np.searchsorted(po, np.arange(n_problems + 1)).tolist()
+    res = []
+    for p, (mix, a, b) in enumerate(zip(out, bounds[:-1], bounds[1:], strict=True)):
+        s = src[a:b] - starts[p]
+        if len(mix) > reduce.max_components:
+            ci = cap_index(mix.weights, reduce.max_components)
+            mix, s = mix.select(ci), s[ci]
+        res.append((mix, s))
+    return res
 
 
 def _split(w, m, P, prob, n_problems: int) -> list[GaussianMixture]:

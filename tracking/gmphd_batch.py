@@ -26,7 +26,13 @@ from collections.abc import Sequence
 import numpy as np
 from sensornet.tracking.fusion_batch import reduce_many
 from sensornet.tracking.gaussian import c_einsum, inv_det_spd
-from sensornet.tracking.gmphd import _LOG_2PI, GMPHDFilter, _inv_det_2x2, _selected_columns
+from sensornet.tracking.gmphd import (
+    _LOG_2PI,
+    GMPHDFilter,
+    _inv_det_2x2,
+    _selected_columns,
+    update_parents,
+)
 from sensornet.tracking.mixture import GaussianMixture
 
 
@@ -42,27 +48,54 @@ def batch_key(filt: GMPHDFilter, steps: int) -> tuple | None:
 
 
 def step_many(filters: Sequence[GMPHDFilter], mixes: Sequence[GaussianMixture],
-              steps: Sequence[int], scans: Sequence[np.ndarray]) -> list[GaussianMixture]:
+              steps: Sequence[int], scans: Sequence[np.ndarray], parents: bool = False) -> list:
     """``[f.correct(f.predict(mix, s), [z]) for f, mix, s, z in ...]``, stacked where the
-    filters allow it (:func:`batch_key`), each problem on its own otherwise."""
-    out: list[GaussianMixture | None] = [None] * len(filters)
+    filters allow it (:func:`batch_key`), each problem on its own otherwise.
+
+    ``parents``: each problem's ``(posterior, parents)`` instead, ``parents (k,)`` for each
+    posterior component the index into the predicted mixture ``f.predict(mix, s)`` (survivors
+    in order, then the births) of the component it descends from (the heaviest member of its
+    merge group): the same numbers, and what tag propagation (tracking.labels) needs."""
+    out: list = [None] * len(filters)
     groups: dict[tuple, list[int]] = {}
     for p, (f, s) in enumerate(zip(filters, steps, strict=True)):
         key = batch_key(f, s)
         if key is None:
-            out[p] = f.correct(f.predict(mixes[p], s), [scans[p]])
+            out[p] = _one(f, mixes[p], s, scans[p], parents)
         else:
             groups.setdefault(key, []).append(p)
     for ps in groups.values():
         if len(ps) == 1:
             p = ps[0]
-            out[p] = filters[p].correct(filters[p].predict(mixes[p], steps[p]), [scans[p]])
+            out[p] = _one(filters[p], mixes[p], steps[p], scans[p], parents)
             continue
         res = _step_stacked([filters[p] for p in ps], [mixes[p] for p in ps], steps[ps[0]],
-                            [scans[p] for p in ps])
+                            [scans[p] for p in ps], parents)
         for p, r in zip(ps, res, strict=True):
             out[p] = r
-    return out  # type: ignore[return-value]
+    return out
+
+
+def correct_parents(filt: GMPHDFilter, predicted: GaussianMixture,
+                    scans: Sequence[np.ndarray]) -> tuple[GaussianMixture, np.ndarray]:
+    """``filt.correct(predicted, scans)`` (the same numbers) and each posterior component's
+    parent index into ``predicted`` (:func:`tracking.gmphd.update_parents`, then
+    :meth:`~tracking.reduction.Reducer.with_sources`, composed over the sensors)."""
+    if len(scans) != len(filt.sensors):
+        raise ValueError(f"expected {len(filt.sensors)} scans, got {len(scans)}")
+    mix, par = predicted, np.arange(len(predicted))
+    for sensor, scan in zip(filt.sensors, scans, strict=True):
+        mix, det = update_parents(mix, scan, sensor, filt.gate, filt.reducer.prune_threshold)
+        par = np.concatenate((par, par[det]))
+        mix, src = filt.reducer.with_sources(mix)
+        par = par[src]
+    return mix, par
+
+
+def _one(f: GMPHDFilter, mix: GaussianMixture, steps: int, z: np.ndarray, parents: bool):
+    if parents:
+        return correct_parents(f, f.predict(mix, steps), [z])
+    return f.correct(f.predict(mix, steps), [z])
 
 
 def _segments(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
@@ -85,7 +118,7 @@ def _interleave(a_lens: np.ndarray, b_lens: np.ndarray) -> np.ndarray:
 
 
 def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], steps: int,
-                  scans: list[np.ndarray]) -> list[GaussianMixture]:
+                  scans: list[np.ndarray], parents: bool = False) -> list:
     f0 = filters[0]
     n_prob = len(filters)
     model = f0.sensors[0].model
@@ -120,6 +153,7 @@ def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], step
     if n_pairs == 0:
         det_w, det_m, det_P = w[:0], mean[:0], P[:0]
         det_lens = np.zeros(n_prob, dtype=np.intp)
+        det_par = np.zeros(0, dtype=np.intp)
     else:
         cols = _selected_columns(model)
         zhat = mean[:, cols]  # (N, dim)
@@ -158,12 +192,21 @@ def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], step
         det_m = mean[kj] + c_einsum("kij,kj->ki", K[kj], nu[keep])
         det_P = P_upd[kj]
         det_lens = np.bincount(pp[keep], minlength=n_prob)
+        det_par = j_local[keep]
     idx = _interleave(n_lens, det_lens)
     w_all = np.concatenate((missed_w, det_w))[idx]
     m_all = np.concatenate((mean, det_m))[idx]
     P_all = np.concatenate((P, det_P))[idx]
     prob_all = np.repeat(np.arange(n_prob), n_lens + det_lens)
-    return reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob)
+    if not parents:
+        return reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob)
+    # each pre-reduction row's parent in its problem's predicted mixture: the missed terms
+    # are the predicted components in order, the detection terms their pairs' components
+    own = np.arange(len(w)) - np.repeat(np.cumsum(n_lens) - n_lens, n_lens)
+    par_all = np.concatenate((own, det_par))[idx]
+    starts = np.cumsum(n_lens + det_lens) - (n_lens + det_lens)
+    return [(mix, par_all[starts[p] + src]) for p, (mix, src) in enumerate(
+        reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob, sources=True))]
 
 
-__all__ = ["batch_key", "step_many"]
+__all__ = ["batch_key", "correct_parents", "step_many"]

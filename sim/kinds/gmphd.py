@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sensornet.peers.estimators import GmphdEstimator
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
+from sensornet.peers.labelling import origin_of
 from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import Scenario
@@ -24,7 +25,8 @@ def mixture_fuser(scn: Scenario, reducer):
 
 def build(scn: Scenario, name: str, run: int = 0):
     filt = make_filter(scn, [name])
-    est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold)
+    est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold,
+                         origin=origin_of([s.name for s in scn.sensors], name))
     return est, mixture_fuser(scn, filt.reducer)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from sensornet.peers.scan_results import merge_parts, read_table
+from sensornet.peers.scan_results import LIST_COLUMNS, merge_parts, read_table
 from sensornet.sim.report.report_plots import plt_module
 
 
@@ -36,7 +36,7 @@ def load_results(run: Path) -> tuple[dict[str, np.ndarray | list], dict]:
     cols, meta = read_table(table)
     out: dict[str, np.ndarray | list] = {}
     for name, values in cols.items():
-        out[name] = values if name in ("tracks", "truth") else np.asarray(values)
+        out[name] = values if name in LIST_COLUMNS else np.asarray(values)
     return out, meta
 
 

@@ -54,11 +54,17 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
 def truth_function(scn: Scenario, run: int):
     """``k -> (n, d)`` true states of scan ``k`` of run ``run`` (None outside the run): what
     the world will publish, regenerated from the scenario, so scoring needs no truth message."""
-    states = generate_truth(scn, truth_rng(scn, run)).states
+    gen = generate_truth(scn, truth_rng(scn, run))
+    states, ids = gen.states, gen.ids
 
     def truth(k: int) -> np.ndarray | None:
         return np.asarray(states[k - 1]) if 1 <= k <= len(states) else None
 
+    def truth_ids(k: int) -> np.ndarray | None:
+        """The true target ids of scan ``k`` (rows of ``truth(k)``), for the results table."""
+        return np.asarray(ids[k - 1]) if 1 <= k <= len(ids) else None
+
+    truth.ids = truth_ids  # read by peers.scoring.Scorer.truth_ids
     return truth
 
 
