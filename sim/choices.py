@@ -17,5 +17,6 @@ OMEGA_RULES = ("metropolis", "uniform", "det", "chernoff")
 optimised per fusion (``"det"``: smallest determinant, ``"chernoff"``: Chernoff point)."""
 OOS_POLICIES = ("nale", "drop-late", "as-is")
 """``network.policy``: what a peer does with an estimate older than its scan."""
-BIRTH_MODELS = ("paper", "truth")
-"""``birth.model``: the printed components or one at each true start."""
+BIRTH_MODELS = ("paper", "truth", "measurements")
+"""``birth.model``: the printed components, one at each true start, or at the previous scan's
+unexplained plots (``sim.world.birth``)."""

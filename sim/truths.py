@@ -25,6 +25,7 @@ TRUTHS: dict[str, str] = {
     "straight": "sensornet.sim.world:STRAIGHT",
     "seed001": "sensornet.sim.studies.truth_models:SEED001",
     "seed003": "sensornet.sim.studies.truth_models:SEED003",
+    "recorded": "sensornet.sim.traffic.recorded:RECORDED",
 }
 """``truth`` value -> ``"module:attribute"`` of its :class:`TruthModel`."""
 

@@ -38,7 +38,8 @@ from sensornet.tracking.mixture import GaussianMixture
 
 def batch_key(filt: GMPHDFilter, steps: int) -> tuple | None:
     """What must be equal for two steps to be stacked together; None: not stackable."""
-    if len(filt.sensors) != 1 or steps < 1 or filt.reducer.refit:
+    if (len(filt.sensors) != 1 or steps < 1 or filt.reducer.refit
+            or not getattr(filt, "stackable", True)):  # a filter with its own step
         return None
     model = filt.sensors[0].model
     if model.selected is None:
@@ -81,6 +82,9 @@ def correct_parents(filt: GMPHDFilter, predicted: GaussianMixture,
     """``filt.correct(predicted, scans)`` (the same numbers) and each posterior component's
     parent index into ``predicted`` (:func:`tracking.gmphd.update_parents`, then
     :meth:`~tracking.reduction.Reducer.with_sources`, composed over the sensors)."""
+    own = getattr(filt, "correct_parents", None)
+    if own is not None:  # a filter that does more in its correction (sim.world.birth)
+        return own(predicted, scans)
     if len(scans) != len(filt.sensors):
         raise ValueError(f"expected {len(filt.sensors)} scans, got {len(scans)}")
     mix, par = predicted, np.arange(len(predicted))

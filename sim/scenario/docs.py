@@ -23,6 +23,7 @@ from sensornet.sim.scenario.model import (
     Scenario,
     SensorSpec,
     TargetSpec,
+    TrafficSpec,
 )
 from sensornet.sim.scenario.options import Meta, key_of, options, required
 
@@ -40,12 +41,15 @@ SECTIONS: tuple[tuple[str, type, str], ...] = (
     ("[extended]", ExtendedSpec, ""),
     ("[clustering]", ClusteringSpec, ""),
     ("[pda]", PdaSpec, ""),
+    ("[traffic]", TrafficSpec, ""),
     ("[security]", Scenario, "security"),
 )
 """The tables in file order: header, the dataclass of its options, their key prefix there."""
 
 TYPES = {"bool": "true/false", "int": "integer", "float": "number", "float | None": "number",
          "str": "string", "str | None": "string", "tuple[float, float]": "[x, y]",
+         "tuple[float, float] | None": "[latitude, longitude]",
+         "float | str | None": "number or ISO 8601 string",
          "tuple[float, ...]": "list of numbers", "Matrix": "list of lists",
          "tuple[tuple[float, float], tuple[float, float]]": "[[xmin, xmax], [ymin, ymax]]",
          "tuple[BirthComponent, ...]": "array of tables", "tuple[tuple[str, str], ...]":

@@ -100,16 +100,45 @@ class SensorSpec:
                            "in case are refused.", custom="required")
     kind: str = option(doc="`\"linear\"` (position with `R = sigma_r^2 I`) or "
                            "`\"range-bearing\"` (radar).", choices=SENSOR_KINDS)
-    position: tuple[float, float] = option(doc="Sensor position `[x, y]`.", unit="m")
+    position: tuple[float, float] = option(doc="Sensor position `[x, y]` in the local frame; "
+                                                 "not with `site`.", unit="m",
+                                           custom="required unless `site` is given")
     sigma_r: float = option(20.0, doc="Position (linear, per axis) or range (range-bearing) "
                                       "noise standard deviation.", unit="m", check=NONNEGATIVE)
     sigma_theta_deg: float | None = option(
-        None, doc="Bearing noise standard deviation; range-bearing only, where it is required.",
+        None, doc="Bearing noise standard deviation; range-bearing only, where it is required "
+                  "(and recorded traffic's radars, whatever their kind).",
         unit="deg", check=NONNEGATIVE, custom="none (linear); required for range-bearing")
     detection_probability: float = option(0.99, doc="`Pd`: probability that a target yields a "
                                                     "measurement in a scan.", check=PROBABILITY)
     clutter_rate: float = option(10.0, doc="`lambda_c`: Poisson mean of the number of clutter "
                                            "measurements per scan.", check=NONNEGATIVE)
+    plot_sigma: float | None = option(
+        None, doc="Recorded traffic, kind `\"linear\"` (required there): the filters' per-axis "
+                  "noise of the x-y plots, whose true error is the radar's range-bearing error "
+                  "at the plot's range (`sigma_r`, `sigma_theta_deg`) plus the time alignment "
+                  "(docs/real-traffic.md); choose it from the cross-range error at the median "
+                  "range.", unit="m", check=POSITIVE)
+    site: tuple[float, float] | None = option(
+        None, doc="`[latitude, longitude]` (degrees WGS84): the sensor stands there and "
+                  "`position` is that point in the local east-north frame about "
+                  "`traffic.centre` (which it needs).", unit="deg",
+        custom="none: `position` is given")
+    rotation_period: float | None = option(
+        None, doc="Recorded traffic (`truth = \"recorded\"`): the radar's rotation period; its "
+                  "plots are made as the beam crosses each aircraft and go to the fusion tick "
+                  "`(t_(k-1), t_k]` they fall in, so the filters' `Pd` is `detection_probability "
+                  "x min(1, scan_period / rotation_period)` and `clutter_rate` is per rotation. "
+                  "Absent: a snapshot of every aircraft at each tick.", unit="s", check=POSITIVE)
+    phase: float | None = option(
+        None, doc="Recorded traffic: rotations start at `start + phase + j rotation_period`; "
+                  "absent: a stable phase from the name (no two radars in step).", unit="s",
+        check=NONNEGATIVE)
+    max_range: float | None = option(
+        None, doc="Recorded traffic (required there): the coverage radius; `Pd` falls with "
+                  "slant range as a Swerling I target's, to half of `detection_probability` at "
+                  "0.8 `max_range` and 0 beyond it (`sim.traffic.radar`); clutter is uniform "
+                  "over the coverage disc.", unit="m", check=POSITIVE)
 
     @property
     def sigma_theta(self) -> float:
@@ -142,8 +171,10 @@ TRUTH_BIRTH_COV = _diag([100, 2500, 100, 2500])
 class BirthSpec:
     """Birth intensity added at every prediction (§10 discusses why the choice matters)."""
 
-    model: str = option("paper", doc="`\"paper\"` (the `[[birth.paper]]` components) or "
-                                     "`\"truth\"` (one at each true start).",
+    model: str = option("paper", doc="`\"paper\"` (the `[[birth.paper]]` components), "
+                                     "`\"truth\"` (one at each true start) or "
+                                     "`\"measurements\"` (at the previous scan's unexplained "
+                                     "plots; GM-PHD peers).",
                         choices=BIRTH_MODELS)
     paper: tuple[BirthComponent, ...] = option(
         PAPER_BIRTH, doc="Components of the `\"paper\"` model (`[[birth.paper]]` entries).",
@@ -154,6 +185,19 @@ class BirthSpec:
         TRUTH_BIRTH_COV, doc="Covariance of each `\"truth\"` component (zero-velocity mean at a "
                              "target's start): `truth.cov` (4 x 4) or `truth.cov_diag`.",
         key="truth.cov", custom="diag(100, 2500, 100, 2500)")
+    measurements_weight: float = option(
+        0.05, doc="`\"measurements\"`: weight of the birth component at each plot of the "
+                  "previous scan that no component explains (adaptive birth, after Ristic, "
+                  "Clark, Vo & Vo 2012).", key="measurements.weight", check=NONNEGATIVE)
+    measurements_speed: float = option(
+        200.0, doc="`\"measurements\"`: standard deviation of each velocity component of a "
+                   "birth (zero-velocity mean at the plot; position covariance the plot's).",
+        unit="m/s", key="measurements.speed", check=POSITIVE)
+    measurements_gate: float = option(
+        13.8, doc="`\"measurements\"`: a plot whose squared Mahalanobis distance to every "
+                  "predicted component heavier than 0.1 exceeds this gives a birth (13.8: the "
+                  "0.999 point of chi-square with 2 degrees of freedom).",
+        key="measurements.gate", check=POSITIVE)
 
 
 @dataclass(frozen=True)
@@ -335,6 +379,34 @@ class PdaSpec:
 
 
 @dataclass(frozen=True)
+class TrafficSpec:
+    """Recorded aircraft as the truth (``truth = "recorded"``; ``[traffic]`` table,
+    ``sim.traffic``): which OpenSky state-vector file, window and region."""
+
+    file: str = option("", doc="OpenSky state vectors (`.json[.gz]`, `.csv[.gz]`, `.parquet`; "
+                               "`sim.traffic.opensky`), relative to the scenario file.",
+                       custom="the shipped excerpt (`sim/traffic/data/paris_excerpt.json.gz`)")
+    start: float | str | None = option(
+        None, doc="Time origin `t_0` of the run (tick `k` is at `t_0 + k scan_period`): an ISO "
+                  "8601 time (no zone: UTC) or seconds after the file's first report.",
+        unit="s", custom="the file's first report")
+    end: float | str | None = option(
+        None, doc="Reports after this are not read (ISO 8601 or seconds after the first "
+                  "report); the run's last tick must not be later.", unit="s",
+        custom="the file's last report")
+    centre: tuple[float, float] | None = option(
+        None, doc="`[latitude, longitude]` (degrees): the origin of the local east-north frame "
+                  "(height 0) and of `radius`; sensors' `site`s need it.", unit="deg",
+        custom="the middle of the reports' latitude/longitude box")
+    radius: float | None = option(None, doc="Only reports within this geodesic distance of "
+                                            "`centre` (which it needs).", unit="m",
+                                  check=POSITIVE)
+    max_gap: float = option(20.0, doc="An aircraft not reported for longer is absent over the "
+                                      "gap, never extrapolated.", unit="s", check=POSITIVE)
+    airborne_only: bool = option(True, doc="Drop reports flagged on the ground.")
+
+
+@dataclass(frozen=True)
 class MetricsSpec:
     """Error metric settings (§11)."""
 
@@ -358,7 +430,8 @@ class Scenario:
         doc="Surveillance region `[[xmin, xmax], [ymin, ymax]]`, non-empty, within "
             f"+-{MAX_COORDINATE:g} m.", unit="m", key="scenario.region", custom="required")
     truth: str = option("straight", doc="Truth model (`sim.truths`): `\"straight\"` is constant "
-                                        "velocity from start to end (our reading).",
+                                        "velocity from start to end (our reading); "
+                                        "`\"recorded\"`: the aircraft of `[traffic]`.",
                         key="scenario.truth", choices=truth_names)
     truth_sigma_w: float = option(0.0, doc="Process noise added to the straight-line truth; 0: "
                                            "exact lines.", unit="m/s^2",
@@ -397,6 +470,9 @@ class Scenario:
                   "`peers.faults`. Delays in scans are bound to the scan interval `scan_period "
                   "/ network.speed` at load: change the speed with an override, not with "
                   "`dataclasses.replace`.", custom="perfect links")
+    traffic: TrafficSpec | None = option(
+        None, doc="Recorded traffic (`[traffic]`), read by `truth = \"recorded\"`.",
+        custom="the defaults of `[traffic]` with truth `\"recorded\"`, else none")
     security: str | None = option(
         None, doc="`[security] keys = \"DIR\"`: the network's keys folder (relative to the "
                   "scenario file); `run`/`demo`/`peer`/`world` then run in secure mode as with "

@@ -5,9 +5,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import pymap3d
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind as peer_kind
 from sensornet.sim.scenario.faults import _faults
@@ -28,6 +30,7 @@ from sensornet.sim.scenario.model import (
     Scenario,
     SensorSpec,
     TargetSpec,
+    TrafficSpec,
     listing,
 )
 from sensornet.sim.scenario.options import Meta, key_of, keys, meta, options, required
@@ -104,7 +107,11 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
         _target(Table(t, f"targets[{i}]", ctx, keys(TargetSpec)))
         for i, t in enumerate(top.tables("targets", []))
     )
-    sensors = _sensors(top, ctx)
+    truth = values["truth"]
+    traffic = None
+    if top.has("traffic") or truth == "recorded":
+        traffic = _traffic(_section(top, "traffic", TrafficSpec), origin)
+    sensors = _sensors(top, ctx, truth, traffic)
     names = [s.name for s in sensors]
     scn = Scenario(
         **values,
@@ -118,6 +125,7 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
         fusion=_fusion(_section(top, "fusion", FusionSpec), names),
         metrics=MetricsSpec(**read(_section(top, "metrics", MetricsSpec), MetricsSpec)),
         network=_network(_section(top, "network", NetworkSpec), names),
+        traffic=traffic,
         source=origin,
     )
     if top.has("extended"):
@@ -181,7 +189,28 @@ def _target(t: Table) -> TargetSpec:
     return spec
 
 
-def _sensors(top: Table, ctx: Context) -> tuple[SensorSpec, ...]:
+def _site(s: Table, traffic: TrafficSpec | None) -> tuple[tuple[float, float],
+                                                         tuple[float, float] | None]:
+    """A sensor's ``(position, site)``: ``position`` as given, or its ``site`` (latitude,
+    longitude) as the east-north point about ``traffic.centre`` (pymap3d, heights 0)."""
+    if not s.has("site"):
+        if not s.has("position"):
+            raise s.ctx.fail(s.key("position"), f"missing required key '{s.key('position')}' "
+                                                f"(or 'site' = [latitude, longitude])")
+        return s.position("position"), None
+    if s.has("position"):
+        raise s.fail("site", "and 'position' are both given; use one")
+    lat, lon = s.vector("site", 2)
+    if not (abs(lat) <= 90 and abs(lon) <= 180):
+        raise s.fail("site", f"is [{lat:g}, {lon:g}], not a [latitude, longitude] in degrees")
+    if traffic is None or traffic.centre is None:
+        raise s.fail("site", "needs 'traffic.centre' (the origin of the local frame)")
+    e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *traffic.centre, 0.0)
+    return (float(e), float(n)), (lat, lon)
+
+
+def _sensors(top: Table, ctx: Context, truth: str = "straight",
+             traffic: TrafficSpec | None = None) -> tuple[SensorSpec, ...]:
     raw = top.tables("sensors")
     if not raw:
         raise top.fail("sensors", "must list at least one sensor ([[sensors]])")
@@ -205,15 +234,75 @@ def _sensors(top: Table, ctx: Context) -> tuple[SensorSpec, ...]:
                                  f"case (one log file on a case-insensitive file system)")
         seen[name.lower()] = i
         values = read(s, SensorSpec)
-        if values["kind"] == "range-bearing":
+        if values["kind"] == "range-bearing" or truth == "recorded":
             if not s.has("sigma_theta_deg"):
+                why = ("kind 'range-bearing'" if values["kind"] == "range-bearing"
+                       else "a radar of recorded traffic")
                 raise ctx.fail(s.key("sigma_theta_deg"), f"missing required key "
-                               f"'{s.key('sigma_theta_deg')}' (kind 'range-bearing' needs it)")
+                               f"'{s.key('sigma_theta_deg')}' ({why} needs it)")
         elif s.has("sigma_theta_deg"):
             raise s.fail("sigma_theta_deg", "is only for kind 'range-bearing'")
-        out.append(SensorSpec(**values, name=name,
+        if truth == "recorded" and values["kind"] == "linear" and not s.has("plot_sigma"):
+            raise ctx.fail(s.key("plot_sigma"), f"missing required key '{s.key('plot_sigma')}' "
+                                                f"(a linear radar of recorded traffic needs it)")
+        if s.has("plot_sigma") and (truth != "recorded" or values["kind"] != "linear"):
+            raise s.fail("plot_sigma", "is only for linear sensors of recorded traffic")
+        recorded = ("rotation_period", "phase", "max_range")
+        if truth != "recorded":
+            for k in recorded:
+                if s.has(k):
+                    raise s.fail(k, f"is only for recorded traffic (scenario.truth is {truth!r})")
+        elif not s.has("max_range"):
+            raise ctx.fail(s.key("max_range"), f"missing required key '{s.key('max_range')}' "
+                                               f"(recorded traffic needs each sensor's coverage)")
+        if s.has("phase") and not s.has("rotation_period"):
+            raise s.fail("phase", "needs 'rotation_period'")
+        position, site = _site(s, traffic)
+        out.append(SensorSpec(**values, name=name, position=position, site=site,
                               sigma_theta_deg=value(s, SensorSpec, "sigma_theta_deg")))
     return tuple(out)
+
+
+def _when(t: Table, name: str) -> float | str | None:
+    """``traffic.start``/``end``: an ISO 8601 time (checked here) or seconds (a number)."""
+    if not t.has(name):
+        return None
+    v = t.raw(name)
+    if isinstance(v, str):
+        try:
+            datetime.fromisoformat(v)
+        except ValueError:
+            raise t.fail(name, f"must be an ISO 8601 time or a number of seconds, got "
+                               f"{brief(v)}") from None
+        return v
+    if isinstance(v, datetime):  # a TOML date-time
+        return v.isoformat()
+    return t._number(name, v, "an ISO 8601 time or a number of seconds")
+
+
+def _traffic(t: Table, origin: str) -> TrafficSpec:
+    """``[traffic]``: the file resolved against the scenario file's folder, the window, the
+    region; centre and radius go together."""
+    values = read(t, TrafficSpec)
+    file = ""
+    if t.has("file"):
+        path = Path(t.text("file"))
+        if not path.is_absolute() and not origin.startswith("builtin:"):
+            path = Path(origin).parent / path
+        file = str(path)
+    centre = None
+    if t.has("centre"):
+        lat, lon = t.vector("centre", 2)
+        if not (abs(lat) <= 90 and abs(lon) <= 180):
+            raise t.fail("centre", f"is [{lat:g}, {lon:g}], not a [latitude, longitude] in "
+                                   f"degrees")
+        centre = (lat, lon)
+    if values["radius"] is not None and centre is None:
+        raise t.fail("radius", "needs 'traffic.centre'")
+    start, end = _when(t, "start"), _when(t, "end")
+    if isinstance(start, float) and isinstance(end, float) and not start < end:
+        raise t.fail("end", f"is {end:g} s, not after start {start:g} s")
+    return TrafficSpec(**values, file=file, centre=centre, start=start, end=end)
 
 
 def _birth(b: Table) -> BirthSpec:
@@ -229,7 +318,10 @@ def _birth(b: Table) -> BirthSpec:
         )
     tr = Table(b.raw("truth", {}), "birth.truth", b.ctx, [*keys(BirthSpec, "truth"),
                                                           "cov_diag"])
-    return BirthSpec(**values, **read(tr, BirthSpec, "truth"), paper=paper,
+    me = Table(b.raw("measurements", {}), "birth.measurements", b.ctx,
+               keys(BirthSpec, "measurements"))
+    return BirthSpec(**values, **read(tr, BirthSpec, "truth"),
+                     **read(me, BirthSpec, "measurements"), paper=paper,
                      truth_cov=tr.covariance(STATE_DIM, default=BirthSpec().truth_cov))
 
 

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from sensornet.peers.faults import FaultInjector
 from sensornet.sim.scenario import Scenario, ScenarioError, SensorSpec
+from sensornet.sim.world.birth import MeasurementBirthGMPHD
 from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
@@ -27,8 +28,8 @@ def motion_model(scn: Scenario) -> ConstantVelocity:
 
 def sensor_model(spec: SensorSpec) -> LinearPosition | RangeBearing:
     """The measurement model of one sensor (``tracking.models``)."""
-    if spec.kind == "linear":
-        return LinearPosition(sigma_r=spec.sigma_r, position=spec.position)
+    if spec.kind == "linear":  # plot_sigma: a radar's x-y plots (recorded traffic)
+        return LinearPosition(sigma_r=spec.plot_sigma or spec.sigma_r, position=spec.position)
     if spec.kind == "range-bearing":
         return RangeBearing(sigma_r=spec.sigma_r, sigma_theta=spec.sigma_theta,
                             position=spec.position)
@@ -50,19 +51,38 @@ def measurement_box(scn: Scenario, spec: SensorSpec) -> tuple[np.ndarray, np.nda
     return np.array([0.0, -math.pi]), np.array([r_max, math.pi])
 
 
+def sweep_fraction(scn: Scenario, spec: SensorSpec) -> float:
+    """The share of a rotating radar's circle its beam sweeps in one scan interval,
+    ``min(1, scan_period / rotation_period)`` (1 for a sensor without rotation): a scan holds
+    the plots of that sector only (``sim.traffic.recorded``)."""
+    if spec.rotation_period is None:
+        return 1.0
+    return min(1.0, scn.scan_period / spec.rotation_period)
+
+
 def clutter_intensity(scn: Scenario, sensor: SensorSpec | str) -> float:
-    """``kappa = lambda_c / V``: clutter per unit measurement volume (m^2, or m * rad)."""
+    """``kappa = lambda_c / V``: clutter per unit measurement volume (m^2, or m * rad).
+
+    A sensor with ``max_range`` (recorded traffic) has its clutter over its coverage disc:
+    ``V = pi r_max^2`` (x-y) or ``r_max 2 pi`` (range-bearing: uniform in range and bearing,
+    an approximation of clutter uniform in area), and ``lambda_c`` per rotation, so per scan
+    ``lambda_c`` times the :func:`sweep_fraction`."""
     spec = scn.sensor(sensor) if isinstance(sensor, str) else sensor
+    if spec.max_range is not None:
+        r = spec.max_range
+        volume = math.pi * r * r if spec.kind == "linear" else 2.0 * math.pi * r
+        return spec.clutter_rate * sweep_fraction(scn, spec) / volume
     low, high = measurement_box(scn, spec)
     return spec.clutter_rate / float(np.prod(high - low))
 
 
 def sensor_params(scn: Scenario, name: str) -> SensorParams:
-    """What a GM-PHD update needs about sensor ``name``: model, ``Pd``, ``kappa``."""
+    """What a GM-PHD update needs about sensor ``name``: model, ``Pd`` (times the
+    :func:`sweep_fraction` of a rotating radar), ``kappa``."""
     spec = scn.sensor(name)
     return SensorParams(
         model=sensor_model(spec),
-        detection_probability=spec.detection_probability,
+        detection_probability=spec.detection_probability * sweep_fraction(scn, spec),
         clutter_intensity=clutter_intensity(scn, spec),
     )
 
@@ -82,6 +102,8 @@ def birth_mixture(scn: Scenario) -> GaussianMixture:
             np.array([c.mean for c in b.paper]),
             np.array([c.cov for c in b.paper]),
         )
+    if b.model == "measurements":  # no fixed births: MeasurementBirthGMPHD makes them
+        return GaussianMixture.empty(4)
     if b.model == "truth":
         n = len(scn.targets)
         if n == 0:
@@ -114,7 +136,7 @@ def make_filter(scn: Scenario, sensor_names: Sequence[str]) -> GMPHDFilter:
         sensor_names = [sensor_names]
     if not sensor_names:
         raise ScenarioError(f"{scn.name}: a filter needs at least one sensor")
-    return GMPHDFilter(
+    common = dict(
         motion=motion_model(scn),
         sensors=[sensor_params(scn, s) for s in sensor_names],
         birth=birth_mixture(scn),
@@ -124,6 +146,12 @@ def make_filter(scn: Scenario, sensor_names: Sequence[str]) -> GMPHDFilter:
         extraction=scn.filter.extraction,
         gate=scn.filter.gate,
     )
+    if scn.birth.model == "measurements":
+        b = scn.birth
+        return MeasurementBirthGMPHD(**common, birth_weight=b.measurements_weight,
+                                     birth_speed=b.measurements_speed,
+                                     birth_gate=b.measurements_gate)
+    return GMPHDFilter(**common)
 
 
 __all__ = [
@@ -135,6 +163,7 @@ __all__ = [
     "motion_model",
     "sensor_model",
     "sensor_params",
+    "sweep_fraction",
 ]
 
 

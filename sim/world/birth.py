@@ -1,0 +1,123 @@
+"""Measurement-driven birth for the GM-PHD (``birth.model = "measurements"``): targets may
+appear anywhere (recorded traffic), so births are placed at the previous scan's plots that no
+existing component explains, as in the adaptive birth of Ristic, Clark, Vo & Vo, "Adaptive
+target birth intensity for PHD and CPHD filters" (IEEE T-AES 48(2), 2012), simplified: a plot
+is unexplained when its squared Mahalanobis distance (in x-y, plot and component covariances
+added) to every predicted component heavier than :data:`HEAVY` exceeds the gate, and each such
+plot gives one component of a fixed weight, zero-velocity mean at the plot, the plot's
+position covariance and ``birth_speed^2`` per velocity axis. The births enter at the next
+prediction (so a target's first plot never updates its own birth).
+
+The filter keeps the births of its last correction (``pending``): one filter per peer, stepped
+by ``correct(predict(...))`` or ``tracking.gmphd_batch.correct_parents`` (which calls
+:meth:`MeasurementBirthGMPHD.correct_parents`); a peer host never stacks its steps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from sensornet.tracking.gmphd import GMPHDFilter, predict, update_parents
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import RangeBearing
+
+HEAVY = 0.1
+"""Components lighter than this do not explain a plot away."""
+
+
+def plots_xy(model, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plots ``z (m, 2)`` of ``model`` as x-y ``(m, 2)`` with covariances ``(m, 2, 2)``
+    (range-bearing: the polar Jacobian at the plot, ``J R J^T``)."""
+    z = np.asarray(z, float).reshape(-1, 2)
+    if not isinstance(model, RangeBearing):  # a linear model measures [px, py]
+        return z, np.broadcast_to(model.R, (len(z), 2, 2)).copy()
+    r, b = z[:, 0], z[:, 1]
+    c, s = np.cos(b), np.sin(b)
+    xy = np.asarray(model.position, float) + r[:, None] * np.stack([c, s], 1)
+    J = np.stack([np.stack([c, -r * s], 1), np.stack([s, r * c], 1)], 1)  # (m, 2, 2)
+    return xy, J @ model.R @ J.transpose(0, 2, 1)
+
+
+def unexplained(mix: GaussianMixture, xy: np.ndarray, R_xy: np.ndarray,
+                gate: float) -> np.ndarray:
+    """``(m,)`` True for plots ``xy (m, 2)`` (covariances ``R_xy (m, 2, 2)``) farther than
+    ``gate`` (squared Mahalanobis, x-y) from every component of ``mix`` heavier than
+    :data:`HEAVY`: one (m, n) array computation."""
+    heavy = mix.weights > HEAVY
+    if not heavy.any() or len(xy) == 0:
+        return np.ones(len(xy), bool)
+    pos = mix.means[heavy][:, [0, 2]]  # (n, 2)
+    P = mix.covs[heavy][:, [0, 2]][:, :, [0, 2]]  # (n, 2, 2)
+    S = P[None] + R_xy[:, None]  # (m, n, 2, 2)
+    nu = xy[:, None, :] - pos[None]  # (m, n, 2)
+    a, b, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+    det = a * d - b * b
+    d2 = (d * nu[..., 0] ** 2 - 2 * b * nu[..., 0] * nu[..., 1] + a * nu[..., 1] ** 2) / det
+    return (d2 > gate).all(axis=1)
+
+
+def birth_components(xy: np.ndarray, R_xy: np.ndarray, weight: float,
+                     speed: float) -> GaussianMixture:
+    """One component per plot: weight ``weight``, mean ``[x, 0, y, 0]``, position covariance
+    ``R_xy``, velocity variance ``speed^2`` per axis (independent)."""
+    m = len(xy)
+    means = np.zeros((m, 4))
+    means[:, [0, 2]] = xy
+    covs = np.zeros((m, 4, 4))
+    covs[:, [0, 0, 2, 2], [0, 2, 0, 2]] = R_xy.reshape(m, 4)
+    covs[:, 1, 1] = covs[:, 3, 3] = speed * speed
+    return GaussianMixture(np.full(m, weight), means, covs)
+
+
+@dataclass
+class MeasurementBirthGMPHD(GMPHDFilter):
+    """A GM-PHD filter whose births are the last scan's unexplained plots (module docstring).
+
+    ``birth`` holds the births the last prediction added (so a labelled estimator counts them,
+    ``len(filter.birth)``); a correction puts its scan's births in :attr:`pending`, and the
+    next prediction of at least one step makes them ``birth``."""
+
+    birth_weight: float = 0.05
+    """Weight of each birth component."""
+    birth_speed: float = 200.0
+    """Velocity standard deviation per axis of a birth (m/s)."""
+    birth_gate: float = 13.8
+    """Squared Mahalanobis distance beyond which a plot is unexplained."""
+    pending: GaussianMixture | None = field(default=None, repr=False)
+    """The births of the last correction, at its time (they enter at the next prediction)."""
+    stackable = False
+    """A peer host never stacks its steps (``tracking.gmphd_batch.batch_key``): the births
+    come from :meth:`correct_parents`."""
+
+    def predict(self, mix: GaussianMixture, steps: int = 1) -> GaussianMixture:
+        if steps >= 1 and self.pending is not None:
+            self.birth, self.pending = self.pending, None
+        return predict(mix, self.motion, self.survival_probability, self.birth, steps)
+
+    def correct(self, mix: GaussianMixture, scans: Sequence[np.ndarray]) -> GaussianMixture:
+        return self.correct_parents(mix, scans)[0]
+
+    def correct_parents(self, mix: GaussianMixture, scans: Sequence[np.ndarray]
+                        ) -> tuple[GaussianMixture, np.ndarray]:
+        """:meth:`correct` and each posterior component's parent in ``mix`` (as
+        ``tracking.gmphd_batch.correct_parents``); the scan's unexplained plots (each judged
+        against the mixture before its sensor's update) become :attr:`pending`."""
+        if len(scans) != len(self.sensors):
+            raise ValueError(f"expected {len(self.sensors)} scans, got {len(scans)}")
+        births_xy, births_R = [], []
+        par = np.arange(len(mix))
+        for sensor, scan in zip(self.sensors, scans, strict=True):
+            xy, R_xy = plots_xy(sensor.model, scan)
+            new = unexplained(mix, xy, R_xy, self.birth_gate)
+            births_xy.append(xy[new])
+            births_R.append(R_xy[new])
+            mix, det = update_parents(mix, scan, sensor, self.gate, self.reducer.prune_threshold)
+            par = np.concatenate((par, par[det]))
+            mix, src = self.reducer.with_sources(mix)
+            par = par[src]
+        self.pending = birth_components(np.concatenate(births_xy).reshape(-1, 2),
+                                        np.concatenate(births_R).reshape(-1, 2, 2),
+                                        self.birth_weight, self.birth_speed)
+        return mix, par
