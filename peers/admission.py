@@ -14,9 +14,8 @@ thread), reading only the first bytes of the message (a few microseconds):
   verified) is charged to its sender's token bucket (``rate``), a few times what an honest sender
   needs: however a member stamps its messages, what it costs a receiver is bounded;
 - an estimate's bytes are charged to its sender's byte budget (``bytes``, with
-  ``estimate_bytes``): ``factor`` times what the receiver itself would send per scan at its
-  component limit (:mod:`peers.budget`), so a member that sends few but huge estimates is
-  bounded by size, not only by count (issue 36);
+  ``estimate_bytes``, :mod:`peers.budget`): a member that sends its whole message rate in
+  estimates of the largest size is bounded by size, not only by count (issue 36);
 - what the callbacks hand to the main loop waits in an inbox bounded per sender
   (:data:`INBOX_SCANS` scans' worth, ``inbox``) and in total (:data:`INBOX_TOTAL` messages,
   :data:`INBOX_BYTES` bytes, ``inbox-total``): a main loop that falls behind drops, it does not
@@ -183,10 +182,10 @@ class Admission:
     An honest world sends one scan per sensor and one truth per scan interval; an honest
     neighbour ``rounds x kinds`` estimates. Each sender may send ``factor`` times that on
     average, with bursts of ``burst`` scans' worth (duplicates, catching up after a pause).
-    Over the limit a message is dropped and counted as ``rate``. With ``estimate_bytes`` (the
-    bytes of the largest estimate the receiver itself would send, :mod:`peers.budget`), each
-    sender's estimates also draw on a :class:`ByteBudget` of ``factor`` times that per
-    estimate it may send per scan (bursts of ``burst`` scans' worth): over it, ``bytes``,
+    Over the limit a message is dropped and counted as ``rate``. With ``estimate_bytes``
+    (bytes per scan for each estimate a sender may send, on average:
+    :meth:`peers.budget.EstimateBudget.slot_bytes`), each sender's estimates also draw on a
+    :class:`ByteBudget` of that (bursts of ``burst`` scans' worth): over it, ``bytes``,
     counted per sender in :attr:`over_budget`.
     """
 
@@ -197,7 +196,8 @@ class Admission:
                  estimate_bytes: int | None = None) -> None:
         """``rounds``: consensus rounds the peer runs (estimates of round ``0 <= r < rounds``
         are taken); ``kinds``: estimate kinds it fuses (None: no check before decoding);
-        ``estimate_bytes``: the unit of the per-sender byte budget of estimates (None: none)."""
+        ``estimate_bytes``: bytes per scan and estimate slot of the per-sender byte budget
+        of estimates (None: none)."""
         self.network = network
         self.window = window
         """``channel -> (lo, hi)``: scan indices the peer keeps for that channel now."""
@@ -336,7 +336,7 @@ class Admission:
             if len(self._budgets) >= self.max_senders:
                 return None  # the message bucket refuses unknown names past the bound
             n = self.per_scan.get("estimate", 1.0) * self.estimate_bytes
-            b = ByteBudget(self.factor * n / self.interval, self.burst * n)
+            b = ByteBudget(n / self.interval, self.burst * n)
             self._budgets[route.name] = b
         return b
 

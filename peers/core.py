@@ -64,7 +64,7 @@ class PeerCore:
         """Bytes -> message (a host shares one read-only decode between its peers)."""
         self._predecoded: tuple[bytes, Scan] | None = None  # (payload, msg): scan_step's
         kinds = max(1, len(consensus.kinds))
-        self.budget = EstimateBudget.of(self.estimator)
+        self.budget = EstimateBudget.of(self.estimator, cfg.limits.max_components)
         """What one neighbour's estimate may cost (peers.budget): its bytes before decoding,
         its components after."""
         self.admission = Admission(cfg.network, cfg.interval, {
@@ -72,7 +72,8 @@ class PeerCore:
             "estimate": float(consensus.rounds * kinds)}, factor=cfg.rate_factor,
             window=self.window_for, rounds=consensus.rounds,
             kinds=consensus.kinds or ("posterior",),
-            estimate_bytes=None if self.budget is None else self.budget.message_bytes)
+            estimate_bytes=(None if self.budget is None
+                            else self.budget.slot_bytes(cfg.rate_factor)))
         self.rejected: Counter = Counter()
         self.received: Counter = Counter()
         self.received_bytes: Counter = Counter()
