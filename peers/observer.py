@@ -16,14 +16,20 @@ import time
 
 import numpy as np
 from sensornet.peers.core import PeerCore, Publish, Record
+from sensornet.peers.rerun_layout import position_columns
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Telemetry
 from sensornet.tracking.mixture import GaussianMixture
 
 PARTICLES_SHOWN = 200
 """Particles of a particle peer sent per scan (a sample: for the eye)."""
+POOLED_SHOWN = 400
+"""Pooled scan points (flooding) sent per scan, at most (a sample)."""
 FUSED_SHOWN = 64
 """Heaviest fused components sent per scan (the view's solid ellipses)."""
+_KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer", "trust",
+                    "trust-event"})
+"""Record kinds the report reads (a peer's many ``estimate`` records pass by at once)."""
 WAIT_SCANS = 2
 """A scan's report waits for its OSPA (the truth comes half a scan after the scans) at most
 until the tracks of this many later scans are out."""
@@ -46,6 +52,9 @@ class Observer:
         self._tracks_out = 0
         self._fusion_ms = 0.0
         self.sent = 0
+        self.wants_flush = False
+        """Whether a report may be complete (tracks or an OSPA came since the last flush): the
+        driver calls :meth:`flush` only then (a wake-up without it costs nothing here)."""
 
     # -- transport ------------------------------------------------------------------------
     def open(self, session, keys) -> Observer:
@@ -91,12 +100,12 @@ class Observer:
         if not self.enabled or out.channel != "tracks":
             return
         g = self._scan(out.k)
-        g["tracks"] = True
+        g["tracks"] = self.wants_flush = True
         self._tracks_out = max(self._tracks_out, out.k)
         self._set(out.k, "latency_ms", latency_ms)
 
     def record(self, r: Record, compute_ms: float | None = None) -> None:
-        if not self.enabled:
+        if not self.enabled or r.kind not in _KINDS:
             return
         core, k, v = self.core, r.k, r.values
         if r.kind == "local":
@@ -106,10 +115,17 @@ class Observer:
             mix = core.consensus.last_local
             if isinstance(mix, GaussianMixture):
                 self._set(k, "cardinality/local", float(mix.weights.sum()))
+            cells = core.consensus.hooks.partition_view()
+            if cells is not None:  # the scan and the cell of each of its points
+                z, labels = cells
+                g = self._scan(k)["points"]
+                g["cells"] = np.asarray(z, float).reshape(-1, 2)
+                g["cells/labels"] = np.column_stack([np.asarray(labels, float).reshape(-1),
+                                                     np.zeros(len(g["cells"]))])
             particles = core.consensus.hooks.particles()
             if particles is not None:
                 p = np.asarray(particles, float).reshape(-1, 2)
-                self._scan(k)["points"]["particles"] = p[:: max(1, len(p) // PARTICLES_SHOWN)]
+                self._scan(k)["points"]["particles"] = p[:: 1 + len(p) // PARTICLES_SHOWN]
         elif r.kind == "fusion":
             self._set(k, "components/fused", v.get("n_fused"))
             ages = v.get("ages") or {}
@@ -118,11 +134,15 @@ class Observer:
             c = core.consensus.nale.counts
             for what in ("late", "redundant", "too_old", "dropped_late"):
                 self._set(k, f"out_of_sequence/{what}", getattr(c, what))
+            if v.get("round", core.consensus.rounds) < core.consensus.rounds:
+                return  # the rest once a scan, at its last round
             fused = core.consensus.last_fused
             hooks = core.consensus.hooks
-            if fused is not None and hooks.plane is not None:
+            if fused is not None and hooks.plane is not None:  # the pooled scans, a sample
                 self._set(k, "flooding/scans_held", len(fused))
-            elif isinstance(fused, GaussianMixture):  # each round's: the last one stays
+                p = np.asarray(hooks.plane(fused), float).reshape(-1, 2)
+                self._scan(k)["points"]["pooled"] = p[:: 1 + len(p) // POOLED_SHOWN]
+            elif isinstance(fused, GaussianMixture):
                 self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
             view = hooks.pda_view()
             if view is not None and "detector" in view:
@@ -140,6 +160,7 @@ class Observer:
                     self._set(k, f"cost/{what}", value)
         elif r.kind == "ospa":
             self._set(k, f"ospa/{v['which']}", v["value"])
+            self.wants_flush = True
         elif r.kind == "rejected":
             self._set(k, f"rejected/{v['reason']}", core.rejected[v["reason"]])
         elif r.kind == "scan":  # those refused before decoding, by reason
@@ -181,6 +202,7 @@ class Observer:
         """Publish the complete reports once nothing waits (or at the end: every one)."""
         if not self.enabled or not self._pending or not (idle or force):
             return
+        self.wants_flush = False
         for k in self.ready(force):
             msg = self.message(k)
             try:
@@ -191,8 +213,23 @@ class Observer:
 
 
 def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:
-    """The ``n`` heaviest components of ``mix`` (all when it has fewer)."""
-    if len(mix) <= n:
-        return mix
+    """The ``n`` heaviest components of ``mix``, reduced to what the map draws: their
+    position marginals in a 4-D ``[px, vx, py, vy]`` frame (velocity blocks unit), each 2x2
+    block symmetrised and floored at 1e-9 of its trace so that it is positive definite (an
+    IMM's 6-D fused covariance need not be, and the receiver refuses a mixture that is not)."""
     keep = np.argsort(mix.weights)[::-1][:n]
-    return GaussianMixture.trusted(mix.weights[keep], mix.means[keep], mix.covs[keep])
+    c = position_columns(mix.dim)
+    m = len(keep)
+    means = np.zeros((m, 4))
+    means[:, [0, 2]] = mix.means[keep][:, c]
+    P = mix.covs[keep][:, c][:, :, c]
+    P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    floor = 1e-9 * np.maximum(np.trace(P, axis1=1, axis2=2), 1e-9)
+    P = P + floor[:, None, None] * np.eye(2)
+    covs = np.tile(np.eye(4), (m, 1, 1))
+    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (P[:, 0, 0], P[:, 0, 1],
+                                                                  P[:, 1, 0], P[:, 1, 1])
+    if m and not np.all(np.linalg.eigvalsh(P) > 0):  # a degenerate one: not drawn
+        good = np.linalg.eigvalsh(P).min(axis=1) > 0
+        return GaussianMixture.trusted(mix.weights[keep][good], means[good], covs[good])
+    return GaussianMixture.trusted(mix.weights[keep], means, covs)

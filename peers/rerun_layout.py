@@ -181,6 +181,29 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
     )
 
 
+def cell_marks(z: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
+    """A scan ``z (m, 2)`` coloured by cell of its most probable partition (``labels (m,)``):
+    ``(colors (m, 3), extents (c, 33, 2), extent colours)``. One-point cells (the clutter the
+    grid method removed, isolated points) grey; the 2-sigma extents of the cells of 3 or more
+    points in their cell's colour."""
+    z = np.asarray(z, float).reshape(-1, 2)
+    _, inv, counts = np.unique(np.asarray(labels).reshape(-1), return_inverse=True,
+                               return_counts=True)
+    inv = inv.reshape(-1)
+    single = counts[inv] == 1
+    colors = np.array([color_of(i) for i in range(len(counts))], dtype=np.uint8)[inv] \
+        if len(counts) else np.zeros((0, 3), np.uint8)
+    colors[single] = (128, 128, 128)
+    big = np.flatnonzero(counts >= 3)
+    means = np.zeros((len(big), 4))
+    covs = np.zeros((len(big), 4, 4))
+    for i, c in enumerate(big):  # a few cells a scan
+        w = z[inv == c]
+        means[i, [0, 2]] = w.mean(axis=0)
+        covs[i][np.ix_([0, 2], [0, 2])] = np.cov(w.T)
+    return colors, ellipses(means, covs), [color_of(int(c)) for c in big]
+
+
 def north_up(xy: np.ndarray) -> np.ndarray:
     """Map coordinates ``(..., 2)`` for Rerun's y-down 2-D views: y negated, so north is up."""
     out = np.array(xy, dtype=float, copy=True)

@@ -199,7 +199,7 @@ class PeerRuntime(RunOutputs):
             if self.recorder is not None and due is not None and due <= now:
                 self.recorder.tick(now)  # a deadline fires: replay must tick here too
             self._carry_out("tick", self.core.tick, now)
-            if self.observer.enabled:  # else nothing was deferred to draw
+            if self.observer.wants_flush:  # a scan's telemetry may be complete
                 t0 = time.thread_time()
                 self.observer.flush(idle=queue_empty() and not self.core.consensus.busy())
                 self.telemetry.cpu_ms["telemetry"] += (time.thread_time() - t0) * 1e3

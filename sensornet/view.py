@@ -27,8 +27,10 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import msgpack
 import numpy as np
 
+from sensornet.peers.rerun_layout import cell_marks
 from sensornet.peers.rerun_sink import (
     TRUTH_COLOR,
     TrackLabels,
@@ -63,13 +65,29 @@ FLUSH_S = 1.0
 FLUSH_MAX_S = 8.0
 FLUSH_SHARE = 0.25
 MAP_KEEP = 12
-"""Newest scans of one map entity kept per flush: older ones are decimated (counted)."""
+"""Newest scans of one map entity kept per flush while the view is behind (more than
+:data:`BEHIND` / 4 messages waiting): older ones are decimated (counted)."""
 QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
 """Waiting messages above which estimates (the heaviest to draw) are skipped unread."""
 TAIL = 20
 """Scans of each peer's fused tracks kept as its trail."""
+
+
+def later_round(payload: bytes) -> bool:
+    """Whether an estimate-channel message (``E``, ``F``, ``R``: ``[v, type, sender, k,
+    round, ...]``) is of a consensus round after 0, read from its head without decoding the
+    rest (a malformed one: False, the decoder says why)."""
+    try:
+        u = msgpack.Unpacker(max_buffer_size=len(payload) + 1)
+        u.feed(payload)
+        if u.read_array_header() < 5:
+            return False
+        _, _, _, _, rnd = u.unpack(), u.unpack(), u.unpack(), u.unpack(), u.unpack()
+    except Exception:  # msgpack raises several types on bad input
+        return False
+    return type(rnd) is int and rnd > 0
 
 
 def id_color(ids: np.ndarray) -> np.ndarray:
@@ -102,7 +120,8 @@ class Batcher:
     """Rows per entity, flushed as one ``send_columns`` per entity (``rec``: a Rerun
     ``RecordingStream``, or anything with its ``send_columns``; ``rr``: the module)."""
 
-    def __init__(self, rr, rec, map_keep: int = MAP_KEEP) -> None:
+    def __init__(self, rr, rec, map_keep: int | None = None) -> None:
+        """``map_keep``: newest rows of a map entity sent per flush (None: all)."""
         self.rr, self.rec = rr, rec
         self.map_keep = map_keep
         self._rows: dict[str, _Rows] = {}
@@ -131,9 +150,10 @@ class Batcher:
         self._add(path, "points", k, t, (xy, c, -abs(radius), labels))
 
     def strips(self, path: str, k: int, t: float, lines, color, radius: float) -> None:
-        """Polylines (map coordinates), one colour for all."""
-        self._add(path, "strips", k, t, ([north_up(np.asarray(a, float)) for a in lines],
-                                         tuple(int(x) for x in color[:3]), -abs(radius)))
+        """Polylines (map coordinates); ``color`` one ``(3,)`` or one per line."""
+        lines = [north_up(np.asarray(a, float)) for a in lines]
+        c = np.broadcast_to(np.asarray(color, np.uint8).reshape(-1, 3), (len(lines), 3))
+        self._add(path, "strips", k, t, (lines, c, -abs(radius)))
 
     def text(self, path: str, k: int, t: float, message: str, level: str = "INFO") -> None:
         self._add(path, "text", k, t, (message, level))
@@ -150,9 +170,10 @@ class Batcher:
         rows, self._rows = self._rows, {}
         for path, r in rows.items():
             ks, ts, data = r.ks, r.ts, r.rows
-            if r.kind in ("points", "strips") and len(ks) > self.map_keep:
-                self.decimated += len(ks) - self.map_keep
-                ks, ts, data = ks[-self.map_keep:], ts[-self.map_keep:], data[-self.map_keep:]
+            keep = self.map_keep
+            if keep is not None and r.kind in ("points", "strips") and len(ks) > keep:
+                self.decimated += len(ks) - keep
+                ks, ts, data = ks[-keep:], ts[-keep:], data[-keep:]
             self._send(path, r.kind, ks, ts, data)
 
     def _send(self, path: str, kind: str, ks: list, ts: list, data: list) -> None:
@@ -174,9 +195,10 @@ class Batcher:
         elif kind == "strips":
             lengths = [len(d[0]) for d in data]
             lines = [a for d in data for a in d[0]]
-            cols = [*rr.LineStrips2D.columns(strips=lines).partition(lengths),
-                    *rr.LineStrips2D.columns(colors=[d[1] for d in data],
-                                             radii=[d[2] for d in data])]
+            colors = np.concatenate([d[1] for d in data]) if data else np.zeros((0, 3))
+            radii = np.repeat([d[2] for d in data], lengths)
+            cols = [*rr.LineStrips2D.columns(strips=lines, colors=colors,
+                                             radii=radii).partition(lengths)]
         elif kind == "text":
             cols = rr.TextLog.columns(text=[d[0] for d in data], level=[d[1] for d in data])
         else:  # transform
@@ -214,6 +236,8 @@ class ViewState:
         self.truth_paths = TruthPaths()
         self.handled = 0
         self.rejected = 0
+        self.skipped = 0
+        """Estimates of later consensus rounds, left undecoded (not drawn)."""
         self.ended = False
         self.newest_k = 0
 
@@ -233,6 +257,9 @@ class ViewState:
     def receive(self, key: str, payload: bytes) -> None:
         """Decode and draw one message heard on ``key`` (a bad one is counted, never raised)."""
         body = inner(payload) if is_sealed(payload) else payload
+        if "/estimate/" in key and later_round(body):  # only a peer's own (round 0) is drawn
+            self.skipped += 1
+            return
         try:
             if f"/{ROOT_SCANS}/" in key:
                 for sensor, entry in unpack_bundle(body).entries:
@@ -321,7 +348,15 @@ class ViewState:
             level, text = ("WARN", line[5:]) if line.startswith("WARN ") else ("INFO", line)
             self.b.text(f"peers/{n}/events", k, t, text, level)
         for name, z in msg.points.items():
-            self.b.points(f"peers/{n}/{name}", k, t, z, color, 1.0)
+            if name == "cells":  # coloured by cell, with the extents of the larger cells
+                labels = msg.points.get("cells/labels", np.zeros((len(z), 2)))[:, 0]
+                colors, extents, ecolors = cell_marks(z, labels.astype(np.int64))
+                self.b.points(f"peers/{n}/cells/points", k, t, z, colors, 2.5)
+                self.b.strips(f"peers/{n}/cells/extents", k, t, list(extents),
+                              np.asarray(ecolors, np.uint8).reshape(-1, 3), 1.5)
+            elif name != "cells/labels":
+                self.b.points(f"peers/{n}/{name}", k, t, z, color,
+                              2.0 if name == "local" else 1.0)
         if msg.mixture is not None:
             self.mixture(f"peers/{n}", "fused", k, msg.mixture, color)
 
@@ -408,6 +443,7 @@ class LiveView:
 
     def flush(self) -> None:
         t0 = time.monotonic()
+        self.batcher.map_keep = MAP_KEEP if self.q.qsize() > BEHIND // 4 else None
         self.batcher.flush()
         took = time.monotonic() - t0
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:

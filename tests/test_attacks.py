@@ -154,7 +154,8 @@ def test_sigterm_after_a_hostile_scan_exits_at_once_with_a_verified_recording(tm
     assert s1["stop_reason"] == "SIGTERM" and s1["rejected"]["future"] == 3
     assert s1["internal_errors"] == {}
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
-    verify = subprocess.run([exe, "rrd", "verify", str(tmp_path / "rerun" / "peer-s1.rrd")],
+    assert not (tmp_path / "rerun" / "peer-s1.rrd").exists()  # peers log nothing to Rerun
+    verify = subprocess.run([exe, "rrd", "verify", str(tmp_path / "rerun" / "view.rrd")],
                             capture_output=True, text=True, timeout=120,
                             env={**os.environ, "RERUN_ANALYTICS": "0"})
     assert verify.returncode == 0, verify.stderr[-2000:]

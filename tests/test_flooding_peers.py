@@ -263,35 +263,48 @@ def test_offline_flooding_bytes_match_what_the_twin_peers_put_on_the_wire():
         assert wire == pytest.approx(offline[i], rel=0.01), n
 
 
-class _RecordingSink:
-    enabled = True
-
-    def __init__(self):
-        self.calls = []
-
-    def __getattr__(self, name):
-        return lambda *a, **kw: self.calls.append((name, *a))
-
-
 def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
+    """A flooding peer's telemetry carries its cost, the scans it holds and a sample of the
+    pooled points; the view draws them, and its own scan from its round-0 forward."""
+    import rerun as rr
     from sensornet.peers.core import Publish, Record
     from sensornet.peers.observer import Observer
+    from sensornet.protocol.codec import decode, encode
+    from sensornet.protocol.messages import Forward, ScanSet
+
+    from sensornet.view import Batcher, ViewState
 
     scn = _line(**{"scenario.num_scans": 3})
-    sink = _RecordingSink()
     res = run_twin(scn, 0)
     core = res.peers["s3"]
-    obs = Observer(core, sink, 0, 1.0)
+    sent = []
+    obs = Observer(core, 1.0).attach(sent.append)
     obs.record(Record("local", 3, {"n_points": 12}))
-    obs.record(Record("fusion", 3, {"round": 4, "n_inputs": 2, "n_fused": 5, "ages": {}}))
+    obs.record(Record("fusion", 3, {"round": core.consensus.rounds, "n_inputs": 2,
+                                    "n_fused": 5, "ages": {}}))
     obs.record(Record("cost", 3, {"tuples": 120, "tuples_published": 60, "bytes": 700}))
     obs.flush(idle=True, force=True)
-    paths = {c[1]: c for c in sink.calls}
-    assert paths["metrics/cost/s3/tuples"][2] == 120
-    assert paths["metrics/cost/s3/bytes"][2] == 700
-    assert paths["metrics/flooding/s3/scans_held"][2] == 5
-    assert paths["peers/s3/pooled"][2].shape[1] == 2  # the pooled points in the plane
-    assert paths["peers/s3/local"][0] == "points"
-    assert not any(c[0] == "mixture" for c in sink.calls)
+    (msg,) = [decode(b) for b in sent]
+    assert msg.values["cost/tuples"] == 120 and msg.values["cost/bytes"] == 700
+    assert msg.values["flooding/scans_held"] == 5
+    assert msg.points["pooled"].shape[1] == 2 and len(msg.points["pooled"])  # in the plane
+    assert msg.mixture is None  # raw scans: no mixture to draw
+    calls = {}
+
+    class Rec:
+        def send_columns(self, path, indexes, columns):
+            calls[path] = list(columns)
+
+    view = ViewState(Batcher(rr, Rec()), scn.sensor_names)
+    view.message(msg)
+    own = ScanSet({"s3": np.ones((4, 2)), "s2": np.zeros((2, 2))})
+    view.receive("sensornet/n/estimate/s3", encode(Forward("s3", 3, own, round=0)))
+    view.b.flush()
+    for path in ("metrics/cost/s3/tuples", "metrics/cost/s3/bytes",
+                 "metrics/flooding/s3/scans_held", "peers/s3/pooled", "peers/s3/local"):
+        assert path in calls, path
+    own_points = calls["peers/s3/local"][0].as_arrow_array().to_pylist()[0]
+    assert len(own_points) == 4  # its own scan only
+    assert not any("means" in p for p in calls)
     out = [o for o in core.finish(99.0) if isinstance(o, Publish)]
     assert out == []  # nothing pending after the run

@@ -109,31 +109,17 @@ def test_experiment_cli_refuses_bad_flags(capsys):
     assert "--runs" in capsys.readouterr().err
 
 
-class _Sink:
-    enabled = True
-
-    def __init__(self):
-        self.calls = []
-
-    def time(self, k, t):
-        pass
-
-    def points(self, path, xy, color=None, radius=4.0, labels=None):
-        self.calls.append(("points", path, np.asarray(xy), color))
-
-    def strips(self, path, lines, color=None):
-        self.calls.append(("strips", path, lines, color))
-
-    def mixture(self, path, mix, color):
-        pass
-
-    def scalar(self, path, value):
-        pass
-
-
 def test_rerun_view_colours_cells_and_greys_one_point_cells():
+    """The peer sends its scan's cells in its telemetry (it logs nothing to Rerun); the view
+    colours them by cell, one-point cells grey, with the extents of the cells of 3+ points."""
+    import rerun as rr
+    from sensornet.peers.core import Record
     from sensornet.peers.observer import Observer
+    from sensornet.peers.rerun_layout import cell_marks
+    from sensornet.protocol.codec import decode
     from sensornet.sim.run.peers import make_peer
+
+    from sensornet.view import Batcher, ViewState
 
     scn = load_scenario("seed002", {"extended.partition": "grid-spectral"})
     core = make_peer(scn, "s1")
@@ -144,13 +130,29 @@ def test_rerun_view_colours_cells_and_greys_one_point_cells():
         est.step(1, scans[0][k - 1])
     z, labels = est.partition_view()
     assert len(z) == len(labels) == len(scans[0][2])
-    sink = _Sink()
-    Observer(core, sink, 0, 1.0)._cells(z, labels)
-    (_, path, xy, colors), (_, epath, lines, _) = sink.calls
-    assert path == "peers/s1/cells/points" and epath == "peers/s1/cells/extents"
+    colors, extents, extent_colors = cell_marks(z, labels)
     single = np.bincount(labels)[labels] == 1
     assert single.any() and (colors[single] == 128).all() and not (colors[~single] == 128).all()
-    assert len(lines) == (np.bincount(labels) >= 3).sum() >= 1
+    assert len(extents) == len(extent_colors) == (np.bincount(labels) >= 3).sum() >= 1
+    sent = []
+    obs = Observer(core, 1.0).attach(sent.append)
+    obs.record(Record("local", 3, {"n_components": 1}))
+    obs.flush(idle=True, force=True)
+    msg = decode(sent[0])
+    np.testing.assert_array_equal(msg.points["cells"], z)
+    calls = []
+
+    class Rec:
+        def send_columns(self, path, indexes, columns):
+            calls.append((path, list(columns)))
+
+    view = ViewState(Batcher(rr, Rec()), ["s1"])
+    view.message(msg)
+    view.b.flush()
+    drawn = dict(calls)
+    assert {"peers/s1/cells/points", "peers/s1/cells/extents"} <= set(drawn)
+    strips = drawn["peers/s1/cells/extents"][0].as_arrow_array().to_pylist()[0]
+    assert len(strips) == len(extents)
 
 
 def test_sensornet_experiment_seed002_runs_the_partitioner_comparison(capsys):

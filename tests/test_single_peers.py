@@ -68,7 +68,7 @@ def test_two_imm_pf_peers_with_latency_as_processes(tmp_path):
         assert s["mean_ospa_fused"] < 0.7 * s["mean_ospa_local"], (name, s)
         assert s["injected_faults"]["reorder"] + s["injected_faults"]["deliver"] > 0
     exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
-    text = subprocess.run([exe, "rrd", "print", str(tmp_path / "rerun" / "peer-r1.rrd")],
+    text = subprocess.run([exe, "rrd", "print", str(tmp_path / "rerun" / "view.rrd")],
                           capture_output=True, text=True, timeout=120,
                           env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
     for entity in ("/peers/r1/particles", "/metrics/model_probability/r1/CA",

@@ -49,6 +49,9 @@ from sensornet.sim.run.run_summary import (  # noqa: F401  (the names other modu
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import adjacency
 
+VIEW_NICE = 10
+"""The view process's nice value: on a busy machine it falls behind, not the peers."""
+
 
 def _cli() -> list[str]:
     return [sys.executable, "-m", "sensornet"]
@@ -147,6 +150,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         cfg = common[common.index("--config") + 1] if "--config" in common else None
         cmds = {"view": [*_cli(), "view", network, "--connect", eps["world"], *extra_connect,
                          "--scenario", source, *sets, "--run-id", run_id, "--until-end",
+                         "--nice", str(VIEW_NICE),
                          *(["--config", cfg] if cfg else []),
                          *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),
                          *(["--viewer", viewer] if viewer else [])], **cmds}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from pathlib import Path
@@ -49,6 +50,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     if out is None and viewer is None:
         raise UserError("nothing to show to: give --out FILE.rrd and/or --viewer")
+    if args.nice:
+        os.nice(args.nice)  # the view yields the CPU to the network's processes
     found = _scenario(args)
     peers: list[str] = []
     layout = {"single_target": False, "imm": False}
@@ -105,7 +108,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     st, b = view.state, view.batcher
     cpu = cpu_seconds() - cpu0
     scans = max(1, st.newest_k)
-    print(f"view: {st.handled} messages drawn ({st.rejected} undecodable), {view.dropped} "
+    print(f"view: {st.handled} messages drawn ({st.rejected} undecodable, {st.skipped} "
+          f"later-round estimates not drawn), {view.dropped} "
           f"dropped, {view.skipped} estimates skipped, {b.decimated} map frames decimated; "
           f"{b.calls} send_columns calls for {b.rows_sent} rows; CPU {cpu:.2f} s "
           f"({cpu / scans * 1e3:.1f} ms per scan over {st.newest_k} scans)",

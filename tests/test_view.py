@@ -1,0 +1,305 @@
+"""The live view costs the network nothing (issue 38): peers publish one compact Telemetry
+message a scan and log nothing to Rerun; ``sensornet view`` subscribes and batches its logging
+(one ``send_columns`` per entity per flush), decimating its own work when behind."""
+
+from __future__ import annotations
+
+import queue
+import subprocess
+import sys
+
+import msgpack
+import numpy as np
+import pytest
+import rerun as rr
+from sensornet.peers.core import Publish, Record
+from sensornet.peers.observer import WAIT_SCANS, Observer
+from sensornet.peers.rerun_sink import color_of, lighter
+from sensornet.peers.session import endpoint, free_port
+from sensornet.protocol.bundle import pack_bundles
+from sensornet.protocol.codec import Rejected, decode, encode
+from sensornet.protocol.messages import Estimate, Forward, Scan, ScanSet, Telemetry, Tracks, Truth
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.mixture import GaussianMixture
+
+from sensornet.cli import main
+from sensornet.view import BEHIND, Batcher, LiveView, ViewState, id_color, later_round
+from tests.processes import env, rerun_exe, stop_all, wait_for
+
+
+class _Rec:
+    """A recording stream that keeps what it is sent: (entity, scan indexes, columns)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, list[int], list]] = []
+
+    def send_columns(self, path, indexes, columns):
+        scans = indexes[0].as_arrow_array().to_pylist()
+        self.calls.append((path, scans, list(columns)))
+
+    def by_path(self) -> dict:
+        return {p: (s, c) for p, s, c in self.calls}
+
+
+def _mix(n: int, x0: float = 0.0) -> GaussianMixture:
+    means = np.zeros((n, 4))
+    means[:, 0] = x0 + 10.0 * np.arange(n)
+    return GaussianMixture.trusted(np.full(n, 0.9), means, np.tile(np.eye(4), (n, 1, 1)))
+
+
+def test_batcher_sends_one_call_per_entity_and_decimates_only_map_rows():
+    rec = _Rec()
+    b = Batcher(rr, rec)
+    for k in range(1, 31):
+        b.scalar("metrics/latency_ms/s1", k, 0.1 * k, float(k))
+        b.points("peers/s1/tracks", k, 0.1 * k, np.full((k % 3, 2), float(k)), (1, 2, 3), 5.0,
+                 labels=[f"s1/{i}" for i in range(k % 3)])
+    b.scalar("metrics/age/s1", 1, 0.1, float("nan"))  # not finite: no row
+    assert b.pending() == 60
+    b.flush()
+    calls = rec.by_path()
+    assert len(rec.calls) == 2 and set(calls) == {"metrics/latency_ms/s1", "peers/s1/tracks"}
+    assert calls["metrics/latency_ms/s1"][0] == list(range(1, 31))
+    assert calls["peers/s1/tracks"][0] == list(range(1, 31))  # not behind: every frame
+    assert b.decimated == 0 and b.pending() == 0
+    b.map_keep = 4  # behind: map frames beyond the newest 4 left out, scalars never
+    for k in range(31, 41):
+        b.scalar("metrics/latency_ms/s1", k, 0.1 * k, 1.0)
+        b.points("peers/s1/tracks", k, 0.1 * k, np.zeros((1, 2)), (1, 2, 3), 5.0)
+    b.flush()
+    last = {p: s for p, s, _ in rec.calls[2:]}
+    assert last["metrics/latency_ms/s1"] == list(range(31, 41))
+    assert last["peers/s1/tracks"] == [37, 38, 39, 40] and b.decimated == 6
+    assert b.calls == 4 and b.rows_sent == 30 + 30 + 10 + 4
+
+
+@pytest.mark.network  # starts the rerun CLI to verify and print the file
+def test_batched_columns_write_a_recording_rerun_reads(tmp_path):
+    """The columns are valid Rerun data: the file verifies and holds each entity."""
+    path = tmp_path / "v.rrd"
+    stream = rr.RecordingStream("sensornet-test", recording_id="view-test")
+    stream.set_sinks(rr.FileSink(str(path)))
+    state = ViewState(Batcher(rr, stream), ["s1", "s2"], 0.5)
+    for k in range(1, 6):
+        state.message(Truth(k, np.array([3, 4]), np.array([[0.0, 1, 0, 1], [50, 0, 60, 0]])))
+        state.message(Tracks("s1", k, np.array([[1.0, 1, 0, 1]])))
+        state.message(Estimate("s2", k, _mix(2)))
+        state.message(Telemetry("s1", k, {"latency_ms": 5.0, "components/fused": 3},
+                                ("s2 joined",), {"particles": np.ones((4, 2))}, _mix(1)))
+    state.b.flush()
+    stream.flush()
+    stream.disconnect()
+    check = subprocess.run([rerun_exe(), "rrd", "verify", str(path)], capture_output=True,
+                           text=True, timeout=120, env=env())
+    assert check.returncode == 0, check.stderr
+    text = subprocess.run([rerun_exe(), "rrd", "print", str(path)], capture_output=True,
+                          text=True, timeout=120, env=env()).stdout
+    for entity in ("/world/truth", "/world/truth/paths", "/peers/s1/tracks", "/peers/s1/tail",
+                   "/peers/s2/local/ellipses", "/peers/s1/fused/means", "/peers/s1/particles",
+                   "/metrics/latency_ms/s1", "/metrics/components/s1/fused",
+                   "/peers/s1/events"):
+        assert entity in text, entity
+
+
+def test_view_state_draws_what_the_network_carries():
+    rec = _Rec()
+    heard = []
+    state = ViewState(Batcher(rr, rec), ["s1", "s2"], scan_period=2.0,
+                      on_new_peer=lambda n, i: heard.append((n, i)))
+    state.message(Truth(3, np.array([7]), np.array([[100.0, 0, 200, 0]])))
+    state.message(Tracks("s2", 3, np.array([[1.0, 0, 2, 0], [5.0, 0, 6, 0]])))
+    state.message(Tracks("s2", 4, np.array([[5.5, 0, 6, 0], [1.2, 0, 2, 0]])))
+    state.message(Estimate("s1", 3, _mix(3)))
+    state.message(Telemetry("s1", 3, {"out_of_sequence/late": 2.0, "age": 1.0,
+                                      "trust/s2/weight": 0.5}, ("WARN s2 a -> b (score 3)",)))
+    state.message(Tracks("s9", 3, np.zeros((0, 4))))  # not in the scenario: the next colour
+    state.b.flush()
+    calls = rec.by_path()
+    assert heard == [("s9", 2)]
+    assert calls["world/truth"][0] == [3] and calls["metrics/cardinality/truth"][0] == [3]
+    assert calls["peers/s2/tracks"][0] == [3, 4]
+    # the same two tracks in the other order keep their numbers (TrackLabels)
+    labels = [c for c in calls["peers/s2/tracks"][1]
+              if "labels" in str(c.component_descriptor())]
+    assert labels[0].as_arrow_array().to_pylist() == [["s2/0", "s2/1"], ["s2/1", "s2/0"]]
+    for path in ("metrics/out_of_sequence/s1/late", "metrics/age/s1",
+                 "metrics/trust/s1/s2/weight", "peers/s1/events", "metrics/cardinality/s2/fused",
+                 "peers/s1/local/means", "peers/s1/local/ellipses"):
+        assert path in calls, path
+    # local dashed: 3 ellipses of 33 points as 16 two-point strips each
+    strips = calls["peers/s1/local/ellipses"][1][0].as_arrow_array().to_pylist()
+    assert len(strips[0]) == 3 * 16
+    colors = [c for c in calls["peers/s1/local/means"][1] if "colors" in
+              str(c.component_descriptor())][0].as_arrow_array().to_pylist()[0]
+    r, g, b = lighter(color_of(0))
+    assert colors[0] == (r << 24) | (g << 16) | (b << 8) | 255
+
+
+def test_labelled_tracks_get_one_colour_and_label_per_id_at_every_peer():
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), ["s1", "s2"])
+    ids = np.array([[1, 5, 0], [2, 9, 1]])
+    X = np.array([[0.0, 0, 0, 0], [10.0, 0, 10, 0]])
+    state.message(Tracks("s1", 5, X, ids=ids))
+    state.message(Tracks("s2", 5, X[::-1], ids=ids[::-1]))
+    state.b.flush()
+    calls = rec.by_path()
+
+    def column(path, name):
+        return [c for c in calls[path][1] if name in str(c.component_descriptor())][0] \
+            .as_arrow_array().to_pylist()[0]
+
+    c1, c2 = column("peers/s1/tracks", "colors"), column("peers/s2/tracks", "colors")
+    assert c1 == c2[::-1] and c1[0] != c1[1]
+    assert column("peers/s1/tracks", "labels") == ["1.5.0", "2.9.1"]
+    np.testing.assert_array_equal(id_color(ids), id_color(ids.copy()))  # stable
+
+
+def test_a_bundle_and_later_rounds():
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), ["a", "b"])
+    entries = [(n, encode(Scan(n, 2, np.ones((3, 2))))) for n in ("a", "b")]
+    (bundle,) = pack_bundles(2, entries)
+    state.receive("sensornet/net/scans/h1", bundle)
+    later = encode(Forward("a", 2, ScanSet({"a": np.ones((2, 2))}), round=1))
+    first = encode(Forward("a", 2, ScanSet({"a": np.ones((2, 2))}), round=0))
+    assert later_round(later) and not later_round(first) and not later_round(b"\x93junk")
+    state.receive("sensornet/net/estimate/a", later)
+    state.receive("sensornet/net/estimate/a", first)
+    state.receive("sensornet/net/tracks/a", b"junk")
+    state.b.flush()
+    assert {"world/scans/a", "world/scans/b", "peers/a/local"} <= set(rec.by_path())
+    assert (state.skipped, state.rejected, state.handled) == (1, 1, 3)
+
+
+class _Sample:
+    def __init__(self, key: str, payload: bytes) -> None:
+        self.key_expr, self.payload = key, type("P", (), {"to_bytes": lambda s: payload})()
+
+
+def test_a_view_behind_drops_and_skips_its_own_work_and_says_so():
+    said = []
+    view = LiveView("net", lambda b: ViewState(b, ["s1"]), rr, _Rec(), say=said.append)
+    view.q = queue.Queue(maxsize=BEHIND + 10)
+    est = encode(Estimate("s1", 1, _mix(1)))
+    tracks = encode(Tracks("s1", 1, np.zeros((1, 4))))
+    for i in range(BEHIND + 20):  # a burst larger than the queue: the rest dropped on arrival
+        view._on_sample(_Sample("sensornet/net/estimate/s1" if i % 2 else
+                                "sensornet/net/tracks/s1", est if i % 2 else tracks))
+    assert view.dropped == 10
+    view.drain(30.0)
+    assert view.q.empty() and view.skipped > 0
+    assert view.state.handled + view.skipped == BEHIND + 10
+    view.note(final=True)
+    assert len(said) == 1 and "10 messages dropped" in said[0] and "peers are not" in said[0]
+
+
+def test_telemetry_round_trip_and_refusals():
+    msg = Telemetry("s1", 4, {"ospa/fused": 3.5, "age": 2.0}, ("s2 left",),
+                    {"particles": np.arange(6.0).reshape(3, 2)}, _mix(2))
+    back = decode(encode(msg))
+    assert back.values == {"ospa/fused": 3.5, "age": 2.0} and back.events == ("s2 left",)
+    np.testing.assert_array_equal(back.points["particles"], msg.points["particles"])
+    np.testing.assert_array_equal(back.mixture.means, msg.mixture.means)
+    assert decode(encode(Telemetry("s1", 4))).mixture is None
+    body = msgpack.unpackb(encode(msg))
+    body[9] = [5]  # point counts that do not add up
+    with pytest.raises(Rejected) as exc:
+        decode(msgpack.packb(body, use_bin_type=True))
+    assert exc.value.reason == "shape"
+
+
+def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
+    scn = load_scenario("seed000", {"scenario.num_scans": 3})
+    core = make_peer(scn, scn.sensor_names[0], score_truth=False)  # truth from the network
+    assert core.wants_truth
+    sent: list[bytes] = []
+    obs = Observer(core, 1.0).attach(sent.append)
+    tr = Tracks(core.name, 7, np.zeros((2, 4)))
+    obs.record(Record("local", 7, {"n_components": 9, "n_published": 4}), 1.5)
+    obs.record(Record("estimate", 7, {"sender": "x"}))  # not read
+    obs.published(Publish("tracks", 7, b"", tr), 12.0)
+    obs.flush(idle=False)
+    obs.flush(idle=True)
+    assert sent == []  # the peer scores OSPA: its report waits for it
+    obs.record(Record("ospa", 7, {"which": "fused", "value": 4.0}))
+    obs.flush(idle=True)
+    (msg,) = [decode(b) for b in sent]
+    assert msg.k == 7 and msg.values["latency_ms"] == 12.0
+    assert msg.values["components/before_level2"] == 9 and msg.values["ospa/fused"] == 4.0
+    assert msg.values["compute_ms/filter"] == 1.5
+    obs.record(Record("local", 8, {"n_components": 1}))  # no OSPA ever: sent all the same
+    for k in range(9, 9 + WAIT_SCANS):
+        obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((0, 4)))), 1.0)
+    obs.flush(idle=True)
+    assert 8 in [decode(b).k for b in sent[1:]]
+
+
+@pytest.mark.network
+def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
+    """``sensornet run`` (view on): world and peers write no .rrd, the view's recording holds
+    truth, scans, tracks, local and fused marks and the health series. Then a view attached by
+    hand to a network started by someone else, detached after a few seconds: the peers handle
+    every scan all the same."""
+    out = tmp_path / "run"
+    run = subprocess.run(
+        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out),
+         "--set", "scenario.num_scans=15", "--speed", "5"], cwd=tmp_path, env=env(),
+        capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert sorted(p.name for p in (out / "rerun").glob("*.rrd")) == ["view.rrd"]
+    view_log = (out / "logs" / "view.log").read_text()
+    assert "messages drawn" in view_log, view_log
+    text = subprocess.run([rerun_exe(), "rrd", "print", str(out / "recording.rrd")],
+                          capture_output=True, text=True, timeout=120, env=env()).stdout
+    for entity in ["/world/truth", "/world/scans/s1", "/world/sensors", "/legend"] + [
+            f"/peers/{p}/{what}" for p in ("s1", "s2", "s3")
+            for what in ("tracks", "local/means", "fused/ellipses")] + [
+            f"/metrics/{m}/s2" for m in ("latency_ms", "age")] + [
+            f"/metrics/{m}/s3/{w}" for m, w in (("ospa", "fused"), ("cardinality", "local"),
+                                               ("compute_ms", "fusion"))]:
+        assert entity in text, entity
+    for name in ("s1", "s2", "s3"):
+        s = (out / f"peer-{name}.json").read_text()
+        assert '"rerun"' not in s and '"telemetry"' in s  # the peers logged nothing
+
+    ep = endpoint(free_port())
+    others = subprocess.Popen(
+        [sys.executable, "-m", "sensornet", "run", "--network", "byhand", "--listen", ep,
+         "--no-rerun", "--set", "scenario.num_scans=60", "--speed", "5",
+         "--out", str(tmp_path / "others")], cwd=tmp_path, env=env(),
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        world_log = tmp_path / "others" / "logs" / "world.log"
+        wait_for(lambda: world_log.is_file() and "starting" in world_log.read_text(), 120,
+                 "the world's start")
+        rrd = tmp_path / "mine.rrd"
+        view = subprocess.run(
+            [sys.executable, "-m", "sensornet", "view", "byhand", "--connect", ep,
+             "--scenario", "seed000", "--duration", "3", "--out", str(rrd)], cwd=tmp_path,
+            env=env(), capture_output=True, text=True, timeout=120)
+        assert view.returncode == 0, view.stderr[-2000:]
+        assert "messages drawn" in view.stderr
+        others.wait(timeout=240)
+        assert others.returncode == 0
+        text = subprocess.run([rerun_exe(), "rrd", "print", str(rrd)], capture_output=True,
+                              text=True, timeout=120, env=env()).stdout
+        assert "/world/truth" in text and "/peers/s1/tracks" in text
+        scn = load_scenario("seed000", {"scenario.num_scans": 60})
+        for name in scn.sensor_names:  # attached and detached: no scan lost
+            s = (tmp_path / "others" / f"peer-{name}.json").read_text()
+            assert '"scans": 60' in s, name
+    finally:
+        stop_all([others])
+
+
+def test_view_command_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit):
+        main(["view", "bad/name"])
+    capsys.readouterr()
+    assert main(["view", "net"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--connect" in err[0]
+    assert main(["view", "net", "--connect", "tcp/127.0.0.1:1"]) == 2
+    assert "--out" in capsys.readouterr().err
