@@ -67,7 +67,7 @@ TARGETS = (
 )
 BIRTH_WEIGHT = 0.1
 BIRTH_COV = np.diag([100.0, 2500.0, 100.0, 2500.0])
-# the seed paper's printed birth model (seed 000 §10; sim.scenario.PAPER_BIRTH)
+# the seed paper's printed birth model (seed 000 §10; sim.scenario.model.PAPER_BIRTH)
 PAPER_BIRTH_MEANS = ((250.0, 0.0, 250.0, 0.0), (-250.0, 0.0, -250.0, 0.0))
 PAPER_BIRTH_COV = np.diag([100.0, 25.0, 100.0, 25.0])
 

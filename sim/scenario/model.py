@@ -44,7 +44,7 @@ FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
 """What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
 FTC baseline, or the iterated-corrector GM-PHD (``clustering.estimator``)."""
 LIE_KINDS = ("empty", "shifted", "inflated", "phantoms", "biased", "stuck")
-"""The lies ``fusion.lie`` names (the test hook; what each does: :mod:`sim.lies`)."""
+"""The lies ``fusion.lie`` names (the test hook; what each does: :mod:`sim.run.lies`)."""
 PARTITIONS = ("distance", "grid-spectral")
 K_RULES = ("eigengap", "core-regions")
 DISTANCE_UNITS = ("sigma", "unit-box")
@@ -229,7 +229,7 @@ class FusionSpec:
     """How local estimates are fused (§3, §4 level 2)."""
 
     rule: str = option("hybrid", doc="`\"hybrid\"` (AA target weights, GCI locations: "
-                                     "`tracking.fusion.hybrid_fuse`), `\"gci\"`, `\"aa\"` "
+                                     "`tracking.fusion_rules.hybrid_fuse`), `\"gci\"`, `\"aa\"` "
                                      "(arithmetic average), `\"ratio\"` (the particle rule, IMM "
                                      "peers) or `\"none\"` (local filters only); each peer kind "
                                      "takes some.", choices=FUSION_RULES)
@@ -260,7 +260,7 @@ class FusionSpec:
                                           "mass the others' median) where that passes the test "
                                           "(`TrustConfig.repair`).")
     lie: str = option("", doc="Test hook: `\"PEER:KIND\"` makes that peer publish lie KIND of "
-                              "`sim.lies` in every estimate (a member lying with its own valid "
+                              "`sim.run.lies` in every estimate (a member lying with its own valid "
                               "key), in the twin and as a process.", custom="no lie")
 
 
@@ -361,8 +361,9 @@ class PdaSpec:
 
     tables: str = option("{}", doc="The seed-003 tables the PDA filters and the "
                                    "world's draws read (`scenario`, `sensors`, `clutter`, "
-                                   "`filters`, `detector`, `fuzzy`, `metrics`: `sim.seed003`), "
-                                   "held as canonical JSON so the scenario stays hashable.",
+                                   "`filters`, `detector`, `fuzzy`, `metrics`: "
+                                   "`sim.world.seed003`), held as canonical JSON so the "
+                                   "scenario stays hashable.",
                          key="config", custom="an empty table")
     mode: str = option("meas", doc="`\"meas\"`: measurement sharing with the sequential update "
                                    "(the paper's scheme); `\"ci\"`: estimate sharing fused by "

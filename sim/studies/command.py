@@ -1,5 +1,5 @@
-"""``python -m sensornet.sim.seedNNN``: a study's own command line, a thin wrapper over the Study
-path.
+"""``python -m sensornet.sim.studies.seedNNN.montecarlo``: a study's own command line, a thin
+wrapper over the Study path.
 
 The flags every study's command line shares are made here; each study module adds its own and
 turns them into a :class:`~sim.studies.base.Request` (its extra choices in ``options``), and
@@ -22,10 +22,13 @@ from sensornet.tracking.idpc import MissingBaseline
 
 def parser(name: str, doc: str | None, runs: int, jobs: bool = True,
            set_help: str | None = "override a scenario value (TOML value), e.g. "
-                                  "fusion.rule=aa (repeatable)") -> argparse.ArgumentParser:
+                                  "fusion.rule=aa (repeatable)",
+           module: str | None = None) -> argparse.ArgumentParser:
     """``--runs``, ``--first-run``, ``--jobs`` (unless the study times its methods in one
-    process), ``--set`` (unless ``set_help`` is None: no scenario file) and ``--quiet``."""
-    ap = argparse.ArgumentParser(prog=f"python -m sensornet.sim.{name}",
+    process), ``--set`` (unless ``set_help`` is None: no scenario file) and ``--quiet``; the
+    usage names ``module`` (default ``sensornet.sim.studies.NAME.montecarlo``)."""
+    module = module or f"sensornet.sim.studies.{name}.montecarlo"
+    ap = argparse.ArgumentParser(prog=f"python -m {module}",
                                  description=(doc or "").split("\n")[0])
     ap.add_argument("--runs", type=int, default=runs, help=f"Monte Carlo runs (default {runs})")
     ap.add_argument("--first-run", type=int, default=0, help="index of the first run")

@@ -55,7 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sensornet.sim.studies.seed003.peers --runs 200 --jobs 2``: the peer modes'
     table."""
     p = command.parser("seed003_peers", seed003_peers.__doc__, runs=200,
-                       set_help="override a setting of the seed003 file (TOML value)")
+                       set_help="override a setting of the seed003 file (TOML value)",
+                       module="sensornet.sim.studies.seed003.peers")
     p.add_argument("--method", default="IMM-PDAF", choices=seed003.METHODS)
     a = p.parse_args(argv)
     try:
