@@ -96,9 +96,22 @@ def test_every_plot_is_in_exactly_the_tick_its_beam_crossing_falls_in():
         swept = T / radar.period_s * 360
         off = (az - beam_lo) % 360
         assert np.all((off <= swept + 1) | (off >= 359)), spec.name
-        # the scan of tick k is the tick's plots in the sensor's kind (range-bearing here)
+        # the scan of tick k is the tick's plots in the sensor's kind (x-y here)
         k = 5
-        np.testing.assert_array_equal(per_tick[k - 1], plots.z[plots.tick == k])
+        np.testing.assert_array_equal(per_tick[k - 1], plots.z_xy[plots.tick == k])
+        # and the filters' beam model gives every aircraft plot of a tick a Pd > 0 in that
+        # tick (at the plot: the sector the world swept), and 0 to the opposite azimuth
+        beam = make_filter(scn, [spec.name]).beams[0]
+        real = plots.truth != ""
+        for k in range(1, K + 1):
+            sel = real & (plots.tick == k)
+            states = np.zeros((sel.sum(), 4))
+            states[:, [0, 2]] = plots.z_xy[sel]
+            assert np.all(beam.detection(k, states) > 0), (spec.name, k)
+            opposite = np.zeros((sel.sum(), 4))
+            opposite[:, [0, 2]] = 2 * site - plots.z_xy[sel]
+            if T / radar.period_s < 0.45:
+                assert np.all(beam.detection(k, opposite) == 0), (spec.name, k)
 
 
 def test_tick_edges_and_snapshot_sensors():
@@ -137,7 +150,11 @@ def test_the_alignment_error_is_the_distance_flown_since_the_plot():
 
 
 def test_measurement_birth_at_unexplained_plots_only():
-    scn = _scn()
+    doc = _doc()
+    cdg = doc["sensors"][0]
+    cdg["kind"] = "range-bearing"
+    del cdg["plot_sigma"]
+    scn = load_document(doc, "paris.toml", SHORT)
     f = make_filter(scn, ["cdg"])
     assert isinstance(f, MeasurementBirthGMPHD) and len(f.birth) == 0
     model = sensor_params(scn, "cdg").model
@@ -218,11 +235,15 @@ def test_bad_keys_are_one_line_errors_naming_them():
     assert "'sensors[0].rotation_period' must be > 0" in _fail(
         _doc(), {"sensors.cdg.rotation_period": 0.0})
     assert "'sensors[0].plot_sigma' is only for linear" in _fail(
-        _doc(), {"sensors.cdg.plot_sigma": 50.0})
-    assert "missing required key 'sensors[0].plot_sigma'" in _fail(
-        _doc(), {"sensors.cdg.kind": "linear"})
+        _doc(), {"sensors.cdg.kind": "range-bearing"})
+    d = copy.deepcopy(doc)
+    del d["sensors"][3]["plot_sigma"]
+    assert "missing required key 'sensors[3].plot_sigma'" in _fail(d)
+    d = copy.deepcopy(doc)
+    d["sensors"][0]["kind"] = "range-bearing"
+    del d["sensors"][0]["plot_sigma"]
     assert "'sensors[0].rotation_period' is only for recorded traffic" in _fail(
-        _doc(), {"scenario.truth": "straight"})
+        d, {"scenario.truth": "straight"})
     assert "'birth.measurements.gate' must be > 0" in _fail(
         _doc(), {"birth.measurements.gate": 0.0})
     # a window longer than the recording: one line naming the keys, at the truth

@@ -128,7 +128,9 @@ class SensorSpec:
         None, doc="Recorded traffic (`truth = \"recorded\"`): the radar's rotation period; its "
                   "plots are made as the beam crosses each aircraft and go to the fusion tick "
                   "`(t_(k-1), t_k]` they fall in, so the filters' `Pd` is `detection_probability "
-                  "x min(1, scan_period / rotation_period)` and `clutter_rate` is per rotation. "
+                  "x min(1, scan_period / rotation_period)` (GM-PHD peers with `birth.model = "
+                  "\"measurements\"`: per component, the beam's sector and the range curve, "
+                  "`sim.world.birth.Beam`) and `clutter_rate` is per rotation. "
                   "Absent: a snapshot of every aircraft at each tick.", unit="s", check=POSITIVE)
     phase: float | None = option(
         None, doc="Recorded traffic: rotations start at `start + phase + j rotation_period`; "

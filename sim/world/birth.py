@@ -8,6 +8,10 @@ plot gives one component of a fixed weight, zero-velocity mean at the plot, the 
 position covariance and ``birth_speed^2`` per velocity axis. The births enter at the next
 prediction (so a target's first plot never updates its own birth).
 
+With ``beams`` (rotating radars of recorded traffic, :class:`Beam`), each component's ``Pd``
+in a scan is the radar's range curve inside the sector the beam swept in that scan and 0
+outside it (the update takes a ``(n,)`` ``Pd``), instead of the sensor's one number.
+
 The filter keeps the births of its last correction (``pending``): one filter per peer, stepped
 by ``correct(predict(...))`` or ``tracking.gmphd_batch.correct_parents`` (which calls
 :meth:`MeasurementBirthGMPHD.correct_parents`); a peer host never stacks its steps.
@@ -15,16 +19,48 @@ by ``correct(predict(...))`` or ``tracking.gmphd_batch.correct_parents`` (which 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from sensornet.sim.traffic.radar import RotatingRadar, _default_phase
 from sensornet.tracking.gmphd import GMPHDFilter, predict, update_parents
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
 
+R50_FRACTION = 0.8
+"""A radar's ``Pd`` is half its ``detection_probability`` at this fraction of ``max_range``."""
 HEAVY = 0.1
 """Components lighter than this do not explain a plot away."""
+
+
+@dataclass(frozen=True)
+class Beam:
+    """A rotating radar seen by the filter (``sim.traffic.recorded``): in the scan interval
+    ``(t_(k-1), t_k]`` (``t_k = k T`` from the run's origin) its beam sweeps the compass
+    azimuths from ``((t_(k-1) - phase) / period) 360`` degrees on for ``T / period`` of a turn,
+    and only aircraft there can be detected, with ``Pd(r)`` falling with range as the world's
+    (``sim.traffic.radar.RotatingRadar.pd`` on the horizontal range)."""
+
+    period: float
+    phase: float
+    T: float
+    site: tuple[float, float]
+    pd: object
+    """``(n,) ranges -> (n,) Pd`` (the radar's curve)."""
+    margin_deg: float = 1.0
+    """Sector edges widened by this (an aircraft crossing the edge between scans)."""
+
+    def detection(self, k: int, means: np.ndarray) -> np.ndarray:
+        """``(n,)`` Pd of components ``means (n, 4)`` in scan ``k``."""
+        dx, dy = means[:, 0] - self.site[0], means[:, 2] - self.site[1]
+        az = np.degrees(np.arctan2(dx, dy)) % 360.0
+        start = (((k - 1) * self.T - self.phase) / self.period % 1.0) * 360.0
+        swept = min(1.0, self.T / self.period) * 360.0
+        off = (az - start + self.margin_deg) % 360.0
+        inside = off <= swept + 2 * self.margin_deg
+        return np.where(inside, self.pd(np.hypot(dx, dy)), 0.0)
 
 
 def plots_xy(model, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -71,6 +107,31 @@ def birth_components(xy: np.ndarray, R_xy: np.ndarray, weight: float,
     return GaussianMixture(np.full(m, weight), means, covs)
 
 
+def rotation_phase(spec) -> float:
+    """A rotating sensor's phase from the run's origin: ``phase``, else a stable one from its
+    name (``sim.traffic.radar``'s default), so no two default in step."""
+    if spec.phase is not None:
+        return float(spec.phase) % spec.rotation_period
+    return _default_phase(spec.name, spec.rotation_period)
+
+
+def radar_pd(spec, r50_fraction: float = R50_FRACTION):
+    """The ``Pd(range)`` curve of sensor ``spec`` (:class:`sim.traffic.radar.RotatingRadar`:
+    ``detection_probability`` at short range, half of it at ``r50_fraction * max_range``,
+    0 beyond ``max_range``)."""
+    r_max = spec.max_range if spec.max_range is not None else math.inf
+    return RotatingRadar(spec.name, 0.0, 0.0, pd_max=max(spec.detection_probability, 1e-12),
+                         max_range_m=r_max, r50_m=r50_fraction * r_max).pd
+
+
+def beam_of(scn, spec) -> Beam | None:
+    """Sensor ``spec``'s :class:`Beam` in scenario ``scn`` (None without a rotation)."""
+    if spec.rotation_period is None:
+        return None
+    return Beam(period=spec.rotation_period, phase=rotation_phase(spec), T=scn.scan_period,
+                site=tuple(spec.position), pd=radar_pd(spec))
+
+
 @dataclass
 class MeasurementBirthGMPHD(GMPHDFilter):
     """A GM-PHD filter whose births are the last scan's unexplained plots (module docstring).
@@ -87,6 +148,12 @@ class MeasurementBirthGMPHD(GMPHDFilter):
     """Squared Mahalanobis distance beyond which a plot is unexplained."""
     pending: GaussianMixture | None = field(default=None, repr=False)
     """The births of the last correction, at its time (they enter at the next prediction)."""
+    beams: tuple[Beam | None, ...] | None = None
+    """Per sensor, its :class:`Beam` (Pd per component and scan) or None (the sensor's
+    fixed ``Pd``)."""
+    k: int = 0
+    """The scan of the last correction (the sum of the predictions' steps)."""
+    _steps: int = field(default=0, repr=False)
     stackable = False
     """A peer host never stacks its steps (``tracking.gmphd_batch.batch_key``): the births
     come from :meth:`correct_parents`."""
@@ -94,6 +161,7 @@ class MeasurementBirthGMPHD(GMPHDFilter):
     def predict(self, mix: GaussianMixture, steps: int = 1) -> GaussianMixture:
         if steps >= 1 and self.pending is not None:
             self.birth, self.pending = self.pending, None
+        self._steps = steps  # a step is predict then correct: its scan is k + steps
         return predict(mix, self.motion, self.survival_probability, self.birth, steps)
 
     def correct(self, mix: GaussianMixture, scans: Sequence[np.ndarray]) -> GaussianMixture:
@@ -108,7 +176,13 @@ class MeasurementBirthGMPHD(GMPHDFilter):
             raise ValueError(f"expected {len(self.sensors)} scans, got {len(scans)}")
         births_xy, births_R = [], []
         par = np.arange(len(mix))
-        for sensor, scan in zip(self.sensors, scans, strict=True):
+        self.k += self._steps
+        self._steps = 0
+        beams = self.beams or (None,) * len(self.sensors)
+        for sensor, scan, beam in zip(self.sensors, scans, beams, strict=True):
+            if beam is not None:
+                sensor = replace(sensor, detection_probability=beam.detection(self.k,
+                                                                              mix.means))
             xy, R_xy = plots_xy(sensor.model, scan)
             new = unexplained(mix, xy, R_xy, self.birth_gate)
             births_xy.append(xy[new])

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 from sensornet.peers.faults import FaultInjector
 from sensornet.sim.scenario import Scenario, ScenarioError, SensorSpec
-from sensornet.sim.world.birth import MeasurementBirthGMPHD
+from sensornet.sim.world.birth import MeasurementBirthGMPHD, beam_of
 from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity, LinearPosition, RangeBearing
@@ -148,9 +148,11 @@ def make_filter(scn: Scenario, sensor_names: Sequence[str]) -> GMPHDFilter:
     )
     if scn.birth.model == "measurements":
         b = scn.birth
+        beams = tuple(beam_of(scn, scn.sensor(s)) for s in sensor_names)
         return MeasurementBirthGMPHD(**common, birth_weight=b.measurements_weight,
                                      birth_speed=b.measurements_speed,
-                                     birth_gate=b.measurements_gate)
+                                     birth_gate=b.measurements_gate,
+                                     beams=beams if any(beams) else None)
     return GMPHDFilter(**common)
 
 
