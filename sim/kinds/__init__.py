@@ -34,6 +34,7 @@ KINDS: dict[str, str] = {
     "imm-ekf": "sensornet.sim.kinds.imm:IMM_EKF",
     "flooding": "sensornet.sim.kinds.flooding:FLOODING",
     "pda": "sensornet.sim.kinds.pda:PDA",
+    "lmb": "sensornet.sim.kinds.lmb:LMB",
 }
 """Kind name (``network.filter``) -> ``"module:attribute"`` of its :class:`PeerKind`. The
 module is imported when the kind is first used, so the loader can list the names without

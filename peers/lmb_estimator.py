@@ -1,0 +1,247 @@
+"""A labelled multi-Bernoulli (LMB) filter behind :class:`peers.contracts.LocalEstimator`.
+
+The peer runs :class:`tracking.lmb.LmbFilter` (Reuter, Vo, Vo & Dietmayer 2014) on its own
+scans and publishes the LMB's first moment, its PHD ``D(x) = sum_i r_i p_i(x)`` (Reuter eq. 6
+integrated over the other targets): one Gaussian per track component, weight ``r_i w_ik``, each
+row beside its track's label. So the mixture fusers (hybrid, GCI, AA) fuse it unchanged, as they
+fuse a GM-PHD's intensity, and the labelling pipeline (:mod:`peers.labelling`) gives the fused
+components network-wide ids from those labels.
+
+What the LMB keeps to itself: its tracks' existence and per-track mixtures, the confirmation
+counts and the adaptive births waiting for the next scan. The local tracks are extracted by the
+LMB's own rule (``r >= extraction_threshold``, each by its heaviest component, its confirmed
+status from the filter's counts); a fused (or any other) mixture by the GM-PHD's rule with the
+scenario's extraction settings (:func:`tracking.gmphd.extract_index`), as a GM-PHD peer does.
+
+No ``prepare_many``: co-hosted LMB peers step one by one (:mod:`peers.batching` skips them).
+Arrays: ``c`` components, ``n`` tracks, ``d`` state dimension; labels ``(., 3)`` int64.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensornet.peers.contracts import LocalOutput
+from sensornet.tracking.gmphd import extract_index
+from sensornet.tracking.gmphd import predict as gm_predict
+from sensornet.tracking.labels import (
+    Confirmation,
+    ExtractedTracks,
+    LabelledMixture,
+    LabelMatch,
+    adopt_labels,
+    as_labels,
+    extract_tracks,
+    label_keys,
+    new_labels,
+)
+from sensornet.tracking.lmb import LmbFilter, LmbState
+from sensornet.tracking.lmb_sets import LabelledBernoulliSet
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import Reducer
+
+ADOPTED_BASE = 1 << 40
+"""Index offset of the labels an unlabelled adopted (feedback) density's tracks get, apart from
+births (small indices) and fusions' fresh labels (``peers.labelling.FRESH_BASE``)."""
+
+
+def phd_mixture(state: LmbState) -> tuple[GaussianMixture, np.ndarray]:
+    """The LMB's PHD as a mixture ``(c,)`` (weights ``r_owner w``, the tracks' own means and
+    covariances, in component order) and each component's track label ``(c, 3)``."""
+    t = state.tracks
+    mix = GaussianMixture.trusted(t.existence[t.owner] * t.weights, t.means, t.covs)
+    return mix, t.labels[t.owner]
+
+
+def lmb_from_mixture(mix: GaussianMixture, labels: np.ndarray | None, origin: int,
+                     k: int) -> LabelledBernoulliSet:
+    """A (fused) PHD mixture back as an LMB (feedback): one track per distinct label, ``r`` its
+    components' total weight clipped to 1, its density those components renormalised; without
+    labels every component its own track, labelled ``(origin, k, ADOPTED_BASE + i)``."""
+    n = len(mix)
+    if labels is None:
+        labels = new_labels(origin, k, n, ADOPTED_BASE)
+    labels = as_labels(labels, n, "adopted labels")
+    if n == 0:
+        return LabelledBernoulliSet.empty(mix.dim)
+    _, first, owner = np.unique(label_keys(labels), return_index=True, return_inverse=True)
+    order = np.argsort(owner, kind="stable")
+    owner = owner[order].astype(np.int64)
+    w = mix.weights[order]
+    mass = np.bincount(owner, w)
+    rel = np.divide(w, mass[owner], out=np.full(n, 1.0), where=mass[owner] > 0)
+    rel = rel / np.bincount(owner, rel)[owner]
+    return LabelledBernoulliSet.trusted(labels[first], np.clip(mass, 0.0, 1.0), rel,
+                                        mix.means[order], mix.covs[order], owner)
+
+
+class LmbEstimator:
+    """An LMB filter on one sensor; publishes its PHD mixture with the tracks' labels.
+
+    ``reducer``: the scenario's GM-PHD reducer, used only to bound what neighbours send
+    (:class:`peers.budget.EstimateBudget` reads ``reducer`` and ``level2``) and by the fuser.
+    ``publish_threshold``: tracks with ``r`` at most this are not published (the LMB form of
+    level-2 pruning: per track, so a track's mixture goes out whole; None publishes every
+    track). ``level2`` is False so that receivers do not prune our rows by component weight,
+    which would cut parts of a track's mixture. ``extraction_threshold`` and ``extraction``:
+    the GM-PHD rule for fused mixtures. ``origin``: this peer's label origin
+    (:func:`peers.labelling.origin_of`); None: unlabelled output (the filter still labels its
+    tracks, with origin 0)."""
+
+    kinds = ("posterior",)
+    position_index = (0, 2)
+    level2 = False
+
+    def __init__(self, filt: LmbFilter, reducer: Reducer | None = None,
+                 publish_threshold: float | None = 0.5, extraction_threshold: float = 0.5,
+                 extraction: str = "cardinality", origin: int | None = None) -> None:
+        if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
+            raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
+        if publish_threshold is not None and not 0.0 <= publish_threshold <= 1.0:
+            raise ValueError(f"publish_threshold must be in [0, 1], got {publish_threshold}")
+        if origin is not None and filt.origin != origin:
+            raise ValueError(f"the filter's origin {filt.origin} is not the estimator's {origin}")
+        extract_index(GaussianMixture.empty(filt.motion.dim), extraction_threshold,
+                      extraction)  # ValueError naming a bad rule now, not at the first scan
+        self.filter = filt
+        self.reducer = reducer
+        self.publish_threshold = publish_threshold
+        self.extraction_threshold = extraction_threshold
+        self.extraction = extraction
+        self.origin = None if origin is None else int(origin)
+        """Label origin; None: the output carries no labels (the consensus then adds none)."""
+        self.state = filt.initial()
+        self.dim = filt.motion.dim
+        self.k = 0
+        """The scan of the last step."""
+        self._next_k: int | None = None
+        self._last: tuple[GaussianMixture, LmbState] | None = None
+        """The last step's PHD mixture (its ``density``) and the state it came from."""
+        self._adopted: GaussianMixture | None = None
+        self._adopted_labels: np.ndarray | None = None
+        self._unpublished = np.zeros(0, dtype=bool)
+        """``(n,)`` the tracks of the last step that were not published (kept on feedback)."""
+
+    # -- the contract ---------------------------------------------------------------------
+    def begin_scan(self, k: int) -> None:
+        """The scan index of the next :meth:`step` (births are stamped with it)."""
+        self._next_k = int(k)
+
+    def step(self, steps: int, z: np.ndarray) -> LocalOutput:
+        """Predict ``steps`` scans ahead, correct with ``z (m, dz)``; publish the PHD."""
+        if steps < 1:
+            raise ValueError(f"steps must be at least 1, got {steps}")
+        k = self.k + steps if self._next_k is None else self._next_k
+        self._next_k = None
+        if self._adopted is not None:
+            self._take_adopted()
+        self.state = self.filter.step(self.state, z, k)
+        self.k = k
+        mix, labels = phd_mixture(self.state)
+        self._last = (mix, self.state)
+        t = self.state.tracks
+        if self.publish_threshold is None:
+            pub, pub_labels = mix, labels
+            self._unpublished = np.zeros(len(t), dtype=bool)
+        else:
+            self._unpublished = t.existence <= self.publish_threshold
+            keep = ~self._unpublished[t.owner]
+            pub, pub_labels = mix.select(keep), labels[keep]
+        labelled = self.origin is not None
+        info = {"n_components": len(mix), "n_published": len(pub), "n_tracks": len(t),
+                "n_pending_births": len(self.state.pending)}
+        return LocalOutput(mix, {"posterior": pub}, info,
+                           labels={"posterior": pub_labels} if labelled else None,
+                           density_labels=labels if labelled else None)
+
+    def predict(self, mix: GaussianMixture, steps: int) -> GaussianMixture:
+        """A neighbour's density ``steps`` scans ahead: survivors ``Ps^steps w``, ``F m``,
+        ``F P F^T + Q`` (tracking.gmphd.predict), no births (an LMB posterior holds none), so
+        the rows keep their order and a neighbour's labels still fit them."""
+        if steps <= 0:
+            return mix
+        f = self.filter
+        return gm_predict(mix, f.motion, f.survival_probability, None, steps)
+
+    def extract(self, mix: GaussianMixture) -> np.ndarray:
+        """States ``(p, d)``: the LMB's tracks for its own last density, the GM-PHD rule for
+        any other mixture."""
+        own = self._own(mix)
+        if own is not None:
+            return self.filter.extract(own).states
+        return mix.means[extract_index(mix, self.extraction_threshold, self.extraction)]
+
+    def extract_tracks(self, mix: GaussianMixture, labels: np.ndarray,
+                       confirmation: Confirmation | None = None) -> ExtractedTracks:
+        """:meth:`extract`'s states with ids, covariances, existence and status. Our own
+        density: each extracted track's ids are ``labels`` at its heaviest component's row
+        (the labels given, which a relabel may have changed), existence ``r``, status the
+        filter's confirmation; any other: :func:`tracking.labels.extract_tracks`."""
+        own = self._own(mix)
+        if own is None:
+            return extract_tracks(LabelledMixture(mix, labels), self.extraction_threshold,
+                                  self.extraction, confirmation)
+        labels = as_labels(labels, len(mix), "labels")
+        tr = self.filter.extract(own)
+        t = own.tracks
+        r = t.existence
+        if self.filter.extraction == "threshold":
+            idx = np.flatnonzero(r >= self.filter.extraction_threshold)
+        else:
+            idx = np.flatnonzero(np.isin(label_keys(t.labels), label_keys(tr.labels)))
+        rows = t.heaviest()[idx]
+        return ExtractedTracks(tr.states, labels[rows], tr.covs, tr.existence, tr.status)
+
+    def adopt(self, fused: GaussianMixture) -> None:
+        """Feedback (``network.feedback``; the consensus calls this only then): the fused PHD
+        becomes the next prior, as an LMB (:func:`lmb_from_mixture`) built at the next step
+        with the labels :meth:`adopt_labels` gives (else fresh ones), beside our unpublished
+        tracks. Without feedback the
+        LMB keeps its own tracks and only takes the network's labels (:meth:`relabel`)."""
+        self._adopted, self._adopted_labels = fused, None
+
+    def adopt_labels(self, labels: np.ndarray) -> None:
+        """The labels of the fused density :meth:`adopt` took."""
+        if self._adopted is not None:
+            self._adopted_labels = as_labels(labels, len(self._adopted), "adopted labels")
+
+    def relabel(self, match: LabelMatch) -> None:
+        """The network rule (tracking.labels.adopt_labels): each own track label the fusion
+        paired with an earlier one takes the winner, unless another own track holds it."""
+        t = self.state.tracks
+        if self.origin is None or len(t) == 0 or len(match) == 0:
+            return
+        new = adopt_labels(t.labels, match)
+        self.state = LmbState(LabelledBernoulliSet.trusted(new, t.existence, t.weights,
+                                                           t.means, t.covs, t.owner),
+                              self.state.hits, self.state.k, self.state.pending)
+
+    # -- helpers --------------------------------------------------------------------------
+    def _own(self, mix: GaussianMixture) -> LmbState | None:
+        """The state behind ``mix`` if it is our last step's density, else None."""
+        last = self._last
+        return last[1] if last is not None and mix is last[0] else None
+
+    def _take_adopted(self) -> None:
+        """The adopted fused density as the LMB state, plus our own tracks that were not
+        published (the fusion never saw them: tentative tracks would otherwise be erased every
+        scan and never grow); tracks whose label we had keep their confirmation counts, the
+        pending adaptive births stay."""
+        fused, labels = self._adopted, self._adopted_labels
+        self._adopted = self._adopted_labels = None
+        old = self.state
+        mine = old.tracks.select(self._unpublished)
+        tracks = lmb_from_mixture(fused, labels, self.filter.origin, self.k)
+        if len(mine):  # a fused label equal to a kept one (it never went out): the fused goes
+            clash = np.isin(label_keys(tracks.labels), label_keys(mine.labels))
+            tracks = LabelledBernoulliSet.concatenate([tracks.select(~clash), mine])
+        hits = np.zeros(len(tracks), dtype=np.int64)
+        if len(old.tracks) and len(tracks):
+            keys, new = label_keys(old.tracks.labels), label_keys(tracks.labels)
+            by = np.argsort(keys)
+            pos = np.searchsorted(keys[by], new).clip(max=len(keys) - 1)
+            seen = keys[by][pos] == new
+            hits[seen] = old.hits[by[pos[seen]]]
+        self.state = LmbState(tracks, hits, old.k, old.pending)
+
+
+__all__ = ["ADOPTED_BASE", "LmbEstimator", "lmb_from_mixture", "phd_mixture"]

@@ -1,0 +1,71 @@
+"""LMB peers (issue 33): a labelled multi-Bernoulli filter per sensor (tracking.lmb), its PHD
+mixture fused by the mixture rules (hybrid, GCI, AA) with the tracks' labels beside it.
+
+Built from the scenario: the motion model and ``Ps``; the sensor model, ``Pd`` and the clutter
+intensity ``kappa = lambda_c / V`` (:func:`sim.world.build.sensor_params`, floored at
+:data:`MIN_CLUTTER_INTENSITY` since the LMB update divides by it); births measurement-driven
+(Reuter et al. 2014, Sec. IV-C) for linear sensors, the scenario's birth components (weights
+clipped to 1) for range-bearing ones; ``filter.gate`` and ``filter.extraction_threshold``. The
+LMB's own settings (association, ``lambda_B``, ``r_B,max``, per-track ``J``, confirmation) are
+:class:`tracking.lmb.LmbFilter`'s defaults: there is no ``[lmb]`` table yet.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensornet.peers.labelling import origin_of
+from sensornet.peers.lmb_estimator import LmbEstimator
+from sensornet.sim.choices import MIXTURE_RULES
+from sensornet.sim.kinds import PeerKind
+from sensornet.sim.kinds.gmphd import mixture_fuser
+from sensornet.sim.scenario import Scenario
+from sensornet.sim.world.build import birth_mixture, make_reducer, motion_model, sensor_params
+from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.lmb import LmbFilter
+from sensornet.tracking.mixture import GaussianMixture
+
+MIN_CLUTTER_INTENSITY = 1e-12
+"""``kappa`` of a sensor without clutter (per m^2 or m rad): the LMB needs ``kappa > 0``."""
+
+
+def make_lmb_filter(scn: Scenario, name: str, origin: int = 0) -> LmbFilter:
+    """The LMB filter of sensor ``name`` (module docstring)."""
+    sp = sensor_params(scn, name)
+    sensor = SensorParams(sp.model, sp.detection_probability,
+                          max(sp.clutter_intensity, MIN_CLUTTER_INTENSITY))
+    adaptive = sensor.model.selected is not None
+    birth = None
+    if not adaptive:
+        b = birth_mixture(scn)
+        birth = GaussianMixture(np.minimum(b.weights, 1.0), b.means, b.covs) if len(b) else None
+    return LmbFilter(motion=motion_model(scn), sensor=sensor,
+                     survival_probability=scn.survival_probability, birth=birth,
+                     adaptive_birth=adaptive, gate=scn.filter.gate,
+                     extraction_threshold=scn.filter.extraction_threshold, origin=origin)
+
+
+def build(scn: Scenario, name: str, run: int = 0):
+    origin = origin_of([s.name for s in scn.sensors], name)
+    reducer = make_reducer(scn)
+    f = scn.fusion
+    est = LmbEstimator(make_lmb_filter(scn, name, origin), reducer,
+                       f.level2_threshold if f.level2_pruning else None,
+                       scn.filter.extraction_threshold, scn.filter.extraction, origin=origin)
+    return est, mixture_fuser(scn, reducer)
+
+
+def check(scn: Scenario) -> tuple[str, str] | None:
+    """``(key, message)`` if the scenario cannot run LMB peers: extended targets, or
+    range-bearing sensors (no adaptive birth) without birth components."""
+    if scn.extended is not None:
+        return ("network.filter", "key 'network.filter' is 'lmb', whose peers track point "
+                "targets ([extended] is for 'et-gmphd')")
+    rb = [s.name for s in scn.sensors if s.kind != "linear"]
+    if rb and len(birth_mixture(scn)) == 0:
+        return ("birth.model", f"'lmb' peers with range-bearing sensors ({', '.join(rb)}) need "
+                f"birth components (birth.model 'paper' with [[birth.paper]], or 'truth')")
+    return None
+
+
+LMB = PeerKind("lmb", "LMB filter per sensor (labelled tracks); its PHD mixture fused", build,
+               MIXTURE_RULES, check=check)
