@@ -39,9 +39,22 @@ class Case:
     name: str
     sets: tuple[str, ...] = ()
     """``--set`` items beyond the shortening (seed 004: fewer sensors)."""
+    kind: str = ""
+    """A peer kind run on this scenario instead of its own: a README row of its own,
+    ``SCENARIO --set network.filter=KIND``."""
+
+    @property
+    def row(self) -> str:
+        """Its README row's first cell (without the backticks)."""
+        return f"{self.name} --set network.filter={self.kind}" if self.kind else self.name
+
+    @property
+    def id(self) -> str:
+        return f"{self.name}-{self.kind}" if self.kind else self.name
 
     def overrides(self) -> list[str]:
-        return [f"scenario.num_scans={SCANS}", "network.speed=20", *self.sets]
+        kind = [f'network.filter="{self.kind}"'] if self.kind else []
+        return [f"scenario.num_scans={SCANS}", "network.speed=20", *kind, *self.sets]
 
     def scenario(self):
         return load_scenario(self.name, overrides=parse_overrides(self.overrides()))
@@ -49,7 +62,8 @@ class Case:
 
 FOUR = "sensors.positions=[[0, 0], [500, 0], [0, 500], [500, 500]]"
 CASES = [Case("seed000"), Case("seed001"), Case("seed002"), Case("seed003"), Case("seed004",
-                                                                                   (FOUR,))]
+                                                                                   (FOUR,)),
+         Case("seed000", kind="lmb")]
 MEMBERS = sorted({"world", *(n for c in CASES for n in c.scenario().sensor_names)})
 
 
@@ -78,7 +92,7 @@ def keys(tmp_path_factory) -> Path:
 
 
 @pytest.mark.network
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_processes_record_kill_secure_then_replay(case, keys, tmp_path, capsys):
     """Cells run, --record + replay, --fault kill, --secure DIR: one run of real processes."""
     scn = case.scenario()
@@ -120,7 +134,7 @@ def test_processes_record_kill_secure_then_replay(case, keys, tmp_path, capsys):
 
 
 @pytest.mark.network
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_twin_campaign_and_report(case, tmp_path, capsys):
     """Cells run --sim, campaign (one cell, one twin run) and report on that campaign."""
     names = case.scenario().sensor_names
@@ -148,8 +162,8 @@ def test_twin_campaign_and_report(case, tmp_path, capsys):
 
 
 def test_readme_feature_table_is_these_tests():
-    """README's table: one row per shipped scenario, one column per feature, each cell names
-    the test above that backs it."""
+    """README's table: one row per shipped scenario (and per kind run on another's scenario),
+    one column per feature, each cell names the test above that backs it."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     section = text.split("## Every scenario, every feature", 1)[1].split("\n## ", 1)[0]
     lines = [ln for ln in section.splitlines() if ln.startswith("|")]
@@ -160,6 +174,7 @@ def test_readme_feature_table_is_these_tests():
         cells = [c.strip() for c in ln.strip("|").split("|")]
         rows[cells[0].strip("`")] = cells[1:]
     shipped = [n for n in builtin_scenarios() if re.fullmatch(r"seed\d{3}", n)]
-    assert sorted(rows) == sorted(shipped) == [c.name for c in CASES]
+    assert sorted(shipped) == [c.name for c in CASES if not c.kind]
+    assert sorted(rows) == sorted(c.row for c in CASES)
     for cells in rows.values():
         assert len(cells) == len(FEATURES) and all(c.startswith("yes") for c in cells), cells
