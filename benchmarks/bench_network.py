@@ -24,6 +24,13 @@ scan-to-track latency stays under one scan interval (100 ms).
     python benchmarks/bench_network.py --sizes 20 --degrees 4 --per-process 20  # one host
     python benchmarks/bench_network.py --targets   # the hosts issue's table: 20/50/100 peers,
                                                    # ring/degree 3/4, one per process and auto
+    python benchmarks/bench_network.py --targets --view on,off  # the same, view on and off
+    python benchmarks/bench_network.py --view-pairs seed004 --repeats 3  # issue 38's table
+
+``--view on`` starts the live view (``sensornet view``: a process that subscribes and writes
+the recording; the peers log nothing to Rerun either way) as ``sensornet run`` does by
+default; ``off`` is ``--no-rerun``. The view's own CPU per scan and how far behind it ran are
+read from its log.
 
 ``--per-process N`` runs N peers per process (``sensornet run --per-process``, peer hosts):
 the CPU per peer per scan is then each host's CPU split between its peers
@@ -66,17 +73,44 @@ PER_PROCESS = 1
 
 
 def run_network(source: str, out: Path, overrides: list[str], timeout: float,
-                sparse: bool = False) -> dict:
+                sparse: bool = False, view: bool = False,
+                per_process: int | None = None) -> dict:
+    """One run; ``view``: with the live view process (``sensornet run``'s default), its CPU
+    and lag in ``"view"``; ``per_process``: None for :data:`PER_PROCESS`, 0 for what
+    ``sensornet run`` chooses."""
+    from sensornet.sim.run.packing import choose, scenario_load
     from sensornet.sim.scenario import parse_overrides
 
     scn = load_scenario(source, overrides=parse_overrides(overrides))
-    handle = start_run(scn, source, out, overrides=overrides, rerun=False, sparse=sparse,
-                       config=ZENOH_CONFIG, per_process=PER_PROCESS)
+    per = PER_PROCESS if per_process is None else per_process
+    if per == 0:  # as sensornet run chooses
+        per = choose(len(scn.sensors), None, load=scenario_load(scn)).per_process
+    handle = start_run(scn, source, out, overrides=overrides, rerun=view, sparse=sparse,
+                       config=ZENOH_CONFIG, per_process=per)
     try:
         codes = wait_run(handle, timeout=timeout)
     finally:
         handle.stop_all()
-    return {"codes": codes, "summaries": read_summaries(out, scn.sensor_names), "scn": scn}
+    return {"codes": codes, "summaries": read_summaries(out, scn.sensor_names), "scn": scn,
+            "view": view_of(out) if view else None}
+
+
+def view_of(out: Path) -> dict | None:
+    """The view's CPU per scan (ms), its lag behind the peers (ms: median, p99) and what it
+    dropped or decimated, from the last lines of ``logs/view.log``."""
+    import re
+
+    log = out / "logs" / "view.log"
+    if not log.is_file():
+        return None
+    text = log.read_text()
+    cpu = re.search(r"CPU ([\d.]+) s \(([\d.]+) ms per scan", text)
+    lag = re.search(r"by (\d+) ms median, (\d+) ms p99", text)
+    lost = re.search(r"(\d+) dropped, (\d+) estimates skipped, (\d+) map frames", text)
+    return {"cpu_ms_per_scan": float(cpu.group(2)) if cpu else float("nan"),
+            "lag_median_ms": float(lag.group(1)) if lag else float("nan"),
+            "lag_p99_ms": float(lag.group(2)) if lag else float("nan"),
+            "lost": sum(int(x) for x in lost.groups()) if lost else -1}
 
 
 def part_flood(tmp: Path, clean: dict, seconds: float = 10.0) -> list[str]:
@@ -163,14 +197,15 @@ def part_latency(tmp: Path, scans: int, clean: dict | None = None) -> list[str]:
     ]
 
 
-CPU_PARTS = ("transport", "scan", "estimate", "truth", "tick", "publish", "rerun", "loop")
+CPU_PARTS = ("transport", "scan", "estimate", "truth", "tick", "publish", "telemetry", "loop")
 """Columns of the CPU table (peers.telemetry.Telemetry.cpu_breakdown); the rest is "other"."""
 
 
 def cpu_per_scan(summaries: dict) -> tuple[float, dict[str, float]]:
     """Process CPU per peer per scan (ms), all peers pooled (their CPU over their scans), and
     its breakdown: main-thread core steps by channel (decoding, filtering, fusing and encoding
-    inside), publishing, Rerun, the rest of the loop, and Zenoh's and the callbacks' threads."""
+    inside), publishing, the live views' telemetry, the rest of the loop, and Zenoh's and the
+    callbacks' threads."""
     scans = sum(max(1, v["scans"]) for v in summaries.values())
     total = sum(v["cpu_s_running"] * 1e3 for v in summaries.values()) / scans
     parts: dict[str, float] = {}
@@ -299,32 +334,35 @@ def speed_probe(repeats: int = 3) -> float:
 
 
 def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list[str],
-                 scans: int, deadline: float) -> list[str]:
+                 scans: int, deadline: float, views: tuple[bool, ...] = (False,)) -> list[str]:
     """The issue's targets table: every size x graph x packing, one row each (no early stop):
     CPU per peer per scan with its breakdown, p99 scan -> fused, deadline fusions, scans
     processed, the load average at the run's end and the machine's speed before the run
     (:func:`speed_probe`)."""
     cols = [*CPU_PARTS, "other"]
-    rows = ["| graph | peers | per process | real time | CPU ms/peer/scan | "
+    rows = ["| graph | peers | per process | view | real time | CPU ms/peer/scan | "
             + " | ".join(cols) + " | p99 scan->fused (ms) | deadline fusions (worst peer) "
-            "| scans processed | load avg | probe (ms) |",
-            "|---|---:|---:|---|---:|" + "---:|" * len(cols) + "---:|---:|---:|---:|---:|"]
+            "| scans processed | view CPU ms/scan | view lag p99 (ms) | load avg | probe (ms) |",
+            "|---|---:|---:|---|---|---:|" + "---:|" * len(cols)
+            + "---:|---:|---:|---:|---:|---:|---:|"]
     print("\n".join(rows), flush=True)
     global PER_PROCESS
     for n in sizes:
         for degree in degrees:
-            for packing in packings:
+            for packing, view in [(p, v) for p in packings for v in views]:
                 PER_PROCESS = per = packing_of(n, packing)
                 probe = speed_probe()
-                path = tmp / f"t-{n}-{degree}-{per}.toml"
+                tag = f"t-{n}-{degree}-{per}-{'view' if view else 'noview'}"
+                path = tmp / f"{tag}.toml"
                 path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0,
                                               deadline=deadline))
-                res = run_network(str(path), tmp / f"t-{n}-{degree}-{per}", [],
-                                  timeout=scans / 10 + 60 + 3 * n, sparse=True)
+                res = run_network(str(path), tmp / tag, [],
+                                  timeout=scans / 10 + 60 + 3 * n, sparse=True, view=view)
                 s, graph = res["summaries"], "ring" if degree == 2 else f"degree {degree}"
                 ok, _, _ = real_time(res)
                 if not s:
-                    rows.append(f"| {graph} | {n} | {per} | NO | (no summaries: exit codes "
+                    rows.append(f"| {graph} | {n} | {per} | {'on' if view else 'off'} | NO | "
+                                f"(no summaries: exit codes "
                                 f"{res['codes']}) |")
                     print(rows[-1], flush=True)
                     continue
@@ -333,12 +371,51 @@ def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list
                             for v in s.values())
                 done = sum(min(v["scans"], scans) for v in s.values()) / (n * scans)
                 auto = " (auto)" if packing == "auto" else ""
-                rows.append(f"| {graph} | {n} | {per}{auto} | {'yes' if ok else 'NO'} | "
-                            f"{total:.2f} | "
+                v = res["view"] or {}
+                rows.append(f"| {graph} | {n} | {per}{auto} | {'on' if view else 'off'} | "
+                            f"{'yes' if ok else 'NO'} | {total:.2f} | "
                             + " | ".join(f"{parts.get(c, 0.0):.2f}" for c in cols)
                             + f" | {pooled(s)[1]:.1f} | {100 * worst:.1f} % | "
-                            f"{100 * done:.1f} % | {load_average()} | {probe:.0f} |")
+                            f"{100 * done:.1f} % | {v.get('cpu_ms_per_scan', float('nan')):.1f} | "
+                            f"{v.get('lag_p99_ms', float('nan')):.0f} | {load_average()} | "
+                            f"{probe:.0f} |")
                 print(rows[-1], flush=True)
+    return rows
+
+
+def part_view_pairs(tmp: Path, source: str, repeats: int) -> list[str]:
+    """Issue 38's table: ``sensornet run SOURCE`` with the view on, then with
+    ``--no-rerun``, back to back, ``repeats`` times (the packing ``sensornet run`` chooses):
+    deadline fusions, p99 scan -> tracks (pooled and worst peer), mean fused OSPA, the fewest
+    scans a peer handled, the peers' CPU per peer-scan, the view's CPU per scan and lag."""
+    rows = ["| run | view | deadline fusions | p99 pooled (ms) | p99 worst peer (ms) | "
+            "fused OSPA (m) | fewest scans | peers' CPU ms/peer-scan | view CPU ms/scan | "
+            "view lag median / p99 (ms) | load avg |",
+            "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    print("\n".join(rows), flush=True)
+    for i in range(repeats):
+        for view in (True, False):
+            res = run_network(source, tmp / f"pair-{i}-{int(view)}", [], timeout=600,
+                              view=view, per_process=0)
+            s = res["summaries"]
+            if not s:
+                rows.append(f"| {i + 1} | {'on' if view else 'off'} | (no summaries: "
+                            f"{res['codes']}) |")
+                print(rows[-1], flush=True)
+                continue
+            fus = sum(v["stats"].get("fusions", 0) for v in s.values())
+            late = sum(v["stats"].get("deadline_fusions", 0) for v in s.values())
+            worst = max(v["latency_ms_p99"] or 0.0 for v in s.values())
+            ospa = statistics.fmean(v["mean_ospa_fused"] for v in s.values())
+            v = res["view"] or {}
+            nan = float("nan")
+            rows.append(f"| {i + 1} | {'on' if view else 'off'} | "
+                        f"{100 * late / max(1, fus):.1f} % | {pooled(s)[1]:.0f} | {worst:.0f} | "
+                        f"{ospa:.2f} | {min(x['scans'] for x in s.values())} | "
+                        f"{cpu_per_scan(s)[0]:.2f} | {v.get('cpu_ms_per_scan', nan):.1f} | "
+                        f"{v.get('lag_median_ms', nan):.0f} / {v.get('lag_p99_ms', nan):.0f} | "
+                        f"{load_average()} |")
+            print(rows[-1], flush=True)
     return rows
 
 
@@ -377,6 +454,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--packings", default="1,auto",
                    help="with --targets: peers per process to try, numbers or 'auto' "
                         "(sensornet run's choice; default 1,auto)")
+    p.add_argument("--view", default="off",
+                   help="with --targets: the live view 'on', 'off' or 'on,off' (a column)")
+    p.add_argument("--view-pairs", metavar="SCENARIO",
+                   help="run SCENARIO with the view on and off, back to back (issue 38)")
+    p.add_argument("--repeats", type=int, default=3, help="pairs for --view-pairs")
     args = p.parse_args(argv)
     os.environ["SENSORNET_HOST_HANDOFF"] = args.handoff  # read by the peer processes
     os.environ["SENSORNET_ZENOH_CALLBACKS"] = args.callbacks
@@ -392,6 +474,13 @@ def main(argv: list[str] | None = None) -> int:
     # and shorter runs carry fewer components per estimate (the wire ratio depends on it)
     scans = args.scans
     scale_scans = 30 if args.quick else min(scans, 50)
+    views = tuple(v == "on" for v in args.view.split(","))
+    if args.view_pairs:
+        with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
+            print(f"## {args.view_pairs}: the live view on vs --no-rerun, back to back; load "
+                  f"average {load_average()} at the start\n", flush=True)
+            part_view_pairs(Path(tmp), args.view_pairs, args.repeats)
+        return 0
     if args.targets:
         sizes = [int(x) for x in (args.sizes if args.sizes != SIZES else "20,50,100").split(",")]
         with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
@@ -399,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"along the graph, hosts' batching: {args.batch}; load average "
                   f"{load_average()} at the start\n", flush=True)
             part_targets(Path(tmp), sizes, degrees, args.packings.split(","), scans,
-                         args.deadline)
+                         args.deadline, views)
         return 0
     with tempfile.TemporaryDirectory(prefix="sensornet-bench-") as tmp:
         tmp = Path(tmp)

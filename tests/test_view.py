@@ -14,7 +14,7 @@ import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import WAIT_SCANS, Observer
-from sensornet.peers.rerun_sink import color_of, lighter
+from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.session import endpoint, free_port
 from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import Rejected, decode, encode
@@ -292,6 +292,23 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
             assert '"scans": 60' in s, name
     finally:
         stop_all([others])
+
+
+def test_ellipses_lie_at_two_sigma_of_their_component():
+    """Every point of a drawn ellipse is at Mahalanobis distance 2 from its mean (the closed
+    form Cholesky factor against NumPy's inverse of the position block)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 4, 4))
+    P = A @ A.transpose(0, 2, 1) + 0.05 * np.eye(4)
+    m = rng.normal(size=(40, 4))
+    E = ellipses(m, P)
+    d = E - m[:, None, [0, 2]]
+    q = np.einsum("npi,nij,npj->np", d, np.linalg.inv(P[:, [0, 2]][:, :, [0, 2]]), d)
+    np.testing.assert_allclose(q, 4.0, rtol=1e-9)
+    # closed, and once round the mean: the angle turned adds up to 2 pi
+    np.testing.assert_allclose(E[:, 0], E[:, -1], atol=1e-9)
+    turn = np.diff(np.unwrap(np.arctan2(d[..., 1], d[..., 0]), axis=1), axis=1).sum(axis=1)
+    np.testing.assert_allclose(np.abs(turn), 2 * np.pi, rtol=1e-9)
 
 
 def test_view_command_errors_are_one_line(capsys):

@@ -108,6 +108,11 @@ def cmd_view(args: argparse.Namespace) -> int:
     st, b = view.state, view.batcher
     cpu = cpu_seconds() - cpu0
     scans = max(1, st.newest_k)
+    lag = sorted(st.lag_ms)
+    if lag:
+        print(f"view: behind the peers by {lag[len(lag) // 2]:.0f} ms median, "
+              f"{lag[min(len(lag) - 1, int(0.99 * len(lag)))]:.0f} ms p99, {lag[-1]:.0f} ms "
+              f"at most (tracks published -> drawn)", file=sys.stderr, flush=True)
     print(f"view: {st.handled} messages drawn ({st.rejected} undecodable, {st.skipped} "
           f"later-round estimates not drawn), {view.dropped} "
           f"dropped, {view.skipped} estimates skipped, {b.decimated} map frames decimated; "
