@@ -103,7 +103,11 @@ class LyingCore(PeerCore):
         told = []
         for m in messages:
             if type(m) is Estimate:
-                m = replace(m, mixture=self.lie(m.mixture))
+                told_mix = self.lie(m.mixture)
+                # its labels stay where its rows do; a lie that adds or drops rows sends none
+                labels = (m.labels if m.labels is not None and len(m.labels) == len(told_mix)
+                          else None)
+                m = replace(m, mixture=told_mix, labels=labels)
                 self.lies_told += 1
             told.append(m)
         return super()._wrap(told)
