@@ -116,7 +116,9 @@ def legend_markdown(peers: list[str], single_target: bool = False, imm: bool = F
         "- small dots: measurements of this scan (detections and clutter)",
         f"- dashed 2-sigma ellipses, light dots: {local} (before fusion)",
         "- solid ellipses: fused; dots with a trail: fused tracks, labelled peer/number (a "
-        "number follows a track from scan to scan by association: for the eye, not scored)",
+        "number follows a track from scan to scan by association: for the eye, not scored); "
+        "tracks with identities: labelled origin.birth.index, one colour per identity, the "
+        "same at every peer",
         "- grey frame: surveillance region; grid labelled just outside its edges",
     ]
     if single_target and follow_radius:

@@ -1,9 +1,12 @@
 """Streaming a process's view of the run to Rerun (one shared recording per run).
 
-Every process (world, peers) calls :meth:`RerunSink.open` with the same ``run_id``: Rerun merges
-their streams into one recording. Each process always writes its own ``.rrd`` file (the
-launcher merges them); with ``viewer`` it also streams to a viewer (``"spawn"`` starts one,
-a ``rerun+http://...`` URL connects to a running one).
+Since issue 38 the live view process (``sensornet view``, :mod:`sensornet.view`) is the one
+that logs: it subscribes to the network and opens a :class:`RerunSink` with the peers' names
+(blueprint and decorations); the peers log nothing (they publish telemetry,
+:mod:`peers.observer`), the world only in secure runs (no view there). A sink writes an
+``.rrd`` file (the launcher merges the run's into ``recording.rrd``); with ``viewer`` it also
+streams to a viewer (``"spawn"`` starts one, a ``rerun+http://...`` URL connects to a
+running one).
 
 The 2-D map is drawn north-up (y negated: Rerun's 2-D views point y down).
 Entity paths: ``world/truth``, ``world/scans/<sensor>``, ``world/sensors``, ``world/region``

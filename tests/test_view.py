@@ -14,6 +14,7 @@ import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import WAIT_SCANS, Observer
+from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.session import endpoint, free_port
 from sensornet.protocol.bundle import pack_bundles
@@ -24,7 +25,15 @@ from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet.cli import main
-from sensornet.view import BEHIND, Batcher, LiveView, ViewState, id_color, later_round
+from sensornet.view import (
+    BEHIND,
+    Batcher,
+    LiveView,
+    ViewState,
+    id_color,
+    later_round,
+    replay_recordings,
+)
 from tests.processes import env, rerun_exe, stop_all, wait_for
 
 
@@ -309,6 +318,27 @@ def test_ellipses_lie_at_two_sigma_of_their_component():
     np.testing.assert_allclose(E[:, 0], E[:, -1], atol=1e-9)
     turn = np.diff(np.unwrap(np.arctan2(d[..., 1], d[..., 0]), axis=1), axis=1).sum(axis=1)
     np.testing.assert_allclose(np.abs(turn), 2 * np.pi, rtol=1e-9)
+
+
+def test_the_view_rebuilds_offline_from_peers_mcap_recordings(tmp_path):
+    """Two peers' recordings (what each received, and its own tracks): the scans and the truth
+    both heard are drawn once, each peer's tracks under its own name."""
+    scan = encode(Scan("s1", 1, np.ones((3, 2))))
+    truth = encode(Truth(1, np.array([1]), np.zeros((1, 4))))
+    for i, peer in enumerate(("s1", "s2")):
+        rec = Recorder(tmp_path / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
+        rec.receive(10.0 + i, "sensornet/net/scan/s1", scan)
+        rec.receive(10.5 + i, "sensornet/net/truth", truth)
+        rec.tracks(10.6 + i, 1, encode(Tracks(peer, 1, np.ones((2, 4)))))
+        rec.close()
+    calls = _Rec()
+    state = ViewState(Batcher(rr, calls), ["s1", "s2"])
+    drawn = replay_recordings(state, sorted(tmp_path.glob("*.mcap")))
+    state.b.flush()
+    assert drawn == 4 and state.handled == 4  # scan, truth, two peers' tracks
+    got = calls.by_path()
+    assert got["world/scans/s1"][0] == [1] and got["world/truth"][0] == [1]
+    assert {"peers/s1/tracks", "peers/s2/tracks"} <= set(got)
 
 
 def test_view_command_errors_are_one_line(capsys):

@@ -419,6 +419,9 @@ def _add_live_and_plot(sub) -> None:
     vw.add_argument("--duration", type=float, help="seconds to watch (default: until Ctrl-C)")
     vw.add_argument("--until-end", action="store_true",
                     help="stop a few seconds after the run's end message")
+    vw.add_argument("--from-mcap", nargs="+", metavar="FILE",
+                    help="rebuild the view offline from peers' recordings (run --record: "
+                         "<run>/record/*.mcap) instead of joining a network")
     vw.add_argument("--nice", type=NONNEGATIVE_INT, default=0,
                     help="lower the view's CPU priority by this much (run: 10), so that on a "
                          "busy machine the view falls behind, not the peers")

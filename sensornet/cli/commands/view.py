@@ -17,7 +17,7 @@ from sensornet.peers.session import SessionError
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind_of
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.view import LiveView, ViewState, cpu_seconds
+from sensornet.view import Batcher, LiveView, ViewState, cpu_seconds, replay_recordings
 
 FOLLOW_RADIUS = 400.0
 """The "around the target" view's half-width (m), as the world drew it."""
@@ -41,7 +41,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         check_name(args.network, "network name")
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    if not args.connect:
+    if not args.connect and not args.from_mcap:
         raise UserError("--connect ENDPOINT: a process of the network to join (the world's "
                         "--listen endpoint, say)")
     if args.duration is not None and not args.duration > 0:
@@ -84,7 +84,19 @@ def cmd_view(args: argparse.Namespace) -> int:
         return ViewState(batcher, peers, period, sensors, layout["single_target"], cutoff,
                          on_new_peer=new_peer)
 
-    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect, args.config)
+    if args.from_mcap:  # offline: the peers' recordings instead of the network
+        missing = [p for p in args.from_mcap if not Path(p).is_file()]
+        if missing:
+            sink.close()
+            raise UserError(f"--from-mcap: no such file {missing[0]}")
+        offline = state(Batcher(sink.rr, sink.rr))
+        drawn = replay_recordings(offline, [Path(p) for p in args.from_mcap])
+        offline.b.flush()
+        sink.close()
+        print(f"view: {drawn} recorded messages drawn from {len(args.from_mcap)} recordings "
+              f"({offline.rejected} undecodable) -> {out or viewer}", file=sys.stderr)
+        return 0
+    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config)
 
     def on_signal(signum, frame) -> None:
         view.stop.set()
