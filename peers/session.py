@@ -7,6 +7,7 @@ work on every host network, so it is off unless a user's own config file turns i
 from __future__ import annotations
 
 import json
+import os
 import random
 import socket
 import threading
@@ -32,6 +33,19 @@ outsider's 400 idle TCP connections keep a new member out for 13 s: it waited fo
 ACCEPT_TIMEOUT_MS = 3000
 """How long an incoming link may take to finish its handshake (Zenoh's default 10 s): a flood
 of idle connections larger than :data:`ACCEPT_PENDING` clears within this."""
+
+DEFER_ACCEPT_S = 3600
+"""Seconds a connection to a ``tls/`` listener may stay silent before the kernel hands it to
+Zenoh anyway (Linux ``TCP_DEFER_ACCEPT``, :func:`defer_accept`). Zenoh's TLS accept loop sleeps
+100 ms after every failed handshake (its ``TLS_ACCEPT_THROTTLE_TIME``, fixed when Zenoh is
+built, meant for a process out of file descriptors), so 400 idle connections timing out their
+handshakes stalled it 40 s, and an outsider reopening them stalled it for good. A member's
+first bytes (its TLS ClientHello) go with its connection, so it is accepted at once; an idle
+one waits in the kernel's SYN queue (Zenoh's backlog, 1,024) for this long, then reaches
+Zenoh and costs its 100 ms (measured: with 5 s and 120 s the 400 came through after that
+long and stalled the loop 40 s; so, an hour). Not covered: more idle connections than the
+backlog (the kernel's SYN cookies accept the rest at once) and connections that send junk
+(accepted, refused, 100 ms each): docs/security.md."""
 
 
 SHARED_MEMORY_NOTE = """Zenoh's shared-memory transport optimisation is off: with it, a large
@@ -175,6 +189,49 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
     return conf
 
 
+def _ports(endpoints: Sequence[str], protocol: str) -> set[int]:
+    """The explicit ports of ``endpoints`` of ``protocol`` (``tls/host:port[?..][#..]``)."""
+    out = set()
+    for e in endpoints:
+        if e.startswith(protocol + "/"):
+            tail = e.split("?", 1)[0].split("#", 1)[0].rsplit(":", 1)[-1]
+            if tail.isdigit() and int(tail):
+                out.add(int(tail))
+    return out
+
+
+def defer_accept(ports: set[int], seconds: int = DEFER_ACCEPT_S) -> int:
+    """Set ``TCP_DEFER_ACCEPT`` on this process's listening TCP sockets on ``ports`` (found
+    among its open file descriptors: Zenoh makes them and offers no such setting; a duplicate
+    of the descriptor sets the option on the same socket). Returns how many were set; 0 where
+    the platform has no such option (not Linux). Why: :data:`DEFER_ACCEPT_S`."""
+    opt = getattr(socket, "TCP_DEFER_ACCEPT", None)
+    if opt is None or not ports or not os.path.isdir("/proc/self/fd"):
+        return 0
+    done = 0
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            fd = os.dup(int(name))
+        except (OSError, ValueError):
+            continue
+        try:
+            s = socket.socket(fileno=fd)
+        except OSError:  # not a socket
+            os.close(fd)
+            continue
+        try:
+            if (s.type == socket.SOCK_STREAM
+                    and s.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN)
+                    and s.getsockname()[1] in ports):
+                s.setsockopt(socket.IPPROTO_TCP, opt, int(seconds))
+                done += 1
+        except OSError:
+            pass
+        finally:
+            s.close()  # the duplicate only
+    return done
+
+
 def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
                  gossip: bool | str = True, max_message: int | None = MAX_MESSAGE_BYTES,
@@ -182,7 +239,9 @@ def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
     """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
     conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message, security)
     try:
-        return zenoh.open(conf)
+        session = zenoh.open(conf)
     except Exception as exc:
         raise SessionError(f"cannot open Zenoh session (listen {list(listen)}, connect "
                            f"{list(connect)}): {exc}") from None
+    defer_accept(_ports(listen, "tls"))  # idle connections must not stall TLS accepts
+    return session
