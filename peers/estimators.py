@@ -39,16 +39,9 @@ class SingleTargetConfig:
     gci_omega: float | str | None = 0.15
     """GCI weight of the other peer: a number, None (0.5), or "det" (minimum fused determinant,
     chosen per scan). The fusing filter's own density already carries the fused history
-    (feedback), so the other peer's single-radar estimate gets much less than half. 0.15 was
-    chosen with ``python -m sensornet.sim.studies.seed001.montecarlo --tune-omega ...`` on geometry
-    A tuning runs
-    10000.. only
-    (Table 1 evaluates runs 0..N-1), by the GCI-fused x-position RMSE, the same for the IMM-EKF
-    and the IMM-PF (both had the same best weight). Runs 10000-10079: 0.2: 2.203 / 2.294 m
-    (EKF / PF), 0.3: 2.265 / 2.356, 0.4: 2.375 / 2.453, 0.5: 2.544 / 2.602, 0.6: 2.792 / 2.827,
-    "det": 3.715 / 4.173; runs 10000-10039: 0.05: 2.590 / 2.673, 0.1: 2.275 / 2.358, 0.15:
-    2.205 / 2.295, 0.2: 2.206 / 2.302, 0.25: 2.231 / 2.329 (0.15 ahead of 0.2 by 0.001 +- 0.003
-    and 0.007 +- 0.003 m, paired); no lost tracks (docs/seed001.md)."""
+    (feedback), so the other peer's single-radar estimate gets much less than half; 0.15 was
+    tuned on geometry A's runs 10000.. (never evaluated): docs/seed001.md, "Choosing the GCI
+    weight"."""
     cov_floor: float = 1e-6
     """Added to summary covariance diagonals before GCI/ratio (CV acceleration variance 0)."""
 

@@ -1,192 +1,20 @@
 """Trust in neighbours: a consistency test per neighbour and round, a score over scans, weights.
 
 A member with a valid key can still lie about its own estimate, and a broken sensor does the
-same by accident. Before every consensus round each neighbour's density is tested against two
-references it cannot have shaped: this peer's own density, and the weighted average of the
-other trusted inputs (own included, the tested neighbour left out). The statistic is the
-smaller of the two tests' values, each
-
-``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)``
-
-(the closed-form Cauchy–Schwarz divergence of :mod:`tracking.divergence`, which compares where
-the targets are, plus a cardinality term for how many), capped at :attr:`TrustConfig.cap`. A
-neighbour's score is a leaky CUSUM of its per-scan statistic (the largest of its rounds),
-``S_k = max(0, leak S_(k-1) + T_k - drift)``: a strong lie is caught in two scans, a mild
-persistent one accumulates, an honest peer's few bad scans (a track that died a scan early, a
-birth picked up late) fade. Its weight falls linearly from 1 at ``suspect`` to 0 at
-``quarantine``, where it is quarantined until its score stays under ``suspect`` for ``readmit``
-scans in a row. What a neighbour loses is shared over own and the trusted neighbours (the
-consensus weights renormalised over the trusted set), so the weights still sum to one. Under a
-product rule (GCI: ``drop_suspects``) a neighbour below full trust is dropped, not
-down-weighted: any weight above 0 lets a confident lie veto the product.
-
-With own and at least two other trusted neighbours (:attr:`TrustConfig.majority`,
-W-MSR-style) the statistic is instead the neighbour's median test against those others less
-the median test between them: a neighbour is scored for disagreeing with a majority that
-agrees, not for a scan where everyone disagrees, and two liars telling the same lie do not
-cover for each other (each one's lie would be in the other's leave-one-out average).
-
-Faults are not lies (:attr:`TrustConfig.same_scan`, :attr:`TrustConfig.detection_probability`):
-each neighbour estimate is tested once, against own's density of the scan it was made at. An
-estimate used again at a later scan (its successor late or lost, predicted forward by the
-out-of-sequence policy) adds statistic 0 and is no reference for the others; one that
-arrives after its scan is tested at its first use against own's density of that scan. The
-location part of every test (the divergence, or the empty penalty) is at most the evidence
-needed to explain the whole disagreement by missed detections, ``-log(1 - Pd)`` per unit of
-target weight on either side (:func:`peers.trust_checks.miss_cost`, Pd the smallest of the
-peer's and its neighbours' sensors): a target missed at a scan falls under the publishing
-threshold (level-2 pruning), and a target born a scan apart looks the same, so an honest
-density lacks a target at rate ``1 - Pd`` and the log-likelihood ratio of that, lying
-against honest, is ``-log(1 - Pd)``. In the majority's pair tests it is also at least
-``unmatched_cost = drift`` per unit of target weight that one side shows and the other has
-nothing within 60 m of (:func:`peers.trust_checks.unmatched_weights`): one extra target
-that a neighbour keeps alone never accumulates, three phantoms do (the divergence alone
-counts an extra target next to matched ones for little). Not with two neighbours, where no
-majority tells an honest neighbour that lost several targets at once at Pd 0.9 from a liar
-(it quarantined honest neighbours on 3 % of seed 000's Pd-0.9 evaluation triples). The
-cardinality term stays.
-
-A biased sensor (every estimate a fixed distance off under an honest covariance) is, scan by
-scan, within an honest neighbour's scatter; its offset, though, is the same every scan
-(:attr:`TrustConfig.bias`): the neighbour's target components are matched to own's nearest,
-and the chi-square of the information-weighted mean position difference over the last 3 and
-16 scans (``y' I^-1 y``, ``I = sum S_i^-1``, ``y = sum S_i^-1 d_i``, ``S_i`` the summed
-position covariances: the generalised-least-squares offset) grows linearly with the window
-under a bias while honest errors average out. With three or more neighbours offset against
-own at a scan, each one's offset is taken relative to the median of the others'
-(:attr:`TrustConfig.bias_relative`): own's own error is in all of them and is taken out.
-Above 32 (3 scans) or 40 (16 scans) the neighbour is quarantined at once. The thresholds sit
-above the largest honest values on the training runs 9000-9001 (28.2 and 33.2, every graph
-and condition below; 30.5 and 41.9 before the relative offset, with thresholds 35 and 50).
-
-The windows see only their last 3 or 16 scans; a sequential test sees all of them
-(:attr:`TrustConfig.bias_cusum`): per neighbour, Page's CUSUM (Page 1954, "Continuous
-inspection schemes", Biometrika 41) of the per-scan log-likelihood ratio of a bias ``beta``
-against none, ``beta' y - beta' I beta / 2`` (the same ``(I, y)``), with ``beta`` 30 m along
-each of 8 directions (a chart per direction, the CUSUM their largest): ``g_k = max(0,
-g_(k-1) + l_k)``, the largest sum over the windows ending now, which takes no window length
-and no start. The increments are those of independent scans; honest offsets are not
-(lag-1 correlation 0.5-0.7, lag 3 0.1-0.35 on seed 000's training runs: the filters' errors
-follow the same target's manoeuvres), so the honest CUSUM climbs higher than its nominal
-false-alarm rate says; that is handled by the threshold, not by whitening: 20, above the
-largest honest value on the training runs 9000-9001 (19.7, circulant clean; 19.2 seed 000
-clean). Pre-whitening the offsets with an AR(1) of coefficient 0.65 was tried on the same
-training runs (offline, on the recorded ``(I, y)``) and was no faster: at its threshold
-8, the lowest with no honest quarantine on seed 000, the liar took 10-21 scans (20 here) and
-honest neighbours on the seed-004 and circulant graphs were quarantined on 0.05-0.14 % of
-triples (whitening takes the bias away with the noise: ``1 - rho`` of it is left per scan). On seed
-000 the liar's CUSUM reaches 20 after 16-20 scans of the training runs (the 16-scan window,
-after 31): a 30 m offset is about 2.5 honest standard deviations per scan there and honest
-offsets of 30-40 m occur for several scans in a row while the filters converge, so no
-threshold that keeps honest neighbours in catches it within 3 scans (at 4, where honest
-neighbours would be quarantined on 36 % of seed 000's clean training triples, it takes
-2-8).
-
-Offsets can be repaired instead (:attr:`TrustConfig.register`, ``fusion.trust_register``):
-a neighbour the offset test fires on has its generalised-least-squares offset subtracted
-from its position means before it is tested and fused, re-estimated each scan until its
-CUSUM is back at 0. So can lies that still carry the liar's measurements
-(:attr:`TrustConfig.repair`, ``fusion.trust_repair``; :mod:`peers.trust_repair`): a
-neighbour whose statistic would make it suspect is tested again with its components that
-neither own nor two other trusted neighbours corroborate dropped (phantoms), its weights
-scaled by the median, over the last 16 scans, of what own weighs the same targets per unit
-of its weight (inflated weights), and, when nothing at all is corroborated, moved back by
-its offset against own over pairs up to 250 m apart with covariances at least own's (a
-confident shifted lie); where that statistic is smaller, the repaired density is scored
-and fused in its place. A repair keeps only what others already show a target at and adds
-no mass, so a lie without the liar's measurements (empty, stuck) is not repaired and is
-caught as before. Both are on by default: on the training runs 9000-9002 (seed 000, seed
-004's graph with one and two liars, the circulant graph) they were better than exclusion
-alone or equal in every cell, clean runs and honest quarantines unchanged or lower. The
-evaluation runs: docs/security.md.
-
-Withheld targets have a sequential test of their own (:attr:`TrustConfig.withhold`): the
-leaky score's drift and leak slow a neighbour that publishes nothing (its statistic is about
-5 a scan with one target, weight 0.1 at the fourth scan at best), and a scan at which own
-is briefly empty too (statistic 0) lets the score fade. Per
-neighbour, Page's CUSUM of the log-likelihood ratio that it withholds the targets its
-references show against an honest filter that missed them (a Bernoulli miss per unit of
-target weight, Wald's SPRT increment: ``log(0.99 / (1 - Pd))`` per unit withheld,
-``log(0.01 / Pd)`` per unit shown, :func:`peers.trust_checks.withheld_increments`; the
-median over own and the other trusted fresh neighbours, the smallest with fewer than three)
-has no drift and no leak: a scan with nothing to compare holds it, each matched unit of
-target weight takes ``log(Pd / 0.01)`` off. Honest misses are not independent across
-targets: a filter drops every track at once (a whole loss: the neighbour shows no target
-while its references show one or more) on 1.15 %
-of the training triples (1,107 of 96,632, runs 9000-9001, every graph and condition below;
-``python -m sensornet.sim.studies.lying.trust_calibration --runs 2`` prints them and the runs of
-each
-length, :attr:`Trust.losses`). So one scan's increment is at most ``-log 0.0115 = 4.47``
-(two lost targets are no more evidence than one scan of a whole loss). Above one scan's
-worth (:attr:`TrustConfig.withhold_hold`, 4.47) the neighbour's weight is held at 0 for the
-scan, without a quarantine or any hysteresis: an empty liar from its second scan, an honest
-filter from the second scan of a whole loss until it shows its targets again (while it
-shows nothing, nothing of it is worth fusing). Above :attr:`TrustConfig.withhold_threshold`,
-14, more than three scans of a whole loss, it is quarantined. Before the hold the
-threshold was 10, between two scans (8.94) and three (13.4), and what follows is that
-design's record. At Pd 0.99 (the training
-runs clean and with link faults) honest whole losses lasted two scans 92 times (per tester
-and neighbour) and three once (seed 000 clean, s2 at scans 81-83 of run 9000, seen by both
-its testers); at Pd 0.9 they last longer (three or four scans 51 times) but a unit of target
-weight is worth less (``log(0.99 / 0.1) = 2.3``) and four reached 10 (circulant). So a
-neighbour that withholds everything is quarantined at its third scan, an honest one that
-loses everything for two is not, and the honest three-scan loss is quarantined like a liar:
-seed 000 clean 2.67 -> 4.33 % of its training triples (the two testers of s2), circulant at
-Pd 0.9 0.09 -> 0.30 %, every other training cell unchanged (``python -m
-sensornet.sim.studies.lying.trust_calibration --runs 2``). On the training runs' lies it takes seed
-000's
-*empty* from 7 scans to 3 and leaves seed 004's two *empty* liars at 3. The parameters
-(alternative 0.99, cap, threshold) were set on the training runs only. With the hold
-(training runs 9000-9002, ``python -m sensornet.sim.studies.lying.study --runs 3 --setups seed000
---first-run 9000``): seed 000's *empty* at weight 0 at its second scan (3 before), every
-honest peer's fused OSPA equal or lower (hybrid clean 14.14 -> 14.10 m), honest
-neighbours held on 0.17 % of their rounds; ``python -m sensornet.sim.studies.lying.trust_calibration
---runs 2``: no quarantine begun by the withheld test (seed 000 clean 4.08 -> 2.42 %,
-circulant Pd 0.9 0.26 -> 0.05 %).
-
-A neighbour whose non-empty density at a scan repeats, bit for bit, the one it sent at an
-earlier scan is quarantined at once (:attr:`TrustConfig.repeat`): a filter's posterior changes
-every scan, so that is a stuck sensor or a replay.
-
-Calibration (``python -m sensornet.sim.studies.lying.trust_calibration --runs 2``, training runs
-9000-9001 only;
-the
-lying study evaluates on 7000..): seed 000, seed 004's graph with GM-PHD peers and the 20-peer
-circulant graph of degree 4, each clean, at Pd 0.9 and with link faults (30 ms latency, 20 %
-loss, 20 % reordering): 108,288 (peer, neighbour, scan) triples. ``cap = 8``, ``drift = 2``,
-``leak = 0.8`` were chosen on the same training runs with the training runs' lies of
-:mod:`sim.studies.lying.study`; ``suspect`` and ``quarantine`` (3.5 and 8.6) were the 99th and
-99.9th
-percentiles of the honest scores before the majority term, which lowered them to 2.05 and 6.59
-(kept: the target is per condition, not pooled); with the median test and the repeat test the
-pooled 99th / 99.9th percentiles were 2.38 / 7.38, with the same-scan test, the
-missed-detection bound and the unmatched term 2.05 / 5.52 (thresholds kept). Honest
-neighbours quarantined, clean / Pd 0.9 / link faults: seed 000 2.67 / 0 / 2.85 %, seed 004
-0 / 0 / 0 %, circulant 0.13 / 0.09 / 0.06 %; with the withheld-target test seed 000
-4.33 / 0 / 2.85 %, seed 004 0 / 0 / 0 %, circulant 0.13 / 0.30 / 0.06 % (its largest honest
-values 13.3, seed 000 clean, and 13.4, circulant at Pd 0.9) (before the same-scan test and the
-missed-detection bound: 3.58 / 0.67 / 3.94, 0 / 0 / 0 and 0.21 / 0.29 / 0.50 %; the
-instrumented counts, ``begun by``, showed every one begun by the divergence test: under link
-faults a neighbour's empty estimate after a miss, reused and predicted forward for two or
-three scans, counted each time; at Pd 0.9 an honest density lacking a missed target). The
-repeat test fired 5 times on honest peers under link faults (circulant, run 9000) before it
-skipped birth-only densities, never since. ``kappa = 3`` (tried on the same training runs)
-quarantines honest neighbours on 7.92 % (seed 000, clean) and 1.14 % (circulant, Pd 0.9)
-of triples: kept at 1. Seed 000 misses the 0.5 % target on the training runs, clean and
-with link faults: each peer has two neighbours (no majority), and an honest filter that
-loses its only target and re-acquires it from the birth component at the target's start
-(75 m off, a tight covariance, scans 3-8 of run 9000) is, for four scans, what a liar is
-(at Pd 0.99 two disjoint single targets cost 9.2 to explain by misses, above the cap); no
-setting of the score tried (``leak`` 0.6-0.8, ``readmit`` 1-5, ``quarantine`` 8.6-14, no
-empty penalty) brings seed 000 under 0.5 % while a lie still reaches weight 0.1 within a
-few scans (at 0 % there, *biased* is never caught and *empty* only after 40 scans). How
-soon each lie reaches weight <= 0.1 on the evaluation runs is in docs/security.md
-(``python -m sensornet.sim.studies.lying.study``'s defence table).
+same by accident, so before every consensus round each neighbour's density is tested against
+references it cannot have shaped (own's density; the others' leave-one-out average or, with a
+majority, their median), ``T = D_CS(D_j, R) + kappa (N_j - N_R)^2 / (N_R + 1)`` (the
+Cauchy-Schwarz divergence of :mod:`tracking.divergence` plus a cardinality term). A leaky CUSUM
+of ``T`` down-weights a neighbour above ``suspect`` and quarantines it at ``quarantine``, with
+hysteresis; sequential tests (Page 1954 CUSUMs) catch a constant offset (repaired by
+registration) and withheld targets, and a bit-identical repeat is quarantined at once. Under a
+product rule (GCI) a suspect is dropped: any weight above 0 lets a confident lie veto a target.
 
 Pure logic (no I/O): :class:`peers.consensus.Consensus` calls :meth:`Trust.weigh` before each
-fusion, whatever the fuser (GCI, AA, hybrid, the single-target rules). This module keeps
-each neighbour's score, state and weight over the scans; the tests of one scan are in
-:mod:`peers.trust_checks`, the settings in :mod:`peers.trust_config`.
+fusion. This module keeps each neighbour's score, state and weight over the scans; the tests of
+one scan are in :mod:`peers.trust_checks`, the settings in :mod:`peers.trust_config`. The design
+in full and the calibration log of every threshold (training runs 9000.., never the evaluation
+runs): docs/trust-calibration.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Each function scores one scan's densities and keeps no state; :class:`peers.trust.Trust`
 turns their statistics into scores, states and weights over time (the tests, their
-references and their calibration are in :mod:`peers.trust`'s docstring).
+references and their calibration: docs/trust-calibration.md).
 
 - :func:`neighbour_statistics`: ``T_j`` of every neighbour, the smaller of its divergence
   tests against own and the leave-one-out average, or (W-MSR-style majority) its median test

@@ -1,5 +1,5 @@
 """How a peer tests and weights its neighbours: :class:`TrustConfig` (the settings of
-:class:`peers.trust.Trust`; the defaults' calibration is in :mod:`peers.trust`'s docstring)."""
+:class:`peers.trust.Trust`; the defaults' calibration: docs/trust-calibration.md)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class TrustConfig:
-    """How neighbours are tested and weighted (defaults: calibrated, see :mod:`peers.trust`)."""
+    """How neighbours are tested and weighted (defaults: calibrated, docs/trust-calibration.md)."""
 
     enabled: bool = True
     kappa: float = 1.0
@@ -26,7 +26,7 @@ class TrustConfig:
     """Fraction of the score carried to the next scan (old evidence fades: re-admission)."""
     suspect: float = 3.5
     """Score above which a neighbour's weight is reduced: the 99th percentile of honest
-    neighbours' scores on the training runs (see :mod:`peers.trust`)."""
+    neighbours' scores on the training runs (docs/trust-calibration.md)."""
     quarantine: float = 8.6
     """Score at which its weight is 0 and it is quarantined: their 99.9th percentile."""
     readmit: int = 5
@@ -82,7 +82,7 @@ class TrustConfig:
     divergence test already sees)."""
     bias_thresholds: tuple[float, ...] = (32.0, 40.0)
     """Per window: the chi-square of its mean offset above which the neighbour is
-    quarantined (above the largest honest value on the training runs, see :mod:`peers.trust`)."""
+    quarantined (above the largest honest value on the training runs, docs/trust-calibration.md)."""
     bias_cusum: bool = True
     """A sequential offset test besides the windows: per neighbour, Page's CUSUM (Page 1954,
     "Continuous inspection schemes", Biometrika 41(1/2)) of the log-likelihood ratio of a
@@ -92,7 +92,7 @@ class TrustConfig:
     Honest offsets are correlated over scans (lag-1 correlation 0.5-0.7 on seed 000's
     training runs), which the increments, written for independent scans, ignore: the
     threshold, not a whitening, absorbs it (set above the largest honest value on the
-    training runs, see :mod:`peers.trust`)."""
+    training runs, docs/trust-calibration.md)."""
     bias_cusum_offset: float = 30.0
     """The alternative's offset (m): a 30 m-class biased sensor (the reference value of the
     CUSUM is half of it along each chart's direction)."""
@@ -104,7 +104,7 @@ class TrustConfig:
     the largest honest value on the training runs 9000-9001 (19.7)."""
     register: bool = True
     """A neighbour the offset test fires on is repaired instead of quarantined
-    (registration; on by default, :mod:`peers.trust` says why): its offset, the
+    (registration; on by default, docs/trust-calibration.md says why): its offset, the
     generalised-least-squares estimate ``I^-1 y`` over the longest window of
     :attr:`bias_windows` (against own, or relative to the others' median,
     :attr:`bias_relative`), is subtracted from its position means before it is tested and
@@ -113,7 +113,7 @@ class TrustConfig:
     repair: bool = True
     """A neighbour whose statistic at a scan would take its score above :attr:`repair_from`
     is offered a repaired density instead (:mod:`peers.trust_repair`; on by default,
-    :mod:`peers.trust` says why): its components that neither own nor two other trusted
+    docs/trust-calibration.md says why): its components that neither own nor two other trusted
     neighbours (the one other, with one) show a target near (within :attr:`bias_gate`)
     dropped, its weights scaled by the median over :attr:`repair_window` scans of what own
     (or, with three or more, the others' median) weighs the same targets per unit of its
@@ -182,11 +182,7 @@ class TrustConfig:
     """CUSUM value (nats) at which the neighbour is quarantined: above three scans of a whole
     loss (``3 x 4.47 = 13.4``; the largest honest value on the training runs 9000-9001 was
     13.4, circulant graph at Pd 0.9, and 13.3, seed 000 clean) and below four (17.9). It was
-    10 (between two scans and three) before the hold (:attr:`withhold_hold`), which now
-    takes a withholding neighbour's weight to 0 from its second scan: at 10, honest
-    neighbours whose filters lost their tracks for three scans or more were quarantined
-    (training runs: 2 of seed 000's 4 honest quarantines, clean; all 4 of the circulant
-    graph's at Pd 0.9)."""
+    10 before the hold (:attr:`withhold_hold`); its record: docs/trust-calibration.md."""
     withhold_hold: float | None = 4.47
     """CUSUM value (nats) above which the neighbour's weight is 0 for the scan (held), not
     quarantined: more than one scan's evidence (:attr:`withhold_cap`), so a single scan's
