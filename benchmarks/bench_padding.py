@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="without peers.budget (no byte budget, no reduction)")
     a = ap.parse_args(argv)
     if a.no_budget:
-        core_mod.EstimateBudget.of = staticmethod(lambda estimator: None)
+        core_mod.EstimateBudget.of = staticmethod(lambda *args: None)
     print(f"seed 000 twin, {a.scans} scans, s2 padded to {a.pad} components, "
           f"budget {'off' if a.no_budget else 'on'}; time in s1+s3's core per peer-scan "
           f"(median of {a.repeat})")
