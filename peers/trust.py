@@ -19,18 +19,13 @@ runs): docs/trust-calibration.md.
 
 from __future__ import annotations
 
-from collections import Counter, deque
-from dataclasses import dataclass, field
+from collections import Counter
 
 import numpy as np
 from sensornet.peers.trust_checks import (
-    cusum_directions,
     divergence_test,
     gls_offset,
-    is_repeat,
     neighbour_statistics,
-    offset_chi2,
-    offset_cusum,
     offset_information,
     relative_offsets,
     target_mass,
@@ -39,92 +34,25 @@ from sensornet.peers.trust_checks import (
     withheld_increments,
 )
 from sensornet.peers.trust_config import TrustConfig
+from sensornet.peers.trust_record import (
+    LOW,
+    MAX_LOG,
+    STATES,
+    NeighbourTrust,
+    add_offset,
+    alarm_limits,
+    is_held,
+    is_repeated,
+    offset_limits,
+    push_window,
+    update_registration,
+)
 from sensornet.peers.trust_repair import corroborated_part, moved_to_own, scan_factor
 from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
-STATES = ("trusted", "suspect", "quarantined")
-MAX_LOG = 200
-"""State changes kept for the summary (a flapping neighbour cannot grow it)."""
-LOW = 0.1
-"""A neighbour at or under this trust counts as detected (issue 24's target)."""
-
-
-def offset_limits(cfg: TrustConfig) -> tuple[float, ...]:
-    """The limits of :meth:`Trust._offset`'s values: per window of
-    :attr:`TrustConfig.bias_windows` its chi-square threshold, then (with
-    :attr:`TrustConfig.bias_cusum`) the CUSUM's."""
-    return (*cfg.bias_thresholds, *((cfg.bias_cusum_threshold,) if cfg.bias_cusum else ()))
-
-
-def alarm_limits(cfg: TrustConfig) -> tuple[float, ...]:
-    """The limits of the values in :attr:`Trust.history`'s last field: :func:`offset_limits`,
-    then (with :attr:`TrustConfig.withhold`) the withheld-target CUSUM's."""
-    return (*offset_limits(cfg), *((cfg.withhold_threshold,) if cfg.withhold else ()))
-
-
-def _push(window: deque, item, n: int) -> None:
-    """Add ``item`` as the newest of ``window`` (newest first), keeping the ``n`` newest: the
-    per-neighbour windows are bounded whatever a neighbour sends."""
-    window.appendleft(item)
-    while len(window) > n:
-        window.pop()
-
-
-@dataclass
-class NeighbourTrust:
-    """One neighbour's record."""
-
-    score: float = 0.0
-    state: str = "trusted"
-    streak: int = 0
-    """Scans in a row under ``suspect`` while quarantined."""
-    scan_max: float = 0.0
-    """Largest statistic of the scan being fused."""
-    last_statistic: float = float("nan")
-    last_weight: float = 1.0
-    first_k: int | None = None
-    """The first scan it was tested at."""
-    low_k: int | None = None
-    """The first scan its weight was at most :data:`LOW` (detected)."""
-    last_mix: GaussianMixture | None = None
-    """Its last round-0 density (the repeat test) and the scan it came at."""
-    last_k: int = -1
-    tested: int = -1
-    """The newest scan whose estimate from this neighbour was tested
-    (:attr:`TrustConfig.same_scan`)."""
-    offsets: deque = field(default_factory=deque)
-    """The offset test's window: per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
-    last_offset_chi2: tuple[float, ...] = ()
-    """Per window of :attr:`TrustConfig.bias_windows`: the last chi-square of the offset;
-    then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
-    cusum: np.ndarray | None = None
-    """The offset CUSUM's charts, ``(directions,)`` (:func:`peers.trust_checks.offset_cusum`)."""
-    withheld: float = 0.0
-    """The withheld-target CUSUM (:attr:`TrustConfig.withhold`)."""
-    registered: np.ndarray | None = None
-    """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
-    or None."""
-    rounds: int = 0
-    """Rounds it was tested in."""
-    holds: int = 0
-    """Rounds its weight was held at 0 by the withheld-target test
-    (:attr:`TrustConfig.withhold_hold`) where its score alone left it above 0."""
-    repairs: int = 0
-    """Rounds its repaired (:attr:`TrustConfig.repair`) or registered
-    (:attr:`TrustConfig.register`) density was fused in."""
-    factors: deque = field(default_factory=deque)
-    """Log mass factors of its repairs' last scans (:attr:`TrustConfig.repair_window`)."""
-    moves: deque = field(default_factory=deque)
-    """Per scan with nothing corroborated, its ``(I, y)`` against own up to
-    :attr:`TrustConfig.repair_offset_gate` apart (:meth:`Trust._moved`)."""
-    kept_k: int | None = None
-    """The last scan a repair of it kept a component."""
-    repaired_k: int | None = None
-    """The first scan its repaired or registered density was fused at."""
-    scans_in: Counter = field(default_factory=Counter)
-    """Scans spent in each state."""
-
+__all__ = ["LOW", "MAX_LOG", "STATES", "NeighbourTrust", "Trust", "TrustConfig", "alarm_limits",
+           "offset_information", "offset_limits"]  # sim/ and tests import these from here
 
 class Trust:
     """Per-neighbour consistency tests and weights for one peer."""
@@ -201,23 +129,62 @@ class Trust:
         self.fused_in = {}
         if cfg.repair:
             stats = self._repair(k, rnd, own, shown, wmap, stats, set(late))
-        tested = {s: (k, inputs[s], own) for s in names if s not in late}
-        for s, (a, mix) in late.items():  # each estimate once, against own of its scan
+        tested = self._test_late(k, own, inputs, late, stats)
+        if rnd == 0:
+            self._repeat_test(tested, stats)
+        raw = dict(stats)
+        if rnd == 0:
+            self._scan_tests(own, shown, late, tested, stats)
+        held = {s for s in names if is_held(cfg, self.n[s])}
+        out = [0.0] + [wmap[s] * self._weight(k, rnd, s, stats[s], raw[s], s in tested,
+                                              s in held, drop_suspects)
+                       for s in names]
+        kept = sum(out[1:])
+        if self.cfg.renormalise and kept + wmap[""] > 0:
+            scale = 1.0 / (kept + wmap[""])
+            out = [wmap[""] * scale] + [w * scale for w in out[1:]]
+        else:
+            out[0] = 1.0 - kept
+        return out
+
+    def _test_late(self, k: int, own: GaussianMixture, inputs: dict[str, GaussianMixture],
+                   late: dict[str, tuple[int, GaussianMixture]], stats: dict[str, float]
+                   ) -> dict[str, tuple[int, GaussianMixture, GaussianMixture]]:
+        """Each estimate tested once, against own of its scan (:attr:`TrustConfig.same_scan`):
+        a ``late`` one's statistic (in ``stats``) against own's density of the scan it was
+        made at, or 0 if it was tested before. Returns the tested ones, ``{s: (scan, density,
+        reference)}``."""
+        tested = {s: (k, inputs[s], own) for s in sorted(inputs) if s not in late}
+        for s, (a, mix) in late.items():
             ref = self.own_at.get(a)
             if a <= self.n[s].tested or ref is None:
                 stats[s] = 0.0  # no new evidence
             else:
                 stats[s] = self._single(ref, self.shift(s, mix))
                 tested[s] = (a, mix, ref)
-        if rnd == 0:
-            for s, (a, _, _) in tested.items():
-                self.n[s].tested = max(self.n[s].tested, a)
-        if rnd == 0 and cfg.repeat:
+        return tested
+
+    def _repeat_test(self, tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
+                     stats: dict[str, float]) -> None:
+        """Round 0: remember the scans tested; a density repeated bit for bit
+        (:attr:`TrustConfig.repeat`) gets statistic ``quarantine + drift`` in ``stats``."""
+        cfg = self.cfg
+        for s, (a, _, _) in tested.items():
+            self.n[s].tested = max(self.n[s].tested, a)
+        if cfg.repeat:
             for s, (a, mix, _) in tested.items():
-                if self._repeated(self.n[s], a, mix):
+                if is_repeated(cfg, self.n[s], a, mix):
                     stats[s] = cfg.quarantine + cfg.drift
-        raw = dict(stats)
-        if rnd == 0 and cfg.bias:
+
+    def _scan_tests(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                    late: dict[str, tuple[int, GaussianMixture]],
+                    tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
+                    stats: dict[str, float]) -> None:
+        """Round 0's other once-a-scan tests, raising ``stats`` to ``quarantine + drift``
+        where they fire: the offset tests (or registration) and the withheld-target CUSUM."""
+        cfg = self.cfg
+        alarm_stat = cfg.quarantine + cfg.drift
+        if cfg.bias:
             infos = {s: offset_information(ref, mix, self.pos, cfg.repeat_weight,
                                            cfg.bias_gate)
                      for s, (_, mix, ref) in tested.items()}
@@ -226,56 +193,52 @@ class Trust:
                                                  and self.n[s].state != "quarantined"])
             for s, info in infos.items():
                 rec = self.n[s]
-                chi2 = self._offset(rec, info)
+                chi2 = add_offset(cfg, rec, info)
                 alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
                 if cfg.register:
-                    self._register(rec, alarm)
+                    update_registration(rec, alarm)
                 elif alarm:
-                    stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
-        if rnd == 0 and cfg.withhold and cfg.detection_probability is not None:
+                    stats[s] = max(stats[s], alarm_stat)
+        if cfg.withhold and cfg.detection_probability is not None:
             fused = {**shown, **self.fused_in}  # a repaired density is what is tested
-            for s in self._withheld(own, fused, [s for s in names if s not in late]):
-                stats[s] = max(stats[s], cfg.quarantine + cfg.drift)
-        held = {s for s in names if self._held(self.n[s])}
-        out = [0.0]
-        for s in names:
-            rec = self.n[s]
-            rec.scan_max = max(rec.scan_max, stats[s])
-            rec.last_statistic = stats[s]
-            score = self._next(rec.score, rec.scan_max)
-            t = self._trust(rec, score)
-            if s in held:
-                rec.holds += t > 0.0  # counted where the hold, not the score, zeroes it
-                t = 0.0
-            if drop_suspects and t < 1.0:
-                t = 0.0
-            rec.last_weight = t
-            rec.rounds += 1
-            if t > 0.0 and (s in self.fused_in or rec.registered is not None):
-                rec.repairs += 1  # a repaired (or registered) density fused
-                rec.repaired_k = k if rec.repaired_k is None else rec.repaired_k
-            elif s in self.fused_in:
-                del self.fused_in[s]
-            if rec.first_k is None:
-                rec.first_k = k
-            if rec.low_k is None and t <= LOW:
-                rec.low_k = k
-            if self.history is not None:
-                self.history.append((k, s, raw[s], score, (
-                    *rec.last_offset_chi2, *((rec.withheld,) if cfg.withhold else ()))
-                    if s in tested and rec.last_offset_chi2 else ()))
-            out.append(wmap[s] * t)
-            self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
-                                 "statistic": round(stats[s], 4), "score": round(score, 4),
-                                 "weight": round(t, 4), "state": rec.state,
-                                 "held": s in held, "withheld": round(rec.withheld, 4)})
-        kept = sum(out[1:])
-        if self.cfg.renormalise and kept + wmap[""] > 0:
-            scale = 1.0 / (kept + wmap[""])
-            out = [wmap[""] * scale] + [w * scale for w in out[1:]]
-        else:
-            out[0] = 1.0 - kept
-        return out
+            for s in self._withheld(own, fused, [s for s in sorted(shown) if s not in late]):
+                stats[s] = max(stats[s], alarm_stat)
+
+    def _weight(self, k: int, rnd: int, s: str, stat: float, raw: float, tested: bool,
+                held: bool, drop_suspects: bool) -> float:
+        """Neighbour ``s``'s trust this round from its statistic ``stat`` (``raw``: before the
+        once-a-scan tests, for :attr:`history`), recorded in its record and :attr:`records`."""
+        cfg = self.cfg
+        rec = self.n[s]
+        rec.scan_max = max(rec.scan_max, stat)
+        rec.last_statistic = stat
+        score = self._next(rec.score, rec.scan_max)
+        t = self._trust(rec, score)
+        if held:
+            rec.holds += t > 0.0  # counted where the hold, not the score, zeroes it
+            t = 0.0
+        if drop_suspects and t < 1.0:
+            t = 0.0
+        rec.last_weight = t
+        rec.rounds += 1
+        if t > 0.0 and (s in self.fused_in or rec.registered is not None):
+            rec.repairs += 1  # a repaired (or registered) density fused
+            rec.repaired_k = k if rec.repaired_k is None else rec.repaired_k
+        elif s in self.fused_in:
+            del self.fused_in[s]
+        if rec.first_k is None:
+            rec.first_k = k
+        if rec.low_k is None and t <= LOW:
+            rec.low_k = k
+        if self.history is not None:
+            self.history.append((k, s, raw, score, (
+                *rec.last_offset_chi2, *((rec.withheld,) if cfg.withhold else ()))
+                if tested and rec.last_offset_chi2 else ()))
+        self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
+                             "statistic": round(stat, 4), "score": round(score, 4),
+                             "weight": round(t, 4), "state": rec.state,
+                             "held": held, "withheld": round(rec.withheld, 4)})
+        return t
 
     def _repair(self, k: int, rnd: int, own: GaussianMixture,
                 shown: dict[str, GaussianMixture],
@@ -308,7 +271,7 @@ class Trust:
                 kept = GaussianMixture.empty(shown[s].dim)
             f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
             if f is not None and f > 0:
-                _push(rec.factors, np.log(f), cfg.repair_window)
+                push_window(rec.factors, np.log(f), cfg.repair_window)
             if not rec.factors:
                 continue
             rep = kept.scaled(float(np.exp(np.median(rec.factors))))
@@ -331,7 +294,7 @@ class Trust:
         precise than own); then its corroborated part, or None."""
         cfg = self.cfg
         if rnd == 0:
-            _push(rec.moves, offset_information(own, mix, self.pos, cfg.repeat_weight,
+            push_window(rec.moves, offset_information(own, mix, self.pos, cfg.repeat_weight,
                                                 cfg.repair_offset_gate), cfg.repair_window)
         if len(rec.moves) < 2 or len(own) == 0 or len(mix) == 0:
             return None
@@ -361,15 +324,6 @@ class Trust:
         return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
                                target_mass(mix, w), target_mass(ref, w))
 
-    def _repeated(self, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:
-        """Whether ``mix`` (round 0 of scan ``k``) repeats, bit for bit, the non-empty density
-        the neighbour sent at an earlier scan (:attr:`TrustConfig.repeat`); remembers it."""
-        prev, prev_k = rec.last_mix, rec.last_k
-        if k <= prev_k:
-            return False
-        rec.last_mix, rec.last_k = mix, k
-        return is_repeat(prev, mix, self.cfg.repeat_weight)
-
     def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
                   fresh: list[str]) -> list[str]:
         """Add this scan's increment to each ``fresh`` neighbour's withheld-target CUSUM
@@ -397,31 +351,6 @@ class Trust:
                     self.losses["lost"] += int(lost)
         return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
-    def _held(self, rec: NeighbourTrust) -> bool:
-        """Whether the neighbour's withheld-target CUSUM holds its weight at 0 this scan
-        (:attr:`TrustConfig.withhold_hold`; every round of the scan, as its round-0 test
-        left it)."""
-        cfg = self.cfg
-        return (cfg.withhold and cfg.withhold_hold is not None
-                and cfg.detection_probability is not None
-                and rec.withheld > cfg.withhold_hold)
-
-    def _offset(self, rec: NeighbourTrust, info: tuple) -> tuple[float, ...]:
-        """Add this scan's ``(I, y)`` (:func:`peers.trust_checks.offset_information`) to the
-        neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
-        chi-square of its mean offset (:attr:`TrustConfig.bias`)."""
-        cfg = self.cfg
-        _push(rec.offsets, info, max(cfg.bias_windows))
-        chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
-        if cfg.bias_cusum:
-            if rec.cusum is None:
-                rec.cusum = np.zeros(cfg.bias_cusum_directions)
-            rec.cusum = offset_cusum(rec.cusum, info, cfg.bias_cusum_offset,
-                                     cusum_directions(cfg.bias_cusum_directions))
-            chi2 = (*chi2, float(rec.cusum.max()))
-        rec.last_offset_chi2 = chi2
-        return chi2
-
     def shift(self, s: str, mix: GaussianMixture) -> GaussianMixture:
         """``mix`` of neighbour ``s`` with its registered offset subtracted from every
         component's position (:attr:`TrustConfig.register`); ``mix`` itself if none."""
@@ -431,18 +360,6 @@ class Trust:
         means = mix.means.copy()
         means[:, self.pos] -= rec.registered
         return GaussianMixture(mix.weights, means, mix.covs)
-
-    def _register(self, rec: NeighbourTrust, alarm: bool) -> None:
-        """Registration (:attr:`TrustConfig.register`): from an offset alarm on, the
-        neighbour's offset is its generalised-least-squares estimate over the window kept,
-        re-estimated each scan, until its CUSUM is back at 0."""
-        if not alarm and (rec.registered is None
-                          or (rec.cusum is not None and float(rec.cusum.max()) <= 0.0)):
-            rec.registered = None
-            return
-        offset = gls_offset(rec.offsets)
-        if offset is not None:
-            rec.registered = offset
 
     def _next(self, score: float, statistic: float) -> float:
         return max(0.0, self.cfg.leak * score + statistic - self.cfg.drift)
