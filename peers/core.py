@@ -35,10 +35,12 @@ import numpy as np
 from sensornet.peers.admission import Admission, Route, parse_key
 from sensornet.peers.budget import EstimateBudget
 from sensornet.peers.consensus import Consensus
+from sensornet.peers.core_lifecycle import STOP_REASONS, Action, Event, Lifecycle, ScanEvent
+from sensornet.peers.core_outputs import CoreOutputs
 from sensornet.peers.core_summary import core_cost, core_snapshot, cost_per_scan
 from sensornet.peers.core_types import CoreConfig, Output, Publish, Record, Stop
 from sensornet.peers.scoring import Scorer
-from sensornet.protocol.codec import Rejected, decode, encode
+from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
@@ -46,7 +48,7 @@ END_GAP = 100_000
 """Scans a world's "end" may name after this peer's last one (misses to score: bounded)."""
 
 
-class PeerCore:
+class PeerCore(CoreOutputs):
     """One peer's whole behaviour between bytes and outputs."""
 
     def __init__(self, cfg: CoreConfig, consensus: Consensus, scorer: Scorer) -> None:
@@ -82,12 +84,12 @@ class PeerCore:
         self.first_k: int | None = None
         self.last_accept: float | None = None
         self.deadlines: dict[int, float] = {}
-        self.world = "unseen"  # "alive", "left"
-        self.end_requested = False
+        self.life = Lifecycle()
+        """The world's lifecycle and the scan numbering's, as explicit states
+        (:mod:`peers.core_lifecycle`)."""
         self.ctl_end_early = 0
         self.t0: float | None = None
         self.departures: deque[tuple[str, str, int]] = deque(maxlen=1000)  # flapping peers
-        self.stopped: str | None = None
         self._pending_local: list[int] = []
         self._pending_fused: list[Tracks] = []  # published tracks, to score
         self.world_gone: float | None = None  # when the world's token went (in the grace)
@@ -155,8 +157,7 @@ class PeerCore:
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""
         if self.world_gone is not None and now >= self.world_gone + self.cfg.grace():
-            self.world_gone, self.world = None, "left"  # not back within the grace
-            return self.finish(now) + [Stop("world left before ending the run")]
+            return self._world(Event.GRACE_OVER, now)  # not back within the grace
         out: list[Output] = []
         for k in [k for k, t in self.deadlines.items() if t <= now]:
             del self.deadlines[k]
@@ -179,22 +180,9 @@ class PeerCore:
         if name == self.name:
             return []
         if name == "world":
-            if joined:
-                if self.world_gone is not None:  # back within the grace: an outage
-                    self.world_outages.append((self.consensus.last_k, now - self.world_gone))
-                    self.world_gone = None
-                self.world = "alive"
-                return []
-            if self.world == "alive" and self.cfg.grace() > 0 and not self.end_requested:
-                if self.world_gone is None:
-                    self.world_gone = now  # maybe a router outage: see tick()
-                return []
-            if self.world == "alive":
-                self.world = "left"
-                reason = ("end of run" if self.end_requested
-                          else "world left before ending the run")
-                return self.finish(now) + [Stop(reason)]
-            return []
+            event = (Event.JOINED if joined  # a grace: maybe a router outage, see tick()
+                     else Event.LOST if self.cfg.grace() > 0 else Event.LEFT)
+            return self._world(event, now)
         c = self.consensus
         changed = c.peer_joined(name) if joined else c.peer_left(name)
         if not changed:
@@ -229,6 +217,32 @@ class PeerCore:
             due = end if due is None else min(due, end)
         return due
 
+    @property
+    def world(self) -> str:
+        """``"unseen"``, ``"alive"`` (an outage included) or ``"left"``."""
+        return self.life.world_seen
+
+    @property
+    def end_requested(self) -> bool:
+        """Whether the world's "end" came."""
+        return self.life.end_requested
+
+    def _world(self, event: Event, now: float) -> list[Output]:
+        """Take the world lifecycle's transition for ``event`` and carry out its action
+        (:data:`peers.core_lifecycle.WORLD_TABLE`)."""
+        action = self.life.step(event)
+        if action is Action.OUTAGE_START:
+            self.world_gone = now
+        elif action is Action.OUTAGE_END:
+            self.world_outages.append((self.consensus.last_k, now - self.world_gone))
+            self.world_gone = None
+        elif action is Action.END_EARLY:
+            self.ctl_end_early += 1  # the world is still there: wait for it to leave
+        elif action in STOP_REASONS:
+            self.world_gone = None
+            return self.finish(now) + [Stop(STOP_REASONS[action])]
+        return []
+
     # -- channels ---------------------------------------------------------------------------
     def _reject(self, reason: str) -> list[Output]:
         self.rejected[reason] += 1
@@ -246,11 +260,13 @@ class PeerCore:
         quiet = (self.last_accept is None
                  or now - self.last_accept > self.cfg.quiet * self.cfg.interval)
         if self.first_k is not None and c.last_k < k <= c.last_k + h:
+            self.life.scan(ScanEvent.NEXT)
             steps = k - c.last_k
             if steps > 1:
                 self.scorer.skipped(range(c.last_k + 1, k))
         elif quiet and k != c.last_k:
             # a new start of the numbering: nothing accepted for a while (late join, restart)
+            self.life.scan(ScanEvent.FIRST if self.first_k is None else ScanEvent.REANCHOR)
             if self.first_k is not None:
                 self.reanchored += 1
                 # the same numbering after a pause (this peer was frozen or fell behind): the
@@ -364,64 +380,11 @@ class PeerCore:
             self.t0 = msg.send_time
             return []
         if msg.command == "end":
-            self.end_requested = True
             last = msg.params.get("last_k")  # the world's last scan: later ones are misses
             if type(last) is int and 0 < last - self.consensus.last_k <= END_GAP:
                 self.end_k = last
-            if self.world_gone is not None:  # its token went first (Zenoh sends declarations
-                # at a higher priority than data, so a starved world's "end" can come after):
-                # the world has ended the run, as if it had left now
-                self.world_gone, self.world = None, "left"
-                return self.finish(now) + [Stop("end of run")]
-            if self.world != "left":
-                self.ctl_end_early += 1  # the world is still there: wait for it to leave
-            return []
+            return self._world(Event.END, now)  # after an outage's start: the end of the run
         return self._reject("ctl")
-
-    # -- helpers ----------------------------------------------------------------------------
-    def _wrap(self, messages: list) -> list[Output]:
-        out: list[Output] = []
-        for m in messages:
-            if isinstance(m, Estimate | Forward | Returns):
-                out.append(Publish("estimate", m.k, encode(m), m))
-                self.sent_bytes["estimate"] += len(out[-1].payload)
-            elif isinstance(m, Tracks):
-                out.append(Publish("tracks", m.k, encode(m), m))
-                self.sent_bytes["tracks"] += len(out[-1].payload)
-                out.append(self._scan_cost(m.k))
-                self._pending_fused.append(m)  # scored after publishing
-        return out
-
-    def _scan_cost(self, k: int) -> Record:
-        """What this scan's estimates or forwards cost (published since the last tracks)."""
-        st = self.consensus.stats
-        now = (st.tuples_out, st.tuples_to_neighbours, self.sent_bytes["estimate"])
-        d = [a - b for a, b in zip(now, self._cost_mark, strict=True)]
-        self._cost_mark = now
-        fan = len(self.consensus.alive)
-        return Record("cost", k, {"tuples": d[1], "tuples_published": d[0],
-                                  "bytes": d[2] * fan, "bytes_published": d[2]})
-
-    def _score_deferred(self) -> None:
-        """Score the fused tracks published since the last call, then extract and score the
-        local estimate: both kept off the path from scan to published tracks."""
-        for m in self._pending_fused:
-            self.scorer.output("fused", m.k, m.states, m.ids, m.status)
-        self._pending_fused.clear()
-        c = self.consensus
-        while self._pending_local:
-            k = self._pending_local.pop()
-            if k == c.last_k and c.last_local is not None:
-                t = c.local_tracks()  # a labelled kind's: the same states, with ids
-                if t is None:
-                    self.scorer.output("local", k, self.estimator.extract(c.last_local))
-                else:
-                    self.scorer.output("local", k, t.states, t.ids, t.status)
-        self._pending_local.clear()
-
-    def _records(self) -> list[Output]:
-        recs = self.consensus.drain_records() + self.scorer.drain_records()
-        return [Record(r.pop("kind"), r.pop("k"), r) for r in recs]
 
     # -- reporting (peers.core_summary) ------------------------------------------------------
     def cost(self) -> dict:
