@@ -37,6 +37,12 @@ from sensornet.peers.admission import TokenBucket, peek
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.core import PeerCore
 from sensornet.peers.host_batching import HostBatching
+from sensornet.peers.host_parts import (  # SharedDecode: re-exported (benchmarks)
+    BacklogInbox,
+    QueueInbox,
+    SharedDecode,
+    rt_line,
+)
 from sensornet.peers.idle_gc import IdleCollector
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.scoring import ScoreBatch
@@ -44,8 +50,7 @@ from sensornet.peers.session import open_session
 from sensornet.peers.telemetry import SharedCpu
 from sensornet.peers.transport import callback, settle
 from sensornet.protocol.bundle import unpack_bundle
-from sensornet.protocol.codec import Rejected, decode
-from sensornet.protocol.messages import Estimate
+from sensornet.protocol.codec import Rejected
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
@@ -63,59 +68,6 @@ together (:meth:`PeerHost._prepare_scans`; default), or each in its peer's step
 
 CONTROL = -1
 """The slot of the host's own items on its queue (commands, a signal's wake-up)."""
-
-
-class SharedDecode:
-    """One decode of an estimate handed to several co-hosted neighbours: the hand-off gives
-    each the same bytes object, so the last :data:`SIZE` estimates' messages are kept by
-    payload (a bytes object caches its hash) with their arrays read-only (a receiver that
-    wrote into one would raise, not change its neighbours'). Anything else (a large payload
-    too), and every refusal, is decoded per receiver as before."""
-
-    SIZE = 256
-    LARGEST = 65536
-    """Bytes of the largest payload kept (at most SIZE x LARGEST = 16 MiB held)."""
-
-    def __init__(self) -> None:
-        self._memo: dict[tuple[bytes, object], Estimate] = {}
-        self.hits = 0
-
-    def __call__(self, payload: bytes, limits):
-        memo_key = (payload, limits)
-        msg = self._memo.get(memo_key)
-        if msg is not None:
-            self.hits += 1
-            return msg
-        msg = decode(payload, limits)
-        if type(msg) is Estimate and len(payload) <= self.LARGEST:
-            for a in (msg.mixture.weights, msg.mixture.means, msg.mixture.covs):
-                a.flags.writeable = False
-            if len(self._memo) >= self.SIZE:
-                del self._memo[next(iter(self._memo))]  # the oldest
-            self._memo[memo_key] = msg
-        return msg
-
-
-class _Inbox:
-    """What one peer's transport puts on: the host's queue, tagged with the peer's slot."""
-
-    def __init__(self, q: queue.Queue, slot: int) -> None:
-        self._q, self._slot = q, slot
-
-    def put(self, item) -> None:
-        self._q.put((self._slot, item))
-
-
-class _Backlog:
-    """A hand-off's inbox: the peer's backlog itself, stamped now. The hand-off runs on the
-    loop's thread, so it needs neither the thread-safe queue nor another wake-up (the loop
-    sees a non-empty backlog and comes straight back)."""
-
-    def __init__(self, backlog: deque) -> None:
-        self._backlog = backlog
-
-    def put(self, item) -> None:
-        self._backlog.append((time.time(), item))
 
 
 class PeerHost(HostBatching):
@@ -141,7 +93,7 @@ class PeerHost(HostBatching):
         self.say = say or (lambda line: print(line, flush=True))
         self.q: queue.Queue = queue.Queue()
         self.cpu = SharedCpu()
-        self.peers = [PeerRuntime(core, o, inbox=_Inbox(self.q, i), shared_cpu=self.cpu)
+        self.peers = [PeerRuntime(core, o, inbox=QueueInbox(self.q, i), shared_cpu=self.cpu)
                       for i, (core, o) in enumerate(peers)]
         self.counts = {"wakes": 0, "fusion_batches": 0, "fusions_batched": 0,
                        "step_batches": 0, "steps_prepared": 0}
@@ -195,7 +147,7 @@ class PeerHost(HostBatching):
         info["gc"] = self.gc_counts
         self._remote_subs: list = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
-        self._inboxes = [_Backlog(b) for b in self._backlog]
+        self._inboxes = [BacklogInbox(b) for b in self._backlog]
 
     def _wire_handoff(self) -> None:
         """Each peer's co-hosted neighbours: not subscribed to through Zenoh, handed over."""
@@ -477,16 +429,3 @@ class PeerHost(HostBatching):
             rt.step([item for _, item in entries], lambda mine=mine: not mine)
             if rt._stop:
                 self._end(i)
-
-
-def rt_line(rt: PeerRuntime) -> str:
-    """The line a peer prints when it stops (as ``sensornet peer`` does)."""
-    s = rt.summary()
-    fused, local = s.get("mean_ospa_fused"), s.get("mean_ospa_local")
-
-    def f(v) -> str:
-        return "-" if v is None else f"{v:.1f}"
-
-    return (f"peer {rt.name}: stopped ({s['stop_reason']}); {s['scans']} scans, mean OSPA "
-            f"local {f(local)} fused {f(fused)}, rejected {s['rejected_total']}")
-
