@@ -67,6 +67,9 @@ class RuntimeOptions:
     recover: bool = False
     """Estimates and scans through Zenoh's advanced publisher/subscriber (routed runs): what a
     router's outage held back is asked for again; ``recovery`` in the summary counts it."""
+    ros2: int | None = None
+    """Also publish the tracks as ROS 2 messages on this ROS 2 domain (:mod:`peers.ros2`;
+    scenario ``network.ros2``); None: not."""
 
 
 class PeerRuntime(RunOutputs):
@@ -100,6 +103,7 @@ class PeerRuntime(RunOutputs):
         self._stop = False
         self._last_input = time.monotonic()
         self.recorder = None
+        self.ros2 = None
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
@@ -128,8 +132,13 @@ class PeerRuntime(RunOutputs):
             if o.record is not None and o.out_dir is not None:
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
+                self.recorder.attach(self.core)  # truth and the Foxglove scene too
             if o.security is None:  # live views' telemetry (the access control has no rule)
                 self.observer.open(self.transport.session, self.core.keys)
+            if o.ros2 is not None:
+                from sensornet.peers.ros2 import PeerRos2  # optional dependency: rosbags
+                self.ros2 = PeerRos2(self.transport.session, self.name, o.ros2,
+                                     o.scan_period, o.color_index)
         except BaseException:
             self.close()
             raise
@@ -137,6 +146,9 @@ class PeerRuntime(RunOutputs):
     def close(self) -> None:
         """Undeclare everything on the transport (the token goes), the telemetry and recorder."""
         try:
+            if self.ros2 is not None:
+                self.ros2.close()
+                self.ros2 = None
             self.observer.close()
             self.transport.close()
         finally:
@@ -279,9 +291,13 @@ class PeerRuntime(RunOutputs):
                 if drawing:  # the publishing timed apart from the drawing
                     t0 = time.thread_time()
                     self.transport.publish(out.channel, out.payload)
+                    if out.channel == "tracks" and self.ros2 is not None:
+                        self.ros2.tracks(out.message, wall)
                     cpu["publish"] += (time.thread_time() - t0) * 1e3
                 else:  # timed with the rest of the outputs' handling, below (one clock read)
                     self.transport.publish(out.channel, out.payload)
+                    if out.channel == "tracks" and self.ros2 is not None:
+                        self.ros2.tracks(out.message, wall)
                     published = True
                 lat = self.telemetry.published(out, wall, len(out.payload))
                 if out.channel == "tracks" and self.saved_tracks is not None:

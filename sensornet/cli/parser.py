@@ -164,6 +164,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="override a scenario value (repeatable)")
         sp.add_argument("--no-rerun", action="store_true",
                         help="do not write .rrd files (benchmarks)")
+        sp.add_argument("--ros2", dest="set", action="append_const",
+                        const="network.ros2=true",
+                        help="also publish the tracks (peers) and detections (world) as ROS 2 "
+                             "messages in rmw_zenoh's format (= --set network.ros2=true; "
+                             "docs/ros2.md)")
         if launcher:
             sp.add_argument("--secure", nargs="?", const="", metavar="DIR",
                             help="mutual TLS and access control with the keys in DIR "

@@ -162,6 +162,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             cond.notify_all()
 
     sent = {"scans": 0, "bytes": 0, "scans_published": 0, "bundles": 0}
+    ros2 = None
     try:
         live_sub = session.liveliness().declare_subscriber(keys.ready("*"), on_live,
                                                            history=True)
@@ -185,6 +186,13 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
             pubs = {n: _Typed(p) for n, p in pubs.items()}
             truth_pub, ctl_pub = _Typed(truth_pub), _Typed(ctl_pub)
         token = session.liveliness().declare_token(keys.alive("world"))
+        if scn.network.ros2:  # each sensor's detections as ROS 2 point clouds (docs/ros2.md)
+            try:
+                from sensornet.peers.ros2 import WorldRos2  # optional dependency: rosbags
+            except ImportError:
+                raise WorldError("network.ros2 (--ros2) needs rosbags: pip install "
+                                 "'sensornet[ros2]'") from None
+            ros2 = WorldRos2(session, scn.sensor_names, scn.network.ros2_domain)
         if wait_for:
             say(f"world: waiting up to {wait_timeout:g} s for peers {', '.join(wait_for)}")
             deadline = time.monotonic() + wait_timeout
@@ -229,6 +237,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                     z = np.asarray(s.position) + z[:, :1] * np.column_stack(
                         [np.cos(z[:, 1]), np.sin(z[:, 1])])
                 sink.points(f"world/scans/{s.name}", z, color_of(i), radius=2.0)
+                if ros2 is not None:
+                    ros2.detections(s.name, z, time.time())
 
         paths = TruthPaths()
         pending = None  # (k, time): scan k's truth and logging, TRUTH_DELAY after its scans
@@ -270,6 +280,8 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
         token.undeclare()
         live_sub.undeclare()
     finally:
+        if ros2 is not None:
+            ros2.close()
         session.close()
         sink.close()
     return sent

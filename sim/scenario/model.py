@@ -300,6 +300,11 @@ class NetworkSpec:
     router: bool = option(False, doc="`sensornet run`/`demo`: every process a client of one "
                                      "Zenoh router the run starts (as `--router`), not peer to "
                                      "peer.")
+    ros2: bool = option(False, doc="Each peer also publishes its tracks (and the world its "
+                                   "detections) as ROS 2 messages in `rmw_zenoh`'s format "
+                                   "(`--ros2`; docs/ros2.md; needs the `[ros2]` extra).")
+    ros2_domain: int = option(0, doc="The ROS 2 domain (`ROS_DOMAIN_ID`) of those messages.",
+                              check=Bound(0, 232))
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -64,8 +65,18 @@ def _peer_parts(args: argparse.Namespace, scn, name: str, color: int, security=N
         color_index=color, idle_timeout=args.idle_timeout, rerun=not args.no_rerun,
         save_tracks=args.save_tracks, scan_period=scn.scan_period,
         faults=fault_injector(scn, args.run), recover=args.recover,
-        record=_record_meta(args, speed) if args.record else None)
+        record=_record_meta(args, speed) if args.record else None, ros2=ros2_domain(scn))
     return core, options
+
+
+def ros2_domain(scn) -> int | None:
+    """The ROS 2 domain the scenario's ``network.ros2`` publishes on, or None (off); a clear
+    error when it is on and ``rosbags`` (the ``[ros2]`` extra) is missing."""
+    if not scn.network.ros2:
+        return None
+    if importlib.util.find_spec("rosbags") is None:
+        raise UserError("network.ros2 (--ros2) needs rosbags: pip install 'sensornet[ros2]'")
+    return scn.network.ros2_domain
 
 
 def _record_meta(args: argparse.Namespace, speed: float) -> dict[str, str]:
