@@ -78,6 +78,17 @@ class TwinResult:
     ospa: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
     """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
 
+    def tally(self, peer: str, outputs: list) -> None:
+        """Keep what ``peer``'s outputs say for the result: its stop, fusion ages, OSPA."""
+        for o in outputs:
+            if isinstance(o, Stop):
+                self.stops[peer] = o.reason
+            elif isinstance(o, Record) and o.kind == "fusion":
+                self.ages.setdefault(peer, []).extend(o.values["ages"].values())
+            elif isinstance(o, Record) and o.kind == "ospa":
+                per = self.ospa.setdefault(peer, {"local": {}, "fused": {}})
+                per[o.values["which"]][o.k] = o.values["value"]
+
     def mean_ospa(self, peer: str, kind: str = "fused") -> float:
         return self.peers[peer].mean_ospa(kind)
 
@@ -93,6 +104,37 @@ class TwinResult:
                  mean_estimate_age=sum(ages) / len(ages) if ages else None,
                  latency_ms_median=None, latency_ms_p99=None, stop_reason=self.stops.get(peer))
         return s
+
+
+def world_events(scn: Scenario, truth, scans, keys: Keys, interval: float,
+                 inject: Iterable[Inject], events: Iterable[Liveliness]) -> list[tuple]:
+    """What the world (and ``inject``, ``events``) puts on the twin's clock, in order:
+    ``(t, kind, target, *payload)``; the start, every scan and truth, the "end", then the
+    world's leaving."""
+    names, network = scn.sensor_names, keys.network
+    out: list[tuple] = []
+    start = encode(Control("start", network, {"speed": scn.network.speed}, send_time=0.0))
+    for n in names:
+        out.append((0.0, "live", n, "world", True))
+        out.append((0.0, "msg", n, keys.ctl(), start))
+    for k in range(1, scn.num_scans + 1):
+        t = k * interval
+        x = truth.states[k - 1]
+        t_msg = encode(Truth(k, truth.ids[k - 1], x, send_time=t + TRUTH_DELAY * interval))
+        for i, n in enumerate(names):
+            out.append((t, "msg", n, keys.scan(n), encode(Scan(n, k, scans[i][k - 1], seq=k,
+                                                               send_time=t))))
+            out.append((t + TRUTH_DELAY * interval, "msg", n, keys.truth(), t_msg))
+    for m in inject:
+        out.append((m.t, "msg", m.target, m.key, m.payload))
+    for e in events:
+        out.append((e.t, "live", e.target, e.name, e.joined))
+    end = (scn.num_scans + 1) * interval + 1.0
+    stop = encode(Control("end", network, {}, send_time=end))
+    for n in names:
+        out.append((end - 0.5, "msg", n, keys.ctl(), stop))  # as the world: "end", then leave
+        out.append((end, "live", n, "world", False))
+    return out
 
 
 def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
@@ -143,27 +185,9 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
                 for d in ds:
                     push(t + d, "msg", other, keys.estimate(sender), o.payload)
 
-    start = encode(Control("start", network, {"speed": scn.network.speed}, send_time=0.0))
-    for n in names:
-        push(0.0, "live", n, "world", True)
-        push(0.0, "msg", n, keys.ctl(), start)
-    for k in range(1, scn.num_scans + 1):
-        t = k * interval
-        x = truth.states[k - 1]
-        t_msg = encode(Truth(k, truth.ids[k - 1], x, send_time=t + TRUTH_DELAY * interval))
-        for i, n in enumerate(names):
-            push(t, "msg", n, keys.scan(n), encode(Scan(n, k, scans[i][k - 1], seq=k,
-                                                        send_time=t)))
-            push(t + TRUTH_DELAY * interval, "msg", n, keys.truth(), t_msg)
-    for m in inject:
-        push(m.t, "msg", m.target, m.key, m.payload)
-    for e in events:
-        push(e.t, "live", e.target, e.name, e.joined)
-    end = (scn.num_scans + 1) * interval + 1.0
-    stop = encode(Control("end", network, {}, send_time=end))
-    for n in names:
-        push(end - 0.5, "msg", n, keys.ctl(), stop)  # as the world: "end", then it leaves
-        push(end, "live", n, "world", False)
+    for t, kind, target, *payload in world_events(scn, truth, scans, keys, interval, inject,
+                                                  events):
+        push(t, kind, target, *payload)
     scheduled: dict[str, float] = {}
     truth_key = keys.truth()
     fusions = FusionBatch() if batch else None
@@ -177,14 +201,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     def handle(t: float, target: str, core: PeerCore, out: list) -> None:
         out += core.tick(t)
         carry_out(t, target, out)
-        for o in out:
-            if isinstance(o, Stop):
-                result.stops[target] = o.reason
-            elif isinstance(o, Record) and o.kind == "fusion":
-                result.ages.setdefault(target, []).extend(o.values["ages"].values())
-            elif isinstance(o, Record) and o.kind == "ospa":
-                per = result.ospa.setdefault(target, {"local": {}, "fused": {}})
-                per[o.values["which"]][o.k] = o.values["value"]
+        result.tally(target, out)
         due = core.next_due()
         if due is not None and scheduled.get(target) != due:
             scheduled[target] = due
