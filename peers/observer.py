@@ -113,8 +113,14 @@ class Observer:
             self._set(k, "components/after_level2", v.get("n_published"))
             self._set(k, "compute_ms/filter", compute_ms)
             mix = core.consensus.last_local
+            hooks = core.consensus.hooks
             if isinstance(mix, GaussianMixture):
                 self._set(k, "cardinality/local", float(mix.weights.sum()))
+                self._scan(k)["points"]["local/mixture"] = pack_marginals(
+                    _heaviest(mix, FUSED_SHOWN))
+            elif mix is not None and hooks.plane is not None:  # raw scans: the own scan
+                self._scan(k)["points"]["local"] = np.asarray(hooks.plane(mix),
+                                                              float).reshape(-1, 2)
             cells = core.consensus.hooks.partition_view()
             if cells is not None:  # the scan and the cell of each of its points
                 z, labels = cells
@@ -210,6 +216,32 @@ class Observer:
                 self.sent += 1
             except Exception:  # best effort: a view is never worth a peer's error
                 pass
+
+
+def pack_marginals(mix: GaussianMixture) -> np.ndarray:
+    """A mixture's position marginals as ``(3 n, 2)`` telemetry points (the local estimate
+    rides in :attr:`Telemetry.points`, so a view needs none of the peers' estimates): per
+    component ``[mx, my], [Pxx, Pxy], [Pyy, w]``; :func:`unpack_marginals` inverts it."""
+    c = position_columns(mix.dim)
+    n = len(mix)
+    out = np.empty((n, 3, 2))
+    out[:, 0] = mix.means[:, c]
+    out[:, 1, 0], out[:, 1, 1] = mix.covs[:, c[0], c[0]], mix.covs[:, c[0], c[1]]
+    out[:, 2, 0], out[:, 2, 1] = mix.covs[:, c[1], c[1]], mix.weights
+    return out.reshape(-1, 2)
+
+
+def unpack_marginals(points: np.ndarray) -> GaussianMixture:
+    """Inverse of :func:`pack_marginals`: a 4-D ``[px, vx, py, vy]`` mixture (velocity
+    blocks unit) for drawing."""
+    r = np.asarray(points, float).reshape(-1, 3, 2)
+    n = len(r)
+    means = np.zeros((n, 4))
+    means[:, 0], means[:, 2] = r[:, 0, 0], r[:, 0, 1]
+    covs = np.tile(np.eye(4), (n, 1, 1))
+    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (r[:, 1, 0], r[:, 1, 1],
+                                                                  r[:, 1, 1], r[:, 2, 0])
+    return GaussianMixture.trusted(r[:, 2, 1], means, covs)
 
 
 def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:

@@ -289,6 +289,7 @@ def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
     assert msg.values["flooding/scans_held"] == 5
     assert msg.points["pooled"].shape[1] == 2 and len(msg.points["pooled"])  # in the plane
     assert msg.mixture is None  # raw scans: no mixture to draw
+    assert msg.points["local"].shape[1] == 2 and "local/mixture" not in msg.points
     calls = {}
 
     class Rec:
@@ -303,8 +304,9 @@ def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
     for path in ("metrics/cost/s3/tuples", "metrics/cost/s3/bytes",
                  "metrics/flooding/s3/scans_held", "peers/s3/pooled", "peers/s3/local"):
         assert path in calls, path
-    own_points = calls["peers/s3/local"][0].as_arrow_array().to_pylist()[0]
-    assert len(own_points) == 4  # its own scan only
+    rows = calls["peers/s3/local"][0].as_arrow_array().to_pylist()
+    assert len(rows[0]) == len(msg.points["local"])  # the own scan, from the telemetry
+    assert len(rows[1]) == 4  # and from its round-0 forward (a view with --estimates)
     assert not any("means" in p for p in calls)
     out = [o for o in core.finish(99.0) if isinstance(o, Publish)]
     assert out == []  # nothing pending after the run

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
-from sensornet.peers.observer import WAIT_SCANS, Observer
+from sensornet.peers.observer import WAIT_SCANS, Observer, pack_marginals, unpack_marginals
 from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.session import endpoint, free_port
@@ -143,6 +143,30 @@ def test_view_state_draws_what_the_network_carries():
               str(c.component_descriptor())][0].as_arrow_array().to_pylist()[0]
     r, g, b = lighter(color_of(0))
     assert colors[0] == (r << 24) | (g << 16) | (b << 8) | 255
+
+
+def test_the_local_estimate_rides_in_the_telemetry():
+    """A peer's local mixture goes as position marginals in its telemetry (no view needs the
+    estimates): round trip against the mixture's own position block, then drawn dashed."""
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(5, 4, 4))
+    mix = GaussianMixture.trusted(rng.uniform(0.1, 1, 5), rng.normal(size=(5, 4)),
+                                  A @ A.transpose(0, 2, 1) + np.eye(4))
+    back = unpack_marginals(pack_marginals(mix))
+    np.testing.assert_allclose(back.weights, mix.weights)
+    np.testing.assert_allclose(back.means[:, [0, 2]], mix.means[:, [0, 2]])
+    np.testing.assert_allclose(back.covs[:, [0, 2]][:, :, [0, 2]],
+                               mix.covs[:, [0, 2]][:, :, [0, 2]])
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), ["s1"])
+    msg = decode(encode(Telemetry("s1", 2, points={"local/mixture": pack_marginals(mix)})))
+    state.message(msg)
+    state.b.flush()
+    calls = rec.by_path()
+    means = calls["peers/s1/local/means"][1][0].as_arrow_array().to_pylist()[0]
+    np.testing.assert_allclose(np.array(means)[:, 0], mix.means[:, 0], rtol=1e-6)
+    assert len(calls["peers/s1/local/ellipses"][1][0].as_arrow_array().to_pylist()[0]) == 5 * 16
+    assert "peers/s1/local/mixture" not in calls
 
 
 def test_labelled_tracks_get_one_colour_and_label_per_id_at_every_peer():

@@ -54,6 +54,8 @@ COMMANDS: dict[str, str] = {
     "report": "report:cmd_report",
     "echo": "live:cmd_live",
     "topics": "live:cmd_live",
+    "record": "bag:cmd_record",
+    "play": "bag:cmd_play",
     "view": "view:cmd_view",
     "plot": "plot:cmd_plot",
     "scenario": "scenario:cmd_scenario",
@@ -123,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
         if launcher:
             sp.add_argument("--network", type=_network_name,
                             help="network name: the key space of this run (default: a fresh "
-                                 "random name)")
+                                 "random name, run-XXXXXXXX, printed as the run starts)")
             sp.add_argument("--listen", action="append", metavar="ENDPOINT", type=_endpoint,
                             help="the world listens here (peers connect to the first), e.g. "
                                  "tcp/127.0.0.1:7447, so that more peers can join by hand")
@@ -377,6 +379,38 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _add_bag(sub) -> None:
+    """The ``record`` and ``play`` subcommands (sensornet.bag)."""
+    rc = sub.add_parser("record", help="record every key of a running network (and its "
+                        "liveliness tokens) into one MCAP file, JSON messages with schemas")
+    rc.add_argument("network", help="the network's name (what 'sensornet run' printed)")
+    rc.add_argument("-o", "--out", required=True, metavar="FILE.mcap", help="the bag to write")
+    rc.add_argument("--connect", action="append", metavar="ENDPOINT",
+                    help="a Zenoh endpoint of the network (e.g. the world's --listen)")
+    rc.add_argument("--config", help="Zenoh JSON5 config file")
+    rc.add_argument("--duration", type=float, help="seconds to record (default: Ctrl-C)")
+    rc.add_argument("--count", type=int, help="stop after this many messages")
+    rc.add_argument("--until-end", action="store_true",
+                    help="stop 2 s after the run's end message")
+    rc.add_argument("--wait", type=float, metavar="S",
+                    help="seconds to wait for the network to answer (default 3, 20 with "
+                         "--connect)")
+    rc.add_argument("--force", action="store_true", help="overwrite FILE")
+    pl = sub.add_parser("play", help="put a recording (sensornet record, or a peer's run "
+                        "--record file) back onto a network at its pace or --rate faster")
+    pl.add_argument("file", help="an MCAP file")
+    pl.add_argument("--connect", action="append", metavar="ENDPOINT",
+                    help="a Zenoh endpoint to put onto (repeatable)")
+    pl.add_argument("--listen", action="append", metavar="ENDPOINT",
+                    help="listen here, so peers started by hand can --connect to it")
+    pl.add_argument("--config", help="Zenoh JSON5 config file")
+    pl.add_argument("--rate", type=float, default=1.0,
+                    help="play this many times faster than recorded (default 1)")
+    pl.add_argument("--network", help="put the keys under this network's name instead")
+    pl.add_argument("--delay", type=float, default=0.0, metavar="S",
+                    help="seconds to wait after opening (for subscribers to link)")
+
+
 def _add_live_and_plot(sub) -> None:
     """The ``echo``, ``topics`` and ``plot`` subcommands."""
     for name, helptext in (("echo", "print every message on a running network, decoded, one "
@@ -384,13 +418,17 @@ def _add_live_and_plot(sub) -> None:
                            ("topics", "listen to a running network for a while, then a table "
                                       "of its keys: messages, rate, bytes, kinds, newest scan")):
         ec = sub.add_parser(name, help=helptext)
-        ec.add_argument("network", help="the network's name (sensornet run --network; default "
-                                        "of run: the scenario's name)")
+        ec.add_argument("network", help="the network's name (sensornet run prints it as it "
+                                        "starts, with the --connect endpoint: its --network, "
+                                        "else a fresh random name run-XXXXXXXX)")
         if name == "echo":
             ec.add_argument("key", nargs="?", default="**",
                             help="key expression under sensornet/NETWORK/ (default **: "
                                  "everything; e.g. 'estimate/*', 'scan/s1', 'tracks/**')")
             ec.add_argument("--count", type=int, help="stop after this many messages")
+            ec.add_argument("--json", action="store_true",
+                            help="one JSON object per message: key, time, encoding, bytes "
+                                 "and every field decoded")
         else:
             ec.add_argument("--count", type=int,
                             help="table as soon as this many messages were heard")
@@ -404,7 +442,11 @@ def _add_live_and_plot(sub) -> None:
                         help="a keys folder: speak as --as MEMBER over mutual TLS and verify "
                              "every signature")
         ec.add_argument("--as", dest="member", help="the member the tool speaks as (--secure)")
+        ec.add_argument("--wait", type=float, metavar="S",
+                        help="seconds to wait for the network to answer before saying what to "
+                             "pass, exit 1 (default 3, 20 with --connect)")
         ec.set_defaults(command_name=name)
+    _add_bag(sub)
 
     vw = sub.add_parser("view", help="attach a live Rerun view to a running network: it only "
                         "subscribes (peers pay nothing for it); Ctrl-C detaches")
@@ -427,6 +469,9 @@ def _add_live_and_plot(sub) -> None:
     vw.add_argument("--from-mcap", nargs="+", metavar="FILE",
                     help="rebuild the view offline from peers' recordings (run --record: "
                          "<run>/record/*.mcap) instead of joining a network")
+    vw.add_argument("--estimates", action="store_true",
+                    help="hear the peers' estimates too (the local marks of peers that send "
+                         "no telemetry; costs every peer a copy of each estimate)")
     vw.add_argument("--nice", type=NONNEGATIVE_INT, default=0,
                     help="lower the view's CPU priority by this much (run: 10), so that on a "
                          "busy machine the view falls behind, not the peers")

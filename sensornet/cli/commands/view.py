@@ -96,7 +96,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         print(f"view: {drawn} recorded messages drawn from {len(args.from_mcap)} recordings "
               f"({offline.rejected} undecodable) -> {out or viewer}", file=sys.stderr)
         return 0
-    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config)
+    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config,
+                    estimates=args.estimates)
 
     def on_signal(signum, frame) -> None:
         view.stop.set()
