@@ -40,6 +40,10 @@ from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.reduction import Reducer
 
 ADOPTED_BASE = 1 << 40
+PUBLISHED_BASE = 1 << 36
+"""Index offset of the label an own track takes when it is first published
+(``(origin, k, PUBLISHED_BASE + i)``: :meth:`LmbEstimator.step`), apart from births (small),
+fusions' fresh labels (``1 << 32``) and adopted ones (:data:`ADOPTED_BASE`)."""
 """Index offset of the labels an unlabelled adopted (feedback) density's tracks get, apart from
 births (small indices) and fusions' fresh labels (``peers.labelling.FRESH_BASE``)."""
 
@@ -120,6 +124,9 @@ class LmbEstimator:
         self._adopted_labels: np.ndarray | None = None
         self._unpublished = np.zeros(0, dtype=bool)
         """``(n,)`` the tracks of the last step that were not published (kept on feedback)."""
+        self._published = label_keys(np.zeros((0, 3), dtype=np.int64))
+        """Keys of the labels of our tracks that have been on the network (published by us,
+        or taken from it)."""
 
     # -- the contract ---------------------------------------------------------------------
     def begin_scan(self, k: int) -> None:
@@ -136,6 +143,8 @@ class LmbEstimator:
             self._take_adopted()
         self.state = self.filter.step(self.state, z, k)
         self.k = k
+        if self.origin is not None and self.publish_threshold is not None:
+            self._stamp_first_publication(k)
         mix, labels = phd_mixture(self.state)
         self._last = (mix, self.state)
         t = self.state.tracks
@@ -211,11 +220,37 @@ class LmbEstimator:
         if self.origin is None or len(t) == 0 or len(match) == 0:
             return
         new = adopt_labels(t.labels, match)
+        was = np.isin(label_keys(t.labels), self._published)
+        self._published = np.union1d(self._published, label_keys(new[was]))
         self.state = LmbState(LabelledBernoulliSet.trusted(new, t.existence, t.weights,
                                                            t.means, t.covs, t.owner),
                               self.state.hits, self.state.k, self.state.pending)
 
     # -- helpers --------------------------------------------------------------------------
+    def _stamp_first_publication(self, k: int) -> None:
+        """An own-born track published for the first time takes the label ``(origin, k,
+        PUBLISHED_BASE + i)``: the network rule's "earliest birth" then means earliest on the
+        network, so a track that sat unpublished below the threshold while a neighbour's track
+        of the same target already carried the target's id cannot take that id over (the one
+        fused identity switch per peer of the seed-000 twin: a track born at scan 20 published at
+        24 beat the id a neighbour had published at 22)."""
+        t = self.state.tracks
+        if len(t) == 0:
+            return
+        keys = label_keys(t.labels)
+        was = np.isin(keys, self._published)
+        new = ((t.existence > self.publish_threshold) & ~was & (t.labels[:, 0] == self.origin)
+               & (t.labels[:, 2] < PUBLISHED_BASE))
+        labels = t.labels
+        if new.any():
+            labels = labels.copy()
+            labels[new] = new_labels(self.origin, k, int(new.sum()), PUBLISHED_BASE)
+            self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
+                                                               t.means, t.covs, t.owner),
+                                  self.state.hits, self.state.k, self.state.pending)
+        on = was | (t.existence > self.publish_threshold)
+        self._published = label_keys(labels[on])
+
     def _own(self, mix: GaussianMixture) -> LmbState | None:
         """The state behind ``mix`` if it is our last step's density, else None."""
         last = self._last
@@ -244,4 +279,4 @@ class LmbEstimator:
         self.state = LmbState(tracks, hits, old.k, old.pending)
 
 
-__all__ = ["ADOPTED_BASE", "LmbEstimator", "lmb_from_mixture", "phd_mixture"]
+__all__ = ["ADOPTED_BASE", "PUBLISHED_BASE", "LmbEstimator", "lmb_from_mixture", "phd_mixture"]

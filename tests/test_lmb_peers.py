@@ -9,7 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
-from sensornet.peers.lmb_estimator import LmbEstimator, lmb_from_mixture, phd_mixture
+from sensornet.peers.lmb_estimator import (
+    PUBLISHED_BASE,
+    LmbEstimator,
+    lmb_from_mixture,
+    phd_mixture,
+)
 from sensornet.sim.kinds import kind
 from sensornet.sim.kinds.lmb import make_lmb_filter
 from sensornet.sim.run.twin import run_twin
@@ -125,6 +130,33 @@ def test_step_tracks_ids_and_relabel():
     assert (est.state.tracks.labels == b).all(axis=1).sum() == 1
 
 
+def test_a_track_takes_its_label_when_first_published_and_keeps_it():
+    """An own-born track is relabelled ``(origin, k, PUBLISHED_BASE + i)`` at the scan its
+    existence first exceeds the publish threshold (so "earliest birth" means earliest on the
+    network), keeps that label on later scans, and a label taken from the network (relabel)
+    is never restamped."""
+    rng = np.random.default_rng(6)
+    est = LmbEstimator(_filter(origin=2), origin=2)
+    first: set[tuple] = set()
+    for k, z in enumerate(_targets_scans(rng, 8), start=1):
+        est.begin_scan(k)
+        out = est.step(1, z)
+        t = est.state.tracks
+        pub = t.existence > est.publish_threshold
+        np.testing.assert_array_equal(out.labels["posterior"], t.labels[t.owner][pub[t.owner]])
+        for lab in t.labels[pub].tolist():
+            if lab != [0, 1, 0]:  # every published own label stamped
+                assert lab[0] == 2 and lab[2] >= PUBLISHED_BASE
+                first.add(tuple(lab))
+        if k == 5:
+            a = t.labels[pub][0]
+            est.relabel(LabelMatch(a[None], np.array([[0, 1, 0]]), np.zeros(1)))
+    labels = est.state.tracks.labels
+    assert len(first) == 2  # two targets, each stamped once, at its first publication
+    assert (labels == [0, 1, 0]).all(axis=1).sum() == 1  # the network's label stays
+    assert sum((labels == lab).all(axis=1).sum() for lab in first) == 1
+
+
 def test_bad_settings_are_one_line_errors():
     with pytest.raises(ValueError, match="origin"):
         LmbEstimator(_filter(origin=1), origin=2)
@@ -205,9 +237,9 @@ def test_seed000_every_scan_and_fusion_beats_local(seed000):
 
 
 def test_seed000_one_id_per_target(seed000):
-    """Measured: fused label agreement 100 % of 214 target-scans (100 % of 204 confirmed),
-    1 identity switch at each peer (4.5 per 1,000 target-scans); local tracks 2-5 switches
-    (they take the network's ids as fusions spread them)."""
+    """Measured: fused label agreement 100 %, 0 identity switches at each peer (1 before own
+    tracks took their label at first publication: peers.lmb_estimator.PUBLISHED_BASE); local
+    tracks 2-5 switches (they take the network's ids as fusions spread them)."""
     scn, twin = seed000
     names, c = scn.sensor_names, scn.metrics.ospa_cutoff
     tabs, truth = _tables(twin, names, "fused")
@@ -219,7 +251,7 @@ def test_seed000_one_id_per_target(seed000):
     for p, tab in tabs.items():
         r = track_report(truth, tab, c=c, with_hota=False, with_tgospa=False)
         print(f"{p}: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000")
-        assert r["truth_scans"] > 200 and r["switches"] <= 2
+        assert r["truth_scans"] > 200 and r["switches_per_1000"] <= 1.0
     local, _ = _tables(twin, names, "local")
     for tab in local.values():
         assert len(tab.id) > 200 and np.unique(tab.id).size < 40
