@@ -1,8 +1,11 @@
 """``sensornet report CAMPAIGN_DIR``: a markdown report with PNG figures from a campaign's results.
 
 Per-cell tables give every scalar metric's mean over the runs with a 95 % confidence interval
-(Student t, ``mean ± t(0.975, n-1) s / sqrt(n)``). Figures, as the campaign's ``[[figures]]``
-ask (default: OSPA over time per cell):
+(Student t, ``mean ± t(0.975, n-1) s / sqrt(n)``), its lower end clipped at 0 for a metric no
+run found negative (OSPA, a cardinality error, counts: :func:`bounds`). The overview leads with
+the fused and local OSPA and GOSPA and, where the runner gives them, the track-level numbers
+(OSPA(2), identity switches per 1,000 target-scans, label agreement). Figures, as the
+campaign's ``[[figures]]`` ask (default: OSPA over time per cell):
 
 * ``sweep``: a metric (``y``, default the fused OSPA) against one grid key (``x``), a line per
   value of ``lines`` (or per combination of the other grid keys), 95 % error bars; optional
@@ -48,6 +51,23 @@ def interval(values: np.ndarray) -> tuple[float, float, int]:
     return float(v.mean()), float(t.ppf(0.975, n - 1) * v.std(ddof=1) / math.sqrt(n)), n
 
 
+def bounds(mean: float, half: float, nonnegative: bool) -> tuple[float, float, bool]:
+    """``(low, high, clipped)`` of the interval ``mean ± half``; for a quantity that cannot be
+    negative (``nonnegative``: no run of the campaign gave a negative value) the low end is
+    clipped at 0, ``clipped`` saying it was (the t interval's symmetry does not hold near 0;
+    clipping keeps its coverage and drops only impossible values)."""
+    low, high = mean - half, mean + half
+    if nonnegative and low < 0:
+        return 0.0, high, True
+    return low, high, False
+
+
+def _nonnegative(values) -> bool:
+    v = np.array([np.nan if x is None else x for x in values], dtype=float)
+    v = v[np.isfinite(v)]
+    return bool(len(v)) and bool((v >= 0).all())
+
+
 def _num(x: float) -> str:
     if not math.isfinite(x):
         return "–"
@@ -75,12 +95,18 @@ def _by_cell(table, manifest) -> dict[int, dict[str, Any]]:
     return out
 
 
+TRACK_COLUMNS = ("fused_ospa2", "local_ospa2", "fused_switches_per_1000", "label_agreement")
+"""The runners' track-level columns (:mod:`sim.studies.network.study`), in the overview when
+present: OSPA(2) over whole tracks (m), identity switches per 1,000 true target-scans, the share
+of target-scans every peer gives the same id."""
+
+
 def _headline(scalars: list[str]) -> list[str]:
     keys = [c for c in scalars if c.startswith("mean_ospa.")]
     if not keys:
         keys = [c for c in ("fused_ospa", "local_ospa", "fused_gospa", "local_gospa")
                 if c in scalars]
-    return keys or scalars[:3]
+    return (keys or scalars[:3]) + [c for c in TRACK_COLUMNS if c in scalars and c not in keys]
 
 
 def _tick_labels(values: list) -> dict[str, str]:
@@ -236,12 +262,16 @@ def overview(table, manifest: dict) -> list[str]:
     head = _headline(scalars)
     lines = ["| cell | runs | " + " | ".join(f"{h} (95 % CI)" for h in head) + " |",
              "|---|---:|" + "---:|" * len(head)]
+    nonneg = {h: _nonnegative(table.column(h).to_pylist()) for h in head}
     for cell in manifest["cells"]:
         d = cells[cell["index"]]
         parts = []
         for h in head:
-            mean, half, _ = interval(np.array(d.get(h, []), dtype=float))
-            parts.append(f"{_num(mean)} ± {_num(half)}")
+            mean, half, _ = interval(np.array([np.nan if v is None else v
+                                               for v in d.get(h, [])], dtype=float))
+            low, high, clipped = bounds(mean, half, nonneg[h])
+            parts.append(f"{_num(mean)} [{_num(low)}, {_num(high)}]" if clipped
+                         else f"{_num(mean)} ± {_num(half)}")
         lines.append(f"| {cell['label']} | {len(d['key'])} | " + " | ".join(parts) + " |")
     return lines
 
@@ -264,7 +294,9 @@ def write_report(folder: str | Path, out: str | Path | None = None,
              f"{table.num_rows}/{total} runs computed; code version "
              f"`{manifest['code_version']}`.", "",
              "Means over the runs with 95 % confidence intervals "
-             "(Student t: mean ± t(0.975, n−1)·s/√n).", ""]
+             "(Student t: mean ± t(0.975, n−1)·s/√n); for a metric no run found negative "
+             "(OSPA, cardinality error, counts) the interval's low end is clipped at 0, "
+             "shown as [low, high].", ""]
     written: list[Path] = []
     if table.num_rows == 0:
         lines.append("No results yet.")
@@ -273,6 +305,7 @@ def write_report(folder: str | Path, out: str | Path | None = None,
         return [path, *_html(path, manifest, html)]
     scalars, _ = _columns(table)
     cells = _by_cell(table, manifest)
+    nonneg = {s: _nonnegative(table.column(s).to_pylist()) for s in scalars}
     lines += ["## Overview", "", *overview(table, manifest), ""]
     figures = manifest.get("figures") or [{"kind": "ospa-time"}]
     campaign_figs: list[tuple[str, Path]] = []
@@ -303,8 +336,9 @@ def write_report(folder: str | Path, out: str | Path | None = None,
                                               dtype=float))
             if k == 0:
                 continue
-            ci = (f"[{_num(mean - half)}, {_num(mean + half)}]" if math.isfinite(half)
-                  else "–")
+            low, high, clipped = bounds(mean, half, nonneg[s])
+            ci = (f"[{_num(low)}, {_num(high)}]" + (" (clipped at 0)" if clipped else "")
+                  if math.isfinite(half) else "–")
             lines.append(f"| {s} | {_num(mean)} | {ci} | {k} |")
         lines.append("")
         for study in cell_reports:

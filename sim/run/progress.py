@@ -42,10 +42,12 @@ class Progress:
     def _line(self) -> str:
         frac = self.done / self.total
         elapsed = time.monotonic() - self.start
-        eta = elapsed / frac - elapsed if frac > 0 else float("nan")
+        # no estimate before the first item is done (not "nan"), none needed after the last
+        eta = ("eta ?" if frac == 0 else "done" if frac >= 1
+               else f"eta {elapsed / frac - elapsed:5.1f}s")
         bar = "#" * int(30 * frac)
         return (f"[{bar:<30}] {self.done}/{self.total} {self.label}  "
-                f"{elapsed:5.1f}s elapsed, eta {eta:5.1f}s")
+                f"{elapsed:5.1f}s elapsed, {eta}")
 
     def _draw(self, force: bool = False) -> None:
         if not self.enabled:

@@ -201,6 +201,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
                     left = deadline - time.monotonic()
                     if left <= 0 or stop.is_set():
                         missing = sorted(set(wait_for) - alive)
+                        if stop.is_set():  # Ctrl-C / SIGTERM, not a timeout
+                            raise WorldError(f"interrupted while waiting for peers {missing} "
+                                             f"to come up")
                         raise WorldError(f"peers {missing} did not come up within "
                                          f"{wait_timeout:g} s")
                     cond.wait(timeout=min(left, 0.2))

@@ -24,7 +24,7 @@ from sensornet.cli.scenarios import load, warn_fusion
 from sensornet.cli.security import run_keys
 from sensornet.peers.rerun_sink import spawn_viewer
 from sensornet.peers.scan_results import merge_parts, write_part
-from sensornet.sim.run import launcher
+from sensornet.sim.run import launcher, run_summary
 from sensornet.sim.run.packing import choose, scenario_load
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.world.build import adjacency
@@ -40,6 +40,22 @@ def report_results(out: Path) -> Path | None:
     if table is not None:
         print(f"per-scan results: {table}  (plots: sensornet plot {out})")
     return table
+
+
+RUN_FILES = ("commands.json", "results.parquet", "logs", "peer-*.json", "*.scans.msgpack")
+"""What a run leaves in its folder: an ``--out`` holding any of them holds a run already."""
+
+
+def _refuse_used_out(base: str | None) -> None:
+    """A second run into a folder that holds one would mix the two (summaries, per-scan parts,
+    logs): refuse in one line, naming what is there."""
+    if not base or not Path(base).is_dir():
+        return
+    found = sorted({q.name for pat in RUN_FILES for q in Path(base).glob(pat)})
+    if found:
+        raise UserError(f"--out {base} already holds a run ({', '.join(found[:3])}"
+                        f"{', ...' if len(found) > 3 else ''}): give a new folder, or leave "
+                        f"--out out for a fresh runs/<time>-run")
 
 
 def _last_line(path: Path) -> str:
@@ -146,11 +162,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             why = args.router if isinstance(args.router, str) else "--router"
             raise UserError(f"{why} makes every process a client of the run's router: "
                             f"drop --{clash[0]}")
+    _refuse_used_out(args.out)
     out = _run_folder(args.out, "run")
     secure = run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
-    how = f"in {len(hosts)} host processes" if hosts else "as processes"
+    how = (f"in {len(hosts)} host process{'es' if len(hosts) != 1 else ''}" if hosts
+           else "as processes")
     print(f"run {scn.name}: world + {len(scn.sensors)} peers {how} over Zenoh on "
           f"127.0.0.1, {scn.num_scans} scans at {speed:g}x ({expected:.0f} s of scans, plus a "
           f"few seconds to start {len(hosts or scn.sensors) + 1} processes); output in {out}",
@@ -181,6 +199,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             run_id=args.run_id, secure=secure, router=bool(getattr(args, "router", False)),
             peer_args={n: ["--record"] for n in scn.sensor_names} if args.record else None,
             per_process=per_process)
+        watch = _watch_line(handle)
+        if watch:
+            print(watch, flush=True)
         if getattr(args, "router", False):
             why = f" ({args.router})" if isinstance(args.router, str) else ""
             print(f"routed{why}: the world and every peer are clients of the run's router "
@@ -197,8 +218,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         for s, h in previous.items():
             signal.signal(s, h)
     summaries = launcher.read_summaries(out, scn.sensor_names)
+    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
+    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
     if summaries:
-        print(launcher.format_summary(summaries))
+        tables, meta = run_summary.read_tables(out)
+        run_summary.add_track_summary(summaries, tables, meta, out)
+        scan_of = {f.peer: f.scan for f in pfaults}
+        scan_of |= {p: f.scan for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
+        missing = {n: (f"killed at scan {scan_of[n]}" if n in killed else "no summary")
+                   for n in scn.sensor_names if n not in summaries}
+        print(launcher.format_summary(summaries, missing, scn.metrics.ospa_cutoff))
         if launcher.trust_note(summaries):
             print(launcher.trust_note(summaries))
         if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
@@ -232,8 +261,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"sensornet: error: the world failed (exit {world}): {why} "
               f"(log: {handle.logs['world']})", file=sys.stderr)
         return 2 if world == 2 else 1
-    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
-    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
     bad = {n: c for n, c in codes.items() if c != 0 and n not in killed}
     if bad:
         n, c = next(iter(bad.items()))
@@ -257,16 +284,36 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _watch_line(handle) -> str | None:
+    """The run's network name and the endpoint to join it at, with the command that watches
+    it (``sensornet echo``; in secure mode with the keys folder); None if the handle has
+    neither."""
+    eps = getattr(handle, "endpoints", None) or {}
+    router, network = eps.get("router"), getattr(handle, "network", None)
+    ep = router or eps.get("world")
+    if not network or not ep:
+        return None
+    where = f"routed through {router}" if router else f"world at {ep}"
+    secure = getattr(handle, "secure", None)
+    keys = f" --secure {secure} --as MEMBER" if secure is not None else ""
+    return (f"network {network}, {where} (watch it: sensornet echo {network} --connect "
+            f"{ep}{keys})")
+
+
 def _run_twin(scn, args: argparse.Namespace) -> int:
     """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
     if args.fault:
         raise UserError("--fault (process faults) needs real processes; drop --sim")
+    _refuse_used_out(args.out)
     t0 = time.perf_counter()
     result = run_twin(scn, args.run)
     summaries = {name: result.summary(name) for name in result.peers}
+    run_summary.add_track_summary(
+        summaries, {n: core.scorer.results.table(n) for n, core in result.peers.items()},
+        next(iter(result.peers.values())).scorer.results.meta() if result.peers else {})
     print(f"twin run {scn.name} (run {args.run}): {len(summaries)} peers, {scn.num_scans} "
           f"scans in {time.perf_counter() - t0:.1f} s (bytes: the encoded messages)")
-    print(launcher.format_summary(summaries))
+    print(launcher.format_summary(summaries, cutoff=scn.metrics.ospa_cutoff))
     if launcher.trust_note(summaries):
         print(launcher.trust_note(summaries))
     out = _run_folder(args.out, "sim")

@@ -1,6 +1,7 @@
 """The peer network as studies: on the discrete-event twin (``twin``) or as processes over
 Zenoh (``real``, as ``sensornet run``). Their rows are a campaign's columns: fused and local
-OSPA averaged over the peers, out-of-sequence counters, communication cost, link faults.
+OSPA averaged over the peers, the track-level numbers (sim.run.track_summary: OSPA(2),
+identity switches, label agreement), out-of-sequence counters, communication cost, link faults.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import numpy as np
 from sensornet.sim.campaign.runners import scenario_source
 from sensornet.sim.campaign.sweep import _toml, cost_columns
 from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.run_summary import read_tables
+from sensornet.sim.run.track_summary import track_columns, track_summary
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import Scenario, load_scenario
 from sensornet.sim.studies.base import Cell, Outcome, Request, Study
@@ -38,6 +41,10 @@ def twin_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(getattr(p.consensus.nale.counts, key) for p in peers.values())
     out.update(cost_columns([p.cost() for p in peers.values()]))
+    meta = next(iter(peers.values())).scorer.results.meta()
+    out.update(track_columns(track_summary(
+        {n: p.scorer.results.table(n) for n, p in peers.items()}, meta["position_index"],
+        meta["cutoff"], meta["order"])))
     if result.faults is not None:
         for action, n in sorted(result.faults.counts().items()):
             out[f"links_{action}"] = n
@@ -63,6 +70,9 @@ def real_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
         finally:
             handle.stop_all()
         summaries = read_summaries(Path(tmp), scn.sensor_names)
+        tables, meta = read_tables(Path(tmp))
+    tracks = (track_columns(track_summary(tables, meta["position_index"], meta["cutoff"],
+                                          meta.get("order", 2.0))) if meta else {})
     out: dict[str, Any] = {
         "fused_ospa": float(np.mean([s["mean_ospa_fused"] for s in summaries.values()])),
         "local_ospa": float(np.mean([s["mean_ospa_local"] for s in summaries.values()])),
@@ -71,6 +81,7 @@ def real_row(scn: Scenario, cell: Cell) -> dict[str, Any]:
     for key in ("late", "redundant", "too_old", "dropped_late"):
         out[key] = sum(s["nale"][key] for s in summaries.values())
     out.update(cost_columns([s.get("cost") or {} for s in summaries.values()]))
+    out.update(tracks)
     for name, s in summaries.items():
         out[f"fused_ospa.{name}"] = float(s["mean_ospa_fused"])
         if s.get("latency_ms_median") is not None:
