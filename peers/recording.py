@@ -4,17 +4,23 @@ The sans-I/O core (:class:`peers.core.PeerCore`) is a function of its inputs: th
 received (after the transport's admission and the injected link faults), the liveliness
 changes, the clock at which deadlines fired, and the end of the run. A recording is exactly
 that, in an MCAP file (the robotics tools' container; JSON records with a JSON Schema per
-topic, :data:`SCHEMAS`, so standard tools decode them; zstd chunks),
-plus the tracks the peer published, so a replay can check itself. :func:`replay_with` feeds
-the same calls to the same peer, which its caller builds (:func:`sim.run.replay.replay` rebuilds it
-from the scenario stored in the file): the fused tracks come out identical to the last bit.
-With changed settings (``--set``) it is a what-if run of one peer on the inputs it really had.
+topic, :data:`SCHEMAS`; zstd chunks), plus the tracks the peer published, so a replay can check
+itself. Each message is there twice: its exact bytes (``payload``, base64, what a replay feeds)
+and every field decoded (``message``, protocol.json_fields), so ``mcap``'s reader and
+``json.loads`` alone read it. With :meth:`Recorder.attach` the file also holds the truth the
+peer scored against (``truth``) and its picture as a Foxglove ``foxglove.SceneUpdate``
+(``/scene``: tracks, 2-sigma ellipses, truth, sensors; peers.foxglove_scene).
+:func:`replay_with` feeds the same calls to the same peer, which its caller builds
+(:func:`sim.run.replay.replay` rebuilds it from the scenario stored in the file): the fused
+tracks come out identical to the last bit. With changed settings (``--set``) it is a what-if
+run of one peer on the inputs it really had.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,24 +28,36 @@ from pathlib import Path
 import msgpack
 import numpy as np
 from sensornet.peers.core import PeerCore, Publish
+from sensornet.peers.foxglove_scene import SCENE_SCHEMA, scene_update
+from sensornet.protocol.codec import Rejected, decode
+from sensornet.protocol.json_fields import MESSAGE_SCHEMA, dumps, fields
 
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
+"""The topics a replay feeds (the core's inputs and its published tracks)."""
+EXTRA = ("truth", "/scene")
+"""Topics for readers only (not fed by a replay): the truth scored against, the scene."""
 META = "sensornet"
 _T = {"type": "number", "description": "the peer's clock (s since the epoch) at the call"}
 _BYTES = {"type": "string", "contentEncoding": "base64",
           "description": "the message's bytes as received or published (protocol.codec)"}
+_MESSAGE = {**MESSAGE_SCHEMA, "type": ["object", "null"],
+            "description": "every field of the payload, decoded (null: it did not decode)"}
 SCHEMAS = {
     "receive": {"t": _T, "key": {"type": "string", "description": "Zenoh key expression"},
-                "payload": _BYTES},
+                "payload": _BYTES, "message": _MESSAGE},
     "liveliness": {"t": _T, "name": {"type": "string"}, "joined": {"type": "boolean"}},
     "tick": {"t": _T},
     "finish": {"t": _T},
     "tracks": {"t": _T, "k": {"type": "integer", "description": "scan index"},
-               "payload": _BYTES},
+               "payload": _BYTES, "message": _MESSAGE},
+    "truth": {"t": _T, "k": {"type": "integer", "description": "scan index"},
+              "ids": {"type": ["array", "null"], "description": "(m,) true target ids"},
+              "states": {"type": "array", "description": "(m, d) true states"}},
 }
 """Each topic's record as a JSON Schema (MCAP ``jsonschema`` schemas over ``json`` messages:
 the mcap tools and Foxglove decode them without our code; floats are written by ``repr``,
-which round-trips exactly, and bytes as base64, so a replay is still bit for bit)."""
+which round-trips exactly, and bytes as base64, so a replay is still bit for bit). The scene
+topic ``/scene`` has Foxglove's ``foxglove.SceneUpdate`` schema."""
 
 
 class Recorder:
@@ -61,17 +79,29 @@ class Recorder:
                                  "additionalProperties": False}).encode()
             sid = self._w.register_schema(f"sensornet.{topic}", "jsonschema", schema)
             self._ch[topic] = self._w.register_channel(topic, "json", sid)
+        sid = self._w.register_schema("foxglove.SceneUpdate", "jsonschema",
+                                      json.dumps(SCENE_SCHEMA).encode())
+        self._ch["/scene"] = self._w.register_channel("/scene", "json", sid)
         self._w.add_metadata(META, {k: str(v) for k, v in meta.items()})
         self._seq = 0
+        self.sensors = sensor_positions(meta.get("scenario_text", ""))
+        """Sensor name -> (x, y) of the scenario's positioned sensors (the scene's marks)."""
+        self._scorer = None
+
+    def attach(self, core: PeerCore) -> None:
+        """Also record the truth ``core`` scores against and the scene of each published
+        Tracks message (its position index picks x, y from a state)."""
+        self._scorer = core.scorer
 
     def _log(self, topic: str, now: float, record: dict) -> None:
         self._seq += 1
         t = max(0, int(now * 1e9))
-        self._w.add_message(self._ch[topic], t, json.dumps(record).encode(), t,
+        self._w.add_message(self._ch[topic], t, dumps(record).encode(), t,
                             sequence=self._seq)
 
     def receive(self, now: float, key: str, payload: bytes) -> None:
-        self._log("receive", now, {"t": now, "key": key, "payload": _b64(payload)})
+        self._log("receive", now, {"t": now, "key": key, "payload": _b64(payload),
+                                   "message": _decoded(payload)})
 
     def liveliness(self, now: float, name: str, joined: bool) -> None:
         self._log("liveliness", now, {"t": now, "name": name, "joined": bool(joined)})
@@ -83,7 +113,24 @@ class Recorder:
         self._log("finish", now, {"t": now})
 
     def tracks(self, now: float, k: int, payload: bytes) -> None:
-        self._log("tracks", now, {"t": now, "k": int(k), "payload": _b64(payload)})
+        try:
+            msg = decode(bytes(payload))
+        except Rejected:
+            msg = None
+        self._log("tracks", now, {"t": now, "k": int(k), "payload": _b64(payload),
+                                  "message": None if msg is None else fields(msg)})
+        if self._scorer is None:
+            return
+        truth, truth_ids = self._scorer.truth(int(k)), self._scorer.truth_ids(int(k))
+        if truth is not None:
+            self._log("truth", now, {"t": now, "k": int(k), "states": np.asarray(
+                truth, float).tolist(), "ids": None if truth_ids is None else np.asarray(
+                truth_ids, np.int64).tolist()})
+        if msg is not None:
+            scene = scene_update(now, msg.sender, msg.states, tuple(self._scorer.pos),
+                                 ids=msg.ids, covs=msg.covs, status=msg.status, truth=truth,
+                                 truth_ids=truth_ids, sensors=self.sensors)
+            self._log("/scene", now, scene)
 
     def close(self) -> None:
         if self._fh is not None:
@@ -94,6 +141,30 @@ class Recorder:
 
 def _b64(data: bytes) -> str:
     return base64.b64encode(bytes(data)).decode("ascii")
+
+
+def _decoded(payload: bytes) -> dict | None:
+    """Every field of a payload (:func:`protocol.json_fields.fields`), None if it does not
+    decode (sealed, forged or garbled bytes are still recorded as bytes)."""
+    try:
+        return fields(decode(bytes(payload)))
+    except Rejected:
+        return None
+
+
+def sensor_positions(scenario_text: str) -> dict[str, tuple[float, float]]:
+    """``{name: (x, y)}`` of the ``[[sensors]]`` with a ``position`` in a scenario's TOML
+    text (none if it does not parse: the scene is then drawn without sensors)."""
+    try:
+        doc = tomllib.loads(scenario_text or "")
+    except tomllib.TOMLDecodeError:
+        return {}
+    out = {}
+    for s in doc.get("sensors", []):
+        pos = s.get("position") if isinstance(s, dict) else None
+        if isinstance(pos, list) and len(pos) >= 2 and "name" in s:
+            out[str(s["name"])] = (float(pos[0]), float(pos[1]))
+    return out
 
 
 _FIELDS = {"receive": ("t", "key", "payload"), "liveliness": ("t", "name", "joined"),
@@ -126,7 +197,8 @@ def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
             fh.seek(0)
             reader = make_reader(fh)
             records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
-                       for _, ch, msg in reader.iter_messages(log_time_order=False)]
+                       for _, ch, msg in reader.iter_messages(topics=list(TOPICS),
+                                                              log_time_order=False)]
         except McapError as exc:
             raise ValueError(
                 f"not a complete recording ({type(exc).__name__}): a peer that was "

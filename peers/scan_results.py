@@ -8,6 +8,7 @@ The schema (:data:`COLUMNS`) is documented in docs/results.md; :func:`write_parq
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import msgpack
@@ -26,6 +27,18 @@ COLUMNS = COLUMNS_V1 + ID_COLUMNS
 """The table's columns, in order (docs/results.md says what each holds)."""
 LIST_COLUMNS = ("tracks", "truth", *ID_COLUMNS)
 """Columns whose rows are lists of varying length (readers keep them as lists)."""
+
+UNITS = {"peer": "name", "scan": "scan index", "estimate": "local or fused",
+         "scored": "bool: the output came", "ospa": "m (lower is better)",
+         "gospa": "m (lower is better)", "gospa_localisation": "m^p, p = order",
+         "gospa_missed": "targets", "gospa_false": "tracks", "n_estimated": "tracks",
+         "n_true": "targets", "latency_ms": "ms (scan to published tracks)",
+         "tracks": "state rows (m, m/s)", "truth": "state rows (m, m/s)",
+         "track_ids": "[origin, birth_scan, index]", "track_status": "0 tentative, 1 confirmed",
+         "truth_ids": "target id"}
+"""Each column's unit or meaning, written in the Parquet file's metadata (docs/results.md)."""
+GOSPA_ALPHA = 2.0
+"""The GOSPA alpha of every row (tracking.metrics.gospa_parts: alpha = 2)."""
 
 Ids = tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None] | None
 """``(track ids (n, 3), status (n,), truth ids (m,))`` of one row, any of them None."""
@@ -172,15 +185,17 @@ def merge_parts(parts: list[Path], path: Path) -> Path | None:
 
 
 def write_parquet(columns: dict[str, list], meta: dict, path: Path) -> Path:
-    """Write a results table (:data:`COLUMNS`, ``meta`` as the file's key-value metadata)
-    atomically (temporary name, then rename)."""
+    """Write a results table (:data:`COLUMNS`; ``meta`` with GOSPA's alpha and each column's
+    unit, :data:`UNITS`, as JSON under the file's ``sensornet`` metadata key) atomically
+    (temporary name, then rename)."""
     import pyarrow as pa  # heavy optional dependency: pyarrow (only writing results)
     import pyarrow.parquet as pq
 
     path = Path(path)
     tmp = path.with_suffix(".tmp")
+    info = {**meta, "gospa_alpha": GOSPA_ALPHA, "units": UNITS}
     table = pa.table(columns, schema=schema()).replace_schema_metadata(
-        {"sensornet": msgpack.packb(meta).hex()})
+        {"sensornet": json.dumps(info)})
     pq.write_table(table, tmp)
     tmp.replace(path)
     return path
@@ -194,8 +209,16 @@ def read_table(path: Path) -> tuple[dict[str, list], dict]:
     raw = (table.schema.metadata or {}).get(b"sensornet")
     if raw is None or tuple(table.column_names) not in (COLUMNS, COLUMNS_V1):
         raise ValueError(f"{path}: not a sensornet per-scan results table")
-    return (with_id_columns(table.to_pydict()),
-            msgpack.unpackb(bytes.fromhex(raw.decode())))
+    return with_id_columns(table.to_pydict()), _meta(raw)
+
+
+def _meta(raw: bytes) -> dict:
+    """A table's metadata: JSON (since the metric parameters and units were added), or the
+    hex of msgpack that earlier tables hold."""
+    text = raw.decode()
+    if text.startswith("{"):
+        return json.loads(text)
+    return msgpack.unpackb(bytes.fromhex(text))
 
 
 def schema():

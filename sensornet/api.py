@@ -8,6 +8,7 @@
     run.tracks("s1")                      # {scan: (n, d) fused states}
     run.tracks_by_id("s1")                # {(origin, birth_scan, index): (scans, states)}
     run.to_pandas()                       # the same table as a DataFrame (needs pandas)
+    done = load_run("runs/<time>-run")    # a finished run's folder (processes, twin, hosts)
 
 The run is the discrete-event twin (:func:`sim.run.twin.run_twin`): the peers' own code on a virtual
 clock, the same bytes as the processes exchange. docs/notebooks/quickstart.ipynb is an example,
@@ -16,18 +17,21 @@ executed by tests/test_api.py.
 
 from __future__ import annotations
 
+import json
+import shlex
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sensornet.peers.scan_results import COLUMNS, LIST_COLUMNS
+from sensornet.peers.scan_results import COLUMNS, LIST_COLUMNS, read_part, read_table
+from sensornet.sim.run.run_summary import read_summaries
 from sensornet.sim.run.twin import TwinResult, run_twin
-from sensornet.sim.scenario import Scenario, builtin_scenarios, load_scenario
+from sensornet.sim.scenario import Scenario, builtin_scenarios, load_scenario, parse_overrides
 
-__all__ = ["Run", "builtin_scenarios", "scenario", "simulate"]
+__all__ = ["Run", "builtin_scenarios", "load_run", "scenario", "simulate"]
 
 
 def scenario(source: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
@@ -39,26 +43,42 @@ def scenario(source: str | Path, overrides: Mapping[str, Any] | None = None) -> 
 
 @dataclass
 class Run:
-    """One twin run: per-peer summaries and the per-scan results table."""
+    """One run: per-peer summaries and the per-scan results table (a twin run of
+    :func:`simulate`, or a finished run's folder read by :func:`load_run`)."""
 
-    scenario: Scenario
-    twin: TwinResult
+    scenario: Scenario | None
+    """The run's scenario (None: a folder whose scenario could not be rebuilt)."""
+    twin: TwinResult | None
+    """The twin's peers (None: a run read from its folder)."""
     columns: dict[str, np.ndarray | list]
     """The per-scan table (docs/results.md): NumPy arrays, the :data:`LIST_COLUMNS` lists."""
     meta: dict
-    """``position_index``, ``cutoff`` and ``order`` of the table."""
+    """``position_index``, ``cutoff`` and ``order`` of the table (and, in tables written
+    since, ``gospa_alpha`` and ``units``)."""
+    summaries: dict[str, dict] = field(default_factory=dict)
+    """A folder's ``peer-<name>.json`` summaries (a twin run makes them on demand)."""
 
     @property
     def peers(self) -> list[str]:
-        return list(self.twin.peers)
+        if self.twin is not None:
+            return list(self.twin.peers)
+        return list(self.summaries) or sorted(set(np.asarray(self.columns["peer"]).tolist()))
 
     def summary(self, peer: str) -> dict:
         """The peer's summary, as a process writes it (``peer-<name>.json``)."""
-        return self.twin.summary(peer)
+        if self.twin is not None:
+            return self.twin.summary(peer)
+        if peer not in self.summaries:
+            raise ValueError(f"peer {peer!r}: no summary in this run (peers: "
+                             f"{', '.join(self.summaries) or 'none'})")
+        return self.summaries[peer]
 
     def mean_ospa(self, peer: str, which: str = "fused") -> float:
         """Mean OSPA of ``"local"`` or ``"fused"`` estimates (a missing output at the cut-off)."""
-        return self.twin.mean_ospa(peer, which)
+        if self.twin is not None:
+            return self.twin.mean_ospa(peer, which)
+        value = self.summary(peer).get(f"mean_ospa_{which}")
+        return float("nan") if value is None else float(value)
 
     def select(self, peer: str, which: str = "fused") -> np.ndarray:
         """Row indices of one peer's ``which`` estimates, in scan order."""
@@ -146,6 +166,11 @@ class Run:
         return pd.DataFrame({name: self.columns[name] for name in COLUMNS})
 
 
+def _arrays(cols: dict[str, list]) -> dict[str, np.ndarray | list]:
+    """A table's columns as :class:`Run` holds them: NumPy arrays, the list columns lists."""
+    return {c: (list(cols[c]) if c in LIST_COLUMNS else np.asarray(cols[c])) for c in COLUMNS}
+
+
 def simulate(scn: Scenario, run: int = 0) -> Run:
     """Monte Carlo run ``run`` of ``scn`` on the twin (deterministic: the same ``run`` gives
     the same numbers)."""
@@ -157,6 +182,46 @@ def simulate(scn: Scenario, run: int = 0) -> Run:
         for c in COLUMNS:
             cols[c].extend(part[c])
         meta = core.scorer.results.meta()
-    arrays: dict[str, np.ndarray | list] = {
-        c: (cols[c] if c in LIST_COLUMNS else np.asarray(cols[c])) for c in COLUMNS}
-    return Run(scenario=scn, twin=result, columns=arrays, meta=meta)
+    return Run(scenario=scn, twin=result, columns=_arrays(cols), meta=meta)
+
+
+def _folder_scenario(folder: Path) -> Scenario | None:
+    """The scenario of a process run, from its world's command in ``commands.json``
+    (``world SOURCE ... --set K=V``); None if there is none or it does not load."""
+    try:
+        cmds = json.loads((folder / "commands.json").read_text())
+        world = cmds.get("world")
+        argv = shlex.split(world) if isinstance(world, str) else list(world)
+        source = argv[argv.index("world") + 1]
+        sets = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--set"]
+        return load_scenario(source, overrides=parse_overrides(sets))
+    except Exception:  # a missing or foreign commands.json: the table alone
+        return None
+
+
+def load_run(folder: str | Path) -> Run:
+    """A finished run from its folder (``sensornet run``: processes, ``--sim``, hosts): the
+    per-scan table of ``results.parquet`` (else the peers' ``*.scans.msgpack`` parts) as the
+    same objects :func:`simulate` gives, the ``peer-<name>.json`` summaries, and the scenario
+    when the folder's ``commands.json`` names it; a one-line ``ValueError`` if it holds no
+    table."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"{folder}: not a run folder")
+    table = folder / "results.parquet"
+    if table.is_file():
+        cols, meta = read_table(table)
+    else:
+        parts = sorted(folder.glob("*.scans.msgpack"))
+        if not parts:
+            raise ValueError(f"{folder}: no results.parquet nor per-peer *.scans.msgpack "
+                             f"parts (is it a sensornet run folder?)")
+        cols, meta = {name: [] for name in COLUMNS}, {}
+        for p in parts:
+            part, meta = read_part(p)
+            for c in COLUMNS:
+                cols[c].extend(part[c])
+    names = sorted(set(cols["peer"]))
+    summaries = {n: s for n, s in read_summaries(folder, names).items()}
+    return Run(scenario=_folder_scenario(folder), twin=None, columns=_arrays(cols),
+               meta=meta, summaries=summaries)

@@ -21,10 +21,12 @@ from dataclasses import dataclass, field
 
 import zenoh
 
+from sensornet.bag import hint, network_answers
 from sensornet.peers.session import open_session
 from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.encodings import parse
 from sensornet.protocol.envelope import inner, is_sealed
+from sensornet.protocol.json_fields import dumps, fields
 from sensornet.protocol.keys import ROOT, Keys
 from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
 
@@ -91,6 +93,35 @@ def describe(key: str, payload: bytes, encoding: str = "", verifier=None) -> Lin
     return line
 
 
+@dataclass(frozen=True)
+class JsonLine:
+    """One message as a JSON object (``echo --json``): the key, the receive time, the declared
+    encoding, the size, and every field decoded (protocol.json_fields) or why not."""
+
+    body: dict
+
+    def text(self, t0: float, now: float) -> str:
+        return dumps(self.body)
+
+
+def as_json(key: str, payload: bytes, encoding: str = "", verifier=None) -> JsonLine:
+    """Decode one message into a :class:`JsonLine` (a refused or undecodable one says why)."""
+    body = {"key": key, "t": time.time(), "encoding": encoding, "nbytes": len(payload)}
+    inside = payload
+    if verifier is not None:
+        opened, why = verifier.open(key, payload)
+        if opened is None:
+            return JsonLine({**body, "error": f"signature check: {why}"})
+        inside = opened
+    elif is_sealed(payload):
+        inside = inner(payload)
+    try:
+        body["message"] = fields(decode(inside))
+    except Rejected as exc:
+        body["error"] = f"rejected ({exc.reason}): {exc}"
+    return JsonLine(body)
+
+
 def secure_keys(keys: Keys, member: str, peers: Sequence[str]) -> list[str]:
     """The key expressions a member may subscribe to (peers.access_control: its own scan,
     the truth, control and every estimate; the world also hears every scan)."""
@@ -111,6 +142,8 @@ class Tap:
     """A :class:`peers.security.Security` of the member the tool speaks as."""
     q: queue.Queue = field(default_factory=lambda: queue.Queue(maxsize=10_000))
     dropped: int = 0
+    json_lines: bool = False
+    """Queue :class:`JsonLine` (every field) instead of one-line :class:`Line` summaries."""
 
     def open(self) -> None:
         keys = Keys(self.network)
@@ -127,14 +160,26 @@ class Tap:
 
     def _on_sample(self, sample) -> None:
         try:
-            line = describe(str(sample.key_expr), sample.payload.to_bytes(),
-                            str(sample.encoding), self.verifier)
+            line = (as_json if self.json_lines else describe)(
+                str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding),
+                self.verifier)
         except Exception as exc:  # a tool must outlive any payload
-            line = Line(str(sample.key_expr), "error", "?", None, type(exc).__name__, 0)
+            line = (JsonLine({"key": str(sample.key_expr), "error": type(exc).__name__})
+                    if self.json_lines else
+                    Line(str(sample.key_expr), "error", "?", None, type(exc).__name__, 0))
         try:
             self.q.put_nowait(line)
         except queue.Full:
             self.dropped += 1
+
+    def answers(self, wait: float) -> bool:
+        """Whether the network answered (a message, or a liveliness token of it) within
+        ``wait`` s (:func:`bag.network_answers`; the messages stay queued)."""
+        return network_answers(self.session, self.network, lambda: self.q.qsize() > 0, wait)
+
+    def hint(self, tool: str, wait: float) -> str:
+        """The one line saying nothing answered, and what to pass."""
+        return hint(tool, self.network, list(self.connect), wait)
 
     def close(self) -> None:
         for s in getattr(self, "_subs", []):
@@ -207,9 +252,31 @@ def topics(tap: Tap, duration: float = 3.0, stop: threading.Event | None = None,
     return "\n".join(rows)
 
 
-def main_echo(tap: Tap, count: int | None, duration: float | None) -> int:
+WAIT = 3.0
+"""Seconds ``echo`` and ``topics`` wait for the network to answer before saying it did not
+(without ``--connect`` nothing can: the sessions do not scout)."""
+WAIT_CONNECT = 20.0
+"""The same with ``--connect``: Zenoh keeps trying the endpoint, and a run just started takes
+seconds before its world listens."""
+
+
+def default_wait(connect: Sequence[str]) -> float:
+    """:data:`WAIT_CONNECT` with endpoints to try, else :data:`WAIT`."""
+    return WAIT_CONNECT if connect else WAIT
+
+
+def main_echo(tap: Tap, count: int | None, duration: float | None,
+              wait: float | None = None) -> int:
+    """``echo``: lines until ``count``/``duration``/Ctrl-C; 1 (and a one-line hint) if
+    nothing of the network answered within ``wait`` s (default :func:`default_wait`)."""
+    wait = default_wait(tap.connect) if wait is None else wait
+    if duration:
+        wait = min(wait, duration)
     tap.open()
     try:
+        if not tap.answers(wait):
+            print(tap.hint("echo", wait), file=sys.stderr, flush=True)
+            return 1
         print(f"echo: {', '.join(tap.exprs)} (Ctrl-C to stop)", file=sys.stderr, flush=True)
         try:
             echo(tap, count, duration, out=lambda s: print(s, flush=True))

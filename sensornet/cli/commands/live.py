@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from sensornet.cli.common import UserError
-from sensornet.live import Tap, main_echo, topics
+from sensornet.live import Tap, default_wait, main_echo, topics
 from sensornet.peers.security import Security, SecurityError, load_roster
 from sensornet.peers.session import SessionError
 from sensornet.protocol.keys import check_name
@@ -22,6 +23,8 @@ def cmd_live(args: argparse.Namespace) -> int:
         raise UserError("--count must be at least 1")
     if args.duration is not None and not args.duration > 0:
         raise UserError("--duration must be positive")
+    if getattr(args, "wait", None) is not None and not args.wait > 0:
+        raise UserError("--wait must be positive")
     if any(c in args.key for c in "?#$") or args.key.startswith("/"):
         raise UserError(f"key {args.key!r}: a key expression under sensornet/{args.network}/, "
                         "e.g. 'estimate/*'")
@@ -36,12 +39,18 @@ def cmd_live(args: argparse.Namespace) -> int:
             raise UserError(str(exc)) from None
     elif args.member:
         raise UserError("--as needs --secure DIR")
-    tap = Tap(args.network, args.key, args.connect or (), args.config, security)
+    tap = Tap(args.network, args.key, args.connect or (), args.config, security,
+              json_lines=bool(getattr(args, "json", False)))
     try:
+        wait = args.wait if getattr(args, "wait", None) is not None else default_wait(tap.connect)
         if args.command_name == "echo":
-            return main_echo(tap, args.count, args.duration)
+            return main_echo(tap, args.count, args.duration, wait)
         tap.open()
         try:
+            wait = min(wait, args.duration)
+            if not tap.answers(wait):
+                print(tap.hint("topics", wait), file=sys.stderr, flush=True)
+                return 1
             print(topics(tap, args.duration, count=args.count), flush=True)
         finally:
             tap.close()
