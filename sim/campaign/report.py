@@ -262,16 +262,13 @@ def overview(table, manifest: dict) -> list[str]:
     head = _headline(scalars)
     lines = ["| cell | runs | " + " | ".join(f"{h} (95 % CI)" for h in head) + " |",
              "|---|---:|" + "---:|" * len(head)]
-    nonneg = {h: _nonnegative(table.column(h).to_pylist()) for h in head}
     for cell in manifest["cells"]:
         d = cells[cell["index"]]
         parts = []
-        for h in head:
+        for h in head:  # mean ± the t half-width: the precision (the cell tables clip at 0)
             mean, half, _ = interval(np.array([np.nan if v is None else v
                                                for v in d.get(h, [])], dtype=float))
-            low, high, clipped = bounds(mean, half, nonneg[h])
-            parts.append(f"{_num(mean)} [{_num(low)}, {_num(high)}]" if clipped
-                         else f"{_num(mean)} ± {_num(half)}")
+            parts.append(f"{_num(mean)} ± {_num(half)}")
         lines.append(f"| {cell['label']} | {len(d['key'])} | " + " | ".join(parts) + " |")
     return lines
 
@@ -294,9 +291,9 @@ def write_report(folder: str | Path, out: str | Path | None = None,
              f"{table.num_rows}/{total} runs computed; code version "
              f"`{manifest['code_version']}`.", "",
              "Means over the runs with 95 % confidence intervals "
-             "(Student t: mean ± t(0.975, n−1)·s/√n); for a metric no run found negative "
-             "(OSPA, cardinality error, counts) the interval's low end is clipped at 0, "
-             "shown as [low, high].", ""]
+             "(Student t: mean ± t(0.975, n−1)·s/√n); in the cells' tables, for a metric "
+             "no run found negative (OSPA, cardinality error, counts) the interval's low end "
+             "is clipped at 0, and says so.", ""]
     written: list[Path] = []
     if table.num_rows == 0:
         lines.append("No results yet.")
