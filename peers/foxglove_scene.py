@@ -110,7 +110,8 @@ def scene_update(t: float, peer: str, states: np.ndarray, position_index: tuple[
     ``truth (m, d)`` with ``truth_ids (m,)``; ``sensors`` name -> (x, y)."""
     stamp = _stamp(t)
     px, py = position_index
-    states = np.asarray(states, float).reshape(len(states), -1)
+    states = np.asarray(states, float)
+    states = states.reshape(len(states), -1) if states.size else np.zeros((0, max(px, py) + 1))
     entities = []
     if len(states):
         xy = states[:, [px, py]]
@@ -137,7 +138,7 @@ def scene_update(t: float, peer: str, states: np.ndarray, position_index: tuple[
                                             for p in loops[i].tolist()],
                                  "color": color, "colors": [], "indices": []}]
             entities.append(ent)
-    if truth is not None and len(truth):
+    if truth is not None and np.asarray(truth).size:
         tr = np.asarray(truth, float).reshape(len(truth), -1)[:, [px, py]]
         for j, (x, y) in enumerate(tr.tolist()):
             tid = str(int(truth_ids[j])) if truth_ids is not None and len(truth_ids) == len(tr) \

@@ -87,6 +87,8 @@ class Recorder:
         self.sensors = sensor_positions(meta.get("scenario_text", ""))
         """Sensor name -> (x, y) of the scenario's positioned sensors (the scene's marks)."""
         self._scorer = None
+        self.skipped = 0
+        """Truth or scene records left out because they could not be made."""
 
     def attach(self, core: PeerCore) -> None:
         """Also record the truth ``core`` scores against and the scene of each published
@@ -121,6 +123,13 @@ class Recorder:
                                   "message": None if msg is None else fields(msg)})
         if self._scorer is None:
             return
+        try:
+            self._readers(now, int(k), msg)
+        except (ValueError, IndexError, TypeError):  # a reader's aid never stops the peer
+            self.skipped += 1
+
+    def _readers(self, now: float, k: int, msg) -> None:
+        """The truth at scan ``k`` and the scene of the Tracks ``msg`` (None: undecodable)."""
         truth, truth_ids = self._scorer.truth(int(k)), self._scorer.truth_ids(int(k))
         if truth is not None:
             self._log("truth", now, {"t": now, "k": int(k), "states": np.asarray(

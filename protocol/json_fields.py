@@ -54,7 +54,9 @@ MESSAGE_SCHEMA: dict = {
 def _plain(value: Any) -> Any:
     """A field value as JSON values (NaN and infinities as None)."""
     if isinstance(value, np.ndarray):
-        value = value.tolist()
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            return np.where(np.isfinite(value), value.astype(object), None).tolist()
+        return value.tolist()  # nested lists of Python ints and floats: nothing to walk
     if isinstance(value, GaussianMixture):
         return {"weights": _plain(value.weights), "means": _plain(value.means),
                 "covs": _plain(value.covs)}

@@ -98,6 +98,14 @@ def test_a_recording_decodes_with_mcap_and_json_alone(tmp_path):
         d = pts - x[[0, 2]]
         maha = np.einsum("ni,ij,nj->n", d, np.linalg.inv(P[np.ix_([0, 2], [0, 2])]), d)
         np.testing.assert_allclose(maha, 4.0, rtol=1e-9)  # 2 sigma: distance^2 = 4
+    # a scan without tracks (nor truth) is a scene of the sensors alone
+    rec = Recorder(tmp_path / "empty.mcap", {"peer": "s1", "network": "net"})
+    rec.attach(SimpleNamespace(scorer=SimpleNamespace(
+        pos=[0, 2], truth=lambda k: np.zeros((0, 4)), truth_ids=lambda k: None)))
+    rec.tracks(1.0, 1, encode(Tracks("s1", 1, np.zeros((0, 4)))))
+    rec.close()
+    empty = {t: b for t, _, _, b in _generic_read(tmp_path / "empty.mcap")}
+    assert empty["/scene"]["entities"] == [] and empty["tracks"]["message"]["states"] == []
     # the replay still gets its records, the readers' topics aside
     _, records = read(tmp_path / "p.mcap")
     assert [t for t, _ in records] == ["receive", "liveliness", "tick", "tracks", "finish"]
