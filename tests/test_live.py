@@ -93,9 +93,10 @@ def test_echo_and_topics_on_a_running_network(tmp_path):
         assert table.returncode == 0, table.stderr
         assert "| sensornet/live1/estimate/s1 |" in table.stdout, table.stdout
         assert heard.wait(120), encodings
-        assert {"application/msgpack;sensornet/estimate/v1",
+        # GM-PHD peers label their estimates and tracks: protocol 2 of both (scans stay 1)
+        assert {"application/msgpack;sensornet/estimate/v2",
                 "application/msgpack;sensornet/scan/v1",
-                "application/msgpack;sensornet/tracks/v1"} <= encodings
+                "application/msgpack;sensornet/tracks/v2"} <= encodings
         sub.undeclare()
     finally:
         if session is not None:
