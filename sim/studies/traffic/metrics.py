@@ -9,7 +9,10 @@ is per time step anyway), and per scan OSPA and GOSPA by :mod:`tracking.metrics`
 
 Per aircraft (:func:`per_aircraft`): ``continuity``, the share of its present scans held by
 the single track matched to it most often (CLEAR MOT matching, :func:`tracking.track_metrics.
-clear_match`), and its identity switches per hour present.
+clear_match`), and its identity switches per hour present. An aircraft that leaves the region
+(or is not reported for longer than ``traffic.max_gap``) and comes back is absent in between:
+no track can hold it across, so :func:`visits` splits it into one truth per visit (a maximal
+run of consecutive scans present) first.
 """
 
 from __future__ import annotations
@@ -87,6 +90,19 @@ def hota_sparse(truth: TrackTable, est: TrackTable, gate: float, grid: np.ndarra
             "gt_ids": gt_ids, "tracker_ids": tr_ids, "similarity_scores": sims}
     res = HOTA().eval_sequence(data)
     return {k.lower(): float(np.mean(res[k])) for k in ("HOTA", "DetA", "AssA", "LocA")}
+
+
+def visits(truth: TrackTable, grid: np.ndarray) -> tuple[TrackTable, np.ndarray]:
+    """``truth`` with one id per visit (a maximal run of consecutive scans of ``grid`` where
+    the aircraft is present) and ``(v,)`` the aircraft id of each visit id ``0 .. v-1``."""
+    pos_in_grid = np.searchsorted(grid, truth.scan)
+    order = np.lexsort((pos_in_grid, truth.id))
+    i, g = truth.id[order], pos_in_grid[order]
+    new = np.ones(len(i), bool)
+    new[1:] = (i[1:] != i[:-1]) | (g[1:] != g[:-1] + 1)
+    vid = np.empty(len(i), np.int64)
+    vid[order] = np.cumsum(new) - 1
+    return TrackTable(truth.scan, vid, truth.pos), i[new]
 
 
 def per_aircraft(truth: TrackTable, est: TrackTable, gate: float, grid: np.ndarray,
