@@ -7,7 +7,8 @@ per scan, the numbers the Rerun health tabs show (component counts, ages, late a
 messages, trust statistics, OSPA, latency, compute) from the core's records and outputs, and
 publishes them when the peer is idle (:meth:`Observer.flush`): never in the burst that sets the
 scan-to-track latency. The put is best effort (congestion control DROP): a slow view never
-holds a peer back.
+holds a peer back. Nobody watching, nothing is gathered: a Zenoh matching listener tells the
+observer whether any subscriber hears its key, and until one does every call returns at once.
 """
 
 from __future__ import annotations
@@ -45,8 +46,10 @@ class Observer:
         self.name = core.name
         self.scan_period = scan_period
         self.telemetry = telemetry
-        self.enabled = False
-        self._pub = None
+        self._open = False
+        self.watched = False
+        """Whether a subscriber (a view) hears ``telemetry/<peer>`` now."""
+        self._pub = self._listener = None
         self._put = None
         self._pending: dict[int, dict] = {}
         self._tracks_out = 0
@@ -55,6 +58,14 @@ class Observer:
         self.wants_flush = False
         """Whether a report may be complete (tracks or an OSPA came since the last flush): the
         driver calls :meth:`flush` only then (a wake-up without it costs nothing here)."""
+
+    @property
+    def enabled(self) -> bool:
+        """Open and watched: only then are records gathered and reports sent."""
+        return self._open and self.watched
+
+    def _matching(self, status) -> None:  # Zenoh's thread: a plain flag for the loop's
+        self.watched = bool(status.matching)
 
     # -- transport ------------------------------------------------------------------------
     def open(self, session, keys) -> Observer:
@@ -65,22 +76,28 @@ class Observer:
         self._pub = session.declare_publisher(keys.telemetry(self.name),
                                               congestion_control=zenoh.CongestionControl.DROP)
         self._put = self._pub.put
-        self.enabled = True
+        try:
+            self._listener = self._pub.declare_matching_listener(self._matching)
+            self.watched = bool(self._pub.matching_status.matching)
+        except Exception:  # no matching status (an older Zenoh): always report
+            self.watched = True
+        self._open = True
         return self
 
     def attach(self, put) -> Observer:
-        """Publish through ``put(payload)`` instead (tests, other transports)."""
-        self._put, self.enabled = put, True
+        """Publish through ``put(payload)`` instead (tests, other transports): watched."""
+        self._put, self._open, self.watched = put, True, True
         return self
 
     def close(self) -> None:
-        if self._pub is not None:
-            try:
-                self._pub.undeclare()
-            except Exception:  # the session is gone already
-                pass
-        self._pub = self._put = None
-        self.enabled = False
+        for d in (self._listener, self._pub):
+            if d is not None:
+                try:
+                    d.undeclare()
+                except Exception:  # the session is gone already
+                    pass
+        self._pub = self._put = self._listener = None
+        self._open = False
 
     # -- gathering ------------------------------------------------------------------------
     def _scan(self, k: int) -> dict:

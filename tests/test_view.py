@@ -262,6 +262,11 @@ def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
     assert msg.k == 7 and msg.values["latency_ms"] == 12.0
     assert msg.values["components/before_level2"] == 9 and msg.values["ospa/fused"] == 4.0
     assert msg.values["compute_ms/filter"] == 1.5
+    obs.watched = False  # nobody hears the key any more: nothing gathered, nothing sent
+    obs.record(Record("local", 20, {"n_components": 1}))
+    obs.published(Publish("tracks", 20, b"", Tracks(core.name, 20, np.zeros((0, 4)))), 1.0)
+    assert not obs.enabled and 20 not in obs._pending and not obs.wants_flush
+    obs.watched = True
     obs.record(Record("local", 8, {"n_components": 1}))  # no OSPA ever: sent all the same
     for k in range(9, 9 + WAIT_SCANS):
         obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((0, 4)))), 1.0)
