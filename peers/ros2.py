@@ -2,9 +2,9 @@
 laid out as ``rmw_zenoh_cpp`` lays them out, so that a ROS 2 machine on the same Zenoh network
 (``RMW_IMPLEMENTATION=rmw_zenoh_cpp``) lists, echoes and draws them (docs/ros2.md).
 
-The format is rmw_zenoh's design document (ros2/rmw_zenoh, design.md: "Topic and Service name mapping to Zenoh key
-expressions", "Graph Cache", "Publishers") and rmw_zenoh_cpp/src/detail/liveliness_utils.cpp
-(``qos_to_keyexpr``, ``mangle_name``, ``Entity``):
+The format is rmw_zenoh's design document (ros2/rmw_zenoh, design.md: "Topic and Service name
+mapping to Zenoh key expressions", "Graph Cache", "Publishers") and
+rmw_zenoh_cpp/src/detail/liveliness_utils.cpp (``qos_to_keyexpr``, ``mangle_name``, ``Entity``):
 
 - data key ``<domain>/<topic without leading slash>/<pkg>::msg::dds_::<Name>_/RIHS01_<sha256>``;
 - payload: CDR, little-endian, with its 4-byte encapsulation header (``rosbags``);

@@ -86,7 +86,7 @@ def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_p
         wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
                  "the world's scan 10")
         kids = launch.find_children()
-        assert len(kids) == 4, kids  # the world and three peers
+        assert len(kids) == 5, kids  # the world, three peers and the view (sensornet view)
         launcher.send_signal(sig)
         stdout, stderr = launcher.communicate(timeout=60)
         ended = time.monotonic()
@@ -132,8 +132,8 @@ def test_signal_during_start_up_says_what_happened(tmp_path):
     out = tmp_path / "run"
     with sensornet(["run", "--viewer", "none", "--out", str(out)], tmp_path) as launch:
         launcher = launch.proc
-        wait_for(lambda: (out / "commands.json").is_file() and len(children(launcher.pid)) == 4,
-                 90, "the launcher to start its four processes")
+        wait_for(lambda: (out / "commands.json").is_file() and len(children(launcher.pid)) == 5,
+                 90, "the launcher to start its five processes (world, 3 peers, view)")
         kids = launch.find_children()
         launcher.send_signal(signal.SIGTERM)
         stdout, stderr = launcher.communicate(timeout=120)

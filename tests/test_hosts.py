@@ -457,7 +457,7 @@ def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp
         wait_for(lambda: world_log.is_file() and "scan 20/" in world_log.read_text(), 90,
                  "the world's scan 20")
         kids = launch.find_children()
-        assert len(kids) == 3, kids  # the world and two hosts
+        assert len(kids) == 4, kids  # the world, two hosts and the view
         launcher.send_signal(signal.SIGTERM)
         stdout, stderr = launcher.communicate(timeout=60)
         ended = time.monotonic()

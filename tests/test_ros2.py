@@ -1,5 +1,6 @@
 """ROS 2 without ROS (peers.ros2, issue 35 item 1): keys, liveliness tokens and attachments as
-ros2/rmw_zenoh's docs/design.md gives them (its own examples are the reference), CDR that
+rmw_zenoh's design document (design.md in ros2/rmw_zenoh) gives them (its own examples are
+the reference), CDR that
 rosbags decodes back, type hashes that ROS 2 itself printed; and a run with ``--ros2`` whose
 puts a plain Zenoh subscriber decodes with rosbags alone."""
 
