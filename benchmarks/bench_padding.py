@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -32,8 +31,6 @@ import sensornet.peers.core as core_mod  # noqa: E402
 import sensornet.peers.trust as trust_mod  # noqa: E402
 import sensornet.peers.trust_checks as checks_mod  # noqa: E402
 import sensornet.tracking.divergence as divergence  # noqa: E402
-from sensornet.peers.core import PeerCore  # noqa: E402
-from sensornet.protocol.messages import Estimate  # noqa: E402
 from sensornet.sim.run.lies import LyingCore  # noqa: E402
 from sensornet.sim.run.peers import make_peer  # noqa: E402
 from sensornet.sim.run.twin import run_twin  # noqa: E402
@@ -57,22 +54,6 @@ def padding(n: int, region, rng: np.random.Generator):
     return lie
 
 
-class PaddingCore(LyingCore):
-    """A :class:`LyingCore` whose lie pads: labels (protocol 2), if any, padded with it
-    (zeros for the padding rows), so the padded estimate is well-formed."""
-
-    def _wrap(self, messages: list) -> list:
-        told = []
-        for m in messages:
-            if type(m) is Estimate:
-                mix = self.lie(m.mixture)
-                labels = getattr(m, "labels", None)
-                extra = {} if labels is None else {"labels": np.concatenate(
-                    [labels, np.zeros((len(mix) - len(labels), 3), np.int64)])}
-                m = replace(m, mixture=mix, **extra)
-                self.lies_told += 1
-            told.append(m)
-        return PeerCore._wrap(self, told)
 
 
 def one(scn, pad: int | None, seed: int) -> dict:
@@ -100,7 +81,7 @@ def one(scn, pad: int | None, seed: int) -> dict:
                     spent[0] += time.perf_counter() - t
             setattr(core, name, timed)
     if pad is not None:
-        peers["s2"] = PaddingCore(peers["s2"], padding(pad, scn.region,
+        peers["s2"] = LyingCore(peers["s2"], padding(pad, scn.region,
                                                      np.random.default_rng(seed)))
     try:
         res = run_twin(scn, 0, peers=peers)

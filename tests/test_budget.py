@@ -5,8 +5,6 @@ divergence and the fusion), never timed: benchmarks/bench_padding.py prints the 
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import sensornet.peers.trust as trust_mod
@@ -15,7 +13,6 @@ import sensornet.tracking.divergence as divergence
 from scipy.stats import multivariate_normal
 from sensornet.peers.admission import Admission, ByteBudget, Route
 from sensornet.peers.budget import EstimateBudget, heaviest, row_bytes
-from sensornet.peers.core import PeerCore
 from sensornet.peers.core_summary import budget_lines
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Estimate, Forward, ScanSet
@@ -45,22 +42,6 @@ def padded(rng: np.random.Generator, n: int = PAD):
     return lie
 
 
-class PaddingCore(LyingCore):
-    """A :class:`LyingCore` whose lie pads: labels (protocol 2), if any, padded with it
-    (zeros for the padding rows), so the padded estimate is well-formed."""
-
-    def _wrap(self, messages: list) -> list:
-        told = []
-        for m in messages:
-            if type(m) is Estimate:
-                mix = self.lie(m.mixture)
-                labels = getattr(m, "labels", None)
-                extra = {} if labels is None else {"labels": np.concatenate(
-                    [labels, np.zeros((len(mix) - len(labels), 3), np.int64)])}
-                m = replace(m, mixture=mix, **extra)
-                self.lies_told += 1
-            told.append(m)
-        return PeerCore._wrap(self, told)
 
 
 # -- before decoding: bytes per member ---------------------------------------------------------
@@ -231,7 +212,7 @@ def runs():
                     return _fuse(inp)
                 fuser.fuse = fuse_counted
             if case == "padded":
-                peers["s2"] = PaddingCore(peers["s2"], padded(np.random.default_rng(6)))
+                peers["s2"] = LyingCore(peers["s2"], padded(np.random.default_rng(6)))
             res = run_twin(scn, 0, peers=peers)
         finally:
             mp.undo()
@@ -275,3 +256,17 @@ def test_labels_follow_the_rows_kept_and_go_where_components_merge():
     assert len(cut.mixture) == 5 and np.array_equal(cut.labels, labels[:5])
     merged = b.bound_estimate(Estimate("s2", 1, lie, round=1, pruning=1, labels=labels))
     assert len(merged.mixture) <= 50 and merged.labels is None
+
+
+def test_a_liars_labels_follow_its_rows():
+    """The lie keeps its own rows' labels, pads appended rows with label 0 and sends none when
+    it drops rows (protocol 2 refuses labels of another length)."""
+    from sensornet.sim.run.lies import told_labels
+
+    own = np.array([[1, 5, 0], [2, 7, 3]], np.int64)
+    assert told_labels(None, 4) is None
+    assert np.array_equal(told_labels(own, 2), own)
+    padded_labels = told_labels(own, 5)
+    assert padded_labels.shape == (5, 3) and np.array_equal(padded_labels[:2], own)
+    assert not padded_labels[2:].any()
+    assert told_labels(own, 1) is None

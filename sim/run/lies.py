@@ -104,10 +104,16 @@ class LyingCore(PeerCore):
         for m in messages:
             if type(m) is Estimate:
                 told_mix = self.lie(m.mixture)
-                # its labels stay where its rows do; a lie that adds or drops rows sends none
-                labels = (m.labels if m.labels is not None and len(m.labels) == len(told_mix)
-                          else None)
-                m = replace(m, mixture=told_mix, labels=labels)
+                m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)))
                 self.lies_told += 1
             told.append(m)
         return super()._wrap(told)
+
+
+def told_labels(labels: np.ndarray | None, n: int) -> np.ndarray | None:
+    """A liar's labels for the ``n`` rows it tells: its own rows keep theirs and rows a lie
+    appends (padding, phantoms) carry label 0 ``(0, 0, 0)``, so the estimate stays well-formed
+    (protocol 2 refuses a label array of another length); a lie that drops rows sends none."""
+    if labels is None or n < len(labels):
+        return None
+    return np.concatenate([labels, np.zeros((n - len(labels), 3), np.int64)])
