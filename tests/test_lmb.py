@@ -281,3 +281,22 @@ def test_three_separated_targets_keep_one_label_each_over_50_scans():
             seen[t].add(tuple(out.labels[near][0].tolist()))
     assert all(len(s) == 1 for s in seen), seen
     assert len(set.union(*seen)) == 3
+
+
+def test_a_track_whose_weights_all_underflowed_gets_equal_weights_not_nan():
+    """reduce_components normalises per track; a track with every weight 0 (it is deleted by
+    its existence in the same step) must not produce 0/0."""
+    import warnings
+
+    from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
+
+    t = LabelledBernoulliSet(np.array([[0, 1, 0], [0, 1, 1]]), np.array([0.5, 0.5]),
+                             np.array([0.0, 0.0, 1.0]),
+                             np.array([[0.0, 0.0], [50.0, 0.0], [0.0, 0.0]]),
+                             np.tile(np.eye(2), (3, 1, 1)), np.array([0, 0, 1]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = reduce_components(t, 1e-4, 4.0, 5)
+    assert np.isfinite(r.weights).all()
+    for i in range(2):
+        assert np.isclose(r.weights[r.owner == i].sum(), 1.0)

@@ -159,7 +159,10 @@ def reduce_components(tracks: LabelledBernoulliSet, prune: float, merge_threshol
         rank = np.arange(len(w)) - (np.cumsum(sizes) - sizes)[own]
         cap = rank < max_components
         w, m, P, own = w[cap], m[cap], P[cap], own[cap]
-    w = w / np.add.reduceat(w, np.searchsorted(own, np.arange(n)))[own]
+    total = np.add.reduceat(w, np.searchsorted(own, np.arange(n)))[own]
+    # a track whose every weight underflowed to 0 (deleted by its existence in the same step)
+    # gets equal weights, not 0/0
+    w = np.divide(w, total, out=1.0 / np.bincount(own, minlength=n)[own], where=total > 0)
     return LabelledBernoulliSet.trusted(tracks.labels, tracks.existence, w, m, P, own)
 
 
