@@ -29,7 +29,9 @@ from sensornet.tracking.labels import (
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity, LinearPosition
 from sensornet.tracking.reduction import Reducer
-from sensornet.tracking.track_metrics import TrackTable, label_agreement, track_report
+from sensornet.tracking.track_metrics import label_agreement, track_report
+
+from tests.labelled_tables import twin_tables
 
 
 def _spd(rng, n: int) -> np.ndarray:
@@ -181,35 +183,6 @@ def test_a_labelled_estimate_is_protocol_2_and_protocol_1_still_decodes():
 
 
 # -- the seed-000 twin ---------------------------------------------------------------------
-def _tables(twin, names, which: str, confirmed: bool = False):
-    """Per peer a TrackTable of its ``which`` tracks (ids coded to ints, shared by all
-    peers; an id twice in a scan keeps its first, heaviest row) and the truth's table."""
-    code: dict[tuple, int] = {}
-    out, truth = {}, None
-    for p in names:
-        t = twin.peers[p].scorer.results.table(p)
-        S, I, X, TS, TI, TX = [], [], [], [], [], []
-        for k, e, tr, ids, st, tru, tids in zip(t["scan"], t["estimate"], t["tracks"],
-                                                t["track_ids"], t["track_status"], t["truth"],
-                                                t["truth_ids"], strict=True):
-            if e != which:
-                continue
-            assert len(ids) == len(tr) and len(st) == len(tr) and len(tids) == len(tru)
-            seen: set = set()
-            for x, i, s in zip(tr, ids, st, strict=True):
-                if tuple(i) in seen or (confirmed and not s):
-                    continue
-                seen.add(tuple(i))
-                S.append(k)
-                I.append(code.setdefault(tuple(i), len(code)))
-                X.append([x[0], x[2]])
-            for x, i in zip(tru, tids, strict=True):
-                TS.append(k)
-                TI.append(i)
-                TX.append([x[0], x[2]])
-        out[p] = TrackTable(np.array(S), np.array(I), np.array(X).reshape(-1, 2))
-        truth = TrackTable(np.array(TS), np.array(TI), np.array(TX).reshape(-1, 2))
-    return out, truth
 
 
 @pytest.fixture(scope="module")
@@ -232,9 +205,9 @@ def test_seed000_one_id_per_target_at_every_peer(seed000):
         assert all(len(rows["track_ids"][i]) == len(rows["tracks"][i]) for i in fused)
         assert sum(len(rows["track_ids"][i]) for i in fused) > 200
     c = scn.metrics.ospa_cutoff
-    tabs, truth = _tables(twin, names, "fused")
+    tabs, truth = twin_tables(twin, names, "fused")
     ag = label_agreement(tabs, truth, gate=c)
-    conf = label_agreement(_tables(twin, names, "fused", confirmed=True)[0], truth, gate=c)
+    conf = label_agreement(twin_tables(twin, names, "fused", confirmed=True)[0], truth, gate=c)
     print(f"fused label agreement {ag['agreement']:.4f} of {ag['confirmed']} target-scans, "
           f"confirmed tracks {conf['agreement']:.4f} of {conf['confirmed']}")
     assert ag["confirmed"] > 200 and conf["confirmed"] > 180
@@ -244,7 +217,7 @@ def test_seed000_one_id_per_target_at_every_peer(seed000):
         print(f"{p}: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000 "
               f"target-scans ({r['truth_scans']})")
         assert r["truth_scans"] > 200 and r["switches_per_1000"] <= 5.0
-    local, _ = _tables(twin, names, "local")
+    local, _ = twin_tables(twin, names, "local")
     for p, tab in local.items():
         r = track_report(truth, tab, c=c, with_hota=False, with_tgospa=False)
         print(f"{p} local: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000")

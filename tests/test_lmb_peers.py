@@ -24,7 +24,9 @@ from sensornet.tracking.labels import LabelMatch, new_labels
 from sensornet.tracking.lmb import LmbFilter, LmbState
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet
 from sensornet.tracking.models import ConstantVelocity, LinearPosition
-from sensornet.tracking.track_metrics import TrackTable, label_agreement, track_report
+from sensornet.tracking.track_metrics import label_agreement, track_report
+
+from tests.labelled_tables import twin_tables
 
 
 def _filter(origin: int = 0) -> LmbFilter:
@@ -182,35 +184,6 @@ def test_kind_builds_from_the_scenario():
 
 
 # -- the seed-000 twin ---------------------------------------------------------------------
-def _tables(twin, names, which: str, confirmed: bool = False):
-    """Per peer a TrackTable of its ``which`` tracks (ids coded to ints shared by all peers;
-    an id twice in a scan keeps its first row) and the truth's."""
-    code: dict[tuple, int] = {}
-    out, truth = {}, None
-    for p in names:
-        t = twin.peers[p].scorer.results.table(p)
-        S, Id, X, TS, TI, TX = [], [], [], [], [], []
-        for k, e, tr, ids, st, tru, tids in zip(t["scan"], t["estimate"], t["tracks"],
-                                                t["track_ids"], t["track_status"], t["truth"],
-                                                t["truth_ids"], strict=True):
-            if e != which:
-                continue
-            assert len(ids) == len(tr)
-            seen: set = set()
-            for x, i, s in zip(tr, ids, st, strict=True):
-                if tuple(i) in seen or (confirmed and not s):
-                    continue
-                seen.add(tuple(i))
-                S.append(k)
-                Id.append(code.setdefault(tuple(i), len(code)))
-                X.append([x[0], x[2]])
-            for x, i in zip(tru, tids, strict=True):
-                TS.append(k)
-                TI.append(i)
-                TX.append([x[0], x[2]])
-        out[p] = TrackTable(np.array(S), np.array(Id), np.array(X).reshape(-1, 2))
-        truth = TrackTable(np.array(TS), np.array(TI), np.array(TX).reshape(-1, 2))
-    return out, truth
 
 
 @pytest.fixture(scope="module")
@@ -242,9 +215,9 @@ def test_seed000_one_id_per_target(seed000):
     tracks 2-5 switches (they take the network's ids as fusions spread them)."""
     scn, twin = seed000
     names, c = scn.sensor_names, scn.metrics.ospa_cutoff
-    tabs, truth = _tables(twin, names, "fused")
+    tabs, truth = twin_tables(twin, names, "fused")
     ag = label_agreement(tabs, truth, gate=c)
-    conf = label_agreement(_tables(twin, names, "fused", confirmed=True)[0], truth, gate=c)
+    conf = label_agreement(twin_tables(twin, names, "fused", confirmed=True)[0], truth, gate=c)
     print(f"fused agreement {ag['agreement']:.4f} of {ag['confirmed']}, confirmed "
           f"{conf['agreement']:.4f} of {conf['confirmed']}")
     assert ag["confirmed"] > 200 and ag["agreement"] >= 0.99 and conf["agreement"] >= 0.99
@@ -252,7 +225,7 @@ def test_seed000_one_id_per_target(seed000):
         r = track_report(truth, tab, c=c, with_hota=False, with_tgospa=False)
         print(f"{p}: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000")
         assert r["truth_scans"] > 200 and r["switches_per_1000"] <= 1.0
-    local, _ = _tables(twin, names, "local")
+    local, _ = twin_tables(twin, names, "local")
     for tab in local.values():
         assert len(tab.id) > 200 and np.unique(tab.id).size < 40
 
