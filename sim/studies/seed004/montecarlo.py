@@ -165,6 +165,28 @@ def iterated_corrector(mix: GaussianMixture, scans: Sequence[np.ndarray],
     return out
 
 
+@dataclass(frozen=True)
+class _Net:
+    """The graph quantities of a run (seed 004's 20-sensor random geometric graph)."""
+
+    A: np.ndarray
+    """(S, S) adjacency."""
+    hops: np.ndarray
+    """(S, S) shortest-path hop counts."""
+    full: int
+    """Flooding iterations run: at least the diameter, so every scan is pooled."""
+    names: list[str]
+    """Sensor names ``s1..sS``, as the network scenario names them."""
+
+    @property
+    def size(self) -> int:
+        return len(self.A)
+
+
+def _tally(tallies: dict[str, Tally], name: str) -> Tally:
+    return tallies.setdefault(name, Tally())
+
+
 def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[str, float]]:
     """Every method on run ``run``'s truth and scans; per-method means over scans and peers.
 
@@ -173,103 +195,124 @@ def run_once(scn: Seed004, run: int, consensus: bool = True) -> dict[str, dict[s
     root = np.random.default_rng([scn.seed, run])
     rng_truth, rng_scan, rng_cluster = root.spawn(3)
     models = scn.models()
-    S, A, hops = len(models), scn.adjacency, scn.hops
-    deg = A.sum(axis=1)
-    diameter = int(hops.max())
-    full = max(scn.iterations, diameter)
-    W = metropolis_weights(A)
-    nbrs = [np.flatnonzero(A[i]) for i in range(S)]
+    A, hops = scn.adjacency, scn.hops
+    net = _Net(A, hops, max(scn.iterations, int(hops.max())),
+               [f"s{i + 1}" for i in range(len(models))])
     cv = ConstantVelocity(scn.scan_period, scn.sigma_w)
     birth, reducer = scn.birth(), scn.reducer()
     sensors = [scn.sensor_params(m) for m in models]
     local = [GMPHDFilter(cv, [s], birth, scn.survival_probability, reducer) for s in sensors]
     mixes = [f.initial() for f in local]
     order = corrector_order(A)
-    ecc = hops.max(axis=1)
-    centre = int(np.argmin(ecc))
     ic_mix = GaussianMixture.empty(4)
     tallies: dict[str, Tally] = {}
-
-    def tally(name: str) -> Tally:
-        return tallies.setdefault(name, Tally())
-
     X = truth(scn, rng_truth)
-    names = [f"s{i + 1}" for i in range(S)]  # as the network scenario names them
     for k in range(scn.num_scans):
         x = X[k][:, [0, 2]]
         scans = measure(scn, models, X[k], rng_scan)
-        plane = to_plane(models, scans)
-        sizes = np.array([len(z) for z in scans])
-        # flooding + clustering: the full pooled set, then what t < diameter iterations leave
-        pooled = np.concatenate(plane)
-        t0 = time.process_time()
-        est_idpc = idpc(pooled, S, scn.clustering, rng_cluster).centres
-        dt = time.process_time() - t0
-        flood_cost = float(flooding_tuples(hops, sizes, full).mean())
-        flood_bytes = flooding_bytes(hops, scans, full, names, k + 1).cumsum(axis=1)
-        tally("IDPC").add(est_idpc, x, scn, flood_cost, dt, flood_bytes[:, -1].mean())
-        t0 = time.process_time()
-        est = ftc(pooled, S, scn.clustering, rng_cluster).centres
-        tally("FTC").add(est, x, scn, flood_cost, time.process_time() - t0,
-                         flood_bytes[:, -1].mean())
-        for t in range(1, full + 1):
-            cost = flooding_tuples(hops, sizes, t)
-            for i in range(S):
-                held = hops[i] <= t
-                t0 = time.process_time()
-                if held.all():
-                    out, dt_i = est_idpc, dt
-                else:
-                    n_scans = int(held.sum()) if scn.assumed_scans == "held" else S
-                    out = idpc(np.concatenate([plane[j] for j in np.flatnonzero(held)]),
-                               n_scans, scn.clustering, rng_cluster).centres
-                    dt_i = time.process_time() - t0
-                tally(f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i,
-                                         float(flood_bytes[i, t - 1]))
-        # local GM-PHD filters, then consensus on what they publish
-        cpu_local = np.zeros(S)
-        for i in range(S):
+        _flooding_step(scn, net, k, x, scans, to_plane(models, scans), rng_cluster, tallies)
+        cpu_local = np.zeros(net.size)
+        for i in range(net.size):
             t0 = time.process_time()
             mixes[i] = local[i].step(mixes[i], scans[i])
             cpu_local[i] = time.process_time() - t0
-            tally("local").add(_positions(mixes[i]), x, scn, 0.0, cpu_local[i])
-        rules = (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))) if consensus else ()
-        for rule, fuse in rules:
-            dens = [keep_above(m, scn.publish_threshold) for m in mixes]
-            tuples, cpu, nbytes = np.zeros(S), cpu_local.copy(), np.zeros(S)
-            for r in range(1, max(scn.rounds) + 1):
-                tuples += deg * np.array([_n_tuples(d) for d in dens])
-                nbytes += deg * np.array([_n_bytes(d, k + 1, r - 1) for d in dens])
-                new = []
-                for i in range(S):
-                    t0 = time.process_time()
-                    group = [dens[i]] + [dens[j] for j in nbrs[i]]
-                    w = np.concatenate(([W[i, i]], W[i, nbrs[i]]))
-                    new.append(fuse(group, w / w.sum()))
-                    cpu[i] += time.process_time() - t0
-                dens = [keep_above(d, scn.publish_threshold) for d in new]
-                if r in scn.rounds:
-                    for i in range(S):
-                        tally(f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i], cpu[i],
-                                                   nbytes[i])
-        # iterated corrector along the depth-first order; centralised: the same at the centre
-        t0 = time.process_time()
-        passes = iterated_corrector(local[0].predict(ic_mix), scans, sensors, order, reducer,
-                                    scn.prune_threshold)
-        ic_mix = passes[-1]
-        ic_tuples, ic_bytes = 0.0, 0.0
-        for s, nxt, mix in zip(order, np.roll(order, -1), passes, strict=True):
-            ic_tuples += hops[s, nxt] * _n_tuples(mix)
-            ic_bytes += hops[s, nxt] * _n_bytes(mix, k + 1)
-        dt = time.process_time() - t0
-        est = _positions(ic_mix)
-        tally("IC").add(est, x, scn, ic_tuples / S, dt / S, ic_bytes / S)
-        routed = float((hops[:, centre] * TUPLES_PER_MEASUREMENT * sizes).sum())
-        routed_bytes = sum(hops[j, centre] * len(encode(Scan(names[j], k + 1, scans[j], seq=k + 1,
-                                                             send_time=float(k + 1))))
-                           for j in range(S))
-        tally("centralised").add(est, x, scn, routed / S, dt / S, routed_bytes / S)
+            _tally(tallies, "local").add(_positions(mixes[i]), x, scn, 0.0, cpu_local[i])
+        if consensus:
+            for rule, fuse in (("GCI", _gci(scn, reducer)), ("AA", _aa(reducer))):
+                _consensus_step(scn, net, k, x, rule, fuse, mixes, cpu_local, tallies)
+        ic_mix = _corrector_step(scn, net, k, x, scans, local[0].predict(ic_mix), sensors,
+                                 order, reducer, tallies)
     return {name: t.means() for name, t in tallies.items()}
+
+
+def _flooding_step(scn: Seed004, net: _Net, k: int, x: np.ndarray, scans: list[np.ndarray],
+                   plane: list[np.ndarray], rng: np.random.Generator,
+                   tallies: dict[str, Tally]) -> None:
+    """Scan ``k`` of flooding + clustering: IDPC and FTC on the full pooled set ``plane``
+    (per-sensor ``(m_i, 2)`` plane points), then IDPC on what ``t`` < diameter iterations
+    leave each peer."""
+    S, hops = net.size, net.hops
+    sizes = np.array([len(z) for z in scans])
+    pooled = np.concatenate(plane)
+    t0 = time.process_time()
+    est_idpc = idpc(pooled, S, scn.clustering, rng).centres
+    dt = time.process_time() - t0
+    flood_cost = float(flooding_tuples(hops, sizes, net.full).mean())
+    flood_bytes = flooding_bytes(hops, scans, net.full, net.names, k + 1).cumsum(axis=1)
+    _tally(tallies, "IDPC").add(est_idpc, x, scn, flood_cost, dt, flood_bytes[:, -1].mean())
+    t0 = time.process_time()
+    est = ftc(pooled, S, scn.clustering, rng).centres
+    _tally(tallies, "FTC").add(est, x, scn, flood_cost, time.process_time() - t0,
+                               flood_bytes[:, -1].mean())
+    for t in range(1, net.full + 1):
+        cost = flooding_tuples(hops, sizes, t)
+        for i in range(S):
+            held = hops[i] <= t
+            t0 = time.process_time()
+            if held.all():
+                out, dt_i = est_idpc, dt
+            else:
+                n_scans = int(held.sum()) if scn.assumed_scans == "held" else S
+                out = idpc(np.concatenate([plane[j] for j in np.flatnonzero(held)]),
+                           n_scans, scn.clustering, rng).centres
+                dt_i = time.process_time() - t0
+            _tally(tallies, f"IDPC t={t}").add(out, x, scn, float(cost[i]), dt_i,
+                                               float(flood_bytes[i, t - 1]))
+
+
+def _consensus_step(scn: Seed004, net: _Net, k: int, x: np.ndarray, rule: str, fuse,
+                    mixes: list[GaussianMixture], cpu_local: np.ndarray,
+                    tallies: dict[str, Tally]) -> None:
+    """Scan ``k`` of consensus ``rule`` (``fuse(group, weights)``, Metropolis weights) on what
+    the local filters publish, tallied after each round in ``scn.rounds``."""
+    S, A = net.size, net.A
+    deg, W = A.sum(axis=1), metropolis_weights(A)
+    nbrs = [np.flatnonzero(A[i]) for i in range(S)]
+    dens = [keep_above(m, scn.publish_threshold) for m in mixes]
+    tuples, cpu, nbytes = np.zeros(S), cpu_local.copy(), np.zeros(S)
+    for r in range(1, max(scn.rounds) + 1):
+        tuples += deg * np.array([_n_tuples(d) for d in dens])
+        nbytes += deg * np.array([_n_bytes(d, k + 1, r - 1) for d in dens])
+        new = []
+        for i in range(S):
+            t0 = time.process_time()
+            group = [dens[i]] + [dens[j] for j in nbrs[i]]
+            w = np.concatenate(([W[i, i]], W[i, nbrs[i]]))
+            new.append(fuse(group, w / w.sum()))
+            cpu[i] += time.process_time() - t0
+        dens = [keep_above(d, scn.publish_threshold) for d in new]
+        if r in scn.rounds:
+            for i in range(S):
+                _tally(tallies, f"{rule} L={r}").add(_positions(new[i]), x, scn, tuples[i],
+                                                     cpu[i], nbytes[i])
+
+
+def _corrector_step(scn: Seed004, net: _Net, k: int, x: np.ndarray, scans: list[np.ndarray],
+                    predicted: GaussianMixture, sensors: list[SensorParams],
+                    order: np.ndarray, reducer: Reducer,
+                    tallies: dict[str, Tally]) -> GaussianMixture:
+    """Scan ``k`` of the iterated corrector along the depth-first ``order`` and of the
+    centralised filter (the same estimate, the scans routed to the most central sensor);
+    the IC posterior."""
+    S, hops = net.size, net.hops
+    centre = int(np.argmin(hops.max(axis=1)))
+    t0 = time.process_time()
+    passes = iterated_corrector(predicted, scans, sensors, order, reducer, scn.prune_threshold)
+    ic_mix = passes[-1]
+    ic_tuples, ic_bytes = 0.0, 0.0
+    for s, nxt, mix in zip(order, np.roll(order, -1), passes, strict=True):
+        ic_tuples += hops[s, nxt] * _n_tuples(mix)
+        ic_bytes += hops[s, nxt] * _n_bytes(mix, k + 1)
+    dt = time.process_time() - t0
+    est = _positions(ic_mix)
+    _tally(tallies, "IC").add(est, x, scn, ic_tuples / S, dt / S, ic_bytes / S)
+    sizes = np.array([len(z) for z in scans])
+    routed = float((hops[:, centre] * TUPLES_PER_MEASUREMENT * sizes).sum())
+    routed_bytes = sum(hops[j, centre] * len(encode(Scan(net.names[j], k + 1, scans[j],
+                                                         seq=k + 1, send_time=float(k + 1))))
+                       for j in range(S))
+    _tally(tallies, "centralised").add(est, x, scn, routed / S, dt / S, routed_bytes / S)
+    return ic_mix
 
 
 def _gci(scn: Seed004, reducer: Reducer):
