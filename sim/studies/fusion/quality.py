@@ -104,9 +104,16 @@ def _scenario(spec: str, base: Path | None, label: str) -> tuple[str, str | None
                 f"campaign, nor a shipped scenario ({', '.join(builtin_scenarios())})")
 
 
-def study_campaign(data: dict, path: Path | None, runs: int | None = None):
-    """The :class:`sim.campaign.Campaign` of a study file (``runs``: every cell's run count)."""
-    label = path.name if path is not None else "study"
+def _round_list(value, where: str, label: str) -> tuple[int, ...]:
+    """A list of round counts, each in 1..16."""
+    if not (isinstance(value, list) and value and all(
+            isinstance(x, int) and not isinstance(x, bool) and 1 <= x <= 16 for x in value)):
+        raise _fail(label, f"{where} must be a list of integers in 1..16, got {value!r}")
+    return tuple(value)
+
+
+def _head(data: dict, label: str, runs: int | None) -> tuple[dict, dict, int]:
+    """``([campaign], [study], first_run)`` of a study file, their keys checked."""
     unknown = set(data) - {"campaign", "study"}
     if unknown:
         raise _fail(label, f"a study file has [campaign] and [study] only, not {sorted(unknown)}")
@@ -124,7 +131,11 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
     first = head.get("first_run", 0)
     if not isinstance(first, int) or first < 0:
         raise _fail(label, f"campaign.first_run must be an integer >= 0, got {first!r}")
-    default_runs = head.get("runs", 4)
+    return head, study, first
+
+
+def _graphs(study: dict, label: str, runs: int | None, default_runs: int) -> dict[str, Graph]:
+    """``study.graphs`` by name (``runs``, when given, overrides each graph's own)."""
     graphs = {}
     for g in _table_list(study, "graphs", label, ("name", "scenario"),
                          ("runs", "set", "pd_key", "clutter_key")):
@@ -135,16 +146,14 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
                                        dict(g.get("set", {})),
                                        str(g.get("pd_key", Graph.pd_key)),
                                        str(g.get("clutter_key", Graph.clutter_key)))
-    def round_list(value, where: str) -> tuple[int, ...]:
-        if not (isinstance(value, list) and value and all(
-                isinstance(x, int) and not isinstance(x, bool) and 1 <= x <= 16 for x in value)):
-            raise _fail(label, f"{where} must be a list of integers in 1..16, got {value!r}")
-        return tuple(value)
+    return graphs
 
-    rounds = round_list(study.get("rounds", [1, 2, 3, 4]), "study.rounds")
+
+def _rules(study: dict, label: str) -> tuple[list[Rule], list[dict]]:
+    """``(study.rules, study.conditions)``, each condition's rules checked against the rules."""
     rules = [Rule(str(r["name"]), dict(r.get("set", {})), r.get("max_peers"),
-                  round_list(r["rounds"], f"rule {r['name']!r}: rounds") if "rounds" in r
-                  else None)
+                  _round_list(r["rounds"], f"rule {r['name']!r}: rounds", label)
+                  if "rounds" in r else None)
              for r in _table_list(study, "rules", label, ("name",),
                                   ("set", "max_peers", "rounds"))]
     conditions = _table_list(study, "conditions", label, ("pd", "clutter"), ("graphs", "rules"))
@@ -154,54 +163,71 @@ def study_campaign(data: dict, path: Path | None, runs: int | None = None):
         if unknown:
             raise _fail(label, f"condition {cond!r} names unknown rule(s) {unknown} "
                         f"(rules: {', '.join(sorted(names))})")
+    return rules, conditions
+
+
+def study_campaign(data: dict, path: Path | None, runs: int | None = None):
+    """The :class:`sim.campaign.Campaign` of a study file (``runs``: every cell's run count)."""
+    label = path.name if path is not None else "study"
+    head, study, first = _head(data, label, runs)
+    graphs = _graphs(study, label, runs, head.get("runs", 4))
+    rounds = _round_list(study.get("rounds", [1, 2, 3, 4]), "study.rounds", label)
+    rules, conditions = _rules(study, label)
     version = code_version()
     base = path.parent if path is not None else None
     cells: list[Cell] = []
     loaded: dict[tuple, Any] = {}
     for cond in conditions:
-        names = cond.get("graphs", list(graphs))
-        for gname in names:
+        for gname in cond.get("graphs", list(graphs)):
             if gname not in graphs:
                 raise _fail(label, f"condition {cond!r} names an unknown graph {gname!r} "
                             f"(graphs: {', '.join(graphs)})")
-            g = graphs[gname]
-            scen_name, scen_text = _scenario(g.scenario, base, label)
-            common = {**g.overrides, g.pd_key: float(cond["pd"]),
-                      g.clutter_key: float(cond["clutter"])}
-            plan: list[tuple[str, int | None, str, dict]] = []
-            for rule in rules:
-                if "rules" in cond and rule.name not in cond["rules"]:
-                    continue
-                for L in rule.rounds or rounds:
-                    plan.append((rule.name, L, "twin", {**common, **rule.overrides,
-                                                        "network.rounds": L}))
-            plan.append((NO_FUSION, None, "twin", {**common, "fusion.rule": "none"}))
-            plan.append((CENTRALISED, None, "experiment", {**common, "fusion.rule": "none"}))
-            for rule_name, L, runner, over in plan:
-                key = (scen_name, json.dumps(over, sort_keys=True))
-                try:
-                    if key not in loaded:
-                        loaded[key] = load_scenario(scenario_source(scen_name, scen_text),
-                                                    overrides=over)
-                except (ScenarioError, ValueError) as exc:
-                    raise _fail(label, f"graph {gname!r}, rule {rule_name!r}: {exc}") from None
-                scn = loaded[key]
-                peers = len(scn.sensors)
-                limit = next((r.max_peers for r in rules if r.name == rule_name), None)
-                if limit is not None and peers > limit:
-                    continue
-                values = {"graph": gname, "peers": peers, "rule": rule_name, "rounds": L,
-                          "pd": float(cond["pd"]), "clutter": float(cond["clutter"])}
-                cell_label = (f"{gname} pd={cond['pd']} clutter={cond['clutter']} "
-                              f"{rule_name}" + (f" L={L}" if L else ""))
-                c = Cell(len(cells), cell_label, over, values, scenario=scen_name,
-                         scenario_text=scen_text, runner=runner)
-                c.hash = scenario_hash(scn)
-                c.keys = [task_key(c.hash, runner, first + r, version) for r in range(g.runs)]
-                cells.append(c)
+            _add_cells(cells, loaded, label, graphs[gname], cond, rules, rounds, base, first,
+                       version)
     return Campaign(str(head.get("name", path.stem if path else "fusion-quality")), path,
                     "(per cell)", None, "twin", max(g.runs for g in graphs.values()), first,
                     ("*",), cells, [], version)
+
+
+def _add_cells(cells: list[Cell], loaded: dict[tuple, Any], label: str, g: Graph, cond: dict,
+               rules: list[Rule], rounds: tuple[int, ...], base: Path | None, first: int,
+               version: str) -> None:
+    """Append to ``cells`` those of condition ``cond`` on graph ``g``: one per rule and round
+    count, one without fusion, the centralised reference (``loaded``: scenarios by overrides,
+    shared across calls)."""
+    scen_name, scen_text = _scenario(g.scenario, base, label)
+    common = {**g.overrides, g.pd_key: float(cond["pd"]), g.clutter_key: float(cond["clutter"])}
+    plan: list[tuple[str, int | None, str, dict]] = []
+    for rule in rules:
+        if "rules" in cond and rule.name not in cond["rules"]:
+            continue
+        for L in rule.rounds or rounds:
+            plan.append((rule.name, L, "twin", {**common, **rule.overrides,
+                                                "network.rounds": L}))
+    plan.append((NO_FUSION, None, "twin", {**common, "fusion.rule": "none"}))
+    plan.append((CENTRALISED, None, "experiment", {**common, "fusion.rule": "none"}))
+    for rule_name, L, runner, over in plan:
+        key = (scen_name, json.dumps(over, sort_keys=True))
+        try:
+            if key not in loaded:
+                loaded[key] = load_scenario(scenario_source(scen_name, scen_text),
+                                            overrides=over)
+        except (ScenarioError, ValueError) as exc:
+            raise _fail(label, f"graph {g.name!r}, rule {rule_name!r}: {exc}") from None
+        scn = loaded[key]
+        peers = len(scn.sensors)
+        limit = next((r.max_peers for r in rules if r.name == rule_name), None)
+        if limit is not None and peers > limit:
+            continue
+        values = {"graph": g.name, "peers": peers, "rule": rule_name, "rounds": L,
+                  "pd": float(cond["pd"]), "clutter": float(cond["clutter"])}
+        cell_label = (f"{g.name} pd={cond['pd']} clutter={cond['clutter']} "
+                      f"{rule_name}" + (f" L={L}" if L else ""))
+        c = Cell(len(cells), cell_label, over, values, scenario=scen_name,
+                 scenario_text=scen_text, runner=runner)
+        c.hash = scenario_hash(scn)
+        c.keys = [task_key(c.hash, runner, first + r, version) for r in range(g.runs)]
+        cells.append(c)
 
 
 # --------------------------------------------------------------------------------------------
