@@ -1,0 +1,192 @@
+"""The sections of a scenario about the peers: how they fuse (``[fusion]``), their network
+(``[network]``) and the settings of particular peer kinds (``[extended]``, ``[clustering]``,
+``[pda]``); re-exported by :mod:`sim.scenario.model`. Each option is declared once in its field
+(:func:`sim.scenario.options.option`)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+from sensornet.sim.bounds import MAX_ROUNDS
+from sensornet.sim.choices import FUSION_RULES, OMEGA_RULES, OOS_POLICIES
+from sensornet.sim.kinds import names as kind_names
+from sensornet.sim.scenario.common import (
+    ASSUMED_SCANS,
+    DISTANCE_UNITS,
+    FLOOD_ESTIMATORS,
+    K_RULES,
+    PARTITIONS,
+    PDA_METHODS,
+    PDA_MODES,
+    TOPOLOGIES,
+)
+from sensornet.sim.scenario.options import (
+    NONNEGATIVE,
+    POSITIVE,
+    PROBABILITY,
+    Bound,
+    at_least,
+    option,
+)
+from sensornet.tracking.gci_product import CARDINALITY_RULES
+
+
+@dataclass(frozen=True)
+class FusionSpec:
+    """How local estimates are fused (§3, §4 level 2)."""
+
+    rule: str = option("hybrid", doc="`\"hybrid\"` (AA target weights, GCI locations: "
+                                     "`tracking.fusion_rules.hybrid_fuse`), `\"gci\"`, `\"aa\"` "
+                                     "(arithmetic average), `\"ratio\"` (the particle rule, IMM "
+                                     "peers) or `\"none\"` (local filters only); each peer kind "
+                                     "takes some.", choices=FUSION_RULES)
+    fusing_omega: str = option("uniform", doc="The offline experiment's fusion weights at the "
+                                              "fusing sensor: `\"uniform\"`, `\"metropolis\"` "
+                                              "(of the star it forms with the others) or "
+                                              "optimised `\"det\"` / `\"chernoff\"` (the peers' "
+                                              "are `network.omega`).",
+                               choices=OMEGA_RULES, was="omega")
+    level2_pruning: bool = option(True, doc="Publish only components heavier than "
+                                            "`level2_threshold`.")
+    level2_threshold: float = option(0.5, doc="Level-2 pruning threshold.", check=NONNEGATIVE)
+    fusing_sensor: str = option("", doc="The sensor that fuses in the offline experiment (seed "
+                                        "000: `\"s2\"`), and the hub of a `\"star\"` network.",
+                                custom="the first sensor")
+    cardinality: str = option("separate", doc="GCI target number: `\"emd\"` (exact Poisson "
+                                              "EMD, Uney 2013) or `\"separate\"` (location "
+                                              "densities and cardinalities fused apart, "
+                                              "Battistelli 2013).", choices=CARDINALITY_RULES)
+    trust: bool = option(False, doc="Test each neighbour's density before fusing it and "
+                                    "down-weight or quarantine the inconsistent ones "
+                                    "(`peers.trust`).")
+    trust_register: bool = option(True, doc="With `trust`: repair a neighbour the offset test "
+                                             "fires on (registration, `TrustConfig.register`) "
+                                             "instead of quarantining it.")
+    trust_repair: bool = option(True, doc="With `trust`: fuse a failing neighbour's repaired "
+                                          "density (its uncorroborated components dropped, its "
+                                          "mass the others' median) where that passes the test "
+                                          "(`TrustConfig.repair`).")
+    lie: str = option("", doc="Test hook: `\"PEER:KIND\"` makes that peer publish lie KIND of "
+                              "`sim.run.lies` in every estimate (a member lying with its own valid "
+                              "key), in the twin and as a process.", custom="no lie")
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """The peer network: one peer per sensor (same name), its graph, consensus and pacing."""
+
+    topology: str = option("full", doc="`\"full\"`, `\"ring\"`, `\"star\"` (hub: "
+                                       "`fusion.fusing_sensor`), `\"line\"` or `\"custom\"` "
+                                       "(`edges`).", choices=TOPOLOGIES)
+    edges: tuple[tuple[str, str], ...] = option(
+        (), doc="Undirected edges between sensor names, `[[\"s1\", \"s2\"], ...]` (topology "
+                "`\"custom\"` only).", custom="none")
+    rounds: int = option(1, doc="Consensus (or flooding) rounds `L` per scan.",
+                         check=Bound(1, MAX_ROUNDS))
+    omega: str = option("metropolis", doc="The peers' fusion weights: `\"metropolis\"`, "
+                                          "`\"uniform\"`, or each pair's optimised `\"det\"` / "
+                                          "`\"chernoff\"` weight (GCI; consensus then "
+                                          "Metropolis).", choices=OMEGA_RULES)
+    max_age: int = option(5, doc="Neighbour estimates older than this are not fused.",
+                          unit="scans", check=NONNEGATIVE)
+    policy: str = option("nale", doc="Out-of-sequence policy: `\"nale\"`, `\"drop-late\"` or "
+                                     "`\"as-is\"`.", choices=OOS_POLICIES)
+    feedback: bool = option(False, doc="Peers use their fused density as the prior of the next "
+                                       "scan.")
+    speed: float = option(10.0, doc="Wall-clock speed factor: a scan every `scan_period / "
+                                    "speed` seconds.", check=POSITIVE)
+    filter: str = option("gmphd", doc="The peers' kind (`sim.kinds`): `\"gmphd\"`, "
+                                      "`\"et-gmphd\"` (`[extended]`), for one target "
+                                      "`\"imm-pf\"`/`\"imm-ekf\"`, `\"flooding\"` (seed 004, "
+                                      "`[clustering]`) or `\"pda\"` (seed 003, `[pda]`).",
+                         choices=kind_names)
+    deadline: float = option(0.5, doc="Fusion deadline after a scan.", unit="scan interval",
+                             check=Bound(0, 1, low_open=True))
+    router: bool = option(False, doc="`sensornet run`/`demo`: every process a client of one "
+                                     "Zenoh router the run starts (as `--router`), not peer to "
+                                     "peer.")
+    ros2: bool = option(False, doc="Each peer also publishes its tracks (and the world its "
+                                   "detections) as ROS 2 messages in `rmw_zenoh`'s format "
+                                   "(`--ros2`; docs/ros2.md; needs the `[ros2]` extra).")
+    ros2_domain: int = option(0, doc="The ROS 2 domain (`ROS_DOMAIN_ID`) of those messages.",
+                              check=Bound(0, 232))
+
+
+@dataclass(frozen=True)
+class ExtendedSpec:
+    """Extended targets (seed 002, docs/seed002.md): returns per target and partitioning."""
+
+    rate: float = option(10.0, doc="`gamma`: Poisson mean of the measurements of a detected "
+                                   "target per scan.", check=POSITIVE)
+    partition: str = option("distance", doc="`\"distance\"` (Granström, MST thresholds) or "
+                                            "`\"grid-spectral\"` (the seed's method).",
+                            choices=PARTITIONS)
+    p_lower: float = option(0.3, doc="Distance partitioning: lower chi-square(2) probability of "
+                                     "the thresholds on `d^2/2`.", check=PROBABILITY)
+    p_upper: float = option(0.8, doc="Distance partitioning: upper chi-square(2) probability "
+                                     "(at least `p_lower`).", check=PROBABILITY)
+    compression: float = option(0.5, doc="Grid-spectral: compression rate `gamma` of the grid "
+                                         "(seed 002 eq. 5).", check=Bound(0, 2, low_open=True))
+    cell_factor: float = option(4.0, doc="Grid-spectral: `c0` in `ceil(N_z^(gamma/2) c0)` cells "
+                                         "per axis (our reading).", check=POSITIVE)
+    core_level: float = option(0.5, doc="Grid-spectral: core threshold `min + core_level (max "
+                                        "- min)` of the cell counts.", check=PROBABILITY)
+    rho: float = option(2.0, doc="Grid-spectral: density parameter of the edge length "
+                                 "`rho^dist - 1`.", check=Bound(1, low_open=True))
+    k_rule: str = option("eigengap", doc="Grid-spectral: number of clusters by `\"eigengap\"` "
+                                         "or `\"core-regions\"`.", choices=K_RULES)
+    k_spread: int = option(0, doc="Grid-spectral: also partitions for K +- 1..k_spread (0: one "
+                                  "partition, the paper's).", check=NONNEGATIVE)
+    units: str = option("sigma", doc="Grid-spectral: distances in `\"sigma\"` units or the "
+                                     "paper's `\"unit-box\"` [0, 1].", choices=DISTANCE_UNITS)
+    max_measurements: int = option(2000, doc="Scans with more points are not partitioned "
+                                             "(counted, corrected as all-missed).",
+                                   check=at_least(1))
+
+
+@dataclass(frozen=True)
+class ClusteringSpec:
+    """Flooding peers' clustering (seed 004, ``tracking.idpc``; ``[clustering]`` table)."""
+
+    cutoff: float = option(25.0, doc="`d_c`, the neighbourhood radius.", unit="m",
+                           check=POSITIVE)
+    zeta: float = option(0.3, doc="Target points have more than `zeta S` neighbours within "
+                                  "`d_c`.", check=POSITIVE)
+    radius_factor: float = option(1.25, doc="`L`: a cluster takes the points within `L d_c` of "
+                                            "its seed.", check=POSITIVE)
+    split_factor: float = option(1.6, doc="Clusters above `split_factor S Pd` points are split "
+                                          "by k-means.", check=POSITIVE)
+    assumed_scans: str = option("held", doc="`S`: the scans a peer holds (`\"held\"`) or every "
+                                            "sensor (`\"all\"`).", choices=ASSUMED_SCANS)
+    estimator: str = option("idpc", doc="The flooding peers' estimator from the pooled scans: "
+                                        "`\"idpc\"` (density-peaks clustering), `\"ftc\"` "
+                                        "(DBSCAN + k-means) or `\"ic\"` (the iterated-corrector "
+                                        "GM-PHD, `[filter]`/`[birth]`, corrected with each "
+                                        "pooled scan in turn; `peers.flooding."
+                                        "IcFloodEstimator`). Seed 004's `flooding.estimator`.",
+                            choices=FLOOD_ESTIMATORS)
+
+
+@dataclass(frozen=True)
+class PdaSpec:
+    """Single-target PDA peers (seed 003, ``network.filter = "pda"``; ``[pda]`` table)."""
+
+    tables: str = option("{}", doc="The seed-003 tables the PDA filters and the "
+                                   "world's draws read (`scenario`, `sensors`, `clutter`, "
+                                   "`filters`, `detector`, `fuzzy`, `metrics`: "
+                                   "`sim.world.seed003`), held as canonical JSON so the "
+                                   "scenario stays hashable.",
+                         key="config", custom="an empty table")
+    mode: str = option("meas", doc="`\"meas\"`: measurement sharing with the sequential update "
+                                   "(the paper's scheme); `\"ci\"`: estimate sharing fused by "
+                                   "covariance intersection.", choices=PDA_MODES)
+    method: str = option("fuzzy IMM", doc="The filter: `\"PDAF\"`, `\"IMM-PDAF\"`, `\"fuzzy "
+                                          "PDA\"` or `\"fuzzy IMM\"`.", choices=PDA_METHODS)
+    pregate: float = option(4.0, doc="Measurement sharing publishes the returns inside "
+                                     "`pregate` x the gate threshold.", check=POSITIVE)
+
+    @property
+    def config(self) -> dict:
+        """A fresh copy of the seed-003 tables as nested dicts."""
+        return json.loads(self.tables)
