@@ -13,11 +13,15 @@ import time
 from pathlib import Path
 
 from sensornet.cli.budgets import check_budget
+from sensornet.cli.commands.run_checks import (
+    check_real_run,
+    plan_processes,
+    refuse_real_only_flags,
+    refuse_used_out,
+)
 from sensornet.cli.common import (
     DEFAULT_SCENARIO,
     UserError,
-    _check_listen_free,
-    _resolve_viewer,
     _run_folder,
 )
 from sensornet.cli.scenarios import load, warn_fusion
@@ -25,9 +29,7 @@ from sensornet.cli.security import run_keys
 from sensornet.peers.rerun_sink import spawn_viewer
 from sensornet.peers.scan_results import merge_parts, write_part
 from sensornet.sim.run import launcher, run_summary
-from sensornet.sim.run.packing import choose, scenario_load
 from sensornet.sim.run.twin import run_twin
-from sensornet.sim.world.build import adjacency
 
 
 def report_results(out: Path) -> Path | None:
@@ -42,23 +44,8 @@ def report_results(out: Path) -> Path | None:
     return table
 
 
-RUN_FILES = ("commands.json", "results.parquet", "logs", "peer-*.json", "*.scans.msgpack")
-"""What a run leaves in its folder: an ``--out`` holding any of them holds a run already."""
-
-
-def _refuse_used_out(base: str | None) -> None:
-    """A second run into a folder that holds one would mix the two (summaries, per-scan parts,
-    logs): refuse in one line, naming what is there."""
-    if not base or not Path(base).is_dir():
-        return
-    found = sorted({q.name for pat in RUN_FILES for q in Path(base).glob(pat)})
-    if found:
-        raise UserError(f"--out {base} already holds a run ({', '.join(found[:3])}"
-                        f"{', ...' if len(found) > 3 else ''}): give a new folder, or leave "
-                        f"--out out for a fresh runs/<time>-run")
-
-
 def _last_line(path: Path) -> str:
+    """The last non-blank line of a process's log (its error, if it failed), or ""."""
     try:
         lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
     except OSError:
@@ -67,6 +54,7 @@ def _last_line(path: Path) -> str:
 
 
 def _why_nothing_scored(name: str, s: dict) -> str:
+    """Why peer ``name`` (summary ``s``) scored nothing: what it rejected, or why it stopped."""
     rejected = {k: v for k, v in (s.get("rejected") or {}).items() if v}
     if rejected:
         parts = ", ".join(f"{v} {k}" for k, v in sorted(rejected.items()))
@@ -77,96 +65,44 @@ def _why_nothing_scored(name: str, s: dict) -> str:
 
 
 def _scored(s: dict) -> bool:
+    """Whether a peer's summary has scans and a finite local or fused mean OSPA."""
     vals = [s.get("mean_ospa_local"), s.get("mean_ospa_fused")]
     return bool(s.get("scans")) and any(v is not None and math.isfinite(v) for v in vals)
 
 
-def _check_hosted_faults(pfaults, hosts: dict[str, list[str]], args) -> None:
-    """With hosts (``--per-process N``, N > 1) only ``kill`` (one peer, in its host) and
-    ``killhost`` (a whole host, named h1, h2, ...) of the peers' faults (the router's as
-    ever); ``killhost`` only with hosts."""
-    for f in pfaults:
-        if f.action == "killhost" and not hosts:
-            raise UserError(f"--fault killhost:{f.peer}@{f.scan} needs hosts: add "
-                            f"--per-process N (N > 1)")
-        if f.action == "killhost" and f.peer not in hosts:
-            raise UserError(f"--fault names unknown host {f.peer!r} (hosts: "
-                            f"{', '.join(hosts)})")
-        if hosts and f.action not in launcher.HOSTED_ACTIONS and f.peer != "router":
-            raise UserError(f"--fault {f.action}:{f.peer}@{f.scan} with --per-process: only "
-                            f"{' and '.join(launcher.HOSTED_ACTIONS)} so far")
-    if hosts and getattr(args, "sim", False):
-        raise UserError("--per-process needs real processes; drop --sim")
-
-
-def _packing(args: argparse.Namespace, scn, pfaults) -> int:
-    """``--per-process``, or the automatic packing (sim.run.packing), saying so in one line."""
-    solo = [f"{f.action}:{f.peer}" for f in pfaults
-            if f.action not in launcher.HOSTED_ACTIONS and f.peer != "router"]
-    asked = getattr(args, "per_process", None)
-    if getattr(args, "sim", False):  # the twin: no processes to pack
-        return asked or 1
-    why_not = ("secure mode" if args.secure is not None or scn.security else
-               f"--fault {solo[0]}" if solo else "")
-    packing = choose(len(scn.sensors), asked, why_not, load=scenario_load(scn))
-    if packing.line:
-        print(packing.line, flush=True)
-    return packing.per_process
-
-
 def cmd_run(args: argparse.Namespace) -> int:
+    """``sensornet run``: check the flags against the scenario, start the world and the peers
+    as processes (or the twin, ``--sim``), wait for them, report; the exit code says whether
+    every peer that was not killed on purpose scored."""
     scn = load(args, args.scenario)
     warn_fusion(scn)
-    try:
-        pfaults = [launcher.ProcessFault.parse(f) for f in args.fault or []]
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    if scn.network.router and hasattr(args, "router") and not args.router:
-        args.router = "[network] router = true"  # the scenario's routed topology
-    routed = {"router"} if getattr(args, "router", False) else set()  # restart:router@K
-    per_process = _packing(args, scn, pfaults)
-    hosts = launcher.host_groups(scn.sensor_names, per_process, adjacency(scn)[1])
-    _check_hosted_faults(pfaults, hosts, args)
-    unknown = sorted({f.peer for f in pfaults if f.action != "killhost"}
-                     - set(scn.sensor_names) - routed)
-    if unknown:
-        raise UserError(f"--fault names unknown peers {unknown} "
-                        f"(peers: {', '.join(scn.sensor_names)})")
-    late = [f for f in pfaults if f.scan >= scn.num_scans]
-    if late:  # it would be accepted and never fire (or fire as the run ends)
-        f = late[0]
-        raise UserError(f"--fault {f.action}:{f.peer}@{f.scan}: scan {f.scan} is at or after "
-                        f"the run's last scan ({scn.name} has {scn.num_scans} scans); "
-                        f"schedule it before scan {scn.num_scans}")
+    pfaults, per_process, hosts = plan_processes(args, scn)
     if getattr(args, "sim", False):
-        for flag in ("listen", "connect", "config", "run_id", "viewer", "lease_ms", "record"):
-            if getattr(args, flag, None):
-                raise UserError(f"--{flag.replace('_', '-')} needs real processes; drop --sim")
-        if args.secure is not None:
-            raise UserError("--secure needs real processes; drop --sim")
-        if args.router is True:
-            raise UserError("--router needs real processes; drop --sim")
+        refuse_real_only_flags(args)
         check_budget(scn, args)
         return _run_twin(scn, args)
-    check_budget(scn, args, processes=len(hosts or scn.sensors) + 1, wire=True)
-    _check_listen_free(args.listen or [])
-    _resolve_viewer(args)
-    if args.secure is None and scn.security:  # the scenario's [security] keys
-        args.secure = scn.security
-    if hosts and args.secure is not None:
-        raise UserError("--per-process: a host has one Zenoh session, so one TLS identity: "
-                        "no --secure (run secure peers one per process)")
-    if getattr(args, "router", False):
-        clash = [f for f in ("config", "listen", "sparse") if getattr(args, f, None)]
-        if clash:
-            why = args.router if isinstance(args.router, str) else "--router"
-            raise UserError(f"{why} makes every process a client of the run's router: "
-                            f"drop --{clash[0]}")
-    _refuse_used_out(args.out)
+    check_real_run(args, scn, hosts)
+    refuse_used_out(args.out)
     out = _run_folder(args.out, "run")
     secure = run_keys(args, scn, out)
     speed = args.speed or scn.network.speed
     expected = scn.num_scans * scn.scan_period / speed
+    _announce(args, scn, hosts, out, secure, speed, expected)
+    handle, codes, caught = _launch_and_wait(args, scn, out, secure, per_process, pfaults,
+                                             expected)
+    summaries = launcher.read_summaries(out, scn.sensor_names)
+    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
+    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
+    if summaries:
+        _print_summaries(scn, out, summaries, pfaults, hosts, killed, caught, speed)
+    _print_outputs(args, out, pfaults, summaries)
+    return _exit_code(scn, out, handle, codes, summaries, killed, caught)
+
+
+def _announce(args: argparse.Namespace, scn, hosts: dict[str, list[str]], out: Path,
+              secure, speed: float, expected: float) -> None:
+    """The run's opening lines: what starts, how long its scans take, where output goes, the
+    hosts and the secure mode."""
     how = (f"in {len(hosts)} host process{'es' if len(hosts) != 1 else ''}" if hosts
            else "as processes")
     print(f"run {scn.name}: world + {len(scn.sensors)} peers {how} over Zenoh on "
@@ -179,10 +115,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         made = " (fresh keys made for this run)" if args.secure == "" else ""
         print(f"secure mode: mutual TLS + access control on network {args.network}, keys in "
               f"{secure}{made}", flush=True)
+
+
+def _launch_and_wait(args: argparse.Namespace, scn, out: Path, secure, per_process: int,
+                     pfaults: list, expected: float) -> tuple[object, dict, list[str]]:
+    """Start the run's processes, inject the process faults, wait for the end (or the
+    timeout, or SIGINT/SIGTERM: stop the children, then report as usual). Returns the run's
+    handle, the exit codes by process and the signals caught."""
     viewer = args.viewer
     if viewer == "spawn":  # one viewer for the whole run; every process streams to it
         viewer = "rerun+http://127.0.0.1:9876/proxy" if spawn_viewer() else None
-    stop = threading.Event()  # SIGINT / SIGTERM: stop the children, then report as usual
+    stop = threading.Event()
     caught: list[str] = []
 
     def on_signal(signum, frame) -> None:
@@ -217,23 +160,32 @@ def cmd_run(args: argparse.Namespace) -> int:
             injector.join(timeout=5)
         for s, h in previous.items():
             signal.signal(s, h)
-    summaries = launcher.read_summaries(out, scn.sensor_names)
-    killed = {f.peer for f in pfaults if f.action in ("kill", "term", "restart", "killhost")}
-    killed |= {p for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
-    if summaries:
-        tables, meta = run_summary.read_tables(out)
-        run_summary.add_track_summary(summaries, tables, meta, out)
-        scan_of = {f.peer: f.scan for f in pfaults}
-        scan_of |= {p: f.scan for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
-        missing = {n: (f"killed at scan {scan_of[n]}" if n in killed else "no summary")
-                   for n in scn.sensor_names if n not in summaries}
-        print(launcher.format_summary(summaries, missing, scn.metrics.ospa_cutoff))
-        if launcher.trust_note(summaries):
-            print(launcher.trust_note(summaries))
-        if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
-            note = launcher.realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
-            if note:
-                print(note)
+    return handle, codes, caught
+
+
+def _print_summaries(scn, out: Path, summaries: dict, pfaults: list,
+                     hosts: dict[str, list[str]], killed: set[str], caught: list[str],
+                     speed: float) -> None:
+    """The peers' summary table (a peer killed on purpose marked so), the trust note and, on
+    an undisturbed run, whether the peers kept up with real time."""
+    tables, meta = run_summary.read_tables(out)
+    run_summary.add_track_summary(summaries, tables, meta, out)
+    scan_of = {f.peer: f.scan for f in pfaults}
+    scan_of |= {p: f.scan for f in pfaults if f.action == "killhost" for p in hosts[f.peer]}
+    missing = {n: (f"killed at scan {scan_of[n]}" if n in killed else "no summary")
+               for n in scn.sensor_names if n not in summaries}
+    print(launcher.format_summary(summaries, missing, scn.metrics.ospa_cutoff))
+    if launcher.trust_note(summaries):
+        print(launcher.trust_note(summaries))
+    if not caught and not pfaults and scn.faults is None:  # faults: deadlines on purpose
+        note = launcher.realtime_note(summaries, scn.scan_period / speed, speed, os.cpu_count())
+        if note:
+            print(note)
+
+
+def _print_outputs(args: argparse.Namespace, out: Path, pfaults: list, summaries: dict) -> None:
+    """What the run left: the process-fault report, the per-scan results and the merged
+    Rerun recording (or why there is none)."""
     faults_file = out / "process-faults.json"
     if pfaults and faults_file.is_file():
         print(launcher.fault_report(json.loads(faults_file.read_text()), summaries))
@@ -246,6 +198,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"recording: {out / 'rerun'} (the .rrd files could not be merged)")
     elif not args.no_rerun:
         print("recording: none (no process got as far as opening its recording)")
+
+
+def _exit_code(scn, out: Path, handle, codes: dict, summaries: dict, killed: set[str],
+               caught: list[str]) -> int:
+    """0 for a run stopped by a signal or one where every peer not killed on purpose scored;
+    else the first failure in one line on stderr (the world's, a process's exit code, a
+    missing summary, a peer that scored nothing) and 1 (2 for a user error)."""
     if caught:
         if not summaries:  # stopped while the processes were still starting
             print(f"sensornet: stopped by {caught[0]} during start-up, before any peer began "
@@ -304,7 +263,7 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
     """``sensornet run --sim``: the same peers on the discrete-event twin (no processes)."""
     if args.fault:
         raise UserError("--fault (process faults) needs real processes; drop --sim")
-    _refuse_used_out(args.out)
+    refuse_used_out(args.out)
     t0 = time.perf_counter()
     result = run_twin(scn, args.run)
     summaries = {name: result.summary(name) for name in result.peers}
