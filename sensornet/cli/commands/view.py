@@ -6,6 +6,7 @@ import argparse
 import os
 import signal
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +38,23 @@ def _scenario(args: argparse.Namespace):
 def cmd_view(args: argparse.Namespace) -> int:
     """Subscribe to NETWORK and build its Rerun recording (``--out``) and/or stream it to a
     viewer (``--viewer``) until Ctrl-C, ``--duration`` or (``--until-end``) the run's end."""
+    viewer, out = _check_args(args)
+    if args.nice:
+        os.nice(args.nice)  # the view yields the CPU to the network's processes
+    sink, state = _open_sink(args, out, viewer)
+    if args.from_mcap:  # offline: the peers' recordings instead of the network
+        return _replay_offline(args, sink, state, out or viewer)
+    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config,
+                    estimates=args.estimates)
+    cpu = _watch(args, view, sink, out, viewer)
+    _print_stats(view, cpu)
+    return 0
+
+
+def _check_args(args: argparse.Namespace) -> tuple[str | None, Path | None]:
+    """The network name, somewhere to read from (``--connect`` or ``--from-mcap``), a positive
+    ``--duration`` and somewhere to draw to; returns the viewer URL (None: no viewer) and the
+    ``.rrd`` path (None: no file)."""
     try:
         check_name(args.network, "network name")
     except ValueError as exc:
@@ -50,8 +68,14 @@ def cmd_view(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     if out is None and viewer is None:
         raise UserError("nothing to show to: give --out FILE.rrd and/or --viewer")
-    if args.nice:
-        os.nice(args.nice)  # the view yields the CPU to the network's processes
+    return viewer, out
+
+
+def _open_sink(args: argparse.Namespace, out: Path | None,
+               viewer: str | None) -> tuple[RerunSink, Callable[[Batcher], ViewState]]:
+    """Open the recording with the scenario's peers, region and sensors drawn (if
+    ``--scenario``); returns the sink and the factory of the view's state, which styles and
+    adds to the legend a peer heard that the scenario does not name."""
     found = _scenario(args)
     peers: list[str] = []
     layout = {"single_target": False, "imm": False}
@@ -84,20 +108,30 @@ def cmd_view(args: argparse.Namespace) -> int:
         return ViewState(batcher, peers, period, sensors, layout["single_target"], cutoff,
                          on_new_peer=new_peer)
 
-    if args.from_mcap:  # offline: the peers' recordings instead of the network
-        missing = [p for p in args.from_mcap if not Path(p).is_file()]
-        if missing:
-            sink.close()
-            raise UserError(f"--from-mcap: no such file {missing[0]}")
-        offline = state(Batcher(sink.rr, sink.rr))
-        drawn = replay_recordings(offline, [Path(p) for p in args.from_mcap])
-        offline.b.flush()
+    return sink, state
+
+
+def _replay_offline(args: argparse.Namespace, sink: RerunSink,
+                    state: Callable[[Batcher], ViewState], dest) -> int:
+    """``--from-mcap``: draw the peers' recordings instead of joining the network, then say
+    how many messages were drawn to ``dest``."""
+    missing = [p for p in args.from_mcap if not Path(p).is_file()]
+    if missing:
         sink.close()
-        print(f"view: {drawn} recorded messages drawn from {len(args.from_mcap)} recordings "
-              f"({offline.rejected} undecodable) -> {out or viewer}", file=sys.stderr)
-        return 0
-    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config,
-                    estimates=args.estimates)
+        raise UserError(f"--from-mcap: no such file {missing[0]}")
+    offline = state(Batcher(sink.rr, sink.rr))
+    drawn = replay_recordings(offline, [Path(p) for p in args.from_mcap])
+    offline.b.flush()
+    sink.close()
+    print(f"view: {drawn} recorded messages drawn from {len(args.from_mcap)} recordings "
+          f"({offline.rejected} undecodable) -> {dest}", file=sys.stderr)
+    return 0
+
+
+def _watch(args: argparse.Namespace, view: LiveView, sink: RerunSink, out: Path | None,
+           viewer: str | None) -> float:
+    """Join the network and draw until Ctrl-C/SIGTERM, ``--duration`` or the run's end;
+    returns the CPU seconds the view spent."""
 
     def on_signal(signum, frame) -> None:
         view.stop.set()
@@ -118,8 +152,13 @@ def cmd_view(args: argparse.Namespace) -> int:
     finally:
         view.close()
         sink.close()
+    return cpu_seconds() - cpu0
+
+
+def _print_stats(view: LiveView, cpu: float) -> None:
+    """What the view did: its lag behind the peers (median, p99, max), the messages drawn,
+    dropped and skipped, the Rerun calls, and its CPU per scan."""
     st, b = view.state, view.batcher
-    cpu = cpu_seconds() - cpu0
     scans = max(1, st.newest_k)
     lag = sorted(st.lag_ms)
     if lag:
@@ -132,4 +171,3 @@ def cmd_view(args: argparse.Namespace) -> int:
           f"{b.calls} send_columns calls for {b.rows_sent} rows; CPU {cpu:.2f} s "
           f"({cpu / scans * 1e3:.1f} ms per scan over {st.newest_k} scans)",
           file=sys.stderr, flush=True)
-    return 0
