@@ -161,78 +161,104 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
         n: make_peer(scn, n, run, network=network) for n in names}
     if faults is None and delay is None:
         faults = fault_injector(scn, run)
-    link_delay = delay or no_delay
     # like the runtime, a peer subscribes to its neighbours' estimate keys only
     listeners = {n: [m for m in names if n in peers[m].consensus.o.neighbours] for n in names}
     interval = scn.scan_period / scn.network.speed
-    result = TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults)
-    queue: list = []
-    order = itertools.count()
+    clock = _Clock(peers=peers, keys=keys, listeners=listeners, faults=faults,
+                   link_delay=delay or no_delay,
+                   result=TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults))
+    for t, kind, target, *payload in world_events(scn, truth, scans, keys, interval, inject,
+                                                  events):
+        clock.push(t, kind, target, *payload)
+    clock.run(names, FusionBatch() if batch else None)
+    return clock.result
 
-    def push(t: float, kind: str, target: str, *payload) -> None:
-        heapq.heappush(queue, (t, next(order), kind, target, payload))
 
-    def carry_out(t: float, sender: str, outputs: list) -> None:
+@dataclass
+class _Clock:
+    """The twin's event queue and the peers it drives: the state of one :func:`run_twin`,
+    with a method per kind of work (deliver, handle a peer's outputs, fuse an instant)."""
+
+    peers: dict[str, PeerCore]
+    keys: Keys
+    listeners: dict[str, list[str]]
+    """``listeners[sender]``: the peers subscribed to ``sender``'s estimates."""
+    faults: FaultInjector | None
+    link_delay: LinkDelay
+    result: TwinResult
+    queue: list = field(default_factory=list)
+    """Heap of ``(t, order, kind, target, payload)``; ``order`` keeps equal times in push order."""
+    order: itertools.count = field(default_factory=itertools.count)
+    scheduled: dict[str, float] = field(default_factory=dict)
+    """Each peer's pending tick time (one tick event per due time)."""
+
+    def push(self, t: float, kind: str, target: str, *payload) -> None:
+        heapq.heappush(self.queue, (t, next(self.order), kind, target, payload))
+
+    def carry_out(self, t: float, sender: str, outputs: list) -> None:
+        """Deliver ``sender``'s published estimates to its listeners after each link's delay
+        (or the fault injector's deliveries); keep its published tracks."""
         for o in outputs:
             if not isinstance(o, Publish):
                 continue
             if o.channel == "tracks":
-                result.tracks[sender][o.k] = o.message.states
+                self.result.tracks[sender][o.k] = o.message.states
                 continue
-            for other in listeners[sender]:
-                ds = (faults.deliveries(sender, other, t, o.message) if faults is not None
-                      else [d for d in [link_delay(sender, other, o.message)] if d is not None])
+            for other in self.listeners[sender]:
+                ds = (self.faults.deliveries(sender, other, t, o.message)
+                      if self.faults is not None else
+                      [d for d in [self.link_delay(sender, other, o.message)] if d is not None])
                 for d in ds:
-                    push(t + d, "msg", other, keys.estimate(sender), o.payload)
+                    self.push(t + d, "msg", other, self.keys.estimate(sender), o.payload)
 
-    for t, kind, target, *payload in world_events(scn, truth, scans, keys, interval, inject,
-                                                  events):
-        push(t, kind, target, *payload)
-    scheduled: dict[str, float] = {}
-    truth_key = keys.truth()
-    fusions = FusionBatch() if batch else None
-    if fusions is not None:
-        for core in peers.values():
-            core.consensus.batch = fusions
-    name_of = {id(core.consensus): n for n, core in peers.items()}
-    scan_keys = {keys.scan(n) for n in names}
-    prepared_at: float | None = None
-
-    def handle(t: float, target: str, core: PeerCore, out: list) -> None:
+    def handle(self, t: float, target: str, core: PeerCore, out: list) -> None:
+        """A peer's outputs at ``t`` (and its tick's): carried out, tallied, its next tick
+        scheduled once."""
         out += core.tick(t)
-        carry_out(t, target, out)
-        result.tally(target, out)
+        self.carry_out(t, target, out)
+        self.result.tally(target, out)
         due = core.next_due()
-        if due is not None and scheduled.get(target) != due:
-            scheduled[target] = due
-            push(max(due, t), "tick", target)
+        if due is not None and self.scheduled.get(target) != due:
+            self.scheduled[target] = due
+            self.push(max(due, t), "tick", target)
 
-    while queue:
-        t, _, kind, target, payload = heapq.heappop(queue)
-        if target in result.stops:
-            pass
-        elif kind == "msg" and payload[0] == truth_key and not peers[target].wants_truth:
-            pass  # not subscribed (peers.transport): Zenoh does not deliver it
-        elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
-            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
-            handle(t, target, peers[target], [])  # the transport drops it (peers.session)
-        elif kind == "msg":
-            if fusions is not None and prepared_at != t and payload[0] in scan_keys:
-                # as a host: the instant's scans, their local steps computed together first
-                prepared_at = t
-                prepare_local_steps([(peers[target], *payload)] + [
-                    (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
-                    and q[4][0] in scan_keys and q[3] not in result.stops])
-            handle(t, target, peers[target], peers[target].receive(payload[0], payload[1], t))
-        elif kind == "live":
-            handle(t, target, peers[target],
-                   peers[target].liveliness(payload[0], payload[1], t))
-        else:
-            scheduled.pop(target, None)
-            handle(t, target, peers[target], [])
-        while fusions is not None and fusions.jobs and (not queue or queue[0][0] != t):
-            for c in fusions.run(t):  # the instant's events are handled: its rounds fused
-                name = name_of[id(c)]
-                if name not in result.stops:
-                    handle(t, name, peers[name], peers[name].completed(t))
-    return result
+    def run(self, names: list[str], fusions: FusionBatch | None) -> None:
+        """Play the queue to its end; with ``fusions`` (a host's batching), an instant's scans
+        get their local steps computed together and its consensus rounds fused together."""
+        peers, result, queue = self.peers, self.result, self.queue
+        if fusions is not None:
+            for core in peers.values():
+                core.consensus.batch = fusions
+        name_of = {id(core.consensus): n for n, core in peers.items()}
+        truth_key = self.keys.truth()
+        scan_keys = {self.keys.scan(n) for n in names}
+        prepared_at: float | None = None
+        while queue:
+            t, _, kind, target, payload = heapq.heappop(queue)
+            if target in result.stops:
+                pass
+            elif kind == "msg" and payload[0] == truth_key and not peers[target].wants_truth:
+                pass  # not subscribed (peers.transport): Zenoh does not deliver it
+            elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
+                result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
+                self.handle(t, target, peers[target], [])  # the transport drops it (peers.session)
+            elif kind == "msg":
+                if fusions is not None and prepared_at != t and payload[0] in scan_keys:
+                    # as a host: the instant's scans, their local steps computed together first
+                    prepared_at = t
+                    prepare_local_steps([(peers[target], *payload)] + [
+                        (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
+                        and q[4][0] in scan_keys and q[3] not in result.stops])
+                self.handle(t, target, peers[target],
+                            peers[target].receive(payload[0], payload[1], t))
+            elif kind == "live":
+                self.handle(t, target, peers[target],
+                            peers[target].liveliness(payload[0], payload[1], t))
+            else:
+                self.scheduled.pop(target, None)
+                self.handle(t, target, peers[target], [])
+            while fusions is not None and fusions.jobs and (not queue or queue[0][0] != t):
+                for c in fusions.run(t):  # the instant's events are handled: its rounds fused
+                    name = name_of[id(c)]
+                    if name not in result.stops:
+                        self.handle(t, name, peers[name], peers[name].completed(t))
