@@ -67,8 +67,9 @@ class Route:
 def parse_key(key: str, network: str) -> Route | None:
     """``sensornet/<network>/<channel>[/<name>]`` -> Route, or None if it is not one of ours.
 
-    A peer parses each message's key a few times on its way (admission, inbox, runtime, core)
-    and sees the same few dozen keys all run: the answers for string keys are kept (bounded,
+    A peer's transport parses each message's key once (the inbox item carries the answer,
+    :class:`peers.inbound.Delivered`); drivers feeding the core themselves parse it there. It
+    sees the same few dozen keys all run: the answers for string keys are kept (bounded,
     least recently used first out; a :class:`Route` is immutable, so sharing it is safe)."""
     if type(key) is str:
         return _parse_key_kept(key, network)
@@ -255,9 +256,11 @@ class Admission:
         with self._lock:
             return self._admit(route, now, payload, inbox=True, head=head)
 
-    def taken(self, key: str, size: int) -> None:
-        """A message :meth:`arrive` let in has left the inbox (handled, skipped or refused)."""
-        route = parse_key(key, self.network)
+    def taken(self, key: str, size: int, route: Route | None = None) -> None:
+        """A message :meth:`arrive` let in has left the inbox (handled, skipped or refused;
+        ``route``: its key parsed already, as the inbox item carries it)."""
+        if route is None:
+            route = parse_key(key, self.network)
         if route is None:
             return
         with self._lock:

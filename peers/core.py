@@ -42,7 +42,16 @@ from sensornet.peers.core_types import CoreConfig, Output, Publish, Record, Stop
 from sensornet.peers.scoring import Scorer
 from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.keys import Keys
-from sensornet.protocol.messages import Control, Estimate, Forward, Returns, Scan, Tracks, Truth
+from sensornet.protocol.messages import (
+    Control,
+    Estimate,
+    Forward,
+    Message,
+    Returns,
+    Scan,
+    Tracks,
+    Truth,
+)
 
 END_GAP = 100_000
 """Scans a world's "end" may name after this peer's last one (misses to score: bounded)."""
@@ -110,16 +119,24 @@ class PeerCore(CoreOutputs):
             return []  # our own publication
         if not admitted and not self.admission.admit(route, now, payload):
             return []
+        return self.receive_routed(route, payload, now)
+
+    def receive_routed(self, route: Route | None, payload: bytes, now: float,
+                       msg: Message | Rejected | None = None) -> list[Output]:
+        """An admitted message whose key the driver parsed already (``route``, the transport's
+        :class:`peers.inbound.Delivered`) and, with ``msg``, whose payload it decoded already
+        (:meth:`decoded`): the runtime's entry, so neither is done twice (issue 37 item 5)."""
         if route is None:
             return self._reject("wrong-key")
+        if route.channel == "estimate" and route.name == self.name:
+            return []  # our own publication
         self.received[route.channel] += 1
         self.received_bytes[route.channel] += len(payload)
         pre, self._predecoded = self._predecoded, None
-        try:
-            msg = (pre[1] if pre is not None and pre[0] is payload
-                   else self.decode(payload, self.cfg.limits))
-        except Rejected as exc:
-            return self._reject(exc.reason)
+        if msg is None:
+            msg = pre[1] if pre is not None and pre[0] is payload else self.decoded(payload)
+        if isinstance(msg, Rejected):
+            return self._reject(msg.reason)
         if not isinstance(msg, _EXPECTED[route.channel]):
             return self._reject("wrong-key")
         if route.channel == "scan":
@@ -129,6 +146,14 @@ class PeerCore(CoreOutputs):
         if route.channel == "truth":
             return self._truth(msg)
         return self._control(msg, now)
+
+    def decoded(self, payload: bytes) -> Message | Rejected:
+        """``payload`` decoded with this peer's limits, or the :class:`Rejected` it raised
+        (returned: a driver decodes once and hands the result to :meth:`receive_routed`)."""
+        try:
+            return self.decode(payload, self.cfg.limits)
+        except Rejected as exc:
+            return exc
 
     def scan_step(self, key: str, payload: bytes) -> tuple[int, np.ndarray] | None:
         """``(steps, z)``: the local step this scan message would make if it came next, for a

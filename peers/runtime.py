@@ -19,15 +19,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from sensornet.peers.admission import parse_key, peek
+from sensornet.peers.admission import Route, peek
 from sensornet.peers.core import PeerCore, Publish, Record, Stop
 from sensornet.peers.faults import FaultInjector, HoldQueue
+from sensornet.peers.inbound import delivered
 from sensornet.peers.observer import Observer
 from sensornet.peers.recording import Recorder
 from sensornet.peers.run_output import RunOutputs, output_stem
 from sensornet.peers.telemetry import SharedCpu, Telemetry
 from sensornet.peers.transport import Transport
-from sensornet.protocol.codec import Rejected
 from sensornet.protocol.messages import Estimate, Forward, Returns
 
 BATCH = 64
@@ -194,18 +194,21 @@ class PeerRuntime(RunOutputs):
     def step(self, items: list[tuple], queue_empty) -> None:
         """One wake-up's work: ``items`` (at most :data:`BATCH`), the held messages now due,
         the core's tick and a telemetry flush (``queue_empty()``: nothing more waiting for this
-        peer, so the observer may flush)."""
+        peer, so the observer may flush). A message's key is parsed once, by the transport
+        (:class:`peers.inbound.Delivered`), and its payload decoded once (:meth:`_handle`)."""
         try:
+            network = self.core.cfg.network
+            items = [delivered(item, network) for item in items]
             taken = self.core.admission.taken
-            for tag, key, payload in items:  # out of the inbox (handled or skipped below)
-                if tag == "msg":
-                    taken(key, len(payload))
+            for item in items:  # out of the inbox (handled or skipped below)
+                if item[0] == "msg":
+                    taken(item[1], len(item[2]), item.route)
             for item in self._catch_up(items):
                 if self._stop:
                     break
-                self._handle(*item)
-            for key, payload in self.held.pop_due(time.monotonic()):
-                self._feed("estimate", key, payload)
+                self._handle(item)
+            for route, key, payload, msg in self.held.pop_due(time.monotonic()):
+                self._feed(route, key, payload, msg)
             now = time.time()
             due = self.core.next_due()
             if self.recorder is not None and due is not None and due <= now:
@@ -244,7 +247,8 @@ class PeerRuntime(RunOutputs):
         self.telemetry.scans_skipped_behind += len(drop)
         return [it for i, it in enumerate(items) if i not in drop]
 
-    def _handle(self, tag: str, key: str, payload) -> None:
+    def _handle(self, item: tuple) -> None:
+        tag, key, payload = item
         if tag == "stop":
             return
         if tag == "live":
@@ -259,18 +263,22 @@ class PeerRuntime(RunOutputs):
             self._carry_out("live", lambda now: self.core.liveliness(name, joined, now), now)
             return
         self._last_input = time.monotonic()
-        route = parse_key(key, self.core.cfg.network)
-        channel = route.channel if route is not None else "other"
-        if channel == "estimate" and self.o.faults is not None and self._hold(key, payload):
-            return
-        self._feed(channel, key, payload)
+        route = item.route
+        msg = None
+        if route is not None and route.channel == "estimate" and self.o.faults is not None:
+            msg = self.core.decoded(payload)  # one decode: the link faults' and the core's
+            if self._hold(route, key, payload, msg):
+                return
+        self._feed(route, key, payload, msg)
 
-    def _feed(self, channel: str, key: str, payload: bytes) -> None:
+    def _feed(self, route: Route | None, key: str, payload: bytes, msg=None) -> None:
+        """Hand an admitted message to the core (``msg``: its payload decoded already)."""
         now = time.time()
         if self.recorder is not None:
             self.recorder.receive(now, key, payload)
-        self._carry_out(channel, lambda now: self.core.receive(key, payload, now,
-                                                               admitted=True), now)
+        channel = route.channel if route is not None else "other"
+        self._carry_out(channel, lambda now: self.core.receive_routed(route, payload, now, msg),
+                        now)
 
     def _carry_out(self, channel: str, step, now: float) -> None:
         """Run one core step at wall time ``now``; publish and record what it returns."""
@@ -323,20 +331,17 @@ class PeerRuntime(RunOutputs):
             send_time - self.core.consensus.last_k * interval)
         return send_time - t0 + interval
 
-    def _hold(self, key: str, payload: bytes) -> bool:
-        """Injected faults on the link ``sender -> self``: hold, duplicate or drop."""
-        try:
-            msg = self.core.decode(payload, self.core.cfg.limits)  # a host's: shared
-        except Rejected:
-            return False  # the core counts it
+    def _hold(self, route: Route, key: str, payload: bytes, msg) -> bool:
+        """Injected faults on the link ``sender -> self``: hold, duplicate or drop (``msg``:
+        the payload decoded, :meth:`peers.core.PeerCore.decoded`; held with the message)."""
         if not isinstance(msg, Estimate | Forward | Returns):
-            return False
+            return False  # a Rejected: the core counts it
         delays = self.o.faults.deliveries(msg.sender, self.name,
                                           self._run_time(msg.send_time), msg)
         transit = max(0.0, time.time() - msg.send_time)
         now = time.monotonic()
         for d in delays:
-            self.held.push(now + max(0.0, d - transit), (key, payload))
+            self.held.push(now + max(0.0, d - transit), (route, key, payload, msg))
         return True
 
     def _report_error(self, r: Record) -> None:

@@ -15,6 +15,7 @@ import time
 import zenoh
 import zenoh.ext as zx
 from sensornet.peers.admission import Admission, parse_key
+from sensornet.peers.inbound import Delivered
 from sensornet.peers.refusal_log import RefusalLog
 from sensornet.peers.session import SessionError, open_session
 from sensornet.protocol.encodings import encoding_text, letter_of
@@ -110,7 +111,8 @@ class DuplicatePeer(SessionError):
 
 class Transport:
     """Subscriptions and publishers of peer ``name`` (items on :attr:`q`:
-    ``("msg", key, payload)``, ``("live", name, joined)``, ``("stop", "", b"")``)."""
+    ``("msg", key, payload)`` as a :class:`peers.inbound.Delivered` carrying the parsed key,
+    ``("live", name, joined)``, ``("stop", "", b"")``)."""
 
     def __init__(self, keys: Keys, name: str, sensor: str, neighbours: tuple[str, ...],
                  admission: Admission, session_args: tuple, security=None,
@@ -166,17 +168,17 @@ class Transport:
         ``head``: the payload's :func:`peers.admission.peek`, if the caller has it;
         ``inbox``: where to put it instead of :attr:`q` (a host's hand-off, on its loop's
         thread, straight into the peer's backlog)."""
-        if self.admission.arrive(parse_key(key, self.keys.network), time.monotonic(), payload,
-                                 head):
+        route = parse_key(key, self.keys.network)  # the one parse: the item carries it
+        if self.admission.arrive(route, time.monotonic(), payload, head):
             if self.verifier is not None:  # secure mode: signed by the key's owner, not a copy
                 size = len(payload)
                 payload, why = self.verifier.open(key, payload, self.check_signatures)
                 if why is not None:
                     self.admission.rejected[why] += 1
-                    self.admission.taken(key, size)
+                    self.admission.taken(key, size, route)
                     return
                 self.admission.shrink(size - len(payload))  # the trailer stays here
-            (self.q if inbox is None else inbox).put(("msg", key, payload))
+            (self.q if inbox is None else inbox).put(Delivered(key, payload, route))
 
     def _missed(self, channel: str, n: int) -> None:
         self.unrecovered[channel] += n
