@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
-from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, marginals
+from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, SCALABLE, marginals
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
@@ -44,8 +44,9 @@ def predict(tracks: LabelledBernoulliSet, motion: ConstantVelocity, survival_pro
 
 def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
            method: str = "auto", gate: float | None = None, min_weight: float = 0.0,
-           exact_limit: int = EXACT_LIMIT,
-           tol: float = 1e-9) -> tuple[LabelledBernoulliSet, np.ndarray]:
+           exact_limit: int = EXACT_LIMIT, tol: float = 1e-9, scalable: str = "gibbs",
+           rng: np.random.Generator | None = None,
+           samples: int | None = None) -> tuple[LabelledBernoulliSet, np.ndarray]:
     """The LMB posterior after scan ``Z (m, dz)`` (Reuter eqs. 20-21) and ``r_U (m,)``, each
     measurement's probability of belonging to a track (the adaptive birth's input, eq. 31).
 
@@ -56,6 +57,8 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     ``p_ij``), normalised by ``r_i'``. ``gate``: pairs with ``nu^T S^-1 nu`` above it get
     likelihood 0. ``min_weight``: detection components lighter than this within their track
     are not materialised (pruning them early). No reduction here: see :func:`reduce_components`.
+    ``method``, ``exact_limit``, ``tol``, ``scalable``, ``rng``, ``samples``: the association
+    (:func:`lmb_association.marginals`).
     """
     Pd, kappa = sensor.detection_probability, sensor.clutter_intensity
     n, dz = len(tracks), sensor.model.dim
@@ -85,7 +88,7 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     starts = tracks.starts()
     eta = np.add.reduceat(wq, starts, axis=0)  # (n, m)
     p_miss, p = marginals(1.0 - r * Pd, (r * Pd)[:, None] * eta / kappa, method, exact_limit,
-                          tol)
+                          tol, scalable=scalable, rng=rng, samples=samples)
     exist_miss = p_miss * stay
     r_post = exist_miss + p.sum(axis=1)
     inv_r = np.divide(1.0, r_post, out=np.zeros(n), where=r_post > 0)
@@ -183,9 +186,17 @@ class LmbFilter:
     birth_velocity_std: float = 30.0
     """Std (m/s) of the unmeasured state entries of an adaptive birth (mean 0)."""
     method: str = "auto"
-    """Association: ``"auto"``, ``"exact"`` or ``"lbp"`` (:func:`lmb_association.marginals`)."""
+    """Association: ``"auto"``, ``"exact"``, ``"lbp"`` or ``"gibbs"``
+    (:func:`lmb_association.marginals`)."""
     exact_limit: int = EXACT_LIMIT
     lbp_tol: float = 1e-9
+    scalable: str = "gibbs"
+    """What ``"auto"`` runs on a cluster with a cycle beyond ``exact_limit`` hypotheses:
+    ``"gibbs"`` or ``"lbp"``."""
+    gibbs_samples: int | None = None
+    """Gibbs draws per such cluster (None: grows with its links)."""
+    seed: int = 0
+    """Seed of the filter's Generator (the Gibbs draws): one scan sequence, one result."""
     gate: float | None = None
     """Optional gate on ``nu^T S^-1 nu``."""
     max_components: int = 5
@@ -206,10 +217,15 @@ class LmbFilter:
     origin: int = 0
     """This peer's id: the first column of its tracks' labels."""
     _birth_cov: np.ndarray | None = field(default=None, init=False, repr=False)
+    _rng: np.random.Generator | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"unknown association method {self.method!r}; expected {METHODS}")
+        if self.scalable not in SCALABLE:
+            raise ValueError(f"unknown scalable association {self.scalable!r}; "
+                             f"expected {SCALABLE}")
+        self._rng = np.random.default_rng(self.seed)
         if self.extraction not in EXTRACTION_RULES:
             raise ValueError(f"unknown extraction {self.extraction!r}; "
                              f"expected {EXTRACTION_RULES}")
@@ -268,7 +284,8 @@ class LmbFilter:
         ``existence_prune``, count confirmations and queue the adaptive births."""
         scan = check_scan(scan, self.sensor.model.dim)
         post, r_u = update(state.tracks, scan, self.sensor, self.method, self.gate,
-                           self.component_prune, self.exact_limit, self.lbp_tol)
+                           self.component_prune, self.exact_limit, self.lbp_tol, self.scalable,
+                           self._rng, self.gibbs_samples)
         post = reduce_components(post, self.component_prune, self.merge_threshold,
                                  self.max_components)
         keep = post.existence >= self.existence_prune

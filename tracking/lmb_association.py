@@ -10,9 +10,12 @@ one weight per track and choice (Williams & Lau 2014, IEEE TAES 50(4), Sec. II):
 
 and a hypothesis (an injective map of tracks to measurements-or-miss) weighs the product of
 its choices. :func:`marginals_exact` enumerates every hypothesis; :func:`marginals_lbp` runs
-Williams & Lau's loopy belief propagation (exact on trees, close elsewhere);
-:func:`marginals` splits the bipartite graph into independent clusters and solves the small
-ones exactly and the rest by LBP (``method="auto"``).
+Williams & Lau's loopy belief propagation (exact on trees, close elsewhere; on tightly coupled
+small cases its existence is off by up to 0.066); :func:`marginals_gibbs` weighs the distinct
+hypotheses a Gibbs sampler finds (Vo, Vo & Hoang 2017), tending to exact as they cover the
+mass; :func:`marginals` splits the bipartite graph into independent clusters and solves the
+small ones exactly and the rest by Gibbs (``method="auto"``; docs/labelled-tracking.md has the
+errors and costs of each).
 """
 
 from __future__ import annotations
@@ -21,9 +24,14 @@ from functools import lru_cache
 from itertools import combinations, permutations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
-METHODS = ("auto", "exact", "lbp")
+METHODS = ("auto", "exact", "lbp", "gibbs")
 """Association methods :func:`marginals` accepts."""
+SCALABLE = ("gibbs", "lbp")
+"""What ``"auto"`` runs on a cluster with a cycle beyond ``exact_limit`` hypotheses."""
+GIBBS_SEED = 33
+"""Seed of the Generator :func:`marginals` makes when given none (one input, one answer)."""
 EXACT_LIMIT = 20_000
 """Auto solves a cluster exactly up to this many hypotheses (6 tracks x 6 measurements is
 13,327; 7 x 7 is 130,922), else by LBP."""
@@ -141,25 +149,187 @@ def marginals_lbp(miss: np.ndarray, detect: np.ndarray, tol: float = 1e-9,
     return 1.0 / denom, pn / denom[:, None]
 
 
+GIBBS_CHAINS = 32
+"""Parallel Gibbs chains of :func:`marginals_gibbs` (NumPy rows, one sweep moves them all)."""
+GIBBS_PER_LINK = 20
+"""Gibbs draws per link (nonzero ``detect_ij``) of a problem, within ``[GIBBS_MIN,
+GIBBS_MAX]`` (benchmarks/bench_lmb_association.py measured the error against this)."""
+GIBBS_MIN = 500
+GIBBS_MAX = 20_000
+EXPAND_MAX = 2_000_000
+"""At most this many one-move neighbours (hypotheses x tracks x choices) are formed; beyond
+it only the heaviest sampled hypotheses are expanded (memory)."""
+
+
+def gibbs_sample_count(links: int) -> int:
+    """Gibbs draws for a problem with ``links`` nonzero detection weights: grows with the size
+    of the problem (more links, more hypotheses of weight to find), within
+    ``[GIBBS_MIN, GIBBS_MAX]``."""
+    return int(min(GIBBS_MAX, max(GIBBS_MIN, GIBBS_PER_LINK * links)))
+
+
+def best_hypothesis(miss: np.ndarray, detect: np.ndarray) -> np.ndarray:
+    """The heaviest hypothesis ``(n,)`` (0 = miss, ``j + 1`` = measurement ``j``): a linear
+    assignment on ``-log`` weights with one private miss column per track (the 1-best of
+    Vo, Vo & Hoang 2017, Sec. III-A, by the Hungarian method instead of Murty's)."""
+    n, m = detect.shape
+    big = 1e6  # a weight of 0 (or an absent miss column): never chosen while any other is
+    with np.errstate(divide="ignore"):
+        cost = np.full((n, m + n), big)
+        cost[:, :m] = np.minimum(-np.log(detect), big)
+        cost[np.arange(n), m + np.arange(n)] = np.minimum(-np.log(miss), big)
+    rows, cols = linear_sum_assignment(cost)
+    out = np.zeros(n, dtype=np.intp)
+    out[rows] = np.where(cols < m, cols + 1, 0)
+    return out
+
+
+def marginals_gibbs(miss: np.ndarray, detect: np.ndarray, rng: np.random.Generator,
+                    samples: int | None = None,
+                    chains: int = GIBBS_CHAINS) -> tuple[np.ndarray, np.ndarray]:
+    """Marginals over the distinct hypotheses a Gibbs sampler finds and their one-move
+    neighbours, each weighed by its true weight: ``p_ij = sum_{theta in T: theta(i) = j}
+    w(theta) / sum_{theta in T} w(theta)``.
+
+    The sampler is Vo, Vo & Hoang 2017 ("An efficient implementation of the generalized
+    labeled multi-Bernoulli filter", IEEE TSP 65(8), Sec. III-B, Algorithm 1) on the LMB's
+    collapsed choices (existence summed out, as in the module docstring): ``chains`` chains
+    side by side as rows of a ``(chains, n)`` array, all from the heaviest hypothesis
+    (:func:`best_hypothesis`, so ``T`` always holds it); a sweep draws each track's choice in
+    turn from its conditional ``W[i, c]`` over the choices the other tracks of its chain leave
+    free (the miss always free), then a Metropolis swap of two random tracks' choices per chain
+    (single-site Gibbs swaps two tracks only through a miss, which may weigh ~0 when
+    ``r Pd ~ 1``). ``T`` is every state drawn plus every hypothesis one move away from one
+    (a track moved to the miss or to a measurement its hypothesis leaves free): the
+    neighbours cost one bincount, not sampling, and take most of the mass the samples miss
+    (on benchmarks/bench_lmb_association.py's 7 x 7 cases the existence error falls from
+    0.028 to 0.002). As ``T`` covers the mass the answer tends to the exact marginals; the
+    weight of the hypotheses outside ``T`` is the error. ``samples``: total draws (default
+    :func:`gibbs_sample_count`). A track whose miss weight is 0 gets ``1e-10`` of its largest
+    weight, as in :func:`marginals_lbp`.
+    """
+    n, m = detect.shape
+    if n == 0 or m == 0:
+        return np.ones(n), np.zeros((n, m))
+    miss, detect = _row_scaled(miss, detect)
+    W = np.concatenate((np.maximum(miss, 1e-10)[:, None], detect), axis=1)  # (n, m + 1)
+    if samples is None:
+        samples = gibbs_sample_count(int(np.count_nonzero(detect)))
+    K = int(chains)
+    sweeps = max(1, -(-int(samples) // K))
+    theta = np.tile(best_hypothesis(W[:, 0], W[:, 1:]), (K, 1))  # (K, n)
+    kk = np.arange(K)
+    free = np.ones((K, m + 1))  # 1: choice j free in the chain (the miss, j = 0, always)
+    free[kk[:, None], theta] = 0.0
+    free[:, 0] = 1.0
+    seen = [theta.copy()]
+    for _ in range(sweeps):
+        u = rng.random((n, K, 1))
+        for i in range(n):
+            free[kk, theta[:, i]] = 1.0
+            cdf = np.cumsum(free * W[i], axis=1)  # (K, m + 1)
+            c = np.minimum((cdf <= u[i] * cdf[:, -1:]).sum(axis=1), m)
+            theta[:, i] = c
+            free[kk, c] = 0.0
+            free[:, 0] = 1.0
+        if n > 1:
+            a = rng.integers(0, n, size=K)
+            b = (a + rng.integers(1, n, size=K)) % n
+            ta, tb = theta[kk, a], theta[kk, b]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = W[a, tb] * W[b, ta] / (W[a, ta] * W[b, tb])
+            swap = rng.random(K) < ratio
+            theta[kk[swap], a[swap]], theta[kk[swap], b[swap]] = tb[swap], ta[swap]
+        seen.append(theta.copy())
+    return _expanded(np.concatenate(seen), W)
+
+
+@lru_cache(maxsize=64)
+def _zobrist(n: int, k: int) -> np.ndarray:
+    """Random 63-bit codes ``(n, k)`` of (track, choice), fixed per shape: a hypothesis's key
+    is the XOR of its choices' codes (Zobrist hashing; two of ``H`` distinct hypotheses share
+    a key with probability about ``H^2 / 2^64``)."""
+    out = np.random.default_rng([n, k]).integers(0, 2**63, size=(n, k), dtype=np.int64)
+    out.setflags(write=False)
+    return out
+
+
+def _expanded(S: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Marginals over the distinct hypotheses of ``S (N, n)`` and every hypothesis one choice
+    away from one of them, each weighed once by ``prod_i W[i, theta_i]`` (``W (n, k)``).
+    Neighbours are never formed as rows: a candidate is ``(h, i, c)``, hypothesis ``h`` with
+    track ``i`` on choice ``c``; its key is ``h``'s with two codes XOR-ed, its log weight
+    ``h``'s plus ``log W[i, c] - log W[i, theta_h(i)]``."""
+    n, k = W.shape
+    Zc = _zobrist(n, k)
+    ar = np.arange(n)
+    key = np.bitwise_xor.reduce(Zc[ar, S], axis=1)  # (N,)
+    _, first = np.unique(key, return_index=True)
+    T, key = S[first], key[first]  # (H, n) distinct samples
+    H = len(T)
+    with np.errstate(divide="ignore"):
+        logW = np.log(W)
+    own = logW[ar, T]  # (H, n)
+    logw = own.sum(axis=1)  # (H,)
+    grow = np.arange(H)
+    if H * n * k > EXPAND_MAX:  # expand the heaviest only
+        grow = np.argsort(-logw, kind="stable")[:max(1, EXPAND_MAX // (n * k))]
+    G = len(grow)  # tracks of each expanded hypothesis on each choice:
+    occ = np.bincount((T[grow] + (np.arange(G) * k)[:, None]).ravel(),
+                      minlength=G * k).reshape(G, k)
+    cur = T[grow][:, :, None]  # (G, n, 1)
+    j = np.arange(k)
+    free = (j == 0) | (occ[:, None, :] - (cur == j) == 0)  # (G, n, k): track i may move to j
+    cand = logw[grow, None, None] - own[grow][:, :, None] + logW[None]
+    g, i, c = np.nonzero(free & np.isfinite(cand))
+    h = np.concatenate((grow[g], np.arange(H)))  # and each sampled hypothesis itself
+    i = np.concatenate((i, np.zeros(H, dtype=np.intp)))
+    c = np.concatenate((c, T[:, 0]))
+    lw = logw[h] + logW[i, c] - own[h, i]
+    ckey = key[h] ^ Zc[i, T[h, i]] ^ Zc[i, c]
+    keep = np.isfinite(lw)
+    _, u = np.unique(ckey[keep], return_index=True)
+    sel = np.flatnonzero(keep)[u]
+    h, i, c, lw = h[sel], i[sel], c[sel], lw[sel]
+    w = np.exp(lw - lw.max())
+    w /= w.sum()
+    # each candidate is T[h] with track i on c: T[h]'s cells get its weight, then track i moves
+    P = np.bincount((T + ar * k).ravel(), np.repeat(np.bincount(h, w, H), n), n * k)
+    P += np.bincount(i * k + c, w, n * k) - np.bincount(i * k + T[h, i], w, n * k)
+    P = np.maximum(P.reshape(n, k), 0.0)
+    return P[:, 0], P[:, 1:]
+
+
 def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
-              exact_limit: int = EXACT_LIMIT, tol: float = 1e-9,
-              max_iter: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+              exact_limit: int = EXACT_LIMIT, tol: float = 1e-9, max_iter: int = 1000,
+              scalable: str = "gibbs", rng: np.random.Generator | None = None,
+              samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Marginal association probabilities ``p_miss (n,)``, ``p (n, m)`` (rows sum to 1).
 
     ``"exact"``: every hypothesis of the whole problem; ``"lbp"``: :func:`marginals_lbp`;
-    ``"auto"``: links below :data:`LINK_EPS` dropped, LBP over the whole problem (exact on
-    every cluster of the bipartite track-measurement graph that is a tree: Williams & Lau 2014,
-    Sec. III), then each cluster with a cycle (a cluster's marginals do not depend on the
-    others) enumerated exactly if it has at most ``exact_limit`` hypotheses (clusters of one
-    shape together); larger ones keep LBP's answer.
+    ``"gibbs"``: :func:`marginals_gibbs` over the whole problem; ``"auto"``: links below
+    :data:`LINK_EPS` dropped, LBP over the whole problem (exact on every cluster of the
+    bipartite track-measurement graph that is a tree: Williams & Lau 2014, Sec. III), then each
+    cluster with a cycle (a cluster's marginals do not depend on the others) enumerated exactly
+    if it has at most ``exact_limit`` hypotheses (clusters of one shape together); larger ones
+    by the ``scalable`` method: ``"gibbs"`` (each such cluster on its own) or ``"lbp"`` (keep
+    LBP's answer). ``rng`` feeds the Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``, so
+    one input gives one answer); ``samples``: Gibbs draws per problem or cluster (None:
+    :func:`gibbs_sample_count`).
     """
     if method not in METHODS:
         raise ValueError(f"unknown association method {method!r}; expected one of {METHODS}")
+    if scalable not in SCALABLE:
+        raise ValueError(f"unknown scalable association {scalable!r}; expected one of {SCALABLE}")
     miss = np.asarray(miss, dtype=float)
     detect = np.asarray(detect, dtype=float)
     n, m = detect.shape
+    if rng is None:
+        rng = np.random.default_rng(GIBBS_SEED)
     if method == "exact":
         return marginals_exact(miss, detect)
+    if method == "gibbs":
+        return marginals_gibbs(miss, detect, rng, samples)
     if method == "lbp" or n == 0 or m == 0:
         return marginals_lbp(miss, detect, tol, max_iter)
     miss, detect = _row_scaled(miss, detect)
@@ -181,10 +351,13 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     t_sorted, t_start = _by_cluster(tcomp, linked_t, ncomp)
     z_sorted, z_start = _by_cluster(zcomp, linked_z, ncomp)
     by_shape: dict[tuple[int, int], list[int]] = {}
+    large: list[int] = []
     for c in loopy.tolist():
         a, b = int(nt[c]), int(nz[c])
         if hypothesis_count(a, b) <= exact_limit:
             by_shape.setdefault((a, b), []).append(c)
+        elif scalable == "gibbs":
+            large.append(c)
     for (a, b), cs in by_shape.items():
         rows = t_sorted[t_start[cs][:, None] + np.arange(a)]  # (C, a)
         cols = z_sorted[z_start[cs][:, None] + np.arange(b)]  # (C, b)
@@ -192,6 +365,12 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
                             hypotheses(a, b))
         p_miss[rows] = pm
         p[rows[:, :, None], cols[:, None, :]] = pd
+    for c in large:  # rare (a cluster beyond exact_limit): one Gibbs run each
+        rows = t_sorted[t_start[c]:t_start[c] + nt[c]]
+        cols = z_sorted[z_start[c]:z_start[c] + nz[c]]
+        pm, pd = marginals_gibbs(miss[rows], detect[np.ix_(rows, cols)], rng, samples)
+        p_miss[rows] = pm
+        p[np.ix_(rows, cols)] = pd
     return p_miss, p
 
 
@@ -218,5 +397,6 @@ def _by_cluster(comp: np.ndarray, linked: np.ndarray,
     return idx, np.searchsorted(comp[idx], np.arange(ncomp))
 
 
-__all__ = ["EXACT_LIMIT", "METHODS", "hypotheses", "hypothesis_count", "marginals",
-           "marginals_exact", "marginals_lbp"]
+__all__ = ["EXACT_LIMIT", "GIBBS_CHAINS", "METHODS", "SCALABLE", "best_hypothesis",
+           "gibbs_sample_count", "hypotheses", "hypothesis_count", "marginals",
+           "marginals_exact", "marginals_gibbs", "marginals_lbp"]
