@@ -10,7 +10,7 @@ import numpy as np
 from sensornet.peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
 from sensornet.sim.kinds import PeerKind, View
 from sensornet.sim.kinds.pda_filters import initial_state, make_filter
-from sensornet.sim.scenario import FUSION_RULES, Scenario
+from sensornet.sim.scenario import FUSION_RULES, Scenario, pda_tables
 from sensornet.sim.world import seed003 as world
 from sensornet.tracking.imm import POS
 
@@ -55,12 +55,11 @@ def make_parts(cfg: Mapping, name: str, mode: str, run: int = 0, *, method: str 
 
 def build(scn: Scenario, name: str, run: int = 0):
     p = scn.pda
-    return make_parts(p.config, name, p.mode, run, method=p.method,
-                                  pregate=p.pregate)
+    return make_parts(pda_tables(scn), name, p.mode, run, method=p.method, pregate=p.pregate)
 
 
 def check(scn: Scenario):
-    if scn.pda is None or not scn.pda.config:
+    if scn.pda is None:
         return ("network.filter", "key 'network.filter' is 'pda', which needs the seed-003 "
                 "tables ([scenario] study = \"seed003\": sim/scenarios/seed003.toml)")
     return None

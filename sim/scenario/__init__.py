@@ -61,6 +61,7 @@ from sensornet.sim.scenario.model import (
     ScenarioError,
     SensorSpec,
     TargetSpec,
+    pda_tables,
     with_birth_model,
 )
 from sensornet.sim.scenario.overrides import apply_overrides, parse_overrides
@@ -95,6 +96,7 @@ __all__ = [
     "PDA_MODES",
     "PEER_FILTERS",
     "PdaSpec",
+    "pda_tables",
     "SENSOR_KINDS",
     "STATE_DIM",
     "Scenario",

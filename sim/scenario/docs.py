@@ -20,7 +20,12 @@ from sensornet.sim.scenario.model import (
     FusionSpec,
     MetricsSpec,
     NetworkSpec,
+    PdaClutter,
+    PdaDetector,
+    PdaFilters,
+    PdaFuzzy,
     PdaSpec,
+    PdaTarget,
     Scenario,
     SensorSpec,
     TargetSpec,
@@ -42,6 +47,11 @@ SECTIONS: tuple[tuple[str, type, str], ...] = (
     ("[extended]", ExtendedSpec, ""),
     ("[clustering]", ClusteringSpec, ""),
     ("[pda]", PdaSpec, ""),
+    ("[pda.target]", PdaTarget, ""),
+    ("[pda.clutter]", PdaClutter, ""),
+    ("[pda.filters]", PdaFilters, ""),
+    ("[pda.detector]", PdaDetector, ""),
+    ("[pda.fuzzy]", PdaFuzzy, ""),
     ("[traffic]", TrafficSpec, ""),
     ("[security]", Scenario, "security"),
 )
@@ -54,10 +64,13 @@ TYPES = {"bool": "true/false", "int": "integer", "float": "number", "float | Non
          "tuple[float, ...]": "list of numbers", "Matrix": "list of lists",
          "tuple[tuple[float, float], tuple[float, float]]": "[[xmin, xmax], [ymin, ymax]]",
          "tuple[BirthComponent, ...]": "array of tables", "tuple[tuple[str, str], ...]":
-         "list of pairs"}
+         "list of pairs", "tuple[int, int]": "[first, last]",
+         "tuple[tuple[str, str, str], ...]": "list of [name, name, name]",
+         "tuple[tuple[str, float, float], ...]": "table of NAME = [centre, width]",
+         "tuple[tuple[str, float], ...]": "table of NAME = number",
+         **{c.__name__: "table" for c in (PdaTarget, PdaClutter, PdaFilters, PdaDetector,
+                                         PdaFuzzy)}}
 """How a field's type is written in TOML."""
-FORMS = {"pda.config": "table"}
-"""Where the TOML form differs from the field's type (``PdaSpec.tables`` holds it as JSON)."""
 
 HEADER = """# Scenario files
 
@@ -87,7 +100,7 @@ def _toml(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def _row(section: str, key: str, f: dataclasses.Field, m: Meta) -> str:
+def _row(key: str, f: dataclasses.Field, m: Meta) -> str:
     if m.custom is not None:
         default = _md(m.custom)
     elif required(f):
@@ -97,7 +110,7 @@ def _row(section: str, key: str, f: dataclasses.Field, m: Meta) -> str:
     values = ", ".join(f'`"{v}"`' for v in m.values()) if m.choices else str(m.check or "")
     if m.was:
         values = (values + "; " if values else "") + f"formerly `{m.was}`"
-    form = FORMS.get(f"{section}.{key}") or TYPES.get(str(f.type), "see text")
+    form = TYPES.get(str(f.type), "see text")
     return (f"| `{key}` | {form} | {default} | {m.unit or ''} | "
             f"{values} | {_md(m.doc)} |")
 
@@ -115,7 +128,7 @@ def _table(header: str, cls: type, prefix: str) -> list[str]:
             if not k.startswith(prefix + "."):
                 continue
             k = k[len(prefix) + 1:]
-        lines.append(_row(header.strip("[]"), k, f, m))
+        lines.append(_row(k, f, m))
     return lines + [""]
 
 

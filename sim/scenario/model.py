@@ -47,7 +47,6 @@ from sensornet.sim.scenario.network import (  # noqa: F401 (re-exported)
     ExtendedSpec,
     FusionSpec,
     NetworkSpec,
-    PdaSpec,
 )
 from sensornet.sim.scenario.options import (
     NONNEGATIVE,
@@ -55,6 +54,15 @@ from sensornet.sim.scenario.options import (
     PROBABILITY,
     at_least,
     option,
+)
+from sensornet.sim.scenario.pda import GATE_PROBABILITY as PDA_GATE_PROBABILITY
+from sensornet.sim.scenario.pda import (  # noqa: F401 (re-exported)
+    PdaClutter,
+    PdaDetector,
+    PdaFilters,
+    PdaFuzzy,
+    PdaSpec,
+    PdaTarget,
 )
 from sensornet.sim.scenario.sensing import (  # noqa: F401 (re-exported)
     PAPER_BIRTH,
@@ -162,3 +170,31 @@ def with_birth_model(scn: Scenario, model: str) -> Scenario:
             f"{scn.name}: unknown birth model {model!r} (expected one of {listing(BIRTH_MODELS)})"
         )
     return dataclasses.replace(scn, birth=dataclasses.replace(scn.birth, model=model))
+
+
+def pda_tables(scn: Scenario) -> dict:
+    """Seed 003's settings of ``scn`` as the nested tables the seed-003 world and filters read
+    (``scenario``, ``sensors``, ``clutter``, ``filters``, ``detector``, ``fuzzy``, ``metrics``:
+    sim/scenarios/seed003.toml's layout); :class:`ScenarioError` if ``scn`` has no ``[pda]``."""
+    p = scn.pda
+    if p is None:
+        raise ScenarioError(f"{scn.name}: no [pda] table (seed 003's settings)")
+    gates = p.gate_probability or (PDA_GATE_PROBABILITY,) * len(scn.sensors)
+    t, f = p.target, p.filters
+    return {
+        "scenario": {"name": scn.name, "seed": scn.seed, "scan_period": scn.scan_period,
+                     "num_scans": scn.num_scans, "start": list(t.start), "speed": t.speed,
+                     "turn_scans": list(t.turn_scans), "manoeuvre": t.manoeuvre},
+        "sensors": [{"name": s.name, "sigma": s.sigma_r,
+                     "detection_probability": s.detection_probability, "gate_probability": g}
+                    for s, g in zip(scn.sensors, gates, strict=True)],
+        "clutter": {"mode": p.clutter.mode, "in_gate": p.clutter.in_gate,
+                    "halfwidth": p.clutter.halfwidth},
+        "filters": {"model": f.model, "sigma_cv": f.sigma_cv, "sigma_ca": f.sigma_ca,
+                    "turn_rate_deg": f.turn_rate_deg, "sigma_ct": f.sigma_ct,
+                    "transition": [list(r) for r in f.transition],
+                    "initial_probs": list(f.initial_probs), "init_sigma": list(f.init_sigma)},
+        "detector": {"window": p.detector.window, "false_alarm": p.detector.false_alarm},
+        "fuzzy": p.fuzzy.config(),
+        "metrics": {"loss_bound": p.loss_bound, "loss_scans": p.loss_scans},
+    }

@@ -1,11 +1,10 @@
 """The sections of a scenario about the peers: how they fuse (``[fusion]``), their network
-(``[network]``) and the settings of particular peer kinds (``[extended]``, ``[clustering]``,
-``[pda]``); re-exported by :mod:`sim.scenario.model`. Each option is declared once in its field
-(:func:`sim.scenario.options.option`)."""
+(``[network]``) and the settings of particular peer kinds (``[extended]``, ``[clustering]``;
+``[pda]`` is :mod:`sim.scenario.pda`); re-exported by :mod:`sim.scenario.model`. Each option
+is declared once in its field (:func:`sim.scenario.options.option`)."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 
 from sensornet.sim.bounds import MAX_ROUNDS
@@ -17,8 +16,6 @@ from sensornet.sim.scenario.common import (
     FLOOD_ESTIMATORS,
     K_RULES,
     PARTITIONS,
-    PDA_METHODS,
-    PDA_MODES,
     TOPOLOGIES,
 )
 from sensornet.sim.scenario.options import (
@@ -166,27 +163,3 @@ class ClusteringSpec:
                                         "pooled scan in turn; `peers.flooding."
                                         "IcFloodEstimator`). Seed 004's `flooding.estimator`.",
                             choices=FLOOD_ESTIMATORS)
-
-
-@dataclass(frozen=True)
-class PdaSpec:
-    """Single-target PDA peers (seed 003, ``network.filter = "pda"``; ``[pda]`` table)."""
-
-    tables: str = option("{}", doc="The seed-003 tables the PDA filters and the "
-                                   "world's draws read (`scenario`, `sensors`, `clutter`, "
-                                   "`filters`, `detector`, `fuzzy`, `metrics`: "
-                                   "`sim.world.seed003`), held as canonical JSON so the "
-                                   "scenario stays hashable.",
-                         key="config", custom="an empty table")
-    mode: str = option("meas", doc="`\"meas\"`: measurement sharing with the sequential update "
-                                   "(the paper's scheme); `\"ci\"`: estimate sharing fused by "
-                                   "covariance intersection.", choices=PDA_MODES)
-    method: str = option("fuzzy IMM", doc="The filter: `\"PDAF\"`, `\"IMM-PDAF\"`, `\"fuzzy "
-                                          "PDA\"` or `\"fuzzy IMM\"`.", choices=PDA_METHODS)
-    pregate: float = option(4.0, doc="Measurement sharing publishes the returns inside "
-                                     "`pregate` x the gate threshold.", check=POSITIVE)
-
-    @property
-    def config(self) -> dict:
-        """A fresh copy of the seed-003 tables as nested dicts."""
-        return json.loads(self.tables)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from datetime import datetime
 from pathlib import Path
@@ -26,7 +25,12 @@ from sensornet.sim.scenario.model import (
     FusionSpec,
     MetricsSpec,
     NetworkSpec,
+    PdaClutter,
+    PdaDetector,
+    PdaFilters,
+    PdaFuzzy,
     PdaSpec,
+    PdaTarget,
     Scenario,
     SensorSpec,
     TargetSpec,
@@ -35,6 +39,7 @@ from sensornet.sim.scenario.model import (
 )
 from sensornet.sim.scenario.options import Meta, key_of, keys, meta, options, required
 from sensornet.sim.scenario.tables import REQUIRED, Context, Table, brief
+from sensornet.tracking.fuzzy import FuzzySystem
 
 # --------------------------------------------------------------------------------------------
 # Options read from their declarations
@@ -135,12 +140,7 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
         scn = dataclasses.replace(scn, clustering=ClusteringSpec(
             **read(_section(top, "clustering", ClusteringSpec), ClusteringSpec)))
     if top.has("pda"):
-        t = _section(top, "pda", PdaSpec)
-        config = t.raw("config", {})
-        if not isinstance(config, dict):
-            raise t.fail("config", f"must be a table, got {brief(config)}")
-        scn = dataclasses.replace(scn, pda=PdaSpec(**read(t, PdaSpec),
-                                                   tables=json.dumps(config, sort_keys=True)))
+        scn = dataclasses.replace(scn, pda=_pda(_section(top, "pda", PdaSpec), len(sensors)))
     kind = peer_kind(scn.network.filter)
     if scn.fusion.rule not in kind.rules:
         raise ctx.fail("fusion.rule", f"key 'fusion.rule' is {scn.fusion.rule!r}, which "
@@ -381,4 +381,119 @@ def _extended(t: Table) -> ExtendedSpec:
     GridSpectralPartitioner(compression=spec.compression, cell_factor=spec.cell_factor,
                             core_level=spec.core_level, rho=spec.rho, k_rule=spec.k_rule,
                             k_spread=spec.k_spread, units=spec.units)
+    return spec
+
+
+# --------------------------------------------------------------------------------------------
+# [pda]: seed 003's settings
+# --------------------------------------------------------------------------------------------
+
+
+def _pda(t: Table, n_sensors: int) -> PdaSpec:
+    """``[pda]`` and its sub-tables (:mod:`sim.scenario.pda`); ``gate_probability`` lists one
+    probability per sensor."""
+    def sub(name: str, cls: type, extra: tuple[str, ...] = ()) -> Table:
+        return Table(t.raw(name, {}), t.key(name), t.ctx, [*keys(cls), *extra])
+
+    gates = ()
+    if t.has("gate_probability"):
+        gates = t.vector("gate_probability", n_sensors)
+        if not all(0.0 < g <= 1.0 for g in gates):
+            raise t.fail("gate_probability", f"must be probabilities in (0, 1], got "
+                                             f"{brief(list(gates))}")
+    tg = sub("target", PdaTarget)
+    target = PdaTarget(**read(tg, PdaTarget), turn_scans=_turn_scans(tg),
+                       start=tg.position("start") if tg.has("start") else PdaTarget().start)
+    fi = sub("filters", PdaFilters)
+    filters = PdaFilters(**read(fi, PdaFilters), transition=_stochastic(fi),
+                         initial_probs=_probabilities(fi, "initial_probs", (0.9, 0.1)),
+                         init_sigma=_nonnegative(fi, "init_sigma", 3, (100.0, 50.0, 5.0)))
+    fz = sub("fuzzy", PdaFuzzy)
+    return PdaSpec(**read(t, PdaSpec), gate_probability=gates, target=target,
+                   clutter=PdaClutter(**read(sub("clutter", PdaClutter), PdaClutter)),
+                   filters=filters,
+                   detector=PdaDetector(**read(sub("detector", PdaDetector), PdaDetector)),
+                   fuzzy=_fuzzy(fz))
+
+
+def _turn_scans(t: Table) -> tuple[int, int]:
+    if not t.has("turn_scans"):
+        return PdaTarget().turn_scans
+    v = t.raw("turn_scans")
+    if (not isinstance(v, list) or len(v) != 2 or not all(
+            isinstance(x, int) and not isinstance(x, bool) for x in v) or not 1 <= v[0] <= v[1]):
+        raise t.fail("turn_scans", f"must be [first, last] scans with 1 <= first <= last, got "
+                                   f"{brief(v)}")
+    return v[0], v[1]
+
+
+def _probabilities(t: Table, name: str, default: tuple[float, ...]) -> tuple[float, ...]:
+    """``len(default)`` probabilities summing to 1."""
+    if not t.has(name):
+        return default
+    p = t.vector(name, len(default))
+    if min(p) < 0 or abs(sum(p) - 1.0) > 1e-9:
+        raise t.fail(name, f"must be {len(default)} probabilities summing to 1, got "
+                           f"{brief(list(p))}")
+    return p
+
+
+def _nonnegative(t: Table, name: str, n: int, default: tuple[float, ...]) -> tuple[float, ...]:
+    v = t.vector(name, n) if t.has(name) else default
+    if min(v) < 0:
+        raise t.fail(name, f"must be {n} numbers >= 0, got {brief(list(v))}")
+    return v
+
+
+def _stochastic(t: Table) -> tuple[tuple[float, ...], ...]:
+    """``transition``: a 2 x 2 Markov matrix (rows of probabilities summing to 1)."""
+    rows = t.raw("transition", None)
+    if rows is None:
+        return PdaFilters().transition
+    if not isinstance(rows, list) or len(rows) != 2:
+        raise t.fail("transition", f"must be a 2 x 2 list of lists, got {brief(rows)}")
+    out = []
+    for row in rows:
+        r = tuple(t._number("transition", x, "a matrix of numbers")
+                  for x in (row if isinstance(row, list) and len(row) == 2 else [None]))
+        if len(r) != 2 or min(r) < 0 or abs(sum(r) - 1.0) > 1e-9:
+            raise t.fail("transition", f"must have rows of 2 probabilities summing to 1, got "
+                                       f"{brief(rows)}")
+        out.append(r)
+    return tuple(out)
+
+
+def _fuzzy(t: Table) -> PdaFuzzy:
+    """``[pda.fuzzy]``: terms as ``NAME = [centre, width]`` (inputs) or ``NAME = centre``
+    (outputs), rules naming them; checked by building the fuzzy system."""
+    d = PdaFuzzy()
+    inputs = Table(t.raw("inputs", {}), t.key("inputs"), t.ctx, ["nis", "dl"])
+
+    def terms(table: Table, name: str, default):
+        raw = table.raw(name, None)
+        if raw is None:
+            return default
+        sub = Table(raw, table.key(name), t.ctx, list(raw) if isinstance(raw, dict) else [])
+        return tuple((k, *sub.vector(k, 2)) for k in raw)
+
+    rules = d.rules
+    if t.has("rules"):
+        raw = t.raw("rules")
+        if not isinstance(raw, list) or not raw or not all(
+                isinstance(r, list) and len(r) == 3 and all(isinstance(x, str) for x in r)
+                for r in raw):
+            raise t.fail("rules", f"must be a list of [nis term, D term, output term], got "
+                                  f"{brief(raw)}")
+        rules = tuple((r[0], r[1], r[2]) for r in raw)
+    outputs = d.outputs
+    if t.has("outputs"):
+        o = Table(t.raw("outputs"), t.key("outputs"), t.ctx, list(t.raw("outputs"))
+                  if isinstance(t.raw("outputs"), dict) else [])
+        outputs = tuple((k, o.number(k)) for k in o.data)
+    spec = PdaFuzzy(**read(t, PdaFuzzy), rules=rules, nis=terms(inputs, "nis", d.nis),
+                    dl=terms(inputs, "dl", d.dl), outputs=outputs)
+    try:
+        FuzzySystem.from_config(spec.config())
+    except ValueError as exc:
+        raise t.ctx.fail(t.path, f"'{t.path}': {exc}") from None
     return spec

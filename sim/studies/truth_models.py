@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from sensornet.sim.scenario import Scenario
+from sensornet.sim.scenario import Scenario, pda_tables
 from sensornet.sim.studies.seed001.montecarlo import Seed001Scenario, truth
 from sensornet.sim.studies.seed003 import montecarlo as seed003
 from sensornet.sim.studies.seed003 import network as seed003_net
@@ -40,13 +40,13 @@ SEED001 = TruthModel("seed001", "seed 001's manoeuvring ground target (one targe
 
 def seed003_truth(scn: Scenario, rng=None) -> Truth:
     """The seed-003 target: straight, a coordinated 90-degree turn, straight (6-D)."""
-    return _one_target(seed003.truth(scn.pda.config), scn.num_scans, "seed-003")
+    return _one_target(seed003.truth(pda_tables(scn)), scn.num_scans, "seed-003")
 
 
 def seed003_run(scn: Scenario, run: int):
     """Seed 003 draws its returns itself (the offline study's draws, so the peers see what
     the published table's filters see): the target's return first, then region clutter."""
-    return seed003_net.run_data(scn.pda.config, run)
+    return seed003_net.run_data(pda_tables(scn), run)
 
 
 SEED003 = TruthModel("seed003", "seed 003's manoeuvring target in dense clutter (one target)",

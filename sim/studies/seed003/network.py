@@ -138,9 +138,23 @@ def network_document(doc: dict, label: str = "seed003.toml") -> dict:
     network = {"topology": "full", "rounds": 1, "filter": "pda", "speed": SPEED,
                "deadline": DEADLINE, **doc.get("network", {})}
     pda = {"mode": "meas", "method": METHOD, "pregate": PREGATE, **doc.get("pda", {}),
-           "config": cfg}
+           **pda_section(cfg)}
     return {"scenario": scenario, "sensors": sensors, "metrics": metrics, "network": network,
             "pda": pda, **{k: doc[k] for k in ("faults", "security", "fusion") if k in doc}}
+
+
+def pda_section(cfg: Mapping) -> dict:
+    """The seed-003 tables ``cfg`` as the typed sub-tables of the scenario's ``[pda]``
+    (:mod:`sim.scenario.pda`): the target of ``[scenario]``, the sensors' gate probabilities
+    (the declared default unless every sensor gives one), ``[clutter]``, ``[filters]``,
+    ``[detector]``, ``[fuzzy]`` and the loss rule of ``[metrics]``."""
+    sc, metrics = cfg["scenario"], cfg.get("metrics", {})
+    gates = [s["gate_probability"] for s in cfg["sensors"] if "gate_probability" in s]
+    return {"target": {k: sc[k] for k in ("start", "speed", "turn_scans", "manoeuvre")
+                       if k in sc},
+            **({"gate_probability": gates} if len(gates) == len(cfg["sensors"]) else {}),
+            **{k: cfg[k] for k in ("clutter", "filters", "detector", "fuzzy") if k in cfg},
+            **{k: metrics[k] for k in ("loss_bound", "loss_scans") if k in metrics}}
 
 
 # -- peers --------------------------------------------------------------------------------------
