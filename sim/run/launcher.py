@@ -85,7 +85,8 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     network = network or f"run-{uuid.uuid4().hex[:8]}"
     run_id = run_id or f"{network}-{uuid.uuid4().hex[:6]}"
     names = scn.sensor_names
-    groups = host_groups(names, per_process, adjacency(scn)[1])
+    graph = adjacency(scn)[1]
+    groups = host_groups(names, per_process, graph)
     if groups and secure:
         raise ValueError("a host has one Zenoh session, so one TLS identity: no --secure "
                          "with more than one peer per process")
@@ -94,16 +95,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     world_listen = list(listen or []) or [ep(free_port())]
     eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
-    common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
-    view = bool(rerun or viewer) and not secure  # the view subscribes; nobody else logs
-    if secure and (rerun or viewer):  # no view in secure mode: the world logs as before
-        common += ["--viewer", viewer] if viewer else []
-    else:
-        common += ["--no-rerun"]
-    if config:
-        common += ["--config", str(config)]
-    if secure:
-        common += ["--secure", str(secure)]
+    common = _common_flags(network, out, run_id, sets, rerun, viewer, secure, config)
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure, hosts=groups)
@@ -112,56 +104,113 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         if config or listen or sparse:
             raise ValueError("a routed run makes its own client config and endpoints: "
                              "no --config, --listen or --sparse with --router")
-        common, eps = _routed(handle, common, ep(free_port()), list(groups or names))
+        common, eps, extra_connect = _routed(handle, common, ep(free_port()),
+                                             list(groups or names), extra_connect, recover)
         world_listen = []
-    if router:  # recover: what a router's outage held back comes from the publishers' caches
-        extra_connect = ["--connect", eps["router"], *extra_connect,
-                         *(["--recover"] if recover else [])]
-    # a host's scans in one message per scan (protocol.bundle); recovery keeps one per sensor
-    bundles = [] if not groups or (router and recover) else [
-        a for h, members in groups.items() for a in ("--bundle", f"{h}={','.join(members)}")]
-    cmds = {"world": [*_cli(), "world", source, *common, *bundles,
-                      *[a for ep in world_listen for a in ("--listen", ep)], *extra_connect,
-                      "--peers", ",".join(names), "--run", str(run), *(world_args or [])]
-            + (["--speed", str(speed)] if speed else [])}
-    if sparse:  # each peer links to the world and its graph neighbours only, gossip off
-        _, A = adjacency(scn)
+    world = _world_command(source, common, {} if router and recover else groups, world_listen,
+                           extra_connect, names, run, world_args, speed)
+    A = graph if sparse else None  # each peer links to the world and its graph neighbours only
+    peers = _peer_commands(names, source, common, eps, extra_connect, run=run, speed=speed,
+                           lease_ms=lease_ms, peer_args=peer_args or {}, router=router,
+                           hosted=bool(groups), A=A)
+    cmds = {"world": world, **peers}
+    if groups:  # the hosts instead of the peers' processes
+        cmds = {"world": world, **_host_commands(
+            groups, peers, names, eps, extra_connect, router, sparse, A)}
+    if bool(rerun or viewer) and not secure:  # the view subscribes; nobody else logs
+        # started first: it hears the run from its first scan
+        cmds = {"view": _view_command(network, eps["world"], extra_connect, source, sets,
+                                      run_id, common, out, rerun, viewer), **cmds}
+    handle.commands = cmds
+    (out / "commands.json").write_text(json.dumps(
+        {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
+    _spawn(handle, cmds, groups, router)
+    return handle
+
+
+def _world_command(source: str, common: list[str], bundled: dict[str, list[str]],
+                   listen: list[str], extra_connect: list[str], names: list[str], run: int,
+                   world_args: list[str] | None, speed: float | None) -> list[str]:
+    """The world's command (``sensornet world``): it waits for every peer, and sends each host
+    of ``bundled`` its scans in one message per scan (:mod:`protocol.bundle`; a routed run
+    that recovers keeps one per sensor, so its caller passes none)."""
+    bundles = [a for h, members in bundled.items()
+               for a in ("--bundle", f"{h}={','.join(members)}")]
+    return [*_cli(), "world", source, *common, *bundles,
+            *[a for ep in listen for a in ("--listen", ep)], *extra_connect,
+            "--peers", ",".join(names), "--run", str(run), *(world_args or [])] \
+        + (["--speed", str(speed)] if speed else [])
+
+
+def _common_flags(network: str, out: Path, run_id: str, sets: list[str], rerun: bool,
+                  viewer: str | None, secure: Path | None, config: str | None) -> list[str]:
+    """The flags every member of the run gets: network, output folder, recording id,
+    overrides, Rerun logging (only the world's, and only in secure mode, where there is no
+    view process), the Zenoh config and the keys folder."""
+    common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
+    if secure and (rerun or viewer):  # no view in secure mode: the world logs as before
+        common += ["--viewer", viewer] if viewer else []
+    else:
+        common += ["--no-rerun"]
+    if config:
+        common += ["--config", str(config)]
+    if secure:
+        common += ["--secure", str(secure)]
+    return common
+
+
+def _peer_commands(names: list[str], source: str, common: list[str], eps: dict[str, str],
+                   extra_connect: list[str], *, run: int, speed: float | None,
+                   lease_ms: int | None, peer_args: dict, router: bool, hosted: bool,
+                   A: np.ndarray | None) -> dict[str, list[str]]:
+    """Each peer's ``sensornet peer`` command. Its links: none of its own in a routed or
+    hosted run (the router; its host's, :func:`_host_commands`), the world and its earlier
+    graph neighbours given the adjacency ``A`` (``--sparse``: gossip off), else the world and
+    every earlier peer (autoconnect off: the links are explicit)."""
+    cmds = {}
     for i, n in enumerate(names):
-        if router or groups:  # a host's links: _host_commands
+        if router or hosted:  # a host's links: _host_commands
             links = []  # the router, in extra_connect like every process
-        elif sparse:
+        elif A is not None:
             links = [eps["world"], *(eps[names[j]] for j in range(i) if A[i, j])]
         else:
             links = [eps["world"], *(eps[m] for m in names[:i])]
-        extra = (peer_args or {}).get(n, [])
         cmds[n] = [*_cli(), "peer", n, "--scenario", source, *common,
                    *(["--listen", eps.get(n, "")] if not router else
                      ["--world-grace", str(ROUTER_GRACE)]),
                    "--color", str(i), "--run", str(run),
                    *[a for c in links for a in ("--connect", c)], *extra_connect,
                    *(["--lease-ms", str(lease_ms)] if lease_ms else []),
-                   *(["--no-gossip"] if sparse else [] if router else ["--no-autoconnect"]),
-                   *extra] \
+                   *(["--no-gossip"] if A is not None else [] if router else
+                     ["--no-autoconnect"]),
+                   *peer_args.get(n, [])] \
             + (["--speed", str(speed)] if speed else [])
-    if groups:  # the hosts instead of the peers' processes
-        cmds = {"world": cmds["world"], **_host_commands(
-            groups, cmds, names, eps, extra_connect, router, sparse, A if sparse else None)}
-    if view:  # started first: it hears the run from its first scan
-        cfg = common[common.index("--config") + 1] if "--config" in common else None
-        cmds = {"view": [*_cli(), "view", network, "--connect", eps["world"], *extra_connect,
-                         "--scenario", source, *sets, "--run-id", run_id, "--until-end",
-                         "--nice", str(VIEW_NICE),
-                         *(["--config", cfg] if cfg else []),
-                         *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),
-                         *(["--viewer", viewer] if viewer else [])], **cmds}
-    handle.commands = cmds
-    (out / "commands.json").write_text(json.dumps(
-        {**({"router": handle.router_command} if router else {}), **cmds}, indent=1))
+    return cmds
+
+
+def _view_command(network: str, world: str, extra_connect: list[str], source: str,
+                  sets: list[str], run_id: str, common: list[str], out: Path, rerun: bool,
+                  viewer: str | None) -> list[str]:
+    """The view process's command (``sensornet view``): it connects to the world's endpoint,
+    records ``<out>/rerun/view.rrd`` and ends a little after the run's end message."""
+    cfg = common[common.index("--config") + 1] if "--config" in common else None
+    return [*_cli(), "view", network, "--connect", world, *extra_connect,
+            "--scenario", source, *sets, "--run-id", run_id, "--until-end",
+            "--nice", str(VIEW_NICE),
+            *(["--config", cfg] if cfg else []),
+            *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),
+            *(["--viewer", viewer] if viewer else [])]
+
+
+def _spawn(handle: RunHandle, cmds: dict[str, list[str]], groups: dict[str, list[str]],
+           router: bool) -> None:
+    """Start the router (routed runs) and every command, each logging to
+    ``<out>/logs/<name>.log``; on any failure stop what was started and re-raise."""
     try:
         if router:
             handle.start_router()
         for name, cmd in cmds.items():
-            log = out / "logs" / f"{name}.log"
+            log = handle.out / "logs" / f"{name}.log"
             handle.logs[name] = log
             with log.open("w") as fh:  # a host reads its commands (kill PEER) on stdin
                 procs = handle.views if name == "view" else handle.procs
@@ -172,7 +221,6 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         handle.stop_all(grace=1.0)
         stop_views(handle, 0.0)
         raise
-    return handle
 
 
 def host_groups(names: list[str], per_process: int,
@@ -247,10 +295,12 @@ def _without_own(cmd: list[str]) -> list[str]:
     return rest
 
 
-def _routed(handle: RunHandle, common: list[str], router_ep: str,
-            names: list[str]) -> tuple[list[str], dict[str, str]]:
+def _routed(handle: RunHandle, common: list[str], router_ep: str, names: list[str],
+            extra_connect: list[str],
+            recover: bool) -> tuple[list[str], dict[str, str], list[str]]:
     """A routed run: the router's command, the clients' config file, every endpoint the
-    router's."""
+    router's, every process connecting to it (``recover``: what a router's outage held back
+    comes from the publishers' caches); returns the common flags, endpoints and connects."""
     config = handle.out / "zenoh-client.json5"
     config.write_text(json.dumps({
         "mode": "client", "scouting": {"multicast": {"enabled": False}},
@@ -262,8 +312,9 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str,
     if handle.secure:
         handle.router_command += ["--secure", str(handle.secure), "--name", ROUTER]
     handle.endpoints = {"router": router_ep}
+    connect = ["--connect", router_ep, *extra_connect, *(["--recover"] if recover else [])]
     return [*common, "--config", str(config)], {"router": router_ep, "world": router_ep,
-                                               **{n: router_ep for n in names}}
+                                               **{n: router_ep for n in names}}, connect
 
 
 def wait_run(handle: RunHandle, timeout: float,
