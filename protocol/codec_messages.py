@@ -1,0 +1,336 @@
+"""Per-message-type encoders and decoders of the codec (:mod:`protocol.codec`).
+
+Each message type has an encoder, message -> its body by field name (:data:`ENCODERS`, with
+its type letter; :data:`protocol.codec_format.VERSIONS` orders the fields on the wire), and a
+decoder, body -> validated message (:data:`DECODERS`), which checks every count and byte length
+before it decodes an array. A new message type is one entry in each table and one in the
+field tables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from sensornet.protocol.codec_format import (
+    _I8,
+    _KINDS,
+    LABELS_VERSION,
+    TRACKS_VERSION,
+    Limits,
+    Rejected,
+    _array,
+    _count,
+    _floats,
+    _get,
+    _index,
+    _name,
+    _names,
+    _optional,
+    _positive_definite,
+    _rows,
+    _time,
+    _tri_index,
+    _tri_to_full,
+    pack_mixture,
+    unpack_mixture,
+)
+from sensornet.protocol.messages import (
+    Control,
+    Estimate,
+    Forward,
+    Returns,
+    Scan,
+    ScanSet,
+    Telemetry,
+    Tracks,
+    Truth,
+)
+
+
+# -- encoding: message -> body by field name ------------------------------------------------
+def _encode_estimate(msg: Estimate) -> dict:
+    """Protocol 1 without labels (byte for byte as always), protocol 2 with them."""
+    body = {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "p": int(msg.pruning), "o": _KINDS.index(msg.kind),
+            "d": msg.mixture.dim, "x": pack_mixture(msg.mixture)}
+    if msg.labels is not None:
+        n = len(msg.mixture)
+        lab = np.asarray(msg.labels)
+        if lab.shape != (n, 3) or (n and lab.dtype.kind not in "iu"):
+            raise ValueError(f"Estimate.labels must be ({n}, 3) integers, got {lab.shape} "
+                             f"{lab.dtype}")
+        body["v"] = LABELS_VERSION
+        body["i"] = np.ascontiguousarray(lab, dtype=_I8).tobytes()
+    return body
+
+
+def _encode_scan(msg: Scan) -> dict:
+    z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+    return {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+            "x": _array(z)}
+
+
+def _states(states) -> np.ndarray:
+    x = np.asarray(states, dtype=float)
+    return x.reshape(len(x), -1) if x.size else x.reshape(0, 4)
+
+
+def _encode_tracks(msg: Tracks) -> dict:
+    """Protocol 1 (states only) when no optional field is set, byte for byte what it always
+    was; protocol 2 (``"v": 2`` here) otherwise."""
+    x = _states(msg.states)
+    body = {"s": msg.sender, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+            "d": x.shape[1], "x": _array(x)}
+    if not msg.labelled:
+        return body
+    n, d = x.shape
+    body["v"] = TRACKS_VERSION
+    body["i"] = body["c"] = body["e"] = body["u"] = None
+    if msg.ids is not None:
+        ids = np.asarray(msg.ids)
+        if ids.shape != (n, 3) or (n and ids.dtype.kind not in "iu"):
+            raise ValueError(f"Tracks.ids must be ({n}, 3) integers, got {ids.shape} {ids.dtype}")
+        body["i"] = np.ascontiguousarray(ids, dtype=_I8).tobytes()
+    if msg.covs is not None:
+        P = np.asarray(msg.covs, dtype=float)
+        if P.shape != (n, d, d):
+            raise ValueError(f"Tracks.covs must be ({n}, {d}, {d}), got {P.shape}")
+        iu = _tri_index(d)
+        body["c"] = _array(P[:, iu[0], iu[1]])
+    if msg.existence is not None:
+        r = np.asarray(msg.existence, dtype=float)
+        if r.shape != (n,):
+            raise ValueError(f"Tracks.existence must be ({n},), got {r.shape}")
+        body["e"] = _array(r)
+    if msg.status is not None:
+        u = np.asarray(msg.status)
+        if u.shape != (n,):
+            raise ValueError(f"Tracks.status must be ({n},), got {u.shape}")
+        body["u"] = np.ascontiguousarray(u, dtype=np.int8).tobytes()
+    return body
+
+
+def _encode_truth(msg: Truth) -> dict:
+    x = _states(msg.states)
+    ids = np.ascontiguousarray(msg.ids, dtype=_I8)
+    return {"k": int(msg.k), "ts": float(msg.send_time), "d": x.shape[1], "x": _array(x),
+            "i": ids.tobytes()}
+
+
+def _encode_forward(msg: Forward) -> dict:
+    origins = list(msg.scans.scans)
+    zs = [np.asarray(msg.scans.scans[o], dtype=float).reshape(-1, 2) for o in origins]
+    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "o": origins, "n": [len(z) for z in zs],
+            "x": _array(np.concatenate(zs) if zs else np.zeros((0, 2)))}
+
+
+def _encode_returns(msg: Returns) -> dict:
+    z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
+    return {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
+            "ts": float(msg.send_time), "x": _array(z)}
+
+
+def _encode_control(msg: Control) -> dict:
+    return {"c": msg.command, "id": msg.run_id, "pa": dict(msg.params),
+            "ts": float(msg.send_time)}
+
+
+def _encode_telemetry(msg: Telemetry) -> dict:
+    names = list(msg.points)
+    pts = [np.asarray(msg.points[n], dtype=float).reshape(-1, 2) for n in names]
+    mix = msg.mixture
+    return {"s": msg.sender, "k": int(msg.k), "ts": float(msg.send_time),
+            "vn": list(msg.values), "vx": _array(np.fromiter(msg.values.values(), float,
+                                                              len(msg.values))),
+            "ev": list(msg.events), "pn": names, "pc": [len(z) for z in pts],
+            "px": _array(np.concatenate(pts) if pts else np.zeros((0, 2))),
+            "d": 0 if mix is None else mix.dim,
+            "x": b"" if mix is None else pack_mixture(mix)}
+
+
+ENCODERS: dict[type, tuple[str, Callable[[Any], dict]]] = {
+    Estimate: ("E", _encode_estimate), Scan: ("S", _encode_scan), Tracks: ("K", _encode_tracks),
+    Truth: ("T", _encode_truth), Forward: ("F", _encode_forward),
+    Returns: ("R", _encode_returns), Control: ("C", _encode_control),
+    Telemetry: ("Y", _encode_telemetry),
+}
+"""Message type -> (wire type letter, the fields of its body by name); ``_FIELDS`` orders them."""
+
+
+# -- decoding: body by field name -> validated message --------------------------------------
+def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
+    """A mixture: its dimension, row count and (protocol 2) labels checked before decoding."""
+    d = _count(body, "d", limits.max_dim)
+    if d < 1:
+        raise Rejected("field", "dimension must be at least 1")
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, 1 + d + d * (d + 1) // 2, limits.max_components, "components")
+    labels = None
+    if version == LABELS_VERSION:  # checked before the mixture is decoded
+        ib = _get(body, "i", bytes)
+        if len(ib) != 24 * n:
+            raise Rejected("shape", f"{len(ib)} bytes of labels for {n} components "
+                                    f"({24 * n} expected)")
+        labels = np.frombuffer(ib, dtype=_I8).reshape(n, 3).astype(np.int64)
+        if n and labels.min() < 0:
+            raise Rejected("field", "a component label is negative")
+    mix = unpack_mixture(blob, n, d)
+    pruning = _get(body, "p", int)
+    kind_i = _get(body, "o", int)
+    if not 0 <= kind_i < len(_KINDS):
+        raise Rejected("field", f"unknown estimate kind {kind_i!r}")
+    return Estimate(sender=_name(body, "s", limits), k=_index(body, "k"),
+                    mixture=mix, round=_index(body, "r"), seq=_index(body, "q"),
+                    send_time=_time(body), pruning=pruning, kind=_KINDS[kind_i],
+                    labels=labels)
+
+
+def _decode_scan(body: dict, limits: Limits, version: int) -> Scan:
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "measurements")
+    return Scan(sensor=_name(body, "s", limits), k=_index(body, "k"),
+                z=_floats(blob, (n, 2)), seq=_index(body, "q"), send_time=_time(body))
+
+
+def _decode_tracks(body: dict, limits: Limits, version: int) -> Tracks:
+    """Protocol 1: states only, the optional fields None; protocol 2: :func:`_tracks_v2`."""
+    if version == TRACKS_VERSION:
+        return _tracks_v2(body, limits)
+    d = _count(body, "d", limits.max_dim)
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, d, limits.max_components, "tracks") if d else 0
+    return Tracks(sender=_name(body, "s", limits), k=_index(body, "k"),
+                  states=_floats(blob, (n, d)), seq=_index(body, "q"),
+                  send_time=_time(body))
+
+
+def _tracks_v2(body: dict, limits: Limits) -> Tracks:
+    """Tracks with identities: the row count comes from the states and is checked against
+    ``max_components``, and every optional block's length against it, before any decoding."""
+    d = _count(body, "d", limits.max_dim)
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, d, limits.max_components, "tracks") if d else 0
+    t = d * (d + 1) // 2
+    ib = _optional(body, "i", 24 * n, "track ids")
+    cb = _optional(body, "c", 8 * n * t, "track covariances")
+    eb = _optional(body, "e", 8 * n, "existence probabilities")
+    ub = _optional(body, "u", n, "track status")
+    sender, k, seq, ts = _name(body, "s", limits), _index(body, "k"), _index(body, "q"), _time(body)
+    states = _floats(blob, (n, d))
+    ids = covs = existence = status = None
+    if ib is not None:
+        ids = np.frombuffer(ib, dtype=_I8).reshape(n, 3).astype(np.int64)
+        if n and ids.min() < 0:
+            raise Rejected("field", "a track id is negative")
+    if cb is not None:
+        covs = _floats(cb, (n, t)).take(_tri_to_full(d), axis=1).reshape(n, d, d)
+        if n and not _positive_definite(covs):
+            raise Rejected("not-psd", "a track covariance is not positive definite")
+    if eb is not None:
+        existence = _floats(eb, (n,))
+        if n and (existence.min() < 0.0 or existence.max() > 1.0):
+            raise Rejected("field", "an existence probability is outside [0, 1]")
+    if ub is not None:
+        status = np.frombuffer(ub, dtype=np.int8).copy()
+        if n and not np.isin(status, (Tracks.TENTATIVE, Tracks.CONFIRMED)).all():
+            raise Rejected("field", "a track status is not 0 (tentative) or 1 (confirmed)")
+    return Tracks(sender=sender, k=k, states=states, seq=seq, send_time=ts, ids=ids, covs=covs,
+                  existence=existence, status=status)
+
+
+def _decode_truth(body: dict, limits: Limits, version: int) -> Truth:
+    d = _count(body, "d", limits.max_dim)
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, d, limits.max_components, "targets") if d else 0
+    x = _floats(blob, (n, d))
+    ib = _get(body, "i", bytes)
+    if len(ib) != 8 * n:
+        raise Rejected("shape", f"{len(ib)} id bytes for {n} targets")
+    ids = np.frombuffer(ib, dtype=_I8).astype(np.int64)
+    return Truth(k=_index(body, "k"), ids=ids, states=x, send_time=_time(body))
+
+
+def _decode_forward(body: dict, limits: Limits, version: int) -> Forward:
+    """A flooding forward: origin names (unique), points per origin, one block of points."""
+    origins = _get(body, "o", list)
+    counts = _get(body, "n", list)
+    if len(origins) > limits.max_entries:
+        raise Rejected("too-many", f"{len(origins)} scans > {limits.max_entries}")
+    if len(counts) != len(origins):
+        raise Rejected("shape", f"{len(counts)} counts for {len(origins)} scans")
+    if not all(type(o) is str and 0 < len(o) <= limits.max_name for o in origins):
+        raise Rejected("field", f"origins must be names of 1-{limits.max_name} characters")
+    if len(set(origins)) != len(origins):
+        raise Rejected("field", "a scan's origin appears twice")
+    if not all(type(c) is int for c in counts):
+        raise Rejected("field", "point counts must be integers")
+    if any(c < 0 or c > limits.max_measurements for c in counts):
+        raise Rejected("too-many", f"a point count outside [0, {limits.max_measurements}]")
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "measurements")
+    if sum(counts) != n:
+        raise Rejected("shape", f"{n} measurements for counts summing to {sum(counts)}")
+    z = _floats(blob, (n, 2))
+    scans, a = {}, 0
+    for o, c in zip(origins, counts, strict=True):
+        scans[o] = z[a:a + c]
+        a += c
+    return Forward(sender=_name(body, "s", limits), k=_index(body, "k"),
+                   scans=ScanSet(scans), round=_index(body, "r"), seq=_index(body, "q"),
+                   send_time=_time(body))
+
+
+def _decode_returns(body: dict, limits: Limits, version: int) -> Returns:
+    sender, k, rnd = _name(body, "s", limits), _index(body, "k"), _index(body, "r")
+    seq, ts = _index(body, "q"), _time(body)
+    blob = _get(body, "x", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "returns")
+    return Returns(sender=sender, k=k, z=_floats(blob, (n, 2)), round=rnd, seq=seq,
+                   send_time=ts)
+
+
+def _decode_control(body: dict, limits: Limits, version: int) -> Control:
+    params = _get(body, "pa", dict)
+    for key, value in params.items():
+        if not isinstance(key, str) or not isinstance(value, str | int | float | bool):
+            raise Rejected("field", "control parameters must map names to scalars")
+    return Control(command=_get(body, "c", str), run_id=_get(body, "id", str),
+                   params=params, send_time=_time(body))
+
+
+def _decode_telemetry(body: dict, limits: Limits, version: int) -> Telemetry:
+    """A peer's per-scan telemetry: every list and block checked before decoding."""
+    vn = _names(body, "vn", limits, 4 * limits.max_entries)
+    vx = _floats(_get(body, "vx", bytes), (len(vn),))
+    events = _get(body, "ev", list)
+    if len(events) > 64 or not all(type(e) is str and len(e) <= 400 for e in events):
+        raise Rejected("field", "events must be at most 64 lines of at most 400 characters")
+    pn = _names(body, "pn", limits, 16)
+    pc = _get(body, "pc", list)
+    if len(pc) != len(pn) or not all(type(c) is int and 0 <= c for c in pc):
+        raise Rejected("shape", f"{len(pc)} point counts for {len(pn)} point sets")
+    blob = _get(body, "px", bytes)
+    n = _rows(blob, 2, limits.max_measurements, "points")
+    if sum(pc) != n:
+        raise Rejected("shape", f"{n} points for counts summing to {sum(pc)}")
+    z, points, a = _floats(blob, (n, 2)), {}, 0
+    for name, c in zip(pn, pc, strict=True):
+        points[name], a = z[a:a + c], a + c
+    d = _count(body, "d", limits.max_dim)
+    mixture = None
+    if d:
+        xb = _get(body, "x", bytes)
+        mixture = unpack_mixture(xb, _rows(xb, 1 + d + d * (d + 1) // 2,
+                                           limits.max_components, "components"), d)
+    return Telemetry(sender=_name(body, "s", limits), k=_index(body, "k"),
+                     values=dict(zip(vn, vx.tolist(), strict=True)), events=tuple(events),
+                     points=points, mixture=mixture, send_time=_time(body))
+
+DECODERS: dict[str, Callable[[dict, Limits, int], Any]] = {
+    "E": _decode_estimate, "S": _decode_scan, "K": _decode_tracks, "T": _decode_truth,
+    "F": _decode_forward, "R": _decode_returns, "C": _decode_control, "Y": _decode_telemetry,
+}
+"""Wire type letter -> ``(body, limits, version) -> message`` (every letter of ``_FIELDS``)."""
