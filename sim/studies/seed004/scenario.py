@@ -1,6 +1,6 @@
-"""Seed 004's scenario file (its own format: sensors on a random geometric graph, the flooding and
-consensus settings), its checks, its network document for the peers, and its truth and
-measurements."""
+"""Seed 004's scenario file (its own layout: sensors on a random geometric graph, the flooding and
+consensus settings), its checks (errors are :class:`sim.scenario.ScenarioError`, one line
+naming the key), its network document for the peers, and its truth and measurements."""
 
 from __future__ import annotations
 
@@ -11,9 +11,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import sensornet.sim.scenario as sc
 from scipy.sparse.csgraph import shortest_path
-from sensornet.sim.scenario import FLOOD_ESTIMATORS, MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
+from sensornet.sim.scenario import (
+    FLOOD_ESTIMATORS,
+    MAX_COORDINATE,
+    MAX_ROUNDS,
+    MAX_SENSORS,
+    ScenarioError,
+)
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.idpc import ClusterParams, polar_to_cartesian
 from sensornet.tracking.mixture import GaussianMixture
@@ -131,10 +136,6 @@ _KEYS = {
 }
 
 
-class ScenarioError(ValueError):
-    """A scenario file or ``--set`` value the loader refuses (one line naming the key)."""
-
-
 def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = ()) -> Seed004:
     """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values) or
     ``{"TABLE.KEY": value}`` (already parsed)."""
@@ -230,9 +231,8 @@ def network_document(doc: dict, label: str = "seed004.toml") -> dict:
     try:
         scn = from_document({k: v for k, v in doc.items() if k not in (*passed, "fusion")},
                             label)
-    except (ScenarioError, TypeError, ValueError) as e:
-        raise sc.ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") \
-            from None
+    except (TypeError, ValueError) as e:  # ScenarioError too: its message names the label
+        raise ScenarioError(str(e) if str(e).startswith(label) else f"{label}: {e}") from None
     names = [f"s{i + 1}" for i in range(len(scn.positions))]
     K, T = scn.num_scans, scn.scan_period
     sensors = []

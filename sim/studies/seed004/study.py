@@ -39,7 +39,7 @@ def load(req: Request) -> list[Setup]:
         scn = s4.load(path, dict(req.overrides))
     except OSError as exc:
         raise ScenarioError(f"seed004: {path}: {exc.strerror or exc}") from None
-    except s4.ScenarioError as exc:  # seed 004's own format: its errors are one line too
+    except ScenarioError as exc:
         raise ScenarioError(f"seed004: {exc}") from None
     return [Setup(scn, bool(req.options.get("consensus", True)))]
 
