@@ -39,66 +39,90 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
       per-member rules are enforced (at its ingress, by the client's certificate name).
     """
     k = Keys(network)
-    everything = f"{k.base}/**"
-    # ``**`` does not match a chunk that starts with "@": the advanced pub/sub keys, spelled out
-    recovery = f"{k.base}/*/*/@adv/**"
-
-    def adv(key: str) -> str:
-        return f"{key}/@adv/**"
-
-    def rule(rid: str, messages: list[str], key_exprs: list[str],
-             flows: tuple[str, ...] = ("ingress",)) -> dict:
-        return {"id": rid, "permission": "allow", "flows": list(flows), "messages": messages,
-                "key_exprs": key_exprs}
-
-    rules = [
-        rule(f"{world}-put", ["put"], [k.scan("*"), k.truth(), k.ctl()]),
-        rule(f"{world}-token", ["liveliness_token"], [k.alive(world)]),
-        rule(f"{world}-hear", ["declare_liveliness_subscriber", "liveliness_query"],
-             [k.alive("*"), k.ready("*")]),
-        # the world's own tools (the launcher's process-fault injector) follow the scans
-        rule(f"{world}-watch", ["declare_subscriber"], [k.scan("*")]),
-        # recovering scan publishers: heartbeats, and a cache that answers queries
-        rule(f"{world}-recover", ["put", "declare_queryable"], [adv(k.scan("*"))]),
-        # liveliness replies (who is alive) and replies from a publisher's cache, on every
-        # member's ingress (a reply answers a query its receiver made)
-        rule("replies", ["reply"], [everything, recovery]),
-        # egress is checked against the receiving member: a member sends what it may send
-        # (every receiver checks the sender on its ingress)
-        rule("send", ["put", "delete", "liveliness_token", "declare_subscriber",
-                      "declare_liveliness_subscriber", "liveliness_query", "reply", "query",
-                      "declare_queryable"],
-             [everything, recovery], flows=("egress",)),
-    ]
+    rules = [*_world_rules(k, world), *_shared_rules(k)]
     subjects = [{"id": f"m-{world}", "cert_common_names": [world]}]
-    policies = [{"rules": [f"{world}-put", f"{world}-token", f"{world}-hear",
-                           f"{world}-watch", f"{world}-recover", "replies", "send"],
-                 "subjects": [f"m-{world}"]}]
+    policies = [_policy(world, [r["id"] for r in rules])]
     for p in peers:
         check_name(p, "peer name")
-        rules += [
-            rule(f"{p}-put", ["put"], [k.estimate(p), k.tracks(p)]),
-            rule(f"{p}-token", ["liveliness_token"], [k.alive(p), k.ready(p)]),
-            rule(f"{p}-hear", ["declare_subscriber"],
-                 [k.scan(p), k.truth(), k.ctl(), k.estimate("*")]),
-            rule(f"{p}-live", ["declare_liveliness_subscriber", "liveliness_query"],
-                 [k.alive("*")]),
-            rule(f"{p}-recover", ["put", "declare_queryable"], [adv(k.estimate(p))]),
-            rule(f"{p}-ask", ["declare_subscriber", "query"],
-                 [adv(k.scan(p)), adv(k.estimate("*"))]),
-        ]
+        mine = _peer_rules(k, p)
+        rules += mine
         subjects.append({"id": f"m-{p}", "cert_common_names": [p]})
-        policies.append({"rules": [f"{p}-put", f"{p}-token", f"{p}-hear", f"{p}-live",
-                                   f"{p}-recover", f"{p}-ask", "replies", "send"],
-                         "subjects": [f"m-{p}"]})
+        policies.append(_policy(p, [r["id"] for r in mine] + [_REPLIES, _SEND]))
     if routers:
-        rules.append(rule("relay", ["put", "delete", "liveliness_token", "declare_subscriber",
-                                    "declare_liveliness_subscriber", "liveliness_query",
-                                    "reply", "query", "declare_queryable"],
-                          [everything, recovery], flows=("ingress", "egress")))
+        rules.append(_rule("relay", _RELAYED, _everything(k), flows=("ingress", "egress")))
         for r in routers:
             check_name(r, "router name")
             subjects.append({"id": f"m-{r}", "cert_common_names": [r]})
         policies.append({"rules": ["relay"], "subjects": [f"m-{r}" for r in routers]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
+
+
+_REPLIES, _SEND = "replies", "send"
+"""The rules every member's policy ends with (:func:`_shared_rules`)."""
+_RELAYED = ["put", "delete", "liveliness_token", "declare_subscriber",
+            "declare_liveliness_subscriber", "liveliness_query", "reply", "query",
+            "declare_queryable"]
+"""Every message kind: what a member may send out (egress) and a router relay."""
+
+
+def _rule(rid: str, messages: list[str], key_exprs: list[str],
+          flows: tuple[str, ...] = ("ingress",)) -> dict:
+    return {"id": rid, "permission": "allow", "flows": list(flows), "messages": list(messages),
+            "key_exprs": list(key_exprs)}
+
+
+def _adv(key: str) -> str:
+    """The advanced publisher's keys of ``key`` (heartbeats, cache queries)."""
+    return f"{key}/@adv/**"
+
+
+def _everything(k: Keys) -> list[str]:
+    """Every key of the network: ``**`` does not match a chunk that starts with "@", so the
+    advanced pub/sub keys are spelled out."""
+    return [f"{k.base}/**", f"{k.base}/*/*/@adv/**"]
+
+
+def _policy(member: str, rule_ids: list[str]) -> dict:
+    return {"rules": rule_ids, "subjects": [f"m-{member}"]}
+
+
+def _world_rules(k: Keys, world: str) -> list[dict]:
+    """The world's: puts scans, truth and ctl; its token; hears who is alive and ready."""
+    return [
+        _rule(f"{world}-put", ["put"], [k.scan("*"), k.truth(), k.ctl()]),
+        _rule(f"{world}-token", ["liveliness_token"], [k.alive(world)]),
+        _rule(f"{world}-hear", ["declare_liveliness_subscriber", "liveliness_query"],
+              [k.alive("*"), k.ready("*")]),
+        # the world's own tools (the launcher's process-fault injector) follow the scans
+        _rule(f"{world}-watch", ["declare_subscriber"], [k.scan("*")]),
+        # recovering scan publishers: heartbeats, and a cache that answers queries
+        _rule(f"{world}-recover", ["put", "declare_queryable"], [_adv(k.scan("*"))]),
+    ]
+
+
+def _shared_rules(k: Keys) -> list[dict]:
+    """Every member's: replies in, anything out."""
+    return [
+        # liveliness replies (who is alive) and replies from a publisher's cache, on every
+        # member's ingress (a reply answers a query its receiver made)
+        _rule(_REPLIES, ["reply"], _everything(k)),
+        # egress is checked against the receiving member: a member sends what it may send
+        # (every receiver checks the sender on its ingress)
+        _rule(_SEND, _RELAYED, _everything(k), flows=("egress",)),
+    ]
+
+
+def _peer_rules(k: Keys, p: str) -> list[dict]:
+    """Peer ``p``'s: puts its estimates and tracks, its tokens, hears what it fuses."""
+    return [
+        _rule(f"{p}-put", ["put"], [k.estimate(p), k.tracks(p)]),
+        _rule(f"{p}-token", ["liveliness_token"], [k.alive(p), k.ready(p)]),
+        _rule(f"{p}-hear", ["declare_subscriber"],
+              [k.scan(p), k.truth(), k.ctl(), k.estimate("*")]),
+        _rule(f"{p}-live", ["declare_liveliness_subscriber", "liveliness_query"],
+              [k.alive("*")]),
+        _rule(f"{p}-recover", ["put", "declare_queryable"], [_adv(k.estimate(p))]),
+        _rule(f"{p}-ask", ["declare_subscriber", "query"],
+              [_adv(k.scan(p)), _adv(k.estimate("*"))]),
+    ]

@@ -123,13 +123,24 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
     member also gets a message-signing key ``NAME.ed25519`` (made where missing, new with
     ``overwrite``), whose public half goes into the roster, ``members.json``.
     """
-    # heavy dependency: cryptography, as above
-    from cryptography import x509
-    from cryptography.hazmat.primitives import hashes, serialization
-    from cryptography.hazmat.primitives.asymmetric import ec
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
-    from cryptography.x509.oid import ExtendedKeyUsageOID
+    members = _checked_members(network, members)
+    out.mkdir(mode=0o700, parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.UTC)
+    valid = (now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days))
+    ca_key, ca_cert = _network_ca(network, out, valid)
+    written = [out / CA_CERT, out / CA_KEY]
+    for m in members:
+        key_path, cert_path = out / f"{m}.key", out / f"{m}.pem"
+        if key_path.exists() and cert_path.exists() and not overwrite:
+            check_private(key_path)  # kept: it must still be private
+        else:
+            _member_certificate(m, network, ca_key, ca_cert, valid, hosts, key_path, cert_path)
+        written += [cert_path, key_path]
+    return [*written, *_signing_keys(network, members, out, overwrite)]
 
+
+def _checked_members(network: str, members: Sequence[str]) -> list[str]:
+    """``members`` without repeats, every name (and the network's) checked."""
     check_name(network, "network name")
     members = list(dict.fromkeys(members))
     if not members:
@@ -138,12 +149,25 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
         check_name(m, "member name")
     if any(m.lower() == CA_CERT.removesuffix(".pem") for m in members):
         raise SecurityError("'ca' cannot be a member name (it is the CA's file)")
-    out.mkdir(mode=0o700, parents=True, exist_ok=True)
-    now = datetime.datetime.now(datetime.UTC)
-    start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
-    pem = serialization.Encoding.PEM
-    no_pw = serialization.NoEncryption()
-    pkcs8 = serialization.PrivateFormat.PKCS8
+    return members
+
+
+def _pem_private(key) -> bytes:
+    """A private key as unencrypted PKCS#8 PEM (what every member file holds)."""
+    # heavy dependency: cryptography, as in _name
+    from cryptography.hazmat.primitives import serialization
+
+    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                             serialization.NoEncryption())
+
+
+def _network_ca(network: str, out: Path, valid: tuple) -> tuple:
+    """``(key, certificate)`` of the network's CA in ``out``: the one there (it must be this
+    network's), or a new one valid over ``valid = (start, end)``, written."""
+    # heavy dependency: cryptography, as in _name
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
 
     ca_cert_path, ca_key_path = out / CA_CERT, out / CA_KEY
     if ca_cert_path.exists() and ca_key_path.exists():
@@ -153,58 +177,72 @@ def make_keys(network: str, members: Sequence[str], out: Path, days: int = 365,
         if not org or org[0].value != network:
             raise SecurityError(f"{out} holds the CA of another network "
                                 f"({org[0].value if org else '?'!r}); use another folder")
-    else:
-        ca_key = ec.generate_private_key(ec.SECP256R1())
-        subject = _name(f"sensornet {network} CA", network)
-        ca_cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
-                   .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
-                   .not_valid_before(start).not_valid_after(end)
-                   .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-                   .add_extension(x509.KeyUsage(
-                       digital_signature=False, content_commitment=False,
-                       key_encipherment=False, data_encipherment=False, key_agreement=False,
-                       key_cert_sign=True, crl_sign=True, encipher_only=False,
-                       decipher_only=False), critical=True)
-                   .add_extension(x509.SubjectKeyIdentifier.from_public_key(
-                       ca_key.public_key()), critical=False)
-                   .sign(ca_key, hashes.SHA256()))
-        _write(ca_key_path, ca_key.private_bytes(pem, pkcs8, no_pw), private=True)
-        _write(ca_cert_path, ca_cert.public_bytes(pem))
-    written = [ca_cert_path, ca_key_path]
-    for m in members:
-        key_path, cert_path = out / f"{m}.key", out / f"{m}.pem"
-        if key_path.exists() and cert_path.exists() and not overwrite:
-            check_private(key_path)  # kept: it must still be private
-            written += [cert_path, key_path]
-            continue
-        key = ec.generate_private_key(ec.SECP256R1())
-        cert = (x509.CertificateBuilder().subject_name(_name(m, network))
-                .issuer_name(ca_cert.subject).public_key(key.public_key())
-                .serial_number(x509.random_serial_number())
-                .not_valid_before(start).not_valid_after(end)
-                .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-                .add_extension(x509.KeyUsage(
-                    digital_signature=True, content_commitment=False, key_encipherment=False,
-                    data_encipherment=False, key_agreement=False, key_cert_sign=False,
-                    crl_sign=False, encipher_only=False, decipher_only=False), critical=True)
-                .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
-                                                      ExtendedKeyUsageOID.CLIENT_AUTH]),
-                               critical=False)
-                .add_extension(_san(hosts), critical=False)
-                .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
-                    ca_key.public_key()), critical=False)
-                .sign(ca_key, hashes.SHA256()))
-        _write(key_path, key.private_bytes(pem, pkcs8, no_pw), private=True)
-        _write(cert_path, cert.public_bytes(pem))
-        written += [cert_path, key_path]
+        return ca_key, ca_cert
+    ca_key = ec.generate_private_key(ec.SECP256R1())
+    subject = _name(f"sensornet {network} CA", network)
+    ca_cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
+               .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
+               .not_valid_before(valid[0]).not_valid_after(valid[1])
+               .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+               .add_extension(x509.KeyUsage(
+                   digital_signature=False, content_commitment=False,
+                   key_encipherment=False, data_encipherment=False, key_agreement=False,
+                   key_cert_sign=True, crl_sign=True, encipher_only=False,
+                   decipher_only=False), critical=True)
+               .add_extension(x509.SubjectKeyIdentifier.from_public_key(
+                   ca_key.public_key()), critical=False)
+               .sign(ca_key, hashes.SHA256()))
+    _write(ca_key_path, _pem_private(ca_key), private=True)
+    _write(ca_cert_path, ca_cert.public_bytes(serialization.Encoding.PEM))
+    return ca_key, ca_cert
+
+
+def _member_certificate(member: str, network: str, ca_key, ca_cert, valid: tuple,
+                        hosts: Sequence[str], key_path: Path, cert_path: Path) -> None:
+    """Write a new key and CA-signed certificate for ``member``: serverAuth and clientAuth,
+    ``hosts`` as SANs, valid over ``valid = (start, end)``."""
+    # heavy dependency: cryptography, as in _name
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    cert = (x509.CertificateBuilder().subject_name(_name(member, network))
+            .issuer_name(ca_cert.subject).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(valid[0]).not_valid_after(valid[1])
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .add_extension(x509.KeyUsage(
+                digital_signature=True, content_commitment=False, key_encipherment=False,
+                data_encipherment=False, key_agreement=False, key_cert_sign=False,
+                crl_sign=False, encipher_only=False, decipher_only=False), critical=True)
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
+                                                  ExtendedKeyUsageOID.CLIENT_AUTH]),
+                           critical=False)
+            .add_extension(_san(hosts), critical=False)
+            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
+                ca_key.public_key()), critical=False)
+            .sign(ca_key, hashes.SHA256()))
+    _write(key_path, _pem_private(key), private=True)
+    _write(cert_path, cert.public_bytes(serialization.Encoding.PEM))
+
+
+def _signing_keys(network: str, members: list[str], out: Path, overwrite: bool) -> list[Path]:
+    """The members' message-signing keys (Ed25519: made where missing, or rotated with
+    ``overwrite``) and the roster ``members.json`` with their public halves; their paths."""
+    # heavy dependency: cryptography, as in _name
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
     roster = out / "members.json"
     known = json.loads(roster.read_text()) if roster.exists() else {}
     signing = dict(known.get(SIGNING, {}))
-    for m in members:  # message signing keys (Ed25519): made where missing, or rotated
+    written = []
+    for m in members:
         sign_path = out / f"{m}{SIGN_KEY}"
         if overwrite or not sign_path.is_file():
-            _write(sign_path, Ed25519PrivateKey.generate().private_bytes(pem, pkcs8, no_pw),
-                   private=True)
+            _write(sign_path, _pem_private(Ed25519PrivateKey.generate()), private=True)
         signing[m] = _public_b64(serialization.load_pem_private_key(
             _read_private(sign_path), None).public_key())
         written.append(sign_path)
