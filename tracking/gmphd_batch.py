@@ -22,6 +22,7 @@ Arrays: ``N`` components of all problems ``(N,)``, ``(N, d)``, ``(N, d, d)``; ``
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from sensornet.tracking.fusion_batch import reduce_many
@@ -121,13 +122,45 @@ def _interleave(a_lens: np.ndarray, b_lens: np.ndarray) -> np.ndarray:
     return _segments(starts, lens)
 
 
+@dataclass(frozen=True)
+class _Stack:
+    """Every problem's predicted components side by side: ``w (N,)``, ``mean (N, d)``,
+    ``P (N, d, d)``, ``n_lens (P,)`` components per problem, ``prob (N,)`` each one's problem."""
+
+    w: np.ndarray
+    mean: np.ndarray
+    P: np.ndarray
+    n_lens: np.ndarray
+    prob: np.ndarray
+
+
 def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], steps: int,
                   scans: list[np.ndarray], parents: bool = False) -> list:
+    """Predict, update and reduce every problem together (see the module docstring)."""
+    f0, n_prob = filters[0], len(filters)
+    st = _predict_stacked(filters, mixes, steps)
+    missed_w, det_w, det_m, det_P, det_lens, det_par = _update_stacked(filters, st, scans)
+    n_lens = st.n_lens
+    idx = _interleave(n_lens, det_lens)
+    w_all = np.concatenate((missed_w, det_w))[idx]
+    m_all = np.concatenate((st.mean, det_m))[idx]
+    P_all = np.concatenate((st.P, det_P))[idx]
+    prob_all = np.repeat(np.arange(n_prob), n_lens + det_lens)
+    if not parents:
+        return reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob)
+    # each pre-reduction row's parent in its problem's predicted mixture: the missed terms
+    # are the predicted components in order, the detection terms their pairs' components
+    own = np.arange(len(st.w)) - np.repeat(np.cumsum(n_lens) - n_lens, n_lens)
+    par_all = np.concatenate((own, det_par))[idx]
+    starts = np.cumsum(n_lens + det_lens) - (n_lens + det_lens)
+    return [(mix, par_all[starts[p] + src]) for p, (mix, src) in enumerate(
+        reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob, sources=True))]
+
+
+def _predict_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture],
+                     steps: int) -> _Stack:
+    """:func:`tracking.gmphd.predict` of every problem: survivors, then each one's births."""
     f0 = filters[0]
-    n_prob = len(filters)
-    model = f0.sensors[0].model
-    dim = model.dim
-    # -- predict (tracking.gmphd.predict): survivors, then each problem's births -----------
     F, Q = f0.motion.transition(steps)
     ps_pow = f0.survival_probability**steps
     w = np.concatenate([m.weights for m in mixes]) * ps_pow
@@ -143,74 +176,72 @@ def _step_stacked(filters: list[GMPHDFilter], mixes: list[GaussianMixture], step
         mean = np.concatenate((mean, *[b.means for b in births]))[idx]
         P = np.concatenate((P, *[b.covs for b in births]))[idx]
     n_lens = s_lens + b_lens  # components per problem after the prediction
-    prob = np.repeat(np.arange(n_prob), n_lens)  # (N,)
-    # -- update (tracking.gmphd.update) over every problem's (z, j) pairs ---------------------
+    return _Stack(w, mean, P, n_lens, np.repeat(np.arange(len(filters)), n_lens))
+
+
+def _update_stacked(filters: list[GMPHDFilter], st: _Stack, scans: list[np.ndarray]) -> tuple:
+    """:func:`tracking.gmphd.update` of every problem over its own (z, j) pairs:
+    ``(missed_w (N,), det_w (K,), det_m (K, d), det_P (K, d, d), det_lens (P,), det_par (K,))``,
+    the detection terms problem by problem, ``det_par`` their components' index in it."""
+    n_prob, dim = len(filters), filters[0].sensors[0].model.dim
     Pd = np.array([f.sensors[0].detection_probability for f in filters])
     kappa = np.array([f.sensors[0].clutter_intensity for f in filters])
     R = np.stack([f.sensors[0].model.R for f in filters])  # (P, dim, dim)
     Z = [np.asarray(z, dtype=float).reshape(-1, dim) for z in scans]
     m_lens = np.array([len(z) for z in Z])
     scan = np.concatenate(Z) if len(Z) else np.zeros((0, dim))
-    missed_w = w * (1.0 - Pd[prob])
-    pair_lens = m_lens * n_lens
-    n_pairs = int(pair_lens.sum())
-    if n_pairs == 0:
-        det_w, det_m, det_P = w[:0], mean[:0], P[:0]
-        det_lens = np.zeros(n_prob, dtype=np.intp)
-        det_par = np.zeros(0, dtype=np.intp)
-    else:
-        cols = _selected_columns(model)
-        zhat = mean[:, cols]  # (N, dim)
-        PHt = P[:, :, cols]  # (N, d, dim)
-        S = PHt[:, cols, :] + R[prob]  # (N, dim, dim)
-        S_inv, S_det = (_inv_det_2x2(S) if dim == 2 else inv_det_spd(S))
-        K = PHt @ S_inv  # (N, d, dim)
-        P_upd = P - K @ PHt.swapaxes(1, 2)
-        P_upd = P_upd + P_upd.swapaxes(1, 2)
-        P_upd *= 0.5
-        # the pairs, problem by problem, measurement-major (update's (m, n) array row by row)
-        pp = np.repeat(np.arange(n_prob), pair_lens)  # (T,)
-        local = np.arange(n_pairs) - np.repeat(np.cumsum(pair_lens) - pair_lens, pair_lens)
-        n_of = n_lens[pp]
-        j_local = local % n_of
-        zi = (np.cumsum(m_lens) - m_lens)[pp] + local // n_of  # into scan
-        ji = (np.cumsum(n_lens) - n_lens)[pp] + j_local  # into the components
-        nu = model.residual(scan[zi], zhat[ji])  # (T, dim)
-        d2 = c_einsum("...i,...ij,...j->...", nu, S_inv[ji], nu)  # (T,)
-        num = d2 + np.log(S_det)[ji]
-        num += dim * _LOG_2PI
-        num *= -0.5
-        np.exp(num, out=num)
-        num *= Pd[pp] * w[ji]
-        if f0.gate is not None:
-            num = np.where(d2 <= f0.gate, num, 0.0)
-        first = j_local == 0  # each (problem, z) row starts here
-        row = np.cumsum(first) - 1  # (T,): the row of each pair
-        denom = np.add.reduceat(num, np.flatnonzero(first))
-        denom += kappa[pp[first]]
-        num /= denom[row]
-        min_weight = f0.reducer.prune_threshold
-        keep = num > min_weight if min_weight > 0 else num >= 0
-        det_w = num[keep]
-        kj = ji[keep]
-        det_m = mean[kj] + c_einsum("kij,kj->ki", K[kj], nu[keep])
-        det_P = P_upd[kj]
-        det_lens = np.bincount(pp[keep], minlength=n_prob)
-        det_par = j_local[keep]
-    idx = _interleave(n_lens, det_lens)
-    w_all = np.concatenate((missed_w, det_w))[idx]
-    m_all = np.concatenate((mean, det_m))[idx]
-    P_all = np.concatenate((P, det_P))[idx]
-    prob_all = np.repeat(np.arange(n_prob), n_lens + det_lens)
-    if not parents:
-        return reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob)
-    # each pre-reduction row's parent in its problem's predicted mixture: the missed terms
-    # are the predicted components in order, the detection terms their pairs' components
-    own = np.arange(len(w)) - np.repeat(np.cumsum(n_lens) - n_lens, n_lens)
-    par_all = np.concatenate((own, det_par))[idx]
-    starts = np.cumsum(n_lens + det_lens) - (n_lens + det_lens)
-    return [(mix, par_all[starts[p] + src]) for p, (mix, src) in enumerate(
-        reduce_many(f0.reducer, w_all, m_all, P_all, prob_all, n_prob, sources=True))]
+    missed_w = st.w * (1.0 - Pd[st.prob])
+    pair_lens = m_lens * st.n_lens
+    if int(pair_lens.sum()) == 0:
+        return (missed_w, st.w[:0], st.mean[:0], st.P[:0], np.zeros(n_prob, dtype=np.intp),
+                np.zeros(0, dtype=np.intp))
+    return (missed_w, *_detections(filters[0], st, R, Pd, kappa, scan, m_lens, pair_lens))
+
+
+def _detections(f0: GMPHDFilter, st: _Stack, R: np.ndarray, Pd: np.ndarray, kappa: np.ndarray,
+                scan: np.ndarray, m_lens: np.ndarray, pair_lens: np.ndarray) -> tuple:
+    """The detection terms of every (problem, z, j) pair (Vo & Ma 2006, Table I, step 4):
+    ``(det_w, det_m, det_P, det_lens, det_par)`` of the pairs kept (weight over the prune
+    threshold), problem by problem; ``R (P, dim, dim)``, ``Pd``/``kappa (P,)``, ``scan (M, dim)``
+    every problem's measurements, ``m_lens``/``pair_lens (P,)`` their counts and pairs."""
+    model, n_prob, n_lens = f0.sensors[0].model, len(m_lens), st.n_lens
+    dim, n_pairs, w, mean, P = model.dim, int(pair_lens.sum()), st.w, st.mean, st.P
+    cols = _selected_columns(model)
+    zhat = mean[:, cols]  # (N, dim)
+    PHt = P[:, :, cols]  # (N, d, dim)
+    S = PHt[:, cols, :] + R[st.prob]  # (N, dim, dim)
+    S_inv, S_det = (_inv_det_2x2(S) if dim == 2 else inv_det_spd(S))
+    K = PHt @ S_inv  # (N, d, dim)
+    P_upd = P - K @ PHt.swapaxes(1, 2)
+    P_upd = P_upd + P_upd.swapaxes(1, 2)
+    P_upd *= 0.5
+    # the pairs, problem by problem, measurement-major (update's (m, n) array row by row)
+    pp = np.repeat(np.arange(n_prob), pair_lens)  # (T,)
+    local = np.arange(n_pairs) - np.repeat(np.cumsum(pair_lens) - pair_lens, pair_lens)
+    n_of = n_lens[pp]
+    j_local = local % n_of
+    zi = (np.cumsum(m_lens) - m_lens)[pp] + local // n_of  # into scan
+    ji = (np.cumsum(n_lens) - n_lens)[pp] + j_local  # into the components
+    nu = model.residual(scan[zi], zhat[ji])  # (T, dim)
+    d2 = c_einsum("...i,...ij,...j->...", nu, S_inv[ji], nu)  # (T,)
+    num = d2 + np.log(S_det)[ji]
+    num += dim * _LOG_2PI
+    num *= -0.5
+    np.exp(num, out=num)
+    num *= Pd[pp] * w[ji]
+    if f0.gate is not None:
+        num = np.where(d2 <= f0.gate, num, 0.0)
+    first = j_local == 0  # each (problem, z) row starts here
+    row = np.cumsum(first) - 1  # (T,): the row of each pair
+    denom = np.add.reduceat(num, np.flatnonzero(first))
+    denom += kappa[pp[first]]
+    num /= denom[row]
+    min_weight = f0.reducer.prune_threshold
+    keep = num > min_weight if min_weight > 0 else num >= 0
+    kj = ji[keep]
+    det_m = mean[kj] + c_einsum("kij,kj->ki", K[kj], nu[keep])
+    return (num[keep], det_m, P_upd[kj], np.bincount(pp[keep], minlength=n_prob),
+            j_local[keep])
 
 
 __all__ = ["batch_key", "correct_parents", "step_many"]
