@@ -18,6 +18,7 @@ from sensornet.sim.scenario.model import (
     ExtendedSpec,
     FilterSpec,
     FusionSpec,
+    ManoeuvreSpec,
     MetricsSpec,
     NetworkSpec,
     PdaClutter,
@@ -46,6 +47,7 @@ SECTIONS: tuple[tuple[str, type, str], ...] = (
     ("[network]", NetworkSpec, ""),
     ("[extended]", ExtendedSpec, ""),
     ("[clustering]", ClusteringSpec, ""),
+    ("[manoeuvre]", ManoeuvreSpec, ""),
     ("[pda]", PdaSpec, ""),
     ("[pda.target]", PdaTarget, ""),
     ("[pda.clutter]", PdaClutter, ""),
@@ -68,6 +70,7 @@ TYPES = {"bool": "true/false", "int": "integer", "float": "number", "float | Non
          "tuple[tuple[str, str, str], ...]": "list of [name, name, name]",
          "tuple[tuple[str, float, float], ...]": "table of NAME = [centre, width]",
          "tuple[tuple[str, float], ...]": "table of NAME = number",
+         "tuple[tuple[float, float], ...]": "list of [number, number]",
          **{c.__name__: "table" for c in (PdaTarget, PdaClutter, PdaFilters, PdaDetector,
                                          PdaFuzzy)}}
 """How a field's type is written in TOML."""
@@ -97,6 +100,8 @@ def _toml(value: Any) -> str:
         return "true" if value else "false"
     if isinstance(value, str):
         return f'"{value}"'
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 

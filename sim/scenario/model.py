@@ -42,6 +42,7 @@ from sensornet.sim.scenario.common import (  # noqa: F401 (re-exported)
     _diag,
     listing,
 )
+from sensornet.sim.scenario.manoeuvre import ManoeuvreSpec
 from sensornet.sim.scenario.network import (  # noqa: F401 (re-exported)
     ClusteringSpec,
     ExtendedSpec,
@@ -132,6 +133,9 @@ class Scenario:
                                         custom="the defaults of `[clustering]`")
     pda: PdaSpec | None = option(None, doc="PDA peers' settings (`[pda]`).",
                                  custom="no PDA settings")
+    manoeuvre: ManoeuvreSpec | None = option(
+        None, doc="The manoeuvring target of truth `\"seed001\"` (`[manoeuvre]`).",
+        custom="seed 001's target (the defaults of `[manoeuvre]`)")
     faults: FaultPlan | None = option(
         None, doc="Link faults (`[faults]`), resolved per link (`peers.faultplan`); injected by "
                   "`peers.faults`. Delays in scans are bound to the scan interval `scan_period "

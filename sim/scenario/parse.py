@@ -23,6 +23,7 @@ from sensornet.sim.scenario.model import (
     ExtendedSpec,
     FilterSpec,
     FusionSpec,
+    ManoeuvreSpec,
     MetricsSpec,
     NetworkSpec,
     PdaClutter,
@@ -84,7 +85,7 @@ def _value(t: Table, k: str, f: dataclasses.Field, m: Meta) -> Any:
     elif kind == "str":
         v = t.choice(k, m.values(), default) if m.choices else t.text(k, default)
     elif kind == "tuple[float, float]":
-        return t.position(k)
+        return t.position(k) if t.has(k) or default is REQUIRED else default
     else:
         raise TypeError(f"option {t.key(k)!r} of type {kind} needs custom= and its own reader")
     if m.check is not None and (problem := m.check.problem(v)) is not None:
@@ -141,6 +142,12 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
             **read(_section(top, "clustering", ClusteringSpec), ClusteringSpec)))
     if top.has("pda"):
         scn = dataclasses.replace(scn, pda=_pda(_section(top, "pda", PdaSpec), len(sensors)))
+    if top.has("manoeuvre"):
+        t = _section(top, "manoeuvre", ManoeuvreSpec)
+        if truth != "seed001":
+            raise top.fail("manoeuvre", f"is only for truth 'seed001' (scenario.truth is "
+                                        f"{truth!r})")
+        scn = dataclasses.replace(scn, manoeuvre=_manoeuvre(t))
     kind = peer_kind(scn.network.filter)
     if scn.fusion.rule not in kind.rules:
         raise ctx.fail("fusion.rule", f"key 'fusion.rule' is {scn.fusion.rule!r}, which "
@@ -384,6 +391,24 @@ def _extended(t: Table) -> ExtendedSpec:
     return spec
 
 
+def _manoeuvre(t: Table) -> ManoeuvreSpec:
+    """``[manoeuvre]``: legs as ``[[duration, turn rate], ...]`` (durations > 0)."""
+    d = ManoeuvreSpec()
+    segments = d.segments
+    if t.has("segments"):
+        raw = t.raw("segments")
+        if not isinstance(raw, list) or not raw or not all(
+                isinstance(g, list) and len(g) == 2 for g in raw):
+            raise t.fail("segments", f"must be a list of [duration, turn rate] pairs, got "
+                                     f"{brief(raw)}")
+        segments = tuple((t._number("segments", g[0]), t._number("segments", g[1]))
+                         for g in raw)
+        if min(g[0] for g in segments) <= 0:
+            raise t.fail("segments", f"must have durations > 0, got {brief(raw)}")
+    return ManoeuvreSpec(**read(t, ManoeuvreSpec), segments=segments,
+                         init_sigma=_nonnegative(t, "init_sigma", 3, d.init_sigma))
+
+
 # --------------------------------------------------------------------------------------------
 # [pda]: seed 003's settings
 # --------------------------------------------------------------------------------------------
@@ -402,8 +427,7 @@ def _pda(t: Table, n_sensors: int) -> PdaSpec:
             raise t.fail("gate_probability", f"must be probabilities in (0, 1], got "
                                              f"{brief(list(gates))}")
     tg = sub("target", PdaTarget)
-    target = PdaTarget(**read(tg, PdaTarget), turn_scans=_turn_scans(tg),
-                       start=tg.position("start") if tg.has("start") else PdaTarget().start)
+    target = PdaTarget(**read(tg, PdaTarget), turn_scans=_turn_scans(tg))
     fi = sub("filters", PdaFilters)
     filters = PdaFilters(**read(fi, PdaFilters), transition=_stochastic(fi),
                          initial_probs=_probabilities(fi, "initial_probs", (0.9, 0.1)),

@@ -29,7 +29,7 @@ class PdaTarget:
     """Seed 003's one target: straight, a turn over ``turn_scans``, straight (docs/seed003.md)."""
 
     start: tuple[float, float] = option((0.0, 5000.0), doc="Position `[x, y]` at scan 0.",
-                                        unit="m", custom="`[0, 5000]`")
+                                        unit="m")
     speed: float = option(500.0, doc="Speed along x at scan 0.", unit="m/s", check=POSITIVE)
     turn_scans: tuple[int, int] = option((51, 70), doc="First and last scan of the manoeuvre.",
                                          unit="scan", custom="`[51, 70]`")

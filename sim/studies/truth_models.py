@@ -20,7 +20,7 @@ def _one_target(X: np.ndarray, num_scans: int, what: str) -> Truth:
 
 
 def _seed001(scn: Scenario):
-    return Seed001Scenario(T=scn.scan_period, seed=scn.seed)
+    return Seed001Scenario.of(scn)
 
 
 def seed001_truth(scn: Scenario, rng=None) -> Truth:

@@ -11,6 +11,7 @@ import numpy as np
 from sensornet.peers.contracts import FusionInput
 from sensornet.peers.estimators import ImmEstimator, SingleTargetConfig
 from sensornet.peers.fusers import ImmFuser
+from sensornet.sim.scenario import ManoeuvreSpec, Scenario
 from sensornet.tracking.models import RangeBearing
 
 # -- scenario ---------------------------------------------------------------------------------
@@ -48,18 +49,22 @@ GEOMETRIES: dict[str, tuple[RadarSpec, RadarSpec]] = {
 """Radar presets (radar 1 sigma_r = 3 m, 0.08 deg; radar 2 sigma_r = 2 m, 0.1 deg; seed 001)."""
 
 
+_TARGET = ManoeuvreSpec()
+
+
 @dataclass(frozen=True)
 class Seed001Scenario:
-    """The seed-001 ground target and radars (docs/seed001.md)."""
+    """The seed-001 ground target and radars (docs/seed001.md). The target's defaults are the
+    scenario's ``[manoeuvre]`` section's (:class:`sim.scenario.ManoeuvreSpec`, declared
+    once); :meth:`of` takes them, the scan period and the seed from a loaded scenario."""
 
-    start: tuple[float, float] = (6000.0, 8400.0)
+    start: tuple[float, float] = _TARGET.start
     """Initial position in m."""
-    speed: float = 23.0
+    speed: float = _TARGET.speed
     """Speed in m/s."""
-    heading_deg: float = -29.36
+    heading_deg: float = _TARGET.heading_deg
     """Initial heading in degrees counter-clockwise from east (29.36 deg south of east)."""
-    segments: tuple[tuple[float, float], ...] = (
-        (180.0, 0.0), (80.0, 1.15), (110.0, 0.0), (140.0, -0.43), (140.0, 0.0))
+    segments: tuple[tuple[float, float], ...] = _TARGET.segments
     """(duration s, turn rate deg/s; positive = left) per segment; 650 s in total."""
     T: float = 1.0
     """Scan period in s."""
@@ -67,10 +72,18 @@ class Seed001Scenario:
     """Key of :data:`GEOMETRIES` (used when ``radars`` is empty)."""
     radars: tuple[RadarSpec, ...] = ()
     """Explicit radars (override ``geometry``)."""
-    init_sigma: tuple[float, float, float] = (20.0, 2.0, 0.05)
+    init_sigma: tuple[float, ...] = _TARGET.init_sigma
     """Initial estimate spread per axis: position m, velocity m/s, acceleration m/s^2."""
     seed: int = 1
     """Base seed; run ``r`` draws from ``SeedSequence([seed, r])``."""
+
+    @classmethod
+    def of(cls, scn: Scenario) -> Seed001Scenario:
+        """The target of ``scn``'s ``[manoeuvre]`` (its defaults when absent), its scan period
+        and seed (the radars: geometry A; the network's are ``scn.sensors``)."""
+        m = scn.manoeuvre or _TARGET
+        return cls(m.start, m.speed, m.heading_deg, m.segments, T=scn.scan_period,
+                   init_sigma=m.init_sigma, seed=scn.seed)
 
     def sensors(self) -> tuple[RangeBearing, ...]:
         """The radars as ``RangeBearing`` objects."""
