@@ -8,10 +8,15 @@ import itertools
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
+from sensornet.tracking import lmb_association
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.lmb import LmbFilter, map_cardinality, update
 from sensornet.tracking.lmb_association import (
+    DROP_BUDGET,
+    EXACT_LIMIT,
+    _auto,
     best_hypothesis,
+    drop_weak_links,
     hypothesis_count,
     marginals,
     marginals_exact,
@@ -131,6 +136,47 @@ def test_gibbs_is_close_to_exact_on_6x6_and_auto_uses_it_beyond_exact_limit():
     assert np.abs(lm - em).max() > 1e-4  # LBP is not exact on these loopy blocks
     with pytest.raises(ValueError, match="scalable"):
         marginals(miss, d, "auto", scalable="murty")
+
+
+def test_a_large_sparse_cluster_is_thinned_within_its_budget_and_solved_exactly():
+    """A ring of 7 tracks x 8 measurements (each track links 3 neighbours, some weakly): its
+    dense count (394,353) is beyond exact_limit, so auto drops its weakest links (mass at most
+    DROP_BUDGET) and solves the rest exactly: within DROP_BUDGET of exact, and the weak links'
+    hypotheses are all that was lost."""
+    rng = np.random.default_rng(21)
+    n, m = 7, 8
+    miss = rng.uniform(0.2, 1.0, n)
+    detect = np.zeros((n, m))
+    for i in range(n):
+        detect[i, [i, i + 1]] = rng.uniform(0.5, 3.0, 2)
+        detect[i, (i + 3) % m] = 10 ** rng.uniform(-9, -6)  # weak: the ratio sum stays < 1e-4
+    assert hypothesis_count(n, m) > EXACT_LIMIT
+    em, ep = marginals_exact(miss, detect)
+    am, ap = marginals(miss, detect, "auto")
+    weak_i, weak_j = np.nonzero((detect > 0) & (detect < 1e-5))
+    ratio_sum = (detect[weak_i, weak_j] / miss[weak_i]).sum()
+    assert ratio_sum <= DROP_BUDGET
+    thinned = drop_weak_links(miss, detect, DROP_BUDGET)
+    assert np.array_equal(thinned > 0, detect >= 1e-5)  # exactly the weak ones dropped
+    assert np.abs(am - em).max() <= ratio_sum and np.abs(ap - ep).max() <= ratio_sum
+    assert np.abs(am - em).max() > 0 or ratio_sum < 1e-12
+    # the thinned problem's exact answer is what auto gave (sparse enumeration, no sampling)
+    tm, tp = marginals_exact(miss, thinned)
+    np.testing.assert_allclose(am, tm, rtol=1e-12)
+    np.testing.assert_allclose(ap, tp, rtol=1e-12, atol=1e-15)
+
+
+def test_sparse_enumeration_equals_dense_on_random_sparse_clusters(monkeypatch):
+    monkeypatch.setattr(lmb_association, "SPARSE_FROM", 0)  # every loopy cluster: sparse
+    rng = np.random.default_rng(8)
+    for _ in range(40):
+        n, m = int(rng.integers(2, 7)), int(rng.integers(2, 7))
+        miss = rng.uniform(0.05, 1.0, n)
+        detect = rng.uniform(0.0, 3.0, (n, m)) * (rng.random((n, m)) < 0.5)
+        em, ep = marginals_exact(miss, detect)
+        sm, sp = _auto(miss, detect, 10**6, 1e-9, 1000, "gibbs", rng, None, 0.0)
+        np.testing.assert_allclose(sm, em, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(sp, ep, rtol=1e-10, atol=1e-14)
 
 
 def test_best_hypothesis_is_the_heaviest_and_gibbs_survives_zero_weights():

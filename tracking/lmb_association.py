@@ -120,6 +120,36 @@ def _enumerate(miss: np.ndarray, detect: np.ndarray,
     return P[:, :, 0], P[:, :, 1:]
 
 
+def _enumerate_sparse(miss: np.ndarray, detect: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`marginals_exact` of one problem through its links only: the hypotheses are grown
+    track by track (each partial one extended by the track's miss and each linked measurement
+    it leaves free), so the work is the number of hypotheses of nonzero weight, at most
+    ``prod_i (1 + links_i)``, not :func:`hypothesis_count`'s dense count. ``(n,)``, ``(n, m)``."""
+    n, m = detect.shape
+    W = np.concatenate((miss[:, None], detect), axis=1)  # (n, m + 1)
+    with np.errstate(divide="ignore"):
+        logW = np.log(W / np.maximum(W.max(axis=1, keepdims=True), 1e-300))
+    hyps = np.zeros((1, 0), dtype=np.intp)
+    used = np.zeros((1, m + 1), dtype=bool)  # measurement j + 1 taken (column 0 never)
+    lw = np.zeros(1)
+    for i in range(n):
+        ch = np.flatnonzero(W[i] > 0)
+        h, e = np.nonzero(~used[:, ch])
+        c = ch[e]
+        hyps = np.concatenate((hyps[h], c[:, None]), axis=1)
+        used = used[h]
+        used[np.arange(len(h)), c] = True
+        used[:, 0] = False
+        lw = lw[h] + logW[i, c]
+    if len(lw) == 0:  # no hypothesis of nonzero weight (a track with nothing): as dense
+        return _enumerate(miss[None], detect[None], hypotheses(n, m))
+    w = np.exp(lw - lw.max())
+    w /= w.sum()
+    P = np.bincount((hyps + np.arange(n) * (m + 1)).ravel(), np.repeat(w, n),
+                    n * (m + 1)).reshape(n, m + 1)
+    return P[:, 0], P[:, 1:]
+
+
 def marginals_lbp(miss: np.ndarray, detect: np.ndarray, tol: float = 1e-9,
                   max_iter: int = 1000) -> tuple[np.ndarray, np.ndarray]:
     """Marginals by loopy belief propagation (Williams & Lau 2014, Sec. III, eqs. 30-31).
@@ -157,8 +187,8 @@ GIBBS_MAX]`` (benchmarks/bench_lmb_association.py measured the error against thi
 GIBBS_MIN = 500
 GIBBS_MAX = 20_000
 EXPAND_MAX = 2_000_000
-"""At most this many one-move neighbours (hypotheses x tracks x choices) are formed; beyond
-it only the heaviest sampled hypotheses are expanded (memory)."""
+"""At most this many one-move neighbours (hypotheses x links) are formed; beyond it only the
+heaviest sampled hypotheses are expanded (memory)."""
 
 
 def gibbs_sample_count(links: int) -> int:
@@ -271,20 +301,20 @@ def _expanded(S: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         logW = np.log(W)
     own = logW[ar, T]  # (H, n)
     logw = own.sum(axis=1)  # (H,)
+    li, lc = np.nonzero(W > 0)  # (L,) the links, misses included: the only moves of weight
+    L = len(li)
     grow = np.arange(H)
-    if H * n * k > EXPAND_MAX:  # expand the heaviest only
-        grow = np.argsort(-logw, kind="stable")[:max(1, EXPAND_MAX // (n * k))]
+    if H * L > EXPAND_MAX:  # expand the heaviest only
+        grow = np.argsort(-logw, kind="stable")[:max(1, EXPAND_MAX // L)]
     G = len(grow)  # tracks of each expanded hypothesis on each choice:
     occ = np.bincount((T[grow] + (np.arange(G) * k)[:, None]).ravel(),
                       minlength=G * k).reshape(G, k)
-    cur = T[grow][:, :, None]  # (G, n, 1)
-    j = np.arange(k)
-    free = (j == 0) | (occ[:, None, :] - (cur == j) == 0)  # (G, n, k): track i may move to j
-    cand = logw[grow, None, None] - own[grow][:, :, None] + logW[None]
-    g, i, c = np.nonzero(free & np.isfinite(cand))
+    cur = T[grow][:, li]  # (G, L): where each link's track is now
+    free = (lc == 0) | (occ[:, lc] - (cur == lc) == 0)  # (G, L): track li may move to lc
+    g, e = np.nonzero(free)
     h = np.concatenate((grow[g], np.arange(H)))  # and each sampled hypothesis itself
-    i = np.concatenate((i, np.zeros(H, dtype=np.intp)))
-    c = np.concatenate((c, T[:, 0]))
+    i = np.concatenate((li[e], np.zeros(H, dtype=np.intp)))
+    c = np.concatenate((lc[e], T[:, 0]))
     lw = logw[h] + logW[i, c] - own[h, i]
     ckey = key[h] ^ Zc[i, T[h, i]] ^ Zc[i, c]
     keep = np.isfinite(lw)
@@ -311,10 +341,13 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     :data:`LINK_EPS` dropped, LBP over the whole problem (exact on every cluster of the
     bipartite track-measurement graph that is a tree: Williams & Lau 2014, Sec. III), then each
     cluster with a cycle (a cluster's marginals do not depend on the others) enumerated exactly
-    if it has at most ``exact_limit`` hypotheses (clusters of one shape together); larger ones
-    by the ``scalable`` method: ``"gibbs"`` (each such cluster on its own) or ``"lbp"`` (keep
-    LBP's answer). ``rng`` feeds the Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``, so
-    one input gives one answer); ``samples``: Gibbs draws per problem or cluster (None:
+    if it has at most ``exact_limit`` hypotheses (clusters of one shape together). A larger
+    one, with ``scalable="gibbs"``, loses its weakest links (:func:`drop_weak_links`, error at
+    most :data:`DROP_BUDGET`), which splits most such clusters (in benchmarks/bench_lmb.py,
+    births linked to clutter) into trees and small ones, solved as above; what stays beyond
+    ``exact_limit`` goes to :func:`marginals_gibbs`. ``scalable="lbp"`` keeps LBP's answer on
+    large clusters. ``rng`` feeds the Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``,
+    so one input gives one answer); ``samples``: Gibbs draws per problem or cluster (None:
     :func:`gibbs_sample_count`).
     """
     if method not in METHODS:
@@ -333,8 +366,42 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     if method == "lbp" or n == 0 or m == 0:
         return marginals_lbp(miss, detect, tol, max_iter)
     miss, detect = _row_scaled(miss, detect)
-    link = detect > LINK_EPS
-    detect = np.where(link, detect, 0.0)
+    detect = np.where(detect > LINK_EPS, detect, 0.0)
+    return _auto(miss, detect, exact_limit, tol, max_iter, scalable, rng, samples, DROP_BUDGET)
+
+
+SPARSE_FROM = 500
+"""Loopy clusters with at most this many dense hypotheses are enumerated densely, batched by
+shape (:func:`hypotheses` tables, cached); larger ones through their links
+(:func:`_enumerate_sparse`: at most as many hypotheses, and no table to build in Python)."""
+DROP_BUDGET = 1e-4
+""":func:`drop_weak_links`' bound on the mass of the hypotheses it removes from a cluster
+beyond ``exact_limit`` (so on any marginal of it, up to a factor ``1 / (1 - bound)``)."""
+
+
+def drop_weak_links(miss: np.ndarray, detect: np.ndarray, budget: float) -> np.ndarray:
+    """``detect (n, m)`` with its weakest links set to 0: by ``detect_ij / miss_i`` ascending,
+    while their sum stays at most ``budget``. Every hypothesis through link ``ij`` weighs
+    ``detect_ij / miss_i`` times the one with track ``i`` missed instead, so the hypotheses
+    removed carry at most that sum of the total mass. (A track with ``miss_i = 0`` keeps its
+    links.)"""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(detect > 0, detect / miss[:, None], np.inf)
+    flat = ratio.ravel()
+    order = np.argsort(flat, kind="stable")
+    cut = int(np.searchsorted(np.cumsum(flat[order]), budget, side="right"))
+    out = detect.copy().ravel()
+    out[order[:cut]] = 0.0
+    return out.reshape(detect.shape)
+
+
+def _auto(miss: np.ndarray, detect: np.ndarray, exact_limit: int, tol: float, max_iter: int,
+          scalable: str, rng: np.random.Generator, samples: int | None,
+          drop: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`marginals` ``"auto"`` on row-scaled weights whose zero links are absent; a large
+    loopy cluster is thinned by ``drop`` and solved again (``drop`` 0: Gibbs)."""
+    n, m = detect.shape
+    link = detect > 0
     p_miss, p = marginals_lbp(miss, detect, tol, max_iter)
     ti, zj = np.nonzero(link)
     if ti.size < 4:  # a cycle needs 2 tracks and 2 measurements with 4 links
@@ -351,13 +418,20 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     t_sorted, t_start = _by_cluster(tcomp, linked_t, ncomp)
     z_sorted, z_start = _by_cluster(zcomp, linked_z, ncomp)
     by_shape: dict[tuple[int, int], list[int]] = {}
+    sparse: list[int] = []
     large: list[int] = []
+    # a bound on each cluster's hypotheses of nonzero weight: prod over its tracks of 1 + links
+    logbound = np.bincount(tcomp, np.log1p(link.sum(axis=1)), ncomp)
     for c in loopy.tolist():
         a, b = int(nt[c]), int(nz[c])
-        if hypothesis_count(a, b) <= exact_limit:
+        dense = hypothesis_count(a, b)
+        bound = float(np.exp(logbound[c]))
+        if dense <= min(SPARSE_FROM, exact_limit):
             by_shape.setdefault((a, b), []).append(c)
+        elif dense <= exact_limit or (drop == 0 and bound <= exact_limit):
+            sparse.append(c)  # at most min(dense, bound) hypotheses, no table to build
         elif scalable == "gibbs":
-            large.append(c)
+            large.append(c)  # else LBP's answer stays
     for (a, b), cs in by_shape.items():
         rows = t_sorted[t_start[cs][:, None] + np.arange(a)]  # (C, a)
         cols = z_sorted[z_start[cs][:, None] + np.arange(b)]  # (C, b)
@@ -365,10 +439,20 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
                             hypotheses(a, b))
         p_miss[rows] = pm
         p[rows[:, :, None], cols[:, None, :]] = pd
-    for c in large:  # rare (a cluster beyond exact_limit): one Gibbs run each
+    for c in sparse:
         rows = t_sorted[t_start[c]:t_start[c] + nt[c]]
         cols = z_sorted[z_start[c]:z_start[c] + nz[c]]
-        pm, pd = marginals_gibbs(miss[rows], detect[np.ix_(rows, cols)], rng, samples)
+        p_miss[rows], p[np.ix_(rows, cols)] = _enumerate_sparse(miss[rows],
+                                                                detect[np.ix_(rows, cols)])
+    for c in large:  # rare (a cluster beyond exact_limit): thinned, or one Gibbs run
+        rows = t_sorted[t_start[c]:t_start[c] + nt[c]]
+        cols = z_sorted[z_start[c]:z_start[c] + nz[c]]
+        sub = detect[np.ix_(rows, cols)]
+        if drop > 0:
+            pm, pd = _auto(miss[rows], drop_weak_links(miss[rows], sub, drop), exact_limit,
+                           tol, max_iter, scalable, rng, samples, 0.0)
+        else:
+            pm, pd = marginals_gibbs(miss[rows], sub, rng, samples)
         p_miss[rows] = pm
         p[np.ix_(rows, cols)] = pd
     return p_miss, p
@@ -397,6 +481,7 @@ def _by_cluster(comp: np.ndarray, linked: np.ndarray,
     return idx, np.searchsorted(comp[idx], np.arange(ncomp))
 
 
-__all__ = ["EXACT_LIMIT", "GIBBS_CHAINS", "METHODS", "SCALABLE", "best_hypothesis",
-           "gibbs_sample_count", "hypotheses", "hypothesis_count", "marginals",
-           "marginals_exact", "marginals_gibbs", "marginals_lbp"]
+__all__ = ["DROP_BUDGET", "EXACT_LIMIT", "GIBBS_CHAINS", "METHODS", "SCALABLE",
+           "best_hypothesis", "drop_weak_links", "gibbs_sample_count", "hypotheses",
+           "hypothesis_count", "marginals", "marginals_exact", "marginals_gibbs",
+           "marginals_lbp"]
