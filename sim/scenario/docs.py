@@ -33,6 +33,8 @@ from sensornet.sim.scenario.model import (
     TrafficSpec,
 )
 from sensornet.sim.scenario.options import Meta, key_of, options, required
+from sensornet.sim.scenario.seed004 import TABLES as SEED004_TABLES
+from sensornet.sim.scenario.seed004 import Seed004File
 
 SECTIONS: tuple[tuple[str, type, str], ...] = (
     ("[scenario]", Scenario, "scenario"),
@@ -71,9 +73,18 @@ TYPES = {"bool": "true/false", "int": "integer", "float": "number", "float | Non
          "tuple[tuple[str, float, float], ...]": "table of NAME = [centre, width]",
          "tuple[tuple[str, float], ...]": "table of NAME = number",
          "tuple[tuple[float, float], ...]": "list of [number, number]",
+         "tuple[int, ...]": "list of integers",
          **{c.__name__: "table" for c in (PdaTarget, PdaClutter, PdaFilters, PdaDetector,
                                          PdaFuzzy)}}
 """How a field's type is written in TOML."""
+
+SEED004_TEXT = ("`sim/scenarios/seed004.toml` (`[scenario] study = \"seed004\"`) has tables of "
+                "its own (`sim.scenario.seed004`): the network scenario is derived from them "
+                "(sensors `s1`, `s2`, ... at `sensors.positions`, linked within "
+                "`sensors.radius`; the targets at `truth.starts` for the whole run, also the "
+                "births; `sim/studies/seed004/scenario.py` `network_document`), and the offline "
+                "study reads them. Its `[network]`, `[faults]`, `[security]` and `[fusion]` are "
+                "the network scenario's own (above).")
 
 HEADER = """# Scenario files
 
@@ -120,9 +131,9 @@ def _row(key: str, f: dataclasses.Field, m: Meta) -> str:
             f"{values} | {_md(m.doc)} |")
 
 
-def _table(header: str, cls: type, prefix: str) -> list[str]:
+def _table(header: str, cls: type, prefix: str, level: str = "##") -> list[str]:
     doc = (cls.__doc__ or "").strip().splitlines()[0] if prefix == "" else ""
-    lines = [f"## `{header}`", ""]
+    lines = [f"{level} `{header}`", ""]
     if doc:
         lines += [_md(doc), ""]
     lines += ["| key | type | default | unit | values | what |",
@@ -154,6 +165,9 @@ def render() -> str:
               f"being {delays}; `partitions` is `[[start, end], ...]` in run-clock seconds. A "
               "peer's table overrides the default, a link's overrides both. Absent: "
               f"{faults.custom}.", ""]
+    lines += ["## Seed 004's file", "", SEED004_TEXT, ""]
+    for name in SEED004_TABLES:
+        lines += _table(f"[{name}]", Seed004File, name, level="###")
     return "\n".join(lines)
 
 

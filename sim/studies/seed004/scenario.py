@@ -1,23 +1,22 @@
-"""Seed 004's scenario file (its own layout: sensors on a random geometric graph, the flooding and
-consensus settings), its checks (errors are :class:`sim.scenario.ScenarioError`, one line
-naming the key), its network document for the peers, and its truth and measurements."""
+"""Seed 004's scenario as the offline study's model (:class:`Seed004`, built from the file's
+declared settings, :class:`sim.scenario.seed004.Seed004File`: errors are the scenario's one-line
+``ScenarioError``), its network document for the peers, and its truth and measurements."""
 
 from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
-from sensornet.sim.scenario import (
-    FLOOD_ESTIMATORS,
-    MAX_COORDINATE,
-    MAX_ROUNDS,
-    MAX_SENSORS,
-    ScenarioError,
+from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.scenario.seed004 import (  # noqa: F401  (VARIANTS re-exported)
+    VARIANTS,
+    Seed004File,
+    read_seed004,
 )
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.idpc import ClusterParams, polar_to_cartesian
@@ -29,46 +28,58 @@ SCENARIO = Path(__file__).parents[2] / "scenarios" / "seed004.toml"
 TUPLES_COMPONENT = 15
 """A 4-D Gaussian component: weight 1, mean 4, covariance 10 (seed 004)."""
 TUPLES_CARDINALITY = 1
-VARIANTS = ("linear", "range-bearing", "mixed")
 
 # -- scenario ---------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class Seed004:
-    """The seed-004 scenario (``sim/scenarios/seed004.toml``; every field documented there)."""
+    """The seed-004 scenario as the offline study uses it: a :class:`sim.scenario.Seed004File`
+    (every field declared and documented there) with the states and positions as arrays and
+    the clustering settings as :class:`tracking.idpc.ClusterParams`."""
 
-    seed: int = 4
-    scan_period: float = 1.0
-    num_scans: int = 60
-    region: tuple[tuple[float, float], tuple[float, float]] = ((-1000.0, 1000.0),
-                                                               (-1000.0, 1000.0))
-    variant: str = "linear"
-    truth_sigma_w: float = 0.0
-    starts: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    detection_probability: float = 0.95
-    clutter_rate: float = 10.0
-    sigma: float = 10.0
-    sigma_range: float = 10.0
-    sigma_bearing_deg: float = 0.5
-    radius: float = 800.0
-    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    sigma_w: float = 2.0
-    survival_probability: float = 0.98
-    birth_weight: float = 0.05
-    birth_cov_diag: tuple[float, ...] = (100.0, 25.0, 100.0, 25.0)
-    prune_threshold: float = 1e-5
-    merge_threshold: float = 4.0
-    max_components: int = 100
-    publish_threshold: float = 0.01
-    cardinality: str = "separate"
-    clustering: ClusterParams = ClusterParams()
-    assumed_scans: str = "held"
-    estimator: str = "idpc"
-    iterations: int = 4
-    rounds: tuple[int, ...] = (1, 2, 3, 4)
-    ospa_cutoff: float = 100.0
-    ospa_order: float = 2.0
+    seed: int
+    scan_period: float
+    num_scans: int
+    region: tuple[tuple[float, float], tuple[float, float]]
+    variant: str
+    truth_sigma_w: float
+    starts: np.ndarray
+    """(n, 4) target states at scan 1."""
+    detection_probability: float
+    clutter_rate: float
+    sigma: float
+    sigma_range: float
+    sigma_bearing_deg: float
+    radius: float
+    positions: np.ndarray
+    """(S, 2) sensor positions."""
+    sigma_w: float
+    survival_probability: float
+    birth_weight: float
+    birth_cov_diag: tuple[float, ...]
+    prune_threshold: float
+    merge_threshold: float
+    max_components: int
+    publish_threshold: float
+    cardinality: str
+    clustering: ClusterParams
+    assumed_scans: str
+    estimator: str
+    iterations: int
+    rounds: tuple[int, ...]
+    ospa_cutoff: float
+    ospa_order: float
+
+    @classmethod
+    def of(cls, f: Seed004File) -> Seed004:
+        """The model of the file's settings ``f``."""
+        same = {k.name: getattr(f, k.name) for k in fields(cls)
+                if k.name not in ("starts", "positions", "clustering")}
+        return cls(**same, starts=np.asarray(f.starts, dtype=float).reshape(-1, 4),
+                   positions=np.asarray(f.positions, dtype=float).reshape(-1, 2),
+                   clustering=ClusterParams(f.cutoff, f.zeta, f.radius_factor, f.split_factor,
+                                            detection_probability=f.detection_probability))
 
     @property
     def adjacency(self) -> np.ndarray:
@@ -117,25 +128,6 @@ class Seed004:
         return Reducer(self.prune_threshold, self.merge_threshold, self.max_components)
 
 
-_KEYS = {
-    "scenario": {"name": None, "study": None, "seed": "seed", "scan_period": "scan_period",
-                 "num_scans": "num_scans", "region": "region", "variant": "variant"},
-    "truth": {"sigma_w": "truth_sigma_w", "starts": "starts"},
-    "sensors": {"detection_probability": "detection_probability",
-                "clutter_rate": "clutter_rate", "sigma": "sigma", "sigma_range": "sigma_range",
-                "sigma_bearing_deg": "sigma_bearing_deg", "radius": "radius",
-                "positions": "positions"},
-    "filter": {k: k for k in ("sigma_w", "survival_probability", "birth_weight",
-                              "birth_cov_diag", "prune_threshold", "merge_threshold",
-                              "max_components", "publish_threshold", "cardinality")},
-    "clustering": {k: k for k in ("cutoff", "zeta", "radius_factor", "split_factor")},
-    "flooding": {"iterations": "iterations", "assumed_scans": "assumed_scans",
-                 "estimator": "estimator"},
-    "consensus": {"rounds": "rounds"},
-    "metrics": {"ospa_cutoff": "ospa_cutoff", "ospa_order": "ospa_order"},
-}
-
-
 def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = ()) -> Seed004:
     """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values) or
     ``{"TABLE.KEY": value}`` (already parsed)."""
@@ -156,70 +148,12 @@ def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = (
 
 
 def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
-    """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers)."""
-    kw: dict = {}
-    cluster: dict = {}
-    for table, values in doc.items():
-        if table == "network":
-            continue  # the peers' settings (network_document)
-        if table not in _KEYS:
-            raise ScenarioError(f"{path}: unknown table [{table}]")
-        for k, v in values.items():
-            if k not in _KEYS[table]:
-                raise ScenarioError(f"{path}: unknown key {table}.{k}")
-            if table == "clustering":
-                cluster[k] = float(v)
-            elif _KEYS[table][k] is not None:
-                kw[_KEYS[table][k]] = v
-    for k in ("starts", "positions"):
-        if k in kw:
-            kw[k] = np.asarray(kw[k], dtype=float)
-    for k in ("region", "birth_cov_diag", "rounds"):
-        if k in kw:
-            kw[k] = tuple(tuple(r) if isinstance(r, list) else r for r in kw[k])
-    scn = Seed004(**kw)
-    _check_sizes(scn, path)
-    if scn.assumed_scans not in ("held", "all"):
-        raise ScenarioError(f"{path}: flooding.assumed_scans {scn.assumed_scans!r}: "
-                            f"expected 'held' or 'all'")
-    if scn.estimator not in FLOOD_ESTIMATORS:
-        raise ScenarioError(f"{path}: flooding.estimator {scn.estimator!r}: expected one of "
-                            f"{', '.join(map(repr, FLOOD_ESTIMATORS))}")
-    if scn.variant not in VARIANTS:
-        raise ScenarioError(f"{path}: scenario.variant {scn.variant!r}: expected {VARIANTS}")
-    scn = replace(scn, clustering=ClusterParams(**cluster, detection_probability=float(
-        scn.detection_probability)))
+    """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers),
+    read as declared (:func:`sim.scenario.seed004.read_seed004`); the graph must be connected."""
+    scn = Seed004.of(read_seed004({k: v for k, v in doc.items() if k != "network"}, str(path)))
     if not np.isfinite(scn.hops).all():
         raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
     return scn
-
-
-def _check_sizes(scn: Seed004, path: str | Path) -> None:
-    """The bounds of ``sim.scenario`` (MAX_SENSORS, MAX_ROUNDS, MAX_COORDINATE), checked
-    before anything is built from the sizes (the graph is sensors x sensors)."""
-    n = len(scn.positions)
-    if scn.positions.ndim != 2 or scn.positions.shape[1] != 2:
-        raise ScenarioError(f"{path}: sensors.positions must be a list of [x, y] pairs")
-    if n > MAX_SENSORS:
-        raise ScenarioError(f"{path}: sensors.positions lists {n:,} sensors, over the limit "
-                            f"of {MAX_SENSORS}")
-    rounds = [scn.iterations, *scn.rounds]
-    if not all(isinstance(r, int) and 1 <= r <= MAX_ROUNDS for r in rounds):
-        raise ScenarioError(f"{path}: flooding.iterations and consensus.rounds must be "
-                            f"integers in 1..{MAX_ROUNDS}, got {scn.iterations!r} and "
-                            f"{list(scn.rounds)!r}")
-    try:
-        region = np.asarray(scn.region, dtype=float).reshape(2, 2)
-        coords = np.concatenate([region.ravel(), scn.positions.ravel()])
-    except (TypeError, ValueError):
-        raise ScenarioError(f"{path}: scenario.region must be [[xmin, xmax], [ymin, ymax]] "
-                            f"(m)") from None
-    if not (region[:, 0] < region[:, 1]).all():
-        raise ScenarioError(f"{path}: scenario.region must have xmin < xmax and ymin < ymax "
-                            f"(a non-empty area)")
-    if not (np.isfinite(coords).all() and (np.abs(coords) <= MAX_COORDINATE).all()):
-        raise ScenarioError(f"{path}: scenario.region and sensors.positions must be finite "
-                            f"and within +-{MAX_COORDINATE:g} m")
 
 
 def network_document(doc: dict, label: str = "seed004.toml") -> dict:
