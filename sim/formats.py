@@ -1,6 +1,10 @@
-"""Scenario files in a study's own format (``[scenario] study = "NAME"``): the adapters that turn
-one into the network scenario's document, by study name. Adding a format is one function and
-one line in :data:`FORMATS`; the loader (:mod:`sim.scenario`) never names a study."""
+"""Scenario files in a study's own layout (``[scenario] study = "NAME"``): a study file states
+the study's parameters and the network scenario is derived from them (seed 003: the sensors'
+clutter rates and the region from its clutter settings, its tables as the typed ``[pda]``
+sections; seed 004: sensors and a graph from positions and a radius, targets and births from
+the start states, its keys declared in :mod:`sim.scenario.seed004`). This is the registry of
+those derivations by study name; adding one is a function and a line in :data:`FORMATS`, and
+the loader (:mod:`sim.scenario`) never names a study."""
 
 from __future__ import annotations
 
