@@ -25,7 +25,7 @@ import numpy as np
 from sensornet.peers.estimators import SingleTargetConfig
 from sensornet.sim.report.report_plots import methods as methods_of
 from sensornet.sim.report.report_plots import plt_module
-from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.scenario import ScenarioError, load_scenario
 from sensornet.sim.studies import command
 from sensornet.sim.studies.base import Cell, Outcome, Request, Study
 from sensornet.sim.studies.seed001 import montecarlo as s1
@@ -39,8 +39,8 @@ Setup = tuple  # (Seed001Scenario, ExperimentConfig)
 
 
 def setup(source: str, overrides: Mapping[str, Any]) -> Setup:
-    """``(Seed001Scenario, ExperimentConfig)`` from :data:`KEYS`; ``ValueError`` naming the
-    key for anything else."""
+    """``(Seed001Scenario, ExperimentConfig)`` from :data:`KEYS` (the target: seed001.toml's
+    ``[manoeuvre]``); ``ValueError`` naming the key for anything else."""
     unknown = sorted(set(overrides) - set(KEYS))
     if unknown:
         raise ValueError(f"seed001 runner: unknown key(s) {unknown} (known: {', '.join(KEYS)})")
@@ -49,7 +49,9 @@ def setup(source: str, overrides: Mapping[str, Any]) -> Setup:
     if geometry not in s1.GEOMETRIES:
         raise ValueError(f"seed001 runner: geometry must be one of {sorted(s1.GEOMETRIES)}, "
                          f"got {geometry!r}")
-    scn = s1.Seed001Scenario(geometry=geometry, seed=int(o.get("seed", 1)))
+    # the target of the shipped scenario's [manoeuvre] (the peers' too), the cell's radars
+    scn = replace(s1.Seed001Scenario.of(load_scenario("seed001")), geometry=geometry,
+                  seed=int(o.get("seed", 1)))
     cfg = s1.ExperimentConfig()
     if "particles" in o or "jitter" in o or "jitter_kind" in o:
         cfg = replace(cfg, particle=replace(
