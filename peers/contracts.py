@@ -142,6 +142,10 @@ class EstimatorHooks(_Hooks):
     """Takes a :class:`tracking.labels.LabelMatch` (own label -> the network's winner)."""
     adopt_labels: Callable[[np.ndarray], None] = _nothing
     """The labels of the fused density ``adopt`` just took (feedback)."""
+    point_tracks: Any = None
+    """A :class:`peers.point_ids.PointIds` (a kind without labels, ``origin`` None): ids for
+    its extracted points by frame-to-frame association, filled into its published tracks and
+    results by the core."""
 
 
 @dataclass(frozen=True)

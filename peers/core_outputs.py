@@ -32,6 +32,8 @@ class CoreOutputs:
                 out.append(Publish("estimate", m.k, encode(m), m))
                 self.sent_bytes["estimate"] += len(out[-1].payload)
             elif isinstance(m, Tracks):
+                ids = self.consensus.hooks.point_tracks  # a kind without labels: point ids
+                m = m if ids is None or self.consensus.labelled else ids.tracks(m)
                 out.append(Publish("tracks", m.k, encode(m), m))
                 self.sent_bytes["tracks"] += len(out[-1].payload)
                 out.append(self._scan_cost(m.k))
@@ -60,7 +62,10 @@ class CoreOutputs:
             if k == c.last_k and c.last_local is not None:
                 t = c.local_tracks()  # a labelled kind's: the same states, with ids
                 if t is None:
-                    self.scorer.output("local", k, self.estimator.extract(c.last_local))
+                    states = self.estimator.extract(c.last_local)
+                    ids = c.hooks.point_tracks  # a kind without labels: point ids
+                    self.scorer.output("local", k, states,
+                                       *(() if ids is None else ids.local_ids(k, states)))
                 else:
                     self.scorer.output("local", k, t.states, t.ids, t.status)
         self._pending_local.clear()

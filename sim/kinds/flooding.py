@@ -5,6 +5,7 @@ the iterated-corrector GM-PHD (IC) (``[clustering]`` table)."""
 from __future__ import annotations
 
 import zlib
+from dataclasses import replace
 
 import numpy as np
 from sensornet.peers.flood_parts import ScanBound, poisson_bound
@@ -15,6 +16,8 @@ from sensornet.peers.flooding import (
     IcFloodFuser,
     corrector_order,
 )
+from sensornet.peers.labelling import origin_of
+from sensornet.peers.point_ids import EXTRACTED, PointIds
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import FUSION_RULES, Scenario
 from sensornet.sim.world.build import adjacency, make_filter, measurement_box, sensor_model
@@ -39,6 +42,14 @@ def scan_bounds(scn: Scenario) -> dict[str, ScanBound]:
 
 
 def build(scn: Scenario, name: str, run: int = 0):
+    est, fuser = _parts(scn, name, run)
+    # every peer holding the same scans computes the same points: one network origin (0)
+    est.point_tracks = PointIds(origin_of(scn.sensor_names, name),
+                                replace(EXTRACTED, fused_origin=0), est.position_index)
+    return est, fuser
+
+
+def _parts(scn: Scenario, name: str, run: int):
     net, c = scn.network, scn.clustering
     bounds = scan_bounds(scn)
     if c.estimator == "ic":  # the iterated-corrector GM-PHD over the pooled scans

@@ -8,6 +8,8 @@ import zlib
 import numpy as np
 from sensornet.peers.estimators import ImmEstimator, SingleTargetConfig
 from sensornet.peers.fusers import ImmFuser, NoFuser
+from sensornet.peers.labelling import origin_of
+from sensornet.peers.point_ids import PointIds, single_target
 from sensornet.sim.kinds import PeerKind, View
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world import initial_state
@@ -25,6 +27,8 @@ def _builder(filter_name: str):
         rng_local, rng_fused = rng.spawn(2)
         est = ImmEstimator(filter_name, cfg.imm, cfg.particle, sensor_model(scn.sensor(name)),
                            m0, cov, rng_local, cfg.cov_floor, with_prediction=rule == "ratio")
+        est.point_tracks = PointIds(origin_of(scn.sensor_names, name),
+                                    single_target(rule != "none"), est.position_index)
         if rule == "none":
             return est, NoFuser()
         return est, ImmFuser(rule, est, m0, cov, rng_fused, cfg.gci_omega, cfg.ratio)

@@ -7,7 +7,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from sensornet.peers.labelling import origin_of
 from sensornet.peers.pda_parts import CiFuser, PdaEstimator, SequentialFuser, SequentialPdaEstimator
+from sensornet.peers.point_ids import PointIds, single_target
 from sensornet.sim.kinds import PeerKind, View
 from sensornet.sim.kinds.pda_filters import initial_state, make_filter
 from sensornet.sim.scenario import FUSION_RULES, Scenario, pda_tables
@@ -55,7 +57,11 @@ def make_parts(cfg: Mapping, name: str, mode: str, run: int = 0, *, method: str 
 
 def build(scn: Scenario, name: str, run: int = 0):
     p = scn.pda
-    return make_parts(pda_tables(scn), name, p.mode, run, method=p.method, pregate=p.pregate)
+    est, fuser = make_parts(pda_tables(scn), name, p.mode, run, method=p.method,
+                            pregate=p.pregate)
+    est.point_tracks = PointIds(origin_of(scn.sensor_names, name), single_target(True),
+                                est.position_index)
+    return est, fuser
 
 
 def check(scn: Scenario):
