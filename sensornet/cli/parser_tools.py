@@ -89,6 +89,18 @@ def add_play(sub) -> None:
     pl.add_argument("--network", help="put the keys under this network's name instead")
     pl.add_argument("--delay", type=float, default=0.0, metavar="S",
                     help="seconds to wait after opening (for subscribers to link)")
+    pl.add_argument("--only", choices=("world", "peers"),
+                    help="play only the world's part (scans, truth, control, its alive token: "
+                         "fresh peers compute their own tracks) or only the peers' (default: "
+                         "everything)")
+    pl.add_argument("--keys", action="append", metavar="EXPR",
+                    help="play only keys a Zenoh key expression includes, e.g. "
+                         "'sensornet/*/scan/**' (repeatable)")
+    pl.add_argument("--peers", metavar="NAMES",
+                    help="as the world: wait until these peers (comma-separated) are ready "
+                         "before the first message, and count the pace from it")
+    pl.add_argument("--wait", type=float, default=60.0, metavar="S",
+                    help="seconds to wait for the --peers (default 60)")
 
 
 def add_view(sub) -> None:

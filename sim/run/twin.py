@@ -141,7 +141,7 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
              peers: dict[str, PeerCore] | None = None,
              faults: FaultInjector | None = None, network: str = "twin",
              inject: Iterable[Inject] = (), events: Iterable[Liveliness] = (),
-             data=None, batch: bool = False) -> TwinResult:
+             data=None, batch: bool = False, world: list[tuple] | None = None) -> TwinResult:
     """One run of the scenario's network on the virtual clock.
 
     Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
@@ -152,9 +152,12 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     ``batch``: as the peers of one host (:mod:`peers.batching`), the consensus rounds that
     become ready at one virtual instant are fused together once every event of that instant
     has been handled (the same fused numbers; what a completed round publishes then goes out
-    at that instant, as events after it).
+    at that instant, as events after it). ``world``: the world's events ``(t, kind, target,
+    *payload)`` (as :func:`world_events` gives them) instead of the scenario's, e.g. a bag's
+    (:mod:`sensornet.bag_twin`); ``inject`` and ``events`` are then ignored.
     """
-    truth, scans = data if data is not None else generate_run(scn, run)
+    truth, scans = (data if data is not None else (None, None) if world is not None
+                    else generate_run(scn, run))
     names = scn.sensor_names
     keys = Keys(network)
     peers = peers if peers is not None else {
@@ -167,8 +170,9 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     clock = _Clock(peers=peers, keys=keys, listeners=listeners, faults=faults,
                    link_delay=delay or no_delay,
                    result=TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults))
-    for t, kind, target, *payload in world_events(scn, truth, scans, keys, interval, inject,
-                                                  events):
+    if world is None:
+        world = world_events(scn, truth, scans, keys, interval, inject, events)
+    for t, kind, target, *payload in world:
         clock.push(t, kind, target, *payload)
     clock.run(names, FusionBatch() if batch else None)
     return clock.result

@@ -1,0 +1,164 @@
+"""``sensornet play`` of a part of a bag (issue 35 item 3): the world's part (``--only world``)
+selected, played after the peers are ready (``--peers``), and fresh peers fed only from it
+compute the recorded run's fused tracks: bit for bit on the twin (a twin run written as
+``sensornet record`` would have, :mod:`sensornet.bag_twin`)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from sensornet.protocol.codec import decode
+from sensornet.protocol.messages import Scan, Tracks
+from sensornet.sim.scenario import load_scenario, parse_overrides
+
+from sensornet.bag import Item, is_world, play, read_bag, select
+from sensornet.bag_twin import bag_events, play_twin, twin_bag
+
+SETS = ["scenario.num_scans=15"]
+
+
+@pytest.fixture(scope="module")
+def twin_recording(tmp_path_factory):
+    """A 15-scan seed-000 twin run and the bag of everything its network carried."""
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    path = tmp_path_factory.mktemp("bag") / "twin.mcap"
+    result = twin_bag(path, scn)
+    meta, items = read_bag(path)
+    return scn, result, meta, items
+
+
+def _recorded_tracks(items: list[Item], peer: str) -> dict[int, np.ndarray]:
+    """A peer's fused tracks as the bag holds them (its ``tracks/<peer>`` messages)."""
+    out = {}
+    for it in items:
+        if it.alive is None and it.key.endswith(f"/tracks/{peer}"):
+            msg = decode(it.payload)
+            assert isinstance(msg, Tracks)
+            out[msg.k] = msg.states
+    return out
+
+
+def test_the_world_part_is_what_the_world_published(twin_recording):
+    _, _, _, items = twin_recording
+    world, peers = select(items, "world"), select(items, "peers")
+    assert len(world) + len(peers) == len(items)
+    chans = {it.key.split("/")[2] for it in world if it.alive is None}
+    assert chans == {"scan", "truth", "ctl"}
+    assert {it.key for it in world if it.alive is not None} == {"sensornet/twin/alive/world"}
+    assert {it.key.split("/")[2] for it in peers} == {"estimate", "tracks", "alive", "ready"}
+    assert not any(is_world(it) for it in peers)
+    scans = select(items, keys=["sensornet/*/scan/**"])
+    assert len(scans) == 3 * 15 and all(isinstance(decode(it.payload), Scan) for it in scans)
+    assert select(items, "peers", ["sensornet/twin/scan/*"]) == []
+    with pytest.raises(ValueError, match="one of world, peers"):
+        select(items, "truths")
+    with pytest.raises(ValueError, match="not a Zenoh key expression"):
+        select(items, keys=["sensornet//scan"])
+
+
+def test_fresh_peers_fed_the_bags_world_give_its_fused_tracks_bit_for_bit(twin_recording):
+    scn, result, _, items = twin_recording
+    played = play_twin(select(items, "world"), scn)
+    for n in scn.sensor_names:
+        recorded = _recorded_tracks(items, n)
+        assert sorted(recorded) == list(range(1, scn.num_scans + 1)), n
+        assert sorted(played.tracks[n]) == sorted(recorded), n
+        for k, x in recorded.items():
+            assert np.array_equal(played.tracks[n][k], x), (n, k)
+            assert np.array_equal(result.tracks[n][k], x), (n, k)
+        assert played.peers[n].snapshot()["scans"] == scn.num_scans
+        assert played.peers[n].mean_ospa("fused") == result.peers[n].mean_ospa("fused")
+        assert played.stops[n] == result.stops[n]
+
+
+def test_a_scan_missing_from_the_bag_changes_the_tracks(twin_recording):
+    """The check can fail: without s1's scan 5 the played peers' tracks differ."""
+    scn, _, _, items = twin_recording
+    world = [it for it in select(items, "world") if not it.key.endswith("/scan/s1")
+             or decode(it.payload).k != 5]
+    played = play_twin(world, scn)
+    for n in scn.sensor_names:  # s1 misses scan 5; its neighbours fuse without its estimate
+        recorded = _recorded_tracks(items, n)
+        differ = [k for k, x in recorded.items()
+                  if k in played.tracks[n] and not np.array_equal(played.tracks[n][k], x)]
+        assert differ and min(differ) <= 6, n
+    assert 5 not in played.tracks["s1"]
+    assert played.peers["s1"].snapshot()["scans"] == scn.num_scans - 1
+
+
+def test_the_twin_refuses_the_peers_part(twin_recording):
+    scn, _, _, items = twin_recording
+    with pytest.raises(ValueError, match="not the world's"):
+        bag_events(items, scn.sensor_names)
+
+
+class _Session:
+    """A session that notes what ``play`` does: ``log`` of (what, key)."""
+
+    def __init__(self) -> None:
+        self.log: list[tuple[str, str]] = []
+        session = self
+
+        class Pub:
+            def __init__(self, key):
+                self.key = key
+
+            def put(self, payload):
+                session.log.append(("put", self.key))
+
+            def undeclare(self):
+                pass
+
+        class Tok:
+            def __init__(self, key):
+                self.key = key
+
+            def undeclare(self):
+                session.log.append(("undeclare", self.key))
+
+        self._pub, self._tok = Pub, Tok
+
+    def declare_publisher(self, key, **kw):
+        self.log.append(("publisher", key))
+        return self._pub(key)
+
+    def liveliness(self):
+        session = self
+
+        class L:
+            def declare_token(self, key):
+                session.log.append(("token", key))
+                return session._tok(key)
+
+        return L()
+
+
+def test_the_gate_runs_before_the_first_message_and_the_pace_counts_from_it():
+    items = [Item(100.0, "sensornet/n/alive/world", alive=True),
+             Item(130.0, "sensornet/n/ctl", b"start"),
+             Item(131.0, "sensornet/n/scan/s1", b"k1"),
+             Item(133.0, "sensornet/n/scan/s1", b"k2"),
+             Item(134.0, "sensornet/n/alive/world", alive=False)]
+    session, now, slept = _Session(), [0.0], []
+
+    def sleep(dt):
+        slept.append(dt)
+        now[0] += dt
+
+    def gate(pubs):
+        assert session.log == [("token", "sensornet/n/alive/world"),
+                               ("publisher", "sensornet/n/ctl"),
+                               ("publisher", "sensornet/n/scan/s1")]
+        assert sorted(pubs) == [("sensornet/n/ctl", ""), ("sensornet/n/scan/s1", "")]
+        now[0] += 50.0  # the peers took their time
+
+    n = play(items, session, rate=2.0, clock=lambda: now[0], sleep=sleep, gate=gate,
+             stop=threading.Event())
+    assert n == 3
+    assert [w for w in session.log if w[0] != "publisher"] == [
+        ("token", "sensornet/n/alive/world"), ("put", "sensornet/n/ctl"),
+        ("put", "sensornet/n/scan/s1"), ("put", "sensornet/n/scan/s1"),
+        ("undeclare", "sensornet/n/alive/world")]
+    assert sum(slept) == pytest.approx((134.0 - 130.0) / 2.0)  # not the 30 s before the gate
