@@ -1,0 +1,265 @@
+"""What the network's messages look like on the live view's map and plots (issue 38):
+:class:`ViewState` turns each decoded message (scans and bundles, tracks, truth, estimates,
+each peer's :class:`protocol.messages.Telemetry`) into rows of a
+:class:`sensornet.view_columns.Batcher`. No I/O of its own: the view process
+(:mod:`sensornet.view`) feeds it what it hears, tests feed it messages.
+
+The picture is the one the peers and the world drew themselves before: per-peer colours,
+local dashed and fused solid, truth in gold, the health tabs, and a PDA peer's validation
+gates with its returns coloured by weight.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+
+import msgpack
+import numpy as np
+
+from sensornet.peers.observer import unpack_marginals
+from sensornet.peers.rerun_layout import cell_marks
+from sensornet.peers.rerun_sink import (
+    TRUTH_COLOR,
+    TrackLabels,
+    TruthPaths,
+    color_of,
+    dashed,
+    ellipses,
+    lighter,
+    north_up,
+    position_columns,
+)
+from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.codec import Rejected, decode
+from sensornet.protocol.envelope import inner, is_sealed
+from sensornet.protocol.messages import (
+    Control,
+    Estimate,
+    Forward,
+    Returns,
+    Scan,
+    Telemetry,
+    Tracks,
+    Truth,
+)
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.view_columns import Batcher
+
+TAIL = 20
+"""Scans of each peer's fused tracks kept as its trail."""
+ROOT_SCANS = "scans"
+"""The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""
+
+
+def later_round(payload: bytes) -> bool:
+    """Whether an estimate-channel message (``E``, ``F``, ``R``: ``[v, type, sender, k,
+    round, ...]``) is of a consensus round after 0, read from its head without decoding the
+    rest (a malformed one: False, the decoder says why)."""
+    try:
+        u = msgpack.Unpacker(max_buffer_size=len(payload) + 1)
+        u.feed(payload)
+        if u.read_array_header() < 5:
+            return False
+        _, _, _, _, rnd = u.unpack(), u.unpack(), u.unpack(), u.unpack(), u.unpack()
+    except Exception:  # msgpack raises several types on bad input
+        return False
+    return type(rnd) is int and rnd > 0
+
+
+def id_color(ids: np.ndarray) -> np.ndarray:
+    """One colour per track id ``(n, 3)`` -> ``(n, 3) uint8``, the same at every peer and in
+    every run: bytes of a BLAKE2 hash of the id (bright enough to see on the dark map)."""
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1, 3)
+    out = np.empty((len(ids), 3), dtype=np.uint8)
+    for i, row in enumerate(ids):
+        h = hashlib.blake2b(row.tobytes(), digest_size=3).digest()
+        out[i] = [64 + b * 191 // 255 for b in h]
+    return out
+
+
+def id_labels(ids: np.ndarray) -> list[str]:
+    """``origin.birth.index`` of each id ``(n, 3)``: one label per target, at every peer."""
+    return [f"{a}.{b}.{c}" for a, b, c in np.asarray(ids).reshape(-1, 3).tolist()]
+
+
+class ViewState:
+    """What the network's messages look like on the map and the plots: turns each decoded
+    message into rows of a :class:`Batcher` (no I/O of its own; tests feed it messages).
+
+    ``peers``: the scenario's sensor names in order (their colours); names first heard later
+    get the next colours. ``scan_period``: seconds per scan (the "sim" timeline).
+    ``sensors``: ``name -> (kind, position)`` to draw range-bearing scans where they point.
+    ``on_new_peer``: called with a peer's name and colour index the first time it is heard.
+    """
+
+    def __init__(self, batcher: Batcher, peers: Sequence[str] = (), scan_period: float = 1.0,
+                 sensors: dict | None = None, single_target: bool = False,
+                 ospa_cutoff: float | None = None,
+                 on_new_peer: Callable[[str, int], None] | None = None,
+                 label_gate: float = 100.0) -> None:
+        self.b = batcher
+        self.index = {p: i for i, p in enumerate(peers)}
+        self.scan_period = scan_period
+        self.sensors = sensors or {}
+        self.single_target = single_target
+        self.ospa_cutoff = ospa_cutoff
+        self.on_new_peer = on_new_peer
+        self.label_gate = label_gate
+        self.labels: dict[str, TrackLabels] = {}
+        self.tails: dict[str, deque] = {}
+        self.truth_paths = TruthPaths()
+        self.handled = 0
+        self.rejected = 0
+        self.skipped = 0
+        """Estimates of later consensus rounds, left undecoded (not drawn)."""
+        self.lag_ms: deque = deque(maxlen=100_000)
+        """How far behind the view runs: wall time from a peer publishing its tracks to the
+        view handling them (ms; same clock on one machine)."""
+        self.ended = False
+        self.newest_k = 0
+
+    def color(self, name: str) -> tuple[int, int, int]:
+        i = self.index.get(name)
+        if i is None:
+            i = self.index[name] = len(self.index)
+            if self.on_new_peer is not None:
+                self.on_new_peer(name, i)
+        return color_of(i)
+
+    def _t(self, k: int) -> float:
+        self.newest_k = max(self.newest_k, k)
+        return k * self.scan_period
+
+    # -- one message ----------------------------------------------------------------------
+    def receive(self, key: str, payload: bytes) -> None:
+        """Decode and draw one message heard on ``key`` (a bad one is counted, never raised)."""
+        body = inner(payload) if is_sealed(payload) else payload
+        if "/estimate/" in key and later_round(body):  # only a peer's own (round 0) is drawn
+            self.skipped += 1
+            return
+        try:
+            if f"/{ROOT_SCANS}/" in key:
+                for sensor, entry in unpack_bundle(body).entries:
+                    self.receive(f"{key.rsplit('/', 2)[0]}/scan/{sensor}", entry)
+                return
+            msg = decode(body)
+        except Rejected:
+            self.rejected += 1
+            return
+        self.handled += 1
+        self.message(msg)
+
+    def message(self, msg) -> None:
+        if isinstance(msg, Tracks):
+            self.tracks(msg)
+        elif isinstance(msg, Telemetry):
+            self.telemetry(msg)
+        elif isinstance(msg, Estimate):
+            if msg.round == 0 and msg.kind == "posterior":  # the peer's own local estimate
+                self.mixture(f"peers/{msg.sender}", "local", msg.k, msg.mixture,
+                             self.color(msg.sender))
+        elif isinstance(msg, Forward | Returns):
+            if msg.round == 0:  # flooding / measurement sharing: the own scan's points
+                if isinstance(msg, Returns):
+                    z = msg.z
+                else:
+                    z = msg.scans.scans.get(msg.sender, np.zeros((0, 2)))
+                self.b.points(f"peers/{msg.sender}/local", msg.k, self._t(msg.k), z,
+                              lighter(self.color(msg.sender)), 2.0)
+        elif isinstance(msg, Scan):
+            self.scan(msg)
+        elif isinstance(msg, Truth):
+            self.truth(msg)
+        elif isinstance(msg, Control) and msg.command == "end":
+            self.ended = True
+
+    def scan(self, msg: Scan) -> None:
+        z = np.asarray(msg.z, float).reshape(-1, 2)
+        kind, pos = self.sensors.get(msg.sensor, ("", None))
+        if kind == "range-bearing" and len(z) and pos is not None:  # shown where they point
+            z = np.asarray(pos) + z[:, :1] * np.column_stack([np.cos(z[:, 1]), np.sin(z[:, 1])])
+        self.b.points(f"world/scans/{msg.sensor}", msg.k, self._t(msg.k), z,
+                      self.color(msg.sensor), 2.0)
+
+    def truth(self, msg: Truth) -> None:
+        k, t = msg.k, self._t(msg.k)
+        X = np.asarray(msg.states, float)
+        xy = X[:, position_columns(X.shape[1])] if len(X) else np.zeros((0, 2))
+        self.b.points("world/truth", k, t, xy, TRUTH_COLOR, 6.0,
+                      labels=[str(i) for i in np.asarray(msg.ids).tolist()])
+        self.truth_paths.add(msg.ids, xy)
+        self.b.strips("world/truth/paths", k, t, self.truth_paths.strips(), TRUTH_COLOR, 1.5)
+        self.b.scalar("metrics/cardinality/truth", k, t, len(X))
+        if self.ospa_cutoff is not None:
+            self.b.scalar("metrics/ospa/cutoff", k, t, self.ospa_cutoff)
+        if self.single_target and len(xy):
+            self.b.translation("follow", k, t, xy[0])
+
+    def tracks(self, msg: Tracks) -> None:
+        if msg.send_time:
+            self.lag_ms.append(1e3 * (time.time() - msg.send_time))
+        n, k, t = msg.sender, msg.k, self._t(msg.k)
+        color = self.color(n)
+        X = np.asarray(msg.states, float)
+        xy = X[:, position_columns(X.shape[1])] if len(X) else np.zeros((0, 2))
+        if msg.ids is not None:  # labelled tracks: one colour and label per id, everywhere
+            colors, labels = id_color(msg.ids), id_labels(msg.ids)
+        else:  # display numbers by association (for the eye, not scored)
+            gate = self.labels.setdefault(n, TrackLabels(self.label_gate))
+            colors, labels = color, [f"{n}/{i}" for i in gate.assign(xy)]
+        self.b.points(f"peers/{n}/tracks", k, t, xy, colors, 5.0, labels=labels)
+        tail = self.tails.setdefault(n, deque(maxlen=TAIL))
+        tail.append(xy)
+        self.b.points(f"peers/{n}/tail", k, t, np.concatenate(list(tail)), color, 1.5)
+        self.b.scalar(f"metrics/cardinality/{n}/fused", k, t, len(X))
+        if msg.covs is not None and len(X):  # the tracks' own 2-sigma ellipses
+            self.b.strips(f"peers/{n}/tracks/ellipses", k, t,
+                          ellipses(X, np.asarray(msg.covs, float)), color, 1.0)
+
+    def telemetry(self, msg: Telemetry) -> None:
+        n, k, t = msg.sender, msg.k, self._t(msg.k)
+        color = self.color(n)
+        for name, value in msg.values.items():
+            head, _, rest = name.partition("/")
+            self.b.scalar(f"metrics/{head}/{n}/{rest}" if rest else f"metrics/{head}/{n}",
+                          k, t, value)
+        for line in msg.events:
+            level, text = ("WARN", line[5:]) if line.startswith("WARN ") else ("INFO", line)
+            self.b.text(f"peers/{n}/events", k, t, text, level)
+        for name, z in msg.points.items():
+            if name == "cells":  # coloured by cell, with the extents of the larger cells
+                labels = msg.points.get("cells/labels", np.zeros((len(z), 2)))[:, 0]
+                colors, extents, ecolors = cell_marks(z, labels.astype(np.int64))
+                self.b.points(f"peers/{n}/cells/points", k, t, z, colors, 2.5)
+                self.b.strips(f"peers/{n}/cells/extents", k, t, extents,
+                              np.asarray(ecolors, np.uint8).reshape(-1, 3), 1.5)
+            elif name == "local/mixture":  # the peer's local estimate (position marginals)
+                self.mixture(f"peers/{n}", "local", k, unpack_marginals(z), color)
+            elif name != "cells/labels":
+                self.b.points(f"peers/{n}/{name}", k, t, z, color,
+                              2.0 if name == "local" else 1.0)
+        if msg.mixture is not None:
+            self.mixture(f"peers/{n}", "fused", k, msg.mixture, color)
+
+    def mixture(self, base: str, which: str, k: int, mix: GaussianMixture, color) -> None:
+        """Component means (radius by weight) and 2-sigma ellipses: local dashed and lighter,
+        fused solid."""
+        t = self._t(k)
+        local = which == "local"
+        shown = lighter(color) if local else color
+        xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
+        self.b._add(f"{base}/{which}/means", "points", k, t,
+                    (north_up(xy), np.broadcast_to(np.asarray(shown, np.uint8), (len(xy), 3)),
+                     -2.0, None))
+        strips = ellipses(mix.means, mix.covs)
+        if local:
+            self.b.strips(f"{base}/{which}/ellipses", k, t, dashed(strips), shown, 1.0)
+        else:
+            self.b.strips(f"{base}/{which}/ellipses", k, t, strips, shown, 1.5)
+
+
+ROOT_SCANS = "scans"
+"""The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""
