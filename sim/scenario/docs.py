@@ -33,6 +33,7 @@ from sensornet.sim.scenario.model import (
     TrafficSpec,
 )
 from sensornet.sim.scenario.options import Meta, key_of, options, required
+from sensornet.sim.scenario.seed003 import TEXT as SEED003_TEXT
 from sensornet.sim.scenario.seed004 import TABLES as SEED004_TABLES
 from sensornet.sim.scenario.seed004 import Seed004File
 
@@ -165,6 +166,7 @@ def render() -> str:
               f"being {delays}; `partitions` is `[[start, end], ...]` in run-clock seconds. A "
               "peer's table overrides the default, a link's overrides both. Absent: "
               f"{faults.custom}.", ""]
+    lines += ["## Seed 003's file", "", SEED003_TEXT, ""]
     lines += ["## Seed 004's file", "", SEED004_TEXT, ""]
     for name in SEED004_TABLES:
         lines += _table(f"[{name}]", Seed004File, name, level="###")

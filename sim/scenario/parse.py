@@ -417,8 +417,8 @@ def _manoeuvre(t: Table) -> ManoeuvreSpec:
 def _pda(t: Table, n_sensors: int) -> PdaSpec:
     """``[pda]`` and its sub-tables (:mod:`sim.scenario.pda`); ``gate_probability`` lists one
     probability per sensor."""
-    def sub(name: str, cls: type, extra: tuple[str, ...] = ()) -> Table:
-        return Table(t.raw(name, {}), t.key(name), t.ctx, [*keys(cls), *extra])
+    def sub(name: str, cls: type) -> Table:
+        return Table(t.raw(name, {}), t.key(name), t.ctx, keys(cls))
 
     gates = ()
     if t.has("gate_probability"):
@@ -426,18 +426,26 @@ def _pda(t: Table, n_sensors: int) -> PdaSpec:
         if not all(0.0 < g <= 1.0 for g in gates):
             raise t.fail("gate_probability", f"must be probabilities in (0, 1], got "
                                              f"{brief(list(gates))}")
-    tg = sub("target", PdaTarget)
-    target = PdaTarget(**read(tg, PdaTarget), turn_scans=_turn_scans(tg))
-    fi = sub("filters", PdaFilters)
-    filters = PdaFilters(**read(fi, PdaFilters), transition=_stochastic(fi),
-                         initial_probs=_probabilities(fi, "initial_probs", (0.9, 0.1)),
-                         init_sigma=_nonnegative(fi, "init_sigma", 3, (100.0, 50.0, 5.0)))
-    fz = sub("fuzzy", PdaFuzzy)
-    return PdaSpec(**read(t, PdaSpec), gate_probability=gates, target=target,
-                   clutter=PdaClutter(**read(sub("clutter", PdaClutter), PdaClutter)),
-                   filters=filters,
-                   detector=PdaDetector(**read(sub("detector", PdaDetector), PdaDetector)),
-                   fuzzy=_fuzzy(fz))
+    return pda_parts(read(t, PdaSpec), gates, sub("target", PdaTarget),
+                     sub("clutter", PdaClutter), sub("filters", PdaFilters),
+                     sub("detector", PdaDetector), sub("fuzzy", PdaFuzzy))
+
+
+def pda_parts(values: dict[str, Any], gates: tuple[float, ...], target: Table, clutter: Table,
+              filters: Table, detector: Table, fuzzy: Table) -> PdaSpec:
+    """A :class:`PdaSpec` of ``values`` (its own options), the sensors' gate probabilities and
+    the tables of its sections, each read as declared (also seed 003's file, whose tables
+    have the sections' keys: :mod:`sim.scenario.seed003`)."""
+    fi = filters
+    return PdaSpec(**values, gate_probability=gates,
+                   target=PdaTarget(**read(target, PdaTarget), turn_scans=_turn_scans(target)),
+                   clutter=PdaClutter(**read(clutter, PdaClutter)),
+                   filters=PdaFilters(**read(fi, PdaFilters), transition=_stochastic(fi),
+                                      initial_probs=_probabilities(fi, "initial_probs",
+                                                                   (0.9, 0.1)),
+                                      init_sigma=_nonnegative(fi, "init_sigma", 3,
+                                                              (100.0, 50.0, 5.0))),
+                   detector=PdaDetector(**read(detector, PdaDetector)), fuzzy=_fuzzy(fuzzy))
 
 
 def _turn_scans(t: Table) -> tuple[int, int]:

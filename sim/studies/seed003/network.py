@@ -49,6 +49,7 @@ from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import Scenario, ScenarioError, apply_overrides, load_document
+from sensornet.sim.scenario.seed003 import read_seed003
 from sensornet.sim.studies.seed003 import montecarlo as seed003
 from sensornet.sim.world import Truth
 from sensornet.sim.world.build import fault_injector
@@ -111,9 +112,7 @@ def network_document(doc: dict, label: str = "seed003.toml") -> dict:
     ``[security]`` are taken as they are."""
     passed = ("network", "faults", "security", "pda", "fusion")
     cfg = copy.deepcopy({k: v for k, v in doc.items() if k not in passed})
-    if bad := _unknown_keys(cfg, tomllib.loads(seed003.SCENARIO.read_text(encoding="utf-8"))):
-        raise ScenarioError(f"{label}: unknown key {bad!r} (not a seed-003 setting: "
-                            f"sim/scenarios/seed003.toml lists them)")
+    read_seed003(cfg, label)  # every key checked as declared (sim/scenario/seed003.py)
     try:
         seed003.check_sensor_names(cfg.get("sensors"), label)
         cfg.setdefault("clutter", {})["mode"] = "region"
@@ -158,26 +157,6 @@ def pda_section(cfg: Mapping) -> dict:
 
 
 # -- peers --------------------------------------------------------------------------------------
-
-
-def _unknown_keys(doc: Mapping, ref: Mapping, prefix: str = "") -> str | None:
-    """The first dotted key of ``doc`` that the shipped file ``ref`` does not have (tables
-    recursively, ``[[sensors]]`` entries against the first shipped one), or None."""
-    for key, value in doc.items():
-        here = f"{prefix}{key}"
-        if key not in ref:
-            return here
-        want = ref[key]
-        if isinstance(value, dict) and isinstance(want, dict):
-            if bad := _unknown_keys(value, want, here + "."):
-                return bad
-        elif (isinstance(value, list) and isinstance(want, list) and want
-              and isinstance(want[0], dict)):
-            for i, entry in enumerate(value):
-                if isinstance(entry, dict) and (bad := _unknown_keys(entry, want[0],
-                                                                     f"{here}[{i}].")):
-                    return bad
-    return None
 
 
 def make_core(cfg: Mapping, name: str, mode: str, run: int = 0, *, network: str = "twin",
