@@ -181,10 +181,10 @@ def marginals_lbp(miss: np.ndarray, detect: np.ndarray, tol: float = 1e-9,
 
 GIBBS_CHAINS = 32
 """Parallel Gibbs chains of :func:`marginals_gibbs` (NumPy rows, one sweep moves them all)."""
-GIBBS_PER_LINK = 20
+GIBBS_PER_LINK = 50
 """Gibbs draws per link (nonzero ``detect_ij``) of a problem, within ``[GIBBS_MIN,
 GIBBS_MAX]`` (benchmarks/bench_lmb_association.py measured the error against this)."""
-GIBBS_MIN = 500
+GIBBS_MIN = 1000
 GIBBS_MAX = 20_000
 EXPAND_MAX = 2_000_000
 """At most this many one-move neighbours (hypotheses x links) are formed; beyond it only the
@@ -374,7 +374,7 @@ SPARSE_FROM = 500
 """Loopy clusters with at most this many dense hypotheses are enumerated densely, batched by
 shape (:func:`hypotheses` tables, cached); larger ones through their links
 (:func:`_enumerate_sparse`: at most as many hypotheses, and no table to build in Python)."""
-DROP_BUDGET = 1e-4
+DROP_BUDGET = 1e-3
 """:func:`drop_weak_links`' bound on the mass of the hypotheses it removes from a cluster
 beyond ``exact_limit`` (so on any marginal of it, up to a factor ``1 / (1 - bound)``)."""
 
