@@ -87,8 +87,8 @@ class Consensus(BatchedRounds):
         """Whether the estimator labels its components (its tracks then carry ids)."""
         self.last_local_labels: np.ndarray | None = None
         self.last_fused_labels: np.ndarray | None = None
-        self.confirm_local = Confirmation(options.confirm_scans)
-        self.confirm_fused = Confirmation(options.confirm_scans)
+        self.confirm_local = Confirmation(options.confirm_scans, settle=options.confirm_settle)
+        self.confirm_fused = Confirmation(options.confirm_scans, settle=options.confirm_settle)
         """Confirmation of the local and the fused tracks' labels (tracking.labels)."""
         self._in_labels: dict[tuple[int, int, str, str], tuple[object, np.ndarray]] = {}
         """(k, round, kind, sender) -> (payload, its labels) of labelled estimates."""
@@ -123,7 +123,8 @@ class Consensus(BatchedRounds):
             self._scan.labels = labels.get("posterior")
             self._scan.local_labels = self.last_local_labels = local.density_labels
             if local.density_labels is not None:
-                self.confirm_local.observe(LabelledMixture(local.density, local.density_labels))
+                self.confirm_local.observe(LabelledMixture(local.density, local.density_labels),
+                                           k)
         self._record(k, "local", **local.info)
         if self.fusing:
             for kind in self.kinds:
@@ -384,7 +385,7 @@ class Consensus(BatchedRounds):
         if labels is None or self.hooks.extract_tracks is None:
             states = self.estimator.extract(fused)
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
-        self.confirm_fused.observe(LabelledMixture(fused, labels))
+        self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]

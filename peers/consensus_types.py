@@ -46,6 +46,10 @@ class ConsensusOptions:
     """A track's label is confirmed once a component carrying it weighed more than the
     extraction threshold in this many scans (tracking.labels.Confirmation; labelled
     estimators only)."""
+    confirm_settle: int = 0
+    """...and once it is this many scans old (its birth scan that far back), so an earlier id
+    of the same target on its way over the graph can no longer replace it: the peer's
+    eccentricity in hops (peers.labelling.settle_scans; 0: no wait)."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:

@@ -15,6 +15,7 @@ from sensornet.tracking.labels import (
     ExtractedTracks,
     LabelledMixture,
     LabelMatch,
+    Publication,
     adopt_labels,
     as_labels,
     extract_tracks,
@@ -72,6 +73,10 @@ class GmphdEstimator:
         """The first column of the labels of this peer's births; None: unlabelled."""
         self.labels = None if origin is None else np.zeros((0, 3), dtype=np.int64)
         """``(n, 3)`` int64, one label per component of :attr:`mix` (None: unlabelled)."""
+        self.publication = None if origin is None else Publication(self.origin)
+        """Which labels have been on the network: an own label is stamped ``(origin, k,
+        PUBLISHED_BASE + i)`` when first published, any label again when it returns after a
+        long gap (tracking.labels.Publication)."""
         self.k = 0
         """The scan of the last step (births are stamped with it)."""
         self._next_k: int | None = None
@@ -116,6 +121,8 @@ class GmphdEstimator:
             post, par = correct_parents(self.filter, self.filter.predict(self.mix, steps), [z])
         if self.labels is not None:
             self.labels = self._step_labels(post, par, k)
+            pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
+            self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
         self.mix, self.k = post, k
         keep = (self.mix.weights > self.level2_threshold if self.level2 and len(self.mix)
                 else None)
@@ -167,6 +174,7 @@ class GmphdEstimator:
         carries it)."""
         if self.labels is not None:
             self.labels = adopt_labels(self.labels, match)
+            self.publication.adopt(match.nbr)
 
 
 class ImmEstimator:

@@ -26,6 +26,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import shortest_path
 from sensornet.tracking.labels import LabelMatch, label_keys, match_labels, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -36,6 +38,28 @@ into a component can pass it (the pair's distance uses the sum of both covarianc
 FRESH_BASE = 1 << 32
 """Index offset of the labels a fusion creates (``(origin, k, FRESH_BASE + c)``), apart from
 the filter's births and splits of the same scan (small indices)."""
+
+
+SETTLE_MARGIN = 2
+"""Scans added to a peer's eccentricity (beyond one hop) in :func:`settle_scans`: a label is
+relayed only by peers whose own tracks carry it, and at Pd 0.9 a relay's track is sometimes
+unpublished for a scan, so a label can take more than one scan per hop. Chosen on training
+runs 100-101 of the labelled study (docs/labelled-tracking.md): the smallest margin with no
+confirmed identity switch at any peer, both kinds, Pd 0.99 and 0.9, 20 peers of degree 4."""
+
+
+def settle_scans(adjacency: np.ndarray, i: int, margin: int = SETTLE_MARGIN) -> int:
+    """Scans a label must be old before peer ``i`` confirms it (tracking.labels.Confirmation
+    ``settle``): the peer's eccentricity ``e`` in hops on the graph ``adjacency (n, n)``
+    (nonzero = link), plus ``margin`` if ``e > 1``. An earlier label published anywhere
+    reaches the peer within ``e`` scans when each hop relays it at once (the margin covers
+    relays that skip a scan; a peer linked to every other has no relay), so its confirmed ids
+    do not switch to a late arrival. Peers out of reach do not count (they cannot send a
+    label); a peer without links: 0."""
+    hops = shortest_path(csr_matrix(np.asarray(adjacency) != 0), unweighted=True, indices=i)
+    reach = hops[np.isfinite(hops)]
+    ecc = int(reach.max()) if reach.size > 1 else 0
+    return ecc + margin if ecc > 1 else ecc
 
 
 def origin_of(names: Sequence[str], name: str) -> int:
@@ -125,5 +149,5 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     return FusedLabels(labels, match, len(lost))
 
 
-__all__ = ["FRESH_BASE", "LABEL_GATE", "FusedLabels", "input_tracks", "label_fused",
-           "origin_of"]
+__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "input_tracks",
+           "label_fused", "origin_of", "settle_scans"]

@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 from sensornet.peers.consensus import Consensus, ConsensusOptions
 from sensornet.peers.core import CoreConfig, PeerCore
+from sensornet.peers.labelling import settle_scans
 from sensornet.peers.scoring import Scorer
 from sensornet.peers.trust import TrustConfig
 from sensornet.sim.kinds import kind_of
@@ -47,6 +48,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
             scn.sensor(n).detection_probability for n in [name, *(names[j] for j in nb)]),
             register=scn.fusion.trust_register, repair=scn.fusion.trust_repair)
             if scn.fusion.trust and kind.trust else None),
+        confirm_settle=settle_scans(A, i),
     )
     return replace(opts, **changes)
 
