@@ -6,7 +6,6 @@ import dataclasses
 import math
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 import pymap3d
 from sensornet.protocol.keys import check_name
@@ -26,71 +25,17 @@ from sensornet.sim.scenario.model import (
     ManoeuvreSpec,
     MetricsSpec,
     NetworkSpec,
-    PdaClutter,
-    PdaDetector,
-    PdaFilters,
-    PdaFuzzy,
     PdaSpec,
-    PdaTarget,
     Scenario,
     SensorSpec,
     TargetSpec,
     TrafficSpec,
     listing,
 )
-from sensornet.sim.scenario.options import Meta, key_of, keys, meta, options, required
-from sensornet.sim.scenario.tables import REQUIRED, Context, Table, brief
-from sensornet.tracking.fuzzy import FuzzySystem
-
-# --------------------------------------------------------------------------------------------
-# Options read from their declarations
-# --------------------------------------------------------------------------------------------
-
-
-def read(t: Table, cls: type, prefix: str = "") -> dict[str, Any]:
-    """``cls``'s options whose key is ``prefix.KEY`` (``KEY`` with no prefix), read from table
-    ``t`` as declared (:func:`sim.scenario.options.option`: type, default, choices, bounds,
-    old name); the ``custom`` ones are left to their section's code. Field name -> value."""
-    out = {}
-    for f, m in options(cls):
-        k = key_of(f)
-        if prefix:
-            if not k.startswith(prefix + "."):
-                continue
-            k = k[len(prefix) + 1:]
-        if m.custom is None and "." not in k:
-            out[f.name] = _value(t, t.renamed(m.was, k) if m.was else k, f, m)
-    return out
-
-
-def value(t: Table, cls: type, name: str) -> Any:
-    """Option ``name`` of ``cls`` read from ``t`` as declared (for a section's own code)."""
-    f = next(f for f in dataclasses.fields(cls) if f.name == name)
-    return _value(t, key_of(f).rpartition(".")[2], f, meta(f))
-
-
-def _value(t: Table, k: str, f: dataclasses.Field, m: Meta) -> Any:
-    default = REQUIRED if required(f) else f.default
-    kind = f.type
-    if kind == "float | None":
-        if not t.has(k):
-            return default
-        kind = "float"
-    if kind == "bool":
-        v = t.flag(k, default)
-    elif kind == "int":
-        v = t.integer(k, default)
-    elif kind == "float":
-        v = t.number(k, default)
-    elif kind == "str":
-        v = t.choice(k, m.values(), default) if m.choices else t.text(k, default)
-    elif kind == "tuple[float, float]":
-        return t.position(k) if t.has(k) or default is REQUIRED else default
-    else:
-        raise TypeError(f"option {t.key(k)!r} of type {kind} needs custom= and its own reader")
-    if m.check is not None and (problem := m.check.problem(v)) is not None:
-        raise t.fail(k, problem)
-    return v
+from sensornet.sim.scenario.options import keys
+from sensornet.sim.scenario.parse_study import read_manoeuvre, read_pda
+from sensornet.sim.scenario.reading import read, value
+from sensornet.sim.scenario.tables import Context, Table, brief
 
 
 def _section(top: Table, name: str, cls: type) -> Table:
@@ -141,13 +86,14 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
         scn = dataclasses.replace(scn, clustering=ClusteringSpec(
             **read(_section(top, "clustering", ClusteringSpec), ClusteringSpec)))
     if top.has("pda"):
-        scn = dataclasses.replace(scn, pda=_pda(_section(top, "pda", PdaSpec), len(sensors)))
+        scn = dataclasses.replace(scn, pda=read_pda(_section(top, "pda", PdaSpec),
+                                                        len(sensors)))
     if top.has("manoeuvre"):
         t = _section(top, "manoeuvre", ManoeuvreSpec)
         if truth != "seed001":
             raise top.fail("manoeuvre", f"is only for truth 'seed001' (scenario.truth is "
                                         f"{truth!r})")
-        scn = dataclasses.replace(scn, manoeuvre=_manoeuvre(t))
+        scn = dataclasses.replace(scn, manoeuvre=read_manoeuvre(t))
     kind = peer_kind(scn.network.filter)
     if scn.fusion.rule not in kind.rules:
         raise ctx.fail("fusion.rule", f"key 'fusion.rule' is {scn.fusion.rule!r}, which "
@@ -388,144 +334,4 @@ def _extended(t: Table) -> ExtendedSpec:
     GridSpectralPartitioner(compression=spec.compression, cell_factor=spec.cell_factor,
                             core_level=spec.core_level, rho=spec.rho, k_rule=spec.k_rule,
                             k_spread=spec.k_spread, units=spec.units)
-    return spec
-
-
-def _manoeuvre(t: Table) -> ManoeuvreSpec:
-    """``[manoeuvre]``: legs as ``[[duration, turn rate], ...]`` (durations > 0)."""
-    d = ManoeuvreSpec()
-    segments = d.segments
-    if t.has("segments"):
-        raw = t.raw("segments")
-        if not isinstance(raw, list) or not raw or not all(
-                isinstance(g, list) and len(g) == 2 for g in raw):
-            raise t.fail("segments", f"must be a list of [duration, turn rate] pairs, got "
-                                     f"{brief(raw)}")
-        segments = tuple((t._number("segments", g[0]), t._number("segments", g[1]))
-                         for g in raw)
-        if min(g[0] for g in segments) <= 0:
-            raise t.fail("segments", f"must have durations > 0, got {brief(raw)}")
-    return ManoeuvreSpec(**read(t, ManoeuvreSpec), segments=segments,
-                         init_sigma=_nonnegative(t, "init_sigma", 3, d.init_sigma))
-
-
-# --------------------------------------------------------------------------------------------
-# [pda]: seed 003's settings
-# --------------------------------------------------------------------------------------------
-
-
-def _pda(t: Table, n_sensors: int) -> PdaSpec:
-    """``[pda]`` and its sub-tables (:mod:`sim.scenario.pda`); ``gate_probability`` lists one
-    probability per sensor."""
-    def sub(name: str, cls: type) -> Table:
-        return Table(t.raw(name, {}), t.key(name), t.ctx, keys(cls))
-
-    gates = ()
-    if t.has("gate_probability"):
-        gates = t.vector("gate_probability", n_sensors)
-        if not all(0.0 < g <= 1.0 for g in gates):
-            raise t.fail("gate_probability", f"must be probabilities in (0, 1], got "
-                                             f"{brief(list(gates))}")
-    return pda_parts(read(t, PdaSpec), gates, sub("target", PdaTarget),
-                     sub("clutter", PdaClutter), sub("filters", PdaFilters),
-                     sub("detector", PdaDetector), sub("fuzzy", PdaFuzzy))
-
-
-def pda_parts(values: dict[str, Any], gates: tuple[float, ...], target: Table, clutter: Table,
-              filters: Table, detector: Table, fuzzy: Table) -> PdaSpec:
-    """A :class:`PdaSpec` of ``values`` (its own options), the sensors' gate probabilities and
-    the tables of its sections, each read as declared (also seed 003's file, whose tables
-    have the sections' keys: :mod:`sim.scenario.seed003`)."""
-    fi = filters
-    return PdaSpec(**values, gate_probability=gates,
-                   target=PdaTarget(**read(target, PdaTarget), turn_scans=_turn_scans(target)),
-                   clutter=PdaClutter(**read(clutter, PdaClutter)),
-                   filters=PdaFilters(**read(fi, PdaFilters), transition=_stochastic(fi),
-                                      initial_probs=_probabilities(fi, "initial_probs",
-                                                                   (0.9, 0.1)),
-                                      init_sigma=_nonnegative(fi, "init_sigma", 3,
-                                                              (100.0, 50.0, 5.0))),
-                   detector=PdaDetector(**read(detector, PdaDetector)), fuzzy=_fuzzy(fuzzy))
-
-
-def _turn_scans(t: Table) -> tuple[int, int]:
-    if not t.has("turn_scans"):
-        return PdaTarget().turn_scans
-    v = t.raw("turn_scans")
-    if (not isinstance(v, list) or len(v) != 2 or not all(
-            isinstance(x, int) and not isinstance(x, bool) for x in v) or not 1 <= v[0] <= v[1]):
-        raise t.fail("turn_scans", f"must be [first, last] scans with 1 <= first <= last, got "
-                                   f"{brief(v)}")
-    return v[0], v[1]
-
-
-def _probabilities(t: Table, name: str, default: tuple[float, ...]) -> tuple[float, ...]:
-    """``len(default)`` probabilities summing to 1."""
-    if not t.has(name):
-        return default
-    p = t.vector(name, len(default))
-    if min(p) < 0 or abs(sum(p) - 1.0) > 1e-9:
-        raise t.fail(name, f"must be {len(default)} probabilities summing to 1, got "
-                           f"{brief(list(p))}")
-    return p
-
-
-def _nonnegative(t: Table, name: str, n: int, default: tuple[float, ...]) -> tuple[float, ...]:
-    v = t.vector(name, n) if t.has(name) else default
-    if min(v) < 0:
-        raise t.fail(name, f"must be {n} numbers >= 0, got {brief(list(v))}")
-    return v
-
-
-def _stochastic(t: Table) -> tuple[tuple[float, ...], ...]:
-    """``transition``: a 2 x 2 Markov matrix (rows of probabilities summing to 1)."""
-    rows = t.raw("transition", None)
-    if rows is None:
-        return PdaFilters().transition
-    if not isinstance(rows, list) or len(rows) != 2:
-        raise t.fail("transition", f"must be a 2 x 2 list of lists, got {brief(rows)}")
-    out = []
-    for row in rows:
-        r = tuple(t._number("transition", x, "a matrix of numbers")
-                  for x in (row if isinstance(row, list) and len(row) == 2 else [None]))
-        if len(r) != 2 or min(r) < 0 or abs(sum(r) - 1.0) > 1e-9:
-            raise t.fail("transition", f"must have rows of 2 probabilities summing to 1, got "
-                                       f"{brief(rows)}")
-        out.append(r)
-    return tuple(out)
-
-
-def _fuzzy(t: Table) -> PdaFuzzy:
-    """``[pda.fuzzy]``: terms as ``NAME = [centre, width]`` (inputs) or ``NAME = centre``
-    (outputs), rules naming them; checked by building the fuzzy system."""
-    d = PdaFuzzy()
-    inputs = Table(t.raw("inputs", {}), t.key("inputs"), t.ctx, ["nis", "dl"])
-
-    def terms(table: Table, name: str, default):
-        raw = table.raw(name, None)
-        if raw is None:
-            return default
-        sub = Table(raw, table.key(name), t.ctx, list(raw) if isinstance(raw, dict) else [])
-        return tuple((k, *sub.vector(k, 2)) for k in raw)
-
-    rules = d.rules
-    if t.has("rules"):
-        raw = t.raw("rules")
-        if not isinstance(raw, list) or not raw or not all(
-                isinstance(r, list) and len(r) == 3 and all(isinstance(x, str) for x in r)
-                for r in raw):
-            raise t.fail("rules", f"must be a list of [nis term, D term, output term], got "
-                                  f"{brief(raw)}")
-        rules = tuple((r[0], r[1], r[2]) for r in raw)
-    outputs = d.outputs
-    if t.has("outputs"):
-        o = Table(t.raw("outputs"), t.key("outputs"), t.ctx, list(t.raw("outputs"))
-                  if isinstance(t.raw("outputs"), dict) else [])
-        outputs = tuple((k, o.number(k)) for k in o.data)
-    spec = PdaFuzzy(**read(t, PdaFuzzy), rules=rules, nis=terms(inputs, "nis", d.nis),
-                    dl=terms(inputs, "dl", d.dl), outputs=outputs)
-    try:
-        FuzzySystem.from_config(spec.config())
-    except ValueError as exc:
-        raise t.ctx.fail(t.path, f"'{t.path}': {exc}") from None
     return spec

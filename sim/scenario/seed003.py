@@ -9,7 +9,7 @@ scenario is derived from the file by :mod:`sim.studies.seed003.network`."""
 from __future__ import annotations
 
 from sensornet.sim.scenario.options import keys
-from sensornet.sim.scenario.parse import pda_parts, value
+from sensornet.sim.scenario.parse_study import pda_parts
 from sensornet.sim.scenario.pda import (
     PdaClutter,
     PdaDetector,
@@ -18,6 +18,7 @@ from sensornet.sim.scenario.pda import (
     PdaSpec,
     PdaTarget,
 )
+from sensornet.sim.scenario.reading import value
 from sensornet.sim.scenario.tables import Context, Table
 
 TABLES = ("scenario", "sensors", "clutter", "filters", "detector", "fuzzy", "metrics")

@@ -22,7 +22,7 @@ from sensornet.sim.scenario.options import (
     keys,
     option,
 )
-from sensornet.sim.scenario.parse import read
+from sensornet.sim.scenario.reading import read
 from sensornet.sim.scenario.tables import Context, Table, brief
 from sensornet.tracking.gci_product import CARDINALITY_RULES
 
