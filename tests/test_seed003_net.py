@@ -143,18 +143,21 @@ def test_unknown_mode_and_sensor_are_one_line_errors():
         seed003_net.make_core(cfg, "s9", "meas")
 
 
+SCANS = 10
+"""Scans of each mode's real run (2 scans/s): enough to hold every peer's tracks to the twin's
+scan by scan, and 5 s a mode."""
 LATE_INPUTS = 1
-"""Inputs of 20 scans that may miss their fusion deadline on a busy machine (5 %)."""
+"""Inputs of a run that may miss their fusion deadline on a busy machine (10 %)."""
 
 
 @pytest.mark.network
 def test_processes_equal_the_twin(tmp_path):
-    """World + 2 PDA peers as processes over Zenoh on loopback, 20 scans at 2 scans/s, each
+    """World + 2 PDA peers as processes over Zenoh on loopback, SCANS at 2 scans/s, each
     mode: every peer publishes a track per scan, fuses every scan with the other's input, and
     its tracks equal the twin's to 1 micrometre (the same code on the same numbers; only the
     memory layout of small matrix products may differ between processes)."""
     a = seed003_net._parser().parse_args(
-        ["run", "--run", str(RUN), "--speed", "2", "--set", "scenario.num_scans=20",
+        ["run", "--run", str(RUN), "--speed", "2", "--set", f"scenario.num_scans={SCANS}",
          "--no-rerun", "--timeout", "90"])
     cfg = seed003_net.load(seed003_net._overrides(a.set))
     for mode in seed003_net.MODES:
@@ -164,7 +167,7 @@ def test_processes_equal_the_twin(tmp_path):
         for r in rows:
             # a loaded machine may push one input past its deadline (counted): that run's
             # tracks then differ from the twin's from that scan on; otherwise they are equal
-            assert r.tracks == 20 and r.missing_inputs <= LATE_INPUTS, r
+            assert r.tracks == SCANS and r.missing_inputs <= LATE_INPUTS, r
             if r.missing_inputs == 0:
                 assert r.twin_diff <= 1e-6, r
 
