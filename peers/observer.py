@@ -28,6 +28,9 @@ POOLED_SHOWN = 400
 """Pooled scan points (flooding) sent per scan, at most (a sample)."""
 FUSED_SHOWN = 64
 """Heaviest fused components sent per scan (the view's solid ellipses)."""
+GATES_SHOWN = 8
+"""Sensors whose PDA gate a peer sends per scan, at most (a telemetry message carries at most
+16 point sets)."""
 _KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer", "trust",
                     "trust-event"})
 """Record kinds the report reads (a peer's many ``estimate`` records pass by at once)."""
@@ -168,6 +171,8 @@ class Observer:
             elif isinstance(fused, GaussianMixture):
                 self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
             view = hooks.pda_view()
+            if view is not None:  # the gates and weighted returns: no other message has them
+                self._scan(k)["points"].update(pack_gates(view))
             if view is not None and "detector" in view:
                 d, threshold = view["detector"]
                 self._set(k, "detector/D_L", d)
@@ -259,6 +264,38 @@ def unpack_marginals(points: np.ndarray) -> GaussianMixture:
     covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (r[:, 1, 0], r[:, 1, 1],
                                                                   r[:, 1, 1], r[:, 2, 0])
     return GaussianMixture.trusted(r[:, 2, 1], means, covs)
+
+
+def pack_gates(view: dict) -> dict[str, np.ndarray]:
+    """A PDA update's gates (``pda_view()``) as telemetry point sets: per sensor (2-D
+    measurements, the first :data:`GATES_SHOWN`) ``pda/<sensor>`` with rows ``zhat``,
+    ``[Sxx, Sxy]``, ``[Syy, gamma]``, then the ``m`` validated returns, then ``[weight, 0]``
+    per return; :func:`unpack_gate` inverts one."""
+    out = {}
+    for name, v in list(view.get("sensors", {}).items())[:GATES_SHOWN]:
+        S = np.asarray(v["S"], float)
+        z = np.asarray(v["returns"], float)
+        w = np.asarray(v["weights"], float).reshape(-1)
+        if S.shape != (2, 2) or len(z) != len(w):  # not a 2-D position gate: not drawn
+            continue
+        head = [np.asarray(v["zhat"], float).reshape(2), S[0], [S[1, 1], float(v["gamma"])]]
+        out[f"pda/{name}"] = np.concatenate([np.array(head), z.reshape(-1, 2),
+                                             np.column_stack([w, np.zeros(len(w))])])
+    return out
+
+
+def unpack_gate(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray,
+                                             np.ndarray]:
+    """Inverse of one :func:`pack_gates` set: ``zhat (2,)``, ``S (2, 2)``, ``gamma``, the
+    returns ``(m, 2)`` and their weights ``(m,)``."""
+    r = np.asarray(points, float).reshape(-1, 2)
+    if len(r) < 3 or (len(r) - 3) % 2:
+        raise ValueError(f"a PDA gate is 3 + 2 m rows, not {len(r)}")
+    m, gamma = (len(r) - 3) // 2, float(r[2, 1])
+    if not (np.isfinite(gamma) and gamma > 0):
+        raise ValueError(f"a PDA gate's gamma must be positive, not {gamma}")
+    S = np.array([[r[1, 0], r[1, 1]], [r[1, 1], r[2, 0]]])
+    return r[0].copy(), S, gamma, r[3:3 + m], r[3 + m:, 0]
 
 
 def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 import msgpack
 import numpy as np
 
-from sensornet.peers.observer import unpack_marginals
+from sensornet.peers.observer import unpack_gate, unpack_marginals
 from sensornet.peers.rerun_layout import cell_marks
 from sensornet.peers.rerun_sink import (
     TRUTH_COLOR,
@@ -238,11 +238,34 @@ class ViewState:
                               np.asarray(ecolors, np.uint8).reshape(-1, 3), 1.5)
             elif name == "local/mixture":  # the peer's local estimate (position marginals)
                 self.mixture(f"peers/{n}", "local", k, unpack_marginals(z), color)
+            elif name.startswith("pda/"):  # a PDA peer's validation gate of one sensor
+                self.gate(f"peers/{n}/{name}", k, z, color)
             elif name != "cells/labels":
                 self.b.points(f"peers/{n}/{name}", k, t, z, color,
                               2.0 if name == "local" else 1.0)
         if msg.mixture is not None:
             self.mixture(f"peers/{n}", "fused", k, msg.mixture, color)
+
+    def gate(self, base: str, k: int, points: np.ndarray, color) -> None:
+        """One sensor's PDA update (:func:`peers.observer.pack_gates`) as the peers drew it
+        before issue 38: the gate, the ``gamma`` ellipse about the predicted measurement in
+        the peer's colour (``<base>/gate``), and the validated returns coloured by weight,
+        blue 0 to red 1 (``<base>/returns``). A malformed one is counted, not drawn."""
+        try:
+            zhat, S, gamma, returns, weights = unpack_gate(points)
+        except ValueError:
+            self.rejected += 1
+            return
+        t = self._t(k)
+        mean = np.zeros((1, 4))
+        mean[0, [0, 2]] = zhat
+        cov = np.zeros((1, 4, 4))
+        cov[0][np.ix_([0, 2], [0, 2])] = S
+        self.b.strips(f"{base}/gate", k, t, ellipses(mean, cov, sigma=float(np.sqrt(gamma))),
+                      color, 1.5)
+        w = np.clip(weights, 0.0, 1.0)
+        colors = np.column_stack([255 * w, np.full(len(w), 40.0), 255 * (1 - w)])
+        self.b.points(f"{base}/returns", k, t, returns, colors.astype(np.uint8), 3.0)
 
     def mixture(self, base: str, which: str, k: int, mix: GaussianMixture, color) -> None:
         """Component means (radius by weight) and 2-sigma ellipses: local dashed and lighter,
