@@ -194,6 +194,12 @@ def test_best_hypothesis_is_the_heaviest_and_gibbs_survives_zero_weights():
             if w > top:
                 best, top = choice, w
         assert tuple(best_hypothesis(miss, detect).tolist()) == best
+    # three tracks with r = Pd = 1 (miss weight 0) and two measurements: one track must miss,
+    # each equally likely; auto and Gibbs give that (not 0 / 0), whatever the row scales
+    for method in ("auto", "gibbs"):
+        pm, p = marginals(np.zeros(3), np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]), method)
+        np.testing.assert_allclose(pm, 1 / 3, rtol=1e-8)
+        np.testing.assert_allclose(p, 1 / 3, rtol=1e-8)
     # r = 1, Pd = 1 and no measurement near: the miss weighs 0 and so does every detection
     pm, p = marginals_gibbs(np.array([0.0, 0.5]), np.array([[0.0, 0.0], [1.0, 2.0]]),
                             np.random.default_rng(0))

@@ -348,7 +348,8 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     ``exact_limit`` goes to :func:`marginals_gibbs`. ``scalable="lbp"`` keeps LBP's answer on
     large clusters. ``rng`` feeds the Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``,
     so one input gives one answer); ``samples``: Gibbs draws per problem or cluster (None:
-    :func:`gibbs_sample_count`).
+    :func:`gibbs_sample_count`). Auto, like LBP and Gibbs, gives a track whose miss weight is
+    0 (``r = Pd = 1``) ``1e-10`` of its largest weight.
     """
     if method not in METHODS:
         raise ValueError(f"unknown association method {method!r}; expected one of {METHODS}")
@@ -366,7 +367,8 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     if method == "lbp" or n == 0 or m == 0:
         return marginals_lbp(miss, detect, tol, max_iter)
     miss, detect = _row_scaled(miss, detect)
-    detect = np.where(detect > LINK_EPS, detect, 0.0)
+    miss = np.maximum(miss, 1e-10)  # r = Pd = 1: as LBP and Gibbs (else 0 / 0 when too few
+    detect = np.where(detect > LINK_EPS, detect, 0.0)  # measurements are left for such tracks)
     return _auto(miss, detect, exact_limit, tol, max_iter, scalable, rng, samples, DROP_BUDGET)
 
 
