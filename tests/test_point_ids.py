@@ -11,7 +11,7 @@ from sensornet.protocol.codec import decode
 from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
-from sensornet.tracking.track_metrics import TrackTable, clear_match, clear_mot
+from sensornet.sim.studies.point_ids import peer_tables, switches
 
 
 def _twin(monkeypatch, name: str, overrides: dict):
@@ -29,40 +29,6 @@ def _twin(monkeypatch, name: str, overrides: dict):
     scn = load_scenario(name, overrides)
     twin = run_twin(scn, 0)
     return scn, twin, [decode(b) for b in sent]
-
-
-def _tables(twin, peer: str, which: str) -> tuple[TrackTable, TrackTable, set]:
-    """The truth's and the peer's ``which`` tracks as track tables (ids coded to ints) from its
-    results table, after checking every row has one id and one status per track; and the
-    set of ids seen."""
-    pos = list(twin.peers[peer].consensus.estimator.position_index)
-    t = twin.peers[peer].scorer.results.table(peer)
-    code: dict = {}
-    S, Id, X, TS, TI, TX = [], [], [], [], [], []
-    for k, e, tr, ids, st, tru, tids in zip(t["scan"], t["estimate"], t["tracks"],
-                                            t["track_ids"], t["track_status"], t["truth"],
-                                            t["truth_ids"], strict=True):
-        if e != which:
-            continue
-        assert len(ids) == len(tr) == len(st) and len(tids) == len(tru), (peer, which, k)
-        assert len({tuple(i) for i in ids}) == len(ids)  # one id per track in a scan
-        for x, i in zip(tr, ids, strict=True):
-            S.append(k)
-            Id.append(code.setdefault(tuple(i), len(code)))
-            X.append(np.asarray(x)[pos])
-        TS += [k] * len(tru)
-        TI += list(tids)
-        TX += [np.asarray(x)[pos] for x in tru]
-    truth = TrackTable(np.array(TS), np.array(TI), np.array(TX, float).reshape(-1, 2))
-    est = TrackTable(np.array(S, np.int64), np.array(Id, np.int64),
-                     np.array(X, float).reshape(-1, 2))
-    return truth, est, set(code)
-
-
-def _held(twin, peer: str, which: str, gate: float) -> dict:
-    """CLEAR MOT of the peer's tracks against the truth ids (tracking.track_metrics)."""
-    truth, est, _ = _tables(twin, peer, which)
-    return clear_mot(clear_match(truth, est, gate))
 
 
 def _published_with_ids(msgs: list[Tracks], names: list[str]) -> None:
@@ -86,11 +52,11 @@ def test_single_target_peers_carry_one_id_the_network_shares(monkeypatch, case):
     for m in msgs:  # the network's id, confirmed, in every published track
         assert m.ids.tolist() == [[0, first, 0]] and m.status.tolist() == [1]
     for p in names:
-        _, _, local = _tables(twin, p, "local")
+        _, _, local = peer_tables(twin, p, "local")
         assert local == {(origin_of(names, p), first, 0)}  # the peer's own, kept all run
-        _, _, fused = _tables(twin, p, "fused")
+        _, _, fused = peer_tables(twin, p, "fused")
         assert fused == {(0, first, 0)}
-        m = _held(twin, p, "fused", scn.metrics.ospa_cutoff)
+        m = switches(twin, p, "fused", scn.metrics.ospa_cutoff)
         assert m["switches"] == 0 and m["truth_scans"] >= 60
         # every scan the track is matched to the target (within the OSPA cut-off: the
         # CI-fused PDA track strays beyond it in 7 of 100 scans) it has the one id
@@ -114,7 +80,7 @@ def test_extended_peers_hold_one_id_per_target(monkeypatch):
     _published_with_ids(msgs, names)
     assert sum(len(m.states) for m in msgs) > 500
     for p in names:
-        m = _held(twin, p, "fused", scn.metrics.ospa_cutoff)
+        m = switches(twin, p, "fused", scn.metrics.ospa_cutoff)
         assert m["truth_scans"] == 223 and len(m["per_truth"]["id"]) == 4
         assert m["switches"] == 0
         assert m["per_truth"]["continuity"].min() >= 0.95, p
@@ -128,7 +94,7 @@ def test_extended_peers_hold_one_id_per_target(monkeypatch):
                     first.setdefault(tuple(i), []).append(s)
         assert first and all(v[:2] == [0, 0] for v in first.values())
         assert all(v[2] == 1 for v in first.values() if len(v) > 2)
-        _, _, local = _tables(twin, p, "local")
+        _, _, local = peer_tables(twin, p, "local")
         assert local and all(i[0] == origin_of(names, p) for i in local)
 
 
@@ -146,6 +112,6 @@ def test_flooding_peers_hold_one_id_per_target_and_agree(monkeypatch):
         assert all(np.array_equal(x.ids, ms[0].ids) for x in ms), k
         assert all(x.ids[:, 0].tolist() == [0] * len(x.ids) for x in ms)
     for p in names[:3]:
-        m = _held(twin, p, "fused", scn.metrics.ospa_cutoff)
+        m = switches(twin, p, "fused", scn.metrics.ospa_cutoff)
         assert m["truth_scans"] == 90 and m["switches"] == 0
         assert m["per_truth"]["continuity"].min() >= 0.95, p
