@@ -29,7 +29,12 @@ from sensornet.tracking.labels import (
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity, LinearPosition
 from sensornet.tracking.reduction import Reducer
-from sensornet.tracking.track_metrics import clear_match, label_agreement
+from sensornet.tracking.track_metrics import (
+    TrackTable,
+    clear_match,
+    first_match_delay,
+    label_agreement,
+)
 
 
 def _lm(labels, weights) -> LabelledMixture:
@@ -216,3 +221,17 @@ def test_chain_peers_confirm_one_id_per_target_from_the_first_confirmed_scan(cha
                                  strict=True):
             if e == "fused":
                 assert all(k - i[1] >= settle for i, s in zip(ids, st, strict=True) if s)
+
+
+def test_first_match_delay_counts_scans_from_birth_to_the_first_match():
+    """Hand case: truth 1 from scan 1, first matched at 4 (delay 3); truth 2 from scan 2,
+    matched at once (0); truth 3 never matched (left out); an estimate far away never
+    matches."""
+    truth = TrackTable(np.array([1, 2, 3, 4, 2, 3, 3]), np.array([1, 1, 1, 1, 2, 2, 3]),
+                       np.array([[0, 0], [1, 0], [2, 0], [3, 0], [50, 0], [51, 0],
+                                 [900, 900]], float))
+    est = TrackTable(np.array([4, 2, 3, 1]), np.array([7, 8, 8, 9]),
+                     np.array([[3, 1], [50, 1], [51, 1], [-500, -500]], float))
+    assert first_match_delay(truth, est, gate=10.0).tolist() == [3.0, 0.0]
+    assert first_match_delay(truth, est, gate=10.0, scans=np.arange(1, 6)).tolist() == [3.0,
+                                                                                         0.0]

@@ -333,6 +333,22 @@ def track_report(truth: TrackTable, est: TrackTable, c: float = 200.0, p: float 
     return out
 
 
+def first_match_delay(truth: TrackTable, est: TrackTable, gate: float,
+                      scans: np.ndarray | None = None) -> np.ndarray:
+    """Track latency: per truth that some estimate ever matched (:func:`clear_match`,
+    ``gate``), the scans from its first present scan to its first matched scan, ``(q,)``
+    float (0: matched at once). With the confirmed tracks as ``est`` this is what a
+    confirmation rule costs in latency (issue 33: confirmation that waits for the label to
+    settle); truths never matched are left out (they are misses, not delays)."""
+    cl = clear_match(truth, est, gate, scans)
+    grid = _grid(truth, est, scans=scans)
+    present, matched = cl.present, cl.match >= 0  # (T, m)
+    seen = matched.any(axis=0)
+    born = grid[present.argmax(axis=0)]
+    first = grid[matched.argmax(axis=0)]
+    return (first - born)[seen].astype(float)
+
+
 def label_agreement(tables_by_peer: Mapping[object, TrackTable], truth: TrackTable,
                     gate: float, scans: np.ndarray | None = None) -> dict:
     """Share of confirmed target-scans where every peer's matched estimate carries the same id.

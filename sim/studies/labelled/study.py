@@ -15,7 +15,9 @@ own per-scan score), OSPA(2) (window 10, mean over the windows ending at each sc
 trajectory GOSPA per scan (switch cost ``gamma = c``, LP form), identity switches per 1,000
 true target-scans (CLEAR MOT, gate ``c``; mean and worst peer), all from
 :func:`tracking.track_metrics.track_report`; label agreement across peers
-(:func:`tracking.track_metrics.label_agreement`, all and confirmed tracks); tuples sent per
+(:func:`tracking.track_metrics.label_agreement`, all and confirmed tracks); the first track's
+delay (scans from a target's first scan to its first matched track, confirmed and all tracks:
+:func:`tracking.track_metrics.first_match_delay`, what confirmation costs); tuples sent per
 peer-scan (``PeerCore.cost``); CPU per peer-scan (the twin's process time over peers x scans:
 local step, fusion, codec; centralised: the filter's CPU per scan for all sensors).
 
@@ -48,7 +50,12 @@ from sensornet.sim.studies.labelled.centralised import (
 from sensornet.sim.world import Truth, generate_run
 from sensornet.sim.world.graphs import network_scenario
 from sensornet.tracking.metrics import ospa
-from sensornet.tracking.track_metrics import TrackTable, label_agreement, track_report
+from sensornet.tracking.track_metrics import (
+    TrackTable,
+    first_match_delay,
+    label_agreement,
+    track_report,
+)
 
 KINDS = ("gmphd", "lmb")
 RULES = {"hybrid": {"fusion.rule": "hybrid"}, "gci": {"fusion.rule": "gci",
@@ -58,7 +65,8 @@ CONDITIONS = ((0.99, 10.0), (0.9, 10.0))
 WINDOW = 10
 """OSPA(2) window (scans)."""
 METRICS = ("ospa", "ospa2", "tgospa", "switches", "switches_max", "switches_confirmed",
-           "switches_confirmed_max", "agreement", "agreement_confirmed", "tuples", "cpu_ms")
+           "switches_confirmed_max", "agreement", "agreement_confirmed", "delay", "delay_all",
+           "tuples", "cpu_ms")
 
 
 @dataclass(frozen=True)
@@ -151,11 +159,21 @@ def track_columns(truth: TrackTable, tables: dict[str, TrackTable], scn: Scenari
            "tgospa": float(np.mean([r["tgospa_per_scan"] for r in reps])) if with_tgospa
            else math.nan,
            "switches": float(np.mean(sw)), "switches_max": float(np.max(sw))}
+    out["delay_all"] = mean_delay(truth, tables, c, grid)
     if confirmed is not None:
         sw = [track_report(truth, t, c=c, scans=grid, with_hota=False,
                            with_tgospa=False)["switches_per_1000"] for t in confirmed.values()]
-        out.update(switches_confirmed=float(np.mean(sw)), switches_confirmed_max=float(max(sw)))
+        out.update(switches_confirmed=float(np.mean(sw)), switches_confirmed_max=float(max(sw)),
+                   delay=mean_delay(truth, confirmed, c, grid))
     return out
+
+
+def mean_delay(truth: TrackTable, tables: dict[str, TrackTable], gate: float,
+               grid: np.ndarray) -> float:
+    """Scans from a target's first scan to its first matched track, mean over every (table,
+    target) pair matched at all (:func:`tracking.track_metrics.first_match_delay`)."""
+    d = np.concatenate([first_match_delay(truth, t, gate, grid) for t in tables.values()])
+    return float(d.mean()) if d.size else math.nan
 
 
 def twin_row(scn: Scenario, run: int, which: str, with_tgospa: bool) -> dict[str, float]:
@@ -251,8 +269,9 @@ def format_markdown(summary: list[dict]) -> str:
     """The study's table (one line per graph, condition, kind, estimate and rule)."""
     head = ("| graph | Pd | kind | estimate | rule | OSPA | OSPA(2) w=10 | tGOSPA / scan | "
             "switches / 1,000 (mean, worst peer) | confirmed: switches / 1,000 (mean, worst) | "
-            "label agreement (all, confirmed) | tuples / peer-scan | CPU ms / peer-scan | runs |")
-    lines = [head, "|---|---:|---|---|---|" + "---:|" * 9]
+            "label agreement (all, confirmed) | first track, scans after birth (confirmed, all) "
+            "| tuples / peer-scan | CPU ms / peer-scan | runs |")
+    lines = [head, "|---|---:|---|---|---|" + "---:|" * 10]
     for r in summary:
         agree = ("–" if not np.isfinite(r["agreement"]) else
                  f"{100 * r['agreement']:.1f} %, {100 * r['agreement_confirmed']:.1f} %")
@@ -262,7 +281,7 @@ def format_markdown(summary: list[dict]) -> str:
             f"{_f(r['ospa'])} | {_f(r['ospa2'])} ± {_f(r['ospa2_ci'])} | {_f(r['tgospa'])} | "
             f"{_f(r['switches'])}, {_f(r['switches_max'])} | "
             f"{_f(r['switches_confirmed'])}, {_f(r['switches_confirmed_max'])} | {agree} | "
-            f"{_f(r['tuples'], 0)} | "
+            f"{_f(r['delay'], 2)}, {_f(r['delay_all'], 2)} | {_f(r['tuples'], 0)} | "
             f"{cpu} | {r['runs']} |")
     return "\n".join(lines) + "\n"
 
