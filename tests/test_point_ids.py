@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 from sensornet.peers import core_outputs
 from sensornet.peers.labelling import origin_of
+from sensornet.peers.point_ids import PointIds
 from sensornet.protocol.codec import decode
 from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
 from sensornet.sim.studies.point_ids import peer_tables, switches
+from sensornet.tracking.point_tracks import PointTrackConfig
 
 
 def _twin(monkeypatch, name: str, overrides: dict):
@@ -115,3 +117,17 @@ def test_flooding_peers_hold_one_id_per_target_and_agree(monkeypatch):
         m = switches(twin, p, "fused", scn.metrics.ospa_cutoff)
         assert m["truth_scans"] == 90 and m["switches"] == 0
         assert m["per_truth"]["continuity"].min() >= 0.95, p
+
+
+def test_point_ids_fill_only_unlabelled_tracks_and_restart_with_the_numbering():
+    ids = PointIds(3, PointTrackConfig(gate=10.0, m=2, n=2, fused_origin=0), (0, 2))
+    x = np.array([[1.0, 0.0, 2.0, 0.0], [50.0, 0.0, 60.0, 0.0]])
+    t = ids.tracks(Tracks("s", 4, x))
+    assert t.ids.tolist() == [[0, 4, 0], [0, 4, 1]] and t.status.tolist() == [0, 0]
+    again = ids.tracks(Tracks("s", 5, x[::-1]))
+    assert again.ids.tolist() == [[0, 4, 1], [0, 4, 0]] and again.status.tolist() == [1, 1]
+    own = Tracks("s", 6, x, ids=np.array([[9, 9, 9], [9, 9, 8]]))
+    assert ids.tracks(own) is own  # a labelled kind's ids are never replaced
+    assert ids.local_ids(2, x[:1])[0].tolist() == [[3, 2, 0]]  # the local origin
+    # the world restarted its numbering: a fresh tracker, births stamped anew
+    assert ids.tracks(Tracks("s", 1, x[:1])).ids.tolist() == [[0, 1, 0]]
