@@ -15,6 +15,7 @@ from sensornet.sim.scenario import load_scenario, parse_overrides
 
 from sensornet.bag import Item, is_world, play, read_bag, select
 from sensornet.bag_twin import bag_events, play_twin, twin_bag
+from sensornet.cli import main
 
 SETS = ["scenario.num_scans=15"]
 
@@ -162,3 +163,29 @@ def test_the_gate_runs_before_the_first_message_and_the_pace_counts_from_it():
         ("put", "sensornet/n/scan/s1"), ("put", "sensornet/n/scan/s1"),
         ("undeclare", "sensornet/n/alive/world")]
     assert sum(slept) == pytest.approx((134.0 - 130.0) / 2.0)  # not the 30 s before the gate
+
+
+def test_play_refuses_a_bad_selection_in_one_line(tmp_path, capsys):
+    """Refused before any session opens: exit code 2, one line naming the flag."""
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    bag = tmp_path / "twin.mcap"
+    twin_bag(bag, scn)
+    cases = [(["--keys", "sensornet//scan"], "not a Zenoh key expression"),
+             (["--keys", "sensornet/other/**"], "no messages of the selected keys"),
+             (["--peers", "s1,world"], "reserved"),
+             (["--wait", "0"], "--wait must be positive")]
+    for flags, what in cases:
+        assert main(["play", str(bag), *flags]) == 2, flags
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and what in err[0], (flags, err)
+
+
+@pytest.mark.network  # a Zenoh session (no endpoint: nothing answers)
+def test_play_says_which_peers_never_came(tmp_path, capsys):
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    bag = tmp_path / "twin.mcap"
+    twin_bag(bag, scn, network="nobodyhere")
+    assert main(["play", str(bag), "--only", "world", "--peers", "s1,s2", "--wait", "1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "once s1, s2 are ready" in err[0], err  # what it would play
+    assert err[1] == "play: peers s1, s2 not ready on network 'nobodyhere' (not within 1 s)"

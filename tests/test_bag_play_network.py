@@ -2,7 +2,8 @@
 (world and peers started by hand) recorded by ``sensornet record``, then fresh peers fed only
 by ``sensornet play --only world --peers ...`` (the world's scans, truth, control and token;
 the peers compute their own estimates): every scan processed, each peer's fused OSPA within
-the recorded run's 95 % interval, and the fused tracks of each scan compared."""
+the recorded run's 95 % interval, and the fused tracks of each scan compared (with the
+recorded run's, and with the twin's fed the same bag)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from sensornet.sim.scenario import load_scenario, parse_overrides
 
 from sensornet.api import load_run
 from sensornet.bag import read_bag, select
+from sensornet.bag_twin import play_twin
 from tests.processes import env, stop_all, wait_for
 
 pytestmark = pytest.mark.network
@@ -153,3 +155,21 @@ def test_peers_fed_from_play_give_the_recorded_runs_fused_tracks(round_trip):
             assert mean_played == pytest.approx(recorded.mean_ospa(n), abs=1e-9)
             compared += 1
     print(f"tracks compared scan by scan for {compared} of {len(NAMES)} peers")
+
+
+def test_the_twin_fed_the_same_bag_gives_the_same_tracks(round_trip):
+    """The bag's world part on the twin (sensornet.bag_twin.play_twin): where the recorded
+    peer fused every estimate in time, its fused tracks, scan by scan."""
+    rec_dir, bag, _, _ = round_trip
+    recorded = load_run(rec_dir)
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    _, items = read_bag(bag)
+    twin = play_twin(select(items, "world"), scn)
+    for n in NAMES:
+        assert sorted(twin.tracks[n]) == list(range(1, scn.num_scans + 1)), n
+        if _complete(recorded.summary(n)):
+            a = recorded.tracks(n)
+            assert all(np.allclose(a[k], twin.tracks[n][k], rtol=1e-9, atol=1e-9)
+                       and a[k].shape == twin.tracks[n][k].shape for k in a), n
+            assert twin.peers[n].mean_ospa("fused") == pytest.approx(recorded.mean_ospa(n),
+                                                                      abs=1e-9)
