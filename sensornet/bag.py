@@ -336,7 +336,7 @@ def select(items: Sequence[Item], only: str | None = None,
         try:
             exprs.append(zenoh.KeyExpr(k))
         except Exception:  # zenoh.ZError: its message spans a source path
-            raise ValueError(f"--keys {k!r}: not a Zenoh key expression (e.g. "
+            raise ValueError(f"{k!r}: not a Zenoh key expression (e.g. "
                              f"sensornet/*/scan/**)") from None
     out = []
     for it in items:
