@@ -9,6 +9,7 @@ scenario derives (sensors on a random geometric graph, the targets at the birth 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from sensornet.sim.bounds import MAX_COORDINATE, MAX_ROUNDS, MAX_SENSORS
@@ -119,10 +120,11 @@ class Seed004File:
                                check=at_least(1))
 
 
-def read_seed004(doc: dict, label: str) -> Seed004File:
+def read_seed004(doc: dict, label: str, overridden: Iterable[str] = ()) -> Seed004File:
     """The settings of seed-004 document ``doc`` (``[network]``, ``[faults]``, ``[security]``,
-    ``[fusion]`` left out by the caller), each key checked as declared."""
-    ctx = Context(label)
+    ``[fusion]`` left out by the caller), each key checked as declared; ``overridden``: the
+    dotted keys an override wrote (their errors say ``(overrides)``)."""
+    ctx = Context(label, set(overridden))
     top = Table(doc, "", ctx, TABLES)
     t = {name: Table(top.raw(name, {}), name, ctx,
                      [*keys(Seed004File, name), *(("name", "study") if name == "scenario"

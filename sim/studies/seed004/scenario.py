@@ -5,14 +5,14 @@ declared settings, :class:`sim.scenario.seed004.Seed004File`: errors are the sce
 from __future__ import annotations
 
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
-from sensornet.sim.scenario import ScenarioError
+from sensornet.sim.scenario import ScenarioError, apply_overrides, parse_overrides
 from sensornet.sim.scenario.seed004 import (  # noqa: F401  (VARIANTS re-exported)
     VARIANTS,
     Seed004File,
@@ -129,28 +129,24 @@ class Seed004:
 
 
 def load(path: Path = SCENARIO, overrides: Sequence[str] | Mapping[str, Any] = ()) -> Seed004:
-    """Read a seed-004 TOML; ``overrides`` are ``TABLE.KEY=VALUE`` strings (TOML values) or
-    ``{"TABLE.KEY": value}`` (already parsed)."""
+    """Read a seed-004 TOML; ``overrides`` are ``KEY=VALUE`` strings (the one ``--set``
+    grammar, :func:`sim.scenario.parse_overrides`) or ``{"TABLE.KEY": value}``; an error in an
+    overridden key says so."""
     try:
         doc = tomllib.loads(Path(path).read_text())
-        items = (overrides.items() if isinstance(overrides, Mapping) else
-                 ((k, v) for k, _, v in (item.partition("=") for item in overrides)))
-        for key, value in items:
-            table, dot, name = key.partition(".")
-            if not dot or not name:
-                raise ScenarioError(f"--set {key!r}: expected TABLE.KEY=VALUE")
-            if not isinstance(overrides, Mapping):
-                value = tomllib.loads(f"v = {value}")["v"]
-            doc.setdefault(table, {})[name] = value
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{path}: {e}") from None
-    return from_document(doc, path)
+    items = overrides if isinstance(overrides, Mapping) else parse_overrides(overrides)
+    return from_document(doc, path, apply_overrides(doc, items, str(path)))
 
 
-def from_document(doc: dict, path: str | Path = "seed004.toml") -> Seed004:
+def from_document(doc: dict, path: str | Path = "seed004.toml",
+                  overridden: Iterable[str] = ()) -> Seed004:
     """The scenario from a parsed seed-004 TOML document (``[network]`` is for the peers),
-    read as declared (:func:`sim.scenario.seed004.read_seed004`); the graph must be connected."""
-    scn = Seed004.of(read_seed004({k: v for k, v in doc.items() if k != "network"}, str(path)))
+    read as declared (:func:`sim.scenario.seed004.read_seed004`; ``overridden``: the dotted
+    keys overrides wrote); the graph must be connected."""
+    scn = Seed004.of(read_seed004({k: v for k, v in doc.items() if k != "network"}, str(path),
+                                  overridden))
     if not np.isfinite(scn.hops).all():
         raise ScenarioError(f"{path}: sensors.radius {scn.radius} leaves the graph disconnected")
     return scn
