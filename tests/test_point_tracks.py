@@ -93,3 +93,12 @@ def test_bad_input_is_refused_with_a_clear_error():
         PointTrackConfig(m=3, n=2)
     with pytest.raises(ValueError, match="gate"):
         PointTrackConfig(gate=0.0)
+
+
+def test_births_are_numbered_by_position_whatever_the_order_of_the_points():
+    P = np.array([[30.0, 1.0], [-5.0, 7.0], [30.0, -2.0], [12.0, 0.0]])
+    want = {(-5.0, 7.0): 0, (12.0, 0.0): 1, (30.0, -2.0): 2, (30.0, 1.0): 3}  # x, then y
+    for perm in ([0, 1, 2, 3], [3, 2, 1, 0], [2, 0, 3, 1]):
+        ids, _ = PointTracker(1).update(9, P[perm])
+        assert [int(i) for i in ids[:, 2]] == [want[tuple(p)] for p in P[perm].tolist()]
+        assert (ids[:, :2] == [1, 9]).all()

@@ -8,9 +8,10 @@ extended-target GM-PHD, flooding's density-peaks clustering) still report tracks
 (last position plus an alpha-beta velocity times the scans since, so crossing targets keep
 their ids), gated at ``gate``; a point left unassigned starts a track ``(origin, k, i)``
 (the label layout of :mod:`tracking.labels`: origin, birth scan, index among the scan's
-births). A track is confirmed after hits in ``m`` of its last ``n`` scans (the classic M-of-N
-confirmation logic, Blackman & Popoli 1999, Sec. 6.3) and stays confirmed while it lives; it
-is deleted after more than ``max_missed`` scans without a hit. Pure NumPy/SciPy: the tracker
+births ordered by x, then y: peers extracting nearly the same points number them alike). A
+track is confirmed after hits in ``m`` of its last ``n`` scans (the classic M-of-N
+confirmation logic, Blackman & Popoli 1999, Sec. 6.3) and stays confirmed while it lives; it is
+deleted after more than ``max_missed`` scans without a hit. Pure NumPy/SciPy: the tracker
 only labels the points, it never moves, adds or drops one.
 
 Arrays: ``t`` live tracks, ``n`` points of a scan; ids ``(n, 3)`` int64, status ``(n,)`` int8
@@ -109,8 +110,10 @@ class PointTracker:
                                 self.vel[ti] + cfg.beta * (P[pi] - pred[ti]) / dt[ti, None])
         self.pos[ti], self.seen[ti] = P[pi], k
         self.hits[ti] += 1
-        # unassigned points: new tracks, (origin, k, i) in point order
+        # unassigned points: new tracks, (origin, k, i) in order of x then y, so peers that
+        # extract nearly the same points number their births alike whatever the points' order
         new = np.setdiff1d(np.arange(len(P)), pi)
+        new = new[np.lexsort((P[new, 1], P[new, 0]))]
         born = np.column_stack([np.full(len(new), self.origin), np.full(len(new), k),
                                 np.arange(len(new))]).astype(np.int64)
         self.ids = np.concatenate([self.ids, born])
