@@ -6,8 +6,8 @@ carries out: the Zenoh runtime (``peers.runtime``) with sockets, clocks and file
 (``sim.run.twin``) on a virtual clock. Everything between the bytes and the outputs lives here:
 key and sender checks, decoding, every bound on what one message may cost, rejection counters
 by reason code, deadlines, departures, scoring. Its configuration (:class:`CoreConfig`)
-and output types are in ``peers.core_types``, what it reports for the summary in
-``peers.core_summary``.
+and output types are in ``peers.core_types``, its receive entry points (the one key parse and
+decode) in ``peers.core_receive``, what it reports for the summary in ``peers.core_summary``.
 
 Bounds (each rejection is counted under its reason in :meth:`snapshot`):
 
@@ -32,21 +32,21 @@ from __future__ import annotations
 from collections import Counter, deque
 
 import numpy as np
-from sensornet.peers.admission import Admission, Route, parse_key
+from sensornet.peers.admission import Admission, Route
 from sensornet.peers.budget import EstimateBudget
 from sensornet.peers.consensus import Consensus
 from sensornet.peers.core_lifecycle import STOP_REASONS, Action, Event, Lifecycle, ScanEvent
 from sensornet.peers.core_outputs import CoreOutputs
+from sensornet.peers.core_receive import CoreReceive
 from sensornet.peers.core_summary import core_cost, core_snapshot, cost_per_scan
 from sensornet.peers.core_types import CoreConfig, Output, Publish, Record, Stop
 from sensornet.peers.scoring import Scorer
-from sensornet.protocol.codec import Rejected, decode
+from sensornet.protocol.codec import decode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import (
     Control,
     Estimate,
     Forward,
-    Message,
     Returns,
     Scan,
     Tracks,
@@ -57,7 +57,7 @@ END_GAP = 100_000
 """Scans a world's "end" may name after this peer's last one (misses to score: bounded)."""
 
 
-class PeerCore(CoreOutputs):
+class PeerCore(CoreReceive, CoreOutputs):
     """One peer's whole behaviour between bytes and outputs."""
 
     def __init__(self, cfg: CoreConfig, consensus: Consensus, scorer: Scorer) -> None:
@@ -110,75 +110,7 @@ class PeerCore(CoreOutputs):
         self._last_scan: tuple[int, float] | None = None  # (k, world's send time) accepted
         self._cost_mark = (0, 0, 0)
 
-    # -- the four entry points ------------------------------------------------------------
-    def receive(self, key: str, payload: bytes, now: float, admitted: bool = False
-                ) -> list[Output]:
-        """One message as it came off the network (``admitted``: the rate check already ran)."""
-        route = parse_key(key, self.cfg.network)
-        if route is not None and route.channel == "estimate" and route.name == self.name:
-            return []  # our own publication
-        if not admitted and not self.admission.admit(route, now, payload):
-            return []
-        return self.receive_routed(route, payload, now)
-
-    def receive_routed(self, route: Route | None, payload: bytes, now: float,
-                       msg: Message | Rejected | None = None) -> list[Output]:
-        """An admitted message whose key the driver parsed already (``route``, the transport's
-        :class:`peers.inbound.Delivered`) and, with ``msg``, whose payload it decoded already
-        (:meth:`decoded`): the runtime's entry, so neither is done twice (issue 37 item 5)."""
-        if route is None:
-            return self._reject("wrong-key")
-        if route.channel == "estimate" and route.name == self.name:
-            return []  # our own publication
-        self.received[route.channel] += 1
-        self.received_bytes[route.channel] += len(payload)
-        pre, self._predecoded = self._predecoded, None
-        if msg is None:
-            msg = pre[1] if pre is not None and pre[0] is payload else self.decoded(payload)
-        if isinstance(msg, Rejected):
-            return self._reject(msg.reason)
-        if not isinstance(msg, _EXPECTED[route.channel]):
-            return self._reject("wrong-key")
-        if route.channel == "scan":
-            return self._scan(route, msg, now)
-        if route.channel == "estimate":
-            return self._estimate(route, msg, now)
-        if route.channel == "truth":
-            return self._truth(msg)
-        return self._control(msg, now)
-
-    def decoded(self, payload: bytes) -> Message | Rejected:
-        """``payload`` decoded with this peer's limits, or the :class:`Rejected` it raised
-        (returned: a driver decodes once and hands the result to :meth:`receive_routed`)."""
-        try:
-            return self.decode(payload, self.cfg.limits)
-        except Rejected as exc:
-            return exc
-
-    def scan_step(self, key: str, payload: bytes) -> tuple[int, np.ndarray] | None:
-        """``(steps, z)``: the local step this scan message would make if it came next, for a
-        host to compute its peers' steps together (``peers.batching.prepare_local_steps``);
-        None if it would not make one plainly (not a scan of ours, a fusion to finish first).
-        The message is decoded here once: :meth:`receive` of the same bytes object reuses it
-        (after its admission, as always). A guess only: the estimator uses a prepared step
-        solely when it is the very step asked for."""
-        route = parse_key(key, self.cfg.network)
-        if route is None or route.channel != "scan" or route.name != self.cfg.sensor:
-            return None
-        c = self.consensus
-        if c.busy():  # (the first scan too: its steps count from scan 0, as in _scan)
-            return None
-        try:
-            msg = self.decode(payload, self.cfg.limits)
-        except Rejected:
-            return None
-        if type(msg) is not Scan or msg.sensor != route.name:
-            return None
-        self._predecoded = (payload, msg)
-        if not c.last_k < msg.k <= c.last_k + self.cfg.horizon:
-            return None
-        return msg.k - c.last_k, msg.z
-
+    # -- the entry points (receive, receive_routed, scan_step: peers.core_receive) ---------
     def tick(self, now: float) -> list[Output]:
         """Fire due deadlines and do the deferred work (call after publishing outputs)."""
         if self.world_gone is not None and now >= self.world_gone + self.cfg.grace():
@@ -423,11 +355,6 @@ class PeerCore(CoreOutputs):
         """Counts, scores and state for the summary (plain data;
         :func:`peers.core_summary.core_snapshot`)."""
         return core_snapshot(self)
-
-
-_EXPECTED = {"scan": Scan, "estimate": (Estimate, Forward, Returns), "truth": Truth,
-             "ctl": Control}
-"""The message types each channel carries (anything else on it is 'wrong-key')."""
 
 
 def positions(states: np.ndarray, index: tuple[int, int]) -> np.ndarray:
