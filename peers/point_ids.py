@@ -69,9 +69,12 @@ def single_target(fusing: bool) -> PointTrackConfig:
     return PointTrackConfig(fused_origin=0 if fusing else None)
 
 
-EXTRACTED = PointTrackConfig(gate=100.0, m=3, n=4, max_missed=3)
+EXTRACTED = PointTrackConfig(gate=100.0, m=3, n=4, max_missed=3, fused_origin=0)
 """Extracted targets of the multi-target kinds without labels (extended-target GM-PHD, seed
 002; flooding's clustering, seed 004): a target moves at most ~35 m a scan there and its
 extracted position is off by about a noise deviation (10-20 m), so a 100 m gate around the
 alpha-beta prediction holds it while two targets 100 m apart stay apart; confirmed after 3 of 4
-scans (a clutter cluster seldom recurs at one place), deleted after 3 scans missed."""
+scans (a clutter cluster seldom recurs at one place), deleted after 3 scans missed. Fused ids
+take origin 0, the network's: peers whose fused points (nearly) coincide (flooding peers
+pooling the same scans, ET-GM-PHD peers fusing on a full mesh) then give a target the same id,
+births being numbered by position."""

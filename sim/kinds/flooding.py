@@ -5,7 +5,6 @@ the iterated-corrector GM-PHD (IC) (``[clustering]`` table)."""
 from __future__ import annotations
 
 import zlib
-from dataclasses import replace
 
 import numpy as np
 from sensornet.peers.flood_parts import ScanBound, poisson_bound
@@ -43,9 +42,8 @@ def scan_bounds(scn: Scenario) -> dict[str, ScanBound]:
 
 def build(scn: Scenario, name: str, run: int = 0):
     est, fuser = _parts(scn, name, run)
-    # every peer holding the same scans computes the same points: one network origin (0)
-    est.point_tracks = PointIds(origin_of(scn.sensor_names, name),
-                                replace(EXTRACTED, fused_origin=0), est.position_index)
+    est.point_tracks = PointIds(origin_of(scn.sensor_names, name), EXTRACTED,
+                                est.position_index)
     return est, fuser
 
 
