@@ -90,10 +90,11 @@ class FusionBatch:
         return done
 
 
-def prepare_local_steps(scans: list[tuple[Any, str, bytes]]) -> list:
+def prepare_local_steps(scans: list[tuple[Any, Any, bytes]]) -> list:
     """The local steps of several co-hosted peers' coming scans, computed together.
 
-    ``scans``: ``(core, key, payload)`` of scan messages about to be handled, each by its
+    ``scans``: ``(core, key, payload)`` of scan messages about to be handled (``key``, or the
+    route its transport parsed from it, :meth:`PeerCore.scan_step`), each by its
     :class:`peers.core.PeerCore`. The peers whose estimator can prepare steps together
     (``prepare_many``, e.g. :class:`peers.estimators.GmphdEstimator`: one stacked GM-PHD
     predict, update and reduction) get them prepared; their own step then takes the prepared

@@ -11,6 +11,7 @@ from collections import deque
 
 from sensornet.peers.admission import peek
 from sensornet.peers.batching import prepare_local_steps
+from sensornet.peers.inbound import Delivered
 from sensornet.peers.runtime import BATCH, PeerRuntime
 
 
@@ -31,8 +32,9 @@ class HostBatching:
                 continue
             item = next((item for _, item in itertools.islice(self._backlog[i], BATCH)
                          if item[0] == "msg" and "/scan/" in item[1]), None)
-            if item is not None:
-                scans.append((self.peers[i].core, item[1], item[2]))
+            if item is not None:  # the route its transport parsed: not parsed again
+                key = item.route if type(item) is Delivered else item[1]
+                scans.append((self.peers[i].core, key, item[2]))
         if len(scans) < 2:
             return
         t0 = time.thread_time()

@@ -9,6 +9,7 @@ is parsed and decoded exactly once, with link faults on or off, and the core sti
 from __future__ import annotations
 
 import sys
+import time
 from collections import Counter
 
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 from sensornet.peers import admission
 from sensornet.peers.faultplan import Constant, FaultPlan, LinkFaults
 from sensornet.peers.faults import FaultInjector
+from sensornet.peers.host import PeerHost
 from sensornet.peers.inbound import Delivered, delivered
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
 from sensornet.protocol.codec import encode
@@ -26,8 +28,8 @@ from sensornet.sim.world.graphs import network_scenario
 from sensornet.tracking.mixture import GaussianMixture
 
 
-def _counting(monkeypatch, rt: PeerRuntime) -> Counter:
-    """Count every ``parse_key`` call (in any module that imported it) and the core's decodes."""
+def _counting(monkeypatch, *rts: PeerRuntime) -> Counter:
+    """Count every ``parse_key`` call (in any module that imported it) and the cores' decodes."""
     calls: Counter = Counter()
     original = admission.parse_key
 
@@ -38,14 +40,18 @@ def _counting(monkeypatch, rt: PeerRuntime) -> Counter:
     for mod in list(sys.modules.values()):
         if mod is not None and getattr(mod, "parse_key", None) is original:
             monkeypatch.setattr(mod, "parse_key", parse_key)
-    decode = rt.core.decode
+    for rt in rts:
+        monkeypatch.setattr(rt.core, "decode", _counted(rt.core.decode, calls))
+    return calls
 
+
+def _counted(decode, calls: Counter):
+    """``decode``, counting its calls under ``decode`` in ``calls``."""
     def counted_decode(payload, limits):
         calls["decode"] += 1
         return decode(payload, limits)
 
-    monkeypatch.setattr(rt.core, "decode", counted_decode)
-    return calls
+    return counted_decode
 
 
 def _runtime(tmp_path, faults: FaultInjector | None = None) -> PeerRuntime:
@@ -89,6 +95,36 @@ def test_a_scan_is_parsed_and_decoded_once(tmp_path, monkeypatch):
     assert calls == {"parse_key": 1, "decode": 1}
     assert rt.core.received["scan"] == 1 and not rt.core.rejected
     assert rt.core.consensus.last_k == 1
+
+
+def test_a_batched_hosts_scans_are_parsed_and_decoded_once(tmp_path, monkeypatch):
+    """A host computing its peers' local steps together (:mod:`peers.host_batching`) reads each
+    scan ahead of its step (``PeerCore.scan_step``) with the route its transport parsed; the
+    step then takes the route and the message decoded there, so neither is done again."""
+    path = tmp_path / "three.toml"
+    path.write_text(network_scenario(3, 2, scans=10, rounds=1, speed=5.0, deadline=1.0))
+    scn = load_scenario(str(path))
+    host = PeerHost("h1", [(make_peer(scn, n, network="net"), RuntimeOptions(rerun=False))
+                           for n in ("p00", "p01")], ((), (), None, None, False))
+    assert host._batched == {0, 1}
+    calls = _counting(monkeypatch, *host.peers)
+    host._active = [0, 1]
+    sent: list[str] = []  # not opened: what the peers publish is only noted (no hand-over)
+    for rt in host.peers:
+        monkeypatch.setattr(rt.transport, "publish", lambda channel, payload: sent.append(channel))
+        sensor = rt.core.cfg.sensor
+        rt.transport.deliver(rt.core.keys.scan(sensor),
+                             encode(Scan(sensor, 1, np.zeros((2, 2)), seq=1)))
+    while not host.q.empty():
+        slot, item = host.q.get_nowait()
+        assert type(item) is Delivered
+        host._backlog[slot].append((time.time(), item))
+    host._work(time.time(), time.monotonic())
+    assert calls == {"parse_key": 2, "decode": 2}
+    assert host.counts["steps_prepared"] == 2  # the look ahead ran: the case counted here
+    for rt in host.peers:
+        assert rt.core.received["scan"] == 1 and not rt.core.rejected
+        assert rt.core.consensus.last_k == 1
 
 
 def test_a_malformed_estimate_is_decoded_once_and_counted(tmp_path, monkeypatch):
