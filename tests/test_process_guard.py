@@ -103,11 +103,15 @@ def _inner(tmp_path: Path, name: str, body: str, *args: str) -> subprocess.Compl
     (d / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
     (d / "test_inner.py").write_text(body)
     (d / "pytest.ini").write_text('[pytest]\nmarkers =\n    network: starts processes\n')
+    # no installed plugin but xdist: the others (hypothesis, dask's, ...) only cost each
+    # session's and worker's start-up (about 2 s of imports apiece, on a busy machine more)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
-    return subprocess.run([sys.executable, "-m", "pytest", "-v", "-p", "no:cacheprovider",
-                           "--basetemp", str(d / "tmp"), *args, "test_inner.py"], cwd=d,
-                          env=env, capture_output=True, text=True, timeout=300)
+        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
+        "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"}
+    return subprocess.run([sys.executable, "-m", "pytest", "-v", "-p", "xdist.plugin",
+                           "-p", "no:cacheprovider", "--basetemp", str(d / "tmp"), *args,
+                           "test_inner.py"], cwd=d, env=env, capture_output=True, text=True,
+                          timeout=300)
 
 
 @pytest.mark.network  # inner pytest sessions (and xdist's workers) as processes
