@@ -8,7 +8,8 @@ over in the process (:data:`HANDOFF`): the encoded bytes the publisher put on Ze
 straight to the neighbour's :meth:`peers.transport.Transport.deliver`, so they pass the same
 admission (per sender) and the same link-fault layer (:class:`peers.faults.HoldQueue`) as a
 remote one, without Zenoh's local routing, a callback thread or a copy; remote neighbours get
-the one Zenoh put (Zenoh sends it once to each remote host, whose session fans it out).
+the one Zenoh put (Zenoh sends it once to each remote host, whose session fans it out). These
+paths in, and the world's scan bundles, are in :mod:`peers.host_delivery`.
 
 One loop thread does every peer's work: at each wake-up it moves what has arrived to the
 peers' own backlogs, then gives each peer with due work (a message waiting, a held message or
@@ -33,10 +34,11 @@ from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
-from sensornet.peers.admission import TokenBucket, peek
+from sensornet.peers.admission import TokenBucket
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.core import PeerCore
 from sensornet.peers.host_batching import HostBatching
+from sensornet.peers.host_delivery import HostDelivery
 from sensornet.peers.host_parts import (  # SharedDecode: re-exported (benchmarks)
     BacklogInbox,
     QueueInbox,
@@ -49,8 +51,6 @@ from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
 from sensornet.peers.telemetry import SharedCpu
 from sensornet.peers.transport import callback, settle
-from sensornet.protocol.bundle import unpack_bundle
-from sensornet.protocol.codec import Rejected
 
 HANDOFF = os.environ.get("SENSORNET_HOST_HANDOFF", "direct") != "zenoh"
 """Hand estimates between co-hosted peers over in-process (default) or through the host's
@@ -70,7 +70,7 @@ CONTROL = -1
 """The slot of the host's own items on its queue (commands, a signal's wake-up)."""
 
 
-class PeerHost(HostBatching):
+class PeerHost(HostDelivery, HostBatching):
     """Runs several peers in one process until every one has stopped (or SIGINT/SIGTERM).
 
     ``session_args``: ``(listen, connect, config_file, lease_ms, gossip)`` of the host's one
@@ -148,83 +148,6 @@ class PeerHost(HostBatching):
         self._remote_subs: list = []
         self._backlog: list[deque] = [deque() for _ in self.peers]
         self._inboxes = [BacklogInbox(b) for b in self._backlog]
-
-    def _wire_handoff(self) -> None:
-        """Each peer's co-hosted neighbours: not subscribed to through Zenoh, handed over."""
-        listeners: dict[str, list[int]] = {}
-        for i, rt in enumerate(self.peers):
-            t = rt.transport
-            t.local = frozenset(n for n in t.neighbours if n in self.by_name)
-            for n in t.local:
-                listeners.setdefault(n, []).append(i)
-        for name, subs in listeners.items():
-            self.peers[self.by_name[name]].transport.handoff = (
-                lambda key, payload, subs=tuple(subs): self._hand_over(subs, key, payload))
-
-    def _share_remote(self) -> dict[str, tuple[int, ...]]:
-        """Remote neighbours' estimate keys -> the peers that listen to them: one Zenoh
-        subscriber each for the whole host (:meth:`_fan_out`), not one per listening peer (a
-        subscriber per peer made Zenoh call back, copy and queue each remote estimate once per
-        co-hosted listener). Not with recovery (each peer's advanced subscriber keeps its own
-        cache state) or a recording (each peer records what its own transport received)."""
-        if any(rt.o.recover or rt.o.record is not None for rt in self.peers):
-            return {}
-        listeners: dict[str, list[int]] = {}
-        for i, rt in enumerate(self.peers):
-            t = rt.transport
-            t.shared = frozenset(n for n in t.neighbours if n not in t.local)
-            for n in t.shared:
-                listeners.setdefault(t.keys.estimate(n), []).append(i)
-        return {k: tuple(v) for k, v in listeners.items()}
-
-    def _unbundle(self, sample) -> None:
-        """A scan bundle from the world (Zenoh's callback thread, :mod:`protocol.bundle`):
-        each scan to the peer of its sensor, through that peer's own admission, as if it had
-        come on the peer's ``scan/<sensor>`` key. Bounded before it is unpacked: at most as
-        many bundles as the hosted sensors' own scan messages were allowed (:attr:`_bundle_rate`)
-        and at most one entry per hosted peer in each. A refused bundle, or an entry for a
-        sensor not hosted here, is counted (``host.bundles`` in the summaries), never
-        delivered."""
-        payload = sample.payload.to_bytes()
-        with self._bundle_lock:  # Zenoh may call back on several threads
-            why = None if self._bundle_rate.take(time.monotonic()) else "rate"
-            if why is None:
-                try:
-                    bundle = unpack_bundle(payload, max_entries=len(self.peers))
-                except Rejected as exc:
-                    why = exc.reason
-            if why is not None:
-                self.bundles["rejected"] += 1
-                self.bundles["why"][why] = self.bundles["why"].get(why, 0) + 1
-                return
-            self.bundles["received"] += 1
-            hosted = [(self._by_sensor.get(sensor), sensor, data)
-                      for sensor, data in bundle.entries]
-            self.bundles["unknown_sensor"] += sum(j is None for j, _, _ in hosted)
-        for j, sensor, data in hosted:
-            if j is not None and j in self._active:
-                t = self.peers[j].transport
-                t.deliver(t.keys.scan(sensor), data)
-
-    def _fan_out(self, subs: tuple[int, ...], sample) -> None:
-        """A remote estimate (Zenoh's callback thread) to each co-hosted peer listening to it,
-        through each one's own admission, as if each had its own subscriber."""
-        self._deliver(subs, str(sample.key_expr), sample.payload.to_bytes(), backlog=False)
-
-    def _hand_over(self, subs: tuple[int, ...], key: str, payload: bytes) -> None:
-        """An estimate published on ``key`` to the co-hosted peers ``subs`` (the loop's
-        thread: straight into their backlogs)."""
-        self._deliver(subs, key, payload, backlog=True)
-
-    def _deliver(self, subs: tuple[int, ...], key: str, payload: bytes, backlog: bool) -> None:
-        """``payload`` to each of the peers ``subs`` still running, its header read once for
-        all of them; each admits it on its own (``backlog``: into the peer's backlog, from
-        the loop's thread; else onto the host's queue)."""
-        active, head = self._active, peek(payload)
-        for j in subs:
-            if j in active:
-                self.peers[j].transport.deliver(key, payload, head,
-                                                self._inboxes[j] if backlog else None)
 
     # -- life cycle -------------------------------------------------------------------------
     def _signal(self, signum, frame) -> None:
