@@ -26,8 +26,11 @@ CASES: dict[str, tuple[str, dict]] = {
     "pda-ci": ("seed003", {"pda.mode": "ci"}),
     "et-gmphd": ("seed002", {}),
     "flooding": ("seed004", {}),
+    "et-gmphd-pd0.9": ("seed002", {"sensors.*.detection_probability": 0.9}),
+    "flooding-loss0.3": ("seed004", {"faults.default.loss": 0.3}),
 }
-"""Kind -> (scenario, overrides)."""
+"""Case -> (scenario, overrides): each kind on its scenario as shipped, then two harder
+cases (ET-GM-PHD at Pd 0.9; flooding with 30 % of the flooded messages lost)."""
 
 
 def peer_tables(twin: TwinResult, peer: str, which: str,
