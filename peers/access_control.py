@@ -11,11 +11,17 @@ from collections.abc import Sequence
 
 from sensornet.protocol.keys import ROUTER_PREFIX, WORLD, Keys, check_name
 
-__all__ = ["ROUTER_PREFIX", "acl_rules"]
+__all__ = ["OBSERVER", "OBSERVER_PREFIX", "ROUTER_PREFIX", "acl_rules"]
+
+OBSERVER_PREFIX = "view"
+"""Members named ``view*`` are read-only observers (a live view, ``sensornet view --secure``):
+they may subscribe to what the view draws and put nothing."""
+OBSERVER = "view"
+"""The observer member ``sensornet keys`` and ``run --secure`` make (the run's view is it)."""
 
 
 def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
-              routers: Sequence[str] = ()) -> dict:
+              routers: Sequence[str] = (), observers: Sequence[str] = ()) -> dict:
     """The network's Zenoh ``access_control`` section (default deny).
 
     Zenoh checks a put or a declaration where it arrives (ingress, against the sender's
@@ -24,9 +30,9 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
     member's own process does. Subjects are certificate common names (reliable in peer mode;
     user names are not). Per member:
 
-    - peer ``p``: puts ``estimate/p`` and ``tracks/p``; liveliness tokens ``alive/p`` and
-      ``ready/p``; subscribes to its own ``scan/p``, ``truth``, ``ctl`` and ``estimate/*``
-      (what it fuses), to liveliness ``alive/*``;
+    - peer ``p``: puts ``estimate/p``, ``tracks/p`` and ``telemetry/p``; liveliness tokens
+      ``alive/p`` and ``ready/p``; subscribes to its own ``scan/p``, ``truth``, ``ctl`` and
+      ``estimate/*`` (what it fuses), to liveliness ``alive/*``;
     - the world: puts ``scan/*``, ``truth``, ``ctl``; token ``alive/<world>``; liveliness
       subscriptions on ``alive/*`` and ``ready/*``; subscribes to ``scan/*`` (its own tools);
     - recovery (``--recover``, Zenoh's advanced publisher/subscriber, routed runs): a
@@ -36,7 +42,10 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
       ``scan/p/@adv/**`` and ``estimate/*/@adv/**``;
     - a router (``routers``): relays anything on the network's keys. A member behind a router
       sees every message as coming from the router's certificate, so the router is where the
-      per-member rules are enforced (at its ingress, by the client's certificate name).
+      per-member rules are enforced (at its ingress, by the client's certificate name);
+    - an observer (``observers``, read-only): subscribes to the scans, truth, control,
+      estimates, tracks and telemetry of every member; puts, declares and queries nothing, so
+      every member refuses anything it sends but its subscriptions.
     """
     k = Keys(network)
     rules = [*_world_rules(k, world), *_shared_rules(k)]
@@ -54,6 +63,15 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
             check_name(r, "router name")
             subjects.append({"id": f"m-{r}", "cert_common_names": [r]})
         policies.append({"rules": ["relay"], "subjects": [f"m-{r}" for r in routers]})
+    if observers:
+        rules.append(_rule("observe", ["declare_subscriber"],
+                           [k.scan("*"), k.scans("*"), k.truth(), k.ctl(), k.estimate("*"),
+                            k.tracks("*"), k.telemetry("*")]))
+        for o in observers:
+            check_name(o, "observer name")
+            subjects.append({"id": f"m-{o}", "cert_common_names": [o]})
+        policies.append({"rules": ["observe", _REPLIES, _SEND],
+                         "subjects": [f"m-{o}" for o in observers]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
 
@@ -114,9 +132,10 @@ def _shared_rules(k: Keys) -> list[dict]:
 
 
 def _peer_rules(k: Keys, p: str) -> list[dict]:
-    """Peer ``p``'s: puts its estimates and tracks, its tokens, hears what it fuses."""
+    """Peer ``p``'s: puts its estimates, tracks and telemetry, its tokens, hears what it
+    fuses."""
     return [
-        _rule(f"{p}-put", ["put"], [k.estimate(p), k.tracks(p)]),
+        _rule(f"{p}-put", ["put"], [k.estimate(p), k.tracks(p), k.telemetry(p)]),
         _rule(f"{p}-token", ["liveliness_token"], [k.alive(p), k.ready(p)]),
         _rule(f"{p}-hear", ["declare_subscriber"],
               [k.scan(p), k.truth(), k.ctl(), k.estimate("*")]),

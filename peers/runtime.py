@@ -133,8 +133,8 @@ class PeerRuntime(RunOutputs):
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
                 self.recorder.attach(self.core)  # truth and the Foxglove scene too
-            if o.security is None:  # live views' telemetry (the access control has no rule)
-                self.observer.open(self.transport.session, self.core.keys)
+            # live views' telemetry (secure: the access control lets p put telemetry/p)
+            self.observer.open(self.transport.session, self.core.keys)
             if o.ros2 is not None:
                 from sensornet.peers.ros2 import PeerRos2  # optional dependency: rosbags
                 self.ros2 = PeerRos2(self.transport.session, self.name, o.ros2,

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from sensornet.peers.access_control import ROUTER_PREFIX, acl_rules
+from sensornet.peers.access_control import OBSERVER, OBSERVER_PREFIX, ROUTER_PREFIX, acl_rules
 from sensornet.peers.endpoints import check_endpoints, tls_endpoint
 from sensornet.peers.member_keys import (
     CA_CERT,
@@ -60,6 +60,8 @@ class Security:
     world: str = WORLD
     routers: tuple[str, ...] = ()
     """Members named ``router*`` in the folder's ``members.json``: trusted to relay."""
+    observers: tuple[str, ...] = ()
+    """Members named ``view*`` there: read-only (they may subscribe, not put)."""
 
     @classmethod
     def load(cls, folder: str | Path, member: str, network: str,
@@ -83,7 +85,9 @@ class Security:
         roster = folder / "members.json"
         names = json.loads(roster.read_text()).get("members", []) if roster.is_file() else []
         routers = tuple(n for n in names if n.startswith(ROUTER_PREFIX))
-        return cls(folder.resolve(), member, network, tuple(peers), routers=routers)
+        observers = tuple(n for n in names if n.startswith(OBSERVER_PREFIX))
+        return cls(folder.resolve(), member, network, tuple(peers), routers=routers,
+                   observers=observers)
 
     @property
     def ca(self) -> Path:
@@ -141,10 +145,10 @@ class Security:
         for name, value in tls.items():
             conf.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
         conf.insert_json5("access_control", json.dumps(
-            acl_rules(self.network, self.peers, self.world, self.routers)))
+            acl_rules(self.network, self.peers, self.world, self.routers, self.observers)))
 
 
-__all__ = ["ACL_LOG", "CA_CERT", "CA_KEY", "DEFAULT_HOSTS", "ROUTER_PREFIX", "SIGNING",
+__all__ = ["ACL_LOG", "CA_CERT", "CA_KEY", "DEFAULT_HOSTS", "OBSERVER", "ROUTER_PREFIX", "SIGNING",
            "SIGN_KEY", "WORLD", "RefusalLog", "Security", "SecurityError", "acl_rules",
            "check_endpoints", "check_private", "common_name", "keys_network", "load_roster",
            "make_keys", "tls_endpoint"]

@@ -56,14 +56,17 @@ class LiveView:
 
     def __init__(self, network: str, state_factory, rr, rec, connect: Sequence[str] = (),
                  config: str | None = None, say: Callable[[str], None] | None = None,
-                 estimates: bool = False) -> None:
+                 estimates: bool = False, security=None) -> None:
         """``estimates``: hear the peers' estimates too (the local marks of peers that send
         no telemetry); by default not: the local estimate rides in each peer's telemetry,
         and every peer would send the view a copy of each of its heaviest messages (+5 %
-        of the peers' CPU at seed 004)."""
+        of the peers' CPU at seed 004). ``security``: a
+        :class:`peers.security.Security` of a read-only observer (``view``) to join a secure
+        network (mutual TLS; the network's access control lets it subscribe, not put)."""
         self.network = network
         self.estimates = estimates
         self.connect, self.config = list(connect), config
+        self.security = security
         self.rr, self.rec = rr, rec
         self.batcher = Batcher(rr, rec)
         self.state: ViewState = state_factory(self.batcher)
@@ -78,10 +81,10 @@ class LiveView:
         self.session = None
 
     def open(self) -> None:
-        self.session = open_session((), self.connect, self.config)
-        k = Keys(self.network)
-        exprs = ([f"{ROOT}/{self.network}/**"] if self.estimates else
-                 [k.scan(), k.scans(), k.tracks(), k.truth(), k.ctl(), k.telemetry()])
+        self.session = open_session((), self.connect, self.config, security=self.security)
+        k = Keys(self.network)  # each channel by name: what an observer may subscribe to
+        exprs = [k.scan(), k.scans(), k.tracks(), k.truth(), k.ctl(), k.telemetry(),
+                 *([k.estimate()] if self.estimates else [])]
         self._subs = [self.session.declare_subscriber(e, self._on_sample) for e in exprs]
 
     def _on_sample(self, sample) -> None:

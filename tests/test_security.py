@@ -90,7 +90,7 @@ def test_keys_reuse_the_ca_add_members_and_rotate(tmp_path):
 def test_keys_command(tmp_path, capsys):
     assert main(["keys", "netc", "--out", str(tmp_path / "a")]) == 0
     assert {p.name for p in (tmp_path / "a").glob("*.pem")} == {
-        "ca.pem", "world.pem", "s1.pem", "s2.pem", "s3.pem"}
+        "ca.pem", "world.pem", "s1.pem", "s2.pem", "s3.pem", "view.pem"}  # view: read-only
     assert main(["keys", "netc", "--out", str(tmp_path / "b"), "--members", "world,x,y",
                  "--hosts", "localhost,127.0.0.1,10.0.0.7,node1"]) == 0
     san = _cert(tmp_path / "b" / "x.pem").extensions.get_extension_for_class(
@@ -127,7 +127,8 @@ def test_acl_lets_each_member_put_only_its_own_keys():
                 if "put" in rules[r]["messages"] and "ingress" in rules[r]["flows"]}
 
     # and the recovery machinery's heartbeats under its own keys (--recover, routed runs)
-    assert puts("s2") == {k.estimate("s2"), k.tracks("s2"), f"{k.estimate('s2')}/@adv/**"}
+    assert puts("s2") == {k.estimate("s2"), k.tracks("s2"), k.telemetry("s2"),
+                          f"{k.estimate('s2')}/@adv/**"}
     assert puts("world") == {k.scan("*"), k.truth(), k.ctl(), f"{k.scan('*')}/@adv/**"}
 
     def allowed(member, message):

@@ -131,6 +131,11 @@ def add_view(sub) -> None:
     vw.add_argument("--nice", type=NONNEGATIVE_INT, default=0,
                     help="lower the view's CPU priority by this much (run: 10), so that on a "
                          "busy machine the view falls behind, not the peers")
+    vw.add_argument("--secure", metavar="DIR",
+                    help="join a secure network with the read-only observer key of this keys "
+                         "folder (sensornet keys makes 'view': it may subscribe, not put)")
+    vw.add_argument("--as", dest="member", help="the observer member to join as, a name "
+                    "starting with 'view' (default: view)")
 
 
 def add_plot(sub) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sensornet.cli.common import UserError
 from sensornet.peers.security import (
+    OBSERVER,
     SIGN_KEY,
     WORLD,
     Security,
@@ -30,8 +31,9 @@ def member_security(args: argparse.Namespace, member: str, scn):
 
 
 def run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
-    """``run/demo --secure [DIR]``: the keys folder (fresh keys in <out>/keys without DIR);
-    the network name defaults to the one the keys were made for."""
+    """``run/demo --secure [DIR]``: the keys folder (fresh keys in <out>/keys without DIR,
+    the view's read-only observer key among them); the network name defaults to the one the
+    keys were made for. A DIR without the observer's key runs without a view (said)."""
     if args.secure is None:
         return None
     check_endpoints([*(args.listen or []), *(args.connect or [])])
@@ -39,7 +41,7 @@ def run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     if args.secure == "":
         args.network = args.network or f"run-{os.urandom(4).hex()}"
         folder = out / "keys"
-        make_keys(args.network, [WORLD, *scn.sensor_names, *router], folder)
+        make_keys(args.network, [WORLD, *scn.sensor_names, *router, OBSERVER], folder)
         return folder.resolve()
     folder = Path(args.secure)
     made_for = keys_network(folder)
@@ -56,4 +58,11 @@ def run_keys(args: argparse.Namespace, scn, out: Path) -> Path | None:
     for m in [WORLD, *scn.sensor_names, *router]:  # before any process reads one
         for x in (".key", SIGN_KEY):
             check_private(folder / f"{m}{x}")
+    if not (folder / f"{OBSERVER}.key").is_file():
+        if not getattr(args, "no_rerun", True):
+            print(f"secure: no view ({folder} has no key for the read-only observer "
+                  f"{OBSERVER!r}; add it with: sensornet keys {made_for} --out {folder} "
+                  f"--members {OBSERVER}); the world records alone", flush=True)
+    else:
+        check_private(folder / f"{OBSERVER}.key")
     return folder.resolve()

@@ -21,7 +21,7 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-from sensornet.peers.security import tls_endpoint
+from sensornet.peers.security import OBSERVER, tls_endpoint
 from sensornet.peers.session import (
     DEFAULT_LEASE_MS,
     MAX_MESSAGE_BYTES,
@@ -95,7 +95,10 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     world_listen = list(listen or []) or [ep(free_port())]
     eps = {"world": world_listen[0], **eps}
     sets = [a for item in (overrides or []) for a in ("--set", item)]
-    common = _common_flags(network, out, run_id, sets, rerun, viewer, secure, config)
+    # the view subscribes, nobody else logs; a secure one joins as the read-only observer
+    watch = bool(rerun or viewer) and (secure is None
+                                       or (Path(secure) / f"{OBSERVER}.key").is_file())
+    common = _common_flags(network, out, run_id, sets, rerun, viewer, secure, config, watch)
     extra_connect = [a for c in (connect or []) for a in ("--connect", c)]
     (out / "logs").mkdir(parents=True, exist_ok=True)
     handle = RunHandle(out=out, endpoints=eps, network=network, secure=secure, hosts=groups)
@@ -117,8 +120,7 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
     if groups:  # the hosts instead of the peers' processes
         cmds = {"world": world, **_host_commands(
             groups, peers, names, eps, extra_connect, router, sparse, A)}
-    if bool(rerun or viewer) and not secure:  # the view subscribes; nobody else logs
-        # started first: it hears the run from its first scan
+    if watch:  # started first: it hears the run from its first scan
         cmds = {"view": _view_command(network, eps["world"], extra_connect, source, sets,
                                       run_id, common, out, rerun, viewer), **cmds}
     handle.commands = cmds
@@ -143,12 +145,14 @@ def _world_command(source: str, common: list[str], bundled: dict[str, list[str]]
 
 
 def _common_flags(network: str, out: Path, run_id: str, sets: list[str], rerun: bool,
-                  viewer: str | None, secure: Path | None, config: str | None) -> list[str]:
+                  viewer: str | None, secure: Path | None, config: str | None,
+                  watch: bool) -> list[str]:
     """The flags every member of the run gets: network, output folder, recording id,
-    overrides, Rerun logging (only the world's, and only in secure mode, where there is no
-    view process), the Zenoh config and the keys folder."""
+    overrides, Rerun logging (only the world's, and only in secure mode with a keys folder
+    that has no observer key, where there is no view process: ``watch`` False), the Zenoh
+    config and the keys folder."""
     common = ["--network", network, "--out", str(out), "--run-id", run_id, *sets]
-    if secure and (rerun or viewer):  # no view in secure mode: the world logs as before
+    if secure and (rerun or viewer) and not watch:  # no view: the world logs as before
         common += ["--viewer", viewer] if viewer else []
     else:
         common += ["--no-rerun"]
@@ -192,12 +196,15 @@ def _view_command(network: str, world: str, extra_connect: list[str], source: st
                   sets: list[str], run_id: str, common: list[str], out: Path, rerun: bool,
                   viewer: str | None) -> list[str]:
     """The view process's command (``sensornet view``): it connects to the world's endpoint,
-    records ``<out>/rerun/view.rrd`` and ends a little after the run's end message."""
+    records ``<out>/rerun/view.rrd`` and ends a little after the run's end message; in secure
+    mode as the keys folder's read-only observer."""
     cfg = common[common.index("--config") + 1] if "--config" in common else None
+    keys = common[common.index("--secure") + 1] if "--secure" in common else None
     return [*_cli(), "view", network, "--connect", world, *extra_connect,
             "--scenario", source, *sets, "--run-id", run_id, "--until-end",
             "--nice", str(VIEW_NICE),
             *(["--config", cfg] if cfg else []),
+            *(["--secure", keys] if keys else []),
             *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),
             *(["--viewer", viewer] if viewer else [])]
 

@@ -7,16 +7,17 @@ from pathlib import Path
 
 from sensornet.cli.common import UserError
 from sensornet.cli.scenarios import load
-from sensornet.peers.security import WORLD, SecurityError, make_keys
+from sensornet.peers.security import OBSERVER, WORLD, SecurityError, make_keys
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
     """``sensornet keys NETWORK --out DIR``: the network's CA and one key + certificate per
-    member (every peer and the world), plain PEM files (see :mod:`peers.security`)."""
+    member (every peer, the world and the read-only observer a view joins as), plain PEM
+    files (see :mod:`peers.security`)."""
     if args.members:
         members = [m.strip() for m in args.members.split(",") if m.strip()]
     else:
-        members = [WORLD, *load(args, args.scenario).sensor_names]
+        members = [WORLD, *load(args, args.scenario).sensor_names, OBSERVER]
     hosts = [h.strip() for h in (args.hosts or "localhost,127.0.0.1").split(",") if h.strip()]
     try:
         paths = make_keys(args.network, members, Path(args.out), days=args.days, hosts=hosts,

@@ -14,6 +14,15 @@ import numpy as np
 from sensornet.cli.common import UserError
 from sensornet.peers.rerun_layout import legend_markdown
 from sensornet.peers.rerun_sink import RerunSink, color_of
+from sensornet.peers.security import (
+    OBSERVER,
+    OBSERVER_PREFIX,
+    ROUTER_PREFIX,
+    WORLD,
+    Security,
+    SecurityError,
+    load_roster,
+)
 from sensornet.peers.session import SessionError
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind_of
@@ -39,13 +48,14 @@ def cmd_view(args: argparse.Namespace) -> int:
     """Subscribe to NETWORK and build its Rerun recording (``--out``) and/or stream it to a
     viewer (``--viewer``) until Ctrl-C, ``--duration`` or (``--until-end``) the run's end."""
     viewer, out = _check_args(args)
+    security = _observer(args)
     if args.nice:
         os.nice(args.nice)  # the view yields the CPU to the network's processes
     sink, state = _open_sink(args, out, viewer)
     if args.from_mcap:  # offline: the peers' recordings instead of the network
         return _replay_offline(args, sink, state, out or viewer)
     view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config,
-                    estimates=args.estimates)
+                    estimates=args.estimates, security=security)
     cpu = _watch(args, view, sink, out, viewer)
     _print_stats(view, cpu)
     return 0
@@ -69,6 +79,26 @@ def _check_args(args: argparse.Namespace) -> tuple[str | None, Path | None]:
     if out is None and viewer is None:
         raise UserError("nothing to show to: give --out FILE.rrd and/or --viewer")
     return viewer, out
+
+
+def _observer(args: argparse.Namespace) -> Security | None:
+    """``--secure DIR [--as NAME]``: the read-only observer's TLS files and the network's
+    policy (every member of the folder's roster a peer but the world, routers and observers);
+    only an observer (``view*``), which the access control lets subscribe and not put."""
+    if not args.secure:
+        if args.member:
+            raise UserError("--as needs --secure DIR")
+        return None
+    member = args.member or OBSERVER
+    if not member.startswith(OBSERVER_PREFIX):
+        raise UserError(f"--as {member}: a view joins as a read-only observer, a member named "
+                        f"'{OBSERVER_PREFIX}...' (sensornet keys makes '{OBSERVER}')")
+    try:
+        peers = [n for n in load_roster(Path(args.secure)) if n != WORLD
+                 and not n.startswith((ROUTER_PREFIX, OBSERVER_PREFIX))]
+        return Security.load(args.secure, member, args.network, peers)
+    except (SecurityError, OSError, ValueError) as exc:
+        raise UserError(str(exc)) from None
 
 
 def _open_sink(args: argparse.Namespace, out: Path | None,
