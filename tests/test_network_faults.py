@@ -317,7 +317,8 @@ def test_loss_duplication_and_reordering(tmp_path):
 
 @pytest.mark.network
 def test_sigterm_leaves_summary_and_recording(tmp_path):
-    sets = ["birth.model=truth", "scenario.num_scans=60"]
+    # 40 scans: s2 is stopped once it reached scan 20, and must not reach the end first
+    sets = ["birth.model=truth", "scenario.num_scans=40"]
     term = {}
 
     def terminate_s2(handle):
