@@ -19,6 +19,9 @@ from sensornet.sim.run.twin import TwinResult, run_twin
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.track_metrics import TrackTable, clear_match, clear_mot
 
+CROSSING = [[-500.0, 20.0, 0.0, 0.0], [500.0, -20.0, 0.0, 0.0], [0.0, 0.0, 950.0, -30.0]]
+"""Seed 004's truth with two targets head-on along y = 0, through each other at scan 26."""
+
 CASES: dict[str, tuple[str, dict]] = {
     "imm-pf": ("seed001", {}),
     "imm-ekf": ("seed001", {"network.filter": "imm-ekf"}),
@@ -28,9 +31,11 @@ CASES: dict[str, tuple[str, dict]] = {
     "flooding": ("seed004", {}),
     "et-gmphd-pd0.9": ("seed002", {"sensors.*.detection_probability": 0.9}),
     "flooding-loss0.3": ("seed004", {"faults.default.loss": 0.3}),
+    "flooding-crossing": ("seed004", {"truth.starts": CROSSING}),
 }
-"""Case -> (scenario, overrides): each kind on its scenario as shipped, then two harder
-cases (ET-GM-PHD at Pd 0.9; flooding with 30 % of the flooded messages lost)."""
+"""Case -> (scenario, overrides): each kind on its scenario as shipped, then harder
+cases (ET-GM-PHD at Pd 0.9; flooding with 30 % of the flooded messages lost; flooding with
+two targets crossing head-on)."""
 
 
 def peer_tables(twin: TwinResult, peer: str, which: str,
