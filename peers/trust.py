@@ -45,6 +45,8 @@ from sensornet.peers.trust_record import (
     is_repeated,
     offset_limits,
     push_window,
+    registered_at,
+    residual_passes,
     update_registration,
 )
 from sensornet.peers.trust_repair import corroborated_part, moved_to_own, scan_factor
@@ -81,6 +83,10 @@ class Trust:
         the runs of ``n`` such scans in a row that ended (:func:`peers.trust_checks.
         whole_losses`; what :attr:`TrustConfig.withhold_cap` was set from)."""
         self._loss_runs: dict[str, int] = {}
+        self.trace: list[dict] | None = None
+        """When a list: per closed scan and neighbour ``{"k", "neighbour", "state",
+        "weight", "registered", "moved", "offset"}`` (the studies' view of registration:
+        what was subtracted, and the scan's raw offset ``I^-1 y`` against own or None)."""
         self.history: list[tuple[int, str, float, float, float]] | None = None
         """When a list: every ``(k, neighbour, statistic, score, values)``, ``values`` those
         of :func:`alarm_limits` (calibration; the statistic without the offset and
@@ -160,7 +166,7 @@ class Trust:
             if a <= self.n[s].tested or ref is None:
                 stats[s] = 0.0  # no new evidence
             else:
-                stats[s] = self._single(ref, self.shift(s, mix))
+                stats[s] = self._single(ref, self.shift(s, mix, a))
                 tested[s] = (a, mix, ref)
         return tested
 
@@ -185,18 +191,25 @@ class Trust:
         cfg = self.cfg
         alarm_stat = cfg.quarantine + cfg.drift
         if cfg.bias:
-            infos = {s: offset_information(ref, mix, self.pos, cfg.repeat_weight,
-                                           cfg.bias_gate)
-                     for s, (_, mix, ref) in tested.items()}
+            follow = cfg.register and cfg.register_drift
+            regs = {s: registered_at(self.n[s], a) if follow else None
+                    for s, (a, _, _) in tested.items()}
+            infos = {s: _raw(offset_information(ref, self.shift(s, mix, a) if follow else mix,
+                                                self.pos, cfg.repeat_weight, cfg.bias_gate),
+                             regs[s])
+                     for s, (a, mix, ref) in tested.items()}
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
             for s, info in infos.items():
                 rec = self.n[s]
+                rec.raw_offset = gls_offset([info])
+                push_window(rec.residuals, _raw(info, regs[s], -1.0), max(cfg.bias_windows))
                 chi2 = add_offset(cfg, rec, info)
                 alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
                 if cfg.register:
-                    update_registration(rec, alarm)
+                    update_registration(rec, alarm, tested[s][0], cfg.register_drift,
+                                        cfg.register_drift_chi2)
                 elif alarm:
                     stats[s] = max(stats[s], alarm_stat)
         if cfg.withhold and cfg.detection_probability is not None:
@@ -301,6 +314,7 @@ class Trust:
         offset = gls_offset(rec.moves)
         if offset is None:
             return None
+        rec.moved = offset
         moved = moved_to_own(mix, own, offset, self.pos)
         return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
 
@@ -351,14 +365,16 @@ class Trust:
                     self.losses["lost"] += int(lost)
         return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
 
-    def shift(self, s: str, mix: GaussianMixture) -> GaussianMixture:
-        """``mix`` of neighbour ``s`` with its registered offset subtracted from every
-        component's position (:attr:`TrustConfig.register`); ``mix`` itself if none."""
+    def shift(self, s: str, mix: GaussianMixture, k: int | None = None) -> GaussianMixture:
+        """``mix`` of neighbour ``s`` (made at scan ``k``; None: the scan being fused) with
+        its registered offset at that scan subtracted from every component's position
+        (:attr:`TrustConfig.register`); ``mix`` itself if none."""
         rec = self.n.get(s)
         if rec is None or rec.registered is None or len(mix) == 0:
             return mix
+        offset = registered_at(rec, self._k if k is None else k)
         means = mix.means.copy()
-        means[:, self.pos] -= rec.registered
+        means[:, self.pos] -= offset
         return GaussianMixture(mix.weights, means, mix.covs)
 
     def _next(self, score: float, statistic: float) -> float:
@@ -392,11 +408,17 @@ class Trust:
                 rec.state, rec.streak = "quarantined", 0
             elif rec.state == "quarantined":
                 rec.streak = rec.streak + 1 if rec.score < cfg.suspect else 0
-                if rec.streak >= cfg.readmit:
+                if rec.streak >= cfg.readmit and (not cfg.readmit_offset
+                                                  or residual_passes(cfg, rec)):
                     rec.state = "trusted"
             else:
                 rec.state = "suspect" if rec.score > cfg.suspect else "trusted"
             rec.scans_in[rec.state] += 1
+            if self.trace is not None:
+                self.trace.append({"k": k, "neighbour": s, "state": rec.state,
+                                   "weight": rec.last_weight,
+                                   "registered": _copy(registered_at(rec, k)),
+                                   "moved": _copy(rec.moved), "offset": _copy(rec.raw_offset)})
             if rec.state != old:
                 event = {"k": k, "neighbour": s, "from": old, "to": rec.state,
                          "score": round(rec.score, 3)}
@@ -424,3 +446,14 @@ class Trust:
         out = self.records + [{"kind": "trust-event", **e} for e in self.events]
         self.records, self.events = [], []
         return out
+
+
+def _raw(info: tuple[np.ndarray, np.ndarray], offset: np.ndarray | None, sign: float = 1.0
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """``(I, y + sign I offset)``: an offset's information with ``offset`` added back
+    (``sign`` -1: taken out); ``info`` itself when ``offset`` is None."""
+    return info if offset is None else (info[0], info[1] + sign * info[0] @ offset)
+
+
+def _copy(v: np.ndarray | None) -> np.ndarray | None:
+    return None if v is None else np.array(v, dtype=float)

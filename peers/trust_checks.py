@@ -207,6 +207,33 @@ def gls_offset(window) -> np.ndarray | None:
     return np.linalg.solve(I, np.sum([v for _, v in window], axis=0))
 
 
+def gls_trend(window) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The generalised-least-squares offset and its rate, ``(a, b)`` (``(2,)`` each), and
+    the rate's chi-square ``b' C_b^-1 b`` (``C_b`` its covariance: 2 degrees of freedom for
+    independent scans), of the
+    per-scan ``(I, y)`` in ``window`` (newest first, one scan apart: the newest at ``t = 0``,
+    the one before at ``t = -1``, ...) under ``d_t = a + b t``: a drifting offset is where
+    ``a`` says now and ``b`` a scan later, where a constant one's mean runs half a window
+    behind. The normal equations ``[[sum I, sum t I], [sum t I, sum t^2 I]] [a; b] = [sum y;
+    sum t y]``; None when they do not determine both (fewer than two scans with an
+    offset: condition number above 1e12)."""
+    if len(window) < 2:
+        return None
+    t = -np.arange(len(window), dtype=float)
+    I = np.array([i for i, _ in window])  # (n, 2, 2)
+    y = np.array([v for _, v in window])  # (n, 2)
+    m = np.array([[1.0, 0.0], [0.0, 0.0]]), np.array([[0.0, 1.0], [1.0, 0.0]]), np.array(
+        [[0.0, 0.0], [0.0, 1.0]])
+    A = (np.kron(m[0], I.sum(0)) + np.kron(m[1], np.einsum("n,nij->ij", t, I))
+         + np.kron(m[2], np.einsum("n,nij->ij", t * t, I)))  # (4, 4)
+    if not np.isfinite(A).all() or np.linalg.cond(A) > 1e12:
+        return None
+    ab = np.linalg.solve(A, np.concatenate([y.sum(0), t @ y]))
+    b = ab[2:]
+    cov_b = np.linalg.inv(A)[2:, 2:]
+    return ab[:2], b, float(b @ np.linalg.solve(cov_b, b))
+
+
 def cusum_directions(n: int) -> np.ndarray:
     """``(n, 2)`` unit vectors at angles ``2 pi m / n`` (the charts of :func:`offset_cusum`)."""
     a = 2.0 * np.pi * np.arange(n) / n

@@ -11,6 +11,7 @@ import numpy as np
 from sensornet.peers.trust_checks import (
     cusum_directions,
     gls_offset,
+    gls_trend,
     is_repeat,
     offset_chi2,
     offset_cusum,
@@ -79,7 +80,21 @@ class NeighbourTrust:
     """The withheld-target CUSUM (:attr:`TrustConfig.withhold`)."""
     registered: np.ndarray | None = None
     """The position offset ``(2,)`` subtracted from its densities (:attr:`TrustConfig.register`),
-    or None."""
+    or None: at scan :attr:`registered_k`, growing by :attr:`registered_rate` per scan."""
+    registered_rate: np.ndarray | None = None
+    """The registered offset's rate ``(2,)`` m/scan (:attr:`TrustConfig.register_drift`)."""
+    registered_k: int = 0
+    """The scan :attr:`registered` is the offset at."""
+    drift_window: deque = field(default_factory=deque)
+    """Per tested scan ``(I, y)`` of its offset, the last :attr:`TrustConfig.register_window`
+    (what :attr:`TrustConfig.register_drift` fits)."""
+    residuals: deque = field(default_factory=deque)
+    """Per tested scan, ``(I, y)`` of what is left after the registered offset
+    (:attr:`TrustConfig.readmit_offset`; the raw offsets when none is registered)."""
+    moved: np.ndarray | None = None
+    """The last offset ``(2,)`` a repair subtracted (:meth:`peers.trust.Trust._moved`)."""
+    raw_offset: np.ndarray | None = None
+    """Its last tested scan's offset ``I^-1 y`` ``(2,)`` (None: nothing matched)."""
     rounds: int = 0
     """Rounds it was tested in."""
     holds: int = 0
@@ -106,6 +121,8 @@ def add_offset(cfg: TrustConfig, rec: NeighbourTrust, info: tuple) -> tuple[floa
     neighbour's window and return, per window of :attr:`TrustConfig.bias_windows`, the
     chi-square of its mean offset (:attr:`TrustConfig.bias`)."""
     push_window(rec.offsets, info, max(cfg.bias_windows))
+    if cfg.register and cfg.register_drift:
+        push_window(rec.drift_window, info, cfg.register_window)
     chi2 = offset_chi2(rec.offsets, cfg.bias_windows)
     if cfg.bias_cusum:
         if rec.cusum is None:
@@ -117,17 +134,45 @@ def add_offset(cfg: TrustConfig, rec: NeighbourTrust, info: tuple) -> tuple[floa
     return chi2
 
 
-def update_registration(rec: NeighbourTrust, alarm: bool) -> None:
+def update_registration(rec: NeighbourTrust, alarm: bool, k: int = 0,
+                        drift: bool = False, drift_chi2: float = 0.0) -> None:
     """Registration (:attr:`TrustConfig.register`): from an offset alarm on, the
     neighbour's offset is its generalised-least-squares estimate over the window kept,
-    re-estimated each scan, until its CUSUM is back at 0."""
+    re-estimated each scan (``k``), until its CUSUM is back at 0. ``drift``
+    (:attr:`TrustConfig.register_drift`): the offset and its rate at ``k``
+    (:func:`peers.trust_checks.gls_trend`) where the rate's chi-square is above
+    ``drift_chi2``, else the window's mean."""
     if not alarm and (rec.registered is None
                       or (rec.cusum is not None and float(rec.cusum.max()) <= 0.0)):
-        rec.registered = None
+        rec.registered, rec.registered_rate = None, None
+        return
+    fit = gls_trend(rec.drift_window or rec.offsets) if drift else None
+    if fit is not None and fit[2] > drift_chi2:
+        rec.registered, rec.registered_rate, _ = fit
+        rec.registered_k = k
         return
     offset = gls_offset(rec.offsets)
     if offset is not None:
-        rec.registered = offset
+        rec.registered, rec.registered_rate, rec.registered_k = offset, None, k
+
+
+def registered_at(rec: NeighbourTrust, k: int) -> np.ndarray | None:
+    """The neighbour's registered offset ``(2,)`` predicted to scan ``k`` (None: none)."""
+    if rec.registered is None:
+        return None
+    if rec.registered_rate is None:
+        return rec.registered
+    return rec.registered + rec.registered_rate * (k - rec.registered_k)
+
+
+def residual_passes(cfg: TrustConfig, rec: NeighbourTrust) -> bool:
+    """Whether the neighbour's residual offset (:attr:`NeighbourTrust.residuals`) is under
+    every window's threshold of :attr:`TrustConfig.bias_thresholds` (true with no
+    window yet: nothing to hold it out on)."""
+    if not rec.residuals:
+        return True
+    chi2 = offset_chi2(rec.residuals, cfg.bias_windows)
+    return all(c <= t for c, t in zip(chi2, cfg.bias_thresholds, strict=True))
 
 
 def is_repeated(cfg: TrustConfig, rec: NeighbourTrust, k: int, mix: GaussianMixture) -> bool:

@@ -83,7 +83,10 @@ def test_a_biased_member_is_repaired_not_excluded_as_in_the_twin(tmp_path):
         want = twin.peers[name].consensus.trust.n["s2"].registered
         assert got["state"] == "trusted" and got["registered"] is not None, (name, got)
         dx, dy = got["registered"]
-        assert 15.0 < dx < 45.0 and abs(dy) < 15.0, (name, got)  # the lie: +30 m along x
+        # the lie: +30 m along x; across, the drift fit's (TrustConfig.register_drift) rate
+        # of the honest filters' own relative drift: 16.6 m at scan 60 on run 0 (8.2 with the
+        # window's mean before issue 36), the twin's too (below)
+        assert 15.0 < dx < 45.0 and abs(dy) < 20.0, (name, got)
         assert want is not None and abs(dx - want[0]) < 5.0 and abs(dy - want[1]) < 5.0, (
             name, got["registered"], want)
         assert abs(s["mean_ospa_fused"] - twin.mean_ospa(name)) < 3.0, (

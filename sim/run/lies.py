@@ -26,8 +26,13 @@ INFLATE = 5.0
 """The ``inflated`` lie's weight factor."""
 BIAS = 30.0
 """Metres the ``biased`` sensor's estimates sit off along x (its covariance stays honest)."""
+DRIFT_RATE = 2.0
+"""Metres per scan by which the ``drift`` liar's offset along x grows (issue 36 item 4: a
+sensor whose bias keeps growing, its covariance honest; :func:`drift_lie` for other rates)."""
 
-Lie = Callable[[GaussianMixture], GaussianMixture]
+Lie = Callable[..., GaussianMixture]
+"""``lie(mixture, k=0)``: what the liar tells at scan ``k`` for its real ``mixture`` (only
+the ``drift`` lie looks at ``k``)."""
 
 
 def _tight(n: int, d: int) -> np.ndarray:
@@ -46,41 +51,57 @@ def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2))
     """The function that turns the liar's real mixture into lie ``kind`` (:data:`LIES`)."""
     ix, iy = position_index
 
-    def empty(mix: GaussianMixture) -> GaussianMixture:
+    def empty(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         return GaussianMixture.empty(mix.dim)
 
-    def shifted(mix: GaussianMixture) -> GaussianMixture:
+    def shifted(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         means = mix.means.copy()
         means[:, ix] += SHIFT
         return GaussianMixture(mix.weights.copy(), means, _tight(len(mix), mix.dim))
 
-    def inflated(mix: GaussianMixture) -> GaussianMixture:
+    def inflated(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         return mix.scaled(INFLATE)
 
-    def phantoms(mix: GaussianMixture) -> GaussianMixture:
+    def phantoms(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         pos = phantom_positions(scn)
         means = np.zeros((len(pos), mix.dim))
         means[:, ix], means[:, iy] = pos[:, 0], pos[:, 1]
         extra = GaussianMixture(np.ones(len(pos)), means, _tight(len(pos), mix.dim))
         return GaussianMixture.concatenate([mix, extra])
 
-    def biased(mix: GaussianMixture) -> GaussianMixture:
+    def biased(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         means = mix.means.copy()
         means[:, ix] += BIAS
         return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
 
     held: list[GaussianMixture] = []
 
-    def stuck(mix: GaussianMixture) -> GaussianMixture:
+    def stuck(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         if not held and len(mix):
             held.append(mix.copy())
         return held[0].copy() if held else mix
 
     lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms,
-            "biased": biased, "stuck": stuck}
+            "biased": biased, "stuck": stuck, "drift": drift_lie(DRIFT_RATE, position_index)}
     if kind not in lies:
         raise ValueError(f"unknown lie {kind!r}; expected one of {', '.join(lies)}")
     return lies[kind]
+
+
+def drift_lie(rate: float, position_index: tuple[int, int] = (0, 2)) -> Lie:
+    """The ``drift`` lie at ``rate`` metres per scan: every component's position moved
+    ``rate * k`` metres along x at scan ``k`` (1-based: already ``rate`` off at the first),
+    its covariance honest. A biased sensor whose bias keeps growing: each scan's offset is
+    within an honest neighbour's scatter of the last one's, so a registration that takes it
+    to be constant runs behind it."""
+    ix = position_index[0]
+
+    def drift(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
+        means = mix.means.copy()
+        means[:, ix] += rate * k
+        return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
+
+    return drift
 
 
 LIES = LIE_KINDS
@@ -103,7 +124,7 @@ class LyingCore(PeerCore):
         told = []
         for m in messages:
             if type(m) is Estimate:
-                told_mix = self.lie(m.mixture)
+                told_mix = self.lie(m.mixture, m.k)
                 m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)))
                 self.lies_told += 1
             told.append(m)
