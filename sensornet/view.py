@@ -17,6 +17,7 @@ are importable from here as before.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import queue
 import sys
@@ -25,8 +26,10 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import zenoh
+
 from sensornet.peers.recording import read as read_recording
-from sensornet.peers.session import open_session
+from sensornet.peers.session import SessionError, zenoh_config
 from sensornet.protocol.keys import ROOT, Keys
 from sensornet.view_columns import Batcher, strip_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_round
@@ -47,6 +50,10 @@ QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
 """Waiting messages above which estimates (the heaviest to draw) are skipped unread."""
+RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
+"""How often the view dials an endpoint that does not answer yet. The run starts the view
+first, before the world listens: with Zenoh's default back-off (1 s, doubling to 4 s) it
+linked up to 4 s late and missed the first scans of a short run."""
 
 
 class LiveView:
@@ -67,9 +74,9 @@ class LiveView:
         self.estimates = estimates
         self.connect, self.config = list(connect), config
         self.security = security
-        self.rr, self.rec = rr, rec
-        self.batcher = Batcher(rr, rec)
-        self.state: ViewState = state_factory(self.batcher)
+        self.state: ViewState | None = None
+        if state_factory is not None:
+            self.draw_into(state_factory, rr, rec)
         self.q: queue.Queue = queue.Queue(maxsize=QUEUE_MAX)
         self.dropped = 0
         self.skipped = 0
@@ -80,8 +87,22 @@ class LiveView:
         self._said_at = 0.0
         self.session = None
 
+    def draw_into(self, state_factory, rr, rec) -> None:
+        """Where to draw (before :meth:`run`; what arrives meanwhile waits in the queue): the
+        view process subscribes first and opens its recording after (0.8 s), so it hears a
+        short run from its first scan."""
+        self.rr, self.rec = rr, rec
+        self.batcher = Batcher(rr, rec)
+        self.state = state_factory(self.batcher)
+
     def open(self) -> None:
-        self.session = open_session((), self.connect, self.config, security=self.security)
+        conf = zenoh_config((), self.connect, self.config, security=self.security)
+        conf.insert_json5("connect/retry", json.dumps(RETRY))  # linked once the world listens
+        try:
+            self.session = zenoh.open(conf)
+        except Exception as exc:
+            raise SessionError(f"cannot open Zenoh session (connect {self.connect}): "
+                               f"{exc}") from None
         k = Keys(self.network)  # each channel by name: what an observer may subscribe to
         exprs = [k.scan(), k.scans(), k.tracks(), k.truth(), k.ctl(), k.telemetry(),
                  *([k.estimate()] if self.estimates else [])]

@@ -228,6 +228,21 @@ def test_a_view_behind_drops_and_skips_its_own_work_and_says_so():
     assert len(said) == 1 and "10 messages dropped" in said[0] and "peers are not" in said[0]
 
 
+def test_what_arrives_before_the_recording_opens_waits_and_is_drawn():
+    """The view process subscribes before it opens its recording (0.8 s): what the run sends
+    meanwhile (its first scans) waits in the queue and is drawn once the recording is open."""
+    view = LiveView("net", None, None, None)
+    assert view.state is None
+    view._on_sample(_Sample("sensornet/net/truth", encode(Truth(1, np.array([3]),
+                                                                np.zeros((1, 4))))))
+    view._on_sample(_Sample("sensornet/net/tracks/s1", encode(Tracks("s1", 1, np.zeros((1, 4))))))
+    rec = _Rec()
+    view.draw_into(lambda b: ViewState(b, ["s1"]), rr, rec)
+    view.run(duration=0.0)  # drains what waits and flushes
+    assert view.state.handled == 2 and view.q.empty()
+    assert rec.by_path()["world/truth"][0] == [1] and rec.by_path()["peers/s1/tracks"][0] == [1]
+
+
 def test_telemetry_round_trip_and_refusals():
     msg = Telemetry("s1", 4, {"ospa/fused": 3.5, "age": 2.0}, ("s2 left",),
                     {"particles": np.arange(6.0).reshape(3, 2)}, _mix(2))

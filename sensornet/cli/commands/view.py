@@ -49,14 +49,12 @@ def cmd_view(args: argparse.Namespace) -> int:
     viewer (``--viewer``) until Ctrl-C, ``--duration`` or (``--until-end``) the run's end."""
     viewer, out = _check_args(args)
     security = _observer(args)
-    if args.nice:
-        os.nice(args.nice)  # the view yields the CPU to the network's processes
-    sink, state = _open_sink(args, out, viewer)
     if args.from_mcap:  # offline: the peers' recordings instead of the network
+        sink, state = _open_sink(args, out, viewer)
         return _replay_offline(args, sink, state, out or viewer)
-    view = LiveView(args.network, state, sink.rr, sink.rr, args.connect or [], args.config,
+    view = LiveView(args.network, None, None, None, args.connect or [], args.config,
                     estimates=args.estimates, security=security)
-    cpu = _watch(args, view, sink, out, viewer)
+    cpu = _watch(args, view, out, viewer)
     _print_stats(view, cpu)
     return 0
 
@@ -158,10 +156,10 @@ def _replay_offline(args: argparse.Namespace, sink: RerunSink,
     return 0
 
 
-def _watch(args: argparse.Namespace, view: LiveView, sink: RerunSink, out: Path | None,
+def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
            viewer: str | None) -> float:
-    """Join the network and draw until Ctrl-C/SIGTERM, ``--duration`` or the run's end;
-    returns the CPU seconds the view spent."""
+    """Join the network, then open the recording, and draw until Ctrl-C/SIGTERM,
+    ``--duration`` or the run's end; returns the CPU seconds the view spent."""
 
     def on_signal(signum, frame) -> None:
         view.stop.set()
@@ -172,8 +170,15 @@ def _watch(args: argparse.Namespace, view: LiveView, sink: RerunSink, out: Path 
     try:
         view.open()
     except SessionError as exc:
-        sink.close()
         raise UserError(str(exc)) from None
+    try:
+        sink, state = _open_sink(args, out, viewer)
+    except BaseException:
+        view.close()
+        raise
+    view.draw_into(state, sink.rr, sink.rr)
+    if args.nice:  # subscribed: from now on it yields the CPU to the network's processes
+        os.nice(args.nice)  # (niced from its start it joined a short run's last scans)
     print(f"view: network {args.network} via {', '.join(args.connect)} -> "
           f"{out or ''}{' + ' if out and viewer else ''}{viewer or ''} (Ctrl-C to detach)",
           file=sys.stderr, flush=True)
