@@ -164,15 +164,15 @@ class TrustConfig:
     repaired density: an inflated liar's factor is the same every scan, an honest one's
     scatters about 1 (one scan's would replace the neighbour's weights with own's)."""
     detection_probability: float | None = None
-    """The smallest detection probability of this peer's and its neighbours' sensors (set
-    from the scenario); None: no missed-detection explanation. Two honest densities that
-    disagree completely (one side empty, or its targets far from the other's) are what a
-    missed detection does to a level-2 pruned posterior (a target missed this scan falls
-    under the publishing threshold) or what a target born a scan apart does; the statistic
-    is the smaller of the divergence test and the evidence needed to explain the whole
-    disagreement by misses, ``-log(1 - Pd)`` per target on either side
-    (:func:`peers.trust_checks.miss_cost`: the log-likelihood ratio of a density that lacks
-    a target, lying against honest)."""
+    """The smallest detection probability of this peer's and its neighbours' sensors (set from the
+    scenario); None (and 1, which is taken as None: seed 001's sensors, where the defence
+    refused to start before issue 36): no missed-detection explanation. Two honest densities
+    that disagree completely (one side empty, or its targets far from the other's) are what a
+    missed detection does to a level-2 pruned posterior (a target missed this scan falls under
+    the publishing threshold) or what a target born a scan apart does; the statistic is the
+    smaller of the divergence test and the evidence needed to explain the whole disagreement by
+    misses, ``-log(1 - Pd)`` per target on either side (:func:`peers.trust_checks.miss_cost`:
+    the log-likelihood ratio of a density that lacks a target, lying against honest)."""
     unmatched: bool = True
     """With :attr:`detection_probability`: the statistic is at least ``-log(1 - Pd)`` per
     target one side shows and the other has nothing within :attr:`bias_gate` metres of
@@ -235,6 +235,8 @@ class TrustConfig:
     filters that start empty agree on nothing, which the cardinality term alone scores)."""
 
     def __post_init__(self) -> None:
+        if self.detection_probability == 1.0:  # no miss explains anything: as if none given
+            object.__setattr__(self, "detection_probability", None)
         if not (0 < self.leak <= 1 and 0 <= self.suspect < self.quarantine and self.cap > 0
                 and self.readmit >= 1 and self.kappa >= 0 and self.warmup >= 0
                 and self.drift >= 0 and self.empty_penalty >= 0 and self.keep_own >= 0

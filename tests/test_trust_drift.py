@@ -122,3 +122,10 @@ def test_drifting_liar_is_never_trusted_again_while_its_offset_is_off(drift_runs
             assert one.peers[n].consensus.trust.trace  # the trace was kept
         worst = max((r for _, _, r in trusted_residuals(one, HONEST)), default=0.0)
         assert worst <= 3 * HONEST_SIGMA
+
+
+def test_a_detection_probability_of_one_means_no_miss_explanation():
+    assert TrustConfig(detection_probability=1.0).detection_probability is None
+    assert TrustConfig(detection_probability=0.9).detection_probability == 0.9
+    with pytest.raises(ValueError, match="invalid trust settings"):
+        TrustConfig(detection_probability=1.5)
