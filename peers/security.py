@@ -85,7 +85,7 @@ class Security:
         roster = folder / "members.json"
         names = json.loads(roster.read_text()).get("members", []) if roster.is_file() else []
         routers = tuple(n for n in names if n.startswith(ROUTER_PREFIX))
-        observers = tuple(n for n in names if n.startswith(OBSERVER_PREFIX))
+        observers = tuple(n for n in names if n.startswith(OBSERVER_PREFIX) and n not in peers)
         return cls(folder.resolve(), member, network, tuple(peers), routers=routers,
                    observers=observers)
 

@@ -15,15 +15,18 @@ import time
 import numpy as np
 import pytest
 from sensornet.peers.access_control import OBSERVER, acl_rules
-from sensornet.peers.security import Security
+from sensornet.peers.security import Security, make_keys
 from sensornet.peers.session import open_session
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.envelope import inner
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Tracks
+from sensornet.sim.run.launcher import _view_command
+from sensornet.sim.run.router import router_security
 from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet.cli import main
+from sensornet.cli.parser import build_parser
 from tests.processes import env, rerun_exe, stop_all, wait_for
 
 NETWORK = "viewsec"
@@ -58,6 +61,12 @@ def test_keys_make_the_observer_and_the_view_joins_only_as_one(tmp_path, capsys)
     sec = Security.load(folder, OBSERVER, NETWORK, PEERS)
     assert sec.observers == (OBSERVER,)  # from the roster: every member loads the rule
     assert Security.load(folder, "s1", NETWORK, PEERS).observers == (OBSERVER,)
+    make_keys(NETWORK, ["router"], folder)
+    router = router_security(folder, "router")  # its peers from the roster: not the view
+    assert OBSERVER not in router.peers and router.observers == (OBSERVER,)
+    ids = [s["id"] for s in acl_rules(NETWORK, router.peers, observers=router.observers)[
+        "subjects"]]
+    assert len(ids) == len(set(ids))  # Zenoh refuses a policy with a repeated subject
     base = ["view", NETWORK, "--connect", "tls/127.0.0.1:1", "--out", str(tmp_path / "v.rrd")]
     for extra, said in ((["--secure", str(folder), "--as", "s1"], "read-only observer"),
                         (["--as", "view"], "--as needs --secure"),
@@ -65,6 +74,19 @@ def test_keys_make_the_observer_and_the_view_joins_only_as_one(tmp_path, capsys)
         assert main([*base, *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
+
+
+def test_a_routed_runs_view_connects_to_the_router_once_and_gets_no_peer_flags(tmp_path):
+    ep = "tls/127.0.0.1:7000"
+    cfg = tmp_path / "c.json5"
+    cfg.write_text("{}")
+    common = ["--network", NETWORK, "--config", str(cfg), "--secure", "k"]
+    cmd = _view_command(NETWORK, ep, ["--connect", ep, "--recover"], "seed000", [], "r",
+                        common, tmp_path, True, None)
+    assert "--recover" not in cmd and cmd.count("--connect") == 1
+    assert cmd[cmd.index("--secure") + 1] == "k" and cmd[cmd.index("--config") + 1] == str(cfg)
+    args = build_parser().parse_args(cmd[cmd.index("view"):])  # every flag is the view's
+    assert args.connect == [ep] and args.secure == "k" and args.until_end
 
 
 def _forge_as_observer(keys, endpoint: str, report: dict) -> None:

@@ -200,7 +200,10 @@ def _view_command(network: str, world: str, extra_connect: list[str], source: st
     mode as the keys folder's read-only observer."""
     cfg = common[common.index("--config") + 1] if "--config" in common else None
     keys = common[common.index("--secure") + 1] if "--secure" in common else None
-    return [*_cli(), "view", network, "--connect", world, *extra_connect,
+    eps = [world, *(extra_connect[i + 1] for i, a in enumerate(extra_connect)
+                    if a == "--connect")]  # not a routed run's --recover: not a view's flag
+    links = [a for e in dict.fromkeys(eps) for a in ("--connect", e)]
+    return [*_cli(), "view", network, *links,
             "--scenario", source, *sets, "--run-id", run_id, "--until-end",
             "--nice", str(VIEW_NICE),
             *(["--config", cfg] if cfg else []),

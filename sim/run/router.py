@@ -21,6 +21,7 @@ from pathlib import Path
 
 import zenoh
 from sensornet.peers.security import (
+    OBSERVER_PREFIX,
     ROUTER_PREFIX,
     WORLD,
     Security,
@@ -33,14 +34,16 @@ from sensornet.peers.session import SessionError, zenoh_config
 
 def router_security(folder: str | Path, name: str, network: str | None = None):
     """The router's :class:`peers.security.Security` from a keys folder (roster from its
-    ``members.json``: the world, the routers, every other name a peer)."""
+    ``members.json``: the world, the routers, the read-only observers, every other name a
+    peer)."""
     made_for = keys_network(folder)
     if network and network != made_for:
         raise SecurityError(f"--secure {folder}: keys of network {made_for!r}, not of "
                             f"{network!r}")
     roster = Path(folder) / "members.json"
     names = json.loads(roster.read_text()).get("members", []) if roster.is_file() else []
-    peers = [n for n in names if n != WORLD and not n.startswith(ROUTER_PREFIX)]
+    peers = [n for n in names if n != WORLD
+             and not n.startswith((ROUTER_PREFIX, OBSERVER_PREFIX))]
     if not name.startswith(ROUTER_PREFIX):
         raise SecurityError(f"a router's member name must start with {ROUTER_PREFIX!r}, "
                             f"not {name!r}")

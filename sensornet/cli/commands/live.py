@@ -8,7 +8,7 @@ from pathlib import Path
 
 from sensornet.cli.common import UserError
 from sensornet.live import Tap, default_wait, main_echo, topics
-from sensornet.peers.security import Security, SecurityError, load_roster
+from sensornet.peers.security import OBSERVER_PREFIX, Security, SecurityError, load_roster
 from sensornet.peers.session import SessionError
 from sensornet.protocol.keys import check_name
 
@@ -33,7 +33,8 @@ def cmd_live(args: argparse.Namespace) -> int:
         if not args.member:
             raise UserError("--secure needs --as MEMBER (whose certificate the tool uses)")
         try:
-            peers = [n for n in load_roster(Path(args.secure)) if n != "world"]
+            peers = [n for n in load_roster(Path(args.secure))
+                     if n != "world" and not n.startswith(OBSERVER_PREFIX)]
             security = Security.load(args.secure, args.member, args.network, peers)
         except (SecurityError, OSError, ValueError) as exc:
             raise UserError(str(exc)) from None
