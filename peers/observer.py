@@ -172,7 +172,7 @@ class Observer:
                 self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
             view = hooks.pda_view()
             if view is not None:  # the gates and weighted returns: no other message has them
-                self._scan(k)["points"].update(pack_gates(view))
+                self._scan(k)["points"].update(pack_gates(view, own=self.name))
             if view is not None and "detector" in view:
                 d, threshold = view["detector"]
                 self._set(k, "detector/D_L", d)
@@ -266,11 +266,12 @@ def unpack_marginals(points: np.ndarray) -> GaussianMixture:
     return GaussianMixture.trusted(r[:, 2, 1], means, covs)
 
 
-def pack_gates(view: dict) -> dict[str, np.ndarray]:
+def pack_gates(view: dict, own: str = "own") -> dict[str, np.ndarray]:
     """A PDA update's gates (``pda_view()``) as telemetry point sets: per sensor (2-D
-    measurements, the first :data:`GATES_SHOWN`) ``pda/<sensor>`` with rows ``zhat``,
-    ``[Sxx, Sxy]``, ``[Syy, gamma]``, then the ``m`` validated returns, then ``[weight, 0]``
-    per return; :func:`unpack_gate` inverts one."""
+    measurements, the first :data:`GATES_SHOWN`; a one-sensor filter's ``"own"`` named
+    ``own``) ``pda/<sensor>`` with rows ``zhat``, ``[Sxx, Sxy]``, ``[Syy, gamma]``, then the
+    ``m`` validated returns, then ``[weight, 0]`` per return; :func:`unpack_gate` inverts
+    one."""
     out = {}
     for name, v in list(view.get("sensors", {}).items())[:GATES_SHOWN]:
         S = np.asarray(v["S"], float)
@@ -279,8 +280,8 @@ def pack_gates(view: dict) -> dict[str, np.ndarray]:
         if S.shape != (2, 2) or len(z) != len(w):  # not a 2-D position gate: not drawn
             continue
         head = [np.asarray(v["zhat"], float).reshape(2), S[0], [S[1, 1], float(v["gamma"])]]
-        out[f"pda/{name}"] = np.concatenate([np.array(head), z.reshape(-1, 2),
-                                             np.column_stack([w, np.zeros(len(w))])])
+        rows = [np.array(head), z.reshape(-1, 2), np.column_stack([w, np.zeros(len(w))])]
+        out[f"pda/{own if name == 'own' else name}"] = np.concatenate(rows)
     return out
 
 

@@ -108,3 +108,18 @@ def test_gates_round_trip_and_a_malformed_one_is_counted_not_drawn():
     state.message(decode(encode(Telemetry("p", 1, points={"pda/a": bad, "pda/b": negative}))))
     state.b.flush()
     assert state.rejected == 2 and not [p for p in rec.calls if "/pda/" in p]
+
+
+def test_a_one_sensor_pda_peer_names_its_gate_after_itself():
+    """Estimate sharing (CI): each peer's PDA filter has one sensor, ``"own"`` in its
+    ``pda_view``; the telemetry names it after the peer, as measurement sharing does."""
+    cfg = seed003_net.load(overrides={"scenario.num_scans": 4})
+    core = seed003_net.twin(cfg, "ci", 1).peers["s2"]
+    assert set(core.consensus.hooks.pda_view()["sensors"]) == {"own"}
+    msg = _telemetry(core, 4)
+    assert "pda/s2" in msg.points and not [p for p in msg.points if p.startswith("pda/own")]
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), ["s1", "s2"])
+    state.message(msg)
+    state.b.flush()
+    assert {"peers/s2/pda/s2/gate", "peers/s2/pda/s2/returns"} <= set(rec.calls)
