@@ -31,6 +31,9 @@ FUSED_SHOWN = 64
 GATES_SHOWN = 8
 """Sensors whose PDA gate a peer sends per scan, at most (a telemetry message carries at most
 16 point sets)."""
+RETURNS_SHOWN = 64
+"""Validated returns of one PDA gate sent per scan, at most: the heaviest (seed 003's dense
+clutter validates 200-300 a sensor late in a run: 16.8 kB of telemetry a scan with all)."""
 _KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer", "trust",
                     "trust-event"})
 """Record kinds the report reads (a peer's many ``estimate`` records pass by at once)."""
@@ -270,8 +273,8 @@ def pack_gates(view: dict, own: str = "own") -> dict[str, np.ndarray]:
     """A PDA update's gates (``pda_view()``) as telemetry point sets: per sensor (2-D
     measurements, the first :data:`GATES_SHOWN`; a one-sensor filter's ``"own"`` named
     ``own``) ``pda/<sensor>`` with rows ``zhat``, ``[Sxx, Sxy]``, ``[Syy, gamma]``, then the
-    ``m`` validated returns, then ``[weight, 0]`` per return; :func:`unpack_gate` inverts
-    one."""
+    ``m`` validated returns (the :data:`RETURNS_SHOWN` heaviest), then ``[weight, 0]`` per
+    return; :func:`unpack_gate` inverts one."""
     out = {}
     for name, v in list(view.get("sensors", {}).items())[:GATES_SHOWN]:
         S = np.asarray(v["S"], float)
@@ -279,6 +282,9 @@ def pack_gates(view: dict, own: str = "own") -> dict[str, np.ndarray]:
         w = np.asarray(v["weights"], float).reshape(-1)
         if S.shape != (2, 2) or len(z) != len(w):  # not a 2-D position gate: not drawn
             continue
+        if len(w) > RETURNS_SHOWN:
+            keep = np.sort(np.argsort(w)[::-1][:RETURNS_SHOWN])
+            z, w = z[keep], w[keep]
         head = [np.asarray(v["zhat"], float).reshape(2), S[0], [S[1, 1], float(v["gamma"])]]
         rows = [np.array(head), z.reshape(-1, 2), np.column_stack([w, np.zeros(len(w))])]
         out[f"pda/{own if name == 'own' else name}"] = np.concatenate(rows)

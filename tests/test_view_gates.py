@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
-from sensornet.peers.observer import Observer, pack_gates, unpack_gate
+from sensornet.peers.observer import RETURNS_SHOWN, Observer, pack_gates, unpack_gate
 from sensornet.peers.rerun_sink import color_of
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.messages import Telemetry, Tracks
@@ -75,11 +75,13 @@ def test_a_pda_peer_sends_its_gates_and_the_view_draws_them(meas_peer):
         assert _column(cols, "colors") == [[(r << 24) | (g << 16) | (b << 8) | 255]]
         scans, cols = rec.calls[f"{base}/returns"]
         (xy,) = _column(cols, "positions")
-        assert len(xy) == len(v["returns"]) > 0
-        np.testing.assert_allclose(np.array(xy) * [1.0, -1.0], v["returns"], rtol=1e-6)
+        w = np.asarray(v["weights"])  # the heaviest RETURNS_SHOWN, in their order
+        keep = np.sort(np.argsort(w)[::-1][:RETURNS_SHOWN])
+        assert len(xy) == min(len(w), RETURNS_SHOWN) > 0
+        np.testing.assert_allclose(np.array(xy) * [1.0, -1.0], v["returns"][keep], rtol=1e-6)
         (colors,) = _column(cols, "colors")
         red = np.array(colors, np.uint32) >> 24  # RGBA packed: red is the top byte
-        np.testing.assert_array_equal(red, (255 * np.clip(v["weights"], 0, 1)).astype(np.uint8))
+        np.testing.assert_array_equal(red, (255 * np.clip(w[keep], 0, 1)).astype(np.uint8))
 
 
 def test_gates_round_trip_and_a_malformed_one_is_counted_not_drawn():
@@ -100,6 +102,12 @@ def test_gates_round_trip_and_a_malformed_one_is_counted_not_drawn():
     np.testing.assert_array_equal(returns, view["sensors"]["a"]["returns"])
     np.testing.assert_array_equal(weights, [0.7, 0.1])
     assert len(unpack_gate(packed["pda/b"])[3]) == 0
+    w = np.linspace(0.0, 0.5, RETURNS_SHOWN + 10)[::-1]  # heaviest first
+    many = {"sensors": {"a": {**view["sensors"]["a"], "weights": w,
+                              "returns": np.column_stack([w, w])}}}
+    _, _, _, returns, weights = unpack_gate(pack_gates(many)["pda/a"])
+    np.testing.assert_array_equal(weights, w[:RETURNS_SHOWN])  # the lightest 10 left out
+    np.testing.assert_array_equal(returns[:, 0], w[:RETURNS_SHOWN])
     rec = _Rec()
     state = ViewState(Batcher(rr, rec), ["p"])
     bad = np.vstack([packed["pda/a"], [[0.0, 0.0]]])  # 3 + 2 m + 1 rows
