@@ -9,6 +9,7 @@ subtracted from it: the scans it was trusted again after a quarantine and the re
 
     python -m sensornet.sim.studies.lying.drift --runs 4 --first-run 9000   # training
     python -m sensornet.sim.studies.lying.drift --runs 4 --first-run 7000   # evaluation
+    python -m sensornet.sim.studies.lying.drift --variants --runs 4 --first-run 9000
 
 Training runs 9000.. choose, evaluation runs 7000.. report (nothing is chosen on them).
 """
@@ -17,10 +18,10 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from sensornet.sim.run.lies import LyingCore, drift_lie
+from sensornet.sim.run.lies import LyingCore, drift_lie, make_lie
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import TwinResult, run_twin
 from sensornet.sim.scenario import Scenario, load_scenario
@@ -40,13 +41,20 @@ def scenario(rule: str, scans: int | None = None, overrides: dict | None = None)
     return load_scenario("seed000", overrides=ov)
 
 
-def run_drift(scn: Scenario, run: int, rate: float | None, liar: str = LIAR) -> TwinResult:
-    """One twin run with ``liar`` drifting at ``rate`` m/scan (None: the clean run); every
-    honest peer's trust (if on) keeps its trace."""
+def run_drift(scn: Scenario, run: int, rate: float | str | None, liar: str = LIAR,
+              trust: dict | None = None) -> TwinResult:
+    """One twin run with ``liar`` drifting at ``rate`` m/scan (a string: that lie of
+    :func:`sim.run.lies.make_lie`; None: the clean run); every honest peer's trust (if on)
+    keeps its trace and takes the :class:`peers.trust.TrustConfig` changes ``trust``."""
     peers = {n: make_peer(scn, n, run) for n in scn.sensor_names}
     if rate is not None:
         core = peers[liar]
-        peers[liar] = LyingCore(core, drift_lie(rate, core.estimator.position_index))
+        pos = core.estimator.position_index
+        peers[liar] = LyingCore(core, make_lie(rate, scn, pos) if isinstance(rate, str)
+                                else drift_lie(rate, pos))
+    for core in peers.values():
+        if trust and core.consensus.trust is not None:
+            core.consensus.trust.cfg = replace(core.consensus.trust.cfg, **trust)
     for name, core in peers.items():
         if name != liar and core.consensus.trust is not None:
             core.consensus.trust.trace = []
@@ -169,6 +177,29 @@ def measure(runs: range, rates: tuple[float, ...] = (1.0, 2.0), scans: int | Non
     return rows
 
 
+VARIANTS = {"before": {"register_drift": False, "readmit_offset": False},
+            "window-16": {"register_window": 16}, "default": {}}
+"""Registration as before issue 36 (the window's mean, the scores alone readmit), the drift
+fit over the offset test's 16 scans, and the default (32)."""
+
+
+def variants(runs: range, lies: tuple = ("biased", 1.0, 2.0)) -> list[dict]:
+    """The defence on, per :data:`VARIANTS` entry and lie (``None``: clean): the honest
+    peers' whole-run and last-30 fused OSPA, mean over ``runs``."""
+    scn = scenario("trust")
+    honest = [n for n in scn.sensor_names if n != LIAR]
+    rows = []
+    for lie in (None, *lies):
+        for name, change in VARIANTS.items():
+            res = [run_drift(scn, r, lie, trust=change) for r in runs]
+            rows.append({"lie": lie or "clean", "variant": name,
+                         "fused": float(np.mean([np.mean([x.peers[n].mean_ospa("fused")
+                                                          for n in honest]) for x in res])),
+                         "last30": float(np.mean([last_fused(x, scn, honest) for x in res]))})
+            print(rows[-1], flush=True)
+    return rows
+
+
 def table(rows: list[dict]) -> str:
     """Mean last-30 fused OSPA per rule and rate (runs in brackets)."""
     lines = ["| rule | clean | " + " | ".join(
@@ -191,7 +222,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="first run (default 9000: training; 7000: evaluation)")
     p.add_argument("--rates", default="1,2", help="comma-separated drift rates (m/scan)")
     p.add_argument("--scans", type=int, default=None)
+    p.add_argument("--variants", action="store_true",
+                   help="compare the registration variants (VARIANTS) instead, defence on")
     a = p.parse_args(argv)
+    if a.variants:
+        variants(range(a.first_run, a.first_run + a.runs))
+        return 0
     rows = measure(range(a.first_run, a.first_run + a.runs),
                    tuple(float(x) for x in a.rates.split(",")), a.scans)
     print(table(rows))
