@@ -5,9 +5,10 @@ Built from the scenario: the motion model and ``Ps``; the sensor model, ``Pd`` a
 intensity ``kappa = lambda_c / V`` (:func:`sim.world.build.sensor_params`, floored at
 :data:`MIN_CLUTTER_INTENSITY` since the LMB update divides by it); births measurement-driven
 (Reuter et al. 2014, Sec. IV-C) for linear sensors, the scenario's birth components (weights
-clipped to 1) for range-bearing ones; ``filter.gate`` and ``filter.extraction_threshold``. The
-LMB's own settings (association, ``lambda_B``, ``r_B,max``, per-track ``J``, confirmation) are
-:class:`tracking.lmb.LmbFilter`'s defaults: there is no ``[lmb]`` table yet.
+clipped to 1) for range-bearing ones; ``filter.gate`` and ``filter.extraction_threshold``; the
+adaptive birth's ``lambda_B``, ``r_B,max`` and velocity spread from ``[lmb]``
+(:class:`sim.scenario.network.LmbSpec`). The LMB's other settings (association, per-track
+``J``, confirmation) are :class:`tracking.lmb.LmbFilter`'s defaults.
 """
 
 from __future__ import annotations
@@ -40,7 +41,9 @@ def make_lmb_filter(scn: Scenario, name: str, origin: int = 0) -> LmbFilter:
         birth = GaussianMixture(np.minimum(b.weights, 1.0), b.means, b.covs) if len(b) else None
     return LmbFilter(motion=motion_model(scn), sensor=sensor,
                      survival_probability=scn.survival_probability, birth=birth,
-                     adaptive_birth=adaptive, gate=scn.filter.gate,
+                     adaptive_birth=adaptive, birth_rate=scn.lmb.birth_rate,
+                     birth_max_existence=scn.lmb.birth_max_existence,
+                     birth_velocity_std=scn.lmb.birth_velocity_std, gate=scn.filter.gate,
                      extraction_threshold=scn.filter.extraction_threshold, origin=origin)
 
 

@@ -47,6 +47,7 @@ from sensornet.sim.scenario.network import (  # noqa: F401 (re-exported)
     ClusteringSpec,
     ExtendedSpec,
     FusionSpec,
+    LmbSpec,
     NetworkSpec,
 )
 from sensornet.sim.scenario.options import (
@@ -131,6 +132,8 @@ class Scenario:
     clustering: ClusteringSpec = option(ClusteringSpec(), doc="Flooding peers' clustering "
                                                               "(`[clustering]`).",
                                         custom="the defaults of `[clustering]`")
+    lmb: LmbSpec = option(LmbSpec(), doc="LMB peers' adaptive birth (`[lmb]`).",
+                          custom="the defaults of `[lmb]`")
     pda: PdaSpec | None = option(None, doc="PDA peers' settings (`[pda]`).",
                                  custom="no PDA settings")
     manoeuvre: ManoeuvreSpec | None = option(

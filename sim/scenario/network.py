@@ -1,7 +1,7 @@
 """The sections of a scenario about the peers: how they fuse (``[fusion]``), their network
-(``[network]``) and the settings of particular peer kinds (``[extended]``, ``[clustering]``;
-``[pda]`` is :mod:`sim.scenario.pda`); re-exported by :mod:`sim.scenario.model`. Each option
-is declared once in its field (:func:`sim.scenario.options.option`)."""
+(``[network]``) and the settings of particular peer kinds (``[extended]``, ``[clustering]``,
+``[lmb]``; ``[pda]`` is :mod:`sim.scenario.pda`); re-exported by :mod:`sim.scenario.model`.
+Each option is declared once in its field (:func:`sim.scenario.options.option`)."""
 
 from __future__ import annotations
 
@@ -163,3 +163,25 @@ class ClusteringSpec:
                                         "pooled scan in turn; `peers.flooding."
                                         "IcFloodEstimator`). Seed 004's `flooding.estimator`.",
                             choices=FLOOD_ESTIMATORS)
+
+
+@dataclass(frozen=True)
+class LmbSpec:
+    """LMB peers' measurement-driven birth (Reuter, Vo, Vo & Dietmayer 2014, Sec. IV-C).
+
+    ``network.filter = "lmb"`` (:mod:`sim.kinds.lmb`, ``tracking.lmb``); ``[lmb]`` table. The
+    defaults are :class:`tracking.lmb.LmbFilter`'s."""
+
+    birth_rate: float = option(0.1, doc="`lambda_B`: expected adaptive births per scan; each "
+                                        "measurement `z` gives a birth of existence "
+                                        "`min(r_B,max, lambda_B (1 - r_U(z)) / max(1, "
+                                        "sum_z' (1 - r_U(z'))))` (Reuter eq. 31; `r_U(z)`: "
+                                        "`z`'s probability of belonging to a track), so the "
+                                        "births of a scan add up to at most `lambda_B`.",
+                               check=NONNEGATIVE)
+    birth_max_existence: float = option(0.1, doc="`r_B,max`: the largest existence of one "
+                                                 "adaptive birth.", check=PROBABILITY)
+    birth_velocity_std: float = option(30.0, doc="Standard deviation of each velocity "
+                                                 "component of an adaptive birth (mean 0; its "
+                                                 "position is the measurement's).", unit="m/s",
+                                       check=POSITIVE)

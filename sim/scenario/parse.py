@@ -22,6 +22,7 @@ from sensornet.sim.scenario.model import (
     ExtendedSpec,
     FilterSpec,
     FusionSpec,
+    LmbSpec,
     ManoeuvreSpec,
     MetricsSpec,
     NetworkSpec,
@@ -85,6 +86,9 @@ def parse_document(data: dict, ctx: Context, default_name: str, origin: str) -> 
     if top.has("clustering"):
         scn = dataclasses.replace(scn, clustering=ClusteringSpec(
             **read(_section(top, "clustering", ClusteringSpec), ClusteringSpec)))
+    if top.has("lmb"):
+        scn = dataclasses.replace(scn, lmb=LmbSpec(**read(_section(top, "lmb", LmbSpec),
+                                                          LmbSpec)))
     if top.has("pda"):
         scn = dataclasses.replace(scn, pda=read_pda(_section(top, "pda", PdaSpec),
                                                         len(sensors)))
