@@ -2,9 +2,11 @@
 
 After each consensus round a peer gives every component of its fused mixture a label taken
 from the labelled inputs it fused (its own density and the neighbours' estimates that carry
-labels): per input, the fused components are paired with that input's tracks by
-:func:`tracking.labels.match_labels` (SciPy ``linear_sum_assignment`` on the Mahalanobis
-distance ``(m_f - m_i)^T (P_f + P_i)^-1 (m_f - m_i)``, gated at :data:`LABEL_GATE`), and a
+labels): per input, the fused components are paired with that input's tracks as
+:func:`tracking.labels.match_labels` pairs them (SciPy ``linear_sum_assignment`` on the
+Mahalanobis distance ``(m_f - m_i)^T (P_f + P_i)^-1 (m_f - m_i)``, gated at
+:data:`LABEL_GATE`; the distances of all inputs in one batch, the solver only for an input
+with a conflict: :func:`_pairs`), and a
 fused component takes the network rule's winner among the labels it was paired with (the
 earliest birth, then the lowest origin: :func:`tracking.labels.precedes`). A fused component
 paired with nothing gets a fresh label of this peer. Labels never add, drop or move a
@@ -26,9 +28,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
-from sensornet.tracking.labels import LabelMatch, label_keys, match_labels, new_labels
+from sensornet.tracking.labels import LabelMatch, label_keys, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
 LABEL_GATE = 26.0
@@ -98,6 +101,69 @@ class FusedLabels:
     """Fresh labels created (fused components paired with no input)."""
 
 
+def _all_tracks(inputs: Sequence[tuple[GaussianMixture, np.ndarray]]
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`input_tracks` of every labelled input at once: ``labels (T, 3)``, ``means (T,
+    d)``, ``covs (T, d, d)`` and ``src (T,)`` (the input's index), grouped by input in input
+    order and, within an input, in :func:`input_tracks`' order (by label). Inputs without
+    labels, or whose labels outnumber their rows, give none."""
+    use = [(i, mix, np.asarray(lab)) for i, (mix, lab) in enumerate(inputs)
+           if lab is not None and 0 < len(lab) <= len(mix)]
+    if not use:
+        return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 0)), np.zeros((0, 0, 0)), \
+            np.zeros(0, dtype=np.int64)
+    lab = np.concatenate([lab for _, _, lab in use]).astype(np.int64, copy=False)
+    w = np.concatenate([mix.weights[:len(la)] for _, mix, la in use])
+    src = np.repeat([i for i, _, _ in use], [len(la) for _, _, la in use])
+    order = np.lexsort((-w, lab[:, 2], lab[:, 1], lab[:, 0], src))  # by input, label; heaviest
+    key = np.column_stack((src, lab))[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = (key[1:] != key[:-1]).any(axis=1)
+    rows = order[first]
+    means = np.concatenate([mix.means[:len(la)] for _, mix, la in use])
+    covs = np.concatenate([mix.covs[:len(la)] for _, mix, la in use])
+    return lab[rows], means[rows], covs[rows], src[rows]
+
+
+def _pairs(fused: GaussianMixture, t_m: np.ndarray, t_P: np.ndarray, src: np.ndarray,
+           gate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per input, :func:`tracking.labels.match_labels` of the fused components with that input's
+    tracks, all inputs in one computation: the squared Mahalanobis distances ``(m_f - m_t)^T
+    (P_f + P_t)^-1 (m_f - m_t)`` of every (fused, track) pair at once (only pairs that can pass
+    the gate are solved, by match_labels' trace bound), then SciPy ``linear_sum_assignment`` on
+    an input's capped costs only where that input has a conflict. A pair inside the gate whose
+    fused component has no other candidate in that input and whose track has no other
+    candidate is in every optimal assignment (the assignment maximises the sum of ``gate - C``
+    over the pairs it keeps), so an input whose pairs are all such needs no solver. Returns
+    the matched pairs' fused rows and track indices ``(p,)``, ordered by input then row."""
+    n, T = len(fused), len(t_m)
+    diff = fused.means[:, None, :] - t_m[None, :, :]  # (n, T, d)
+    trace = np.trace(fused.covs, axis1=1, axis2=2)[:, None] + np.trace(t_P, axis1=1, axis2=2)
+    near = np.einsum("abi,abi->ab", diff, diff) <= gate * trace
+    cost = np.full((n, T), np.inf)
+    ii, jj = np.nonzero(near)
+    dn = diff[ii, jj]
+    cost[ii, jj] = np.einsum("pi,pi->p", dn, np.linalg.solve(fused.covs[ii] + t_P[jj],
+                                                           dn[..., None])[..., 0])
+    inside = cost <= gate
+    starts = np.flatnonzero(np.r_[True, src[1:] != src[:-1]])  # the inputs' column blocks
+    block = np.cumsum(np.r_[False, src[1:] != src[:-1]])  # (T,) block of each track
+    row_deg = np.add.reduceat(inside, starts, axis=1)  # (n, B) candidates per fused row, input
+    alone = inside & (row_deg[:, block] == 1) & (inside.sum(axis=0) == 1) & (cost < gate)
+    conflict = np.logical_or.reduceat(inside & ~alone, starts, axis=1).any(axis=0)  # (B,)
+    kept = alone
+    for b in np.flatnonzero(conflict):  # per input with a conflict: its own assignment
+        lo = starts[b]
+        hi = starts[b + 1] if b + 1 < len(starts) else T
+        r, c = linear_sum_assignment(np.minimum(cost[:, lo:hi], gate))
+        ok = cost[r, lo + c] <= gate
+        kept[:, lo:hi] = False
+        kept[r[ok], lo + c[ok]] = True
+    J, t = np.nonzero(kept)
+    by = np.lexsort((J, block[t]))
+    return J[by], t[by]
+
+
 def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, np.ndarray]],
                 origin: int, k: int, fresh_start: int = 0,
                 gate: float = LABEL_GATE) -> FusedLabels:
@@ -105,25 +171,19 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
     won one label: the heavier keeps it, the other takes a fresh one (two targets never share
-    an id)."""
+    an id). The per-input matching is :func:`_pairs` (one batched cost computation)."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
         return FusedLabels(none, LabelMatch(none, none.copy(), np.zeros(0)), 0)
-    tmp = new_labels(0, 0, n)  # the fused rows as unique labels (index = row)
-    rows, cands, src = [], [], []
-    for i, (mix, labels) in enumerate(inputs):
-        if labels is None or len(labels) == 0 or len(labels) > len(mix):
-            continue
-        t_lab, t_m, t_P = input_tracks(mix, labels)
-        m = match_labels(tmp, fused.means, fused.covs, t_lab, t_m, t_P, gate)
-        rows.append(m.own[:, 2])
-        cands.append(m.nbr)
-        src.append(np.full(len(m), i))
+    t_lab, t_m, t_P, t_src = _all_tracks(inputs)
     labels = np.empty((n, 3), dtype=np.int64)
     won = np.zeros(n, dtype=bool)
-    if rows:
-        J, L, S = np.concatenate(rows), np.concatenate(cands), np.concatenate(src)
+    J = np.zeros(0, dtype=np.int64)
+    if len(t_lab):
+        J, t = _pairs(fused, t_m, t_P, t_src, gate)
+    if len(J):
+        L, S = t_lab[t], t_src[t]
         order = np.lexsort((L[:, 2], L[:, 0], L[:, 1], J))  # per row, the winner first
         Js = J[order]
         first = np.ones(len(Js), dtype=bool)
