@@ -91,7 +91,7 @@ def end_to_end(args) -> None:
         pairs = statistics.median(g[k]["ms"] / g["off"]["ms"] for g in rows)
         print(f"  ros2 {'now' if k == 'on' else 'before'}: ratio of medians {ratio:.3f}, median "
               f"of the repeats' ratios {pairs:.3f} (target <= {TARGET:.2f}: "
-              f"{'met' if ratio <= TARGET else 'NOT met'})")
+              f"{'PASS' if ratio <= TARGET else 'FAIL'})")
 
 
 def scan_tracks(rng, n: int) -> Tracks:
