@@ -19,9 +19,8 @@ and ``sensor_msgs/msg/PointCloud2`` (detections) from Jazzy's standard set; the 
 store, because no standard ROS 2 message carries a track's label, covariance and existence
 (``radar_msgs/RadarTracks`` is not in the store and has neither of the last two).
 
-The messages are built two ways: as ``rosbags`` objects (:func:`tracks_message`, ...: the
-reference, and what tests decode against) and as CDR bytes packed directly
-(:mod:`peers.ros2_cdr`: what the peers publish, equal bytes, a tenth of the CPU).
+Messages as ``rosbags`` objects here (the reference); the peers publish the same bytes packed
+directly by :mod:`peers.ros2_cdr` (about a fifth of the CPU).
 
 Everything but :class:`Ros2Node` is pure (bytes and strings); :class:`Ros2Node` takes a Zenoh
 session object and never imports Zenoh.
@@ -223,11 +222,10 @@ def markers_message(tracks: Tracks, stamp_ns: int, color_index: int = 0):
     its 2-sigma position ellipse (no covariance: a 20 m disc) and a text with its label."""
     store = typestore()
     T = store.types
-    Marker, Pose, Point, Quat, Vec, Color = (
-        T["visualization_msgs/msg/Marker"], T["geometry_msgs/msg/Pose"],
-        T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"],
-        T["geometry_msgs/msg/Vector3"], T["std_msgs/msg/ColorRGBA"])
-    Duration = T["builtin_interfaces/msg/Duration"]
+    Marker, Pose, Point, Quat, Vec, Color, Duration = (T[f"{n}/msg/{m}"] for n, m in (
+        ("visualization_msgs", "Marker"), ("geometry_msgs", "Pose"), ("geometry_msgs", "Point"),
+        ("geometry_msgs", "Quaternion"), ("geometry_msgs", "Vector3"), ("std_msgs", "ColorRGBA"),
+        ("builtin_interfaces", "Duration")))
     header = _stamp(store, stamp_ns)
     rgb = [c / 255 for c in PALETTE[color_index % len(PALETTE)]]
     ns = tracks.sender
