@@ -224,9 +224,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scans", type=int, default=None)
     p.add_argument("--variants", action="store_true",
                    help="compare the registration variants (VARIANTS) instead, defence on")
+    p.add_argument("--lies", default="biased,1,2",
+                   help="with --variants: lies of sim.run.lies or drift rates (m/scan)")
     a = p.parse_args(argv)
     if a.variants:
-        variants(range(a.first_run, a.first_run + a.runs))
+        lies = tuple(x if x.isalpha() else float(x) for x in a.lies.split(","))
+        variants(range(a.first_run, a.first_run + a.runs), lies)
         return 0
     rows = measure(range(a.first_run, a.first_run + a.runs),
                    tuple(float(x) for x in a.rates.split(",")), a.scans)
