@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.stats import chi2
+from sensornet.tracking.chi2 import chi2_isf
 
 WEIGHTING_MODES = ("switched", "always")
 
@@ -94,7 +94,7 @@ class FuzzySystem:
 
 @lru_cache(maxsize=1024)
 def _chi2_isf(p: float, dof: int) -> float:
-    return float(chi2.isf(p, dof))
+    return chi2_isf(p, dof)
 
 
 class ManoeuvreDetector:

@@ -32,7 +32,7 @@ from scipy.ndimage import label as image_label
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, shortest_path
 from scipy.spatial.distance import pdist, squareform
-from scipy.stats import chi2
+from sensornet.tracking.chi2 import chi2_ppf
 
 MAX_MEASUREMENTS = 2000
 """Default cap on the scan size a partitioner accepts (pairwise work is O(m^2))."""
@@ -85,8 +85,8 @@ class DistancePartitioner:
     """Larger scans raise :class:`ScanTooLarge` (pairwise work is O(m^2))."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "_bounds", (float(chi2.ppf(self.p_lower, 2)),
-                                             float(chi2.ppf(self.p_upper, 2))))
+        object.__setattr__(self, "_bounds", (float(chi2_ppf(self.p_lower, 2)),
+                                             float(chi2_ppf(self.p_upper, 2))))
         if not (0.0 < self.p_lower <= self.p_upper < 1.0):
             raise ValueError(f"distance partition needs 0 < p_lower <= p_upper < 1, got "
                              f"{self.p_lower:g}, {self.p_upper:g}")

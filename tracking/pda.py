@@ -41,7 +41,7 @@ from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
-from scipy.stats import chi2
+from sensornet.tracking.chi2 import chi2_ppf
 from sensornet.tracking.imm import mixing
 
 
@@ -74,7 +74,7 @@ class LinearSensor:
 
 @lru_cache(maxsize=256)
 def _chi2_ppf(p: float, dof: int) -> float:
-    return float(chi2.ppf(p, dof))
+    return chi2_ppf(p, dof)
 
 
 _SIGN2 = np.array([[1.0, -1.0], [-1.0, 1.0]])
