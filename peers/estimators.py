@@ -25,6 +25,7 @@ from sensornet.tracking.labels import (
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
 from sensornet.tracking.particles import IMMParticleFilter, ParticleParams, RatioConfig, floored
+from sensornet.tracking.reidentify import Reidentification
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,8 @@ class GmphdEstimator:
         """Which labels have been on the network: an own label is stamped ``(origin, k,
         PUBLISHED_BASE + i)`` when first published, any label again when it returns after a
         long gap (tracking.labels.Publication)."""
+        self.reid = None if origin is None else Reidentification(filt.motion, self.origin)
+        """A re-born track takes its lost label back (tracking.reidentify)."""
         self.k = 0
         """The scan of the last step (births are stamped with it)."""
         self._next_k: int | None = None
@@ -123,6 +126,7 @@ class GmphdEstimator:
             self.labels = self._step_labels(post, par, k)
             pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
+            self.labels = self.reid.apply(self.labels, post, pub_at, k)
         self.mix, self.k = post, k
         keep = (self.mix.weights > self.level2_threshold if self.level2 and len(self.mix)
                 else None)
