@@ -1,6 +1,7 @@
-"""The label matching of the labelled fusion (tracking.labels.match_labels, used by
-peers.labelling.label_fused for LMB and GM-PHD peers): its gate pre-filter (only pairs that can
-pass the gate are solved) gives the assignment of every pair solved, against plain loops."""
+"""The label matching of two peers' tracks (tracking.labels.match_labels; peers.labelling
+.label_fused does the same per input, batched: tests/test_label_fused_batched.py): its gate
+pre-filter (only pairs that can pass the gate are solved) gives the assignment of every pair
+solved, against plain loops."""
 
 from __future__ import annotations
 
