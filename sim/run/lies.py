@@ -31,8 +31,9 @@ DRIFT_RATE = 2.0
 sensor whose bias keeps growing, its covariance honest; :func:`drift_lie` for other rates)."""
 
 Lie = Callable[..., GaussianMixture]
-"""``lie(mixture, k=0)``: what the liar tells at scan ``k`` for its real ``mixture`` (only
-the ``drift`` lie looks at ``k``)."""
+"""``lie(mixture)``: what the liar tells for its real ``mixture``; one with the attribute
+``by_scan`` true is called ``lie(mixture, k)`` with the estimate's scan ``k`` (the ``drift``
+lie)."""
 
 
 def _tight(n: int, d: int) -> np.ndarray:
@@ -101,6 +102,7 @@ def drift_lie(rate: float, position_index: tuple[int, int] = (0, 2)) -> Lie:
         means[:, ix] += rate * k
         return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
 
+    drift.by_scan = True  # LyingCore passes the estimate's scan
     return drift
 
 
@@ -124,7 +126,8 @@ class LyingCore(PeerCore):
         told = []
         for m in messages:
             if type(m) is Estimate:
-                told_mix = self.lie(m.mixture, m.k)
+                told_mix = (self.lie(m.mixture, m.k) if getattr(self.lie, "by_scan", False)
+                            else self.lie(m.mixture))
                 m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)))
                 self.lies_told += 1
             told.append(m)
