@@ -128,63 +128,14 @@ class Observer:
         self._set(out.k, "latency_ms", latency_ms)
 
     def record(self, r: Record, compute_ms: float | None = None) -> None:
+        """The scan's report fields from one core record (``local``, ``fusion``: own steps)."""
         if not self.enabled or r.kind not in _KINDS:
             return
         core, k, v = self.core, r.k, r.values
         if r.kind == "local":
-            self._set(k, "components/before_level2", v.get("n_components"))
-            self._set(k, "components/after_level2", v.get("n_published"))
-            self._set(k, "compute_ms/filter", compute_ms)
-            mix = core.consensus.last_local
-            hooks = core.consensus.hooks
-            if isinstance(mix, GaussianMixture):
-                self._set(k, "cardinality/local", float(mix.weights.sum()))
-                self._scan(k)["points"]["local/mixture"] = pack_marginals(
-                    _heaviest(mix, FUSED_SHOWN))
-            elif mix is not None and hooks.plane is not None:  # raw scans: the own scan
-                self._scan(k)["points"]["local"] = np.asarray(hooks.plane(mix),
-                                                              float).reshape(-1, 2)
-            cells = core.consensus.hooks.partition_view()
-            if cells is not None:  # the scan and the cell of each of its points
-                z, labels = cells
-                g = self._scan(k)["points"]
-                g["cells"] = np.asarray(z, float).reshape(-1, 2)
-                g["cells/labels"] = np.column_stack([np.asarray(labels, float).reshape(-1),
-                                                     np.zeros(len(g["cells"]))])
-            particles = core.consensus.hooks.particles()
-            if particles is not None:
-                p = np.asarray(particles, float).reshape(-1, 2)
-                self._scan(k)["points"]["particles"] = p[:: 1 + len(p) // PARTICLES_SHOWN]
+            self._record_local(k, v, compute_ms)
         elif r.kind == "fusion":
-            self._set(k, "components/fused", v.get("n_fused"))
-            ages = v.get("ages") or {}
-            if ages:
-                self._set(k, "age", max(ages.values()))
-            c = core.consensus.nale.counts
-            for what in ("late", "redundant", "too_old", "dropped_late"):
-                self._set(k, f"out_of_sequence/{what}", getattr(c, what))
-            if v.get("round", core.consensus.rounds) < core.consensus.rounds:
-                return  # the rest once a scan, at its last round
-            fused = core.consensus.last_fused
-            hooks = core.consensus.hooks
-            if fused is not None and hooks.plane is not None:  # the pooled scans, a sample
-                self._set(k, "flooding/scans_held", len(fused))
-                p = np.asarray(hooks.plane(fused), float).reshape(-1, 2)
-                self._scan(k)["points"]["pooled"] = p[:: 1 + len(p) // POOLED_SHOWN]
-            elif isinstance(fused, GaussianMixture):
-                self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
-            view = hooks.pda_view()
-            if view is not None:  # the gates and weighted returns: no other message has them
-                self._scan(k)["points"].update(pack_gates(view, own=self.name))
-            if view is not None and "detector" in view:
-                d, threshold = view["detector"]
-                self._set(k, "detector/D_L", d)
-                self._set(k, "detector/threshold", threshold)
-            probs = core.consensus.fuser_hooks.model_probabilities
-            if probs is not None:
-                names = hooks.model_names
-                for i, p in enumerate(probs()):
-                    self._set(k, f"model_probability/{names[i] if i < len(names) else i}", p)
+            self._record_fusion(k, v)
         elif r.kind == "cost":
             for what, value in v.items():
                 if isinstance(value, int | float):
@@ -208,6 +159,66 @@ class Observer:
         elif r.kind == "trust-event":
             self._scan(k)["events"].append(f"WARN {v['neighbour']} {v['from']} -> {v['to']} "
                                            f"(score {v['score']})")
+
+    def _record_local(self, k: int, v: dict, compute_ms: float | None) -> None:
+        """A ``local`` record: component counts, filter time and the own scan's points."""
+        core = self.core
+        self._set(k, "components/before_level2", v.get("n_components"))
+        self._set(k, "components/after_level2", v.get("n_published"))
+        self._set(k, "compute_ms/filter", compute_ms)
+        mix = core.consensus.last_local
+        hooks = core.consensus.hooks
+        if isinstance(mix, GaussianMixture):
+            self._set(k, "cardinality/local", float(mix.weights.sum()))
+            self._scan(k)["points"]["local/mixture"] = pack_marginals(
+                _heaviest(mix, FUSED_SHOWN))
+        elif mix is not None and hooks.plane is not None:  # raw scans: the own scan
+            self._scan(k)["points"]["local"] = np.asarray(hooks.plane(mix),
+                                                          float).reshape(-1, 2)
+        cells = core.consensus.hooks.partition_view()
+        if cells is not None:  # the scan and the cell of each of its points
+            z, labels = cells
+            g = self._scan(k)["points"]
+            g["cells"] = np.asarray(z, float).reshape(-1, 2)
+            g["cells/labels"] = np.column_stack([np.asarray(labels, float).reshape(-1),
+                                                 np.zeros(len(g["cells"]))])
+        particles = core.consensus.hooks.particles()
+        if particles is not None:
+            p = np.asarray(particles, float).reshape(-1, 2)
+            self._scan(k)["points"]["particles"] = p[:: 1 + len(p) // PARTICLES_SHOWN]
+
+    def _record_fusion(self, k: int, v: dict) -> None:
+        """A ``fusion`` record: fused counts and ages; once a scan the fused points."""
+        core = self.core
+        self._set(k, "components/fused", v.get("n_fused"))
+        ages = v.get("ages") or {}
+        if ages:
+            self._set(k, "age", max(ages.values()))
+        c = core.consensus.nale.counts
+        for what in ("late", "redundant", "too_old", "dropped_late"):
+            self._set(k, f"out_of_sequence/{what}", getattr(c, what))
+        if v.get("round", core.consensus.rounds) < core.consensus.rounds:
+            return  # the rest once a scan, at its last round
+        fused = core.consensus.last_fused
+        hooks = core.consensus.hooks
+        if fused is not None and hooks.plane is not None:  # the pooled scans, a sample
+            self._set(k, "flooding/scans_held", len(fused))
+            p = np.asarray(hooks.plane(fused), float).reshape(-1, 2)
+            self._scan(k)["points"]["pooled"] = p[:: 1 + len(p) // POOLED_SHOWN]
+        elif isinstance(fused, GaussianMixture):
+            self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
+        view = hooks.pda_view()
+        if view is not None:  # the gates and weighted returns: no other message has them
+            self._scan(k)["points"].update(pack_gates(view, own=self.name))
+        if view is not None and "detector" in view:
+            d, threshold = view["detector"]
+            self._set(k, "detector/D_L", d)
+            self._set(k, "detector/threshold", threshold)
+        probs = core.consensus.fuser_hooks.model_probabilities
+        if probs is not None:
+            names = hooks.model_names
+            for i, p in enumerate(probs()):
+                self._set(k, f"model_probability/{names[i] if i < len(names) else i}", p)
 
     # -- publishing -----------------------------------------------------------------------
     def ready(self, force: bool = False) -> list[int]:

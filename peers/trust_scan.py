@@ -1,0 +1,168 @@
+"""Trust's once-a-scan tests and its repair: the offset tests (or registration), the
+withheld-target CUSUM and the repaired density of a neighbour about to turn suspect.
+
+A mixin of :class:`peers.trust.Trust` (moved out of peers/trust.py to keep that module short):
+its methods use the state :class:`Trust` keeps (``cfg``, ``n``, ``pos``, ``fused_in``,
+``losses``) and its ``shift``, ``statistics`` and ``_next``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensornet.peers.trust_checks import (
+    gls_offset,
+    offset_information,
+    relative_offsets,
+    target_mass,
+    unmatched_weights,
+    whole_losses,
+    withheld_increments,
+)
+from sensornet.peers.trust_record import (
+    NeighbourTrust,
+    add_offset,
+    offset_limits,
+    push_window,
+    registered_at,
+    update_registration,
+)
+from sensornet.peers.trust_repair import corroborated_part, moved_to_own, scan_factor
+from sensornet.tracking.mixture import GaussianMixture
+
+
+class ScanTests:
+    """The once-a-scan tests and repair of :class:`peers.trust.Trust` (its mixin)."""
+
+    def _scan_tests(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                    late: dict[str, tuple[int, GaussianMixture]],
+                    tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
+                    stats: dict[str, float]) -> None:
+        """Round 0's other once-a-scan tests, raising ``stats`` to ``quarantine + drift``
+        where they fire: the offset tests (or registration) and the withheld-target CUSUM."""
+        cfg = self.cfg
+        alarm_stat = cfg.quarantine + cfg.drift
+        if cfg.bias:
+            follow = cfg.register and cfg.register_drift
+            regs = {s: registered_at(self.n[s], a) if follow else None
+                    for s, (a, _, _) in tested.items()}
+            infos = {s: _raw(offset_information(ref, self.shift(s, mix, a) if follow else mix,
+                                                self.pos, cfg.repeat_weight, cfg.bias_gate),
+                             regs[s])
+                     for s, (a, mix, ref) in tested.items()}
+            if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
+                infos = relative_offsets(infos, [s for s in infos if s not in late
+                                                 and self.n[s].state != "quarantined"])
+            for s, info in infos.items():
+                rec = self.n[s]
+                rec.raw_offset = gls_offset([info])
+                push_window(rec.residuals, _raw(info, regs[s], -1.0), max(cfg.bias_windows))
+                chi2 = add_offset(cfg, rec, info)
+                alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
+                if cfg.register:
+                    update_registration(rec, alarm, tested[s][0], cfg.register_drift,
+                                        cfg.register_drift_chi2)
+                elif alarm:
+                    stats[s] = max(stats[s], alarm_stat)
+        if cfg.withhold and cfg.detection_probability is not None:
+            fused = {**shown, **self.fused_in}  # a repaired density is what is tested
+            for s in self._withheld(own, fused, [s for s in sorted(shown) if s not in late]):
+                stats[s] = max(stats[s], alarm_stat)
+
+    def _repair(self, k: int, rnd: int, own: GaussianMixture,
+                shown: dict[str, GaussianMixture],
+                wmap: dict[str, float], stats: dict[str, float], late: set[str]
+                ) -> dict[str, float]:
+        """:attr:`TrustConfig.repair`: each fresh neighbour whose statistic would take its
+        score above ``repair_from`` (or, within ``repair_window`` scans of a repair that
+        kept a component, above ``drift``) is tested again with its repaired density: its
+        components own and the other trusted fresh neighbours do not corroborate dropped
+        (all of them, while its repairs keep components: a miss), its weights scaled by its
+        median mass factor (:mod:`peers.trust_repair`). Where that statistic is smaller it
+        replaces the neighbour's and the repaired density is fused (:meth:`fused_input`)."""
+        cfg = self.cfg
+        out = dict(stats)
+        for s in sorted(shown):
+            rec = self.n[s]
+            recent = rec.kept_k is not None and k - rec.kept_k <= cfg.repair_window
+            if s in late or stats[s] <= cfg.drift or (
+                    not recent and self._next(rec.score, stats[s]) <= cfg.repair_from):
+                continue  # it would not accumulate, or not become suspect
+            others = [own] + [m for t, m in shown.items() if t != s and t not in late
+                              and self.n[t].state != "quarantined"]
+            kept = corroborated_part(shown[s], others, self.pos, cfg.repeat_weight,
+                                     cfg.bias_gate)
+            if kept is None and cfg.repair_offset_gate > cfg.bias_gate:
+                kept = self._moved(rec, rnd, own, shown[s], others)
+            if kept is None:  # nothing corroborated: a miss, if its repairs keep things
+                if rec.kept_k is None or k - rec.kept_k > cfg.repair_window:
+                    continue
+                kept = GaussianMixture.empty(shown[s].dim)
+            f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
+            if f is not None and f > 0:
+                push_window(rec.factors, np.log(f), cfg.repair_window)
+            if not rec.factors:
+                continue
+            rep = kept.scaled(float(np.exp(np.median(rec.factors))))
+            t = self.statistics(own, {**shown, s: rep}, wmap, late)[s]
+            if t < stats[s]:
+                out[s] = t
+                self.fused_in[s] = rep
+                if len(rep):
+                    rec.kept_k = k
+        return out
+
+    def _moved(self, rec: NeighbourTrust, rnd: int, own: GaussianMixture,
+               mix: GaussianMixture, others: list[GaussianMixture]) -> GaussianMixture | None:
+        """A neighbour none of whose components is corroborated, registered
+        (:attr:`TrustConfig.repair_offset_gate`): its generalised-least-squares offset
+        against own over the scans of :attr:`TrustConfig.repair_window` it was in this case,
+        pairs up to the wider gate apart (at least two scans: one scan's nearest pairs may be
+        any), subtracted, and each component's covariance at least own's nearest one's (by
+        determinant: a neighbour caught with a constant offset is not taken to be more
+        precise than own); then its corroborated part, or None."""
+        cfg = self.cfg
+        if rnd == 0:
+            push_window(rec.moves, offset_information(own, mix, self.pos, cfg.repeat_weight,
+                                                cfg.repair_offset_gate), cfg.repair_window)
+        if len(rec.moves) < 2 or len(own) == 0 or len(mix) == 0:
+            return None
+        offset = gls_offset(rec.moves)
+        if offset is None:
+            return None
+        rec.moved = offset
+        moved = moved_to_own(mix, own, offset, self.pos)
+        return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
+
+    def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
+                  fresh: list[str]) -> list[str]:
+        """Add this scan's increment to each ``fresh`` neighbour's withheld-target CUSUM
+        (:attr:`TrustConfig.withhold`; references: own and the other fresh neighbours not
+        quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
+        cfg = self.cfg
+        mixes = [own] + [shown[s] for s in fresh]
+        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate)
+        tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
+        ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
+        refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
+        inc = withheld_increments(U, tm, refs, cfg.detection_probability,
+                                  cfg.withhold_alternative, cfg.withhold_cap)
+        for s, v in zip(fresh, inc[1:], strict=True):
+            self.n[s].withheld = max(0.0, self.n[s].withheld + float(v))
+        if self.losses is not None:
+            for s, lost in zip(fresh, whole_losses(tm, refs, cfg.repeat_weight)[1:],
+                               strict=True):
+                if lost == 1.0:
+                    self._loss_runs[s] = self._loss_runs.get(s, 0) + 1
+                elif lost == 0.0 and self._loss_runs.get(s):
+                    self.losses[self._loss_runs.pop(s)] += 1
+                if not np.isnan(lost):
+                    self.losses["compared"] += 1
+                    self.losses["lost"] += int(lost)
+        return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
+
+
+def _raw(info: tuple[np.ndarray, np.ndarray], offset: np.ndarray | None, sign: float = 1.0
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """``(I, y + sign I offset)``: an offset's information with ``offset`` added back
+    (``sign`` -1: taken out); ``info`` itself when ``offset`` is None."""
+    return info if offset is None else (info[0], info[1] + sign * info[0] @ offset)
