@@ -1,0 +1,87 @@
+"""Label rows ``(origin, birth_scan, index)`` (checks, fresh labels, sortable keys, the network
+rule's order) and the labelled mixture: the base of :mod:`tracking.labels` (issue 37 split).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from sensornet.tracking.mixture import GaussianMixture
+
+LABEL_COLUMNS = ("origin", "birth_scan", "index")
+"""Columns of a label array ``(n, 3)`` int64."""
+PUBLISHED_BASE = 1 << 36
+"""Index offset of the label an own track takes when it is first published (``(origin, k,
+PUBLISHED_BASE + i)``: :class:`tracking.label_confirmation.Publication`), apart from births
+and splits (small indices) and a fusion's fresh labels (``peers.labelling.FRESH_BASE``)."""
+_KEY = np.dtype([("origin", "<i8"), ("birth_scan", "<i8"), ("index", "<i8")])
+
+
+def as_labels(labels, n: int | None = None, what: str = "labels") -> np.ndarray:
+    """``labels`` as a contiguous int64 ``(n, 3)`` array, or ValueError naming ``what``."""
+    a = np.asarray(labels)
+    if a.size == 0:
+        a = a.reshape(0, 3)
+    if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
+        want = f"({n}, 3)" if n is not None else "(n, 3)"
+        raise ValueError(f"{what} has shape {a.shape}, expected {want}")
+    if a.dtype.kind not in "iu":
+        raise ValueError(f"{what} has dtype {a.dtype}, expected integers")
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+def new_labels(origin: int, k: int, count: int, start: int = 0) -> np.ndarray:
+    """Fresh labels ``(origin, k, start + i)`` for ``i < count``: ``(count, 3)`` int64."""
+    out = np.empty((count, 3), dtype=np.int64)
+    out[:, 0] = origin
+    out[:, 1] = k
+    out[:, 2] = np.arange(start, start + count)
+    return out
+
+
+def label_keys(labels: np.ndarray) -> np.ndarray:
+    """One structured scalar per label row ``(n,)``: comparable, sortable, ``np.isin``-able."""
+    return np.ascontiguousarray(labels, dtype=np.int64).view(_KEY).reshape(-1)
+
+
+def precedes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise ``a < b`` for label arrays ``(n, 3)`` in the network rule's order ``(birth_scan,
+    origin, index)`` (earliest birth first, then the lowest origin id): ``(n,)`` bool."""
+    a = np.asarray(a, dtype=np.int64)[:, [1, 0, 2]]
+    b = np.asarray(b, dtype=np.int64)[:, [1, 0, 2]]
+    differ = a != b
+    first = differ.argmax(axis=1)  # the first column that differs (0 if none does)
+    rows = np.arange(len(a))
+    return differ.any(axis=1) & (a[rows, first] < b[rows, first])
+
+
+@dataclass(frozen=True)
+class LabelledMixture:
+    """A Gaussian mixture with one label per component.
+
+    mixture: the intensity (``n`` components), unchanged by labelling.
+    labels:  (n, 3) int64 ``(origin, birth_scan, index)``.
+    """
+
+    mixture: GaussianMixture
+    labels: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "labels", as_labels(self.labels, len(self.mixture)))
+
+    @classmethod
+    def empty(cls, dim: int) -> LabelledMixture:
+        return cls(GaussianMixture.empty(dim), np.zeros((0, 3), dtype=np.int64))
+
+    def __len__(self) -> int:
+        return len(self.mixture)
+
+    def select(self, index: np.ndarray) -> LabelledMixture:
+        """Components (and labels) picked by a boolean mask or an index array."""
+        index = np.asarray(index)
+        return LabelledMixture(self.mixture.select(index), self.labels[index])
+
+
+__all__ = ["LABEL_COLUMNS", "PUBLISHED_BASE", "LabelledMixture", "as_labels", "label_keys",
+           "new_labels", "precedes"]
