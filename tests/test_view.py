@@ -394,3 +394,32 @@ def test_view_command_errors_are_one_line(capsys):
     assert len(err) == 1 and "--connect" in err[0]
     assert main(["view", "net", "--connect", "tcp/127.0.0.1:1"]) == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_a_flooding_peer_sends_the_last_pooled_scans_of_a_scan_sampled_in_order():
+    """A flooding peer's fusion records come per round and flood step, each with a new scan
+    set: the report carries the plane points of the last one (packed once, when sent), at
+    most POOLED_SHOWN of them by a fixed stride, in the place the first record gave them;
+    a value that is not finite is left out."""
+    scn = load_scenario("seed004", {"scenario.num_scans": 3})
+    names = scn.sensor_names
+    core = make_peer(scn, names[0], score_truth=False)
+    core.wants_truth = False
+    sent: list[bytes] = []
+    obs = Observer(core, 1.0).attach(sent.append)
+    rng = np.random.default_rng(4)
+    first = ScanSet({n: rng.uniform(1.0, 50.0, (3, 2)) for n in names[:2]})
+    last = ScanSet({n: rng.uniform(1.0, 50.0, (40, 2)) for n in names[:12]})
+    core.consensus.last_fused = first
+    obs.record(Record("fusion", 5, {"n_fused": 2}))
+    obs.record(Record("cost", 5, {"bad": float("nan"), "good": 3.0}))
+    core.consensus.last_fused = last
+    obs.record(Record("fusion", 5, {"n_fused": 12}))
+    obs.published(Publish("tracks", 5, b"", Tracks(core.name, 5, np.zeros((0, 4)))), 2.0)
+    obs.flush(idle=True)
+    (msg,) = [decode(b) for b in sent]
+    p = np.asarray(core.consensus.hooks.plane(last), float).reshape(-1, 2)
+    assert len(p) == 480 and len(msg.points["pooled"]) == 240  # every 2nd: at most 400
+    np.testing.assert_allclose(msg.points["pooled"], p[::2])
+    assert msg.values["flooding/scans_held"] == 12 and msg.values["components/fused"] == 12
+    assert msg.values["cost/good"] == 3.0 and "cost/bad" not in msg.values
