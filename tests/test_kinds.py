@@ -124,7 +124,8 @@ def test_a_registered_kind_runs_as_processes_and_replays(tmp_path):
 
 
 def test_readme_kind_example_runs():
-    """README's two code blocks (the estimator, then its kind) register and run as they are."""
+    """The manual's two code blocks (the estimator, then its kind; README links to them)
+    register and run as they are."""
     import re
 
     from sensornet.peers.contracts import LocalOutput
@@ -133,7 +134,7 @@ def test_readme_kind_example_runs():
     from sensornet.tracking.mixture import GaussianMixture
     from sensornet.tracking.reduction import Reducer
 
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    text = (ROOT / "docs" / "usage.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     est = next(b for b in blocks if "class CountingEstimator" in b)
     kind = next(b for b in blocks if "COUNTING = PeerKind" in b)
