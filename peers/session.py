@@ -55,6 +55,10 @@ without), and up to 16 MiB more per large-message sender. Estimates are a few hu
 bounded memory is worth more than a copy saved on a rare large one."""
 
 
+DIAL_SOON = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
+"""Connect retry of a session that may open before the process it dials listens (the view, a
+test's observer; ``zenoh_config(retry=DIAL_SOON)``): with Zenoh's default back-off (1 s,
+doubling to 4 s) such a session linked up to 4 s late and missed a short run's first scans."""
 ANNOUNCE = "announce"
 """Gossip on (others still learn of this process and link to it) but no links made from it:
 only its ``connect`` endpoints are dialled. Zenoh dials a lost link again only from the side
@@ -132,8 +136,9 @@ def endpoint(port: int, host: str = "127.0.0.1") -> str:
 def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
                  gossip: bool | str = True, max_message: int | None = MAX_MESSAGE_BYTES,
-                 security=None) -> zenoh.Config:
-    """A peer-mode config: the user's JSON5 file if given, then the flags on top of it.
+                 security=None, retry: dict | None = None) -> zenoh.Config:
+    """A peer-mode config: the user's JSON5 file if given, then the flags on top of it
+    (``retry``: Zenoh's ``connect/retry`` settings, e.g. :data:`DIAL_SOON`).
 
     ``gossip``: ``True`` (Zenoh's discovery: links to whoever gossip names), ``False`` (links
     only to the ``connect`` endpoints) or :data:`ANNOUNCE` (see there).
@@ -182,6 +187,8 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                 # learn it by gossip and link to it unauthenticated (every message refused)
                 conf.insert_json5("listen/endpoints", "[]")
             security.apply(conf)
+        if retry is not None:
+            conf.insert_json5("connect/retry", json.dumps(retry))
     except SessionError:
         raise
     except Exception as exc:
@@ -235,9 +242,10 @@ def defer_accept(ports: set[int], seconds: int = DEFER_ACCEPT_S) -> int:
 def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  config_file: str | None = None, lease_ms: int | None = None,
                  gossip: bool | str = True, max_message: int | None = MAX_MESSAGE_BYTES,
-                 security=None) -> zenoh.Session:
+                 security=None, retry: dict | None = None) -> zenoh.Session:
     """Open a Zenoh session; a bad endpoint or a port in use is a :class:`SessionError`."""
-    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message, security)
+    conf = zenoh_config(listen, connect, config_file, lease_ms, gossip, max_message, security,
+                        retry)
     try:
         session = zenoh.open(conf)
     except Exception as exc:

@@ -17,7 +17,6 @@ are importable from here as before.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import queue
 import sys
@@ -29,7 +28,7 @@ from pathlib import Path
 import zenoh
 
 from sensornet.peers.recording import read as read_recording
-from sensornet.peers.session import SessionError, zenoh_config
+from sensornet.peers.session import DIAL_SOON, SessionError, zenoh_config
 from sensornet.protocol.keys import ROOT, Keys
 from sensornet.view_columns import Batcher, strip_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_round
@@ -50,10 +49,6 @@ QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
 """Waiting messages above which estimates (the heaviest to draw) are skipped unread."""
-RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
-"""How often the view dials an endpoint that does not answer yet. The run starts the view
-first, before the world listens: with Zenoh's default back-off (1 s, doubling to 4 s) it
-linked up to 4 s late and missed the first scans of a short run."""
 
 
 class LiveView:
@@ -96,8 +91,9 @@ class LiveView:
         self.state = state_factory(self.batcher)
 
     def open(self) -> None:
-        conf = zenoh_config((), self.connect, self.config, security=self.security)
-        conf.insert_json5("connect/retry", json.dumps(RETRY))  # linked once the world listens
+        # the run starts the view before the world listens: dial it soon (DIAL_SOON)
+        conf = zenoh_config((), self.connect, self.config, security=self.security,
+                            retry=DIAL_SOON)
         try:
             self.session = zenoh.open(conf)
         except Exception as exc:

@@ -4,21 +4,17 @@ targets, and results.parquet carries the track_ids, track_status and truth_ids c
 
 from __future__ import annotations
 
-import json
 import threading
 
 import numpy as np
 import pytest
-import zenoh
 from sensornet.peers.scan_results import merge_parts, read_table
-from sensornet.peers.session import zenoh_config
+from sensornet.peers.session import DIAL_SOON, open_session
 from sensornet.protocol.codec import decode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.launcher import start_run, wait_run
 from sensornet.sim.scenario import load_scenario
-
-from sensornet.view import RETRY
 
 pytestmark = pytest.mark.network
 
@@ -37,9 +33,7 @@ def labelled_run(tmp_path_factory):
     try:
         # dial as the view does (every 0.1-0.5 s): with Zenoh's default back-off (1 s doubling
         # to 4 s) a session opened before the world listens links seconds into a 4 s run
-        conf = zenoh_config((), list(handle.endpoints.values()))
-        conf.insert_json5("connect/retry", json.dumps(RETRY))
-        session = zenoh.open(conf)
+        session = open_session(connect=list(handle.endpoints.values()), retry=DIAL_SOON)
         try:
             def on_tracks(sample) -> None:
                 with lock:
