@@ -44,7 +44,7 @@ def padding(n: int, region, rng: np.random.Generator):
     """The lie: the real mixture plus negligible-weight components up to ``n``."""
     (x0, x1), (y0, y1) = region
 
-    def lie(mix: GaussianMixture) -> GaussianMixture:
+    def lie(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         m = max(0, n - len(mix))
         means = np.zeros((m, mix.dim))
         means[:, 0], means[:, 2] = rng.uniform(x0, x1, m), rng.uniform(y0, y1, m)

@@ -36,7 +36,7 @@ def _mix(n: int, rng: np.random.Generator, w: float | None = None, d: int = 4,
 
 def padded(rng: np.random.Generator, n: int = PAD):
     """The padding lie: the real estimate plus negligible-weight components up to ``n``."""
-    def lie(mix: GaussianMixture) -> GaussianMixture:
+    def lie(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
         extra = _mix(max(0, n - len(mix)), rng, w=1e-4, d=mix.dim)
         return GaussianMixture.concatenate([mix, extra])
     return lie

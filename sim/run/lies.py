@@ -30,10 +30,9 @@ DRIFT_RATE = 2.0
 """Metres per scan by which the ``drift`` liar's offset along x grows (issue 36 item 4: a
 sensor whose bias keeps growing, its covariance honest; :func:`drift_lie` for other rates)."""
 
-Lie = Callable[..., GaussianMixture]
-"""``lie(mixture)``: what the liar tells for its real ``mixture``; one with the attribute
-``by_scan`` true is called ``lie(mixture, k)`` with the estimate's scan ``k`` (the ``drift``
-lie)."""
+Lie = Callable[[GaussianMixture, int], GaussianMixture]
+"""``lie(mixture, k)``: what the liar tells for its real ``mixture`` in its estimate of scan
+``k`` (only the ``drift`` lie uses ``k``)."""
 
 
 def _tight(n: int, d: int) -> np.ndarray:
@@ -102,7 +101,6 @@ def drift_lie(rate: float, position_index: tuple[int, int] = (0, 2)) -> Lie:
         means[:, ix] += rate * k
         return GaussianMixture(mix.weights.copy(), means, mix.covs.copy())
 
-    drift.by_scan = True  # LyingCore passes the estimate's scan
     return drift
 
 
@@ -126,8 +124,7 @@ class LyingCore(PeerCore):
         told = []
         for m in messages:
             if type(m) is Estimate:
-                told_mix = (self.lie(m.mixture, m.k) if getattr(self.lie, "by_scan", False)
-                            else self.lie(m.mixture))
+                told_mix = self.lie(m.mixture, m.k)
                 m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)))
                 self.lies_told += 1
             told.append(m)
