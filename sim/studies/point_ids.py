@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 from sensornet.sim.run.twin import TwinResult, run_twin
 from sensornet.sim.scenario import load_scenario
+from sensornet.sim.studies.labelled.study import peer_tables as labelled_tables
 from sensornet.tracking.track_metrics import TrackTable, clear_match, clear_mot
 
 CROSSING = [[-500.0, 20.0, 0.0, 0.0], [500.0, -20.0, 0.0, 0.0], [0.0, 0.0, 950.0, -30.0]]
@@ -44,31 +45,22 @@ def peer_tables(twin: TwinResult, peer: str, which: str,
     from its results table (ids coded to ints; positions by the estimator's
     ``position_index``), and the set of ids seen. Raises if a row lacks one id and one
     status per track or one id per true target."""
-    pos = list(twin.peers[peer].consensus.estimator.position_index)
-    t = twin.peers[peer].scorer.results.table(peer)
+    pos = tuple(twin.peers[peer].consensus.estimator.position_index)
     code: dict = {}
-    S, Id, X, TS, TI, TX = [], [], [], [], [], []
-    for k, e, tr, ids, st, tru, tids in zip(t["scan"], t["estimate"], t["tracks"],
-                                            t["track_ids"], t["track_status"], t["truth"],
-                                            t["truth_ids"], strict=True):
+    est = labelled_tables(twin, [peer], which, code, confirmed, pos)[peer]
+    t = twin.peers[peer].scorer.results.table(peer)
+    TS, TI, TX = [], [], []
+    for k, e, tru, tids in zip(t["scan"], t["estimate"], t["truth"], t["truth_ids"],
+                               strict=True):
         if e != which:
             continue
-        if not (len(ids) == len(tr) == len(st) and len(tids) == len(tru)):
-            raise ValueError(f"{peer} {which} scan {k}: {len(tr)} tracks, {len(ids)} ids, "
-                             f"{len(st)} status; {len(tru)} targets, {len(tids)} ids")
-        for x, i, s in zip(tr, ids, st, strict=True):
-            if confirmed and not s:
-                continue
-            S.append(k)
-            Id.append(code.setdefault(tuple(i), len(code)))
-            X.append(np.asarray(x)[pos])
+        if len(tids) != len(tru):
+            raise ValueError(f"{peer} {which} scan {k}: {len(tru)} targets, {len(tids)} ids")
         TS += [k] * len(tru)
         TI += list(tids)
-        TX += [np.asarray(x)[pos] for x in tru]
+        TX += [np.asarray(x)[list(pos)] for x in tru]
     truth = TrackTable(np.array(TS, np.int64), np.array(TI, np.int64),
                        np.array(TX, float).reshape(-1, 2))
-    est = TrackTable(np.array(S, np.int64), np.array(Id, np.int64),
-                     np.array(X, float).reshape(-1, 2))
     return truth, est, set(code)
 
 

@@ -101,11 +101,13 @@ def truth_table(truth: Truth, pos=(0, 2)) -> TrackTable:
 
 
 def peer_tables(twin: TwinResult, names: list[str], which: str, code: dict,
-                confirmed: bool = False) -> dict[str, TrackTable]:
+                confirmed: bool = False, pos: tuple[int, int] = (0, 2)
+                ) -> dict[str, TrackTable]:
     """Per peer a table of its ``which`` (``"local"``/``"fused"``) tracks from its results
-    table; labels coded to ints by ``code`` (shared by all peers, so equal labels get equal
-    ids); a label twice in one scan keeps its first row (it can happen only for GM-PHD tags,
-    Panta's rule applies above the extraction threshold only)."""
+    table (positions: state indices ``pos``); labels coded to ints by ``code`` (shared by all
+    peers, so equal labels get equal ids); a label twice in one scan keeps its first row (it
+    can happen only for GM-PHD tags, Panta's rule applies above the extraction threshold
+    only). A row without one id and one status per track is a ValueError."""
     out = {}
     for p in names:
         t = twin.peers[p].scorer.results.table(p)
@@ -122,7 +124,7 @@ def peer_tables(twin: TwinResult, names: list[str], which: str, code: dict,
                 seen.add(key)
                 S.append(k)
                 Id.append(code.setdefault(key, len(code)))
-                X.append([x[0], x[2]])
+                X.append([x[pos[0]], x[pos[1]]])
         out[p] = TrackTable(np.array(S, dtype=np.int64), np.array(Id, dtype=np.int64),
                             np.array(X, dtype=float).reshape(-1, 2))
     return out
