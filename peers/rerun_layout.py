@@ -20,6 +20,8 @@ REGION_COLOR = (170, 170, 170)
 CUTOFF_COLOR = (120, 120, 120)
 TICK_GAP = 0.03
 """Grid labels sit this fraction of the region's larger side outside its frame."""
+GEO_ZOOM = 9.0
+"""The geographic map view's zoom level (web-map tiles: 9 is about 140 km across a panel)."""
 TRUTH_PATH_KEEP = 500
 """Scans of each true target's path drawn (the newest; memory stays flat in long runs)."""
 
@@ -131,12 +133,15 @@ def legend_markdown(peers: list[str], single_target: bool = False, imm: bool = F
 
 
 def default_blueprint(peers: list[str], *, single_target: bool = False, imm: bool = False,
-                      follow_radius: float = 500.0, ospa_cutoff: float | None = None):
+                      follow_radius: float = 500.0, ospa_cutoff: float | None = None,
+                      geo: bool = False):
     """Map and legend beside time series of the health metrics.
 
     ``single_target``: a second map view centred on the target (the ``follow`` transform the
     world logs), for scenarios whose region dwarfs the target and its particle cloud;
-    ``imm``: the model probabilities in view instead of the component counts.
+    ``imm``: the model probabilities in view instead of the component counts; ``geo``: a
+    geographic map view of ``map/**`` beside the local map (a scenario with a geographic
+    origin, :mod:`sensornet.view_map`).
     """
     # heavy dependency: rerun (runs without a recording never load it)
     import rerun.blueprint as rrb
@@ -164,6 +169,10 @@ def default_blueprint(peers: list[str], *, single_target: bool = False, imm: boo
             row_shares=[1, 1])
     else:
         maps = map_view
+    if geo:  # WGS84 on OpenStreetMap tiles; zoom 9 shows about 140 km across
+        maps = rrb.Horizontal(maps, rrb.MapView(name="geographic map", origin="/map",
+                                                zoom=GEO_ZOOM,
+                                                background=rrb.MapProvider.OpenStreetMap))
     third = (probabilities if imm
              else series("components (fused solid, local dotted)", "metrics/components"))
     tabs = [

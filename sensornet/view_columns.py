@@ -40,6 +40,9 @@ class Batcher:
         """Map rows left out because newer ones of the same entity were waiting."""
         self.calls = 0
         self.rows_sent = 0
+        self.builders: dict = {}
+        """Kinds other modules add (:mod:`sensornet.view_map`'s geographic map): ``kind ->
+        builder(rr, rows) -> columns``; their entities are map entities (decimated)."""
 
     def _add(self, path: str, kind: str, k: int, t: float, row) -> None:
         r = self._rows.get(path)
@@ -90,7 +93,8 @@ class Batcher:
         for path, r in rows.items():
             ks, ts, data = r.ks, r.ts, r.rows
             keep = self.map_keep
-            if keep is not None and r.kind in ("points", "strips") and len(ks) > keep:
+            if (keep is not None and (r.kind in ("points", "strips") or r.kind in self.builders)
+                    and len(ks) > keep):
                 self.decimated += len(ks) - keep
                 ks, ts, data = ks[-keep:], ts[-keep:], data[-keep:]
             self._send(path, r.kind, ks, ts, data)
@@ -120,6 +124,8 @@ class Batcher:
                 strips=strip_array(np.concatenate([d[0] for d in data]),
                                    np.concatenate([d[1] for d in data])),
                 colors=colors, radii=radii).partition(lengths)]
+        elif kind in self.builders:
+            cols = self.builders[kind](rr, data)
         elif kind == "text":
             cols = rr.TextLog.columns(text=[d[0] for d in data], level=[d[1] for d in data])
         else:  # transform

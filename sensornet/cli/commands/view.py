@@ -28,6 +28,7 @@ from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind_of
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.view import Batcher, LiveView, ViewState, cpu_seconds, replay_recordings
+from sensornet.view_map import GeoViewState, geo_map
 
 FOLLOW_RADIUS = 400.0
 """The "around the target" view's half-width (m), as the world drew it."""
@@ -107,15 +108,17 @@ def _open_sink(args: argparse.Namespace, out: Path | None,
     found = _scenario(args)
     peers: list[str] = []
     layout = {"single_target": False, "imm": False}
-    sensors, region, period, cutoff = {}, None, 1.0, None
+    sensors, region, period, cutoff, geo = {}, None, 1.0, None, None
     if found is not None:
         scn, layout = found
         layout = {**layout, "single_target": layout["single_target"] or len(scn.targets) == 1}
         peers = list(scn.sensor_names)
         sensors = {s.name: (s.kind, s.position) for s in scn.sensors}
         region, period, cutoff = scn.region, scn.scan_period, scn.metrics.ospa_cutoff
+        geo = geo_map(scn)  # a geographic origin: the map view too (sensornet.view_map)
     sink = RerunSink().open(args.run_id or args.network, out, viewer, peers=peers,
-                            ospa_cutoff=cutoff, follow_radius=FOLLOW_RADIUS, **layout)
+                            ospa_cutoff=cutoff, follow_radius=FOLLOW_RADIUS,
+                            geo=geo is not None, **layout)
     sink.decorate(peers, region=region, follow_radius=FOLLOW_RADIUS, **layout)
     if sensors:
         sink.time(0, 0.0)
@@ -133,6 +136,9 @@ def _open_sink(args: argparse.Namespace, out: Path | None,
                                          media_type=rr.MediaType.MARKDOWN), static=True)
 
     def state(batcher):
+        if geo is not None:
+            return GeoViewState(batcher, peers, period, sensors, layout["single_target"],
+                                cutoff, on_new_peer=new_peer, geo=geo)
         return ViewState(batcher, peers, period, sensors, layout["single_target"], cutoff,
                          on_new_peer=new_peer)
 
