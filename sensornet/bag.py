@@ -44,6 +44,7 @@ from sensornet.bag_play import (  # noqa: F401  (re-exported: bag's public names
     play,
     read_bag,
     rename,
+    restamp,
     select,
 )
 from sensornet.peers.session import open_session

@@ -14,8 +14,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgpack
 import zenoh
 
+from sensornet.protocol.codec_format import VERSIONS
 from sensornet.protocol.keys import ROOT, WORLD
 
 META = "sensornet.bag"
@@ -130,9 +132,11 @@ def await_peers(session, network: str, names: Sequence[str], timeout: float,
                 stop: threading.Event | None = None) -> Callable[[dict], None]:
     """A ``gate`` for :func:`play`, as the world waits for its peers: until every peer of
     ``names`` has its ``sensornet/<network>/ready/<name>`` token up (it sees all its
-    neighbours) and, of the publishers ``play`` declared, those of these peers' scans have a
-    subscriber; :class:`PeersMissing` after ``timeout`` s or on ``stop``. The liveliness
-    subscriber is declared at once (tokens up before the gate runs are its history)."""
+    neighbours) and, of the publishers ``play`` declared, those of these peers' scans and
+    every scan bundle's (``scans/<host>``: peer hosts) have a subscriber (as the world waits,
+    at most until ``timeout``); :class:`PeersMissing` after ``timeout`` s or on ``stop``. The
+    liveliness subscriber is declared at once (tokens up before the gate runs are its
+    history)."""
     stop = stop or threading.Event()
     ready: set[str] = set()
     cond = threading.Condition()
@@ -162,7 +166,9 @@ def await_peers(session, network: str, names: Sequence[str], timeout: float,
                     cond.wait(timeout=0.2)
             # as the world: a peer's subscription can reach us after its ready token
             wanted = {f"{ROOT}/{network}/scan/{n}" for n in names}
-            probes = [p for (key, _), p in pubs.items() if key in wanted]
+            bundles = f"{ROOT}/{network}/scans/"  # a peer host's (the bag says which hosts)
+            probes = [p for (key, _), p in pubs.items()
+                      if key in wanted or key.startswith(bundles)]
             while not stop.is_set() and time.monotonic() < end:
                 if all(p.matching_status.matching for p in probes):
                     return
@@ -171,6 +177,49 @@ def await_peers(session, network: str, names: Sequence[str], timeout: float,
             sub.undeclare()
 
     return gate
+
+
+def _stamped(payload: bytes, now: float) -> bytes | None:
+    """An encoded message (``[version, type, fields...]``, :mod:`protocol.codec`) with its
+    ``ts`` field set to ``now``, or None if ``payload`` is not one."""
+    try:
+        body = msgpack.unpackb(payload, raw=False)
+    except Exception:  # msgpack raises several unrelated types (a sealed message: ExtraData)
+        return None
+    if not isinstance(body, list) or len(body) < 2 or type(body[0]) is not int:
+        return None
+    names = VERSIONS.get(body[0], {}).get(body[1]) if isinstance(body[1], str) else None
+    if not names or len(body) != 2 + len(names) or "ts" not in names:
+        return None
+    i = 2 + names.index("ts")
+    if not isinstance(body[i], float | int) or isinstance(body[i], bool):
+        return None
+    body[i] = float(now)
+    return msgpack.packb(body, use_bin_type=True)
+
+
+def restamp(key: str, payload: bytes, now: float) -> bytes | None:
+    """``payload`` (put on ``key``) with its send time set to ``now`` and every other byte as
+    recorded: a message of :mod:`protocol.codec` (its ``ts``), or a scan bundle (``scans/<host>``,
+    :mod:`protocol.bundle`: each entry's); None for anything else, e.g. a signed message
+    (:mod:`protocol.envelope`), whose signature covers the payload: :func:`play` puts those as
+    recorded."""
+    parts = key.split("/")
+    if len(parts) > 2 and parts[0] == ROOT and parts[2] == "scans":
+        try:
+            body = msgpack.unpackb(payload, raw=False)
+        except Exception:  # as above
+            return None
+        if (not isinstance(body, list) or len(body) != 2 or not isinstance(body[1], list)
+                or not all(isinstance(e, list) and len(e) == 2 for e in body[1])):
+            return None
+        entries = [_stamped(e[1], now) if isinstance(e[1], bytes) else None for e in body[1]]
+        if any(e is None for e in entries):
+            return None
+        return msgpack.packb([body[0], [[e[0], x] for e, x in zip(body[1], entries,
+                                                                  strict=True)]],
+                             use_bin_type=True)
+    return _stamped(payload, now)
 
 
 def rename(key: str, network: str | None) -> str:
@@ -184,10 +233,15 @@ def rename(key: str, network: str | None) -> str:
 def play(items: Sequence[Item], session, rate: float = 1.0, network: str | None = None,
          stop: threading.Event | None = None, clock: Callable[[], float] = time.monotonic,
          sleep: Callable[[float], None] = time.sleep,
-         gate: Callable[[dict], None] | None = None) -> int:
+         gate: Callable[[dict], None] | None = None,
+         stamp: Callable[[], float] | None = time.time) -> int:
     """Put ``items`` onto ``session`` at their recorded pace divided by ``rate`` (their keys
     under ``network`` if given); liveliness tokens declared and undeclared as recorded, all
     undeclared at the end. Returns the samples put.
+
+    ``stamp``: each message's send time is set to ``stamp()`` as it is put (:func:`restamp`),
+    as a live sender stamps it, so the receivers' scan -> tracks latency, transit and run
+    clock count from the put, not from the recording; None: the recorded bytes exactly.
 
     ``gate`` (e.g. :func:`await_peers`): called once before the first sample with the
     publishers, every one declared first (``{(key, encoding): publisher}``); the liveliness
@@ -234,7 +288,9 @@ def play(items: Sequence[Item], session, rate: float = 1.0, network: str | None 
                 if tok is not None:
                     tok.undeclare()
             else:
-                publisher(key, it.encoding).put(it.payload)
+                payload = it.payload if stamp is None else (
+                    restamp(it.key, it.payload, stamp()) or it.payload)
+                publisher(key, it.encoding).put(payload)
                 n += 1
     finally:
         for tok in tokens.values():

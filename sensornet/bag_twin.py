@@ -17,6 +17,8 @@ from pathlib import Path
 
 from sensornet.bag import Bag, Item, is_world
 from sensornet.peers.core import Publish
+from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.codec import Rejected
 from sensornet.protocol.keys import ROOT, WORLD, Keys
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import TwinResult, run_twin, world_events
@@ -48,8 +50,13 @@ def bag_events(items: Sequence[Item], names: Sequence[str]) -> list[tuple]:
             if len(parts) == 4 and parts[3] in names:
                 out.append((t, "msg", parts[3], it.key, it.payload))
         elif parts[2] == "scans":
-            raise ValueError(f"{it.key}: scan bundles are a peer host's, not for the twin's "
-                             f"peers (record a run without --per-process)")
+            try:
+                bundle = unpack_bundle(it.payload)
+            except Rejected as exc:
+                raise ValueError(f"{it.key}: not a scan bundle ({exc.reason})") from None
+            base = "/".join(parts[:2])
+            out += [(t, "msg", s, f"{base}/scan/{s}", z) for s, z in bundle.entries
+                    if s in names]
         else:  # truth, ctl: every peer subscribes
             out += [(t, "msg", n, it.key, it.payload) for n in names]
     return out

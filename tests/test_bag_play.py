@@ -6,14 +6,18 @@ compute the recorded run's fused tracks: bit for bit on the twin (a twin run wri
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode
+from sensornet.protocol.json_fields import fields
 from sensornet.protocol.messages import Scan, Tracks
 from sensornet.sim.scenario import load_scenario, parse_overrides
 
 from sensornet.bag import Item, is_world, play, read_bag, select
+from sensornet.bag_play import restamp
 from sensornet.bag_twin import bag_events, play_twin, twin_bag
 from sensornet.cli import main
 
@@ -100,6 +104,7 @@ class _Session:
 
     def __init__(self) -> None:
         self.log: list[tuple[str, str]] = []
+        self.puts: list[bytes] = []
         session = self
 
         class Pub:
@@ -108,6 +113,7 @@ class _Session:
 
             def put(self, payload):
                 session.log.append(("put", self.key))
+                session.puts.append(payload)
 
             def undeclare(self):
                 pass
@@ -189,3 +195,54 @@ def test_play_says_which_peers_never_came(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "once s1, s2 are ready" in err[0], err  # what it would play
     assert err[1] == "play: peers s1, s2 not ready on network 'nobodyhere' (not within 1 s)"
+
+
+def _same_but_time(a: bytes, b: bytes, t: float) -> bool:
+    """Whether ``b`` decodes to ``a``'s message with send time ``t`` (every field compared)."""
+    return fields(decode(b)) == fields(replace(decode(a), send_time=t))
+
+
+def test_restamp_changes_the_send_time_and_no_other_byte(twin_recording):
+    """Every message a network carries (the world's and the peers'): re-stamped, it is the
+    same message sent at the new time; re-stamped with its own time, the same bytes."""
+    _, _, _, items = twin_recording
+    samples = [it for it in items if it.alive is None]
+    assert {it.key.split("/")[2] for it in samples} == {"scan", "truth", "ctl", "estimate",
+                                                        "tracks"}
+    for it in samples:
+        again = restamp(it.key, it.payload, 1.7e9 + 0.25)
+        assert again is not None and _same_but_time(it.payload, again, 1.7e9 + 0.25), it.key
+        assert restamp(it.key, it.payload, decode(it.payload).send_time) == it.payload, it.key
+
+
+def test_restamp_stamps_every_scan_of_a_bundle_and_leaves_what_it_cannot_read(twin_recording):
+    _, _, _, items = twin_recording
+    scans = [it.payload for it in items if it.alive is None and "/scan/" in it.key
+             and decode(it.payload).k == 3]
+    assert len(scans) == 3
+    (bundle,) = pack_bundles(3, [(decode(p).sensor, p) for p in scans])
+    again = unpack_bundle(restamp("sensornet/twin/scans/h1", bundle, 42.0))
+    assert again.k == 3 and [s for s, _ in again.entries] == ["s1", "s2", "s3"]
+    assert all(_same_but_time(p, q, 42.0) for p, (_, q) in zip(scans, again.entries,
+                                                               strict=True))
+    sealed = scans[0] + bytes(76)  # a signed message: payload | stamp | signature | tag
+    for key, payload in [("sensornet/twin/scan/s1", sealed), ("sensornet/twin/ctl", b"start"),
+                         ("sensornet/twin/scans/h1", scans[0]),  # a scan is no bundle
+                         ("sensornet/twin/scans/h1", pack_bundles(3, [("s1", sealed)])[0])]:
+        assert restamp(key, payload, 42.0) is None, key
+
+
+def test_play_stamps_each_message_as_it_puts_it(twin_recording):
+    """What a played world's peers measure latency from: the time of the put (``stamp``),
+    not the recording's; ``stamp=None`` (``--keep-stamps``) puts the recorded bytes."""
+    _, _, _, items = twin_recording
+    world = [it for it in select(items, "world") if it.alive is None][:8]
+    assert len({decode(it.payload).send_time for it in world}) > 1
+    session, clock = _Session(), iter(range(1000, 2000))
+    play(world, session, rate=1e6, stamp=lambda: float(next(clock)))
+    assert len(session.puts) == len(world)
+    for i, (it, put) in enumerate(zip(world, session.puts, strict=True)):
+        assert _same_but_time(it.payload, put, 1000.0 + i), it.key
+    session = _Session()
+    play(world, session, rate=1e6, stamp=None)
+    assert session.puts == [it.payload for it in world]

@@ -27,30 +27,39 @@ pytestmark = pytest.mark.network
 
 SETS = ["scenario.num_scans=12", "network.speed=5", "network.deadline=0.9"]
 NAMES = ["s1", "s2", "s3"]
+HOSTS = {"h1": ["s1", "s2"], "h2": ["s3"]}
+"""The peer hosts of the ``hosts`` layout (``sensornet run --per-process 2`` packs seed 000 so):
+h1's two peers hand estimates over in the process, h2's one peer gets them over Zenoh."""
 TIMEOUT = 90.0
 
 
 def _cli(*args: str, log: Path) -> subprocess.Popen:
-    """``python -m sensornet ARGS``, stdout and stderr to ``log``."""
+    """``python -m sensornet ARGS``, stdout and stderr to ``log`` (stdin empty: a host reads
+    its commands there)."""
     fh = log.open("w")
     try:
         return subprocess.Popen([sys.executable, "-m", "sensornet", *args], env=env(),
-                                stdout=fh, stderr=subprocess.STDOUT, text=True)
+                                stdin=subprocess.DEVNULL, stdout=fh, stderr=subprocess.STDOUT,
+                                text=True)
     finally:
         fh.close()
 
 
-def _peers(network: str, upstream: str, out: Path, procs: list) -> None:
+def _peers(network: str, upstream: str, out: Path, procs: list, hosts: bool = False) -> None:
     """Peers s1-s3 by hand, as ``sensornet run`` starts them: each dials ``upstream`` (the
-    world, or ``play``) and the peers before it."""
-    eps = {n: endpoint(free_port()) for n in NAMES}
+    world, or ``play``) and the peers before it; ``hosts``: as ``run --per-process 2`` does,
+    peer hosts (:data:`HOSTS`, ``sensornet host``), each dialling the hosts before it."""
+    groups = HOSTS if hosts else {n: [n] for n in NAMES}
+    eps = {g: endpoint(free_port()) for g in groups}
     sets = [a for s in SETS for a in ("--set", s)]
-    for i, n in enumerate(NAMES):
-        links = [upstream, *(eps[m] for m in NAMES[:i])]
-        procs.append(_cli("peer", n, "--scenario", "seed000", "--network", network,
-                          "--out", str(out), *sets, "--no-rerun", "--listen", eps[n],
-                          "--color", str(i), *[a for c in links for a in ("--connect", c)],
-                          "--no-autoconnect", log=out / f"{n}.log"))
+    for i, (g, members) in enumerate(groups.items()):
+        links = [upstream, *(eps[h] for h in list(groups)[:i])]
+        what = (["host", "seed000", "--peers", ",".join(members), "--name", g] if hosts
+                else ["peer", g, "--scenario", "seed000", "--color", str(i)])
+        procs.append(_cli(*what, "--network", network, "--out", str(out), *sets,
+                          "--no-rerun", "--listen", eps[g],
+                          *[a for c in links for a in ("--connect", c)],
+                          "--no-autoconnect", log=out / f"{g}.log"))
 
 
 def _finished(procs: list[subprocess.Popen], timeout: float) -> list[int]:
@@ -59,35 +68,40 @@ def _finished(procs: list[subprocess.Popen], timeout: float) -> list[int]:
     return [p.returncode for p in procs]
 
 
-@pytest.fixture(scope="module")
-def round_trip(tmp_path_factory):
-    """(recorded run folder, its bag, played run folder)."""
-    base = tmp_path_factory.mktemp("bagplay")
+@pytest.fixture(scope="module", params=["processes", "hosts"])
+def round_trip(request, tmp_path_factory):
+    """(recorded run folder, its bag, played run folder, play's log, layout): a run of a
+    process per peer, or of peer hosts (the world sends each host its scans in one bundle per
+    scan), recorded, then its world part played onto fresh peers of the same layout."""
+    hosts = request.param == "hosts"
+    base = tmp_path_factory.mktemp(f"bagplay-{request.param}")
     rec_dir, play_dir = base / "recorded", base / "played"
     rec_dir.mkdir()
     play_dir.mkdir()
     bag = base / "net.mcap"
     network = f"bagrt{free_port()}"
     procs: list[subprocess.Popen] = []
+    n_procs = len(HOSTS) if hosts else len(NAMES)
     try:
         world_ep = endpoint(free_port())
         sets = [a for s in SETS for a in ("--set", s)]
+        bundles = [a for h, m in HOSTS.items() for a in ("--bundle", f"{h}={','.join(m)}")]
         rec = _cli("record", network, "--connect", world_ep, "-o", str(bag), "--until-end",
                    "--wait", str(TIMEOUT), log=base / "record.log")  # dials until the world is up
         procs.append(rec)
         world = _cli("world", "seed000", "--network", network, "--listen", world_ep,
                      "--peers", ",".join(NAMES), "--out", str(rec_dir), *sets, "--no-rerun",
-                     log=rec_dir / "world.log")
+                     *(bundles if hosts else []), log=rec_dir / "world.log")
         procs.append(world)
         # the recorder heard the world (its token) before any peer exists: it hears every scan
         wait_for(lambda: f"-> {bag}" in (base / "record.log").read_text()
                  or rec.poll() is not None, TIMEOUT, "the recorder to hear the world")
         assert rec.poll() is None, (base / "record.log").read_text()
         peers: list[subprocess.Popen] = []
-        _peers(network, world_ep, rec_dir, peers)
+        _peers(network, world_ep, rec_dir, peers, hosts)
         procs += peers
         codes = _finished([world, *peers, rec], TIMEOUT)
-        assert codes == [0] * 5, [(base / "record.log").read_text(), codes]
+        assert codes == [0] * (n_procs + 2), [(base / "record.log").read_text(), codes]
 
         play_ep = endpoint(free_port())
         player = _cli("play", str(bag), "--only", "world", "--listen", play_ep,
@@ -95,13 +109,13 @@ def round_trip(tmp_path_factory):
                       log=base / "play.log")
         procs.append(player)
         peers = []
-        _peers(network, play_ep, play_dir, peers)
+        _peers(network, play_ep, play_dir, peers, hosts)
         procs += peers
         codes = _finished([player, *peers], TIMEOUT)
-        assert codes == [0] * 4, [(base / "play.log").read_text(), codes]
+        assert codes == [0] * (n_procs + 1), [(base / "play.log").read_text(), codes]
     finally:
         stop_all(procs)
-    return rec_dir, bag, play_dir, (base / "play.log").read_text()
+    return rec_dir, bag, play_dir, (base / "play.log").read_text(), request.param
 
 
 def _interval95(values: np.ndarray) -> tuple[float, float]:
@@ -112,12 +126,14 @@ def _interval95(values: np.ndarray) -> tuple[float, float]:
 
 
 def test_play_puts_back_only_the_worlds_part(round_trip):
-    _, bag, _, log = round_trip
+    _, bag, _, log, layout = round_trip
     _, items = read_bag(bag)
     world = select(items, "world")
     samples = [it for it in world if it.alive is None]
-    assert {it.key.split("/")[2] for it in samples} == {"scan", "truth", "ctl"}
-    assert len([it for it in samples if "/scan/" in it.key]) == 3 * 12
+    scans = "scans" if layout == "hosts" else "scan"  # a bundle per host and scan, or a scan
+    assert {it.key.split("/")[2] for it in samples} == {scans, "truth", "ctl"}
+    per_scan = len(HOSTS) if layout == "hosts" else len(NAMES)
+    assert len([it for it in samples if f"/{scans}/" in it.key]) == per_scan * 12
     assert f"play: {len(samples)} messages put" in log, log
     assert len(select(items, "peers")) > 0  # the recorded peers' estimates: not played
 
@@ -131,7 +147,7 @@ def _complete(summary: dict) -> bool:
 
 
 def test_peers_fed_from_play_give_the_recorded_runs_fused_tracks(round_trip):
-    rec_dir, _, play_dir, _ = round_trip
+    rec_dir, _, play_dir, _, _ = round_trip
     recorded, played = load_run(rec_dir), load_run(play_dir)
     scn = load_scenario("seed000", overrides=parse_overrides(SETS))
     compared = 0
@@ -160,7 +176,7 @@ def test_peers_fed_from_play_give_the_recorded_runs_fused_tracks(round_trip):
 def test_the_twin_fed_the_same_bag_gives_the_same_tracks(round_trip):
     """The bag's world part on the twin (sensornet.bag_twin.play_twin): where the recorded
     peer fused every estimate in time, its fused tracks, scan by scan."""
-    rec_dir, bag, _, _ = round_trip
+    rec_dir, bag, _, _, _ = round_trip
     recorded = load_run(rec_dir)
     scn = load_scenario("seed000", overrides=parse_overrides(SETS))
     _, items = read_bag(bag)
@@ -173,3 +189,23 @@ def test_the_twin_fed_the_same_bag_gives_the_same_tracks(round_trip):
                        and a[k].shape == twin.tracks[n][k].shape for k in a), n
             assert twin.peers[n].mean_ospa("fused") == pytest.approx(recorded.mean_ospa(n),
                                                                       abs=1e-9)
+
+
+def test_a_played_runs_latency_counts_from_plays_put(round_trip):
+    """``play`` stamps each message as it puts it (sensornet.bag_play.restamp): the played
+    peers' scan -> tracks latency is under 5 scan intervals, where the recorded stamps would
+    give at least the recording's length (the check below that this bound tells them apart)."""
+    rec_dir, bag, play_dir, log, _ = round_trip
+    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
+    interval_ms = 1e3 * scn.scan_period / scn.network.speed
+    _, items = read_bag(bag)
+    first_scan = min(it.t for it in select(items, "world") if "/scan" in it.key)
+    recorded_floor_ms = 1e3 * (items[-1].t - first_scan)  # played after the recording ended
+    assert recorded_floor_ms > 5 * interval_ms
+    assert "send times set as each message is put" in log, log
+    recorded, played = load_run(rec_dir), load_run(play_dir)
+    for n in NAMES:
+        lat = played.summary(n)["latency_ms_median"]
+        print(f"{n}: latency median recorded {recorded.summary(n)['latency_ms_median']:.1f} ms, "
+              f"played {lat:.1f} ms (recorded stamps: >= {recorded_floor_ms:.0f} ms)")
+        assert lat is not None and 0 < lat < 5 * interval_ms, (n, lat)

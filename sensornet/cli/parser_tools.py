@@ -101,6 +101,10 @@ def add_play(sub) -> None:
                          "before the first message, and count the pace from it")
     pl.add_argument("--wait", type=float, default=60.0, metavar="S",
                     help="seconds to wait for the --peers (default 60)")
+    pl.add_argument("--keep-stamps", action="store_true",
+                    help="put the recorded bytes exactly, send times as recorded (default: "
+                         "each message's send time set as it is put, as a live sender does, "
+                         "so the peers' latency counts from play)")
 
 
 def add_view(sub) -> None:

@@ -6,6 +6,7 @@ import argparse
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 from sensornet.bag import (
@@ -16,6 +17,7 @@ from sensornet.bag import (
     play,
     read_bag,
     record,
+    restamp,
     select,
 )
 from sensornet.cli.common import UserError
@@ -59,6 +61,21 @@ def cmd_record(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stamps_line(items, keep: bool) -> str:
+    """What the played messages' send times are, so what the peers' latency means."""
+    if keep:
+        return ("send times as recorded (--keep-stamps): the peers' latency figures count "
+                "from the recording, not measured")
+    first = {}
+    for it in items:
+        if it.alive is None:
+            first.setdefault(it.key, it)  # a key's messages are all signed or none
+    kept = sorted(k for k, it in first.items() if restamp(k, it.payload, 0.0) is None)
+    return ("send times set as each message is put (the peers' latency counts from play)"
+            + (f"; {len(kept)} keys' messages as recorded (signed or not sensornet's: "
+               f"latency from them not measured)" if kept else ""))
+
+
 def cmd_play(args: argparse.Namespace) -> int:
     """``sensornet play FILE``: put a recording back onto a network at its pace (``--rate``),
     all of it or a part (``--only``, ``--keys``), after ``--peers`` are ready if given."""
@@ -100,8 +117,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         span = items[-1].t - items[0].t
         wait = f" once {', '.join(peers)} are ready" if peers else ""
         print(f"play: {sum(it.alive is None for it in items)} messages over {span:.1f} s "
-              f"at x{args.rate:g}{wait} (Ctrl-C to stop)", file=sys.stderr, flush=True)
-        n = play(items, session, args.rate, args.network, stop, gate=gate)
+              f"at x{args.rate:g}{wait}; {_stamps_line(items, args.keep_stamps)} (Ctrl-C to "
+              f"stop)", file=sys.stderr, flush=True)
+        n = play(items, session, args.rate, args.network, stop, gate=gate,
+                 stamp=None if args.keep_stamps else time.time)
     except KeyboardInterrupt:
         n = None
     except PeersMissing as exc:
