@@ -38,9 +38,10 @@ from sensornet.peers.fusers import NoFuser
 from sensornet.peers.labelling import label_fused
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
-from sensornet.tracking.labels import Confirmation, LabelledMixture
+from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
+from sensornet.tracking.support import SupportRule, input_support
 
 
 class Consensus(BatchedRounds):
@@ -95,6 +96,9 @@ class Consensus(BatchedRounds):
         self._nale_labels: dict[str, tuple[object, np.ndarray]] = {}
         """sender -> (the NALE buffer's stored payload, its labels)."""
         self._fresh = 0  # fresh labels this peer's fusions created (their index offsets)
+        self.support = (SupportRule(options.support_inputs, options.support_scans)
+                        if self.fusing and options.support_inputs > 0 else None)
+        """Which extracted fused tracks are reported (tracking.support); None: all."""
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -304,7 +308,7 @@ class Consensus(BatchedRounds):
                 self.hooks.adopt_labels(st.labels)
         elif labelling is not None:
             self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
-        return self._tracks(st.k, fused, now, st.labels)
+        return self._tracks(st.k, fused, now, st.labels, st.inputs)
 
     def _label(self, st: ScanState, fused):
         """The labels of a round's fused density (peers.labelling.label_fused), from the
@@ -378,17 +382,33 @@ class Consensus(BatchedRounds):
                         labels=labels if self.labelled else None)
 
     def _tracks(self, k: int, fused: GaussianMixture, now: float,
-                labels: np.ndarray | None = None) -> list:
+                labels: np.ndarray | None = None, inputs: FusionInput | None = None) -> list:
         """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
-        with ids, covariances, existence and confirmation status (protocol 2)."""
+        with ids, covariances, existence and confirmation status (protocol 2); with
+        :attr:`support`, only the fused tracks it reports (``inputs``: the last round's)."""
         self.stats.tracks_out += 1
         if labels is None or self.hooks.extract_tracks is None:
             states = self.estimator.extract(fused)
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
+        if self.support is not None and inputs is not None:
+            t = self._supported(t, inputs)
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
+
+    def _supported(self, t: ExtractedTracks, inputs: FusionInput) -> ExtractedTracks:
+        """``t`` without the tracks :attr:`support` does not report (tracking.support): the
+        round's inputs are its own density and each neighbour's posterior (mixtures only)."""
+        mixes = [inputs.own, *(inputs.neighbours[s].get("posterior")
+                               for s in sorted(inputs.neighbours))]
+        if not all(isinstance(m, GaussianMixture) for m in mixes):
+            return t
+        keep = self.support.keep(t.ids, input_support(t.states, mixes))
+        if keep.all():
+            return t
+        return ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep], t.existence[keep],
+                               t.status[keep])
 
     def local_tracks(self):
         """The last local density's tracks (tracking.labels.ExtractedTracks, with ids and

@@ -50,12 +50,20 @@ class ConsensusOptions:
     """...and once it is this many scans old (its birth scan that far back), so an earlier id
     of the same target on its way over the graph can no longer replace it: the peer's
     eccentricity in hops (peers.labelling.settle_scans; 0: no wait)."""
+    support_inputs: int = 0
+    """Report a fused track only if this many of the last round's inputs hold it, or it was
+    extracted in :attr:`support_scans` consecutive scans (tracking.support.SupportRule; the
+    fused density is unchanged); 0: every extracted track (the rule off)."""
+    support_scans: int = 2
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
             raise ValueError("consensus rounds must be at least 1")
         if self.name in self.neighbours:
             raise ValueError("a peer cannot be its own neighbour")
+        if self.support_inputs < 0 or self.support_scans < 1:
+            raise ValueError(f"support_inputs must be >= 0 and support_scans >= 1, got "
+                             f"{self.support_inputs} and {self.support_scans}")
 
 
 @dataclass

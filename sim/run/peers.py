@@ -49,6 +49,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
             register=scn.fusion.trust_register, repair=scn.fusion.trust_repair)
             if scn.fusion.trust and kind.trust else None),
         confirm_settle=settle_scans(A, i),
+        support_inputs=scn.fusion.support,
+        support_scans=scn.fusion.support_scans,
     )
     return replace(opts, **changes)
 

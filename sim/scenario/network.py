@@ -54,6 +54,14 @@ class FusionSpec:
                                               "EMD, Uney 2013) or `\"separate\"` (location "
                                               "densities and cardinalities fused apart, "
                                               "Battistelli 2013).", choices=CARDINALITY_RULES)
+    support: int = option(0, doc="Report a fused track only if this many of the fusion's "
+                                 "inputs hold a component within the hybrid gate of it, or "
+                                 "it was extracted in `support_scans` consecutive scans "
+                                 "(`tracking.support`; extraction only, the fused density is "
+                                 "unchanged); 0: every extracted track.", check=NONNEGATIVE)
+    support_scans: int = option(2, doc="With `support`: scans a fused track held by fewer "
+                                       "inputs must be extracted in a row before it is "
+                                       "reported.", unit="scans", check=at_least(1))
     trust: bool = option(False, doc="Test each neighbour's density before fusing it and "
                                     "down-weight or quarantine the inconsistent ones "
                                     "(`peers.trust`).")

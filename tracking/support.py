@@ -1,0 +1,88 @@
+"""Support of fused tracks: how many fusion inputs hold each extracted track, and the rule that
+extracts a fused track only once it is supported (issue 33, docs/labelled-tracking.md,
+"Fused vs centralised: where the gap is").
+
+The hybrid rule (:func:`tracking.fusion_rules.hybrid_fuse`) keeps a target that only one input
+holds, at that input's weight ``omega_i W`` (a miss at one input must not erase a target), so a
+component one peer's clutter pushed above the level-2 threshold also stays, and under the
+cardinality extraction the inputs' surplus mass turns it into a one-scan false track. The rule
+here acts on extraction only (the fused density is unchanged, so the next scan can confirm the
+track): a fused track is reported if at least ``min_inputs`` inputs hold a component within the
+hybrid rule's association gate of it, or if it was extracted in each of the last ``scans``
+scans (the same label), so a target that the other inputs then miss stays reported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from sensornet.tracking.fusion_rules import HYBRID_GATE
+from sensornet.tracking.gaussian import c_einsum, inv_spd
+from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.mixture import GaussianMixture
+
+
+def input_support(means: np.ndarray, inputs: Sequence[GaussianMixture],
+                  gate: float = HYBRID_GATE) -> np.ndarray:
+    """``(n,)`` int: for each state of ``means (n, d)``, the number of ``inputs`` that hold a
+    component ``j`` with ``(x - m_j)' P_j^-1 (x - m_j) <= gate`` (the hybrid rule's test,
+    :data:`tracking.fusion_rules.HYBRID_GATE`, by the input component's covariance)."""
+    X = np.asarray(means, dtype=float)
+    if X.ndim != 2:
+        raise ValueError(f"means must be (n, d), got shape {X.shape}")
+    n, d = X.shape
+    if gate <= 0 or not np.isfinite(gate):
+        raise ValueError(f"gate must be positive and finite, got {gate}")
+    used = [D for D in inputs if len(D)]
+    if n == 0 or not used:
+        return np.zeros(n, dtype=np.int64)
+    if any(D.dim != d for D in used):
+        raise ValueError(f"inputs must have dimension {d} (the states'), got "
+                         f"{sorted({D.dim for D in used})}")
+    M = np.concatenate([D.means for D in used])  # (N, d)
+    Y = inv_spd(np.concatenate([D.covs for D in used]))  # (N, d, d)
+    diff = X[:, None, :] - M[None, :, :]  # (n, N, d)
+    q = c_einsum("anj,njk,ank->an", diff, Y, diff)  # (n, N)
+    starts = np.concatenate(([0], np.cumsum([len(D) for D in used])[:-1]))
+    held = np.logical_or.reduceat(q <= gate, starts, axis=1)  # (n, inputs)
+    return held.sum(axis=1).astype(np.int64)
+
+
+@dataclass
+class SupportRule:
+    """Which extracted fused tracks to report (module docstring): supported by at least
+    ``min_inputs`` inputs, or extracted (under the same label) in ``scans`` consecutive calls.
+    One per peer; call :meth:`keep` once per scan with that scan's extracted tracks."""
+
+    min_inputs: int = 2
+    scans: int = 2
+    _keys: np.ndarray = field(default_factory=lambda: label_keys(np.zeros((0, 3), np.int64)),
+                              repr=False)
+    _streak: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+
+    def __post_init__(self) -> None:
+        if self.min_inputs < 1:
+            raise ValueError(f"min_inputs must be at least 1, got {self.min_inputs}")
+        if self.scans < 1:
+            raise ValueError(f"scans must be at least 1, got {self.scans}")
+
+    def keep(self, labels: np.ndarray, support: np.ndarray) -> np.ndarray:
+        """``(n,)`` bool for the extracted tracks ``labels (n, 3)`` with ``support (n,)``
+        (:func:`input_support`); remembers each label's run of consecutive extractions."""
+        labels = np.asarray(labels, dtype=np.int64).reshape(-1, 3)
+        support = np.asarray(support)
+        if support.shape != (len(labels),):
+            raise ValueError(f"support must be ({len(labels)},), got shape {support.shape}")
+        keys = label_keys(labels)
+        by = np.argsort(self._keys)
+        pos = np.searchsorted(self._keys[by], keys).clip(max=max(len(by) - 1, 0))
+        seen = (self._keys[by][pos] == keys) if len(by) else np.zeros(len(keys), bool)
+        streak = np.ones(len(keys), dtype=np.int64)
+        streak[seen] += self._streak[by[pos[seen]]]
+        self._keys, self._streak = keys, streak  # a label twice in a scan: either row's run
+        return (support >= self.min_inputs) | (streak >= self.scans)
+
+
+__all__ = ["SupportRule", "input_support"]
