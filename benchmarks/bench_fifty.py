@@ -1,0 +1,274 @@
+"""50 peers in real time, labelled and watched (issues 33 and 38), measured in one run.
+
+Runs 50 peers on a circulant graph of degree 4, 2 consensus rounds, 10 scans/s, packed in peer
+hosts (``sensornet run``'s automatic packing unless ``--per-process``), for each peer kind
+(GM-PHD with tags and LMB, ``network.filter``) with the live view off and on, and prints one
+row per run:
+
+- scans handled per peer (the fewest), deadline fusions (all peers pooled, and the worst peer),
+  p50 / p99 scan -> fused tracks (every peer's samples pooled), mean fused OSPA;
+- the peers' CPU per peer-scan (their hosts' CPU split between their peers, from the loop's
+  start: ``bench_network.cpu_per_scan``) and its largest parts;
+- CPU seconds per wall second of every process of the run (world, hosts, view), sampled from
+  ``/proc`` while the world sent its scans, against the 2.0 cores there are: the honest floor.
+  A run that is not real time while this is well under 2.0 was starved by other work on the
+  machine (the load average is printed beside every row), not by its own design;
+- for view-on runs the view's CPU per scan and its lag behind the peers (``view_of``).
+
+Then the ratio rows measured in the same invocation: view on / off per kind, LMB / GM-PHD per
+view setting (medians over the repeats).
+
+    python benchmarks/bench_fifty.py                       # 2 kinds x view off/on, 2 repeats
+    python benchmarks/bench_fifty.py --kinds lmb --views off --repeats 3
+    python benchmarks/bench_fifty.py --per-process 50      # one host of 50
+
+"Real time" is ``bench_network.real_time``: every peer handled every scan, at most 5 % of a
+peer's fusions forced by the deadline, pooled p99 scan -> tracks under one scan interval.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bench_network import (
+    cpu_per_scan,
+    load_average,
+    real_time,
+    scenario_text,
+    speed_probe,
+    view_of,
+)
+from sensornet.peers.telemetry import percentile
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
+from sensornet.sim.run.packing import choose, scenario_load
+from sensornet.sim.scenario import load_scenario, parse_overrides
+
+CORES = 2.0
+"""Cores of the machine the targets are stated for."""
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def proc_cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of process ``pid`` (its own threads; /proc/PID/stat fields
+    14 and 15), None once it is gone."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = text.rsplit(")", 1)[1].split()  # the name may hold spaces: cut after it
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+@dataclass
+class CpuSampler:
+    """Samples every process of a run handle (its members and its view) every ``period``
+    seconds from a thread: ``samples`` of (wall time, {name: CPU seconds})."""
+
+    handle: object
+    period: float = 0.25
+    samples: list[tuple[float, dict[str, float]]] = field(default_factory=list)
+    _stop: threading.Event = field(default_factory=threading.Event)
+
+    def start(self) -> CpuSampler:
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            procs = {**self.handle.procs, **getattr(self.handle, "views", {})}
+            now = time.monotonic()
+            cpu = {n: c for n, p in procs.items() if (c := proc_cpu_s(p.pid)) is not None}
+            self.samples.append((now, cpu))
+            self._stop.wait(self.period)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def window(self, t0: float, t1: float) -> tuple[float, dict[str, float]]:
+        """CPU seconds per wall second of each process between the samples nearest ``t0``
+        and ``t1`` (a process gone before ``t1`` counts to its last sample), and the span."""
+        if len(self.samples) < 2:
+            return float("nan"), {}
+        a = min(self.samples, key=lambda s: abs(s[0] - t0))
+        b = min(self.samples, key=lambda s: abs(s[0] - t1))
+        span = b[0] - a[0]
+        if span <= 0:
+            return float("nan"), {}
+        last: dict[str, float] = {}
+        for t, cpu in self.samples:
+            if t <= b[0]:
+                last.update(cpu)
+        return span, {n: (last[n] - a[1].get(n, 0.0)) / span for n in last if n in a[1]}
+
+
+def scanning_window(samples: list[tuple[float, dict[str, float]]], world_start: float,
+                    seconds: float) -> tuple[float, float]:
+    """The wall interval the world sent its scans in: it ends when the world exits (its last
+    sample, about a second after the last scan) and lasts ``seconds``; clipped to the
+    samples (``world_start``: when the world process was seen first)."""
+    alive = [t for t, cpu in samples if "world" in cpu]
+    end = alive[-1] if alive else world_start + seconds
+    return max(world_start, end - 1.0 - seconds), end - 1.0
+
+
+@dataclass
+class Run:
+    kind: str
+    view: bool
+    repeat: int
+    rows: dict
+    ok: bool
+
+
+def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_process: int | None,
+            degree: int, n: int, speed: float = 10.0) -> Run:
+    """One network run at ``speed`` scans/s; its numbers in ``rows`` (module docstring)."""
+    tag = f"{kind}-{'on' if view else 'off'}-{repeat}"
+    path = tmp / f"fifty-{n}-{degree}-{speed:g}.toml"
+    path.write_text(scenario_text(n, degree, scans, rounds=2, speed=speed))
+    overrides = [f"network.filter={kind}"]
+    scn = load_scenario(str(path), overrides=parse_overrides(overrides))
+    per = per_process or choose(n, None, load=scenario_load(scn)).per_process
+    probe = speed_probe()
+    load0 = load_average()
+    handle = start_run(scn, str(path), tmp / tag, overrides=overrides, rerun=view, sparse=True,
+                       per_process=per)
+    t_start = time.monotonic()
+    sampler = CpuSampler(handle).start()
+    try:
+        codes = wait_run(handle, timeout=scans / speed + 120 + 3 * n)
+    finally:
+        handle.stop_all()
+        sampler.stop()
+    out = tmp / tag
+    s = read_summaries(out, scn.sensor_names)
+    res = {"codes": codes, "summaries": s, "scn": scn, "view": view_of(out) if view else None}
+    ok, why, _ = real_time(res)
+    interval = scn.scan_period / scn.network.speed
+    t0, t1 = scanning_window(sampler.samples, t_start, scans * interval)
+    span, per_proc = sampler.window(t0, t1)
+    total = sum(per_proc.values())
+    row: dict = {"per": per, "ok": ok, "why": why, "load": f"{load0}-{load_average()}",
+                 "probe": probe, "cpu_total": total, "span": span, "speed": speed,
+                 "cores_at_10": total * 10.0 / speed,
+                 "cpu_view": per_proc.get("view", float("nan")),
+                 "cpu_world": per_proc.get("world", float("nan")),
+                 "cpu_hosts": sum(v for k, v in per_proc.items() if k not in ("view", "world"))}
+    if s:
+        lat = sorted(x for v in s.values() for x in v.get("latency_ms_samples") or [])
+        fus = sum(v["stats"].get("fusions", 0) for v in s.values())
+        late = sum(v["stats"].get("deadline_fusions", 0) for v in s.values())
+        worst = max(v["stats"]["deadline_fusions"] / max(1, v["scans"]) for v in s.values())
+        cpu, parts = cpu_per_scan(s)
+        ospa = [v["mean_ospa_fused"] for v in s.values() if v.get("mean_ospa_fused") is not None]
+        row |= {"min_scans": min(v["scans"] for v in s.values()), "peers": len(s),
+                "late": late / max(1, fus), "late_worst": worst,
+                "p50": statistics.median(lat) if lat else float("nan"),
+                "p99": percentile(lat, 0.99) if lat else float("nan"),
+                "cpu_peer": cpu, "parts": parts,
+                "ospa": statistics.fmean(ospa) if ospa else float("nan")}
+    row["view"] = res["view"] or {}
+    return Run(kind, view, repeat, row, ok)
+
+
+HEADER = ("| kind | view | rep | scans/s | per host | real time | fewest scans | deadline fusions "
+          "(all / worst peer) | p50 / p99 scan->tracks (ms) | peers' CPU ms/peer-scan | "
+          "top parts (ms) | CPU s per wall s: hosts + world + view | peers' work at 10 scans/s "
+          "(cores of 2.0) | fused OSPA | view CPU ms/scan | view lag median / p99 (ms) | "
+          "load avg start-end | probe (ms) |")
+RULE = "|" + "---|" * 6 + "---:|" * 12
+
+
+def fmt(r: Run, n: int) -> str:
+    """One table row of run ``r`` of ``n`` peers (see :data:`HEADER`)."""
+    x, nan = r.rows, float("nan")
+    v = x["view"]
+    parts = sorted((x.get("parts") or {}).items(), key=lambda kv: -kv[1])[:3]
+    top = ", ".join(f"{k} {ms:.2f}" for k, ms in parts)
+    view_cols = (f"{v.get('cpu_ms_per_scan', nan):.1f} | {v.get('lag_median_ms', nan):.0f} / "
+                 f"{v.get('lag_p99_ms', nan):.0f}") if r.view else "- | -"
+    work = x.get("cpu_peer", nan) * n * 10.0 / 1e3
+    return (f"| {r.kind} | {'on' if r.view else 'off'} | {r.repeat + 1} | {x['speed']:g} | "
+            f"{x['per']} | {'yes' if r.ok else 'NO'} | {x.get('min_scans', '-')} | "
+            f"{100 * x.get('late', nan):.1f} / {100 * x.get('late_worst', nan):.1f} % | "
+            f"{x.get('p50', nan):.1f} / {x.get('p99', nan):.1f} | {x.get('cpu_peer', nan):.2f} | "
+            f"{top} | {x['cpu_total']:.2f} = {x['cpu_hosts']:.2f} + {x['cpu_world']:.2f} + "
+            f"{x['cpu_view'] if r.view else 0.0:.2f} | {work:.2f} | {x.get('ospa', nan):.2f} | "
+            f"{view_cols} | {x['load']} | {x['probe']:.0f} |")
+
+
+def ratio_rows(runs: list[Run], kinds: list[str], views: list[bool]) -> list[str]:
+    """Medians over repeats of the CPU per peer-scan, p99 and CPU per wall second: view on /
+    off per kind and LMB / GM-PHD per view setting."""
+    def med(kind: str, view: bool, key: str) -> float:
+        xs = [r.rows.get(key, float("nan")) for r in runs if r.kind == kind and r.view == view]
+        xs = [x for x in xs if x == x]
+        return statistics.median(xs) if xs else float("nan")
+
+    keys = (("cpu_peer", "peers' CPU/peer-scan"), ("p99", "p99 scan->tracks"),
+            ("cpu_total", "CPU s per wall s"))
+    rows = ["| ratio | " + " | ".join(k[1] for k in keys) + " |", "|---|" + "---:|" * len(keys)]
+    if len(views) == 2:
+        for kind in kinds:
+            rows.append(f"| {kind}: view on / off | " + " | ".join(
+                f"{med(kind, True, k) / med(kind, False, k):.2f}" for k, _ in keys) + " |")
+    if "lmb" in kinds and "gmphd" in kinds:
+        for view in views:
+            rows.append(f"| lmb / gmphd, view {'on' if view else 'off'} | " + " | ".join(
+                f"{med('lmb', view, k) / med('gmphd', view, k):.2f}" for k, _ in keys) + " |")
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--kinds", default="gmphd,lmb", help="network.filter values (default both)")
+    p.add_argument("--views", default="off,on", help="the live view: off, on or off,on")
+    p.add_argument("--repeats", type=int, default=2, help="runs of each kind x view")
+    p.add_argument("--scans", type=int, default=100, help="scans per run (default 100)")
+    p.add_argument("--peers", type=int, default=50, help="peers (default 50)")
+    p.add_argument("--degree", type=int, default=4, help="graph degree (default 4)")
+    p.add_argument("--speed", type=float, default=10.0,
+                   help="scans per second (default 10; lower: the CPU a scan costs when the "
+                        "network keeps up, on a machine too busy for 10)")
+    p.add_argument("--keep", metavar="DIR", help="keep the runs' folders under DIR")
+    p.add_argument("--per-process", type=int, default=None, metavar="N",
+                   help="peers per host (default: sensornet run's choice for the kind)")
+    args = p.parse_args(argv)
+    kinds = args.kinds.split(",")
+    views = [v == "on" for v in args.views.split(",")]
+    print(f"## {args.peers} peers, degree {args.degree}, 2 rounds, {args.speed:g} scans/s, "
+          f"{args.scans} "
+          f"scans, peer hosts; load average {load_average()} at the start\n", flush=True)
+    print(HEADER, RULE, sep="\n", flush=True)
+    runs: list[Run] = []
+    with tempfile.TemporaryDirectory(prefix="sensornet-fifty-") as tmp:
+        if args.keep:
+            tmp = args.keep
+            Path(tmp).mkdir(parents=True, exist_ok=True)
+        for rep in range(args.repeats):  # interleaved, so drift hits every setting alike
+            for kind in kinds:
+                for view in views:
+                    r = one_run(Path(tmp), kind, view, rep, args.scans, args.per_process,
+                                args.degree, args.peers, args.speed)
+                    runs.append(r)
+                    print(fmt(r, args.peers), flush=True)
+                    if not r.ok:
+                        print(f"<!-- {r.kind} view {'on' if r.view else 'off'}: "
+                              f"{r.rows['why']} -->", flush=True)
+    print()
+    print("\n".join(ratio_rows(runs, kinds, views)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
