@@ -22,6 +22,7 @@ from sensornet.sim.traffic.recorded import recorded_world
 
 from sensornet.view import Batcher
 from sensornet.view_map import GeoViewState, circle, geo_frame, geo_map, lat_lon
+from sensornet.view_map_figure import plot_map, read_map, track_lines
 from sensornet.view_state import id_color
 from tests.processes import env, rerun_exe
 
@@ -160,6 +161,49 @@ def _classes(rec: _Rec) -> dict[str, int]:
     return {c["class_description"]["info"]["label"]: c["class_id"] for c in ctx}
 
 
+def test_the_figure_reads_back_what_the_view_recorded(tmp_path):
+    """A view's .rrd written in-process: read_map returns the logged lat/lon and names, the
+    tracks grouped per id in scan order, and plot_map draws them; bad input: one line."""
+    scn = load_scenario("paris")
+    path = tmp_path / "v.rrd"
+    stream = rr.RecordingStream("sensornet-test", recording_id="map-test")
+    stream.set_sinks(rr.FileSink(str(path)))
+    state = GeoViewState(Batcher(rr, stream), scn.sensor_names, 2.0, geo=geo_map(scn))
+    for k in range(1, 5):
+        X = np.array([[800.0 * k, 400, 100, 0], [-3000, 0, 400.0 * k, 200]])
+        state.message(Truth(k, np.array([0x3C6444, 0x4CA7B5]), X))
+        state.message(Tracks("cdg", k, X + 5.0, ids=np.array([[1, 1, 0], [1, 2, 0]])))
+    state.b.flush()
+    stream.flush()
+    stream.disconnect()
+    rec = read_map(path)
+    assert rec.peers() == ["cdg"] and sorted(rec.rows["/map/truth"]) == [1, 2, 3, 4]
+    names = rec.names()
+    assert {names[c] for c in rec.rows["/map/truth"][4]["GeoPoints:class_ids"]} == {
+        "3c6444", "4ca7b5"}
+    np.testing.assert_allclose(_east_north(np.array(
+        rec.rows["/map/truth"][4]["GeoPoints:positions"])), X[:, [0, 2]], atol=1e-3)
+    lines = track_lines(rec.rows["/map/peers/cdg/tracks"])
+    assert sorted(names[i] for i, _, _ in lines) == ["1.1.0", "1.2.0"]
+    for i, ll, _ in lines:
+        j = 0 if names[i] == "1.1.0" else 1
+        want = np.array([[800.0 * k + 5 if j == 0 else -2995, 105 if j == 0 else 400.0 * k + 5]
+                         for k in range(1, 5)])
+        np.testing.assert_allclose(_east_north(ll), want, atol=1e-3)
+    out = plot_map(rec, "cdg", tmp_path / "map.png")
+    assert out.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="--peer orly: no tracks"):
+        plot_map(rec, "orly", tmp_path / "x.png")
+    plain = tmp_path / "plain.rrd"
+    other = rr.RecordingStream("sensornet-test", recording_id="plain")
+    other.set_sinks(rr.FileSink(str(plain)))
+    other.log("world/truth", rr.Points2D([[0.0, 0.0]]), static=True)
+    other.flush()
+    other.disconnect()
+    with pytest.raises(ValueError, match="plain.rrd: no map"):
+        read_map(plain)
+
+
 @pytest.mark.network
 def test_a_paris_run_records_the_map(tmp_path):
     """``sensornet run paris`` (processes, the view on): the run's recording verifies and holds
@@ -180,3 +224,4 @@ def test_a_paris_run_records_the_map(tmp_path):
                    "/map/region", "/map/peers/cdg/tracks", "/map/peers/south/trails"):
         assert entity in text, entity
     assert "GeoPoints:positions" in text and "GeoLineStrings:line_strings" in text
+    assert "MapZoom" in text  # the blueprint's map view
