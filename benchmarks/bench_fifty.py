@@ -18,9 +18,15 @@ row per run:
 Then the ratio rows measured in the same invocation: view on / off per kind, LMB / GM-PHD per
 view setting (medians over the repeats).
 
+``--gaps`` measures one LMB peer alone (no network): its step's CPU and OSPA when it leaves
+scans out, as a host that fell behind does (``peers.runtime`` ``_catch_up``), with LBP on a
+step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every step.
+
     python benchmarks/bench_fifty.py                       # 2 kinds x view off/on, 2 repeats
     python benchmarks/bench_fifty.py --kinds lmb --views off --repeats 3
     python benchmarks/bench_fifty.py --per-process 50      # one host of 50
+    python benchmarks/bench_fifty.py --speed 4             # the same at 4 scans/s
+    python benchmarks/bench_fifty.py --gaps                # one LMB peer leaving scans out
 
 "Real time" is ``bench_network.real_time``: every peer handled every scan, at most 5 % of a
 peer's fusions forced by the deadline, pooled p99 scan -> tracks under one scan interval.
@@ -38,6 +44,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from bench_network import (
     cpu_per_scan,
     load_average,
@@ -46,10 +53,14 @@ from bench_network import (
     speed_probe,
     view_of,
 )
+from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.peers.telemetry import percentile
+from sensornet.sim.kinds.lmb import make_lmb_filter
 from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.run.packing import choose, scenario_load
 from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.world import generate_run
+from sensornet.tracking.metrics import ospa
 
 CORES = 2.0
 """Cores of the machine the targets are stated for."""
@@ -229,6 +240,49 @@ def ratio_rows(runs: list[Run], kinds: list[str], views: list[bool]) -> list[str
     return rows
 
 
+GAP_PATTERNS = (("every scan", lambda k: 1), ("a gap of 5 every 10 scans",
+                                              lambda k: 5 if k % 10 == 9 else 1),
+                ("every 3rd scan", lambda k: 3), ("every 5th scan", lambda k: 5))
+"""Scan patterns of :func:`part_gaps`: the step from scan ``k`` to the next one taken."""
+
+
+def part_gaps(sensors: int = 4) -> list[str]:
+    """One LMB peer's step (``LmbEstimator.step``, thread CPU) on the 50-peer scenario's
+    scans of ``sensors`` sensors when it leaves scans out, as a host catching up does: the
+    estimator as it is (LBP on a step after a gap: ``filter_for``) against Gibbs sampling
+    on every step (the design before), with the OSPA (c = 100 m) of its tracks."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "gaps.toml"
+        path.write_text(scenario_text(50, 4, 100, rounds=2, speed=10.0))
+        scn = load_scenario(str(path), overrides=parse_overrides(["network.filter=lmb"]))
+    truth, scans = generate_run(scn, 0)
+    rows = ["| scans stepped | design | step CPU ms: median / mean / p99 / max | OSPA (m) |",
+            "|---|---|---:|---:|"]
+    print("\n".join(rows), flush=True)
+    for name, pattern in GAP_PATTERNS:
+        for design in ("Gibbs on every step", "LBP after a gap"):
+            ts, errs = [], []
+            for i in range(sensors):
+                est = LmbEstimator(make_lmb_filter(scn, scn.sensor_names[i], i))
+                if design.startswith("Gibbs"):
+                    est.filter_for = lambda k, e=est: e.filter
+                k, prev = 0, -1
+                while k < scn.num_scans:
+                    est.begin_scan(k)
+                    t0 = time.thread_time()
+                    out = est.step(max(1, k - prev), scans[i][k])
+                    ts.append(time.thread_time() - t0)
+                    X = est.extract(out.density)
+                    errs.append(ospa(X[:, [0, 2]], truth.states[k][:, [0, 2]], c=100.0))
+                    prev, k = k, k + pattern(k)
+            t = np.array(ts) * 1e3
+            rows.append(f"| {name} | {design} | {np.median(t):.2f} / {t.mean():.2f} / "
+                        f"{np.percentile(t, 99):.1f} / {t.max():.1f} | "
+                        f"{np.mean(errs):.1f} |")
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--kinds", default="gmphd,lmb", help="network.filter values (default both)")
@@ -243,7 +297,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep", metavar="DIR", help="keep the runs' folders under DIR")
     p.add_argument("--per-process", type=int, default=None, metavar="N",
                    help="peers per host (default: sensornet run's choice for the kind)")
+    p.add_argument("--gaps", action="store_true",
+                   help="only one LMB peer's step when it leaves scans out (no network)")
     args = p.parse_args(argv)
+    if args.gaps:
+        print(f"## one LMB peer's step with scans left out; load average {load_average()}\n")
+        part_gaps()  # prints its rows as they come
+        return 0
     kinds = args.kinds.split(",")
     views = [v == "on" for v in args.views.split(",")]
     print(f"## {args.peers} peers, degree {args.degree}, 2 rounds, {args.speed:g} scans/s, "
