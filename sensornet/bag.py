@@ -8,8 +8,10 @@ encoding, the exact bytes (base64: what ``play`` puts back) and every field deco
 (protocol.json_fields), so ``mcap``'s reader and ``json.loads`` alone read it. Liveliness
 tokens (a peer's ``alive``/``ready``, the world's) are the channel ``@liveliness``: ``play``
 declares and undeclares them at their times, so peers started by hand see a world. The
-metadata ``sensornet.bag`` names the network, the key space heard (keys, kinds, counts) and the
-run's start parameters if its ``start`` message was heard (the world publishes no scenario).
+metadata ``sensornet.bag`` names the network, the key space heard (keys, kinds, counts), the
+run's start parameters if its ``start`` message was heard and, given to ``record`` (the world
+publishes none), the run's scenario: its text, file name and ``--set`` items, as a peer's
+recording holds them (:func:`sensornet.bag_twin.bag_scenario` loads it).
 
 ``play`` can put back a part of a bag (:func:`select`): ``only="world"`` keeps what the world
 published (scans, scan bundles, truth, control and its ``alive/world`` token), so fresh peers
@@ -60,7 +62,8 @@ SAMPLE_SCHEMA = {
         "key": {"type": "string", "description": "Zenoh key expression"},
         "encoding": {"type": "string", "description": "the put's declared encoding"},
         "payload": {"type": "string", "contentEncoding": "base64",
-                    "description": "the exact bytes (protocol.codec), what play puts back"},
+                    "description": "the exact bytes (protocol.codec), what play puts back "
+                                   "(with its send time set as it puts it)"},
         "message": {**MESSAGE_SCHEMA, "type": ["object", "null"],
                     "description": "every field decoded (null: not decodable, e.g. sealed)"},
     },
@@ -123,6 +126,8 @@ class Bag:
     keys: Counter = field(default_factory=Counter)
     kinds: dict = field(default_factory=dict)
     start: dict | None = None
+    scenario: dict[str, str] | None = None
+    """``scenario_text``, ``scenario_file``, ``overrides`` (JSON list of ``--set`` items)."""
     ended: threading.Event = field(default_factory=threading.Event)
 
     def on_sample(self, sample) -> None:
@@ -218,6 +223,7 @@ class Bag:
                 "dropped": str(self.dropped), "key_space": json.dumps(space)}
         if self.start is not None:
             meta["start"] = json.dumps(self.start)
+        meta.update(self.scenario or {})
         self._w.add_metadata(META, meta)
         self._w.finish()
         self._fh.close()
@@ -227,12 +233,13 @@ class Bag:
 def record(path: Path, network: str, connect: Sequence[str] = (), config: str | None = None,
            duration: float | None = None, count: int | None = None, until_end: bool = False,
            wait: float = 3.0, stop: threading.Event | None = None,
-           say: Callable[[str], None] = print) -> Bag:
+           say: Callable[[str], None] = print, scenario: dict[str, str] | None = None) -> Bag:
     """Record every key of ``network`` (and its liveliness tokens) into ``path`` until
     ``duration`` s, ``count`` messages, the run's ``end`` message (``until_end``: 2 s after
-    it) or ``stop``; :class:`NoNetwork` if nothing answered within ``wait`` s."""
+    it) or ``stop``; :class:`NoNetwork` if nothing answered within ``wait`` s. ``scenario``:
+    the run's (:attr:`Bag.scenario`), written to the metadata."""
     stop = stop or threading.Event()
-    bag = Bag(Path(path), network)
+    bag = Bag(Path(path), network, scenario=scenario)
     session = open_session((), list(connect), config)
     subs = []
     try:

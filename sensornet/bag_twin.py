@@ -12,7 +12,9 @@ estimates on the twin as usual.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+import tomllib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from sensornet.bag import Bag, Item, is_world
@@ -22,11 +24,27 @@ from sensornet.protocol.codec import Rejected
 from sensornet.protocol.keys import ROOT, WORLD, Keys
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import TwinResult, run_twin, world_events
-from sensornet.sim.scenario import Scenario
+from sensornet.sim.scenario import Scenario, ScenarioError, load_document, parse_overrides
 from sensornet.sim.world import generate_run
 
 EPOCH = 1_700_000_000.0
 """The receive time (s since the epoch) a twin bag gives the twin's time 0."""
+
+
+def bag_scenario(meta: Mapping[str, str]) -> Scenario | None:
+    """The run's scenario a bag's metadata holds (``sensornet record --scenario``: its text,
+    file name and ``--set`` items), None if it holds none; a bad one raises as loading does
+    (:class:`sensornet.sim.scenario.ScenarioError`)."""
+    text = meta.get("scenario_text")
+    if not text:
+        return None
+    name = meta.get("scenario_file") or "scenario.toml"
+    sets = parse_overrides(json.loads(meta.get("overrides") or "[]"))
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{name} (in the bag): invalid TOML: {exc}") from None
+    return load_document(data, name, sets, Path(name).stem, f"bag:{name}")
 
 
 def bag_events(items: Sequence[Item], names: Sequence[str]) -> list[tuple]:

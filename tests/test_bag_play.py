@@ -5,6 +5,7 @@ compute the recorded run's fused tracks: bit for bit on the twin (a twin run wri
 
 from __future__ import annotations
 
+import json
 import threading
 from dataclasses import replace
 
@@ -14,11 +15,12 @@ from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode
 from sensornet.protocol.json_fields import fields
 from sensornet.protocol.messages import Scan, Tracks
-from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.scenario import load_scenario, parse_overrides, scenario_text
+from sensornet.sim.world import generate_run
 
-from sensornet.bag import Item, is_world, play, read_bag, select
+from sensornet.bag import Bag, Item, is_world, play, read_bag, select
 from sensornet.bag_play import restamp
-from sensornet.bag_twin import bag_events, play_twin, twin_bag
+from sensornet.bag_twin import EPOCH, bag_events, bag_scenario, play_twin, twin_bag
 from sensornet.cli import main
 
 SETS = ["scenario.num_scans=15"]
@@ -91,6 +93,41 @@ def test_a_scan_missing_from_the_bag_changes_the_tracks(twin_recording):
         assert differ and min(differ) <= 6, n
     assert 5 not in played.tracks["s1"]
     assert played.peers["s1"].snapshot()["scans"] == scn.num_scans - 1
+
+
+def _bundled(items: list[Item], hosts: dict[str, list[str]]) -> list[Item]:
+    """``items`` with each scan index's scans packed, as the world does for peer hosts, into
+    one bundle per host (``scans/<host>``) at the time of the host's first scan."""
+    out, scans = [], {}
+    for it in items:
+        if it.alive is None and "/scan/" in it.key:
+            msg = decode(it.payload)
+            scans.setdefault(msg.k, []).append((it, msg.sensor))
+        else:
+            out.append(it)
+    for k, group in scans.items():
+        for h, members in hosts.items():
+            mine = [(it, s) for it, s in group if s in members]
+            (payload,) = pack_bundles(k, [(s, it.payload) for it, s in mine])
+            out.append(Item(mine[0][0].t, f"sensornet/twin/scans/{h}", payload))
+    return sorted(out, key=lambda it: it.t)
+
+
+def test_scan_bundles_give_the_twins_peers_the_same_tracks(twin_recording):
+    """A bag of a peer-hosts run holds a bundle per host and scan (``scans/<host>``): the
+    twin hands each entry to its sensor's peer, as a host does, and the tracks stay bit for
+    bit; a bundle that does not unpack is a one-line error."""
+    scn, _, _, items = twin_recording
+    world = _bundled(select(items, "world"), {"h1": ["s1", "s2"], "h2": ["s3"]})
+    assert not any("/scan/" in it.key for it in world)
+    assert len([it for it in world if "/scans/" in it.key]) == 2 * scn.num_scans
+    played = play_twin(world, scn)
+    for n in scn.sensor_names:
+        recorded = _recorded_tracks(items, n)
+        assert sorted(played.tracks[n]) == sorted(recorded), n
+        assert all(np.array_equal(played.tracks[n][k], x) for k, x in recorded.items()), n
+    with pytest.raises(ValueError, match="scans/h1: not a scan bundle"):
+        bag_events([Item(EPOCH, "sensornet/twin/scans/h1", b"\x93")], scn.sensor_names)
 
 
 def test_the_twin_refuses_the_peers_part(twin_recording):
@@ -246,3 +283,31 @@ def test_play_stamps_each_message_as_it_puts_it(twin_recording):
     session = _Session()
     play(world, session, rate=1e6, stamp=None)
     assert session.puts == [it.payload for it in world]
+
+
+def test_a_bag_holds_the_runs_scenario_when_record_is_given_it(tmp_path, capsys):
+    """``record --scenario SRC --set ...`` writes the scenario to the bag's metadata; loaded
+    back (bag_scenario) it makes the same world as the scenario loaded from its name; a bad
+    one is refused in one line before anything is recorded."""
+    sets = ["scenario.num_scans=7", "sensors.s2.clutter_rate=3"]
+    want = load_scenario("seed000", overrides=parse_overrides(sets))
+    meta = {"scenario_text": scenario_text("seed000"),
+            "scenario_file": "seed000.toml", "overrides": json.dumps(sets)}
+    bag = Bag(tmp_path / "b.mcap", "net", scenario=meta)
+    bag.open()
+    bag.close()
+    got_meta, _ = read_bag(tmp_path / "b.mcap")
+    assert {k: got_meta[k] for k in meta} == meta
+    got = bag_scenario(got_meta)
+    assert got.num_scans == 7 and got.sensors[1].clutter_rate == 3
+    for a, b in zip(generate_run(got, 0)[1], generate_run(want, 0)[1], strict=True):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert bag_scenario({"network": "net"}) is None
+    out = tmp_path / "r.mcap"
+    for flags, what in [(["--scenario", "nosuch"], "nosuch"),
+                        (["--scenario", "seed000", "--set", "nosuch.key=1"], "nosuch"),
+                        (["--set", "scenario.num_scans=3"], "--set changes the --scenario")]:
+        assert main(["record", "net", "-o", str(out), *flags]) == 2, flags
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and what in err[0], (flags, err)
+    assert not out.exists()

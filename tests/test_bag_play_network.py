@@ -3,10 +3,12 @@
 by ``sensornet play --only world --peers ...`` (the world's scans, truth, control and token;
 the peers compute their own estimates): every scan processed, each peer's fused OSPA within
 the recorded run's 95 % interval, and the fused tracks of each scan compared (with the
-recorded run's, and with the twin's fed the same bag)."""
+recorded run's, and with the twin's fed the same bag); the played peers' latency counts from
+play's put. Two layouts: a process per peer, and peer hosts (:data:`HOSTS`)."""
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -20,7 +22,7 @@ from sensornet.sim.scenario import load_scenario, parse_overrides
 
 from sensornet.api import load_run
 from sensornet.bag import read_bag, select
-from sensornet.bag_twin import play_twin
+from sensornet.bag_twin import bag_scenario, play_twin
 from tests.processes import env, stop_all, wait_for
 
 pytestmark = pytest.mark.network
@@ -87,7 +89,8 @@ def round_trip(request, tmp_path_factory):
         sets = [a for s in SETS for a in ("--set", s)]
         bundles = [a for h, m in HOSTS.items() for a in ("--bundle", f"{h}={','.join(m)}")]
         rec = _cli("record", network, "--connect", world_ep, "-o", str(bag), "--until-end",
-                   "--wait", str(TIMEOUT), log=base / "record.log")  # dials until the world is up
+                   "--wait", str(TIMEOUT), "--scenario", "seed000", *sets,
+                   log=base / "record.log")  # dials until the world is up
         procs.append(rec)
         world = _cli("world", "seed000", "--network", network, "--listen", world_ep,
                      "--peers", ",".join(NAMES), "--out", str(rec_dir), *sets, "--no-rerun",
@@ -127,7 +130,9 @@ def _interval95(values: np.ndarray) -> tuple[float, float]:
 
 def test_play_puts_back_only_the_worlds_part(round_trip):
     _, bag, _, log, layout = round_trip
-    _, items = read_bag(bag)
+    meta, items = read_bag(bag)
+    assert meta["scenario_file"] == "seed000.toml" and json.loads(meta["overrides"]) == SETS
+    assert f"play: recorded with scenario seed000.toml --set {SETS[0]}" in log, log
     world = select(items, "world")
     samples = [it for it in world if it.alive is None]
     scans = "scans" if layout == "hosts" else "scan"  # a bundle per host and scan, or a scan
@@ -178,8 +183,9 @@ def test_the_twin_fed_the_same_bag_gives_the_same_tracks(round_trip):
     peer fused every estimate in time, its fused tracks, scan by scan."""
     rec_dir, bag, _, _, _ = round_trip
     recorded = load_run(rec_dir)
-    scn = load_scenario("seed000", overrides=parse_overrides(SETS))
-    _, items = read_bag(bag)
+    meta, items = read_bag(bag)
+    scn = bag_scenario(meta)  # the scenario record was given
+    assert scn.num_scans == 12
     twin = play_twin(select(items, "world"), scn)
     for n in NAMES:
         assert sorted(twin.tracks[n]) == list(range(1, scn.num_scans + 1)), n

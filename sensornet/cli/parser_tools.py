@@ -72,6 +72,11 @@ def add_record(sub) -> None:
                     help="seconds to wait for the network to answer (default 3, 20 with "
                          "--connect)")
     rc.add_argument("--force", action="store_true", help="overwrite FILE")
+    rc.add_argument("--scenario", help="the run's scenario (file or built-in name), written to "
+                    "the bag's metadata (the world publishes none): what peers fed from the "
+                    "bag need")
+    rc.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="the run's scenario overrides (repeatable; with --scenario)")
 
 
 def add_play(sub) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import json
+import shlex
 import signal
 import sys
 import threading
@@ -21,9 +23,11 @@ from sensornet.bag import (
     select,
 )
 from sensornet.cli.common import UserError
+from sensornet.cli.scenarios import load
 from sensornet.live import default_wait
 from sensornet.peers.session import SessionError, open_session
 from sensornet.protocol.keys import check_name
+from sensornet.sim.scenario import scenario_text
 
 
 def _stop_on_term() -> threading.Event:
@@ -31,6 +35,31 @@ def _stop_on_term() -> threading.Event:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     return stop
+
+
+def _scenario_meta(args: argparse.Namespace) -> dict[str, str] | None:
+    """The run's scenario for the bag's metadata (``--scenario``, ``--set``), checked by
+    loading it (a bad one: the loader's one line, exit 2); None without ``--scenario``."""
+    if not args.scenario:
+        if args.set:
+            raise UserError("--set changes the --scenario: give it too")
+        return None
+    load(args, args.scenario)
+    src = Path(args.scenario)
+    key = args.scenario.removesuffix(".toml")
+    return {"scenario_text": src.read_text() if src.is_file() else scenario_text(key),
+            "scenario_file": src.name if src.is_file() else f"{key}.toml",
+            "overrides": json.dumps(list(args.set or []))}
+
+
+def _scenario_line(meta: dict[str, str]) -> str | None:
+    """One line naming the recorded run's scenario, what peers fed from the bag need."""
+    if not meta.get("scenario_file"):
+        return None
+    sets = "".join(f" --set {shlex.quote(s)}" for s in json.loads(meta.get("overrides")
+                                                                   or "[]"))
+    return (f"play: recorded with scenario {meta['scenario_file']}{sets} (start the peers "
+            f"with it; the bag's metadata has its text)")
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -46,11 +75,12 @@ def cmd_record(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not args.force:
         raise UserError(f"{out} exists (pass --force to overwrite it)")
+    scenario = _scenario_meta(args)
     wait = args.wait if args.wait is not None else default_wait(args.connect or ())
     try:
         bag = record(out, args.network, args.connect or (), args.config, args.duration,
                      args.count, args.until_end, wait, _stop_on_term(),
-                     say=lambda s: print(s, file=sys.stderr, flush=True))
+                     say=lambda s: print(s, file=sys.stderr, flush=True), scenario=scenario)
     except NoNetwork as exc:
         print(str(exc), file=sys.stderr)
         return 1
@@ -114,6 +144,9 @@ def cmd_play(args: argparse.Namespace) -> int:
         gate = (await_peers(session, network, peers, args.wait, stop) if peers else None)
         if args.delay:
             stop.wait(args.delay)
+        line = _scenario_line(meta)
+        if line:
+            print(line, file=sys.stderr, flush=True)
         span = items[-1].t - items[0].t
         wait = f" once {', '.join(peers)} are ready" if peers else ""
         print(f"play: {sum(it.alive is None for it in items)} messages over {span:.1f} s "
