@@ -9,9 +9,12 @@ with ``geo``): ``map/truth`` the aircraft (gold) and ``map/truth/paths`` their p
 tracks`` each peer's fused tracks (one colour per track id, as on the 2-D map) and
 ``map/peers/<peer>/trails`` their last :data:`sensornet.view_state.TAIL` scans as lines. Rows
 go through the view's :class:`sensornet.view_columns.Batcher` (one ``send_columns`` per entity
-per flush, never a call per aircraft). Rerun 0.41's map view draws no text (rerun issue 9452):
-each point carries a class id whose annotation (``map``) is its name, the aircraft's icao24,
-the track's id or the radar's name, shown on hover and selection.
+per flush, never a call per aircraft) in the local frame, converted when flushed (one
+:func:`lat_lon` per entity per flush: pymap3d costs about 0.3 ms a call, whatever its size).
+
+Rerun 0.41's map view draws no text (rerun issue 9452): each point carries a class id whose
+annotation (``map``) is its name, the aircraft's icao24, the track's id or the radar's name,
+shown on hover and selection.
 
 Conversion (:func:`lat_lon`): the inverse of the loader's transform
 (:class:`sim.traffic.opensky.LocalFrame`, pymap3d at the frame's origin) with its up
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import pyarrow as pa
@@ -147,18 +151,45 @@ class _Classes:
         return rr.AnnotationContext([(c, name) for name, c in self.ids.items()])
 
 
-def _lines(hist: deque) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The marks of the scans in ``hist`` (``(keys (n,), lat_lon (n, 2), colors (n, 3))`` per
-    scan, oldest first) as one line per key with 2 or more points: ``(points (P, 2),
-    lengths (s,), colors (s, 3))``, each line in time order (a stable sort by key)."""
+@dataclass(eq=False)
+class _Marks:
+    """One scan's marks of one entity: kept in the local frame until a flush converts them
+    (:func:`_convert`, once, whichever row or path first needs them)."""
+
+    keys: np.ndarray
+    """(n,) what joins a mark to its line: truth id or track class id."""
+    xy: np.ndarray
+    """(n, 2) east, north (m)."""
+    colors: np.ndarray
+    """(n, 3) uint8."""
+    ll: np.ndarray | None = None
+    """(n, 2) [lat, lon] once converted."""
+
+
+def _convert(frame: LocalFrame, marks) -> None:
+    """Give every not yet converted one of ``marks`` its ``ll``, in one :func:`lat_lon`."""
+    todo = list({id(m): m for m in marks if m.ll is None}.values())
+    if not todo:
+        return
+    ll = lat_lon(frame, np.concatenate([m.xy for m in todo]))
+    for m, part in zip(todo, np.split(ll, np.cumsum([len(m.xy) for m in todo])[:-1]),
+                       strict=True):
+        m.ll = part
+
+
+def _lines(hist) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The converted :class:`_Marks` of the scans in ``hist`` (oldest first) as one line per
+    key with 2 or more points: ``(points (P, 2) [lat, lon], lengths (s,), colors (s, 3))``,
+    each line in time order (a stable sort by key). Key 0 draws no line (a track past the
+    class ids; no aircraft has the icao24 000000)."""
     if not hist:
         return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros((0, 3), np.uint8)
-    keys = np.concatenate([h[0] for h in hist])
-    pts = np.concatenate([h[1] for h in hist])
-    cols = np.concatenate([h[2] for h in hist])
+    keys = np.concatenate([h.keys for h in hist])
+    pts = np.concatenate([h.ll for h in hist])
+    cols = np.concatenate([h.colors for h in hist])
     order = np.argsort(keys, kind="stable")
-    _, first, counts = np.unique(keys[order], return_index=True, return_counts=True)
-    keep = counts >= 2
+    ukeys, first, counts = np.unique(keys[order], return_index=True, return_counts=True)
+    keep = (counts >= 2) & (ukeys != 0)
     take = np.repeat(keep, counts)
     return pts[order][take], counts[keep].astype(np.int64), cols[order][first[keep]]
 
@@ -171,8 +202,8 @@ class GeoViewState(ViewState):
     def __init__(self, batcher: Batcher, *args, geo: GeoMap, **kwargs) -> None:
         super().__init__(batcher, *args, **kwargs)
         self.geo = geo
-        batcher.builders.update({GEO_POINTS: geo_points_columns,
-                                 GEO_STRIPS: geo_strips_columns})
+        batcher.builders.update({GEO_POINTS: partial(geo_points_columns, geo.frame),
+                                 GEO_STRIPS: partial(geo_strips_columns, geo.frame)})
         self.classes = _Classes()
         self.truth_hist: deque = deque(maxlen=TRUTH_PATH_KEEP)
         self.trails: dict[str, deque] = {}
@@ -208,13 +239,13 @@ class GeoViewState(ViewState):
         k, t = msg.k, self._t(msg.k)
         X = np.asarray(msg.states, float)
         ids = np.asarray(msg.ids, np.int64).reshape(-1)
-        ll = lat_lon(self.geo.frame, X[:, position_columns(X.shape[1])] if len(X)
-                     else np.zeros((0, 2)))
-        gold = np.broadcast_to(np.asarray(TRUTH_COLOR, np.uint8), (len(ll), 3))
+        xy = X[:, position_columns(X.shape[1])] if len(X) else np.zeros((0, 2))
+        gold = np.broadcast_to(np.asarray(TRUTH_COLOR, np.uint8), (len(xy), 3))
         names = [f"{i:06x}" for i in ids.tolist()]  # the icao24 (truth id int(icao24, 16))
-        self.b._add("map/truth", GEO_POINTS, k, t, (ll, gold, -6.0, self.classes.of(names)))
-        self.truth_hist.append((ids, ll, gold))
-        self.b._add("map/truth/paths", GEO_STRIPS, k, t, (*_lines(self.truth_hist), -1.5))
+        marks = _Marks(ids, xy, gold)
+        self.b._add("map/truth", GEO_POINTS, k, t, (marks, -6.0, self.classes.of(names)))
+        self.truth_hist.append(marks)
+        self.b._add("map/truth/paths", GEO_STRIPS, k, t, (tuple(self.truth_hist), -1.5))
         self._name_classes()
 
     def tracks(self, msg: Tracks) -> None:
@@ -228,35 +259,39 @@ class GeoViewState(ViewState):
             gate = self.track_labels.setdefault(n, TrackLabels(self.label_gate))
             colors = np.broadcast_to(np.asarray(self.color(n), np.uint8), (len(xy), 3))
             names = [f"{n}/{i}" for i in gate.assign(xy)]
-        ll = lat_lon(self.geo.frame, xy)
         classes = self.classes.of(names)
-        self.b._add(f"map/peers/{n}/tracks", GEO_POINTS, k, t, (ll, colors, -5.0, classes))
+        marks = _Marks(classes, xy, np.asarray(colors, np.uint8))
+        self.b._add(f"map/peers/{n}/tracks", GEO_POINTS, k, t, (marks, -5.0, classes))
         trail = self.trails.setdefault(n, deque(maxlen=TAIL))
-        named = classes > 0  # class 0 (past the class ids): no line
-        trail.append((classes[named], ll[named], np.asarray(colors, np.uint8)[named]))
-        self.b._add(f"map/peers/{n}/trails", GEO_STRIPS, k, t, (*_lines(trail), -1.5))
+        trail.append(marks)
+        self.b._add(f"map/peers/{n}/trails", GEO_STRIPS, k, t, (tuple(trail), -1.5))
         self._name_classes()
 
 
-def geo_points_columns(rr, data: list) -> list:
-    """Rows ``(lat_lon (n, 2), colors (n, 3), radius, class_ids (n,))`` as GeoPoints columns."""
-    lengths = [len(d[0]) for d in data]
+def geo_points_columns(frame: LocalFrame, rr, data: list) -> list:
+    """Rows ``(marks, radius, class_ids (n,))`` (:class:`_Marks`) as GeoPoints columns, the
+    rows' marks converted in one :func:`lat_lon`."""
+    _convert(frame, [d[0] for d in data])
+    lengths = [len(d[0].xy) for d in data]
     return [*rr.GeoPoints.columns(
-        positions=np.concatenate([d[0] for d in data]),
-        colors=np.concatenate([d[1] for d in data]),
-        radii=np.repeat([d[2] for d in data], lengths),
-        class_ids=np.concatenate([d[3] for d in data])).partition(lengths)]
+        positions=np.concatenate([d[0].ll for d in data]),
+        colors=np.concatenate([d[0].colors for d in data]),
+        radii=np.repeat([d[1] for d in data], lengths),
+        class_ids=np.concatenate([d[2] for d in data])).partition(lengths)]
 
 
-def geo_strips_columns(rr, data: list) -> list:
-    """Rows ``(points (P, 2), lengths (s,), colors (s, 3), radius)`` as GeoLineStrings
-    columns (the lines as one Arrow array, as :func:`sensornet.view_columns.strip_array`)."""
-    lines = [len(d[1]) for d in data]
+def geo_strips_columns(frame: LocalFrame, rr, data: list) -> list:
+    """Rows ``(marks of the scans so far, radius)`` as GeoLineStrings columns, one line per
+    key (:func:`_lines`; the marks not converted yet in one :func:`lat_lon`; the lines as one
+    Arrow array, as :func:`sensornet.view_columns.strip_array`)."""
+    _convert(frame, [m for d in data for m in d[0]])
+    rows = [_lines(d[0]) for d in data]
+    lines = [len(r[1]) for r in rows]
     return [*rr.GeoLineStrings.columns(
-        line_strings=geo_strip_array(np.concatenate([d[0] for d in data]),
-                                     np.concatenate([d[1] for d in data])),
-        colors=np.concatenate([d[2] for d in data]),
-        radii=np.repeat([d[3] for d in data], lines)).partition(lines)]
+        line_strings=geo_strip_array(np.concatenate([r[0] for r in rows]),
+                                     np.concatenate([r[1] for r in rows])),
+        colors=np.concatenate([r[2] for r in rows]),
+        radii=np.repeat([d[1] for d in data], lines)).partition(lines)]
 
 
 def geo_strip_array(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
