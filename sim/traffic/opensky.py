@@ -8,11 +8,13 @@ interpolates them (:func:`trajectories`, :func:`truth_at`).
 
 Gaps: each aircraft's reports are cut into pieces wherever two consecutive reports are more
 than ``max_gap_s`` apart (default 20 s: ADS-B is received about once a second, so 20 s is a
-real loss of contact, not jitter). An aircraft is present at time ``t`` only inside a piece of
-at least two reports: never extrapolated before its first report, after its last, or across
-a gap. Inside a piece positions are linear in ENU between the bracketing reports and the
-velocity is that segment's slope (so the truth position is the integral of the truth
-velocity, and files without speed columns work the same).
+real loss of contact, not jitter). A file reporting less often (the ``traffic`` library's
+samples: every 10 s) needs ``max_gap_s`` above its interval; one whose median interval is
+longer than ``max_gap_s`` is refused, not read as no aircraft. An aircraft is present at time
+``t`` only inside a piece of at least two reports: never extrapolated before its first report,
+after its last, or across a gap. Inside a piece positions are linear in ENU between the
+bracketing reports and the velocity is that segment's slope (so the truth position is the
+integral of the truth velocity, and files without speed columns work the same).
 
 A bad file or selection raises one ``ValueError`` line naming the file and the field.
 """
@@ -230,11 +232,25 @@ def trajectories(states: StateVectors, frame: LocalFrame | tuple[float, ...] | N
         stale[1:] = ((states.icao[1:] == states.icao[:-1]) & (states.lat[1:] == states.lat[:-1])
                      & (states.lon[1:] == states.lon[:-1]))
         states = states.take(~stale)
+    _check_cadence(states, float(max_gap_s))
     ids, first = np.unique(states.icao, return_index=True)  # rows are sorted by icao already
     starts = np.append(first, len(states)).astype(np.intp)
     enu = frame.to_enu(states.lat, states.lon, states.alt_m)
     return Trajectories(frame=frame, ids=ids, t=states.t, enu=enu, starts=starts,
                         max_gap_s=float(max_gap_s))
+
+
+def _check_cadence(states: StateVectors, max_gap_s: float) -> None:
+    """Refuse a file whose aircraft report less often than ``max_gap_s``: every consecutive
+    pair would be a gap and the truth silently empty (a file resampled to one report a minute
+    gave 0 aircraft at every tick with the 20 s default, which assumes ADS-B's ~1 s)."""
+    same = states.icao[1:] == states.icao[:-1]
+    dt = np.diff(states.t)[same]
+    if len(dt) and (med := float(np.median(dt))) > max_gap_s:
+        raise _fail(states.source, f"field 'timestamp': an aircraft's reports are {med:g} s "
+                                   f"apart (median), more than max_gap {max_gap_s:g} s, so "
+                                   f"every aircraft would be absent between them; set "
+                                   f"traffic.max_gap above the file's report interval")
 
 
 def truth_at(states: StateVectors, times: np.ndarray,

@@ -8,7 +8,8 @@ Files: a list of records as JSON (``.json`` or ``.json.gz``), or a table as CSV 
 * ``timestamp``: milliseconds since 1970 UTC. Numbers are read by magnitude (below 1e11:
   seconds; below 1e14: milliseconds; below 1e17: microseconds; else nanoseconds), strings as a
   number or as ISO 8601 (no zone = UTC), and Parquet/CSV timestamp columns as they are typed.
-* ``icao24``: the transponder address, the aircraft's identity (kept as the truth id).
+* ``icao24``: the transponder address in hexadecimal, the aircraft's identity (kept as the
+  truth id).
 * ``latitude``, ``longitude``: degrees WGS84.
 * ``altitude``: barometric altitude in **feet**.
 * ``onground`` (optional, null = airborne), ``callsign`` (optional).
@@ -237,6 +238,10 @@ def load_states(path: str | Path) -> StateVectors:
         raise _fail(source, "missing column 'altitude' (feet; or 'baroaltitude', metres)")
     t = _times(tcol, tname, source)
     icao = _strings(icol, "icao24", source, required=True)
+    not_hex = np.flatnonzero(np.char.strip(icao, "0123456789abcdef") != "")
+    if len(not_hex):  # the truth id is int(icao24, 16) (sim.traffic.recorded.truth_ids)
+        raise _fail(source, f"field 'icao24': record {not_hex[0] + 1} is not a hexadecimal "
+                            f"transponder address ({icao[not_hex[0]]!r})")
     lat = _floats(latcol, latname, source)
     lon = _floats(loncol, lonname, source)
     alt = _floats(cols[altname], altname, source) * dict(_ALT)[altname]

@@ -124,8 +124,13 @@ def recorded_world(scn: Scenario) -> RecordedWorld:
     if t is None:
         raise ScenarioError(f"{scn.name}: truth 'recorded' needs a [traffic] table")
     path = traffic_file(scn)
-    traj, t0, t1 = _trajectories(str(path), t.start, t.end, t.centre, t.radius, t.max_gap,
-                                 t.airborne_only)
+    try:
+        traj, t0, t1 = _trajectories(str(path), t.start, t.end, t.centre, t.radius, t.max_gap,
+                                     t.airborne_only)
+    except ScenarioError:
+        raise
+    except ValueError as e:  # the loader's one line (file and field): the user's to fix
+        raise ScenarioError(f"{scn.name}: [traffic] {e}") from None
     K, T = scn.num_scans, scn.scan_period
     if t0 + K * T > t1 + 1e-6:
         raise ScenarioError(
