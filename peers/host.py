@@ -46,6 +46,7 @@ from sensornet.peers.host_parts import (  # SharedDecode: re-exported (benchmark
     rt_line,
 )
 from sensornet.peers.idle_gc import IdleCollector
+from sensornet.peers.observer import HostReports
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
@@ -100,6 +101,10 @@ class PeerHost(HostDelivery, HostBatching):
         """The host loop's work so far (every hosted peer's summary shows it under ``host``):
         wake-ups, passes that fused rounds together and the rounds fused so, stacked local
         steps and the steps they prepared."""
+        self.reports = HostReports()
+        """The peers' telemetry for live views, one bundle a pass (:meth:`_report`)."""
+        for rt in self.peers:
+            self.reports.add(rt.observer)
         info = {"name": name, "peers": [rt.name for rt in self.peers], "loop": self.counts}
         for rt in self.peers:
             rt.host = info
@@ -184,6 +189,7 @@ class PeerHost(HostDelivery, HostBatching):
             keys = self.peers[0].transport.keys
             self._remote_subs.append(self.session.declare_subscriber(  # the world's bundles
                 keys.scans(self.name), callback(self._unbundle)))
+            self.reports.open(self.session, keys.telemetries(self.name))
             for key, subs in self._remote.items():  # before any peer says it is ready
                 self._remote_subs.append(self.session.declare_subscriber(
                     key, callback(lambda sample, subs=subs: self._fan_out(subs, sample))))
@@ -197,6 +203,7 @@ class PeerHost(HostDelivery, HostBatching):
                 for i in list(self._active):  # SIGTERM, or a bug in the loop: finish them all
                     self._end(i)
         finally:
+            self.reports.close()
             for sub in self._remote_subs:
                 try:
                     sub.undeclare()
@@ -218,6 +225,7 @@ class PeerHost(HostDelivery, HostBatching):
             rt.stop_reason = self.stop_reason
         try:
             rt._finish()
+            self.reports.send()  # its last reports (the others' complete ones with them)
         finally:
             with self.cpu.aside():  # after its last fusion: not the others' CPU per scan
                 rt.close()
@@ -304,10 +312,30 @@ class PeerHost(HostDelivery, HostBatching):
             self._work(time.time(), time.monotonic(), wakes)
             self._fuse()
             self._score()
+            self._report()
             if time.monotonic() >= idle_check:  # idle timeouts are seconds: look 4 times a second
                 idle_check = time.monotonic() + 0.25
                 for i in [i for i in self._active if self.peers[i].idle_expired()]:
                     self._end(i)
+
+    def _report(self) -> None:
+        """The peers' complete telemetry reports, in one bundle, once no peer of the host has
+        work waiting (never in the burst of a scan that sets its peers' latency); each peer's
+        packing on its own CPU, the put split evenly between them ("telemetry" CPU)."""
+        if not self.reports.watched or any(self._backlog[i] for i in self._active):
+            return
+        flushing = [self.peers[i] for i in self._active if self.peers[i].observer.wants_flush]
+        if not flushing:
+            return
+        for rt in flushing:
+            t0 = time.thread_time()
+            rt.observer.flush(idle=not rt.core.consensus.busy(), host=True)
+            rt.telemetry.cpu_ms["telemetry"] += (time.thread_time() - t0) * 1e3
+        t0 = time.thread_time()
+        self.reports.send()
+        share = (time.thread_time() - t0) * 1e3 / len(flushing)
+        for rt in flushing:
+            rt.telemetry.cpu_ms["telemetry"] += share
 
     def _score(self) -> None:
         """The pass's scores, computed together; their CPU split evenly between the peers

@@ -19,6 +19,7 @@ import time
 import numpy as np
 from sensornet.peers.core import PeerCore, Publish, Record
 from sensornet.peers.rerun_layout import position_columns
+from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Telemetry
 from sensornet.tracking.mixture import GaussianMixture
@@ -43,6 +44,18 @@ WAIT_SCANS = 2
 until the tracks of this many later scans are out."""
 
 
+_OUT_OF_SEQUENCE = tuple(f"out_of_sequence/{w}" for w in ("late", "redundant", "too_old",
+                                                             "dropped_late"))
+
+
+def _put(values: dict, name: str, value) -> None:
+    """``values[name] = value`` for a finite scalar (None and NaN left out)."""
+    if value is not None:
+        v = float(value)
+        if math.isfinite(v):  # a scalar: NumPy's ufunc costs ~1 us a call, 35 a scan
+            values[name] = v
+
+
 class Observer:
     """Gathers one peer's per-scan telemetry and publishes it (no-op until :meth:`open`)."""
 
@@ -62,6 +75,8 @@ class Observer:
         self._tracks_out = 0
         self._fusion_ms = 0.0
         self.sent = 0
+        self.reports: HostReports | None = None
+        """A peer host's: reports go there, flushed when the host says (:meth:`flush`)."""
         self.wants_flush = False
         """Whether a report may be complete (tracks or an OSPA came since the last flush): the
         driver calls :meth:`flush` only then (a wake-up without it costs nothing here)."""
@@ -76,7 +91,10 @@ class Observer:
 
     # -- transport ------------------------------------------------------------------------
     def open(self, session, keys) -> Observer:
-        """Declare the publisher on ``telemetry/<peer>`` of ``session`` (best effort)."""
+        """Declare the publisher on ``telemetry/<peer>`` of ``session`` (best effort); a
+        hosted peer's observer (:class:`HostReports`) has its host's."""
+        if self.reports is not None:
+            return self
         # heavy optional dependency: zenoh (the sans-I/O core and the twin never load it)
         import zenoh
 
@@ -116,9 +134,7 @@ class Observer:
 
     def _set(self, k: int, name: str, value) -> None:
         if value is not None:
-            v = float(value)
-            if math.isfinite(v):  # a scalar: NumPy's ufunc costs ~1 us a call, 35 a scan
-                self._scan(k)["values"][name] = v
+            _put(self._scan(k)["values"], name, value)
 
     def published(self, out: Publish, latency_ms: float | None) -> None:
         if not self.enabled or out.channel != "tracks":
@@ -130,7 +146,7 @@ class Observer:
 
     def record(self, r: Record, compute_ms: float | None = None) -> None:
         """The scan's report fields from one core record (``local``, ``fusion``: own steps)."""
-        if not self.enabled or r.kind not in _KINDS:
+        if r.kind not in _KINDS or not self.enabled:  # most records pass by: kind first
             return
         core, k, v = self.core, r.k, r.values
         if r.kind == "local":
@@ -191,13 +207,11 @@ class Observer:
     def _record_fusion(self, k: int, v: dict) -> None:
         """A ``fusion`` record: fused counts and ages; once a scan the fused points."""
         core = self.core
-        self._set(k, "components/fused", v.get("n_fused"))
-        ages = v.get("ages") or {}
-        if ages:
-            self._set(k, "age", max(ages.values()))
         c = core.consensus.nale.counts
-        for what in ("late", "redundant", "too_old", "dropped_late"):
-            self._set(k, f"out_of_sequence/{what}", getattr(c, what))
+        g = self._scan(k)
+        # a record comes per round (and flood step), each overriding the last: kept as they
+        # are, read once when the report is sent (:meth:`message`)
+        g["fusion"] = (v, (c.late, c.redundant, c.too_old, c.dropped_late))
         if v.get("round", core.consensus.rounds) < core.consensus.rounds:
             return  # the rest once a scan, at its last round
         fused = core.consensus.last_fused
@@ -206,7 +220,6 @@ class Observer:
             self._set(k, "flooding/scans_held", len(fused))
             # packed when the report is sent (a fusion record comes per round and flood
             # step, each with a new scan set: only the last is sent); its place kept now
-            g = self._scan(k)
             g["points"]["pooled"] = None
             g["pooled"] = (hooks.plane, fused)
         elif isinstance(fused, GaussianMixture):
@@ -237,6 +250,16 @@ class Observer:
     def message(self, k: int) -> Telemetry:
         """Scan ``k``'s report (taken out of the pending ones)."""
         g = self._pending.pop(k)
+        fusion = g.get("fusion")
+        if fusion is not None:  # the scan's last fusion record
+            v, counts = fusion
+            values = g["values"]
+            _put(values, "components/fused", v.get("n_fused"))
+            ages = v.get("ages")
+            if ages:
+                _put(values, "age", max(ages.values()))
+            for what, n in zip(_OUT_OF_SEQUENCE, counts, strict=True):
+                values[what] = float(n)
         if "pooled" in g:
             plane, fused = g["pooled"]
             p = np.asarray(plane(fused), float).reshape(-1, 2)
@@ -248,9 +271,13 @@ class Observer:
         return Telemetry(self.name, k, g["values"], tuple(g["events"]), g["points"],
                          g["mixture"], send_time=time.time())
 
-    def flush(self, idle: bool, force: bool = False) -> None:
-        """Publish the complete reports once nothing waits (or at the end: every one)."""
+    def flush(self, idle: bool, force: bool = False, host: bool = False) -> None:
+        """Publish the complete reports once nothing waits (or at the end: every one); a
+        hosted peer's only when its host calls (``host``: no peer of the host has work
+        waiting) or at the end."""
         if not self.enabled or not self._pending or not (idle or force):
+            return
+        if self.reports is not None and not (host or force):
             return
         self.wants_flush = False
         for k in self.ready(force):
@@ -260,6 +287,82 @@ class Observer:
                 self.sent += 1
             except Exception:  # best effort: a view is never worth a peer's error
                 pass
+
+
+class HostReports:
+    """The reports of a peer host's observers, sent as one bundle a pass of the host's loop
+    on ``telemetries/<host>`` (:mod:`protocol.bundle`: ``[k, [[peer, report], ...]]``, each
+    report an encoded :class:`protocol.messages.Telemetry`) instead of one put per peer: the
+    host's ten or fifty peers make one message a scan, not ten or fifty. The view unpacks it
+    as if each report had come on ``telemetry/<peer>``."""
+
+    def __init__(self, put=None) -> None:
+        """``put(payload)``: where bundles go (tests, :meth:`open` declares the publisher)."""
+        self._put = put
+        self._pub = self._listener = None
+        self.observers: list[Observer] = []
+        self._reports: list[tuple[str, bytes]] = []
+        self.sent = 0
+
+    def add(self, obs: Observer) -> Observer:
+        """``obs`` sends its reports here (watched whenever the host's key is)."""
+        self.observers.append(obs)
+        obs._put, obs._open, obs.watched = self._report_of(obs.name), True, self._put is not None
+        obs.reports = self
+        return obs
+
+    def _report_of(self, name: str):
+        return lambda payload: self._reports.append((name, payload))
+
+    @property
+    def watched(self) -> bool:
+        """Whether a subscriber (a view) hears the host's key now."""
+        return any(obs.watched for obs in self.observers)
+
+    def _matching(self, status) -> None:  # Zenoh's thread: plain flags for the loop's
+        for obs in self.observers:
+            obs.watched = bool(status.matching)
+
+    def open(self, session, key: str) -> HostReports:
+        """Declare the publisher on ``key`` (best effort, as :meth:`Observer.open`)."""
+        # heavy optional dependency: zenoh (the sans-I/O core and the twin never load it)
+        import zenoh
+
+        self._pub = session.declare_publisher(key,
+                                              congestion_control=zenoh.CongestionControl.DROP)
+        self._put = self._pub.put
+        try:
+            self._listener = self._pub.declare_matching_listener(self._matching)
+            watched = bool(self._pub.matching_status.matching)
+        except Exception:  # no matching status (an older Zenoh): always report
+            watched = True
+        for obs in self.observers:
+            obs.watched = watched
+        return self
+
+    def send(self) -> None:
+        """The reports gathered since the last call, in one put (several past
+        :data:`protocol.bundle.BUNDLE_BYTES`)."""
+        if not self._reports:
+            return
+        reports, self._reports = self._reports, []
+        try:
+            for bundle in pack_bundles(0, reports):  # reports of several scans: no one k
+                self._put(bundle)
+                self.sent += 1
+        except Exception:  # best effort: a view is never worth a host's error
+            pass
+
+    def close(self) -> None:
+        for d in (self._listener, self._pub):
+            if d is not None:
+                try:
+                    d.undeclare()
+                except Exception:  # the session is gone already
+                    pass
+        self._pub = self._listener = None
+        for obs in self.observers:
+            obs._open = False
 
 
 def pack_marginals(mix: GaussianMixture) -> np.ndarray:

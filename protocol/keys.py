@@ -91,6 +91,10 @@ class Keys:
         """A peer's per-scan telemetry for live views (``sensornet view``): no peer reads it."""
         return f"{self.base}/telemetry/{peer}"
 
+    def telemetries(self, host: str = "*") -> str:
+        """A peer host's bundle of its peers' telemetry (:class:`peers.observer.HostReports`)."""
+        return f"{self.base}/telemetries/{host}"
+
     def truth(self) -> str:
         return f"{self.base}/truth"
 

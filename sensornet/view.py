@@ -101,6 +101,7 @@ class LiveView:
                                f"{exc}") from None
         k = Keys(self.network)  # each channel by name: what an observer may subscribe to
         exprs = [k.scan(), k.scans(), k.tracks(), k.truth(), k.ctl(), k.telemetry(),
+                 k.telemetries(),
                  *([k.estimate()] if self.estimates else [])]
         self._subs = [self.session.declare_subscriber(e, self._on_sample) for e in exprs]
 

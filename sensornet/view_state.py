@@ -52,6 +52,8 @@ TAIL = 20
 """Scans of each peer's fused tracks kept as its trail."""
 ROOT_SCANS = "scans"
 """The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""
+ROOT_TELEMETRIES = "telemetries"
+"""The key chunk of a host's telemetry bundles (protocol.keys.Keys.telemetries)."""
 
 
 def later_round(payload: bytes) -> bool:
@@ -144,6 +146,10 @@ class ViewState:
             if f"/{ROOT_SCANS}/" in key:
                 for sensor, entry in unpack_bundle(body).entries:
                     self.receive(f"{key.rsplit('/', 2)[0]}/scan/{sensor}", entry)
+                return
+            if f"/{ROOT_TELEMETRIES}/" in key:  # a host's peers' reports (HostReports)
+                for peer, entry in unpack_bundle(body).entries:
+                    self.receive(f"{key.rsplit('/', 2)[0]}/telemetry/{peer}", entry)
                 return
             msg = decode(body)
         except Rejected:
@@ -282,7 +288,3 @@ class ViewState:
             self.b.strips(f"{base}/{which}/ellipses", k, t, dashed(strips), shown, 1.0)
         else:
             self.b.strips(f"{base}/{which}/ellipses", k, t, strips, shown, 1.5)
-
-
-ROOT_SCANS = "scans"
-"""The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""

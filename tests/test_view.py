@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
-from sensornet.peers.observer import WAIT_SCANS, Observer, pack_marginals, unpack_marginals
+from sensornet.peers.observer import (
+    WAIT_SCANS,
+    HostReports,
+    Observer,
+    pack_marginals,
+    unpack_marginals,
+)
 from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.session import endpoint, free_port
@@ -287,6 +293,66 @@ def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
         obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((0, 4)))), 1.0)
     obs.flush(idle=True)
     assert 8 in [decode(b).k for b in sent[1:]]
+
+
+def _report_scan(obs: Observer, k: int, n: int) -> None:
+    """Scan ``k`` of a peer that scores nothing: a local step and ``n`` tracks out."""
+    obs.record(Record("local", k, {"n_components": n + 3, "n_published": n}), 1.5)
+    tracks = Tracks(obs.name, k, np.full((n, 4), float(n)))
+    obs.published(Publish("tracks", k, b"", tracks), 10.0 + n)
+
+
+def test_a_hosts_peers_report_in_one_bundle_drawn_as_their_own():
+    """A host's observers send their reports through its HostReports: nothing until the host
+    flushes them (not in a peer's own step), then one put for all; the view draws the bundle
+    as the same reports sent one per peer (the reference: observers of their own). A bad
+    bundle, or a bad report in one, is counted and the rest drawn."""
+    scn = load_scenario("seed000", {"scenario.num_scans": 3})
+    names = scn.sensor_names[:2]
+    bundles: list[bytes] = []
+    reports = HostReports(bundles.append)
+    own: list[bytes] = []
+    hosted, alone = [], []
+    for n in names:
+        for group, obs in ((hosted, reports.add(Observer(make_peer(scn, n, score_truth=False)))),
+                           (alone, Observer(make_peer(scn, n, score_truth=False)).attach(
+                               own.append))):
+            obs.core.wants_truth = False
+            group.append(obs)
+    for i, (a, b) in enumerate(zip(hosted, alone, strict=True)):
+        for obs in (a, b):
+            _report_scan(obs, 4, i + 1)
+            obs.flush(idle=True)
+    reports.send()
+    assert bundles == [] and len(own) == 2  # hosted: only when the host flushes them
+    for obs in hosted:
+        obs.flush(idle=True, host=True)
+    reports.send()
+    assert len(bundles) == 1 and reports.sent == 1
+    drawn = {}
+    for name, heard in (("bundle", [("sensornet/net/telemetries/h1", bundles[0])]),
+                        ("own", [(f"sensornet/net/telemetry/{n}", b)
+                                 for n, b in zip(names, own, strict=True)])):
+        rec = _Rec()
+        state = ViewState(Batcher(rr, rec), names)
+        for key, payload in heard:
+            state.receive(key, payload)
+        state.b.flush()
+        assert state.rejected == 0 and state.handled == 2
+        drawn[name] = {p: (s, [c.as_arrow_array().to_pylist() for c in cols])
+                       for p, s, cols in rec.calls}
+    assert drawn["bundle"] == drawn["own"]
+    assert {f"metrics/latency_ms/{n}" for n in names} <= set(drawn["own"])
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), names)
+    state.receive("sensornet/net/telemetries/h1", b"\x93not a bundle")
+    bad = msgpack.packb([0, [[names[0], own[0]], [names[1], b"\x91\x01"]]], use_bin_type=True)
+    state.receive("sensornet/net/telemetries/h1", bad)
+    state.b.flush()
+    assert state.rejected == 2 and state.handled == 1
+    assert f"metrics/latency_ms/{names[0]}" in rec.by_path()
+    reports._matching(type("Status", (), {"matching": False})())  # nobody listens: no work
+    assert not reports.watched and not any(obs.enabled for obs in hosted)
 
 
 @pytest.mark.network
