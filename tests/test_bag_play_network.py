@@ -215,3 +215,22 @@ def test_a_played_runs_latency_counts_from_plays_put(round_trip):
         print(f"{n}: latency median recorded {recorded.summary(n)['latency_ms_median']:.1f} ms, "
               f"played {lat:.1f} ms (recorded stamps: >= {recorded_floor_ms:.0f} ms)")
         assert lat is not None and 0 < lat < 5 * interval_ms, (n, lat)
+
+
+def test_load_run_of_each_run_equals_its_summaries(round_trip):
+    """``load_run`` on a run of processes (or of peer hosts), recorded or played: every peer's
+    summary as its process wrote it, and the per-scan table's mean OSPA (local and fused) and
+    scan count equal to the summary's, which the peer's scorer computed on its own."""
+    for folder in round_trip[0], round_trip[2]:
+        run = load_run(folder)
+        assert run.peers == NAMES
+        for n in NAMES:
+            written = json.loads((folder / f"peer-{n}.json").read_text())
+            loaded = dict(run.summary(n))
+            for s in (written, loaded):  # which files hold it (a run's launcher drops it)
+                s.pop("summary_files", None)
+            assert loaded == written, n
+            for which in ("local", "fused"):
+                ospa = np.asarray(run.metric(n, "ospa", which)[1], float)
+                assert len(ospa) == written["scans"], (n, which)
+                assert ospa.mean() == pytest.approx(written[f"mean_ospa_{which}"], rel=1e-12)
