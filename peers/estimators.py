@@ -11,6 +11,7 @@ from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
 from sensornet.tracking.labels import (
+    SHARED_ORIGIN,
     Confirmation,
     ExtractedTracks,
     LabelledMixture,
@@ -55,13 +56,19 @@ class GmphdEstimator:
     components carry labels beside the mixture (tracking.labels: Panta, Clark & Vo 2009 tag
     propagation, then Panta's duplicate rule) and what it publishes carries them: the labels
     only gather rows by the indices the filter's own steps return, so every number is what the
-    unlabelled filter computes. ``origin=None``: no labels (``labels`` stays None)."""
+    unlabelled filter computes. ``origin=None``: no labels (``labels`` stays None).
+
+    ``shared_births``: the filter's birth components are the same at every peer (fixed birth
+    points), so a birth is labelled ``(SHARED_ORIGIN, k, i)`` as every peer labels it, not with
+    this peer's origin (which must then differ from :data:`tracking.label_keys.SHARED_ORIGIN`);
+    peers that start a target's track from the same birth component agree on its id at once."""
 
     kinds = ("posterior",)
     position_index = (0, 2)
 
     def __init__(self, filt: GMPHDFilter, level2: bool = True,
-                 level2_threshold: float = 0.5, origin: int | None = None) -> None:
+                 level2_threshold: float = 0.5, origin: int | None = None,
+                 shared_births: bool = False) -> None:
         self.filter = filt
         self.reducer = filt.reducer
         self.level2 = level2
@@ -70,15 +77,23 @@ class GmphdEstimator:
         self.dim = self.mix.dim
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
+        if shared_births and origin == SHARED_ORIGIN:
+            raise ValueError(f"origin {origin} is the shared births' (SHARED_ORIGIN): with "
+                             f"shared_births own origins start at {SHARED_ORIGIN + 1}")
         self.origin = None if origin is None else int(origin)
-        """The first column of the labels of this peer's births; None: unlabelled."""
+        """The first column of this peer's own labels (splits, fusion); None: unlabelled."""
+        self.birth_origin = SHARED_ORIGIN if shared_births else self.origin
+        """The first column of the labels of this peer's births."""
         self.labels = None if origin is None else np.zeros((0, 3), dtype=np.int64)
         """``(n, 3)`` int64, one label per component of :attr:`mix` (None: unlabelled)."""
-        self.publication = None if origin is None else Publication(self.origin)
+        shared = SHARED_ORIGIN if shared_births else None
+        self.publication = None if origin is None else Publication(self.origin, shared=shared)
         """Which labels have been on the network: an own label is stamped ``(origin, k,
-        PUBLISHED_BASE + i)`` when first published, any label again when it returns after a
-        long gap (tracking.labels.Publication)."""
-        self.reid = None if origin is None else Reidentification(filt.motion, self.origin)
+        PUBLISHED_BASE + i)`` when first published (a shared birth ``(SHARED_ORIGIN, k,
+        PUBLISHED_BASE + i)``), any label again when it returns after a long gap
+        (tracking.labels.Publication)."""
+        self.reid = (None if origin is None
+                     else Reidentification(filt.motion, self.origin, shared=shared))
         """A re-born track takes its lost label back (tracking.reidentify)."""
         self.k = 0
         """The scan of the last step (births are stamped with it)."""
@@ -140,10 +155,10 @@ class GmphdEstimator:
 
     def _step_labels(self, post: GaussianMixture, parents: np.ndarray, k: int) -> np.ndarray:
         """Labels of the posterior: each component its parent's (survivors keep theirs,
-        births get ``(origin, k, i)``), then the duplicate rule (tracking.labels)."""
+        births get ``(birth_origin, k, i)``), then the duplicate rule (tracking.labels)."""
         f = self.filter
         nb = 0 if f.birth is None else len(f.birth)
-        pred = np.concatenate((self.labels, new_labels(self.origin, k, nb)))
+        pred = np.concatenate((self.labels, new_labels(self.birth_origin, k, nb)))
         lm = LabelledMixture(post, pred[parents])
         return split_duplicates(lm, f.extraction_threshold, self.origin, k, nb).labels
 

@@ -119,6 +119,18 @@ class Publication:
     origin: int
     gap: int | None = REPUBLISH_GAP
     """None: a label once published keeps its stamp while any component carries it."""
+    shared: int | None = None
+    """The origin of births every peer labels alike (:data:`tracking.label_keys.SHARED_ORIGIN`;
+    None: none). Such a birth ``(shared, b, i)`` first published at ``k`` is stamped ``(shared,
+    k, PUBLISHED_BASE + i)``, the label every peer that publishes a track of birth component
+    ``i`` at scan ``k`` gives it, so those peers need no spreading to agree. Should two of our
+    tracks map to one stamp (or the stamp be held already), the earliest birth takes it and the
+    others an own stamp: a label stays one track at a peer."""
+    shared_window: int = 0
+    """A shared birth first published at most this many scans after its birth keeps its birth
+    scan in the stamp, ``(shared, b, PUBLISHED_BASE + i)``: peers that publish a track of one
+    birth a scan apart still give it one id. A label's scan then precedes its publication by
+    up to this many scans (add it to a confirmation's ``settle``)."""
     _keys: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=_KEY), init=False,
                               repr=False)
     """Sorted keys of the present labels that have been published."""
@@ -143,13 +155,21 @@ class Publication:
         keys = label_keys(labels)
         on = np.isin(keys, keys[np.asarray(weights) > threshold])
         known, last = self._lookup(keys)
-        fresh = ~known & (labels[:, 0] == self.origin) & (labels[:, 2] < PUBLISHED_BASE)
+        unstamped = labels[:, 2] < PUBLISHED_BASE
+        fresh = ~known & (labels[:, 0] == self.origin) & unstamped
+        alike = np.zeros(len(labels), dtype=bool)
+        if self.shared is not None:
+            alike = on & ~known & (labels[:, 0] == self.shared) & unstamped
         back = known & (self.gap is not None) & (k - last > (self.gap or 0) + 1)
-        new = on & (fresh | back)
+        new = on & (fresh | back) | alike
         if new.any():
-            uniq, inv = np.unique(keys[new], return_inverse=True)
             labels = labels.copy()
-            labels[new] = new_labels(self.origin, k, len(uniq), PUBLISHED_BASE)[inv]
+            if alike.any():
+                alike = self._alike(labels, keys, alike, new, k)
+            own = new & ~alike
+            if own.any():
+                uniq, inv = np.unique(keys[own], return_inverse=True)
+                labels[own] = new_labels(self.origin, k, len(uniq), PUBLISHED_BASE)[inv]
             keys = label_keys(labels)
             known[new] = False
         keep = on | known
@@ -158,6 +178,28 @@ class Publication:
         self._last = when[idx] if self._keys.size else np.zeros(0, dtype=np.int64)
         self._k = int(k)
         return labels
+
+    def _alike(self, labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
+               k: int) -> np.ndarray:
+        """Stamp the shared births ``alike (n,)`` of ``labels`` (in place) ``(shared, k,
+        PUBLISHED_BASE + i)``, one old label per stamp (the earliest birth) and none that a
+        label not stamped now holds; returns the rows stamped so."""
+        rows = np.flatnonzero(alike)
+        birth = labels[rows, 1]
+        stamp = labels[rows].copy()
+        stamp[:, 1] = np.where(k - birth <= self.shared_window, birth, k)
+        stamp[:, 2] += PUBLISHED_BASE
+        by = np.lexsort((birth, stamp[:, 2], stamp[:, 1]))  # per stamp, the earliest birth first
+        start = np.ones(len(by), dtype=bool)
+        start[1:] = (stamp[by[1:], 1:] != stamp[by[:-1], 1:]).any(axis=1)
+        winner = birth[by][np.flatnonzero(start)][np.cumsum(start) - 1]
+        ok = np.zeros(len(rows), dtype=bool)
+        ok[by] = birth[by] == winner
+        ok &= ~np.isin(label_keys(stamp), keys[~new])
+        labels[rows[ok]] = stamp[ok]
+        out = np.zeros(len(labels), dtype=bool)
+        out[rows[ok]] = True
+        return out
 
     def adopt(self, labels: np.ndarray) -> None:
         """Labels the network gave us (a relabel's winners): published as of the last scan."""

@@ -15,6 +15,13 @@ PUBLISHED_BASE = 1 << 36
 """Index offset of the label an own track takes when it is first published (``(origin, k,
 PUBLISHED_BASE + i)``: :class:`tracking.label_confirmation.Publication`), apart from births
 and splits (small indices) and a fusion's fresh labels (``peers.labelling.FRESH_BASE``)."""
+SHARED_ORIGIN = 0
+"""Origin of the labels every peer makes alike (issue 33): a birth at a fixed birth point that
+all peers share (seed 000's ``[[birth.paper]]``) is ``(SHARED_ORIGIN, k, i)``, ``i`` its birth
+component, at every peer, and stamped ``(SHARED_ORIGIN, k', PUBLISHED_BASE + i)`` at its first
+publication (:class:`tracking.label_confirmation.Publication` ``shared``). Peers' own origins
+then start at 1, so in the network rule's order a shared label beats an own one of the same
+scan: the id most peers already hold wins a tie."""
 _KEY = np.dtype([("origin", "<i8"), ("birth_scan", "<i8"), ("index", "<i8")])
 
 
@@ -83,5 +90,5 @@ class LabelledMixture:
         return LabelledMixture(self.mixture.select(index), self.labels[index])
 
 
-__all__ = ["LABEL_COLUMNS", "PUBLISHED_BASE", "LabelledMixture", "as_labels", "label_keys",
-           "new_labels", "precedes"]
+__all__ = ["LABEL_COLUMNS", "PUBLISHED_BASE", "SHARED_ORIGIN", "LabelledMixture", "as_labels",
+           "label_keys", "new_labels", "precedes"]

@@ -52,6 +52,7 @@ from sensornet.tracking.label_confirmation import REPUBLISH_GAP, Confirmation, P
 from sensornet.tracking.label_keys import (
     LABEL_COLUMNS,
     PUBLISHED_BASE,
+    SHARED_ORIGIN,
     LabelledMixture,
     as_labels,
     label_keys,
@@ -196,6 +197,7 @@ __all__ = [
     "LABEL_COLUMNS",
     "PUBLISHED_BASE",
     "REPUBLISH_GAP",
+    "SHARED_ORIGIN",
     "Confirmation",
     "ExtractedTracks",
     "LabelMatch",

@@ -60,6 +60,9 @@ class Reidentification:
 
     motion: ConstantVelocity
     origin: int
+    shared: int | None = None
+    """The origin of labels all peers make alike (``Publication.shared``): a label ``(shared,
+    k, PUBLISHED_BASE + i)`` seen at scan ``k`` was stamped new too; None: none."""
     scans: int = REID_SCANS
     gate: float = REID_GATE
     age: int = REID_AGE
@@ -77,7 +80,8 @@ class Reidentification:
         labels = as_labels(labels, len(mix))
         on = mix.weights > threshold
         lab, m, P = _tracks(labels, mix, on)
-        new = (lab[:, 0] == self.origin) & (lab[:, 1] == k) & (lab[:, 2] >= PUBLISHED_BASE)
+        mine = np.isin(lab[:, 0], [o for o in (self.origin, self.shared) if o is not None])
+        new = mine & (lab[:, 1] == k) & (lab[:, 2] >= PUBLISHED_BASE)
         self._forget(lab, m[~new], P[~new], k)
         if self._lost is not None and len(self._lost[0]) and new.any():
             labels, lab = self._match(labels, lab, m, P, new, k)

@@ -9,6 +9,7 @@ from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import make_filter
+from sensornet.tracking.label_keys import SHARED_ORIGIN
 
 
 def mixture_fuser(scn: Scenario, reducer):
@@ -25,8 +26,12 @@ def mixture_fuser(scn: Scenario, reducer):
 
 def build(scn: Scenario, name: str, run: int = 0):
     filt = make_filter(scn, [name])
+    origin = origin_of([s.name for s in scn.sensors], name)
+    shared = (origin is not None and scn.network.birth_ids == "shared"
+              and scn.birth.model != "measurements")
     est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold,
-                         origin=origin_of([s.name for s in scn.sensors], name))
+                         origin=SHARED_ORIGIN + 1 + origin if shared else origin,
+                         shared_births=shared)
     return est, mixture_fuser(scn, filt.reducer)
 
 

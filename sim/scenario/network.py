@@ -101,6 +101,14 @@ class NetworkSpec:
                                        "scan.")
     speed: float = option(10.0, doc="Wall-clock speed factor: a scan every `scan_period / "
                                     "speed` seconds.", check=POSITIVE)
+    birth_ids: str = option(
+        "shared", doc="GM-PHD peers' ids of births at fixed birth points (`birth.model` "
+                      "`\"paper\"` or `\"truth\"`): `\"shared\"`, made alike at every peer "
+                      "(origin 0, the scan of first publication, the birth component: "
+                      "`tracking.label_keys.SHARED_ORIGIN`; the peers' own origins then start at "
+                      "1), or `\"own\"` (the peer's origin; the network rule spreads the "
+                      "winner over the graph). Measurement births are always own.",
+        choices=("shared", "own"))
     filter: str = option("gmphd", doc="The peers' kind (`sim.kinds`): `\"gmphd\"`, "
                                       "`\"et-gmphd\"` (`[extended]`), for one target "
                                       "`\"imm-pf\"`/`\"imm-ekf\"`, `\"flooding\"` (seed 004, "
