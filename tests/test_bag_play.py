@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import zenoh
 from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode
 from sensornet.protocol.json_fields import fields
@@ -18,7 +19,7 @@ from sensornet.protocol.messages import Scan, Tracks
 from sensornet.sim.scenario import load_scenario, parse_overrides, scenario_text
 from sensornet.sim.world import generate_run
 
-from sensornet.bag import Bag, Item, is_world, play, read_bag, select
+from sensornet.bag import Bag, Item, await_peers, is_world, play, read_bag, select
 from sensornet.bag_play import restamp
 from sensornet.bag_twin import EPOCH, bag_events, bag_scenario, play_twin, twin_bag
 from sensornet.cli import main
@@ -311,3 +312,41 @@ def test_a_bag_holds_the_runs_scenario_when_record_is_given_it(tmp_path, capsys)
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and what in err[0], (flags, err)
     assert not out.exists()
+
+
+class _Matching:
+    """A publisher whose subscriber reaches it at its ``after``-th look (None: never)."""
+
+    def __init__(self, after: int | None) -> None:
+        self.after, self.looks = after, 0
+
+    @property
+    def matching_status(self):
+        self.looks += 1
+        return type("Status", (), {"matching": self.after is not None
+                                   and self.looks >= self.after})()
+
+
+def test_the_gate_waits_for_the_scan_bundles_subscribers_as_the_world_does():
+    """A run of peer hosts gets its scans in bundles (``scans/<host>``): once the peers are
+    ready, ``play``'s gate still waits until every bundle publisher has its host's subscriber
+    (as the world does), and not for scans of peers it does not wait for."""
+    subs = []
+
+    class Liveliness:
+        def declare_subscriber(self, expr, cb, history):
+            subs.append(cb)
+            return type("Sub", (), {"undeclare": lambda self: None})()
+
+    session = type("S", (), {"liveliness": lambda self: Liveliness()})()
+    gate = await_peers(session, "n", ["s1", "s2"], timeout=30.0)
+    for name in ("s1", "s2"):
+        subs[0](type("Sample", (), {"key_expr": f"sensornet/n/ready/{name}",
+                                    "kind": zenoh.SampleKind.PUT})())
+    pubs = {("sensornet/n/scans/h1", ""): _Matching(3), ("sensornet/n/scans/h2", ""):
+            _Matching(5), ("sensornet/n/scan/s9", ""): _Matching(None),
+            ("sensornet/n/ctl", ""): _Matching(None)}
+    gate(pubs)
+    assert pubs[("sensornet/n/scans/h2", "")].looks >= 5  # waited for h2's host
+    assert pubs[("sensornet/n/scans/h1", "")].looks >= 3
+    assert pubs[("sensornet/n/scan/s9", "")].looks == pubs[("sensornet/n/ctl", "")].looks == 0
