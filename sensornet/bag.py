@@ -4,7 +4,8 @@ faster), like ``ros2 bag record/play``.
 
 A bag has one MCAP channel per Zenoh key (topic = the key, ``sensornet/<network>/...``), each
 message a JSON object (:data:`SAMPLE_SCHEMA`): the receive time, the key, the declared
-encoding, the exact bytes (base64: what ``play`` puts back) and every field decoded
+encoding, the exact bytes (base64: what ``play`` puts back, its send time set as it puts
+it, :func:`sensornet.bag_play.restamp`) and every field decoded
 (protocol.json_fields), so ``mcap``'s reader and ``json.loads`` alone read it. Liveliness
 tokens (a peer's ``alive``/``ready``, the world's) are the channel ``@liveliness``: ``play``
 declares and undeclares them at their times, so peers started by hand see a world. The

@@ -1,7 +1,8 @@
 """Playing a bag (``sensornet play``, :mod:`sensornet.bag` records): reading an MCAP bag into
 :class:`Item` s, choosing a part of it (:func:`select`), waiting for peers (:func:`await_peers`)
-and putting it back onto a network at the recorded pace (:func:`play`); apart from the
-recorder so each stays a module of one concern.
+and putting it back onto a network at the recorded pace (:func:`play`), each message's send time
+set as it is put (:func:`restamp`: as a live sender stamps it, so the receivers' latency counts
+from the put); apart from the recorder so each stays a module of one concern.
 """
 
 from __future__ import annotations
