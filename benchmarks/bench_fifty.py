@@ -1,7 +1,8 @@
 """50 peers in real time, labelled and watched (issues 33 and 38), measured in one run.
 
 Runs 50 peers on a circulant graph of degree 4, 2 consensus rounds, 10 scans/s, packed in peer
-hosts (``sensornet run``'s automatic packing unless ``--per-process``), for each peer kind
+hosts (``sensornet run``'s automatic packing unless ``--per-process``; its default links, gossip
+on, so that the view, which connects to the world, finds the hosts), for each peer kind
 (GM-PHD with tags and LMB, ``network.filter``) with the live view off and on, and prints one
 row per run:
 
@@ -142,7 +143,7 @@ class Run:
 
 
 def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_process: int | None,
-            degree: int, n: int, speed: float = 10.0) -> Run:
+            degree: int, n: int, speed: float = 10.0, sparse: bool = False) -> Run:
     """One network run at ``speed`` scans/s; its numbers in ``rows`` (module docstring)."""
     tag = f"{kind}-{'on' if view else 'off'}-{repeat}"
     path = tmp / f"fifty-{n}-{degree}-{speed:g}.toml"
@@ -152,8 +153,8 @@ def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_proce
     per = per_process or choose(n, None, load=scenario_load(scn)).per_process
     probe = speed_probe()
     load0 = load_average()
-    handle = start_run(scn, str(path), tmp / tag, overrides=overrides, rerun=view, sparse=True,
-                       per_process=per)
+    handle = start_run(scn, str(path), tmp / tag, overrides=overrides, rerun=view,
+                       sparse=sparse, per_process=per)
     t_start = time.monotonic()
     sampler = CpuSampler(handle).start()
     try:
@@ -294,6 +295,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--speed", type=float, default=10.0,
                    help="scans per second (default 10; lower: the CPU a scan costs when the "
                         "network keeps up, on a machine too busy for 10)")
+    p.add_argument("--sparse", action="store_true",
+                   help="links along the peer graph only, gossip off (sensornet run --sparse); "
+                        "the view then links to the world alone and hears no peer (its "
+                        "numbers are the world's scans and truth only)")
     p.add_argument("--keep", metavar="DIR", help="keep the runs' folders under DIR")
     p.add_argument("--per-process", type=int, default=None, metavar="N",
                    help="peers per host (default: sensornet run's choice for the kind)")
@@ -319,7 +324,7 @@ def main(argv: list[str] | None = None) -> int:
             for kind in kinds:
                 for view in views:
                     r = one_run(Path(tmp), kind, view, rep, args.scans, args.per_process,
-                                args.degree, args.peers, args.speed)
+                                args.degree, args.peers, args.speed, args.sparse)
                     runs.append(r)
                     print(fmt(r, args.peers), flush=True)
                     if not r.ok:
