@@ -199,14 +199,18 @@ def _stamped(payload: bytes, now: float) -> bytes | None:
     return msgpack.packb(body, use_bin_type=True)
 
 
+BUNDLES = ("scans", "telemetries")
+"""Channels whose messages are bundles (:mod:`protocol.bundle`, ``[k, [[name, message], ...]]``):
+the world's scans for a peer host, a host's peers' telemetry."""
+
+
 def restamp(key: str, payload: bytes, now: float) -> bytes | None:
     """``payload`` (put on ``key``) with its send time set to ``now`` and every other byte as
-    recorded: a message of :mod:`protocol.codec` (its ``ts``), or a scan bundle (``scans/<host>``,
-    :mod:`protocol.bundle`: each entry's); None for anything else, e.g. a signed message
-    (:mod:`protocol.envelope`), whose signature covers the payload: :func:`play` puts those as
-    recorded."""
+    recorded: a message of :mod:`protocol.codec` (its ``ts``), or a bundle (:data:`BUNDLES`:
+    each entry's); None for anything else, e.g. a signed message (:mod:`protocol.envelope`),
+    whose signature covers the payload: :func:`play` puts those as recorded."""
     parts = key.split("/")
-    if len(parts) > 2 and parts[0] == ROOT and parts[2] == "scans":
+    if len(parts) > 2 and parts[0] == ROOT and parts[2] in BUNDLES:
         try:
             body = msgpack.unpackb(payload, raw=False)
         except Exception:  # as above

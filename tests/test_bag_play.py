@@ -259,10 +259,11 @@ def test_restamp_stamps_every_scan_of_a_bundle_and_leaves_what_it_cannot_read(tw
              and decode(it.payload).k == 3]
     assert len(scans) == 3
     (bundle,) = pack_bundles(3, [(decode(p).sensor, p) for p in scans])
-    again = unpack_bundle(restamp("sensornet/twin/scans/h1", bundle, 42.0))
-    assert again.k == 3 and [s for s, _ in again.entries] == ["s1", "s2", "s3"]
-    assert all(_same_but_time(p, q, 42.0) for p, (_, q) in zip(scans, again.entries,
-                                                               strict=True))
+    for key in ("sensornet/twin/scans/h1", "sensornet/twin/telemetries/h1"):  # a host's
+        again = unpack_bundle(restamp(key, bundle, 42.0))
+        assert again.k == 3 and [s for s, _ in again.entries] == ["s1", "s2", "s3"]
+        assert all(_same_but_time(p, q, 42.0) for p, (_, q) in zip(scans, again.entries,
+                                                                   strict=True))
     sealed = scans[0] + bytes(76)  # a signed message: payload | stamp | signature | tag
     for key, payload in [("sensornet/twin/scan/s1", sealed), ("sensornet/twin/ctl", b"start"),
                          ("sensornet/twin/scans/h1", scans[0]),  # a scan is no bundle
