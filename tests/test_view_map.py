@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pymap3d
@@ -94,6 +95,10 @@ def test_the_geographic_origin_is_the_loaders():
         assert geo.ranges[s.name] == s.max_range
     assert geo.radius == scn.traffic.radius
     assert geo_map(load_scenario("seed000")) is None
+    # no traffic.centre: the loader's frame at the middle of the reports' box
+    bare = replace(scn, traffic=replace(scn.traffic, centre=None, radius=None))
+    frame = geo_frame(bare)
+    assert frame == recorded_world(bare).frame and frame != geo.frame
 
 
 def _views(item) -> list[str]:
