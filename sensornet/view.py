@@ -35,7 +35,7 @@ from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_rou
 
 __all__ = ["BEHIND", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE", "MAP_KEEP", "QUEUE_MAX", "TAIL",
            "Batcher", "LiveView", "ViewState", "cpu_seconds", "id_color", "id_labels",
-           "later_round", "replay_recordings", "strip_array"]
+           "later_round", "nice_process", "replay_recordings", "strip_array"]
 
 FLUSH_S = 1.0
 """Seconds of rows gathered per entity before one ``send_columns`` (doubled, up to
@@ -205,6 +205,27 @@ def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
         state.receive(key, payload)
         drawn += 1
     return drawn
+
+
+def nice_process(increment: int) -> int:
+    """Lower every thread of this process's CPU priority by ``increment`` (at most to 19);
+    returns the threads changed. On Linux a nice value is a thread's own (``os.nice`` lowers
+    the caller's only): the view's Zenoh, callback and Rerun threads would keep competing
+    with the peers at full priority. Threads started later inherit their starter's value."""
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:  # no /proc: the process's value, as the platform defines it
+        os.nice(increment)
+        return 1
+    changed = 0
+    for tid in tids:
+        try:
+            now = os.getpriority(os.PRIO_PROCESS, tid)
+            os.setpriority(os.PRIO_PROCESS, tid, min(19, now + increment))
+            changed += 1
+        except OSError:  # the thread has ended meanwhile
+            pass
+    return changed
 
 
 def cpu_seconds() -> float:

@@ -4,6 +4,8 @@ message a scan and log nothing to Rerun; ``sensornet view`` subscribes and batch
 
 from __future__ import annotations
 
+import json
+import os
 import queue
 import subprocess
 import sys
@@ -293,6 +295,33 @@ def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
         obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((0, 4)))), 1.0)
     obs.flush(idle=True)
     assert 8 in [decode(b).k for b in sent[1:]]
+
+
+_NICE_CHILD = """
+import json, os, threading
+from sensornet.view import nice_process
+stop = threading.Event()
+t = threading.Thread(target=stop.wait)  # a thread started before: os.nice would miss it
+t.start()
+nice_process(3)
+u = threading.Thread(target=stop.wait)  # one started after: inherits it
+u.start()
+print(json.dumps(sorted(int(open(f"/proc/self/task/{i}/stat").read().rsplit(")", 1)[1].split()[16])
+                        for i in os.listdir("/proc/self/task"))))
+stop.set()
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice: Linux")
+def test_the_view_lowers_the_priority_of_every_thread_it_has():
+    """On Linux a nice value is per thread: the view's Zenoh and Rerun threads are lowered
+    too, not only the one that asks (a child process: the test's own stays as it is)."""
+    out = subprocess.run([sys.executable, "-c", _NICE_CHILD], capture_output=True, text=True,
+                         timeout=120, env=env())
+    assert out.returncode == 0, out.stderr[-2000:]
+    nices = json.loads(out.stdout.strip().splitlines()[-1])
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    assert len(nices) >= 3 and set(nices) == {min(19, base + 3)}
 
 
 def _report_scan(obs: Observer, k: int, n: int) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 from collections.abc import Callable
@@ -27,7 +26,14 @@ from sensornet.peers.session import SessionError
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind_of
 from sensornet.sim.scenario import load_scenario, parse_overrides
-from sensornet.view import Batcher, LiveView, ViewState, cpu_seconds, replay_recordings
+from sensornet.view import (
+    Batcher,
+    LiveView,
+    ViewState,
+    cpu_seconds,
+    nice_process,
+    replay_recordings,
+)
 from sensornet.view_map import GeoViewState, geo_map
 
 FOLLOW_RADIUS = 400.0
@@ -177,14 +183,14 @@ def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
         view.open()
     except SessionError as exc:
         raise UserError(str(exc)) from None
+    if args.nice:  # subscribed: from now on every thread yields the CPU to the network's
+        nice_process(args.nice)  # (niced from its start it joined a short run's last scans)
     try:
         sink, state = _open_sink(args, out, viewer)
     except BaseException:
         view.close()
         raise
     view.draw_into(state, sink.rr, sink.rr)
-    if args.nice:  # subscribed: from now on it yields the CPU to the network's processes
-        os.nice(args.nice)  # (niced from its start it joined a short run's last scans)
     print(f"view: network {args.network} via {', '.join(args.connect)} -> "
           f"{out or ''}{' + ' if out and viewer else ''}{viewer or ''} (Ctrl-C to detach)",
           file=sys.stderr, flush=True)
