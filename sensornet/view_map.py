@@ -3,7 +3,8 @@ traffic, drawn in the east-north frame about ``traffic.centre``) is also drawn i
 view, in WGS84 latitude and longitude, beside the local-frame map.
 
 Entities (under ``map/``, the blueprint's map view, :func:`peers.rerun_layout.default_blueprint`
-with ``geo``): ``map/truth`` the aircraft (gold) and ``map/truth/paths`` their paths;
+with ``geo``): ``map/truth`` the aircraft (gold) and ``map/truth/paths`` their paths over the
+last :data:`peers.rerun_layout.TRUTH_PATH_KEEP` scans;
 ``map/sensors`` the radar sites and ``map/sensors/coverage`` their range circles (geodesic,
 ``pymap3d.vincenty.vreckon``), ``map/region`` the traffic disc (static); ``map/peers/<peer>/
 tracks`` each peer's fused tracks (one colour per track id, as on the 2-D map) and
@@ -202,7 +203,7 @@ class GeoViewState(ViewState):
     def __init__(self, batcher: Batcher, *args, geo: GeoMap, **kwargs) -> None:
         super().__init__(batcher, *args, **kwargs)
         self.geo = geo
-        batcher.builders.update({GEO_POINTS: partial(geo_points_columns, geo.frame),
+        batcher.builders.update({GEO_POINTS: self._points_columns,
                                  GEO_STRIPS: partial(geo_strips_columns, geo.frame)})
         self.classes = _Classes()
         self.truth_hist: deque = deque(maxlen=TRUTH_PATH_KEEP)
@@ -231,8 +232,14 @@ class GeoViewState(ViewState):
         self._name_classes()
 
     def _name_classes(self) -> None:
+        """The annotation context naming the class ids, logged (static) if names were added:
+        at most once a flush (:meth:`_points_columns`), not once per new aircraft or id."""
         if self.classes.changed:
             self.b.rec.log("map", self.classes.context(self.b.rr), static=True)
+
+    def _points_columns(self, rr, data: list) -> list:
+        self._name_classes()
+        return geo_points_columns(self.geo.frame, rr, data)
 
     def truth(self, msg: Truth) -> None:
         super().truth(msg)
@@ -246,7 +253,6 @@ class GeoViewState(ViewState):
         self.b._add("map/truth", GEO_POINTS, k, t, (marks, -6.0, self.classes.of(names)))
         self.truth_hist.append(marks)
         self.b._add("map/truth/paths", GEO_STRIPS, k, t, (tuple(self.truth_hist), -1.5))
-        self._name_classes()
 
     def tracks(self, msg: Tracks) -> None:
         super().tracks(msg)
@@ -265,7 +271,6 @@ class GeoViewState(ViewState):
         trail = self.trails.setdefault(n, deque(maxlen=TAIL))
         trail.append(marks)
         self.b._add(f"map/peers/{n}/trails", GEO_STRIPS, k, t, (tuple(trail), -1.5))
-        self._name_classes()
 
 
 def geo_points_columns(frame: LocalFrame, rr, data: list) -> list:

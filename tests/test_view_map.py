@@ -36,6 +36,7 @@ class _Rec:
     def __init__(self) -> None:
         self.columns: dict[str, tuple[list[int], dict]] = {}
         self.logs: dict[str, object] = {}
+        self.times: dict[str, int] = {}
 
     def send_columns(self, path, indexes, columns):
         scans = indexes[0].as_arrow_array().to_pylist()
@@ -45,6 +46,7 @@ class _Rec:
     def log(self, path, archetype, static=False):
         assert static, path
         self.logs[path] = archetype
+        self.times[path] = self.times.get(path, 0) + 1
 
 
 def _rgba(c) -> int:
@@ -141,6 +143,7 @@ def test_truth_sites_and_tracks_on_the_map():
                                rtol=0, atol=1e-3)
     assert truth["colors"][2] == [_rgba(TRUTH_COLOR)] * 2
     names = _classes(rec)
+    assert rec.times["map"] == 2  # the sites' names when made, the rest once at the flush
     assert truth["class_ids"][2] == [names["3c6444"], names["4ca7b5"]]
     paths = np.array(cols["map/truth/paths"][1]["line_strings"][2])  # 2 aircraft x 3 scans
     np.testing.assert_allclose(_east_north(paths[1]), [[-5000.0, 300], [-5000, 600],
