@@ -312,6 +312,7 @@ stop.set()
 """
 
 
+@pytest.mark.network  # a child process
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice: Linux")
 def test_the_view_lowers_the_priority_of_every_thread_it_has():
     """On Linux a nice value is per thread: the view's Zenoh and Rerun threads are lowered
