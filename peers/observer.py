@@ -137,7 +137,7 @@ class Observer:
             _put(self._scan(k)["values"], name, value)
 
     def published(self, out: Publish, latency_ms: float | None) -> None:
-        if not self.enabled or out.channel != "tracks":
+        if out.channel != "tracks" or not self.enabled:  # estimates pass by: channel first
             return
         g = self._scan(out.k)
         g["tracks"] = self.wants_flush = True

@@ -32,6 +32,7 @@ written (and read) as protocol 1, byte for byte."""
 LABELS_VERSION = TRACKS_VERSION
 """The protocol of a labelled Estimate."""
 _F8 = np.dtype("<f8")
+_F4 = np.dtype("<f4")
 _I8 = np.dtype("<i8")
 
 REASONS = (
@@ -132,15 +133,19 @@ _FIELDS_V2 = {
     "K": ("s", "k", "q", "ts", "d", "i", "c", "e", "u", "x"),
     # Estimate with component labels: "i" (n, 3) int64 bytes, one row per component of "x"
     "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "i", "x"),
+    # Telemetry with its (m, 2) map points as float32 rows "pf" (for the eye: half the
+    # bytes of "px"); a report whose points do not fit float32 is still protocol 1
+    "Y": ("s", "k", "ts", "vn", "vx", "ev", "pn", "pc", "pf", "d", "x"),
 }
 VERSIONS = {VERSION: _FIELDS, TRACKS_VERSION: _FIELDS_V2}
 """Protocol version -> the message types it has -> their field names in wire order."""
 
-def _rows(blob: bytes, width: int, limit: int, what: str) -> int:
-    """Number of rows of ``width`` float64 in ``blob``, checked against ``limit``."""
-    if width <= 0 or len(blob) % (8 * width):
+def _rows(blob: bytes, width: int, limit: int, what: str, size: int = 8) -> int:
+    """Number of rows of ``width`` float64 (``size`` bytes each: 4 for float32) in ``blob``,
+    checked against ``limit``."""
+    if width <= 0 or len(blob) % (size * width):
         raise Rejected("shape", f"{len(blob)} bytes is not a whole number of {what}")
-    n = len(blob) // (8 * width)
+    n = len(blob) // (size * width)
     if n > limit:
         raise Rejected("too-many", f"{n} {what} > {limit}")
     return n
@@ -217,11 +222,13 @@ def _count(body: dict, key: str, limit: int) -> int:
     return n
 
 
-def _floats(blob: bytes, shape: tuple[int, ...]) -> np.ndarray:
-    expected = math.prod(shape) * 8
+def _floats(blob: bytes, shape: tuple[int, ...], dtype: np.dtype = _F8) -> np.ndarray:
+    """``blob`` as a float64 array of ``shape`` (stored as ``dtype``: little-endian float64
+    or float32), its size and finiteness checked."""
+    expected = math.prod(shape) * dtype.itemsize
     if len(blob) != expected:
         raise Rejected("shape", f"{len(blob)} bytes for shape {shape} ({expected} expected)")
-    a = np.frombuffer(blob, dtype=_F8).reshape(shape).astype(float)
+    a = np.frombuffer(blob, dtype=dtype).reshape(shape).astype(float)
     if not np.isfinite(a).all():
         raise Rejected("nonfinite", "array holds NaN or infinity")
     return a

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 from sensornet.protocol.codec_format import (
+    _F4,
+    _F8,
     _I8,
     _KINDS,
     LABELS_VERSION,
@@ -139,16 +141,25 @@ def _encode_control(msg: Control) -> dict:
 
 
 def _encode_telemetry(msg: Telemetry) -> dict:
+    """Protocol 2: the points as float32 (map marks for the eye); protocol 1 (float64) if
+    one does not fit (beyond float32's range, or not finite: then the receiver says so)."""
     names = list(msg.points)
     pts = [np.asarray(msg.points[n], dtype=float).reshape(-1, 2) for n in names]
     mix = msg.mixture
-    return {"s": msg.sender, "k": int(msg.k), "ts": float(msg.send_time),
+    z = np.concatenate(pts) if pts else np.zeros((0, 2))
+    with np.errstate(over="ignore"):
+        z32 = np.ascontiguousarray(z, dtype=_F4)
+    body = {"s": msg.sender, "k": int(msg.k), "ts": float(msg.send_time),
             "vn": list(msg.values), "vx": _array(np.fromiter(msg.values.values(), float,
                                                               len(msg.values))),
             "ev": list(msg.events), "pn": names, "pc": [len(z) for z in pts],
-            "px": _array(np.concatenate(pts) if pts else np.zeros((0, 2))),
             "d": 0 if mix is None else mix.dim,
             "x": b"" if mix is None else pack_mixture(mix)}
+    if np.isfinite(z32).all():
+        body["v"], body["pf"] = TRACKS_VERSION, z32.tobytes()
+    else:
+        body["px"] = _array(z)
+    return body
 
 
 ENCODERS: dict[type, tuple[str, Callable[[Any], dict]]] = {
@@ -312,11 +323,12 @@ def _decode_telemetry(body: dict, limits: Limits, version: int) -> Telemetry:
     pc = _get(body, "pc", list)
     if len(pc) != len(pn) or not all(type(c) is int and 0 <= c for c in pc):
         raise Rejected("shape", f"{len(pc)} point counts for {len(pn)} point sets")
-    blob = _get(body, "px", bytes)
-    n = _rows(blob, 2, limits.max_measurements, "points")
+    blob, dtype = (_get(body, "pf", bytes), _F4) if version == TRACKS_VERSION else (
+        _get(body, "px", bytes), _F8)
+    n = _rows(blob, 2, limits.max_measurements, "points", dtype.itemsize)
     if sum(pc) != n:
         raise Rejected("shape", f"{n} points for counts summing to {sum(pc)}")
-    z, points, a = _floats(blob, (n, 2)), {}, 0
+    z, points, a = _floats(blob, (n, 2), dtype), {}, 0
     for name, c in zip(pn, pc, strict=True):
         points[name], a = z[a:a + c], a + c
     d = _count(body, "d", limits.max_dim)

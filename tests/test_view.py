@@ -266,6 +266,33 @@ def test_telemetry_round_trip_and_refusals():
     assert exc.value.reason == "shape"
 
 
+def test_telemetry_points_go_as_float32_and_bad_ones_are_refused():
+    """Protocol 2 of a report: its map points as float32 (4 bytes a number, within float32's
+    rounding of the float64 ones); points beyond float32's range go as protocol 1 (float64,
+    exactly); a float32 block of the wrong size or holding NaN is refused, with its reason."""
+    rng = np.random.default_rng(5)
+    z = rng.uniform(-5e4, 5e4, (300, 2))
+    payload = encode(Telemetry("s1", 4, {"age": 1.0}, (), {"pooled": z, "none": z[:0]}))
+    body = msgpack.unpackb(payload)
+    assert body[0] == 2 and len(body[10]) == 4 * z.size  # "pf": 4 bytes a number
+    back = decode(payload).points
+    np.testing.assert_allclose(back["pooled"], z, rtol=2 ** -24)
+    np.testing.assert_array_equal(back["pooled"], z.astype(np.float32))
+    assert back["none"].shape == (0, 2)
+    far = np.array([[1e300, 0.0]])
+    body1 = msgpack.unpackb(encode(Telemetry("s1", 4, points={"far": far})))
+    assert body1[0] == 1
+    np.testing.assert_array_equal(decode(msgpack.packb(body1, use_bin_type=True)).points["far"],
+                                  far)
+    for blob, reason in ((body[10][:-4], "shape"),
+                         (np.full(z.size, np.nan, np.float32).tobytes(), "nonfinite")):
+        bad = list(body)
+        bad[10] = blob
+        with pytest.raises(Rejected) as exc:
+            decode(msgpack.packb(bad, use_bin_type=True))
+        assert exc.value.reason == reason
+
+
 def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
     scn = load_scenario("seed000", {"scenario.num_scans": 3})
     core = make_peer(scn, scn.sensor_names[0], score_truth=False)  # truth from the network
