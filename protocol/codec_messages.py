@@ -140,6 +140,9 @@ def _encode_control(msg: Control) -> dict:
             "ts": float(msg.send_time)}
 
 
+_F4_MAX = float(np.finfo(np.float32).max)
+
+
 def _encode_telemetry(msg: Telemetry) -> dict:
     """Protocol 2: the points as float32 (map marks for the eye); protocol 1 (float64) if
     one does not fit (beyond float32's range, or not finite: then the receiver says so)."""
@@ -147,16 +150,14 @@ def _encode_telemetry(msg: Telemetry) -> dict:
     pts = [np.asarray(msg.points[n], dtype=float).reshape(-1, 2) for n in names]
     mix = msg.mixture
     z = np.concatenate(pts) if pts else np.zeros((0, 2))
-    with np.errstate(over="ignore"):
-        z32 = np.ascontiguousarray(z, dtype=_F4)
     body = {"s": msg.sender, "k": int(msg.k), "ts": float(msg.send_time),
             "vn": list(msg.values), "vx": _array(np.fromiter(msg.values.values(), float,
                                                               len(msg.values))),
             "ev": list(msg.events), "pn": names, "pc": [len(z) for z in pts],
             "d": 0 if mix is None else mix.dim,
             "x": b"" if mix is None else pack_mixture(mix)}
-    if np.isfinite(z32).all():
-        body["v"], body["pf"] = TRACKS_VERSION, z32.tobytes()
+    if not z.size or float(np.abs(z).max()) <= _F4_MAX:  # NaN compares False: protocol 1
+        body["v"], body["pf"] = TRACKS_VERSION, z.astype(_F4).tobytes()
     else:
         body["px"] = _array(z)
     return body
