@@ -23,7 +23,7 @@ from sensornet.tracking.reidentify import Reidentification
 S = SHARED_ORIGIN
 
 
-def reference_stamp(labels, weights, threshold, k, origin, window=0):
+def reference_stamp(labels, weights, threshold, k, origin):
     """The stamp of a first publication, a label at a time (nothing published before)."""
     labels = [tuple(int(v) for v in row) for row in labels]
     on = {lab for lab, w in zip(labels, weights, strict=True) if w > threshold}
@@ -32,7 +32,7 @@ def reference_stamp(labels, weights, threshold, k, origin, window=0):
         lab[0] in (S, origin) and lab[2] < PB)}
     out, own = {}, []
     for lab in shared:
-        stamp = (S, lab[1] if k - lab[1] <= window else k, PB + lab[2])
+        stamp = (S, k, PB + lab[2])
         if stamp in out.values() or stamp in taken:
             own.append(lab)
         else:
@@ -43,8 +43,7 @@ def reference_stamp(labels, weights, threshold, k, origin, window=0):
     return np.array([out.get(lab, lab) for lab in labels], dtype=np.int64).reshape(-1, 3)
 
 
-@pytest.mark.parametrize("window", [0, 1])
-def test_first_publication_stamps_shared_births_alike_one_stamp_per_track(window):
+def test_first_publication_stamps_shared_births_alike_one_stamp_per_track():
     rng = np.random.default_rng(3)
     collisions = 0
     for _ in range(300):
@@ -53,8 +52,8 @@ def test_first_publication_stamps_shared_births_alike_one_stamp_per_track(window
                                   rng.integers(0, 3, n)))
         labels[rng.random(n) < 0.15, 2] += PB  # some stamped already (held by the network)
         weights = rng.random(n)
-        got = Publication(2, shared=S, shared_window=window).stamp(labels, weights, 0.5, 9)
-        want = reference_stamp(labels, weights, 0.5, 9, 2, window)
+        got = Publication(2, shared=S).stamp(labels, weights, 0.5, 9)
+        want = reference_stamp(labels, weights, 0.5, 9, 2)
         np.testing.assert_array_equal(got, want)
         # one track per label: distinct old labels never share a new one
         old = {tuple(a): tuple(b) for a, b in zip(labels.tolist(), got.tolist(), strict=True)}

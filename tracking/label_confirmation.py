@@ -126,11 +126,6 @@ class Publication:
     ``i`` at scan ``k`` gives it, so those peers need no spreading to agree. Should two of our
     tracks map to one stamp (or the stamp be held already), the earliest birth takes it and the
     others an own stamp: a label stays one track at a peer."""
-    shared_window: int = 0
-    """A shared birth first published at most this many scans after its birth keeps its birth
-    scan in the stamp, ``(shared, b, PUBLISHED_BASE + i)``: peers that publish a track of one
-    birth a scan apart still give it one id. A label's scan then precedes its publication by
-    up to this many scans (add it to a confirmation's ``settle``)."""
     _keys: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=_KEY), init=False,
                               repr=False)
     """Sorted keys of the present labels that have been published."""
@@ -179,7 +174,8 @@ class Publication:
         self._k = int(k)
         return labels
 
-    def _alike(self, labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
+    @staticmethod
+    def _alike(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
                k: int) -> np.ndarray:
         """Stamp the shared births ``alike (n,)`` of ``labels`` (in place) ``(shared, k,
         PUBLISHED_BASE + i)``, one old label per stamp (the earliest birth) and none that a
@@ -187,11 +183,11 @@ class Publication:
         rows = np.flatnonzero(alike)
         birth = labels[rows, 1]
         stamp = labels[rows].copy()
-        stamp[:, 1] = np.where(k - birth <= self.shared_window, birth, k)
+        stamp[:, 1] = k
         stamp[:, 2] += PUBLISHED_BASE
-        by = np.lexsort((birth, stamp[:, 2], stamp[:, 1]))  # per stamp, the earliest birth first
+        by = np.lexsort((birth, stamp[:, 2]))  # per stamp, the earliest birth first
         start = np.ones(len(by), dtype=bool)
-        start[1:] = (stamp[by[1:], 1:] != stamp[by[:-1], 1:]).any(axis=1)
+        start[1:] = stamp[by[1:], 2] != stamp[by[:-1], 2]
         winner = birth[by][np.flatnonzero(start)][np.cumsum(start) - 1]
         ok = np.zeros(len(rows), dtype=bool)
         ok[by] = birth[by] == winner
