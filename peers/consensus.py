@@ -41,7 +41,7 @@ from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tra
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
-from sensornet.tracking.support import SupportRule, input_support
+from sensornet.tracking.support import SupportRule, input_mass, input_support, pooled_weights
 
 
 class Consensus(BatchedRounds):
@@ -384,31 +384,37 @@ class Consensus(BatchedRounds):
     def _tracks(self, k: int, fused: GaussianMixture, now: float,
                 labels: np.ndarray | None = None, inputs: FusionInput | None = None) -> list:
         """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
-        with ids, covariances, existence and confirmation status (protocol 2); with
-        :attr:`support`, only the fused tracks it reports (``inputs``: the last round's)."""
+        with ids, covariances, existence and confirmation status (protocol 2). Fused tracks
+        (``inputs``: the last round's) by the extraction rules of tracking.support when on:
+        young tracks' pooled existence (``existence_prior``), then :attr:`support`."""
         self.stats.tracks_out += 1
         if labels is None or self.hooks.extract_tracks is None:
             states = self.estimator.extract(fused)
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
+        mixes = self._input_mixtures(inputs)
+        if self.o.existence_prior > 0 and mixes is not None and len(fused):
+            fused = GaussianMixture.trusted(  # for extraction only
+                pooled_weights(fused, labels, k, input_mass(fused.means, mixes),
+                               self.o.existence_prior, self.o.existence_young),
+                fused.means, fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
-        if self.support is not None and inputs is not None:
-            t = self._supported(t, inputs)
+        if self.support is not None and mixes is not None:
+            keep = self.support.keep(t.ids, input_support(t.states, mixes))
+            if not keep.all():
+                t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
+                                    t.existence[keep], t.status[keep])
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
 
-    def _supported(self, t: ExtractedTracks, inputs: FusionInput) -> ExtractedTracks:
-        """``t`` without the tracks :attr:`support` does not report (tracking.support): the
-        round's inputs are its own density and each neighbour's posterior (mixtures only)."""
+    def _input_mixtures(self, inputs: FusionInput | None) -> list[GaussianMixture] | None:
+        """The last round's inputs (own density, then each neighbour's posterior) if the
+        extraction rules need them and all are mixtures, else None."""
+        if inputs is None or (self.support is None and self.o.existence_prior <= 0):
+            return None
         mixes = [inputs.own, *(inputs.neighbours[s].get("posterior")
                                for s in sorted(inputs.neighbours))]
-        if not all(isinstance(m, GaussianMixture) for m in mixes):
-            return t
-        keep = self.support.keep(t.ids, input_support(t.states, mixes))
-        if keep.all():
-            return t
-        return ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep], t.existence[keep],
-                               t.status[keep])
+        return mixes if all(isinstance(m, GaussianMixture) for m in mixes) else None
 
     def local_tracks(self):
         """The last local density's tracks (tracking.labels.ExtractedTracks, with ids and

@@ -55,12 +55,20 @@ class ConsensusOptions:
     extracted in :attr:`support_scans` consecutive scans (tracking.support.SupportRule; the
     fused density is unchanged); 0: every extracted track (the rule off)."""
     support_scans: int = 2
+    existence_prior: float = 0.0
+    """Extraction of fused tracks: a track at most :attr:`existence_young` scans old that two
+    inputs or more hold weighs at least their pooled existence with this prior
+    (tracking.support.pooled_weights; the fused density is unchanged); 0: off."""
+    existence_young: int = 2
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
             raise ValueError("consensus rounds must be at least 1")
         if self.name in self.neighbours:
             raise ValueError("a peer cannot be its own neighbour")
+        if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
+            raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
+                             f"got {self.existence_prior} and {self.existence_young}")
         if self.support_inputs < 0 or self.support_scans < 1:
             raise ValueError(f"support_inputs must be >= 0 and support_scans >= 1, got "
                              f"{self.support_inputs} and {self.support_scans}")

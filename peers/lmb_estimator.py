@@ -99,11 +99,16 @@ class LmbEstimator:
 
     def __init__(self, filt: LmbFilter, reducer: Reducer | None = None,
                  publish_threshold: float | None = 0.5, extraction_threshold: float = 0.5,
-                 extraction: str = "cardinality", origin: int | None = None) -> None:
+                 extraction: str = "cardinality", origin: int | None = None,
+                 tentative_threshold: float | None = None, tentative_scans: int = 2) -> None:
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
         if publish_threshold is not None and not 0.0 <= publish_threshold <= 1.0:
             raise ValueError(f"publish_threshold must be in [0, 1], got {publish_threshold}")
+        if tentative_threshold is not None and not 0.0 <= tentative_threshold <= 1.0:
+            raise ValueError(f"tentative_threshold must be in [0, 1], got {tentative_threshold}")
+        if tentative_scans < 0:
+            raise ValueError(f"tentative_scans must be >= 0, got {tentative_scans}")
         if origin is not None and filt.origin != origin:
             raise ValueError(f"the filter's origin {filt.origin} is not the estimator's {origin}")
         extract_index(GaussianMixture.empty(filt.motion.dim), extraction_threshold,
@@ -111,6 +116,11 @@ class LmbEstimator:
         self.filter = filt
         self.reducer = reducer
         self.publish_threshold = publish_threshold
+        self.tentative_threshold = tentative_threshold
+        """Young tracks (label scan at most :attr:`tentative_scans` back) are published from
+        this existence on, so a fusion can pool weak evidence of a new target
+        (tracking.support.pooled_weights); None: only above ``publish_threshold``."""
+        self.tentative_scans = tentative_scans
         self.extraction_threshold = extraction_threshold
         self.extraction = extraction
         self.origin = None if origin is None else int(origin)
@@ -156,7 +166,7 @@ class LmbEstimator:
             pub, pub_labels = mix, labels
             self._unpublished = np.zeros(len(t), dtype=bool)
         else:
-            self._unpublished = t.existence <= self.publish_threshold
+            self._unpublished = ~self._publishing(k)
             keep = ~self._unpublished[t.owner]
             pub, pub_labels = mix.select(keep), labels[keep]
         labelled = self.origin is not None
@@ -231,6 +241,16 @@ class LmbEstimator:
                               self.state.hits, self.state.k, self.state.pending)
 
     # -- helpers --------------------------------------------------------------------------
+    def _publishing(self, k: int) -> np.ndarray:
+        """``(n,)`` the tracks published at scan ``k``: ``r`` above the publication threshold,
+        or a young track's above :attr:`tentative_threshold`."""
+        t = self.state.tracks
+        out = t.existence > self.publish_threshold
+        if self.tentative_threshold is not None:
+            out |= ((t.existence > self.tentative_threshold)
+                    & (k - t.labels[:, 1] <= self.tentative_scans))
+        return out
+
     def filter_for(self, k: int) -> LmbFilter:
         """The filter of the step to scan ``k``: :attr:`filter`, or after a gap (scans left
         out while the peer caught up, or lost) the same filter with LBP instead of Gibbs on
@@ -260,8 +280,8 @@ class LmbEstimator:
             return
         keys = label_keys(t.labels)
         was = np.isin(keys, self._published)
-        new = ((t.existence > self.publish_threshold) & ~was & (t.labels[:, 0] == self.origin)
-               & (t.labels[:, 2] < PUBLISHED_BASE))
+        pub = self._publishing(k)
+        new = pub & ~was & (t.labels[:, 0] == self.origin) & (t.labels[:, 2] < PUBLISHED_BASE)
         labels = t.labels
         if new.any():
             labels = labels.copy()
@@ -269,7 +289,7 @@ class LmbEstimator:
             self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
                                                                t.means, t.covs, t.owner),
                                   self.state.hits, self.state.k, self.state.pending)
-        on = was | (t.existence > self.publish_threshold)
+        on = was | pub
         self._published = label_keys(labels[on])
 
     def _own(self, mix: GaussianMixture) -> LmbState | None:

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.special import expit, logit
 from sensornet.tracking.fusion import Reduce, check_weights, gci_combine, gci_pair
 from sensornet.tracking.gaussian import (
     c_einsum,
@@ -38,6 +39,32 @@ HYBRID_GATE = 26.0
 consistent estimates of one target differ by about ``2 P``, so the form is about twice a
 chi-square with ``d`` degrees of freedom: 26 keeps 99 % of same-target pairs in 4-D (twice the
 99 % point 13.3)."""
+
+
+POOL_CLIP = 1e-9
+"""Existences are clipped to ``[POOL_CLIP, 1 - POOL_CLIP]`` before :func:`pool_existence`."""
+
+
+def pool_existence(W: np.ndarray, group: np.ndarray, n_groups: int,
+                   prior: float) -> np.ndarray:
+    """``(n_groups,)`` fused existence of each group from its inputs' existences ``W (c,)``
+    (one per (group, input) cell, ``group (c,)`` its group), as if the inputs' evidence were
+    independent given a common prior existence ``prior``: the independent-likelihood pool
+    ``f(X | Z_1..Z_n) ∝ f(X) prod_i f(X | Z_i) / f(X)`` (Chong, Mori & Chang 1990; Bayes' rule
+    with conditionally independent data) on a Bernoulli's ``X = ∅`` / ``{x}`` masses, the
+    spatial factor taken as 1 (the group is the association): in log-odds,
+    ``logit r = logit r0 + sum_i (logit r_i - logit r0)``. Unlike the AA existence (Li 2022:
+    ``sum_i omega_i r_i``) and the GCI one (Fantacci et al. 2018: for agreeing densities the
+    odds' weighted geometric mean ``prod_i (r_i / (1 - r_i))^omega_i``), both means of the
+    inputs, each input's evidence adds, as the centralised update's sensors' does. Exact only
+    for a static existence and inputs that share no data (``network.feedback`` off, one
+    round): a track's posterior after a death is not prior x likelihood, so callers pool
+    young tracks only (:mod:`tracking.support`)."""
+    if not 0.0 < prior < 1.0:
+        raise ValueError(f"existence prior must be in (0, 1), got {prior}")
+    r = np.clip(np.asarray(W, dtype=float), POOL_CLIP, 1.0 - POOL_CLIP)
+    lo = float(logit(prior))
+    return expit(lo + np.bincount(group, weights=logit(r) - lo, minlength=n_groups))
 
 
 def hybrid_fuse(

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from sensornet.tracking.fusion_rules import HYBRID_GATE
+from sensornet.tracking.fusion_rules import HYBRID_GATE, pool_existence
 from sensornet.tracking.gaussian import c_einsum, inv_spd
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.mixture import GaussianMixture
@@ -29,15 +29,27 @@ def input_support(means: np.ndarray, inputs: Sequence[GaussianMixture],
     """``(n,)`` int: for each state of ``means (n, d)``, the number of ``inputs`` that hold a
     component ``j`` with ``(x - m_j)' P_j^-1 (x - m_j) <= gate`` (the hybrid rule's test,
     :data:`tracking.fusion_rules.HYBRID_GATE`, by the input component's covariance)."""
+    return (input_mass(means, inputs, gate, held=True) > 0).sum(axis=1).astype(np.int64)
+
+
+def input_mass(means: np.ndarray, inputs: Sequence[GaussianMixture],
+               gate: float = HYBRID_GATE, held: bool = False) -> np.ndarray:
+    """``(n, len(inputs))``: for each state of ``means (n, d)`` and input, the weight of the
+    input's components that went to it: within the gate (:func:`input_support`'s test) and
+    nearer to it than to any other state (so a target's mass is not counted again for a
+    weak component beside it); ``held``: whether any component is within the gate (1.0 per
+    component, nearest or not)."""
     X = np.asarray(means, dtype=float)
     if X.ndim != 2:
         raise ValueError(f"means must be (n, d), got shape {X.shape}")
     n, d = X.shape
     if gate <= 0 or not np.isfinite(gate):
         raise ValueError(f"gate must be positive and finite, got {gate}")
+    sizes = np.array([len(D) for D in inputs], dtype=np.int64)
     used = [D for D in inputs if len(D)]
+    out = np.zeros((n, len(inputs)))
     if n == 0 or not used:
-        return np.zeros(n, dtype=np.int64)
+        return out
     if any(D.dim != d for D in used):
         raise ValueError(f"inputs must have dimension {d} (the states'), got "
                          f"{sorted({D.dim for D in used})}")
@@ -45,9 +57,53 @@ def input_support(means: np.ndarray, inputs: Sequence[GaussianMixture],
     Y = inv_spd(np.concatenate([D.covs for D in used]))  # (N, d, d)
     diff = X[:, None, :] - M[None, :, :]  # (n, N, d)
     q = c_einsum("anj,njk,ank->an", diff, Y, diff)  # (n, N)
-    starts = np.concatenate(([0], np.cumsum([len(D) for D in used])[:-1]))
-    held = np.logical_or.reduceat(q <= gate, starts, axis=1)  # (n, inputs)
-    return held.sum(axis=1).astype(np.int64)
+    w = np.ones(len(M)) if held else np.concatenate([D.weights for D in used])
+    ok = q <= gate
+    if not held:
+        ok &= np.arange(n)[:, None] == q.argmin(axis=0)[None, :]
+    starts = np.concatenate(([0], np.cumsum(sizes[sizes > 0])[:-1]))
+    out[:, sizes > 0] = np.add.reduceat(np.where(ok, w, 0.0), starts, axis=1)
+    return out
+
+
+def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.ndarray,
+                   prior: float, young: int, gate: float = HYBRID_GATE,
+                   threshold: float = 0.5) -> np.ndarray:
+    """``(n,)`` the weights of the fused components of ``mix`` for extraction. A component
+    whose label ``labels (n, 3)`` is at most ``young`` scans old at scan ``k`` (its second
+    column, the birth or first-publication scan) and that two inputs or more hold (``mass
+    (n, I)``, :func:`input_mass`) weighs the pooled existence of those inputs' masses
+    (:func:`tracking.fusion_rules.pool_existence`, prior ``prior``) if that is larger, unless
+    a component heavier than ``threshold``, or a candidate of larger pooled existence, lies
+    within ``gate`` of it (``(m_a - m_b)' (P_a + P_b)^-1 (m_a - m_b)``: it would be a second
+    track of that target). So weak evidence of a new target at several peers adds up, as in
+    the centralised update, while the density stays the fused one."""
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1, 3)
+    w = mix.weights
+    n = len(w)
+    if labels.shape[0] != n or mass.shape[0] != n:
+        raise ValueError(f"labels and mass must have {n} rows (the mixture's), got "
+                         f"{labels.shape[0]} and {mass.shape[0]}")
+    if young < 0:
+        raise ValueError(f"young must be >= 0, got {young}")
+    held = mass > 0
+    row, _ = np.nonzero(held)
+    pooled = pool_existence(mass[held], row, n, prior)
+    pick = (held.sum(axis=1) >= 2) & (k - labels[:, 1] <= young) & (pooled > w)
+    cand = np.flatnonzero(pick)
+    strength = np.where(pick, pooled, w)
+    other = np.flatnonzero(pick | (w > threshold))  # what a candidate could duplicate
+    if len(cand) > 0 and len(other) > 1:
+        diff = mix.means[cand][:, None] - mix.means[other][None]  # (c, o, d)
+        Y = inv_spd(mix.covs[cand][:, None] + mix.covs[other][None])  # (c, o, d, d)
+        q = c_einsum("coj,cojk,cok->co", diff, Y, diff)
+        # beside a track above the threshold, a stronger candidate, or an equal one before
+        s_c, s_o = strength[cand][:, None], strength[other][None, :]
+        first = ((w[other] > threshold)[None, :] | (s_o > s_c)
+                 | ((s_o == s_c) & (other[None, :] < cand[:, None])))
+        beside = ((q <= gate) & first).any(axis=1)
+        pick[cand[beside]] = False
+    return np.where(pick, pooled, w)
 
 
 @dataclass
@@ -85,4 +141,4 @@ class SupportRule:
         return (support >= self.min_inputs) | (streak >= self.scans)
 
 
-__all__ = ["SupportRule", "input_support"]
+__all__ = ["SupportRule", "input_mass", "input_support", "pooled_weights"]

@@ -53,7 +53,9 @@ def build(scn: Scenario, name: str, run: int = 0):
     f = scn.fusion
     est = LmbEstimator(make_lmb_filter(scn, name, origin), reducer,
                        f.level2_threshold if f.level2_pruning else None,
-                       scn.filter.extraction_threshold, scn.filter.extraction, origin=origin)
+                       scn.filter.extraction_threshold, scn.filter.extraction, origin=origin,
+                       tentative_threshold=scn.lmb.tentative_threshold or None,
+                       tentative_scans=scn.lmb.tentative_scans)
     return est, mixture_fuser(scn, reducer)
 
 

@@ -50,6 +50,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
             if scn.fusion.trust and kind.trust else None),
         confirm_settle=settle_scans(A, i),
         support_inputs=scn.fusion.support,
+        existence_prior=scn.fusion.existence_prior,
+        existence_young=scn.fusion.existence_young,
         support_scans=scn.fusion.support_scans,
     )
     return replace(opts, **changes)

@@ -62,6 +62,19 @@ class FusionSpec:
     support_scans: int = option(2, doc="With `support`: scans a fused track held by fewer "
                                        "inputs must be extracted in a row before it is "
                                        "reported.", unit="scans", check=at_least(1))
+    existence_prior: float = option(0.0, doc="Extraction of fused tracks (LMB peers): a "
+                                             "track at most `existence_young` scans old that "
+                                             "two inputs or more hold weighs at least their "
+                                             "existences pooled as independent evidence with "
+                                             "this prior existence (`logit r = logit r0 + "
+                                             "sum_i (logit r_i - logit r0)`, `tracking."
+                                             "support.pooled_weights`; the fused density is "
+                                             "unchanged; with `level2_threshold` below 0.5 "
+                                             "tentative tracks add theirs); 0: off.",
+                                    check=Bound(0, 1, high_open=True))
+    existence_young: int = option(2, doc="With `existence_prior`: how many scans old (its "
+                                         "label's scan) a fused track may be and still be "
+                                         "pooled.", unit="scans", check=NONNEGATIVE)
     trust: bool = option(False, doc="Test each neighbour's density before fusing it and "
                                     "down-weight or quarantine the inconsistent ones "
                                     "(`peers.trust`).")
@@ -197,6 +210,15 @@ class LmbSpec:
                                check=NONNEGATIVE)
     birth_max_existence: float = option(0.1, doc="`r_B,max`: the largest existence of one "
                                                  "adaptive birth.", check=PROBABILITY)
+    tentative_threshold: float = option(0.0, doc="Also publish young tracks (label at most "
+                                                 "`tentative_scans` scans old) of existence "
+                                                 "above this (below `fusion.level2_threshold`), "
+                                                 "for `fusion.existence_prior` to pool; 0: "
+                                                 "only tracks above `fusion.level2_threshold`.",
+                                        check=PROBABILITY)
+    tentative_scans: int = option(2, doc="With `tentative_threshold`: how many scans old a "
+                                         "track may be and still be published as tentative.",
+                                  unit="scans", check=NONNEGATIVE)
     birth_velocity_std: float = option(30.0, doc="Standard deviation of each velocity "
                                                  "component of an adaptive birth (mean 0; its "
                                                  "position is the measurement's).", unit="m/s",
