@@ -159,7 +159,8 @@ class Observer:
                     self._set(k, f"cost/{what}", value)
         elif r.kind == "ospa":
             self._set(k, f"ospa/{v['which']}", v["value"])
-            self.wants_flush = True
+            if v["which"] == "fused":  # only the fused one completes a report (ready)
+                self.wants_flush = True
         elif r.kind == "rejected":
             self._set(k, f"rejected/{v['reason']}", core.rejected[v["reason"]])
         elif r.kind == "scan":  # those refused before decoding, by reason
