@@ -28,6 +28,7 @@ step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every 
     python benchmarks/bench_fifty.py --per-process 50      # one host of 50
     python benchmarks/bench_fifty.py --speed 4             # the same at 4 scans/s
     python benchmarks/bench_fifty.py --gaps                # one LMB peer leaving scans out
+    python benchmarks/bench_fifty.py --twin --repeats 3    # the peers' logic alone, per kind
 
 "Real time" is ``bench_network.real_time``: every peer handled every scan, at most 5 % of a
 peer's fusions forced by the deadline, pooled p99 scan -> tracks under one scan interval.
@@ -54,11 +55,14 @@ from bench_network import (
     speed_probe,
     view_of,
 )
+from sensornet.peers.host import SharedDecode
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.peers.telemetry import percentile
 from sensornet.sim.kinds.lmb import make_lmb_filter
 from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.run.packing import choose, scenario_load
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.world import generate_run
 from sensornet.tracking.metrics import ospa
@@ -124,13 +128,14 @@ class CpuSampler:
 
 
 def scanning_window(samples: list[tuple[float, dict[str, float]]], world_start: float,
-                    seconds: float) -> tuple[float, float]:
-    """The wall interval the world sent its scans in: it ends when the world exits (its last
-    sample, about a second after the last scan) and lasts ``seconds``; clipped to the
-    samples (``world_start``: when the world process was seen first)."""
+                    seconds: float, interval: float) -> tuple[float, float]:
+    """The wall interval the world sent its scans in: the world leaves a fusion deadline
+    (0.9 of an ``interval``) and about 0.3 s after its last scan (``World.end``), so the
+    window ends then and lasts ``seconds``; clipped to the samples (``world_start``: when the
+    world process started)."""
     alive = [t for t, cpu in samples if "world" in cpu]
-    end = alive[-1] if alive else world_start + seconds
-    return max(world_start, end - 1.0 - seconds), end - 1.0
+    end = (alive[-1] if alive else world_start + seconds) - 0.9 * interval - 0.3
+    return max(world_start, end - seconds), end
 
 
 @dataclass
@@ -167,7 +172,7 @@ def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_proce
     res = {"codes": codes, "summaries": s, "scn": scn, "view": view_of(out) if view else None}
     ok, why, _ = real_time(res)
     interval = scn.scan_period / scn.network.speed
-    t0, t1 = scanning_window(sampler.samples, t_start, scans * interval)
+    t0, t1 = scanning_window(sampler.samples, t_start, scans * interval, interval)
     span, per_proc = sampler.window(t0, t1)
     total = sum(per_proc.values())
     row: dict = {"per": per, "ok": ok, "why": why, "load": f"{load0}-{load_average()}",
@@ -284,6 +289,43 @@ def part_gaps(sensors: int = 4) -> list[str]:
     return rows
 
 
+def part_twin(kinds: list[str], repeats: int, n: int = 50, degree: int = 4,
+              scans: int = 100) -> list[str]:
+    """The peers' logic alone: the twin (``sim.run.twin``, a virtual clock, no transport) of
+    the same network, every peer decoding through one shared decode and the rounds ready at
+    one instant fused together, as co-hosted peers do: process CPU per peer-scan and mean
+    fused OSPA per kind, kinds interleaved ``repeats`` times; then LMB / GM-PHD (medians).
+    What a network that keeps up costs in its peers' logic, whatever the machine's load."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "twin.toml"
+        path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0))
+        scns = {kind: load_scenario(str(path), overrides=parse_overrides(
+            [f"network.filter={kind}"])) for kind in kinds}
+    rows = ["| kind | rep | logic CPU ms/peer-scan | fused OSPA | load avg |",
+            "|---|---:|---:|---:|---:|"]
+    print("\n".join(rows), flush=True)
+    ms: dict[str, list[float]] = {k: [] for k in kinds}
+    for rep in range(repeats):
+        for kind in kinds:
+            scn = scns[kind]
+            peers = {q: make_peer(scn, q, 0, network="twin") for q in scn.sensor_names}
+            shared = SharedDecode()
+            for core in peers.values():
+                core.decode = shared
+            t0 = time.process_time()
+            result = run_twin(scn, 0, peers=peers, batch=True)
+            ms[kind].append((time.process_time() - t0) * 1e3 / n / scans)
+            ospa_f = statistics.fmean(result.mean_ospa(q) for q in scn.sensor_names)
+            rows.append(f"| {kind} | {rep + 1} | {ms[kind][-1]:.2f} | {ospa_f:.2f} | "
+                        f"{load_average()} |")
+            print(rows[-1], flush=True)
+    if "lmb" in ms and "gmphd" in ms:
+        rows.append(f"\nLMB / GM-PHD logic CPU: "
+                    f"{statistics.median(ms['lmb']) / statistics.median(ms['gmphd']):.2f}")
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--kinds", default="gmphd,lmb", help="network.filter values (default both)")
@@ -304,7 +346,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="peers per host (default: sensornet run's choice for the kind)")
     p.add_argument("--gaps", action="store_true",
                    help="only one LMB peer's step when it leaves scans out (no network)")
+    p.add_argument("--twin", action="store_true",
+                   help="only the peers' logic: the twin of the network per kind (no processes)")
     args = p.parse_args(argv)
+    if args.twin:
+        print(f"## the twin of {args.peers} peers, degree {args.degree}, 2 rounds, {args.scans} "
+              f"scans; load average {load_average()}\n")
+        part_twin(args.kinds.split(","), args.repeats, args.peers, args.degree, args.scans)
+        return 0
     if args.gaps:
         print(f"## one LMB peer's step with scans left out; load average {load_average()}\n")
         part_gaps()  # prints its rows as they come
