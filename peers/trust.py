@@ -27,6 +27,7 @@ from sensornet.peers.trust_checks import (
     divergence_test,
     neighbour_statistics,
     offset_information,
+    shape_overlaps,
     target_mass,
 )
 from sensornet.peers.trust_config import TrustConfig
@@ -43,7 +44,7 @@ from sensornet.peers.trust_record import (
     residual_passes,
 )
 from sensornet.peers.trust_scan import ScanTests
-from sensornet.tracking.divergence import log_overlaps
+from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 __all__ = ["LOW", "MAX_LOG", "STATES", "NeighbourTrust", "Trust", "TrustConfig", "alarm_limits",
@@ -55,7 +56,9 @@ class Trust(ScanTests):
     def __init__(self, cfg: TrustConfig, neighbours: tuple[str, ...],
                  position_index: tuple[int, int] = (0, 2)) -> None:
         self.cfg = cfg
-        self.pos = list(position_index)
+        self.state_pos = list(position_index)
+        self.pos = [0, 1] if cfg.single_target else list(position_index)
+        """The position entries of the densities tested (single-target: their positions)."""
         self.n = {s: NeighbourTrust() for s in neighbours}
         self.scans = 0
         self._k: int | None = None
@@ -112,7 +115,8 @@ class Trust(ScanTests):
         if not self.cfg.enabled:
             return list(weights)
         if rnd == 0:
-            self._keep_own(k, own)
+            self._keep_own(k, _collapsed(own, self.state_pos) if self.cfg.single_target
+                           else own)
         if not names:
             return list(weights)
         if self._k != k:
@@ -120,6 +124,10 @@ class Trust(ScanTests):
         if self.scans <= self.cfg.warmup:
             return list(weights)
         cfg = self.cfg
+        if cfg.single_target:  # one target: where its moment-matched estimate is
+            p = self.state_pos
+            own, inputs = _collapsed(own, p), {s: _collapsed(m, p) for s, m in inputs.items()}
+            late = {s: (a, _collapsed(m, p)) for s, (a, m) in (late or {}).items()}
         late = (late or {}) if rnd == 0 and cfg.same_scan else {}
         late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
@@ -227,9 +235,12 @@ class Trust(ScanTests):
         """The divergence test of ``mix`` against ``ref`` alone (a late estimate against own's
         density of its scan)."""
         L = log_overlaps([ref, mix])
+        L0 = shape_overlaps(self.cfg, [ref, mix])
         w = self.cfg.repeat_weight
         return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
-                               target_mass(mix, w), target_mass(ref, w))
+                               target_mass(mix, w), target_mass(ref, w),
+                               shape=0.0 if L0 is None else max(0.0, float(
+                                   cs_from_log_overlaps(L0[1, 0], L0[1, 1], L0[0, 0]))))
 
     def shift(self, s: str, mix: GaussianMixture, k: int | None = None) -> GaussianMixture:
         """``mix`` of neighbour ``s`` (made at scan ``k``; None: the scan being fused) with
@@ -316,3 +327,12 @@ class Trust(ScanTests):
 
 def _copy(v: np.ndarray | None) -> np.ndarray | None:
     return None if v is None else np.array(v, dtype=float)
+
+
+def _collapsed(mix: GaussianMixture, pos: list[int]) -> GaussianMixture:
+    """A single-target summary as one 2-D component: the position part (entries ``pos``)
+    of its moment-matched Gaussian, at its mass (:attr:`TrustConfig.single_target`)."""
+    if len(mix) == 0:
+        return GaussianMixture.empty(2)
+    mean, cov = mix.moments()
+    return GaussianMixture(np.array([mix.mass]), mean[pos][None], cov[np.ix_(pos, pos)][None])

@@ -16,6 +16,28 @@ class TrustConfig:
     cap: float = 8.0
     """Largest per-round statistic: one scan of total disagreement (an honest peer whose
     track died a scan before the others') cannot quarantine on its own; a lie keeps it up."""
+    location_only: bool = False
+    """The divergence test's ``D_CS`` less the divergence of the same two densities with
+    every component moved to the origin (:func:`peers.trust_checks.shape_overlaps`): for
+    two Gaussians that leaves half the squared Mahalanobis distance of their means in the
+    sum of their covariances, whose honest mean is half the dimension whatever the
+    covariances' shapes. The shape part is not evidence of a lie: two honest radars that
+    see one target from different sides have differently oriented covariances (seed 001:
+    1.6 on average, up to 3 under manoeuvre, above the score's drift of 2 with the rest;
+    19 % of honest triples quarantined on the evaluation runs, issue 36 item 5). On for
+    single-target peers (:func:`sim.run.peers.trust_config`), whose densities are one
+    Gaussian each (:attr:`single_target`); not for multi-target mixtures, where the
+    centred divergence also holds the profile of the weights (a tight phantom's own
+    overlap) and would take a phantom's evidence away with the shapes."""
+    single_target: bool = False
+    """The densities are single-target summaries, a mixture over motion models of one target
+    (IMM peers, seed 001 eq. 12): each is tested as the position part of its
+    moment-matched Gaussian (where the target is; the covariance holds the models'
+    spread). Compared model by model and in all six state variables, two honest IMMs whose
+    models lag a manoeuvre differently (different model probabilities, a constant-velocity
+    component tens of metres behind) failed the offset test on 16 scans in a row, and the
+    divergence's honest mean, half the dimension under consistent filters, was 3 against
+    the score's drift of 2."""
     empty_penalty: float = 5.0
     """Statistic added when exactly one side is empty (where cannot be compared; an honest
     peer that missed its only target publishes nothing after level-2 pruning)."""
@@ -80,6 +102,15 @@ class TrustConfig:
     bias_gate: float = 60.0
     """Largest position distance (m) of a matched pair (farther: another target or a lie the
     divergence test already sees)."""
+    gate_chi2: float | None = 13.82
+    """Besides :attr:`bias_gate`: two target components are also one target (paired by the
+    offset test, matched by the unmatched-target and withheld-target tests, corroborated by
+    a repair) when their position difference is within this chi-square gate of their own
+    uncertainty (:func:`peers.trust_checks.gated`: twice the pair's smaller position
+    covariance). 13.82 is the 99.9 % quantile of chi-square with 2 degrees of freedom. For
+    estimates hundreds of metres uncertain (the Paris radars: 9 % of honest pairs within
+    60 m, 90 % within this gate) the metric gate alone counted most honest targets as
+    withheld (issue 36 item 5); None: the metric gate only."""
     bias_thresholds: tuple[float, ...] = (32.0, 40.0)
     """Per window: the chi-square of its mean offset above which the neighbour is
     quarantined (above the largest honest value on the training runs, docs/trust-calibration.md)."""

@@ -18,41 +18,46 @@ Pure functions (no state).
 from __future__ import annotations
 
 import numpy as np
+from sensornet.peers.trust_checks import gated, near
 from sensornet.tracking.mixture import GaussianMixture
 
 
 def corroborated(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],
-                 min_weight: float, gate: float) -> np.ndarray:
+                 min_weight: float, gate: float, chi2: float | None = None) -> np.ndarray:
     """``(n,)`` bool: the components of ``mix`` with a target component (weight at least
-    ``min_weight``, within ``gate`` metres; position entries ``pos`` of the state) in
+    ``min_weight``, within the gate: ``gate`` metres or the ``chi2`` gate of their
+    covariances, :func:`peers.trust_checks.gated`; position entries ``pos`` of the state) in
     ``others[0]`` (own), or in at least two of the other densities of ``others`` (in the one
     other, with only one): two liars telling the same lie do not corroborate each other."""
     if len(mix) == 0:
         return np.zeros(0, bool)
-    X = mix.means[:, pos]  # (n, 2)
+    X, P = mix.means[:, pos], _pos_covs(mix, pos)  # (n, 2), (n, 2, 2)
     hits = np.zeros((len(others), len(mix)), bool)  # (references, n)
     for r, D in enumerate(others):
-        R = D.means[D.weights >= min_weight][:, pos] if len(D) else np.zeros((0, 2))
-        if len(R):
-            hits[r] = (((X[:, None, :] - R[None, :, :]) ** 2).sum(axis=2) <= gate * gate).any(1)
+        sel = D.weights >= min_weight if len(D) else np.zeros(0, bool)
+        if sel.any():
+            hits[r] = near(X, P, D.means[sel][:, pos], _pos_covs(D, pos)[sel], gate,
+                           chi2).any(1)
     need = 1 if len(others) <= 2 else 2
     return hits[0] | (hits[1:].sum(axis=0) >= need)
 
 
 def mass_factor(mix: GaussianMixture, ref: GaussianMixture, pos: list[int],
-                min_weight: float, gate: float) -> float | None:
+                min_weight: float, gate: float, chi2: float | None = None) -> float | None:
     """How much ``ref`` weighs what ``mix`` shows, per unit of ``mix``'s weight: each target
     component of ``ref`` (weight at least ``min_weight``) goes to ``mix``'s nearest
-    component within ``gate`` metres, and the factor is their summed weight over the summed
+    component if within the gate (``gate`` metres or the ``chi2`` gate,
+    :func:`peers.trust_checks.gated`), and the factor is their summed weight over the summed
     weight of the components of ``mix`` they went to (None: nothing matched). An honest
     pair's is about 1; an inflated density's, 1 over its inflation."""
     sel = ref.weights >= min_weight if len(ref) else np.zeros(0, bool)
     if len(mix) == 0 or not sel.any():
         return None
     R = ref.means[sel][:, pos]  # (m, 2)
-    d2 = ((R[:, None, :] - mix.means[None, :, pos]) ** 2).sum(axis=2)  # (m, n)
-    j = d2.argmin(axis=1)
-    hit = d2[np.arange(len(R)), j] <= gate * gate
+    diff = R[:, None, :] - mix.means[None, :, pos]  # (m, n, 2)
+    j = (diff ** 2).sum(axis=2).argmin(axis=1)
+    rows = np.arange(len(R))
+    hit = gated(diff[rows, j], _pos_covs(ref, pos)[sel], _pos_covs(mix, pos)[j], gate, chi2)
     if not hit.any():
         return None
     den = float(mix.weights[np.unique(j[hit])].sum())
@@ -61,20 +66,22 @@ def mass_factor(mix: GaussianMixture, ref: GaussianMixture, pos: list[int],
 
 
 def corroborated_part(mix: GaussianMixture, others: list[GaussianMixture], pos: list[int],
-                      min_weight: float, gate: float) -> GaussianMixture | None:
+                      min_weight: float, gate: float, chi2: float | None = None
+                      ) -> GaussianMixture | None:
     """``mix`` less its components no density of ``others`` corroborates
     (:func:`corroborated`); None if none is left."""
-    keep = corroborated(mix, others, pos, min_weight, gate)
+    keep = corroborated(mix, others, pos, min_weight, gate, chi2)
     return mix.select(np.flatnonzero(keep)) if keep.any() else None
 
 
 def scan_factor(kept: GaussianMixture, others: list[GaussianMixture], pos: list[int],
-                min_weight: float, gate: float) -> float | None:
+                min_weight: float, gate: float, chi2: float | None = None) -> float | None:
     """The median :func:`mass_factor` of ``kept`` against each of ``others`` (against
     ``others[0]``, own, alone with fewer than three: a median of two is their mean, which
     one liar among them sets); None if no reference matched it."""
     refs = others if len(others) >= 3 else others[:1]
-    factors = [f for D in refs if (f := mass_factor(kept, D, pos, min_weight, gate)) is not None]
+    factors = [f for D in refs
+               if (f := mass_factor(kept, D, pos, min_weight, gate, chi2)) is not None]
     return float(np.median(factors)) if factors else None
 
 
@@ -91,3 +98,8 @@ def moved_to_own(mix: GaussianMixture, own: GaussianMixture, offset: np.ndarray,
     wider = np.linalg.det(near) > np.linalg.det(mix.covs)
     covs = np.where(wider[:, None, None], near, mix.covs)
     return GaussianMixture(mix.weights.copy(), means, covs)
+
+
+def _pos_covs(mix: GaussianMixture, pos: list[int]) -> np.ndarray:
+    """The position blocks ``(n, 2, 2)`` of ``mix``'s covariances."""
+    return mix.covs[:, pos][:, :, pos]

@@ -46,7 +46,8 @@ class ScanTests:
             regs = {s: registered_at(self.n[s], a) if follow else None
                     for s, (a, _, _) in tested.items()}
             infos = {s: _raw(offset_information(ref, self.shift(s, mix, a) if follow else mix,
-                                                self.pos, cfg.repeat_weight, cfg.bias_gate),
+                                                self.pos, cfg.repeat_weight, cfg.bias_gate,
+                                                cfg.gate_chi2),
                              regs[s])
                      for s, (a, mix, ref) in tested.items()}
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
@@ -90,14 +91,15 @@ class ScanTests:
             others = [own] + [m for t, m in shown.items() if t != s and t not in late
                               and self.n[t].state != "quarantined"]
             kept = corroborated_part(shown[s], others, self.pos, cfg.repeat_weight,
-                                     cfg.bias_gate)
+                                     cfg.bias_gate, cfg.gate_chi2)
             if kept is None and cfg.repair_offset_gate > cfg.bias_gate:
                 kept = self._moved(rec, rnd, own, shown[s], others)
             if kept is None:  # nothing corroborated: a miss, if its repairs keep things
                 if rec.kept_k is None or k - rec.kept_k > cfg.repair_window:
                     continue
                 kept = GaussianMixture.empty(shown[s].dim)
-            f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
+            f = scan_factor(kept, others, self.pos, cfg.repeat_weight, cfg.bias_gate,
+                            cfg.gate_chi2)
             if f is not None and f > 0:
                 push_window(rec.factors, np.log(f), cfg.repair_window)
             if not rec.factors:
@@ -131,7 +133,8 @@ class ScanTests:
             return None
         rec.moved = offset
         moved = moved_to_own(mix, own, offset, self.pos)
-        return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate)
+        return corroborated_part(moved, others, self.pos, cfg.repeat_weight, cfg.bias_gate,
+                                 cfg.gate_chi2)
 
     def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
                   fresh: list[str]) -> list[str]:
@@ -140,7 +143,8 @@ class ScanTests:
         quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
         cfg = self.cfg
         mixes = [own] + [shown[s] for s in fresh]
-        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate)
+        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate,
+                                 cfg.gate_chi2)
         tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
         ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
         refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
