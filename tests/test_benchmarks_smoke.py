@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -74,7 +75,14 @@ def test_benchmark_commands_run_as_the_readmes_write_them():
     assert {"bench_immpf.py", "bench_pda.py", "bench_transport_floor.py",
             "bench_gci.py"} <= set(scripts), scripts
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    for script in scripts:
-        p = subprocess.run([sys.executable, f"benchmarks/{script}", "--help"], cwd=root,
-                           env=env, capture_output=True, text=True, timeout=120)
+
+    def help_of(script: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, f"benchmarks/{script}", "--help"], cwd=root,
+                              env=env, capture_output=True, text=True, timeout=240)
+
+    # a few at a time: each start is mostly imports (CPU and disk), one after another they
+    # were the slowest part of this test; each still runs alone in its own interpreter
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        done = dict(zip(scripts, pool.map(help_of, scripts), strict=True))
+    for script, p in done.items():
         assert p.returncode == 0 and "usage:" in p.stdout, (script, p.stderr[-500:])
