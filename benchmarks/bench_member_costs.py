@@ -125,6 +125,12 @@ def print_pair(label: str, clean: dict, attacked: dict, honest: list[str]) -> bo
     print("  CPU ms/scan by part, honest peers, clean -> attacked: " + ", ".join(
         f"{k} {parts['clean'].get(k, 0.0):.2f} -> {v:.2f}" for k, v in parts["attacked"].items()
         if abs(v - parts["clean"].get(k, 0.0)) >= 0.05))
+    liars = [n for n in attacked["summaries"] if n not in honest]
+    print("  padding members (their own cost): " + ", ".join(
+        f"{n} CPU {1e3 * x['cpu_s_running'] / max(1, x['scans']):.1f} ms/scan "
+        f"(clean {1e3 * c['cpu_s_running'] / max(1, c['scans']):.1f}), estimates out "
+        f"{x['stats'].get('estimates_out', 0)}"
+        for n in liars for x, c in [(attacked["summaries"][n], clean["summaries"][n])]))
     bad = {k: v for run in (clean, attacked) for k, v in run["codes"].items() if v != 0}
     if bad:
         print(f"  (non-zero exits: {bad})")
@@ -157,13 +163,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scans", type=int, default=0, help="default 100 (padding), 60 (mesh)")
     ap.add_argument("--trust", choices=("off", "on", "both"), default="both",
                     help="fusion.trust in the padding case")
+    ap.add_argument("--liars", choices=(*MESH_LIARS, "both"), default="both",
+                    help="mesh case: two or six padding members, or both")
+    ap.add_argument("--keep", type=Path, help="keep the runs' folders here (default: a "
+                    "temporary folder, removed)")
     a = ap.parse_args(argv)
     ok = True
     print(f"padding to {a.pad} components, {a.copies} cop{'y' if a.copies == 1 else 'ies'} "
           f"per scan and round; {os.cpu_count()} CPUs")
     print(HEADER)
     with tempfile.TemporaryDirectory() as td:
-        tmp = Path(td)
+        tmp = a.keep or Path(td)
+        tmp.mkdir(parents=True, exist_ok=True)
         if a.case in ("padding", "all"):
             scans = a.scans or 100
             for trust in {"off": (False,), "on": (True,), "both": (False, True)}[a.trust]:
@@ -181,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
             make_keys(NETWORK, ["world", *(f"s{i}" for i in range(1, 9))], keys)
             sets = ["birth.model=truth", f"scenario.num_scans={scans}", "network.speed=10"]
             for label, names in MESH_LIARS.items():
+                if a.liars not in ("both", label):
+                    continue
                 liars = {n: (a.pad, a.copies) for n in names}
                 honest = [f"s{i}" for i in range(1, 9) if f"s{i}" not in names]
                 for i in range(a.repeat):
