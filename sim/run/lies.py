@@ -15,7 +15,7 @@ import numpy as np
 from sensornet.peers.core import Output, PeerCore
 from sensornet.protocol.messages import Estimate
 from sensornet.sim.scenario import Scenario
-from sensornet.sim.scenario.model import LIE_KINDS
+from sensornet.sim.scenario.common import LIE_KINDS, parse_lie
 from sensornet.tracking.mixture import GaussianMixture
 
 SHIFT = 110.0
@@ -48,7 +48,11 @@ def phantom_positions(scn: Scenario) -> np.ndarray:
 
 
 def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2)) -> Lie:
-    """The function that turns the liar's real mixture into lie ``kind`` (:data:`LIES`)."""
+    """The function that turns the liar's real mixture into lie ``kind`` (:data:`LIES`;
+    ``"drift:RATE"``: the drift lie at ``RATE`` m/scan, :data:`DRIFT_RATE` without one)."""
+    kind, rate = parse_lie(kind)
+    if kind == "drift":
+        return drift_lie(DRIFT_RATE if rate is None else rate, position_index)
     ix, iy = position_index
 
     def empty(mix: GaussianMixture, k: int = 0) -> GaussianMixture:
@@ -82,9 +86,7 @@ def make_lie(kind: str, scn: Scenario, position_index: tuple[int, int] = (0, 2))
         return held[0].copy() if held else mix
 
     lies = {"empty": empty, "shifted": shifted, "inflated": inflated, "phantoms": phantoms,
-            "biased": biased, "stuck": stuck, "drift": drift_lie(DRIFT_RATE, position_index)}
-    if kind not in lies:
-        raise ValueError(f"unknown lie {kind!r}; expected one of {', '.join(lies)}")
+            "biased": biased, "stuck": stuck}
     return lies[kind]
 
 
@@ -93,7 +95,10 @@ def drift_lie(rate: float, position_index: tuple[int, int] = (0, 2)) -> Lie:
     ``rate * k`` metres along x at scan ``k`` (1-based: already ``rate`` off at the first),
     its covariance honest. A biased sensor whose bias keeps growing: each scan's offset is
     within an honest neighbour's scatter of the last one's, so a registration that takes it
-    to be constant runs behind it."""
+    to be constant runs behind it. ``rate`` must be positive and finite."""
+    if not (np.isfinite(rate) and rate > 0):
+        raise ValueError(f"the drift lie's rate must be a positive number of metres per scan, "
+                         f"got {rate!r}")
     ix = position_index[0]
 
     def drift(mix: GaussianMixture, k: int = 0) -> GaussianMixture:

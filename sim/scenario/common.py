@@ -4,6 +4,7 @@ methods, fault keys, ...), the matrix type, and :class:`ScenarioError` (split fr
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 from sensornet.sim.choices import OMEGA_RULES
@@ -25,8 +26,9 @@ knows plug-ins registered later)."""
 FLOOD_ESTIMATORS = ("idpc", "ftc", "ic")
 """What a flooding peer makes of its pooled scans (seed 004): density-peaks clustering, the
 FTC baseline, or the iterated-corrector GM-PHD (``clustering.estimator``)."""
-LIE_KINDS = ("empty", "shifted", "inflated", "phantoms", "biased", "stuck")
-"""The lies ``fusion.lie`` names (the test hook; what each does: :mod:`sim.run.lies`)."""
+LIE_KINDS = ("empty", "shifted", "inflated", "phantoms", "biased", "stuck", "drift")
+"""The lies ``fusion.lie`` names (the test hook; what each does: :mod:`sim.run.lies`);
+``drift`` takes its rate as ``"drift:RATE"`` (m/scan; :func:`parse_lie`)."""
 PARTITIONS = ("distance", "grid-spectral")
 K_RULES = ("eigengap", "core-regions")
 DISTANCE_UNITS = ("sigma", "unit-box")
@@ -51,6 +53,26 @@ def _diag(values: Iterable[float]) -> Matrix:
 def listing(options: Iterable[str]) -> str:
     """The choices of a key, quoted, for error messages."""
     return ", ".join(repr(o) for o in options)
+
+
+def parse_lie(kind: str) -> tuple[str, float | None]:
+    """``"KIND"`` of :data:`LIE_KINDS`, or ``"drift:RATE"`` (a positive, finite number of
+    metres per scan), as ``(KIND, RATE or None)``; a ValueError in one line otherwise."""
+    name, sep, arg = str(kind).partition(":")
+    if name not in LIE_KINDS:
+        raise ValueError(f"unknown lie {name!r}; expected one of {listing(LIE_KINDS)}")
+    if not sep:
+        return name, None
+    if name != "drift":
+        raise ValueError(f"lie {name!r} takes no value, got {kind!r}")
+    try:
+        rate = float(arg)
+    except ValueError:
+        rate = math.nan
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise ValueError(f"the drift lie's rate must be a positive number of metres per scan "
+                         f"(\"drift:2\"), got {arg!r}")
+    return name, rate
 
 
 class ScenarioError(ValueError):

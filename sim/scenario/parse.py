@@ -10,6 +10,7 @@ from pathlib import Path
 import pymap3d
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind as peer_kind
+from sensornet.sim.scenario.common import parse_lie
 from sensornet.sim.scenario.faults import _faults
 from sensornet.sim.scenario.model import (
     LIE_KINDS,
@@ -294,9 +295,13 @@ def _lie(f: Table, sensor_names: list[str]) -> str:
     if v == "":
         return ""
     peer, _, kind = str(v).partition(":")
-    if not isinstance(v, str) or peer not in sensor_names or kind not in LIE_KINDS:
+    if not isinstance(v, str) or peer not in sensor_names:
         raise f.fail("lie", f"must be \"PEER:KIND\" with a sensor's name and KIND one of "
-                            f"{listing(LIE_KINDS)}, got {brief(v)}")
+                            f"{listing(LIE_KINDS)} (\"drift:RATE\", m/scan), got {brief(v)}")
+    try:
+        parse_lie(kind)
+    except ValueError as e:
+        raise f.fail("lie", str(e)) from None
     return v
 
 
