@@ -14,7 +14,9 @@ row per run:
   ``/proc`` while the world sent its scans, against the 2.0 cores there are: the honest floor.
   A run that is not real time while this is well under 2.0 was starved by other work on the
   machine (the load average is printed beside every row), not by its own design;
-- for view-on runs the view's CPU per scan and its lag behind the peers (``view_of``).
+- for view-on runs the view's CPU per scan and its lag behind the peers (``view_of``), and the
+  messages it drew (about 150 per peer and 100 scans when it hears the peers; a view that hears
+  only the world's scans and truth draws about one per sensor and scan).
 
 Then the ratio rows measured in the same invocation: view on / off per kind, LMB / GM-PHD per
 view setting (medians over the repeats).
@@ -38,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import statistics
 import sys
 import tempfile
@@ -195,6 +198,9 @@ def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_proce
                 "cpu_peer": cpu, "parts": parts,
                 "ospa": statistics.fmean(ospa) if ospa else float("nan")}
     row["view"] = res["view"] or {}
+    log = out / "logs" / "view.log"
+    drawn = re.search(r"(\d+) messages drawn", log.read_text()) if log.is_file() else None
+    row["view"]["drawn"] = int(drawn.group(1)) if drawn else -1
     return Run(kind, view, repeat, row, ok)
 
 
@@ -202,8 +208,9 @@ HEADER = ("| kind | view | rep | scans/s | per host | real time | fewest scans |
           "(all / worst peer) | p50 / p99 scan->tracks (ms) | peers' CPU ms/peer-scan | "
           "top parts (ms) | CPU s per wall s: hosts + world + view | peers' work at 10 scans/s "
           "(cores of 2.0) | fused OSPA | view CPU ms/scan | view lag median / p99 (ms) | "
+          "view messages drawn | "
           "load avg start-end | probe (ms) |")
-RULE = "|" + "---|" * 6 + "---:|" * 12
+RULE = "|" + "---|" * 6 + "---:|" * 13
 
 
 def fmt(r: Run, n: int) -> str:
@@ -212,8 +219,10 @@ def fmt(r: Run, n: int) -> str:
     v = x["view"]
     parts = sorted((x.get("parts") or {}).items(), key=lambda kv: -kv[1])[:3]
     top = ", ".join(f"{k} {ms:.2f}" for k, ms in parts)
-    view_cols = (f"{v.get('cpu_ms_per_scan', nan):.1f} | {v.get('lag_median_ms', nan):.0f} / "
-                 f"{v.get('lag_p99_ms', nan):.0f}") if r.view else "- | -"
+    view_cols = "- | - | -"
+    if r.view:
+        view_cols = (f"{v.get('cpu_ms_per_scan', nan):.1f} | {v.get('lag_median_ms', nan):.0f} "
+                     f"/ {v.get('lag_p99_ms', nan):.0f} | {v.get('drawn', -1)}")
     work = x.get("cpu_peer", nan) * n * 10.0 / 1e3
     return (f"| {r.kind} | {'on' if r.view else 'off'} | {r.repeat + 1} | {x['speed']:g} | "
             f"{x['per']} | {'yes' if r.ok else 'NO'} | {x.get('min_scans', '-')} | "
