@@ -1,5 +1,5 @@
-"""Support of fused tracks: how many fusion inputs hold each extracted track, and the rule that
-extracts a fused track only once it is supported (issue 33, docs/labelled-tracking.md,
+"""Extraction rules for fused tracks: how many fusion inputs hold each extracted track, the rule
+that extracts a fused track only once it is supported (issue 33, docs/labelled-tracking.md,
 "Fused vs centralised: where the gap is").
 
 The hybrid rule (:func:`tracking.fusion_rules.hybrid_fuse`) keeps a target that only one input
@@ -10,6 +10,13 @@ here acts on extraction only (the fused density is unchanged, so the next scan c
 track): a fused track is reported if at least ``min_inputs`` inputs hold a component within the
 hybrid rule's association gate of it, or if it was extracted in each of the last ``scans``
 scans (the same label), so a target that the other inputs then miss stays reported.
+
+:func:`pooled_weights` acts on extraction too: a young fused track (its label a few scans old)
+that several inputs hold, each weakly (LMB peers publishing tentative tracks), weighs its
+inputs' existences pooled as independent evidence
+(:func:`tracking.fusion_rules.pool_existence`), so it is reported when the centralised filter,
+which adds every sensor's evidence each scan, would report it, not a scan or two later when one
+peer's own track passes ``r > 0.5``.
 """
 
 from __future__ import annotations
