@@ -10,6 +10,7 @@ import os
 import socket
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -20,15 +21,22 @@ from sensornet.cli.commands.peer import _prepare_peer
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# the CLI is exercised as a user runs it: as a subprocess (so the fast '-m "not network"' run,
-# which starts no process, leaves these to the full suite)
-pytestmark = pytest.mark.network
+# the CLI is exercised as a user runs it: as a subprocess, so the tests that start one are marked
+# network (the fast '-m "not network"' run, which starts no process, leaves them to the full
+# suite); the ones below that call the CLI in this process are not, so they run beside them
 
 
 def _cli(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0"}
     return subprocess.run([sys.executable, "-m", "sensornet", *args], capture_output=True,
                           text=True, timeout=timeout, cwd=cwd, env=env)
+
+
+def _cli_each(*commands: list[str], cwd: Path) -> list[subprocess.CompletedProcess]:
+    """Several ``_cli`` runs at once, each its own process in ``cwd``: their results in order
+    (their interpreter start-ups, one after another, were most of these tests' time)."""
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        return list(pool.map(lambda argv: _cli(*argv, cwd=cwd, timeout=240), commands))
 
 
 def _refused(proc: subprocess.CompletedProcess, *needles: str) -> str:
@@ -79,31 +87,58 @@ BAD_FLAGS = [
 ]
 
 
-@pytest.mark.parametrize("argv, flag", BAD_FLAGS, ids=[" ".join(a) for a, _ in BAD_FLAGS])
-def test_bad_flag_value_is_one_line_and_exit_2(tmp_path, argv, flag):
-    line = _refused(_cli(*argv, cwd=tmp_path), flag)
-    assert line.startswith("sensornet")
-    _no_run_folders(tmp_path)
-
-
-@pytest.mark.parametrize("argv, flag", [(["run", "--sim", f], f.split()[0]) for f in (
+SIM_REFUSED = [(["run", "--sim", f], f.split()[0]) for f in (
     "--listen=tcp/127.0.0.1:7447", "--connect=tcp/127.0.0.1:7447", "--run-id=x",
-    "--viewer=spawn", "--lease-ms=100")])
-def test_process_flags_with_sim_are_refused(tmp_path, argv, flag):
-    _refused(_cli(*argv, cwd=tmp_path), flag.split("=")[0], "--sim")
+    "--viewer=spawn", "--lease-ms=100")]
 
 
+@pytest.fixture(scope="module")
+def refusals(request, tmp_path_factory) -> dict[tuple[str, ...], tuple[
+        subprocess.CompletedProcess, Path]]:
+    """Each command line of the two parametrized refusal tests below that this session
+    selected, run once as its own ``sensornet`` process in its own empty folder: (process,
+    folder) by argv. They run four at a time (one after another, their interpreter start-ups
+    were most of this module's time); each test then checks its own process as before."""
+    wanted = sorted({tuple(item.callspec.params["argv"]) for item in request.session.items
+                     if item.module is request.module and hasattr(item, "callspec")
+                     and "argv" in item.callspec.params})
+
+    def one(argv: tuple[str, ...]) -> tuple[subprocess.CompletedProcess, Path]:
+        cwd = tmp_path_factory.mktemp("refused")
+        return _cli(*argv, cwd=cwd, timeout=240), cwd
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        return dict(zip(wanted, pool.map(one, wanted), strict=True))
+
+
+@pytest.mark.network
+@pytest.mark.parametrize("argv, flag", BAD_FLAGS, ids=[" ".join(a) for a, _ in BAD_FLAGS])
+def test_bad_flag_value_is_one_line_and_exit_2(refusals, argv, flag):
+    proc, cwd = refusals[tuple(argv)]
+    line = _refused(proc, flag)
+    assert line.startswith("sensornet")
+    _no_run_folders(cwd)
+
+
+@pytest.mark.network
+@pytest.mark.parametrize("argv, flag", SIM_REFUSED)
+def test_process_flags_with_sim_are_refused(refusals, argv, flag):
+    _refused(refusals[tuple(argv)][0], flag.split("=")[0], "--sim")
+
+
+@pytest.mark.network
 def test_listen_on_a_port_in_use_is_refused_before_anything_starts(tmp_path):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        for command in ("run", "demo"):
-            _refused(_cli(command, "--listen", f"tcp/127.0.0.1:{port}", cwd=tmp_path),
-                     f"--listen tcp/127.0.0.1:{port}")
+        for proc in _cli_each(*([command, "--listen", f"tcp/127.0.0.1:{port}"]
+                                for command in ("run", "demo")), cwd=tmp_path):
+            _refused(proc, f"--listen tcp/127.0.0.1:{port}")
     _no_run_folders(tmp_path)
 
 
+@pytest.mark.network
 def test_broken_pipe_is_quiet(tmp_path):
     """``sensornet experiment | head``: the reader leaves; no traceback."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -138,38 +173,46 @@ def _many_sensors(n: int) -> str:
     return text.replace("# A radar instead", extra + "\n# A radar instead", 1)
 
 
+@pytest.mark.network
 def test_too_many_points_per_scan_is_refused(tmp_path):
     clutter = "sensors.s1.clutter_rate=1000000"
-    _refused(_cli("experiment", "--set", clutter, "--runs", "1", cwd=tmp_path),
-             "s1", "points per scan", "--max-points")
-    _refused(_cli("run", "--sim", "--set", clutter, cwd=tmp_path), "--max-points")
+    experiment, sim, processes = _cli_each(
+        ["experiment", "--set", clutter, "--runs", "1"], ["run", "--sim", "--set", clutter],
+        ["run", "--set", "sensors.s1.clutter_rate=30000", "--max-points", "100000"],
+        cwd=tmp_path)
+    _refused(experiment, "s1", "points per scan", "--max-points")
+    _refused(sim, "--max-points")
     # over processes a scan message carries at most so many points, whatever the budget
-    _refused(_cli("run", "--set", "sensors.s1.clutter_rate=30000", "--max-points", "100000",
-                  cwd=tmp_path), "s1", "scan message", "experiment")
+    _refused(processes, "s1", "scan message", "experiment")
     _no_run_folders(tmp_path)
 
 
+@pytest.mark.network
 def test_too_many_targets_is_refused(tmp_path):
-    path = tmp_path / "crowd.toml"
-    path.write_text(_many_targets(600))
-    _refused(_cli("experiment", str(path), "--runs", "1", cwd=tmp_path),
-             "targets", "--max-targets")
-    path.write_text(_many_targets(2100))
-    _refused(_cli("run", str(path), "--max-targets", "5000", "--max-points", "50000",
-                  cwd=tmp_path), "truth message")
+    crowd, crowds = tmp_path / "crowd.toml", tmp_path / "crowds.toml"
+    crowd.write_text(_many_targets(600))
+    crowds.write_text(_many_targets(2100))
+    experiment, processes = _cli_each(
+        ["experiment", str(crowd), "--runs", "1"],
+        ["run", str(crowds), "--max-targets", "5000", "--max-points", "50000"], cwd=tmp_path)
+    _refused(experiment, "targets", "--max-targets")
+    _refused(processes, "truth message")
     _no_run_folders(tmp_path)
 
 
+@pytest.mark.network
 def test_too_many_peers_is_refused(tmp_path):
     path = tmp_path / "crowd.toml"
     path.write_text(_many_sensors(40))
-    _refused(_cli("run", str(path), "--per-process", "1", cwd=tmp_path),
-             "43 peer processes", "--max-peers")
-    _refused(_cli("run", str(path), "--max-peers", "50", "--max-memory-gb", "0.5",
-                  "--per-process", "1", cwd=tmp_path), "memory", "--max-memory-gb")
+    peers, memory, packed = _cli_each(
+        ["run", str(path), "--per-process", "1"],
+        ["run", str(path), "--max-peers", "50", "--max-memory-gb", "0.5", "--per-process", "1"],
+        ["run", str(path), "--max-memory-gb", "0.5"], cwd=tmp_path)
+    _refused(peers, "43 peer processes", "--max-peers")
+    _refused(memory, "memory", "--max-memory-gb")
     # packed in hosts (the default above sim.run.packing.PACK_ABOVE peers): a few processes, so
     # the peer budget passes and the next check (memory, squeezed here) is the one that speaks
-    _refused(_cli("run", str(path), "--max-memory-gb", "0.5", cwd=tmp_path), "memory")
+    _refused(packed, "memory")
     _no_run_folders(tmp_path)
 
 
