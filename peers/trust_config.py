@@ -279,3 +279,7 @@ class TrustConfig:
                 and 0.0 < self.withhold_alternative < 1.0 and self.withhold_cap > 0
                 and (self.withhold_hold is None or self.withhold_hold >= 0)):
             raise ValueError(f"invalid trust settings {self}")
+        if self.single_target and (self.register or self.repair):
+            raise ValueError("trust settings: single_target needs register=False and "
+                             "repair=False (a summary moved or cut without its prediction "
+                             "misleads the ratio rule)")

@@ -143,3 +143,9 @@ def test_scenarios_give_the_test_per_scan_detection_and_a_warm_up():
     cfg = consensus_options(s0, "s1").trust
     assert cfg.warmup == 0 and not cfg.single_target and not cfg.location_only
     assert cfg.detection_probability == min(s.detection_probability for s in s0.sensors)
+
+
+def test_single_target_settings_refuse_registration_and_repair():
+    for bad in ({"register": True, "repair": False}, {"register": False, "repair": True}):
+        with pytest.raises(ValueError, match="single_target"):
+            TrustConfig(single_target=True, **bad)
