@@ -51,6 +51,8 @@ class FloodEstimator:
         self.name = name
         self.roster = dict(roster)
         self._rank = {o: i for i, o in enumerate(self.roster)}
+        self._planes: list[tuple[ScanSet, np.ndarray]] = []
+        """The last two scan sets given to :meth:`plane` (by identity) and their points."""
         """Every sensor of the network by name -> its measurement model (``position`` and
         whether it is range-bearing); an origin outside it is refused (``spoofed``)."""
         self.params = params or ClusterParams()
@@ -70,13 +72,20 @@ class FloodEstimator:
         return mix  # scans of another index are never pooled
 
     def plane(self, scans: ScanSet) -> np.ndarray:
-        """The pooled points ``(n, 2)`` in the plane."""
+        """The pooled points ``(n, 2)`` in the plane, read-only: the last two scan sets' are
+        kept, as the clustering and a watched peer's report ask for the same ones (issue 38)."""
+        for held, points in self._planes:
+            if held is scans:
+                return points
         parts = []
         for origin in sorted(scans.scans, key=self._order):  # one order at every peer
             z, model = scans.scans[origin], self.roster.get(origin)
             parts.append(polar_to_cartesian(z, model.position)
                          if isinstance(model, RangeBearing) else z)
-        return np.concatenate(parts) if parts else np.zeros((0, 2))
+        points = np.concatenate(parts) if parts else np.zeros((0, 2))
+        points.flags.writeable = False
+        self._planes = [(scans, points), *self._planes[:1]]
+        return points
 
     def extract(self, scans: ScanSet) -> np.ndarray:
         S = len(self.roster) if self.assumed_scans == "all" else len(scans)
