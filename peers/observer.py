@@ -7,8 +7,10 @@ per scan, the numbers the Rerun health tabs show (component counts, ages, late a
 messages, trust statistics, OSPA, latency, compute) from the core's records and outputs, and
 publishes them when the peer is idle (:meth:`Observer.flush`): never in the burst that sets the
 scan-to-track latency. The put is best effort (congestion control DROP): a slow view never
-holds a peer back. Nobody watching, nothing is gathered: a Zenoh matching listener tells the
-observer whether any subscriber hears its key, and until one does every call returns at once.
+holds a peer back. The peers of a host send theirs together (:class:`HostReports`: one bundle
+on ``telemetries/<host>`` a pass of the host's loop, once none of its peers has work
+waiting). Nobody watching, nothing is gathered: a Zenoh matching listener tells the observer
+whether any subscriber hears its key, and until one does every call returns at once.
 """
 
 from __future__ import annotations
