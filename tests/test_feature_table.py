@@ -133,7 +133,8 @@ def test_processes_record_kill_secure_then_replay(case, keys, tmp_path, capsys):
     assert code == 2 and "not a complete recording" in err and len(err.splitlines()) == 1
 
 
-@pytest.mark.network
+# all in this process (campaign --jobs 1 starts no worker): not marked network, so it runs on
+# the fast tests' worker beside the process tests, not in their one-at-a-time queue
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_twin_campaign_and_report(case, tmp_path, capsys):
     """Cells run --sim, campaign (one cell, one twin run) and report on that campaign."""
