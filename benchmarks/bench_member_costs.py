@@ -62,12 +62,12 @@ def mesh_source(folder: Path) -> Path:
 
 
 def one_run(out: Path, source: str, sets: list[str], liars: dict, keys: Path | None,
-            timeout: float) -> dict:
+            timeout: float, nice: int = 0) -> dict:
     """One run; its summaries, exit codes and the load average before and after."""
     scn = load_scenario(source, overrides=parse_overrides(sets))
     load0 = os.getloadavg()[0]
     handle = start_padded_run(scn, source, out, liars, network=NETWORK, overrides=sets,
-                              rerun=False, secure=keys)
+                              rerun=False, secure=keys, nice=nice)
     try:
         codes = wait_run(handle, timeout=timeout)
     finally:
@@ -105,10 +105,32 @@ def cpu_parts(summaries: list[dict]) -> dict[str, float]:
     return parts
 
 
+SUMMARY: list[str] = []
+"""One line per pair, the honest peers pooled (printed last: the table of docs/security.md)."""
+
+
+def summarise(label: str, clean: dict, attacked: dict, honest: list[str]) -> str:
+    """The pair's honest peers pooled: fewest scans handled, most deadline fusions, worst p99
+    (clean's beside it), worst OSPA and RSS ratios, mean CPU per scan ratio, the load."""
+    rows = [peer_row(attacked["summaries"][n], clean["summaries"][n], attacked)
+            for n in honest]
+    cp99 = max(clean["summaries"][n]["latency_ms_p99"] or 0.0 for n in honest)
+    cdl = max(clean["summaries"][n]["stats"]["deadline_fusions"] for n in honest)
+    return (f"| {label} | {min(r['scans'] for r in rows)} / {attacked['scans']} | "
+            f"{max(r['deadline'] for r in rows)} ({cdl}) | "
+            f"{max(r['p99'] for r in rows):.0f} ({cp99:.0f}) | "
+            f"{max(r['ospa_ratio'] for r in rows):.2f} | {max(r['rss_ratio'] for r in rows):.2f} "
+            f"| {sum(r['cpu_ratio'] for r in rows) / len(rows):.2f} | "
+            f"{sum(r['refused'] for r in rows) / len(rows):.0f} / "
+            f"{sum(r['reduced'] for r in rows) / len(rows):.0f} | "
+            f"{max(clean['load'] + attacked['load']):.0f} |")
+
+
 def print_pair(label: str, clean: dict, attacked: dict, honest: list[str]) -> bool:
     """Rows for the honest peers of one clean/attacked pair (each peer's clean row, then its
     attacked one); True if every target was met."""
     ok = True
+    SUMMARY.append(summarise(label, clean, attacked, honest))
     for name in honest:
         c, s = clean["summaries"][name], attacked["summaries"][name]
         for case, run, x in (("clean", clean, c), ("attacked", attacked, s)):
@@ -144,12 +166,12 @@ HEADER = ("| case | run | peer | scans handled | fused | deadline fusions | p99 
 
 
 def pair(tmp: Path, tag: str, i: int, source: str, sets: list[str], liars: dict,
-         keys: Path | None, timeout: float) -> tuple[dict, dict]:
+         keys: Path | None, timeout: float, nice: int = 0) -> tuple[dict, dict]:
     """Clean and attacked runs back to back, the order alternating with ``i``."""
     runs = {}
     for case in (("clean", "attacked") if i % 2 == 0 else ("attacked", "clean")):
         runs[case] = one_run(tmp / f"{tag}-{case}-{i}", source, sets,
-                             liars if case == "attacked" else {}, keys, timeout)
+                             liars if case == "attacked" else {}, keys, timeout, nice)
     return runs["clean"], runs["attacked"]
 
 
@@ -165,10 +187,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="fusion.trust in the padding case")
     ap.add_argument("--liars", choices=(*MESH_LIARS, "both"), default="both",
                     help="mesh case: two or six padding members, or both")
+    ap.add_argument("--nice", type=int, default=0,
+                    help="the padding members' nice value (10: their own extra work yields "
+                    "to the honest peers, as on machines of their own)")
     ap.add_argument("--keep", type=Path, help="keep the runs' folders here (default: a "
                     "temporary folder, removed)")
     a = ap.parse_args(argv)
     ok = True
+    x = (f" x{a.copies}" if a.copies != 1 else "") + (f", nice {a.nice}" if a.nice else "")
     print(f"padding to {a.pad} components, {a.copies} cop{'y' if a.copies == 1 else 'ies'} "
           f"per scan and round; {os.cpu_count()} CPUs")
     print(HEADER)
@@ -182,8 +208,9 @@ def main(argv: list[str] | None = None) -> int:
                         "network.speed=10", f"fusion.trust={str(trust).lower()}"]
                 for i in range(a.repeat):
                     clean, att = pair(tmp, f"pad-{trust}", i, "seed000", sets,
-                                      {"s2": (a.pad, a.copies)}, None, scans / 10 + 180)
-                    ok &= print_pair(f"seed 000, trust {'on' if trust else 'off'}, s2 pads",
+                                      {"s2": (a.pad, a.copies)}, None, scans / 10 + 180,
+                                      a.nice)
+                    ok &= print_pair(f"seed 000, trust {'on' if trust else 'off'}, s2 pads{x}",
                                      clean, att, ["s1", "s3"])
         if a.case in ("mesh", "all"):
             scans = a.scans or 60
@@ -198,8 +225,14 @@ def main(argv: list[str] | None = None) -> int:
                 honest = [f"s{i}" for i in range(1, 9) if f"s{i}" not in names]
                 for i in range(a.repeat):
                     clean, att = pair(tmp, f"mesh-{label}", i, source, sets, liars, keys,
-                                      scans / 10 + 240)
-                    ok &= print_pair(f"secure mesh of 8, {label} pad", clean, att, honest)
+                                      scans / 10 + 240, a.nice)
+                    ok &= print_pair(f"secure mesh of 8, {label} pad{x}", clean, att, honest)
+    print("\nhonest peers pooled (worst peer; in brackets the clean run's):")
+    print("| case | scans handled | deadline fusions | p99 ms | fused OSPA / clean | "
+          "peak RSS / clean | CPU per scan / clean | refused (bytes) / reduced per peer | "
+          "load 1-min max |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("\n".join(SUMMARY))
     print("all targets met" if ok else "some target missed (MISSED rows)")
     return 0
 

@@ -77,9 +77,11 @@ def padded_core(core: PeerCore, scn, pad: int, copies: int, seed: int) -> Repeat
 
 
 def start_padded_run(scn, source: str, out: Path, liars: dict[str, tuple[int, int]],
-                     seed: int = 36, **kw):
+                     seed: int = 36, nice: int = 0, **kw):
     """:func:`sim.run.launcher.start_run` (``kw`` its arguments) with each peer of ``liars``
-    ``{name: (pad, copies)}`` started as a padding member (this file's entry point)."""
+    ``{name: (pad, copies)}`` started as a padding member (this file's entry point);
+    ``nice``: their nice value (on one machine, a positive one keeps their own extra work off
+    the honest peers' CPU, as if each member had a machine of its own)."""
     unknown = sorted(set(liars) - set(scn.sensor_names))
     if unknown:
         raise ValueError(f"liars {unknown} are not sensors of {scn.name!r}")
@@ -91,8 +93,10 @@ def start_padded_run(scn, source: str, out: Path, liars: dict[str, tuple[int, in
         for name, (pad, copies) in liars.items():
             cmd = cmds[name]
             assert cmd[:len(prefix)] == prefix, cmd
-            cmds[name] = [sys.executable, str(Path(__file__).resolve()), str(pad), str(copies),
-                          str(seed), "--", *cmd[len(prefix):]]
+            entry = [sys.executable, str(Path(__file__).resolve()), str(pad), str(copies),
+                     str(seed), "--"]
+            cmds[name] = [*(["nice", "-n", str(nice)] if nice else []), *entry,
+                          *cmd[len(prefix):]]
         return cmds
 
     launcher._peer_commands = commands
