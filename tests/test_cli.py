@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from sensornet.sim.scenario import scenario_text
@@ -29,10 +30,12 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path, edit, needle):
     assert text != scenario_text("seed000"), "the edit did not apply"
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    for command in (["experiment", str(path), "--runs", "1", "--quiet", "--out",
-                     str(tmp_path / "out")],
-                    ["run", str(path), "--sim"]):
-        proc = _cli(*command)
+    commands = (["experiment", str(path), "--runs", "1", "--quiet", "--out",
+                 str(tmp_path / "out")],
+                ["run", str(path), "--sim"])
+    with ThreadPoolExecutor(max_workers=2) as pool:  # two processes at once: mostly start-up
+        procs = list(pool.map(lambda command: _cli(*command), commands))
+    for proc in procs:
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and needle in lines[0], proc.stderr

@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -69,10 +70,13 @@ def test_echo_and_topics_on_a_running_network(tmp_path):
                 heard.set()
 
         sub = session.declare_subscriber("sensornet/live1/**", on)
-        echo = subprocess.run(
-            [sys.executable, "-m", "sensornet", "echo", "live1", "--connect", ep,
-             "--count", "40"], cwd=tmp_path, env=env, capture_output=True, text=True,
-            timeout=180)
+        tools = (["echo", "live1", "--connect", ep, "--count", "40"],
+                 ["echo", "live1", "tracks/*", "--connect", ep, "--count", "5"],
+                 ["topics", "live1", "--connect", ep, "--count", "60", "--duration", "170"])
+        with ThreadPoolExecutor(max_workers=3) as pool:  # three listeners at once, as users
+            echo, only, table = pool.map(lambda argv: subprocess.run(
+                [sys.executable, "-m", "sensornet", *argv], cwd=tmp_path, env=env,
+                capture_output=True, text=True, timeout=180), tools)
         assert echo.returncode == 0, echo.stderr
         lines = echo.stdout.strip().splitlines()
         assert len(lines) == 40
@@ -80,16 +84,8 @@ def test_echo_and_topics_on_a_running_network(tmp_path):
         assert {"estimate", "scan"} <= kinds, lines[:5]
         est = next(ln for ln in lines if " estimate " in ln)
         assert "comp, round" in est and " B" in est
-        only = subprocess.run(
-            [sys.executable, "-m", "sensornet", "echo", "live1", "tracks/*", "--connect", ep,
-             "--count", "5"], cwd=tmp_path, env=env, capture_output=True, text=True,
-            timeout=180)
         assert only.returncode == 0, only.stderr
         assert all(ln.split()[2] == "tracks" for ln in only.stdout.strip().splitlines())
-        table = subprocess.run(
-            [sys.executable, "-m", "sensornet", "topics", "live1", "--connect", ep,
-             "--count", "60", "--duration", "170"], cwd=tmp_path, env=env,
-            capture_output=True, text=True, timeout=180)
         assert table.returncode == 0, table.stderr
         assert "| sensornet/live1/estimate/s1 |" in table.stdout, table.stdout
         assert heard.wait(120), encodings
