@@ -46,7 +46,7 @@ from sensornet.peers.host_parts import (  # SharedDecode: re-exported (benchmark
     rt_line,
 )
 from sensornet.peers.idle_gc import IdleCollector
-from sensornet.peers.observer import HostReports
+from sensornet.peers.observer import PENDING_MAX, HostReports
 from sensornet.peers.runtime import BATCH, PeerRuntime, RuntimeOptions
 from sensornet.peers.scoring import ScoreBatch
 from sensornet.peers.session import open_session
@@ -320,16 +320,23 @@ class PeerHost(HostDelivery, HostBatching):
 
     def _report(self) -> None:
         """The peers' complete telemetry reports, in one bundle, once no peer of the host has
-        work waiting (never in the burst of a scan that sets its peers' latency); each peer's
+        work waiting (never in the burst of a scan that sets its peers' latency; a host never
+        idle sends them once a peer holds :data:`peers.observer.PENDING_MAX`); each peer's
         packing on its own CPU, the put split evenly between them ("telemetry" CPU)."""
-        if not self.reports.watched or any(self._backlog[i] for i in self._active):
+        if not self.reports.watched:
             return
-        flushing = [self.peers[i] for i in self._active if self.peers[i].observer.wants_flush]
+        busy = any(self._backlog[i] for i in self._active)
+        crowded = busy and any(self.peers[i].observer.pending >= PENDING_MAX
+                               for i in self._active)
+        if busy and not crowded:
+            return
+        flushing = [self.peers[i] for i in self._active
+                    if self.peers[i].observer.wants_flush or crowded]
         if not flushing:
             return
         for rt in flushing:
             t0 = time.thread_time()
-            rt.observer.flush(idle=not rt.core.consensus.busy(), host=True)
+            rt.observer.flush(idle=crowded or not rt.core.consensus.busy(), host=True)
             rt.telemetry.cpu_ms["telemetry"] += (time.thread_time() - t0) * 1e3
         t0 = time.thread_time()
         self.reports.send()

@@ -44,6 +44,9 @@ _KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer
 WAIT_SCANS = 2
 """A scan's report waits for its OSPA (the truth comes half a scan after the scans) at most
 until the tracks of this many later scans are out."""
+PENDING_MAX = 16
+"""Scans' reports a hosted peer may hold before its host sends them though it is busy (a host
+that is never idle must not gather reports without end)."""
 
 
 _OUT_OF_SEQUENCE = tuple(f"out_of_sequence/{w}" for w in ("late", "redundant", "too_old",
@@ -82,6 +85,11 @@ class Observer:
         self.wants_flush = False
         """Whether a report may be complete (tracks or an OSPA came since the last flush): the
         driver calls :meth:`flush` only then (a wake-up without it costs nothing here)."""
+
+    @property
+    def pending(self) -> int:
+        """Scans whose report is gathered and not sent yet."""
+        return len(self._pending)
 
     @property
     def enabled(self) -> bool:

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 import rerun as rr
 from sensornet.peers.core import Publish, Record
+from sensornet.peers.host import PeerHost
 from sensornet.peers.observer import (
+    PENDING_MAX,
     WAIT_SCANS,
     HostReports,
     Observer,
@@ -24,8 +26,9 @@ from sensornet.peers.observer import (
 )
 from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
+from sensornet.peers.runtime import RuntimeOptions
 from sensornet.peers.session import endpoint, free_port
-from sensornet.protocol.bundle import pack_bundles
+from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
 from sensornet.protocol.messages import Estimate, Forward, Scan, ScanSet, Telemetry, Tracks, Truth
 from sensornet.sim.run.peers import make_peer
@@ -410,6 +413,41 @@ def test_a_hosts_peers_report_in_one_bundle_drawn_as_their_own():
     assert f"metrics/latency_ms/{names[0]}" in rec.by_path()
     reports._matching(type("Status", (), {"matching": False})())  # nobody listens: no work
     assert not reports.watched and not any(obs.enabled for obs in hosted)
+
+
+def test_a_host_sends_its_peers_reports_when_idle_or_crowded():
+    """A host sends its peers' complete reports once none of its peers has work waiting, in
+    one bundle; a host never idle sends them once a peer holds PENDING_MAX scans' (the
+    oldest, those WAIT_SCANS behind the newest but 8), so it never gathers without end."""
+    scn = load_scenario("seed000", {"scenario.num_scans": 3})
+    names = scn.sensor_names[:2]
+    host = PeerHost("h1", [(make_peer(scn, n, network="net", score_truth=False),
+                            RuntimeOptions(rerun=False)) for n in names],
+                    ((), (), None, None, False))
+    bundles: list[bytes] = []
+    host.reports._put = bundles.append
+    for rt in host.peers:
+        rt.core.wants_truth = False
+        rt.observer.watched = True
+    host._active = [0, 1]
+    obs = host.peers[0].observer
+    _report_scan(obs, 1, 1)
+    obs.flush(idle=True)  # the peer's own step: not its to send
+    host._backlog[1].append((0.0, ("msg", "x", b"")))  # the other peer has work waiting
+    host._report()
+    assert bundles == [] and obs.pending == 1
+    host._backlog[1].clear()
+    host._report()
+    (entries,) = [unpack_bundle(b).entries for b in bundles]
+    assert [(n, decode(p).k) for n, p in entries] == [(names[0], 1)] and obs.pending == 0
+    host._backlog[1].append((0.0, ("msg", "x", b"")))
+    for k in range(2, 2 + PENDING_MAX):  # no tracks out: none complete
+        obs.record(Record("local", k, {"n_components": 1}))
+        host._report()
+    newest = 1 + PENDING_MAX
+    sent = [decode(p).k for n, p in unpack_bundle(bundles[-1]).entries]
+    assert len(bundles) == 2 and sent == list(range(2, newest - 8 - WAIT_SCANS + 1))
+    assert obs.pending == PENDING_MAX - len(sent) < PENDING_MAX
 
 
 @pytest.mark.network
