@@ -50,6 +50,7 @@ def test_a_member_padding_to_the_codec_limit_costs_its_neighbours_no_scan(tmp_pa
         assert budget["refused"] == {}, (name, budget)  # one a scan is within the budget
         assert budget["largest"]["s2"] == PAD, (name, budget)
         assert budget["reduced"]["s2"] >= scn.num_scans - 2, (name, budget)  # every one cut
+        # s2's estimate, cut to its real one, is still fused at the end (not shut out)
         assert s["stats"]["last_fused_from"].get("s2", 0) >= scn.num_scans - 2, (name, s)
         assert s["mean_ospa_fused"] <= 1.1 * clean.mean_ospa(name), (
             name, s["mean_ospa_fused"], clean.mean_ospa(name))
