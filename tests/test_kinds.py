@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -109,11 +110,13 @@ SETS = ["--set", "network.filter=toy", "--set", "fusion.rule=aa",
 def test_a_registered_kind_runs_as_processes_and_replays(tmp_path):
     """One module and one registry entry: `run` (world + 3 peer processes over Zenoh on
     127.0.0.1), `run --sim`, and `--record` + `replay` reproducing each peer's fused tracks."""
-    sim = _sensornet("run", "seed000", "--sim", *SETS)
+    out = tmp_path / "run"
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the twin (one process) beside the run
+        twin = pool.submit(_sensornet, "run", "seed000", "--sim", *SETS)
+        p = _sensornet("run", "seed000", *SETS, "--record", "--no-rerun", "--out", str(out))
+        sim = twin.result()
     assert sim.returncode == 0, sim.stderr
     assert "twin run" in sim.stdout and "| s3 | 15 |" in sim.stdout
-    out = tmp_path / "run"
-    p = _sensornet("run", "seed000", *SETS, "--record", "--no-rerun", "--out", str(out))
     assert p.returncode == 0, p.stderr[-2000:]
     for n in ("s1", "s2", "s3"):
         s = json.loads((out / f"peer-{n}.json").read_text())
