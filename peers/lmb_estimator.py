@@ -25,6 +25,7 @@ import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
+from sensornet.tracking.label_confirmation import stamp_shared
 from sensornet.tracking.labels import (
     Confirmation,
     ExtractedTracks,
@@ -274,17 +275,24 @@ class LmbEstimator:
         network, so a track that sat unpublished below the threshold while a neighbour's track
         of the same target already carried the target's id cannot take that id over (the one
         fused identity switch per peer of the seed-000 twin: a track born at scan 20 published at
-        24 beat the id a neighbour had published at 22)."""
+        24 beat the id a neighbour had published at 22). A birth labelled alike at every peer
+        (``filter.shared_origin``) is stamped ``(shared, k, PUBLISHED_BASE + i)`` instead, as
+        other peers stamp it (tracking.label_confirmation.stamp_shared), or own if taken."""
         t = self.state.tracks
         if len(t) == 0:
             return
         keys = label_keys(t.labels)
         was = np.isin(keys, self._published)
         pub = self._publishing(k)
-        new = pub & ~was & (t.labels[:, 0] == self.origin) & (t.labels[:, 2] < PUBLISHED_BASE)
+        fresh = pub & ~was & (t.labels[:, 2] < PUBLISHED_BASE)
+        new = fresh & (t.labels[:, 0] == self.origin)
+        shared = self.filter.shared_origin
+        alike = fresh & (t.labels[:, 0] == (-1 if shared is None else shared))
         labels = t.labels
-        if new.any():
+        if new.any() or alike.any():
             labels = labels.copy()
+            if alike.any():  # shared births: (shared, k, PUBLISHED_BASE + cell) as elsewhere
+                new |= alike & ~stamp_shared(labels, keys, alike, new | alike, k)
             labels[new] = new_labels(self.origin, k, int(new.sum()), PUBLISHED_BASE)
             self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
                                                                t.means, t.covs, t.owner),

@@ -177,7 +177,12 @@ def test_kind_builds_from_the_scenario():
     scn = load_scenario("seed000", {"network.filter": "lmb"})
     est, fuser = kind("lmb").build(scn, "s2", 0)
     f = make_lmb_filter(scn, "s2", 1)
-    assert est.origin == 1 and est.filter.origin == 1 and est.filter.adaptive_birth
+    # network.birth_ids "shared" (default): own origins from 1, births alike at origin 0
+    assert est.origin == 2 and est.filter.origin == 2 and est.filter.adaptive_birth
+    assert est.filter.shared_origin == 0 and est.filter.birth_cell == scn.lmb.birth_cell
+    own, _ = kind("lmb").build(load_scenario("seed000", {"network.filter": "lmb",
+                                                         "network.birth_ids": "own"}), "s2", 0)
+    assert own.origin == 1 and own.filter.origin == 1 and own.filter.shared_origin is None
     assert est.filter.sensor.clutter_intensity == f.sensor.clutter_intensity > 0
     assert est.publish_threshold == scn.fusion.level2_threshold
     assert type(fuser).__name__ == "HybridFuser"

@@ -89,6 +89,31 @@ class Confirmation:
         return ok.astype(np.int8)
 
 
+def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
+                 k: int) -> np.ndarray:
+    """Stamp the shared births ``alike (n,)`` of ``labels (n, 3)`` (in place) ``(shared, k,
+    PUBLISHED_BASE + i)`` at their first publication at scan ``k``, one old label per stamp
+    (the earliest birth) and none that a label not stamped now (``~new``; ``keys`` the rows'
+    :func:`label_keys`) holds; returns the rows stamped so (the others need an own stamp).
+    :class:`Publication` (GM-PHD peers) and ``peers.lmb_estimator`` (LMB peers) share it."""
+    rows = np.flatnonzero(alike)
+    birth = labels[rows, 1]
+    stamp = labels[rows].copy()
+    stamp[:, 1] = k
+    stamp[:, 2] += PUBLISHED_BASE
+    by = np.lexsort((birth, stamp[:, 2]))  # per stamp, the earliest birth first
+    start = np.ones(len(by), dtype=bool)
+    start[1:] = stamp[by[1:], 2] != stamp[by[:-1], 2]
+    winner = birth[by][np.flatnonzero(start)][np.cumsum(start) - 1]
+    ok = np.zeros(len(rows), dtype=bool)
+    ok[by] = birth[by] == winner
+    ok &= ~np.isin(label_keys(stamp), keys[~new])
+    labels[rows[ok]] = stamp[ok]
+    out = np.zeros(len(labels), dtype=bool)
+    out[rows[ok]] = True
+    return out
+
+
 REPUBLISH_GAP = 3
 """Scans a published label may stay unpublished at a peer and keep its stamp
 (:class:`Publication`); longer, and it is stamped anew when it returns."""
@@ -160,7 +185,7 @@ class Publication:
         if new.any():
             labels = labels.copy()
             if alike.any():
-                alike = self._alike(labels, keys, alike, new, k)
+                alike = stamp_shared(labels, keys, alike, new, k)
             own = new & ~alike
             if own.any():
                 uniq, inv = np.unique(keys[own], return_inverse=True)
@@ -173,29 +198,6 @@ class Publication:
         self._last = when[idx] if self._keys.size else np.zeros(0, dtype=np.int64)
         self._k = int(k)
         return labels
-
-    @staticmethod
-    def _alike(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
-               k: int) -> np.ndarray:
-        """Stamp the shared births ``alike (n,)`` of ``labels`` (in place) ``(shared, k,
-        PUBLISHED_BASE + i)``, one old label per stamp (the earliest birth) and none that a
-        label not stamped now holds; returns the rows stamped so."""
-        rows = np.flatnonzero(alike)
-        birth = labels[rows, 1]
-        stamp = labels[rows].copy()
-        stamp[:, 1] = k
-        stamp[:, 2] += PUBLISHED_BASE
-        by = np.lexsort((birth, stamp[:, 2]))  # per stamp, the earliest birth first
-        start = np.ones(len(by), dtype=bool)
-        start[1:] = stamp[by[1:], 2] != stamp[by[:-1], 2]
-        winner = birth[by][np.flatnonzero(start)][np.cumsum(start) - 1]
-        ok = np.zeros(len(rows), dtype=bool)
-        ok[by] = birth[by] == winner
-        ok &= ~np.isin(label_keys(stamp), keys[~new])
-        labels[rows[ok]] = stamp[ok]
-        out = np.zeros(len(labels), dtype=bool)
-        out[rows[ok]] = True
-        return out
 
     def adopt(self, labels: np.ndarray) -> None:
         """Labels the network gave us (a relabel's winners): published as of the last scan."""
@@ -211,4 +213,4 @@ class Publication:
             self._keys, self._last = allk[by], alll[by]
 
 
-__all__ = ["REPUBLISH_GAP", "Confirmation", "Publication"]
+__all__ = ["REPUBLISH_GAP", "Confirmation", "Publication", "stamp_shared"]

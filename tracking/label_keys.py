@@ -22,6 +22,13 @@ component, at every peer, and stamped ``(SHARED_ORIGIN, k', PUBLISHED_BASE + i)`
 publication (:class:`tracking.label_confirmation.Publication` ``shared``). Peers' own origins
 then start at 1, so in the network rule's order a shared label beats an own one of the same
 scan: the id most peers already hold wins a tie."""
+CELL_BASE = 1 << 34
+"""Index offset of a shared label made from a grid cell (:func:`cell_index`): an LMB's
+measurement-driven birth is ``(SHARED_ORIGIN, k, CELL_BASE + cell)`` at every peer whose birth
+plot falls in that cell, apart from fixed birth components (small indices); below
+:data:`PUBLISHED_BASE`, so it is stamped at first publication like any shared birth."""
+CELL_BITS = 32
+"""Bits of a cell code (:func:`cell_index`), split evenly over the position axes."""
 _KEY = np.dtype([("origin", "<i8"), ("birth_scan", "<i8"), ("index", "<i8")])
 
 
@@ -44,6 +51,44 @@ def new_labels(origin: int, k: int, count: int, start: int = 0) -> np.ndarray:
     out[:, 0] = origin
     out[:, 1] = k
     out[:, 2] = np.arange(start, start + count)
+    return out
+
+
+def cell_index(points: np.ndarray, size: float) -> np.ndarray:
+    """The grid cell of each point ``(n, dz)`` (cells ``size`` wide, edges at multiples of
+    ``size`` from the origin) as a label index ``CELL_BASE + code`` ``(n,)`` int64: the cell
+    numbers per axis, offset and packed in :data:`CELL_BITS` bits (``CELL_BITS // dz`` each,
+    the first axis highest), so every peer computes the same index for the same cell and the
+    order of indices is a fixed order of cells. Cells beyond the packed range (2^15 cells from
+    the origin per axis in 2-D: 6,500 km at 200 m) are clipped to the edge cell."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or not 1 <= pts.shape[1] <= 4:
+        raise ValueError(f"points has shape {pts.shape}, expected (n, dz) with 1 <= dz <= 4")
+    if not (np.isfinite(size) and size > 0):
+        raise ValueError(f"cell size must be a positive finite number, got {size!r}")
+    bits = CELL_BITS // pts.shape[1]
+    half = 1 << (bits - 1)
+    cells = np.clip(np.floor(pts / size), -half, half - 1).astype(np.int64) + half
+    shifts = bits * np.arange(pts.shape[1] - 1, -1, -1, dtype=np.int64)
+    return CELL_BASE + (cells << shifts).sum(axis=1)
+
+
+def shared_births(index: np.ndarray, priority: np.ndarray, shared: int, origin: int, k: int,
+                  start: int) -> np.ndarray:
+    """Labels ``(n, 3)`` of ``n`` births at scan ``k`` that every peer makes alike: ``(shared,
+    k, index[i])``, except where two births share an index (two plots in one cell): the one of
+    highest ``priority (n,)`` (then the first) keeps it, the others take own labels ``(origin,
+    k, start + i)`` (a label stays one track at a peer)."""
+    index = np.asarray(index, dtype=np.int64).reshape(-1)
+    n = len(index)
+    order = np.lexsort((np.arange(n), -np.asarray(priority, dtype=float), index))
+    first = np.ones(n, dtype=bool)
+    first[1:] = index[order[1:]] != index[order[:-1]]
+    keep = np.zeros(n, dtype=bool)
+    keep[order] = first
+    out = new_labels(origin, k, n, start)
+    out[keep, 0] = shared
+    out[keep, 2] = index[keep]
     return out
 
 
@@ -90,5 +135,6 @@ class LabelledMixture:
         return LabelledMixture(self.mixture.select(index), self.labels[index])
 
 
-__all__ = ["LABEL_COLUMNS", "PUBLISHED_BASE", "SHARED_ORIGIN", "LabelledMixture", "as_labels",
-           "label_keys", "new_labels", "precedes"]
+__all__ = ["CELL_BASE", "CELL_BITS", "LABEL_COLUMNS", "PUBLISHED_BASE", "SHARED_ORIGIN",
+           "LabelledMixture", "as_labels", "cell_index", "label_keys", "new_labels", "precedes",
+           "shared_births"]

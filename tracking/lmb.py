@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.label_keys import cell_index, new_labels, shared_births
 from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, SCALABLE, marginals
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
 from sensornet.tracking.mixture import GaussianMixture
@@ -216,6 +217,13 @@ class LmbFilter:
     """Counted scans (not necessarily consecutive) after which a track is confirmed."""
     origin: int = 0
     """This peer's id: the first column of its tracks' labels."""
+    shared_origin: int | None = None
+    """Births labelled alike at every peer (issue 33; ``tracking.label_keys.SHARED_ORIGIN``):
+    a fixed birth component ``i`` is ``(shared_origin, k, i)``, an adaptive birth ``(shared_origin,
+    k, cell_index(z, birth_cell))`` by the grid cell of its plot ``z`` (two in one cell: the
+    likelier keeps it, the other an own label). None: every birth ``(origin, k, .)``."""
+    birth_cell: float = 200.0
+    """Width (m) of the grid cells of shared adaptive-birth labels (:func:`cell_index`)."""
     _birth_cov: np.ndarray | None = field(default=None, init=False, repr=False)
     _rng: np.random.Generator | None = field(default=None, init=False, repr=False)
 
@@ -242,6 +250,12 @@ class LmbFilter:
         if self.birth is not None and (self.birth.weights.max(initial=0) > 1
                                        or self.birth.dim != self.motion.dim):
             raise ValueError("LmbFilter.birth needs weights <= 1 and the motion model's dim")
+        if self.shared_origin is not None and self.shared_origin == self.origin:
+            raise ValueError(f"LmbFilter.origin {self.origin} is shared_origin's: own origins "
+                             f"must differ from the shared births' ({self.shared_origin})")
+        if not (np.isfinite(self.birth_cell) and self.birth_cell > 0):
+            raise ValueError(f"LmbFilter.birth_cell must be a positive number of metres, got "
+                             f"{self.birth_cell!r}")
         if self.adaptive_birth:
             cols = self.sensor.model.selected
             if cols is None:
@@ -274,10 +288,27 @@ class LmbFilter:
                                                 F @ pend.covs @ F.T + Q))
         births = GaussianMixture.concatenate(born)
         if len(births):
-            parts.append(LabelledBernoulliSet.births(births, self.origin, k))
+            b = LabelledBernoulliSet.births(births, self.origin, k)
+            if self.shared_origin is not None:
+                b = LabelledBernoulliSet.trusted(self._shared_labels(state.pending, k),
+                                                 b.existence, b.weights, b.means, b.covs,
+                                                 b.owner)
+            parts.append(b)
         hits = np.concatenate((state.hits, np.zeros(len(births), dtype=np.int64)))
         return LmbState(LabelledBernoulliSet.concatenate(parts), hits, k,
                         GaussianMixture.empty(self.motion.dim))
+
+    def _shared_labels(self, pending: GaussianMixture, k: int) -> np.ndarray:
+        """Labels ``(nb, 3)`` of scan ``k``'s births (fixed components, then ``pending``, the
+        adaptive births at their plots) made alike at every peer (:attr:`shared_origin`)."""
+        nf = 0 if self.birth is None else len(self.birth)
+        fixed = new_labels(self.shared_origin, k, nf)
+        if not len(pending):
+            return fixed
+        plots = pending.means[:, list(self.sensor.model.selected)]
+        cells = shared_births(cell_index(plots, self.birth_cell), pending.weights,
+                              self.shared_origin, self.origin, k, nf)
+        return np.concatenate((fixed, cells))
 
     def correct(self, state: LmbState, scan: np.ndarray) -> LmbState:
         """Update with scan ``Z (m, dz)``, reduce each track's mixture, delete tracks below

@@ -7,7 +7,9 @@ intensity ``kappa = lambda_c / V`` (:func:`sim.world.build.sensor_params`, floor
 (Reuter et al. 2014, Sec. IV-C) for linear sensors, the scenario's birth components (weights
 clipped to 1) for range-bearing ones; ``filter.gate`` and ``filter.extraction_threshold``; the
 adaptive birth's ``lambda_B``, ``r_B,max`` and velocity spread from ``[lmb]``
-(:class:`sim.scenario.network.LmbSpec`). The LMB's other settings (association, per-track
+(:class:`sim.scenario.network.LmbSpec`); with ``network.birth_ids = "shared"`` births labelled
+alike at every peer (fixed ones by component, adaptive ones by the ``lmb.birth_cell`` grid cell
+of their plot; own origins from 1). The LMB's other settings (association, per-track
 ``J``, confirmation) are :class:`tracking.lmb.LmbFilter`'s defaults.
 """
 
@@ -22,6 +24,7 @@ from sensornet.sim.kinds.gmphd import mixture_fuser
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import birth_mixture, make_reducer, motion_model, sensor_params
 from sensornet.tracking.gmphd import SensorParams
+from sensornet.tracking.label_keys import SHARED_ORIGIN
 from sensornet.tracking.lmb import LmbFilter
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -29,8 +32,11 @@ MIN_CLUTTER_INTENSITY = 1e-12
 """``kappa`` of a sensor without clutter (per m^2 or m rad): the LMB needs ``kappa > 0``."""
 
 
-def make_lmb_filter(scn: Scenario, name: str, origin: int = 0) -> LmbFilter:
-    """The LMB filter of sensor ``name`` (module docstring)."""
+def make_lmb_filter(scn: Scenario, name: str, origin: int = 0,
+                    shared_origin: int | None = None) -> LmbFilter:
+    """The LMB filter of sensor ``name`` (module docstring); ``shared_origin``: births
+    labelled alike at every peer (``network.birth_ids = "shared"``, cells of
+    ``lmb.birth_cell``), None: own."""
     sp = sensor_params(scn, name)
     sensor = SensorParams(sp.model, sp.detection_probability,
                           max(sp.clutter_intensity, MIN_CLUTTER_INTENSITY))
@@ -44,14 +50,16 @@ def make_lmb_filter(scn: Scenario, name: str, origin: int = 0) -> LmbFilter:
                      adaptive_birth=adaptive, birth_rate=scn.lmb.birth_rate,
                      birth_max_existence=scn.lmb.birth_max_existence,
                      birth_velocity_std=scn.lmb.birth_velocity_std, gate=scn.filter.gate,
-                     extraction_threshold=scn.filter.extraction_threshold, origin=origin)
+                     extraction_threshold=scn.filter.extraction_threshold, origin=origin,
+                     shared_origin=shared_origin, birth_cell=scn.lmb.birth_cell)
 
 
 def build(scn: Scenario, name: str, run: int = 0):
-    origin = origin_of([s.name for s in scn.sensors], name)
+    shared = SHARED_ORIGIN if scn.network.birth_ids == "shared" else None
+    origin = origin_of([s.name for s in scn.sensors], name) + (0 if shared is None else 1)
     reducer = make_reducer(scn)
     f = scn.fusion
-    est = LmbEstimator(make_lmb_filter(scn, name, origin), reducer,
+    est = LmbEstimator(make_lmb_filter(scn, name, origin, shared), reducer,
                        f.level2_threshold if f.level2_pruning else None,
                        scn.filter.extraction_threshold, scn.filter.extraction, origin=origin,
                        tentative_threshold=scn.lmb.tentative_threshold or None,

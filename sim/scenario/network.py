@@ -115,12 +115,13 @@ class NetworkSpec:
     speed: float = option(10.0, doc="Wall-clock speed factor: a scan every `scan_period / "
                                     "speed` seconds.", check=POSITIVE)
     birth_ids: str = option(
-        "shared", doc="GM-PHD peers' ids of births at fixed birth points (`birth.model` "
-                      "`\"paper\"` or `\"truth\"`): `\"shared\"`, made alike at every peer "
-                      "(origin 0, the scan of first publication, the birth component: "
-                      "`tracking.label_keys.SHARED_ORIGIN`; the peers' own origins then start at "
-                      "1), or `\"own\"` (the peer's origin; the network rule spreads the "
-                      "winner over the graph). Measurement births are always own.",
+        "shared", doc="GM-PHD and LMB peers' ids of births: `\"shared\"`, made alike at "
+                      "every peer (origin 0, the scan of first publication, the birth "
+                      "component, or for an LMB's adaptive birth the `lmb.birth_cell` grid "
+                      "cell of its plot: `tracking.label_keys.SHARED_ORIGIN`; the peers' own "
+                      "origins then start at 1), or `\"own\"` (the peer's origin; the network "
+                      "rule spreads the winner over the graph). GM-PHD measurement births "
+                      "(`birth.model` `\"measurements\"`) are always own.",
         choices=("shared", "own"))
     filter: str = option("gmphd", doc="The peers' kind (`sim.kinds`): `\"gmphd\"`, "
                                       "`\"et-gmphd\"` (`[extended]`), for one target "
@@ -219,6 +220,10 @@ class LmbSpec:
     tentative_scans: int = option(2, doc="With `tentative_threshold`: how many scans old a "
                                          "track may be and still be published as tentative.",
                                   unit="scans", check=NONNEGATIVE)
+    birth_cell: float = option(200.0, doc="With `network.birth_ids` `\"shared\"`: width of "
+                                          "the grid cells whose index labels an adaptive birth "
+                                          "alike at every peer (edges at multiples of it).",
+                               unit="m", check=POSITIVE)
     birth_velocity_std: float = option(30.0, doc="Standard deviation of each velocity "
                                                  "component of an adaptive birth (mean 0; its "
                                                  "position is the measurement's).", unit="m/s",
