@@ -17,6 +17,7 @@ from sensornet.sim.campaign.report import bounds, write_report
 from sensornet.sim.report import run_plots
 from sensornet.sim.run import launcher
 from sensornet.sim.run.progress import Progress
+from sensornet.sim.run.run_handle import RunHandle
 from sensornet.sim.run.run_summary import (
     add_track_summary,
     format_summary,
@@ -30,6 +31,7 @@ from sensornet.tracking.track_metrics import TrackTable, label_agreement, track_
 
 from sensornet.api import Run
 from sensornet.cli import main
+from sensornet.cli.commands.run import _exit_code
 from sensornet.cli.parser import build_parser
 
 POS = [0, 2]
@@ -322,3 +324,18 @@ def test_plot_colours_are_the_views():
     view = pytest.importorskip("sensornet.view")
     ids = np.array([[0, 1, 0], [2, 40, 3], [1, 0, 7]])
     np.testing.assert_allclose(run_plots.id_colour(ids), view.id_color(ids) / 255)
+
+
+def test_a_run_stopped_at_its_timeout_says_so_in_one_line(tmp_path, capsys):
+    """A run that outlived its length + --timeout was stopped by the launcher: the exit code is
+    1 and one stderr line says why (it used to end silently with code 0, its last scans simply
+    missing from the table)."""
+    scn = load_scenario("seed000")
+    summaries = {n: {"scans": 5, "mean_ospa_fused": 1.0} for n in scn.sensor_names}
+    handle = RunHandle(out=tmp_path)
+    codes = {"world": 0, **{n: 0 for n in scn.sensor_names}}
+    assert _exit_code(scn, tmp_path, handle, codes, summaries, set(), []) == 0
+    handle.timed_out = True
+    assert _exit_code(scn, tmp_path, handle, codes, summaries, set(), []) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--timeout" in err[0] and "stopped" in err[0], err

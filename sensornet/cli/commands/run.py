@@ -214,6 +214,11 @@ def _exit_code(scn, out: Path, handle, codes: dict, summaries: dict, killed: set
         print(f"sensornet: stopped by {caught[0]}; every process stopped, output in {out}",
               file=sys.stderr)
         return 0
+    if handle.timed_out:  # stopped by wait_run, not by the run's own end: say so
+        print(f"sensornet: error: the run outlived its length plus --timeout and was stopped "
+              f"(the table above is what it did until then; allow more with --timeout), "
+              f"output in {out}", file=sys.stderr)
+        return 1
     world = codes.get("world")
     if world not in (0, None):
         why = _last_line(handle.logs["world"]).removeprefix("sensornet: error: ")
