@@ -50,14 +50,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from bench_network import (
-    cpu_per_scan,
-    load_average,
-    real_time,
-    scenario_text,
-    speed_probe,
-    view_of,
-)
+
+if not __package__:  # `python benchmarks/bench_fifty.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.peers.host import SharedDecode
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.peers.telemetry import percentile
@@ -69,6 +65,15 @@ from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.world import generate_run
 from sensornet.tracking.metrics import ospa
+
+from benchmarks.bench_network import (
+    cpu_per_scan,
+    load_average,
+    real_time,
+    scenario_text,
+    speed_probe,
+    view_of,
+)
 
 CORES = 2.0
 """Cores of the machine the targets are stated for."""
