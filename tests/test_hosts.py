@@ -7,6 +7,7 @@ sleeps; every run is stopped in ``finally`` (``tests.test_network_faults._run``)
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from collections import deque
@@ -77,21 +78,27 @@ def test_packing_is_a_process_per_peer_up_to_the_threshold_then_a_host_per_core(
 
 
 def test_packing_with_a_known_cost_uses_the_fewest_hosts_under_their_share():
-    """GM-PHD peers at 10 scans/s cost about 1.5 ms a scan: 50 of them (0.75 cores) fit one
-    host, 51 need two, 100 (1.5) get one host per core; seed 004's flooding peers (5 ms, 1.0
-    cores) two; a kind not measured, a host per core as before."""
+    """With a kind's measured cost per peer-scan, the fewest hosts that keep each under
+    HOST_SHARE of a core, at most one per core: at 10 scans/s the largest GM-PHD network that
+    fits one host, one peer more needs two, 100 peers get a host per core (2 or 4 of 8 cores);
+    seed 004's flooding peers two; a kind not measured, a host per core as before."""
     from sensornet.sim.run.packing import HOST_SHARE, PEER_COST_MS, peer_load, scenario_load
     from sensornet.sim.scenario import load_scenario
 
-    assert peer_load(20, "gmphd", 10.0) == pytest.approx(20 * PEER_COST_MS["gmphd"] / 100)
+    cost = PEER_COST_MS["gmphd"]
+    assert peer_load(20, "gmphd", 10.0) == pytest.approx(20 * cost / 100)
     assert peer_load(20, "pda", 10.0) is None
+    fit = int(HOST_SHARE * 100 / cost)  # peers whose work at 10 scans/s fits one host
+    assert fit >= 20  # the shipped 20-peer networks run as one host
     one = choose(20, None, n_cores=2, load=peer_load(20, "gmphd", 10.0))
     assert one.per_process == 20 and "into 1 host process of 20" in one.line
-    assert choose(50, None, n_cores=2, load=peer_load(50, "gmphd", 10.0)).per_process == 50
-    assert choose(51, None, n_cores=2, load=peer_load(51, "gmphd", 10.0)).per_process == 26
+    assert choose(fit, None, n_cores=2, load=peer_load(fit, "gmphd", 10.0)).per_process == fit
+    two = choose(fit + 1, None, n_cores=2, load=peer_load(fit + 1, "gmphd", 10.0))
+    assert two.per_process == -(-(fit + 1) // 2)
     assert choose(100, None, n_cores=2, load=peer_load(100, "gmphd", 10.0)).per_process == 50
-    assert choose(100, None, n_cores=8, load=peer_load(100, "gmphd", 10.0)).per_process == 50
-    assert choose(200, None, n_cores=8, load=peer_load(200, "gmphd", 10.0)).per_process == 50
+    need = math.ceil(peer_load(100, "gmphd", 10.0) / HOST_SHARE)  # hosts under their share
+    per8 = choose(100, None, n_cores=8, load=peer_load(100, "gmphd", 10.0)).per_process
+    assert per8 == math.ceil(100 / min(8, need))
     assert choose(20, None, n_cores=2, load=HOST_SHARE * 0.99).per_process == 20
     assert choose(20, None, n_cores=2, load=HOST_SHARE * 1.01).per_process == 10
     assert choose(20, None, n_cores=2, load=None).per_process == 10  # unknown: per core

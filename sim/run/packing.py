@@ -30,11 +30,12 @@ runs of 2026-12-03 evening in benchmarks/README.md: one host of 50 GM-PHD peers 
 kept real time in 3 of 3 runs at 0.51-0.67 cores (p99 83-92 ms); those runs are the
 evidence for the value, not an independent check of it."""
 
-PEER_COST_MS = {"gmphd": 1.5, "flooding": 5.0}
+PEER_COST_MS = {"gmphd": 2.4, "lmb": 3.6, "flooding": 5.0}
 """CPU ms per peer per scan of a hosted peer, by kind (``network.filter``), rounded up from
-the benchmarks (benchmarks/README.md, 2026-12-03 evening): GM-PHD consensus peers of degree
-2-4, two rounds, 0.94-1.46 ms in hosts of 20-50 (scan bundles, idle collections); seed-004
-flooding peers 3.7-4.8 ms in hosts of 10. Kinds not here are packed a host per core."""
+the benchmarks: GM-PHD consensus peers of degree 4, two rounds, 1.93-2.38 ms and LMB peers
+2.91-3.55 ms in hosts of 50 and 25 (``benchmarks/bench_fifty.py``, 4 Dec at load 3-5; the
+GM-PHD's 0.94-1.46 ms of 3 Dec predates its labels); seed-004 flooding peers 3.7-4.8 ms in
+hosts of 10. Kinds not here are packed a host per core."""
 
 
 def peer_load(n_peers: int, kind: str, scans_per_s: float) -> float | None:
