@@ -8,7 +8,9 @@ Kalman updates and the likelihoods are array operations over every component and
 
 Labels are int64 rows ``(origin, birth_scan, index)`` as in :mod:`tracking.labels`: the peer
 whose filter gave birth to the track, the scan of the birth and its index among that scan's
-births (the fixed birth model's components first, then the measurement-driven births).
+births (the fixed birth model's components first, then the measurement-driven births); with
+``shared_origin`` births are labelled alike at every peer (the component, or the grid cell of
+the birth's plot: :func:`tracking.label_keys.cell_index`, issue 33).
 
 One scan: predict (``r+ = Ps r``, components through the motion model; Reuter eqs. 9-12),
 add births (a fixed birth model, and adaptive births from the last scan's measurements that
