@@ -135,7 +135,9 @@ def _row(key: str, f: dataclasses.Field, m: Meta) -> str:
 
 
 def _table(header: str, cls: type, prefix: str, level: str = "##") -> list[str]:
-    doc = (cls.__doc__ or "").strip().splitlines()[0] if prefix == "" else ""
+    # the docstring's first paragraph (a sentence may wrap onto the next lines)
+    doc = " ".join(ln.strip() for ln in (cls.__doc__ or "").strip().split("\n\n")[0]
+                   .splitlines()) if prefix == "" else ""
     lines = [f"{level} `{header}`", ""]
     if doc:
         lines += [_md(doc), ""]
