@@ -53,6 +53,16 @@ _OUT_OF_SEQUENCE = tuple(f"out_of_sequence/{w}" for w in ("late", "redundant", "
                                                              "dropped_late"))
 
 
+def _undeclare(*declared) -> None:
+    """Undeclare each Zenoh publisher / listener given (None: never declared)."""
+    for d in declared:
+        if d is not None:
+            try:
+                d.undeclare()
+            except Exception:  # the session is gone already
+                pass
+
+
 def _put(values: dict, name: str, value) -> None:
     """``values[name] = value`` for a finite scalar (None and NaN left out)."""
     if value is not None:
@@ -125,12 +135,7 @@ class Observer:
         return self
 
     def close(self) -> None:
-        for d in (self._listener, self._pub):
-            if d is not None:
-                try:
-                    d.undeclare()
-                except Exception:  # the session is gone already
-                    pass
+        _undeclare(self._listener, self._pub)
         self._pub = self._put = self._listener = None
         self._open = False
 
@@ -365,12 +370,7 @@ class HostReports:
             pass
 
     def close(self) -> None:
-        for d in (self._listener, self._pub):
-            if d is not None:
-                try:
-                    d.undeclare()
-                except Exception:  # the session is gone already
-                    pass
+        _undeclare(self._listener, self._pub)
         self._pub = self._listener = None
         for obs in self.observers:
             obs._open = False
