@@ -12,13 +12,17 @@ overrides), mean over peers and runs; the guard metrics as
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 from sensornet.sim.campaign.sweep import cost_columns
 from sensornet.sim.run.twin import run_twin
-from sensornet.sim.studies.labelled.ospa2_floor import GRAPHS, _overrides, ospa2_parts
+from sensornet.sim.studies.labelled.ospa2_floor import (
+    GRAPHS,
+    _overrides,
+    cell_arguments,
+    ospa2_parts,
+)
 from sensornet.sim.studies.labelled.study import (
     RULES,
     WINDOW,
@@ -71,16 +75,8 @@ def check(graph: str, kind: str, pd: float, runs: list[int], rule: str, extra: d
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.labelled.design_check",
-                                 description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", default="100,101", help="runs (training: 100, 101)")
-    ap.add_argument("--scans", type=int, help="scans per run (default: the scenario's)")
-    ap.add_argument("--graphs", default="full3,circ20")
-    ap.add_argument("--kinds", default="gmphd,lmb")
-    ap.add_argument("--pds", default="0.99,0.9")
-    ap.add_argument("--rule", default="hybrid", choices=sorted(RULES))
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="the variant's overrides of the fused twin's scenario")
+    ap = cell_arguments("design_check", __doc__,
+                        "the variant's overrides of the fused twin's scenario")
     a = ap.parse_args(argv)
     extra = _overrides(a.set)
     runs = [int(x) for x in a.runs.split(",")]
