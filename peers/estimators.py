@@ -68,7 +68,7 @@ class GmphdEstimator:
 
     def __init__(self, filt: GMPHDFilter, level2: bool = True,
                  level2_threshold: float = 0.5, origin: int | None = None,
-                 shared_births: bool = False) -> None:
+                 shared_births: bool = False, revisit: int = 1) -> None:
         self.filter = filt
         self.reducer = filt.reducer
         self.level2 = level2
@@ -87,11 +87,13 @@ class GmphdEstimator:
         self.labels = None if origin is None else np.zeros((0, 3), dtype=np.int64)
         """``(n, 3)`` int64, one label per component of :attr:`mix` (None: unlabelled)."""
         shared = SHARED_ORIGIN if shared_births else None
-        self.publication = None if origin is None else Publication(self.origin, shared=shared)
+        self.publication = None if origin is None else Publication(self.origin, shared=shared,
+                                                                   revisit=revisit)
         """Which labels have been on the network: an own label is stamped ``(origin, k,
         PUBLISHED_BASE + i)`` when first published (a shared birth ``(SHARED_ORIGIN, k,
         PUBLISHED_BASE + i)``), any label again when it returns after a long gap
-        (tracking.labels.Publication)."""
+        (tracking.labels.Publication; the gap counted in looks of ``revisit`` scans: a rotating
+        radar's rotation)."""
         self.reid = (None if origin is None
                      else Reidentification(filt.motion, self.origin, shared=shared))
         """A re-born track takes its lost label back (tracking.reidentify)."""

@@ -115,8 +115,9 @@ def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: n
 
 
 REPUBLISH_GAP = 3
-"""Scans a published label may stay unpublished at a peer and keep its stamp
-(:class:`Publication`); longer, and it is stamped anew when it returns."""
+"""Looks a published label may stay unpublished at a peer and keep its stamp
+(:class:`Publication`); longer, and it is stamped anew when it returns. A look is a scan, or a
+rotation of a rotating radar whose plots are spread over the scans (``Publication.revisit``)."""
 
 
 @dataclass
@@ -144,6 +145,12 @@ class Publication:
     origin: int
     gap: int | None = REPUBLISH_GAP
     """None: a label once published keeps its stamp while any component carries it."""
+    revisit: int = 1
+    """Scans between two looks of the sensor at a target (a rotating radar's rotation in
+    scans, rounded up; 1: every scan sees every target). A label returns only at a look, so
+    the gap is counted in looks: more than ``(gap + 1) * revisit`` scans since it was last
+    published (with ``revisit`` 1 scans, a gap of 3 meant 6 s at a 2 s tick, less than one
+    rotation of a 10 s radar: every missed plot re-stamped its track, issue 34)."""
     shared: int | None = None
     """The origin of births every peer labels alike (:data:`tracking.label_keys.SHARED_ORIGIN`;
     None: none). Such a birth ``(shared, b, i)`` first published at ``k`` is stamped ``(shared,
@@ -158,6 +165,10 @@ class Publication:
                               init=False, repr=False)
     """The scan each was last published."""
     _k: int = field(default=0, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.revisit < 1:
+            raise ValueError(f"Publication.revisit must be at least 1, got {self.revisit}")
 
     def _lookup(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each key was published, and its last scan (``(n,)`` bool, int64)."""
@@ -180,7 +191,8 @@ class Publication:
         alike = np.zeros(len(labels), dtype=bool)
         if self.shared is not None:
             alike = on & ~known & (labels[:, 0] == self.shared) & unstamped
-        back = known & (self.gap is not None) & (k - last > (self.gap or 0) + 1)
+        back = (known & (self.gap is not None)
+                & (k - last > ((self.gap or 0) + 1) * self.revisit))
         new = on & (fresh | back) | alike
         if new.any():
             labels = labels.copy()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from sensornet.peers.estimators import GmphdEstimator
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
 from sensornet.peers.labelling import origin_of
@@ -24,6 +26,13 @@ def mixture_fuser(scn: Scenario, reducer):
     return NoFuser()
 
 
+def revisit_scans(scn: Scenario, name: str) -> int:
+    """Scans between two looks of sensor ``name`` at a target: a rotating radar's rotation in
+    scans, rounded up (its plots are spread over the scans its beam sweeps), else 1."""
+    rotation = scn.sensor(name).rotation_period
+    return max(1, math.ceil(rotation / scn.scan_period - 1e-9)) if rotation else 1
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     filt = make_filter(scn, [name])
     origin = origin_of([s.name for s in scn.sensors], name)
@@ -31,7 +40,7 @@ def build(scn: Scenario, name: str, run: int = 0):
               and scn.birth.model != "measurements")
     est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold,
                          origin=SHARED_ORIGIN + 1 + origin if shared else origin,
-                         shared_births=shared)
+                         shared_births=shared, revisit=revisit_scans(scn, name))
     return est, mixture_fuser(scn, filt.reducer)
 
 
