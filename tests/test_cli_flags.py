@@ -259,6 +259,7 @@ def test_run_that_scored_nothing_exits_nonzero(tmp_path, monkeypatch, capsys):
     class Handle:
         logs = {n: tmp_path / f"{n}.log" for n in ("world", "s1", "s2", "s3")}
         procs: dict = {}
+        timed_out = False  # as a RunHandle whose run ended by itself
 
     summary = {"scans": 0, "mean_ospa_local": None, "mean_ospa_fused": None,
                "messages_sent": 0, "messages_received": 0, "bytes_sent": 0,
