@@ -139,8 +139,13 @@ def strip_array(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
     """Line strips as Rerun's Arrow type, built in one go: ``points (P, 2)`` end to end,
     ``lengths (n,)`` points per strip (Rerun's own conversion of a list of strips costs ~5 us
     a strip in Python; a view of 100 peers draws ~30,000 dashed segments a scan)."""
-    dt = LineStrip2DBatch._ARROW_DATATYPE
-    flat = pa.array(np.ascontiguousarray(points, np.float32).reshape(-1), pa.float32())
+    return list_array(points, lengths, LineStrip2DBatch._ARROW_DATATYPE, np.float32)
+
+
+def list_array(points: np.ndarray, lengths: np.ndarray, dt: pa.DataType, dtype) -> pa.Array:
+    """Rows of fixed-size points as an Arrow list array of type ``dt`` (a list of fixed-size
+    lists of ``dtype``): ``points (P, m)`` end to end, ``lengths (n,)`` points per row."""
+    flat = pa.array(np.ascontiguousarray(points, dtype).reshape(-1), pa.from_numpy_dtype(dtype))
     offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
     np.cumsum(lengths, out=offsets[1:])
     return pa.ListArray.from_arrays(pa.array(offsets),

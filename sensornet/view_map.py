@@ -47,7 +47,7 @@ from sensornet.protocol.messages import Tracks, Truth
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.traffic.opensky import LocalFrame
 from sensornet.sim.traffic.recorded import recorded_world
-from sensornet.view_columns import Batcher
+from sensornet.view_columns import Batcher, list_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels
 
 GEO_POINTS, GEO_STRIPS = "geopoints", "geostrips"
@@ -302,10 +302,4 @@ def geo_strips_columns(frame: LocalFrame, rr, data: list) -> list:
 def geo_strip_array(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
     """Geo line strings as Rerun's Arrow type in one go: ``points (P, 2)`` [lat, lon] end to
     end, ``lengths (s,)`` points per line."""
-    dt = GeoLineStringBatch._ARROW_DATATYPE
-    flat = pa.array(np.ascontiguousarray(points, np.float64).reshape(-1), pa.float64())
-    offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
-    return pa.ListArray.from_arrays(pa.array(offsets),
-                                    pa.FixedSizeListArray.from_arrays(flat, type=dt.value_type),
-                                    type=dt)
+    return list_array(points, lengths, GeoLineStringBatch._ARROW_DATATYPE, np.float64)
