@@ -138,18 +138,30 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
 
         sub = s3.declare_subscriber(k.scan("s3"), on_scan)
         tokens, sent, rounds, attacked = [], 0, 0, set()
-        try:
-            # while the world waits for its peers: who cannot even connect
+
+        def refusals() -> None:
+            """Who cannot even connect, checked at once beside the attack (each check may wait
+            out its 1 s connect timeout; run one after another they once ate the whole run)."""
             no_cert = zenoh.Config()
             no_cert.insert_json5("transport/link/tls/root_ca_certificate",
                                  json.dumps(str(keys / "ca.pem")))
-            report["no_cert_refused"] = _refused(no_cert, eps)
             foreign = zenoh.Config()
             Security.load(other_ca, "s2", NETWORK, PEERS).apply(foreign)
-            report["other_ca_refused"] = _refused(foreign, eps)
-            report["plain_tcp_refused"] = _refused(
-                zenoh.Config(), [e.replace("tls/", "tcp/") for e in eps])
+            checks = {"no_cert_refused": (no_cert, eps),
+                      "other_ca_refused": (foreign, eps),
+                      "plain_tcp_refused": (zenoh.Config(),
+                                            [e.replace("tls/", "tcp/") for e in eps])}
+            threads = [threading.Thread(target=lambda n=n, c=c: report.__setitem__(
+                n, _refused(*c))) for n, c in checks.items()]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
             report["all_up"] = all(p.poll() is None for p in handle.procs.values())
+
+        checker = threading.Thread(target=refusals)
+        checker.start()
+        try:
             assert reached.wait(150), f"the run never reached scan {K0} ({seen})"
             empty = GaussianMixture(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4, 4)))
             phantom = np.array([[0.0, 0.0]])
@@ -178,6 +190,7 @@ def test_forgeries_are_refused_and_the_run_matches_the_clean_one(tmp_path, keys,
                 time.sleep(0.02)  # a few forgeries per scan interval (0.1 s)
             report["attack_s"] = round(time.monotonic() - t0, 2)
         finally:
+            checker.join()
             for t in tokens:
                 t.undeclare()
             sub.undeclare()
