@@ -9,8 +9,11 @@ publishes them when the peer is idle (:meth:`Observer.flush`): never in the burs
 scan-to-track latency. The put is best effort (congestion control DROP): a slow view never
 holds a peer back. The peers of a host send theirs together (:class:`HostReports`: one bundle
 on ``telemetries/<host>`` a pass of the host's loop, once none of its peers has work
-waiting). Nobody watching, nothing is gathered: a Zenoh matching listener tells the observer
-whether any subscriber hears its key, and until one does every call returns at once.
+waiting). The view hears nothing a peer publishes for others: each scan's tracks (the bytes
+put on ``tracks/<peer>``) go to it with the scan's report (a host's: in the same bundle), so
+a peer's own puts reach the same sessions whether or not a view listens. Nobody watching,
+nothing is gathered: a Zenoh matching listener tells the observer whether any subscriber
+hears its key, and until one does every call returns at once.
 """
 
 from __future__ import annotations
@@ -38,9 +41,10 @@ GATES_SHOWN = 8
 RETURNS_SHOWN = 64
 """Validated returns of one PDA gate sent per scan, at most: the heaviest (seed 003's dense
 clutter validates 200-300 a sensor late in a run: 16.8 kB of telemetry a scan with all)."""
-_KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer", "trust",
-                    "trust-event"})
-"""Record kinds the report reads (a peer's many ``estimate`` records pass by at once)."""
+KINDS = frozenset({"local", "fusion", "cost", "ospa", "rejected", "scan", "peer", "trust",
+                   "trust-event"})
+"""Record kinds the report reads (a peer's many ``estimate`` records pass by at once: the
+runtime checks the kind before it calls :meth:`Observer.record`)."""
 WAIT_SCANS = 2
 """A scan's report waits for its OSPA (the truth comes half a scan after the scans) at most
 until the tracks of this many later scans are out."""
@@ -152,16 +156,21 @@ class Observer:
             _put(self._scan(k)["values"], name, value)
 
     def published(self, out: Publish, latency_ms: float | None) -> None:
+        """Tracks went out: the report's latency, and their encoded bytes, sent to the view
+        with the report (a view that heard ``tracks/<peer>`` itself made every tracks put
+        fan out to one more session: the peers paid per message for the watcher)."""
         if out.channel != "tracks" or not self.enabled:  # estimates pass by: channel first
             return
         g = self._scan(out.k)
         g["tracks"] = self.wants_flush = True
+        if out.payload:  # the view draws the tracks from the report's put, not tracks/<peer>
+            g["tracks_bytes"] = out.payload
         self._tracks_out = max(self._tracks_out, out.k)
         self._set(out.k, "latency_ms", latency_ms)
 
     def record(self, r: Record, compute_ms: float | None = None) -> None:
         """The scan's report fields from one core record (``local``, ``fusion``: own steps)."""
-        if r.kind not in _KINDS or not self.enabled:  # most records pass by: kind first
+        if r.kind not in KINDS or not self.enabled:  # most records pass by: kind first
             return
         core, k, v = self.core, r.k, r.values
         if r.kind == "local":
@@ -297,8 +306,11 @@ class Observer:
             return
         self.wants_flush = False
         for k in self.ready(force):
+            tracks = self._pending[k].get("tracks_bytes")
             msg = self.message(k)
             try:
+                if tracks is not None:  # the bytes the peer published: no copy, no encoding
+                    self._put(tracks)
                 self._put(encode(msg))
                 self.sent += 1
             except Exception:  # best effort: a view is never worth a peer's error

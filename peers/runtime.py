@@ -23,6 +23,7 @@ from sensornet.peers.admission import Route, peek
 from sensornet.peers.core import PeerCore, Publish, Record, Stop
 from sensornet.peers.faults import FaultInjector, HoldQueue
 from sensornet.peers.inbound import delivered
+from sensornet.peers.observer import KINDS as OBSERVED
 from sensornet.peers.observer import Observer
 from sensornet.peers.recording import Recorder
 from sensornet.peers.run_output import RunOutputs, output_stem
@@ -291,11 +292,12 @@ class PeerRuntime(RunOutputs):
         if channel in ("scan", "estimate", "tick") and outputs:
             self.telemetry.handled(channel, now, leave, outputs)
         scan_ms = (leave - now) * 1e3 if channel == "scan" else None
-        # a live view watching: the observer gathers telemetry, timed with the rest of the
-        # outputs' handling below (a thread-CPU clock read is a system call: two a call cost
-        # more than the gathering itself)
+        # a live view watching: the observer gathers telemetry from the records it reads
+        # (their kind checked here: most are estimates', a call each cost more than the
+        # check), untimed ("loop" CPU) unless the step published: a thread-CPU clock read
+        # is a system call, and most steps publish nothing
         drawing = self.observer.enabled
-        published = drawing
+        published = False
         for out in outputs:
             if isinstance(out, Publish):
                 wall = time.time()
@@ -308,10 +310,10 @@ class PeerRuntime(RunOutputs):
                     self.saved_tracks[out.k] = out.message.states
                 if out.channel == "tracks" and self.recorder is not None:
                     self.recorder.tracks(wall, out.k, out.payload)
-                if drawing:
+                if drawing and out.channel == "tracks":
                     self.observer.published(out, lat)
             elif isinstance(out, Record):
-                if drawing:
+                if drawing and out.kind in OBSERVED:
                     self.observer.record(out, scan_ms)
                 if out.kind == "error":
                     self._report_error(out)

@@ -2,8 +2,11 @@
 recording from what is on the wire (issue 38; ``sensornet view NETWORK --connect EP``).
 
 Peers log nothing to Rerun: like RViz or Foxglove on ROS 2 topics, the view only subscribes
-(scans and scan bundles, estimates, tracks, truth, control and each peer's per-scan
-:class:`protocol.messages.Telemetry`), so a network never pays for who watches it, and a view
+(the world's scans and scan bundles, truth and control, and each peer's per-scan
+:class:`protocol.messages.Telemetry` with its tracks, alone or in its host's bundle), never to
+a key the peers publish for each other (estimates, tracks: each put there would fan out to
+the view too, and the peers would pay per message for the watcher), so a network never pays
+for who watches it beyond its reports, and a view
 that falls behind drops or decimates its own work (counted, and said in one line), never the
 peers'.
 
@@ -100,8 +103,8 @@ class LiveView:
             raise SessionError(f"cannot open Zenoh session (connect {self.connect}): "
                                f"{exc}") from None
         k = Keys(self.network)  # each channel by name: what an observer may subscribe to
-        exprs = [k.scan(), k.scans(), k.tracks(), k.truth(), k.ctl(), k.telemetry(),
-                 k.telemetries(),
+        # no tracks/<peer>: each peer's tracks come with its reports (peers.observer)
+        exprs = [k.scan(), k.scans(), k.truth(), k.ctl(), k.telemetry(), k.telemetries(),
                  *([k.estimate()] if self.estimates else [])]
         self._subs = [self.session.declare_subscriber(e, self._on_sample) for e in exprs]
 

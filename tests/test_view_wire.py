@@ -1,0 +1,150 @@
+"""What a live view hears, and what a watched peer sends for it (issue 38): the view
+subscribes to no key the peers publish for each other (each put there would fan out to the
+view too), so each scan's tracks go to it with the peer's report, the very bytes published."""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+import zenoh
+from sensornet.peers.core import Publish, Record
+from sensornet.peers.observer import KINDS, HostReports, Observer
+from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
+from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.codec import decode, encode
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Telemetry, Tracks
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+
+from sensornet import view as view_module
+from sensornet.view import Batcher, LiveView, ViewState
+
+
+class _Rec:
+    """A recording stream that keeps what it is sent: entity -> (scan indexes, columns)."""
+
+    def __init__(self) -> None:
+        self.calls: dict[str, tuple[list[int], list]] = {}
+
+    def send_columns(self, path, indexes, columns):
+        self.calls[path] = (indexes[0].as_arrow_array().to_pylist(),
+                            [c.as_arrow_array().to_pylist() for c in columns])
+
+
+class _Session:
+    """A Zenoh session that keeps the key expressions subscribed to."""
+
+    def __init__(self) -> None:
+        self.keys: list[str] = []
+
+    def declare_subscriber(self, key, callback):
+        self.keys.append(key)
+        return self
+
+    def undeclare(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _subscribed(monkeypatch, **kwargs) -> list[str]:
+    session = _Session()
+    monkeypatch.setattr(view_module.zenoh, "open", lambda conf: session)
+    lv = LiveView("net", None, None, None, **kwargs)
+    lv.open()
+    lv.close()
+    return session.keys
+
+
+def test_the_view_hears_no_key_a_peer_publishes_for_others(monkeypatch):
+    """Nothing a peer puts for its neighbours (estimates) or for nobody in particular
+    (tracks) reaches a view; its reports and the world's messages do. ``--estimates``
+    asks for the estimates, knowingly."""
+    k = Keys("net")
+    keys = _subscribed(monkeypatch)
+
+    def heard(key: str, exprs: list[str]) -> bool:
+        return any(zenoh.KeyExpr(e).intersects(zenoh.KeyExpr(key)) for e in exprs)
+
+    assert not heard(k.tracks("s1"), keys) and not heard(k.estimate("s1"), keys)
+    for key in (k.telemetry("s1"), k.telemetries("h1"), k.scan("s1"), k.scans("h1"),
+                k.truth(), k.ctl()):
+        assert heard(key, keys), key
+    assert heard(k.estimate("s1"), _subscribed(monkeypatch, estimates=True))
+
+
+def _scan(obs: Observer, k: int, n: int) -> bytes:
+    """Scan ``k`` of a peer that scores nothing: a local step and ``n`` tracks published;
+    returns the tracks' bytes as published."""
+    obs.record(Record("local", k, {"n_components": n + 3, "n_published": n}), 1.5)
+    tracks = Tracks(obs.name, k, np.full((n, 4), float(n)), send_time=1.0)
+    payload = encode(tracks)
+    obs.published(Publish("tracks", k, payload, tracks), 10.0)
+    return payload
+
+
+def test_a_scans_tracks_go_with_its_report_and_are_drawn_from_it():
+    """A hosted peer's tracks ride in its host's bundle beside its report, the very bytes
+    published (no copy, no encoding); a peer of its own process sends them on its own
+    telemetry key. The view draws both the same, as tracks of that peer."""
+    scn = load_scenario("seed000", {"scenario.num_scans": 3})
+    name = scn.sensor_names[0]
+    bundles: list[bytes] = []
+    reports = HostReports(bundles.append)
+    hosted = reports.add(Observer(make_peer(scn, name, score_truth=False)))
+    own: list[bytes] = []
+    alone = Observer(make_peer(scn, name, score_truth=False)).attach(own.append)
+    published = {}
+    for obs in (hosted, alone):
+        obs.core.wants_truth = False
+        published[id(obs)] = _scan(obs, 4, 2)
+        obs.flush(idle=True, host=True)
+    reports.send()
+    (entries,) = [unpack_bundle(b).entries for b in bundles]
+    assert [n for n, _ in entries] == [name, name]
+    assert entries[0][1] == published[id(hosted)] and len(own) == 2
+    assert own[0] is published[id(alone)]  # handed over as published
+    assert isinstance(decode(own[1]), Telemetry) and hosted.sent == alone.sent == 1
+    drawn = []
+    for heard in ([("sensornet/net/telemetries/h1", bundles[0])],
+                  [(f"sensornet/net/telemetry/{name}", b) for b in own]):
+        rec = _Rec()
+        state = ViewState(Batcher(rr, rec), [name])
+        for key, payload in heard:
+            state.receive(key, payload)
+        state.b.flush()
+        assert state.rejected == 0 and state.handled == 2
+        scans, columns = rec.calls[f"peers/{name}/tracks"]
+        assert scans == [4] and len(state.lag_ms) == 1
+        drawn.append(columns)
+    assert drawn[0] == drawn[1]
+    assert np.allclose(np.asarray(drawn[0][0][0]), [[2.0, -2.0], [2.0, -2.0]])  # north up
+
+
+def test_a_watched_runtime_hands_the_observer_only_what_it_reads():
+    """The runtime passes the observer the tracks it published and the records of the
+    kinds it reads (:data:`peers.observer.KINDS`), none of the rest (most records are
+    estimates': a call each for nothing); the report then carries the tracks' bytes."""
+    scn = load_scenario("seed000", {"scenario.num_scans": 3})
+    rt = PeerRuntime(make_peer(scn, scn.sensor_names[0], network="net", score_truth=False),
+                     RuntimeOptions(rerun=False))
+    rt.core.wants_truth = False
+    put: list[tuple[str, bytes]] = []
+    rt.transport.publish = lambda channel, payload: put.append((channel, payload))
+    sent: list[bytes] = []
+    rt.observer.attach(sent.append)
+    seen: list[str] = []
+    record = rt.observer.record
+    rt.observer.record = lambda r, ms=None: (seen.append(r.kind), record(r, ms))
+    tracks = Tracks(rt.name, 3, np.zeros((1, 4)))
+    est = Publish("estimate", 3, b"estimate bytes", None)
+    outputs = [est, Publish("tracks", 3, encode(tracks), tracks),
+               Record("estimate", 3, {"sender": "x"}), Record("local", 3, {"n_components": 2}),
+               Record("fusion-input", 3, {})]
+    rt._carry_out("tick", lambda now: outputs, 100.0)
+    assert [c for c, _ in put] == ["estimate", "tracks"]
+    assert seen == ["local"] and set(seen) <= KINDS
+    rt.observer.flush(idle=True)
+    assert sent[0] == put[1][1] and decode(sent[1]).k == 3
