@@ -385,8 +385,9 @@ def part_targets(tmp: Path, sizes: list[int], degrees: list[int], packings: list
 
 WATCHED_PARTS = ("publish", "telemetry", "transport", "loop")
 """The CPU parts a watched peer's extra work shows in (``cpu_ms_breakdown``): publishing (the
-observer's gathering is timed with it; tracks put to a remote subscriber), the telemetry
-reports, Zenoh's threads, the rest of the loop."""
+observer's gathering in steps that publish is timed with it), the telemetry reports (packing
+them, their tracks and the put), Zenoh's threads, the rest of the loop (the gathering in steps
+that publish nothing)."""
 
 
 def worst_p99(summaries: dict, skip: int = 0) -> float:
