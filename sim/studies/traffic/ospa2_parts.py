@@ -1,0 +1,136 @@
+"""What OSPA(2) charges on real traffic (issue 34): localisation, gaps, or the track count.
+
+OSPA(2) on a window (Beard, Vo & Vo 2020, Sec. VI; :func:`tracking.track_metrics.ospa2_dense`)
+is ``((sum_pairs B + c^p |n - m|) / max(n, m))^(1/p)`` over ``n`` estimated and ``m`` true
+tracks present in the window, ``B = base^p`` with ``base`` a pair's mean over the scans where
+either exists of ``min(c, d)`` (both exist) or ``c`` (one exists). Its ``p``-th power splits
+exactly into
+
+* ``loc``: the pairs' base from scans where both exist and ``d < c`` (localisation),
+* ``gap``: the pairs' base from scans where one exists or ``d >= c`` (a track starting late or
+  ending early inside the window, a miss),
+* ``card``: ``c^p |n - m|`` (tracks without a partner: an extra id from a switch or a
+  fragment, a false track, an aircraft without track),
+
+each pair's ``B`` shared between ``loc`` and ``gap`` in proportion to their parts of its base.
+Per window the three are divided by ``max(n, m)``; their means over windows (``(p)``-th power
+units, m^2 for ``p = 2``) add up to the mean of OSPA(2)^p. So a fusion that halves the
+localisation error cannot halve OSPA(2) if ``card`` dominates it.
+
+``python -m sensornet.sim.studies.traffic.ospa2_parts [SCENARIO] --file F --start S --minutes
+M [--kinds gmphd,lmb] [--set KEY=VALUE ...]``: per kind, local (each peer), fused (first peer)
+and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the three shares.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.studies.traffic.metrics import _rows_between
+from sensornet.sim.studies.traffic.study import WINDOW, run_part
+from sensornet.tracking.track_metrics import TrackTable, _pair_dist
+
+
+def ospa2_parts_dense(E: np.ndarray, Y: np.ndarray, c: float, p: float, window: int
+                      ) -> np.ndarray:
+    """``(T, 4)`` per window ending at each scan: ``loc``, ``gap``, ``card`` (each already
+    divided by ``max(n, m)``) and OSPA(2), for dense estimates ``E (T, n, d)`` and truth ``Y
+    (T, m, d)`` (NaN rows absent). ``loc + gap + card == OSPA(2)^p``."""
+    T = E.shape[0]
+    ex, ty = ~np.isnan(E).any(-1), ~np.isnan(Y).any(-1)
+    D = _pair_dist(E, Y)
+    either = ex[:, :, None] | ty[:, None, :]
+    near = ~np.isnan(D) & (np.nan_to_num(D, nan=np.inf) < c)
+    Cl = np.where(near, D, 0.0)  # the localisation part of each scan's cost
+    Cg = np.where(near, 0.0, np.where(either, c, 0.0))  # c where one exists or d >= c
+
+    def cum(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.zeros((1, *a.shape[1:])), np.cumsum(a, axis=0)])
+
+    cL, cG, cU = cum(Cl), cum(Cg), cum(either.astype(float))
+    cx, cy = cum(ex.astype(float)), cum(ty.astype(float))
+    out = np.zeros((T, 4))
+    for k in range(T):
+        s, e = max(k + 1 - window, 0), k + 1
+        xi, yj = np.nonzero(cx[e] - cx[s])[0], np.nonzero(cy[e] - cy[s])[0]
+        n, m = len(xi), len(yj)
+        if n == 0 or m == 0:
+            out[k] = (0.0, 0.0, c**p if n != m else 0.0, 0.0 if n == m else c)
+            continue
+        sub = np.ix_(xi, yj)
+        U = cU[e][sub] - cU[s][sub]
+        bl, bg = (cL[e][sub] - cL[s][sub]) / U, (cG[e][sub] - cG[s][sub]) / U
+        B = (bl + bg) ** p
+        r, q = linear_sum_assignment(B)
+        share = np.divide(bl[r, q], bl[r, q] + bg[r, q], out=np.zeros(len(r)),
+                          where=(bl[r, q] + bg[r, q]) > 0)
+        big = max(n, m)
+        loc, gap = (B[r, q] * share).sum() / big, (B[r, q] * (1 - share)).sum() / big
+        card = c**p * abs(n - m) / big
+        out[k] = (loc, gap, card, (loc + gap + card) ** (1.0 / p))
+    return out
+
+
+def ospa2_parts(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, p: float,
+                window: int, chunk: int = 400) -> np.ndarray:
+    """:func:`ospa2_parts_dense` on a long run, ``chunk`` scans at a time (each window looks
+    back ``window - 1`` scans only): ``(T, 4)`` over ``grid (T,)`` (sorted scans)."""
+    grid = np.asarray(grid, dtype=np.int64)
+    out = np.empty((len(grid), 4))
+    for a in range(0, len(grid), chunk):
+        b = min(a + chunk, len(grid))
+        s = max(a - window + 1, 0)
+        sub = grid[s:b]
+        Tt, Et = (_rows_between(x, int(sub[0]), int(sub[-1])) for x in (truth, est))
+        out[a:b] = ospa2_parts_dense(Et.dense(sub)[1], Tt.dense(sub)[1], c, p, window)[a - s:]
+    return out
+
+
+def summary(parts: np.ndarray, p: float) -> dict[str, float]:
+    """Mean OSPA(2), its RMS and the shares of ``loc``, ``gap``, ``card`` in mean OSPA(2)^p."""
+    tot = parts[:, :3].sum(axis=1).mean()
+    sh = parts[:, :3].mean(axis=0) / tot if tot > 0 else np.zeros(3)
+    return {"ospa2": float(parts[:, 3].mean()), "rms": float(tot ** (1.0 / p)),
+            "loc": float(sh[0]), "gap": float(sh[1]), "card": float(sh[2])}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.ospa2_parts",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenario", nargs="?", default="paris-8")
+    ap.add_argument("--file")
+    ap.add_argument("--start", type=float)
+    ap.add_argument("--minutes", type=float)
+    ap.add_argument("--kinds", default="gmphd,lmb")
+    ap.add_argument("--run", type=int, default=0)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    a = ap.parse_args(argv)
+    over = parse_overrides(a.set)
+    if a.file:
+        over["traffic.file"] = a.file
+    if a.start is not None:
+        over["traffic.start"] = a.start
+    scn = load_scenario(a.scenario, overrides=over)
+    if a.minutes is not None:
+        over["scenario.num_scans"] = int(round(a.minutes * 60 / scn.scan_period))
+        scn = load_scenario(a.scenario, overrides=over)
+    c, p = scn.metrics.ospa_cutoff, scn.metrics.ospa_order
+    grid = np.arange(1, scn.num_scans + 1)
+    print("kind estimate peer: OSPA(2) mean, rms; shares of mean OSPA(2)^p: loc gap card")
+    for kind in a.kinds.split(","):
+        for est in ("local", "fused", "centralised"):
+            part = run_part(a.scenario, over, kind, est, a.run, with_hota=False,
+                            keep_tables=True)
+            names = list(part.tables)[:1] if est == "fused" else list(part.tables)
+            for name in names:
+                s = summary(ospa2_parts(part.truth, part.tables[name], grid, c, p, WINDOW), p)
+                print(f"{kind} {est} {name}: {s['ospa2']:.1f}, {s['rms']:.1f}; "
+                      f"{s['loc']:.2f} {s['gap']:.2f} {s['card']:.2f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

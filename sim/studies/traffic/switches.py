@@ -1,0 +1,141 @@
+"""Where a tracker's identity switches on real traffic happen (issue 34): one line per switch.
+
+A switch (CLEAR MOT matching at the OSPA cut-off, :func:`tracking.track_metrics.clear_match`)
+is an aircraft whose matched track differs from the one it last had. Per switch: the tick,
+the aircraft (icao24), the old and new track labels ``(origin, scan, index)``, how old the
+new label is (ticks since it was first seen on this peer), what became of the old track
+(``swap``: it now holds another aircraft; ``dropped``: it is gone; ``coasting``: present but
+matched to nothing), the nearest other aircraft (m) and the aircraft's speed, turn rate and
+the radars whose coverage it is in. Cause classes, so a fix can be aimed at the largest:
+
+* ``crossing``: another aircraft within 3 km (their tracks' labels can trade);
+* ``relabel``: the old track is gone and the new label is older than the switch (a label
+  that existed elsewhere took the aircraft: the network rule replacing the id);
+* ``reborn``: the old track is gone and the new label is new (a lost and re-born track);
+* ``other``.
+
+``python -m sensornet.sim.studies.traffic.switches [SCENARIO] --file F --start S --minutes M
+[--kind lmb] [--estimate fused] [--peer NAME] [--set KEY=VALUE ...]``
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+
+import numpy as np
+from sensornet.sim.run.twin import run_twin
+from sensornet.sim.scenario import Scenario, load_scenario, parse_overrides
+from sensornet.sim.studies.labelled.study import peer_tables, truth_table
+from sensornet.sim.world import Truth, generate_run
+from sensornet.tracking.track_metrics import TrackTable, clear_match
+
+NEAR = 3000.0
+"""An aircraft closer than this (m) to the switching one makes the switch a crossing."""
+
+
+def switch_events(scn: Scenario, run: int, which: str, peer: str | None = None
+                  ) -> tuple[list[dict], dict]:
+    """The switches of ``peer``'s ``which`` (``"local"``/``"fused"``) tracks (first peer if
+    None) on the scenario's twin, as :func:`trace` gives them."""
+    truth, _ = generate_run(scn, run)
+    twin = run_twin(scn, run)
+    peer = peer or scn.sensor_names[0]
+    code: dict = {}
+    est = peer_tables(twin, [peer], which, code)[peer]
+    sites = {s.name: (np.asarray(s.position[:2], float), float(s.max_range or np.inf))
+             for s in scn.sensors}
+    return trace(truth, est, {v: k for k, v in code.items()}, sites,
+                 scn.metrics.ospa_cutoff, scn.scan_period)
+
+
+def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
+          period: float) -> tuple[list[dict], dict]:
+    """Each identity switch of ``est`` against ``truth`` (CLEAR MOT at ``gate``) as a dict:
+    ``tick``, ``aircraft`` (hex id), ``old``/``new`` labels (``label``: table id -> label),
+    ``new_age`` (ticks since the new id was first in ``est``), ``fate`` of the old track,
+    ``near_m``, ``speed``, ``turn`` (deg/s), ``centre_km``, ``cover`` (radars in ``sites``:
+    name -> (position (2,), max range) whose range holds it) and ``cause`` (module
+    docstring); and the totals."""
+    T = truth_table(truth)
+    grid = np.arange(1, truth.num_scans + 1)
+    cm = clear_match(T, est, gate, grid)
+    first_seen = {int(i): int(est.scan[est.id == i].min()) for i in np.unique(est.id)}
+    events = []
+    last = np.full(len(cm.truth_ids), -1)
+    for t, k in enumerate(grid):
+        X, ids = truth.states[t], np.asarray(truth.ids[t])
+        for j in np.flatnonzero(cm.switch[t]):
+            a = int(cm.truth_ids[j])
+            old, new = last[j], cm.match[t, j]
+            old_id, new_id = int(cm.est_ids[old]), int(cm.est_ids[new])
+            fate = ("swap" if (cm.match[t] == old).any() else "coasting"
+                    if cm.est_present[t, old] else "dropped")
+            x = X[ids == a][0]
+            d = np.hypot(X[ids != a, 0] - x[0], X[ids != a, 2] - x[2])
+            near = float(d.min()) if len(d) else np.inf
+            turn = np.nan
+            if 0 < t < len(grid) - 1:
+                h0 = truth.states[t - 1][np.asarray(truth.ids[t - 1]) == a]
+                h1 = truth.states[t + 1][np.asarray(truth.ids[t + 1]) == a]
+                if len(h0) and len(h1):
+                    dh = np.arctan2(h1[0, 3], h1[0, 1]) - np.arctan2(h0[0, 3], h0[0, 1])
+                    turn = abs((np.degrees(dh) + 180) % 360 - 180) / (2 * period)
+            cover = sum(np.hypot(x[0] - p[0], x[2] - p[1]) <= r for p, r in sites.values())
+            age = int(k) - first_seen[new_id]
+            cause = ("crossing" if near < NEAR else
+                     "relabel" if fate == "dropped" and age > 0 else
+                     "reborn" if fate == "dropped" else "other")
+            events.append({"tick": int(k), "aircraft": f"{a:06x}",
+                           "old": label.get(old_id, old_id), "new": label.get(new_id, new_id),
+                           "new_age": age, "fate": fate, "near_m": near,
+                           "speed": float(np.hypot(x[1], x[3])), "turn": turn,
+                           "centre_km": float(np.hypot(x[0], x[2]) / 1e3), "cover": int(cover),
+                           "cause": cause})
+        m = cm.match[t] >= 0
+        last[m] = cm.match[t, m]
+    totals = {"switches": len(events), "aircraft": len(cm.truth_ids),
+              "tracks": len(cm.est_ids), "ticks": len(grid)}
+    return events, totals
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.switches",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenario", nargs="?", default="paris-8")
+    ap.add_argument("--file")
+    ap.add_argument("--start", type=float)
+    ap.add_argument("--minutes", type=float)
+    ap.add_argument("--kind", default="lmb")
+    ap.add_argument("--estimate", default="fused", choices=("local", "fused"))
+    ap.add_argument("--peer")
+    ap.add_argument("--run", type=int, default=0)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    a = ap.parse_args(argv)
+    over = parse_overrides(a.set)
+    over["network.filter"] = a.kind
+    if a.estimate == "local":
+        over["fusion.rule"] = "none"
+    if a.file:
+        over["traffic.file"] = a.file
+    if a.start is not None:
+        over["traffic.start"] = a.start
+    scn = load_scenario(a.scenario, overrides=over)
+    if a.minutes is not None:
+        over["scenario.num_scans"] = int(round(a.minutes * 60 / scn.scan_period))
+        scn = load_scenario(a.scenario, overrides=over)
+    events, totals = switch_events(scn, a.run, a.estimate, a.peer)
+    print(f"{totals['switches']} switches, {totals['aircraft']} aircraft, {totals['tracks']} "
+          f"track ids, {totals['ticks']} ticks")
+    print("tick aircraft old -> new (new age) fate near_m speed turn centre_km cover cause")
+    for e in events:
+        print(f"{e['tick']} {e['aircraft']} {e['old']} -> {e['new']} ({e['new_age']}) "
+              f"{e['fate']} {e['near_m']:.0f} {e['speed']:.0f} {e['turn']:.1f} "
+              f"{e['centre_km']:.1f} {e['cover']} {e['cause']}")
+    print("by cause:", dict(Counter(e["cause"] for e in events)))
+    print("by aircraft:", dict(Counter(e["aircraft"] for e in events).most_common(10)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
