@@ -19,9 +19,10 @@ def test_parts_add_up_to_ospa2_of_the_reference(seed):
     E, Y = _random_dense(rng, 30, 5, 0.3), _random_dense(rng, 30, 4, 0.2)
     parts = ospa2_parts_dense(E, Y, 1000.0, 2.0, 10)
     ref = ospa2_dense(E, Y, 1000.0, 2.0, 10)
-    np.testing.assert_allclose(parts[:, 3], ref, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(parts[:, :3].sum(axis=1), ref**2, rtol=1e-9, atol=1e-6)
-    assert (parts[:, :3] >= 0).all()
+    np.testing.assert_allclose(parts[:, 4], ref, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(parts[:, :4].sum(axis=1), ref**2, rtol=1e-9, atol=1e-6)
+    assert (parts[:, :4] >= 0).all()
+    assert not (parts[:, 2] * parts[:, 3]).any()  # missing and extra never both
 
 
 def test_a_switch_is_charged_to_the_track_count_and_an_offset_to_localisation():
@@ -31,12 +32,12 @@ def test_a_switch_is_charged_to_the_track_count_and_an_offset_to_localisation():
     sw = TrackTable(np.arange(1, T + 1), (np.arange(T) >= 5).astype(int), np.zeros((T, 2)))
     grid = np.arange(1, T + 1)
     a = summary(ospa2_parts(truth, off, grid, 1000.0, 2.0, 10), 2.0)
-    assert a["loc"] == pytest.approx(1.0) and a["card"] == 0.0
+    assert a["loc"] == pytest.approx(1.0) and a["missing"] == a["extra"] == 0.0
     b = ospa2_parts(truth, sw, grid, 1000.0, 2.0, 10)
     # the last window holds both ids: one pair half present (gap), one id without partner
-    assert b[-1, 2] == pytest.approx(1000.0**2 / 2)
+    assert b[-1, 3] == pytest.approx(1000.0**2 / 2) and b[-1, 2] == 0.0
     assert b[-1, 1] == pytest.approx(500.0**2 / 2)
-    assert b[:5, :3].sum() == 0.0
+    assert b[:5, :4].sum() == 0.0
 
 
 def test_chunked_equals_whole():

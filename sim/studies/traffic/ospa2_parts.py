@@ -9,17 +9,19 @@ exactly into
 * ``loc``: the pairs' base from scans where both exist and ``d < c`` (localisation),
 * ``gap``: the pairs' base from scans where one exists or ``d >= c`` (a track starting late or
   ending early inside the window, a miss),
-* ``card``: ``c^p |n - m|`` (tracks without a partner: an extra id from a switch or a
-  fragment, a false track, an aircraft without track),
+* ``card``: ``c^p |n - m|`` (tracks without a partner), split by its sign: ``missing``
+  (``m > n``: aircraft in the window without a track) and ``extra`` (``n > m``: more track
+  ids than aircraft: a switch or a fragment gives an aircraft two ids in one window, or a
+  false track),
 
 each pair's ``B`` shared between ``loc`` and ``gap`` in proportion to their parts of its base.
-Per window the three are divided by ``max(n, m)``; their means over windows (``(p)``-th power
+Per window the parts are divided by ``max(n, m)``; their means over windows (``p``-th power
 units, m^2 for ``p = 2``) add up to the mean of OSPA(2)^p. So a fusion that halves the
 localisation error cannot halve OSPA(2) if ``card`` dominates it.
 
 ``python -m sensornet.sim.studies.traffic.ospa2_parts [SCENARIO] --file F --start S --minutes
 M [--kinds gmphd,lmb] [--set KEY=VALUE ...]``: per kind, local (each peer), fused (first peer)
-and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the three shares.
+and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the four shares.
 """
 
 from __future__ import annotations
@@ -33,12 +35,16 @@ from sensornet.sim.studies.traffic.metrics import _rows_between
 from sensornet.sim.studies.traffic.study import WINDOW, run_part
 from sensornet.tracking.track_metrics import TrackTable, _pair_dist
 
+PARTS = ("loc", "gap", "missing", "extra")
+"""The parts of OSPA(2)^p (module docstring)."""
+
 
 def ospa2_parts_dense(E: np.ndarray, Y: np.ndarray, c: float, p: float, window: int
                       ) -> np.ndarray:
-    """``(T, 4)`` per window ending at each scan: ``loc``, ``gap``, ``card`` (each already
-    divided by ``max(n, m)``) and OSPA(2), for dense estimates ``E (T, n, d)`` and truth ``Y
-    (T, m, d)`` (NaN rows absent). ``loc + gap + card == OSPA(2)^p``."""
+    """``(T, 5)`` per window ending at each scan: ``loc``, ``gap``, ``missing``, ``extra``
+    (each already divided by ``max(n, m)``) and OSPA(2), for dense estimates ``E (T, n, d)``
+    and truth ``Y (T, m, d)`` (NaN rows absent). ``loc + gap + missing + extra ==
+    OSPA(2)^p``."""
     T = E.shape[0]
     ex, ty = ~np.isnan(E).any(-1), ~np.isnan(Y).any(-1)
     D = _pair_dist(E, Y)
@@ -52,13 +58,13 @@ def ospa2_parts_dense(E: np.ndarray, Y: np.ndarray, c: float, p: float, window: 
 
     cL, cG, cU = cum(Cl), cum(Cg), cum(either.astype(float))
     cx, cy = cum(ex.astype(float)), cum(ty.astype(float))
-    out = np.zeros((T, 4))
+    out = np.zeros((T, 5))
     for k in range(T):
         s, e = max(k + 1 - window, 0), k + 1
         xi, yj = np.nonzero(cx[e] - cx[s])[0], np.nonzero(cy[e] - cy[s])[0]
         n, m = len(xi), len(yj)
         if n == 0 or m == 0:
-            out[k] = (0.0, 0.0, c**p if n != m else 0.0, 0.0 if n == m else c)
+            out[k] = (0.0, 0.0, c**p * (m > n), c**p * (n > m), 0.0 if n == m else c)
             continue
         sub = np.ix_(xi, yj)
         U = cU[e][sub] - cU[s][sub]
@@ -70,16 +76,16 @@ def ospa2_parts_dense(E: np.ndarray, Y: np.ndarray, c: float, p: float, window: 
         big = max(n, m)
         loc, gap = (B[r, q] * share).sum() / big, (B[r, q] * (1 - share)).sum() / big
         card = c**p * abs(n - m) / big
-        out[k] = (loc, gap, card, (loc + gap + card) ** (1.0 / p))
+        out[k] = (loc, gap, card * (m > n), card * (n > m), (loc + gap + card) ** (1.0 / p))
     return out
 
 
 def ospa2_parts(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, p: float,
                 window: int, chunk: int = 400) -> np.ndarray:
     """:func:`ospa2_parts_dense` on a long run, ``chunk`` scans at a time (each window looks
-    back ``window - 1`` scans only): ``(T, 4)`` over ``grid (T,)`` (sorted scans)."""
+    back ``window - 1`` scans only): ``(T, 5)`` over ``grid (T,)`` (sorted scans)."""
     grid = np.asarray(grid, dtype=np.int64)
-    out = np.empty((len(grid), 4))
+    out = np.empty((len(grid), 5))
     for a in range(0, len(grid), chunk):
         b = min(a + chunk, len(grid))
         s = max(a - window + 1, 0)
@@ -90,11 +96,12 @@ def ospa2_parts(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, 
 
 
 def summary(parts: np.ndarray, p: float) -> dict[str, float]:
-    """Mean OSPA(2), its RMS and the shares of ``loc``, ``gap``, ``card`` in mean OSPA(2)^p."""
-    tot = parts[:, :3].sum(axis=1).mean()
-    sh = parts[:, :3].mean(axis=0) / tot if tot > 0 else np.zeros(3)
-    return {"ospa2": float(parts[:, 3].mean()), "rms": float(tot ** (1.0 / p)),
-            "loc": float(sh[0]), "gap": float(sh[1]), "card": float(sh[2])}
+    """Mean OSPA(2), its RMS and the shares of ``loc``, ``gap``, ``missing``, ``extra`` in
+    mean OSPA(2)^p."""
+    tot = parts[:, :4].sum(axis=1).mean()
+    sh = parts[:, :4].mean(axis=0) / tot if tot > 0 else np.zeros(4)
+    return {"ospa2": float(parts[:, 4].mean()), "rms": float(tot ** (1.0 / p)),
+            **{n: float(v) for n, v in zip(PARTS, sh, strict=True)}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         scn = load_scenario(a.scenario, overrides=over)
     c, p = scn.metrics.ospa_cutoff, scn.metrics.ospa_order
     grid = np.arange(1, scn.num_scans + 1)
-    print("kind estimate peer: OSPA(2) mean, rms; shares of mean OSPA(2)^p: loc gap card")
+    print("kind estimate peer: OSPA(2) mean, rms; shares of mean OSPA(2)^p: loc gap missing "
+          "extra")
     for kind in a.kinds.split(","):
         for est in ("local", "fused", "centralised"):
             part = run_part(a.scenario, over, kind, est, a.run, with_hota=False,
@@ -128,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
             for name in names:
                 s = summary(ospa2_parts(part.truth, part.tables[name], grid, c, p, WINDOW), p)
                 print(f"{kind} {est} {name}: {s['ospa2']:.1f}, {s['rms']:.1f}; "
-                      f"{s['loc']:.2f} {s['gap']:.2f} {s['card']:.2f}", flush=True)
+                      + " ".join(f"{s[n]:.2f}" for n in PARTS), flush=True)
     return 0
 
 
