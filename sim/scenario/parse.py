@@ -7,7 +7,6 @@ import math
 from datetime import datetime
 from pathlib import Path
 
-import pymap3d
 from sensornet.protocol.keys import check_name
 from sensornet.sim.kinds import kind as peer_kind
 from sensornet.sim.scenario.common import parse_lie
@@ -163,6 +162,8 @@ def _site(s: Table, traffic: TrafficSpec | None) -> tuple[tuple[float, float],
         raise s.fail("site", f"is [{lat:g}, {lon:g}], not a [latitude, longitude] in degrees")
     if traffic is None or traffic.centre is None:
         raise s.fail("site", "needs 'traffic.centre' (the origin of the local frame)")
+    # heavy optional dependency: pymap3d (25 ms of CPU at every process's start, for sites)
+    import pymap3d
     e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *traffic.centre, 0.0)
     return (float(e), float(n)), (lat, lon)
 

@@ -24,7 +24,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from sensornet.sim.traffic.radar import RotatingRadar, _default_phase
 from sensornet.tracking.gmphd import GMPHDFilter, predict, update_parents
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
@@ -112,6 +111,9 @@ def rotation_phase(spec) -> float:
     name (``sim.traffic.radar``'s default), so no two default in step."""
     if spec.phase is not None:
         return float(spec.phase) % spec.rotation_period
+    # heavy optional dependency: pyarrow (sim.traffic reads recorded traffic; a run without
+    # rotating radars, most of them, starts 45 ms of CPU sooner without it)
+    from sensornet.sim.traffic.radar import _default_phase
     return _default_phase(spec.name, spec.rotation_period)
 
 
@@ -120,6 +122,8 @@ def radar_pd(spec, r50_fraction: float = R50_FRACTION):
     ``detection_probability`` at short range, half of it at ``r50_fraction * max_range``,
     0 beyond ``max_range``)."""
     r_max = spec.max_range if spec.max_range is not None else math.inf
+    # heavy optional dependency: pyarrow (through sim.traffic, as in rotation_phase)
+    from sensornet.sim.traffic.radar import RotatingRadar
     return RotatingRadar(spec.name, 0.0, 0.0, pd_max=max(spec.detection_probability, 1e-12),
                          max_range_m=r_max, r50_m=r50_fraction * r_max).pd
 
