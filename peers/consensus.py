@@ -334,7 +334,9 @@ class Consensus(BatchedRounds):
                     continue
                 if len(labels) <= len(mix):
                     pairs.append((mix, labels))
-        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh)
+        own_first = bool(pairs) and pairs[0][0] is st.current
+        bump = self.hooks.fresh_stamps() if st.round == 0 and own_first else None
+        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump)
         self._fresh += out.fresh
         return out
 

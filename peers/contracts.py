@@ -140,6 +140,9 @@ class EstimatorHooks(_Hooks):
     states with their ids, covariances, existence and status."""
     relabel: Callable[[Any], None] = _nothing
     """Takes a :class:`tracking.labels.LabelMatch` (own label -> the network's winner)."""
+    fresh_stamps: Callable[[], np.ndarray | None] = _nothing
+    """The labels ``(b, 3)`` its last step stamped at their first publication (the fusion
+    moves an uncorroborated one a scan later: :func:`peers.labelling.corroborated`)."""
     adopt_labels: Callable[[np.ndarray], None] = _nothing
     """The labels of the fused density ``adopt`` just took (feedback)."""
     point_tracks: Any = None

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.labelling import take_moves
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
@@ -189,13 +190,20 @@ class GmphdEstimator:
         if self.labels is not None:
             self.labels = as_labels(labels, len(self.mix), "adopted labels")
 
+    def fresh_stamps(self) -> np.ndarray | None:
+        """The labels ``(b, 3)`` the last step stamped at first publication (None: no
+        labels); tracking.labels.Publication.stamped."""
+        return None if self.publication is None else self.publication.stamped
+
     def relabel(self, match: LabelMatch) -> None:
         """Take the network's labels for our own (tracking.labels.adopt_labels: each matched
         own label becomes the winner of the fusion it went into, on every component that
         carries it)."""
         if self.labels is not None:
+            moved = match.nbr
+            self.labels, match = take_moves(self.labels, match, self.publication.stamped)
             self.labels = adopt_labels(self.labels, match)
-            self.publication.adopt(match.nbr)
+            self.publication.adopt(moved)
 
 
 class ImmEstimator:

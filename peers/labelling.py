@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
-from sensornet.tracking.labels import LabelMatch, label_keys, new_labels
+from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
 LABEL_GATE = 26.0
@@ -166,12 +166,17 @@ def _pairs(fused: GaussianMixture, t_m: np.ndarray, t_P: np.ndarray, src: np.nda
 
 def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, np.ndarray]],
                 origin: int, k: int, fresh_start: int = 0,
-                gate: float = LABEL_GATE) -> FusedLabels:
+                gate: float = LABEL_GATE, bump: np.ndarray | None = None) -> FusedLabels:
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
     won one label: the heavier keeps it, the other takes a fresh one (two targets never share
-    an id). The per-input matching is :func:`_pairs` (one batched cost computation)."""
+    an id). The per-input matching is :func:`_pairs` (one batched cost computation).
+
+    ``bump (b, 3)``: the own labels stamped at their first publication this scan (the
+    estimator's ``fresh_stamps``). One that wins a fused component which no other input's track
+    was paired with (uncorroborated: no neighbour holds the track) becomes ``(o, k + 1, i)``,
+    for the fused component and, through ``own``, the own estimator (:func:`corroborated`)."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -197,6 +202,8 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         dup = np.zeros(len(by), dtype=bool)
         dup[1:] = keys[by[1:]] == keys[by[:-1]]
         won[wrows[by[dup]]] = False
+        if bump is not None and len(bump):
+            labels = corroborated(labels, won, J, S, bump, k)
         # own pairs whose winner is another label: what the own estimator adopts
         own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
@@ -209,5 +216,58 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     return FusedLabels(labels, match, len(lost))
 
 
-__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "input_tracks",
-           "label_fused", "origin_of", "settle_scans"]
+def corroborated(labels: np.ndarray, won: np.ndarray, J: np.ndarray, S: np.ndarray,
+                 bump: np.ndarray, k: int) -> np.ndarray:
+    """A label's network scan is its first *corroborated* one: ``labels (n, 3)`` of the fused
+    rows with each won (``won (n,)``) own label of ``bump (b, 3)`` (stamped at its first
+    publication at scan ``k``) whose row no other input was paired with (pairs: fused rows
+    ``J (p,)``, their inputs ``S (p,)``, 0 the own) moved to ``(o, k + 1, i)``, unless another
+    row holds that label. Why (docs/labelled-tracking.md, "Corroborated stamps"): on 20 peers a
+    clutter plot beside a new target's birth point one scan before it appears, at one peer of
+    twenty, starts a track that takes the target's first detections and, as the earliest label
+    on the network, replaced the id of the target at most other peers, hop by hop (15 switches
+    in 20 peers); a track no neighbour holds at its first publication is stamped with the next
+    scan, the scan most peers stamp the target's track, so the ids agree from the start."""
+    other = np.zeros(len(labels), dtype=bool)
+    other[J[S != 0]] = True
+    rows = np.flatnonzero(won & ~other)
+    rows = rows[np.isin(label_keys(labels[rows]), label_keys(as_labels(bump)))
+                & (labels[rows, 1] == k)]
+    if not len(rows):
+        return labels
+    moved = labels[rows].copy()
+    moved[:, 1] = k + 1
+    ok = ~np.isin(label_keys(moved), label_keys(labels[won]))
+    labels = labels.copy()
+    labels[rows[ok]] = moved[ok]
+    return labels
+
+
+def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
+               ) -> tuple[np.ndarray, LabelMatch]:
+    """The moves of :func:`corroborated` in an own estimator's ``labels (n, 3)``: each pair of
+    ``match`` whose own label is one of ``fresh (b, 3)`` (stamped this scan) and whose winner is
+    that label a scan later replaces it (the network rule, :func:`tracking.labels.adopt_labels`,
+    takes only earlier labels); returns the labels and the pairs left for the rule."""
+    if fresh is None or not len(fresh) or not len(match) or not len(labels):
+        return labels, match
+    own, nbr = as_labels(match.own), as_labels(match.nbr)
+    later = own.copy()
+    later[:, 1] += 1
+    move = (np.isin(label_keys(own), label_keys(as_labels(fresh)))
+            & (label_keys(nbr) == label_keys(later)))
+    if not move.any():
+        return labels, match
+    keys = label_keys(labels)
+    by = np.argsort(label_keys(own[move]))
+    src, dst = label_keys(own[move])[by], nbr[move][by]
+    pos = np.searchsorted(src, keys).clip(max=len(src) - 1)
+    hit = src[pos] == keys
+    out = labels.copy()
+    out[hit] = dst[pos[hit]]
+    rest = ~move
+    return out, LabelMatch(own[rest], nbr[rest], np.asarray(match.cost)[rest])
+
+
+__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "corroborated",
+           "input_tracks", "label_fused", "origin_of", "settle_scans", "take_moves"]

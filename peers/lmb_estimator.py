@@ -23,6 +23,7 @@ import dataclasses
 
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.labelling import take_moves
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
 from sensornet.tracking.label_confirmation import stamp_shared
@@ -139,6 +140,8 @@ class LmbEstimator:
         self._adopted_labels: np.ndarray | None = None
         self._unpublished = np.zeros(0, dtype=bool)
         """``(n,)`` the tracks of the last step that were not published (kept on feedback)."""
+        self._stamped = np.zeros((0, 3), dtype=np.int64)
+        """The labels the last step stamped at first publication (:meth:`fresh_stamps`)."""
         self._published = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Keys of the labels of our tracks that have been on the network (published by us,
         or taken from it)."""
@@ -234,7 +237,8 @@ class LmbEstimator:
         t = self.state.tracks
         if self.origin is None or len(t) == 0 or len(match) == 0:
             return
-        new = adopt_labels(t.labels, match)
+        moved, match = take_moves(t.labels, match, self._stamped)
+        new = adopt_labels(moved, match)
         was = np.isin(label_keys(t.labels), self._published)
         self._published = np.union1d(self._published, label_keys(new[was]))
         self.state = LmbState(LabelledBernoulliSet.trusted(new, t.existence, t.weights,
@@ -279,6 +283,7 @@ class LmbEstimator:
         (``filter.shared_origin``) is stamped ``(shared, k, PUBLISHED_BASE + i)`` instead, as
         other peers stamp it (tracking.label_confirmation.stamp_shared), or own if taken."""
         t = self.state.tracks
+        self._stamped = t.labels[:0]
         if len(t) == 0:
             return
         keys = label_keys(t.labels)
@@ -291,14 +296,22 @@ class LmbEstimator:
         labels = t.labels
         if new.any() or alike.any():
             labels = labels.copy()
+            shared_ok = np.zeros(len(t), dtype=bool)
             if alike.any():  # shared births: (shared, k, PUBLISHED_BASE + cell) as elsewhere
-                new |= alike & ~stamp_shared(labels, keys, alike, new | alike, k)
+                shared_ok = stamp_shared(labels, keys, alike, new | alike, k)
+                new |= alike & ~shared_ok
             labels[new] = new_labels(self.origin, k, int(new.sum()), PUBLISHED_BASE)
+            self._stamped = labels[new | shared_ok]
             self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
                                                                t.means, t.covs, t.owner),
                                   self.state.hits, self.state.k, self.state.pending)
         on = was | pub
         self._published = label_keys(labels[on])
+
+    def fresh_stamps(self) -> np.ndarray | None:
+        """The labels ``(b, 3)`` the last step stamped at first publication (None: no
+        labels)."""
+        return None if self.origin is None else self._stamped
 
     def _own(self, mix: GaussianMixture) -> LmbState | None:
         """The state behind ``mix`` if it is our last step's density, else None."""

@@ -165,6 +165,9 @@ class Publication:
                               init=False, repr=False)
     """The scan each was last published."""
     _k: int = field(default=0, init=False, repr=False)
+    stamped: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64),
+                                init=False, repr=False)
+    """The labels ``(b, 3)`` the last :meth:`stamp` gave (each once)."""
 
     def __post_init__(self) -> None:
         if self.revisit < 1:
@@ -194,6 +197,7 @@ class Publication:
         back = (known & (self.gap is not None)
                 & (k - last > ((self.gap or 0) + 1) * self.revisit))
         new = on & (fresh | back) | alike
+        self.stamped = np.zeros((0, 3), dtype=np.int64)
         if new.any():
             labels = labels.copy()
             if alike.any():
@@ -204,6 +208,8 @@ class Publication:
                 labels[own] = new_labels(self.origin, k, len(uniq), PUBLISHED_BASE)[inv]
             keys = label_keys(labels)
             known[new] = False
+            _, first = np.unique(keys[new], return_index=True)
+            self.stamped = labels[np.flatnonzero(new)[first]]
         keep = on | known
         when = np.where(on, k, last)[keep]
         self._keys, idx = np.unique(keys[keep], return_index=True)
