@@ -20,8 +20,8 @@ units, m^2 for ``p = 2``) add up to the mean of OSPA(2)^p. So a fusion that halv
 localisation error cannot halve OSPA(2) if ``card`` dominates it.
 
 ``python -m sensornet.sim.studies.traffic.ospa2_parts [SCENARIO] --file F --start S --minutes
-M [--kinds gmphd,lmb] [--set KEY=VALUE ...]``: per kind, local (each peer), fused (first peer)
-and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the four shares.
+M [--kinds gmphd,lmb] [--estimates local,fused,centralised] [--set KEY=VALUE ...]``: per
+kind, local (each peer), fused (first peer) and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the four shares.
 """
 
 from __future__ import annotations
@@ -112,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--start", type=float)
     ap.add_argument("--minutes", type=float)
     ap.add_argument("--kinds", default="gmphd,lmb")
+    ap.add_argument("--estimates", default="local,fused,centralised")
     ap.add_argument("--run", type=int, default=0)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     print("kind estimate peer: OSPA(2) mean, rms; shares of mean OSPA(2)^p: loc gap missing "
           "extra")
     for kind in a.kinds.split(","):
-        for est in ("local", "fused", "centralised"):
+        for est in a.estimates.split(","):
             part = run_part(a.scenario, over, kind, est, a.run, with_hota=False,
                             keep_tables=True)
             names = list(part.tables)[:1] if est == "fused" else list(part.tables)
