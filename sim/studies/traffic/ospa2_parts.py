@@ -21,7 +21,8 @@ localisation error cannot halve OSPA(2) if ``card`` dominates it.
 
 ``python -m sensornet.sim.studies.traffic.ospa2_parts [SCENARIO] --file F --start S --minutes
 M [--kinds gmphd,lmb] [--estimates local,fused,centralised] [--set KEY=VALUE ...]``: per
-kind, local (each peer), fused (first peer) and centralised: OSPA(2) mean, its RMS (``mean(OSPA(2)^p)^(1/p)``) and the four shares.
+kind, local (each peer), fused (first peer) and centralised: OSPA(2) mean, its RMS
+(``mean(OSPA(2)^p)^(1/p)``) and the four shares.
 """
 
 from __future__ import annotations
