@@ -455,46 +455,50 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
     """``sensornet run`` (view on): world and peers write no .rrd, the view's recording holds
     truth, scans, tracks, local and fused marks and the health series. Then a view attached by
     hand to a network started by someone else, detached after a few seconds: the peers handle
-    every scan all the same."""
-    out = tmp_path / "run"
-    run = subprocess.run(
-        [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out),
-         "--set", "scenario.num_scans=15", "--speed", "5"], cwd=tmp_path, env=env(),
-        capture_output=True, text=True, timeout=300)
-    assert run.returncode == 0, run.stderr[-2000:]
-    assert sorted(p.name for p in (out / "rerun").glob("*.rrd")) == ["view.rrd"]
-    view_log = (out / "logs" / "view.log").read_text()
-    assert "messages drawn" in view_log, view_log
-    text = subprocess.run([rerun_exe(), "rrd", "print", str(out / "recording.rrd")],
-                          capture_output=True, text=True, timeout=120, env=env()).stdout
-    for entity in ["/world/truth", "/world/scans/s1", "/world/sensors", "/legend"] + [
-            f"/peers/{p}/{what}" for p in ("s1", "s2", "s3")
-            for what in ("tracks", "local/means", "fused/ellipses")] + [
-            f"/metrics/{m}/s2" for m in ("latency_ms", "age")] + [
-            f"/metrics/{m}/s3/{w}" for m, w in (("ospa", "fused"), ("cardinality", "local"),
-                                               ("compute_ms", "fusion"))]:
-        assert entity in text, entity
-    for name in ("s1", "s2", "s3"):
-        s = (out / f"peer-{name}.json").read_text()
-        assert '"rerun"' not in s and '"telemetry"' in s  # the peers logged nothing
-
+    every scan all the same. The two runs go side by side (each its own network and ports):
+    one after the other their start-ups and pacing were the whole test."""
     ep = endpoint(free_port())
     others = subprocess.Popen(
         [sys.executable, "-m", "sensornet", "run", "--network", "byhand", "--listen", ep,
          "--no-rerun", "--set", "scenario.num_scans=60", "--speed", "5",
          "--out", str(tmp_path / "others")], cwd=tmp_path, env=env(),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    view = None
     try:
         world_log = tmp_path / "others" / "logs" / "world.log"
         wait_for(lambda: world_log.is_file() and "starting" in world_log.read_text(), 120,
                  "the world's start")
         rrd = tmp_path / "mine.rrd"
-        view = subprocess.run(
+        view = subprocess.Popen(
             [sys.executable, "-m", "sensornet", "view", "byhand", "--connect", ep,
              "--scenario", "seed000", "--duration", "3", "--out", str(rrd)], cwd=tmp_path,
-            env=env(), capture_output=True, text=True, timeout=120)
-        assert view.returncode == 0, view.stderr[-2000:]
-        assert "messages drawn" in view.stderr
+            env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        out = tmp_path / "run"
+        run = subprocess.run(
+            [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out),
+             "--set", "scenario.num_scans=15", "--speed", "5"], cwd=tmp_path, env=env(),
+            capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
+        assert sorted(p.name for p in (out / "rerun").glob("*.rrd")) == ["view.rrd"]
+        view_log = (out / "logs" / "view.log").read_text()
+        assert "messages drawn" in view_log, view_log
+        text = subprocess.run([rerun_exe(), "rrd", "print", str(out / "recording.rrd")],
+                              capture_output=True, text=True, timeout=120, env=env()).stdout
+        for entity in ["/world/truth", "/world/scans/s1", "/world/sensors", "/legend"] + [
+                f"/peers/{p}/{what}" for p in ("s1", "s2", "s3")
+                for what in ("tracks", "local/means", "fused/ellipses")] + [
+                f"/metrics/{m}/s2" for m in ("latency_ms", "age")] + [
+                f"/metrics/{m}/s3/{w}" for m, w in (("ospa", "fused"), ("cardinality", "local"),
+                                                   ("compute_ms", "fusion"))]:
+            assert entity in text, entity
+        for name in ("s1", "s2", "s3"):
+            s = (out / f"peer-{name}.json").read_text()
+            assert '"rerun"' not in s and '"telemetry"' in s  # the peers logged nothing
+
+        _, view_err = view.communicate(timeout=120)
+        assert view.returncode == 0, view_err[-2000:]
+        assert "messages drawn" in view_err
         others.wait(timeout=240)
         assert others.returncode == 0
         text = subprocess.run([rerun_exe(), "rrd", "print", str(rrd)], capture_output=True,
@@ -505,7 +509,7 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
             s = (tmp_path / "others" / f"peer-{name}.json").read_text()
             assert '"scans": 60' in s, name
     finally:
-        stop_all([others])
+        stop_all([p for p in (view, others) if p is not None])
 
 
 def test_ellipses_lie_at_two_sigma_of_their_component():
