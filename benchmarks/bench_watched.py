@@ -21,7 +21,7 @@ import sys
 import time
 
 from sensornet.peers.core import Publish, Record
-from sensornet.peers.observer import HostReports, Observer
+from sensornet.peers.observer import KINDS, HostReports, Observer
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario, parse_overrides
@@ -51,10 +51,11 @@ def measure(source: str, scans: int, hosts: int, run: int = 0) -> dict:
         obs = observers[target]
         # the calls a watched runtime adds to its loop over the outputs (the loop is there
         # anyway, to publish): listed first, so that only the calls are timed
-        calls = [(obs.published, o, 1.0 if o.channel == "tracks" else None)
-                 if isinstance(o, Publish) else (obs.record, o, 1.0 if o.kind == "local"
-                                                  else None)
-                 for o in out if isinstance(o, Publish | Record)]
+        # (the runtime hands over only tracks and the record kinds the observer reads)
+        calls = [(obs.published, o, 1.0) if isinstance(o, Publish)
+                 else (obs.record, o, 1.0 if o.kind == "local" else None)
+                 for o in out if (isinstance(o, Publish) and o.channel == "tracks")
+                 or (isinstance(o, Record) and o.kind in KINDS)]
         t0 = time.thread_time()
         if last[0] != t:  # a new instant: the hosts' passes of the last one are over
             for reports in {id(r): r for r in host_of.values() if r is not None}.values():
