@@ -454,20 +454,25 @@ def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:
     """The ``n`` heaviest components of ``mix``, reduced to what the map draws: their
     position marginals in a 4-D ``[px, vx, py, vy]`` frame (velocity blocks unit), each 2x2
     block symmetrised and floored at 1e-9 of its trace so that it is positive definite (an
-    IMM's 6-D fused covariance need not be, and the receiver refuses a mixture that is not)."""
+    IMM's 6-D fused covariance need not be, and the receiver refuses a mixture that is not;
+    one that is not even then is left out). Closed form per 2x2 block (Sylvester: ``a > 0``
+    and ``a d - b^2 > 0``): a stacked ``eigvalsh`` cost ~85 us a call, twice a scan."""
     keep = np.argsort(mix.weights)[::-1][:n]
-    c = position_columns(mix.dim)
-    m = len(keep)
+    i, j = position_columns(mix.dim)  # integer indexes below: list ones cost 3x as much
+    mu, P = mix.means[keep], mix.covs[keep]
+    x, y = mu[:, i], mu[:, j]
+    a, d = P[:, i, i], P[:, j, j]
+    b = 0.5 * (P[:, i, j] + P[:, j, i])
+    floor = 1e-9 * np.maximum(a + d, 1e-9)
+    a, d = a + floor, d + floor
+    w = mix.weights[keep]
+    good = (a > 0) & (a * d - b * b > 0)
+    if not good.all():  # a degenerate one: not drawn
+        x, y, a, b, d, w = x[good], y[good], a[good], b[good], d[good], w[good]
+    m = len(w)
     means = np.zeros((m, 4))
-    means[:, [0, 2]] = mix.means[keep][:, c]
-    P = mix.covs[keep][:, c][:, :, c]
-    P = 0.5 * (P + np.swapaxes(P, 1, 2))
-    floor = 1e-9 * np.maximum(np.trace(P, axis1=1, axis2=2), 1e-9)
-    P = P + floor[:, None, None] * np.eye(2)
-    covs = np.tile(np.eye(4), (m, 1, 1))
-    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (P[:, 0, 0], P[:, 0, 1],
-                                                                  P[:, 1, 0], P[:, 1, 1])
-    if m and not np.all(np.linalg.eigvalsh(P) > 0):  # a degenerate one: not drawn
-        good = np.linalg.eigvalsh(P).min(axis=1) > 0
-        return GaussianMixture.trusted(mix.weights[keep][good], means[good], covs[good])
-    return GaussianMixture.trusted(mix.weights[keep], means, covs)
+    means[:, 0], means[:, 2] = x, y
+    covs = np.zeros((m, 4, 4))
+    covs[:, 1, 1] = covs[:, 3, 3] = 1.0
+    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = a, b, b, d
+    return GaussianMixture.trusted(w, means, covs)

@@ -8,7 +8,7 @@ import numpy as np
 import rerun as rr
 import zenoh
 from sensornet.peers.core import Publish, Record
-from sensornet.peers.observer import KINDS, HostReports, Observer
+from sensornet.peers.observer import KINDS, HostReports, Observer, _heaviest
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
 from sensornet.protocol.bundle import unpack_bundle
 from sensornet.protocol.codec import decode, encode
@@ -16,6 +16,7 @@ from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Telemetry, Tracks
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet import view as view_module
 from sensornet.view import Batcher, LiveView, ViewState
@@ -148,3 +149,23 @@ def test_a_watched_runtime_hands_the_observer_only_what_it_reads():
     assert seen == ["local"] and set(seen) <= KINDS
     rt.observer.flush(idle=True)
     assert sent[0] == put[1][1] and decode(sent[1]).k == 3
+
+
+def test_the_fused_marks_are_the_heaviest_position_blocks_that_can_be_drawn():
+    """``_heaviest``: the ``n`` heaviest components, heaviest first, as 4-D position
+    marginals (a 6-D IMM state's px, py in columns 0 and 3), each block symmetrised and
+    floored; a block that is not positive definite even then is left out."""
+    cov = np.tile(np.eye(6), (5, 1, 1))
+    cov[0][np.ix_([0, 3], [0, 3])] = [[4.0, 1.0], [3.0, 9.0]]  # asymmetric: b = 2
+    cov[1][np.ix_([0, 3], [0, 3])] = [[-1.0, 0.0], [0.0, 1.0]]  # indefinite: out
+    cov[2][np.ix_([0, 3], [0, 3])] = [[1.0, 5.0], [5.0, 1.0]]  # det < 0: out
+    cov[3][np.ix_([0, 3], [0, 3])] = 0.0  # floored at 1e-9 of its trace: kept
+    means = np.arange(30, dtype=float).reshape(5, 6)
+    mix = GaussianMixture.trusted(np.array([0.9, 0.8, 0.7, 0.6, 0.1]), means, cov)
+    got = _heaviest(mix, 4)  # the lightest (0.1) is not among the 4 heaviest
+    assert got.weights.tolist() == [0.9, 0.6]
+    assert got.means[:, [0, 2]].tolist() == [[0.0, 3.0], [18.0, 21.0]]
+    assert got.means[:, [1, 3]].tolist() == [[0.0, 0.0], [0.0, 0.0]]
+    assert np.allclose(got.covs[0][np.ix_([0, 2], [0, 2])], [[4.0, 2.0], [2.0, 9.0]], rtol=1e-8)
+    assert np.allclose(got.covs[:, [1, 3], [1, 3]], 1.0)
+    assert 0.0 < got.covs[1, 0, 0] < 1e-12 and got.covs[1, 0, 2] == 0.0
