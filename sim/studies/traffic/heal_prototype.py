@@ -37,56 +37,35 @@ import sensornet.peers.labelling as labelling
 import sensornet.peers.lmb_estimator as lmb_estimator
 from sensornet.tracking.label_matching import LabelMatch
 from sensornet.tracking.label_matching import adopt_labels as _adopt
-from sensornet.tracking.labels import label_keys, new_labels
+from sensornet.tracking.labels import label_keys
+
+_label_fused = labelling.label_fused
 
 RELEASE = -1.0
 """The cost that flags a release pair in a :class:`LabelMatch`."""
 
 
 def label_fused(fused, inputs, origin: int, k: int, fresh_start: int = 0,
-                gate: float = labelling.LABEL_GATE) -> labelling.FusedLabels:
-    """:func:`peers.labelling.label_fused`, and the release pairs (module docstring) added to
-    ``own`` with cost :data:`RELEASE`."""
-    n = len(fused)
-    none = np.zeros((0, 3), dtype=np.int64)
-    if n == 0:
-        return labelling.FusedLabels(none, LabelMatch(none, none.copy(), np.zeros(0)), 0)
+                gate: float = labelling.LABEL_GATE, **kw) -> labelling.FusedLabels:
+    """:func:`peers.labelling.label_fused` (whatever its other keywords), and the release
+    pairs (module docstring) added to ``own`` with cost :data:`RELEASE`: an own track paired
+    with a row that ends with a fresh label. A row paired with any input wins a label, so a
+    paired row with a fresh one lost its label to a heavier row."""
+    out = _label_fused(fused, inputs, origin, k, fresh_start, gate=gate, **kw)
     t_lab, t_m, t_P, t_src = labelling._all_tracks(inputs)
-    labels = np.empty((n, 3), dtype=np.int64)
-    won = np.zeros(n, dtype=bool)
-    lost_dup = np.zeros(n, dtype=bool)
-    J = np.zeros(0, dtype=np.int64)
-    if len(t_lab):
-        J, t = labelling._pairs(fused, t_m, t_P, t_src, gate)
-    if len(J):
-        L, S = t_lab[t], t_src[t]
-        order = np.lexsort((L[:, 2], L[:, 0], L[:, 1], J))
-        Js = J[order]
-        first = np.ones(len(Js), dtype=bool)
-        first[1:] = Js[1:] != Js[:-1]
-        labels[Js[first]] = L[order[first]]
-        won[Js[first]] = True
-        wrows = np.flatnonzero(won)
-        keys = label_keys(labels[wrows])
-        by = np.lexsort((-fused.weights[wrows], keys))
-        dup = np.zeros(len(by), dtype=bool)
-        dup[1:] = keys[by[1:]] == keys[by[:-1]]
-        lost_dup[wrows[by[dup]]] = True
-        won[wrows[by[dup]]] = False
-    lost = np.flatnonzero(~won)
-    labels[lost] = new_labels(origin, k, len(lost), labelling.FRESH_BASE + fresh_start)
-    if not len(J):
-        return labelling.FusedLabels(labels, LabelMatch(none, none.copy(), np.zeros(0)),
-                                     len(lost))
-    own = (S == 0) & won[J]
-    own_lab, win = L[own], labels[J[own]]
-    change = label_keys(own_lab) != label_keys(win)
-    rel = (S == 0) & lost_dup[J]
-    match = LabelMatch(np.concatenate([own_lab[change], L[rel]]),
-                       np.concatenate([win[change], labels[J[rel]]]),
-                       np.concatenate([np.zeros(int(change.sum())),
-                                       np.full(int(rel.sum()), RELEASE)]))
-    return labelling.FusedLabels(labels, match, len(lost))
+    if not len(fused) or not len(t_lab):
+        return out
+    J, t = labelling._pairs(fused, t_m, t_P, t_src, gate)
+    lab = out.labels[J]
+    rel = ((t_src[t] == 0) & (lab[:, 0] == origin) & (lab[:, 1] == k)
+           & (lab[:, 2] >= labelling.FRESH_BASE))
+    if not rel.any():
+        return out
+    own = out.own
+    match = LabelMatch(np.concatenate([own.own, t_lab[t[rel]]]),
+                       np.concatenate([own.nbr, lab[rel]]),
+                       np.concatenate([own.cost, np.full(int(rel.sum()), RELEASE)]))
+    return labelling.FusedLabels(out.labels, match, out.fresh)
 
 
 def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
