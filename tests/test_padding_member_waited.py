@@ -4,7 +4,7 @@ A member padding its estimates to the codec's limit makes them late (building, s
 sending 240 kB); its receivers cut each to its real estimate (peers.budget). Not waiting for
 such a member was built and measured (issue 36, docs/security.md): its estimate is then fused a
 scan late (NALE), and with six of seven neighbours padding the honest peers' fused OSPA went to
-2.3-3.7 x clean as processes and 2.8 x on the twin (``benchmarks/bench_late_inputs.py``), where
+2.3-3.7 x clean as processes and 2.8-3.9 x on the twin (``benchmarks/bench_late_inputs.py``), where
 waiting up to the deadline (0.5 of an interval) kept it within 12 % of clean. So a round waits
 for every live neighbour, cut or not, up to the deadline; these tests hold that: padding members
 0.3 intervals late change nothing the honest peers publish. Twin, no network, no timing.
