@@ -56,9 +56,12 @@ bounded memory is worth more than a copy saved on a rare large one."""
 
 
 DIAL_SOON = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
-"""Connect retry of a session that may open before the process it dials listens (the view, a
-test's observer; ``zenoh_config(retry=DIAL_SOON)``): with Zenoh's default back-off (1 s,
-doubling to 4 s) such a session linked up to 4 s late and missed a short run's first scans."""
+"""Connect retry of a session that may open before the process it dials listens: every
+session without a Zenoh config file (:func:`zenoh_config`; a file's own settings stand). A
+run's processes start at once and each listens only once it has loaded: with Zenoh's default
+back-off (1 s, doubling to 4 s) a peer that dialled an earlier one still loading linked up 1-3 s
+late, and the world, waiting for every peer's ``ready``, started the run that much later; the
+view missed a short run's first scans."""
 ANNOUNCE = "announce"
 """Gossip on (others still learn of this process and link to it) but no links made from it:
 only its ``connect`` endpoints are dialled. Zenoh dials a lost link again only from the side
@@ -138,7 +141,7 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                  gossip: bool | str = True, max_message: int | None = MAX_MESSAGE_BYTES,
                  security=None, retry: dict | None = None) -> zenoh.Config:
     """A peer-mode config: the user's JSON5 file if given, then the flags on top of it
-    (``retry``: Zenoh's ``connect/retry`` settings, e.g. :data:`DIAL_SOON`).
+    (``retry``: Zenoh's ``connect/retry`` settings; :data:`DIAL_SOON` unless a file is given).
 
     ``gossip``: ``True`` (Zenoh's discovery: links to whoever gossip names), ``False`` (links
     only to the ``connect`` endpoints) or :data:`ANNOUNCE` (see there).
@@ -187,8 +190,8 @@ def zenoh_config(listen: Sequence[str] = (), connect: Sequence[str] = (),
                 # learn it by gossip and link to it unauthenticated (every message refused)
                 conf.insert_json5("listen/endpoints", "[]")
             security.apply(conf)
-        if retry is not None:
-            conf.insert_json5("connect/retry", json.dumps(retry))
+        if retry is not None or not config_file:
+            conf.insert_json5("connect/retry", json.dumps(retry or DIAL_SOON))
     except SessionError:
         raise
     except Exception as exc:
