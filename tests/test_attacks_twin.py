@@ -55,12 +55,15 @@ def test_attack_in_the_twin(scn, clean, attack):
             assert core.ctl_end_early == 2  # the forged "end" and the world's own
 
 
-def test_far_future_estimates_do_not_disable_nale(scn):
+def test_far_future_estimates_do_not_disable_nale(scn, clean):
     result = _attacked(scn, next(a for a in ATTACKS if a.name == "future-estimates"))
     for name in ("s1", "s3"):
         stats = result.peers[name].snapshot()["stats"]
         assert stats["last_fused_from"]["s2"] == scn.num_scans  # s2 is fused to the end
-        assert stats["fused_inputs"] == 2 * scn.num_scans
+        # every scan's two neighbours, as in the clean run: with the defence (on by default)
+        # the clean run itself holds s2 out for one scan (a withheld-target hold near scan 19)
+        assert stats["fused_inputs"] == clean.peers[name].snapshot()["stats"]["fused_inputs"]
+        assert stats["fused_inputs"] >= 2 * scn.num_scans - 1
 
 
 def test_a_departed_neighbour_is_forgotten(scn):

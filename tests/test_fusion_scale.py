@@ -39,17 +39,26 @@ def test_the_default_rule_is_the_hybrid(source):
     assert fusion_warnings(scn) == []
 
 
+HEAVY = pytest.mark.timeout(900)
+"""Twin runs of 20 peers x 100 scans at up to 4 rounds: with the defence on by default (issue 36
+item 5) each costs about twice the CPU (its test per neighbour and round; 2 rounds, 20 scans:
+1.2 s -> 2.7 s), which on a busy shared machine took the fixture past the suite's 300 s."""
+
+
+@HEAVY
 def test_default_fusion_beats_every_peer_at_two_rounds(default_runs):
     local, fused = default_runs[2]
     assert np.all(fused < local), (fused, local)
     assert fused.mean() <= 0.5 * local.mean()
 
 
+@HEAVY
 def test_more_rounds_do_not_make_the_default_worse(default_runs):
     f1, f2, f4 = (default_runs[L][1].mean() for L in (1, 2, 4))
     assert f2 <= f1 and f4 <= f2, (f1, f2, f4)
 
 
+@HEAVY
 def test_four_rounds_at_pd_0_9_without_pruning_beat_local(source):
     local, fused = _ospa(source, {"network.rounds": 4, "fusion.level2_pruning": False,
                                   "sensors.*.detection_probability": 0.9})

@@ -124,11 +124,11 @@ def test_a_lagging_model_is_within_the_summary_not_a_disagreement():
 
 
 def test_scenarios_give_the_test_per_scan_detection_and_a_warm_up():
+    off = load_scenario("paris", overrides={"fusion.trust": False})
+    assert consensus_options(off, "cdg").trust is None  # off when asked
     paris = load_scenario("paris")
-    cfg = consensus_options(paris, "cdg").trust
-    assert cfg is None  # off unless asked
-    paris = load_scenario("paris", overrides={"fusion.trust": True})
-    cfg = consensus_options(paris, "cdg").trust
+    cfg = consensus_options(paris, "cdg").trust  # on by default (issue 36 item 5)
+    assert cfg is not None and cfg.enabled
     # the en-route radars sweep 2 s of their 12 s turn per scan: Pd 0.95 x 1/6
     assert cfg.detection_probability == pytest.approx(0.95 * 2.0 / 12.0)
     assert cfg.warmup == 12  # two turns of the slowest radar, in 2 s scans

@@ -75,9 +75,10 @@ class FusionSpec:
     existence_young: int = option(2, doc="With `existence_prior`: how many scans old (its "
                                          "label's scan) a fused track may be and still be "
                                          "pooled.", unit="scans", check=NONNEGATIVE)
-    trust: bool = option(False, doc="Test each neighbour's density before fusing it and "
-                                    "down-weight or quarantine the inconsistent ones "
-                                    "(`peers.trust`).")
+    trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
+                                   "down-weight or quarantine the inconsistent ones "
+                                   "(`peers.trust`; on by default since issue 36 item 5: "
+                                   "clean runs lose nothing measurable, docs/security.md).")
     trust_register: bool = option(True, doc="With `trust`: repair a neighbour the offset test "
                                              "fires on (registration, `TrustConfig.register`) "
                                              "instead of quarantining it.")

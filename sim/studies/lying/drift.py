@@ -29,7 +29,7 @@ from sensornet.sim.scenario import Scenario, load_scenario
 LIAR = "s2"
 LAST = 30
 """Scans at the end the fused OSPA is averaged over (the drift has grown by then)."""
-RULES = {"off": {"fusion.rule": "hybrid"},
+RULES = {"off": {"fusion.rule": "hybrid", "fusion.trust": False},
          "trust": {"fusion.rule": "hybrid", "fusion.trust": True}}
 
 

@@ -118,12 +118,15 @@ def _source(name: str) -> str:
     return str(path)
 
 
+_OFF = {"fusion.trust": False}
+"""The undefended rules pin the defence off (on by default since issue 36 item 5)."""
 _EXCLUDE = {"fusion.trust": True, "fusion.trust_register": False, "fusion.trust_repair": False}
 RULES: dict[str, dict] = {
-    "hybrid": {"fusion.rule": "hybrid"},
+    "default": {},
+    "hybrid": {"fusion.rule": "hybrid", **_OFF},
     "hybrid+trust": {"fusion.rule": "hybrid", "fusion.trust": True},
     "hybrid+exclude": {"fusion.rule": "hybrid", **_EXCLUDE},
-    "gci": {"fusion.rule": "gci"},
+    "gci": {"fusion.rule": "gci", **_OFF},
     "gci+trust": {"fusion.rule": "gci", "fusion.trust": True},
     "gci+exclude": {"fusion.rule": "gci", **_EXCLUDE},
     "hybrid+register": {"fusion.rule": "hybrid", **_EXCLUDE, "fusion.trust_register": True},
@@ -134,9 +137,9 @@ RULES: dict[str, dict] = {
                    "fusion.trust_repair": True},
     "hybrid+trust+feedback": {"fusion.rule": "hybrid", "fusion.trust": True,
                               "network.feedback": True},
-    "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd"},
-    "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff"},
-    "aa": {"fusion.rule": "aa"},
+    "gci-emd": {"fusion.rule": "gci", "fusion.cardinality": "emd", **_OFF},
+    "gci-chernoff": {"fusion.rule": "gci", "network.omega": "chernoff", **_OFF},
+    "aa": {"fusion.rule": "aa", **_OFF},
     "aa+trust": {"fusion.rule": "aa", "fusion.trust": True},
 }
 """The GM-PHD peers' fusion rules, each without and (``+trust``) with the neighbour defence
@@ -146,7 +149,9 @@ densities that still carry the liar's measurements); ``+exclude``: the test with
 registration only; ``+repair``: registration and repair named explicitly (= ``+trust``);
 ``hybrid+trust+feedback``: the defence with every peer's fused density as its next prior
 (``network.feedback``; not under GCI, whose product with fed-back priors loses every track
-on seed 000: 161 m clean, no liar). The rules: the hybrid (the default), GCI with
+on seed 000: 161 m clean, no liar); ``default``: no override (the scenario as shipped:
+the hybrid with the defence, on by default since issue 36 item 5; the rules without
+``+trust`` pin it off). The rules: the hybrid (the default), GCI with
 Metropolis weights and the cardinality fused apart, GCI with the exact Poisson EMD mass,
 GCI with each pair's weight chosen at the Chernoff point, and the arithmetic average (AA)."""
 
