@@ -155,6 +155,9 @@ class ViewState:
         except Rejected:
             self.rejected += 1
             return
+        if "/telemetry/" in key and getattr(msg, "sender", None) != key.rsplit("/", 1)[-1]:
+            self.rejected += 1  # a peer's report key carries its own reports and tracks only
+            return
         self.handled += 1
         self.message(msg)
 

@@ -10,7 +10,7 @@ import zenoh
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import KINDS, HostReports, Observer, _heaviest
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
-from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Telemetry, Tracks
@@ -169,3 +169,20 @@ def test_the_fused_marks_are_the_heaviest_position_blocks_that_can_be_drawn():
     assert np.allclose(got.covs[0][np.ix_([0, 2], [0, 2])], [[4.0, 2.0], [2.0, 9.0]], rtol=1e-8)
     assert np.allclose(got.covs[:, [1, 3], [1, 3]], 1.0)
     assert 0.0 < got.covs[1, 0, 0] < 1e-12 and got.covs[1, 0, 2] == 0.0
+
+
+def test_a_report_key_carries_its_own_peers_messages_only():
+    """Tracks (or a report) under another peer's name on ``telemetry/<peer>``, alone or in a
+    host's bundle, are counted as refused, not drawn as that peer's: the view hears tracks
+    there now, and a peer may put only its own telemetry key."""
+    rec = _Rec()
+    state = ViewState(Batcher(rr, rec), ["s1", "s2"])
+    theirs = encode(Tracks("s2", 1, np.zeros((1, 4))))
+    state.receive("sensornet/net/telemetry/s1", theirs)
+    state.receive("sensornet/net/telemetries/h1",
+                  pack_bundles(0, [("s1", theirs), ("s2", theirs)])[0])
+    state.receive("sensornet/net/telemetry/s1", encode(Telemetry("s2", 1, {"age": 1.0})))
+    state.b.flush()
+    assert state.rejected == 3 and state.handled == 1  # the bundle's s2 entry drawn
+    assert set(rec.calls) == {"peers/s2/tracks", "peers/s2/tail",
+                              "metrics/cardinality/s2/fused"}
