@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd
+from sensornet.tracking.gaussian import LOG_2PI, c_einsum, inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import cell_index, new_labels, shared_births
 from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, SCALABLE, marginals
@@ -69,8 +69,8 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     m = len(scan)
     r, w, mean, P, owner = (tracks.existence, tracks.weights, tracks.means, tracks.covs,
                             tracks.owner)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        stay = np.where(1.0 - r * Pd > 0, r * (1.0 - Pd) / (1.0 - r * Pd), 0.0)
+    miss = 1.0 - r * Pd
+    stay = np.divide(r * (1.0 - Pd), miss, out=np.zeros(n), where=miss > 0)
     if n == 0 or m == 0:
         return LabelledBernoulliSet.trusted(tracks.labels, stay, w, mean, P, owner), np.zeros(m)
     cols = sensor.model.selected
@@ -84,13 +84,13 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
         S = H @ PHt + sensor.model.R
     S_inv, S_det = inv_det_spd(S)
     nu = sensor.model.residual(scan[None, :, :], zhat[:, None, :])  # (c, m, dz)
-    d2 = np.einsum("cmi,cij,cmj->cm", nu, S_inv, nu)
+    d2 = c_einsum("cmi,cij,cmj->cm", nu, S_inv, nu)
     wq = np.exp(-0.5 * (d2 + (np.log(S_det) + dz * LOG_2PI)[:, None])) * w[:, None]  # (c, m)
     if gate is not None:
         wq[d2 > gate] = 0.0
     starts = tracks.starts()
     eta = np.add.reduceat(wq, starts, axis=0)  # (n, m)
-    p_miss, p = marginals(1.0 - r * Pd, (r * Pd)[:, None] * eta / kappa, method, exact_limit,
+    p_miss, p = marginals(miss, (r * Pd)[:, None] * eta / kappa, method, exact_limit,
                           tol, scalable=scalable, rng=rng, samples=samples)
     exist_miss = p_miss * stay
     r_post = exist_miss + p.sum(axis=1)
@@ -101,7 +101,7 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     K = PHt @ S_inv  # (c, d, dz)
     P_upd = P - K @ PHt.swapaxes(1, 2)
     P_upd = 0.5 * (P_upd + P_upd.swapaxes(1, 2))
-    means_upd = mean[ci] + np.einsum("kij,kj->ki", K[ci], nu[ci, zj])
+    means_upd = mean[ci] + c_einsum("kij,kj->ki", K[ci], nu[ci, zj])
     all_owner = np.concatenate((owner, owner[ci]))
     order = np.argsort(all_owner, kind="stable")
     post = LabelledBernoulliSet.trusted(
@@ -276,29 +276,42 @@ class LmbFilter:
     def predict(self, state: LmbState, k: int | None = None) -> LmbState:
         """Survivors and births at scan ``k`` (default ``state.k + 1``): the fixed births get
         labels ``(origin, k, 0..nb-1)``, the pending adaptive ones ``nb..``; the pending births
-        move through the motion model over the same steps."""
+        move through the motion model over the same steps. Each birth is one Bernoulli, ``r``
+        its weight clipped to [0, 1] (:meth:`LabelledBernoulliSet.births`), appended to the
+        survivors' arrays in one concatenation each (no intermediate sets: a scan's few tracks
+        cost less than the objects around them)."""
         k = state.k + 1 if k is None else int(k)
         if k <= state.k:
             raise ValueError(f"cannot predict from scan {state.k} to scan {k}")
         steps = k - state.k if state.k >= 0 else 1
-        parts = [predict(state.tracks, self.motion, self.survival_probability, steps)]
-        born = [GaussianMixture.empty(self.motion.dim) if self.birth is None else self.birth]
-        if len(state.pending):
+        t = predict(state.tracks, self.motion, self.survival_probability, steps)
+        pend, fixed = state.pending, self.birth
+        w, m, P = [], [], []
+        if fixed is not None:
+            w.append(fixed.weights)
+            m.append(fixed.means)
+            P.append(fixed.covs)
+        if len(pend):
             F, Q = self.motion.transition(steps)
-            pend = state.pending
-            born.append(GaussianMixture.trusted(pend.weights, pend.means @ F.T,
-                                                F @ pend.covs @ F.T + Q))
-        births = GaussianMixture.concatenate(born)
-        if len(births):
-            b = LabelledBernoulliSet.births(births, self.origin, k)
-            if self.shared_origin is not None:
-                b = LabelledBernoulliSet.trusted(self._shared_labels(state.pending, k),
-                                                 b.existence, b.weights, b.means, b.covs,
-                                                 b.owner)
-            parts.append(b)
-        hits = np.concatenate((state.hits, np.zeros(len(births), dtype=np.int64)))
-        return LmbState(LabelledBernoulliSet.concatenate(parts), hits, k,
-                        GaussianMixture.empty(self.motion.dim))
+            w.append(pend.weights)
+            m.append(pend.means @ F.T)
+            P.append(F @ pend.covs @ F.T + Q)
+        nb = sum(len(x) for x in w)
+        n = len(t)
+        if nb == 0:
+            labels = np.zeros((0, 3), dtype=np.int64)
+        elif self.shared_origin is not None:
+            labels = self._shared_labels(pend, k)
+        else:
+            labels = new_labels(self.origin, k, nb)
+        tracks = LabelledBernoulliSet.trusted(
+            np.concatenate((t.labels, labels)),
+            np.concatenate([t.existence] + [np.clip(x, 0.0, 1.0) for x in w]),
+            np.concatenate((t.weights, np.ones(nb))),
+            np.concatenate([t.means] + m), np.concatenate([t.covs] + P),
+            np.concatenate((t.owner, np.arange(n, n + nb, dtype=np.int64))))
+        hits = np.concatenate((state.hits, np.zeros(nb, dtype=np.int64)))
+        return LmbState(tracks, hits, k, _empty_mixture(self.motion.dim))
 
     def _shared_labels(self, pending: GaussianMixture, k: int) -> np.ndarray:
         """Labels ``(nb, 3)`` of scan ``k``'s births (fixed components, then ``pending``, the
@@ -323,7 +336,7 @@ class LmbFilter:
                                  self.max_components)
         keep = post.existence >= self.existence_prune
         hits = state.hits[keep] + (post.existence[keep] >= self.confirm_existence)
-        pending = GaussianMixture.empty(self.motion.dim)
+        pending = _empty_mixture(self.motion.dim)
         if self.adaptive_birth and len(scan):
             r_b = adaptive_birth_existence(r_u, self.birth_rate, self.birth_max_existence)
             born = r_b >= self.existence_prune
@@ -351,6 +364,11 @@ class LmbFilter:
         top = t.heaviest()[idx]
         status = (state.hits[idx] >= self.confirm_scans).astype(np.int8)
         return LmbTracks(t.labels[idx], t.means[top], t.covs[top], r[idx], status)
+
+
+def _empty_mixture(dim: int) -> GaussianMixture:
+    """``GaussianMixture.empty(dim)`` without its checks (the same arrays)."""
+    return GaussianMixture.trusted(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)))
 
 
 def check_scan(scan: np.ndarray, dim: int) -> np.ndarray:

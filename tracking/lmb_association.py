@@ -42,7 +42,7 @@ from sensornet.tracking.lmb_gibbs import (
     gibbs_sample_count,
     marginals_gibbs,
 )
-from sensornet.tracking.lmb_lbp import _row_scaled, marginals_lbp
+from sensornet.tracking.lmb_lbp import _row_scaled, lbp_scaled, marginals_lbp
 
 METHODS = ("auto", "exact", "lbp", "gibbs")
 """Association methods :func:`marginals` accepts."""
@@ -128,11 +128,13 @@ def drop_weak_links(miss: np.ndarray, detect: np.ndarray, budget: float) -> np.n
 def _auto(miss: np.ndarray, detect: np.ndarray, exact_limit: int, tol: float, max_iter: int,
           scalable: str, rng: np.random.Generator, samples: int | None,
           drop: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`marginals` ``"auto"`` on row-scaled weights whose zero links are absent; a large
-    loopy cluster is thinned by ``drop`` and solved again (``drop`` 0: Gibbs)."""
+    """:func:`marginals` ``"auto"`` on row-scaled weights (each row's largest exactly 1) with
+    the misses floored at 1e-10 and whose zero links are absent (so LBP runs on ``detect /
+    miss`` with no second scaling); a large loopy cluster is thinned by ``drop`` (which keeps
+    each row's largest) and solved again (``drop`` 0: Gibbs)."""
     n, m = detect.shape
     link = detect > 0
-    p_miss, p = marginals_lbp(miss, detect, tol, max_iter)
+    p_miss, p = lbp_scaled(detect / miss[:, None], tol, max_iter)  # = marginals_lbp's answer
     ti, zj = np.nonzero(link)
     if ti.size < 4:  # a cycle needs 2 tracks and 2 measurements with 4 links
         return p_miss, p

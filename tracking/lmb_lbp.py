@@ -29,7 +29,15 @@ def marginals_lbp(miss: np.ndarray, detect: np.ndarray, tol: float = 1e-9,
     if n == 0 or m == 0:
         return np.ones(n), np.zeros((n, m))
     miss, detect = _row_scaled(miss, detect)
-    psi = detect / np.maximum(miss, 1e-10)[:, None]
+    return lbp_scaled(detect / np.maximum(miss, 1e-10)[:, None], tol, max_iter)
+
+
+def lbp_scaled(psi: np.ndarray, tol: float = 1e-9,
+               max_iter: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`marginals_lbp` from ``psi = detect / miss (n, m)`` (``n, m > 0``) of weights
+    already row-scaled with the miss floored (:func:`lmb_association.marginals` has them: a
+    second scaling divides by exactly 1, so it is left out)."""
+    n, m = psi.shape
     nu = np.ones((n, m))
     for _ in range(max_iter):
         pn = psi * nu
@@ -44,4 +52,4 @@ def marginals_lbp(miss: np.ndarray, detect: np.ndarray, tol: float = 1e-9,
     return 1.0 / denom, pn / denom[:, None]
 
 
-__all__ = ["marginals_lbp"]
+__all__ = ["lbp_scaled", "marginals_lbp"]

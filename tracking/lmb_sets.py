@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from sensornet.tracking.gaussian import inv_spd
+from sensornet.tracking.gaussian import c_einsum, inv_spd
 from sensornet.tracking.labels import as_labels, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -146,8 +146,10 @@ def reduce_components(tracks: LabelledBernoulliSet, prune: float, merge_threshol
         return tracks
     order = np.lexsort((-tracks.weights, tracks.owner))
     w, own = tracks.weights[order], tracks.owner[order]
-    rank = np.arange(len(w)) - np.searchsorted(own, np.arange(n))[own]
-    keep = order[(w >= prune) | (rank == 0)]
+    first = np.empty(len(w), dtype=bool)  # each track's heaviest
+    first[0] = True
+    np.not_equal(own[1:], own[:-1], out=first[1:])
+    keep = order[(w >= prune) | first]
     w, m, P, own = tracks.weights[keep], tracks.means[keep], tracks.covs[keep], tracks.owner[keep]
     sizes = np.bincount(own, minlength=n)
     if sizes.max() > 1:
@@ -166,15 +168,27 @@ def reduce_components(tracks: LabelledBernoulliSet, prune: float, merge_threshol
     return LabelledBernoulliSet.trusted(tracks.labels, tracks.existence, w, m, P, own)
 
 
+PAIRS_DENSE = 64
+""":func:`_merge_within` finds a scan's same-track pairs in a dense ``(c, c)`` mask up to this
+many components (fewer NumPy calls), beyond it from the track sizes (memory ``O(pairs)``)."""
+
+
 def _merge_within(w, m, P, own, sizes, threshold):
-    """The Vo-Ma sweep in every track at once; components sorted by (owner, -weight)."""
+    """The Vo-Ma sweep in every track at once; components sorted by (owner, -weight). The
+    pairs (centre, member) are every same-track pair, centre first, sorted by (centre, member)
+    whichever way they are found."""
     c = len(w)
-    rank = np.arange(c) - (np.cumsum(sizes) - sizes)[own]
-    counts = sizes[own] - rank - 1  # later (lighter) components of the same track
-    centre = np.repeat(np.arange(c), counts)
-    member = centre + 1 + np.arange(centre.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    idx = np.arange(c)
+    if c <= PAIRS_DENSE:
+        centre, member = np.nonzero((own[:, None] == own) & (idx[:, None] < idx))
+    else:
+        rank = idx - (np.cumsum(sizes) - sizes)[own]
+        counts = sizes[own] - rank - 1  # later (lighter) components of the same track
+        centre = np.repeat(idx, counts)
+        member = centre + 1 + np.arange(centre.size) - np.repeat(np.cumsum(counts) - counts,
+                                                                  counts)
     diff = m[member] - m[centre]
-    close = np.einsum("gi,gij,gj->g", diff, inv_spd(P[member]), diff) <= threshold
+    close = c_einsum("gi,gij,gj->g", diff, inv_spd(P[member]), diff) <= threshold
     if not close.any():
         return w, m, P, own
     root = np.arange(c)
@@ -185,7 +199,7 @@ def _merge_within(w, m, P, own, sizes, threshold):
         root[i] = j
         taken[i] = True
     W = np.bincount(root, w, minlength=c)
-    centres = np.flatnonzero(root == np.arange(c))
+    centres = np.flatnonzero(root == idx)
     Wm = np.zeros_like(m)
     np.add.at(Wm, root, w[:, None] * m)
     mean = Wm / np.where(W > 0, W, 1.0)[:, None]
