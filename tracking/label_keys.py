@@ -81,7 +81,7 @@ def shared_births(index: np.ndarray, priority: np.ndarray, shared: int, origin: 
     k, start + i)`` (a label stays one track at a peer)."""
     index = np.asarray(index, dtype=np.int64).reshape(-1)
     n = len(index)
-    order = np.lexsort((np.arange(n), -np.asarray(priority, dtype=float), index))
+    order = np.lexsort((-np.asarray(priority, dtype=float), index))  # stable: ties, first
     first = np.ones(n, dtype=bool)
     first[1:] = index[order[1:]] != index[order[:-1]]
     keep = np.zeros(n, dtype=bool)

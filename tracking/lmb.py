@@ -344,8 +344,7 @@ class LmbFilter:
             means = np.zeros((nb, self.motion.dim))
             means[:, list(self.sensor.model.selected)] = scan[born]
             pending = GaussianMixture.trusted(r_b[born], means,
-                                              np.broadcast_to(self._birth_cov, (nb,) +
-                                                              self._birth_cov.shape).copy())
+                                              np.repeat(self._birth_cov[None], nb, axis=0))
         return LmbState(post.select(keep), hits.astype(np.int64), state.k, pending)
 
     def step(self, state: LmbState, scan: np.ndarray, k: int | None = None) -> LmbState:

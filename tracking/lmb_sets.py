@@ -104,7 +104,14 @@ class LabelledBernoulliSet:
 
     def select(self, index: np.ndarray) -> LabelledBernoulliSet:
         """The tracks picked by a boolean mask or an index array, in that order."""
-        idx = np.arange(len(self))[np.asarray(index)]
+        index = np.asarray(index)
+        if index.dtype == bool and index.shape == (len(self),):  # order kept: no sort
+            comp = np.flatnonzero(index[self.owner])
+            renumber = np.cumsum(index) - 1
+            return LabelledBernoulliSet.trusted(self.labels[index], self.existence[index],
+                                                self.weights[comp], self.means[comp],
+                                                self.covs[comp], renumber[self.owner[comp]])
+        idx = np.arange(len(self))[index]
         new = np.full(len(self), -1, dtype=np.int64)
         new[idx] = np.arange(len(idx))
         comp_owner = new[self.owner]
