@@ -20,6 +20,8 @@ references and their calibration: docs/trust-calibration.md).
 
 from __future__ import annotations
 
+import functools
+import math
 from collections import deque
 
 import numpy as np
@@ -50,6 +52,7 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                                  cfg.gate_chi2)
     pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
     out = {}
+    pos_w = w > 0
     for j, s in enumerate(names, start=1):
         t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
                                 shape=_cs(L0, j, L0[j, 0], L0[0, 0]) if L0 is not None else 0.0)
@@ -57,19 +60,47 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
         wo[j] = 0.0
         if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
             wo = wo / wo.sum()
-            t_loo = divergence_test(cfg, L[j, j], *_loo(L, j, wo), mass[j], float(wo @ mass),
-                                    tm[j], float(wo @ tm),
-                                    shape=_cs(L0, j, *_loo(L0, j, wo)) if L0 is not None
+            lw = _log(wo)  # shared by the two leave-one-out references
+            t_loo = divergence_test(cfg, L[j, j], *_loo(L, j, wo, lw), mass[j],
+                                    float(wo @ mass), tm[j], float(wo @ tm),
+                                    shape=_cs(L0, j, *_loo(L0, j, wo, lw)) if L0 is not None
                                     else 0.0)
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own
-        others = np.flatnonzero(wo > 0) if pair is not None else ()
+        if pair is None:
+            continue
+        keep = pos_w.copy()  # wo > 0: w > 0 but j (wo is w scaled by a positive sum)
+        keep[j] = False
+        others = np.flatnonzero(keep)
         if len(others) >= 3:  # own and at least two other trusted neighbours
-            sub = pair[np.ix_(others, others)][np.triu_indices(len(others), 1)]
-            base = float(np.median(pair[j, others])) if cfg.median_test else out[s]
-            out[s] = max(0.0, base - float(np.median(sub)))
+            sub = pair[others][:, others][triu_indices(len(others))]
+            base = median_small(pair[j, others]) if cfg.median_test else out[s]
+            out[s] = max(0.0, base - median_small(sub))
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def triu_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, made once per ``n`` (read-only arrays): the pairs of the
+    majority's references, asked for per neighbour and round."""
+    rows, cols = np.triu_indices(n, 1)
+    rows.flags.writeable = False
+    cols.flags.writeable = False
+    return rows, cols
+
+
+def median_small(values: np.ndarray) -> float:
+    """``float(np.median(values))`` of a short 1-d array without NaN, to the bit: the middle
+    of the sorted values, or half the sum of the two middle ones (as ``np.median``'s mean of
+    two: ``(a + b) / 2``), without ``np.median``'s per-call overhead (tens of microseconds,
+    called per neighbour and round). NaN when empty, as ``np.median``."""
+    v = sorted(values.tolist())
+    n = len(v)
+    if n == 0:
+        return float("nan")
+    h = n // 2
+    return v[h] if n % 2 else (v[h - 1] + v[h]) / 2.0
 
 
 def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
@@ -203,9 +234,8 @@ def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j
     elif n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
         where = cfg.empty_penalty * min(1.0, max(n_j, n_r))
     else:
-        where = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(l_jj),
-                                           np.float64(l_rr)))
-        if not np.isfinite(where):
+        where = _cs_scalar(float(l_jr), float(l_jj), float(l_rr))
+        if not math.isfinite(where):
             where = cfg.cap
         elif np.isfinite(shape):
             where = max(0.0, where - shape)
@@ -392,14 +422,27 @@ def _cs(L0: np.ndarray, j: int, l_jr: float, l_rr: float) -> float:
     """``D_CS`` of input ``j`` and a reference from the centred log overlaps ``L0``
     (``log int D_j R``: ``l_jr``, ``log int R^2``: ``l_rr``), 0 where it is not finite (the
     ``shape`` of :func:`divergence_test`)."""
-    v = float(cs_from_log_overlaps(np.float64(l_jr), np.float64(L0[j, j]), np.float64(l_rr)))
-    return v if np.isfinite(v) else 0.0
+    v = _cs_scalar(float(l_jr), float(L0[j, j]), float(l_rr))
+    return v if math.isfinite(v) else 0.0
 
 
-def _loo(L: np.ndarray, j: int, wo: np.ndarray) -> tuple[float, float]:
+def _cs_scalar(lpq: float, lpp: float, lqq: float) -> float:
+    """:func:`tracking.divergence.cs_from_log_overlaps` of three floats, the same operations
+    in the same order (``max(-lpq + lpp / 2 + lqq / 2, 0)``, NaN where either side is empty)
+    without its array overhead (``np.maximum``'s NaN kept: a NaN ``lpq`` stays NaN)."""
+    if not (math.isfinite(lpp) and math.isfinite(lqq)):
+        return math.nan
+    v = -lpq + 0.5 * lpp + 0.5 * lqq
+    return 0.0 if v < 0.0 else v
+
+
+def _loo(L: np.ndarray, j: int, wo: np.ndarray, lw: np.ndarray | None = None
+         ) -> tuple[float, float]:
     """``log int D_j R`` and ``log int R^2`` of the leave-one-out average ``R`` of the
-    inputs with weights ``wo`` (``(n,)``, 0 at ``j``) from the log overlaps ``L``."""
-    lw = _log(wo)
+    inputs with weights ``wo`` (``(n,)``, 0 at ``j``) from the log overlaps ``L`` (``lw``:
+    ``log(wo)`` if already made)."""
+    if lw is None:
+        lw = _log(wo)
     return _lse(L[j] + lw), _lse((L + lw[:, None] + lw[None, :]).ravel())
 
 

@@ -1,0 +1,123 @@
+"""What the defence against lying neighbours (``fusion.trust``) costs a peer-scan, old and new.
+
+The twin (``sim.run.twin``, a virtual clock, no transport; the peers of one host: a shared
+decode, batched rounds) of ``n`` LMB peers on a circulant graph of degree 4, 2 consensus
+rounds, run three ways in ONE process, interleaved ``--repeats`` times: trust off, trust on
+with the trust checks of ``benchmarks/trust_before.py`` (the module before the speed-up,
+patched into the trust modules) and trust on as it is. Prints per run the process CPU per
+peer-scan, then the medians and the ratios on / off; and whether the old and new runs
+published the same fused states to the bit and ended with the same trust states, scores and
+state changes (the speed-up must change no decision).
+
+    python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
+    python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+if not __package__:  # `python benchmarks/bench_trust_cost.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sensornet.peers import trust, trust_checks, trust_record, trust_repair, trust_scan
+from sensornet.peers.host import SharedDecode
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.run.twin import run_twin
+from sensornet.sim.scenario import load_scenario
+
+from benchmarks import trust_before
+from benchmarks.bench_network import scenario_text
+
+MODULES = (trust, trust_scan, trust_record, trust_repair)
+"""The modules that import the trust checks by name (patched for the 'old' runs)."""
+
+
+@contextlib.contextmanager
+def old_checks():
+    """The trust modules with ``benchmarks/trust_before.py``'s functions in place of
+    :mod:`peers.trust_checks`' (every name they imported from it)."""
+    saved = []
+    for mod in MODULES:
+        for name, value in vars(mod).items():
+            if callable(value) and getattr(trust_checks, name, None) is value \
+                    and hasattr(trust_before, name):
+                saved.append((mod, name, value))
+    try:
+        for mod, name, _ in saved:
+            setattr(mod, name, getattr(trust_before, name))
+        yield
+    finally:
+        for mod, name, value in saved:
+            setattr(mod, name, value)
+
+
+def one_run(path: Path, trust_on: bool, n: int, scans: int):
+    """One twin run: CPU ms per peer-scan, the fused states and the trust summaries."""
+    scn = load_scenario(str(path), overrides={"network.filter": "lmb", "fusion.trust": trust_on})
+    peers = {q: make_peer(scn, q, 0, network="twin") for q in scn.sensor_names}
+    shared = SharedDecode()
+    for core in peers.values():
+        core.decode = shared
+    t0 = time.process_time()
+    result = run_twin(scn, 0, peers=peers, batch=True)
+    ms = (time.process_time() - t0) * 1e3 / n / scans
+    summaries = {}
+    for q, core in peers.items():
+        tr = core.consensus.trust
+        if tr is not None:
+            tr.finish()
+            summaries[q] = tr.summary()
+    return ms, result.tracks, summaries
+
+
+def same_tracks(a: dict, b: dict) -> bool:
+    """Whether two runs published the same fused states, bit for bit."""
+    return a.keys() == b.keys() and all(
+        a[q].keys() == b[q].keys() and all(np.array_equal(a[q][k], b[q][k]) for k in a[q])
+        for q in a)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--peers", type=int, default=50)
+    p.add_argument("--scans", type=int, default=40)
+    p.add_argument("--repeats", type=int, default=2)
+    args = p.parse_args()
+    n, scans = args.peers, args.scans
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "twin.toml"
+        path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
+        ms: dict[str, list[float]] = {"off": [], "on (old)": [], "on (new)": []}
+        print(f"## twin of {n} LMB peers, degree 4, 2 rounds, {scans} scans")
+        print("| run | rep | CPU ms/peer-scan |\n|---|---:|---:|", flush=True)
+        for rep in range(args.repeats):
+            v, _, _ = one_run(path, False, n, scans)
+            ms["off"].append(v)
+            print(f"| off | {rep + 1} | {v:.2f} |", flush=True)
+            with old_checks():
+                v, tracks_old, sum_old = one_run(path, True, n, scans)
+            ms["on (old)"].append(v)
+            print(f"| on (old) | {rep + 1} | {v:.2f} |", flush=True)
+            v, tracks_new, sum_new = one_run(path, True, n, scans)
+            ms["on (new)"].append(v)
+            print(f"| on (new) | {rep + 1} | {v:.2f} |", flush=True)
+            print(f"old vs new: fused states identical: {same_tracks(tracks_old, tracks_new)}, "
+                  f"trust summaries identical: {sum_old == sum_new}", flush=True)
+    med = {k: statistics.median(v) for k, v in ms.items()}
+    print("\n" + ", ".join(f"{k} {v:.2f}" for k, v in med.items()) + " ms/peer-scan (medians)")
+    print(f"on (old) / off: {med['on (old)'] / med['off']:.2f}, "
+          f"on (new) / off: {med['on (new)'] / med['off']:.2f}, "
+          f"new / old: {med['on (new)'] / med['on (old)']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

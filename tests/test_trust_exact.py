@@ -1,0 +1,148 @@
+"""The trust checks' cheaper code gives the old numbers to the bit (peers/trust_checks.py).
+
+``benchmarks/trust_before.py`` keeps the module before the speed-up; its
+``neighbour_statistics`` is compared with the new one on random inputs (empty mixtures, one
+component, identical components and inputs, quarantined and zero-weight neighbours, every
+setting the loop branches on), and the new helpers against numpy's own functions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from sensornet.peers.trust_checks import (
+    _cs_scalar,
+    median_small,
+    neighbour_statistics,
+    triu_indices,
+)
+from sensornet.peers.trust_config import TrustConfig
+from sensornet.tracking.divergence import cs_from_log_overlaps
+from sensornet.tracking.mixture import GaussianMixture
+
+from benchmarks import trust_before
+
+
+def _mixture(rng: np.random.Generator, size: int) -> GaussianMixture:
+    """``size`` components in 4-d (positions at 0 and 2) over a 2 km square, some heavy."""
+    if size == 0:
+        return GaussianMixture.empty(4)
+    means = rng.uniform(-1000, 1000, (size, 4))
+    A = rng.normal(0, 1, (size, 4, 4)) * rng.uniform(1, 40, (size, 1, 1))
+    covs = A @ A.transpose(0, 2, 1) + 1.0 * np.eye(4)
+    return GaussianMixture(rng.uniform(0.05, 1.0, size), means, covs)
+
+
+def _inputs(rng: np.random.Generator):
+    """Own and 0-7 neighbours: random sizes (0 and 1 included), some copies of own or of
+    each other, some near copies (the same targets a few metres off)."""
+    own = _mixture(rng, int(rng.integers(0, 5)))
+    inputs = {}
+    for i in range(int(rng.integers(0, 8))):
+        kind = rng.integers(0, 4)
+        if kind == 0 and inputs:
+            inputs[f"n{i}"] = inputs[sorted(inputs)[0]]  # identical to another
+        elif kind == 1:
+            inputs[f"n{i}"] = GaussianMixture(own.weights.copy(), own.means + rng.normal(
+                0, 5, own.means.shape), own.covs.copy())
+        else:
+            inputs[f"n{i}"] = _mixture(rng, int(rng.integers(0, 5)))
+    names = sorted(inputs)
+    weights = {"": float(rng.uniform(0.1, 1))}
+    weights.update({s: float(rng.choice([0.0, rng.uniform(0.05, 1)], p=[0.15, 0.85]))
+                    for s in names})
+    quarantined = {s for s in names if rng.random() < 0.2}
+    return own, inputs, weights, quarantined
+
+
+CONFIGS = [
+    TrustConfig(),
+    TrustConfig(detection_probability=0.9),
+    TrustConfig(detection_probability=0.9, location_only=True),
+    TrustConfig(detection_probability=0.9, median_test=False),
+    TrustConfig(majority=False),
+    TrustConfig(location_only=True, detection_probability=0.7, unmatched=False),
+]
+
+
+@pytest.mark.parametrize("c", range(len(CONFIGS)))
+def test_neighbour_statistics_equal_old_to_the_bit(c):
+    rng = np.random.default_rng(100 + c)
+    cfg = CONFIGS[c]
+    seen = 0
+    for _ in range(150):
+        own, inputs, weights, quarantined = _inputs(rng)
+        new = neighbour_statistics(cfg, own, inputs, weights, quarantined)
+        old = trust_before.neighbour_statistics(cfg, own, inputs, weights, quarantined)
+        assert new.keys() == old.keys()
+        for s in new:  # to the bit (NaN nowhere: both would be flagged as unequal)
+            assert new[s] == old[s], (s, new[s], old[s])
+        seen += sum(v > 0 for v in new.values())
+    assert seen > 50  # the inputs disagree often enough for the tests to matter
+
+
+def test_statistics_of_empty_and_single_inputs():
+    cfg = TrustConfig(detection_probability=0.9)
+    rng = np.random.default_rng(7)
+    one = _mixture(rng, 1)
+    empty = GaussianMixture.empty(4)
+    for own, inputs in [(empty, {}), (empty, {"a": empty}), (one, {"a": empty, "b": one}),
+                        (one, {"a": one, "b": one, "c": one, "d": empty})]:
+        w = {"": 1.0, **{s: 1.0 for s in inputs}}
+        new = neighbour_statistics(cfg, own, inputs, w, set())
+        assert new == trust_before.neighbour_statistics(cfg, own, inputs, w, set())
+    # identical inputs: no evidence against anyone
+    same = neighbour_statistics(cfg, one, {"a": one, "b": one, "c": one},
+                                {"": 1.0, "a": 1.0, "b": 1.0, "c": 1.0}, set())
+    assert same == {"a": 0.0, "b": 0.0, "c": 0.0}
+
+
+@pytest.mark.parametrize("n", range(0, 12))
+def test_median_small_is_numpys_median(n):
+    rng = np.random.default_rng(n)
+    for values in [rng.normal(0, 10, n), np.round(rng.normal(0, 2, n)), np.full(n, 3.25),
+                   rng.choice([0.0, 1e300, -1e300, np.inf, -0.0], n)]:
+        got = median_small(values)
+        want = float(np.median(values)) if n else math.nan
+        assert got == want or (math.isnan(got) and math.isnan(want)), (values, got, want)
+
+
+def test_triu_indices_cached_and_read_only():
+    for n in range(0, 9):
+        rows, cols = triu_indices(n)
+        want = np.triu_indices(n, 1)
+        assert np.array_equal(rows, want[0]) and np.array_equal(cols, want[1])
+        assert triu_indices(n)[0] is rows  # made once
+        with pytest.raises(ValueError):
+            rows[:1] = 0
+
+
+def test_cs_scalar_is_cs_from_log_overlaps():
+    rng = np.random.default_rng(3)
+    vals = list(rng.normal(-20, 10, 30)) + [-np.inf, np.inf, np.nan, 0.0, -0.0, -1e308]
+    for lpq in vals:
+        for lpp in vals[::3]:
+            for lqq in vals[::4]:
+                want = float(cs_from_log_overlaps(np.float64(lpq), np.float64(lpp),
+                                                  np.float64(lqq)))
+                got = _cs_scalar(float(lpq), float(lpp), float(lqq))
+                assert got == want or (math.isnan(got) and math.isnan(want)), \
+                    (lpq, lpp, lqq, got, want)
+
+
+def test_reference_module_is_the_old_code():
+    """The reference differs from the new code in the speed-up only: same statistic on a
+    hand-made case where the majority term decides (a liar far from three agreeing inputs)."""
+    cfg = dataclasses.replace(TrustConfig(), detection_probability=None)
+    rng = np.random.default_rng(11)
+    own = _mixture(rng, 3)
+    near = GaussianMixture(own.weights, own.means + 1.0, own.covs)
+    liar = GaussianMixture(own.weights, own.means + 500.0, own.covs)
+    inputs = {"a": near, "b": near, "c": liar}
+    w = {"": 1.0, "a": 1.0, "b": 1.0, "c": 1.0}
+    for f in (neighbour_statistics, trust_before.neighbour_statistics):
+        out = f(cfg, own, inputs, w, set())
+        assert out["c"] > 10 * max(out["a"], out["b"], 1e-9)
