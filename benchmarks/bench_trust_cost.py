@@ -4,10 +4,11 @@ The twin (``sim.run.twin``, a virtual clock, no transport; the peers of one host
 decode, batched rounds) of ``n`` LMB peers on a circulant graph of degree 4, 2 consensus
 rounds, run three ways in ONE process, interleaved ``--repeats`` times: trust off, trust on
 with the trust checks of ``benchmarks/trust_before.py`` (the module before the speed-up,
-patched into the trust modules) and trust on as it is. Prints per run the process CPU per
-peer-scan, then the medians and the ratios on / off; and whether the old and new runs
-published the same fused states to the bit and ended with the same trust states, scores and
-state changes (the speed-up must change no decision).
+patched into the trust modules: one ``offset_information`` per neighbour, the unmatched
+weights made again by the withheld-target test) and trust on as it is. Prints per run the
+process CPU per peer-scan, then the medians and the ratios on / off; and whether the old and
+new runs published the same fused states to the bit and ended with the same trust states,
+scores and state changes (the speed-up must change no decision).
 
     python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
     python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
@@ -51,13 +52,29 @@ def old_checks():
             if callable(value) and getattr(trust_checks, name, None) is value \
                     and hasattr(trust_before, name):
                 saved.append((mod, name, value))
+    saved.append((trust_scan, "offset_information_many", trust_scan.offset_information_many))
+    old = {name: getattr(trust_before, name) for _, name, _ in saved if name in vars(
+        trust_before)}
+    old["neighbour_statistics"] = _old_statistics
+    old["offset_information_many"] = _old_offsets
     try:
         for mod, name, _ in saved:
-            setattr(mod, name, getattr(trust_before, name))
+            setattr(mod, name, old[name])
         yield
     finally:
         for mod, name, value in saved:
             setattr(mod, name, value)
+
+
+def _old_statistics(cfg, own, inputs, weights, quarantined, pos=(0, 2), keep=None):
+    """The old ``neighbour_statistics`` (which kept nothing for the withheld-target test)."""
+    return trust_before.neighbour_statistics(cfg, own, inputs, weights, quarantined, pos)
+
+
+def _old_offsets(ref, mixes, pos, min_weight, gate, chi2=None):
+    """The old per-neighbour ``offset_information`` calls."""
+    return [trust_before.offset_information(ref, m, pos, min_weight, gate, chi2)
+            for m in mixes]
 
 
 def one_run(path: Path, trust_on: bool, n: int, scans: int):

@@ -60,6 +60,9 @@ class Trust(ScanTests):
         self.pos = [0, 1] if cfg.single_target else list(position_index)
         """The position entries of the densities tested (single-target: their positions)."""
         self.n = {s: NeighbourTrust() for s in neighbours}
+        self.made: dict = {}
+        """What this round's statistics made that its other tests take
+        (:func:`peers.trust_checks.neighbour_statistics`' ``keep``)."""
         self.scans = 0
         self._k: int | None = None
         self.own_at: dict[int, GaussianMixture] = {}
@@ -90,15 +93,15 @@ class Trust(ScanTests):
 
     # -- one round ----------------------------------------------------------------------------
     def statistics(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
-                   weights: dict[str, float], left_out: set[str] = frozenset()
-                   ) -> dict[str, float]:
+                   weights: dict[str, float], left_out: set[str] = frozenset(),
+                   keep: dict | None = None) -> dict[str, float]:
         """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
         average of the other trusted inputs (weights ``weights``, own's under ``""``):
         :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours and
-        ``left_out`` (stale inputs) left out of the references."""
+        ``left_out`` (stale inputs) left out of the references (``keep``: as there)."""
         out = {s for s in inputs if self.n[s].state == "quarantined"} | set(left_out)
         return neighbour_statistics(self.cfg, own, inputs, weights, out,
-                                    (self.pos[0], self.pos[1]))
+                                    (self.pos[0], self.pos[1]), keep)
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
               inputs: dict[str, GaussianMixture], weights: list[float],
@@ -132,7 +135,8 @@ class Trust(ScanTests):
         late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
         shown = {s: self.shift(s, m) for s, m in inputs.items()}  # registered, if any
-        stats = self.statistics(own, shown, wmap, set(late))
+        self.made = {}  # what the statistics made that this round's other tests take
+        stats = self.statistics(own, shown, wmap, set(late), self.made)
         self.fused_in = {}
         if cfg.repair:
             stats = self._repair(k, rnd, own, shown, wmap, stats, set(late))

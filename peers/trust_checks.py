@@ -32,12 +32,15 @@ from sensornet.tracking.mixture import GaussianMixture
 
 def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                          inputs: dict[str, GaussianMixture], weights: dict[str, float],
-                         quarantined: set[str], pos: tuple[int, int] = (0, 2)
-                         ) -> dict[str, float]:
+                         quarantined: set[str], pos: tuple[int, int] = (0, 2),
+                         keep: dict | None = None) -> dict[str, float]:
     """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
     average of the other trusted inputs (weights ``weights``, own's under ``""``; the
     neighbours in ``quarantined`` are left out of every reference; ``pos``: the position
-    entries of the state, for :func:`unmatched_weights`)."""
+    entries of the state, for :func:`unmatched_weights`). ``keep``: a dict given gets
+    ``"unmatched"``: ``(mixes, U)``, the inputs ``[own, *sorted(inputs)]`` and their
+    :func:`unmatched_weights`, where they were made (the withheld-target test of the same
+    round takes them instead of making them again)."""
     names = sorted(inputs)
     mixes = [own] + [inputs[s] for s in names]
     L = log_overlaps(mixes)
@@ -50,6 +53,8 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     if cfg.majority and cfg.unmatched and cfg.detection_probability is not None:
         U, _ = unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate,
                                  cfg.gate_chi2)
+        if keep is not None:
+            keep["unmatched"] = (mixes, U)
     pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
     out = {}
     pos_w = w > 0
@@ -146,9 +151,11 @@ def unmatched_weights(mixes: list[GaussianMixture], pos: list[int], min_weight: 
     owner = np.concatenate([np.full(int(m.sum()), i) for i, m in enumerate(sel)])
     if len(owner) == 0:
         return np.zeros((n, n)), (np.zeros((0, n), bool), np.zeros(0), owner)
-    w = np.concatenate([D.weights[m] for D, m in zip(mixes, sel, strict=True)])
-    X = np.concatenate([D.means[m][:, pos] for D, m in zip(mixes, sel, strict=True)])
-    P = (np.concatenate([D.covs[m][:, pos][:, :, pos] for D, m in zip(mixes, sel, strict=True)])
+    full = [D for D in mixes if len(D)]  # selected once from all components together
+    keep = np.concatenate([m for m in sel if len(m)])
+    w = np.concatenate([D.weights for D in full])[keep]
+    X = np.concatenate([D.means for D in full])[keep][:, pos]
+    P = (np.concatenate([D.covs for D in full])[keep][:, pos][:, :, pos]
          if chi2 is not None else np.zeros((len(owner), 2, 2)))
     G = np.zeros((len(owner), n))
     G[np.arange(len(owner)), owner] = 1.0  # (C, n): which input a component is of
@@ -241,9 +248,17 @@ def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j
             where = max(0.0, where - shape)
     if unmatched is not None:
         where = max(where, cfg.unmatched_cost * float(unmatched))
-    if t_j is not None and t_r is not None:
-        where = min(where, float(miss_cost(cfg, t_j, t_r)))
+    if t_j is not None and t_r is not None and cfg.detection_probability is not None:
+        # miss_cost of two scalars (the same operations; without it the bound is inf)
+        where = min(where, float(_miss_rate(cfg.detection_probability)
+                                 * (np.float64(t_j) + np.float64(t_r))))
     return min(cfg.cap, where + card)
+
+
+@functools.lru_cache(maxsize=16)
+def _miss_rate(detection_probability: float) -> np.float64:
+    """``-log(1 - Pd)`` (:func:`miss_cost` per unit of target mass), made once per ``Pd``."""
+    return -np.log1p(-detection_probability)
 
 
 def is_repeat(prev: GaussianMixture | None, mix: GaussianMixture, min_weight: float) -> bool:
@@ -310,10 +325,14 @@ def gls_trend(window) -> tuple[np.ndarray, np.ndarray, float] | None:
     return ab[:2], b, float(b @ np.linalg.solve(cov_b, b))
 
 
+@functools.lru_cache(maxsize=16)
 def cusum_directions(n: int) -> np.ndarray:
-    """``(n, 2)`` unit vectors at angles ``2 pi m / n`` (the charts of :func:`offset_cusum`)."""
+    """``(n, 2)`` unit vectors at angles ``2 pi m / n`` (the charts of :func:`offset_cusum`;
+    made once per ``n``, read-only: asked for per neighbour and scan)."""
     a = 2.0 * np.pi * np.arange(n) / n
-    return np.stack([np.cos(a), np.sin(a)], axis=1)
+    out = np.stack([np.cos(a), np.sin(a)], axis=1)
+    out.flags.writeable = False
+    return out
 
 
 def offset_increments(info: tuple[np.ndarray, np.ndarray], offset: float,
@@ -372,6 +391,46 @@ def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int
     S = Pa[ok] + Pb[nearest[ok]]  # (p, 2, 2)
     Si = np.linalg.inv(S)
     return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
+
+
+def offset_information_many(ref: GaussianMixture, mixes: list[GaussianMixture],
+                            pos: list[int], min_weight: float, gate: float,
+                            chi2: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`offset_information` of each of ``mixes`` against the same ``ref``, the same
+    numbers to the bit: the nearest-component search, gate and inverses of every mixture's
+    components done at once (one round's neighbours against own), the sums per mixture as
+    :func:`offset_information` does them."""
+    out = [(np.zeros((2, 2)), np.zeros(2)) for _ in mixes]
+    if len(ref) == 0:
+        return out
+    b = ref.weights >= min_weight
+    if not b.any():
+        return out
+    sel = [(i, M.weights >= min_weight) for i, M in enumerate(mixes) if len(M)]
+    sel = [(i, a) for i, a in sel if a.any()]
+    if not sel:
+        return out
+    ix = np.ix_(pos, pos)
+    ma = np.concatenate([mixes[i].means[a] for i, a in sel])[:, pos]  # (n, 2)
+    Pa = np.concatenate([mixes[i].covs[a] for i, a in sel])[:, ix[0], ix[1]]  # (n, 2, 2)
+    mb, Pb = ref.means[b][:, pos], ref.covs[b][:, ix[0], ix[1]]  # (m, 2), (m, 2, 2)
+    diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
+    nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
+    d = diff[np.arange(len(ma)), nearest]
+    Pn = Pb[nearest]
+    ok = gated(d, Pa, Pn, gate, chi2)
+    if not ok.any():
+        return out
+    Si = np.zeros_like(Pa)
+    Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
+    ends = np.cumsum([int(a.sum()) for _, a in sel])
+    starts = np.r_[0, ends[:-1]]
+    for (i, _), lo, hi in zip(sel, starts, ends, strict=True):
+        k = ok[lo:hi]
+        if k.any():
+            S = Si[lo:hi][k]
+            out[i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
+    return out
 
 
 def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],

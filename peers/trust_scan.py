@@ -12,6 +12,7 @@ import numpy as np
 from sensornet.peers.trust_checks import (
     gls_offset,
     offset_information,
+    offset_information_many,
     relative_offsets,
     target_mass,
     unmatched_weights,
@@ -45,11 +46,7 @@ class ScanTests:
             follow = cfg.register and cfg.register_drift
             regs = {s: registered_at(self.n[s], a) if follow else None
                     for s, (a, _, _) in tested.items()}
-            infos = {s: _raw(offset_information(ref, self.shift(s, mix, a) if follow else mix,
-                                                self.pos, cfg.repeat_weight, cfg.bias_gate,
-                                                cfg.gate_chi2),
-                             regs[s])
-                     for s, (a, mix, ref) in tested.items()}
+            infos = {s: _raw(info, regs[s]) for s, info in self._offsets(tested, follow).items()}
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
@@ -68,6 +65,24 @@ class ScanTests:
             fused = {**shown, **self.fused_in}  # a repaired density is what is tested
             for s in self._withheld(own, fused, [s for s in sorted(shown) if s not in late]):
                 stats[s] = max(stats[s], alarm_stat)
+
+    def _offsets(self, tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
+                 follow: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Each tested neighbour's :func:`peers.trust_checks.offset_information` against its
+        reference (registered at its scan when ``follow``), those against one reference
+        (own, for every fresh one) together (:func:`offset_information_many`)."""
+        cfg = self.cfg
+        groups: dict[int, tuple[GaussianMixture, list[str]]] = {}
+        for s, (_, _, ref) in tested.items():
+            groups.setdefault(id(ref), (ref, []))[1].append(s)
+        out = {}
+        for ref, names in groups.values():
+            mixes = [self.shift(s, tested[s][1], tested[s][0]) if follow else tested[s][1]
+                     for s in names]
+            out.update(zip(names, offset_information_many(
+                ref, mixes, self.pos, cfg.repeat_weight, cfg.bias_gate, cfg.gate_chi2),
+                strict=True))
+        return {s: out[s] for s in tested}
 
     def _repair(self, k: int, rnd: int, own: GaussianMixture,
                 shown: dict[str, GaussianMixture],
@@ -143,8 +158,13 @@ class ScanTests:
         quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
         cfg = self.cfg
         mixes = [own] + [shown[s] for s in fresh]
-        U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate,
-                                 cfg.gate_chi2)
+        made = self.made.get("unmatched")  # the statistics' of the same inputs, if so
+        if made is not None and len(made[0]) == len(mixes) and all(
+                a is b for a, b in zip(made[0], mixes, strict=True)):
+            U = made[1]
+        else:
+            U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate,
+                                     cfg.gate_chi2)
         tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
         ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
         refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)

@@ -13,11 +13,16 @@ import math
 
 import numpy as np
 import pytest
+from sensornet.peers.trust import Trust
 from sensornet.peers.trust_checks import (
     _cs_scalar,
+    cusum_directions,
     median_small,
     neighbour_statistics,
+    offset_information,
+    offset_information_many,
     triu_indices,
+    unmatched_weights,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.divergence import cs_from_log_overlaps
@@ -146,3 +151,95 @@ def test_reference_module_is_the_old_code():
     for f in (neighbour_statistics, trust_before.neighbour_statistics):
         out = f(cfg, own, inputs, w, set())
         assert out["c"] > 10 * max(out["a"], out["b"], 1e-9)
+
+
+def _near_copies(rng: np.random.Generator, ref: GaussianMixture, count: int):
+    """Mixtures like a round's neighbours: ``ref`` itself, shifted copies (some beyond the
+    gate), empty ones, one-component ones and fresh random ones."""
+    out = []
+    for _ in range(count):
+        kind = rng.integers(0, 5)
+        if kind == 0:
+            out.append(ref)
+        elif kind == 1:
+            out.append(GaussianMixture(ref.weights * rng.uniform(0.5, 1.5), ref.means
+                                       + rng.normal(0, rng.choice([3.0, 80.0]), ref.means.shape),
+                                       ref.covs))
+        elif kind == 2:
+            out.append(GaussianMixture.empty(4))
+        else:
+            out.append(_mixture(rng, int(rng.integers(1, 6))))
+    return out
+
+
+@pytest.mark.parametrize("chi2", [None, 13.8])
+def test_offset_information_many_is_one_at_a_time(chi2):
+    rng = np.random.default_rng(5 if chi2 else 6)
+    matched = 0
+    for _ in range(200):
+        ref = _mixture(rng, int(rng.integers(0, 6)))
+        mixes = _near_copies(rng, ref, int(rng.integers(0, 7)))
+        gate = float(rng.choice([10.0, 50.0, 300.0]))
+        got = offset_information_many(ref, mixes, [0, 2], 0.3, gate, chi2)
+        assert len(got) == len(mixes)
+        for m, (I, y) in zip(mixes, got, strict=True):
+            I0, y0 = offset_information(ref, m, [0, 2], 0.3, gate, chi2)
+            assert np.array_equal(I, I0) and np.array_equal(y, y0)
+            matched += bool(I.any())
+    assert matched > 100  # most of them have pairs within the gate
+
+
+@pytest.mark.parametrize("chi2", [None, 13.8])
+def test_unmatched_weights_equal_old(chi2):
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        own = _mixture(rng, int(rng.integers(0, 6)))
+        mixes = [own] + _near_copies(rng, own, int(rng.integers(0, 6)))
+        U, (hit, w, owner) = unmatched_weights(mixes, [0, 2], 0.3, 50.0, chi2)
+        U0, (hit0, w0, owner0) = trust_before.unmatched_weights(mixes, [0, 2], 0.3, 50.0, chi2)
+        assert np.array_equal(U, U0) and np.array_equal(hit, hit0)
+        assert np.array_equal(w, w0) and np.array_equal(owner, owner0)
+
+
+def test_cusum_directions_cached_read_only():
+    for n in (1, 4, 8):
+        want = trust_before.cusum_directions(n)
+        got = cusum_directions(n)
+        assert np.array_equal(got, want) and cusum_directions(n) is got
+        assert np.allclose(np.linalg.norm(got, axis=1), 1.0)
+        with pytest.raises(ValueError):
+            got[0, 0] = 0.0
+
+
+def test_withheld_test_taking_the_statistics_unmatched_weights_changes_nothing():
+    """A round's withheld-target test takes the unmatched weights its statistics made of the
+    same inputs (``Trust.made``); a Trust that makes them again weighs every round the same,
+    to the bit, over scans where neighbours lie (empty, moved 200 m, a random density)."""
+    rng = np.random.default_rng(21)
+    cfg = TrustConfig(detection_probability=0.9)
+    names = ("a", "b", "c", "d")
+    reuse, again = Trust(cfg, names), Trust(cfg, names)
+    plain = Trust.statistics
+
+    def no_keep(own, inputs, weights, left_out=frozenset(), keep=None):
+        return plain(again, own, inputs, weights, left_out)
+
+    again.statistics = no_keep
+    reused = 0
+    for k in range(1, 16):
+        own = _mixture(rng, 4)
+        for rnd in (0, 1):
+            inputs = {s: GaussianMixture(own.weights, own.means + rng.normal(0, 3, (4, 4)),
+                                         own.covs) for s in names}
+            inputs["b"] = GaussianMixture.empty(4) if k % 3 else inputs["b"]
+            inputs["c"] = GaussianMixture(own.weights, own.means + 200.0, own.covs)
+            inputs["d"] = _mixture(rng, 3) if k > 8 else inputs["d"]
+            w = [0.2] * 5
+            assert reuse.weigh(k, rnd, own, inputs, w) == again.weigh(k, rnd, own, inputs, w)
+            reused += "unmatched" in reuse.made and not again.made
+    reuse.finish()
+    again.finish()
+    assert reused > 10
+    assert reuse.summary() == again.summary()
+    assert [reuse.n[s].withheld for s in names] == [again.n[s].withheld for s in names]
+    assert max(reuse.n[s].withheld for s in names) > 0  # the withheld test did fire
