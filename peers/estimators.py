@@ -27,7 +27,7 @@ from sensornet.tracking.labels import (
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
 from sensornet.tracking.particles import IMMParticleFilter, ParticleParams, RatioConfig, floored
-from sensornet.tracking.reidentify import Reidentification
+from sensornet.tracking.reidentify import REID_SCANS, Reidentification
 
 
 @dataclass(frozen=True)
@@ -96,8 +96,11 @@ class GmphdEstimator:
         (tracking.labels.Publication; the gap counted in looks of ``revisit`` scans: a rotating
         radar's rotation)."""
         self.reid = (None if origin is None
-                     else Reidentification(filt.motion, self.origin, shared=shared))
-        """A re-born track takes its lost label back (tracking.reidentify)."""
+                     else Reidentification(filt.motion, self.origin, shared=shared,
+                                           scans=REID_SCANS * revisit))
+        """A re-born track takes its lost label back (tracking.reidentify), remembered for
+        :data:`tracking.reidentify.REID_SCANS` looks of ``revisit`` scans (a 10 s radar sees a
+        target once in 5 scans of 2 s: 3 scans ended the memory before its next look)."""
         self.k = 0
         """The scan of the last step (births are stamped with it)."""
         self._next_k: int | None = None

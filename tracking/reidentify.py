@@ -29,7 +29,9 @@ from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
 
 REID_SCANS = 3
-"""Scans a lost label is remembered (after the last scan it was published)."""
+"""Looks a lost label is remembered (after the last scan it was published): scans of a sensor
+that sees every target every scan; a rotating radar's peer passes ``REID_SCANS x revisit``
+scans (``peers.estimators.GmphdEstimator``: a 10 s radar looks once in 5 scans of 2 s)."""
 REID_AGE = 3
 """Scans a track must have been published in a row to be remembered when lost (the
 confirmation count, tracking.labels.Confirmation ``scans``): a birth or clutter track that is
