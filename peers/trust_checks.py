@@ -58,18 +58,25 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
     out = {}
     pos_w = w > 0
+    # every neighbour's leave-one-out weights at once: row i leaves out input i + 1
+    J = len(names)
+    W = np.repeat(w[None, :], J, axis=0)
+    W[np.arange(J), np.arange(1, J + 1)] = 0.0
+    tot = W.sum(axis=1)
+    has = (tot > 0) & (np.count_nonzero(W, axis=1) > 1)  # the others besides own
+    W = W / np.where(has, tot, 1.0)[:, None]
+    LW = _log(W)
+    loo = _loo_all(L, LW)
+    loo0 = _loo_all(L0, LW) if L0 is not None else None
     for j, s in enumerate(names, start=1):
         t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
                                 shape=_cs(L0, j, L0[j, 0], L0[0, 0]) if L0 is not None else 0.0)
-        wo = w.copy()
-        wo[j] = 0.0
-        if wo.sum() > 0 and np.count_nonzero(wo) > 1:  # the others besides own
-            wo = wo / wo.sum()
-            lw = _log(wo)  # shared by the two leave-one-out references
-            t_loo = divergence_test(cfg, L[j, j], *_loo(L, j, wo, lw), mass[j],
+        if has[j - 1]:
+            wo = W[j - 1]
+            t_loo = divergence_test(cfg, L[j, j], loo[0][j - 1], loo[1][j - 1], mass[j],
                                     float(wo @ mass), tm[j], float(wo @ tm),
-                                    shape=_cs(L0, j, *_loo(L0, j, wo, lw)) if L0 is not None
-                                    else 0.0)
+                                    shape=_cs(L0, j, loo0[0][j - 1], loo0[1][j - 1])
+                                    if loo0 is not None else 0.0)
             out[s] = min(t_own, t_loo)
         else:
             out[s] = t_own
@@ -503,6 +510,29 @@ def _loo(L: np.ndarray, j: int, wo: np.ndarray, lw: np.ndarray | None = None
     if lw is None:
         lw = _log(wo)
     return _lse(L[j] + lw), _lse((L + lw[:, None] + lw[None, :]).ravel())
+
+
+def _loo_all(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_loo` of every row of log weights ``LW`` (``(J, n)``; row ``i`` the log of
+    input ``i + 1``'s leave-one-out weights) at once, the same numbers: ``log int D_j R``
+    and ``log int R^2`` (``(J,)`` each), row-wise log-sum-exps as :func:`_lse`."""
+    J, n = LW.shape
+    rows = np.arange(1, J + 1)
+    cross = _lse_rows(L[rows] + LW)
+    square = _lse_rows((L[None] + LW[:, :, None] + LW[:, None, :]).reshape(J, n * n))
+    return cross, square
+
+
+def _lse_rows(X: np.ndarray) -> np.ndarray:
+    """:func:`_lse` of every row of ``X`` (``(J, m)``): ``(J,)``, ``-inf`` for a row
+    without a finite maximum."""
+    top = np.max(X, axis=1) if X.shape[1] else np.full(len(X), -np.inf)
+    ok = np.isfinite(top)
+    safe = np.where(ok, top, 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        S = np.exp(X - safe[:, None]).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, safe + np.log(S), -np.inf)
 
 
 def _log(w: np.ndarray) -> np.ndarray:
