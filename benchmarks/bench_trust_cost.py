@@ -4,11 +4,12 @@ The twin (``sim.run.twin``, a virtual clock, no transport; the peers of one host
 decode, batched rounds) of ``n`` LMB peers on a circulant graph of degree 4, 2 consensus
 rounds, run three ways in ONE process, interleaved ``--repeats`` times: trust off, trust on
 with the trust checks of ``benchmarks/trust_before.py`` (the module before the speed-up,
-patched into the trust modules: one ``offset_information`` per neighbour, the unmatched
-weights made again by the withheld-target test) and trust on as it is. Prints per run the
-process CPU per peer-scan, then the medians and the ratios on / off; and whether the old and
-new runs published the same fused states to the bit and ended with the same trust states,
-scores and state changes (the speed-up must change no decision).
+patched into the trust modules: one ``offset_information`` and ``add_offset`` per
+neighbour, the unmatched weights made again by the withheld-target test) and trust on as
+it is. Prints per run the process CPU per peer-scan, then the medians and the ratios on /
+off; and whether the old and new runs published the same fused states to the bit and ended
+with the same trust states, scores and state changes (the speed-up must change no
+decision).
 
     python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
     python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
@@ -53,10 +54,12 @@ def old_checks():
                     and hasattr(trust_before, name):
                 saved.append((mod, name, value))
     saved.append((trust_scan, "offset_information_many", trust_scan.offset_information_many))
+    saved.append((trust_scan, "add_offsets", trust_scan.add_offsets))
     old = {name: getattr(trust_before, name) for _, name, _ in saved if name in vars(
         trust_before)}
     old["neighbour_statistics"] = _old_statistics
     old["offset_information_many"] = _old_offsets
+    old["add_offsets"] = _old_add_offsets
     try:
         for mod, name, _ in saved:
             setattr(mod, name, old[name])
@@ -75,6 +78,12 @@ def _old_offsets(ref, mixes, pos, min_weight, gate, chi2=None):
     """The old per-neighbour ``offset_information`` calls."""
     return [trust_before.offset_information(ref, m, pos, min_weight, gate, chi2)
             for m in mixes]
+
+
+def _old_add_offsets(cfg, recs, infos):
+    """The old per-neighbour ``add_offset`` calls (its ``offset_chi2`` the old one)."""
+    return [trust_record.add_offset(cfg, rec, info) for rec, info in
+            zip(recs, infos, strict=True)]
 
 
 def one_run(path: Path, trust_on: bool, n: int, scans: int):

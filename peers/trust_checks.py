@@ -293,6 +293,28 @@ def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
     return tuple(float(c) for c in chi2)
 
 
+def offset_chi2_many(offsets: list[deque], windows: tuple[int, ...]
+                     ) -> list[tuple[float, ...]]:
+    """:func:`offset_chi2` of several neighbours' offsets (each non-empty), the same
+    numbers: the window sums per neighbour, the determinants and solves of all of them in
+    one batch (one round's neighbours, per scan)."""
+    if not offsets:
+        return []
+    infos, ys = [], []
+    for window in offsets:
+        last = np.minimum(np.array(windows), len(window)) - 1
+        infos.append(np.cumsum([i for i, _ in window], axis=0)[last])  # newest first
+        ys.append(np.cumsum([v for _, v in window], axis=0)[last])
+    info, y = np.concatenate(infos), np.concatenate(ys)  # (n w, 2, 2), (n w, 2)
+    ok = np.linalg.det(info) > 1e-12
+    chi2 = np.zeros(len(info))
+    if ok.any():
+        b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # mean offsets
+        chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
+    values = chi2.reshape(len(offsets), len(windows)).tolist()
+    return [tuple(v) for v in values]
+
+
 def gls_offset(window) -> np.ndarray | None:
     """The generalised-least-squares offset ``I^-1 y`` (``(2,)``) of the per-scan
     ``(I, y)`` in ``window`` (:func:`offset_information`), summed; None when they do not

@@ -14,6 +14,7 @@ from sensornet.peers.trust_checks import (
     gls_trend,
     is_repeat,
     offset_chi2,
+    offset_chi2_many,
     offset_cusum,
 )
 from sensornet.peers.trust_config import TrustConfig
@@ -132,6 +133,26 @@ def add_offset(cfg: TrustConfig, rec: NeighbourTrust, info: tuple) -> tuple[floa
         chi2 = (*chi2, float(rec.cusum.max()))
     rec.last_offset_chi2 = chi2
     return chi2
+
+
+def add_offsets(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[tuple]
+                ) -> list[tuple[float, ...]]:
+    """:func:`add_offset` of several neighbours at once, the same windows and numbers (their
+    chi-squares in one batch, :func:`peers.trust_checks.offset_chi2_many`)."""
+    for rec, info in zip(recs, infos, strict=True):
+        push_window(rec.offsets, info, max(cfg.bias_windows))
+        if cfg.register and cfg.register_drift:
+            push_window(rec.drift_window, info, cfg.register_window)
+    out = offset_chi2_many([rec.offsets for rec in recs], cfg.bias_windows)
+    for i, (rec, info) in enumerate(zip(recs, infos, strict=True)):
+        if cfg.bias_cusum:
+            if rec.cusum is None:
+                rec.cusum = np.zeros(cfg.bias_cusum_directions)
+            rec.cusum = offset_cusum(rec.cusum, info, cfg.bias_cusum_offset,
+                                     cusum_directions(cfg.bias_cusum_directions))
+            out[i] = (*out[i], float(rec.cusum.max()))
+        rec.last_offset_chi2 = out[i]
+    return out
 
 
 def update_registration(rec: NeighbourTrust, alarm: bool, k: int = 0,

@@ -21,7 +21,7 @@ from sensornet.peers.trust_checks import (
 )
 from sensornet.peers.trust_record import (
     NeighbourTrust,
-    add_offset,
+    add_offsets,
     offset_limits,
     push_window,
     registered_at,
@@ -54,7 +54,9 @@ class ScanTests:
                 rec = self.n[s]
                 rec.raw_offset = gls_offset([info])
                 push_window(rec.residuals, _raw(info, regs[s], -1.0), max(cfg.bias_windows))
-                chi2 = add_offset(cfg, rec, info)
+            chi2s = add_offsets(cfg, [self.n[s] for s in infos], list(infos.values()))
+            for s, chi2 in zip(infos, chi2s, strict=True):
+                rec = self.n[s]
                 alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
                 if cfg.register:
                     update_registration(rec, alarm, tested[s][0], cfg.register_drift,

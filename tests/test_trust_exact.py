@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 
 import numpy as np
 import pytest
@@ -19,6 +20,8 @@ from sensornet.peers.trust_checks import (
     cusum_directions,
     median_small,
     neighbour_statistics,
+    offset_chi2,
+    offset_chi2_many,
     offset_information,
     offset_information_many,
     triu_indices,
@@ -243,3 +246,24 @@ def test_withheld_test_taking_the_statistics_unmatched_weights_changes_nothing()
     assert reuse.summary() == again.summary()
     assert [reuse.n[s].withheld for s in names] == [again.n[s].withheld for s in names]
     assert max(reuse.n[s].withheld for s in names) > 0  # the withheld test did fire
+
+
+def test_offset_chi2_many_is_one_at_a_time():
+    """Windows of different lengths, singular scans (nothing matched) among them."""
+    rng = np.random.default_rng(31)
+    windows = (1, 5, 20)
+    for _ in range(50):
+        offsets = []
+        for _ in range(int(rng.integers(1, 6))):
+            d = deque()
+            for _ in range(int(rng.integers(1, 25))):
+                if rng.random() < 0.3:
+                    d.append((np.zeros((2, 2)), np.zeros(2)))
+                else:
+                    A = rng.normal(0, 0.1, (2, 2))
+                    d.append((A @ A.T + 1e-3 * np.eye(2), rng.normal(0, 1, 2)))
+            offsets.append(d)
+        got = offset_chi2_many(offsets, windows)
+        assert got == [offset_chi2(d, windows) for d in offsets]
+        assert any(c > 0 for g in got for c in g) and all(type(c) is float for c in got[0])
+    assert offset_chi2_many([], windows) == []
