@@ -13,6 +13,7 @@ decision).
 
     python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
     python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
+    python benchmarks/bench_trust_cost.py --peers 20 --scans 30 --repeats 1 --lie p02:biased
 """
 
 from __future__ import annotations
@@ -86,9 +87,13 @@ def _old_add_offsets(cfg, recs, infos):
             zip(recs, infos, strict=True)]
 
 
-def one_run(path: Path, trust_on: bool, n: int, scans: int):
-    """One twin run: CPU ms per peer-scan, the fused states and the trust summaries."""
-    scn = load_scenario(str(path), overrides={"network.filter": "lmb", "fusion.trust": trust_on})
+def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None):
+    """One twin run (``lie``: ``fusion.lie``, e.g. ``p02:biased``): CPU ms per peer-scan,
+    the fused states and the trust summaries."""
+    over = {"network.filter": "lmb", "fusion.trust": trust_on}
+    if lie:
+        over["fusion.lie"] = lie
+    scn = load_scenario(str(path), overrides=over)
     peers = {q: make_peer(scn, q, 0, network="twin") for q in scn.sensor_names}
     shared = SharedDecode()
     for core in peers.values():
@@ -117,6 +122,8 @@ def main() -> None:
     p.add_argument("--peers", type=int, default=50)
     p.add_argument("--scans", type=int, default=40)
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--lie", default=None,
+                   help="a lying peer (fusion.lie, e.g. p02:biased): the defence's decisions")
     args = p.parse_args()
     n, scans = args.peers, args.scans
     with tempfile.TemporaryDirectory() as tmp:
@@ -126,18 +133,20 @@ def main() -> None:
         print(f"## twin of {n} LMB peers, degree 4, 2 rounds, {scans} scans")
         print("| run | rep | CPU ms/peer-scan |\n|---|---:|---:|", flush=True)
         for rep in range(args.repeats):
-            v, _, _ = one_run(path, False, n, scans)
+            v, _, _ = one_run(path, False, n, scans, args.lie)
             ms["off"].append(v)
             print(f"| off | {rep + 1} | {v:.2f} |", flush=True)
             with old_checks():
-                v, tracks_old, sum_old = one_run(path, True, n, scans)
+                v, tracks_old, sum_old = one_run(path, True, n, scans, args.lie)
             ms["on (old)"].append(v)
             print(f"| on (old) | {rep + 1} | {v:.2f} |", flush=True)
-            v, tracks_new, sum_new = one_run(path, True, n, scans)
+            v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie)
             ms["on (new)"].append(v)
             print(f"| on (new) | {rep + 1} | {v:.2f} |", flush=True)
             print(f"old vs new: fused states identical: {same_tracks(tracks_old, tracks_new)}, "
-                  f"trust summaries identical: {sum_old == sum_new}", flush=True)
+                  f"trust summaries identical: {sum_old == sum_new} "
+                  f"({sum(len(v['changes']) for v in sum_new.values())} state changes)",
+                  flush=True)
     med = {k: statistics.median(v) for k, v in ms.items()}
     print("\n" + ", ".join(f"{k} {v:.2f}" for k, v in med.items()) + " ms/peer-scan (medians)")
     print(f"on (old) / off: {med['on (old)'] / med['off']:.2f}, "
