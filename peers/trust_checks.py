@@ -524,20 +524,11 @@ def _cs_scalar(lpq: float, lpp: float, lqq: float) -> float:
     return 0.0 if v < 0.0 else v
 
 
-def _loo(L: np.ndarray, j: int, wo: np.ndarray, lw: np.ndarray | None = None
-         ) -> tuple[float, float]:
-    """``log int D_j R`` and ``log int R^2`` of the leave-one-out average ``R`` of the
-    inputs with weights ``wo`` (``(n,)``, 0 at ``j``) from the log overlaps ``L`` (``lw``:
-    ``log(wo)`` if already made)."""
-    if lw is None:
-        lw = _log(wo)
-    return _lse(L[j] + lw), _lse((L + lw[:, None] + lw[None, :]).ravel())
-
-
 def _loo_all(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_loo` of every row of log weights ``LW`` (``(J, n)``; row ``i`` the log of
-    input ``i + 1``'s leave-one-out weights) at once, the same numbers: ``log int D_j R``
-    and ``log int R^2`` (``(J,)`` each), row-wise log-sum-exps as :func:`_lse`."""
+    """``log int D_j R`` and ``log int R^2`` (``(J,)`` each) of every input ``j = i + 1``
+    and the leave-one-out average ``R`` of the inputs with the log weights ``LW[i]``
+    (``(J, n)``, ``-inf`` at ``j``), from the log overlaps ``L`` (``(n, n)``): all
+    neighbours at once (row-wise log-sum-exps, the same numbers as one at a time)."""
     J, n = LW.shape
     rows = np.arange(1, J + 1)
     cross = _lse_rows(L[rows] + LW)
@@ -546,8 +537,8 @@ def _loo_all(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _lse_rows(X: np.ndarray) -> np.ndarray:
-    """:func:`_lse` of every row of ``X`` (``(J, m)``): ``(J,)``, ``-inf`` for a row
-    without a finite maximum."""
+    """``log sum exp`` of every row of ``X`` (``(J, m)``) from its maximum: ``(J,)``,
+    ``-inf`` for a row without a finite maximum."""
     top = np.max(X, axis=1) if X.shape[1] else np.full(len(X), -np.inf)
     ok = np.isfinite(top)
     safe = np.where(ok, top, 0.0)
@@ -560,13 +551,6 @@ def _lse_rows(X: np.ndarray) -> np.ndarray:
 def _log(w: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore"):
         return np.log(w)
-
-
-def _lse(x: np.ndarray) -> float:
-    top = np.max(x)
-    if not np.isfinite(top):
-        return -np.inf
-    return float(top + np.log(np.exp(x - top).sum()))
 
 
 def withheld_increments(U: np.ndarray, targets: np.ndarray, refs: np.ndarray,
