@@ -4,7 +4,7 @@ The twin (``sim.run.twin``, a virtual clock, no transport; the peers of one host
 decode, batched rounds) of ``n`` LMB peers on a circulant graph of degree 4, 2 consensus
 rounds, run three ways in ONE process, interleaved ``--repeats`` times: trust off, trust on
 with the trust checks of ``benchmarks/trust_before.py`` (the module before the speed-up,
-patched into the trust modules: one ``offset_information`` and ``add_offset`` per
+patched into the trust modules: one ``offset_information``, ``add_offset`` and ``gls_offset`` per
 neighbour, the unmatched weights made again by the withheld-target test) and trust on as
 it is. Prints per run the process CPU per peer-scan, then the medians and the ratios on /
 off; and whether the old and new runs published the same fused states to the bit and ended
@@ -56,11 +56,13 @@ def old_checks():
                 saved.append((mod, name, value))
     saved.append((trust_scan, "offset_information_many", trust_scan.offset_information_many))
     saved.append((trust_scan, "add_offsets", trust_scan.add_offsets))
+    saved.append((trust_scan, "gls_offsets", trust_scan.gls_offsets))
     old = {name: getattr(trust_before, name) for _, name, _ in saved if name in vars(
         trust_before)}
     old["neighbour_statistics"] = _old_statistics
     old["offset_information_many"] = _old_offsets
     old["add_offsets"] = _old_add_offsets
+    old["gls_offsets"] = lambda infos: [trust_before.gls_offset([i]) for i in infos]
     try:
         for mod, name, _ in saved:
             setattr(mod, name, old[name])

@@ -327,6 +327,22 @@ def gls_offset(window) -> np.ndarray | None:
     return np.linalg.solve(I, np.sum([v for _, v in window], axis=0))
 
 
+def gls_offsets(infos: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray | None]:
+    """:func:`gls_offset` of each single scan's ``(I, y)`` of ``infos`` (``gls_offset([info])``
+    per neighbour), the same numbers: the determinants and solves in one batch."""
+    if not infos:
+        return []
+    I = np.array([i for i, _ in infos])  # (n, 2, 2)
+    ok = np.linalg.det(I) > 1e-12
+    out: list[np.ndarray | None] = [None] * len(infos)
+    if ok.any():
+        y = np.array([v for _, v in infos])[ok]  # (p, 2)
+        for i, b in zip(np.flatnonzero(ok), np.linalg.solve(I[ok], y[..., None])[..., 0],
+                        strict=True):
+            out[i] = b
+    return out
+
+
 def gls_trend(window) -> tuple[np.ndarray, np.ndarray, float] | None:
     """The generalised-least-squares offset and its rate, ``(a, b)`` (``(2,)`` each), and
     the rate's chi-square ``b' C_b^-1 b`` (``C_b`` its covariance: 2 degrees of freedom for

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from sensornet.peers.trust_checks import (
     gls_offset,
+    gls_offsets,
     offset_information,
     offset_information_many,
     relative_offsets,
@@ -50,9 +51,10 @@ class ScanTests:
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
-            for s, info in infos.items():
+            for (s, info), raw in zip(infos.items(), gls_offsets(list(infos.values())),
+                                      strict=True):
                 rec = self.n[s]
-                rec.raw_offset = gls_offset([info])
+                rec.raw_offset = raw
                 push_window(rec.residuals, _raw(info, regs[s], -1.0), max(cfg.bias_windows))
             chi2s = add_offsets(cfg, [self.n[s] for s in infos], list(infos.values()))
             for s, chi2 in zip(infos, chi2s, strict=True):

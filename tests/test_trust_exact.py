@@ -18,6 +18,8 @@ from sensornet.peers.trust import Trust
 from sensornet.peers.trust_checks import (
     _cs_scalar,
     cusum_directions,
+    gls_offset,
+    gls_offsets,
     median_small,
     neighbour_statistics,
     offset_chi2,
@@ -267,3 +269,18 @@ def test_offset_chi2_many_is_one_at_a_time():
         assert got == [offset_chi2(d, windows) for d in offsets]
         assert any(c > 0 for g in got for c in g) and all(type(c) is float for c in got[0])
     assert offset_chi2_many([], windows) == []
+
+
+def test_gls_offsets_is_one_at_a_time():
+    rng = np.random.default_rng(41)
+    for n in range(0, 7):
+        infos = []
+        for _ in range(n):
+            A = rng.normal(0, 0.1, (2, 2))
+            infos.append((np.zeros((2, 2)), np.zeros(2)) if rng.random() < 0.3 else
+                         (A @ A.T + 1e-4 * np.eye(2), rng.normal(0, 1, 2)))
+        got = gls_offsets(infos)
+        assert len(got) == n
+        for info, g in zip(infos, got, strict=True):
+            want = gls_offset([info])
+            assert (g is None and want is None) or np.array_equal(g, want)
