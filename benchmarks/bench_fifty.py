@@ -156,12 +156,14 @@ class Run:
 
 
 def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_process: int | None,
-            degree: int, n: int, speed: float = 10.0, sparse: bool = False) -> Run:
-    """One network run at ``speed`` scans/s; its numbers in ``rows`` (module docstring)."""
+            degree: int, n: int, speed: float = 10.0, sparse: bool = False,
+            sets: tuple[str, ...] = ()) -> Run:
+    """One network run at ``speed`` scans/s; its numbers in ``rows`` (module docstring);
+    ``sets``: more scenario overrides (``KEY=VALUE``, as ``sensornet run --set``)."""
     tag = f"{kind}-{'on' if view else 'off'}-{repeat}"
     path = tmp / f"fifty-{n}-{degree}-{speed:g}.toml"
     path.write_text(scenario_text(n, degree, scans, rounds=2, speed=speed))
-    overrides = [f"network.filter={kind}"]
+    overrides = [f"network.filter={kind}", *sets]
     scn = load_scenario(str(path), overrides=parse_overrides(overrides))
     per = per_process or choose(n, None, load=scenario_load(scn)).per_process
     probe = speed_probe()
@@ -358,6 +360,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep", metavar="DIR", help="keep the runs' folders under DIR")
     p.add_argument("--per-process", type=int, default=None, metavar="N",
                    help="peers per host (default: sensornet run's choice for the kind)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="a scenario override for every run, as sensornet run --set (repeatable; "
+                        "e.g. fusion.trust=false to price the defence)")
     p.add_argument("--gaps", action="store_true",
                    help="only one LMB peer's step when it leaves scans out (no network)")
     p.add_argument("--twin", action="store_true",
@@ -376,7 +381,8 @@ def main(argv: list[str] | None = None) -> int:
     views = [v == "on" for v in args.views.split(",")]
     print(f"## {args.peers} peers, degree {args.degree}, 2 rounds, {args.speed:g} scans/s, "
           f"{args.scans} "
-          f"scans, peer hosts; load average {load_average()} at the start\n", flush=True)
+          f"scans, peer hosts{''.join(' --set ' + x for x in args.sets)}; load average "
+          f"{load_average()} at the start\n", flush=True)
     print(HEADER, RULE, sep="\n", flush=True)
     runs: list[Run] = []
     with tempfile.TemporaryDirectory(prefix="sensornet-fifty-") as tmp:
@@ -387,7 +393,8 @@ def main(argv: list[str] | None = None) -> int:
             for kind in kinds:
                 for view in views:
                     r = one_run(Path(tmp), kind, view, rep, args.scans, args.per_process,
-                                args.degree, args.peers, args.speed, args.sparse)
+                                args.degree, args.peers, args.speed, args.sparse,
+                                tuple(args.sets))
                     runs.append(r)
                     print(fmt(r, args.peers), flush=True)
                     if not r.ok:
