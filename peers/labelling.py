@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
+from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -213,6 +214,15 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         match = LabelMatch(none, none.copy(), np.zeros(0))
     lost = np.flatnonzero(~won)
     labels[lost] = new_labels(origin, k, len(lost), FRESH_BASE + fresh_start)
+    if len(J):
+        # an own track paired with a row that lost its label to a heavier row (a label two
+        # targets held) releases it: it takes the row's fresh label (a RELEASE pair), else it
+        # keeps the duplicated label and the row gets a new id every scan (docs/real-traffic.md)
+        rel = (S == 0) & ~won[J]
+        if rel.any():
+            match = LabelMatch(np.concatenate([match.own, L[rel]]),
+                               np.concatenate([match.nbr, labels[J[rel]]]),
+                               np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
     return FusedLabels(labels, match, len(lost))
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 from sensornet.peers.labelling import FRESH_BASE, LABEL_GATE, FusedLabels, input_tracks, label_fused
+from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, label_keys, match_labels, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -94,8 +95,10 @@ def test_batched_label_fused_equals_per_input_matching():
         got = label_fused(fused, inputs, origin, k, start, gate)
         ref = reference(fused, inputs, origin, k, start, gate)
         np.testing.assert_array_equal(got.labels, ref.labels)
-        np.testing.assert_array_equal(got.own.own, ref.own.own)
-        np.testing.assert_array_equal(got.own.nbr, ref.own.nbr)
+        # the reference predates the release pairs (tests/test_label_release.py checks those)
+        plain = got.own.cost != RELEASE
+        np.testing.assert_array_equal(got.own.own[plain], ref.own.own)
+        np.testing.assert_array_equal(got.own.nbr[plain], ref.own.nbr)
         assert got.fresh == ref.fresh
         paired += len(fused) - ref.fresh
         adopted += len(ref.own)

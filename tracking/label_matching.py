@@ -16,7 +16,8 @@ from sensornet.tracking.label_keys import as_labels, label_keys, precedes
 @dataclass(frozen=True)
 class LabelMatch:
     """Matched track pairs of two peers: ``own (p, 3)`` and ``nbr (p, 3)`` labels, ``cost
-    (p,)`` their squared Mahalanobis distances (each at most the gate)."""
+    (p,)`` their squared Mahalanobis distances (each at most the gate); a pair whose cost is
+    :data:`RELEASE` is a release (:func:`adopt_labels`)."""
 
     own: np.ndarray
     nbr: np.ndarray
@@ -89,10 +90,20 @@ def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
     take the smaller of the two in ``(birth_scan, origin, index)`` order. ``labels (n, 3)``
     (a whole mixture's or a track list's) -> ``(n, 3)``. A pair whose winning label already
     marks one of our other components is left unchanged (two of our targets would share it).
-    The rule picks the same label on both peers, so fusing A into B and B into A agree."""
+    The rule picks the same label on both peers, so fusing A into B and B into A agree.
+
+    A *release* pair (cost :data:`RELEASE`, made by ``peers.labelling.label_fused``): our label
+    is replaced by the pair's label whatever the order says, unless that label is already ours
+    (a label two targets held: ours lost it to the heavier fused component, docs/real-traffic.md
+    "The fused LMB's switches")."""
     labels = as_labels(labels)
     if len(match) == 0 or len(labels) == 0:
         return labels
+    rel = np.asarray(match.cost) == RELEASE
+    if rel.any():
+        out = adopt_labels(labels, LabelMatch(match.own[~rel], match.nbr[~rel],
+                                              np.asarray(match.cost)[~rel]))
+        return _release(out, as_labels(match.own[rel]), as_labels(match.nbr[rel]))
     win = np.where(precedes(match.nbr, match.own)[:, None], match.nbr, match.own)
     change = (label_keys(win) != label_keys(match.own))
     own_keys, win_keys = label_keys(match.own)[change], label_keys(win)[change]
@@ -110,4 +121,24 @@ def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
     return out
 
 
-__all__ = ["LabelMatch", "adopt_labels", "match_labels"]
+def _release(labels: np.ndarray, own: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """``labels (n, 3)`` with each of ``own (r, 3)`` replaced by its ``new (r, 3)`` on every
+    row carrying it, except where the new label is already among ``labels``."""
+    keys = label_keys(labels)
+    ok = ~np.isin(label_keys(new), keys)
+    own_k, new = label_keys(own)[ok], new[ok]
+    if not len(own_k):
+        return labels
+    by = np.argsort(own_k)
+    pos = np.searchsorted(own_k[by], keys).clip(max=len(own_k) - 1)
+    hit = own_k[by][pos] == keys
+    out = labels.copy()
+    out[hit] = new[by][pos[hit]]
+    return out
+
+
+RELEASE = -1.0
+"""The cost that marks a release pair in a :class:`LabelMatch` (real pairs' costs are >= 0)."""
+
+
+__all__ = ["RELEASE", "LabelMatch", "adopt_labels", "match_labels"]
