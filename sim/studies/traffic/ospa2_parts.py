@@ -28,12 +28,18 @@ kind, local (each peer), fused (first peer) and centralised: OSPA(2) mean, its R
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from sensornet.sim.scenario import load_scenario, parse_overrides
+from sensornet.sim.scenario import ScenarioError
 from sensornet.sim.studies.traffic.metrics import _rows_between
-from sensornet.sim.studies.traffic.study import WINDOW, run_part
+from sensornet.sim.studies.traffic.study import (
+    WINDOW,
+    add_window_arguments,
+    run_part,
+    window_scenario,
+)
 from sensornet.tracking.track_metrics import TrackTable, _pair_dist
 
 PARTS = ("loc", "gap", "missing", "extra")
@@ -108,24 +114,16 @@ def summary(parts: np.ndarray, p: float) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.ospa2_parts",
                                  description=__doc__.split("\n\n")[0])
-    ap.add_argument("scenario", nargs="?", default="paris-8")
-    ap.add_argument("--file")
-    ap.add_argument("--start", type=float)
-    ap.add_argument("--minutes", type=float)
+    add_window_arguments(ap)
     ap.add_argument("--kinds", default="gmphd,lmb")
     ap.add_argument("--estimates", default="local,fused,centralised")
     ap.add_argument("--run", type=int, default=0)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
-    over = parse_overrides(a.set)
-    if a.file:
-        over["traffic.file"] = a.file
-    if a.start is not None:
-        over["traffic.start"] = a.start
-    scn = load_scenario(a.scenario, overrides=over)
-    if a.minutes is not None:
-        over["scenario.num_scans"] = int(round(a.minutes * 60 / scn.scan_period))
-        scn = load_scenario(a.scenario, overrides=over)
+    try:
+        over, scn = window_scenario(a)
+    except (ScenarioError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     c, p = scn.metrics.ospa_cutoff, scn.metrics.ospa_order
     grid = np.arange(1, scn.num_scans + 1)
     print("kind estimate peer: OSPA(2) mean, rms; shares of mean OSPA(2)^p: loc gap missing "

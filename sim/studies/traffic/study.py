@@ -305,9 +305,8 @@ def plot(parts: list[Part], out: Path, minutes: float, scan_period: float,
     return paths
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.study",
-                                 description=__doc__.split("\n\n")[0])
+def add_window_arguments(ap: argparse.ArgumentParser) -> None:
+    """The scenario and its traffic window, alike in every traffic study's command line."""
     ap.add_argument("scenario", nargs="?", default="paris-8",
                     help="a shipped scenario name or a scenario file (default paris-8)")
     ap.add_argument("--file", help="state-vector file (traffic.file)")
@@ -316,6 +315,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--minutes", type=float, help="window length (sets scenario.num_scans)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="scenario override (e.g. sensors.cdg.site=[49.0, 2.5])")
+
+
+def window_scenario(a: argparse.Namespace, over: dict | None = None) -> tuple[dict, Scenario]:
+    """The overrides (``over`` first, then ``--set``, file, start, window) and the scenario
+    of :func:`add_window_arguments`' arguments; raises ScenarioError / ValueError."""
+    over = {**(over or {}), **parse_overrides(a.set)}
+    if a.file:
+        over["traffic.file"] = str(Path(a.file).resolve())
+    if a.start is not None:
+        over["traffic.start"] = parse_overrides([f"v={a.start}"])["v"]
+        if isinstance(over["traffic.start"], int):
+            over["traffic.start"] = float(over["traffic.start"])
+    base = load_scenario(a.scenario, overrides=over)
+    if a.minutes is not None:
+        over["scenario.num_scans"] = int(round(a.minutes * 60 / base.scan_period))
+        base = load_scenario(a.scenario, overrides=over)
+    return over, base
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.study",
+                                 description=__doc__.split("\n\n")[0])
+    add_window_arguments(ap)
     ap.add_argument("--kinds", default=",".join(KINDS))
     ap.add_argument("--estimates", default=",".join(ESTIMATES))
     ap.add_argument("--run", type=int, default=0, help="the radars' noise seed")
@@ -337,17 +359,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unknown kind or estimate: {', '.join(bad)}", file=sys.stderr)
         return 2
     try:
-        over = parse_overrides(a.set)
-        if a.file:
-            over["traffic.file"] = str(Path(a.file).resolve())
-        if a.start is not None:
-            over["traffic.start"] = parse_overrides([f"v={a.start}"])["v"]
-            if isinstance(over["traffic.start"], int):
-                over["traffic.start"] = float(over["traffic.start"])
-        base = load_scenario(a.scenario, overrides=over)
-        if a.minutes is not None:
-            over["scenario.num_scans"] = int(round(a.minutes * 60 / base.scan_period))
-            base = load_scenario(a.scenario, overrides=over)
+        over, base = window_scenario(a)
     except (ScenarioError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -21,12 +21,14 @@ the radars whose coverage it is in. Cause classes, so a fix can be aimed at the 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections import Counter
 
 import numpy as np
 from sensornet.sim.run.twin import run_twin
-from sensornet.sim.scenario import Scenario, load_scenario, parse_overrides
+from sensornet.sim.scenario import Scenario, ScenarioError
 from sensornet.sim.studies.labelled.study import peer_tables, truth_table
+from sensornet.sim.studies.traffic.study import add_window_arguments, window_scenario
 from sensornet.sim.world import Truth, generate_run
 from sensornet.tracking.track_metrics import TrackTable, clear_match
 
@@ -102,28 +104,18 @@ def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.switches",
                                  description=__doc__.split("\n\n")[0])
-    ap.add_argument("scenario", nargs="?", default="paris-8")
-    ap.add_argument("--file")
-    ap.add_argument("--start", type=float)
-    ap.add_argument("--minutes", type=float)
+    add_window_arguments(ap)
     ap.add_argument("--kind", default="lmb")
     ap.add_argument("--estimate", default="fused", choices=("local", "fused"))
     ap.add_argument("--peer")
     ap.add_argument("--run", type=int, default=0)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
-    over = parse_overrides(a.set)
-    over["network.filter"] = a.kind
-    if a.estimate == "local":
-        over["fusion.rule"] = "none"
-    if a.file:
-        over["traffic.file"] = a.file
-    if a.start is not None:
-        over["traffic.start"] = a.start
-    scn = load_scenario(a.scenario, overrides=over)
-    if a.minutes is not None:
-        over["scenario.num_scans"] = int(round(a.minutes * 60 / scn.scan_period))
-        scn = load_scenario(a.scenario, overrides=over)
+    try:
+        _, scn = window_scenario(a, {"network.filter": a.kind, **(
+            {"fusion.rule": "none"} if a.estimate == "local" else {})})
+    except (ScenarioError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     events, totals = switch_events(scn, a.run, a.estimate, a.peer)
     print(f"{totals['switches']} switches, {totals['aircraft']} aircraft, {totals['tracks']} "
           f"track ids, {totals['ticks']} ticks")
