@@ -33,20 +33,29 @@ def _rows_between(t: TrackTable, lo: int, hi: int) -> TrackTable:
     return TrackTable(t.scan[keep], t.id[keep], t.pos[keep])
 
 
-def ospa2_curve(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, p: float,
-                window: int, chunk: int = 400) -> np.ndarray:
-    """``(T,)`` OSPA(2) of the windows of ``window`` scans ending at each scan of ``grid (T,)``
-    (sorted), equal to :func:`tracking.track_metrics.ospa2_dense` on the whole run, computed
-    ``chunk`` scans at a time."""
+def by_chunks(fn, truth: TrackTable, est: TrackTable, grid: np.ndarray, window: int,
+              chunk: int = 400, shape: tuple[int, ...] = ()) -> np.ndarray:
+    """A windowed metric ``fn(est_dense, truth_dense) -> (t, *shape)`` over a long run,
+    ``chunk`` scans of ``grid (T,)`` (sorted) at a time, each chunk with the ``window - 1``
+    scans before it (a window looks back no further): ``(T, *shape)``."""
     grid = np.asarray(grid, dtype=np.int64)
-    out = np.empty(len(grid))
+    out = np.empty((len(grid), *shape))
     for a in range(0, len(grid), chunk):
         b = min(a + chunk, len(grid))
         s = max(a - window + 1, 0)
         sub = grid[s:b]
         T, E = (_rows_between(x, int(sub[0]), int(sub[-1])) for x in (truth, est))
-        out[a:b] = ospa2_dense(E.dense(sub)[1], T.dense(sub)[1], c, p, window)[a - s:]
+        out[a:b] = fn(E.dense(sub)[1], T.dense(sub)[1])[a - s:]
     return out
+
+
+def ospa2_curve(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, p: float,
+                window: int, chunk: int = 400) -> np.ndarray:
+    """``(T,)`` OSPA(2) of the windows of ``window`` scans ending at each scan of ``grid (T,)``
+    (sorted), equal to :func:`tracking.track_metrics.ospa2_dense` on the whole run, computed
+    ``chunk`` scans at a time."""
+    return by_chunks(lambda E, T: ospa2_dense(E, T, c, p, window), truth, est, grid, window,
+                     chunk)
 
 
 def _per_scan(t: TrackTable, grid: np.ndarray) -> list[np.ndarray]:

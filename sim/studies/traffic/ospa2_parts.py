@@ -33,7 +33,7 @@ import sys
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sensornet.sim.scenario import ScenarioError
-from sensornet.sim.studies.traffic.metrics import _rows_between
+from sensornet.sim.studies.traffic.metrics import by_chunks
 from sensornet.sim.studies.traffic.study import (
     WINDOW,
     add_window_arguments,
@@ -91,15 +91,8 @@ def ospa2_parts(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float, 
                 window: int, chunk: int = 400) -> np.ndarray:
     """:func:`ospa2_parts_dense` on a long run, ``chunk`` scans at a time (each window looks
     back ``window - 1`` scans only): ``(T, 5)`` over ``grid (T,)`` (sorted scans)."""
-    grid = np.asarray(grid, dtype=np.int64)
-    out = np.empty((len(grid), 5))
-    for a in range(0, len(grid), chunk):
-        b = min(a + chunk, len(grid))
-        s = max(a - window + 1, 0)
-        sub = grid[s:b]
-        Tt, Et = (_rows_between(x, int(sub[0]), int(sub[-1])) for x in (truth, est))
-        out[a:b] = ospa2_parts_dense(Et.dense(sub)[1], Tt.dense(sub)[1], c, p, window)[a - s:]
-    return out
+    return by_chunks(lambda E, T: ospa2_parts_dense(E, T, c, p, window), truth, est, grid,
+                     window, chunk, shape=(5,))
 
 
 def summary(parts: np.ndarray, p: float) -> dict[str, float]:
