@@ -24,8 +24,43 @@ from collections import deque
 
 import numpy as np
 from sensornet.peers.trust_config import TrustConfig
-from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
+from sensornet.tracking import divergence
+from sensornet.tracking.divergence import cs_from_log_overlaps
+from sensornet.tracking.gaussian import inv_det_spd, log_gaussian
 from sensornet.tracking.mixture import GaussianMixture
+
+
+def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:
+    """:func:`tracking.divergence.log_overlaps` before it made each unordered pair once (every
+    ordered pair's term, then block log-sum-exps; its blocked path is the module's own)."""
+    n = len(mixtures)
+    sizes = np.array([len(D) for D in mixtures], dtype=int)
+    L = np.full((n, n), -np.inf)
+    C = int(sizes.sum())
+    if C == 0:
+        return L
+    w = np.concatenate([D.weights for D in mixtures if len(D)])
+    m = np.concatenate([D.means for D in mixtures if len(D)])
+    P = np.concatenate([D.covs for D in mixtures if len(D)])
+    with np.errstate(divide="ignore"):
+        lw = np.log(w)
+    present = np.flatnonzero(sizes)
+    starts = np.r_[0, np.cumsum(sizes[present])[:-1]]
+    if C * C <= divergence.BLOCK_PAIRS:
+        inv, det = inv_det_spd(P[:, None] + P[None, :])
+        G = lw[:, None] + lw[None, :] + log_gaussian(m[:, None] - m[None, :], inv, det)
+        blk = np.repeat(np.arange(len(present)), sizes[present])  # block of each component
+        top = np.maximum.reduceat(np.maximum.reduceat(G, starts, axis=0), starts, axis=1)
+        safe = np.where(np.isfinite(top), top, 0.0)
+        S = np.add.reduceat(np.add.reduceat(np.exp(G - safe[blk][:, blk]), starts, axis=0),
+                            starts, axis=1)
+        with np.errstate(divide="ignore"):
+            L[np.ix_(present, present)] = np.where(np.isfinite(top), safe + np.log(S),
+                                                   -np.inf)
+        return L
+    L[np.ix_(present, present)] = divergence._blocked(
+        lw, m, P, starts, max(1, divergence.BLOCK_PAIRS // C))
+    return L
 
 
 def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,

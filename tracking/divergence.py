@@ -13,6 +13,8 @@ compares *where* the targets are; how many is compared apart (the masses).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from sensornet.tracking.gaussian import inv_det_spd, log_gaussian
 from sensornet.tracking.mixture import GaussianMixture
@@ -31,35 +33,74 @@ def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:
     components, log-sum-exp'ed in blocks (far-apart tight components underflow nothing); an
     empty mixture has ``-inf`` rows and columns. Time is quadratic in the total number of
     components ``C``, memory ``O(C * BLOCK_PAIRS / C)``: bound the components first
-    (:mod:`peers.budget`).
+    (:mod:`peers.budget`). The term matrix is symmetric, so each unordered pair is made once
+    (:func:`pair_terms`; the same numbers to the bit), and where every mixture has at most
+    one component it is ``L`` itself.
     """
     n = len(mixtures)
-    sizes = np.array([len(D) for D in mixtures], dtype=int)
+    sizes = [len(D) for D in mixtures]
     L = np.full((n, n), -np.inf)
-    C = int(sizes.sum())
+    C = sum(sizes)
     if C == 0:
         return L
-    w = np.concatenate([D.weights for D in mixtures if len(D)])
-    m = np.concatenate([D.means for D in mixtures if len(D)])
-    P = np.concatenate([D.covs for D in mixtures if len(D)])
+    full = [D for D in mixtures if len(D)]
+    w = np.concatenate([D.weights for D in full])
+    m = np.concatenate([D.means for D in full])
+    P = np.concatenate([D.covs for D in full])
     with np.errstate(divide="ignore"):
         lw = np.log(w)
+    whole = len(full) == n  # no empty mixture: L is all of the term blocks
+    if C == len(full):  # one component each: the log-sum-exp of one term is the term
+        G = pair_terms(lw, m, P)
+        out = np.where(np.isfinite(G), G, -np.inf)
+        if whole:
+            return out
+        present = np.flatnonzero(sizes)
+        L[np.ix_(present, present)] = out
+        return L
     present = np.flatnonzero(sizes)
-    starts = np.r_[0, np.cumsum(sizes[present])[:-1]]
+    starts = np.r_[0, np.cumsum(np.asarray(sizes)[present])[:-1]]
     if C * C <= BLOCK_PAIRS:
-        inv, det = inv_det_spd(P[:, None] + P[None, :])
-        G = lw[:, None] + lw[None, :] + log_gaussian(m[:, None] - m[None, :], inv, det)
-        blk = np.repeat(np.arange(len(present)), sizes[present])  # block of each component
+        G = pair_terms(lw, m, P)
+        blk = np.repeat(np.arange(len(present)), np.asarray(sizes)[present])  # of each one
         top = np.maximum.reduceat(np.maximum.reduceat(G, starts, axis=0), starts, axis=1)
         safe = np.where(np.isfinite(top), top, 0.0)
         S = np.add.reduceat(np.add.reduceat(np.exp(G - safe[blk][:, blk]), starts, axis=0),
                             starts, axis=1)
         with np.errstate(divide="ignore"):
-            L[np.ix_(present, present)] = np.where(np.isfinite(top), safe + np.log(S),
-                                                   -np.inf)
-        return L
-    L[np.ix_(present, present)] = _blocked(lw, m, P, starts, max(1, BLOCK_PAIRS // C))
+            out = np.where(np.isfinite(top), safe + np.log(S), -np.inf)
+    else:
+        out = _blocked(lw, m, P, starts, max(1, BLOCK_PAIRS // C))
+    if whole:
+        return out
+    L[np.ix_(present, present)] = out
     return L
+
+
+def pair_terms(lw: np.ndarray, m: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``G[a, b] = lw_a + lw_b + log N(m_a; m_b, P_a + P_b)`` of every two components
+    (``lw (C,)``, ``m (C, d)``, ``P (C, d, d)``): ``(C, C)``, symmetric, so each unordered
+    pair (the diagonal with them) is made once and mirrored: ``P_a + P_b`` is the same sum
+    either way, ``m_a - m_b`` its negation (a quadratic form of it the same to the bit), and
+    the inverses the closed forms :func:`inv_det_spd` takes for a ``(C, C, d, d)`` stack
+    (hence the leading axis of 1)."""
+    C = len(lw)
+    a, b = _upper(C)
+    inv, det = inv_det_spd((P[a] + P[b])[None])
+    g = lw[a] + lw[b] + log_gaussian((m[a] - m[b])[None], inv, det)[0]
+    G = np.empty((C, C))
+    G[a, b] = g
+    G[b, a] = g
+    return G
+
+
+@functools.lru_cache(maxsize=64)
+def _upper(C: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(C)`` (the diagonal with the pairs), made once per ``C``, read-only."""
+    a, b = np.triu_indices(C)
+    a.flags.writeable = False
+    b.flags.writeable = False
+    return a, b
 
 
 def _blocked(lw: np.ndarray, m: np.ndarray, P: np.ndarray, starts: np.ndarray,
@@ -104,4 +145,4 @@ def cs_divergence(p: GaussianMixture, q: GaussianMixture) -> float:
     return float(cs_from_log_overlaps(L[0, 1], L[0, 0], L[1, 1]))
 
 
-__all__ = ["BLOCK_PAIRS", "cs_divergence", "cs_from_log_overlaps", "log_overlaps"]
+__all__ = ["BLOCK_PAIRS", "cs_divergence", "cs_from_log_overlaps", "log_overlaps", "pair_terms"]
