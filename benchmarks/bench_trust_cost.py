@@ -14,12 +14,14 @@ decision).
     python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
     python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
     python benchmarks/bench_trust_cost.py --peers 20 --scans 30 --repeats 1 --lie p02:biased
+    python benchmarks/bench_trust_cost.py --once     # also TrustConfig.test_once (once a scan)
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import statistics
 import sys
 import tempfile
@@ -89,9 +91,11 @@ def _old_add_offsets(cfg, recs, infos):
             zip(recs, infos, strict=True)]
 
 
-def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None):
-    """One twin run (``lie``: ``fusion.lie``, e.g. ``p02:biased``): CPU ms per peer-scan,
-    the fused states and the trust summaries."""
+def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None,
+            once: bool = False):
+    """One twin run (``lie``: ``fusion.lie``, e.g. ``p02:biased``; ``once``: the peers'
+    :attr:`TrustConfig.test_once` on): CPU ms per peer-scan, the fused states and the trust
+    summaries."""
     over = {"network.filter": "lmb", "fusion.trust": trust_on}
     if lie:
         over["fusion.lie"] = lie
@@ -100,6 +104,9 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
     shared = SharedDecode()
     for core in peers.values():
         core.decode = shared
+        if once and core.consensus.trust is not None:
+            core.consensus.trust.cfg = dataclasses.replace(core.consensus.trust.cfg,
+                                                           test_once=True)
     t0 = time.process_time()
     result = run_twin(scn, 0, peers=peers, batch=True)
     ms = (time.process_time() - t0) * 1e3 / n / scans
@@ -124,6 +131,8 @@ def main() -> None:
     p.add_argument("--peers", type=int, default=50)
     p.add_argument("--scans", type=int, default=40)
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--once", action="store_true",
+                   help="also trust on with TrustConfig.test_once (a test once a scan)")
     p.add_argument("--lie", default=None,
                    help="a lying peer (fusion.lie, e.g. p02:biased): the defence's decisions")
     args = p.parse_args()
@@ -149,11 +158,19 @@ def main() -> None:
                   f"trust summaries identical: {sum_old == sum_new} "
                   f"({sum(len(v['changes']) for v in sum_new.values())} state changes)",
                   flush=True)
+            if args.once:
+                v, _, sum_once = one_run(path, True, n, scans, args.lie, once=True)
+                ms.setdefault("on (once)", []).append(v)
+                print(f"| on (once) | {rep + 1} | {v:.2f} |", flush=True)
+                print(f"once vs new: trust summaries identical: {sum_once == sum_new} "
+                      f"({sum(len(v['changes']) for v in sum_once.values())} state changes)",
+                      flush=True)
     med = {k: statistics.median(v) for k, v in ms.items()}
     print("\n" + ", ".join(f"{k} {v:.2f}" for k, v in med.items()) + " ms/peer-scan (medians)")
     print(f"on (old) / off: {med['on (old)'] / med['off']:.2f}, "
           f"on (new) / off: {med['on (new)'] / med['off']:.2f}, "
-          f"new / old: {med['on (new)'] / med['on (old)']:.2f}")
+          f"new / old: {med['on (new)'] / med['on (old)']:.2f}"
+          + (f", on (once) / off: {med['on (once)'] / med['off']:.2f}" if args.once else ""))
 
 
 if __name__ == "__main__":

@@ -127,6 +127,8 @@ class Trust(ScanTests):
         if self.scans <= self.cfg.warmup:
             return list(weights)
         cfg = self.cfg
+        if rnd > 0 and cfg.test_once and self._settled(k, names):
+            return self._reuse(k, rnd, names, weights)
         if cfg.single_target:  # one target: where its moment-matched estimate is
             p = self.state_pos
             own, inputs = _collapsed(own, p), {s: _collapsed(m, p) for s, m in inputs.items()}
@@ -147,16 +149,48 @@ class Trust(ScanTests):
         if rnd == 0:
             self._scan_tests(own, shown, late, tested, stats)
         held = {s for s in names if is_held(cfg, self.n[s])}
-        out = [0.0] + [wmap[s] * self._weight(k, rnd, s, stats[s], raw[s], s in tested,
-                                              s in held, drop_suspects)
-                       for s in names]
-        kept = sum(out[1:])
-        if self.cfg.renormalise and kept + wmap[""] > 0:
-            scale = 1.0 / (kept + wmap[""])
-            out = [wmap[""] * scale] + [w * scale for w in out[1:]]
-        else:
-            out[0] = 1.0 - kept
-        return out
+        return self._normalised(wmap[""], [wmap[s] * self._weight(
+            k, rnd, s, stats[s], raw[s], s in tested, s in held, drop_suspects)
+            for s in names])
+
+    def _normalised(self, own: float, kept: list[float]) -> list[float]:
+        """``[own's, *kept]`` weights: what the neighbours lost shared over own and the
+        trusted ones (:attr:`TrustConfig.renormalise`) or given to own."""
+        total = sum(kept)
+        if self.cfg.renormalise and total + own > 0:
+            scale = 1.0 / (total + own)
+            return [own * scale] + [w * scale for w in kept]
+        return [1.0 - total] + kept
+
+    def _settled(self, k: int, names: list[str]) -> bool:
+        """Whether round 1 of scan ``k`` found nothing in ``names`` (:attr:`TrustConfig.
+        test_once`): each tested at this scan and quarantined, or at full trust with a
+        scan statistic of at most ``drift``, neither held nor repaired."""
+        cfg = self.cfg
+        for s in names:
+            rec = self.n[s]
+            if rec.tested != k or s in self.fused_in:
+                return False
+            if rec.state != "quarantined" and (rec.last_weight != 1.0
+                                               or rec.scan_max > cfg.drift):
+                return False
+        return True
+
+    def _reuse(self, k: int, rnd: int, names: list[str], weights: list[float]) -> list[float]:
+        """A later round of a settled scan (:meth:`_settled`): each neighbour's round-1
+        trust again, recorded as :meth:`_weight` records a round."""
+        self.made, self.fused_in = {}, {}
+        out = []
+        for s, w in zip(names, weights[1:], strict=True):
+            rec = self.n[s]
+            rec.rounds += 1
+            out.append(w * rec.last_weight)
+            self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
+                                 "statistic": round(rec.last_statistic, 4),
+                                 "score": round(self._next(rec.score, rec.scan_max), 4),
+                                 "weight": round(rec.last_weight, 4), "state": rec.state,
+                                 "held": False, "withheld": round(rec.withheld, 4)})
+        return self._normalised(weights[0], out)
 
     def _test_late(self, k: int, own: GaussianMixture, inputs: dict[str, GaussianMixture],
                    late: dict[str, tuple[int, GaussianMixture]], stats: dict[str, float]
