@@ -10,8 +10,10 @@ scan-to-track latency. The put is best effort (congestion control DROP): a slow 
 holds a peer back. The peers of a host send theirs together (:class:`HostReports`: one bundle
 on ``telemetries/<host>`` a pass of the host's loop, once none of its peers has work
 waiting). The view hears nothing a peer publishes for others: each scan's tracks (the bytes
-put on ``tracks/<peer>``) go to it with the scan's report (a host's: in the same bundle), so
-a peer's own puts reach the same sessions whether or not a view listens. Nobody watching,
+put on ``tracks/<peer>``) go to it with the scan's report (a host's: in the same bundle; a
+peer of its own process: both in one bundle on ``telemetry/<peer>``, one put a flush, not
+one for the tracks and one for the report), so a peer's own puts reach the same sessions
+whether or not a view listens. Nobody watching,
 nothing is gathered: a Zenoh matching listener tells the observer whether any subscriber
 hears its key, and until one does every call returns at once.
 """
@@ -237,6 +239,8 @@ class Observer:
         # a record comes per round (and flood step), each overriding the last: kept as they
         # are, read once when the report is sent (:meth:`message`)
         g["fusion"] = (v, (c.late, c.redundant, c.too_old, c.dropped_late))
+        if v.get("round", 1) <= 1:  # ages are measured in the first round only (the later
+            g["ages"] = v.get("ages")  # rounds' records say 0 for every sender): kept from it
         if v.get("round", core.consensus.rounds) < core.consensus.rounds:
             return  # the rest once a scan, at its last round
         fused = core.consensus.last_fused
@@ -280,7 +284,7 @@ class Observer:
             v, counts = fusion
             values = g["values"]
             _put(values, "components/fused", v.get("n_fused"))
-            ages = v.get("ages")
+            ages = g.get("ages")
             if ages:
                 _put(values, "age", max(ages.values()))
             for what, n in zip(_OUT_OF_SEQUENCE, counts, strict=True):
@@ -297,24 +301,32 @@ class Observer:
                          g["mixture"], send_time=time.time())
 
     def flush(self, idle: bool, force: bool = False, host: bool = False) -> None:
-        """Publish the complete reports once nothing waits (or at the end: every one); a
-        hosted peer's only when its host calls (``host``: no peer of the host has work
-        waiting) or at the end."""
+        """Publish the complete reports once nothing waits (or at the end: every one), each
+        after its scan's tracks: a peer of its own process as one bundle (one put), a hosted
+        peer's into its host's bundle and only when its host calls (``host``: no peer of the
+        host has work waiting) or at the end."""
         if not self.enabled or not self._pending or not (idle or force):
             return
         if self.reports is not None and not (host or force):
             return
         self.wants_flush = False
-        for k in self.ready(force):
+        entries: list[tuple[str, bytes]] = []
+        done = self.ready(force)
+        for k in done:
             tracks = self._pending[k].get("tracks_bytes")
-            msg = self.message(k)
-            try:
-                if tracks is not None:  # the bytes the peer published: no copy, no encoding
-                    self._put(tracks)
-                self._put(encode(msg))
-                self.sent += 1
-            except Exception:  # best effort: a view is never worth a peer's error
-                pass
+            if tracks is not None:  # the bytes the peer published: no copy, no encoding
+                entries.append((self.name, tracks))
+            entries.append((self.name, encode(self.message(k))))
+        try:
+            if self.reports is not None:  # into the host's bundle, entry by entry
+                for _, payload in entries:
+                    self._put(payload)
+            else:  # a peer of its own process: its tracks and reports in one put
+                for bundle in pack_bundles(0, entries):
+                    self._put(bundle)
+            self.sent += len(done)
+        except Exception:  # best effort: a view is never worth a peer's error
+            pass
 
 
 class HostReports:

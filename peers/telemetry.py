@@ -135,7 +135,8 @@ class Telemetry:
                     self.rss_samples = self.rss_samples[-100:]
             elif o.kind == "estimate":
                 self._last_in[o.k] = entry
-            elif o.kind == "fusion":
+            elif o.kind == "fusion" and o.values.get("round", 1) <= 1:
+                # ages are measured in a scan's first round (later rounds' records say 0)
                 self.ages.extend(o.values.get("ages", {}).values())
 
     def published(self, out: Publish, wall: float, nbytes: int) -> float | None:

@@ -54,6 +54,9 @@ ROOT_SCANS = "scans"
 """The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""
 ROOT_TELEMETRIES = "telemetries"
 """The key chunk of a host's telemetry bundles (protocol.keys.Keys.telemetries)."""
+BUNDLE_HEAD = b"\x92"
+"""A bundle's first byte (a msgpack array of 2, :mod:`protocol.bundle`); a message is an array
+of 3 or more (``[version, type, fields...]``, :mod:`protocol.codec`)."""
 
 
 def later_round(payload: bytes) -> bool:
@@ -137,20 +140,38 @@ class ViewState:
 
     # -- one message ----------------------------------------------------------------------
     def receive(self, key: str, payload: bytes) -> None:
-        """Decode and draw one message heard on ``key`` (a bad one is counted, never raised)."""
+        """Decode and draw one message heard on ``key`` (a bad one is counted, never raised):
+        a bundle's entries each as if heard on its own key (a host's scans or reports; a peer
+        of its own process sends its tracks and report as one bundle on its report key)."""
+        body = inner(payload) if is_sealed(payload) else payload
+        base = key.rsplit("/", 2)[0]
+        if f"/{ROOT_SCANS}/" in key:
+            channel, own = "scan", None
+        elif f"/{ROOT_TELEMETRIES}/" in key:  # a host's peers' reports (HostReports)
+            channel, own = "telemetry", None
+        elif "/telemetry/" in key and body[:1] == BUNDLE_HEAD:  # one peer's reports
+            channel, own = "telemetry", key.rsplit("/", 1)[-1]
+        else:
+            self._one(key, body)
+            return
+        try:
+            entries = unpack_bundle(body).entries
+        except Rejected:
+            self.rejected += 1
+            return
+        for name, entry in entries:
+            if own is not None and name != own:  # a peer's key carries its own reports only
+                self.rejected += 1
+            else:
+                self._one(f"{base}/{channel}/{name}", entry)
+
+    def _one(self, key: str, payload: bytes) -> None:
+        """One message (not a bundle: a bundle inside a bundle is refused)."""
         body = inner(payload) if is_sealed(payload) else payload
         if "/estimate/" in key and later_round(body):  # only a peer's own (round 0) is drawn
             self.skipped += 1
             return
         try:
-            if f"/{ROOT_SCANS}/" in key:
-                for sensor, entry in unpack_bundle(body).entries:
-                    self.receive(f"{key.rsplit('/', 2)[0]}/scan/{sensor}", entry)
-                return
-            if f"/{ROOT_TELEMETRIES}/" in key:  # a host's peers' reports (HostReports)
-                for peer, entry in unpack_bundle(body).entries:
-                    self.receive(f"{key.rsplit('/', 2)[0]}/telemetry/{peer}", entry)
-                return
             msg = decode(body)
         except Rejected:
             self.rejected += 1

@@ -28,9 +28,11 @@ from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.runtime import RuntimeOptions
 from sensornet.peers.session import endpoint, free_port
+from sensornet.peers.telemetry import Telemetry as PeerTelemetry
 from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
 from sensornet.protocol.messages import Estimate, Forward, Scan, ScanSet, Telemetry, Tracks, Truth
+from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
@@ -311,7 +313,7 @@ def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
     assert sent == []  # the peer scores OSPA: its report waits for it
     obs.record(Record("ospa", 7, {"which": "fused", "value": 4.0}))
     obs.flush(idle=True)
-    (msg,) = [decode(b) for b in sent]
+    (msg,) = [decode(b) for b in _entries(sent)]
     assert msg.k == 7 and msg.values["latency_ms"] == 12.0
     assert msg.values["components/before_level2"] == 9 and msg.values["ospa/fused"] == 4.0
     assert msg.values["compute_ms/filter"] == 1.5
@@ -324,7 +326,49 @@ def test_a_peer_reports_each_scan_once_when_idle_with_its_ospa():
     for k in range(9, 9 + WAIT_SCANS):
         obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((0, 4)))), 1.0)
     obs.flush(idle=True)
-    assert 8 in [decode(b).k for b in sent[1:]]
+    assert 8 in [decode(b).k for b in _entries(sent[1:])]
+
+
+def test_with_several_rounds_the_age_is_the_first_rounds(monkeypatch):
+    """With 2 consensus rounds a scan, the fused estimates' ages are measured in the first
+    round (the later round's record says 0 for every sender): a peer's "age" series and its
+    mean estimate age (process and twin) are the first round's, not the last record's 0s.
+    A twin run where s2's round-0 estimate of every third scan reaches the others late;
+    the reference: the first-round records' ages, and the delayed scans."""
+    scn = load_scenario("seed000", {"scenario.num_scans": 12, "network.rounds": 2})
+    fusions: list[tuple[str, Record]] = []
+    tally = twin.TwinResult.tally
+
+    def kept(self, peer, outputs):
+        fusions.extend((peer, o) for o in outputs if isinstance(o, Record) and o.kind == "fusion")
+        return tally(self, peer, outputs)
+
+    monkeypatch.setattr(twin.TwinResult, "tally", kept)
+    late = {k for k in range(1, 13) if k % 3 == 0}
+    result = twin.run_twin(scn, 0, delay=lambda a, b, e: (
+        0.9 * scn.scan_period if a == "s2" and e.round == 0 and e.k in late else 0.0))
+    first = [(p, r) for p, r in fusions if r.values["round"] == 1]
+    assert {r.values["round"] for _, r in fusions} == {1, 2}
+    assert all(not any(r.values["ages"].values()) for _, r in fusions if r.values["round"] == 2)
+    for name in ("s1", "s3"):
+        core = make_peer(scn, name, score_truth=False)
+        core.wants_truth = False
+        sent: list[bytes] = []
+        obs = Observer(core, 1.0).attach(sent.append)
+        tel = PeerTelemetry()
+        for p, r in fusions:
+            if p == name:
+                obs.record(r)
+                tel.handled("estimate", 0.0, 0.0, [r])
+        for k in range(1, 13):
+            obs.published(Publish("tracks", k, b"", Tracks(name, k, np.zeros((0, 4)))), 1.0)
+        obs.flush(idle=True, force=True)
+        ages = {m.k: m.values["age"] for m in map(decode, _entries(sent)) if "age" in m.values}
+        want = {r.k: float(max(r.values["ages"].values())) for p, r in first if p == name}
+        # a scan whose s2 estimate is late fuses s2's one before: age 1 there, 0 elsewhere
+        assert ages == want and {k for k, a in ages.items() if a > 0} == late
+        mine = [a for p, r in first if p == name for a in r.values["ages"].values()]
+        assert list(tel.ages) == mine == result.ages[name] and sum(mine) > 0
 
 
 _NICE_CHILD = """
@@ -353,6 +397,12 @@ def test_the_view_lowers_the_priority_of_every_thread_it_has():
     nices = json.loads(out.stdout.strip().splitlines()[-1])
     base = os.getpriority(os.PRIO_PROCESS, 0)
     assert len(nices) >= 3 and set(nices) == {min(19, base + 3)}
+
+
+def _entries(puts: list[bytes]) -> list[bytes]:
+    """The messages in a peer's puts on its report key (each a bundle of its tracks and
+    reports)."""
+    return [p for b in puts for _, p in unpack_bundle(b).entries]
 
 
 def _report_scan(obs: Observer, k: int, n: int) -> None:
@@ -406,7 +456,8 @@ def test_a_hosts_peers_report_in_one_bundle_drawn_as_their_own():
     rec = _Rec()
     state = ViewState(Batcher(rr, rec), names)
     state.receive("sensornet/net/telemetries/h1", b"\x93not a bundle")
-    bad = msgpack.packb([0, [[names[0], own[0]], [names[1], b"\x91\x01"]]], use_bin_type=True)
+    bad = msgpack.packb([0, [[names[0], _entries(own[:1])[0]], [names[1], b"\x91\x01"]]],
+                        use_bin_type=True)
     state.receive("sensornet/net/telemetries/h1", bad)
     state.b.flush()
     assert state.rejected == 2 and state.handled == 1
@@ -582,7 +633,7 @@ def test_a_flooding_peer_sends_the_last_pooled_scans_of_a_scan_sampled_in_order(
     obs.record(Record("fusion", 5, {"n_fused": 12}))
     obs.published(Publish("tracks", 5, b"", Tracks(core.name, 5, np.zeros((0, 4)))), 2.0)
     obs.flush(idle=True)
-    (msg,) = [decode(b) for b in sent]
+    (msg,) = [decode(b) for b in _entries(sent)]
     p = np.asarray(core.consensus.hooks.plane(last), float).reshape(-1, 2)
     assert len(p) == 480 and len(msg.points["pooled"]) == 240  # every 2nd: at most 400
     np.testing.assert_allclose(msg.points["pooled"], p[::2])

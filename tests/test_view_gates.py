@@ -11,6 +11,7 @@ import rerun as rr
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import RETURNS_SHOWN, Observer, pack_gates, unpack_gate
 from sensornet.peers.rerun_sink import color_of
+from sensornet.protocol.bundle import unpack_bundle
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.messages import Telemetry, Tracks
 from sensornet.sim.studies.seed003 import network as seed003_net
@@ -49,7 +50,8 @@ def _telemetry(core, k: int) -> Telemetry:
     obs.record(Record("fusion", k, {"n_fused": 1, "round": core.consensus.rounds}))
     obs.published(Publish("tracks", k, b"", Tracks(core.name, k, np.zeros((1, 4)))), 1.0)
     obs.flush(idle=True, force=True)
-    (payload,) = sent
+    (bundle,) = sent  # a peer of its own process: one put, its report in a bundle
+    ((_, payload),) = unpack_bundle(bundle).entries
     return decode(payload)
 
 

@@ -4,12 +4,18 @@ view too), so each scan's tracks go to it with the peer's report, the very bytes
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import threading
+
 import numpy as np
+import pytest
 import rerun as rr
 import zenoh
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import KINDS, HostReports, Observer, _heaviest
 from sensornet.peers.runtime import PeerRuntime, RuntimeOptions
+from sensornet.peers.session import DIAL_SOON, endpoint, free_port, zenoh_config
 from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.keys import Keys
@@ -20,6 +26,7 @@ from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet import view as view_module
 from sensornet.view import Batcher, LiveView, ViewState
+from tests.processes import env
 
 
 class _Rec:
@@ -88,8 +95,9 @@ def _scan(obs: Observer, k: int, n: int) -> bytes:
 
 def test_a_scans_tracks_go_with_its_report_and_are_drawn_from_it():
     """A hosted peer's tracks ride in its host's bundle beside its report, the very bytes
-    published (no copy, no encoding); a peer of its own process sends them on its own
-    telemetry key. The view draws both the same, as tracks of that peer."""
+    published (no copy, no encoding); a peer of its own process sends them with its report
+    in one bundle on its own telemetry key: one put a scan, not two. The view draws both the
+    same, as tracks of that peer."""
     scn = load_scenario("seed000", {"scenario.num_scans": 3})
     name = scn.sensor_names[0]
     bundles: list[bytes] = []
@@ -105,9 +113,11 @@ def test_a_scans_tracks_go_with_its_report_and_are_drawn_from_it():
     reports.send()
     (entries,) = [unpack_bundle(b).entries for b in bundles]
     assert [n for n, _ in entries] == [name, name]
-    assert entries[0][1] == published[id(hosted)] and len(own) == 2
-    assert own[0] is published[id(alone)]  # handed over as published
-    assert isinstance(decode(own[1]), Telemetry) and hosted.sent == alone.sent == 1
+    assert entries[0][1] == published[id(hosted)] and len(own) == 1  # one put
+    (alone_entries,) = [unpack_bundle(b).entries for b in own]
+    assert [n for n, _ in alone_entries] == [name, name]
+    assert alone_entries[0][1] == published[id(alone)]  # the bytes as published
+    assert isinstance(decode(alone_entries[1][1]), Telemetry) and hosted.sent == alone.sent == 1
     drawn = []
     for heard in ([("sensornet/net/telemetries/h1", bundles[0])],
                   [(f"sensornet/net/telemetry/{name}", b) for b in own]):
@@ -148,7 +158,8 @@ def test_a_watched_runtime_hands_the_observer_only_what_it_reads():
     assert [c for c, _ in put] == ["estimate", "tracks"]
     assert seen == ["local"] and set(seen) <= KINDS
     rt.observer.flush(idle=True)
-    assert sent[0] == put[1][1] and decode(sent[1]).k == 3
+    ((_, tracks_bytes), (_, report)) = unpack_bundle(sent[0]).entries
+    assert len(sent) == 1 and tracks_bytes == put[1][1] and decode(report).k == 3
 
 
 def test_the_fused_marks_are_the_heaviest_position_blocks_that_can_be_drawn():
@@ -186,3 +197,64 @@ def test_a_report_key_carries_its_own_peers_messages_only():
     assert state.rejected == 3 and state.handled == 1  # the bundle's s2 entry drawn
     assert set(rec.calls) == {"peers/s2/tracks", "peers/s2/tail",
                               "metrics/cardinality/s2/fused"}
+    # a peer's own bundle on its key (its tracks and reports, one put): its entries only,
+    # and no bundle inside a bundle (refused, not unpacked again)
+    mine = encode(Tracks("s1", 2, np.zeros((1, 4))))
+    inside = pack_bundles(0, [("s1", mine)])[0]
+    state.receive("sensornet/net/telemetry/s1",
+                  pack_bundles(0, [("s1", mine), ("s2", theirs), ("s1", inside)])[0])
+    state.receive("sensornet/net/telemetry/s1", b"\x92not a bundle")
+    state.b.flush()
+    assert state.rejected == 3 + 3 and state.handled == 2
+    assert rec.calls["peers/s1/tracks"][0] == [2]
+
+
+@pytest.mark.network
+def test_a_watched_peer_of_its_own_process_makes_one_put_a_scan(tmp_path):
+    """A real run over Zenoh on loopback (3 peers, a process each, no view of its own) with
+    a session of this test subscribed to the report keys: each peer's puts there are bundles
+    of its own tracks and reports, one put a scan (before, its tracks and its report were two
+    puts a scan), the tracks beside their scan's report, and no host bundle (no host)."""
+    ep = endpoint(free_port())
+    k = Keys("oneput")
+    heard: list[tuple[str, bytes]] = []
+    lock = threading.Lock()
+
+    def on_sample(sample) -> None:
+        with lock:
+            heard.append((str(sample.key_expr), sample.payload.to_bytes()))
+
+    session = zenoh.open(zenoh_config((), [ep], retry=DIAL_SOON))
+    subs = []
+    try:
+        subs = [session.declare_subscriber(e, on_sample)
+                for e in (k.telemetry(), k.telemetries())]
+        run = subprocess.run(
+            [sys.executable, "-m", "sensornet", "run", "--network", "oneput", "--listen", ep,
+             "--no-rerun", "--set", "scenario.num_scans=20", "--speed", "5",
+             "--out", str(tmp_path / "run")], cwd=tmp_path, env=env(), capture_output=True,
+            text=True, timeout=300)  # returns when the run has ended: the event waited for
+        assert run.returncode == 0, run.stderr[-2000:]
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        session.close()
+    with lock:
+        heard = list(heard)
+    names = load_scenario("seed000").sensor_names
+    assert {key.rsplit("/", 1)[-1] for key, _ in heard} == set(names)
+    assert not any("/telemetries/" in key for key, _ in heard)
+    for name in names:
+        puts = [p for key, p in heard if key == k.telemetry(name)]
+        reports, tracks = [], set()
+        for put in puts:
+            entries = unpack_bundle(put).entries  # a bundle, or Rejected: the test fails
+            assert {n for n, _ in entries} == {name}
+            msgs = [decode(p) for _, p in entries]
+            tracks |= {m.k for m in msgs if isinstance(m, Tracks)}
+            reports += [m.k for m in msgs if isinstance(m, Telemetry)]
+        assert len(reports) >= 10, (name, reports)  # of 20 scans: the first may go unheard
+        # at most one put a scan; the end's flush may add one (what came after a scan's
+        # report was sent: a trust event as the neighbours leave)
+        assert len(puts) <= len(set(reports)) + 1, (name, len(puts), reports)
+        assert tracks <= set(reports) and len(tracks) >= len(reports) - 2, (name, tracks)

@@ -79,11 +79,12 @@ class TwinResult:
     """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
 
     def tally(self, peer: str, outputs: list) -> None:
-        """Keep what ``peer``'s outputs say for the result: its stop, fusion ages, OSPA."""
+        """Keep what ``peer``'s outputs say for the result: its stop, fusion ages (a scan's
+        first round's: later rounds' records say 0 for every sender), OSPA."""
         for o in outputs:
             if isinstance(o, Stop):
                 self.stops[peer] = o.reason
-            elif isinstance(o, Record) and o.kind == "fusion":
+            elif isinstance(o, Record) and o.kind == "fusion" and o.values["round"] <= 1:
                 self.ages.setdefault(peer, []).extend(o.values["ages"].values())
             elif isinstance(o, Record) and o.kind == "ospa":
                 per = self.ospa.setdefault(peer, {"local": {}, "fused": {}})
