@@ -296,16 +296,23 @@ def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
 def offset_chi2_many(offsets: list[deque], windows: tuple[int, ...]
                      ) -> list[tuple[float, ...]]:
     """:func:`offset_chi2` of several neighbours' offsets (each non-empty), the same
-    numbers: the window sums per neighbour, the determinants and solves of all of them in
-    one batch (one round's neighbours, per scan)."""
+    numbers: every window stacked at once (the shorter ones padded at their old end with
+    zeros no window reaches), their running sums along the scans, the determinants and
+    solves of all of them in one batch (one round's neighbours, per scan)."""
     if not offsets:
         return []
-    infos, ys = [], []
-    for window in offsets:
-        last = np.minimum(np.array(windows), len(window)) - 1
-        infos.append(np.cumsum([i for i, _ in window], axis=0)[last])  # newest first
-        ys.append(np.cumsum([v for _, v in window], axis=0)[last])
-    info, y = np.concatenate(infos), np.concatenate(ys)  # (n w, 2, 2), (n w, 2)
+    lengths = [len(window) for window in offsets]
+    top = max(lengths)
+    zero_i, zero_y = np.zeros((2, 2)), np.zeros(2)
+    pad = [top - n for n in lengths]
+    I = np.cumsum([[i for i, _ in w] + [zero_i] * p for w, p in zip(offsets, pad, strict=True)],
+                  axis=1)  # (r, top, 2, 2): newest first
+    Y = np.cumsum([[v for _, v in w] + [zero_y] * p for w, p in zip(offsets, pad, strict=True)],
+                  axis=1)  # (r, top, 2)
+    last = [[min(w, n) - 1 for w in windows] for n in lengths]  # (r, w)
+    rows = np.repeat(np.arange(len(offsets)), len(windows))
+    cols = np.ravel(last)
+    info, y = I[rows, cols], Y[rows, cols]  # (r w, 2, 2), (r w, 2)
     ok = np.linalg.det(info) > 1e-12
     chi2 = np.zeros(len(info))
     if ok.any():
@@ -405,6 +412,22 @@ def offset_cusum(g: np.ndarray, info: tuple[np.ndarray, np.ndarray], offset: flo
     return np.maximum(0.0, g + offset_increments(info, offset, directions))
 
 
+def offset_cusums(g: np.ndarray, infos: list[tuple[np.ndarray, np.ndarray]], offset: float,
+                  directions: np.ndarray) -> np.ndarray:
+    """:func:`offset_cusum` of several neighbours at once, the same numbers: their charts
+    ``g (r, m)`` and scan offsets ``infos`` (``r`` of ``(I, y)``), the determinants and
+    increments in one batch; ``(r, m)``."""
+    if not infos:
+        return np.zeros((0, len(directions)))
+    I = np.array([i for i, _ in infos])  # (r, 2, 2)
+    y = np.array([v for _, v in infos])  # (r, 2)
+    beta = offset * directions  # (m, 2)
+    lin = np.array([beta @ v for v in y])  # (r, m): per neighbour, as offset_increments
+    inc = lin - 0.5 * np.einsum("mi,rij,mj->rm", beta, I, beta)
+    inc[np.linalg.det(I) <= 1e-12] = 0.0  # singular: nothing matched
+    return np.maximum(0.0, g + inc)
+
+
 def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int],
                        min_weight: float, gate: float, chi2: float | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -487,18 +510,40 @@ def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],
     re-acquires a target 70 m off moves them all); the median of the others' takes it out,
     and a biased neighbour's offset is its own (W-MSR's premise: the others are mostly
     honest). ``infos``: per neighbour ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
-    names = [s for s in among if np.linalg.det(infos[s][0]) > 1e-12]
+    if len(among) < 3:
+        return infos
+    I = np.array([infos[s][0] for s in among])  # (m, 2, 2): the determinants in one batch
+    ok = np.linalg.det(I) > 1e-12
+    names = [s for s, good in zip(among, ok.tolist(), strict=True) if good]
     if len(names) < 3:
         return infos
-    b = np.linalg.solve(np.array([infos[s][0] for s in names]),
-                        np.array([infos[s][1] for s in names])[..., None])[..., 0]  # (n, 2)
-    n = len(names)
-    others = np.array([[h for h in range(n) if h != i] for i in range(n)])  # (n, n-1)
-    med = np.median(b[others], axis=1)  # (n, 2): each one's leave-one-out median
-    info = np.array([infos[s][0] for s in names])  # (n, 2, 2)
+    info = I[ok]  # (n, 2, 2)
+    b = np.linalg.solve(info, np.array([infos[s][1] for s in names])[..., None])[..., 0]
+    med = _loo_medians(b)  # (n, 2): each one's leave-one-out median
     y = np.einsum("nij,nj->ni", info, b - med)
     out = dict(infos)
     out.update({s: (infos[s][0], y[i]) for i, s in enumerate(names)})
+    return out
+
+
+def _loo_medians(b: np.ndarray) -> np.ndarray:
+    """Per row ``i`` of ``b`` (``(n, k)``, ``n >= 2``): the coordinate-wise median of the
+    other rows, ``(n, k)``; ``np.median(b[others], axis=1)`` to the bit (the middle of the
+    sorted values, or half the sum of the two middle ones) without its per-call overhead,
+    and NaN where a column holds one, as there."""
+    S = np.sort(b[_others(len(b))], axis=1)  # (n, n - 1, k)
+    h = (len(b) - 1) // 2
+    med = S[:, h] if (len(b) - 1) % 2 else (S[:, h - 1] + S[:, h]) * 0.5
+    if np.isnan(b).any():  # np.median: NaN where any of the values is
+        med = np.where(np.isnan(S).any(axis=1), np.nan, med)
+    return med
+
+
+@functools.lru_cache(maxsize=64)
+def _others(n: int) -> np.ndarray:
+    """``(n, n - 1)``: row ``i`` the indices ``0..n-1`` but ``i`` (made once, read-only)."""
+    out = np.array([[h for h in range(n) if h != i] for i in range(n)], dtype=np.intp)
+    out.flags.writeable = False
     return out
 
 

@@ -16,6 +16,7 @@ from sensornet.peers.trust_checks import (
     offset_chi2,
     offset_chi2_many,
     offset_cusum,
+    offset_cusums,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.mixture import GaussianMixture
@@ -144,14 +145,16 @@ def add_offsets(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[tuple]
         if cfg.register and cfg.register_drift:
             push_window(rec.drift_window, info, cfg.register_window)
     out = offset_chi2_many([rec.offsets for rec in recs], cfg.bias_windows)
-    for i, (rec, info) in enumerate(zip(recs, infos, strict=True)):
-        if cfg.bias_cusum:
-            if rec.cusum is None:
-                rec.cusum = np.zeros(cfg.bias_cusum_directions)
-            rec.cusum = offset_cusum(rec.cusum, info, cfg.bias_cusum_offset,
-                                     cusum_directions(cfg.bias_cusum_directions))
-            out[i] = (*out[i], float(rec.cusum.max()))
-        rec.last_offset_chi2 = out[i]
+    if cfg.bias_cusum and recs:  # every chart in one batch (offset_cusums)
+        m = cfg.bias_cusum_directions
+        G = offset_cusums(np.array([np.zeros(m) if rec.cusum is None else rec.cusum
+                                    for rec in recs]), list(infos), cfg.bias_cusum_offset,
+                          cusum_directions(m))
+        for i, (rec, g) in enumerate(zip(recs, G, strict=True)):
+            rec.cusum = g
+            out[i] = (*out[i], float(g.max()))
+    for rec, chi2 in zip(recs, out, strict=True):
+        rec.last_offset_chi2 = chi2
     return out
 
 

@@ -17,6 +17,7 @@ import pytest
 from sensornet.peers.trust import Trust
 from sensornet.peers.trust_checks import (
     _cs_scalar,
+    _loo_medians,
     cusum_directions,
     gls_offset,
     gls_offsets,
@@ -24,12 +25,16 @@ from sensornet.peers.trust_checks import (
     neighbour_statistics,
     offset_chi2,
     offset_chi2_many,
+    offset_cusum,
+    offset_cusums,
     offset_information,
     offset_information_many,
+    relative_offsets,
     triu_indices,
     unmatched_weights,
 )
 from sensornet.peers.trust_config import TrustConfig
+from sensornet.peers.trust_record import NeighbourTrust, add_offset, add_offsets
 from sensornet.tracking.divergence import cs_from_log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
@@ -284,3 +289,78 @@ def test_gls_offsets_is_one_at_a_time():
         for info, g in zip(infos, got, strict=True):
             want = gls_offset([info])
             assert (g is None and want is None) or np.array_equal(g, want)
+
+
+def test_relative_offsets_equal_old():
+    """The determinants in one batch and the leave-one-out medians by sorting: the old
+    numbers to the bit (singular scans, two to seven neighbours, repeated offsets)."""
+    rng = np.random.default_rng(51)
+    changed = 0
+    for _ in range(300):
+        infos = {}
+        for i in range(int(rng.integers(0, 8))):
+            A = rng.normal(0, 0.1, (2, 2))
+            infos[f"n{i}"] = ((np.zeros((2, 2)), np.zeros(2)) if rng.random() < 0.2 else
+                              (A @ A.T + 1e-3 * np.eye(2), rng.normal(0, 1, 2)))
+            if i and rng.random() < 0.2:
+                infos[f"n{i}"] = infos[f"n{i - 1}"]
+        among = [s for s in infos if rng.random() < 0.9]
+        new = relative_offsets(infos, among)
+        old = trust_before.relative_offsets(infos, among)
+        assert new.keys() == old.keys()
+        for s in new:
+            assert np.array_equal(new[s][0], old[s][0]) and np.array_equal(new[s][1], old[s][1])
+            changed += new[s] is not infos[s]
+    assert changed > 300
+
+
+@pytest.mark.parametrize("n", range(2, 10))
+def test_loo_medians_are_numpys(n):
+    rng = np.random.default_rng(n)
+    for b in [rng.normal(0, 5, (n, 2)), np.round(rng.normal(0, 1, (n, 3))),
+              np.where(rng.random((n, 2)) < 0.2, np.nan, rng.normal(0, 1, (n, 2)))]:
+        others = np.array([[h for h in range(n) if h != i] for i in range(n)])
+        with np.errstate(invalid="ignore"):
+            want = np.median(b[others], axis=1)
+        assert np.array_equal(_loo_medians(b), want, equal_nan=True)
+
+
+def test_offset_cusums_are_one_at_a_time():
+    """Every neighbour's offset CUSUM in one batch: :func:`offset_cusum` per neighbour to the
+    bit (singular scans, charts at 0 and above, offsets small and large)."""
+    rng = np.random.default_rng(61)
+    dirs = cusum_directions(8)
+    for _ in range(500):
+        r = int(rng.integers(1, 7))
+        infos = []
+        for _ in range(r):
+            A = rng.normal(0, rng.choice([0.01, 1.0, 100.0]), (2, 2))
+            infos.append((np.zeros((2, 2)), np.zeros(2)) if rng.random() < 0.2 else
+                         (A @ A.T + 1e-6 * np.eye(2), rng.normal(0, rng.choice([0.1, 1e3]), 2)))
+        g = np.abs(rng.normal(0, 5, (r, 8))) * (rng.random((r, 8)) < 0.5)
+        want = np.array([offset_cusum(g[i], infos[i], 30.0, dirs) for i in range(r)])
+        assert np.array_equal(offset_cusums(g, infos, 30.0, dirs), want)
+    assert offset_cusums(np.zeros((0, 8)), [], 30.0, dirs).shape == (0, 8)
+
+
+def test_add_offsets_is_add_offset_per_neighbour():
+    """Windows of different lengths over 30 scans: the same chi-squares, charts and windows
+    as :func:`add_offset` one neighbour at a time."""
+    rng = np.random.default_rng(62)
+    cfg = TrustConfig()
+    batch = [NeighbourTrust() for _ in range(4)]
+    single = [NeighbourTrust() for _ in range(4)]
+    for k in range(30):
+        idx = [i for i in range(4) if rng.random() < 0.8 or k == 0]
+        infos = []
+        for _ in idx:
+            A = rng.normal(0, 0.1, (2, 2))
+            infos.append((np.zeros((2, 2)), np.zeros(2)) if rng.random() < 0.2 else
+                         (A @ A.T + 1e-3 * np.eye(2), rng.normal(0, 1, 2)))
+        got = add_offsets(cfg, [batch[i] for i in idx], infos)
+        want = [add_offset(cfg, single[i], info) for i, info in zip(idx, infos, strict=True)]
+        assert got == want
+        for i in idx:
+            assert np.array_equal(batch[i].cusum, single[i].cusum)
+            assert batch[i].last_offset_chi2 == single[i].last_offset_chi2
+    assert max(max(c) for c in want) > 0
