@@ -34,7 +34,10 @@ def _published(outputs, channel):
 
 
 def test_zero_delay_network_equals_offline_fusion(scn):
+    """A zero-delay twin's fused OSPA is the offline experiment's (``fusion.support = 0``,
+    pinned: the offline fusion has no ids, so no support rule, issue 33)."""
     # full mesh of 3: Metropolis weights are 1/3 each, the offline experiment's uniform weights
+    scn = dataclasses.replace(scn, fusion=dataclasses.replace(scn.fusion, support=0))
     twin = run_twin(scn, run=3)
     offline = run_once(scn, 3)
     fused = _per_scan(twin, "s2", "fused")

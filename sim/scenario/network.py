@@ -54,11 +54,16 @@ class FusionSpec:
                                               "EMD, Uney 2013) or `\"separate\"` (location "
                                               "densities and cardinalities fused apart, "
                                               "Battistelli 2013).", choices=CARDINALITY_RULES)
-    support: int = option(0, doc="Report a fused track only if this many of the fusion's "
+    support: int = option(2, doc="Report a fused track only if this many of the fusion's "
                                  "inputs hold a component within the hybrid gate of it, or "
                                  "it was extracted in `support_scans` consecutive scans "
                                  "(`tracking.support`; extraction only, the fused density is "
-                                 "unchanged); 0: every extracted track.", check=NONNEGATIVE)
+                                 "unchanged); 0: every extracted track. Labelled (GM-PHD, "
+                                 "LMB) peers only. 2 by default since issue 33: on training "
+                                 "runs it removes the GM-PHD's one-scan false fused tracks "
+                                 "(fused OSPA(2) 18-52 -> 11-30 m) and leaves the LMB's "
+                                 "unchanged (docs/labelled-tracking.md, \"Design B\").",
+                          check=NONNEGATIVE)
     support_scans: int = option(2, doc="With `support`: scans a fused track held by fewer "
                                        "inputs must be extracted in a row before it is "
                                        "reported.", unit="scans", check=at_least(1))
@@ -221,6 +226,13 @@ class LmbSpec:
     tentative_scans: int = option(2, doc="With `tentative_threshold`: how many scans old a "
                                          "track may be and still be published as tentative.",
                                   unit="scans", check=NONNEGATIVE)
+    republish_gap: int = option(-1, doc="A published track label that returns after more than "
+                                        "this many scans unpublished is stamped anew at first "
+                                        "publication (as GM-PHD peers do); -1: never.",
+                                unit="scans", check=at_least(-1))
+    tentative_gap: int = option(-1, doc="The same for a label only ever published as "
+                                        "tentative (`tentative_threshold`); -1: "
+                                        "`republish_gap`.", unit="scans", check=at_least(-1))
     birth_cell: float = option(200.0, doc="With `network.birth_ids` `\"shared\"`: width of "
                                           "the grid cells whose index labels an adaptive birth "
                                           "alike at every peer (edges at multiples of it).",
