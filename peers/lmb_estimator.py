@@ -102,7 +102,8 @@ class LmbEstimator:
     def __init__(self, filt: LmbFilter, reducer: Reducer | None = None,
                  publish_threshold: float | None = 0.5, extraction_threshold: float = 0.5,
                  extraction: str = "cardinality", origin: int | None = None,
-                 tentative_threshold: float | None = None, tentative_scans: int = 2) -> None:
+                 tentative_threshold: float | None = None, tentative_scans: int = 2,
+                 republish_gap: int | None = None, tentative_gap: int | None = None) -> None:
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
         if publish_threshold is not None and not 0.0 <= publish_threshold <= 1.0:
@@ -111,6 +112,9 @@ class LmbEstimator:
             raise ValueError(f"tentative_threshold must be in [0, 1], got {tentative_threshold}")
         if tentative_scans < 0:
             raise ValueError(f"tentative_scans must be >= 0, got {tentative_scans}")
+        for name, gap in (("republish_gap", republish_gap), ("tentative_gap", tentative_gap)):
+            if gap is not None and gap < 0:
+                raise ValueError(f"{name} must be >= 0 or None, got {gap}")
         if origin is not None and filt.origin != origin:
             raise ValueError(f"the filter's origin {filt.origin} is not the estimator's {origin}")
         extract_index(GaussianMixture.empty(filt.motion.dim), extraction_threshold,
@@ -123,6 +127,13 @@ class LmbEstimator:
         this existence on, so a fusion can pool weak evidence of a new target
         (tracking.support.pooled_weights); None: only above ``publish_threshold``."""
         self.tentative_scans = tentative_scans
+        self.republish_gap = republish_gap
+        """A published label that returns after more than this many scans unpublished is
+        stamped anew (tracking.label_confirmation.Publication's rule for GM-PHD peers); None:
+        a label keeps its stamp while its track lives."""
+        self.tentative_gap = tentative_gap
+        """The same for a label only ever published as tentative (``r`` at most the
+        publication threshold); None: :attr:`republish_gap`."""
         self.extraction_threshold = extraction_threshold
         self.extraction = extraction
         self.origin = None if origin is None else int(origin)
@@ -143,8 +154,13 @@ class LmbEstimator:
         self._stamped = np.zeros((0, 3), dtype=np.int64)
         """The labels the last step stamped at first publication (:meth:`fresh_stamps`)."""
         self._published = label_keys(np.zeros((0, 3), dtype=np.int64))
-        """Keys of the labels of our tracks that have been on the network (published by us,
-        or taken from it)."""
+        """Sorted keys of the labels of our tracks that have been on the network (published by
+        us, or taken from it)."""
+        self._last_pub = np.zeros(0, dtype=np.int64)
+        """``(len(_published),)`` the scan each was last published (or taken)."""
+        self._strong = np.zeros(0, dtype=bool)
+        """``(len(_published),)`` whether each was published above the threshold (or taken
+        from a label that was)."""
 
     # -- the contract ---------------------------------------------------------------------
     def begin_scan(self, k: int) -> None:
@@ -239,8 +255,10 @@ class LmbEstimator:
             return
         moved, match = take_moves(t.labels, match, self._stamped)
         new = adopt_labels(moved, match)
-        was = np.isin(label_keys(t.labels), self._published)
-        self._published = np.union1d(self._published, label_keys(new[was]))
+        was, last, strong = self._lookup(label_keys(t.labels))
+        self._remember(np.concatenate([self._published, label_keys(new[was])]),
+                       np.concatenate([self._last_pub, last[was]]),
+                       np.concatenate([self._strong, strong[was]]))
         self.state = LmbState(LabelledBernoulliSet.trusted(new, t.existence, t.weights,
                                                            t.means, t.covs, t.owner),
                               self.state.hits, self.state.k, self.state.pending)
@@ -281,16 +299,24 @@ class LmbEstimator:
         fused identity switch per peer of the seed-000 twin: a track born at scan 20 published at
         24 beat the id a neighbour had published at 22). A birth labelled alike at every peer
         (``filter.shared_origin``) is stamped ``(shared, k, PUBLISHED_BASE + i)`` instead, as
-        other peers stamp it (tracking.label_confirmation.stamp_shared), or own if taken."""
+        other peers stamp it (tracking.label_confirmation.stamp_shared), or own if taken. A
+        label back after more than :attr:`republish_gap` (:attr:`tentative_gap` if it was only
+        ever tentative) scans unpublished is stamped anew (own), so a track that went dark
+        (nobody relays its label) cannot return with an early label later than the settle
+        wait allows (docs/labelled-tracking.md, issue 33)."""
         t = self.state.tracks
         self._stamped = t.labels[:0]
         if len(t) == 0:
             return
         keys = label_keys(t.labels)
-        was = np.isin(keys, self._published)
+        was, last, strong = self._lookup(keys)
         pub = self._publishing(k)
+        high = t.existence > self.publish_threshold
+        weak = self.republish_gap if self.tentative_gap is None else self.tentative_gap
+        back = was & pub & (k - last > np.where(strong, self._gap(self.republish_gap),
+                                                self._gap(weak)) + 1)
         fresh = pub & ~was & (t.labels[:, 2] < PUBLISHED_BASE)
-        new = fresh & (t.labels[:, 0] == self.origin)
+        new = (fresh & (t.labels[:, 0] == self.origin)) | back
         shared = self.filter.shared_origin
         alike = fresh & (t.labels[:, 0] == (-1 if shared is None else shared))
         labels = t.labels
@@ -305,8 +331,36 @@ class LmbEstimator:
             self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
                                                                t.means, t.covs, t.owner),
                                   self.state.hits, self.state.k, self.state.pending)
+            was &= ~(new | shared_ok)
         on = was | pub
-        self._published = label_keys(labels[on])
+        self._remember(label_keys(labels[on]), np.where(pub, k, last)[on],
+                       ((strong & was) | (pub & high))[on])
+
+    @staticmethod
+    def _gap(gap: int | None) -> float:
+        return np.inf if gap is None else float(gap)
+
+    def _lookup(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Whether each of ``keys (n,)`` has been on the network, the scan it last was, and
+        whether it was above the publication threshold: ``(n,)`` bool, int64, bool."""
+        if not len(self._published):
+            z = np.zeros(len(keys), dtype=bool)
+            return z, np.zeros(len(keys), dtype=np.int64), z.copy()
+        pos = np.searchsorted(self._published, keys).clip(max=len(self._published) - 1)
+        known = self._published[pos] == keys
+        return (known, np.where(known, self._last_pub[pos], 0),
+                known & self._strong[pos])
+
+    def _remember(self, keys: np.ndarray, last: np.ndarray, strong: np.ndarray) -> None:
+        """Keep ``keys (n,)`` as the labels on the network (a key twice: its latest scan, and
+        strong if either was)."""
+        order = np.lexsort((-last, keys))
+        keys, last, strong = keys[order], last[order], strong[order]
+        first = np.ones(len(keys), dtype=bool)
+        first[1:] = keys[1:] != keys[:-1]
+        grp = np.cumsum(first) - 1
+        anystrong = np.bincount(grp, weights=strong, minlength=int(first.sum())) > 0
+        self._published, self._last_pub, self._strong = keys[first], last[first], anystrong
 
     def fresh_stamps(self) -> np.ndarray | None:
         """The labels ``(b, 3)`` the last step stamped at first publication (None: no

@@ -63,7 +63,9 @@ def build(scn: Scenario, name: str, run: int = 0):
                        f.level2_threshold if f.level2_pruning else None,
                        scn.filter.extraction_threshold, scn.filter.extraction, origin=origin,
                        tentative_threshold=scn.lmb.tentative_threshold or None,
-                       tentative_scans=scn.lmb.tentative_scans)
+                       tentative_scans=scn.lmb.tentative_scans,
+                       republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,
+                       tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap)
     return est, mixture_fuser(scn, reducer)
 
 
