@@ -45,7 +45,8 @@ from sensornet.tracking.metrics import ospa
 def run_async_part(source: str, overrides: dict, kind: str, run: int,
                    slice_s: float = SLICE) -> Part:
     """The asynchronous centralised ``kind`` on the study's scenario, scored as
-    :func:`.study.run_part` scores the tick reference (estimate ``"async"``)."""
+    :func:`.study.run_part` scores the references (estimate ``"async"``), with its own
+    ``slice_s``."""
     scn = scenario_of(source, overrides, kind, "centralised")
     truth, _ = generate_run(scn, run)
     T = truth_table(truth)
@@ -88,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     add_window_arguments(ap)
     ap.add_argument("--kinds", default=",".join(KINDS))
     ap.add_argument("--slice", type=float, default=SLICE, help="batch slice (s)")
-    ap.add_argument("--tick", action="store_true", help="the tick centralised reference too")
+    ap.add_argument("--tick", action="store_true",
+                    help="the tick centralised reference too")
     ap.add_argument("--local-json", help="a study --json summary holding the local rows")
     ap.add_argument("--no-local", action="store_true", help="no local peers")
     ap.add_argument("--run", type=int, default=0, help="the radars' noise seed")
@@ -118,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
                 local[r["kind"]] = r["ospa2_by_peer"]
     calls = [(run_async_part, (a.scenario, over, k, a.run, a.slice)) for k in kinds]
     if a.tick:
-        calls += [(run_part, (a.scenario, over, k, "centralised", a.run, False)) for k in kinds]
+        calls += [(run_part, (a.scenario, over, k, "centralised", a.run, False, False, "tick"))
+                  for k in kinds]
     if not a.local_json and not a.no_local:
         calls += [(run_part, (a.scenario, over, k, "local", a.run, False)) for k in kinds]
     parts = map_runs(_call, calls, a.jobs, "async study", not a.quiet)

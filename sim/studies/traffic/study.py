@@ -6,8 +6,9 @@ For each kind, on the twin (:func:`sim.run.twin.run_twin`, the peers' own cores)
 
 * ``local``: the twin without fusion (``fusion.rule = "none"``): each radar's own filter;
 * ``fused``: the twin with the scenario's rule: each peer's fused tracks;
-* ``centralised``: the labelled centralised reference of the kind over every radar's scans
-  (:mod:`sim.studies.labelled.centralised`).
+* ``centralised``: the labelled centralised reference of the kind over every radar's plots,
+  at their own times (``--centralised async``, :mod:`.asynchronous`) or at the tick's
+  (``--centralised tick``, :mod:`sim.studies.labelled.centralised`).
 
 Per peer: OSPA per tick, OSPA(2) (window 10 ticks, mean over the windows), GOSPA per tick
 (``alpha = 2``), HOTA (gate = the OSPA cut-off), identity switches; per aircraft visit (an
@@ -19,9 +20,10 @@ percentile and the share >= 90 %. The twin's wall and CPU time per simulated sec
 speed against real time.
 
 ``python -m sensornet.sim.studies.traffic.study [SCENARIO] [--file F] [--start S]
-[--minutes M] [--set KEY=VALUE ...] [--kinds gmphd,lmb] [--jobs 2] [--md FILE] [--csv FILE]
-[--plot DIR]``; another recording runs through the same command with only ``--file``,
-``--start`` (window) and the sites (``--set sensors.NAME.site=[lat, lon]``) changed.
+[--minutes M] [--set KEY=VALUE ...] [--kinds gmphd,lmb] [--centralised async|tick]
+[--jobs 2] [--md FILE] [--csv FILE] [--plot DIR]``; another recording runs through the same
+command with only ``--file``, ``--start`` (window) and the sites (``--set
+sensors.NAME.site=[lat, lon]``) changed.
 """
 
 from __future__ import annotations
@@ -45,6 +47,12 @@ from sensornet.sim.studies.labelled.centralised import (
     run_central,
 )
 from sensornet.sim.studies.labelled.study import central_table, peer_tables, truth_table
+from sensornet.sim.studies.traffic.asynchronous import (
+    async_gmphd,
+    async_lmb,
+    plot_batches,
+    run_async,
+)
 from sensornet.sim.studies.traffic.centralised import central_measurement_gmphd
 from sensornet.sim.studies.traffic.metrics import (
     hota_sparse,
@@ -59,6 +67,9 @@ from sensornet.tracking.track_metrics import TrackTable
 
 KINDS = ("gmphd", "lmb")
 ESTIMATES = ("local", "fused", "centralised")
+REFERENCES = ("async", "tick")
+"""The centralised reference: every radar's plots at their own times
+(:mod:`.asynchronous`), or at the tick's (:mod:`sim.studies.labelled.centralised`)."""
 WINDOW = 10
 """OSPA(2) window (ticks)."""
 MIN_SCANS = 30
@@ -115,16 +126,22 @@ def table_rows(truth: TrackTable, tables: dict[str, TrackTable], scn: Scenario,
 
 
 def run_part(source: str, overrides: dict, kind: str, estimate: str, run: int,
-             with_hota: bool = True, keep_tables: bool = False) -> Part:
-    """One kind's ``estimate``: run it, then score every peer's (or the reference's) tracks."""
+             with_hota: bool = True, keep_tables: bool = False,
+             reference: str = REFERENCES[0]) -> Part:
+    """One kind's ``estimate``: run it, then score every peer's (or the reference's) tracks;
+    ``reference``: which centralised one (:data:`REFERENCES`)."""
     scn = scenario_of(source, overrides, kind, estimate)
     truth, scans = generate_run(scn, run)
     T = truth_table(truth)
     w0, c0 = time.perf_counter(), time.process_time()
-    if estimate == "centralised":
+    if estimate == "centralised" and reference == "async":
+        tracks, _ = run_async(async_lmb(scn) if kind == "lmb" else async_gmphd(scn),
+                              plot_batches(scn, run), scn.scan_period)
+    elif estimate == "centralised":
         central = (central_lmb(scn) if kind == "lmb" else central_measurement_gmphd(scn)
                    if scn.birth.model == "measurements" else central_gmphd(scn))
         tracks, _ = run_central(central, scans)
+    if estimate == "centralised":
         c, p = scn.metrics.ospa_cutoff, scn.metrics.ospa_order
         om = {"central": float(np.mean([ospa(e.states[:, [0, 2]], truth.states[k][:, [0, 2]],
                                              c, p) for k, e in enumerate(tracks)]))}
@@ -340,6 +357,9 @@ def main(argv: list[str] | None = None) -> int:
     add_window_arguments(ap)
     ap.add_argument("--kinds", default=",".join(KINDS))
     ap.add_argument("--estimates", default=",".join(ESTIMATES))
+    ap.add_argument("--centralised", choices=REFERENCES, default=REFERENCES[0],
+                    help="the centralised reference: plots at their own times (async) or at "
+                    "the tick's (tick)")
     ap.add_argument("--run", type=int, default=0, help="the radars' noise seed")
     ap.add_argument("--min-scans", type=int, default=MIN_SCANS,
                     help="ticks an aircraft must be present to be judged per aircraft")
@@ -363,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ScenarioError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    calls = [(a.scenario, over, k, e, a.run, not a.no_hota, bool(a.plot))
+    calls = [(a.scenario, over, k, e, a.run, not a.no_hota, bool(a.plot), a.centralised)
              for k in kinds for e in ests]
     t0 = time.perf_counter()
     parts = map_runs(run_part, calls, a.jobs, "traffic study (kind x estimate)", not a.quiet)
