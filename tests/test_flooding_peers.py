@@ -269,6 +269,7 @@ def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
     import rerun as rr
     from sensornet.peers.core import Publish, Record
     from sensornet.peers.observer import Observer
+    from sensornet.protocol.bundle import unpack_bundle
     from sensornet.protocol.codec import decode, encode
     from sensornet.protocol.messages import Forward, ScanSet
 
@@ -284,7 +285,7 @@ def test_rerun_view_of_a_flooding_peer_draws_scans_and_logs_the_cost():
                                     "n_fused": 5, "ages": {}}))
     obs.record(Record("cost", 3, {"tuples": 120, "tuples_published": 60, "bytes": 700}))
     obs.flush(idle=True, force=True)
-    (msg,) = [decode(b) for b in sent]
+    (msg,) = [decode(p) for b in sent for _, p in unpack_bundle(b).entries]  # one bundle
     assert msg.values["cost/tuples"] == 120 and msg.values["cost/bytes"] == 700
     assert msg.values["flooding/scans_held"] == 5
     assert msg.points["pooled"].shape[1] == 2 and len(msg.points["pooled"])  # in the plane

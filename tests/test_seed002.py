@@ -116,6 +116,7 @@ def test_rerun_view_colours_cells_and_greys_one_point_cells():
     from sensornet.peers.core import Record
     from sensornet.peers.observer import Observer
     from sensornet.peers.rerun_layout import cell_marks
+    from sensornet.protocol.bundle import unpack_bundle
     from sensornet.protocol.codec import decode
     from sensornet.sim.run.peers import make_peer
 
@@ -138,7 +139,8 @@ def test_rerun_view_colours_cells_and_greys_one_point_cells():
     obs = Observer(core, 1.0).attach(sent.append)
     obs.record(Record("local", 3, {"n_components": 1}))
     obs.flush(idle=True, force=True)
-    msg = decode(sent[0])
+    ((_, report),) = unpack_bundle(sent[0]).entries  # one put: a bundle of the report
+    msg = decode(report)
     # the view's points travel as float32 (telemetry protocol 2: for the eye), so equal to
     # the partition's plots as float32 numbers
     np.testing.assert_array_equal(msg.points["cells"], z.astype(np.float32))
