@@ -39,8 +39,9 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     neighbours in ``quarantined`` are left out of every reference; ``pos``: the position
     entries of the state, for :func:`unmatched_weights`). ``keep``: a dict given gets
     ``"unmatched"``: ``(mixes, U)``, the inputs ``[own, *sorted(inputs)]`` and their
-    :func:`unmatched_weights`, where they were made (the withheld-target test of the same
-    round takes them instead of making them again)."""
+    :func:`unmatched_weights`, and ``"targets"``: their :func:`target_mass` (``(n,)``),
+    where they were made (the withheld-target test of the same round takes them instead of
+    making them again)."""
     names = sorted(inputs)
     mixes = [own] + [inputs[s] for s in names]
     L = log_overlaps(mixes)
@@ -55,6 +56,7 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                                  cfg.gate_chi2)
         if keep is not None:
             keep["unmatched"] = (mixes, U)
+            keep["targets"] = tm
     pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
     out = {}
     pos_w = w > 0

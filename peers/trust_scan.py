@@ -165,11 +165,11 @@ class ScanTests:
         made = self.made.get("unmatched")  # the statistics' of the same inputs, if so
         if made is not None and len(made[0]) == len(mixes) and all(
                 a is b for a, b in zip(made[0], mixes, strict=True)):
-            U = made[1]
+            U, tm = made[1], self.made["targets"]
         else:
             U, _ = unmatched_weights(mixes, self.pos, cfg.repeat_weight, cfg.bias_gate,
                                      cfg.gate_chi2)
-        tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
+            tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
         ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
         refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
         inc = withheld_increments(U, tm, refs, cfg.detection_probability,
