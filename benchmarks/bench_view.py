@@ -1,35 +1,58 @@
-"""Can one view process show 100 peers at 10 scans/s? (issue 38)
+"""Can one view process show 50 or 100 peers at 10 scans/s? (issue 38)
 
-Feeds the live view's drawing (:class:`sensornet.view.ViewState`, decoding included) the
-messages of ``--peers`` peers for ``--scans`` scans, synthetic but of the sizes a GM-PHD
-network sends: per peer and scan its tracks (5 targets), its round-0 estimate (20 components),
-its telemetry (about 25 values and the fused mixture's 10 heaviest components), its sensor's
-scan (20 returns), and the truth once a scan; a round-1 estimate per peer as well (skipped
-from its head, as the view does). Writes a real ``.rrd`` (Rerun FileSink) and prints the CPU
-per scan against the 100 ms a scan lasts at 10 scans/s, for the batched logging (one
-``send_columns`` per entity per flush) and for one ``rr.log`` per row (what the peers did
-before), and their ratio.
+Feeds the live view's drawing (:class:`sensornet.view.ViewState`, decoding included, into a
+real ``.rrd``: Rerun FileSink) what a view hears from a network, and prints its process CPU
+per scan against the 100 ms a scan lasts at 10 scans/s. Two sources:
 
-    python benchmarks/bench_view.py                 # 100 peers, 50 scans
-    python benchmarks/bench_view.py --peers 50 --scans 100
+- ``--source twin`` (default): the traffic of the 50-peer network (degree 4, L = 2, 10
+  scans/s, the peers packed in ``--hosts`` hosts as ``sensornet run`` packs them), made on
+  the twin with every peer watched (``bench_watched.watched_twin``): the world's scan bundles
+  and truth, the hosts' report bundles with each scan's tracks, in virtual time order,
+  flushed every second of it (:data:`sensornet.view.FLUSH_S`). ``--profile N``: the N
+  functions with the most own time. ``--cache FILE``: the traffic kept in FILE (made once).
+- ``--source synthetic``: messages of a GM-PHD network's sizes (tracks, round-0 and round-1
+  estimates, telemetry, scans, truth), batched logging against one ``rr.log`` per row (what
+  the peers did before) and their ratio.
+
+    python benchmarks/bench_view.py                          # twin traffic, 50 peers
+    python benchmarks/bench_view.py --peers 100 --scans 60 --cache /tmp/v100.pkl
+    python benchmarks/bench_view.py --source synthetic --peers 100 --scans 80
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import os
+import pickle
+import pstats
+import statistics
+import subprocess
 import sys
 import tempfile
+import threading
 import time
+import types
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
+
+if not __package__:  # `python benchmarks/bench_view.py`: the repository root importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import encode
-from sensornet.protocol.messages import Estimate, Scan, Telemetry, Tracks, Truth
+from sensornet.protocol.keys import Keys
+from sensornet.protocol.messages import Control, Estimate, Scan, Telemetry, Tracks, Truth
+from sensornet.sim.run.twin import world_events
+from sensornet.sim.scenario import load_scenario
+from sensornet.sim.world import generate_run
+from sensornet.sim.world.graphs import network_scenario
 from sensornet.tracking.mixture import GaussianMixture
 
-from sensornet.view import Batcher, ViewState
+from benchmarks.bench_watched import watched_twin
+from sensornet.view import FLUSH_S, Batcher, LiveView, ViewState
 
 
 def _mix(rng: np.random.Generator, n: int) -> GaussianMixture:
@@ -66,6 +89,203 @@ def messages(peers: int, scans: int, rng: np.random.Generator) -> list[list[tupl
             ]
         out.append(batch)
     return out
+
+
+def twin_traffic(peers: int, scans: int, hosts: int, degree: int = 4,
+                 rounds: int = 2) -> tuple[list[str], float, list[tuple[float, str, bytes]]]:
+    """What a view hears from ``peers`` peers (degree, rounds, 10 scans/s) in ``hosts``
+    hosts, made on the twin: the peers' names, the scan period (s) and the ``(t, key,
+    payload)`` heard, in time order (``t``: seconds of the run)."""
+    with tempfile.TemporaryDirectory(prefix="sensornet-view-") as tmp:
+        path = Path(tmp) / "view.toml"
+        path.write_text(network_scenario(peers, degree, scans, rounds, speed=10.0))
+        scn = load_scenario(str(path))
+    names = scn.sensor_names
+    heard: list[tuple[float, str, bytes]] = []
+    watched_twin(scn, 0, hosts, lambda t, key, payload: heard.append((t, key, payload)))
+    keys = Keys("twin")
+    truth, scans_ = generate_run(scn, 0)
+    interval = scn.scan_period / scn.network.speed
+    host_of = {n: f"h{i % hosts + 1}" for i, n in enumerate(names)} if hosts else {}
+    world: dict[tuple[float, str], list] = {}
+    truths: set[bytes] = set()
+    for t, kind, target, *payload in world_events(scn, truth, scans_, keys, interval, (), ()):
+        if kind != "msg" or payload[0] == keys.ctl():
+            continue
+        if payload[0] == keys.truth():  # once, not once per peer
+            if payload[1] not in truths:
+                truths.add(payload[1])
+                heard.append((t, payload[0], payload[1]))
+        elif hosts:  # the world's scan bundle of each host
+            world.setdefault((t, host_of[target]), []).append((target, payload[1]))
+        else:
+            heard.append((t, payload[0], payload[1]))
+    for (t, host), entries in world.items():
+        k = round(t / interval)
+        heard += [(t, keys.scans(host), b) for b in pack_bundles(k, entries)]
+    heard.sort(key=lambda h: h[0])  # stable: a peer's puts in their order
+    return list(names), scn.scan_period, heard
+
+
+def by_second(heard: list[tuple[float, str, bytes]]) -> list[list[tuple[str, bytes]]]:
+    """``(key, payload)`` per :data:`FLUSH_S` of the run (a flush's worth)."""
+    seconds: list[list[tuple[str, bytes]]] = []
+    for t, key, payload in heard:
+        i = int(t / FLUSH_S)
+        while len(seconds) <= i:
+            seconds.append([])
+        seconds[i].append((key, payload))
+    return seconds
+
+
+def realtime(names: list[str], period: float, heard: list[tuple[float, str, bytes]],
+             out: Path) -> dict:
+    """The traffic replayed at its pace into the view process's loop (:class:`LiveView`: its
+    queue, drain, flushes that lengthen while they are long, decimation), this thread
+    feeding the queue: the process CPU per scan, how late the view handled what it heard
+    (ms after it was due: median, p99, max), its flush period at the end and what it left
+    out."""
+    rec = rr.RecordingStream("sensornet-bench", recording_id="bench-view-realtime")
+    rec.set_sinks(rr.FileSink(str(out)))
+    view = LiveView("twin", lambda b: ViewState(b, names, period), rr, rec, say=lambda s: None)
+    due: dict[int, float] = {}
+    late: list[float] = []
+    receive = view.state.receive
+
+    def handled(key: str, payload: bytes) -> None:
+        late.append(time.monotonic() - due.pop(id(payload)))
+        receive(key, payload)
+
+    view.state.receive = handled
+    runner = threading.Thread(target=view.run, kwargs={"until_end": True, "grace": 1.0})
+    cpu0 = time.process_time()
+    start = time.monotonic() + 0.2
+    runner.start()
+    for t, key, payload in heard:
+        wait = start + t - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        due[id(payload)] = start + t
+        view.q.put((key, payload))
+    end = encode(Control("end", "twin", {}))
+    due[id(end)] = time.monotonic()
+    view.q.put(("twin/ctl", end))
+    runner.join()
+    cpu = time.process_time() - cpu0
+    rec.flush()
+    rec.disconnect()
+    scans = sum(1 for _, k, _ in heard if k.endswith("/truth"))
+    ms = sorted(1e3 * x for x in late)
+    return {"cpu_ms": 1e3 * cpu / scans, "late_median": statistics.median(ms),
+            "late_p99": ms[int(0.99 * (len(ms) - 1))], "late_max": ms[-1],
+            "flush_s": view.flush_s, "dropped": view.dropped, "skipped": view.skipped,
+            "decimated": view.batcher.decimated}
+
+
+VIEW_MODULES = ("view_columns", "view_state")
+"""The drawing's modules (``sensornet/<name>.py``), loaded from a git revision by
+:func:`modules_at` to compare the drawing then and now on the same traffic."""
+
+
+def modules_at(rev: str) -> tuple[type, type]:
+    """``(Batcher, ViewState)`` of the view's modules at git revision ``rev`` (imported under
+    other names, each importing the other's old version; the rest of the package as now)."""
+    root = Path(__file__).resolve().parents[1]
+    loaded = {}
+    for name in VIEW_MODULES:
+        text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:sensornet/{name}.py"],
+                              capture_output=True, text=True, check=True).stdout
+        for other in VIEW_MODULES:
+            text = text.replace(f"sensornet.{other}", f"_at_rev_{other}")
+        module = types.ModuleType(f"_at_rev_{name}")
+        sys.modules[module.__name__] = module
+        exec(compile(text, f"{rev}:sensornet/{name}.py", "exec"), module.__dict__)
+        loaded[name] = module
+    return loaded["view_columns"].Batcher, loaded["view_state"].ViewState
+
+
+def draw(names: list[str], period: float, seconds: list[list[tuple[str, bytes]]], out: Path,
+         every: int = 1, profile: int = 0, kinds: tuple[type, type] = (Batcher, ViewState),
+         skip: int = 0) -> tuple[float, Batcher, ViewState]:
+    """Process CPU (s) of drawing ``seconds`` of traffic into a ``.rrd`` at ``out``, flushed
+    every ``every`` seconds (``profile``: print the most costly functions; ``kinds``: the
+    ``(Batcher, ViewState)`` classes; ``skip``: the CPU of the first seconds not counted, the
+    recording's first flushes that make its entities)."""
+    rec = rr.RecordingStream("sensornet-bench", recording_id="bench-view-twin")
+    rec.set_sinks(rr.FileSink(str(out)))
+    b = kinds[0](rr, rec)
+    state = kinds[1](b, names, period)
+    prof = cProfile.Profile() if profile else None
+    t0 = time.process_time()
+    if prof is not None:
+        prof.enable()
+    for i, second in enumerate(seconds, start=1):
+        for key, payload in second:
+            state.receive(key, payload)
+        if i % every == 0:
+            b.flush()
+        if i == skip:
+            t0 = time.process_time()
+    b.flush()
+    rec.flush()
+    if prof is not None:
+        prof.disable()
+    cpu = time.process_time() - t0
+    rec.disconnect()
+    if prof is not None:
+        pstats.Stats(prof).sort_stats("tottime").print_stats(profile)
+    return cpu, b, state
+
+
+def main_twin(args) -> int:
+    cache = Path(args.cache) if args.cache else None
+    if cache is not None and cache.is_file():
+        names, period, heard = pickle.loads(cache.read_bytes())
+    else:
+        names, period, heard = twin_traffic(args.peers, args.scans, args.hosts)
+        if cache is not None:
+            cache.write_bytes(pickle.dumps((names, period, heard)))
+    seconds = by_second(heard)
+    scans = max(1, sum(1 for s in seconds for k, _ in s if k.endswith("/truth")))
+    n_msgs = sum(map(len, seconds))
+    n_bytes = sum(len(p) for s in seconds for _, p in s)
+    skip = args.skip
+    counted = sum(1 for s in seconds[skip:] for k, _ in s if k.endswith("/truth"))
+    sides = [("now", (Batcher, ViewState))]
+    if args.against:
+        sides.insert(0, (args.against, modules_at(args.against)))
+    cpu: dict[tuple[str, int], list[float]] = {}
+    with tempfile.TemporaryDirectory(prefix="sensornet-view-") as tmp:
+        for _, kinds in sides:  # imports, first calls: not measured
+            draw(names[:10], period, seconds[:2], Path(tmp) / "warm.rrd", kinds=kinds)
+        if args.profile:
+            draw(names, period, seconds, Path(tmp) / "profile.rrd", profile=args.profile)
+        for _ in range(args.repeats):  # interleaved: the machine's load falls on every side
+            for every in (1, 2):
+                for side, kinds in sides:
+                    used, b, state = draw(names, period, seconds, Path(tmp) / "t.rrd", every,
+                                          kinds=kinds, skip=skip)
+                    cpu.setdefault((side, every), []).append(1e3 * used / counted)
+                    assert state.rejected == 0, state.rejected
+    lines = [f"| {len(names)} peers, {scans} scans, hosts {args.hosts or 'none'}, CPU ms per "
+             f"scan after the first {skip} s (min / median of {args.repeats}) | "
+             + " | ".join(side for side, _ in sides) + " |",
+             "|---|" + "---:|" * len(sides)]
+    for every in (1, 2):
+        lines.append(f"| flushed every {every * FLUSH_S:g} s | " + " | ".join(
+            f"{min(cpu[side, every]):.1f} / {statistics.median(cpu[side, every]):.1f}"
+            for side, _ in sides) + " |")
+        if args.realtime:
+            r = realtime(names, period, heard, Path(tmp) / "realtime.rrd")
+            lines += ["", f"In real time through the view's loop (LiveView; the traffic's "
+                      f"{len(heard) / (heard[-1][0] or 1):.0f} messages/s): CPU "
+                      f"{r['cpu_ms']:.1f} ms per scan, messages handled {r['late_median']:.0f} "
+                      f"ms after due (median; p99 {r['late_p99']:.0f}, max "
+                      f"{r['late_max']:.0f}), flushing every {r['flush_s']:g} s at the end; "
+                      f"{r['dropped']} dropped, {r['decimated']} map frames decimated."]
+    print("\n".join(lines) + f"\n\n{n_msgs} messages, {n_bytes / 1e6:.1f} MB heard; load "
+          f"average {os.getloadavg()[0]:.1f}; 100 ms a scan at 10 scans/s")
+    return 0
 
 
 class _PerRow(Batcher):
@@ -114,10 +334,25 @@ def run(peers: int, scans: int, per_row: bool, out: Path,
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--peers", type=int, default=100)
-    p.add_argument("--scans", type=int, default=80)
+    p.add_argument("--source", choices=("twin", "synthetic"), default="twin")
+    p.add_argument("--peers", type=int, default=None, help="50 (twin), 100 (synthetic)")
+    p.add_argument("--scans", type=int, default=None, help="60 (twin), 80 (synthetic)")
+    p.add_argument("--hosts", type=int, default=2, help="twin: peer hosts (0: none)")
+    p.add_argument("--cache", default=None, help="twin: keep the traffic in this file")
+    p.add_argument("--profile", type=int, default=0, help="twin: print the N costliest")
+    p.add_argument("--against", default=None, metavar="REV",
+                   help="twin: also the drawing of git revision REV, interleaved")
+    p.add_argument("--repeats", type=int, default=3, help="twin: draws of each side")
+    p.add_argument("--realtime", action="store_true",
+                   help="twin: also replay the traffic at its pace through the view's loop")
+    p.add_argument("--skip", type=int, default=2,
+                   help="twin: seconds not counted at the start (the entities' first flushes)")
     args = p.parse_args(argv)
     os.environ.setdefault("RERUN_ANALYTICS", "0")
+    if args.source == "twin":
+        args.peers, args.scans = args.peers or 50, args.scans or 60
+        return main_twin(args)
+    args.peers, args.scans = args.peers or 100, args.scans or 80
     with tempfile.TemporaryDirectory(prefix="sensornet-view-") as tmp:
         run(10, 10, False, Path(tmp) / "warm.rrd")  # imports and first calls, not measured
         naive, rows = run(args.peers, args.scans, True, Path(tmp) / "per-row.rrd")

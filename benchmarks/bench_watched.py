@@ -22,26 +22,34 @@ import time
 
 from sensornet.peers.core import Publish, Record
 from sensornet.peers.observer import KINDS, HostReports, Observer
+from sensornet.protocol.keys import Keys
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario, parse_overrides
 
 
-def measure(source: str, scans: int, hosts: int, run: int = 0) -> dict:
-    """One twin run with every peer watched: CPU (ms per peer-scan) of gathering and of
-    flushing, reports and puts per peer-scan, bytes per peer-scan."""
-    scn = load_scenario(source, overrides=parse_overrides([f"scenario.num_scans={scans}"]))
+def watched_twin(scn, run: int, hosts: int, put) -> dict:
+    """One twin run of ``scn`` with every peer watched, as a watched runtime drives its
+    observer (every output through it, a flush after each step; ``hosts``: reports gathered
+    per host of ``n / hosts`` peers, sent once per virtual instant, 0: each peer its own);
+    ``put(t, key, payload)`` gets each put at virtual time ``t`` on its report key (network
+    ``twin``). Returns the CPU seconds of gathering and of flushing."""
     names = scn.sensor_names
+    keys = Keys("twin")
     peers = {n: make_peer(scn, n, run) for n in names}
-    sent: list[bytes] = []
     cpu = {"gather": 0.0, "flush": 0.0}
+    now = [0.0]
     observers, host_of, last = {}, {}, [None]
     groups = [names[i::hosts] for i in range(hosts)] if hosts else [[n] for n in names]
-    for group in groups:
-        reports = HostReports(sent.append) if hosts else None
+
+    def put_on(key: str):
+        return lambda payload: put(now[0], key, payload)
+
+    for h, group in enumerate(groups):
+        reports = HostReports(put_on(keys.telemetries(f"h{h + 1}"))) if hosts else None
         for n in group:
             obs = Observer(peers[n], scn.scan_period)
-            observers[n] = (obs.attach(sent.append) if reports is None
+            observers[n] = (obs.attach(put_on(keys.telemetry(n))) if reports is None
                             else reports.add(obs))
             host_of[n] = reports
     handle = twin._Clock.handle
@@ -60,7 +68,7 @@ def measure(source: str, scans: int, hosts: int, run: int = 0) -> dict:
         if last[0] != t:  # a new instant: the hosts' passes of the last one are over
             for reports in {id(r): r for r in host_of.values() if r is not None}.values():
                 reports.send()
-            last[0] = t
+            last[0] = now[0] = t
         for call, o, x in calls:
             call(o, x)
         t1 = time.thread_time()
@@ -80,7 +88,16 @@ def measure(source: str, scans: int, hosts: int, run: int = 0) -> dict:
     for reports in {id(r): r for r in host_of.values() if r is not None}.values():
         reports.send()
     cpu["flush"] += time.thread_time() - t0
-    peer_scans = len(names) * scans
+    return cpu
+
+
+def measure(source: str, scans: int, hosts: int, run: int = 0) -> dict:
+    """One twin run with every peer watched: CPU (ms per peer-scan) of gathering and of
+    flushing, reports and puts per peer-scan, bytes per peer-scan."""
+    scn = load_scenario(source, overrides=parse_overrides([f"scenario.num_scans={scans}"]))
+    sent: list[bytes] = []
+    cpu = watched_twin(scn, run, hosts, lambda t, key, payload: sent.append(payload))
+    peer_scans = len(scn.sensor_names) * scans
     return {"gather": 1e3 * cpu["gather"] / peer_scans, "flush": 1e3 * cpu["flush"] / peer_scans,
             "puts": len(sent) / peer_scans, "bytes": sum(map(len, sent)) / peer_scans}
 

@@ -8,13 +8,19 @@ Knows nothing of messages: :mod:`sensornet.view_state` turns those into rows.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
 from rerun.components import LineStrip2DBatch
 
+from sensornet.peers.rerun_layout import dashed, ellipses
 from sensornet.peers.rerun_sink import north_up
+
+MAP_KINDS = ("points", "strips", "ellipses")
+"""Kinds of map entities (decimated when the view is behind); the rest are series and logs."""
 
 
 @dataclass
@@ -40,6 +46,7 @@ class Batcher:
         """Map rows left out because newer ones of the same entity were waiting."""
         self.calls = 0
         self.rows_sent = 0
+        self._indexes: dict = {}
         self.builders: dict = {}
         """Kinds other modules add (:mod:`sensornet.view_map`'s geographic map): ``kind ->
         builder(rr, rows) -> columns``; their entities are map entities (decimated)."""
@@ -53,15 +60,39 @@ class Batcher:
         r.rows.append(row)
 
     def scalar(self, path: str, k: int, t: float, value) -> None:
-        if value is not None and np.isfinite(value):
+        if value is not None and math.isfinite(value):
             self._add(path, "scalar", k, t, float(value))
+
+    def scalars(self, k: int, t: float, values: Iterable[tuple[str, float]]) -> None:
+        """Many series' rows of one scan at once (a peer's report: ~30 values); those not
+        finite are left out, as :meth:`scalar` does."""
+        rows, k, t = self._rows, int(k), float(t)
+        for path, value in values:
+            if value is None or not math.isfinite(value):
+                continue
+            r = rows.get(path)
+            if r is None:
+                r = rows[path] = _Rows("scalar")
+            r.ks.append(k)
+            r.ts.append(t)
+            r.rows.append(float(value))
+
+    def ellipses(self, path: str, k: int, t: float, means: np.ndarray, covs: np.ndarray,
+                 color, radius: float, dashed: bool = False) -> None:
+        """The 2-sigma ellipses of the position marginals of ``means (n, d)``, ``covs (n, d,
+        d)`` (:func:`peers.rerun_layout.ellipses`; ``dashed``: every other segment), drawn
+        as line strips of ``color``. Kept as given until a flush, which draws the ellipses
+        of all the entity's rows in one vectorised call (and none of the rows a behind view
+        decimates)."""
+        self._add(path, "ellipses", k, t, (means, covs, color, -abs(radius), dashed))
 
     def points(self, path: str, k: int, t: float, xy, colors, radius: float,
                labels: list[str] | None = None) -> None:
-        """Points (map coordinates ``(n, 2)``); ``colors`` one ``(3,)`` or ``(n, 3)``."""
+        """Points (map coordinates ``(n, 2)``); ``colors`` one ``(3,)`` or ``(n, 3)`` (one is
+        repeated when flushed, with the other rows' in one call)."""
         xy = north_up(np.asarray(xy, float).reshape(-1, 2))
-        c = np.broadcast_to(np.asarray(colors, np.uint8).reshape(-1, 3), (len(xy), 3))
-        self._add(path, "points", k, t, (xy, c, -abs(radius), labels))
+        self._add(path, "points", k, t, (xy, _colors(colors, len(xy), path), -abs(radius),
+                                         labels))
 
     def strips(self, path: str, k: int, t: float, lines, color, radius: float) -> None:
         """Polylines (map coordinates): an ``(n, m, 2)`` array or a list of ``(m_i, 2)``;
@@ -74,8 +105,8 @@ class Batcher:
             lines = [np.asarray(a, float).reshape(-1, 2) for a in lines]
             flat = np.concatenate(lines) if lines else np.zeros((0, 2))
             lengths = np.array([len(a) for a in lines], dtype=np.int64)
-        c = np.broadcast_to(np.asarray(color, np.uint8).reshape(-1, 3), (len(lengths), 3))
-        self._add(path, "strips", k, t, (north_up(flat), lengths, c, -abs(radius)))
+        self._add(path, "strips", k, t, (north_up(flat), lengths,
+                                         _colors(color, len(lengths), path), -abs(radius)))
 
     def text(self, path: str, k: int, t: float, message: str, level: str = "INFO") -> None:
         self._add(path, "text", k, t, (message, level))
@@ -90,10 +121,11 @@ class Batcher:
     def flush(self) -> None:
         """Every entity's rows in one call each (map entities: the newest :attr:`map_keep`)."""
         rows, self._rows = self._rows, {}
+        self._indexes = {}
         for path, r in rows.items():
             ks, ts, data = r.ks, r.ts, r.rows
             keep = self.map_keep
-            if (keep is not None and (r.kind in ("points", "strips") or r.kind in self.builders)
+            if (keep is not None and (r.kind in MAP_KINDS or r.kind in self.builders)
                     and len(ks) > keep):
                 self.decimated += len(ks) - keep
                 ks, ts, data = ks[-keep:], ts[-keep:], data[-keep:]
@@ -101,29 +133,41 @@ class Batcher:
 
     def _send(self, path: str, kind: str, ks: list, ts: list, data: list) -> None:
         rr = self.rr
-        index = [rr.TimeColumn("scan", sequence=np.asarray(ks, np.int64)),  # arrays: a list
-                 rr.TimeColumn("sim", duration=np.asarray(ts, float))]  # costs 5x as much
+        index = self._index(ks, ts)
         if kind == "scalar":
-            cols = rr.Scalars.columns(scalars=np.asarray(data, float))
+            cols = [_Column(_descriptor(rr, "Scalars", "scalars"),
+                            _rows(pa.array(data, pa.float64())))]
         elif kind == "points":
-            lengths = [len(d[0]) for d in data]
+            lengths = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
             xy = np.concatenate([d[0] for d in data]) if data else np.zeros((0, 2))
-            colors = np.concatenate([d[1] for d in data]) if data else np.zeros((0, 3))
-            radii = np.repeat([d[2] for d in data], lengths)
-            cols = [*rr.Points2D.columns(positions=xy, colors=colors, radii=radii).partition(
-                lengths)]
+            colors = repeat_colors([d[1] for d in data], lengths)
+            radii = np.repeat(np.fromiter((d[2] for d in data), np.float32, len(data)), lengths)
+            cols = [_Column(_descriptor(rr, "Points2D", "positions"),
+                            list_array(xy, lengths, _datatype(rr, "Points2D", "positions"),
+                                       np.float32)),
+                    _Column(_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), lengths)),
+                    _Column(_descriptor(rr, "Points2D", "colors"),
+                            _rows(pa.array(packed_colors(colors)), lengths))]
             if any(d[3] is not None for d in data):  # labels always shown
                 labels = [s for d in data for s in (d[3] or [""] * len(d[0]))]
-                cols += [*rr.Points2D.columns(labels=labels).partition(lengths),
-                         *rr.Points2D.columns(show_labels=[True] * len(data))]
+                cols += [_Column(_descriptor(rr, "Points2D", "labels"),
+                                 _rows(pa.array(labels, pa.string()), lengths)),
+                         _Column(_descriptor(rr, "Points2D", "show_labels"),
+                                 _rows(pa.array(np.ones(len(data), bool))))]
+        elif kind == "ellipses":
+            self._send(path, "strips", ks, ts, ellipse_strips(data))
+            return
         elif kind == "strips":
-            lengths = [len(d[1]) for d in data]
-            colors = np.concatenate([d[2] for d in data])
-            radii = np.repeat([d[3] for d in data], lengths)
-            cols = [*rr.LineStrips2D.columns(
-                strips=strip_array(np.concatenate([d[0] for d in data]),
-                                   np.concatenate([d[1] for d in data])),
-                colors=colors, radii=radii).partition(lengths)]
+            lengths = np.fromiter((len(d[1]) for d in data), np.int64, len(data))
+            colors = repeat_colors([d[2] for d in data], lengths)
+            radii = np.repeat(np.fromiter((d[3] for d in data), np.float32, len(data)), lengths)
+            strips = strip_array(np.concatenate([d[0] for d in data]),
+                                 np.concatenate([d[1] for d in data]))
+            cols = [_Column(_descriptor(rr, "LineStrips2D", "strips"), _rows(strips, lengths)),
+                    _Column(_descriptor(rr, "LineStrips2D", "radii"),
+                            _rows(pa.array(radii), lengths)),
+                    _Column(_descriptor(rr, "LineStrips2D", "colors"),
+                            _rows(pa.array(packed_colors(colors)), lengths))]
         elif kind in self.builders:
             cols = self.builders[kind](rr, data)
         elif kind == "text":
@@ -133,6 +177,145 @@ class Batcher:
         self.rec.send_columns(path, indexes=index, columns=cols)
         self.calls += 1
         self.rows_sent += len(ks)
+
+    def _index(self, ks: list, ts: list) -> list:
+        """The scan and sim time columns of these rows: made once per flush for the many
+        entities (a peer's series) that have rows of the same scans."""
+        key = (tuple(ks), tuple(ts))
+        index = self._indexes.get(key)
+        if index is None:
+            index = self._indexes[key] = [
+                _Index("scan", pa.array(np.asarray(ks, np.int64))),
+                _Index("sim", pa.array((np.asarray(ts, float) * 1e9).astype("timedelta64[ns]"),
+                                       pa.duration("ns")))]
+        return index
+
+
+def ellipse_strips(data: list) -> list:
+    """Rows of :meth:`Batcher.ellipses` ``(means (n, d), covs (n, d, d), color, radius,
+    dashed)`` as rows of line strips (:meth:`Batcher.strips`' layout: flat north-up points,
+    points per strip, one colour, radius), the ellipses of all the rows of one state
+    dimension computed in one call."""
+    lines: list = [None] * len(data)
+    by_dim: dict[int, list[int]] = {}
+    for i, d in enumerate(data):
+        by_dim.setdefault(np.shape(d[0])[-1], []).append(i)
+    for rows in by_dim.values():
+        counts = np.fromiter((len(data[i][0]) for i in rows), np.int64, len(rows))
+        drawn = north_up(ellipses(np.concatenate([np.asarray(data[i][0], float) for i in rows]),
+                                  np.concatenate([np.asarray(data[i][1], float)
+                                                  for i in rows])))  # (N, 33, 2)
+        for i, part in zip(rows, np.split(drawn, np.cumsum(counts)[:-1]), strict=True):
+            lines[i] = part
+    out = []
+    for part, (_, _, color, radius, dash) in zip(lines, data, strict=True):
+        if dash:
+            part = dashed(part)
+        n, m = part.shape[:2]
+        out.append((part.reshape(-1, 2), np.full(n, m, np.int64),
+                    np.asarray(color, np.uint8).reshape(-1, 3), radius))
+    return out
+
+
+def _colors(colors, n: int, path: str) -> np.ndarray:
+    """``colors`` as ``(1, 3)`` or ``(n, 3)`` uint8 (one for all ``n`` marks, or one each)."""
+    c = np.asarray(colors, np.uint8).reshape(-1, 3)
+    if len(c) not in (1, n):
+        raise ValueError(f"{path}: {len(c)} colours for {n} marks (give one, or one each)")
+    return c
+
+
+def repeat_colors(colors: list, counts: np.ndarray) -> np.ndarray:
+    """Rows' colours (each ``(1, 3)`` or ``(counts[i], 3)``) as one ``(sum counts, 3)``: a
+    row's one colour repeated for each of its marks, in one call for all rows."""
+    if not colors:
+        return np.zeros((0, 3), np.uint8)
+    given = np.fromiter((len(c) for c in colors), np.int64, len(colors))
+    flat = np.concatenate(colors)
+    if (given == counts).all():
+        return flat
+    return np.repeat(flat, np.repeat(np.where(given == counts, 1, counts), given), axis=0)
+
+
+class _Index:
+    """A time column (Rerun's ``TimeColumnLike``: a timeline's name and its Arrow array)."""
+
+    __slots__ = ("name", "array")
+
+    def __init__(self, name: str, array: pa.Array) -> None:
+        self.name, self.array = name, array
+
+    def timeline_name(self) -> str:
+        return self.name
+
+    def as_arrow_array(self) -> pa.Array:
+        return self.array
+
+
+class _Column:
+    """A component column built here in Arrow (what ``send_columns`` reads of Rerun's
+    ``ComponentColumn``: its descriptor and its array, one list per row). Rerun's own
+    ``Archetype.columns(...).partition(...)`` costs ~0.1-0.5 ms an entity in Python
+    conversions, and the view flushes thousands of entities a second at 50 peers."""
+
+    __slots__ = ("descriptor", "array")
+
+    def __init__(self, descriptor, array: pa.Array) -> None:
+        self.descriptor, self.array = descriptor, array
+
+    def component_descriptor(self):
+        return self.descriptor
+
+    def as_arrow_array(self) -> pa.Array:
+        return self.array
+
+
+_TEMPLATES: dict[tuple[str, str], tuple] = {}
+
+
+def _template(rr, archetype: str, field: str) -> tuple:
+    """Rerun's descriptor and list type of an archetype's component, from a one-row column
+    Rerun builds itself (once)."""
+    got = _TEMPLATES.get((archetype, field))
+    if got is None:
+        sample = {"positions": np.zeros((1, 2)), "radii": [1.0], "colors": [0],
+                  "labels": ["a"], "show_labels": [True], "scalars": [0.0],
+                  "strips": [np.zeros((2, 2))]}[field]
+        (col,) = getattr(rr, archetype).columns(**{field: sample}).partition([1])
+        got = _TEMPLATES[(archetype, field)] = (col.component_descriptor(),
+                                                col.as_arrow_array().type)
+    return got
+
+
+def _descriptor(rr, archetype: str, field: str):
+    return _template(rr, archetype, field)[0]
+
+
+def _datatype(rr, archetype: str, field: str) -> pa.DataType:
+    return _template(rr, archetype, field)[1]
+
+
+_ONES: dict[int, pa.Array] = {}
+
+
+def _rows(values: pa.Array, lengths=None) -> pa.Array:
+    """``values`` end to end as one list per row of ``lengths`` (Arrow ``list<...>``; None:
+    one value a row, the offsets kept per row count)."""
+    if lengths is None:
+        offsets = _ONES.get(len(values))
+        if offsets is None:
+            offsets = _ONES[len(values)] = pa.array(np.arange(len(values) + 1, dtype=np.int32))
+    else:
+        o = np.zeros(len(lengths) + 1, dtype=np.int32)
+        np.cumsum(lengths, out=o[1:])
+        offsets = pa.array(o)
+    return pa.ListArray.from_arrays(offsets, values)
+
+
+def packed_colors(colors: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` uint8 RGB as Rerun's packed ``0xRRGGBBAA`` uint32 (opaque), ``(n,)``."""
+    c = np.asarray(colors).reshape(-1, 3).astype(np.uint32)
+    return (c[:, 0] << 24) | (c[:, 1] << 16) | (c[:, 2] << 8) | np.uint32(0xFF)
 
 
 def strip_array(points: np.ndarray, lengths: np.ndarray) -> pa.Array:

@@ -26,10 +26,8 @@ from sensornet.peers.rerun_sink import (
     TrackLabels,
     TruthPaths,
     color_of,
-    dashed,
     ellipses,
     lighter,
-    north_up,
     position_columns,
 )
 from sensornet.protocol.bundle import unpack_bundle
@@ -125,6 +123,8 @@ class ViewState:
         view handling them (ms; same clock on one machine)."""
         self.ended = False
         self.newest_k = 0
+        self._series: dict[str, dict[str, str]] = {}
+        """Per peer: report value name -> its entity (made once, not per row)."""
 
     def color(self, name: str) -> tuple[int, int, int]:
         i = self.index.get(name)
@@ -246,16 +246,17 @@ class ViewState:
         self.b.points(f"peers/{n}/tail", k, t, np.concatenate(list(tail)), color, 1.5)
         self.b.scalar(f"metrics/cardinality/{n}/fused", k, t, len(X))
         if msg.covs is not None and len(X):  # the tracks' own 2-sigma ellipses
-            self.b.strips(f"peers/{n}/tracks/ellipses", k, t,
-                          ellipses(X, np.asarray(msg.covs, float)), color, 1.0)
+            self.b.ellipses(f"peers/{n}/tracks/ellipses", k, t, X, np.asarray(msg.covs, float),
+                            color, 1.0)
 
     def telemetry(self, msg: Telemetry) -> None:
         n, k, t = msg.sender, msg.k, self._t(msg.k)
         color = self.color(n)
-        for name, value in msg.values.items():
-            head, _, rest = name.partition("/")
-            self.b.scalar(f"metrics/{head}/{n}/{rest}" if rest else f"metrics/{head}/{n}",
-                          k, t, value)
+        paths = self._series.get(n)
+        if paths is None:
+            paths = self._series[n] = {}
+        self.b.scalars(k, t, [(paths.get(name) or self._series_path(paths, n, name), value)
+                              for name, value in msg.values.items()])
         for line in msg.events:
             level, text = ("WARN", line[5:]) if line.startswith("WARN ") else ("INFO", line)
             self.b.text(f"peers/{n}/events", k, t, text, level)
@@ -275,6 +276,13 @@ class ViewState:
                               2.0 if name == "local" else 1.0)
         if msg.mixture is not None:
             self.mixture(f"peers/{n}", "fused", k, msg.mixture, color)
+
+    @staticmethod
+    def _series_path(paths: dict, peer: str, name: str) -> str:
+        """The entity of a report value: ``metrics/<head>/<peer>[/<rest>]`` (kept per peer)."""
+        head, _, rest = name.partition("/")
+        path = paths[name] = f"metrics/{head}/{peer}/{rest}" if rest else f"metrics/{head}/{peer}"
+        return path
 
     def gate(self, base: str, k: int, points: np.ndarray, color) -> None:
         """One sensor's PDA update (:func:`peers.observer.pack_gates`) as the peers drew it
@@ -304,11 +312,6 @@ class ViewState:
         local = which == "local"
         shown = lighter(color) if local else color
         xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
-        self.b._add(f"{base}/{which}/means", "points", k, t,
-                    (north_up(xy), np.broadcast_to(np.asarray(shown, np.uint8), (len(xy), 3)),
-                     -2.0, None))
-        strips = ellipses(mix.means, mix.covs)
-        if local:
-            self.b.strips(f"{base}/{which}/ellipses", k, t, dashed(strips), shown, 1.0)
-        else:
-            self.b.strips(f"{base}/{which}/ellipses", k, t, strips, shown, 1.5)
+        self.b.points(f"{base}/{which}/means", k, t, xy, shown, 2.0)
+        self.b.ellipses(f"{base}/{which}/ellipses", k, t, mix.means, mix.covs, shown,
+                        1.0 if local else 1.5, dashed=local)
