@@ -21,6 +21,7 @@ references and their calibration: docs/trust-calibration.md).
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections import deque
 
@@ -164,7 +165,7 @@ def unmatched_weights(mixes: list[GaussianMixture], pos: list[int], min_weight: 
     keep = np.concatenate([m for m in sel if len(m)])
     w = np.concatenate([D.weights for D in full])[keep]
     X = np.concatenate([D.means for D in full])[keep][:, pos]
-    P = (np.concatenate([D.covs for D in full])[keep][:, pos][:, :, pos]
+    P = (position_block(np.concatenate([D.covs for D in full])[keep], pos)
          if chi2 is not None else np.zeros((len(owner), 2, 2)))
     G = np.zeros((len(owner), n))
     G[np.arange(len(owner)), owner] = 1.0  # (C, n): which input a component is of
@@ -480,10 +481,9 @@ def offset_information_many(ref: GaussianMixture, mixes: list[GaussianMixture],
     sel = [(i, a) for i, a in sel if a.any()]
     if not sel:
         return out
-    ix = np.ix_(pos, pos)
     ma = np.concatenate([mixes[i].means[a] for i, a in sel])[:, pos]  # (n, 2)
-    Pa = np.concatenate([mixes[i].covs[a] for i, a in sel])[:, ix[0], ix[1]]  # (n, 2, 2)
-    mb, Pb = ref.means[b][:, pos], ref.covs[b][:, ix[0], ix[1]]  # (m, 2), (m, 2, 2)
+    Pa = position_block(np.concatenate([mixes[i].covs[a] for i, a in sel]), pos)  # (n, 2, 2)
+    mb, Pb = ref.means[b][:, pos], position_block(ref.covs[b], pos)  # (m, 2), (m, 2, 2)
     diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
     nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
     d = diff[np.arange(len(ma)), nearest]
@@ -493,14 +493,25 @@ def offset_information_many(ref: GaussianMixture, mixes: list[GaussianMixture],
         return out
     Si = np.zeros_like(Pa)
     Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
-    ends = np.cumsum([int(a.sum()) for _, a in sel])
-    starts = np.r_[0, ends[:-1]]
+    ends = list(itertools.accumulate(int(a.sum()) for _, a in sel))
+    starts = [0, *ends[:-1]]
     for (i, _), lo, hi in zip(sel, starts, ends, strict=True):
         k = ok[lo:hi]
         if k.any():
             S = Si[lo:hi][k]
             out[i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
     return out
+
+
+def position_block(covs: np.ndarray, pos: list[int]) -> np.ndarray:
+    """The position block ``covs[:, pos][:, :, pos]`` (``(n, 2, 2)``) of covariances
+    ``(n, d, d)``: a strided view where ``pos`` is increasing (the same numbers, without
+    two fancy-indexing copies per call), the fancy-indexed copy otherwise."""
+    i, j = pos
+    if j > i:
+        step = slice(i, j + 1, j - i)
+        return covs[:, step, step]
+    return covs[:, pos][:, :, pos]
 
 
 def relative_offsets(infos: dict[str, tuple[np.ndarray, np.ndarray]],

@@ -96,7 +96,8 @@ class NeighbourTrust:
     moved: np.ndarray | None = None
     """The last offset ``(2,)`` a repair subtracted (:meth:`peers.trust.Trust._moved`)."""
     raw_offset: np.ndarray | None = None
-    """Its last tested scan's offset ``I^-1 y`` ``(2,)`` (None: nothing matched)."""
+    """Its last tested scan's offset ``I^-1 y`` ``(2,)`` (None: nothing matched), kept
+    where :attr:`peers.trust.Trust.trace` is on (the trace's alone)."""
     rounds: int = 0
     """Rounds it was tested in."""
     holds: int = 0

@@ -3,7 +3,7 @@ withheld-target CUSUM and the repaired density of a neighbour about to turn susp
 
 A mixin of :class:`peers.trust.Trust` (moved out of peers/trust.py to keep that module short):
 its methods use the state :class:`Trust` keeps (``cfg``, ``n``, ``pos``, ``fused_in``,
-``losses``) and its ``shift``, ``statistics`` and ``_next``.
+``losses``, ``trace``) and its ``shift``, ``statistics`` and ``_next``.
 """
 
 from __future__ import annotations
@@ -51,11 +51,12 @@ class ScanTests:
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
-            for (s, info), raw in zip(infos.items(), gls_offsets(list(infos.values())),
-                                      strict=True):
-                rec = self.n[s]
-                rec.raw_offset = raw
-                push_window(rec.residuals, _raw(info, regs[s], -1.0), max(cfg.bias_windows))
+            if self.trace is not None:  # the scan's raw offsets: for the trace alone
+                for s, raw in zip(infos, gls_offsets(list(infos.values())), strict=True):
+                    self.n[s].raw_offset = raw
+            for s, info in infos.items():
+                push_window(self.n[s].residuals, _raw(info, regs[s], -1.0),
+                            max(cfg.bias_windows))
             chi2s = add_offsets(cfg, [self.n[s] for s in infos], list(infos.values()))
             for s, chi2 in zip(infos, chi2s, strict=True):
                 rec = self.n[s]
