@@ -50,10 +50,26 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         confirm_settle=settle_scans(A, i),
         support_inputs=scn.fusion.support,
         support_scans=scn.fusion.support_scans,
-        existence_prior=scn.fusion.existence_prior,
+        existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
     )
     return replace(opts, **changes)
+
+
+LMB_EXISTENCE_PRIOR = 0.01
+"""``fusion.existence_prior`` "auto" (-1) for LMB peers that publish tentative tracks: about the
+adaptive births' existence (docs/labelled-tracking.md, "Design B")."""
+
+
+def existence_prior(scn: Scenario) -> float:
+    """The pooling prior of fused extraction: ``fusion.existence_prior``, or if negative
+    (auto) :data:`LMB_EXISTENCE_PRIOR` for LMB peers with ``lmb.tentative_threshold`` on, else
+    0 (off: the GM-PHD's fused tracks are worse pooled, docs/labelled-tracking.md)."""
+    r0 = scn.fusion.existence_prior
+    if r0 >= 0:
+        return r0
+    return (LMB_EXISTENCE_PRIOR if scn.network.filter == "lmb" and scn.lmb.tentative_threshold > 0
+            else 0.0)
 
 
 SINGLE_TARGET_WARMUP = 10.0

@@ -67,16 +67,18 @@ class FusionSpec:
     support_scans: int = option(2, doc="With `support`: scans a fused track held by fewer "
                                        "inputs must be extracted in a row before it is "
                                        "reported.", unit="scans", check=at_least(1))
-    existence_prior: float = option(0.0, doc="Extraction of fused tracks (LMB peers): a "
-                                             "track at most `existence_young` scans old that "
-                                             "two inputs or more hold weighs at least their "
-                                             "existences pooled as independent evidence with "
-                                             "this prior existence (`logit r = logit r0 + "
-                                             "sum_i (logit r_i - logit r0)`, `tracking."
-                                             "support.pooled_weights`; the fused density is "
-                                             "unchanged; with `level2_threshold` below 0.5 "
-                                             "tentative tracks add theirs); 0: off.",
-                                    check=Bound(0, 1, high_open=True))
+    existence_prior: float = option(-1.0, doc="Extraction of fused tracks (labelled peers): "
+                                              "a track at most `existence_young` scans old "
+                                              "that two inputs or more hold weighs at least "
+                                              "their existences pooled as independent "
+                                              "evidence with this prior existence (`logit r = "
+                                              "logit r0 + sum_i (logit r_i - logit r0)`, "
+                                              "`tracking.support.pooled_weights`; the fused "
+                                              "density is unchanged; LMB peers' tentative "
+                                              "tracks, `lmb.tentative_threshold`, add theirs); "
+                                              "0: off; -1: 0.01 for LMB peers that publish "
+                                              "tentative tracks, else off.",
+                                    check=Bound(-1, 1, high_open=True))
     existence_young: int = option(2, doc="With `existence_prior`: how many scans old (its "
                                          "label's scan) a fused track may be and still be "
                                          "pooled.", unit="scans", check=NONNEGATIVE)

@@ -54,16 +54,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pds", default="0.99,0.9")
     ap.add_argument("--rule", default="hybrid", choices=sorted(RULES))
     ap.add_argument("--base", default="", metavar="KEY=VALUE;...",
-                    help="the baseline's overrides (default: the scenario's defaults)")
+                    help="the baseline's overrides, under each variant's too (default: none)")
     ap.add_argument("--variant", action="append", default=[], metavar="NAME=KEY=VALUE;...",
                     help="a named variant's overrides of the fused twin's scenario")
+    ap.add_argument("--no-base", action="store_true", help="skip the baseline rows")
     ap.add_argument("--no-reference", action="store_true",
                     help="skip the local and centralised reference")
     ap.add_argument("--jobs", type=int, default=1, help="processes (runs side by side)")
     a = ap.parse_args(argv)
     runs = [int(x) for x in a.runs.split(",")]
-    variants = [("base", _overrides([kv for kv in a.base.split(";") if kv]))]
-    variants += [parse_variant(v) for v in a.variant]
+    base = _overrides([kv for kv in a.base.split(";") if kv])
+    variants = [] if a.no_base else [("base", base)]
+    variants += [(name, {**base, **over}) for name, over in map(parse_variant, a.variant)]
     t0 = time.perf_counter()
     print("| graph | kind | Pd | variant | " + " | ".join(COLUMNS) + " | / local | / central |")
     print("|---|---|---:|---|" + "---:|" * (len(COLUMNS) + 2))
