@@ -5,9 +5,15 @@ is an aircraft whose matched track differs from the one it last had. Per switch:
 the aircraft (icao24), the old and new track labels ``(origin, scan, index)``, how old the
 new label is (ticks since it was first seen on this peer), what became of the old track
 (``swap``: it now holds another aircraft; ``dropped``: it is gone; ``coasting``: present but
-matched to nothing), the nearest other aircraft (m) and the aircraft's speed, turn rate and
-the radars whose coverage it is in. Cause classes, so a fix can be aimed at the largest:
+matched to nothing), the nearest other aircraft (m), the aircraft's speed, turn rate and
+the radars whose coverage it is in, and which aircraft last held the new label and how many
+ticks before (``held_by``: ``self``, another's icao24, or ``-``).
+Cause classes (the first that applies), so a fix can be aimed at the largest:
 
+* ``settle``: the old and the new label were made at the same scan and the new one is at most
+  a tick old (two peers' labels of one new track meeting: the network rule keeps one);
+* ``handover``: the new label last held another aircraft (``held_by``): a label moved from
+  one aircraft to another;
 * ``crossing``: another aircraft within 3 km (their tracks' labels can trade);
 * ``relabel``: the old track is gone and the new label is older than the switch (a label
   that existed elsewhere took the aircraft: the network rule replacing the id);
@@ -40,15 +46,23 @@ def switch_events(scn: Scenario, run: int, which: str, peer: str | None = None
                   ) -> tuple[list[dict], dict]:
     """The switches of ``peer``'s ``which`` (``"local"``/``"fused"``) tracks (first peer if
     None) on the scenario's twin, as :func:`trace` gives them."""
+    peer = peer or scn.sensor_names[0]
+    return peer_switches(scn, run, which, [peer])[peer]
+
+
+def peer_switches(scn: Scenario, run: int, which: str, peers: list[str]
+                  ) -> dict[str, tuple[list[dict], dict]]:
+    """:func:`trace` of each of ``peers``' ``which`` tracks, from one twin of the scenario
+    (the peers' tables share one label code, so a label is one id at every peer)."""
     truth, _ = generate_run(scn, run)
     twin = run_twin(scn, run)
-    peer = peer or scn.sensor_names[0]
     code: dict = {}
-    est = peer_tables(twin, [peer], which, code)[peer]
+    est = peer_tables(twin, peers, which, code)
     sites = {s.name: (np.asarray(s.position[:2], float), float(s.max_range or np.inf))
              for s in scn.sensors}
-    return trace(truth, est, {v: k for k, v in code.items()}, sites,
-                 scn.metrics.ospa_cutoff, scn.scan_period)
+    back = {v: k for k, v in code.items()}
+    return {p: trace(truth, est[p], back, sites, scn.metrics.ospa_cutoff, scn.scan_period)
+            for p in peers}
 
 
 def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
@@ -65,6 +79,7 @@ def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
     first_seen = {int(i): int(est.scan[est.id == i].min()) for i in np.unique(est.id)}
     events = []
     last = np.full(len(cm.truth_ids), -1)
+    held = np.full((len(cm.est_ids), 2), -1)  # per track: the last aircraft (index), its tick
     for t, k in enumerate(grid):
         X, ids = truth.states[t], np.asarray(truth.ids[t])
         for j in np.flatnonzero(cm.switch[t]):
@@ -85,7 +100,13 @@ def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
                     turn = abs((np.degrees(dh) + 180) % 360 - 180) / (2 * period)
             cover = sum(np.hypot(x[0] - p[0], x[2] - p[1]) <= r for p, r in sites.values())
             age = int(k) - first_seen[new_id]
-            cause = ("crossing" if near < NEAR else
+            h, when = held[new]
+            was = ("-" if h < 0 else "self" if h == j else f"{int(cm.truth_ids[h]):06x}")
+            lo, ln = label.get(old_id), label.get(new_id)
+            cause = ("settle" if lo is not None and ln is not None and lo[1] == ln[1]
+                     and age <= 1 else
+                     "handover" if h >= 0 and h != j else
+                     "crossing" if near < NEAR else
                      "relabel" if fate == "dropped" and age > 0 else
                      "reborn" if fate == "dropped" else "other")
             events.append({"tick": int(k), "aircraft": f"{a:06x}",
@@ -93,12 +114,25 @@ def trace(truth: Truth, est: TrackTable, label: dict, sites: dict, gate: float,
                            "new_age": age, "fate": fate, "near_m": near,
                            "speed": float(np.hypot(x[1], x[3])), "turn": turn,
                            "centre_km": float(np.hypot(x[0], x[2]) / 1e3), "cover": int(cover),
+                           "held_by": was, "held_ago": int(k - grid[when]) if h >= 0 else -1,
                            "cause": cause})
         m = cm.match[t] >= 0
         last[m] = cm.match[t, m]
+        held[cm.match[t, m]] = np.column_stack((np.flatnonzero(m), np.full(int(m.sum()), t)))
+    present = np.array([[a in ids for a in cm.truth_ids] for ids in truth.ids])  # (T, m)
+    hours = present.sum(axis=0) * period / 3600.0
     totals = {"switches": len(events), "aircraft": len(cm.truth_ids),
-              "tracks": len(cm.est_ids), "ticks": len(grid)}
+              "tracks": len(cm.est_ids), "ticks": len(grid), "hours": float(hours.sum()),
+              "hours_by": {f"{int(a):06x}": float(h)
+                           for a, h in zip(cm.truth_ids, hours, strict=True)}}
     return events, totals
+
+
+def per_aircraft_rates(events: list[dict], totals: dict) -> np.ndarray:
+    """Switches per hour present of every aircraft in ``totals["hours_by"]`` (``(m,)``, the
+    aircraft in that order; an aircraft present for no tick is left out)."""
+    n = Counter(e["aircraft"] for e in events)
+    return np.array([n[a] / h for a, h in totals["hours_by"].items() if h > 0])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,25 +141,43 @@ def main(argv: list[str] | None = None) -> int:
     add_window_arguments(ap)
     ap.add_argument("--kind", default="lmb")
     ap.add_argument("--estimate", default="fused", choices=("local", "fused"))
-    ap.add_argument("--peer")
+    ap.add_argument("--peer", help="a sensor's name, or 'all' (default: the first sensor)")
     ap.add_argument("--run", type=int, default=0)
     a = ap.parse_args(argv)
     try:
         _, scn = window_scenario(a, {"network.filter": a.kind, **(
             {"fusion.rule": "none"} if a.estimate == "local" else {})})
+        names = list(scn.sensor_names)
+        peers = names if a.peer == "all" else [a.peer or names[0]]
+        if peers[0] not in names:
+            raise ValueError(f"no sensor named {peers[0]!r} among {', '.join(names)}")
     except (ScenarioError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    events, totals = switch_events(scn, a.run, a.estimate, a.peer)
-    print(f"{totals['switches']} switches, {totals['aircraft']} aircraft, {totals['tracks']} "
-          f"track ids, {totals['ticks']} ticks")
-    print("tick aircraft old -> new (new age) fate near_m speed turn centre_km cover cause")
-    for e in events:
-        print(f"{e['tick']} {e['aircraft']} {e['old']} -> {e['new']} ({e['new_age']}) "
-              f"{e['fate']} {e['near_m']:.0f} {e['speed']:.0f} {e['turn']:.1f} "
-              f"{e['centre_km']:.1f} {e['cover']} {e['cause']}")
-    print("by cause:", dict(Counter(e["cause"] for e in events)))
-    print("by aircraft:", dict(Counter(e["aircraft"] for e in events).most_common(10)))
+    out = peer_switches(scn, a.run, a.estimate, peers)
+    every: list[dict] = []
+    for peer, (events, totals) in out.items():
+        rate = per_aircraft_rates(events, totals)
+        print(f"== {peer}: {totals['switches']} switches, {totals['aircraft']} aircraft, "
+              f"{totals['tracks']} track ids, {totals['ticks']} ticks, "
+              f"{totals['switches'] / max(totals['hours'], 1e-9):.2f} per aircraft-hour "
+              f"(per aircraft: median {np.median(rate):.2f}, p90 "
+              f"{np.percentile(rate, 90):.2f}, max {rate.max():.2f}; none "
+              f"{np.mean(rate == 0):.0%})")
+        print("tick aircraft old -> new (new age) fate near_m speed turn centre_km cover "
+              "held_by(ticks ago) cause")
+        for e in events:
+            print(f"{e['tick']} {e['aircraft']} {e['old']} -> {e['new']} ({e['new_age']}) "
+                  f"{e['fate']} {e['near_m']:.0f} {e['speed']:.0f} {e['turn']:.1f} "
+                  f"{e['centre_km']:.1f} {e['cover']} {e['held_by']}({e['held_ago']}) "
+                  f"{e['cause']}")
+        every += [{**e, "peer": peer} for e in events]
+    print("by cause:", dict(Counter(e["cause"] for e in every)))
+    print("by aircraft:", dict(Counter(e["aircraft"] for e in every).most_common(10)))
+    if len(out) > 1:
+        hours = sum(t["hours"] for _, t in out.values())
+        print(f"all peers: {len(every)} switches, {len(every) / max(hours, 1e-9):.2f} per "
+              f"aircraft-hour")
     return 0
 
 
