@@ -127,8 +127,6 @@ class Trust(ScanTests):
         if self.scans <= self.cfg.warmup:
             return list(weights)
         cfg = self.cfg
-        if rnd > 0 and cfg.test_once and self._settled(k, names):
-            return self._reuse(k, rnd, names, weights)
         if cfg.single_target:  # one target: where its moment-matched estimate is
             p = self.state_pos
             own, inputs = _collapsed(own, p), {s: _collapsed(m, p) for s, m in inputs.items()}
@@ -137,6 +135,8 @@ class Trust(ScanTests):
         late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
         shown = {s: self.shift(s, m) for s, m in inputs.items()}  # registered, if any
+        if rnd > 0 and cfg.test_once and self._settled(k, names) and self._agree(own, shown):
+            return self._reuse(k, rnd, names, weights)
         self.made = {}  # what the statistics made that this round's other tests take
         stats = self.statistics(own, shown, wmap, set(late), self.made)
         self.fused_in = {}
@@ -173,6 +173,26 @@ class Trust(ScanTests):
                 return False
             if rec.state != "quarantined" and (rec.last_weight != 1.0
                                                or rec.scan_max > cfg.drift):
+                return False
+        return True
+
+    def _agree(self, own: GaussianMixture, shown: dict[str, GaussianMixture]) -> bool:
+        """The guard of :attr:`TrustConfig.test_once`: whether every neighbour's density of
+        this round (``shown``) is within ``drift`` of own's by its divergence test against
+        own alone (:func:`peers.trust_checks.divergence_test`; one matrix of overlaps, no
+        reference average, majority or once-a-scan test)."""
+        cfg = self.cfg
+        names = sorted(shown)
+        mixes = [own] + [shown[s] for s in names]
+        L = log_overlaps(mixes)
+        L0 = shape_overlaps(cfg, mixes)
+        w = cfg.repeat_weight
+        n_r, t_r = own.mass, target_mass(own, w)
+        for j, mix in enumerate(mixes[1:], start=1):
+            shape = 0.0 if L0 is None else max(0.0, float(
+                cs_from_log_overlaps(L0[j, 0], L0[j, j], L0[0, 0])))
+            if divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mix.mass, n_r,
+                               target_mass(mix, w), t_r, shape=shape) > cfg.drift:
                 return False
         return True
 

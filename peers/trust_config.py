@@ -262,14 +262,15 @@ class TrustConfig:
     """Scans of own's round-0 densities kept for late estimates (the out-of-sequence
     window)."""
     test_once: bool = False
-    """Test the neighbours once a scan (round 1) where that round found nothing: a later
-    round whose neighbours were all tested at this scan's round 1 with full trust and a
-    statistic of at most :attr:`drift` (or quarantined), none repaired, held or late,
-    takes each one's round-1 trust with no test (:meth:`peers.trust.Trust.weigh`); any
-    other round is tested in full. About half the defence's CPU at two rounds; what it
-    gives up: a neighbour honest in round 1 and lying only in later rounds of a scan
-    where nobody else is suspect goes untested (the lies of :mod:`sim.run.lies` are told in
-    every round)."""
+    """Test the neighbours in full once a scan (round 1) where that round found nothing: a
+    later round whose neighbours were all tested at this scan's round 1 with full trust
+    and a scan statistic of at most :attr:`drift` (or quarantined), none repaired, held or
+    late, and whose densities are each within :attr:`drift` of own's by the divergence
+    test against own alone (the guard: one matrix of overlaps), takes each one's round-1
+    trust (:meth:`peers.trust.Trust.weigh`); any other round is tested in full. About a
+    quarter of the defence's CPU at two rounds. What it gives up: a later round's lie that
+    own's density alone does not show (within ``drift`` of it) is not tested against the
+    others' average and median."""
     warmup: int = 0
     """Scans at the start with no test (0: a lie told from the first scan is caught at once;
     filters that start empty agree on nothing, which the cardinality term alone scores)."""

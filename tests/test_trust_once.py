@@ -1,6 +1,7 @@
-"""Testing the neighbours once a scan (``TrustConfig.test_once``, peers/trust.py): a later
-round of a scan whose first round found nothing takes that round's trust untested; any
-other round is tested in full, so a liar is weighed as before."""
+"""Testing the neighbours in full once a scan (``TrustConfig.test_once``, peers/trust.py): a
+later round of a scan whose first round found nothing, and whose densities each pass the
+test against own alone, takes that round's trust; any other round is tested in full, so a
+liar is weighed as before."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ import dataclasses
 
 import numpy as np
 from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.peers.trust_checks import divergence_test
+from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 NAMES = ("a", "b", "c", "d")
@@ -85,12 +88,42 @@ def test_a_liar_is_tested_every_round_and_caught_as_before():
     assert all(w[liar] == 0.0 for w in w_once[4:])  # out from the third scan, both rounds
 
 
-def test_a_liar_in_the_later_round_only_is_what_it_gives_up():
-    """The trade-off, stated: a neighbour honest in round 1 and lying in round 2 is caught
-    when every round is tested and weighed in full when only round 1 is."""
+def test_a_liar_in_the_later_round_only_is_caught_by_the_guard():
+    """A neighbour honest in round 1 and moved 300 m in round 2: the guard (its test against
+    own alone) sends round 2 to the full test, so it is caught as when every round is."""
     cfg = TrustConfig(detection_probability=0.9)
     tr_all, _, w_all = _run(cfg, (1,))
-    tr_once, _, w_once = _run(dataclasses.replace(cfg, test_once=True), (1,))
+    tr_once, n_once, w_once = _run(dataclasses.replace(cfg, test_once=True), (1,))
     liar = NAMES.index("c") + 1
-    assert tr_all.n["c"].state != "trusted" and w_all[-1][liar] < 0.2
-    assert tr_once.n["c"].state == "trusted" and w_once[-1][liar] == 0.2
+    assert n_once == 24  # every second round tested in full
+    assert tr_once.n["c"].state == tr_all.n["c"].state != "trusted"
+    assert w_once[1::2] == w_all[1::2] and w_once[-1][liar] == 0.0
+
+
+def test_the_guard_is_the_test_against_own_alone():
+    """Round 2 is tested in full exactly when some neighbour's divergence test against own
+    alone is above ``drift`` (here neighbour c moved 0 to 40 m, covariances 25 m^2)."""
+    cfg = TrustConfig(detection_probability=None)
+    rng = np.random.default_rng(3)
+    seen = set()
+    for shift in (0.0, 2.0, 5.0, 10.0, 20.0, 40.0):
+        once = Trust(dataclasses.replace(cfg, test_once=True), NAMES)
+        calls = _counted(once)
+        own = _own(rng)
+        once.weigh(1, 0, own, {s: _near(rng, own) for s in NAMES}, [0.2] * 5)
+        inputs = {s: _near(rng, own, shift if s == "c" else 0.0) for s in NAMES}
+        L = log_overlaps([own, inputs["c"]])
+        t = divergence_test(cfg, L[1, 1], L[1, 0], L[0, 0], inputs["c"].mass, own.mass)
+        others = max(divergence_test(cfg, *_ls(own, inputs[s]), inputs[s].mass, own.mass)
+                     for s in NAMES if s != "c")
+        once.weigh(1, 1, own, inputs, [0.2] * 5)
+        untested = max(t, others) <= cfg.drift
+        assert (calls[0] == 1) == untested, (shift, t, others, calls)  # 2+: a repair too
+        seen.add(untested)
+    assert seen == {True, False}
+
+
+def _ls(own: GaussianMixture, mix: GaussianMixture) -> tuple[float, float, float]:
+    """``log int D^2``, ``log int D own``, ``log int own^2``."""
+    L = log_overlaps([own, mix])
+    return L[1, 1], L[1, 0], L[0, 0]
