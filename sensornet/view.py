@@ -83,6 +83,8 @@ class LiveView:
         self.stop = threading.Event()
         self._said = (0, 0, 0)
         self._said_at = 0.0
+        self._between = 0.0
+        """Seconds of the flush under way spent handling messages (:meth:`waiting`)."""
         self.session = None
 
     def draw_into(self, state_factory, rr, rec) -> None:
@@ -134,18 +136,37 @@ class LiveView:
                 key, payload = self.q.get(timeout=max(0.0, min(0.05, end - time.monotonic())))
             except queue.Empty:
                 break
-            if "/estimate/" in key and self.q.qsize() > BEHIND:
-                self.skipped += 1
-                continue
-            self.state.receive(key, payload)
-            n += 1
+            n += self._take(key, payload)
         return n
 
-    def flush(self) -> None:
+    def _take(self, key: str, payload: bytes) -> int:
+        """Draw one message (1), or skip an estimate while behind (0, counted)."""
+        if "/estimate/" in key and self.q.qsize() > BEHIND:
+            self.skipped += 1
+            return 0
+        self.state.receive(key, payload)
+        return 1
+
+    def waiting(self) -> None:
+        """Handle the messages waiting now, without waiting for more (between the parts of a
+        flush: a long flush would hold them back, and the view would run behind by it)."""
         t0 = time.monotonic()
+        for _ in range(self.q.qsize()):
+            try:
+                key, payload = self.q.get_nowait()
+            except queue.Empty:
+                break
+            self._take(key, payload)
+        self._between += time.monotonic() - t0
+
+    def flush(self) -> None:
+        """The batcher's rows to Rerun, handling what arrives meanwhile; the period doubles
+        while a flush (its own part) takes more than :data:`FLUSH_SHARE` of it."""
+        t0 = time.monotonic()
+        self._between = 0.0
         self.batcher.map_keep = MAP_KEEP if self.q.qsize() > BEHIND // 4 else None
-        self.batcher.flush()
-        took = time.monotonic() - t0
+        self.batcher.flush(between=self.waiting)
+        took = time.monotonic() - t0 - self._between
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:
             self.flush_s = min(FLUSH_MAX_S, 2 * self.flush_s)
         self.note()

@@ -118,11 +118,14 @@ class Batcher:
     def pending(self) -> int:
         return sum(len(r.ks) for r in self._rows.values())
 
-    def flush(self) -> None:
-        """Every entity's rows in one call each (map entities: the newest :attr:`map_keep`)."""
+    def flush(self, between=None, every: int = 200) -> None:
+        """Every entity's rows in one call each (map entities: the newest :attr:`map_keep`);
+        ``between()`` called after each ``every`` entities (the view handles what arrived
+        meanwhile: rows it adds go to the next flush), so that a long flush does not hold
+        back the messages waiting."""
         rows, self._rows = self._rows, {}
         self._indexes = {}
-        for path, r in rows.items():
+        for i, (path, r) in enumerate(rows.items(), start=1):
             ks, ts, data = r.ks, r.ts, r.rows
             keep = self.map_keep
             if (keep is not None and (r.kind in MAP_KINDS or r.kind in self.builders)
@@ -130,6 +133,8 @@ class Batcher:
                 self.decimated += len(ks) - keep
                 ks, ts, data = ks[-keep:], ts[-keep:], data[-keep:]
             self._send(path, r.kind, ks, ts, data)
+            if between is not None and i % every == 0 and i < len(rows):
+                between()
 
     def _send(self, path: str, kind: str, ks: list, ts: list, data: list) -> None:
         rr = self.rr
