@@ -106,7 +106,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     result = yield
     if getattr(config.option, "loadgroup", False):  # set on an xdist worker under loadgroup
         for item in items:
-            if item.get_closest_marker("network") is not None and "@" not in item.nodeid.rsplit(
-                    "]", 1)[-1]:
+            if "@" in item.nodeid.rsplit("]", 1)[-1]:
+                continue
+            if item.get_closest_marker("network") is not None:
                 _group_suffix(item, "processes")
+            elif marks := list(item.iter_markers("xdist_group")):
+                # a fast module's own group, so its module fixture is computed on one worker,
+                # not once on each (xdist's way of naming: the marks' names sorted, joined)
+                _group_suffix(item, "_".join(sorted({str(m.args[0] if m.args else m.kwargs.get(
+                    "name", "default")) for m in marks})))
     return result
