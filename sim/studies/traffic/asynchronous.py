@@ -73,7 +73,7 @@ from sensornet.tracking.reduction import Reducer
 
 SLICE = 0.5
 """Default slice length (s): plots at most 0.25 s from their batch's time (about 60 m at
-250 m/s, 0.5 s chosen on the training hour: module docstring of :mod:`.async_study`)."""
+250 m/s); chosen on the training hour (:mod:`.async_study`'s docstring)."""
 
 
 @lru_cache(maxsize=1024)
