@@ -54,6 +54,7 @@ from sensornet.tracking.mixture import GaussianMixture
 
 from benchmarks.bench_watched import watched_twin
 from sensornet.view import FLUSH_S, Batcher, LiveView, ViewState
+from sensornet.view_columns import ellipse_strips
 
 
 def _mix(rng: np.random.Generator, n: int) -> GaussianMixture:
@@ -304,6 +305,8 @@ class _PerRow(Batcher):
 
     def _send(self, path, kind, ks, ts, data) -> None:
         rec = self.rec
+        if kind == "ellipses":  # drawn as the batcher draws them, then logged a row each
+            kind, data = "strips", ellipse_strips(data)
         for k, t, d in zip(ks, ts, data, strict=True):
             rec.set_time("scan", sequence=k)
             rec.set_time("sim", duration=t)
@@ -312,8 +315,9 @@ class _PerRow(Batcher):
             elif kind == "points":
                 rec.log(path, rr.Points2D(d[0], colors=d[1], radii=d[2], labels=d[3],
                                           show_labels=d[3] is not None or None))
-            elif kind == "strips":
-                rec.log(path, rr.LineStrips2D(d[0], colors=d[1], radii=d[2]))
+            elif kind == "strips":  # flat points, points per strip, colours, radius
+                strips = np.split(d[0], np.cumsum(d[1])[:-1]) if len(d[1]) else []
+                rec.log(path, rr.LineStrips2D(strips, colors=d[2], radii=d[3]))
             elif kind == "text":
                 rec.log(path, rr.TextLog(d[0], level=d[1]))
             else:
