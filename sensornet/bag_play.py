@@ -201,7 +201,8 @@ def _stamped(payload: bytes, now: float) -> bytes | None:
 
 BUNDLES = ("scans", "telemetries")
 """Channels whose messages are bundles (:mod:`protocol.bundle`, ``[k, [[name, message], ...]]``):
-the world's scans for a peer host, a host's peers' telemetry."""
+the world's scans for a peer host, a host's peers' telemetry; a peer of its own process puts
+its tracks and report as one bundle on ``telemetry/<peer>`` (``0x92``, a message never is)."""
 
 
 def restamp(key: str, payload: bytes, now: float) -> bytes | None:
@@ -210,7 +211,8 @@ def restamp(key: str, payload: bytes, now: float) -> bytes | None:
     each entry's); None for anything else, e.g. a signed message (:mod:`protocol.envelope`),
     whose signature covers the payload: :func:`play` puts those as recorded."""
     parts = key.split("/")
-    if len(parts) > 2 and parts[0] == ROOT and parts[2] in BUNDLES:
+    if len(parts) > 2 and parts[0] == ROOT and (parts[2] in BUNDLES or (
+            parts[2] == "telemetry" and payload[:1] == b"\x92")):  # a peer's own bundle
         try:
             body = msgpack.unpackb(payload, raw=False)
         except Exception:  # as above

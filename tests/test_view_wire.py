@@ -25,6 +25,7 @@ from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet import view as view_module
+from sensornet.bag_play import restamp
 from sensornet.view import Batcher, LiveView, ViewState
 from tests.processes import env
 
@@ -258,3 +259,15 @@ def test_a_watched_peer_of_its_own_process_makes_one_put_a_scan(tmp_path):
         # report was sent: a trust event as the neighbours leave)
         assert len(puts) <= len(set(reports)) + 1, (name, len(puts), reports)
         assert tracks <= set(reports) and len(tracks) >= len(reports) - 2, (name, tracks)
+
+
+def test_a_peer_s_own_bundle_is_restamped_when_played():
+    """``sensornet play`` sets each message's send time to when it puts it again (the view's
+    lag is measured from it): in a peer's own bundle on its report key, every entry's, as in
+    a host's bundle; a plain report as before."""
+    tracks = encode(Tracks("s1", 3, np.zeros((1, 4)), send_time=5.0))
+    report = encode(Telemetry("s1", 3, {"age": 1.0}, send_time=5.0))
+    (own,) = pack_bundles(0, [("s1", tracks), ("s1", report)])
+    again = restamp("sensornet/net/telemetry/s1", own, 99.0)
+    assert [decode(p).send_time for _, p in unpack_bundle(again).entries] == [99.0, 99.0]
+    assert decode(restamp("sensornet/net/telemetry/s1", report, 99.0)).send_time == 99.0
