@@ -147,32 +147,27 @@ class Batcher:
             xy = np.concatenate([d[0] for d in data]) if data else np.zeros((0, 2))
             colors = repeat_colors([d[1] for d in data], lengths)
             radii = np.repeat(np.fromiter((d[2] for d in data), np.float32, len(data)), lengths)
+            off = offsets_of(lengths)
             cols = [_Column(_descriptor(rr, "Points2D", "positions"),
-                            list_array(xy, lengths, _datatype(rr, "Points2D", "positions"),
+                            list_array(xy, off, _datatype(rr, "Points2D", "positions"),
                                        np.float32)),
-                    _Column(_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), lengths)),
+                    _Column(_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), off)),
                     _Column(_descriptor(rr, "Points2D", "colors"),
-                            _rows(pa.array(packed_colors(colors)), lengths))]
+                            _rows(pa.array(packed_colors(colors)), off))]
             if any(d[3] is not None for d in data):  # labels always shown
                 labels = [s for d in data for s in (d[3] or [""] * len(d[0]))]
                 cols += [_Column(_descriptor(rr, "Points2D", "labels"),
-                                 _rows(pa.array(labels, pa.string()), lengths)),
+                                 _rows(pa.array(labels, pa.string()), off)),
                          _Column(_descriptor(rr, "Points2D", "show_labels"),
                                  _rows(pa.array(np.ones(len(data), bool))))]
         elif kind == "ellipses":
-            self._send(path, "strips", ks, ts, ellipse_strips(data))
-            return
+            cols = self._ellipse_columns(data)
         elif kind == "strips":
             lengths = np.fromiter((len(d[1]) for d in data), np.int64, len(data))
-            colors = repeat_colors([d[2] for d in data], lengths)
-            radii = np.repeat(np.fromiter((d[3] for d in data), np.float32, len(data)), lengths)
-            strips = strip_array(np.concatenate([d[0] for d in data]),
-                                 np.concatenate([d[1] for d in data]))
-            cols = [_Column(_descriptor(rr, "LineStrips2D", "strips"), _rows(strips, lengths)),
-                    _Column(_descriptor(rr, "LineStrips2D", "radii"),
-                            _rows(pa.array(radii), lengths)),
-                    _Column(_descriptor(rr, "LineStrips2D", "colors"),
-                            _rows(pa.array(packed_colors(colors)), lengths))]
+            cols = self._strip_columns(
+                np.concatenate([d[0] for d in data]), np.concatenate([d[1] for d in data]),
+                lengths, repeat_colors([d[2] for d in data], lengths),
+                np.fromiter((d[3] for d in data), np.float32, len(data)))
         elif kind in self.builders:
             cols = self.builders[kind](rr, data)
         elif kind == "text":
@@ -182,6 +177,46 @@ class Batcher:
         self.rec.send_columns(path, indexes=index, columns=cols)
         self.calls += 1
         self.rows_sent += len(ks)
+
+    def _strip_columns(self, points: np.ndarray, per_strip: np.ndarray, per_row: np.ndarray,
+                       colors: np.ndarray, radii: np.ndarray) -> list:
+        """LineStrips2D columns: ``points (P, 2)`` end to end, ``per_strip (S,)`` points per
+        strip, ``per_row (rows,)`` strips per row, ``colors (S, 3)`` and ``radii (rows,)``."""
+        rr = self.rr
+        off = offsets_of(per_row)
+        return [_Column(_descriptor(rr, "LineStrips2D", "strips"),
+                        _rows(strip_array(points, per_strip), off)),
+                _Column(_descriptor(rr, "LineStrips2D", "radii"),
+                        _rows(pa.array(np.repeat(radii.astype(np.float32), per_row)), off)),
+                _Column(_descriptor(rr, "LineStrips2D", "colors"),
+                        _rows(pa.array(packed_colors(colors)), off))]
+
+    def _ellipse_columns(self, data: list) -> list:
+        """Rows of :meth:`ellipses` as LineStrips2D columns: every row's ellipses (and their
+        dashes) computed at once when the rows are alike (one state dimension, all dashed or
+        none, as an entity's are), else row by row (:func:`ellipse_strips`)."""
+        dims = {np.shape(d[0])[-1] for d in data}
+        dash = {bool(d[4]) for d in data}
+        if len(dims) != 1 or len(dash) != 1:
+            rows = ellipse_strips(data)
+            lengths = np.fromiter((len(r[1]) for r in rows), np.int64, len(rows))
+            return self._strip_columns(
+                np.concatenate([r[0] for r in rows]), np.concatenate([r[1] for r in rows]),
+                lengths, repeat_colors([r[2] for r in rows], lengths),
+                np.fromiter((r[3] for r in rows), np.float32, len(rows)))
+        counts = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
+        lines = north_up(ellipses(np.concatenate([np.asarray(d[0], float) for d in data]),
+                                  np.concatenate([np.asarray(d[1], float) for d in data])))
+        if dash.pop():
+            lines = dashed(lines)  # (N * 16, 2, 2): each ellipse's 16 dashes, in order
+        per_ellipse = len(lines) // max(1, counts.sum()) if len(lines) else 0
+        per_row = counts * per_ellipse
+        colors = np.repeat(np.stack([np.asarray(d[2], np.uint8).reshape(3) for d in data]),
+                           per_row, axis=0)
+        return self._strip_columns(lines.reshape(-1, 2),
+                                   np.full(len(lines), lines.shape[1], np.int64), per_row,
+                                   colors, np.fromiter((d[3] for d in data), np.float32,
+                                                       len(data)))
 
     def _index(self, ks: list, ts: list) -> list:
         """The scan and sim time columns of these rows: made once per flush for the many
@@ -305,16 +340,22 @@ _ONES: dict[int, pa.Array] = {}
 
 def _rows(values: pa.Array, lengths=None) -> pa.Array:
     """``values`` end to end as one list per row of ``lengths`` (Arrow ``list<...>``; None:
-    one value a row, the offsets kept per row count)."""
+    one value a row, the offsets kept per row count; a ``pa.Array``: the offsets, made once
+    by :func:`offsets_of` for the columns of one entity)."""
     if lengths is None:
         offsets = _ONES.get(len(values))
         if offsets is None:
             offsets = _ONES[len(values)] = pa.array(np.arange(len(values) + 1, dtype=np.int32))
     else:
-        o = np.zeros(len(lengths) + 1, dtype=np.int32)
-        np.cumsum(lengths, out=o[1:])
-        offsets = pa.array(o)
+        offsets = lengths if isinstance(lengths, pa.Array) else offsets_of(lengths)
     return pa.ListArray.from_arrays(offsets, values)
+
+
+def offsets_of(lengths) -> pa.Array:
+    """Arrow list offsets ``(n + 1,)`` int32 of rows of ``lengths (n,)``."""
+    o = np.zeros(len(lengths) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=o[1:])
+    return pa.array(o)
 
 
 def packed_colors(colors: np.ndarray) -> np.ndarray:
@@ -330,12 +371,12 @@ def strip_array(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
     return list_array(points, lengths, LineStrip2DBatch._ARROW_DATATYPE, np.float32)
 
 
-def list_array(points: np.ndarray, lengths: np.ndarray, dt: pa.DataType, dtype) -> pa.Array:
+def list_array(points: np.ndarray, lengths, dt: pa.DataType, dtype) -> pa.Array:
     """Rows of fixed-size points as an Arrow list array of type ``dt`` (a list of fixed-size
-    lists of ``dtype``): ``points (P, m)`` end to end, ``lengths (n,)`` points per row."""
+    lists of ``dtype``): ``points (P, m)`` end to end, ``lengths (n,)`` points per row (or
+    their offsets, :func:`offsets_of`)."""
     flat = pa.array(np.ascontiguousarray(points, dtype).reshape(-1), pa.from_numpy_dtype(dtype))
-    offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
-    return pa.ListArray.from_arrays(pa.array(offsets),
+    offsets = lengths if isinstance(lengths, pa.Array) else offsets_of(lengths)
+    return pa.ListArray.from_arrays(offsets,
                                     pa.FixedSizeListArray.from_arrays(flat, type=dt.value_type),
                                     type=dt)

@@ -163,13 +163,14 @@ def test_columns_built_here_are_rerun_s_own():
             lines = [rng.normal(size=(m, 2)) for m in (2, 5)[:n]]
             b.strips("s", k, t, lines, rng.integers(0, 256, (len(lines), 3)) if k % 2
                      else (4, 5, 6), 1.5)
-            for dim, dash in ((4, True), (6, False)):
+            for name, dim, dash in (("4", 4, True), ("6", 6, False),  # rows unlike: one by one
+                                    ("mixed", 4 + 2 * (k % 2), k % 3 == 0)):
                 A = rng.normal(size=(n, dim, dim))
-                b.ellipses(f"e/{dim}", k, t, rng.normal(size=(n, dim)) * 100,
+                b.ellipses(f"e/{name}", k, t, rng.normal(size=(n, dim)) * 100,
                            A @ A.transpose(0, 2, 1) + np.eye(dim), (9, 8, 7), 1.0, dashed=dash)
         b.flush()
     paths = {p for _, p in sent}
-    assert paths == {"m/s1", "p/labelled", "p/plain", "s", "e/4", "e/6"}
+    assert paths == {"m/s1", "p/labelled", "p/plain", "s", "e/4", "e/6", "e/mixed"}
     for path in paths:
         (here_index, here), (ref_index, ref) = sent["here", path], sent["rerun", path]
         assert [n for n, _ in here_index] == [n for n, _ in ref_index] == ["scan", "sim"]
