@@ -25,6 +25,11 @@ SCANS = 30
 HONEST = ("s1", "s3")
 
 
+SHARED = pytest.mark.xdist_group("lying_member_results")
+"""The tests of ``results`` on one xdist worker, so its 32 twin runs are made once, not once
+on each worker (``tests/conftest.py`` puts the group in the node id)."""
+
+
 @pytest.fixture(scope="module")
 def results():
     out = {}
@@ -40,6 +45,7 @@ def fused(results, rule, lie):
     return float(np.mean([honest_scores(r, "s2")["fused"] for r in results[rule, lie]]))
 
 
+@SHARED
 def test_lies_are_well_formed_and_accepted(results):
     for (rule, lie), runs in results.items():
         for res in runs:
@@ -52,6 +58,7 @@ def test_lies_are_well_formed_and_accepted(results):
                 assert res.peers[n].consensus.stats.last_fused_from.get("s2") == SCANS
 
 
+@SHARED
 def test_local_filtering_is_untouched(results):
     for (rule, lie), runs in results.items():
         for res, clean in zip(runs, results[rule, "clean"], strict=True):
@@ -59,6 +66,7 @@ def test_local_filtering_is_untouched(results):
                 assert res.ospa[n]["local"] == clean.ospa[n]["local"], (rule, lie, n)
 
 
+@SHARED
 def test_every_lie_hurts_under_some_rule(results):
     for lie in ("empty", "shifted", "inflated", "phantoms"):  # a 30 m bias costs less
         worst = max(fused(results, rule, lie) - fused(results, rule, "clean")
@@ -66,6 +74,7 @@ def test_every_lie_hurts_under_some_rule(results):
         assert worst > 10.0, lie
 
 
+@SHARED
 def test_gci_is_vetoed_by_nothing_and_by_a_confident_wrong_estimate(results):
     cutoff = scenario_for(SETUPS[0], "gci", SCANS).metrics.ospa_cutoff
     assert fused(results, "gci", "clean") < 60.0
@@ -75,6 +84,7 @@ def test_gci_is_vetoed_by_nothing_and_by_a_confident_wrong_estimate(results):
         assert fused(results, "aa", lie) < 0.5 * cutoff
 
 
+@SHARED
 def test_gci_limits_phantom_mass_that_aa_takes_in(results):
     for lie in ("inflated", "phantoms"):
         assert abs(fused(results, "gci", lie) - fused(results, "gci", "clean")) < 5.0, lie
