@@ -204,6 +204,8 @@ class Trust(ScanTests):
         for s, w in zip(names, weights[1:], strict=True):
             rec = self.n[s]
             rec.rounds += 1
+            if rec.last_weight > 0.0 and rec.registered is not None:
+                rec.repairs += 1  # its registered density fused, as _weight counts it
             out.append(w * rec.last_weight)
             self.records.append({"k": k, "kind": "trust", "round": rnd + 1, "neighbour": s,
                                  "statistic": round(rec.last_statistic, 4),
