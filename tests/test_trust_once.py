@@ -58,12 +58,12 @@ def _run(cfg: TrustConfig, liar_rounds: tuple[int, ...], scans: int = 12, seed: 
     return tr, calls[0], out
 
 
-def test_off_by_default():
-    assert TrustConfig().test_once is False
+def test_on_by_default():
+    assert TrustConfig().test_once is True
 
 
 def test_honest_scans_tested_once_with_the_same_first_round():
-    cfg = TrustConfig(detection_probability=0.9)
+    cfg = TrustConfig(detection_probability=0.9, test_once=False)
     once = dataclasses.replace(cfg, test_once=True)
     tr_all, n_all, w_all = _run(cfg, ())
     tr_once, n_once, w_once = _run(once, ())
@@ -77,7 +77,7 @@ def test_honest_scans_tested_once_with_the_same_first_round():
 
 
 def test_a_liar_is_tested_every_round_and_caught_as_before():
-    cfg = TrustConfig(detection_probability=0.9)
+    cfg = TrustConfig(detection_probability=0.9, test_once=False)
     once = dataclasses.replace(cfg, test_once=True)
     tr_all, _, w_all = _run(cfg, (0, 1))
     tr_once, n_once, w_once = _run(once, (0, 1))
@@ -91,7 +91,7 @@ def test_a_liar_is_tested_every_round_and_caught_as_before():
 def test_a_liar_in_the_later_round_only_is_caught_by_the_guard():
     """A neighbour honest in round 1 and moved 300 m in round 2: the guard (its test against
     own alone) sends round 2 to the full test, so it is caught as when every round is."""
-    cfg = TrustConfig(detection_probability=0.9)
+    cfg = TrustConfig(detection_probability=0.9, test_once=False)
     tr_all, _, w_all = _run(cfg, (1,))
     tr_once, n_once, w_once = _run(dataclasses.replace(cfg, test_once=True), (1,))
     liar = NAMES.index("c") + 1
@@ -103,7 +103,7 @@ def test_a_liar_in_the_later_round_only_is_caught_by_the_guard():
 def test_the_guard_is_the_test_against_own_alone():
     """Round 2 is tested in full exactly when some neighbour's divergence test against own
     alone is above ``drift`` (here neighbour c moved 0 to 40 m, covariances 25 m^2)."""
-    cfg = TrustConfig(detection_probability=None)
+    cfg = TrustConfig(detection_probability=None, test_once=False)
     rng = np.random.default_rng(3)
     seen = set()
     for shift in (0.0, 2.0, 5.0, 10.0, 20.0, 40.0):
