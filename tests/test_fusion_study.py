@@ -25,8 +25,8 @@ runs = 2
 kind = "fusion-quality"
 rounds = [1, 2]
 graphs = [
-    { name = "full-3", scenario = "seed000", set = { "scenario.num_scans" = 15 } },
-    { name = "ring-6", scenario = "circulant:6:2", set = { "scenario.num_scans" = 15 }, runs = 1 },
+    { name = "full-3", scenario = "seed000", set = { "scenario.num_scans" = 8 } },
+    { name = "ring-6", scenario = "circulant:6:2", set = { "scenario.num_scans" = 8 }, runs = 1 },
 ]
 rules = [
     { name = "hybrid", set = { "fusion.rule" = "hybrid" } },
@@ -80,7 +80,7 @@ def test_study_rows_are_the_twin_and_experiment_numbers(study, tmp_path):
     # one cell recomputed by hand: full-3, hybrid, L=2, runs 0 and 1
     row = next(r for r in rows if r["graph"] == "full-3" and r["rule"] == "hybrid"
                and r["rounds"] == 2)
-    scn = load_scenario("seed000", overrides={"scenario.num_scans": 15, "network.rounds": 2,
+    scn = load_scenario("seed000", overrides={"scenario.num_scans": 8, "network.rounds": 2,
                                               "fusion.rule": "hybrid",
                                               "sensors.*.detection_probability": 0.99,
                                               "sensors.*.clutter_rate": 10.0})
