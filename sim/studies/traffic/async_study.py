@@ -6,7 +6,7 @@ local at every peer" for a design that takes the plots at their own times.
 
 ``python -m sensornet.sim.studies.traffic.async_study [SCENARIO] [--file F] [--start S]
 [--minutes M] [--set KEY=VALUE ...] [--kinds lmb,gmphd] [--slice 0.5] [--local-json FILE |
---no-local] [--tick] [--json FILE]``
+--no-local] [--async-local] [--tick] [--json FILE]``
 
 Choices, made on the training hour only (12:00-13:00 UTC of the 3-hour recording, ``--start 0
 --minutes 60``, run 0; OSPA(2) of the LMB / GM-PHD reference, m):
@@ -25,7 +25,14 @@ Choices, made on the training hour only (12:00-13:00 UTC of the 3-hour recording
 Training hour against its local peers (study ``--estimates local``): LMB 121.0 m = 0.45 x the
 best local peer (268.3 m), 0.30 x the worst (406.6 m); the tick reference 211.6 m (0.79 x).
 GM-PHD 288.4 m (270.2 at ``sigma_w`` 5) = 0.79 (0.74) x the best local peer (365.9 m); tick
-427.2 m.
+427.2 m. Each radar alone through the same design (``--async-local``): LMB 223.8-391.4 m, so
+the LMB reference is 0.54 x the best of those; GM-PHD 310.5-450.6 m (0.93 x).
+
+Evaluation 13:00-15:00 UTC (``--start 3600 --minutes 119.9``): LMB 113.8 m = 0.42 x the best
+local peer (270.0 m), 0.29 x the worst (399.3 m), tick reference 203.3 m; GM-PHD 270.7 m (255.3
+at ``sigma_w`` 5) = 0.74 (0.70) x the best (364.0 m), tick 405.0 m. The 3 hours (``--start 0
+--minutes 179.9``): LMB 119.8 m, GM-PHD 285.0 m (local rows of docs/real-traffic.md: LMB
+268.5-400.8, GM-PHD 363.7-502.4 m: 0.45 and 0.78 x the best). About 120-130 x real time (CPU).
 """
 
 from __future__ import annotations
