@@ -19,6 +19,9 @@ from sensornet.protocol.codec import Rejected
 BUNDLE_BYTES = 256 * 1024
 """A bundle is cut here (the world starts another): far under the transport's largest
 message, so a network with big scans sends a few bundles, never one it cannot carry."""
+BUNDLE_HEAD = b"\x92"
+"""A bundle's first byte (a msgpack array of 2); a message is an array of 3 or more
+(``[version, type, fields...]``, :mod:`protocol.codec`), so the two never share it."""
 MAX_ENTRIES = 1024
 """Most scans in one bundle a receiver accepts (a host of that many peers)."""
 

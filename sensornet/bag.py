@@ -51,6 +51,7 @@ from sensornet.bag_play import (  # noqa: F401  (re-exported: bag's public names
     select,
 )
 from sensornet.peers.session import open_session
+from sensornet.protocol.bundle import BUNDLE_HEAD, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.json_fields import MESSAGE_SCHEMA, dumps, fields
 from sensornet.protocol.keys import ROOT
@@ -66,7 +67,14 @@ SAMPLE_SCHEMA = {
                     "description": "the exact bytes (protocol.codec), what play puts back "
                                    "(with its send time set as it puts it)"},
         "message": {**MESSAGE_SCHEMA, "type": ["object", "null"],
-                    "description": "every field decoded (null: not decodable, e.g. sealed)"},
+                    "description": "every field decoded (null: not decodable, e.g. sealed, "
+                                   "or a bundle)"},
+        "entries": {"type": "array", "description": "a bundle's entries (a host's scans or "
+                    "its peers' reports, a peer's tracks and report), each decoded",
+                    "items": {"type": "object", "required": ["name", "message"],
+                              "properties": {"name": {"type": "string"},
+                                             "message": {**MESSAGE_SCHEMA,
+                                                         "type": ["object", "null"]}}}},
     },
     "required": ["t", "key", "encoding", "payload", "message"],
 }
@@ -80,6 +88,22 @@ LIVELINESS_SCHEMA = {
 
 class NoNetwork(RuntimeError):
     """Nothing of the network answered within the wait (one line: what to pass)."""
+
+
+def _entries(payload: bytes) -> list[dict]:
+    """A bundle's entries decoded for the JSON body (each as the codec reads it; an entry it
+    refuses, or a payload that is no bundle, gives ``message: null`` / no entries)."""
+    try:
+        entries = unpack_bundle(payload).entries
+    except Rejected:
+        return []
+    out = []
+    for name, entry in entries:
+        try:
+            out.append({"name": name, "message": fields(decode(entry))})
+        except Rejected:
+            out.append({"name": name, "message": None})
+    return out
 
 
 def hint(tool: str, network: str, connect: Sequence[str], wait: float) -> str:
@@ -196,9 +220,14 @@ class Bag:
         body = {"t": t, "key": key, "encoding": encoding,
                 "payload": base64.b64encode(payload).decode("ascii"),
                 "message": None if msg is None else fields(msg)}
+        if msg is None and payload[:1] == BUNDLE_HEAD:
+            body["entries"] = _entries(payload)
         self._w.add_message(self._ch[key], ns, dumps(body).encode(), ns, sequence=self._seq)
         self.count += 1
         self.keys[key] += 1
+        for e in body.get("entries", ()):
+            if e["message"] is not None:
+                self.kinds.setdefault(key, set()).add(e["message"]["type"])
         if msg is not None:
             self.kinds.setdefault(key, set()).add(body["message"]["type"])
             if isinstance(msg, Control):

@@ -30,7 +30,7 @@ from sensornet.peers.rerun_sink import (
     lighter,
     position_columns,
 )
-from sensornet.protocol.bundle import unpack_bundle
+from sensornet.protocol.bundle import BUNDLE_HEAD, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.envelope import inner, is_sealed
 from sensornet.protocol.messages import (
@@ -52,9 +52,6 @@ ROOT_SCANS = "scans"
 """The key chunk of a host's scan bundles (protocol.keys.Keys.scans)."""
 ROOT_TELEMETRIES = "telemetries"
 """The key chunk of a host's telemetry bundles (protocol.keys.Keys.telemetries)."""
-BUNDLE_HEAD = b"\x92"
-"""A bundle's first byte (a msgpack array of 2, :mod:`protocol.bundle`); a message is an array
-of 3 or more (``[version, type, fields...]``, :mod:`protocol.codec`)."""
 
 
 def later_round(payload: bytes) -> bool:

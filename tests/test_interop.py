@@ -252,7 +252,10 @@ def test_record_then_play_onto_a_fresh_network(tmp_path):
     # the bag, read by the mcap reader and json.loads alone
     msgs = _generic_read(bag)
     samples = [b for topic, _, _, b in msgs if topic.startswith("sensornet/bagnet/")]
-    assert {b["message"]["type"] for b in samples} >= {"scan", "estimate", "tracks"}
+    kinds = {b["message"]["type"] for b in samples if b["message"] is not None}
+    kinds |= {e["message"]["type"] for b in samples for e in b.get("entries", ())
+              if e["message"] is not None}  # a peer's tracks ride in its report bundle
+    assert kinds >= {"scan", "estimate", "tracks", "telemetry"}, kinds
     assert any(topic == "@liveliness" for topic, *_ in msgs)
     _, items = read_bag(bag)
     recorded = sorted((it.key.replace("bagnet", "fresh", 1), it.payload)
