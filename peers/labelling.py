@@ -39,9 +39,6 @@ LABEL_GATE = 26.0
 """Squared Mahalanobis gate of a (fused component, input track) pair: the hybrid rule's
 grouping gate (tracking.fusion_rules.HYBRID_GATE), so every input component the rule fused
 into a component can pass it (the pair's distance uses the sum of both covariances)."""
-RELEASED_BASE = 1 << 44
-"""Index offset of a released label (:func:`released_label`), above every other kind of
-label index (births, splits, fresh labels, cells, first publications, adoptions)."""
 FRESH_BASE = 1 << 32
 """Index offset of the labels a fusion creates (``(origin, k, FRESH_BASE + c)``), apart from
 the filter's births and splits of the same scan (small indices)."""
@@ -174,10 +171,8 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
-    won one label: the heavier keeps it (two targets never share an id), the other takes the
-    label every peer gives it (:func:`released_label`), else a fresh one (:func:`_released`);
-    our tracks that carried the lost label take the row's new one (RELEASE pairs in ``own``).
-    The per-input matching is :func:`_pairs` (one batched cost computation).
+    won one label: the heavier keeps it, the other takes a fresh one (two targets never share
+    an id). The per-input matching is :func:`_pairs` (one batched cost computation).
 
     ``bump (b, 3)``: the own labels stamped at their first publication this scan (the
     estimator's ``fresh_stamps``). One that wins a fused component which no other input's track
@@ -201,18 +196,17 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         first[1:] = Js[1:] != Js[:-1]
         labels[Js[first]] = L[order[first]]
         won[Js[first]] = True
-        # a label won by two rows: the heavier keeps it, the other its released label
-        released = np.zeros(n, dtype=bool)
-        released[_lighter(labels, won, fused.weights)] = True
-        won &= ~released
-        before = labels.copy()  # the labels the released rows lost
-        if released.any():
-            labels, won = _released(labels, won, released, fused.weights)
+        # a label won by two rows: the heavier keeps it
+        wrows = np.flatnonzero(won)
+        keys = label_keys(labels[wrows])
+        by = np.lexsort((-fused.weights[wrows], keys))
+        dup = np.zeros(len(by), dtype=bool)
+        dup[1:] = keys[by[1:]] == keys[by[:-1]]
+        won[wrows[by[dup]]] = False
         if bump is not None and len(bump):
-            labels = corroborated(labels, won & ~released, J, S, bump, k)
+            labels = corroborated(labels, won, J, S, bump, k)
         # own pairs whose winner is another label: what the own estimator adopts
-        gave = released[J] & (label_keys(L) == label_keys(before[J]))  # the lost label's pairs
-        own = (S == 0) & won[J] & ~gave
+        own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
         change = label_keys(own_lab) != label_keys(win)
         match = LabelMatch(own_lab[change], win[change], np.zeros(int(change.sum())))
@@ -222,67 +216,14 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     labels[lost] = new_labels(origin, k, len(lost), FRESH_BASE + fresh_start)
     if len(J):
         # an own track paired with a row that lost its label to a heavier row (a label two
-        # targets held) releases it: it takes the row's new label (_released's, or fresh) as a
-        # RELEASE pair, else it keeps the duplicated label and the row gets a new id every scan
-        # (docs/real-traffic.md)
-        rel = (S == 0) & (~won[J] | gave)
+        # targets held) releases it: it takes the row's fresh label (a RELEASE pair), else it
+        # keeps the duplicated label and the row gets a new id every scan (docs/real-traffic.md)
+        rel = (S == 0) & ~won[J]
         if rel.any():
             match = LabelMatch(np.concatenate([match.own, L[rel]]),
                                np.concatenate([match.nbr, labels[J[rel]]]),
                                np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
     return FusedLabels(labels, match, len(lost))
-
-
-def _lighter(labels: np.ndarray, won: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Rows (indices) of the won rows of ``labels (n, 3)`` whose label a heavier won row also
-    won (``won (n,)``, ``weights (n,)``): all but the heaviest row of each label."""
-    wrows = np.flatnonzero(won)
-    keys = label_keys(labels[wrows])
-    by = np.lexsort((-weights[wrows], keys))
-    dup = np.zeros(len(by), dtype=bool)
-    dup[1:] = keys[by[1:]] == keys[by[:-1]]
-    return wrows[by[dup]]
-
-
-def released_label(lost: np.ndarray) -> np.ndarray:
-    """The label every peer gives a fused component that lost label ``lost (r, 3)`` to a
-    heavier one: ``(origin, birth_scan, RELEASED_BASE + h)`` of the lost label, ``h`` a 40-bit
-    hash of it. The same at every peer and scan, so peers that release one label agree on the
-    new id instead of each making its own and the network rule settling on one a scan later (a
-    second switch at every other peer, docs/real-traffic.md); born when the lost label was, so
-    a later stamp of the same aircraft elsewhere does not replace it (it did when the released
-    label was born at the release scan)."""
-    lost = as_labels(lost)
-    h = lost.astype(np.uint64) * np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9,
-                                           0x94D049BB133111EB], dtype=np.uint64)
-    h = np.bitwise_xor.reduce(h, axis=1)
-    h ^= h >> np.uint64(29)
-    out = np.empty_like(lost)
-    out[:, 0] = lost[:, 0]
-    out[:, 1] = lost[:, 1]
-    out[:, 2] = RELEASED_BASE + (h & np.uint64((1 << 40) - 1)).astype(np.int64)
-    return out
-
-
-def _released(labels: np.ndarray, won: np.ndarray, released: np.ndarray,
-              weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Labels of the ``released (n,)`` rows of ``labels (n, 3)`` (rows that lost their label
-    to a heavier row): :func:`released_label` of the label each lost, the heavier row first if
-    two lost one label, unless a won row (``won (n,)``) holds it. Rows given one are set in
-    ``won``; the rest stay unwon (fresh labels). Not the row's runner-up among the labels it
-    was paired with: on the training hour that was the heavier aircraft's other label at some
-    peers, and the two aircraft traded ids every few scans (docs/real-traffic.md)."""
-    labels, won = labels.copy(), won.copy()
-    rows = np.flatnonzero(released)
-    derived = released_label(labels[rows])
-    keys = label_keys(derived)
-    by = np.lexsort((-weights[rows], keys))
-    keep = np.ones(len(by), dtype=bool)
-    keep[1:] = keys[by[1:]] != keys[by[:-1]]
-    keep &= ~np.isin(keys[by], label_keys(labels[won]))
-    labels[rows[by[keep]]] = derived[by[keep]]
-    won[rows[by[keep]]] = True
-    return labels, won
 
 
 def corroborated(labels: np.ndarray, won: np.ndarray, J: np.ndarray, S: np.ndarray,
@@ -338,6 +279,5 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
     return out, LabelMatch(own[rest], nbr[rest], np.asarray(match.cost)[rest])
 
 
-__all__ = ["FRESH_BASE", "LABEL_GATE", "RELEASED_BASE", "SETTLE_MARGIN", "FusedLabels",
-           "corroborated", "input_tracks", "label_fused", "origin_of", "released_label",
-           "settle_scans", "take_moves"]
+__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "corroborated",
+           "input_tracks", "label_fused", "origin_of", "settle_scans", "take_moves"]

@@ -5,23 +5,14 @@ tracking.labels.match_labels (one linear_sum_assignment each), kept here as the 
 from __future__ import annotations
 
 import numpy as np
-from sensornet.peers.labelling import (
-    FRESH_BASE,
-    LABEL_GATE,
-    FusedLabels,
-    _released,
-    input_tracks,
-    label_fused,
-)
+from sensornet.peers.labelling import FRESH_BASE, LABEL_GATE, FusedLabels, input_tracks, label_fused
 from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, label_keys, match_labels, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 
 
 def reference(fused, inputs, origin, k, fresh_start=0, gate=LABEL_GATE) -> FusedLabels:
-    """label_fused as it was before the batched matching (one match_labels per input); the
-    lighter of two rows that won one label takes _released's label (tests/test_label_release.py
-    checks that rule against a loop)."""
+    """label_fused as it was before the batched matching (one match_labels per input)."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -52,11 +43,7 @@ def reference(fused, inputs, origin, k, fresh_start=0, gate=LABEL_GATE) -> Fused
         dup = np.zeros(len(by), dtype=bool)
         dup[1:] = keys[by[1:]] == keys[by[:-1]]
         won[wrows[by[dup]]] = False
-        released = np.zeros(n, dtype=bool)  # the lighter of two rows: _released's labels
-        released[wrows[by[dup]]] = True
-        before = labels.copy()
-        labels, won = _released(labels, won, released, fused.weights)
-        own = (S == 0) & won[J] & ~(released[J] & (label_keys(L) == label_keys(before[J])))
+        own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
         change = label_keys(own_lab) != label_keys(win)
         match = LabelMatch(own_lab[change], win[change], np.zeros(int(change.sum())))
