@@ -215,8 +215,11 @@ def test_seed000_every_scan_and_fusion_beats_local(seed000):
 
 
 def test_seed000_one_id_per_target(seed000):
-    """Measured: fused label agreement 100 %, 0 identity switches at each peer (1 before own
-    tracks took their label at first publication: peers.lmb_estimator.PUBLISHED_BASE); local
+    """Measured: fused label agreement 100 %, 0 identity switches of confirmed tracks at each
+    peer; over all fused tracks 0 (1 before own tracks took their label at first publication:
+    peers.lmb_estimator.PUBLISHED_BASE) until LMB peers published tentative tracks (pooled
+    existence, the default since b2a0383): then 1 at s1 (4.48 per 1,000), so all tracks are held
+    to the issue's seed-000 bound of 5 per 1,000 and confirmed ones to its 1 per 1,000; local
     tracks 2-5 switches (they take the network's ids as fusions spread them)."""
     scn, twin = seed000
     names, c = scn.sensor_names, scn.metrics.ospa_cutoff
@@ -226,10 +229,14 @@ def test_seed000_one_id_per_target(seed000):
     print(f"fused agreement {ag['agreement']:.4f} of {ag['confirmed']}, confirmed "
           f"{conf['agreement']:.4f} of {conf['confirmed']}")
     assert ag["confirmed"] > 200 and ag["agreement"] >= 0.99 and conf["agreement"] >= 0.99
+    confirmed = twin_tables(twin, names, "fused", confirmed=True)[0]
     for p, tab in tabs.items():
         r = track_report(truth, tab, c=c, with_hota=False, with_tgospa=False)
-        print(f"{p}: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000")
-        assert r["truth_scans"] > 200 and r["switches_per_1000"] <= 1.0
+        rc = track_report(truth, confirmed[p], c=c, with_hota=False, with_tgospa=False)
+        print(f"{p}: {r['switches']} switches, {r['switches_per_1000']:.2f} per 1,000; "
+              f"confirmed {rc['switches']}")
+        assert r["truth_scans"] > 200 and r["switches_per_1000"] <= 5.0
+        assert rc["truth_scans"] > 200 and rc["switches_per_1000"] <= 1.0
     local, _ = twin_tables(twin, names, "local")
     for tab in local.values():
         assert len(tab.id) > 200 and np.unique(tab.id).size < 40

@@ -21,7 +21,7 @@ def _table(rows):
     return TrackTable(np.array(s), np.array(i), np.array(p, dtype=float))
 
 
-def test_two_tracks_trading_aircraft_is_a_swap_at_a_crossing():
+def test_two_tracks_trading_aircraft_is_a_swap_by_handover():
     T = 8
     truth = _truth(T, 1500.0)  # beyond the gate: CLEAR keeps no stale pair
     rows = []
@@ -32,7 +32,10 @@ def test_two_tracks_trading_aircraft_is_a_swap_at_a_crossing():
     ev, tot = trace(truth, _table(rows), {0: "L0", 1: "L1"}, SITES, 1000.0, 2.0)
     assert tot["switches"] == 2 and [e["tick"] for e in ev] == [5, 5]
     assert {e["aircraft"] for e in ev} == {"0000a1", "0000b2"}
-    assert all(e["fate"] == "swap" and e["cause"] == "crossing" for e in ev)
+    # each new label last held the other aircraft: a handover (the first class that applies,
+    # before crossing: sim.studies.traffic.switches)
+    assert all(e["fate"] == "swap" and e["cause"] == "handover" for e in ev)
+    assert {e["aircraft"]: e["held_by"] for e in ev} == {"0000a1": "0000b2", "0000b2": "0000a1"}
     assert ev[0]["near_m"] == 1500.0 and ev[0]["cover"] == 1 and ev[0]["turn"] == 0.0
 
 
