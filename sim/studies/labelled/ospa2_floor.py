@@ -230,18 +230,22 @@ def _overrides(items: list[str]) -> dict:
     return out
 
 
-def cell_arguments(prog: str, doc: str, set_help: str) -> argparse.ArgumentParser:
+def cell_arguments(prog: str, doc: str, set_help: str | None,
+                   kinds: str = "gmphd,lmb") -> argparse.ArgumentParser:
     """The options of a study over the labelled cells (runs, scans, graphs, kinds, Pd, rule,
-    the fused twin's overrides), shared by this study and ``design_check``."""
+    and with ``set_help`` the fused twin's overrides), shared by this study, ``design_check``
+    and ``pool_check``."""
     ap = argparse.ArgumentParser(prog=f"python -m sensornet.sim.studies.labelled.{prog}",
                                  description=doc.split("\n\n")[0])
     ap.add_argument("--runs", default="100,101", help="runs (training: 100, 101)")
     ap.add_argument("--scans", type=int, help="scans per run (default: the scenario's)")
     ap.add_argument("--graphs", default="full3,circ20")
-    ap.add_argument("--kinds", default="gmphd,lmb")
+    ap.add_argument("--kinds", default=kinds)
     ap.add_argument("--pds", default="0.99,0.9")
     ap.add_argument("--rule", default="hybrid", choices=sorted(RULES))
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=set_help)
+    if set_help is not None:
+        ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help=set_help)
     return ap
 
 

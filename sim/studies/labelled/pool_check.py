@@ -12,13 +12,12 @@ per cell, not once per variant as ``design_check`` does.
 
 from __future__ import annotations
 
-import argparse
 import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 from sensornet.sim.studies.labelled.design_check import fused_row
-from sensornet.sim.studies.labelled.ospa2_floor import GRAPHS, _overrides, cell
+from sensornet.sim.studies.labelled.ospa2_floor import GRAPHS, _overrides, cell, cell_arguments
 from sensornet.sim.studies.labelled.study import RULES, scenario_of
 
 COLUMNS = ("ospa2", "late+missed", "dup", "false+extra", "switches", "switches_max",
@@ -45,14 +44,7 @@ def _reference(args: tuple) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.labelled.pool_check",
-                                 description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", default="100,101", help="runs (training: 100, 101)")
-    ap.add_argument("--scans", type=int, help="scans per run (default: the scenario's)")
-    ap.add_argument("--graphs", default="full3,circ20")
-    ap.add_argument("--kinds", default="lmb")
-    ap.add_argument("--pds", default="0.99,0.9")
-    ap.add_argument("--rule", default="hybrid", choices=sorted(RULES))
+    ap = cell_arguments("pool_check", __doc__, None, kinds="lmb")
     ap.add_argument("--base", default="", metavar="KEY=VALUE;...",
                     help="the baseline's overrides, under each variant's too (default: none)")
     ap.add_argument("--variant", action="append", default=[], metavar="NAME=KEY=VALUE;...",
