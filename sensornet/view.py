@@ -38,7 +38,8 @@ from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_rou
 
 __all__ = ["BEHIND", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE", "MAP_KEEP", "QUEUE_MAX", "TAIL",
            "Batcher", "LiveView", "ViewState", "cpu_seconds", "id_color", "id_labels",
-           "later_round", "nice_process", "replay_recordings", "strip_array"]
+           "idle_process", "later_round", "nice_process", "replay_recordings",
+           "strip_array", "thread_policies"]
 
 FLUSH_S = 1.0
 """Seconds of rows gathered per entity before one ``send_columns`` (doubled, up to
@@ -61,14 +62,19 @@ class LiveView:
 
     def __init__(self, network: str, state_factory, rr, rec, connect: Sequence[str] = (),
                  config: str | None = None, say: Callable[[str], None] | None = None,
-                 estimates: bool = False, security=None) -> None:
+                 estimates: bool = False, security=None, discard: bool = False) -> None:
         """``estimates``: hear the peers' estimates too (the local marks of peers that send
         no telemetry); by default not: the local estimate rides in each peer's telemetry,
         and every peer would send the view a copy of each of its heaviest messages (+5 %
         of the peers' CPU at seed 004). ``security``: a
         :class:`peers.security.Security` of a read-only observer (``view``) to join a secure
-        network (mutual TLS; the network's access control lets it subscribe, not put)."""
+        network (mutual TLS; the network's access control lets it subscribe, not put).
+        ``discard`` (a diagnostic): subscribe as usual but drop every message on arrival but
+        the world's control (its end), counted in :attr:`discarded`: what a subscriber's mere
+        presence costs the peers, without the view's drawing."""
         self.network = network
+        self.discard = discard
+        self.discarded = 0
         self.estimates = estimates
         self.connect, self.config = list(connect), config
         self.security = security
@@ -111,6 +117,9 @@ class LiveView:
         self._subs = [self.session.declare_subscriber(e, self._on_sample) for e in exprs]
 
     def _on_sample(self, sample) -> None:
+        if self.discard and not str(sample.key_expr).endswith("/ctl"):
+            self.discarded += 1
+            return
         try:
             self.q.put_nowait((str(sample.key_expr), sample.payload.to_bytes()))
         except queue.Full:
@@ -250,6 +259,45 @@ def nice_process(increment: int) -> int:
         except OSError:  # the thread has ended meanwhile
             pass
     return changed
+
+
+def idle_process(fallback_nice: int = 10, tids: Sequence[int] | None = None) -> tuple[str, int]:
+    """Put every thread of this process (or the threads ``tids``) in Linux's ``SCHED_IDLE``
+    class (sched(7)): it runs only on CPU time no normal thread wants, and a normal thread
+    that wakes preempts it at once, where a niced thread still takes its weighted share and
+    its slice first. The view's drawing then never delays a peer on the cores they share
+    (issue 38); a view left no CPU falls behind alone (its queue, its decimation). Per
+    thread, as :func:`nice_process` (later threads inherit their starter's class). Where not
+    permitted (no ``SCHED_IDLE``, not Linux, refused): :func:`nice_process` by
+    ``fallback_nice``. Returns ``("idle" or "nice", threads changed)``."""
+    if not hasattr(os, "SCHED_IDLE"):
+        return "nice", nice_process(fallback_nice)
+    if tids is None:
+        try:
+            tids = [int(t) for t in os.listdir("/proc/self/task")]
+        except OSError:  # no /proc: this thread, which the later ones inherit from
+            tids = [0]
+    changed = 0
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+            changed += 1
+        except ProcessLookupError:  # the thread has ended meanwhile
+            pass
+        except OSError:  # not permitted here (a container's seccomp, say): nice instead
+            return "nice", nice_process(fallback_nice)
+    return "idle", changed
+
+
+def thread_policies() -> dict[int, int]:
+    """Each thread of this process and its scheduling policy (``os.SCHED_*``; Linux)."""
+    out = {}
+    for t in os.listdir("/proc/self/task"):
+        try:
+            out[int(t)] = os.sched_getscheduler(int(t))
+        except ProcessLookupError:  # ended meanwhile
+            pass
+    return out
 
 
 def cpu_seconds() -> float:

@@ -5,6 +5,8 @@ subcommand (``echo`` and ``topics`` share one), each taking the subparsers actio
 
 from __future__ import annotations
 
+import argparse
+
 from sensornet.cli.common import (
     NONNEGATIVE_INT,
     _network_name,
@@ -140,6 +142,13 @@ def add_view(sub) -> None:
     vw.add_argument("--nice", type=NONNEGATIVE_INT, default=0,
                     help="lower the view's CPU priority by this much (run: 10), so that on a "
                          "busy machine the view falls behind, not the peers")
+    vw.add_argument("--idle", action="store_true",
+                    help="run every thread of the view in Linux's SCHED_IDLE class (run does): "
+                         "it takes only CPU time no peer wants, and a peer that wakes preempts "
+                         "it at once; where not permitted, --nice (10 if 0) instead")
+    vw.add_argument("--discard", action="store_true", help=argparse.SUPPRESS)
+    # --discard, a diagnostic: subscribe and drop every message (what the subscription alone
+    # costs the peers; benchmarks/bench_fifty.py --view-arg=--discard)
     vw.add_argument("--secure", metavar="DIR",
                     help="join a secure network with the read-only observer key of this keys "
                          "folder (sensornet keys makes 'view': it may subscribe, not put)")

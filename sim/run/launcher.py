@@ -50,7 +50,8 @@ from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import adjacency
 
 VIEW_NICE = 10
-"""The view process's nice value: on a busy machine it falls behind, not the peers."""
+"""The view process's nice value where its threads may not be SCHED_IDLE (``--idle``, which
+it asks for): on a busy machine it falls behind, not the peers."""
 
 
 def _cli() -> list[str]:
@@ -205,7 +206,7 @@ def _view_command(network: str, world: str, extra_connect: list[str], source: st
     links = [a for e in dict.fromkeys(eps) for a in ("--connect", e)]
     return [*_cli(), "view", network, *links,
             "--scenario", source, *sets, "--run-id", run_id, "--until-end",
-            "--nice", str(VIEW_NICE),
+            "--idle", "--nice", str(VIEW_NICE),
             *(["--config", cfg] if cfg else []),
             *(["--secure", keys] if keys else []),
             *(["--out", str(out / "rerun" / "view.rrd")] if rerun else []),

@@ -31,6 +31,7 @@ from sensornet.view import (
     LiveView,
     ViewState,
     cpu_seconds,
+    idle_process,
     nice_process,
     replay_recordings,
 )
@@ -60,7 +61,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         sink, state = _open_sink(args, out, viewer)
         return _replay_offline(args, sink, state, out or viewer)
     view = LiveView(args.network, None, None, None, args.connect or [], args.config,
-                    estimates=args.estimates, security=security)
+                    estimates=args.estimates, security=security,
+                    discard=getattr(args, "discard", False))
     cpu = _watch(args, view, out, viewer)
     _print_stats(view, cpu)
     return 0
@@ -183,8 +185,7 @@ def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
         view.open()
     except SessionError as exc:
         raise UserError(str(exc)) from None
-    if args.nice:  # subscribed: from now on every thread yields the CPU to the network's
-        nice_process(args.nice)  # (niced from its start it joined a short run's last scans)
+    _lower_priority(args)  # subscribed (lowered from its start, it joined a short run late)
     try:
         sink, state = _open_sink(args, out, viewer)
     except BaseException:
@@ -200,6 +201,18 @@ def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
         view.close()
         sink.close()
     return cpu_seconds() - cpu0
+
+
+def _lower_priority(args: argparse.Namespace) -> None:
+    """``--idle``: every thread in SCHED_IDLE (said in one line, as is a fallback to nice);
+    else ``--nice``: every thread's nice value raised by it."""
+    if args.idle:
+        how, n = idle_process(args.nice or 10)
+        print(f"view: {n} threads in SCHED_IDLE (CPU time no peer wants)" if how == "idle" else
+              f"view: SCHED_IDLE not permitted here: nice +{args.nice or 10} instead",
+              file=sys.stderr, flush=True)
+    elif args.nice:
+        nice_process(args.nice)
 
 
 def _print_stats(view: LiveView, cpu: float) -> None:
@@ -218,3 +231,6 @@ def _print_stats(view: LiveView, cpu: float) -> None:
           f"{b.calls} send_columns calls for {b.rows_sent} rows; CPU {cpu:.2f} s "
           f"({cpu / scans * 1e3:.1f} ms per scan over {st.newest_k} scans)",
           file=sys.stderr, flush=True)
+    if view.discard:
+        print(f"view: --discard: {view.discarded} messages dropped unread", file=sys.stderr,
+              flush=True)
