@@ -135,6 +135,9 @@ class EstimatorHooks(_Hooks):
     labels in :attr:`LocalOutput.labels`; the consensus then labels the fused density)."""
     begin_scan: Callable[[int], None] = _nothing
     """Told the scan index of the next step (births are stamped with it)."""
+    plot_ages: Callable[[np.ndarray | None], None] = _nothing
+    """Told the ages ``(m,)`` of the next step's plots (s before the scan's time, the scan
+    message's ``ages``; None: all at the scan's time), to take them at their own times."""
     extract_tracks: Callable[..., Any] | None = None
     """``(mix, labels, confirmation) -> tracking.labels.ExtractedTracks``: ``extract``'s
     states with their ids, covariances, existence and status."""

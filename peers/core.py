@@ -249,6 +249,7 @@ class PeerCore(CoreReceive, CoreOutputs):
         out = [*closed, Record("scan", k, {"send_time": msg.send_time, "n": len(msg.z)})]
         self.scorer.expect(k)
         self._score_deferred()  # the previous scan's, if no tick came between (a backlog)
+        c.hooks.plot_ages(msg.ages)
         out += self._wrap(c.on_scan(k, msg.z, steps, now))
         self.scorer.advance(k)
         self._pending_local.append(k)

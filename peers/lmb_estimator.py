@@ -24,6 +24,7 @@ import dataclasses
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.peers.labelling import take_moves
+from sensornet.peers.lmb_own_times import OwnTimes, step_at_own_times
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
 from sensornet.tracking.label_confirmation import stamp_shared
@@ -103,7 +104,8 @@ class LmbEstimator:
                  publish_threshold: float | None = 0.5, extraction_threshold: float = 0.5,
                  extraction: str = "cardinality", origin: int | None = None,
                  tentative_threshold: float | None = None, tentative_scans: int = 2,
-                 republish_gap: int | None = None, tentative_gap: int | None = None) -> None:
+                 republish_gap: int | None = None, tentative_gap: int | None = None,
+                 own_times: OwnTimes | None = None) -> None:
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
         if publish_threshold is not None and not 0.0 <= publish_threshold <= 1.0:
@@ -136,6 +138,10 @@ class LmbEstimator:
         publication threshold); None: :attr:`republish_gap`."""
         self.extraction_threshold = extraction_threshold
         self.extraction = extraction
+        self.own_times = own_times
+        """Plots with ages (:meth:`plot_ages`) taken at their own times within the tick
+        (:mod:`peers.lmb_own_times`); None: every plot at the tick."""
+        self._ages: np.ndarray | None = None
         self.origin = None if origin is None else int(origin)
         """Label origin; None: the output carries no labels (the consensus then adds none)."""
         self.state = filt.initial()
@@ -167,15 +173,25 @@ class LmbEstimator:
         """The scan index of the next :meth:`step` (births are stamped with it)."""
         self._next_k = int(k)
 
+    def plot_ages(self, ages: np.ndarray | None) -> None:
+        """The ages ``(m,)`` of the next step's plots (s before the scan's time), or None."""
+        self._ages = ages
+
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
-        """Predict ``steps`` scans ahead, correct with ``z (m, dz)``; publish the PHD."""
+        """Predict ``steps`` scans ahead, correct with ``z (m, dz)``; publish the PHD. With
+        :attr:`own_times` and the plots' ages: each plot at its own time within the tick."""
         if steps < 1:
             raise ValueError(f"steps must be at least 1, got {steps}")
         k = self.k + steps if self._next_k is None else self._next_k
         self._next_k = None
+        ages, self._ages = self._ages, None
         if self._adopted is not None:
             self._take_adopted()
-        self.state = self.filter_for(k).step(self.state, z, k)
+        if self.own_times is not None and ages is not None:
+            self.state = step_at_own_times(self.filter_for(k), self.state, z, ages, k,
+                                           self.own_times)
+        else:
+            self.state = self.filter_for(k).step(self.state, z, k)
         self.k = k
         if self.origin is not None and self.publish_threshold is not None:
             self._stamp_first_publication(k)

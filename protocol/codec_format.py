@@ -26,9 +26,9 @@ from sensornet.tracking.mixture import GaussianMixture
 VERSION = 1
 """The protocol version of every message type: the first element of ``[version, type, ...]``."""
 TRACKS_VERSION = 2
-"""Protocol 2 exists for two types: Tracks (``"K"``) with identities, covariances, existence
-and status, and Estimate (``"E"``) with component labels; a message without them is still
-written (and read) as protocol 1, byte for byte."""
+"""Protocol 2 exists for Tracks (``"K"``) with identities, covariances, existence and status,
+Estimate (``"E"``) with component labels and Scan (``"S"``) with its plots' ages; a message
+without them is still written (and read) as protocol 1, byte for byte."""
 LABELS_VERSION = TRACKS_VERSION
 """The protocol of a labelled Estimate."""
 _F8 = np.dtype("<f8")
@@ -133,6 +133,8 @@ _FIELDS_V2 = {
     "K": ("s", "k", "q", "ts", "d", "i", "c", "e", "u", "x"),
     # Estimate with component labels: "i" (n, 3) int64 bytes, one row per component of "x"
     "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "i", "x"),
+    # Scan with each plot's age "a" (m,) float64 bytes (seconds before the scan's time)
+    "S": ("s", "k", "q", "ts", "a", "x"),
     # Telemetry with its (m, 2) map points as float32 rows "pf" (for the eye: half the
     # bytes of "px"); a report whose points do not fit float32 is still protocol 1
     "Y": ("s", "k", "ts", "vn", "vx", "ev", "pn", "pc", "pf", "d", "x"),

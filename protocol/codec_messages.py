@@ -69,9 +69,17 @@ def _encode_estimate(msg: Estimate) -> dict:
 
 
 def _encode_scan(msg: Scan) -> dict:
+    """Protocol 1 without ages (byte for byte as always), protocol 2 with them."""
     z = np.asarray(msg.z, dtype=float).reshape(-1, 2)
-    return {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
+    body = {"s": msg.sensor, "k": int(msg.k), "q": int(msg.seq), "ts": float(msg.send_time),
             "x": _array(z)}
+    if msg.ages is not None:
+        a = np.asarray(msg.ages, dtype=float)
+        if a.shape != (len(z),):
+            raise ValueError(f"Scan.ages must be ({len(z)},), got {a.shape}")
+        body["v"] = TRACKS_VERSION
+        body["a"] = _array(a)
+    return body
 
 
 def _states(states) -> np.ndarray:
@@ -203,8 +211,12 @@ def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
 def _decode_scan(body: dict, limits: Limits, version: int) -> Scan:
     blob = _get(body, "x", bytes)
     n = _rows(blob, 2, limits.max_measurements, "measurements")
+    ages = None
+    if version == TRACKS_VERSION:  # each plot's age: one float64 per row of "x"
+        ages = _floats(_get(body, "a", bytes), (n,))
     return Scan(sensor=_name(body, "s", limits), k=_index(body, "k"),
-                z=_floats(blob, (n, 2)), seq=_index(body, "q"), send_time=_time(body))
+                z=_floats(blob, (n, 2)), seq=_index(body, "q"), send_time=_time(body),
+                ages=ages)
 
 
 def _decode_tracks(body: dict, limits: Limits, version: int) -> Tracks:

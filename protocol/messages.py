@@ -23,6 +23,10 @@ class Scan:
     z: np.ndarray
     seq: int = 0
     send_time: float = 0.0
+    ages: np.ndarray | None = None
+    """``(m,)`` how long before the scan's time each plot was made (s, the scenario's clock,
+    in ``[0, scan_period)``): a rotating radar's plots at their own times (issue 34); None:
+    every plot at the scan's time (protocol 1, byte for byte as always)."""
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,9 @@ class TruthModel:
     start from (one-target models)."""
     run: Callable[[Scenario, int], tuple[Truth, list[list[Array]]]] | None = None
     """``(scenario, run) -> (truth, scans)`` when the model draws the sensors' returns too."""
+    ages: Callable[[Scenario, int], list[list[Array]]] | None = None
+    """``(scenario, run) -> ages``: ``ages[s][k-1]`` ``(m,)`` how long before scan ``k``'s
+    time each row of ``run``'s ``scans[s][k-1]`` was made (s), when the model knows it."""
 
 
 _loaded: dict[str, TruthModel] = {}

@@ -18,11 +18,21 @@ from __future__ import annotations
 import numpy as np
 from sensornet.peers.labelling import origin_of
 from sensornet.peers.lmb_estimator import LmbEstimator
+from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.kinds.gmphd import mixture_fuser
 from sensornet.sim.scenario import Scenario
-from sensornet.sim.world.build import birth_mixture, make_reducer, motion_model, sensor_params
+from sensornet.sim.world.birth import beam_of
+from sensornet.sim.world.build import (
+    birth_mixture,
+    clutter_intensity,
+    make_reducer,
+    motion_model,
+    sensor_params,
+    sweep_fraction,
+)
+from sensornet.tracking.elapsed import ElapsedMotion, slices_per_tick
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import SHARED_ORIGIN
 from sensornet.tracking.lmb import LmbFilter
@@ -54,6 +64,30 @@ def make_lmb_filter(scn: Scenario, name: str, origin: int = 0,
                      shared_origin=shared_origin, birth_cell=scn.lmb.birth_cell)
 
 
+def sector_clutter(scn: Scenario, name: str) -> float:
+    """Clutter intensity inside a rotating radar's swept sector (the per-tick intensity over
+    the circle divided by the share swept), floored for the LMB's division."""
+    spec = scn.sensor(name)
+    return max(clutter_intensity(scn, spec) / sweep_fraction(scn, spec), MIN_CLUTTER_INTENSITY)
+
+
+def own_times(scn: Scenario, name: str) -> OwnTimes | None:
+    """Sensor ``name``'s plots at their own times (``lmb.time_slice`` > 0): a rotating radar's
+    sector ``Pd`` (:meth:`sim.world.birth.Beam.sector`) and the clutter inside its swept sector
+    (:func:`sector_clutter`), as the asynchronous centralised reference; a sensor without a
+    rotation its ``detection_probability`` and its filter's clutter. None when off."""
+    if scn.lmb.time_slice <= 0:
+        return None
+    spec = scn.sensor(name)
+    beam = beam_of(scn, spec)
+    clutter = (sector_clutter(scn, name) if beam is not None
+               else max(sensor_params(scn, name).clutter_intensity, MIN_CLUTTER_INTENSITY))
+    return OwnTimes(scn.lmb.time_slice, scn.scan_period,
+                    ElapsedMotion(scn.scan_period, scn.sigma_w), scn.survival_probability,
+                    clutter, None if beam is None else beam.sector,
+                    max(spec.detection_probability, 1e-12))
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     shared = SHARED_ORIGIN if scn.network.birth_ids == "shared" else None
     origin = origin_of([s.name for s in scn.sensors], name) + (0 if shared is None else 1)
@@ -65,7 +99,9 @@ def build(scn: Scenario, name: str, run: int = 0):
                        tentative_threshold=scn.lmb.tentative_threshold or None,
                        tentative_scans=scn.lmb.tentative_scans,
                        republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,
-                       tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap)
+                       tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap,
+                       corroborate_scans=scn.lmb.corroborate_scans,
+                       own_times=own_times(scn, name))
     return est, mixture_fuser(scn, reducer)
 
 
@@ -75,6 +111,12 @@ def check(scn: Scenario) -> tuple[str, str] | None:
     if scn.extended is not None:
         return ("network.filter", "key 'network.filter' is 'lmb', whose peers track point "
                 "targets ([extended] is for 'et-gmphd')")
+    if scn.lmb.time_slice > 0:
+        try:
+            slices_per_tick(scn.scan_period, scn.lmb.time_slice)
+        except ValueError:
+            return ("lmb.time_slice", f"key 'lmb.time_slice' ({scn.lmb.time_slice:g} s) must "
+                    f"divide scenario.scan_period ({scn.scan_period:g} s)")
     rb = [s.name for s in scn.sensors if s.kind != "linear"]
     if rb and len(birth_mixture(scn)) == 0:
         return ("birth.model", f"'lmb' peers with range-bearing sensors ({', '.join(rb)}) need "

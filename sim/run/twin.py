@@ -26,7 +26,7 @@ from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Scan, Truth
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import Scenario
-from sensornet.sim.world import generate_run
+from sensornet.sim.world import generate_run, plot_ages
 from sensornet.sim.world.build import fault_injector
 
 LinkDelay = Callable[[str, str, Estimate], float | None]
@@ -108,10 +108,12 @@ class TwinResult:
 
 
 def world_events(scn: Scenario, truth, scans, keys: Keys, interval: float,
-                 inject: Iterable[Inject], events: Iterable[Liveliness]) -> list[tuple]:
+                 inject: Iterable[Inject], events: Iterable[Liveliness],
+                 ages=None) -> list[tuple]:
     """What the world (and ``inject``, ``events``) puts on the twin's clock, in order:
     ``(t, kind, target, *payload)``; the start, every scan and truth, the "end", then the
-    world's leaving."""
+    world's leaving. ``ages``: each plot's age, sent with the scans (as
+    :func:`sim.world.plot_ages` gives them), or None."""
     names, network = scn.sensor_names, keys.network
     out: list[tuple] = []
     start = encode(Control("start", network, {"speed": scn.network.speed}, send_time=0.0))
@@ -123,8 +125,9 @@ def world_events(scn: Scenario, truth, scans, keys: Keys, interval: float,
         x = truth.states[k - 1]
         t_msg = encode(Truth(k, truth.ids[k - 1], x, send_time=t + TRUTH_DELAY * interval))
         for i, n in enumerate(names):
+            a = None if ages is None else ages[i][k - 1]
             out.append((t, "msg", n, keys.scan(n), encode(Scan(n, k, scans[i][k - 1], seq=k,
-                                                               send_time=t))))
+                                                               send_time=t, ages=a))))
             out.append((t + TRUTH_DELAY * interval, "msg", n, keys.truth(), t_msg))
     for m in inject:
         out.append((m.t, "msg", m.target, m.key, m.payload))
@@ -172,7 +175,8 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
                    link_delay=delay or no_delay,
                    result=TwinResult(peers=peers, tracks={n: {} for n in names}, faults=faults))
     if world is None:
-        world = world_events(scn, truth, scans, keys, interval, inject, events)
+        world = world_events(scn, truth, scans, keys, interval, inject, events,
+                             plot_ages(scn, run))
     for t, kind, target, *payload in world:
         clock.push(t, kind, target, *payload)
     clock.run(names, FusionBatch() if batch else None)

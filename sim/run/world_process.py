@@ -34,7 +34,7 @@ from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Scan, Truth
 from sensornet.sim.kinds import kind_of
 from sensornet.sim.scenario import Scenario
-from sensornet.sim.world import generate_run
+from sensornet.sim.world import generate_run, plot_ages
 
 TRUTH_DELAY = 0.5
 """The truth of scan ``k`` is published this fraction of a scan interval after its scans.
@@ -117,7 +117,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     speed = speed or scn.network.speed
     truth, scans = data if data is not None else generate_run(scn, run)
     world = _World(scn=scn, keys=Keys(network), name=run_id or network, speed=speed,
-                   truth=truth, scans=scans, bundles=bundles,
+                   truth=truth, scans=scans, ages=plot_ages(scn, run), bundles=bundles,
                    say=say or (lambda line: None), progress=progress)
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, world.on_signal)
@@ -171,6 +171,8 @@ class _World:
     truth: object
     scans: list
     """``scans[i][k - 1]``: sensor ``i``'s measurements ``(m, 2)`` at scan ``k``."""
+    ages: list | None
+    """``ages[i][k - 1]``: their plots' ages (:func:`sim.world.plot_ages`), or None."""
     bundles: dict[str, list[str]]
     say: Callable[[str], None]
     progress: Callable[[int], None] | None
@@ -304,7 +306,8 @@ class _World:
         parts = {}
         for i, s in enumerate(self.scn.sensors):
             z = self.scans[i][k - 1]
-            data = encode(Scan(s.name, k, z, seq=k, send_time=time.time()))
+            a = None if self.ages is None else self.ages[i][k - 1]
+            data = encode(Scan(s.name, k, z, seq=k, send_time=time.time(), ages=a))
             if s.name in self.bundled:
                 parts[s.name] = data
             else:

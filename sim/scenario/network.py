@@ -253,3 +253,12 @@ class LmbSpec:
                                                  "component of an adaptive birth (mean 0; its "
                                                  "position is the measurement's).", unit="m/s",
                                        check=POSITIVE)
+    time_slice: float = option(0.0, doc="Plots at their own times (issue 34, recorded "
+                                        "traffic): the world sends each plot's age with the "
+                                        "scan and the peer takes a rotating radar's plots in "
+                                        "slices of this length at the slice's midpoint "
+                                        "(sector `Pd` and clutter, as the asynchronous "
+                                        "centralised reference; `peers.lmb_own_times`), then "
+                                        "predicts to the tick; divides `scenario.scan_period`. "
+                                        "0: every plot at its tick.", unit="s",
+                               check=NONNEGATIVE)

@@ -214,16 +214,27 @@ def tick_plots(scn: Scenario, run: int) -> list[TickPlots]:
     return out
 
 
+def _per_tick(p: TickPlots, rows: np.ndarray, K: int) -> list[np.ndarray]:
+    """``rows`` (one per plot of ``p``) split by tick: ``out[k-1]`` in the plots' order."""
+    order = np.argsort(p.tick, kind="stable")
+    bounds = np.searchsorted(p.tick[order], np.arange(1, K + 2))
+    rows = rows[order]
+    return [rows[bounds[k]:bounds[k + 1]] for k in range(K)]
+
+
 def recorded_run(scn: Scenario, run: int) -> tuple[Truth, list[list[np.ndarray]]]:
     """Truth and every sensor's scan per tick: ``scans[s][k-1]`` is ``(m, 2)``."""
     K = scn.num_scans
-    scans = []
-    for p in tick_plots(scn, run):
-        order = np.argsort(p.tick, kind="stable")
-        bounds = np.searchsorted(p.tick[order], np.arange(1, K + 2))
-        z = p.z[order]
-        scans.append([z[bounds[k]:bounds[k + 1]] for k in range(K)])
+    scans = [_per_tick(p, p.z, K) for p in tick_plots(scn, run)]
     return recorded_truth(scn), scans
+
+
+def recorded_ages(scn: Scenario, run: int) -> list[list[np.ndarray]]:
+    """``ages[s][k-1]`` ``(m,)``: how long before ``t_k`` each plot of :func:`recorded_run`'s
+    ``scans[s][k-1]`` was made (s, in ``[0, T)``): its beam crossing's time, which the world
+    sends with the scan for peers that take plots at their own times (``lmb.time_slice``)."""
+    w, K, T = recorded_world(scn), scn.num_scans, scn.scan_period
+    return [_per_tick(p, p.tick * T - (p.t_meas - w.t0), K) for p in tick_plots(scn, run)]
 
 
 def alignment_errors(scn: Scenario, run: int = 0) -> np.ndarray:
@@ -244,4 +255,4 @@ def alignment_errors(scn: Scenario, run: int = 0) -> np.ndarray:
 
 RECORDED = TruthModel("recorded", "recorded aircraft ([traffic]) under rotating radars on their "
                                   "own clocks, fused on the common tick", recorded_truth,
-                      run=recorded_run)
+                      run=recorded_run, ages=recorded_ages)

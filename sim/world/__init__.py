@@ -206,6 +206,17 @@ def generate_run(scn: Scenario, run: int) -> tuple[Truth, list[list[np.ndarray]]
     return truth, scans
 
 
+def plot_ages(scn: Scenario, run: int) -> list[list[np.ndarray]] | None:
+    """``ages[s][k-1]`` ``(m,)``: how long before scan ``k``'s time each plot of
+    :func:`generate_run`'s ``scans[s][k-1]`` was made (s), sent with the scans when the
+    scenario takes plots at their own times (``lmb.time_slice`` > 0) and its truth model knows
+    them (recorded traffic); else None (every plot at its scan's time)."""
+    model = truth_model(scn.truth)
+    if scn.lmb.time_slice <= 0 or model.ages is None:
+        return None
+    return model.ages(scn, run)
+
+
 STRAIGHT = TruthModel("straight", "targets on straight lines from start to end (seed 000)",
                       straight_truth)
 
@@ -216,6 +227,7 @@ __all__ = [
     "generate_truth",
     "initial_state",
     "labelled_sensor_scans",
+    "plot_ages",
     "sensor_rng",
     "sensor_scans",
     "truth_rng",

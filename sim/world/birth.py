@@ -61,6 +61,12 @@ class Beam:
         inside = off <= swept + 2 * self.margin_deg
         return np.where(inside, self.pd(np.hypot(dx, dy)), 0.0)
 
+    def sector(self, start: float, end: float, means: np.ndarray) -> np.ndarray:
+        """``(n,)`` Pd of components ``means (n, 4)`` over the sector swept in ``(start,
+        end]`` (seconds after the run's origin): :meth:`detection` on a one-interval clock (a
+        slice of a tick, for plots taken at their own times)."""
+        return replace(self, phase=self.phase - start, T=end - start).detection(1, means)
+
 
 def plots_xy(model, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Plots ``z (m, 2)`` of ``model`` as x-y ``(m, 2)`` with covariances ``(m, 2, 2)``

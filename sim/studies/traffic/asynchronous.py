@@ -16,11 +16,10 @@ clutter intensity is the one inside the swept sector, ``clutter_rate / (pi r_max
 (per rotation over the coverage disc), not the tick filters' average over the circle.
 
 Between batches the motion is the constant-velocity model with continuous white-noise
-acceleration over the elapsed time (:class:`ElapsedMotion`; Bar-Shalom, Li & Kirubarajan,
-"Estimation with Applications to Tracking and Navigation", 2001, Sec. 6.2.2): its ``Q(dt)`` is
-additive over splits of ``dt``, so many short predictions equal one long one, which the
-scenario's discretised model (``Q = sigma_w^2 G G^T`` per step) is not. Its intensity
-``q = sigma_w^2 T`` gives one tick the velocity variance of the tick model.
+acceleration over the elapsed time (:class:`tracking.elapsed.ElapsedMotion`; Bar-Shalom, Li &
+Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001, Sec. 6.2.2).
+LMB peers with ``lmb.own_times`` take their own plots the same way
+(:mod:`peers.lmb_own_times`).
 
 The filters are the project's: :class:`tracking.lmb.LmbFilter` (one per radar, as
 :func:`sim.kinds.lmb.make_lmb_filter` builds it, sharing label origin 0) and the measurement
@@ -35,12 +34,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from functools import lru_cache
+from dataclasses import dataclass, replace
 
 import numpy as np
 from sensornet.peers.consensus_types import ConsensusOptions
-from sensornet.sim.kinds.lmb import MIN_CLUTTER_INTENSITY, make_lmb_filter
+from sensornet.sim.kinds.lmb import make_lmb_filter, sector_clutter
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.studies.labelled.centralised import Extracted
 from sensornet.sim.traffic.recorded import recorded_world, tick_plots
@@ -51,13 +49,8 @@ from sensornet.sim.world.birth import (
     plots_xy,
     unexplained,
 )
-from sensornet.sim.world.build import (
-    clutter_intensity,
-    make_filter,
-    make_reducer,
-    sensor_params,
-    sweep_fraction,
-)
+from sensornet.sim.world.build import make_filter, make_reducer, sensor_params
+from sensornet.tracking.elapsed import ElapsedMotion, slice_of, slices_per_tick
 from sensornet.tracking.gmphd import SensorParams, update_parents
 from sensornet.tracking.gmphd import predict as gmphd_predict
 from sensornet.tracking.label_keys import label_keys, new_labels
@@ -74,44 +67,6 @@ from sensornet.tracking.reduction import Reducer
 SLICE = 0.5
 """Default slice length (s): plots at most 0.25 s from their batch's time (about 60 m at
 250 m/s); chosen on the training hour (:mod:`.async_study`'s docstring)."""
-
-
-@lru_cache(maxsize=1024)
-def _cwna(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
-    """``F (4, 4)`` and ``Q (4, 4)`` of the CV model over ``dt`` with continuous white-noise
-    acceleration of intensity ``q`` (Bar-Shalom, Li & Kirubarajan 2001, eq. 6.2.2-12), state
-    ``[px, vx, py, vy]``."""
-    F1 = np.array([[1.0, dt], [0.0, 1.0]])
-    q1 = q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
-    F, Q = np.kron(np.eye(2), F1), np.kron(np.eye(2), q1)
-    F.setflags(write=False)
-    Q.setflags(write=False)
-    return F, Q
-
-
-@dataclass(frozen=True)
-class ElapsedMotion:
-    """Constant velocity over an elapsed time ``dt`` (s), continuous white-noise acceleration
-    ``q = sigma_w^2 T`` (module docstring): ``transition(steps)`` is over ``steps * dt``, the
-    interface of :class:`tracking.models.ConstantVelocity` the filters call."""
-
-    T: float
-    """The tick the scenario's ``sigma_w`` is stated for (s)."""
-    sigma_w: float
-    dt: float = 0.0
-    dim: int = field(default=4, init=False)
-
-    def __post_init__(self) -> None:
-        if not (self.T > 0 and self.sigma_w >= 0 and self.dt >= 0):
-            raise ValueError(f"ElapsedMotion needs T > 0, sigma_w >= 0, dt >= 0; got T={self.T}, "
-                             f"sigma_w={self.sigma_w}, dt={self.dt}")
-
-    def at(self, dt: float) -> ElapsedMotion:
-        """The same model over ``dt`` seconds."""
-        return replace(self, dt=float(dt))
-
-    def transition(self, steps: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        return _cwna(self.dt * steps, self.sigma_w**2 * self.T)
 
 
 @dataclass(frozen=True)
@@ -132,10 +87,7 @@ def plot_batches(scn: Scenario, run: int, slice_s: float = SLICE) -> list[list[B
     ones too: the beam swept the sector and saw nothing), at the slice's midpoint; a sensor
     without rotation one batch per tick at ``t_k`` (its snapshot)."""
     T, K = scn.scan_period, scn.num_scans
-    n = T / slice_s
-    if not (slice_s > 0 and abs(n - round(n)) < 1e-9):
-        raise ValueError(f"slice_s must divide scenario.scan_period ({T:g} s), got {slice_s!r}")
-    n = int(round(n))
+    n = slices_per_tick(T, slice_s)
     t0 = recorded_world(scn).t0
     out: list[list[Batch]] = [[] for _ in range(K)]
     for s, (spec, p) in enumerate(zip(scn.sensors, tick_plots(scn, run), strict=True)):
@@ -146,7 +98,7 @@ def plot_batches(scn: Scenario, run: int, slice_s: float = SLICE) -> list[list[B
             for k in range(K):
                 out[k].append(Batch(s, (k + 1) * T, k * T, (k + 1) * T, z[b[k]:b[k + 1]]))
             continue
-        j = np.ceil((p.t_meas - t0) / slice_s - 1e-9).astype(np.int64)  # slice of each plot
+        j = slice_of(p.t_meas - t0, slice_s)  # slice of each plot
         order = np.argsort(j, kind="stable")
         b = np.searchsorted(j[order], np.arange(1, K * n + 2))
         z = p.z[order]
@@ -163,15 +115,7 @@ def batch_pd(beam: Beam | None, fixed: float, batch: Batch, means: np.ndarray) -
     swept in ``(start, end]`` (:meth:`Beam.detection` of a one-slice clock), else ``fixed``."""
     if beam is None:
         return np.full(len(means), fixed)
-    sector = replace(beam, phase=beam.phase - batch.start, T=batch.end - batch.start)
-    return sector.detection(1, means)
-
-
-def sector_clutter(scn: Scenario, name: str) -> float:
-    """Clutter intensity inside a rotating radar's swept sector (the per-tick intensity over
-    the circle divided by the share swept), floored for the LMB's division."""
-    spec = scn.sensor(name)
-    return max(clutter_intensity(scn, spec) / sweep_fraction(scn, spec), MIN_CLUTTER_INTENSITY)
+    return beam.sector(batch.start, batch.end, means)
 
 
 @dataclass
