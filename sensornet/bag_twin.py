@@ -25,7 +25,7 @@ from sensornet.protocol.keys import ROOT, WORLD, Keys
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import TwinResult, run_twin, world_events
 from sensornet.sim.scenario import Scenario, ScenarioError, load_document, parse_overrides
-from sensornet.sim.world import generate_run
+from sensornet.sim.world import generate_run, plot_ages
 
 EPOCH = 1_700_000_000.0
 """The receive time (s since the epoch) a twin bag gives the twin's time 0."""
@@ -131,7 +131,7 @@ def twin_bag(path: Path, scn: Scenario, run: int = 0, network: str = "twin") -> 
     names = scn.sensor_names
     truth, scans = generate_run(scn, run)
     interval = scn.scan_period / scn.network.speed
-    world = world_events(scn, truth, scans, keys, interval, (), ())
+    world = world_events(scn, truth, scans, keys, interval, (), (), plot_ages(scn, run))
     items: list[Item] = []
     seen: set[tuple] = set()
     for t, kind, _target, *payload in world:  # the twin delivers a copy to every peer
