@@ -100,7 +100,6 @@ def build(scn: Scenario, name: str, run: int = 0):
                        tentative_scans=scn.lmb.tentative_scans,
                        republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,
                        tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap,
-                       corroborate_scans=scn.lmb.corroborate_scans,
                        own_times=own_times(scn, name))
     return est, mixture_fuser(scn, reducer)
 
