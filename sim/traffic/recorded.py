@@ -21,7 +21,9 @@ up to one tick earlier: the aircraft has moved on by ``v (t_k - t_plot)``, up to
 (500 m for 250 m/s and ``T = 2 s``) and ``v T / 2`` on average, along its track. Without the
 aircraft's velocity the world cannot move the plot (that would be using the truth), so the
 tick is kept short and the filters' noise covers it: measured by :func:`alignment_errors`
-(tests/test_traffic_scenario.py) and in docs/real-traffic.md.
+(tests/test_traffic_scenario.py) and in docs/real-traffic.md. With ``lmb.time_slice`` the world
+sends each plot's age with its scan (:func:`recorded_ages`, the Scan message's ``ages``), and
+LMB peers take the plots at their own times instead (:mod:`peers.lmb_own_times`).
 
 **Filters' view of a radar** (``sim.world.build.sensor_params``): in a tick of ``T`` the beam
 sweeps ``T / rotation_period`` of the circle, so the per-tick detection probability is
