@@ -18,8 +18,15 @@ row per run:
   messages it drew (about 150 per peer and 100 scans when it hears the peers; a view that hears
   only the world's scans and truth draws about one per sensor and scan).
 
-Then the ratio rows measured in the same invocation: view on / off per kind, LMB / GM-PHD per
-view setting (medians over the repeats).
+Then the ratio rows measured in the same invocation: each view setting / off per kind, LMB /
+GM-PHD per view setting (medians over the repeats).
+
+``--views`` takes ``off``, ``on`` (the view as ``sensornet run`` starts it: every thread in
+SCHED_IDLE), ``nice`` (the view before: its threads at nice 10, no ``--idle``) and ``discard``
+(the view subscribes and drops every message unread: what the subscription alone costs the
+peers, their reports and puts, without the view's drawing), so that the view's cost can be
+told apart: the peers' side (``discard`` / ``off``) and the view's CPU beside them (``nice``
+against ``on``).
 
 ``--gaps`` measures one LMB peer alone (no network): its step's CPU and OSPA when it leaves
 scans out, as a host that fell behind does (``peers.runtime`` ``_catch_up``), with LBP on a
@@ -27,6 +34,7 @@ step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every 
 
     python benchmarks/bench_fifty.py                       # 2 kinds x view off/on, 2 repeats
     python benchmarks/bench_fifty.py --kinds lmb --views off --repeats 3
+    python benchmarks/bench_fifty.py --views off,discard,nice,on   # the view's cost apart
     python benchmarks/bench_fifty.py --per-process 50      # one host of 50
     python benchmarks/bench_fifty.py --speed 4             # the same at 4 scans/s
     python benchmarks/bench_fifty.py --gaps                # one LMB peer leaving scans out
@@ -54,6 +62,7 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_fifty.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import sensornet.sim.run.launcher as launcher
 from sensornet.peers.host import SharedDecode
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.peers.telemetry import percentile
@@ -78,6 +87,8 @@ from benchmarks.bench_network import (
 CORES = 2.0
 """Cores of the machine the targets are stated for."""
 TICK = os.sysconf("SC_CLK_TCK")
+VIEWS = ("off", "on", "nice", "discard")
+"""The view settings of ``--views`` (module docstring)."""
 
 
 def proc_cpu_s(pid: int) -> float | None:
@@ -146,21 +157,36 @@ def scanning_window(samples: list[tuple[float, dict[str, float]]], world_start: 
     return max(world_start, end - seconds), end
 
 
+def view_command(view: str):
+    """``launcher._view_command`` for view setting ``view``: ``nice`` without ``--idle``,
+    ``discard`` with the diagnostic ``--discard``, ``on`` as it is."""
+    made = launcher._view_command
+
+    def command(*args, **kwargs) -> list[str]:
+        cmd = made(*args, **kwargs)
+        if view == "nice":
+            return [a for a in cmd if a != "--idle"]
+        return cmd + (["--discard"] if view == "discard" else [])
+
+    return command
+
+
 @dataclass
 class Run:
     kind: str
-    view: bool
+    view: str
     repeat: int
     rows: dict
     ok: bool
 
 
-def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_process: int | None,
+def one_run(tmp: Path, kind: str, view: str, repeat: int, scans: int, per_process: int | None,
             degree: int, n: int, speed: float = 10.0, sparse: bool = False,
             sets: tuple[str, ...] = ()) -> Run:
-    """One network run at ``speed`` scans/s; its numbers in ``rows`` (module docstring);
-    ``sets``: more scenario overrides (``KEY=VALUE``, as ``sensornet run --set``)."""
-    tag = f"{kind}-{'on' if view else 'off'}-{repeat}"
+    """One network run at ``speed`` scans/s with the view ``view`` (:data:`VIEWS`); its
+    numbers in ``rows`` (module docstring); ``sets``: more scenario overrides (``KEY=VALUE``,
+    as ``sensornet run --set``)."""
+    tag = f"{kind}-{view}-{repeat}"
     path = tmp / f"fifty-{n}-{degree}-{speed:g}.toml"
     path.write_text(scenario_text(n, degree, scans, rounds=2, speed=speed))
     overrides = [f"network.filter={kind}", *sets]
@@ -168,8 +194,12 @@ def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_proce
     per = per_process or choose(n, None, load=scenario_load(scn)).per_process
     probe = speed_probe()
     load0 = load_average()
-    handle = start_run(scn, str(path), tmp / tag, overrides=overrides, rerun=view,
-                       sparse=sparse, per_process=per)
+    made, launcher._view_command = launcher._view_command, view_command(view)
+    try:
+        handle = start_run(scn, str(path), tmp / tag, overrides=overrides, rerun=view != "off",
+                           sparse=sparse, per_process=per)
+    finally:
+        launcher._view_command = made
     t_start = time.monotonic()
     sampler = CpuSampler(handle).start()
     try:
@@ -179,7 +209,8 @@ def one_run(tmp: Path, kind: str, view: bool, repeat: int, scans: int, per_proce
         sampler.stop()
     out = tmp / tag
     s = read_summaries(out, scn.sensor_names)
-    res = {"codes": codes, "summaries": s, "scn": scn, "view": view_of(out) if view else None}
+    res = {"codes": codes, "summaries": s, "scn": scn,
+           "view": view_of(out) if view != "off" else None}
     ok, why, _ = real_time(res)
     interval = scn.scan_period / scn.network.speed
     t0, t1 = scanning_window(sampler.samples, t_start, scans * interval, interval)
@@ -227,23 +258,24 @@ def fmt(r: Run, n: int) -> str:
     parts = sorted((x.get("parts") or {}).items(), key=lambda kv: -kv[1])[:3]
     top = ", ".join(f"{k} {ms:.2f}" for k, ms in parts)
     view_cols = "- | - | -"
-    if r.view:
+    if r.view != "off":
         view_cols = (f"{v.get('cpu_ms_per_scan', nan):.1f} | {v.get('lag_median_ms', nan):.0f} "
                      f"/ {v.get('lag_p99_ms', nan):.0f} | {v.get('drawn', -1)}")
     work = x.get("cpu_peer", nan) * n * 10.0 / 1e3
-    return (f"| {r.kind} | {'on' if r.view else 'off'} | {r.repeat + 1} | {x['speed']:g} | "
+    return (f"| {r.kind} | {r.view} | {r.repeat + 1} | {x['speed']:g} | "
             f"{x['per']} | {'yes' if r.ok else 'NO'} | {x.get('min_scans', '-')} | "
             f"{100 * x.get('late', nan):.1f} / {100 * x.get('late_worst', nan):.1f} % | "
             f"{x.get('p50', nan):.1f} / {x.get('p99', nan):.1f} | {x.get('cpu_peer', nan):.2f} | "
             f"{top} | {x['cpu_total']:.2f} = {x['cpu_hosts']:.2f} + {x['cpu_world']:.2f} + "
-            f"{x['cpu_view'] if r.view else 0.0:.2f} | {work:.2f} | {x.get('ospa', nan):.2f} | "
+            f"{x['cpu_view'] if r.view != 'off' else 0.0:.2f} | {work:.2f} | "
+            f"{x.get('ospa', nan):.2f} | "
             f"{view_cols} | {x['load']} | {x['probe']:.0f} |")
 
 
-def ratio_rows(runs: list[Run], kinds: list[str], views: list[bool]) -> list[str]:
-    """Medians over repeats of the CPU per peer-scan, p99 and CPU per wall second: view on /
-    off per kind and LMB / GM-PHD per view setting."""
-    def med(kind: str, view: bool, key: str) -> float:
+def ratio_rows(runs: list[Run], kinds: list[str], views: list[str]) -> list[str]:
+    """Medians over repeats of the CPU per peer-scan, p99 and CPU per wall second: each view
+    setting / off per kind and LMB / GM-PHD per view setting."""
+    def med(kind: str, view: str, key: str) -> float:
         xs = [r.rows.get(key, float("nan")) for r in runs if r.kind == kind and r.view == view]
         xs = [x for x in xs if x == x]
         return statistics.median(xs) if xs else float("nan")
@@ -251,13 +283,14 @@ def ratio_rows(runs: list[Run], kinds: list[str], views: list[bool]) -> list[str
     keys = (("cpu_peer", "peers' CPU/peer-scan"), ("p99", "p99 scan->tracks"),
             ("cpu_total", "CPU s per wall s"))
     rows = ["| ratio | " + " | ".join(k[1] for k in keys) + " |", "|---|" + "---:|" * len(keys)]
-    if len(views) == 2:
+    if "off" in views:
         for kind in kinds:
-            rows.append(f"| {kind}: view on / off | " + " | ".join(
-                f"{med(kind, True, k) / med(kind, False, k):.2f}" for k, _ in keys) + " |")
+            for view in (v for v in views if v != "off"):
+                rows.append(f"| {kind}: view {view} / off | " + " | ".join(
+                    f"{med(kind, view, k) / med(kind, 'off', k):.2f}" for k, _ in keys) + " |")
     if "lmb" in kinds and "gmphd" in kinds:
         for view in views:
-            rows.append(f"| lmb / gmphd, view {'on' if view else 'off'} | " + " | ".join(
+            rows.append(f"| lmb / gmphd, view {view} | " + " | ".join(
                 f"{med('lmb', view, k) / med('gmphd', view, k):.2f}" for k, _ in keys) + " |")
     return rows
 
@@ -345,7 +378,10 @@ def part_twin(kinds: list[str], repeats: int, n: int = 50, degree: int = 4,
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--kinds", default="gmphd,lmb", help="network.filter values (default both)")
-    p.add_argument("--views", default="off,on", help="the live view: off, on or off,on")
+    p.add_argument("--views", default="off,on",
+                   help="the live view's settings, comma-separated: off, on (SCHED_IDLE, as run "
+                        "starts it), nice (nice 10, the view before), discard (subscribes, "
+                        "drops everything)")
     p.add_argument("--repeats", type=int, default=2, help="runs of each kind x view")
     p.add_argument("--scans", type=int, default=100, help="scans per run (default 100)")
     p.add_argument("--peers", type=int, default=50, help="peers (default 50)")
@@ -378,7 +414,9 @@ def main(argv: list[str] | None = None) -> int:
         part_gaps()  # prints its rows as they come
         return 0
     kinds = args.kinds.split(",")
-    views = [v == "on" for v in args.views.split(",")]
+    views = args.views.split(",")
+    if bad := [v for v in views if v not in VIEWS]:
+        p.error(f"--views: {bad[0]!r} is not one of {', '.join(VIEWS)}")
     print(f"## {args.peers} peers, degree {args.degree}, 2 rounds, {args.speed:g} scans/s, "
           f"{args.scans} "
           f"scans, peer hosts{''.join(' --set ' + x for x in args.sets)}; load average "
@@ -398,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
                     runs.append(r)
                     print(fmt(r, args.peers), flush=True)
                     if not r.ok:
-                        print(f"<!-- {r.kind} view {'on' if r.view else 'off'}: "
+                        print(f"<!-- {r.kind} view {r.view}: "
                               f"{r.rows['why']} -->", flush=True)
     print()
     print("\n".join(ratio_rows(runs, kinds, views)), flush=True)
