@@ -1,27 +1,29 @@
-"""What the defence against lying neighbours (``fusion.trust``) costs a peer-scan, old and new.
+"""What the defence against lying neighbours (``fusion.trust``) costs a peer-scan, per peer and
+host-batched.
 
 The twin (``sim.run.twin``, a virtual clock, no transport; the peers of one host: a shared
-decode, batched rounds) of ``n`` LMB peers on a circulant graph of degree 4, 2 consensus
-rounds, run three ways in ONE process, interleaved ``--repeats`` times: trust off, trust on
-with the trust checks of ``benchmarks/trust_before.py`` (the module before the speed-up,
-patched into the trust modules: one ``offset_information``, ``add_offset`` and ``gls_offset`` per
-neighbour, the unmatched weights made again by the withheld-target test) and trust on as
-it is. Prints per run the process CPU per peer-scan, then the medians and the ratios on /
-off; and whether the old and new runs published the same fused states to the bit and ended
-with the same trust states, scores and state changes (the speed-up must change no
-decision). Both trust-on runs take :attr:`TrustConfig.test_once` at its default (on: a full
-test once a scan where round 1 found nothing); ``--every-round`` adds a run with it off.
+decode, batched rounds, as a peer host runs them) of ``n`` LMB peers (``--filter gmphd``:
+GM-PHD) on a circulant graph of degree 4, 2 consensus rounds, run three ways in ONE process,
+interleaved ``--repeats`` times: trust off, trust on with each peer's trust test on its own
+(:meth:`peers.trust.Trust.weigh` per round, as before the host batching:
+``FusionBatch.trust_together`` off) and trust on as a host runs it (the rounds of one
+instant tested together, :func:`peers.trust_batch.weigh_together`). Prints per run the
+process CPU per peer-scan, then the medians and the ratios; and whether the per-peer and
+host-batched runs published the same fused states to the bit and ended with the same trust
+states, scores and state changes (the batching must change no number). Both trust-on runs
+take :attr:`TrustConfig.test_once` at its default (on: a full test once a scan where round 1
+found nothing); ``--every-round`` adds a host-batched run with it off.
 
     python benchmarks/bench_trust_cost.py                      # 50 peers, 40 scans, 2 repeats
     python benchmarks/bench_trust_cost.py --peers 20 --scans 20 --repeats 1
     python benchmarks/bench_trust_cost.py --peers 20 --scans 30 --repeats 1 --lie p02:biased
     python benchmarks/bench_trust_cost.py --every-round   # also TrustConfig.test_once off
+    python benchmarks/bench_trust_cost.py --filter gmphd  # GM-PHD peers (bench_fifty's kind)
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import statistics
 import sys
@@ -34,70 +36,22 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_trust_cost.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sensornet.peers import trust, trust_checks, trust_record, trust_repair, trust_scan
+from sensornet.peers.batching import FusionBatch
 from sensornet.peers.host import SharedDecode
+from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
-from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
 
-from benchmarks import trust_before
 from benchmarks.bench_network import scenario_text
-
-MODULES = (trust, trust_scan, trust_record, trust_repair)
-"""The modules that import the trust checks by name (patched for the 'old' runs)."""
-
-
-@contextlib.contextmanager
-def old_checks():
-    """The trust modules with ``benchmarks/trust_before.py``'s functions in place of
-    :mod:`peers.trust_checks`' (every name they imported from it)."""
-    saved = []
-    for mod in MODULES:
-        for name, value in vars(mod).items():
-            if callable(value) and getattr(trust_checks, name, None) is value \
-                    and hasattr(trust_before, name):
-                saved.append((mod, name, value))
-    saved.append((trust_scan, "offset_information_many", trust_scan.offset_information_many))
-    saved.append((trust_scan, "add_offsets", trust_scan.add_offsets))
-    saved.append((trust_scan, "gls_offsets", trust_scan.gls_offsets))
-    old = {name: getattr(trust_before, name) for _, name, _ in saved if name in vars(
-        trust_before)}
-    old["neighbour_statistics"] = _old_statistics
-    old["offset_information_many"] = _old_offsets
-    old["add_offsets"] = _old_add_offsets
-    old["gls_offsets"] = lambda infos: [trust_before.gls_offset([i]) for i in infos]
-    try:
-        for mod, name, _ in saved:
-            setattr(mod, name, old[name])
-        yield
-    finally:
-        for mod, name, value in saved:
-            setattr(mod, name, value)
-
-
-def _old_statistics(cfg, own, inputs, weights, quarantined, pos=(0, 2), keep=None):
-    """The old ``neighbour_statistics`` (which kept nothing for the withheld-target test)."""
-    return trust_before.neighbour_statistics(cfg, own, inputs, weights, quarantined, pos)
-
-
-def _old_offsets(ref, mixes, pos, min_weight, gate, chi2=None):
-    """The old per-neighbour ``offset_information`` calls."""
-    return [trust_before.offset_information(ref, m, pos, min_weight, gate, chi2)
-            for m in mixes]
-
-
-def _old_add_offsets(cfg, recs, infos):
-    """The old per-neighbour ``add_offset`` calls (its ``offset_chi2`` the old one)."""
-    return [trust_record.add_offset(cfg, rec, info) for rec, info in
-            zip(recs, infos, strict=True)]
 
 
 def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None,
-            once: bool | None = None):
+            once: bool | None = None, together: bool = True, kind: str = "lmb"):
     """One twin run (``lie``: ``fusion.lie``, e.g. ``p02:biased``; ``once``: the peers'
-    :attr:`TrustConfig.test_once`, None: the default): CPU ms per peer-scan, the fused
-    states and the trust summaries."""
-    over = {"network.filter": "lmb", "fusion.trust": trust_on}
+    :attr:`TrustConfig.test_once`, None: the default; ``together``: the rounds' trust
+    tests host-batched, else each on its own; ``kind``: ``network.filter``): CPU ms per
+    peer-scan, the fused states and the trust summaries."""
+    over = {"network.filter": kind, "fusion.trust": trust_on}
     if lie:
         over["fusion.lie"] = lie
     scn = load_scenario(str(path), overrides=over)
@@ -108,9 +62,13 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
         if once is not None and core.consensus.trust is not None:
             core.consensus.trust.cfg = dataclasses.replace(core.consensus.trust.cfg,
                                                            test_once=once)
-    t0 = time.process_time()
-    result = run_twin(scn, 0, peers=peers, batch=True)
-    ms = (time.process_time() - t0) * 1e3 / n / scans
+    twin.FusionBatch = lambda: FusionBatch(trust_together=together)  # the twin's batch
+    try:
+        t0 = time.process_time()
+        result = twin.run_twin(scn, 0, peers=peers, batch=True)
+        ms = (time.process_time() - t0) * 1e3 / n / scans
+    finally:
+        twin.FusionBatch = FusionBatch
     summaries = {}
     for q, core in peers.items():
         tr = core.consensus.trust
@@ -132,47 +90,54 @@ def main() -> None:
     p.add_argument("--peers", type=int, default=50)
     p.add_argument("--scans", type=int, default=40)
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--filter", default="lmb", choices=("lmb", "gmphd"),
+                   help="the peers' kind (network.filter)")
     p.add_argument("--every-round", action="store_true",
                    help="also trust on with TrustConfig.test_once off (every round tested "
                         "in full, as before 2026-12-05)")
     p.add_argument("--lie", default=None,
                    help="a lying peer (fusion.lie, e.g. p02:biased): the defence's decisions")
     args = p.parse_args()
-    n, scans = args.peers, args.scans
+    n, scans, kind = args.peers, args.scans, args.filter
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
-        ms: dict[str, list[float]] = {"off": [], "on (old)": [], "on (new)": []}
-        print(f"## twin of {n} LMB peers, degree 4, 2 rounds, {scans} scans")
+        ms: dict[str, list[float]] = {"off": [], "on (per peer)": [], "on (host-batched)": []}
+        print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans")
         print("| run | rep | CPU ms/peer-scan |\n|---|---:|---:|", flush=True)
         for rep in range(args.repeats):
-            v, _, _ = one_run(path, False, n, scans, args.lie)
+            v, _, _ = one_run(path, False, n, scans, args.lie, kind=kind)
             ms["off"].append(v)
             print(f"| off | {rep + 1} | {v:.2f} |", flush=True)
-            with old_checks():
-                v, tracks_old, sum_old = one_run(path, True, n, scans, args.lie)
-            ms["on (old)"].append(v)
-            print(f"| on (old) | {rep + 1} | {v:.2f} |", flush=True)
-            v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie)
-            ms["on (new)"].append(v)
-            print(f"| on (new) | {rep + 1} | {v:.2f} |", flush=True)
-            print(f"old vs new: fused states identical: {same_tracks(tracks_old, tracks_new)}, "
-                  f"trust summaries identical: {sum_old == sum_new} "
+            v, tracks_one, sum_one = one_run(path, True, n, scans, args.lie, together=False,
+                                             kind=kind)
+            ms["on (per peer)"].append(v)
+            print(f"| on (per peer) | {rep + 1} | {v:.2f} |", flush=True)
+            v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind)
+            ms["on (host-batched)"].append(v)
+            print(f"| on (host-batched) | {rep + 1} | {v:.2f} |", flush=True)
+            print(f"per peer vs host-batched: fused states identical: "
+                  f"{same_tracks(tracks_one, tracks_new)}, trust summaries identical: "
+                  f"{sum_one == sum_new} "
                   f"({sum(len(v['changes']) for v in sum_new.values())} state changes)",
                   flush=True)
             if args.every_round:
-                v, _, sum_all = one_run(path, True, n, scans, args.lie, once=False)
+                v, _, sum_all = one_run(path, True, n, scans, args.lie, once=False, kind=kind)
                 ms.setdefault("on (every round)", []).append(v)
                 print(f"| on (every round) | {rep + 1} | {v:.2f} |", flush=True)
-                print(f"every round vs new: trust summaries identical: {sum_all == sum_new} "
+                print(f"every round vs host-batched: trust summaries identical: "
+                      f"{sum_all == sum_new} "
                       f"({sum(len(v['changes']) for v in sum_all.values())} state changes)",
                       flush=True)
     med = {k: statistics.median(v) for k, v in ms.items()}
+    off = med["off"]
     print("\n" + ", ".join(f"{k} {v:.2f}" for k, v in med.items()) + " ms/peer-scan (medians)")
-    print(f"on (old) / off: {med['on (old)'] / med['off']:.2f}, "
-          f"on (new) / off: {med['on (new)'] / med['off']:.2f}, "
-          f"new / old: {med['on (new)'] / med['on (old)']:.2f}"
-          + (f", on (every round) / off: {med['on (every round)'] / med['off']:.2f}"
+    print(f"on (per peer) / off: {med['on (per peer)'] / off:.2f}, "
+          f"on (host-batched) / off: {med['on (host-batched)'] / off:.2f}, "
+          f"host-batched / per peer: {med['on (host-batched)'] / med['on (per peer)']:.2f}; "
+          f"trust ms/peer-scan: per peer {med['on (per peer)'] - off:.2f}, "
+          f"host-batched {med['on (host-batched)'] - off:.2f}"
+          + (f", on (every round) / off: {med['on (every round)'] / off:.2f}"
              if args.every_round else ""))
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sensornet.peers.contracts import FusionInput
+from sensornet.peers.trust_batch import weigh_together
 
 
 @dataclass(eq=False)
@@ -34,6 +35,11 @@ class FusionJob:
     senders: list[str]
     forced: bool = False
     """The scan's deadline passed: run its remaining rounds with what arrived."""
+    trust: tuple | None = None
+    """The round's trust test still to run (``input`` None until it has): the arguments of
+    its :meth:`peers.trust.Trust.weigh` and the round's inputs
+    (:meth:`peers.consensus_batch.BatchedRounds.tested`); the batch runs every job's
+    together (:func:`peers.trust_batch.weigh_together`)."""
     settled: bool = False
     """Fused already (settled on the spot) or cancelled: the batch skips it."""
 
@@ -46,6 +52,9 @@ class FusionBatch:
     stacked: int = 0
     """Jobs fused through a ``fuse_many`` with at least one other (for the summary)."""
     runs: int = 0
+    trust_together: bool = True
+    """The jobs' trust tests together (:func:`peers.trust_batch.weigh_together`); False:
+    each on its own (:meth:`peers.trust.Trust.weigh`, the same numbers: to compare)."""
 
     def add(self, job: FusionJob) -> None:
         self.jobs.append(job)
@@ -58,10 +67,20 @@ class FusionBatch:
         if not jobs:
             return []
         self.runs += 1
+        results: dict[int, tuple[object, Exception | None]] = {}
+        tested = [j for j in jobs if j.trust is not None]
+        if tested:  # every round's trust test at once, then each job's inputs
+            calls = [(j.consensus.trust, *j.trust[0]) for j in tested]
+            weights = weigh_together(calls) if self.trust_together else [
+                _alone(trust, args) for trust, *args in calls]
+            for j, w in zip(tested, weights, strict=True):
+                exc = j.consensus.tested(j, w)
+                if exc is not None:
+                    results[id(j)] = (None, exc)
         groups: dict[object, list[FusionJob]] = {}
         for j in jobs:
-            groups.setdefault(j.consensus.fuser_hooks.batch_key, []).append(j)
-        results: dict[int, tuple[object, Exception | None]] = {}
+            if id(j) not in results:
+                groups.setdefault(j.consensus.fuser_hooks.batch_key, []).append(j)
         for group in groups.values():
             fused = None
             if len(group) > 1:
@@ -88,6 +107,14 @@ class FusionBatch:
                 seen.add(id(j.consensus))
                 done.append(j.consensus)
         return done
+
+
+def _alone(trust, args: list):
+    """``trust.weigh(*args)``, or the exception it raised (as :func:`weigh_together` gives)."""
+    try:
+        return trust.weigh(*args)
+    except Exception as exc:  # noqa: BLE001 - that round failed, as in the batch
+        return exc
 
 
 def prepare_local_steps(scans: list[tuple[Any, Any, bytes]]) -> list:

@@ -260,8 +260,14 @@ class Consensus(BatchedRounds):
         senders = sorted(inputs)
         weights = metropolis_weights(self.o.name, senders, self._deg,
                                      uniform=self.o.omega == "uniform")
-        if self.trust is not None and isinstance(st.current, GaussianMixture):
-            inputs, senders, weights = self._trusted(st, inputs, senders, weights)
+        call = (self._trust_call(st, inputs, senders, weights)
+                if self.trust is not None and isinstance(st.current, GaussianMixture) else None)
+        if call is not None and self.batch is not None and self.batchable and not now_only:
+            st.pending = FusionJob(self, st, None, senders, forced, trust=(call, inputs))
+            self.batch.add(st.pending)  # tested with the batch's (peers.trust_batch)
+            return []
+        if call is not None:
+            inputs, senders, weights = self._trusted(call, inputs, self.trust.weigh(*call))
         inp = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
         st.inputs = inp
         if self.batch is not None and self.batchable and not now_only:
@@ -340,19 +346,28 @@ class Consensus(BatchedRounds):
         self._fresh += out.fresh
         return out
 
-    def _trusted(self, st: ScanState, inputs: dict, senders: list[str], weights: list[float]):
-        """The round's inputs and weights after the trust test: a neighbour's weight scaled by
-        its trust (the rest to own); a neighbour at weight 0 is left out (fusers that do not
-        use the weights, e.g. the single-target rules, must not see it)."""
+    def _trust_call(self, st: ScanState, inputs: dict, senders: list[str],
+                    weights: list[float]) -> tuple | None:
+        """The arguments of the round's :meth:`Trust.weigh` (None: raw scans, not
+        densities, are fused)."""
         mixes = {s: inputs[s]["posterior"] for s in senders}
         if not all(isinstance(m, GaussianMixture) for m in mixes.values()):
-            return inputs, senders, weights  # raw scans: not densities
+            return None
         late = None
         if st.round == 0:  # made at an earlier scan, predicted forward: as received
             late = {s: self.nale.stored[s] for s in senders
                     if s in self.nale.stored and self.nale.stored[s][0] < st.k}
-        weights = self.trust.weigh(st.k, st.round, st.current, mixes, list(weights),
-                                   drop_suspects=self.fuser_hooks.product, late=late)
+        return (st.k, st.round, st.current, mixes, list(weights), self.fuser_hooks.product,
+                late)
+
+    def _trusted(self, call: tuple, inputs: dict, weights: list[float]):
+        """The round's inputs, senders and weights after the trust test (``call``:
+        :meth:`_trust_call`'s, ``weights``: what :meth:`Trust.weigh` gave): a neighbour's
+        weight scaled by its trust (the rest to own); a neighbour at weight 0 is left out
+        (fusers that do not use the weights, e.g. the single-target rules, must not see
+        it)."""
+        mixes = call[3]
+        senders = sorted(mixes)
         self.records.extend(self.trust.drain_records())
         if self.trust.cfg.register or self.trust.cfg.repair:  # repaired / registered
             inputs = {s: {**inputs[s], "posterior": self.trust.fused_input(s, mixes[s])}

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from sensornet.peers.batching import FusionJob
 from sensornet.peers.consensus_types import ScanState
+from sensornet.peers.contracts import FusionInput
 from sensornet.tracking.mixture import GaussianMixture
 
 
@@ -18,8 +19,9 @@ class BatchedRounds:
     """The batch half of :class:`peers.consensus.Consensus` (mixed into it).
 
     It uses the consensus's ``batch``, ``batchable``, ``_scan`` (the
-    :class:`~peers.consensus_types.ScanState` being fused), ``stats``, ``fuser``, ``_completed``
-    and its round steps ``_fuse_round``, ``_fused``, ``_failed`` and ``_advance``.
+    :class:`~peers.consensus_types.ScanState` being fused), ``stats``, ``fuser``, ``trust``,
+    ``_completed`` and its round steps ``_fuse_round``, ``_fused``, ``_failed``,
+    ``_advance`` and ``_trusted``.
     """
 
     def close(self, now: float) -> bool:
@@ -58,11 +60,34 @@ class BatchedRounds:
         if job is None:
             return []
         job.settled, st.pending = True, None
+        if job.trust is not None:  # its trust test first, on its own
+            try:
+                weights = self.trust.weigh(*job.trust[0])
+            except Exception as exc:  # noqa: BLE001 - as the batch scores it
+                weights = exc
+            exc = self.tested(job, weights)
+            if exc is not None:
+                return self._failed(st, exc)
         try:
             fused = self.fuser.fuse(job.input)
         except Exception as exc:
             return self._failed(st, exc)
         return self._fused(st, fused, job.senders, now)
+
+    def tested(self, job: FusionJob, weights: list[float] | BaseException
+               ) -> BaseException | None:
+        """A queued round's trust test done (``weights``: what its
+        :meth:`~peers.trust.Trust.weigh` gave, or raised): the job's inputs, senders and
+        weights as :meth:`~peers.consensus.Consensus._fuse_round` makes them after the test.
+        Returns the exception, if the test raised (the round then failed)."""
+        call, inputs = job.trust
+        job.trust = None
+        if isinstance(weights, BaseException):
+            return weights
+        st = job.state
+        inputs, job.senders, weights = self._trusted(call, inputs, weights)
+        job.input = st.inputs = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
+        return None
 
     def complete(self, job: FusionJob, fused: GaussianMixture | None,
                  exc: Exception | None, now: float) -> None:

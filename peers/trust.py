@@ -21,12 +21,15 @@ runs): docs/trust-calibration.md.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Generator
 
 import numpy as np
 from sensornet.peers.trust_checks import (
+    centred,
     divergence_test,
-    neighbour_statistics,
+    neighbour_statistics_steps,
     offset_information,
+    run_alone,
     shape_overlaps,
     target_mass,
 )
@@ -99,9 +102,15 @@ class Trust(ScanTests):
         average of the other trusted inputs (weights ``weights``, own's under ``""``):
         :func:`peers.trust_checks.neighbour_statistics`, quarantined neighbours and
         ``left_out`` (stale inputs) left out of the references (``keep``: as there)."""
+        return run_alone(self._statistics_steps(own, inputs, weights, left_out, keep))
+
+    def _statistics_steps(self, own: GaussianMixture, inputs: dict[str, GaussianMixture],
+                          weights: dict[str, float], left_out: set[str] = frozenset(),
+                          keep: dict | None = None) -> Generator:
+        """:meth:`statistics` as requests (:func:`peers.trust_checks.run_alone`)."""
         out = {s for s in inputs if self.n[s].state == "quarantined"} | set(left_out)
-        return neighbour_statistics(self.cfg, own, inputs, weights, out,
-                                    (self.pos[0], self.pos[1]), keep)
+        return (yield from neighbour_statistics_steps(self.cfg, own, inputs, weights, out,
+                                                      (self.pos[0], self.pos[1]), keep))
 
     def weigh(self, k: int, rnd: int, own: GaussianMixture,
               inputs: dict[str, GaussianMixture], weights: list[float],
@@ -113,7 +122,16 @@ class Trust(ScanTests):
         where any weight above 0 lets a confident lie veto the product): a neighbour below
         full trust gets weight 0. ``late`` (round 0): the neighbours whose input was made at
         an earlier scan (predicted forward), with that scan and the density as received
-        (:attr:`TrustConfig.same_scan`)."""
+        (:attr:`TrustConfig.same_scan`). Several peers' at once, the same numbers:
+        :func:`peers.trust_batch.weigh_together`."""
+        return run_alone(self.weigh_steps(k, rnd, own, inputs, weights, drop_suspects, late))
+
+    def weigh_steps(self, k: int, rnd: int, own: GaussianMixture,
+                    inputs: dict[str, GaussianMixture], weights: list[float],
+                    drop_suspects: bool = False,
+                    late: dict[str, tuple[int, GaussianMixture]] | None = None) -> Generator:
+        """:meth:`weigh` as a generator of requests (:func:`peers.trust_checks.run_alone`):
+        its divergences, offsets and charts computed with other peers' by a host."""
         names = sorted(inputs)
         if not self.cfg.enabled:
             return list(weights)
@@ -135,10 +153,11 @@ class Trust(ScanTests):
         late = {s: v for s, v in late.items() if s in inputs and v[0] < k}
         wmap = {"": weights[0], **dict(zip(names, weights[1:], strict=True))}
         shown = {s: self.shift(s, m) for s, m in inputs.items()}  # registered, if any
-        if rnd > 0 and cfg.test_once and self._settled(k, names) and self._agree(own, shown):
+        if rnd > 0 and cfg.test_once and self._settled(k, names) and (
+                yield from self._agree(own, shown)):
             return self._reuse(k, rnd, names, weights)
         self.made = {}  # what the statistics made that this round's other tests take
-        stats = self.statistics(own, shown, wmap, set(late), self.made)
+        stats = yield from self._statistics_steps(own, shown, wmap, set(late), self.made)
         self.fused_in = {}
         if cfg.repair:
             stats = self._repair(k, rnd, own, shown, wmap, stats, set(late))
@@ -147,7 +166,7 @@ class Trust(ScanTests):
             self._repeat_test(tested, stats)
         raw = dict(stats)
         if rnd == 0:
-            self._scan_tests(own, shown, late, tested, stats)
+            yield from self._scan_tests(own, shown, late, tested, stats)
         held = {s for s in names if is_held(cfg, self.n[s])}
         return self._normalised(wmap[""], [wmap[s] * self._weight(
             k, rnd, s, stats[s], raw[s], s in tested, s in held, drop_suspects)
@@ -176,16 +195,17 @@ class Trust(ScanTests):
                 return False
         return True
 
-    def _agree(self, own: GaussianMixture, shown: dict[str, GaussianMixture]) -> bool:
+    def _agree(self, own: GaussianMixture, shown: dict[str, GaussianMixture]) -> Generator:
         """The guard of :attr:`TrustConfig.test_once`: whether every neighbour's density of
         this round (``shown``) is within ``drift`` of own's by its divergence test against
         own alone (:func:`peers.trust_checks.divergence_test`; one matrix of overlaps, no
-        reference average, majority or once-a-scan test)."""
+        reference average, majority or once-a-scan test; a generator of requests, its value
+        the answer)."""
         cfg = self.cfg
         names = sorted(shown)
         mixes = [own] + [shown[s] for s in names]
-        L = log_overlaps(mixes)
-        L0 = shape_overlaps(cfg, mixes)
+        L = yield ("overlaps", mixes)
+        L0 = (yield ("overlaps", centred(mixes))) if cfg.location_only else None
         w = cfg.repeat_weight
         n_r, t_r = own.mass, target_mass(own, w)
         for j, mix in enumerate(mixes[1:], start=1):

@@ -24,6 +24,7 @@ import functools
 import itertools
 import math
 from collections import deque
+from collections.abc import Generator
 
 import numpy as np
 from sensornet.peers.trust_config import TrustConfig
@@ -35,6 +36,28 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
                          inputs: dict[str, GaussianMixture], weights: dict[str, float],
                          quarantined: set[str], pos: tuple[int, int] = (0, 2),
                          keep: dict | None = None) -> dict[str, float]:
+    """:func:`neighbour_statistics_steps` run on its own (:func:`run_alone`)."""
+    return run_alone(neighbour_statistics_steps(cfg, own, inputs, weights, quarantined, pos,
+                                                keep))
+
+
+def run_alone(steps: Generator):
+    """The value of a trust computation written as a generator of requests (``*_steps``:
+    each yields ``(op, *args)`` and is sent its result), every request computed on its own
+    (:data:`ALONE`); :func:`peers.trust_batch.run_together` computes several generators'
+    requests of one kind at once, the same numbers."""
+    try:
+        request = next(steps)
+        while True:
+            request = steps.send(ALONE[request[0]](*request[1:]))
+    except StopIteration as stop:
+        return stop.value
+
+
+def neighbour_statistics_steps(cfg: TrustConfig, own: GaussianMixture,
+                               inputs: dict[str, GaussianMixture], weights: dict[str, float],
+                               quarantined: set[str], pos: tuple[int, int] = (0, 2),
+                               keep: dict | None = None) -> Generator:
     """``T_j`` of every neighbour in ``inputs`` against ``own`` and the leave-one-out
     average of the other trusted inputs (weights ``weights``, own's under ``""``; the
     neighbours in ``quarantined`` are left out of every reference; ``pos``: the position
@@ -45,16 +68,16 @@ def neighbour_statistics(cfg: TrustConfig, own: GaussianMixture,
     making them again)."""
     names = sorted(inputs)
     mixes = [own] + [inputs[s] for s in names]
-    L = log_overlaps(mixes)
-    L0 = shape_overlaps(cfg, mixes)
+    L = yield ("overlaps", mixes)
+    L0 = (yield ("overlaps", centred(mixes))) if cfg.location_only else None
     mass = np.array([D.mass for D in mixes])
     tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
     U = None
     if cfg.majority and cfg.unmatched and cfg.detection_probability is not None:
-        U, _ = unmatched_weights(mixes, list(pos), cfg.repeat_weight, cfg.bias_gate,
-                                 cfg.gate_chi2)
+        U = yield ("unmatched", mixes, list(pos), cfg.repeat_weight, cfg.bias_gate,
+                   cfg.gate_chi2)
         if keep is not None:
             keep["unmatched"] = (mixes, U)
             keep["targets"] = tm
@@ -569,8 +592,12 @@ def shape_overlaps(cfg: TrustConfig, mixes: list[GaussianMixture]) -> np.ndarray
     None without it."""
     if not cfg.location_only:
         return None
-    return log_overlaps([GaussianMixture(D.weights, np.zeros_like(D.means), D.covs)
-                         for D in mixes])
+    return log_overlaps(centred(mixes))
+
+
+def centred(mixes: list[GaussianMixture]) -> list[GaussianMixture]:
+    """``mixes`` with every component moved to the origin (:func:`shape_overlaps`)."""
+    return [GaussianMixture(D.weights, np.zeros_like(D.means), D.covs) for D in mixes]
 
 
 def _cs_matrix(L: np.ndarray) -> np.ndarray:
@@ -685,3 +712,17 @@ def whole_losses(targets: np.ndarray, refs: np.ndarray, min_weight: float) -> np
     out = np.where(ref >= min_weight, (np.asarray(targets) <= 0.0).astype(float), np.nan)
     out[:1] = np.nan  # own
     return out
+
+
+ALONE = {
+    "overlaps": lambda mixes: log_overlaps(mixes),
+    "unmatched": lambda *args: unmatched_weights(*args)[0],
+    "offsets": lambda *args: offset_information_many(*args),
+    "chi2": lambda offsets, windows: offset_chi2_many(offsets, windows),
+    "cusums": lambda *args: offset_cusums(*args),
+}
+"""How :func:`run_alone` computes each request of the trust generators: ``"overlaps"``
+(:func:`tracking.divergence.log_overlaps`), ``"unmatched"`` (:func:`unmatched_weights`'
+``U``), ``"offsets"`` (:func:`offset_information_many`), ``"chi2"``
+(:func:`offset_chi2_many`), ``"cusums"`` (:func:`offset_cusums`); looked up when called
+(a test's patch of a module's function is seen)."""

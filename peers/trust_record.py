@@ -5,6 +5,7 @@ the offset windows and CUSUM, registration, the repeat test, the withheld-target
 from __future__ import annotations
 
 from collections import Counter, deque
+from collections.abc import Generator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,9 +15,8 @@ from sensornet.peers.trust_checks import (
     gls_trend,
     is_repeat,
     offset_chi2,
-    offset_chi2_many,
     offset_cusum,
-    offset_cusums,
+    run_alone,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking.mixture import GaussianMixture
@@ -141,16 +141,23 @@ def add_offsets(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[tuple]
                 ) -> list[tuple[float, ...]]:
     """:func:`add_offset` of several neighbours at once, the same windows and numbers (their
     chi-squares in one batch, :func:`peers.trust_checks.offset_chi2_many`)."""
+    return run_alone(add_offsets_steps(cfg, recs, infos))
+
+
+def add_offsets_steps(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[tuple]
+                      ) -> Generator:
+    """:func:`add_offsets` as requests (``"chi2"``, ``"cusums"``:
+    :func:`peers.trust_checks.run_alone`), so that a host computes its peers' at once."""
     for rec, info in zip(recs, infos, strict=True):
         push_window(rec.offsets, info, max(cfg.bias_windows))
         if cfg.register and cfg.register_drift:
             push_window(rec.drift_window, info, cfg.register_window)
-    out = offset_chi2_many([rec.offsets for rec in recs], cfg.bias_windows)
+    out = yield ("chi2", [rec.offsets for rec in recs], cfg.bias_windows)
     if cfg.bias_cusum and recs:  # every chart in one batch (offset_cusums)
         m = cfg.bias_cusum_directions
-        G = offset_cusums(np.array([np.zeros(m) if rec.cusum is None else rec.cusum
-                                    for rec in recs]), list(infos), cfg.bias_cusum_offset,
-                          cusum_directions(m))
+        G = yield ("cusums", np.array([np.zeros(m) if rec.cusum is None else rec.cusum
+                                       for rec in recs]), list(infos), cfg.bias_cusum_offset,
+                   cusum_directions(m))
         for i, (rec, g) in enumerate(zip(recs, G, strict=True)):
             rec.cusum = g
             out[i] = (*out[i], float(g.max()))

@@ -8,12 +8,13 @@ its methods use the state :class:`Trust` keeps (``cfg``, ``n``, ``pos``, ``fused
 
 from __future__ import annotations
 
+from collections.abc import Generator
+
 import numpy as np
 from sensornet.peers.trust_checks import (
     gls_offset,
     gls_offsets,
     offset_information,
-    offset_information_many,
     relative_offsets,
     target_mass,
     unmatched_weights,
@@ -22,7 +23,7 @@ from sensornet.peers.trust_checks import (
 )
 from sensornet.peers.trust_record import (
     NeighbourTrust,
-    add_offsets,
+    add_offsets_steps,
     offset_limits,
     push_window,
     registered_at,
@@ -38,16 +39,18 @@ class ScanTests:
     def _scan_tests(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
                     late: dict[str, tuple[int, GaussianMixture]],
                     tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
-                    stats: dict[str, float]) -> None:
+                    stats: dict[str, float]) -> Generator:
         """Round 0's other once-a-scan tests, raising ``stats`` to ``quarantine + drift``
-        where they fire: the offset tests (or registration) and the withheld-target CUSUM."""
+        where they fire: the offset tests (or registration) and the withheld-target CUSUM
+        (a generator of requests: :func:`peers.trust_checks.run_alone`)."""
         cfg = self.cfg
         alarm_stat = cfg.quarantine + cfg.drift
         if cfg.bias:
             follow = cfg.register and cfg.register_drift
             regs = {s: registered_at(self.n[s], a) if follow else None
                     for s, (a, _, _) in tested.items()}
-            infos = {s: _raw(info, regs[s]) for s, info in self._offsets(tested, follow).items()}
+            offsets = yield from self._offsets(tested, follow)
+            infos = {s: _raw(info, regs[s]) for s, info in offsets.items()}
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
                 infos = relative_offsets(infos, [s for s in infos if s not in late
                                                  and self.n[s].state != "quarantined"])
@@ -57,7 +60,8 @@ class ScanTests:
             for s, info in infos.items():
                 push_window(self.n[s].residuals, _raw(info, regs[s], -1.0),
                             max(cfg.bias_windows))
-            chi2s = add_offsets(cfg, [self.n[s] for s in infos], list(infos.values()))
+            chi2s = yield from add_offsets_steps(cfg, [self.n[s] for s in infos],
+                                                 list(infos.values()))
             for s, chi2 in zip(infos, chi2s, strict=True):
                 rec = self.n[s]
                 alarm = any(c > t for c, t in zip(chi2, offset_limits(cfg), strict=True))
@@ -72,10 +76,11 @@ class ScanTests:
                 stats[s] = max(stats[s], alarm_stat)
 
     def _offsets(self, tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
-                 follow: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                 follow: bool) -> Generator:
         """Each tested neighbour's :func:`peers.trust_checks.offset_information` against its
         reference (registered at its scan when ``follow``), those against one reference
-        (own, for every fresh one) together (:func:`offset_information_many`)."""
+        (own, for every fresh one) together (:func:`offset_information_many`; a generator of
+        requests)."""
         cfg = self.cfg
         groups: dict[int, tuple[GaussianMixture, list[str]]] = {}
         for s, (_, _, ref) in tested.items():
@@ -84,9 +89,8 @@ class ScanTests:
         for ref, names in groups.values():
             mixes = [self.shift(s, tested[s][1], tested[s][0]) if follow else tested[s][1]
                      for s in names]
-            out.update(zip(names, offset_information_many(
-                ref, mixes, self.pos, cfg.repeat_weight, cfg.bias_gate, cfg.gate_chi2),
-                strict=True))
+            out.update(zip(names, (yield ("offsets", ref, mixes, self.pos, cfg.repeat_weight,
+                                          cfg.bias_gate, cfg.gate_chi2)), strict=True))
         return {s: out[s] for s in tested}
 
     def _repair(self, k: int, rnd: int, own: GaussianMixture,

@@ -31,13 +31,13 @@ def _near(rng: np.random.Generator, own: GaussianMixture, shift: float = 0.0) ->
 def _counted(tr: Trust) -> list[int]:
     """Count ``tr``'s calls of its statistics (the test of a round)."""
     calls = [0]
-    plain = tr.statistics
+    plain = tr._statistics_steps  # what weigh (and statistics) run
 
     def statistics(*args, **kwargs):
         calls[0] += 1
         return plain(*args, **kwargs)
 
-    tr.statistics = statistics
+    tr._statistics_steps = statistics
     return calls
 
 

@@ -49,19 +49,72 @@ def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:
     P = np.concatenate([D.covs for D in full])
     with np.errstate(divide="ignore"):
         lw = np.log(w)
-    whole = len(full) == n  # no empty mixture: L is all of the term blocks
-    if C == len(full):  # one component each: the log-sum-exp of one term is the term
-        G = pair_terms(lw, m, P)
-        out = np.where(np.isfinite(G), G, -np.inf)
-        if whole:
-            return out
-        present = np.flatnonzero(sizes)
-        L[np.ix_(present, present)] = out
-        return L
+    if C == len(full) or C * C <= BLOCK_PAIRS:  # one block of terms (or one term each)
+        return _reduce_terms(pair_terms(lw, m, P), sizes)
     present = np.flatnonzero(sizes)
     starts = np.r_[0, np.cumsum(np.asarray(sizes)[present])[:-1]]
-    if C * C <= BLOCK_PAIRS:
-        G = pair_terms(lw, m, P)
+    out = _blocked(lw, m, P, starts, max(1, BLOCK_PAIRS // C))
+    if len(full) == n:
+        return out
+    L[np.ix_(present, present)] = out
+    return L
+
+
+def log_overlaps_many(groups: list[list[GaussianMixture]]) -> list[np.ndarray]:
+    """:func:`log_overlaps` of each group of mixtures (several peers' rounds at once, a peer
+    host's trust tests: :mod:`peers.trust_batch`), the same numbers to the bit: the pair
+    terms of every group's components in one computation (:func:`pair_terms`' arithmetic is
+    per pair, so a pair's term does not depend on the others), then each group's
+    log-sum-exps as :func:`log_overlaps` does them. Groups of another dimension than the
+    first non-empty one's, or beyond one block (:data:`BLOCK_PAIRS`), on their own."""
+    out: list[np.ndarray | None] = [None] * len(groups)
+    todo, dim = [], None
+    for i, mixes in enumerate(groups):
+        C = sum(len(D) for D in mixes)
+        d = next((D.dim for D in mixes if len(D)), None)
+        if C == 0 or C * C > BLOCK_PAIRS or (dim is not None and d != dim):
+            out[i] = log_overlaps(mixes)
+            continue
+        dim = d
+        todo.append((i, C))
+    if len(todo) < 2:
+        for i, _ in todo:
+            out[i] = log_overlaps(groups[i])
+        return out
+    full = [D for i, _ in todo for D in groups[i] if len(D)]
+    w = np.concatenate([D.weights for D in full])
+    m = np.concatenate([D.means for D in full])
+    P = np.concatenate([D.covs for D in full])
+    with np.errstate(divide="ignore"):
+        lw = np.log(w)
+    ends = np.cumsum([C for _, C in todo])
+    a = np.concatenate([_upper(C)[0] + (e - C) for (_, C), e in zip(todo, ends, strict=True)])
+    b = np.concatenate([_upper(C)[1] + (e - C) for (_, C), e in zip(todo, ends, strict=True)])
+    inv, det = inv_det_spd((P[a] + P[b])[None])
+    g = lw[a] + lw[b] + log_gaussian((m[a] - m[b])[None], inv, det)[0]
+    lo = 0
+    for i, C in todo:
+        u, v = _upper(C)
+        G = np.empty((C, C))
+        G[u, v] = g[lo:lo + len(u)]
+        G[v, u] = g[lo:lo + len(u)]
+        lo += len(u)
+        out[i] = _reduce_terms(G, [len(D) for D in groups[i]])
+    return out
+
+
+def _reduce_terms(G: np.ndarray, sizes: list[int]) -> np.ndarray:
+    """``L`` (``(n, n)``) from the pair terms ``G`` (``(C, C)``) of mixtures of ``sizes``
+    components (``C`` in all, ``C * C`` at most :data:`BLOCK_PAIRS`): :func:`log_overlaps`'
+    log-sum-exps over each two mixtures' blocks, the same operations."""
+    n = len(sizes)
+    C = len(G)
+    present = np.flatnonzero(sizes)
+    whole = len(present) == n
+    if C == len(present):  # one component each: the log-sum-exp of one term is the term
+        out = np.where(np.isfinite(G), G, -np.inf)
+    else:
+        starts = np.r_[0, np.cumsum(np.asarray(sizes)[present])[:-1]]
         blk = np.repeat(np.arange(len(present)), np.asarray(sizes)[present])  # of each one
         top = np.maximum.reduceat(np.maximum.reduceat(G, starts, axis=0), starts, axis=1)
         safe = np.where(np.isfinite(top), top, 0.0)
@@ -69,10 +122,9 @@ def log_overlaps(mixtures: list[GaussianMixture]) -> np.ndarray:
                             starts, axis=1)
         with np.errstate(divide="ignore"):
             out = np.where(np.isfinite(top), safe + np.log(S), -np.inf)
-    else:
-        out = _blocked(lw, m, P, starts, max(1, BLOCK_PAIRS // C))
     if whole:
         return out
+    L = np.full((n, n), -np.inf)
     L[np.ix_(present, present)] = out
     return L
 
@@ -145,4 +197,5 @@ def cs_divergence(p: GaussianMixture, q: GaussianMixture) -> float:
     return float(cs_from_log_overlaps(L[0, 1], L[0, 0], L[1, 1]))
 
 
-__all__ = ["BLOCK_PAIRS", "cs_divergence", "cs_from_log_overlaps", "log_overlaps", "pair_terms"]
+__all__ = ["BLOCK_PAIRS", "cs_divergence", "cs_from_log_overlaps", "log_overlaps",
+           "log_overlaps_many", "pair_terms"]

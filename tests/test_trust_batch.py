@@ -1,0 +1,252 @@
+"""A peer host's trust tests run together (peers/trust_batch.py) give each peer's own numbers.
+
+``weigh_together`` runs several peers' rounds of :meth:`Trust.weigh` in lockstep and computes
+their divergences, offsets and charts in stacked computations; every peer's weights, records
+and trust states must be those of its own ``weigh``, to the bit, over scans with lying,
+quarantined, registered, repaired and late neighbours. The stacked primitives are held to
+the one-at-a-time functions, and a twin with a liar publishes the same fused states and trust
+summaries whichever way its host tests.
+"""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sensornet.peers.batching import FusionBatch
+from sensornet.peers.trust import Trust, TrustConfig
+from sensornet.peers.trust_batch import TOGETHER, run_together, weigh_together
+from sensornet.peers.trust_checks import ALONE
+from sensornet.sim.run import twin
+from sensornet.sim.run.peers import make_peer
+from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.divergence import log_overlaps, log_overlaps_many
+from sensornet.tracking.mixture import GaussianMixture
+
+from benchmarks.bench_network import scenario_text
+
+
+def _mixture(rng: np.random.Generator, size: int, d: int = 4) -> GaussianMixture:
+    """``size`` components over a 2 km square (positions at 0 and 2), some heavy."""
+    if size == 0:
+        return GaussianMixture.empty(d)
+    A = rng.normal(0, 1, (size, d, d)) * rng.uniform(1, 40, (size, 1, 1))
+    return GaussianMixture(rng.uniform(0.05, 1.0, size), rng.uniform(-1000, 1000, (size, d)),
+                           A @ A.transpose(0, 2, 1) + np.eye(d))
+
+
+def test_log_overlaps_many_is_each_groups_log_overlaps_to_the_bit():
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        groups = []
+        for _ in range(int(rng.integers(1, 12))):
+            mixes = [_mixture(rng, int(rng.integers(0, 13))) for _ in range(rng.integers(1, 7))]
+            if rng.random() < 0.3:
+                mixes.append(mixes[0])  # identical inputs
+            if rng.random() < 0.2:  # one component each (or none)
+                mixes = [_mixture(rng, int(rng.integers(0, 2))) for _ in range(4)]
+            if rng.random() < 0.05:
+                mixes = [_mixture(rng, 2, d=2)]  # another dimension: on its own
+            groups.append(mixes)
+        for mixes, L in zip(groups, log_overlaps_many(groups), strict=True):
+            assert np.array_equal(L, log_overlaps(mixes))
+
+
+def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
+    """Random arguments of a stacked request kind, as the trust generators make them."""
+    if op == "overlaps":
+        return [([_mixture(rng, int(rng.integers(0, 6))) for _ in range(5)],)
+                for _ in range(int(rng.integers(2, 9)))]
+    out = []
+    for _ in range(int(rng.integers(2, 9))):
+        infos = []
+        for _ in range(int(rng.integers(1, 6))):  # per neighbour: a window of (I, y)
+            window = []
+            for _ in range(int(rng.integers(1, 20))):
+                B = rng.normal(0, 1, (2, 2))
+                I = B @ B.T * (rng.random() < 0.8)  # some scans matched nothing
+                window.append((I, rng.normal(0, 3, 2)))
+            infos.append(window)
+        if op == "chi2":
+            out.append(([list(w) for w in infos], (3, 16)))
+        else:
+            g = np.maximum(0.0, rng.normal(0, 5, (len(infos), 8)))
+            out.append((g, [w[0] for w in infos], 30.0, np.eye(2)[[0, 1, 0, 1, 0, 1, 0, 1]]))
+    return out
+
+
+@pytest.mark.parametrize("op", sorted(TOGETHER))
+def test_each_stacked_request_equals_its_own_computation(op):
+    rng = np.random.default_rng(len(op))
+    for _ in range(30):
+        args = _requests(rng, op)
+        for a, got in zip(args, TOGETHER[op](args), strict=True):
+            want = ALONE[op](*a)
+            if isinstance(want, np.ndarray):
+                assert np.array_equal(got, want)
+            else:
+                assert got == want
+
+
+NAMES = ("a", "b", "c", "d")
+
+
+def _round(rng: np.random.Generator, own: GaussianMixture, liar: str, k: int,
+           rnd: int) -> dict[str, GaussianMixture]:
+    """One round's inputs: honest ones near own; the liar per ``liar`` (``empty``, moved
+    ``200`` m, ``biased`` 30 m, ``random``); an honest neighbour sometimes losing a track."""
+    out = {}
+    for s in NAMES:
+        means = own.means + rng.normal(0, 3, own.means.shape)
+        mix = GaussianMixture(own.weights.copy(), means, own.covs.copy())
+        if s == "a" and rng.random() < 0.15 and len(mix):
+            mix = GaussianMixture(mix.weights[1:], mix.means[1:], mix.covs[1:])
+        out[s] = mix
+    m = out["c"]
+    if liar == "empty" and k > 3:
+        out["c"] = GaussianMixture.empty(4)
+    elif liar == "moved" and k > 3:
+        out["c"] = GaussianMixture(m.weights, m.means + 200.0, m.covs)
+    elif liar == "biased":
+        shift = np.zeros(4)
+        shift[[0, 2]] = 30.0
+        out["c"] = GaussianMixture(m.weights, m.means + shift, m.covs)
+    elif liar == "random" and k > 5:
+        out["c"] = _mixture(rng, int(rng.integers(0, 5)))
+    if liar == "repeat" and k > 4 and rnd == 0:
+        out["c"] = GaussianMixture(np.full(2, 0.9), np.zeros((2, 4)),
+                                   np.broadcast_to(np.eye(4) * 30, (2, 4, 4)))
+    return out
+
+
+CONFIGS = [
+    TrustConfig(detection_probability=0.9),
+    TrustConfig(detection_probability=0.9, test_once=False),
+    TrustConfig(detection_probability=0.95, repair=False, register=False),
+    TrustConfig(),
+    TrustConfig(detection_probability=0.9, location_only=True, renormalise=False),
+]
+LIARS = ("none", "empty", "moved", "biased", "random", "repeat")
+
+
+@pytest.mark.parametrize("c", range(len(CONFIGS)))
+def test_rounds_weighed_together_are_each_peers_own(c):
+    """Six peers (one per kind of liar among its neighbours), 14 scans of 2 rounds, some
+    round-0 inputs late (made a scan before): weights, records and the trust states of
+    every peer the same, to the bit, as its own weigh's."""
+    cfg = CONFIGS[c]
+    rng = np.random.default_rng(40 + c)
+    alone = [Trust(cfg, NAMES) for _ in LIARS]
+    for t in alone:
+        t.history = []  # every round's raw statistic (floats: compared to the bit)
+    together = copy.deepcopy(alone)
+    prev: list[dict] = [{} for _ in LIARS]
+    changes = 0
+    for k in range(1, 15):
+        owns = [_mixture(rng, int(rng.integers(1, 5))) if k % 4 == 1 or k == 1 else None
+                for _ in LIARS]
+        for rnd in (0, 1):
+            calls = []
+            for p, liar in enumerate(LIARS):
+                own = owns[p] if owns[p] is not None else _drift(alone[p].own_at, k, rng)
+                owns[p] = own
+                inputs = _round(rng, own, liar, k, rnd)
+                late = None
+                if rnd == 0 and prev[p] and rng.random() < 0.3:  # b's estimate a scan old
+                    late = {"b": (k - 1, prev[p]["b"])}
+                if rnd == 0:
+                    prev[p] = inputs
+                w = list(rng.uniform(0.1, 0.3, len(NAMES) + 1))
+                calls.append((k, rnd, own, inputs, w, bool(p % 2), late))
+            want = [t.weigh(*call) for t, call in zip(alone, calls, strict=True)]
+            got = weigh_together([(t, *call) for t, call in zip(together, calls, strict=True)])
+            assert got == want, (k, rnd)
+            for a, b in zip(alone, together, strict=True):
+                assert a.drain_records() == b.drain_records()
+                assert a.fused_in.keys() == b.fused_in.keys()
+                assert [a.n[s].last_statistic for s in NAMES] == [
+                    b.n[s].last_statistic for s in NAMES]
+    for a, b in zip(alone, together, strict=True):
+        a.finish()
+        b.finish()
+        assert a.summary() == b.summary()
+        assert a.history == b.history
+        changes += len(a.summary()["changes"])
+        for s in NAMES:
+            ra, rb = a.n[s], b.n[s]
+            assert (ra.score, ra.withheld, ra.last_offset_chi2) == (
+                rb.score, rb.withheld, rb.last_offset_chi2)
+            assert np.array_equal(ra.cusum, rb.cusum)
+            assert (ra.registered is None) == (rb.registered is None)
+            if ra.registered is not None:
+                assert np.array_equal(ra.registered, rb.registered)
+    assert changes > 0  # the liars were caught: the states moved
+
+
+def _drift(own_at: dict, k: int, rng: np.random.Generator) -> GaussianMixture:
+    """Own's density of the scan before, moved a little (the targets move)."""
+    last = own_at[max(own_at)] if own_at else _mixture(rng, 3)
+    return GaussianMixture(last.weights, last.means + rng.normal(0, 2, last.means.shape),
+                           last.covs)
+
+
+def test_a_generator_that_raises_has_its_exception_and_the_others_go_on():
+    def good():
+        L = yield ("overlaps", [GaussianMixture.empty(4)])
+        return L.shape
+
+    def bad():
+        yield ("overlaps", [GaussianMixture.empty(4)])
+        raise ValueError("broken")
+
+    out = run_together([good(), bad(), good()])
+    assert out[0] == out[2] == (1, 1)
+    assert isinstance(out[1], ValueError)
+
+
+@pytest.fixture(scope="module")
+def twin_runs():
+    """A twin of 8 GM-PHD peers with a shifted liar, its host testing each round on its own
+    and together."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "twin.toml"
+        path.write_text(scenario_text(8, 4, 12, rounds=2, speed=10.0))
+        scn = load_scenario(str(path), overrides={"network.filter": "gmphd",
+                                                   "fusion.trust": True,
+                                                   "fusion.lie": "p02:shifted"})
+        for together in (False, True):
+            peers = {q: make_peer(scn, q, 0, network="twin") for q in scn.sensor_names}
+            made: list[FusionBatch] = []
+
+            def batch(together=together, made=made):
+                made.append(FusionBatch(trust_together=together))
+                return made[-1]
+
+            saved = twin.FusionBatch
+            twin.FusionBatch = batch
+            try:
+                res = twin.run_twin(scn, 0, peers=peers, batch=True)
+            finally:
+                twin.FusionBatch = saved
+            summaries = {}
+            for q, core in peers.items():
+                core.consensus.trust.finish()
+                summaries[q] = core.consensus.trust.summary()
+            out[together] = (res, summaries, made[0])
+    return out
+
+
+def test_a_twins_host_tests_together_with_the_same_results(twin_runs):
+    (one, sum_one, _), (many, sum_many, batch) = twin_runs[False], twin_runs[True]
+    assert batch.stacked > 0  # the rounds did go through the batch
+    assert one.tracks.keys() == many.tracks.keys()
+    for q in one.tracks:
+        assert one.tracks[q].keys() == many.tracks[q].keys()
+        for k in one.tracks[q]:
+            assert np.array_equal(one.tracks[q][k], many.tracks[q][k])
+    assert sum_one == sum_many
+    assert any(v["changes"] for v in sum_many.values())  # the liar was noticed
