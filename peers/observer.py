@@ -149,7 +149,7 @@ class Observer:
     def _scan(self, k: int) -> dict:
         g = self._pending.get(k)
         if g is None:
-            g = self._pending[k] = {"values": {}, "events": [], "points": {}, "mixture": None,
+            g = self._pending[k] = {"values": {}, "events": [], "points": {},
                                     "tracks": False}
         return g
 
@@ -214,8 +214,7 @@ class Observer:
         hooks = core.consensus.hooks
         if isinstance(mix, GaussianMixture):
             self._set(k, "cardinality/local", float(mix.weights.sum()))
-            self._scan(k)["points"]["local/mixture"] = pack_marginals(
-                _heaviest(mix, FUSED_SHOWN))
+            self._scan(k)["points"]["local/mixture"] = heaviest_marginals(mix, FUSED_SHOWN)
         elif mix is not None and hooks.plane is not None:  # raw scans: the own scan
             self._scan(k)["points"]["local"] = np.asarray(hooks.plane(mix),
                                                           float).reshape(-1, 2)
@@ -251,8 +250,8 @@ class Observer:
             # step, each with a new scan set: only the last is sent); its place kept now
             g["points"]["pooled"] = None
             g["pooled"] = (hooks.plane, fused)
-        elif isinstance(fused, GaussianMixture):
-            self._scan(k)["mixture"] = _heaviest(fused, FUSED_SHOWN)
+        elif isinstance(fused, GaussianMixture):  # as points, as the local (no 4-D mixture)
+            self._scan(k)["points"]["fused/mixture"] = heaviest_marginals(fused, FUSED_SHOWN)
         view = hooks.pda_view()
         if view is not None:  # the gates and weighted returns: no other message has them
             self._scan(k)["points"].update(pack_gates(view, own=self.name))
@@ -298,7 +297,7 @@ class Observer:
             g["values"]["compute_ms/fusion"] = total - self._fusion_ms
             self._fusion_ms = total
         return Telemetry(self.name, k, g["values"], tuple(g["events"]), g["points"],
-                         g["mixture"], send_time=time.time())
+                         None, send_time=time.time())
 
     def flush(self, idle: bool, force: bool = False, host: bool = False) -> None:
         """Publish the complete reports once nothing waits (or at the end: every one), each
@@ -462,29 +461,32 @@ def unpack_gate(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.n
     return r[0].copy(), S, gamma, r[3:3 + m], r[3 + m:, 0]
 
 
-def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:
-    """The ``n`` heaviest components of ``mix``, reduced to what the map draws: their
-    position marginals in a 4-D ``[px, vx, py, vy]`` frame (velocity blocks unit), each 2x2
-    block symmetrised and floored at 1e-9 of its trace so that it is positive definite (an
-    IMM's 6-D fused covariance need not be, and the receiver refuses a mixture that is not;
-    one that is not even then is left out). Closed form per 2x2 block (Sylvester: ``a > 0``
-    and ``a d - b^2 > 0``): a stacked ``eigvalsh`` cost ~85 us a call, twice a scan."""
-    keep = np.argsort(mix.weights)[::-1][:n]
+def heaviest_marginals(mix: GaussianMixture, n: int) -> np.ndarray:
+    """The ``n`` heaviest components of ``mix``, heaviest first, reduced to what the map
+    draws: their position marginals packed as :func:`pack_marginals` packs them, ``(3 m, 2)``
+    rows ``[mx, my], [Pxx, Pxy], [Pyy, w]``, each 2x2 block symmetrised and floored at 1e-9 of
+    its trace so that it is positive definite (an IMM's 6-D fused covariance need not be);
+    one that is not even then is left out. Closed form per 2x2 block (Sylvester: ``a > 0``
+    and ``a d - b^2 > 0``), straight from the mixture's arrays: a watched peer does this twice
+    a scan, and a 4-D mixture made first and packed after cost it ~3x as much (issue 38)."""
+    w = mix.weights
+    keep = np.argsort(w)[::-1][:n]
     i, j = position_columns(mix.dim)  # integer indexes below: list ones cost 3x as much
-    mu, P = mix.means[keep], mix.covs[keep]
-    x, y = mu[:, i], mu[:, j]
-    a, d = P[:, i, i], P[:, j, j]
-    b = 0.5 * (P[:, i, j] + P[:, j, i])
+    P = mix.covs
+    a, d = P[keep, i, i], P[keep, j, j]
+    b = 0.5 * (P[keep, i, j] + P[keep, j, i])
     floor = 1e-9 * np.maximum(a + d, 1e-9)
     a, d = a + floor, d + floor
-    w = mix.weights[keep]
+    out = np.empty((len(keep), 3, 2))
+    out[:, 0, 0], out[:, 0, 1] = mix.means[keep, i], mix.means[keep, j]
+    out[:, 1, 0], out[:, 1, 1], out[:, 2, 0], out[:, 2, 1] = a, b, d, w[keep]
     good = (a > 0) & (a * d - b * b > 0)
     if not good.all():  # a degenerate one: not drawn
-        x, y, a, b, d, w = x[good], y[good], a[good], b[good], d[good], w[good]
-    m = len(w)
-    means = np.zeros((m, 4))
-    means[:, 0], means[:, 2] = x, y
-    covs = np.zeros((m, 4, 4))
-    covs[:, 1, 1] = covs[:, 3, 3] = 1.0
-    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = a, b, b, d
-    return GaussianMixture.trusted(w, means, covs)
+        out = out[good]
+    return out.reshape(-1, 2)
+
+
+def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:
+    """:func:`heaviest_marginals` as a 4-D ``[px, vx, py, vy]`` mixture (velocity blocks
+    unit): the marks the view draws."""
+    return unpack_marginals(heaviest_marginals(mix, n))

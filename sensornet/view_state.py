@@ -264,14 +264,14 @@ class ViewState:
                 self.b.points(f"peers/{n}/cells/points", k, t, z, colors, 2.5)
                 self.b.strips(f"peers/{n}/cells/extents", k, t, extents,
                               np.asarray(ecolors, np.uint8).reshape(-1, 3), 1.5)
-            elif name == "local/mixture":  # the peer's local estimate (position marginals)
-                self.mixture(f"peers/{n}", "local", k, unpack_marginals(z), color)
+            elif name in ("local/mixture", "fused/mixture"):  # position marginals
+                self.mixture(f"peers/{n}", name[:-8], k, unpack_marginals(z), color)
             elif name.startswith("pda/"):  # a PDA peer's validation gate of one sensor
                 self.gate(f"peers/{n}/{name}", k, z, color)
             elif name != "cells/labels":
                 self.b.points(f"peers/{n}/{name}", k, t, z, color,
                               2.0 if name == "local" else 1.0)
-        if msg.mixture is not None:
+        if msg.mixture is not None:  # a sender of before: the fused one as a mixture
             self.mixture(f"peers/{n}", "fused", k, msg.mixture, color)
 
     @staticmethod
