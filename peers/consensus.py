@@ -342,7 +342,9 @@ class Consensus(BatchedRounds):
                     pairs.append((mix, labels))
         own_first = bool(pairs) and pairs[0][0] is st.current
         bump = self.hooks.fresh_stamps() if st.round == 0 and own_first else None
-        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump)
+        # an AA fuser keeps each input's copy of a target (peers.fusers.AaFuser.copies)
+        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
+                          copies=bool(getattr(self.fuser, "copies", False)))
         self._fresh += out.fresh
         return out
 

@@ -71,6 +71,10 @@ class AaFuser(_MixtureFuser):
     """Arithmetic-average fusion of GM-PHD densities, then reduced."""
 
     rule = staticmethod(aa_fuse)
+    copies = True
+    """Its fused density keeps every input's component of a target (at reduced weight) unless
+    the reducer merged them, so the labelling releases no label won by two nearby copies
+    (peers.labelling.label_fused ``copies``)."""
 
 
 class HybridFuser(_MixtureFuser):

@@ -167,7 +167,8 @@ def _pairs(fused: GaussianMixture, t_m: np.ndarray, t_P: np.ndarray, src: np.nda
 
 def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, np.ndarray]],
                 origin: int, k: int, fresh_start: int = 0,
-                gate: float = LABEL_GATE, bump: np.ndarray | None = None) -> FusedLabels:
+                gate: float = LABEL_GATE, bump: np.ndarray | None = None,
+                copies: bool = False) -> FusedLabels:
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
@@ -177,7 +178,12 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     ``bump (b, 3)``: the own labels stamped at their first publication this scan (the
     estimator's ``fresh_stamps``). One that wins a fused component which no other input's track
     was paired with (uncorroborated: no neighbour holds the track) becomes ``(o, k + 1, i)``,
-    for the fused component and, through ``own``, the own estimator (:func:`corroborated`)."""
+    for the fused component and, through ``own``, the own estimator (:func:`corroborated`).
+
+    ``copies``: the fuser keeps every input's components at reduced weight (AA: Li 2022's
+    ``sum_i omega_i D_i``, reduced), so a row that lost its label to a heavier row within
+    ``gate`` of it is the same target's copy, not a second target: its own track is not released
+    (:func:`release_rows`)."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -203,6 +209,8 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         dup = np.zeros(len(by), dtype=bool)
         dup[1:] = keys[by[1:]] == keys[by[:-1]]
         won[wrows[by[dup]]] = False
+        keeper = np.arange(n)  # the row that kept each won label (a lost row: its heavier row)
+        keeper[wrows[by]] = wrows[by[np.maximum.accumulate(np.where(dup, 0, np.arange(len(by))))]]
         if bump is not None and len(bump):
             labels = corroborated(labels, won, J, S, bump, k)
         # own pairs whose winner is another label: what the own estimator adopts
@@ -218,12 +226,34 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         # an own track paired with a row that lost its label to a heavier row (a label two
         # targets held) releases it: it takes the row's fresh label (a RELEASE pair), else it
         # keeps the duplicated label and the row gets a new id every scan (docs/real-traffic.md)
-        rel = (S == 0) & ~won[J]
+        rel = release_rows(fused, J, (S == 0) & ~won[J], keeper, gate, copies)
         if rel.any():
             match = LabelMatch(np.concatenate([match.own, L[rel]]),
                                np.concatenate([match.nbr, labels[J[rel]]]),
                                np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
     return FusedLabels(labels, match, len(lost))
+
+
+def release_rows(fused: GaussianMixture, J: np.ndarray, rel: np.ndarray, keeper: np.ndarray,
+                 gate: float, copies: bool) -> np.ndarray:
+    """Which own pairs ``rel (p,)`` (of fused rows ``J (p,)``, lost their label to
+    ``keeper[J]``) release their label: all of them, unless ``copies``, then only those whose
+    row is outside ``gate`` of its keeper (the squared Mahalanobis distance of
+    :func:`_pairs`). Why (docs/labelled-tracking.md, "The study"): under AA each input's
+    component of one target survives at reduced weight, every input's track of it pairs with
+    its own copy, so one label is won by the target's copies; a release then gave the own track
+    a second id for its own target, two ids on one target (dup) that flipped back a scan later
+    (8542ee5: AA fused OSPA(2) 73.5 -> 92.0 m, confirmed switches 0 -> 8.0 per 1,000)."""
+    if not copies or not rel.any():
+        return rel
+    r = np.flatnonzero(rel)
+    a, b = J[r], keeper[J[r]]
+    dm = fused.means[a] - fused.means[b]
+    d2 = np.einsum("pi,pi->p", dm, np.linalg.solve(fused.covs[a] + fused.covs[b],
+                                                  dm[..., None])[..., 0])
+    out = rel.copy()
+    out[r[d2 <= gate]] = False
+    return out
 
 
 def corroborated(labels: np.ndarray, won: np.ndarray, J: np.ndarray, S: np.ndarray,
@@ -280,4 +310,5 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
 
 
 __all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "corroborated",
-           "input_tracks", "label_fused", "origin_of", "settle_scans", "take_moves"]
+           "input_tracks", "label_fused", "origin_of", "release_rows", "settle_scans",
+           "take_moves"]
