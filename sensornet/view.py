@@ -36,7 +36,8 @@ from sensornet.protocol.keys import ROOT, Keys
 from sensornet.view_columns import Batcher, strip_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_round
 
-__all__ = ["BEHIND", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE", "MAP_KEEP", "QUEUE_MAX", "TAIL",
+__all__ = ["BEHIND", "BEHIND_S", "END_DRAIN_S", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE",
+           "MAP_KEEP", "QUEUE_MAX", "TAIL",
            "Batcher", "LiveView", "ViewState", "cpu_seconds", "id_color", "id_labels",
            "idle_process", "later_round", "nice_process", "replay_recordings",
            "strip_array", "thread_policies"]
@@ -48,7 +49,15 @@ FLUSH_MAX_S = 8.0
 FLUSH_SHARE = 0.25
 MAP_KEEP = 12
 """Newest scans of one map entity kept per flush while the view is behind (more than
-:data:`BEHIND` / 4 messages waiting): older ones are decimated (counted)."""
+:data:`BEHIND` / 4 messages waiting, or its newest tracks drawn :data:`BEHIND_S` after their
+peer sent them): older ones are decimated (counted)."""
+BEHIND_S = 2.0
+"""Seconds from a peer's tracks to their drawing beyond which the view is behind: at 50 peers
+in two hosts a scan is ~5 messages, so :data:`BEHIND` / 4 waiting messages came only ~10 s
+behind, and a view in SCHED_IDLE left little CPU by a busy network must catch up sooner."""
+END_DRAIN_S = 10.0
+"""Seconds the view spends at its end on the messages still waiting (those heard before it
+stopped); what is left after is counted as dropped and said."""
 QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
@@ -173,18 +182,25 @@ class LiveView:
         while a flush (its own part) takes more than :data:`FLUSH_SHARE` of it."""
         t0 = time.monotonic()
         self._between = 0.0
-        self.batcher.map_keep = MAP_KEEP if self.q.qsize() > BEHIND // 4 else None
+        self.batcher.map_keep = MAP_KEEP if self.behind() else None
         self.batcher.flush(between=self.waiting)
         took = time.monotonic() - t0 - self._between
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:
             self.flush_s = min(FLUSH_MAX_S, 2 * self.flush_s)
         self.note()
 
+    def behind(self) -> bool:
+        """Whether the view runs behind the network: more than :data:`BEHIND` / 4 messages
+        wait, or the newest tracks it drew were more than :data:`BEHIND_S` old."""
+        lag = self.state.lag_ms
+        return self.q.qsize() > BEHIND // 4 or bool(lag and lag[-1] > 1e3 * BEHIND_S)
+
     def note(self, final: bool = False) -> None:
         """One line when the view fell behind (at most every 5 s): what it left out."""
         now = (self.dropped, self.skipped, self.batcher.decimated)
         if now != self._said and (final or time.monotonic() - self._said_at > 5.0):
-            self.say(f"view: behind the network: {now[0]} messages dropped on arrival, "
+            self.say(f"view: behind the network: {now[0]} messages dropped (on arrival or "
+                     f"unread at the end), "
                      f"{now[1]} estimates skipped, {now[2]} map frames decimated (the view's "
                      f"own work; the peers are not affected); flushing every {self.flush_s:g} s")
             self._said, self._said_at = now, time.monotonic()
@@ -209,8 +225,27 @@ class LiveView:
                 self.flush()
                 next_flush = time.monotonic() + self.flush_s
         self.drain(0.5)
+        self.finish()
         self.batcher.flush()
         self.note(final=True)
+
+    def finish(self) -> None:
+        """The messages still waiting at the end (heard before the view stopped: a view that
+        ran behind has seconds of them), for at most :data:`END_DRAIN_S` seconds; the rest
+        counted as dropped."""
+        end = time.monotonic() + END_DRAIN_S
+        while time.monotonic() < end:
+            try:
+                key, payload = self.q.get_nowait()
+            except queue.Empty:
+                return
+            self._take(key, payload)
+        while True:
+            try:
+                self.q.get_nowait()
+            except queue.Empty:
+                return
+            self.dropped += 1
 
 
 def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:

@@ -1,6 +1,7 @@
-"""The live view yields every core to the peers (issue 38): its threads in SCHED_IDLE, the run
-asks for it, a refusal falls back to nice and says so, and the ``--discard`` diagnostic drops
-everything but the world's control."""
+"""The live view yields every core to the peers and falls behind alone (issue 38): its threads
+in SCHED_IDLE, the run asks for it, a refusal falls back to nice and says so; a view whose
+drawing lags its peers by seconds decimates its map frames, and at its end draws what it heard
+(what it cannot is counted); the ``--discard`` diagnostic drops everything but the control."""
 
 from __future__ import annotations
 
@@ -8,14 +9,19 @@ import argparse
 import os
 import sys
 import threading
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import rerun as rr
+from sensornet.protocol.codec import encode
+from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.launcher import _view_command
 
 import sensornet.cli.commands.view as view_cmd
 import sensornet.view as view_mod
-from sensornet.view import LiveView, idle_process
+from sensornet.view import BEHIND_S, MAP_KEEP, LiveView, ViewState, idle_process
 
 linux = pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE: Linux")
 
@@ -110,6 +116,57 @@ def test_discard_drops_all_but_the_worlds_control():
     keep = LiveView("net", None, None, None, say=lambda s: None)
     keep._on_sample(_Sample("sensornet/net/truth", b"y"))
     assert keep.discarded == 0 and keep.q.qsize() == 1
+
+
+class _Rec:
+    def __init__(self) -> None:
+        self.paths: list[str] = []
+
+    def send_columns(self, path, indexes, columns):
+        self.paths.append(path)
+
+
+def _view(said: list[str] | None = None) -> LiveView:
+    return LiveView("net", lambda b: ViewState(b, ["s1"]), rr, _Rec(),
+                    say=(said.append if said is not None else lambda s: None))
+
+
+def test_a_view_whose_drawing_lags_by_seconds_decimates_its_map_frames():
+    """Few messages waiting, but the newest tracks drawn :data:`BEHIND_S` after they were
+    sent: behind (map frames beyond the newest :data:`MAP_KEEP` decimated, counted and said);
+    drawn promptly: not."""
+    said: list[str] = []
+    v = _view(said)
+    for k in range(1, MAP_KEEP + 6):
+        v.state.receive("sensornet/net/telemetry/s1", encode(Tracks(
+            "s1", k, np.zeros((1, 4)), send_time=time.time() - BEHIND_S - 1.0)))
+    assert v.q.qsize() == 0 and v.behind()
+    v.flush()
+    assert v.batcher.map_keep == MAP_KEEP and v.batcher.decimated > 0
+    assert said and "map frames decimated" in said[-1]
+    prompt = _view()
+    prompt.state.receive("sensornet/net/telemetry/s1",
+                         encode(Tracks("s1", 1, np.zeros((1, 4)), send_time=time.time())))
+    assert not prompt.behind()
+    prompt.flush()
+    assert prompt.batcher.map_keep is None and prompt.batcher.decimated == 0
+
+
+def test_at_its_end_the_view_draws_what_it_heard_and_counts_what_it_cannot(monkeypatch):
+    """Messages still waiting when the view stops are drawn (a view that ran behind has
+    seconds of them); with no time left for them they are counted as dropped."""
+    v = _view()
+    for k in range(1, 41):
+        v.q.put(("sensornet/net/telemetry/s1", encode(Tracks("s1", k, np.zeros((1, 4))))))
+    v.stop.set()
+    v.run()
+    assert v.state.handled == 40 and v.dropped == 0 and v.q.empty()
+    monkeypatch.setattr(view_mod, "END_DRAIN_S", 0.0)
+    late = _view()
+    for k in range(1, 41):
+        late.q.put(("sensornet/net/telemetry/s1", encode(Tracks("s1", k, np.zeros((1, 4))))))
+    late.finish()
+    assert late.state.handled == 0 and late.dropped == 40 and late.q.empty()
 
 
 if __name__ == "__main__":
