@@ -105,6 +105,7 @@ class LmbEstimator:
                  extraction: str = "cardinality", origin: int | None = None,
                  tentative_threshold: float | None = None, tentative_scans: int = 2,
                  republish_gap: int | None = None, tentative_gap: int | None = None,
+                 corroborate_scans: int = 1,
                  own_times: OwnTimes | None = None) -> None:
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
@@ -114,6 +115,8 @@ class LmbEstimator:
             raise ValueError(f"tentative_threshold must be in [0, 1], got {tentative_threshold}")
         if tentative_scans < 0:
             raise ValueError(f"tentative_scans must be >= 0, got {tentative_scans}")
+        if corroborate_scans < 1:
+            raise ValueError(f"corroborate_scans must be >= 1, got {corroborate_scans}")
         for name, gap in (("republish_gap", republish_gap), ("tentative_gap", tentative_gap)):
             if gap is not None and gap < 0:
                 raise ValueError(f"{name} must be >= 0 or None, got {gap}")
@@ -136,6 +139,10 @@ class LmbEstimator:
         self.tentative_gap = tentative_gap
         """The same for a label only ever published as tentative (``r`` at most the
         publication threshold); None: :attr:`republish_gap`."""
+        self.corroborate_scans = corroborate_scans
+        """Scans after its first publication in which a label no neighbour's track corroborates
+        (peers.labelling.corroborated) moves a scan later, each scan (:meth:`fresh_stamps`); 1:
+        only in the scan of its first publication, as GM-PHD peers' labels."""
         self.extraction_threshold = extraction_threshold
         self.extraction = extraction
         self.own_times = own_times
@@ -159,6 +166,10 @@ class LmbEstimator:
         """``(n,)`` the tracks of the last step that were not published (kept on feedback)."""
         self._stamped = np.zeros((0, 3), dtype=np.int64)
         """The labels the last step stamped at first publication (:meth:`fresh_stamps`)."""
+        self._moving = np.zeros((0, 3), dtype=np.int64)
+        """``(m, 3)`` own labels the last relabel moved a scan later (uncorroborated stamps)."""
+        self._moving_first = np.zeros(0, dtype=np.int64)
+        """``(m,)`` the scan each was first stamped (before any move)."""
         self._published = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Sorted keys of the labels of our tracks that have been on the network (published by
         us, or taken from it)."""
@@ -270,6 +281,7 @@ class LmbEstimator:
         if self.origin is None or len(t) == 0 or len(match) == 0:
             return
         moved, match = take_moves(t.labels, match, self._stamped)
+        self._note_moves(t.labels, moved)
         new = adopt_labels(moved, match)
         was, last, strong = self._lookup(label_keys(t.labels))
         self._remember(np.concatenate([self._published, label_keys(new[was])]),
@@ -322,6 +334,7 @@ class LmbEstimator:
         wait allows (docs/labelled-tracking.md, issue 33)."""
         t = self.state.tracks
         self._stamped = t.labels[:0]
+        moving = self._still_moving(k)
         if len(t) == 0:
             return
         keys = label_keys(t.labels)
@@ -348,9 +361,36 @@ class LmbEstimator:
                                                                t.means, t.covs, t.owner),
                                   self.state.hits, self.state.k, self.state.pending)
             was &= ~(new | shared_ok)
+        if len(moving):  # moved last scan, still uncorroborated: offered to move again
+            again = pub & np.isin(label_keys(labels), label_keys(moving))
+            self._stamped = np.concatenate([self._stamped, labels[again]])
         on = was | pub
         self._remember(label_keys(labels[on]), np.where(pub, k, last)[on],
                        ((strong & was) | (pub & high))[on])
+
+    def _note_moves(self, before: np.ndarray, after: np.ndarray) -> None:
+        """Remember the own labels :func:`peers.labelling.take_moves` moved (``before (n, 3)``
+        -> ``after (n, 3)``) with the scan each was first stamped, for :meth:`_still_moving`."""
+        diff = (before != after).any(axis=1)
+        if not diff.any():
+            self._moving = before[:0]
+            self._moving_first = np.zeros(0, dtype=np.int64)
+            return
+        old = before[diff]
+        first = old[:, 1].copy()
+        if len(self._moving):  # a label moved before keeps the scan of its first stamp
+            keys, prev = label_keys(old), label_keys(self._moving)
+            by = np.argsort(prev)
+            pos = np.searchsorted(prev[by], keys).clip(max=len(prev) - 1)
+            seen = prev[by][pos] == keys
+            first[seen] = self._moving_first[by[pos[seen]]]
+        self._moving, self._moving_first = after[diff], first
+
+    def _still_moving(self, k: int) -> np.ndarray:
+        """``(m, 3)`` the labels moved by the last relabel that may move again at scan ``k``:
+        now of scan ``k`` and first stamped less than :attr:`corroborate_scans` scans before."""
+        ok = (self._moving[:, 1] == k) & (k - self._moving_first < self.corroborate_scans)
+        return self._moving[ok]
 
     @staticmethod
     def _gap(gap: int | None) -> float:

@@ -88,6 +88,21 @@ def own_times(scn: Scenario, name: str) -> OwnTimes | None:
                     max(spec.detection_probability, 1e-12))
 
 
+LMB_CORROBORATE_SCANS = 3
+"""``lmb.corroborate_scans`` "auto" (0) for LMB peers that publish tentative tracks: an
+uncorroborated label moves in the first 3 scans after its first publication (decided on the
+labelled study's training runs, docs/labelled-tracking.md "Uncorroborated LMB labels keep
+moving")."""
+
+
+def corroborate_scans(scn: Scenario) -> int:
+    """``lmb.corroborate_scans``, or if 0 (auto) :data:`LMB_CORROBORATE_SCANS` with
+    ``lmb.tentative_threshold`` on, else 1 (a label moves only in its first scan, as before:
+    without tentative tracks, e.g. the real-traffic scenarios, nothing changes)."""
+    n = scn.lmb.corroborate_scans
+    return n if n > 0 else (LMB_CORROBORATE_SCANS if scn.lmb.tentative_threshold > 0 else 1)
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     shared = SHARED_ORIGIN if scn.network.birth_ids == "shared" else None
     origin = origin_of([s.name for s in scn.sensors], name) + (0 if shared is None else 1)
@@ -100,6 +115,7 @@ def build(scn: Scenario, name: str, run: int = 0):
                        tentative_scans=scn.lmb.tentative_scans,
                        republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,
                        tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap,
+                       corroborate_scans=corroborate_scans(scn),
                        own_times=own_times(scn, name))
     return est, mixture_fuser(scn, reducer)
 
