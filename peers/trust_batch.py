@@ -13,10 +13,22 @@ trust states are those of its own :meth:`Trust.weigh`.
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Callable, Generator
 
 import numpy as np
-from sensornet.peers.trust_checks import ALONE, offset_chi2_many, offset_cusums
+from sensornet.peers.trust_checks import (
+    ALONE,
+    _cs_scalar,
+    _lse_rows,
+    divergence_test,
+    gated,
+    offset_chi2_many,
+    offset_cusums,
+    pair_tests,
+    position_block,
+)
 from sensornet.tracking.divergence import log_overlaps_many
 
 
@@ -123,8 +135,222 @@ def _cusums(args: list[tuple]) -> list:
     return _by_key(args, lambda a: (a[2], a[3].tobytes(), a[0].shape[1:]), many)
 
 
+def _unmatched(args: list[tuple]) -> list[np.ndarray]:
+    """``"unmatched"``: :func:`peers.trust_checks.unmatched_weights`' ``U`` of every request
+    (the same ``pos``, ``min_weight``, ``gate``, ``chi2``) at once: every group's pairs of
+    target components gated in one computation (:func:`gated` is per pair), then each
+    group's sums as there (its own products: the same numbers)."""
+    return _by_key(args, lambda a: (tuple(a[1]), a[2], a[3], a[4]), _unmatched_group)
+
+
+def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
+    pos, min_weight, gate, chi2 = group[0][1:]
+    parts = []  # per request: (n, its components' owners, weights, X, P) or None
+    for mixes, *_ in group:
+        sel = [D.weights >= min_weight if len(D) else np.zeros(0, bool) for D in mixes]
+        owner = np.concatenate([np.full(int(m.sum()), i) for i, m in enumerate(sel)])
+        if len(owner) == 0:
+            parts.append((len(mixes), None))
+            continue
+        full = [D for D in mixes if len(D)]
+        keep = np.concatenate([m for m in sel if len(m)])
+        w = np.concatenate([D.weights for D in full])[keep]
+        X = np.concatenate([D.means for D in full])[keep][:, pos]
+        P = (position_block(np.concatenate([D.covs for D in full])[keep], pos)
+             if chi2 is not None else np.zeros((len(owner), 2, 2)))
+        parts.append((len(mixes), (owner, w, X, P)))
+    live = [p[1] for p in parts if p[1] is not None]
+    if live:
+        sizes = [len(q[0]) for q in live]
+        ends = np.cumsum(sizes)
+        X = np.concatenate([q[2] for q in live])
+        P = np.concatenate([q[3] for q in live])
+        a = np.concatenate([_square(C)[0] + (e - C) for C, e in zip(sizes, ends, strict=True)])
+        b = np.concatenate([_square(C)[1] + (e - C) for C, e in zip(sizes, ends, strict=True)])
+        close = gated(X[a] - X[b], P[a], P[b], gate, chi2)  # near(), pair by pair
+    out, pairs = [], 0
+    for n, part in parts:
+        if part is None:
+            out.append(np.zeros((n, n)))
+            continue
+        owner, w, _, _ = part
+        C = len(owner)
+        G = np.zeros((C, n))
+        G[np.arange(C), owner] = 1.0  # (C, n): which input a component is of
+        near_ = close[pairs:pairs + C * C].reshape(C, C)
+        pairs += C * C
+        hit = (near_.astype(float) @ G) > 0  # (C, n)
+        out.append(G.T @ (w[:, None] * ~hit))
+    return out
+
+
+def _square(C: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column of every entry of a ``(C, C)`` matrix, row-major."""
+    return np.repeat(np.arange(C), C), np.tile(np.arange(C), C)
+
+
+def _offsets(args: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+    """``"offsets"``: :func:`peers.trust_checks.offset_information_many` of every request
+    (each its own reference; the same ``pos``, ``min_weight``, ``gate``, ``chi2``) at once:
+    every component's nearest reference component (the references padded at their end
+    with components at infinity, never nearest), gate and inverse in one computation, the
+    sums per mixture as there."""
+    return _by_key(args, lambda a: (tuple(a[2]), a[3], a[4], a[5]), _offsets_group)
+
+
+def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
+    pos, min_weight, gate, chi2 = group[0][2:]
+    out = [[(np.zeros((2, 2)), np.zeros(2)) for _ in mixes] for _, mixes, *_ in group]
+    todo = []  # (request, its reference's target components, [(mixture, selection)])
+    for r, (ref, mixes, *_) in enumerate(group):
+        if len(ref) == 0:
+            continue
+        b = ref.weights >= min_weight
+        if not b.any():
+            continue
+        sel = [(i, M.weights >= min_weight) for i, M in enumerate(mixes) if len(M)]
+        sel = [(i, a) for i, a in sel if a.any()]
+        if sel:
+            todo.append((r, b, sel))
+    if not todo:
+        return out
+    top = max(int(b.sum()) for _, b, _ in todo)
+    mb = np.full((len(todo), top, 2), np.inf)  # (g, m, 2): padded at infinity
+    Pb = np.zeros((len(todo), top, 2, 2))
+    rows = []
+    for g, (r, b, sel) in enumerate(todo):
+        ref = group[r][0]
+        m = int(b.sum())
+        mb[g, :m] = ref.means[b][:, pos]
+        Pb[g, :m] = position_block(ref.covs[b], pos)
+        rows += [g] * sum(int(a.sum()) for _, a in sel)
+    mixes = [group[r][1][i].means[a] for r, _, sel in todo for i, a in sel]
+    ma = np.concatenate(mixes)[:, pos]  # (n, 2)
+    Pa = position_block(np.concatenate([group[r][1][i].covs[a] for r, _, sel in todo
+                                        for i, a in sel]), pos)  # (n, 2, 2)
+    rows = np.asarray(rows)
+    diff = ma[:, None, :] - mb[rows]  # (n, top, 2)
+    nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
+    d = diff[np.arange(len(ma)), nearest]
+    Pn = Pb[rows, nearest]
+    ok = gated(d, Pa, Pn, gate, chi2)
+    if not ok.any():
+        return out
+    Si = np.zeros_like(Pa)
+    Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
+    lo = 0
+    for r, _, sel in todo:
+        for i, a in sel:
+            hi = lo + int(a.sum())
+            k = ok[lo:hi]
+            if k.any():
+                S = Si[lo:hi][k]
+                out[r][i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
+            lo = hi
+    return out
+
+
+def _tests(args: list[tuple]) -> list[list[float]]:
+    """``"tests"``: :func:`peers.trust_checks.neighbour_tests` of every request (the same
+    config and number of inputs) at once: the pair tests, leave-one-out weights and
+    log-sum-exps stacked (the same elementwise and per-row operations), the references'
+    masses by the same products (a stacked ``matmul`` of 1 x n by n x 1: each a dot), each
+    neighbour's divergence tests and medians on Python floats as there."""
+    return _by_key(args, lambda a: (a[0], len(a[6]), a[2] is None, a[5] is None),
+                   _tests_group)
+
+
+def _tests_group(group: list[tuple]) -> list[list[float]]:
+    cfg = group[0][0]
+    n = len(group[0][6])
+    J = n - 1
+    if J == 0:
+        return [[] for _ in group]
+    L = np.stack([a[1] for a in group])  # (g, n, n)
+    L0 = None if group[0][2] is None else np.stack([a[2] for a in group])
+    mass = np.stack([a[3] for a in group])  # (g, n)
+    tm = np.stack([a[4] for a in group])
+    U = None if group[0][5] is None else np.stack([a[5] for a in group])
+    w = np.stack([a[6] for a in group])
+    pair = pair_tests(cfg, L, mass, tm, U, L0).tolist() if cfg.majority else None
+    W = np.repeat(w[:, None, :], J, axis=1)  # (g, J, n): row i leaves out input i + 1
+    W[:, np.arange(J), np.arange(1, J + 1)] = 0.0
+    tot = W.sum(axis=2)
+    has = (tot > 0) & (np.count_nonzero(W, axis=2) > 1)  # the others besides own
+    W = W / np.where(has, tot, 1.0)[..., None]
+    with np.errstate(divide="ignore"):
+        LW = np.log(W)
+    loo = _loo_stacked(L, LW)
+    loo0 = _loo_stacked(L0, LW) if L0 is not None else None
+    ref_mass = np.matmul(W[:, :, None, :], np.repeat(mass[:, None, :, None], J, axis=1))
+    ref_tm = np.matmul(W[:, :, None, :], np.repeat(tm[:, None, :, None], J, axis=1))
+    Ls, ms, ts = L.tolist(), mass.tolist(), tm.tolist()
+    L0s = L0.tolist() if L0 is not None else None
+    loos = [v.tolist() for v in loo]
+    loo0s = [v.tolist() for v in loo0] if loo0 is not None else None
+    ref_ms, ref_ts = ref_mass[..., 0, 0].tolist(), ref_tm[..., 0, 0].tolist()
+    pos_w, has = (w > 0).tolist(), has.tolist()
+    out = []
+    for g in range(len(group)):
+        Lg, mg, tg = Ls[g], ms[g], ts[g]
+        values = []
+        for j in range(1, J + 1):
+            t_own = divergence_test(cfg, Lg[j][j], Lg[j][0], Lg[0][0], mg[j], mg[0], tg[j],
+                                    tg[0], shape=_cs_list(L0s[g], j, L0s[g][j][0],
+                                                          L0s[g][0][0])
+                                    if L0s is not None else 0.0)
+            if has[g][j - 1]:
+                t_loo = divergence_test(cfg, Lg[j][j], loos[0][g][j - 1], loos[1][g][j - 1],
+                                        mg[j], ref_ms[g][j - 1], tg[j], ref_ts[g][j - 1],
+                                        shape=_cs_list(L0s[g], j, loo0s[0][g][j - 1],
+                                                       loo0s[1][g][j - 1])
+                                        if loo0s is not None else 0.0)
+                value = min(t_own, t_loo)
+            else:
+                value = t_own
+            if pair is not None:
+                others = [i for i in range(n) if pos_w[g][i] and i != j]
+                if len(others) >= 3:  # own and at least two other trusted neighbours
+                    P = pair[g]
+                    sub = [P[a][b] for a, b in itertools.combinations(others, 2)]
+                    base = _median_list([P[j][i] for i in others]) if cfg.median_test \
+                        else value
+                    value = max(0.0, base - _median_list(sub))
+            values.append(value)
+        out.append(values)
+    return out
+
+
+def _loo_stacked(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`peers.trust_checks._loo_all` of several peers (``L (g, n, n)``,
+    ``LW (g, J, n)``): the same rows' log-sum-exps, ``(g, J)`` each."""
+    g, J, n = LW.shape
+    rows = np.arange(1, J + 1)
+    cross = _lse_rows((L[:, rows] + LW).reshape(g * J, n)).reshape(g, J)
+    square = _lse_rows((L[:, None] + LW[:, :, :, None] + LW[:, :, None, :]).reshape(
+        g * J, n * n)).reshape(g, J)
+    return cross, square
+
+
+def _cs_list(L0: list, j: int, l_jr: float, l_rr: float) -> float:
+    """:func:`peers.trust_checks._cs` of nested lists."""
+    v = _cs_scalar(float(l_jr), float(L0[j][j]), float(l_rr))
+    return v if math.isfinite(v) else 0.0
+
+
+def _median_list(v: list[float]) -> float:
+    """:func:`peers.trust_checks.median_small` of a list (the same operations)."""
+    v = sorted(v)
+    n = len(v)
+    h = n // 2
+    return v[h] if n % 2 else (v[h - 1] + v[h]) / 2.0
+
+
 TOGETHER: dict[str, Callable[[list[tuple]], list]] = {
+    "tests": _tests,
     "overlaps": _overlaps,
+    "unmatched": _unmatched,
+    "offsets": _offsets,
     "chi2": _chi2,
     "cusums": _cusums,
 }

@@ -81,11 +81,23 @@ def neighbour_statistics_steps(cfg: TrustConfig, own: GaussianMixture,
         if keep is not None:
             keep["unmatched"] = (mixes, U)
             keep["targets"] = tm
+    values = yield ("tests", cfg, L, L0, mass, tm, U, w)
+    return dict(zip(names, values, strict=True))
+
+
+def neighbour_tests(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass: np.ndarray,
+                    tm: np.ndarray, U: np.ndarray | None, w: np.ndarray) -> list[float]:
+    """The statistics of :func:`neighbour_statistics` (per input ``1..n-1``, ``(n-1)``
+    floats) from its inputs' log overlaps ``L`` (``(n, n)``; ``L0``: centred, or None),
+    masses ``mass``, target masses ``tm`` (``(n,)``), unmatched weights ``U`` (``(n, n)``
+    or None) and reference weights ``w`` (``(n,)``, 0 where left out of the references).
+    :func:`peers.trust_batch.neighbour_tests_many`: several peers' at once, the same
+    numbers."""
     pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
-    out = {}
+    out = []
     pos_w = w > 0
     # every neighbour's leave-one-out weights at once: row i leaves out input i + 1
-    J = len(names)
+    J = len(w) - 1
     W = np.repeat(w[None, :], J, axis=0)
     W[np.arange(J), np.arange(1, J + 1)] = 0.0
     tot = W.sum(axis=1)
@@ -94,7 +106,7 @@ def neighbour_statistics_steps(cfg: TrustConfig, own: GaussianMixture,
     LW = _log(W)
     loo = _loo_all(L, LW)
     loo0 = _loo_all(L0, LW) if L0 is not None else None
-    for j, s in enumerate(names, start=1):
+    for j in range(1, J + 1):
         t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
                                 shape=_cs(L0, j, L0[j, 0], L0[0, 0]) if L0 is not None else 0.0)
         if has[j - 1]:
@@ -103,18 +115,18 @@ def neighbour_statistics_steps(cfg: TrustConfig, own: GaussianMixture,
                                     float(wo @ mass), tm[j], float(wo @ tm),
                                     shape=_cs(L0, j, loo0[0][j - 1], loo0[1][j - 1])
                                     if loo0 is not None else 0.0)
-            out[s] = min(t_own, t_loo)
+            value = min(t_own, t_loo)
         else:
-            out[s] = t_own
-        if pair is None:
-            continue
-        keep = pos_w.copy()  # wo > 0: w > 0 but j (wo is w scaled by a positive sum)
-        keep[j] = False
-        others = np.flatnonzero(keep)
-        if len(others) >= 3:  # own and at least two other trusted neighbours
-            sub = pair[others][:, others][triu_indices(len(others))]
-            base = median_small(pair[j, others]) if cfg.median_test else out[s]
-            out[s] = max(0.0, base - median_small(sub))
+            value = t_own
+        if pair is not None:
+            keep = pos_w.copy()  # wo > 0: w > 0 but j (wo is w scaled by a positive sum)
+            keep[j] = False
+            others = np.flatnonzero(keep)
+            if len(others) >= 3:  # own and at least two other trusted neighbours
+                sub = pair[others][:, others][triu_indices(len(others))]
+                base = median_small(pair[j, others]) if cfg.median_test else value
+                value = max(0.0, base - median_small(sub))
+        out.append(value)
     return out
 
 
@@ -150,23 +162,26 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
     ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound),
     unmatched target weights ``unmatched`` (``(n, n)``, :func:`unmatched_weights`; None:
     not used) and the log overlaps of the inputs centred (``(n, n)``,
-    :func:`shape_overlaps`; None: the divergence as it is)."""
+    :func:`shape_overlaps`; None: the divergence as it is). Stacks too (``(..., n, n)``,
+    ``(..., n)``: several peers' at once, elementwise, so the same numbers)."""
     cs = _cs_matrix(L)
     if shape is not None:  # the location part (TrustConfig.location_only)
         cs = np.maximum(cs - np.nan_to_num(_cs_matrix(shape), nan=0.0, posinf=0.0), 0.0)
-    a, b = mass[:, None], mass[None, :]
+    a, b = mass[..., :, None], mass[..., None, :]
     card = cfg.kappa * (a - b) ** 2 / (b + 1.0)
-    card = np.minimum(card, card.T)  # symmetric: the smaller of the two directions
+    card = np.minimum(card, np.swapaxes(card, -1, -2))  # the smaller of the two directions
     ea, eb = a <= 1e-9, b <= 1e-9
     cs = np.where(np.isfinite(cs), cs, cfg.cap)
     one = cfg.empty_penalty * np.minimum(1.0, np.maximum(a, b))
     where = np.where(ea & eb, 0.0, np.where(ea | eb, one, cs))
     if unmatched is not None:
-        where = np.maximum(where, cfg.unmatched_cost * (unmatched + unmatched.T))
+        where = np.maximum(where, cfg.unmatched_cost * (unmatched
+                                                         + np.swapaxes(unmatched, -1, -2)))
     if targets is not None:
-        where = np.minimum(where, miss_cost(cfg, targets[:, None], targets[None, :]))
+        where = np.minimum(where, miss_cost(cfg, targets[..., :, None], targets[..., None, :]))
     P = np.minimum(where + card, cfg.cap)
-    np.fill_diagonal(P, 0.0)
+    n = P.shape[-1]
+    P[..., np.arange(n), np.arange(n)] = 0.0
     return P
 
 
@@ -601,10 +616,10 @@ def centred(mixes: list[GaussianMixture]) -> list[GaussianMixture]:
 
 
 def _cs_matrix(L: np.ndarray) -> np.ndarray:
-    """``D_CS`` between every two inputs from their log overlaps ``L`` (``(n, n)``)."""
-    d = np.diag(L)
-    return np.asarray(cs_from_log_overlaps(L, np.broadcast_to(d[:, None], L.shape),
-                                           np.broadcast_to(d[None, :], L.shape)))
+    """``D_CS`` between every two inputs from their log overlaps ``L`` (``(..., n, n)``)."""
+    d = np.diagonal(L, 0, -2, -1)
+    return np.asarray(cs_from_log_overlaps(L, np.broadcast_to(d[..., :, None], L.shape),
+                                           np.broadcast_to(d[..., None, :], L.shape)))
 
 
 def _cs(L0: np.ndarray, j: int, l_jr: float, l_rr: float) -> float:
@@ -720,9 +735,11 @@ ALONE = {
     "offsets": lambda *args: offset_information_many(*args),
     "chi2": lambda offsets, windows: offset_chi2_many(offsets, windows),
     "cusums": lambda *args: offset_cusums(*args),
+    "tests": lambda *args: neighbour_tests(*args),
 }
 """How :func:`run_alone` computes each request of the trust generators: ``"overlaps"``
 (:func:`tracking.divergence.log_overlaps`), ``"unmatched"`` (:func:`unmatched_weights`'
 ``U``), ``"offsets"`` (:func:`offset_information_many`), ``"chi2"``
-(:func:`offset_chi2_many`), ``"cusums"`` (:func:`offset_cusums`); looked up when called
+(:func:`offset_chi2_many`), ``"cusums"`` (:func:`offset_cusums`), ``"tests"``
+(:func:`neighbour_tests`); looked up when called
 (a test's patch of a module's function is seen)."""

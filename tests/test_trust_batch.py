@@ -19,7 +19,7 @@ import pytest
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.trust import Trust, TrustConfig
 from sensornet.peers.trust_batch import TOGETHER, run_together, weigh_together
-from sensornet.peers.trust_checks import ALONE
+from sensornet.peers.trust_checks import ALONE, neighbour_statistics_steps
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
@@ -29,12 +29,14 @@ from sensornet.tracking.mixture import GaussianMixture
 from benchmarks.bench_network import scenario_text
 
 
-def _mixture(rng: np.random.Generator, size: int, d: int = 4) -> GaussianMixture:
-    """``size`` components over a 2 km square (positions at 0 and 2), some heavy."""
+def _mixture(rng: np.random.Generator, size: int, d: int = 4,
+             side: float = 2000.0) -> GaussianMixture:
+    """``size`` components over a square of ``side`` m (positions at 0 and 2), some heavy."""
     if size == 0:
         return GaussianMixture.empty(d)
     A = rng.normal(0, 1, (size, d, d)) * rng.uniform(1, 40, (size, 1, 1))
-    return GaussianMixture(rng.uniform(0.05, 1.0, size), rng.uniform(-1000, 1000, (size, d)),
+    return GaussianMixture(rng.uniform(0.05, 1.0, size),
+                           rng.uniform(-side / 2, side / 2, (size, d)),
                            A @ A.transpose(0, 2, 1) + np.eye(d))
 
 
@@ -60,6 +62,18 @@ def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
     if op == "overlaps":
         return [([_mixture(rng, int(rng.integers(0, 6))) for _ in range(5)],)
                 for _ in range(int(rng.integers(2, 9)))]
+    if op in ("unmatched", "offsets"):  # near enough for the gates to pair some
+        out = []
+        for _ in range(int(rng.integers(2, 9))):
+            mixes = [_mixture(rng, int(rng.integers(0, 6)), side=300.0)
+                     for _ in range(int(rng.integers(1, 6)))]
+            chi2 = [None, 13.8][int(rng.integers(0, 2))]
+            if op == "unmatched":
+                out.append((mixes, [0, 2], 0.3, 50.0, chi2))
+            else:
+                ref = _mixture(rng, int(rng.integers(0, 6)), side=300.0)
+                out.append((ref, mixes, [0, 2], 0.3, 60.0, chi2))
+        return out
     out = []
     for _ in range(int(rng.integers(2, 9))):
         infos = []
@@ -78,17 +92,71 @@ def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
     return out
 
 
-@pytest.mark.parametrize("op", sorted(TOGETHER))
+@pytest.mark.parametrize("op", sorted(set(TOGETHER) - {"tests"}))  # "tests": below
 def test_each_stacked_request_equals_its_own_computation(op):
     rng = np.random.default_rng(len(op))
     for _ in range(30):
         args = _requests(rng, op)
         for a, got in zip(args, TOGETHER[op](args), strict=True):
             want = ALONE[op](*a)
-            if isinstance(want, np.ndarray):
+            if op == "offsets":  # per mixture (I, y)
+                assert len(got) == len(want)
+                for (I, y), (I0, y0) in zip(got, want, strict=True):
+                    assert np.array_equal(I, I0) and np.array_equal(y, y0)
+            elif isinstance(want, np.ndarray):
                 assert np.array_equal(got, want)
             else:
                 assert got == want
+
+
+TEST_CONFIGS = [
+    TrustConfig(),
+    TrustConfig(detection_probability=0.9),
+    TrustConfig(detection_probability=0.9, location_only=True),
+    TrustConfig(detection_probability=0.9, median_test=False),
+    TrustConfig(majority=False),
+]
+
+
+def _tests_request(cfg: TrustConfig, rng: np.random.Generator) -> tuple:
+    """The ``"tests"`` request :func:`neighbour_statistics_steps` makes of random inputs
+    (0-8 neighbours: empty, single, copied and near copies of own; zero weights and
+    quarantined ones)."""
+    own = _mixture(rng, int(rng.integers(0, 5)), side=600.0)
+    inputs = {}
+    for i in range(int(rng.integers(0, 9))):
+        kind = rng.integers(0, 4)
+        if kind == 0 and inputs:
+            inputs[f"n{i}"] = inputs[sorted(inputs)[0]]
+        elif kind == 1:
+            inputs[f"n{i}"] = GaussianMixture(own.weights.copy(), own.means + rng.normal(
+                0, 5, own.means.shape), own.covs.copy())
+        else:
+            inputs[f"n{i}"] = _mixture(rng, int(rng.integers(0, 5)), side=600.0)
+    weights = {"": float(rng.uniform(0.1, 1))}
+    weights.update({s: float(rng.choice([0.0, rng.uniform(0.05, 1)], p=[0.15, 0.85]))
+                    for s in inputs})
+    quarantined = {s for s in inputs if rng.random() < 0.2}
+    steps = neighbour_statistics_steps(cfg, own, inputs, weights, quarantined)
+    request = next(steps)
+    while request[0] != "tests":
+        request = steps.send(ALONE[request[0]](*request[1:]))
+    return request[1:]
+
+
+def test_neighbour_tests_together_are_each_ones_to_the_bit():
+    """Every config the tests branch on, 0-8 neighbours, requests of several sizes and
+    configs mixed in one call (grouped inside)."""
+    rng = np.random.default_rng(11)
+    seen = 0
+    for _ in range(40):
+        args = [_tests_request(TEST_CONFIGS[int(rng.integers(0, len(TEST_CONFIGS)))], rng)
+                for _ in range(int(rng.integers(2, 30)))]
+        for a, got in zip(args, TOGETHER["tests"](args), strict=True):
+            want = ALONE["tests"](*a)
+            assert got == want
+            seen += sum(v > 0 for v in want)
+    assert seen > 100
 
 
 NAMES = ("a", "b", "c", "d")
