@@ -36,8 +36,11 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_trust_cost.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sensornet.peers import batching
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.host import SharedDecode
+from sensornet.peers.trust import Trust
+from sensornet.peers.trust_batch import weigh_together
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
@@ -63,12 +66,17 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
             core.consensus.trust.cfg = dataclasses.replace(core.consensus.trust.cfg,
                                                            test_once=once)
     twin.FusionBatch = lambda: FusionBatch(trust_together=together)  # the twin's batch
+    spent = [0.0]
+    batching.weigh_together = _timed(weigh_together, spent)
+    Trust.weigh = _timed(WEIGH, spent)
     try:
         t0 = time.process_time()
         result = twin.run_twin(scn, 0, peers=peers, batch=True)
         ms = (time.process_time() - t0) * 1e3 / n / scans
     finally:
         twin.FusionBatch = FusionBatch
+        batching.weigh_together, Trust.weigh = weigh_together, WEIGH
+    TESTS.append(spent[0] * 1e3 / n / scans)
     summaries = {}
     for q, core in peers.items():
         tr = core.consensus.trust
@@ -76,6 +84,23 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
             tr.finish()
             summaries[q] = tr.summary()
     return ms, result.tracks, summaries
+
+
+WEIGH = Trust.weigh
+TESTS: list[float] = []
+"""Per run: the CPU ms per peer-scan of the trust tests themselves (every
+:meth:`Trust.weigh` and :func:`peers.trust_batch.weigh_together`)."""
+
+
+def _timed(f, spent: list[float]):
+    """``f`` with its process CPU time added to ``spent[0]`` (a handful of calls a scan)."""
+    def timed(*args, **kwargs):
+        t0 = time.process_time()
+        try:
+            return f(*args, **kwargs)
+        finally:
+            spent[0] += time.process_time() - t0
+    return timed
 
 
 def same_tracks(a: dict, b: dict) -> bool:
@@ -104,18 +129,23 @@ def main() -> None:
         path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
         ms: dict[str, list[float]] = {"off": [], "on (per peer)": [], "on (host-batched)": []}
         print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans")
-        print("| run | rep | CPU ms/peer-scan |\n|---|---:|---:|", flush=True)
+        print("| run | rep | CPU ms/peer-scan | of which trust tests |\n|---|---:|---:|---:|",
+              flush=True)
+        tests: dict[str, list[float]] = {}
         for rep in range(args.repeats):
             v, _, _ = one_run(path, False, n, scans, args.lie, kind=kind)
             ms["off"].append(v)
-            print(f"| off | {rep + 1} | {v:.2f} |", flush=True)
+            print(f"| off | {rep + 1} | {v:.2f} | |", flush=True)
             v, tracks_one, sum_one = one_run(path, True, n, scans, args.lie, together=False,
                                              kind=kind)
             ms["on (per peer)"].append(v)
-            print(f"| on (per peer) | {rep + 1} | {v:.2f} |", flush=True)
+            tests.setdefault("per peer", []).append(TESTS[-1])
+            print(f"| on (per peer) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |", flush=True)
             v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind)
             ms["on (host-batched)"].append(v)
-            print(f"| on (host-batched) | {rep + 1} | {v:.2f} |", flush=True)
+            tests.setdefault("host-batched", []).append(TESTS[-1])
+            print(f"| on (host-batched) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |",
+                  flush=True)
             print(f"per peer vs host-batched: fused states identical: "
                   f"{same_tracks(tracks_one, tracks_new)}, trust summaries identical: "
                   f"{sum_one == sum_new} "
@@ -124,7 +154,8 @@ def main() -> None:
             if args.every_round:
                 v, _, sum_all = one_run(path, True, n, scans, args.lie, once=False, kind=kind)
                 ms.setdefault("on (every round)", []).append(v)
-                print(f"| on (every round) | {rep + 1} | {v:.2f} |", flush=True)
+                print(f"| on (every round) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |",
+                      flush=True)
                 print(f"every round vs host-batched: trust summaries identical: "
                       f"{sum_all == sum_new} "
                       f"({sum(len(v['changes']) for v in sum_all.values())} state changes)",
@@ -139,6 +170,10 @@ def main() -> None:
           f"host-batched {med['on (host-batched)'] - off:.2f}"
           + (f", on (every round) / off: {med['on (every round)'] / off:.2f}"
              if args.every_round else ""))
+    t = {k: statistics.median(v) for k, v in tests.items()}
+    print(f"the trust tests themselves (Trust.weigh / weigh_together), ms/peer-scan (medians): "
+          f"per peer {t['per peer']:.3f}, host-batched {t['host-batched']:.3f} "
+          f"(host-batched / per peer {t['host-batched'] / t['per peer']:.2f})")
 
 
 if __name__ == "__main__":

@@ -92,14 +92,84 @@ def log_overlaps_many(groups: list[list[GaussianMixture]]) -> list[np.ndarray]:
     b = np.concatenate([_upper(C)[1] + (e - C) for (_, C), e in zip(todo, ends, strict=True)])
     inv, det = inv_det_spd((P[a] + P[b])[None])
     g = lw[a] + lw[b] + log_gaussian((m[a] - m[b])[None], inv, det)[0]
-    lo = 0
-    for i, C in todo:
-        u, v = _upper(C)
-        G = np.empty((C, C))
-        G[u, v] = g[lo:lo + len(u)]
-        G[v, u] = g[lo:lo + len(u)]
-        lo += len(u)
-        out[i] = _reduce_terms(G, [len(D) for D in groups[i]])
+    sizes = [[len(D) for D in groups[i]] for i, _ in todo]
+    present = [[c for c in z if c] for z in sizes]
+    one = [len(p) == C for p, (_, C) in zip(present, todo, strict=True)]  # one term each
+    many = [n for n, o in enumerate(one) if not o]
+    Cs = np.array([C for _, C in todo])
+    base = np.r_[0, np.cumsum(Cs * Cs)[:-1]]  # where each group's (C, C) terms start
+    pairs = np.array([len(_upper(C)[0]) for C in Cs.tolist()])
+    g_of = np.repeat(np.arange(len(todo)), pairs)
+    first = (ends - Cs)[g_of]  # the group's first component
+    u, v = a - first, b - first
+    flat = np.empty(int((Cs * Cs).sum()))
+    flat[base[g_of] + u * Cs[g_of] + v] = g
+    flat[base[g_of] + v * Cs[g_of] + u] = g
+    for n, o in enumerate(one):
+        if o:
+            C = int(Cs[n])
+            out[todo[n][0]] = _reduce_terms(flat[base[n]:base[n] + C * C].reshape(C, C),
+                                            sizes[n])
+    if many:
+        C2 = (Cs * Cs).tolist()
+        terms = np.concatenate([flat[base[n]:base[n] + C2[n]] for n in many])
+        blocks = _reduce_blocks(terms, [tuple(present[n]) for n in many])
+        for n, block in zip(many, blocks, strict=True):
+            i = todo[n][0]
+            if len(present[n]) == len(sizes[n]):
+                out[i] = block
+            else:
+                idx = np.flatnonzero(sizes[n])
+                L = np.full((len(sizes[n]), len(sizes[n])), -np.inf)
+                L[np.ix_(idx, idx)] = block
+                out[i] = L
+    return out
+
+
+def _reduce_blocks(terms: np.ndarray, sizes: list[tuple[int, ...]]) -> list[np.ndarray]:
+    """:func:`_reduce_terms`' log-sum-exps of several groups' pair terms at once, the same
+    numbers to the bit. ``terms``: the groups' symmetric ``(C, C)`` term matrices, each
+    row-major, one after the other; ``sizes``: each group's non-empty mixtures' sizes
+    (``C`` in all). ``np.add.reduceat`` sums each segment as ``a_0 + pairwise(a_1, ...)``
+    whatever the array's shape, so the segments of both of :func:`_reduce_terms`'
+    reductions (over a block's rows, then its columns) are laid out contiguously in 1-d
+    (the terms' symmetry makes a column a row) and reduced in one call each. Returns each
+    group's ``(m, m)`` block of its non-empty mixtures."""
+    plans = [_block_plan(z) for z in sizes]
+    M = np.array([len(z) for z in sizes])
+    C = np.array([sum(z) for z in sizes])
+    base = np.r_[0, np.cumsum(C * C)[:-1]].tolist()
+    off1 = np.r_[0, np.cumsum(M * C)[:-1]].tolist()
+    off2 = np.r_[0, np.cumsum(M * M)[:-1]].tolist()
+    s1 = np.concatenate([p[0] + o for p, o in zip(plans, base, strict=True)])
+    perm = np.concatenate([p[1] + o for p, o in zip(plans, off1, strict=True)])
+    s2 = np.concatenate([p[2] + o for p, o in zip(plans, off1, strict=True)])
+    eblk = np.concatenate([p[3] + o for p, o in zip(plans, off2, strict=True)])
+    top = np.maximum.reduceat(np.maximum.reduceat(terms, s1)[perm], s2)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    S = np.add.reduceat(np.add.reduceat(np.exp(terms - safe[eblk]), s1)[perm], s2)
+    with np.errstate(divide="ignore"):
+        out = np.where(np.isfinite(top), safe + np.log(S), -np.inf)
+    return [out[o:o + m * m].reshape(m, m) for o, m in zip(off2, M.tolist(), strict=True)]
+
+
+@functools.lru_cache(maxsize=4096)
+def _block_plan(sizes: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+    """The index arrays of :func:`_reduce_blocks` for one group of non-empty mixtures of
+    ``sizes`` components (``C`` in all, ``m`` mixtures), made once per ``sizes``
+    (read-only): the starts of the row sums' segments in its ``(C, C)`` terms (per column
+    ``b`` and mixture ``I``: ``b C + start_I``), where row ``(I, b)`` of the ``(m, C)``
+    row sums is among them (``b m + I``), the starts of the column sums' segments in those
+    (``I C + start_J``) and each term's block (``I m + J``)."""
+    m, C = len(sizes), sum(sizes)
+    st = np.r_[0, np.cumsum(sizes)[:-1]]
+    blk = np.repeat(np.arange(m), sizes)
+    out = ((np.arange(C)[:, None] * C + st[None, :]).ravel(),
+           (np.arange(C)[None, :] * m + np.arange(m)[:, None]).ravel(),
+           (np.arange(m)[:, None] * C + st[None, :]).ravel(),
+           (blk[:, None] * m + blk[None, :]).ravel())
+    for a in out:
+        a.flags.writeable = False
     return out
 
 
