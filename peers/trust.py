@@ -206,13 +206,12 @@ class Trust(ScanTests):
         mixes = [own] + [shown[s] for s in names]
         L = yield ("overlaps", mixes)
         L0 = (yield ("overlaps", centred(mixes))) if cfg.location_only else None
-        w = cfg.repeat_weight
-        n_r, t_r = own.mass, target_mass(own, w)
-        for j, mix in enumerate(mixes[1:], start=1):
+        mass, targets = yield ("masses", mixes, cfg.repeat_weight)
+        for j in range(1, len(mixes)):
             shape = 0.0 if L0 is None else max(0.0, float(
                 cs_from_log_overlaps(L0[j, 0], L0[j, j], L0[0, 0])))
-            if divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mix.mass, n_r,
-                               target_mass(mix, w), t_r, shape=shape) > cfg.drift:
+            if divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0],
+                               targets[j], targets[0], shape=shape) > cfg.drift:
                 return False
         return True
 

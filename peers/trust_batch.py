@@ -22,12 +22,15 @@ from sensornet.peers.trust_checks import (
     ALONE,
     _cs_scalar,
     _lse_rows,
+    _others,
     divergence_test,
     gated,
     offset_chi2_many,
     offset_cusums,
     pair_tests,
     position_block,
+    target_mass,
+    withheld_increments,
 )
 from sensornet.tracking.divergence import log_overlaps_many
 
@@ -346,7 +349,85 @@ def _median_list(v: list[float]) -> float:
     return v[h] if n % 2 else (v[h - 1] + v[h]) / 2.0
 
 
+def _masses(args: list[tuple]) -> list[tuple[list[float], list[float]]]:
+    """``"masses"``: each mixture's mass and target mass, computed once per mixture object
+    however many peers' requests hold it (a neighbour's estimate is one object at every
+    co-hosted receiver: :class:`peers.host_parts.SharedDecode`), by the same functions."""
+    seen: dict[tuple[int, float], tuple[float, float]] = {}
+    out = []
+    for mixes, min_weight in args:
+        masses, targets = [], []
+        for D in mixes:
+            key = (id(D), min_weight)  # the objects are held by the requests meanwhile
+            v = seen.get(key)
+            if v is None:
+                v = seen[key] = (D.mass, target_mass(D, min_weight))
+            masses.append(v[0])
+            targets.append(v[1])
+        out.append((masses, targets))
+    return out
+
+
+def _withheld(args: list[tuple]) -> list[np.ndarray]:
+    """``"withheld"``: :func:`peers.trust_checks.withheld_increments` of the requests with
+    as many inputs (and the same rates) stacked: the same elementwise operations, sorts and
+    medians per stack."""
+    def many(group: list[tuple]) -> list[np.ndarray]:
+        U, tm, refs = (np.stack([a[i] for a in group]) for i in range(3))
+        return list(withheld_increments(U, tm, refs, *group[0][3:]))
+    return _by_key(args, lambda a: (a[0].shape, a[3], a[4], a[5]), many)
+
+
+def _relative(args: list[tuple]) -> list[dict]:
+    """``"relative"``: :func:`peers.trust_checks.relative_offsets` of every request at once:
+    the determinants of all, then the solves, leave-one-out medians (sorts) and products of
+    the requests with as many offsets kept stacked (per matrix and per row, the same
+    numbers)."""
+    out: list = [None] * len(args)
+    todo = []
+    for r, (infos, among) in enumerate(args):
+        if len(among) < 3:
+            out[r] = infos
+        else:
+            todo.append(r)
+    if not todo:
+        return out
+    I = np.array([args[r][0][s][0] for r in todo for s in args[r][1]])  # (m, 2, 2)
+    ok = (np.linalg.det(I) > 1e-12).tolist()
+    groups: dict[int, list[tuple[int, list[str]]]] = {}
+    lo = 0
+    for r in todo:
+        infos, among = args[r]
+        names = [s for s, good in zip(among, ok[lo:lo + len(among)], strict=True) if good]
+        lo += len(among)
+        if len(names) < 3:
+            out[r] = infos
+        else:
+            groups.setdefault(len(names), []).append((r, names))
+    for n, members in groups.items():
+        info = np.array([[args[r][0][s][0] for s in names] for r, names in members])
+        y0 = np.array([[args[r][0][s][1] for s in names] for r, names in members])
+        g = len(members)
+        b = np.linalg.solve(info.reshape(g * n, 2, 2), y0.reshape(g * n, 2, 1))[..., 0]
+        b = b.reshape(g, n, 2)
+        S = np.sort(b[:, _others(n)], axis=2)  # (g, n, n - 1, 2)
+        h = (n - 1) // 2
+        med = S[:, :, h] if (n - 1) % 2 else (S[:, :, h - 1] + S[:, :, h]) * 0.5
+        med = np.where(np.isnan(S).any(axis=2), np.nan, med)  # np.median: NaN where any is
+        y = np.einsum("nij,nj->ni", info.reshape(g * n, 2, 2),
+                      (b - med).reshape(g * n, 2)).reshape(g, n, 2)
+        for (r, names), yr in zip(members, y, strict=True):
+            infos = args[r][0]
+            res = dict(infos)
+            res.update({s: (infos[s][0], yr[i]) for i, s in enumerate(names)})
+            out[r] = res
+    return out
+
+
 TOGETHER: dict[str, Callable[[list[tuple]], list]] = {
+    "relative": _relative,
+    "withheld": _withheld,
+    "masses": _masses,
     "tests": _tests,
     "overlaps": _overlaps,
     "unmatched": _unmatched,

@@ -70,8 +70,8 @@ def neighbour_statistics_steps(cfg: TrustConfig, own: GaussianMixture,
     mixes = [own] + [inputs[s] for s in names]
     L = yield ("overlaps", mixes)
     L0 = (yield ("overlaps", centred(mixes))) if cfg.location_only else None
-    mass = np.array([D.mass for D in mixes])
-    tm = np.array([target_mass(D, cfg.repeat_weight) for D in mixes])
+    masses, targets = yield ("masses", mixes, cfg.repeat_weight)
+    mass, tm = np.array(masses), np.array(targets)
     trusted = np.array([1.0] + [0.0 if s in quarantined else 1.0 for s in names])
     w = np.array([weights.get("", 1.0)] + [weights.get(s, 0.0) for s in names]) * trusted
     U = None
@@ -689,14 +689,15 @@ def withheld_increments(U: np.ndarray, targets: np.ndarray, refs: np.ndarray,
     r]`` whether ``r`` is a reference of ``j``): the median with three or more (W-MSR's
     majority), else the smallest (no majority to outvote a reference that lies itself); 0
     with none. ``U`` (``(n, n)``): :func:`unmatched_weights`; ``targets`` (``(n,)``):
-    :func:`target_mass`."""
+    :func:`target_mass`. Stacks too (``(..., n, n)``, ``(..., n)``: several peers' at once,
+    the same numbers)."""
     a = np.log(alternative) - np.log1p(-detection_probability)
     b = np.log1p(-alternative) - np.log(detection_probability)
-    d = np.maximum(0.0, U - U.T)  # [r, j]: r's target weight j lacks, net of j's own extras
-    m = np.maximum(0.0, targets[:, None] - U)  # [r, j]: r's target weight j shows too
+    d = np.maximum(0.0, U - np.swapaxes(U, -1, -2))  # [r, j]: r's target weight j lacks,
+    m = np.maximum(0.0, targets[..., :, None] - U)  # net of j's extras; [r, j]: j shows too
     L = np.minimum(a * d, cap) + b * m  # [r, j]
     out = over_references(L, refs)
-    out[0] = 0.0
+    out[..., 0] = 0.0
     return np.nan_to_num(out, nan=0.0)
 
 
@@ -704,15 +705,18 @@ def over_references(values: np.ndarray, refs: np.ndarray) -> np.ndarray:
     """Per input ``j`` (``(n,)``): ``values[r, j]`` (``(n, n)``) over its references
     ``r`` (``refs[j, r]``): the median with three or more (W-MSR's majority), else the
     smallest (no majority to outvote a reference that lies itself); NaN with none. The
-    rule of :func:`withheld_increments` and :func:`whole_losses`."""
+    rule of :func:`withheld_increments` and :func:`whole_losses`. Stacks too
+    (``(..., n, n)``)."""
     refs = np.asarray(refs, bool)
-    count = refs.sum(axis=1)
-    V = np.where(refs.T, values, np.inf)  # [r, j], non-references last when sorted
-    V.sort(axis=0)
-    cols = np.arange(len(count))
+    count = refs.sum(axis=-1)
+    V = np.where(np.swapaxes(refs, -1, -2), values, np.inf)  # [r, j], non-references last
+    V.sort(axis=-2)
+    if count.shape[-1] == 0:
+        return np.zeros(count.shape)
     lo, hi = np.maximum(count - 1, 0) // 2, count // 2  # the median's two middle entries
-    med = 0.5 * (V[lo, cols] + V[hi, cols]) if len(count) else np.zeros(0)
-    out = np.where(count >= 3, med, V[0] if len(count) else np.zeros(0))
+    med = 0.5 * (np.take_along_axis(V, lo[..., None, :], -2)[..., 0, :]
+                 + np.take_along_axis(V, hi[..., None, :], -2)[..., 0, :])
+    out = np.where(count >= 3, med, V[..., 0, :])
     return np.where(count > 0, out, np.nan)
 
 
@@ -736,10 +740,16 @@ ALONE = {
     "chi2": lambda offsets, windows: offset_chi2_many(offsets, windows),
     "cusums": lambda *args: offset_cusums(*args),
     "tests": lambda *args: neighbour_tests(*args),
+    "withheld": lambda *args: withheld_increments(*args),
+    "relative": lambda infos, among: relative_offsets(infos, among),
+    "masses": lambda mixes, min_weight: ([D.mass for D in mixes],
+                                         [target_mass(D, min_weight) for D in mixes]),
 }
 """How :func:`run_alone` computes each request of the trust generators: ``"overlaps"``
 (:func:`tracking.divergence.log_overlaps`), ``"unmatched"`` (:func:`unmatched_weights`'
 ``U``), ``"offsets"`` (:func:`offset_information_many`), ``"chi2"``
 (:func:`offset_chi2_many`), ``"cusums"`` (:func:`offset_cusums`), ``"tests"``
-(:func:`neighbour_tests`); looked up when called
+(:func:`neighbour_tests`), ``"withheld"`` (:func:`withheld_increments`), ``"relative"``
+(:func:`relative_offsets`), ``"masses"``
+(each mixture's mass and :func:`target_mass`, lists of floats); looked up when called
 (a test's patch of a module's function is seen)."""

@@ -15,11 +15,9 @@ from sensornet.peers.trust_checks import (
     gls_offset,
     gls_offsets,
     offset_information,
-    relative_offsets,
     target_mass,
     unmatched_weights,
     whole_losses,
-    withheld_increments,
 )
 from sensornet.peers.trust_record import (
     NeighbourTrust,
@@ -52,8 +50,8 @@ class ScanTests:
             offsets = yield from self._offsets(tested, follow)
             infos = {s: _raw(info, regs[s]) for s, info in offsets.items()}
             if cfg.bias_relative:  # own's error is common to every fresh neighbour's offset
-                infos = relative_offsets(infos, [s for s in infos if s not in late
-                                                 and self.n[s].state != "quarantined"])
+                infos = yield ("relative", infos, [s for s in infos if s not in late
+                                                   and self.n[s].state != "quarantined"])
             if self.trace is not None:  # the scan's raw offsets: for the trace alone
                 for s, raw in zip(infos, gls_offsets(list(infos.values())), strict=True):
                     self.n[s].raw_offset = raw
@@ -72,7 +70,9 @@ class ScanTests:
                     stats[s] = max(stats[s], alarm_stat)
         if cfg.withhold and cfg.detection_probability is not None:
             fused = {**shown, **self.fused_in}  # a repaired density is what is tested
-            for s in self._withheld(own, fused, [s for s in sorted(shown) if s not in late]):
+            withheld = yield from self._withheld(own, fused,
+                                                 [s for s in sorted(shown) if s not in late])
+            for s in withheld:
                 stats[s] = max(stats[s], alarm_stat)
 
     def _offsets(self, tested: dict[str, tuple[int, GaussianMixture, GaussianMixture]],
@@ -161,10 +161,11 @@ class ScanTests:
                                  cfg.gate_chi2)
 
     def _withheld(self, own: GaussianMixture, shown: dict[str, GaussianMixture],
-                  fresh: list[str]) -> list[str]:
+                  fresh: list[str]) -> Generator:
         """Add this scan's increment to each ``fresh`` neighbour's withheld-target CUSUM
         (:attr:`TrustConfig.withhold`; references: own and the other fresh neighbours not
-        quarantined) and return those above :attr:`TrustConfig.withhold_threshold`."""
+        quarantined) and return those above :attr:`TrustConfig.withhold_threshold` (a
+        generator of requests)."""
         cfg = self.cfg
         mixes = [own] + [shown[s] for s in fresh]
         made = self.made.get("unmatched")  # the statistics' of the same inputs, if so
@@ -177,8 +178,8 @@ class ScanTests:
             tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
         ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
         refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
-        inc = withheld_increments(U, tm, refs, cfg.detection_probability,
-                                  cfg.withhold_alternative, cfg.withhold_cap)
+        inc = yield ("withheld", U, tm, refs, cfg.detection_probability,
+                     cfg.withhold_alternative, cfg.withhold_cap)
         for s, v in zip(fresh, inc[1:], strict=True):
             self.n[s].withheld = max(0.0, self.n[s].withheld + float(v))
         if self.losses is not None:

@@ -62,6 +62,28 @@ def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
     if op == "overlaps":
         return [([_mixture(rng, int(rng.integers(0, 6))) for _ in range(5)],)
                 for _ in range(int(rng.integers(2, 9)))]
+    if op == "relative":  # 2-7 offsets, some singular, some left out of the median
+        out = []
+        for _ in range(int(rng.integers(2, 12))):
+            infos = {}
+            for i in range(int(rng.integers(2, 8))):
+                B = rng.normal(0, 1, (2, 2))
+                infos[f"n{i}"] = (B @ B.T * (rng.random() < 0.85), rng.normal(0, 30, 2))
+            among = [s for s in infos if rng.random() < 0.85]
+            out.append((infos, among))
+        return out
+    if op == "withheld":  # 2-6 inputs, any references (own's column always among them)
+        out = []
+        for _ in range(int(rng.integers(2, 12))):
+            n = int(rng.integers(2, 7))
+            U = rng.uniform(0, 2, (n, n)) * (rng.random((n, n)) < 0.5)
+            refs = (rng.random((n, n)) < 0.7) & ~np.eye(n, dtype=bool)
+            out.append((U, rng.uniform(0, 3, n), refs, 0.9, 0.99, 4.47))
+        return out
+    if op == "masses":  # mixtures shared between requests, as a host's estimates are
+        pool = [_mixture(rng, int(rng.integers(0, 6))) for _ in range(6)]
+        return [([pool[i] for i in rng.integers(0, 6, int(rng.integers(1, 6)))],
+                 float(rng.choice([0.3, 0.5]))) for _ in range(int(rng.integers(2, 9)))]
     if op in ("unmatched", "offsets"):  # near enough for the gates to pair some
         out = []
         for _ in range(int(rng.integers(2, 9))):
@@ -99,7 +121,12 @@ def test_each_stacked_request_equals_its_own_computation(op):
         args = _requests(rng, op)
         for a, got in zip(args, TOGETHER[op](args), strict=True):
             want = ALONE[op](*a)
-            if op == "offsets":  # per mixture (I, y)
+            if op == "relative":  # per neighbour (I, y)
+                assert got.keys() == want.keys()
+                for s in want:
+                    assert np.array_equal(got[s][0], want[s][0])
+                    assert np.array_equal(got[s][1], want[s][1])
+            elif op == "offsets":  # per mixture (I, y)
                 assert len(got) == len(want)
                 for (I, y), (I0, y0) in zip(got, want, strict=True):
                     assert np.array_equal(I, I0) and np.array_equal(y, y0)
