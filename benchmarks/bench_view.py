@@ -152,9 +152,13 @@ def realtime(names: list[str], period: float, heard: list[tuple[float, str, byte
     view = LiveView("twin", None, rr, rec, say=lambda s: None)
     view.rr, view.rec, view.batcher = rr, rec, kinds[0](rr, rec)
     view.state = kinds[1](view.batcher, names, period)
-    if "between" not in inspect.signature(view.batcher.flush).parameters:  # an older one:
-        flush = view.batcher.flush  # its flushes whole, as its view did
-        view.batcher.flush = lambda between=None, every=0: flush()
+    params = inspect.signature(view.batcher.flush).parameters
+    if "between" not in params:  # an older one: its flushes whole, as its view did
+        flush = view.batcher.flush
+        view.batcher.flush = lambda between=None, every=0, hold=(): flush()
+    elif "hold" not in params:  # one that sent its series every flush, as its view did
+        flush = view.batcher.flush
+        view.batcher.flush = lambda between=None, every=200, hold=(): flush(between, every)
     due: dict[int, float] = {}
     late: list[float] = []
     take = view._take

@@ -37,7 +37,7 @@ from sensornet.view_columns import Batcher, strip_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_round
 
 __all__ = ["BEHIND", "BEHIND_S", "END_DRAIN_S", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE",
-           "MAP_KEEP", "QUEUE_MAX", "TAIL",
+           "MAP_KEEP", "QUEUE_MAX", "SERIES_EVERY", "TAIL",
            "Batcher", "LiveView", "ViewState", "cpu_seconds", "id_color", "id_labels",
            "idle_process", "later_round", "nice_process", "replay_recordings",
            "strip_array", "thread_policies"]
@@ -49,15 +49,21 @@ FLUSH_MAX_S = 8.0
 FLUSH_SHARE = 0.25
 MAP_KEEP = 12
 """Newest scans of one map entity kept per flush while the view is behind (more than
-:data:`BEHIND` / 4 messages waiting, or its newest tracks drawn :data:`BEHIND_S` after their
-peer sent them): older ones are decimated (counted)."""
+:data:`BEHIND` / 4 messages waiting, or none handled with an empty queue for
+:data:`BEHIND_S`): older ones are decimated (counted)."""
 BEHIND_S = 2.0
-"""Seconds from a peer's tracks to their drawing beyond which the view is behind: at 50 peers
-in two hosts a scan is ~5 messages, so :data:`BEHIND` / 4 waiting messages came only ~10 s
-behind, and a view in SCHED_IDLE left little CPU by a busy network must catch up sooner."""
+"""Seconds without the view's queue once empty beyond which the view is behind (its own clock:
+no sender's): at 50 peers in two hosts a scan is ~5 messages, so :data:`BEHIND` / 4 waiting
+messages came only ~10 s behind, and a view in SCHED_IDLE that a busy network leaves little
+CPU must catch up sooner."""
 END_DRAIN_S = 10.0
 """Seconds the view spends at its end on the messages still waiting (those heard before it
 stopped); what is left after is counted as dropped and said."""
+SERIES_EVERY = 4
+"""Flushes from one sending of the health series to the next (the first flush sends them, the
+map goes every flush): one
+``send_columns`` per series and flush, and at 50 peers ~1,500 of the view's ~2,000 entities
+are series; their plots a few seconds behind cost the view ~a third less CPU (issue 38)."""
 QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
@@ -100,6 +106,9 @@ class LiveView:
         self._said_at = 0.0
         self._between = 0.0
         """Seconds of the flush under way spent handling messages (:meth:`waiting`)."""
+        self.flushes = 0
+        self._empty_at = time.monotonic()
+        """When the view last found its queue empty (:meth:`behind`)."""
         self.session = None
 
     def draw_into(self, state_factory, rr, rec) -> None:
@@ -153,6 +162,7 @@ class LiveView:
             try:
                 key, payload = self.q.get(timeout=max(0.0, min(0.05, end - time.monotonic())))
             except queue.Empty:
+                self._empty_at = time.monotonic()
                 break
             n += self._take(key, payload)
         return n
@@ -175,15 +185,20 @@ class LiveView:
             except queue.Empty:
                 break
             self._take(key, payload)
+        if self.q.empty():
+            self._empty_at = time.monotonic()
         self._between += time.monotonic() - t0
 
     def flush(self) -> None:
-        """The batcher's rows to Rerun, handling what arrives meanwhile; the period doubles
-        while a flush (its own part) takes more than :data:`FLUSH_SHARE` of it."""
+        """The batcher's rows to Rerun, handling what arrives meanwhile, the health series'
+        every :data:`SERIES_EVERY` flushes; the period doubles while a flush (its own part)
+        takes more than :data:`FLUSH_SHARE` of it."""
         t0 = time.monotonic()
         self._between = 0.0
         self.batcher.map_keep = MAP_KEEP if self.behind() else None
-        self.batcher.flush(between=self.waiting)
+        self.flushes += 1
+        self.batcher.flush(between=self.waiting,
+                           hold=() if self.flushes % SERIES_EVERY == 1 else ("scalar",))
         took = time.monotonic() - t0 - self._between
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:
             self.flush_s = min(FLUSH_MAX_S, 2 * self.flush_s)
@@ -191,9 +206,10 @@ class LiveView:
 
     def behind(self) -> bool:
         """Whether the view runs behind the network: more than :data:`BEHIND` / 4 messages
-        wait, or the newest tracks it drew were more than :data:`BEHIND_S` old."""
-        lag = self.state.lag_ms
-        return self.q.qsize() > BEHIND // 4 or bool(lag and lag[-1] > 1e3 * BEHIND_S)
+        wait, or its queue has not been empty for :data:`BEHIND_S` (a view that keeps up
+        empties it every drain)."""
+        return (self.q.qsize() > BEHIND // 4
+                or time.monotonic() - self._empty_at > BEHIND_S)
 
     def note(self, final: bool = False) -> None:
         """One line when the view fell behind (at most every 5 s): what it left out."""

@@ -118,12 +118,16 @@ class Batcher:
     def pending(self) -> int:
         return sum(len(r.ks) for r in self._rows.values())
 
-    def flush(self, between=None, every: int = 200) -> None:
+    def flush(self, between=None, every: int = 200, hold: tuple[str, ...] = ()) -> None:
         """Every entity's rows in one call each (map entities: the newest :attr:`map_keep`);
         ``between()`` called after each ``every`` entities (the view handles what arrived
         meanwhile: rows it adds go to the next flush), so that a long flush does not hold
-        back the messages waiting."""
+        back the messages waiting. Entities of the kinds in ``hold`` keep their rows for a
+        later flush (the view sends its many health series less often than its map)."""
         rows, self._rows = self._rows, {}
+        if hold:  # kept back first: rows added meanwhile join them
+            self._rows = {p: r for p, r in rows.items() if r.kind in hold}
+            rows = {p: r for p, r in rows.items() if r.kind not in hold}
         self._indexes = {}
         for i, (path, r) in enumerate(rows.items(), start=1):
             ks, ts, data = r.ks, r.ts, r.rows

@@ -21,7 +21,7 @@ from sensornet.sim.run.launcher import _view_command
 
 import sensornet.cli.commands.view as view_cmd
 import sensornet.view as view_mod
-from sensornet.view import BEHIND_S, MAP_KEEP, LiveView, ViewState, idle_process
+from sensornet.view import BEHIND_S, MAP_KEEP, SERIES_EVERY, LiveView, ViewState, idle_process
 
 linux = pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE: Linux")
 
@@ -131,25 +131,48 @@ def _view(said: list[str] | None = None) -> LiveView:
                     say=(said.append if said is not None else lambda s: None))
 
 
-def test_a_view_whose_drawing_lags_by_seconds_decimates_its_map_frames():
-    """Few messages waiting, but the newest tracks drawn :data:`BEHIND_S` after they were
-    sent: behind (map frames beyond the newest :data:`MAP_KEEP` decimated, counted and said);
-    drawn promptly: not."""
+def test_a_view_whose_queue_stays_full_for_seconds_decimates_its_map_frames():
+    """Few messages waiting, but the queue not empty for :data:`BEHIND_S`: behind (map frames
+    beyond the newest :data:`MAP_KEEP` decimated, counted and said); a view that emptied its
+    queue just now: not, though its messages' send times are old (a replay's, another
+    machine's clock: the view measures on its own)."""
     said: list[str] = []
     v = _view(said)
     for k in range(1, MAP_KEEP + 6):
-        v.state.receive("sensornet/net/telemetry/s1", encode(Tracks(
-            "s1", k, np.zeros((1, 4)), send_time=time.time() - BEHIND_S - 1.0)))
-    assert v.q.qsize() == 0 and v.behind()
+        v.state.receive("sensornet/net/telemetry/s1", encode(Tracks("s1", k, np.zeros((1, 4)))))
+    v.q.put(("sensornet/net/telemetry/s1", encode(Tracks("s1", 99, np.zeros((1, 4))))))
+    v._empty_at = time.monotonic() - BEHIND_S - 0.5
+    assert v.behind()
     v.flush()
     assert v.batcher.map_keep == MAP_KEEP and v.batcher.decimated > 0
     assert said and "map frames decimated" in said[-1]
     prompt = _view()
-    prompt.state.receive("sensornet/net/telemetry/s1",
-                         encode(Tracks("s1", 1, np.zeros((1, 4)), send_time=time.time())))
+    for k in range(1, MAP_KEEP + 6):
+        prompt.state.receive("sensornet/net/telemetry/s1", encode(Tracks(
+            "s1", k, np.zeros((1, 4)), send_time=time.time() - 3600.0)))
+    prompt.q.put(("sensornet/net/telemetry/s1", encode(Tracks("s1", 99, np.zeros((1, 4))))))
+    prompt.drain(0.1)  # emptied: keeps up
     assert not prompt.behind()
     prompt.flush()
     assert prompt.batcher.map_keep is None and prompt.batcher.decimated == 0
+
+
+def test_the_health_series_go_every_few_flushes_the_map_every_flush():
+    """Series rows go at the first flush, then wait :data:`SERIES_EVERY` flushes (one call for
+    all of them); map rows go at each; nothing is lost, and the end's flush sends what
+    waits."""
+    rec = _Rec()
+    v = LiveView("net", lambda b: ViewState(b, ["s1"]), rr, rec, say=lambda s: None)
+    for k in range(1, 2 * SERIES_EVERY + 1):
+        v.batcher.scalar("metrics/latency_ms/s1", k, 0.1 * k, float(k))
+        v.batcher.points("peers/s1/tracks", k, 0.1 * k, np.zeros((1, 2)), (1, 2, 3), 5.0)
+        v._empty_at = time.monotonic()
+        v.flush()
+    assert rec.paths.count("peers/s1/tracks") == 2 * SERIES_EVERY
+    assert rec.paths.count("metrics/latency_ms/s1") == 2  # the first flush's and one more
+    v.batcher.flush()
+    assert rec.paths.count("metrics/latency_ms/s1") == 3
+    assert v.batcher.rows_sent == 2 * 2 * SERIES_EVERY
 
 
 def test_at_its_end_the_view_draws_what_it_heard_and_counts_what_it_cannot(monkeypatch):
