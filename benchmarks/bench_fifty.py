@@ -7,7 +7,8 @@ on, so that the view, which connects to the world, finds the hosts), for each pe
 row per run:
 
 - scans handled per peer (the fewest), deadline fusions (all peers pooled, and the worst peer),
-  p50 / p99 scan -> fused tracks (every peer's samples pooled), mean fused OSPA;
+  p50 / p99 scan -> fused tracks (every peer's samples pooled) and the worst peer's own p99,
+  mean fused OSPA;
 - the peers' CPU per peer-scan (their hosts' CPU split between their peers, from the loop's
   start: ``bench_network.cpu_per_scan``) and its largest parts;
 - CPU seconds per wall second of every process of the run (world, hosts, view), sampled from
@@ -233,6 +234,9 @@ def one_run(tmp: Path, kind: str, view: str, repeat: int, scans: int, per_proces
                 "late": late / max(1, fus), "late_worst": worst,
                 "p50": statistics.median(lat) if lat else float("nan"),
                 "p99": percentile(lat, 0.99) if lat else float("nan"),
+                "p99_worst": max((percentile(sorted(v["latency_ms_samples"]), 0.99)
+                                  for v in s.values() if v.get("latency_ms_samples")),
+                                 default=float("nan")),
                 "cpu_peer": cpu, "parts": parts,
                 "ospa": statistics.fmean(ospa) if ospa else float("nan")}
     row["view"] = res["view"] or {}
@@ -243,7 +247,8 @@ def one_run(tmp: Path, kind: str, view: str, repeat: int, scans: int, per_proces
 
 
 HEADER = ("| kind | view | rep | scans/s | per host | real time | fewest scans | deadline fusions "
-          "(all / worst peer) | p50 / p99 scan->tracks (ms) | peers' CPU ms/peer-scan | "
+          "(all / worst peer) | p50 / p99 / worst peer's p99 scan->tracks (ms) | "
+          "peers' CPU ms/peer-scan | "
           "top parts (ms) | CPU s per wall s: hosts + world + view | peers' work at 10 scans/s "
           "(cores of 2.0) | fused OSPA | view CPU ms/scan | view lag median / p99 (ms) | "
           "view messages drawn | "
@@ -265,7 +270,8 @@ def fmt(r: Run, n: int) -> str:
     return (f"| {r.kind} | {r.view} | {r.repeat + 1} | {x['speed']:g} | "
             f"{x['per']} | {'yes' if r.ok else 'NO'} | {x.get('min_scans', '-')} | "
             f"{100 * x.get('late', nan):.1f} / {100 * x.get('late_worst', nan):.1f} % | "
-            f"{x.get('p50', nan):.1f} / {x.get('p99', nan):.1f} | {x.get('cpu_peer', nan):.2f} | "
+            f"{x.get('p50', nan):.1f} / {x.get('p99', nan):.1f} / "
+            f"{x.get('p99_worst', nan):.1f} | {x.get('cpu_peer', nan):.2f} | "
             f"{top} | {x['cpu_total']:.2f} = {x['cpu_hosts']:.2f} + {x['cpu_world']:.2f} + "
             f"{x['cpu_view'] if r.view != 'off' else 0.0:.2f} | {work:.2f} | "
             f"{x.get('ospa', nan):.2f} | "
