@@ -8,9 +8,11 @@ asynchronous centralised reference does for one radar
 (``sim.studies.traffic.asynchronous.AsyncLmb``; Bar-Shalom, Willett & Tian 2011, ch. 9,
 sequential updating): per slice, empty ones too (the beam swept the sector and saw nothing),
 predict over the elapsed time (:class:`tracking.elapsed.ElapsedMotion`, ``Ps^(dt / T)``), correct
-with the slice's plots, the ``Pd`` of the sector the beam swept in the slice and the clutter
-intensity inside that sector; then predict to ``t_k``, where the peer publishes and fuses as
-before. A track's confirmation counts once per tick, at ``t_k``.
+with the slice's plots, the ``Pd`` of the sector the beam swept in the slice (soft edges:
+the range curve times the probability that the track's azimuth is in the sector,
+``sim.world.birth.sector_share``) and the clutter intensity inside that sector; then predict
+to ``t_k``, where the peer publishes and fuses as before. A track's confirmation counts once
+per tick, at ``t_k``.
 
 The births of a slice's plots enter at the next slice's prediction (the last slice's at
 ``t_k``), labelled ``(origin, k, j * SLICE_LABEL_BASE + i)`` for the ``j``-th prediction of the
@@ -52,9 +54,10 @@ class OwnTimes:
     """Per tick ``T``; ``Ps^(dt / T)`` over ``dt``."""
     clutter_intensity: float
     """Inside the sector the beam sweeps (``> 0``)."""
-    sector_pd: Callable[[float, float, np.ndarray], np.ndarray] | None = None
-    """``(start, end, means (n, 4)) -> (n,)`` Pd over the sector swept in ``(start, end]``
-    (``sim.world.birth.Beam.sector``); None: :attr:`fixed_pd` everywhere."""
+    sector_pd: Callable[[float, float, np.ndarray, np.ndarray], np.ndarray] | None = None
+    """``(start, end, means (n, 4), covs (n, 4, 4)) -> (n,)`` Pd over the sector swept in
+    ``(start, end]`` (``sim.world.birth.Beam.sector``, soft edges); None: :attr:`fixed_pd`
+    everywhere."""
     fixed_pd: float = 1.0
 
     def __post_init__(self) -> None:
@@ -132,9 +135,9 @@ def step_at_own_times(filt: LmbFilter, state: LmbState, z: np.ndarray, ages: np.
         pred = _predict(f, state, k, mid - t, j, own)
         t = mid
         tr = pred.tracks
-        means = tr.means[tr.heaviest()]
-        pd = (np.full(len(means), own.fixed_pd) if own.sector_pd is None
-              else own.sector_pd(a, a + s, means))
+        top = tr.heaviest()
+        pd = (np.full(len(top), own.fixed_pd) if own.sector_pd is None
+              else own.sector_pd(a, a + s, tr.means[top], tr.covs[top]))
         f.sensor = SensorParams(model, pd, own.clutter_intensity)
         st = f.correct(pred, z[bounds[j]:bounds[j + 1]])
         rows = np.isin(label_keys(tr.labels), label_keys(st.tracks.labels))

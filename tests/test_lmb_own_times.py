@@ -24,6 +24,7 @@ from sensornet.sim.studies.traffic.asynchronous import (
     run_async,
 )
 from sensornet.sim.world import generate_run, plot_ages
+from sensornet.sim.world.birth import sector_share
 from sensornet.tracking.elapsed import ElapsedMotion
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.lmb import LmbFilter
@@ -50,7 +51,7 @@ def one_target(seed: int = 3, ticks: int = 8):
 
 def beam_pd(times: np.ndarray):
     """A beam that sees the target in the slice of its plot and nowhere else (``Pd`` 1 / 0)."""
-    def pd(start: float, end: float, means: np.ndarray) -> np.ndarray:
+    def pd(start: float, end: float, means: np.ndarray, covs=None) -> np.ndarray:
         seen = bool(((times > start) & (times <= end)).any())
         return np.full(len(means), 1.0 if seen else 0.0)
     return pd
@@ -167,7 +168,7 @@ def test_each_paris_peer_equals_the_async_reference_of_its_radar():
     batches = plot_batches(scn, 0, SLICE)
     for s, name in enumerate(scn.sensor_names):
         est, _ = build(scn, name)
-        ref = async_lmb(scn)
+        ref = async_lmb(scn, soft=True)
         st = ref.initial()
         for k in range(1, scn.num_scans + 1):
             est.begin_scan(k)
@@ -184,7 +185,7 @@ def test_each_paris_peer_equals_the_async_reference_of_its_radar():
 
 def test_the_twin_sends_the_ages_and_its_peers_take_them():
     scn = load_scenario("paris", overrides={**PARIS, "lmb.time_slice": SLICE})
-    tracks, _ = run_async(async_lmb(scn), [[b for b in bs if b.sensor == 0]
+    tracks, _ = run_async(async_lmb(scn, soft=True), [[b for b in bs if b.sensor == 0]
                                             for bs in plot_batches(scn, 0, SLICE)],
                           scn.scan_period)
     twin = run_twin(scn, 0)
@@ -224,3 +225,18 @@ def test_option_off_gives_todays_twin_to_the_bit(rule):
 def test_a_slice_that_does_not_divide_the_tick_is_refused():
     with pytest.raises(ScenarioError, match="lmb.time_slice"):
         load_scenario("paris", overrides={**PARIS, "lmb.time_slice": 0.3})
+
+
+def test_sector_share_is_the_monte_carlo_share_of_azimuths_in_the_sector():
+    rng = np.random.default_rng(5)
+    dx, dy = np.array([3000.0, -800.0, 20000.0, 500.0]), np.array([4000.0, 2500.0, -100.0, -30.0])
+    P = np.array([[[9e4, 2e4], [2e4, 4e4]], [[4e4, 0], [0, 4e4]], [[1e6, 0], [0, 2.5e5]],
+                  [[400.0, 0], [0, 400.0]]])
+    # each sector cuts one target's azimuth spread (36.9, 342.3 across north, 90.3, 93.4 deg)
+    for first, swept in ((35.0, 5.0), (340.0, 30.0), (90.0, 30.0), (92.0, 5.0)):
+        got = sector_share(dx, dy, P, first, swept, 0.0)
+        for i in range(len(dx)):
+            xy = rng.multivariate_normal([dx[i], dy[i]], P[i], 200_000)
+            az = np.degrees(np.arctan2(xy[:, 0], xy[:, 1]))
+            want = np.mean((az - first) % 360.0 <= swept)
+            assert got[i] == pytest.approx(want, abs=0.01), (first, i)

@@ -110,12 +110,14 @@ def plot_batches(scn: Scenario, run: int, slice_s: float = SLICE) -> list[list[B
     return out
 
 
-def batch_pd(beam: Beam | None, fixed: float, batch: Batch, means: np.ndarray) -> np.ndarray:
+def batch_pd(beam: Beam | None, fixed: float, batch: Batch, means: np.ndarray,
+             covs: np.ndarray | None = None) -> np.ndarray:
     """``(n,)`` ``Pd`` of tracks at ``means (n, 4)`` in ``batch``: the beam's over the sector
-    swept in ``(start, end]`` (:meth:`Beam.detection` of a one-slice clock), else ``fixed``."""
+    swept in ``(start, end]`` (:meth:`Beam.sector`: with ``covs (n, 4, 4)`` soft edges), else
+    ``fixed``."""
     if beam is None:
         return np.full(len(means), fixed)
-    return beam.sector(batch.start, batch.end, means)
+    return beam.sector(batch.start, batch.end, means, covs)
 
 
 @dataclass
@@ -134,6 +136,10 @@ class AsyncLmb:
     """Seconds after the run's origin the state refers to."""
     count: int = 0
     """Predictions so far: the ``birth_scan`` of the births' labels."""
+    soft: bool = False
+    """Soft sector edges (:meth:`sim.world.birth.Beam.sector` with the tracks' covariances),
+    as LMB peers with ``lmb.time_slice`` take them; False: hard edges (the reference's
+    published numbers)."""
 
     def initial(self) -> LmbState:
         self.time, self.count = 0.0, 0
@@ -156,8 +162,9 @@ class AsyncLmb:
         f = self.filters[batch.sensor]
         pred = self._predict(f, state, batch.t)
         t = pred.tracks
-        means = t.means[t.heaviest()]
-        pd = batch_pd(self.beams[batch.sensor], self.fixed_pd[batch.sensor], batch, means)
+        top = t.heaviest()
+        pd = batch_pd(self.beams[batch.sensor], self.fixed_pd[batch.sensor], batch,
+                      t.means[top], t.covs[top] if self.soft else None)
         f.sensor = SensorParams(f.sensor.model, pd, f.sensor.clutter_intensity)
         st = f.correct(pred, batch.z)
         rows = np.isin(label_keys(t.labels), label_keys(st.tracks.labels))
@@ -178,10 +185,10 @@ class AsyncLmb:
         return Extracted(tr.states, tr.labels, tr.status)
 
 
-def async_lmb(scn: Scenario) -> AsyncLmb:
+def async_lmb(scn: Scenario, soft: bool = False) -> AsyncLmb:
     """The scenario's asynchronous centralised LMB: each sensor's LMB filter as the ``lmb``
     peer kind builds it (:func:`sim.kinds.lmb.make_lmb_filter`), with the sector's clutter
-    intensity; beams from :func:`sim.world.birth.beam_of`."""
+    intensity; beams from :func:`sim.world.birth.beam_of`; ``soft``: :attr:`AsyncLmb.soft`."""
     filters, beams, fixed = [], [], []
     for spec in scn.sensors:
         f = make_lmb_filter(scn, spec.name, 0)
@@ -193,7 +200,7 @@ def async_lmb(scn: Scenario) -> AsyncLmb:
         beams.append(beam)
         fixed.append(spec.detection_probability)
     return AsyncLmb(filters, beams, fixed, ElapsedMotion(scn.scan_period, scn.sigma_w),
-                    scn.survival_probability)
+                    scn.survival_probability, soft=soft)
 
 
 @dataclass
