@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.peers.labelling import take_moves
+from sensornet.peers.stamp_moves import MovingStamps
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
@@ -69,7 +70,8 @@ class GmphdEstimator:
 
     def __init__(self, filt: GMPHDFilter, level2: bool = True,
                  level2_threshold: float = 0.5, origin: int | None = None,
-                 shared_births: bool = False, revisit: int = 1) -> None:
+                 shared_births: bool = False, revisit: int = 1,
+                 corroborate_scans: int = 1) -> None:
         self.filter = filt
         self.reducer = filt.reducer
         self.level2 = level2
@@ -101,6 +103,11 @@ class GmphdEstimator:
         """A re-born track takes its lost label back (tracking.reidentify), remembered for
         :data:`tracking.reidentify.REID_SCANS` looks of ``revisit`` scans (a 10 s radar sees a
         target once in 5 scans of 2 s: 3 scans ended the memory before its next look)."""
+        self.moving = None if origin is None else MovingStamps(corroborate_scans)
+        """Own labels an uncorroborated stamp moved a scan later, offered to move again while
+        within ``corroborate_scans`` scans of their first stamp (peers.stamp_moves)."""
+        self._stamped = np.zeros((0, 3), dtype=np.int64)
+        """The last step's stamps and moving labels (:meth:`fresh_stamps`)."""
         self.k = 0
         """The scan of the last step (births are stamped with it)."""
         self._next_k: int | None = None
@@ -148,6 +155,12 @@ class GmphdEstimator:
             pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
             self.labels = self.reid.apply(self.labels, post, pub_at, k)
+            on = post.weights > pub_at
+            self.labels, anew = self.moving.returning(self.labels, on, self.origin, k)
+            self.publication.adopt(anew)
+            again = self.moving.offer(k, self.labels[on])
+            self._stamped = (np.concatenate([self.publication.stamped, anew, again])
+                             if len(anew) or len(again) else self.publication.stamped)
         self.mix, self.k = post, k
         keep = (self.mix.weights > self.level2_threshold if self.level2 and len(self.mix)
                 else None)
@@ -194,9 +207,10 @@ class GmphdEstimator:
             self.labels = as_labels(labels, len(self.mix), "adopted labels")
 
     def fresh_stamps(self) -> np.ndarray | None:
-        """The labels ``(b, 3)`` the last step stamped at first publication (None: no
-        labels); tracking.labels.Publication.stamped."""
-        return None if self.publication is None else self.publication.stamped
+        """The labels ``(b, 3)`` the last step stamped at first publication
+        (tracking.labels.Publication.stamped) and those an earlier move left uncorroborated that
+        may move again (:attr:`moving`); None: no labels."""
+        return None if self.publication is None else self._stamped
 
     def relabel(self, match: LabelMatch) -> None:
         """Take the network's labels for our own (tracking.labels.adopt_labels: each matched
@@ -204,7 +218,9 @@ class GmphdEstimator:
         carries it)."""
         if self.labels is not None:
             moved = match.nbr
-            self.labels, match = take_moves(self.labels, match, self.publication.stamped)
+            before = self.labels
+            self.labels, match = take_moves(self.labels, match, self._stamped)
+            self.moving.note(before, self.labels, self.k)
             self.labels = adopt_labels(self.labels, match)
             self.publication.adopt(moved)
 

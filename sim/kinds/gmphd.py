@@ -33,6 +33,13 @@ def revisit_scans(scn: Scenario, name: str) -> int:
     return max(1, math.ceil(rotation / scn.scan_period - 1e-9)) if rotation else 1
 
 
+def corroborate_scans(scn: Scenario, shared: bool) -> int:
+    """``filter.corroborate_scans``, its automatic value (0) resolved: 2 for births alike at
+    every peer (the clutter tracks at fixed birth points it was chosen for, issue 33), else 1
+    (measurement births, e.g. recorded traffic: not measured with more)."""
+    return scn.filter.corroborate_scans or (2 if shared else 1)
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     filt = make_filter(scn, [name])
     origin = origin_of([s.name for s in scn.sensors], name)
@@ -40,7 +47,8 @@ def build(scn: Scenario, name: str, run: int = 0):
               and scn.birth.model != "measurements")
     est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold,
                          origin=SHARED_ORIGIN + 1 + origin if shared else origin,
-                         shared_births=shared, revisit=revisit_scans(scn, name))
+                         shared_births=shared, revisit=revisit_scans(scn, name),
+                         corroborate_scans=corroborate_scans(scn, shared))
     return est, mixture_fuser(scn, filt.reducer)
 
 
