@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import threading
 import time
@@ -15,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rerun as rr
+import zenoh
+from sensornet.peers.session import endpoint, free_port, zenoh_config
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.launcher import _view_command
@@ -22,6 +25,7 @@ from sensornet.sim.run.launcher import _view_command
 import sensornet.cli.commands.view as view_cmd
 import sensornet.view as view_mod
 from sensornet.view import BEHIND_S, MAP_KEEP, SERIES_EVERY, LiveView, ViewState, idle_process
+from tests.processes import env, stop_all, wait_for
 
 linux = pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE: Linux")
 
@@ -190,6 +194,36 @@ def test_at_its_end_the_view_draws_what_it_heard_and_counts_what_it_cannot(monke
         late.q.put(("sensornet/net/telemetry/s1", encode(Tracks("s1", k, np.zeros((1, 4))))))
     late.finish()
     assert late.state.handled == 0 and late.dropped == 40 and late.q.empty()
+
+
+@pytest.mark.network  # a view process joining a Zenoh session of the test's
+@linux
+def test_every_thread_of_a_view_process_started_idle_is_sched_idle(tmp_path):
+    """``sensornet view --idle``, joined and recording: each of its threads (Python's, Zenoh's,
+    Rerun's) is SCHED_IDLE, read from outside the process."""
+    ep = endpoint(free_port())
+    session = zenoh.open(zenoh_config([ep], []))
+    err = tmp_path / "view.err"
+    with err.open("w") as fh:
+        view = subprocess.Popen(
+            [sys.executable, "-m", "sensornet", "view", "idlenet", "--connect", ep, "--idle",
+             "--duration", "60", "--out", str(tmp_path / "v.rrd")], cwd=tmp_path, env=env(),
+            stdout=subprocess.DEVNULL, stderr=fh)
+    try:
+        wait_for(lambda: "Ctrl-C to detach" in err.read_text() or view.poll() is not None,
+                 120, "the view's recording open")
+        assert view.poll() is None, err.read_text()[-2000:]
+        assert "threads in SCHED_IDLE" in err.read_text()
+        policies = {}
+        for tid in os.listdir(f"/proc/{view.pid}/task"):
+            try:
+                policies[int(tid)] = os.sched_getscheduler(int(tid))
+            except ProcessLookupError:  # ended meanwhile
+                pass
+        assert len(policies) >= 3 and set(policies.values()) == {os.SCHED_IDLE}, policies
+    finally:
+        stop_all([view])
+        session.close()
 
 
 if __name__ == "__main__":
