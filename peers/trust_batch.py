@@ -13,6 +13,7 @@ trust states are those of its own :meth:`Trust.weigh`.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Generator
@@ -25,7 +26,7 @@ from sensornet.peers.trust_checks import (
     _others,
     divergence_test,
     gated,
-    offset_chi2_many,
+    offset_chi2_stacked,
     offset_cusums,
     pair_tests,
     position_block,
@@ -110,11 +111,11 @@ def _by_key(args: list[tuple], key: Callable, many: Callable) -> list:
 
 
 def _chi2(args: list[tuple]) -> list:
-    """``"chi2"``: :func:`peers.trust_checks.offset_chi2_many` of every peer's windows (the
-    same ``windows``) in one batch, split back per peer."""
+    """``"chi2"``: :func:`peers.trust_checks.offset_chi2_stacked` of every peer's windows
+    (the same ``windows``) in one batch, split back per peer."""
     def many(group: list[tuple]) -> list:
-        flat = [w for offsets, _ in group for w in offsets]
-        values = offset_chi2_many(flat, group[0][1])
+        flat = [w for stacks, _ in group for w in stacks]
+        values = offset_chi2_stacked(flat, group[0][1])
         out, lo = [], 0
         for offsets, _ in group:
             out.append(values[lo:lo + len(offsets)])
@@ -148,48 +149,49 @@ def _unmatched(args: list[tuple]) -> list[np.ndarray]:
 
 def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     pos, min_weight, gate, chi2 = group[0][1:]
-    parts = []  # per request: (n, its components' owners, weights, X, P) or None
-    for mixes, *_ in group:
-        sel = [D.weights >= min_weight if len(D) else np.zeros(0, bool) for D in mixes]
-        owner = np.concatenate([np.full(int(m.sum()), i) for i, m in enumerate(sel)])
-        if len(owner) == 0:
-            parts.append((len(mixes), None))
-            continue
-        full = [D for D in mixes if len(D)]
-        keep = np.concatenate([m for m in sel if len(m)])
-        w = np.concatenate([D.weights for D in full])[keep]
-        X = np.concatenate([D.means for D in full])[keep][:, pos]
-        P = (position_block(np.concatenate([D.covs for D in full])[keep], pos)
-             if chi2 is not None else np.zeros((len(owner), 2, 2)))
-        parts.append((len(mixes), (owner, w, X, P)))
-    live = [p[1] for p in parts if p[1] is not None]
-    if live:
-        sizes = [len(q[0]) for q in live]
-        ends = np.cumsum(sizes)
-        X = np.concatenate([q[2] for q in live])
-        P = np.concatenate([q[3] for q in live])
-        a = np.concatenate([_square(C)[0] + (e - C) for C, e in zip(sizes, ends, strict=True)])
-        b = np.concatenate([_square(C)[1] + (e - C) for C, e in zip(sizes, ends, strict=True)])
-        close = gated(X[a] - X[b], P[a], P[b], gate, chi2)  # near(), pair by pair
-    out, pairs = [], 0
-    for n, part in parts:
-        if part is None:
-            out.append(np.zeros((n, n)))
-            continue
-        owner, w, _, _ = part
-        C = len(owner)
+    lens = [[len(D) for D in mixes] for mixes, *_ in group]
+    full = [D for (mixes, *_), z in zip(group, lens, strict=True)
+            for D, c in zip(mixes, z, strict=True) if c]
+    out = [np.zeros((len(z), len(z))) for z in lens]
+    if not full:
+        return out
+    sizes = [c for z in lens for c in z if c]
+    req = np.repeat([r for r, z in enumerate(lens) for c in z if c], sizes)  # per component
+    inp = np.repeat([i for z in lens for i, c in enumerate(z) if c], sizes)
+    keep = np.flatnonzero(np.concatenate([D.weights for D in full]) >= min_weight)
+    if not len(keep):
+        return out
+    w = np.concatenate([D.weights for D in full])[keep]
+    X = np.concatenate([D.means for D in full])[keep][:, pos]
+    P = (position_block(np.concatenate([D.covs for D in full])[keep], pos)
+         if chi2 is not None else np.zeros((len(keep), 2, 2)))
+    counts = np.bincount(req[keep], minlength=len(group)).tolist()
+    owner = inp[keep]
+    ends = np.cumsum(counts).tolist()
+    live = [(r, C, e) for r, (C, e) in enumerate(zip(counts, ends, strict=True)) if C]
+    a = np.concatenate([_square(C)[0] + (e - C) for _, C, e in live])
+    b = np.concatenate([_square(C)[1] + (e - C) for _, C, e in live])
+    close = gated(X[a] - X[b], P[a], P[b], gate, chi2)  # near(), pair by pair
+    pairs = 0
+    for r, C, e in live:
+        n = len(lens[r])
         G = np.zeros((C, n))
-        G[np.arange(C), owner] = 1.0  # (C, n): which input a component is of
+        G[np.arange(C), owner[e - C:e]] = 1.0  # (C, n): which input a component is of
         near_ = close[pairs:pairs + C * C].reshape(C, C)
         pairs += C * C
         hit = (near_.astype(float) @ G) > 0  # (C, n)
-        out.append(G.T @ (w[:, None] * ~hit))
+        out[r] = G.T @ (w[e - C:e, None] * ~hit)
     return out
 
 
+@functools.lru_cache(maxsize=256)
 def _square(C: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column of every entry of a ``(C, C)`` matrix, row-major."""
-    return np.repeat(np.arange(C), C), np.tile(np.arange(C), C)
+    """Row and column of every entry of a ``(C, C)`` matrix, row-major (made once per ``C``,
+    read-only)."""
+    out = np.repeat(np.arange(C), C), np.tile(np.arange(C), C)
+    for x in out:
+        x.flags.writeable = False
+    return out
 
 
 def _offsets(args: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:

@@ -337,21 +337,34 @@ def offset_chi2(offsets: deque, windows: tuple[int, ...]) -> tuple[float, ...]:
 def offset_chi2_many(offsets: list[deque], windows: tuple[int, ...]
                      ) -> list[tuple[float, ...]]:
     """:func:`offset_chi2` of several neighbours' offsets (each non-empty), the same
-    numbers: every window stacked at once (the shorter ones padded at their old end with
-    zeros no window reaches), their running sums along the scans, the determinants and
-    solves of all of them in one batch (one round's neighbours, per scan)."""
-    if not offsets:
+    numbers: every window stacked at once (:func:`offset_chi2_stacked`)."""
+    return offset_chi2_stacked([(np.array([i for i, _ in w]), np.array([v for _, v in w]))
+                                for w in offsets], windows)
+
+
+def offset_chi2_stacked(stacks: list[tuple[np.ndarray, np.ndarray]], windows: tuple[int, ...]
+                        ) -> list[tuple[float, ...]]:
+    """:func:`offset_chi2_many` of windows given as arrays (per neighbour ``(I, y)``,
+    ``(n, 2, 2)`` and ``(n, 2)``, newest first, ``n >= 1``: :func:`peers.trust_record.
+    stacked_window`), the same numbers: the shorter ones padded at their old end with zeros
+    no window reaches, their running sums along the scans, the determinants and solves of
+    all of them in one batch (one round's neighbours, per scan)."""
+    if not stacks:
         return []
-    lengths = [len(window) for window in offsets]
+    lengths = [len(i) for i, _ in stacks]
     top = max(lengths)
-    zero_i, zero_y = np.zeros((2, 2)), np.zeros(2)
-    pad = [top - n for n in lengths]
-    I = np.cumsum([[i for i, _ in w] + [zero_i] * p for w, p in zip(offsets, pad, strict=True)],
-                  axis=1)  # (r, top, 2, 2): newest first
-    Y = np.cumsum([[v for _, v in w] + [zero_y] * p for w, p in zip(offsets, pad, strict=True)],
-                  axis=1)  # (r, top, 2)
+    if all(n == top for n in lengths):
+        I = np.stack([i for i, _ in stacks])  # (r, top, 2, 2): newest first
+        Y = np.stack([v for _, v in stacks])  # (r, top, 2)
+    else:
+        I, Y = np.zeros((len(stacks), top, 2, 2)), np.zeros((len(stacks), top, 2))
+        for k, (i, v) in enumerate(stacks):
+            I[k, :len(i)] = i
+            Y[k, :len(v)] = v
+    I = np.cumsum(I, axis=1)
+    Y = np.cumsum(Y, axis=1)
     last = [[min(w, n) - 1 for w in windows] for n in lengths]  # (r, w)
-    rows = np.repeat(np.arange(len(offsets)), len(windows))
+    rows = np.repeat(np.arange(len(stacks)), len(windows))
     cols = np.ravel(last)
     info, y = I[rows, cols], Y[rows, cols]  # (r w, 2, 2), (r w, 2)
     ok = np.linalg.det(info) > 1e-12
@@ -359,7 +372,7 @@ def offset_chi2_many(offsets: list[deque], windows: tuple[int, ...]
     if ok.any():
         b = np.linalg.solve(info[ok], y[ok][..., None])[..., 0]  # mean offsets
         chi2[ok] = np.einsum("wi,wi->w", y[ok], b)
-    values = chi2.reshape(len(offsets), len(windows)).tolist()
+    values = chi2.reshape(len(stacks), len(windows)).tolist()
     return [tuple(v) for v in values]
 
 
@@ -737,7 +750,7 @@ ALONE = {
     "overlaps": lambda mixes: log_overlaps(mixes),
     "unmatched": lambda *args: unmatched_weights(*args)[0],
     "offsets": lambda *args: offset_information_many(*args),
-    "chi2": lambda offsets, windows: offset_chi2_many(offsets, windows),
+    "chi2": lambda stacks, windows: offset_chi2_stacked(stacks, windows),
     "cusums": lambda *args: offset_cusums(*args),
     "tests": lambda *args: neighbour_tests(*args),
     "withheld": lambda *args: withheld_increments(*args),
@@ -748,7 +761,7 @@ ALONE = {
 """How :func:`run_alone` computes each request of the trust generators: ``"overlaps"``
 (:func:`tracking.divergence.log_overlaps`), ``"unmatched"`` (:func:`unmatched_weights`'
 ``U``), ``"offsets"`` (:func:`offset_information_many`), ``"chi2"``
-(:func:`offset_chi2_many`), ``"cusums"`` (:func:`offset_cusums`), ``"tests"``
+(:func:`offset_chi2_stacked`), ``"cusums"`` (:func:`offset_cusums`), ``"tests"``
 (:func:`neighbour_tests`), ``"withheld"`` (:func:`withheld_increments`), ``"relative"``
 (:func:`relative_offsets`), ``"masses"``
 (each mixture's mass and :func:`target_mass`, lists of floats); looked up when called

@@ -73,6 +73,8 @@ class NeighbourTrust:
     (:attr:`TrustConfig.same_scan`)."""
     offsets: deque = field(default_factory=deque)
     """The offset test's window: per scan ``(I, y)``, ``(2, 2)`` and ``(2,)``."""
+    stacked: tuple | None = None
+    """:attr:`offsets` as arrays and the entry they are newest of (:func:`stacked_window`)."""
     last_offset_chi2: tuple[float, ...] = ()
     """Per window of :attr:`TrustConfig.bias_windows`: the last chi-square of the offset;
     then (:attr:`TrustConfig.bias_cusum`) the offset CUSUM's value."""
@@ -152,7 +154,7 @@ def add_offsets_steps(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[
         push_window(rec.offsets, info, max(cfg.bias_windows))
         if cfg.register and cfg.register_drift:
             push_window(rec.drift_window, info, cfg.register_window)
-    out = yield ("chi2", [rec.offsets for rec in recs], cfg.bias_windows)
+    out = yield ("chi2", [stacked_window(rec) for rec in recs], cfg.bias_windows)
     if cfg.bias_cusum and recs:  # every chart in one batch (offset_cusums)
         m = cfg.bias_cusum_directions
         G = yield ("cusums", np.array([np.zeros(m) if rec.cusum is None else rec.cusum
@@ -164,6 +166,24 @@ def add_offsets_steps(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[
     for rec, chi2 in zip(recs, out, strict=True):
         rec.last_offset_chi2 = chi2
     return out
+
+
+def stacked_window(rec: NeighbourTrust) -> tuple[np.ndarray, np.ndarray]:
+    """The offset test's window (:attr:`NeighbourTrust.offsets`) as arrays, newest first:
+    ``I`` (``(n, 2, 2)``) and ``y`` (``(n, 2)``), the same values. The window just pushed
+    to is the one before with its newest scan in front, so it is made from the arrays kept
+    of that one (:attr:`NeighbourTrust.stacked`: their newest entry is the window's
+    second), or anew where they are not (another push came between)."""
+    w = rec.offsets
+    kept = rec.stacked
+    if kept is not None and len(w) >= 2 and kept[2] is w[1]:
+        I, y = np.asarray(w[0][0])[None], np.asarray(w[0][1])[None]
+        I = np.concatenate([I, kept[0][:len(w) - 1]])
+        y = np.concatenate([y, kept[1][:len(w) - 1]])
+    else:
+        I, y = np.array([i for i, _ in w]), np.array([v for _, v in w])
+    rec.stacked = (I, y, w[0])
+    return I, y
 
 
 def update_registration(rec: NeighbourTrust, alarm: bool, k: int = 0,

@@ -20,6 +20,7 @@ from sensornet.peers.batching import FusionBatch
 from sensornet.peers.trust import Trust, TrustConfig
 from sensornet.peers.trust_batch import TOGETHER, run_together, weigh_together
 from sensornet.peers.trust_checks import ALONE, neighbour_statistics_steps
+from sensornet.peers.trust_record import NeighbourTrust, push_window, stacked_window
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
@@ -106,8 +107,9 @@ def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
                 I = B @ B.T * (rng.random() < 0.8)  # some scans matched nothing
                 window.append((I, rng.normal(0, 3, 2)))
             infos.append(window)
-        if op == "chi2":
-            out.append(([list(w) for w in infos], (3, 16)))
+        if op == "chi2":  # the windows as trust_record.stacked_window gives them
+            out.append(([(np.array([i for i, _ in w]), np.array([v for _, v in w]))
+                         for w in infos], (3, 16)))
         else:
             g = np.maximum(0.0, rng.normal(0, 5, (len(infos), 8)))
             out.append((g, [w[0] for w in infos], 30.0, np.eye(2)[[0, 1, 0, 1, 0, 1, 0, 1]]))
@@ -345,3 +347,22 @@ def test_a_twins_host_tests_together_with_the_same_results(twin_runs):
             assert np.array_equal(one.tracks[q][k], many.tracks[q][k])
     assert sum_one == sum_many
     assert any(v["changes"] for v in sum_many.values())  # the liar was noticed
+
+
+def test_stacked_window_is_the_window_made_anew():
+    """The arrays kept of the offset window, updated per push, equal the window's; a push
+    they did not see (here: two in a row) makes them anew."""
+    rng = np.random.default_rng(8)
+    rec = NeighbourTrust()
+    rebuilt = 0
+    for k in range(40):
+        B = rng.normal(0, 1, (2, 2))
+        push_window(rec.offsets, (B @ B.T, rng.normal(0, 3, 2)), 16)
+        if k in (5, 20):
+            push_window(rec.offsets, (np.eye(2), np.zeros(2)), 16)
+        before = rec.stacked
+        I, y = stacked_window(rec)
+        rebuilt += before is not None and before[2] is not rec.offsets[1]
+        assert np.array_equal(I, np.array([i for i, _ in rec.offsets]))
+        assert np.array_equal(y, np.array([v for _, v in rec.offsets]))
+    assert len(rec.offsets) == 16 and rebuilt == 2
