@@ -68,20 +68,23 @@ def log_overlaps_many(groups: list[list[GaussianMixture]]) -> list[np.ndarray]:
     log-sum-exps as :func:`log_overlaps` does them. Groups of another dimension than the
     first non-empty one's, or beyond one block (:data:`BLOCK_PAIRS`), on their own."""
     out: list[np.ndarray | None] = [None] * len(groups)
-    todo, dim = [], None
+    todo, dim, lens = [], None, []
     for i, mixes in enumerate(groups):
-        C = sum(len(D) for D in mixes)
-        d = next((D.dim for D in mixes if len(D)), None)
+        z = [len(D) for D in mixes]
+        C = sum(z)
+        d = next((D.means.shape[1] for D, c in zip(mixes, z, strict=True) if c), None)
         if C == 0 or C * C > BLOCK_PAIRS or (dim is not None and d != dim):
             out[i] = log_overlaps(mixes)
             continue
         dim = d
         todo.append((i, C))
+        lens.append(z)
     if len(todo) < 2:
         for i, _ in todo:
             out[i] = log_overlaps(groups[i])
         return out
-    full = [D for i, _ in todo for D in groups[i] if len(D)]
+    full = [D for (i, _), z in zip(todo, lens, strict=True)
+            for D, c in zip(groups[i], z, strict=True) if c]
     w = np.concatenate([D.weights for D in full])
     m = np.concatenate([D.means for D in full])
     P = np.concatenate([D.covs for D in full])
@@ -92,7 +95,7 @@ def log_overlaps_many(groups: list[list[GaussianMixture]]) -> list[np.ndarray]:
     b = np.concatenate([_upper(C)[1] + (e - C) for (_, C), e in zip(todo, ends, strict=True)])
     inv, det = inv_det_spd((P[a] + P[b])[None])
     g = lw[a] + lw[b] + log_gaussian((m[a] - m[b])[None], inv, det)[0]
-    sizes = [[len(D) for D in groups[i]] for i, _ in todo]
+    sizes = lens
     present = [[c for c in z if c] for z in sizes]
     one = [len(p) == C for p, (_, C) in zip(present, todo, strict=True)]  # one term each
     many = [n for n, o in enumerate(one) if not o]
