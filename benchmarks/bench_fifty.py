@@ -40,6 +40,7 @@ step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every 
     python benchmarks/bench_fifty.py --speed 4             # the same at 4 scans/s
     python benchmarks/bench_fifty.py --gaps                # one LMB peer leaving scans out
     python benchmarks/bench_fifty.py --twin --repeats 3    # the peers' logic alone, per kind
+    python benchmarks/bench_fifty.py --watched --against REV  # being watched, REV's and now
 
 "Real time" is ``bench_network.real_time``: every peer handled every scan, at most 5 % of a
 peer's fusions forced by the deadline, pooled p99 scan -> tracks under one scan interval.
@@ -51,10 +52,12 @@ import argparse
 import os
 import re
 import statistics
+import subprocess
 import sys
 import tempfile
 import threading
 import time
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -76,6 +79,7 @@ from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.world import generate_run
 from sensornet.tracking.metrics import ospa
 
+import benchmarks.bench_watched as bench_watched
 from benchmarks.bench_network import (
     cpu_per_scan,
     load_average,
@@ -381,6 +385,56 @@ def part_twin(kinds: list[str], repeats: int, n: int = 50, degree: int = 4,
     return rows
 
 
+def observer_at(rev: str) -> types.ModuleType:
+    """``peers/observer.py`` of git revision ``rev``, imported under another name (the rest
+    of the package as now)."""
+    root = Path(__file__).resolve().parents[1]
+    text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:peers/observer.py"],
+                          capture_output=True, text=True, check=True).stdout
+    module = types.ModuleType("_observer_at_rev")
+    exec(compile(text, f"{rev}:peers/observer.py", "exec"), module.__dict__)
+    return module
+
+
+def part_watched(repeats: int, against: str | None, n: int = 50, degree: int = 4,
+                 scans: int = 40, sets: tuple[str, ...] = ()) -> list[str]:
+    """What being watched costs the peers themselves (issue 38): the twin of the network with
+    every peer watched (``bench_watched.watched_twin``, two hosts), the observers' gathering
+    and flushing CPU per peer-scan and the bytes they send, with today's observer and
+    (``against``) revision REV's, interleaved ``repeats`` times; medians and their ratio."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "watched.toml"
+        path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0))
+        scn = load_scenario(str(path), overrides=parse_overrides(list(sets)))
+    sides = [("now", (bench_watched.Observer, bench_watched.HostReports))]
+    if against:
+        old = observer_at(against)
+        sides.insert(0, (against, (old.Observer, old.HostReports)))
+    rows = ["| observer | rep | gather + flush ms/peer-scan | bytes/peer-scan | load |",
+            "|---|---:|---:|---:|---:|"]
+    print("\n".join(rows), flush=True)
+    ms: dict[str, list[float]] = {side: [] for side, _ in sides}
+    now = sides[-1][1]
+    try:
+        for rep in range(repeats):
+            for side, (obs, host) in sides:
+                bench_watched.Observer, bench_watched.HostReports = obs, host
+                sent: list[int] = []
+                cpu = bench_watched.watched_twin(
+                    scn, 0, 2, lambda t, k, b, sent=sent: sent.append(len(b)))
+                ms[side].append((cpu["gather"] + cpu["flush"]) * 1e3 / n / scans)
+                rows.append(f"| {side} | {rep + 1} | {ms[side][-1]:.3f} | "
+                            f"{sum(sent) / n / scans:.0f} | {load_average()} |")
+                print(rows[-1], flush=True)
+    finally:
+        bench_watched.Observer, bench_watched.HostReports = now
+    if against:
+        rows.append(f"\nnow / {against}: "
+                    f"{statistics.median(ms['now']) / statistics.median(ms[against]):.2f}")
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--kinds", default="gmphd,lmb", help="network.filter values (default both)")
@@ -409,11 +463,23 @@ def main(argv: list[str] | None = None) -> int:
                    help="only one LMB peer's step when it leaves scans out (no network)")
     p.add_argument("--twin", action="store_true",
                    help="only the peers' logic: the twin of the network per kind (no processes)")
+    p.add_argument("--watched", action="store_true",
+                   help="only what being watched costs the peers on the twin (their reports' "
+                        "gathering and flushing), today's observer and --against REV's")
+    p.add_argument("--against", metavar="REV", default=None,
+                   help="--watched: also the observer of this git revision, interleaved")
     args = p.parse_args(argv)
     if args.twin:
         print(f"## the twin of {args.peers} peers, degree {args.degree}, 2 rounds, {args.scans} "
               f"scans; load average {load_average()}\n")
         part_twin(args.kinds.split(","), args.repeats, args.peers, args.degree, args.scans)
+        return 0
+    if args.watched:
+        print(f"## being watched on the twin of {args.peers} peers (2 hosts), degree "
+              f"{args.degree}, 2 rounds, {min(args.scans, 40)} scans; load average "
+              f"{load_average()}\n")
+        part_watched(args.repeats, args.against, args.peers, args.degree, min(args.scans, 40),
+                     tuple(args.sets))
         return 0
     if args.gaps:
         print(f"## one LMB peer's step with scans left out; load average {load_average()}\n")
