@@ -17,6 +17,11 @@ per scan against the 100 ms a scan lasts at 10 scans/s. Two sources:
     python benchmarks/bench_view.py                          # twin traffic, 50 peers
     python benchmarks/bench_view.py --peers 100 --scans 60 --cache /tmp/v100.pkl
     python benchmarks/bench_view.py --source synthetic --peers 100 --scans 80
+    python benchmarks/bench_view.py --series-every 1,4 --repeats 3   # series every flush or 4th
+
+``--series-every N,M``: only the real-time replay through the view's loop, with the health
+series sent every N-th flush, then every M-th (:data:`sensornet.view.SERIES_EVERY`),
+interleaved ``--repeats`` times: the view's CPU per scan and how late it handled messages.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from sensornet.sim.world import generate_run
 from sensornet.sim.world.graphs import network_scenario
 from sensornet.tracking.mixture import GaussianMixture
 
+import sensornet.view as view_module
 from benchmarks.bench_watched import watched_twin
 from sensornet.view import FLUSH_S, Batcher, LiveView, ViewState
 from sensornet.view_columns import ellipse_strips
@@ -250,6 +256,34 @@ def draw(names: list[str], period: float, seconds: list[list[tuple[str, bytes]]]
     return cpu, b, state
 
 
+def series_every(names: list[str], period: float, heard: list[tuple[float, str, bytes]],
+                 args) -> int:
+    """``--series-every``: the real-time replay with :data:`sensornet.view.SERIES_EVERY` at
+    each value given, interleaved; CPU per scan and lateness per run, then the medians."""
+    values = [int(v) for v in args.series_every.split(",")]
+    made = view_module.SERIES_EVERY
+    cpu: dict[int, list[float]] = {v: [] for v in values}
+    print("| series every | rep | CPU ms per scan | handled after due: median / p99 (ms) | "
+          "flush period at the end (s) | load |\n|---:|---:|---:|---:|---:|---:|", flush=True)
+    try:
+        with tempfile.TemporaryDirectory(prefix="sensornet-view-") as tmp:
+            for rep in range(args.repeats):
+                for v in values:
+                    view_module.SERIES_EVERY = v
+                    r = realtime(names, period, heard, Path(tmp) / "live.rrd",
+                                 skip=args.skip * FLUSH_S)
+                    cpu[v].append(r["cpu_ms"])
+                    print(f"| {v} | {rep + 1} | {r['cpu_ms']:.1f} | {r['late_median']:.0f} / "
+                          f"{r['late_p99']:.0f} | {r['flush_s']:g} | "
+                          f"{os.getloadavg()[0]:.1f} |", flush=True)
+    finally:
+        view_module.SERIES_EVERY = made
+    base = statistics.median(cpu[values[0]])
+    print("\n" + ", ".join(f"every {v}: {statistics.median(cpu[v]):.1f} ms a scan "
+                           f"({statistics.median(cpu[v]) / base:.2f})" for v in values))
+    return 0
+
+
 def main_twin(args) -> int:
     cache = Path(args.cache) if args.cache else None
     if cache is not None and cache.is_file():
@@ -258,6 +292,8 @@ def main_twin(args) -> int:
         names, period, heard = twin_traffic(args.peers, args.scans, args.hosts)
         if cache is not None:
             cache.write_bytes(pickle.dumps((names, period, heard)))
+    if args.series_every:
+        return series_every(names, period, heard, args)
     seconds = by_second(heard)
     scans = max(1, sum(1 for s in seconds for k, _ in s if k.endswith("/truth")))
     n_msgs = sum(map(len, seconds))
@@ -366,6 +402,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="twin: also replay the traffic at its pace through the view's loop")
     p.add_argument("--skip", type=int, default=2,
                    help="twin: seconds not counted at the start (the entities' first flushes)")
+    p.add_argument("--series-every", default=None, metavar="N,M",
+                   help="twin: only the real-time replay, the health series sent every N-th "
+                        "flush against every M-th, interleaved")
     args = p.parse_args(argv)
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     if args.source == "twin":

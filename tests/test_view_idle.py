@@ -161,22 +161,27 @@ def test_a_view_whose_queue_stays_full_for_seconds_decimates_its_map_frames():
     assert prompt.batcher.map_keep is None and prompt.batcher.decimated == 0
 
 
-def test_the_health_series_go_every_few_flushes_the_map_every_flush():
-    """Series rows go at the first flush, then wait :data:`SERIES_EVERY` flushes (one call for
-    all of them); map rows go at each; nothing is lost, and the end's flush sends what
-    waits."""
+@pytest.mark.parametrize("every", [SERIES_EVERY, 4])
+def test_the_health_series_go_every_few_flushes_the_map_every_flush(monkeypatch, every):
+    """Series rows go at the first flush, then every ``SERIES_EVERY``-th (their rows waiting
+    meanwhile, one call for all of them); map rows go at each; nothing is lost, and the end's
+    flush sends what waits."""
+    monkeypatch.setattr(view_mod, "SERIES_EVERY", every)
     rec = _Rec()
     v = LiveView("net", lambda b: ViewState(b, ["s1"]), rr, rec, say=lambda s: None)
-    for k in range(1, 2 * SERIES_EVERY + 1):
+    n = 2 * every + 1
+    for k in range(1, n + 1):
         v.batcher.scalar("metrics/latency_ms/s1", k, 0.1 * k, float(k))
         v.batcher.points("peers/s1/tracks", k, 0.1 * k, np.zeros((1, 2)), (1, 2, 3), 5.0)
         v._empty_at = time.monotonic()
         v.flush()
-    assert rec.paths.count("peers/s1/tracks") == 2 * SERIES_EVERY
-    assert rec.paths.count("metrics/latency_ms/s1") == 2  # the first flush's and one more
+    assert rec.paths.count("peers/s1/tracks") == n
+    assert rec.paths.count("metrics/latency_ms/s1") == 3  # flushes 1, every + 1, 2 every + 1
     v.batcher.flush()
-    assert rec.paths.count("metrics/latency_ms/s1") == 3
-    assert v.batcher.rows_sent == 2 * 2 * SERIES_EVERY
+    assert rec.paths.count("metrics/latency_ms/s1") == 3 and v.batcher.rows_sent == 2 * n
+    v.batcher.scalar("metrics/latency_ms/s1", n + 1, 0.1, 1.0)
+    v.flush()  # flush 2 every + 2: held unless every series goes every flush
+    assert rec.paths.count("metrics/latency_ms/s1") == (4 if every == 1 else 3)
 
 
 def test_at_its_end_the_view_draws_what_it_heard_and_counts_what_it_cannot(monkeypatch):
