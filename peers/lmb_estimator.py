@@ -39,7 +39,7 @@ from sensornet.tracking.labels import (
     label_keys,
     new_labels,
 )
-from sensornet.tracking.lmb import LmbFilter, LmbState
+from sensornet.tracking.lmb import EDGE_FLAG, LmbFilter, LmbState
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.reduction import Reducer
@@ -353,7 +353,10 @@ class LmbEstimator:
             labels = labels.copy()
             shared_ok = np.zeros(len(t), dtype=bool)
             if alike.any():  # shared births: (shared, k, PUBLISHED_BASE + cell) as elsewhere
+                edge = alike & (labels[:, 2] & EDGE_FLAG != 0)
+                labels[edge, 2] -= EDGE_FLAG
                 shared_ok = stamp_shared(labels, keys, alike, new | alike, k)
+                labels[edge & shared_ok, 1] += 1  # its plot near a cell edge: the next scan
                 new |= alike & ~shared_ok
             labels[new] = new_labels(self.origin, k, int(new.sum()), PUBLISHED_BASE)
             self._stamped = labels[new | shared_ok]

@@ -32,6 +32,11 @@ from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
 
+EDGE_FLAG = 1 << 33
+"""Added to the index of a shared adaptive birth's label whose plot lies near a cell edge
+(:attr:`LmbFilter.birth_edge`; cell indices are ``CELL_BASE + code`` with the code below
+``2^32``); stripped when the label is stamped at its first publication."""
+
 
 def predict(tracks: LabelledBernoulliSet, motion: ConstantVelocity, survival_probability: float,
             steps: int = 1) -> LabelledBernoulliSet:
@@ -226,6 +231,12 @@ class LmbFilter:
     likelier keeps it, the other an own label). None: every birth ``(origin, k, .)``."""
     birth_cell: float = 200.0
     """Width (m) of the grid cells of shared adaptive-birth labels (:func:`cell_index`)."""
+    birth_edge: float = 0.0
+    """With :attr:`shared_origin`: an adaptive birth whose plot lies within this distance (m)
+    of an edge of its cell is flagged (:data:`EDGE_FLAG` in its label's index), and its shared
+    stamp at first publication takes the next scan (``peers.lmb_estimator``): a stamp other peers
+    may give the target in the neighbouring cell then loses the tie to the stamps of plots
+    well inside a cell (docs/labelled-tracking.md). 0: no flag."""
     _birth_cov: np.ndarray | None = field(default=None, init=False, repr=False)
     _rng: np.random.Generator | None = field(default=None, init=False, repr=False)
 
@@ -255,6 +266,9 @@ class LmbFilter:
         if self.shared_origin is not None and self.shared_origin == self.origin:
             raise ValueError(f"LmbFilter.origin {self.origin} is shared_origin's: own origins "
                              f"must differ from the shared births' ({self.shared_origin})")
+        if not (np.isfinite(self.birth_edge) and 0 <= self.birth_edge < self.birth_cell / 2):
+            raise ValueError(f"LmbFilter.birth_edge must be in [0, birth_cell / 2) m, got "
+                             f"{self.birth_edge!r}")
         if not (np.isfinite(self.birth_cell) and self.birth_cell > 0):
             raise ValueError(f"LmbFilter.birth_cell must be a positive number of metres, got "
                              f"{self.birth_cell!r}")
@@ -323,6 +337,10 @@ class LmbFilter:
         plots = pending.means[:, list(self.sensor.model.selected)]
         cells = shared_births(cell_index(plots, self.birth_cell), pending.weights,
                               self.shared_origin, self.origin, k, nf)
+        if self.birth_edge > 0:  # a plot near a cell edge: another peer's may be across it
+            frac = plots / self.birth_cell - np.floor(plots / self.birth_cell)  # (nb, dz)
+            near = (self.birth_cell * np.minimum(frac, 1.0 - frac) < self.birth_edge).any(axis=1)
+            cells[near & (cells[:, 0] == self.shared_origin), 2] += EDGE_FLAG
         return np.concatenate((fixed, cells))
 
     def correct(self, state: LmbState, scan: np.ndarray) -> LmbState:
@@ -383,6 +401,6 @@ def check_scan(scan: np.ndarray, dim: int) -> np.ndarray:
     return z
 
 
-__all__ = ["EXTRACTION_RULES", "LabelledBernoulliSet", "LmbFilter", "LmbState", "LmbTracks",
-           "adaptive_birth_existence", "check_scan", "map_cardinality", "predict",
+__all__ = ["EDGE_FLAG", "EXTRACTION_RULES", "LabelledBernoulliSet", "LmbFilter", "LmbState",
+           "LmbTracks", "adaptive_birth_existence", "check_scan", "map_cardinality", "predict",
            "reduce_components", "update"]

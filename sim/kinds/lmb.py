@@ -42,6 +42,18 @@ MIN_CLUTTER_INTENSITY = 1e-12
 """``kappa`` of a sensor without clutter (per m^2 or m rad): the LMB needs ``kappa > 0``."""
 
 
+def birth_edge(scn: Scenario, sensor: SensorParams) -> float:
+    """``lmb.birth_edge``, or if negative (auto) the sensor's position noise (the largest
+    standard deviation of ``R``, below half a cell) for LMB peers that publish tentative tracks,
+    else 0 (off: the real-traffic scenarios, which publish none, are unchanged)."""
+    if scn.lmb.birth_edge >= 0:
+        return scn.lmb.birth_edge
+    if scn.lmb.tentative_threshold <= 0 or sensor.model.selected is None:
+        return 0.0
+    sd = float(np.sqrt(np.max(np.diag(sensor.model.R))))
+    return min(sd, 0.49 * scn.lmb.birth_cell)
+
+
 def make_lmb_filter(scn: Scenario, name: str, origin: int = 0,
                     shared_origin: int | None = None) -> LmbFilter:
     """The LMB filter of sensor ``name`` (module docstring); ``shared_origin``: births
@@ -61,7 +73,8 @@ def make_lmb_filter(scn: Scenario, name: str, origin: int = 0,
                      birth_max_existence=scn.lmb.birth_max_existence,
                      birth_velocity_std=scn.lmb.birth_velocity_std, gate=scn.filter.gate,
                      extraction_threshold=scn.filter.extraction_threshold, origin=origin,
-                     shared_origin=shared_origin, birth_cell=scn.lmb.birth_cell)
+                     shared_origin=shared_origin, birth_cell=scn.lmb.birth_cell,
+                     birth_edge=birth_edge(scn, sensor))
 
 
 def sector_clutter(scn: Scenario, name: str) -> float:
