@@ -36,6 +36,8 @@ MESSAGE_SCHEMA: dict = {
         "k": {"type": "integer", "description": "scan index (simulated time k T)"},
         "send_time": {"type": "number", "description": "sender's wall clock, s since epoch"},
         "z": {"type": "array", "description": "(m, 2) measurements"},
+        "ages": {"type": ["array", "null"],
+                 "description": "Scan: (m,) s each plot was made before the scan's time"},
         "states": {"type": "array", "description": "(n, d) target states"},
         "ids": {"type": ["array", "null"],
                 "description": "Tracks: (n, 3) labels [origin, birth_scan, index]; Truth: (n,)"},

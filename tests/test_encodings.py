@@ -36,7 +36,7 @@ def test_every_codec_type_letter_is_read_without_decoding():
         assert letter_of(head) == letter
 
 
-@pytest.mark.parametrize("junk", [b"", b"\x00\x01\x02\x03", b"\x92\x02\xa1S", b"\x92\x01\xa2EE"])
+@pytest.mark.parametrize("junk", [b"", b"\x00\x01\x02\x03", b"\x92\x02\xa1T", b"\x92\x01\xa2EE"])
 def test_junk_is_unknown_not_an_error(junk):
     assert letter_of(junk) == "?"
     assert parse(encoding_text(junk)) == ("unknown", VERSION, False)

@@ -81,7 +81,7 @@ def test_a_recording_decodes_with_mcap_and_json_alone(tmp_path):
     assert set(by) == {"receive", "liveliness", "tick", "tracks", "finish", "truth", "/scene"}
     got = by["receive"][1]["message"]
     assert got == {"type": "scan", "sensor": "s1", "k": 3, "z": [[1.5, 2.5], [3.0, -4.0]],
-                   "seq": 4, "send_time": 5.25}
+                   "seq": 4, "send_time": 5.25, "ages": None}
     assert base64.b64decode(by["receive"][1]["payload"]) == scan
     t = by["tracks"][1]["message"]
     assert t["ids"] == tracks.ids.tolist() and t["covs"] == covs.tolist()

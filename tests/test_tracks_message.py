@@ -170,8 +170,9 @@ def test_rejections_name_the_culprit():
         decode(v2(c=np.concatenate([BAD_PSD[_IU]] * 2).astype("<f8").tobytes()))
 
 
-def test_protocol_2_has_only_tracks_and_estimates():
-    assert reason(msgpack.packb([2, "S", "s1", 3, 0, 1.0, b""])) == "version"
+def test_protocol_2_has_only_tracks_estimates_and_scans_with_ages():
+    assert reason(msgpack.packb([2, "T", 3, b"", b""])) == "version"
+    assert reason(msgpack.packb([2, "S", "s1", 3, 0, 1.0, b""])) == "field"  # no ages
     assert reason(msgpack.packb([3, "K"])) == "version"
     assert reason(msgpack.packb([2, "K", "s1"])) == "field"  # wrong field count
 
