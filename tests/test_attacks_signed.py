@@ -112,8 +112,10 @@ def test_replayed_and_forged_signed_messages_are_counted(tmp_path):
         assert s["mean_ospa_fused"] < s["mean_ospa_local"], name
         assert s["ctl_end_while_world_alive"] <= 1, name  # the world's own "end" only
         assert s["signatures_checked"] is True, name  # a router is in the roster
-        # nothing the relay sent reached a core: only the envelope's reasons (and no decoding)
-        assert set(s["rejected"]) <= {"replayed", "unauthenticated"}, (name, s["rejected"])
+        # nothing the relay sent reached a core: only the envelope's reasons (and no decoding);
+        # on a busy machine the relay falls behind and sends its backlog in bursts, which the
+        # sender's token bucket refuses as ``rate``, also before decoding (seen at load 15)
+        assert set(s["rejected"]) <= {"replayed", "unauthenticated", "rate"}, (name, s["rejected"])
         bad = s["rejected"].get("unauthenticated", 0)
         if name == "s2":  # s2 does not listen to its own estimates: the forged ctl only
             assert "replayed" not in s["rejected"]
