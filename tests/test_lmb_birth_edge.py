@@ -79,7 +79,7 @@ def test_a_stamp_across_an_edge_yields_to_one_well_inside():
     assert set(old[2]) == {(S, 2, PB + across)}
 
 
-def test_auto_is_the_sensors_noise_only_with_tentative_tracks():
+def test_auto_is_the_sensors_noise_only_with_tentative_tracks_and_off_by_default():
     base = {"network.filter": "lmb"}
 
     def edge(over):
@@ -87,6 +87,8 @@ def test_auto_is_the_sensors_noise_only_with_tentative_tracks():
         return est.filter.birth_edge
 
     sd = float(np.sqrt(np.max(np.diag(sensor_params(load_scenario("seed000"), "s1").model.R))))
-    assert edge({}) == pytest.approx(sd) and sd > 0
-    assert edge({"lmb.tentative_threshold": 0.0}) == 0.0
+    auto = {"lmb.birth_edge": -1.0}
+    assert edge(auto) == pytest.approx(sd) and sd > 0
+    assert edge({**auto, "lmb.tentative_threshold": 0.0}) == 0.0
     assert edge({"lmb.birth_edge": 7.0}) == 7.0
+    assert edge({}) == 0.0  # off by default

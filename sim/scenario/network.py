@@ -260,17 +260,17 @@ class LmbSpec:
                                           "the grid cells whose index labels an adaptive birth "
                                           "alike at every peer (edges at multiples of it).",
                                unit="m", check=POSITIVE)
-    birth_edge: float = option(-1.0, doc="With `network.birth_ids` `\"shared\"`: an "
-                                         "adaptive birth whose plot lies within this distance "
-                                         "of an edge of its `birth_cell` cell is stamped at "
-                                         "first publication with the next scan, so that a "
-                                         "stamp of the neighbouring cell (another peer's plot "
-                                         "across the edge) loses the tie to the stamps of plots "
-                                         "well inside a cell; 0: off; -1: the sensor's position "
-                                         "noise (standard deviation) when `tentative_threshold` "
-                                         "is on, else off (issue 33; training runs, 20 peers: "
-                                         "fused OSPA(2) 30.8 -> 28.6 and 40.6 -> 40.2 m at Pd "
-                                         "0.99 / 0.9).", unit="m", check=at_least(-1))
+    birth_edge: float = option(0.0, doc="With `network.birth_ids` `\"shared\"`: an adaptive "
+                                        "birth whose plot lies within this distance of an edge "
+                                        "of its `birth_cell` cell is stamped at first "
+                                        "publication with the next scan, so that a stamp of the "
+                                        "neighbouring cell (another peer's plot across the "
+                                        "edge) loses the tie to the stamps of plots well inside "
+                                        "a cell; 0: off (the default: better on the training "
+                                        "runs, not on the evaluation runs, issue 33); -1: the "
+                                        "sensor's position noise (standard deviation) when "
+                                        "`tentative_threshold` is on, else off.", unit="m",
+                               check=at_least(-1))
     birth_velocity_std: float = option(30.0, doc="Standard deviation of each velocity "
                                                  "component of an adaptive birth (mean 0; its "
                                                  "position is the measurement's).", unit="m/s",
