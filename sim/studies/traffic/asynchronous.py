@@ -18,8 +18,8 @@ clutter intensity is the one inside the swept sector, ``clutter_rate / (pi r_max
 Between batches the motion is the constant-velocity model with continuous white-noise
 acceleration over the elapsed time (:class:`tracking.elapsed.ElapsedMotion`; Bar-Shalom, Li &
 Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001, Sec. 6.2.2).
-LMB peers with ``lmb.own_times`` take their own plots the same way
-(:mod:`peers.lmb_own_times`).
+LMB peers with ``lmb.time_slice`` take their own plots the same way
+(:mod:`peers.lmb_own_times`, with soft sector edges: :attr:`AsyncLmb.soft`).
 
 The filters are the project's: :class:`tracking.lmb.LmbFilter` (one per radar, as
 :func:`sim.kinds.lmb.make_lmb_filter` builds it, sharing label origin 0) and the measurement
