@@ -97,6 +97,21 @@ def label_keys(labels: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(labels, dtype=np.int64).view(_KEY).reshape(-1)
 
 
+def replace_labels(labels: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """``labels (n, 3)`` with each of the labels ``old (r, 3)`` replaced by its ``new (r, 3)`` on
+    every row carrying it (a copy; sorted-key lookup, no loop over rows)."""
+    was = label_keys(old)
+    if not was.size:
+        return labels
+    keys = label_keys(labels)
+    by = np.argsort(was)
+    pos = np.searchsorted(was[by], keys).clip(max=was.size - 1)
+    hit = was[by][pos] == keys
+    out = labels.copy()
+    out[hit] = np.asarray(new)[by][pos[hit]]
+    return out
+
+
 def precedes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise ``a < b`` for label arrays ``(n, 3)`` in the network rule's order ``(birth_scan,
     origin, index)`` (earliest birth first, then the lowest origin id): ``(n,)`` bool."""

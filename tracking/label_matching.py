@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from sensornet.tracking.label_keys import as_labels, label_keys, precedes
+from sensornet.tracking.label_keys import as_labels, label_keys, precedes, replace_labels
 
 
 @dataclass(frozen=True)
@@ -112,13 +112,7 @@ def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
     own_keys, win_keys = own_keys[~clash], win_keys[~clash]
     if own_keys.size == 0:
         return labels
-    by = np.argsort(own_keys)
-    own_sorted, new_sorted = own_keys[by], win[change][~clash][by]
-    pos = np.searchsorted(own_sorted, keys).clip(max=own_sorted.size - 1)
-    hit = own_sorted[pos] == keys
-    out = labels.copy()
-    out[hit] = new_sorted[pos[hit]]
-    return out
+    return replace_labels(labels, match.own[change][~clash], win[change][~clash])
 
 
 def _release(labels: np.ndarray, own: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -126,15 +120,7 @@ def _release(labels: np.ndarray, own: np.ndarray, new: np.ndarray) -> np.ndarray
     row carrying it, except where the new label is already among ``labels``."""
     keys = label_keys(labels)
     ok = ~np.isin(label_keys(new), keys)
-    own_k, new = label_keys(own)[ok], new[ok]
-    if not len(own_k):
-        return labels
-    by = np.argsort(own_k)
-    pos = np.searchsorted(own_k[by], keys).clip(max=len(own_k) - 1)
-    hit = own_k[by][pos] == keys
-    out = labels.copy()
-    out[hit] = new[by][pos[hit]]
-    return out
+    return replace_labels(labels, own[ok], new[ok])
 
 
 RELEASE = -1.0

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from sensornet.tracking.label_keys import replace_labels
 from sensornet.tracking.labels import PUBLISHED_BASE, as_labels, label_keys, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
@@ -161,7 +162,7 @@ class Reidentification:
         if not len(rows):
             return labels, lab, new
         stamp = new_labels(self.origin, k, len(rows), PUBLISHED_BASE + REJECTED_BASE)
-        labels = _replace(labels, lab[rows], stamp)
+        labels = replace_labels(labels, lab[rows], stamp)
         lab = lab.copy()
         lab[rows] = stamp
         new = new.copy()
@@ -238,26 +239,13 @@ class Reidentification:
         if not len(r):
             return labels, lab
         back = L[c]
-        labels = _replace(labels, lab[ni[r]], back)
+        labels = replace_labels(labels, lab[ni[r]], back)
         lab = lab.copy()
         lab[ni[r]] = back
         gone = np.ones(len(L), dtype=bool)
         gone[c] = False
         self._lost = (L[gone], K[gone], M[gone], C[gone])
         return labels, lab
-
-
-def _replace(labels: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """``labels (n, 3)`` with each of the distinct labels ``old (r, 3)`` replaced by its
-    ``new (r, 3)`` on every row carrying it."""
-    was = label_keys(old)
-    keys = label_keys(labels)
-    by = np.argsort(was)
-    pos = np.searchsorted(was[by], keys).clip(max=len(was) - 1)
-    hit = was[by][pos] == keys
-    labels = labels.copy()
-    labels[hit] = new[by][pos[hit]]
-    return labels
 
 
 __all__ = ["REID_GATE", "REID_JUMP", "REID_SCANS", "Reidentification"]
