@@ -39,7 +39,7 @@ from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_rou
 __all__ = ["BEHIND", "BEHIND_S", "END_DRAIN_S", "FLUSH_MAX_S", "FLUSH_S", "FLUSH_SHARE",
            "MAP_KEEP", "QUEUE_MAX", "SERIES_EVERY", "TAIL",
            "Batcher", "LiveView", "ViewState", "cpu_seconds", "id_color", "id_labels",
-           "idle_process", "later_round", "nice_process", "replay_recordings",
+           "idle_process", "later_round", "nice_process", "normal_process", "replay_recordings",
            "strip_array", "thread_policies"]
 
 FLUSH_S = 1.0
@@ -104,6 +104,10 @@ class LiveView:
         self.flush_s = FLUSH_S
         self.say = say or (lambda s: print(s, file=sys.stderr, flush=True))
         self.stop = threading.Event()
+        self.at_end: Callable[[], object] | None = None
+        """Called once the drawing loop stops, before the last messages are drawn and the
+        recording closed (``sensornet view --idle``: back to normal scheduling, so a view left
+        no CPU while the network ran still writes its recording within the run's grace)."""
         self._said = (0, 0, 0)
         self._said_at = 0.0
         self._between = 0.0
@@ -242,6 +246,8 @@ class LiveView:
             if time.monotonic() >= next_flush:
                 self.flush()
                 next_flush = time.monotonic() + self.flush_s
+        if self.at_end is not None:
+            self.at_end()
         self.drain(0.5)
         self.finish()
         self.batcher.flush()
@@ -340,6 +346,28 @@ def idle_process(fallback_nice: int = 10, tids: Sequence[int] | None = None) -> 
         except OSError:  # not permitted here (a container's seccomp, say): nice instead
             return "nice", nice_process(fallback_nice)
     return "idle", changed
+
+
+def normal_process(tids: Sequence[int] | None = None) -> int:
+    """Every thread of this process back in the normal class (``SCHED_OTHER``), undoing
+    :func:`idle_process` once the network no longer needs the cores (the view's end: its last
+    drawing and the recording's close must not wait for CPU a busy machine never leaves).
+    Returns the threads changed; threads where it is refused stay as they were."""
+    if not hasattr(os, "SCHED_OTHER"):
+        return 0
+    if tids is None:
+        try:
+            tids = [int(t) for t in os.listdir("/proc/self/task")]
+        except OSError:
+            tids = [0]
+    changed = 0
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            changed += 1
+        except OSError:  # ended meanwhile, or not permitted: it stays idle
+            pass
+    return changed
 
 
 def thread_policies() -> dict[int, int]:

@@ -24,7 +24,15 @@ from sensornet.sim.run.launcher import _view_command
 
 import sensornet.cli.commands.view as view_cmd
 import sensornet.view as view_mod
-from sensornet.view import BEHIND_S, MAP_KEEP, SERIES_EVERY, LiveView, ViewState, idle_process
+from sensornet.view import (
+    BEHIND_S,
+    MAP_KEEP,
+    SERIES_EVERY,
+    LiveView,
+    ViewState,
+    idle_process,
+    normal_process,
+)
 from tests.processes import env, stop_all, wait_for
 
 linux = pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE: Linux")
@@ -233,3 +241,52 @@ def test_every_thread_of_a_view_process_started_idle_is_sched_idle(tmp_path):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q", "-n", "0"]))
+
+
+@linux
+def test_a_view_put_idle_is_back_in_the_normal_class_at_its_end():
+    """A view left no CPU while the network ran must still draw its last messages and write
+    its recording within the run's grace: at the loop's end ``at_end`` (``normal_process``
+    for ``--idle``) puts its threads back in SCHED_OTHER (here one thread of the test's)."""
+    seen: dict[str, int] = {}
+    lowered, raised, stop = threading.Event(), threading.Event(), threading.Event()
+
+    def worker() -> None:
+        lowered.wait(5)
+        seen["idle"] = os.sched_getscheduler(0)
+        raised.wait(5)
+        seen["normal"] = os.sched_getscheduler(0)
+        stop.wait(5)
+
+    t = threading.Thread(target=worker)
+    t.start()
+    try:
+        assert idle_process(3, tids=[t.native_id]) == ("idle", 1)
+        lowered.set()
+        while "idle" not in seen and t.is_alive():
+            t.join(0.01)
+        assert normal_process(tids=[t.native_id]) == 1
+        raised.set()
+        while "normal" not in seen and t.is_alive():
+            t.join(0.01)
+    finally:
+        lowered.set()
+        raised.set()
+        stop.set()
+        t.join(5)
+    assert seen == {"idle": os.SCHED_IDLE, "normal": os.SCHED_OTHER}
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread untouched
+
+
+def test_the_loop_calls_at_end_before_its_last_drawing():
+    """``LiveView.run`` calls ``at_end`` once when it stops, before the final drain."""
+    view = LiveView("net", None, None, None, say=lambda s: None)
+    order = []
+    view.at_end = lambda: order.append("at_end")
+    view.drain = lambda timeout: order.append("drain")
+    view.finish = lambda: order.append("finish")
+    view.stop.set()
+    view.batcher = type("B", (), {"flush": lambda self: None})()
+    view.note = lambda final=False: None
+    view.run()
+    assert order == ["at_end", "drain", "finish"]

@@ -33,6 +33,7 @@ from sensornet.view import (
     cpu_seconds,
     idle_process,
     nice_process,
+    normal_process,
     replay_recordings,
 )
 from sensornet.view_map import GeoViewState, geo_map
@@ -185,13 +186,17 @@ def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
         view.open()
     except SessionError as exc:
         raise UserError(str(exc)) from None
-    _lower_priority(args)  # subscribed (lowered from its start, it joined a short run late)
     try:
         sink, state = _open_sink(args, out, viewer)
     except BaseException:
         view.close()
         raise
     view.draw_into(state, sink.rr, sink.rr)
+    # subscribed and its recording open (lowered from its start, it joined a short run late;
+    # lowered before the sink, a view left no CPU on a busy machine never wrote its file)
+    _lower_priority(args)
+    if args.idle:
+        view.at_end = normal_process
     print(f"view: network {args.network} via {', '.join(args.connect)} -> "
           f"{out or ''}{' + ' if out and viewer else ''}{viewer or ''} (Ctrl-C to detach)",
           file=sys.stderr, flush=True)
