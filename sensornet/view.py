@@ -331,21 +331,10 @@ def idle_process(fallback_nice: int = 10, tids: Sequence[int] | None = None) -> 
     ``fallback_nice``. Returns ``("idle" or "nice", threads changed)``."""
     if not hasattr(os, "SCHED_IDLE"):
         return "nice", nice_process(fallback_nice)
-    if tids is None:
-        try:
-            tids = [int(t) for t in os.listdir("/proc/self/task")]
-        except OSError:  # no /proc: this thread, which the later ones inherit from
-            tids = [0]
-    changed = 0
-    for tid in tids:
-        try:
-            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
-            changed += 1
-        except ProcessLookupError:  # the thread has ended meanwhile
-            pass
-        except OSError:  # not permitted here (a container's seccomp, say): nice instead
-            return "nice", nice_process(fallback_nice)
-    return "idle", changed
+    try:
+        return "idle", _set_class(os.SCHED_IDLE, tids)
+    except PermissionError:  # not permitted here (a container's seccomp, say): nice instead
+        return "nice", nice_process(fallback_nice)
 
 
 def normal_process(tids: Sequence[int] | None = None) -> int:
@@ -355,6 +344,17 @@ def normal_process(tids: Sequence[int] | None = None) -> int:
     Returns the threads changed; threads where it is refused stay as they were."""
     if not hasattr(os, "SCHED_OTHER"):
         return 0
+    try:
+        return _set_class(os.SCHED_OTHER, tids)
+    except PermissionError:  # not permitted: it stays idle
+        return 0
+
+
+def _set_class(policy: int, tids: Sequence[int] | None) -> int:
+    """Each thread of ``tids`` (default: every thread of this process; without /proc this
+    one, which later threads inherit from) in scheduling class ``policy``; returns the
+    threads changed. A thread that ended meanwhile is skipped; any other refusal is raised
+    as PermissionError (the callers' fallback)."""
     if tids is None:
         try:
             tids = [int(t) for t in os.listdir("/proc/self/task")]
@@ -363,10 +363,12 @@ def normal_process(tids: Sequence[int] | None = None) -> int:
     changed = 0
     for tid in tids:
         try:
-            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            os.sched_setscheduler(tid, policy, os.sched_param(0))
             changed += 1
-        except OSError:  # ended meanwhile, or not permitted: it stays idle
+        except ProcessLookupError:  # the thread has ended meanwhile
             pass
+        except OSError as exc:
+            raise PermissionError(str(exc)) from exc
     return changed
 
 
