@@ -109,3 +109,16 @@ def test_reidentification_keeps_to_the_bound():
 def test_jump_must_be_positive():
     with pytest.raises(ValueError, match="jump"):
         Reidentification(CV, OWN, jump=0.0)
+
+
+def test_a_label_back_after_the_memory_forgot_every_label_is_no_error():
+    """A label published, then dark longer than the memory (which is left empty), then back:
+    the distance bound has nothing to test against and leaves it (a frozen peer's catch-up hit
+    an IndexError here: tests/test_catch_up.py)."""
+    reid = Reidentification(CV, OWN, scans=2, jump=REID_JUMP)
+    x = [0.0, 60.0, 0.0, 0.0]
+    reid.apply(np.array([A]), _mix([_state(x, 1)], [0.9]), 0.5, 1)
+    for k in range(2, 7):
+        reid.apply(np.zeros((0, 3), np.int64), _mix(np.zeros((0, 4)), []), 0.5, k)
+    out = reid.apply(np.array([A]), _mix([_state(x, 7)], [0.9]), 0.5, 7)
+    assert len(out) == 1

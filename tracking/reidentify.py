@@ -143,6 +143,8 @@ class Reidentification:
         last scan whose label is gone (a merge took that track's label): stamped new (on every
         component carrying the label) and marked ``new``."""
         L, keys, K, M = self._last
+        if not len(keys) or not len(lab):  # nothing published yet (or left): nothing returns
+            return labels, lab, new
         own = label_keys(lab)
         pos = np.searchsorted(keys, own).clip(max=len(keys) - 1)
         known = ~new & (keys[pos] == own)
