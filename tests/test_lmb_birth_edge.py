@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.peers.labelling import label_fused
 from sensornet.peers.lmb_estimator import PUBLISHED_BASE as PB
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.sim.kinds.lmb import build
@@ -21,6 +20,8 @@ from sensornet.tracking.label_keys import cell_index
 from sensornet.tracking.lmb import EDGE_FLAG, LmbFilter
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity, LinearPosition
+
+from tests.lmb_pair import run_pair
 
 
 def _filter(origin: int, edge: float) -> LmbFilter:
@@ -47,24 +48,8 @@ def _run(edge: float, scans: int = 6) -> dict[int, list[tuple]]:
     1 m across its lower edge (cell [0, 200), the lower index). One fusion round a scan between
     the two, as the consensus runs it. Returns the label each published, per scan."""
     a, b = (LmbEstimator(_filter(o, edge), origin=o, tentative_threshold=0.15) for o in (1, 2))
-    seen: dict[int, list[tuple]] = {1: [], 2: []}
-    for k in range(1, scans + 1):
-        x = 210.0 + k
-        outs = []
-        for e, z in ((a, [[x + 11.0, 100.0]]), (b, [[x - 12.0, 100.0]])):
-            e.begin_scan(k)
-            outs.append(e.step(1, np.array(z)))
-        for e, out in ((a, outs[0]), (b, outs[1])):
-            if len(out.labels["posterior"]):
-                seen[e.origin].append(tuple(out.labels["posterior"][0].tolist()))
-        for e, mine, theirs in ((a, outs[0], outs[1]), (b, outs[1], outs[0])):
-            own = (mine.published["posterior"], mine.labels["posterior"])
-            nbr = (theirs.published["posterior"], theirs.labels["posterior"])
-            fused = own[0] if len(own[0]) else nbr[0]
-            if len(fused):
-                e.relabel(label_fused(fused, [own, nbr], e.origin, k,
-                                      bump=e.fresh_stamps()).own)
-    return seen
+    return run_pair(a, b, lambda k: ([[210.0 + k + 11.0, 100.0]], [[210.0 + k - 12.0, 100.0]]),
+                    scans)
 
 
 def test_a_stamp_across_an_edge_yields_to_one_well_inside():

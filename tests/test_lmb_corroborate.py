@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sensornet.peers.labelling import label_fused
 from sensornet.peers.lmb_estimator import PUBLISHED_BASE as PB
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.sim.kinds.lmb import LMB_CORROBORATE_SCANS, build, corroborate_scans
@@ -18,6 +17,8 @@ from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.lmb import LmbFilter
 from sensornet.tracking.models import ConstantVelocity, LinearPosition
+
+from tests.lmb_pair import run_pair
 
 
 def _peer(origin: int, corroborate_scans: int) -> LmbEstimator:
@@ -34,24 +35,12 @@ def _run(corroborate_scans: int, b_from: int = 3, scans: int = 8) -> dict[int, l
     ``a``'s / ``b``'s published PHD, own first, with the estimator's fresh stamps). Returns
     the label each peer published for the target, per scan (from its first publication)."""
     a, b = _peer(2, corroborate_scans), _peer(1, corroborate_scans)
-    seen: dict[int, list[tuple]] = {2: [], 1: []}
-    for k in range(1, scans + 1):
+
+    def plots(k: int) -> tuple:
         x = np.array([[2.0 * k, 0.0]])
-        outs = []
-        for e, z in ((a, x), (b, x if k >= b_from else np.zeros((0, 2)))):
-            e.begin_scan(k)
-            outs.append(e.step(1, z))
-        for e, out in ((a, outs[0]), (b, outs[1])):
-            if len(out.labels["posterior"]):
-                seen[e.origin].append(tuple(out.labels["posterior"][0].tolist()))
-        for e, mine, theirs in ((a, outs[0], outs[1]), (b, outs[1], outs[0])):
-            own = (mine.published["posterior"], mine.labels["posterior"])
-            nbr = (theirs.published["posterior"], theirs.labels["posterior"])
-            fused = own[0] if len(own[0]) else nbr[0]
-            if len(fused):
-                lab = label_fused(fused, [own, nbr], e.origin, k, bump=e.fresh_stamps())
-                e.relabel(lab.own)
-    return seen
+        return x, (x if k >= b_from else np.zeros((0, 2)))
+
+    return run_pair(a, b, plots, scans)
 
 
 def test_an_uncorroborated_label_moves_until_a_neighbour_holds_the_track():
