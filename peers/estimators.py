@@ -7,7 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
+from sensornet.peers.gmphd_own_times import check_filter, step_at_own_times
 from sensornet.peers.labelling import take_moves
+from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.peers.stamp_moves import MovingStamps
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
@@ -71,7 +73,13 @@ class GmphdEstimator:
     def __init__(self, filt: GMPHDFilter, level2: bool = True,
                  level2_threshold: float = 0.5, origin: int | None = None,
                  shared_births: bool = False, revisit: int = 1,
-                 corroborate_scans: int = 1) -> None:
+                 corroborate_scans: int = 1, own_times: OwnTimes | None = None) -> None:
+        if own_times is not None:
+            check_filter(filt)
+        self.own_times = own_times
+        """Plots with ages (:meth:`plot_ages`) taken at their own times within the tick
+        (:mod:`peers.gmphd_own_times`); None: every plot at the tick."""
+        self._ages: np.ndarray | None = None
         self.filter = filt
         self.reducer = filt.reducer
         self.level2 = level2
@@ -141,8 +149,10 @@ class GmphdEstimator:
         prep, self._prepared = self._prepared, None
         k = self.k + steps if self._next_k is None else self._next_k
         self._next_k = None
-        par = None
-        if (prep is not None and prep[0] is self.mix and prep[1] == steps
+        par, own = None, self._own_times_step(z, k)
+        if own is not None:
+            post = own[0]
+        elif (prep is not None and prep[0] is self.mix and prep[1] == steps
                 and (prep[2] is z or np.array_equal(prep[2], z))):
             post, par = prep[3], prep[4]
             self.prepared_hits += 1
@@ -151,7 +161,7 @@ class GmphdEstimator:
         else:
             post, par = correct_parents(self.filter, self.filter.predict(self.mix, steps), [z])
         if self.labels is not None:
-            self.labels = self._step_labels(post, par, k)
+            self.labels = own[1] if own is not None else self._step_labels(post, par, k)
             pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
             self.labels = self.reid.apply(self.labels, post, pub_at, k)
@@ -171,6 +181,21 @@ class GmphdEstimator:
         return LocalOutput(self.mix, {"posterior": pub},
                            {"n_components": len(self.mix), "n_published": len(pub)},
                            labels=labels, density_labels=self.labels)
+
+    def plot_ages(self, ages: np.ndarray | None) -> None:
+        """The ages ``(m,)`` of the next step's plots (s before the scan's time), or None."""
+        self._ages = ages
+
+    def _own_times_step(self, z: np.ndarray, k: int) -> tuple | None:
+        """``(posterior, labels)`` of scan ``k``'s plots taken at their own times
+        (:mod:`peers.gmphd_own_times`) if :attr:`own_times` is on and the scan came with ages;
+        else None (the tick step)."""
+        ages, self._ages = self._ages, None
+        if self.own_times is None or ages is None:
+            return None
+        return step_at_own_times(self.filter, self.mix, self.labels, z, ages,
+                                 self.k * self.own_times.T, k, self.own_times, self.origin,
+                                 self.birth_origin)
 
     def _step_labels(self, post: GaussianMixture, parents: np.ndarray, k: int) -> np.ndarray:
         """Labels of the posterior: each component its parent's (survivors keep theirs,

@@ -9,8 +9,10 @@ from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser, NoFuser
 from sensornet.peers.labelling import origin_of
 from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
+from sensornet.sim.kinds.own_times import own_times
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import make_filter
+from sensornet.tracking.elapsed import slices_per_tick
 from sensornet.tracking.label_keys import SHARED_ORIGIN
 
 
@@ -48,9 +50,27 @@ def build(scn: Scenario, name: str, run: int = 0):
     est = GmphdEstimator(filt, scn.fusion.level2_pruning, scn.fusion.level2_threshold,
                          origin=SHARED_ORIGIN + 1 + origin if shared else origin,
                          shared_births=shared, revisit=revisit_scans(scn, name),
-                         corroborate_scans=corroborate_scans(scn, shared))
+                         corroborate_scans=corroborate_scans(scn, shared),
+                         own_times=own_times(scn, name, scn.filter.time_slice))
     return est, mixture_fuser(scn, filt.reducer)
 
 
+def check(scn: Scenario) -> tuple[str, str] | None:
+    """``(key, message)`` if ``filter.time_slice`` is on but does not divide the tick or the
+    births are not measurement-driven (fixed birth components would enter at every slice)."""
+    s = scn.filter.time_slice
+    if s <= 0:
+        return None
+    if scn.birth.model != "measurements":
+        return ("filter.time_slice", f"key 'filter.time_slice' ({s:g} s) needs birth.model "
+                f"'measurements', got {scn.birth.model!r}")
+    try:
+        slices_per_tick(scn.scan_period, s)
+    except ValueError:
+        return ("filter.time_slice", f"key 'filter.time_slice' ({s:g} s) must divide "
+                f"scenario.scan_period ({scn.scan_period:g} s)")
+    return None
+
+
 GMPHD = PeerKind("gmphd", "GM-PHD filter per sensor; mixtures fused (seed 000)", build,
-                 MIXTURE_RULES)
+                 MIXTURE_RULES, check=check)

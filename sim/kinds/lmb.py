@@ -18,28 +18,17 @@ from __future__ import annotations
 import numpy as np
 from sensornet.peers.labelling import origin_of
 from sensornet.peers.lmb_estimator import LmbEstimator
-from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.sim.choices import MIXTURE_RULES
 from sensornet.sim.kinds import PeerKind
 from sensornet.sim.kinds.gmphd import mixture_fuser
+from sensornet.sim.kinds.own_times import MIN_CLUTTER_INTENSITY, own_times
 from sensornet.sim.scenario import Scenario
-from sensornet.sim.world.birth import beam_of
-from sensornet.sim.world.build import (
-    birth_mixture,
-    clutter_intensity,
-    make_reducer,
-    motion_model,
-    sensor_params,
-    sweep_fraction,
-)
-from sensornet.tracking.elapsed import ElapsedMotion, slices_per_tick
+from sensornet.sim.world.build import birth_mixture, make_reducer, motion_model, sensor_params
+from sensornet.tracking.elapsed import slices_per_tick
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import SHARED_ORIGIN
 from sensornet.tracking.lmb import LmbFilter
 from sensornet.tracking.mixture import GaussianMixture
-
-MIN_CLUTTER_INTENSITY = 1e-12
-"""``kappa`` of a sensor without clutter (per m^2 or m rad): the LMB needs ``kappa > 0``."""
 
 
 def birth_edge(scn: Scenario, sensor: SensorParams) -> float:
@@ -77,30 +66,6 @@ def make_lmb_filter(scn: Scenario, name: str, origin: int = 0,
                      birth_edge=birth_edge(scn, sensor))
 
 
-def sector_clutter(scn: Scenario, name: str) -> float:
-    """Clutter intensity inside a rotating radar's swept sector (the per-tick intensity over
-    the circle divided by the share swept), floored for the LMB's division."""
-    spec = scn.sensor(name)
-    return max(clutter_intensity(scn, spec) / sweep_fraction(scn, spec), MIN_CLUTTER_INTENSITY)
-
-
-def own_times(scn: Scenario, name: str) -> OwnTimes | None:
-    """Sensor ``name``'s plots at their own times (``lmb.time_slice`` > 0): a rotating radar's
-    sector ``Pd`` (:meth:`sim.world.birth.Beam.sector`) and the clutter inside its swept sector
-    (:func:`sector_clutter`), as the asynchronous centralised reference; a sensor without a
-    rotation its ``detection_probability`` and its filter's clutter. None when off."""
-    if scn.lmb.time_slice <= 0:
-        return None
-    spec = scn.sensor(name)
-    beam = beam_of(scn, spec)
-    clutter = (sector_clutter(scn, name) if beam is not None
-               else max(sensor_params(scn, name).clutter_intensity, MIN_CLUTTER_INTENSITY))
-    return OwnTimes(scn.lmb.time_slice, scn.scan_period,
-                    ElapsedMotion(scn.scan_period, scn.sigma_w), scn.survival_probability,
-                    clutter, None if beam is None else beam.sector,
-                    max(spec.detection_probability, 1e-12))
-
-
 LMB_CORROBORATE_SCANS = 3
 """``lmb.corroborate_scans`` "auto" (0) for LMB peers that publish tentative tracks: an
 uncorroborated label moves in the first 3 scans after its first publication (decided on the
@@ -129,7 +94,7 @@ def build(scn: Scenario, name: str, run: int = 0):
                        republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,
                        tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap,
                        corroborate_scans=corroborate_scans(scn),
-                       own_times=own_times(scn, name))
+                       own_times=own_times(scn, name, scn.lmb.time_slice))
     return est, mixture_fuser(scn, reducer)
 
 

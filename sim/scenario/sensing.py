@@ -179,6 +179,14 @@ class FilterSpec:
                                            "0.99: fused OSPA(2) 17.4 -> 12.0 and 21.8 -> 15.0 m "
                                            "on the two runs it acts on).",
                                     unit="scans", check=NONNEGATIVE)
+    time_slice: float = option(0.0, doc="GM-PHD peers: plots at their own times (issue 34, "
+                                        "recorded traffic, measurement births): the peer takes "
+                                        "a rotating radar's plots in slices of this length at "
+                                        "the slice's midpoint (sector `Pd` with soft edges and "
+                                        "sector clutter, as `lmb.time_slice`; "
+                                        "`peers.gmphd_own_times`), then predicts to the tick; "
+                                        "divides `scenario.scan_period`. 0: every plot at its "
+                                        "tick.", unit="s", check=NONNEGATIVE)
 
 
 @dataclass(frozen=True)

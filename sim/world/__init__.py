@@ -209,10 +209,11 @@ def generate_run(scn: Scenario, run: int) -> tuple[Truth, list[list[np.ndarray]]
 def plot_ages(scn: Scenario, run: int) -> list[list[np.ndarray]] | None:
     """``ages[s][k-1]`` ``(m,)``: how long before scan ``k``'s time each plot of
     :func:`generate_run`'s ``scans[s][k-1]`` was made (s), sent with the scans when the
-    scenario takes plots at their own times (``lmb.time_slice`` > 0) and its truth model knows
-    them (recorded traffic); else None (every plot at its scan's time)."""
+    scenario takes plots at their own times (``lmb.time_slice`` or ``filter.time_slice`` > 0)
+    and its truth model knows them (recorded traffic); else None (every plot at its scan's
+    time)."""
     model = truth_model(scn.truth)
-    if scn.lmb.time_slice <= 0 or model.ages is None:
+    if (scn.lmb.time_slice <= 0 and scn.filter.time_slice <= 0) or model.ages is None:
         return None
     return model.ages(scn, run)
 

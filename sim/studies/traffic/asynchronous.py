@@ -38,7 +38,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from sensornet.peers.consensus_types import ConsensusOptions
-from sensornet.sim.kinds.lmb import make_lmb_filter, sector_clutter
+from sensornet.sim.kinds.lmb import make_lmb_filter
+from sensornet.sim.kinds.own_times import sector_clutter
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.studies.labelled.centralised import Extracted
 from sensornet.sim.traffic.recorded import recorded_world, tick_plots
@@ -225,6 +226,9 @@ class AsyncGmphd:
     time: float = 0.0
     count: int = 0
     pending: GaussianMixture | None = None
+    soft: bool = False
+    """Soft sector edges, as GM-PHD peers with ``filter.time_slice`` take them
+    (:attr:`AsyncLmb.soft`); False: hard edges (the reference's published numbers)."""
 
     def initial(self) -> LabelledMixture:
         self.time, self.count, self.pending = 0.0, 0, None
@@ -256,8 +260,8 @@ class AsyncGmphd:
         sensor = self.sensors[batch.sensor]
         beam = self.beams[batch.sensor]
         if beam is not None:
-            sensor = replace(sensor, detection_probability=batch_pd(beam, 0.0, batch,
-                                                                    mix.means))
+            sensor = replace(sensor, detection_probability=batch_pd(
+                beam, 0.0, batch, mix.means, mix.covs if self.soft else None))
         xy, R_xy = plots_xy(sensor.model, batch.z)
         new = unexplained(mix, xy, R_xy, self.birth_gate)
         self.pending = birth_components(xy[new], R_xy[new], self.birth_weight, self.birth_speed)
@@ -283,9 +287,10 @@ class AsyncGmphd:
         return Extracted(states, labels, self.confirmation.status(labels))
 
 
-def async_gmphd(scn: Scenario) -> AsyncGmphd:
+def async_gmphd(scn: Scenario, soft: bool = False) -> AsyncGmphd:
     """The scenario's asynchronous centralised GM-PHD (``birth.model = "measurements"``): the
-    settings of :func:`sim.world.build.make_filter`, the sector's clutter intensity."""
+    settings of :func:`sim.world.build.make_filter`, the sector's clutter intensity; ``soft``:
+    :attr:`AsyncGmphd.soft`."""
     if scn.birth.model != "measurements":
         raise ValueError(f"{scn.name}: async_gmphd needs birth.model 'measurements', got "
                          f"{scn.birth.model!r}")
@@ -303,7 +308,8 @@ def async_gmphd(scn: Scenario) -> AsyncGmphd:
     return AsyncGmphd(sensors, beams, ElapsedMotion(scn.scan_period, scn.sigma_w),
                       scn.survival_probability, make_reducer(scn), f.extraction_threshold,
                       f.extraction, f.gate, b.measurements_weight, b.measurements_speed,
-                      b.measurements_gate, Confirmation(ConsensusOptions.confirm_scans))
+                      b.measurements_gate, Confirmation(ConsensusOptions.confirm_scans),
+                      soft=soft)
 
 
 def run_async(central: AsyncLmb | AsyncGmphd, batches: Sequence[Sequence[Batch]], T: float
