@@ -133,6 +133,11 @@ class GmphdEstimator:
         prior (anything else, and it computes its own: a prepared step never changes what a
         step gives, only where its arithmetic is done). The parents of each posterior
         component come along, so a labelled estimator's labels follow without a second step."""
+        tick = [i for i, e in enumerate(estimators) if e.own_times is None]
+        if len(tick) < len(estimators):  # plots at their own times: each steps on its own
+            estimators = [estimators[i] for i in tick]  # (a prepared tick step would
+            steps = [steps[i] for i in tick]            # move its filter's pending births)
+            scans = [scans[i] for i in tick]
         if not estimators:
             return
         posts = step_many([e.filter for e in estimators], [e.mix for e in estimators],

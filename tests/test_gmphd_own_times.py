@@ -157,6 +157,27 @@ def test_each_paris_peer_equals_the_async_reference_of_its_radar():
         assert heavy.sum() > 5, name  # aircraft were tracked
 
 
+def test_co_hosted_peers_at_own_times_are_not_prepared_a_tick_step():
+    """A peer host prepares co-hosted peers' steps together (``prepare_many``); a prepared
+    tick step of a measurement-birth filter moves its pending births, so peers at their own
+    times are left to their own step: the same mixtures as peers stepped alone."""
+    scn = load_scenario("paris", overrides={**PARIS, "scenario.num_scans": 12,
+                                            "filter.time_slice": SLICE})
+    _, scans = generate_run(scn, 0)
+    ages = plot_ages(scn, 0)
+    hosted = [build(scn, n)[0] for n in scn.sensor_names[:2]]
+    alone = [build(scn, n)[0] for n in scn.sensor_names[:2]]
+    for k in range(1, scn.num_scans + 1):
+        GmphdEstimator.prepare_many(hosted, [1, 1], [scans[s][k - 1] for s in range(2)])
+        for s in range(2):
+            for est in (hosted[s], alone[s]):
+                est.plot_ages(ages[s][k - 1])
+                est.step(1, scans[s][k - 1])
+            np.testing.assert_array_equal(hosted[s].mix.means, alone[s].mix.means)
+            np.testing.assert_array_equal(hosted[s].labels, alone[s].labels)
+    assert hosted[0].prepared_hits == 0 and len(hosted[0].mix) > 0
+
+
 def test_the_twin_sends_the_ages_and_its_gmphd_peers_take_them():
     scn = load_scenario("paris", overrides={**PARIS, "filter.time_slice": SLICE,
                                             "lmb.time_slice": 0.0})
