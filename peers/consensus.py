@@ -69,6 +69,10 @@ class Consensus(BatchedRounds):
         self.stats = ConsensusStats()
         self.errors: Counter = Counter()
         """Unexpected exceptions in the estimator or fuser, by type (each scored a miss)."""
+        self._unstepped = 0
+        """Scans whose local step raised, of an estimator whose step is all or nothing
+        (``atomic_parts``: peers.step_atomic): the next step covers them too, as after a gap."""
+        self._atomic = callable(getattr(estimator, "atomic_parts", None))
         self.records: list[dict] = []
         self.last_local: GaussianMixture | None = None
         self.last_fused: GaussianMixture | None = None
@@ -114,11 +118,13 @@ class Consensus(BatchedRounds):
         self.last_k = k
         try:
             self.hooks.begin_scan(k)
-            local = self.estimator.step(steps, z)
+            local = self.estimator.step(steps + self._unstepped, z)
         except Exception as exc:  # a bug must not stop the scans: no output, scored a miss
             self._error(k, exc)
             self._scan = None
+            self._unstepped += steps if self._atomic else 0
             return out
+        self._unstepped = 0
         self.last_local = local.density
         self.stats.scans += 1
         self._scan = ScanState(k, z, 0, local.published["posterior"], local.density)
@@ -222,6 +228,7 @@ class Consensus(BatchedRounds):
             self.nale.forget(name)
         self.cancel_pending()
         self._scan = None
+        self._unstepped = 0
 
     # -- rounds -----------------------------------------------------------------------------
     def _inputs(self, k: int, rnd: int) -> dict[str, dict[str, GaussianMixture]]:

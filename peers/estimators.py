@@ -11,6 +11,7 @@ from sensornet.peers.gmphd_own_times import check_filter, step_at_own_times
 from sensornet.peers.labelling import take_moves
 from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.peers.stamp_moves import MovingStamps
+from sensornet.peers.step_atomic import atomic
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
@@ -150,7 +151,18 @@ class GmphdEstimator:
         the index counts the steps)."""
         self._next_k = int(k)
 
+    def atomic_parts(self) -> tuple:
+        """What a step or relabel may change (:func:`peers.step_atomic.atomic`): the
+        estimator (mixture, labels, scan) and its label bookkeeping."""
+        return self, self.publication, self.reid, self.moving
+
+    def atomic_streams(self) -> tuple:
+        return ()
+
+    @atomic
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
+        """Predict ``steps`` scans, correct with ``z``; the labels and their bookkeeping
+        follow. All or nothing: if it raises, the estimator is as before (peers.step_atomic)."""
         prep, self._prepared = self._prepared, None
         k = self.k + steps if self._next_k is None else self._next_k
         self._next_k = None
@@ -226,6 +238,7 @@ class GmphdEstimator:
         return extract_tracks(LabelledMixture(mix, labels), self.filter.extraction_threshold,
                               self.filter.extraction, confirmation)
 
+    @atomic
     def adopt(self, fused: GaussianMixture) -> None:
         self.mix = fused
         if self.labels is not None:  # until adopt_labels: one fresh label per component
@@ -242,10 +255,11 @@ class GmphdEstimator:
         may move again (:attr:`moving`); None: no labels."""
         return None if self.publication is None else self._stamped
 
+    @atomic
     def relabel(self, match: LabelMatch) -> None:
         """Take the network's labels for our own (tracking.labels.adopt_labels: each matched
         own label becomes the winner of the fusion it went into, on every component that
-        carries it)."""
+        carries it). All or nothing, as :meth:`step`."""
         if self.labels is not None:
             moved = match.nbr
             before = self.labels

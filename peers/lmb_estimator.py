@@ -25,6 +25,7 @@ import numpy as np
 from sensornet.peers.contracts import LocalOutput
 from sensornet.peers.labelling import take_moves
 from sensornet.peers.lmb_own_times import OwnTimes, step_at_own_times
+from sensornet.peers.step_atomic import atomic
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
 from sensornet.tracking.label_confirmation import stamp_shared
@@ -188,9 +189,21 @@ class LmbEstimator:
         """The ages ``(m,)`` of the next step's plots (s before the scan's time), or None."""
         self._ages = ages
 
+    def atomic_parts(self) -> tuple:
+        """What a step or relabel may change (:func:`peers.step_atomic.atomic`): the
+        estimator's attributes (state, scan, publication memory, moving stamps)."""
+        return (self,)
+
+    def atomic_streams(self) -> tuple:
+        """The Gibbs draws' Generators (the filter's; the gap filter's once built)."""
+        gap = self._gap_filter
+        return self.filter._rng, None if gap is None else gap._rng
+
+    @atomic
     def step(self, steps: int, z: np.ndarray) -> LocalOutput:
         """Predict ``steps`` scans ahead, correct with ``z (m, dz)``; publish the PHD. With
-        :attr:`own_times` and the plots' ages: each plot at its own time within the tick."""
+        :attr:`own_times` and the plots' ages: each plot at its own time within the tick.
+        All or nothing: if it raises, the estimator (its Gibbs stream too) is as before."""
         if steps < 1:
             raise ValueError(f"steps must be at least 1, got {steps}")
         k = self.k + steps if self._next_k is None else self._next_k
@@ -274,6 +287,7 @@ class LmbEstimator:
         if self._adopted is not None:
             self._adopted_labels = as_labels(labels, len(self._adopted), "adopted labels")
 
+    @atomic
     def relabel(self, match: LabelMatch) -> None:
         """The network rule (tracking.labels.adopt_labels): each own track label the fusion
         paired with an earlier one takes the winner, unless another own track holds it."""

@@ -101,9 +101,9 @@ class MovingStamps:
         present = np.isin(mine, keys)
         on = np.isin(mine, keys[published])
         young = k - self.first <= self.scans
-        self.dark |= young & present & ~on
-        back = self.dark & on
-        keep = present & ~back & (young | self.dark)
+        dark = self.dark | (young & present & ~on)  # a new array: a failed step restores
+        back = dark & on
+        keep = present & ~back & (young | dark)
         out = labels
         new = labels[:0]
         if back.any():
@@ -113,7 +113,7 @@ class MovingStamps:
             out = labels.copy()
             out[hit] = new[row[hit]]
         self.labels, self.first = self.labels[keep], self.first[keep]
-        self.dark, self.moved_at = self.dark[keep], self.moved_at[keep]
+        self.dark, self.moved_at = dark[keep], self.moved_at[keep]
         return out, new
 
     def offer(self, k: int, present: np.ndarray) -> np.ndarray:
