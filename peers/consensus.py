@@ -35,6 +35,7 @@ from sensornet.peers.contracts import (
     metropolis_weights,
 )
 from sensornet.peers.fusers import NoFuser
+from sensornet.peers.label_support import LabelSupport, decode, peer_bit
 from sensornet.peers.labelling import label_fused
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
@@ -100,6 +101,9 @@ class Consensus(BatchedRounds):
         self._nale_labels: dict[str, tuple[object, np.ndarray]] = {}
         """sender -> (the NALE buffer's stored payload, its labels)."""
         self._fresh = 0  # fresh labels this peer's fusions created (their index offsets)
+        self.label_support = (LabelSupport(peer_bit(self.hooks.origin))
+                              if self.labelled and options.label_support else None)
+        """Holder masks of shared labels (peers.label_support): same-scan ties by support."""
         self.support = (SupportRule(options.support_inputs, options.support_scans)
                         if self.fusing and options.support_inputs > 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
@@ -131,6 +135,9 @@ class Consensus(BatchedRounds):
         labels = local.labels if self.labelled and local.labels is not None else {}
         if self.labelled:
             self._scan.labels = labels.get("posterior")
+            if self.label_support is not None and self._scan.labels is not None:
+                self.label_support.prune(k)
+                self.label_support.own(self._scan.labels, k)
             self._scan.local_labels = self.last_local_labels = local.density_labels
             if local.density_labels is not None:
                 self.confirm_local.observe(LabelledMixture(local.density, local.density_labels),
@@ -155,6 +162,9 @@ class Consensus(BatchedRounds):
             late(est.sender, payload, est.k)  # after its round: the fuser's hook decides
             return []
         labels = getattr(est, "labels", None)
+        if labels is not None and self.label_support is not None:  # the masks off the wire
+            labels, masks = decode(labels)
+            self.label_support.add(labels, masks)
         if labels is not None and (not self.labelled or len(labels) != len(payload)):
             labels = None  # not ours to use, or a receiver's bound cut its rows
         if est.round == 0 and est.kind == "posterior":
@@ -351,7 +361,8 @@ class Consensus(BatchedRounds):
         bump = self.hooks.fresh_stamps() if st.round == 0 and own_first else None
         # an AA fuser keeps each input's copy of a target (peers.fusers.AaFuser.copies)
         out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
-                          copies=bool(getattr(self.fuser, "copies", False)))
+                          copies=bool(getattr(self.fuser, "copies", False)),
+                          support=self.label_support)
         self._fresh += out.fresh
         return out
 
@@ -403,6 +414,8 @@ class Consensus(BatchedRounds):
             return Forward(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
         if isinstance(mix, np.ndarray):
             return Returns(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
+        if labels is not None and self.label_support is not None:  # the masks on the wire
+            labels = self.label_support.encode(labels)
         return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
                         send_time=now, pruning=2 if rnd == 0 else 1, kind=kind,
                         labels=labels if self.labelled else None)

@@ -60,6 +60,9 @@ class ConsensusOptions:
     inputs or more hold weighs at least their pooled existence with this prior
     (tracking.support.pooled_weights; the fused density is unchanged); 0: off."""
     existence_young: int = 2
+    label_support: bool = False
+    """Break a tie between shared labels of one scan by how many peers stamped each
+    (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:

@@ -31,8 +31,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
+from sensornet.peers.label_support import LabelSupport
 from sensornet.tracking.label_matching import RELEASE
-from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, new_labels
+from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, new_labels, precedes
 from sensornet.tracking.mixture import GaussianMixture
 
 LABEL_GATE = 26.0
@@ -168,7 +169,7 @@ def _pairs(fused: GaussianMixture, t_m: np.ndarray, t_P: np.ndarray, src: np.nda
 def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, np.ndarray]],
                 origin: int, k: int, fresh_start: int = 0,
                 gate: float = LABEL_GATE, bump: np.ndarray | None = None,
-                copies: bool = False) -> FusedLabels:
+                copies: bool = False, support: LabelSupport | None = None) -> FusedLabels:
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
@@ -183,7 +184,13 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     ``copies``: the fuser keeps every input's components at reduced weight (AA: Li 2022's
     ``sum_i omega_i D_i``, reduced), so a row that lost its label to a heavier row within
     ``gate`` of it is the same target's copy, not a second target: its own track is not released
-    (:func:`release_rows`)."""
+    (:func:`release_rows`).
+
+    ``support``: the holder masks of shared labels (:class:`peers.label_support.LabelSupport`);
+    among labels of one scan the one more peers stamped wins (order ``(birth_scan, -holders,
+    origin, index)``), and an own label that loses so to a later-ordered one is handed the
+    winner as a release pair (:func:`tracking.label_matching.adopt_labels` takes only earlier
+    labels otherwise)."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -196,7 +203,8 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         J, t = _pairs(fused, t_m, t_P, t_src, gate)
     if len(J):
         L, S = t_lab[t], t_src[t]
-        order = np.lexsort((L[:, 2], L[:, 0], L[:, 1], J))  # per row, the winner first
+        held = np.zeros(len(L), dtype=np.int64) if support is None else support.counts(L)
+        order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], J))  # per row, the winner first
         Js = J[order]
         first = np.ones(len(Js), dtype=bool)
         first[1:] = Js[1:] != Js[:-1]
@@ -217,7 +225,11 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
         change = label_keys(own_lab) != label_keys(win)
-        match = LabelMatch(own_lab[change], win[change], np.zeros(int(change.sum())))
+        cost = np.zeros(int(change.sum()))
+        if support is not None:  # won by support, not by the order: the own track takes it
+            o, w = own_lab[change], win[change]
+            cost[(o[:, 1] == w[:, 1]) & ~precedes(w, o)] = RELEASE
+        match = LabelMatch(own_lab[change], win[change], cost)
     else:
         match = LabelMatch(none, none.copy(), np.zeros(0))
     lost = np.flatnonzero(~won)

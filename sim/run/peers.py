@@ -52,6 +52,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         support_scans=scn.fusion.support_scans,
         existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
+        label_support=net.label_support,
     )
     return replace(opts, **changes)
 

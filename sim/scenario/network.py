@@ -131,6 +131,11 @@ class NetworkSpec:
                       "rule spreads the winner over the graph). GM-PHD measurement births "
                       "(`birth.model` `\"measurements\"`) are always own.",
         choices=("shared", "own"))
+    label_support: bool = option(
+        False, doc="Labelled peers with `birth_ids` `\"shared\"`: a tie between shared ids "
+                   "of one scan (a target's first plots in two birth cells) goes to the id "
+                   "more peers stamped, not the lowest cell (`peers.label_support`: each "
+                   "label's stamping peers as a bit mask, OR-ed over the neighbours').")
     filter: str = option("gmphd", doc="The peers' kind (`sim.kinds`): `\"gmphd\"`, "
                                       "`\"et-gmphd\"` (`[extended]`), for one target "
                                       "`\"imm-pf\"`/`\"imm-ekf\"`, `\"flooding\"` (seed 004, "

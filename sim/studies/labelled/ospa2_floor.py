@@ -223,6 +223,9 @@ def _overrides(items: list[str]) -> dict:
     out: dict = {}
     for kv in items:
         k, v = kv.split("=", 1)
+        if v.lower() in ("true", "false"):  # a flag
+            out[k] = v.lower() == "true"
+            continue
         try:
             out[k] = float(v) if "." in v else int(v)
         except ValueError:

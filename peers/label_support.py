@@ -1,0 +1,128 @@
+"""Holder support of shared labels (issue 33): which peers stamped a shared label, so that a
+tie between two labels of one scan is broken by support, alike at every peer.
+
+Why (docs/labelled-tracking.md, "Same-scan ties broken by support"): a target's first plots
+fall in two neighbouring birth cells at different peers, so two shared stamps of one scan
+``(0, k, PUBLISHED_BASE + cell)`` name one target; the network rule (earliest scan, then
+lowest origin, then lowest index) then picks the lower cell, often one that one or two peers
+hold, and it replaces the id at the others hop by hop. With support the rule's order is
+``(birth_scan, -holders, origin, index)``: ``holders`` the number of peers known to have
+stamped the label at its scan, a bit mask per label (a peer's bit: its origin) OR-ed over what
+the neighbours report, so it only grows and every peer ends with the same masks (OR is
+idempotent and commutative; a label's mask travels with the label, one hop a scan).
+
+On the wire the mask rides in bits :data:`SUPPORT_SHIFT` and up of a shared label's origin
+column (a shared origin is 0; own origins are peer indices, far below ``2^24``), so Estimate
+protocol 2 is unchanged; :meth:`LabelSupport.encode` and :func:`decode` are the two ends, at
+``peers.consensus.Consensus``. Peers whose origin shares a bit modulo :data:`SUPPORT_BITS`
+count once (more than 39 peers: a lower bound of the holders).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensornet.tracking.label_keys import SHARED_ORIGIN, as_labels, label_keys
+
+SUPPORT_SHIFT = 24
+"""First bit of the origin column that carries the holder mask on the wire."""
+SUPPORT_BITS = 39
+"""Bits of the mask (``SUPPORT_SHIFT`` .. 62: the column stays a non-negative int64)."""
+ORIGIN_MASK = (1 << SUPPORT_SHIFT) - 1
+KEEP_SCANS = 64
+"""Scans a label's mask is kept after its birth scan (ties are settled within the settle wait,
+eccentricity + 2 scans; then the mask is no longer asked for)."""
+
+
+def peer_bit(origin: int) -> int:
+    """The mask bit of the peer with label ``origin`` (own origins start at 1 with shared
+    births; bit ``(origin - 1) mod SUPPORT_BITS``)."""
+    return 1 << ((max(int(origin), 1) - 1) % SUPPORT_BITS)
+
+
+def decode(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Labels received ``(n, 3)`` -> the labels without masks ``(n, 3)`` and each row's mask
+    ``(n,)`` int64 (0: none)."""
+    lab = as_labels(labels)
+    masks = lab[:, 0] >> SUPPORT_SHIFT
+    if not masks.any():
+        return lab, masks
+    clean = lab.copy()
+    clean[:, 0] &= ORIGIN_MASK
+    return clean, masks
+
+
+def popcount(masks: np.ndarray) -> np.ndarray:
+    """Bits set in each mask ``(n,)`` int64 -> ``(n,)`` int64."""
+    return np.bitwise_count(np.asarray(masks, dtype=np.int64)).astype(np.int64)
+
+
+class LabelSupport:
+    """A peer's holder masks of shared labels: sorted label keys, their masks and birth
+    scans. ``bit``: this peer's own bit (:func:`peer_bit`)."""
+
+    def __init__(self, bit: int) -> None:
+        self.bit = int(bit)
+        self.keys = label_keys(np.zeros((0, 3), dtype=np.int64))
+        self.masks = np.zeros(0, dtype=np.int64)
+        self.scans = np.zeros(0, dtype=np.int64)
+
+    def add(self, labels: np.ndarray, masks: np.ndarray | int) -> None:
+        """OR ``masks`` (``(n,)`` or one for all) into the masks of ``labels (n, 3)``; only
+        shared labels (origin :data:`SHARED_ORIGIN`) with a nonzero mask are kept."""
+        lab = as_labels(labels)
+        m = np.broadcast_to(np.asarray(masks, dtype=np.int64), (len(lab),))
+        ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
+        if not ok.any():
+            return
+        keys = np.concatenate([self.keys, label_keys(lab[ok])])
+        allm = np.concatenate([self.masks, m[ok]])
+        scans = np.concatenate([self.scans, lab[ok, 1]])
+        order = np.argsort(keys, kind="stable")
+        keys, allm, scans = keys[order], allm[order], scans[order]
+        first = np.ones(len(keys), dtype=bool)
+        first[1:] = keys[1:] != keys[:-1]
+        starts = np.flatnonzero(first)
+        self.keys, self.scans = keys[starts], scans[starts]
+        self.masks = np.bitwise_or.reduceat(allm, starts)
+
+    def own(self, labels: np.ndarray, k: int) -> None:
+        """Our published ``labels (n, 3)`` at scan ``k``: the shared ones of scan ``k`` (stamped
+        by us this scan, or moved to it) take our bit."""
+        lab = as_labels(labels)
+        self.add(lab[lab[:, 1] == k], self.bit)
+
+    def mask_of(self, labels: np.ndarray) -> np.ndarray:
+        """``(n,)`` int64 masks of ``labels (n, 3)`` (0: not known, or not shared)."""
+        lab = as_labels(labels)
+        out = np.zeros(len(lab), dtype=np.int64)
+        if not len(self.keys) or not len(lab):
+            return out
+        keys = label_keys(lab)
+        pos = np.searchsorted(self.keys, keys).clip(max=len(self.keys) - 1)
+        hit = self.keys[pos] == keys
+        out[hit] = self.masks[pos[hit]]
+        return out
+
+    def counts(self, labels: np.ndarray) -> np.ndarray:
+        """``(n,)`` holders known of each of ``labels (n, 3)`` (0: own labels)."""
+        return popcount(self.mask_of(labels))
+
+    def encode(self, labels: np.ndarray) -> np.ndarray:
+        """``labels (n, 3)`` for the wire: each shared row's origin carries its mask."""
+        lab = as_labels(labels)
+        m = self.mask_of(lab) & ((1 << SUPPORT_BITS) - 1)
+        if not m.any():
+            return lab
+        out = lab.copy()
+        out[:, 0] |= m << SUPPORT_SHIFT
+        return out
+
+    def prune(self, k: int, keep: int = KEEP_SCANS) -> None:
+        """Forget the masks of labels born more than ``keep`` scans before scan ``k``."""
+        ok = self.scans >= k - keep
+        if not ok.all():
+            self.keys, self.masks, self.scans = self.keys[ok], self.masks[ok], self.scans[ok]
+
+
+__all__ = ["KEEP_SCANS", "ORIGIN_MASK", "SUPPORT_BITS", "SUPPORT_SHIFT", "LabelSupport",
+           "decode", "peer_bit", "popcount"]
