@@ -153,8 +153,9 @@ class GmphdEstimator:
 
     def atomic_parts(self) -> tuple:
         """What a step or relabel may change (:func:`peers.step_atomic.atomic`): the
-        estimator (mixture, labels, scan) and its label bookkeeping."""
-        return self, self.publication, self.reid, self.moving
+        estimator (mixture, labels, scan), its filter (a measurement-birth filter's pending
+        births and scan: sim.world.birth.MeasurementBirthGMPHD) and its label bookkeeping."""
+        return self, self.filter, self.publication, self.reid, self.moving
 
     def atomic_streams(self) -> tuple:
         return ()

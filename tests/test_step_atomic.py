@@ -16,6 +16,7 @@ import copy
 import numpy as np
 import pytest
 import sensornet.peers.estimators as est_mod
+import sensornet.peers.gmphd_own_times as gm_own
 import sensornet.peers.lmb_estimator as lmb_mod
 from sensornet.peers.estimators import GmphdEstimator
 from sensornet.peers.labelling import label_fused
@@ -27,6 +28,7 @@ from sensornet.protocol.keys import Keys
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
+from sensornet.sim.world.birth import MeasurementBirthGMPHD
 from sensornet.tracking.elapsed import ElapsedMotion
 from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
 from sensornet.tracking.label_confirmation import Publication
@@ -59,24 +61,35 @@ def _scans(seed: int) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     return {k: (_plots(k, rng, {5, 6}), _plots(k, rng, set())) for k in range(1, SCANS + 1)}
 
 
-def _gmphd(origin: int, shared: bool) -> GmphdEstimator:
+OWN = OwnTimes(0.5, 1.0, ElapsedMotion(1.0, 2.0), 0.99, 2.5e-6, None, 0.95)
+"""Plots at their own times, one slice a tick (no beam): the own-times code path."""
+
+
+def _gmphd(origin: int, kind: str) -> GmphdEstimator:
+    """``kind``: ``"fixed"`` births (own labels), ``"shared"`` (fixed, labelled alike at every
+    peer), ``"measurements"`` (births from the last scan's plots: a filter with state),
+    ``"own_times"`` (measurement births, plots at their own times)."""
     motion = ConstantVelocity(1.0, 2.0)
     reducer = Reducer(prune_threshold=1e-5, merge_threshold=4.0, max_components=30)
-    birth = GaussianMixture(np.full(3, 0.05),
-                            np.array([[0.0, 0, 10, 0], [100.0, 0, 60, 0], [-80.0, 0, -50, 0]]),
-                            np.tile(np.diag([400.0, 25, 400, 25]), (3, 1, 1)))
-    f = GMPHDFilter(motion, [SensorParams(LinearPosition(5.0), 0.95, 2.5e-6)], birth, 0.99,
-                    reducer)
-    return GmphdEstimator(f, origin=origin, shared_births=shared, corroborate_scans=2)
+    sensors = [SensorParams(LinearPosition(5.0), 0.95, 2.5e-6)]
+    if kind in ("fixed", "shared"):
+        birth = GaussianMixture(np.full(3, 0.05), np.array(
+            [[0.0, 0, 10, 0], [100.0, 0, 60, 0], [-80.0, 0, -50, 0]]),
+            np.tile(np.diag([400.0, 25, 400, 25]), (3, 1, 1)))
+        f = GMPHDFilter(motion, sensors, birth, 0.99, reducer)
+    else:
+        f = MeasurementBirthGMPHD(motion=motion, sensors=sensors, birth=GaussianMixture.empty(4),
+                                  survival_probability=0.99, reducer=reducer,
+                                  birth_weight=0.05, birth_speed=10.0)
+    return GmphdEstimator(f, origin=origin, shared_births=kind == "shared", corroborate_scans=2,
+                          own_times=OWN if kind == "own_times" else None)
 
 
 def _lmb(origin: int, own_times: bool = False) -> LmbEstimator:
     f = LmbFilter(ConstantVelocity(1.0, 2.0), SensorParams(LinearPosition(5.0), 0.95, 2.5e-6),
                   origin=origin, method="gibbs", gibbs_samples=50, seed=origin)
-    own = (OwnTimes(0.5, 1.0, ElapsedMotion(1.0, 2.0), 0.99, 2.5e-6, None, 0.95)
-           if own_times else None)
     return LmbEstimator(f, origin=origin, tentative_threshold=0.15, corroborate_scans=2,
-                        republish_gap=1, own_times=own)
+                        republish_gap=1, own_times=OWN if own_times else None)
 
 
 def _state(est) -> list:
@@ -185,23 +198,36 @@ def _after(cls, name: str, monkeypatch):
 
 GMPHD_POINTS = [(Publication, "stamp"), (Reidentification, "apply"),
                 (MovingStamps, "returning"), (MovingStamps, "offer"), (Publication, "adopt"),
-                (est_mod, "split_duplicates"), (est_mod, "correct_parents")]
+                (est_mod, "split_duplicates")]
+GMPHD_CASES = ([(kind, p) for kind in ("fixed", "shared", "measurements", "own_times")
+                for p in GMPHD_POINTS]
+               + [("fixed", (est_mod, "correct_parents")), ("shared", (est_mod, "correct_parents")),
+                  ("measurements", (MeasurementBirthGMPHD, "correct_parents")),
+                  ("own_times", (gm_own, "step_at_own_times"))])
 
 
-@pytest.mark.parametrize("shared", [False, True])
-@pytest.mark.parametrize("point", GMPHD_POINTS, ids=lambda p: f"{p[0].__name__}.{p[1]}")
-def test_a_gmphd_step_that_raises_leaves_the_estimator_as_before(point, shared, monkeypatch):
+@pytest.mark.parametrize(("kind", "point"), GMPHD_CASES,
+                         ids=lambda p: p if isinstance(p, str) else f"{p[0].__name__}.{p[1]}")
+def test_a_gmphd_step_that_raises_leaves_the_estimator_as_before(kind, point, monkeypatch):
     scans = _scans(3)
-    ref = _run(_gmphd(1, shared), _gmphd(2, shared), scans, None, skip=FAIL_AT)
+    if kind == "own_times":
+        ages = {k: np.linspace(0.0, 1.0, len(scans[k][0])) for k in scans}
+        monkeypatch.setattr(GmphdEstimator, "begin_scan", _with_ages(
+            GmphdEstimator, lambda e, k: e.plot_ages(ages[k] if e.origin == 1 else None)))
+    ref = _run(_gmphd(1, kind), _gmphd(2, kind), scans, None, skip=FAIL_AT)
+    if point == (gm_own, "step_at_own_times"):
+        point = (est_mod, "step_at_own_times")  # the name the estimator calls
+    elif kind == "own_times" and point == (est_mod, "split_duplicates"):
+        point = (gm_own, "split_duplicates")  # the slices' duplicate rule
     fail = {k: _after(*point, monkeypatch) for k in FAIL_AT}
-    got = _run(_gmphd(1, shared), _gmphd(2, shared), scans, fail)
+    got = _run(_gmphd(1, kind), _gmphd(2, kind), scans, fail)
     _assert_same_outputs(got, ref)
     assert any(len(o.labels["posterior"]) for o in got.values())  # tracks were published
 
 
 def test_a_gmphd_relabel_that_raises_leaves_the_estimator_as_before(monkeypatch):
     scans = _scans(4)
-    a, b = _gmphd(1, True), _gmphd(2, True)
+    a, b = _gmphd(1, "shared"), _gmphd(2, "shared")
     _run(a, b, scans, None)
     match = label_fused(*_fused_pair(a, b, scans[SCANS], SCANS + 1))
     assert len(match.own), "the case must move a label"
@@ -234,10 +260,8 @@ def test_an_lmb_step_that_raises_leaves_the_estimator_as_before(point, own_times
     scans = _scans(5)
     if own_times:
         ages = {k: np.linspace(0.0, 1.0, len(scans[k][0])) for k in scans}
-
-        def plot_ages(e, k):
-            e.plot_ages(ages[k] if e.origin == 1 else None)
-        monkeypatch.setattr(LmbEstimator, "begin_scan", _with_ages(plot_ages))
+        monkeypatch.setattr(LmbEstimator, "begin_scan", _with_ages(
+            LmbEstimator, lambda e, k: e.plot_ages(ages[k] if e.origin == 1 else None)))
     ref = _run(_lmb(1, own_times), _lmb(2), scans, None, skip=FAIL_AT)
     fail = {k: _after(*point, monkeypatch) for k in FAIL_AT}
     got = _run(_lmb(1, own_times), _lmb(2), scans, fail)
@@ -245,8 +269,9 @@ def test_an_lmb_step_that_raises_leaves_the_estimator_as_before(point, own_times
     assert any(len(o.labels["posterior"]) for o in got.values())
 
 
-def _with_ages(plot_ages):
-    real = LmbEstimator.begin_scan
+def _with_ages(cls, plot_ages):
+    """``cls.begin_scan`` that also gives the estimator its plots' ages."""
+    real = cls.begin_scan
 
     def begin_scan(self, k):
         real(self, k)
