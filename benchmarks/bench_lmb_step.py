@@ -30,6 +30,7 @@ if not __package__:  # `python benchmarks/bench_lmb_step.py`: the repository roo
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sensornet.peers.host import SharedDecode
+from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
@@ -45,7 +46,8 @@ FIELDS = ("labels", "existence", "weights", "means", "covs", "owner")
 def record(n: int, degree: int, scans: int, overrides: list[str]) -> tuple[list, float]:
     """Every ``LmbFilter.step`` call of the twin run: ``[(filter, state, scan, k)]`` (copies
     taken before the call, the filter's Generator included), and the run's process CPU ms per
-    peer-scan (the copies' CPU taken out)."""
+    peer-scan (the copies' CPU taken out). The peers step one by one (no
+    ``LmbEstimator.prepare_many``), so that every step is a call."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0))
@@ -66,12 +68,15 @@ def record(n: int, degree: int, scans: int, overrides: list[str]) -> tuple[list,
     for core in peers.values():
         core.decode = shared
     lmb.LmbFilter.step = recording
+    prepare = LmbEstimator.__dict__["prepare_many"]
+    del LmbEstimator.prepare_many  # each peer's own step (a prepared one calls no step)
     try:
         t0 = time.process_time()
         run_twin(scn, 0, peers=peers, batch=True)
         spent = time.process_time() - t0 - copying[0]
     finally:
         lmb.LmbFilter.step = step
+        LmbEstimator.prepare_many = prepare
     return calls, spent * 1e3 / n / scans
 
 

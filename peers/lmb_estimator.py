@@ -13,7 +13,9 @@ LMB's own rule (``r >= extraction_threshold``, each by its heaviest component, i
 status from the filter's counts); a fused (or any other) mixture by the GM-PHD's rule with the
 scenario's extraction settings (:func:`tracking.gmphd.extract_index`), as a GM-PHD peer does.
 
-No ``prepare_many``: co-hosted LMB peers step one by one (:mod:`peers.batching` skips them).
+Co-hosted LMB peers' steps are computed together (:meth:`LmbEstimator.prepare_many`,
+:func:`tracking.lmb_batch.step_many`; :mod:`peers.batching`), each taken only if it is the very
+step the peer makes, so the numbers are its own step's to the bit.
 Arrays: ``c`` components, ``n`` tracks, ``d`` state dimension; labels ``(., 3)`` int64.
 """
 
@@ -41,6 +43,7 @@ from sensornet.tracking.labels import (
     new_labels,
 )
 from sensornet.tracking.lmb import EDGE_FLAG, LmbFilter, LmbState
+from sensornet.tracking.lmb_batch import step_many
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.reduction import Reducer
@@ -159,6 +162,11 @@ class LmbEstimator:
         self.k = 0
         """The scan of the last step."""
         self._next_k: int | None = None
+        self._prepared: tuple | None = None
+        """``(prior state, k, z, filter, posterior state, Generator state)`` from
+        :meth:`prepare_many`."""
+        self.prepared_hits = 0
+        """Steps that took a prepared posterior (for the summary and tests)."""
         self._last: tuple[GaussianMixture, LmbState] | None = None
         """The last step's PHD mixture (its ``density``) and the state it came from."""
         self._adopted: GaussianMixture | None = None
@@ -181,6 +189,40 @@ class LmbEstimator:
         from a label that was)."""
 
     # -- the contract ---------------------------------------------------------------------
+    @staticmethod
+    def prepare_many(estimators: list[LmbEstimator], steps: list[int],
+                     scans: list[np.ndarray]) -> None:
+        """The next filter step of each estimator (``steps`` ahead, scan ``z``) computed for all
+        at once (:func:`tracking.lmb_batch.step_many`: a peer host's co-hosted peers); each
+        :meth:`step` takes its result only if it makes exactly that step from the same state
+        with the same filter (else it computes its own: a prepared step never changes what a
+        step gives, only where its arithmetic is done). Not prepared: an estimator with an
+        adopted density to take first, or whose plots may come with ages (:attr:`own_times`)."""
+        todo = [(e, e.k + int(s), z) for e, s, z in zip(estimators, steps, scans, strict=True)
+                if e._adopted is None and e.own_times is None and int(s) >= 1]
+        for e in estimators:
+            e._prepared = None
+        if not todo:
+            return
+        filters = [e.filter_for(k) for e, k, _ in todo]
+        got = step_many(filters, [e.state for e, *_ in todo], [z for *_, z in todo],
+                        [k for _, k, _ in todo])  # raises before any estimator is touched
+        for (e, k, z), f, r in zip(todo, filters, got, strict=True):
+            if r is not None:
+                e._prepared = (e.state, k, z, f, r[0], r[1])
+
+    def _filter_step(self, k: int, z: np.ndarray) -> LmbState:
+        """The filter's step to scan ``k`` with ``z``: the prepared one if it is this very
+        step (same state, scan index, filter and plots), else computed here."""
+        prep, self._prepared = self._prepared, None
+        filt = self.filter_for(k)
+        if (prep is not None and prep[0] is self.state and prep[1] == k and prep[3] is filt
+                and (prep[2] is z or np.array_equal(prep[2], z))):
+            filt._rng.bit_generator.state = prep[5]  # as after its own draws
+            self.prepared_hits += 1
+            return prep[4]
+        return filt.step(self.state, z, k)
+
     def begin_scan(self, k: int) -> None:
         """The scan index of the next :meth:`step` (births are stamped with it)."""
         self._next_k = int(k)
@@ -215,7 +257,7 @@ class LmbEstimator:
             self.state = step_at_own_times(self.filter_for(k), self.state, z, ages, k,
                                            self.own_times)
         else:
-            self.state = self.filter_for(k).step(self.state, z, k)
+            self.state = self._filter_step(k, z)
         self.k = k
         if self.origin is not None and self.publish_threshold is not None:
             self._stamp_first_publication(k)

@@ -350,8 +350,22 @@ class LmbFilter:
         post, r_u = update(state.tracks, scan, self.sensor, self.method, self.gate,
                            self.component_prune, self.exact_limit, self.lbp_tol, self.scalable,
                            self._rng, self.gibbs_samples)
+        return self.finish(state, post, r_u, scan)
+
+    def finish(self, state: LmbState, post: LabelledBernoulliSet, r_u: np.ndarray,
+               scan: np.ndarray) -> LmbState:
+        """The rest of :meth:`correct` after :func:`update` (``post``, ``r_u``) of the predicted
+        ``state`` with ``scan`` (checked): reduce each track's mixture, then :meth:`settle`
+        (:func:`tracking.lmb_batch.step_many` reduces its stacked steps together)."""
         post = reduce_components(post, self.component_prune, self.merge_threshold,
                                  self.max_components)
+        return self.settle(state, post, r_u, scan)
+
+    def settle(self, state: LmbState, post: LabelledBernoulliSet, r_u: np.ndarray,
+               scan: np.ndarray) -> LmbState:
+        """The end of :meth:`finish` on the reduced ``post``: delete tracks below
+        ``existence_prune``, count confirmations, queue the adaptive births (reads
+        ``state.hits`` and ``state.k`` only)."""
         keep = post.existence >= self.existence_prune
         hits = state.hits[keep] + (post.existence[keep] >= self.confirm_existence)
         pending = _empty_mixture(self.motion.dim)
