@@ -105,7 +105,7 @@ class Consensus(BatchedRounds):
                               if self.labelled and options.label_support else None)
         """Holder masks of shared labels (peers.label_support): same-scan ties by support."""
         self.support = (SupportRule(options.support_inputs, options.support_scans)
-                        if self.fusing and options.support_inputs > 0 else None)
+                        if self.fusing and options.support_inputs != 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
 
     # -- inputs -----------------------------------------------------------------------------
@@ -439,7 +439,7 @@ class Consensus(BatchedRounds):
                 fused.means, fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:
-            keep = self.support.keep(t.ids, input_support(t.states, mixes))
+            keep = self.support.keep(t.ids, input_support(t.states, mixes), len(mixes))
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])

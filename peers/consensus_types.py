@@ -53,7 +53,8 @@ class ConsensusOptions:
     support_inputs: int = 0
     """Report a fused track only if this many of the last round's inputs hold it, or it was
     extracted in :attr:`support_scans` consecutive scans (tracking.support.SupportRule; the
-    fused density is unchanged); 0: every extracted track (the rule off)."""
+    fused density is unchanged); 0: every extracted track (the rule off); -1: more than half
+    of the round's inputs, at least 2 (tracking.support.MAJORITY)."""
     support_scans: int = 2
     existence_prior: float = 0.0
     """Extraction of fused tracks: a track at most :attr:`existence_young` scans old that two
@@ -72,8 +73,8 @@ class ConsensusOptions:
         if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
             raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
                              f"got {self.existence_prior} and {self.existence_young}")
-        if self.support_inputs < 0 or self.support_scans < 1:
-            raise ValueError(f"support_inputs must be >= 0 and support_scans >= 1, got "
+        if self.support_inputs < -1 or self.support_scans < 1:
+            raise ValueError(f"support_inputs must be >= -1 and support_scans >= 1, got "
                              f"{self.support_inputs} and {self.support_scans}")
 
 

@@ -58,12 +58,14 @@ class FusionSpec:
                                  "inputs hold a component within the hybrid gate of it, or "
                                  "it was extracted in `support_scans` consecutive scans "
                                  "(`tracking.support`; extraction only, the fused density is "
-                                 "unchanged); 0: every extracted track. Labelled (GM-PHD, "
+                                 "unchanged); 0: every extracted track; -1: more than half "
+                                 "of the round's inputs, at least 2 (`tracking.support."
+                                 "MAJORITY`). Labelled (GM-PHD, "
                                  "LMB) peers only. 2 by default since issue 33: on training "
                                  "runs it removes the GM-PHD's one-scan false fused tracks "
                                  "(fused OSPA(2) 18-52 -> 11-30 m) and leaves the LMB's "
                                  "unchanged (docs/labelled-tracking.md, \"Design B\").",
-                          check=NONNEGATIVE)
+                          check=at_least(-1))
     support_scans: int = option(2, doc="With `support`: scans a fused track held by fewer "
                                        "inputs must be extracted in a row before it is "
                                        "reported.", unit="scans", check=at_least(1))
