@@ -200,7 +200,9 @@ def test_the_twin_sends_the_ages_and_its_peers_take_them():
 
 
 # today's twin (LMB peers on the shipped excerpt, 40 ticks, local and hybrid): per peer the
-# mean local and fused OSPA before lmb.time_slice existed (commit ab8228d)
+# mean local and fused OSPA before lmb.time_slice existed (commit ab8228d). Compared to 1e-12,
+# not to the bit: another NumPy / SciPy build (a fresh install) changes the last bit of these
+# means (369.8607512170714 -> ...194), any change of behaviour moves far more digits.
 TODAY = {"none": {"cdg": (369.8607512170714, 369.8607512170714),
                   "orly": (338.50574151835525, 338.50574151835525),
                   "north": (597.1229241134804, 597.1229241134804),
@@ -212,14 +214,14 @@ TODAY = {"none": {"cdg": (369.8607512170714, 369.8607512170714),
 
 
 @pytest.mark.parametrize("rule", ["none", "hybrid"])
-def test_option_off_gives_todays_twin_to_the_bit(rule):
+def test_option_off_gives_todays_twin_to_1e12(rule):
     scn = load_scenario("paris", overrides={"network.filter": "lmb", "scenario.num_scans": 40,
                                             "fusion.rule": rule, "lmb.time_slice": 0.0})
     assert scn.lmb.time_slice == 0 and plot_ages(scn, 0) is None
     twin = run_twin(scn, 0)
     for name, (local, fused) in TODAY[rule].items():
-        assert twin.mean_ospa(name, "local") == local
-        assert twin.mean_ospa(name, "fused") == fused
+        assert twin.mean_ospa(name, "local") == pytest.approx(local, rel=1e-12, abs=0)
+        assert twin.mean_ospa(name, "fused") == pytest.approx(fused, rel=1e-12, abs=0)
 
 
 def test_a_slice_that_does_not_divide_the_tick_is_refused():
