@@ -8,6 +8,7 @@ import threading
 
 import numpy as np
 import pytest
+from sensornet.peers.labelling import origin_of
 from sensornet.peers.scan_results import merge_parts, read_table
 from sensornet.peers.session import DIAL_SOON, open_session
 from sensornet.protocol.codec import decode
@@ -15,6 +16,7 @@ from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Tracks
 from sensornet.sim.run.launcher import start_run, wait_run
 from sensornet.sim.scenario import load_scenario
+from sensornet.tracking.label_keys import SHARED_ORIGIN
 
 pytestmark = pytest.mark.network
 
@@ -82,5 +84,11 @@ def test_results_table_has_the_id_columns(labelled_run):
         assert len(cols["track_status"][i]) == len(cols["tracks"][i])
         assert len(cols["truth_ids"][i]) == len(cols["truth"][i])
     ids = np.array([r for i in fused for r in cols["track_ids"][i]])
-    assert ids.shape[1] == 3 and set(ids[:, 0]) <= {0, 1, 2}
+    # every id's origin is a peer of this network (shared births: SHARED_ORIGIN and the
+    # peers' 1 + index; else the index): a split or a fusion's fresh label may be any peer's
+    names = [s.name for s in scn.sensors]
+    shared = scn.network.birth_ids == "shared" and scn.birth.model != "measurements"
+    origins = ({SHARED_ORIGIN} | {SHARED_ORIGIN + 1 + origin_of(names, n) for n in names}
+               if shared else {origin_of(names, n) for n in names})
+    assert ids.shape[1] == 3 and set(ids[:, 0].tolist()) <= origins, set(ids[:, 0].tolist())
     assert {t for i in fused for t in cols["truth_ids"][i]} == {1, 2, 3, 4}
