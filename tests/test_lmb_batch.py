@@ -237,3 +237,25 @@ def test_a_failing_stack_prepares_nothing(monkeypatch):
         q.step(1, z)
         _same(e.state, q.state)
         assert e.prepared_hits == 0
+
+
+@pytest.mark.network
+def test_two_hosts_of_three_lmb_peers_prepare_their_steps_and_equal_the_twin(tmp_path):
+    """Real processes: six LMB peers in two hosts stack their local steps (the summaries count
+    the prepared steps taken) and every scan's tracks are the twin's, where each steps alone."""
+    from sensornet.sim.run.twin import run_twin
+    from sensornet.sim.world.graphs import network_scenario
+
+    from tests.test_network_faults import _assert_tracks_equal_the_twin, _run
+
+    names = [f"p{i:02d}" for i in range(6)]
+    source = tmp_path / "six.toml"
+    source.write_text(network_scenario(6, 2, scans=30, rounds=1, speed=5.0, deadline=1.0))
+    sets = ["network.filter=lmb"]
+    scn, codes, summaries = _run(str(source), tmp_path / "run", sets, rerun=False,
+                                 per_process=3, peer_args={n: ["--save-tracks"] for n in names})
+    assert all(c == 0 for c in codes.values()), codes
+    assert set(summaries) == set(names)
+    assert all(s["internal_errors"] == {} for s in summaries.values())
+    assert sum(s["prepared_steps"] for s in summaries.values()) > 0
+    _assert_tracks_equal_the_twin(tmp_path / "run", scn, summaries, run_twin(scn, 0))
