@@ -7,10 +7,11 @@ per scan, the numbers the Rerun health tabs show (component counts, ages, late a
 messages, trust statistics, OSPA, latency, compute) from the core's records and outputs, and
 publishes them when the peer is idle (:meth:`Observer.flush`): never in the burst that sets the
 scan-to-track latency. The put is best effort (congestion control DROP): a slow view never
-holds a peer back. The peers of a host send theirs together (:class:`HostReports`: one bundle
+holds a peer back. The peers of a host send theirs together (:class:`HostReports`: one message
 on ``telemetries/<host>`` a pass of the host's loop, once none of its peers has work
-waiting). The view hears nothing a peer publishes for others: each scan's tracks (the bytes
-put on ``tracks/<peer>``) go to it with the scan's report (a host's: in the same bundle; a
+waiting, their map marks made in one call). The view hears nothing a peer publishes for
+others: each scan's tracks (the bytes put on ``tracks/<peer>``) go to it with the scan's
+report (a host's: in the same message; a
 peer of its own process: both in one bundle on ``telemetry/<peer>``, one put a flush, not
 one for the tracks and one for the report), so a peer's own puts reach the same sessions
 whether or not a view listens. Nobody watching,
@@ -29,6 +30,7 @@ from sensornet.peers.rerun_layout import position_columns
 from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Telemetry
+from sensornet.protocol.report_bundle import pack_reports
 from sensornet.tracking.mixture import GaussianMixture
 
 PARTICLES_SHOWN = 200
@@ -95,6 +97,9 @@ class Observer:
         self._pending: dict[int, dict] = {}
         self._tracks_out = 0
         self._fusion_ms = 0.0
+        self._cost_names: dict[str, str] = {}
+        self._trust_names: dict[str, tuple[str, ...]] = {}
+        """Report value names of cost fields and of each neighbour's trust, made once."""
         self.sent = 0
         self.reports: HostReports | None = None
         """A peer host's: reports go there, flushed when the host says (:meth:`flush`)."""
@@ -149,7 +154,7 @@ class Observer:
     def _scan(self, k: int) -> dict:
         g = self._pending.get(k)
         if g is None:
-            g = self._pending[k] = {"values": {}, "events": [], "points": {},
+            g = self._pending[k] = {"values": {}, "events": [], "points": {}, "later": [],
                                     "tracks": False}
         return g
 
@@ -179,10 +184,8 @@ class Observer:
             self._record_local(k, v, compute_ms)
         elif r.kind == "fusion":
             self._record_fusion(k, v)
-        elif r.kind == "cost":
-            for what, value in v.items():
-                if isinstance(value, int | float):
-                    self._set(k, f"cost/{what}", value)
+        elif r.kind == "cost":  # its values named when the report is sent (message)
+            self._scan(k)["later"].append(v)
         elif r.kind == "ospa":
             self._set(k, f"ospa/{v['which']}", v["value"])
             if v["which"] == "fused":  # only the fused one completes a report (ready)
@@ -194,12 +197,8 @@ class Observer:
                 self._set(k, f"rejected/before_decoding/{reason}", count)
         elif r.kind == "peer":
             self._scan(k)["events"].append(f"{v['peer']} {v['what']}")
-        elif r.kind == "trust":  # each neighbour's statistic and weight
-            j = v["neighbour"]
-            self._set(k, f"trust/{j}/statistic", v["statistic"])
-            self._set(k, f"trust/{j}/weight", v["weight"])
-            if "withheld" in v:
-                self._set(k, f"trust/{j}/withheld", v["withheld"])
+        elif r.kind == "trust":  # each neighbour's statistic and weight, named in message
+            self._scan(k)["later"].append(v)  # (8 records a scan: each named here was 4 us)
         elif r.kind == "trust-event":
             self._scan(k)["events"].append(f"WARN {v['neighbour']} {v['from']} -> {v['to']} "
                                            f"(score {v['score']})")
@@ -214,7 +213,7 @@ class Observer:
         hooks = core.consensus.hooks
         if isinstance(mix, GaussianMixture):
             self._set(k, "cardinality/local", float(mix.weights.sum()))
-            self._scan(k)["points"]["local/mixture"] = heaviest_marginals(mix, FUSED_SHOWN)
+            self._scan(k)["points"]["local/mixture"] = mix  # marks made at the flush
         elif mix is not None and hooks.plane is not None:  # raw scans: the own scan
             self._scan(k)["points"]["local"] = np.asarray(hooks.plane(mix),
                                                           float).reshape(-1, 2)
@@ -250,8 +249,8 @@ class Observer:
             # step, each with a new scan set: only the last is sent); its place kept now
             g["points"]["pooled"] = None
             g["pooled"] = (hooks.plane, fused)
-        elif isinstance(fused, GaussianMixture):  # as points, as the local (no 4-D mixture)
-            self._scan(k)["points"]["fused/mixture"] = heaviest_marginals(fused, FUSED_SHOWN)
+        elif isinstance(fused, GaussianMixture):  # as points, as the local (no 4-D mixture);
+            self._scan(k)["points"]["fused/mixture"] = fused  # made at the flush (pack_marks)
         view = hooks.pda_view()
         if view is not None:  # the gates and weighted returns: no other message has them
             self._scan(k)["points"].update(pack_gates(view, own=self.name))
@@ -276,8 +275,29 @@ class Observer:
                       or (g["tracks"] and (not scores or "ospa/fused" in g["values"])))
 
     def message(self, k: int) -> Telemetry:
-        """Scan ``k``'s report (taken out of the pending ones)."""
+        """Scan ``k``'s report (taken out of the pending ones); its map marks still as the
+        mixtures they are made of, until :func:`pack_marks` (a host makes all its peers'
+        at once)."""
         g = self._pending.pop(k)
+        values, costs, trusts = g["values"], self._cost_names, self._trust_names
+        for v in g["later"]:  # trust and cost records, in their order, as record had set them
+            j = v.get("neighbour")
+            if j is None:  # cost
+                for what, value in v.items():
+                    if isinstance(value, int | float):
+                        name = costs.get(what)
+                        if name is None:
+                            name = costs[what] = f"cost/{what}"
+                        _put(values, name, value)
+                continue
+            trust = trusts.get(j)
+            if trust is None:
+                trust = trusts[j] = tuple(f"trust/{j}/{x}" for x in ("statistic", "weight",
+                                                                      "withheld"))
+            _put(values, trust[0], v["statistic"])
+            _put(values, trust[1], v["weight"])
+            if "withheld" in v:
+                _put(values, trust[2], v["withheld"])
         fusion = g.get("fusion")
         if fusion is not None:  # the scan's last fusion record
             v, counts = fusion
@@ -309,18 +329,20 @@ class Observer:
         if self.reports is not None and not (host or force):
             return
         self.wants_flush = False
-        entries: list[tuple[str, bytes]] = []
         done = self.ready(force)
-        for k in done:
-            tracks = self._pending[k].get("tracks_bytes")
-            if tracks is not None:  # the bytes the peer published: no copy, no encoding
-                entries.append((self.name, tracks))
-            entries.append((self.name, encode(self.message(k))))
+        # the bytes the peer published with each report: no copy, no encoding
+        items = [(self.name, self._pending[k].get("tracks_bytes"), self.message(k))
+                 for k in done]
         try:
-            if self.reports is not None:  # into the host's bundle, entry by entry
-                for _, payload in entries:
-                    self._put(payload)
+            if self.reports is not None:  # into the host's message, marks made there
+                self.reports.items.extend(items)
             else:  # a peer of its own process: its tracks and reports in one put
+                pack_marks([r for _, _, r in items])
+                entries: list[tuple[str, bytes]] = []
+                for name, tracks, r in items:
+                    if tracks is not None:
+                        entries.append((name, tracks))
+                    entries.append((name, encode(r)))
                 for bundle in pack_bundles(0, entries):
                     self._put(bundle)
             self.sent += len(done)
@@ -329,29 +351,28 @@ class Observer:
 
 
 class HostReports:
-    """The reports of a peer host's observers, sent as one bundle a pass of the host's loop
-    on ``telemetries/<host>`` (:mod:`protocol.bundle`: ``[k, [[peer, report], ...]]``, each
-    report an encoded :class:`protocol.messages.Telemetry`) instead of one put per peer: the
-    host's ten or fifty peers make one message a scan, not ten or fifty. The view unpacks it
-    as if each report had come on ``telemetry/<peer>``."""
+    """The reports of a peer host's observers, sent as one message a pass of the host's loop
+    on ``telemetries/<host>`` (:mod:`protocol.report_bundle`: the reports' values and points
+    in one block each, their tracks beside them) instead of one put per peer: the host's ten
+    or fifty peers make one message a scan, not ten or fifty, and their map marks are made
+    in one vectorised call (:func:`pack_marks`) and converted once. The view splits it into
+    the reports as if each had come on ``telemetry/<peer>``."""
 
     def __init__(self, put=None) -> None:
         """``put(payload)``: where bundles go (tests, :meth:`open` declares the publisher)."""
         self._put = put
         self._pub = self._listener = None
         self.observers: list[Observer] = []
-        self._reports: list[tuple[str, bytes]] = []
+        self.items: list[tuple[str, bytes | None, Telemetry]] = []
+        """``(peer, its tracks' bytes or None, report)`` gathered since the last send."""
         self.sent = 0
 
     def add(self, obs: Observer) -> Observer:
         """``obs`` sends its reports here (watched whenever the host's key is)."""
         self.observers.append(obs)
-        obs._put, obs._open, obs.watched = self._report_of(obs.name), True, self._put is not None
+        obs._open, obs.watched = True, self._put is not None
         obs.reports = self
         return obs
-
-    def _report_of(self, name: str):
-        return lambda payload: self._reports.append((name, payload))
 
     @property
     def watched(self) -> bool:
@@ -380,14 +401,15 @@ class HostReports:
         return self
 
     def send(self) -> None:
-        """The reports gathered since the last call, in one put (several past
-        :data:`protocol.bundle.BUNDLE_BYTES`)."""
-        if not self._reports:
+        """The reports gathered since the last call, their marks made together, in one put
+        (several past :data:`protocol.bundle.BUNDLE_BYTES`)."""
+        if not self.items:
             return
-        reports, self._reports = self._reports, []
+        items, self.items = self.items, []
         try:
-            for bundle in pack_bundles(0, reports):  # reports of several scans: no one k
-                self._put(bundle)
+            pack_marks([r for _, _, r in items])
+            for message in pack_reports(items, time.time()):
+                self._put(message)
                 self.sent += 1
         except Exception:  # best effort: a view is never worth a host's error
             pass
@@ -470,7 +492,7 @@ def heaviest_marginals(mix: GaussianMixture, n: int) -> np.ndarray:
     and ``a d - b^2 > 0``), straight from the mixture's arrays: a watched peer does this twice
     a scan, and a 4-D mixture made first and packed after cost it ~3x as much (issue 38)."""
     w = mix.weights
-    keep = np.argsort(w)[::-1][:n]
+    keep = np.argsort(w, kind="stable")[::-1][:n]  # ties: the later first, as _many
     i, j = position_columns(mix.dim)  # integer indexes below: list ones cost 3x as much
     P = mix.covs
     a, d = P[keep, i, i], P[keep, j, j]
@@ -484,6 +506,55 @@ def heaviest_marginals(mix: GaussianMixture, n: int) -> np.ndarray:
     if not good.all():  # a degenerate one: not drawn
         out = out[good]
     return out.reshape(-1, 2)
+
+
+def heaviest_marginals_many(mixes: list[GaussianMixture], n: int) -> list[np.ndarray]:
+    """:func:`heaviest_marginals` of each mixture, to the bit, in one vectorised pass over
+    all their components (those of one dimension together): a host's peers' marks at once,
+    not two calls a peer-scan (issue 38). The ``n`` heaviest of each by one stable sort on
+    (mixture, weight), then the same closed form on the rows kept."""
+    out: list[np.ndarray] = [np.zeros((0, 2))] * len(mixes)
+    groups: dict[int, list[int]] = {}
+    for t, m in enumerate(mixes):
+        groups.setdefault(m.dim, []).append(t)
+    for dim, idx in groups.items():
+        ms = [mixes[t] for t in idx]
+        lens = np.fromiter((len(m.weights) for m in ms), np.intp, len(ms))
+        w = np.concatenate([m.weights for m in ms])
+        seg = np.repeat(np.arange(len(ms)), lens)
+        # ascending by (-mixture, weight), stable, then reversed: mixtures in order, each
+        # heaviest first with ties later-first, as argsort(w, stable)[::-1] per mixture
+        order = np.lexsort((w, -seg))[::-1]
+        start = np.cumsum(lens) - lens
+        keep = order[np.arange(len(w)) - start[seg[order]] < n]
+        i, j = position_columns(dim)
+        P = np.concatenate([m.covs for m in ms])
+        M = np.concatenate([m.means for m in ms])
+        a, d = P[keep, i, i], P[keep, j, j]
+        b = 0.5 * (P[keep, i, j] + P[keep, j, i])
+        floor = 1e-9 * np.maximum(a + d, 1e-9)
+        a, d = a + floor, d + floor
+        rows = np.empty((len(keep), 3, 2))
+        rows[:, 0, 0], rows[:, 0, 1] = M[keep, i], M[keep, j]
+        rows[:, 1, 0], rows[:, 1, 1], rows[:, 2, 0], rows[:, 2, 1] = a, b, d, w[keep]
+        good = (a > 0) & (a * d - b * b > 0)
+        flat = rows[good].reshape(-1, 2)
+        ends = 3 * np.cumsum(np.bincount(seg[keep][good], minlength=len(ms)))
+        for t, e0, e1 in zip(idx, [0, *ends[:-1].tolist()], ends.tolist(), strict=True):
+            out[t] = flat[e0:e1]
+    return out
+
+
+def pack_marks(reports: list[Telemetry]) -> None:
+    """Each report's map marks still held as a mixture (``local/mixture``, ``fused/mixture``:
+    :meth:`Observer.message`) replaced by its :data:`FUSED_SHOWN` heaviest position
+    marginals, all the reports' in one :func:`heaviest_marginals_many` call."""
+    held = [(r.points, name) for r in reports for name, z in r.points.items()
+            if isinstance(z, GaussianMixture)]
+    if held:
+        marks = heaviest_marginals_many([p[name] for p, name in held], FUSED_SHOWN)
+        for (p, name), z in zip(held, marks, strict=True):
+            p[name] = z
 
 
 def _heaviest(mix: GaussianMixture, n: int) -> GaussianMixture:

@@ -56,6 +56,7 @@ from sensornet.protocol.codec import Rejected, decode
 from sensornet.protocol.json_fields import MESSAGE_SCHEMA, dumps, fields
 from sensornet.protocol.keys import ROOT
 from sensornet.protocol.messages import Control
+from sensornet.protocol.report_bundle import REPORTS_HEAD, unpack_reports
 
 SAMPLE_SCHEMA = {
     "title": "sensornet.sample", "type": "object",
@@ -92,11 +93,24 @@ class NoNetwork(RuntimeError):
 
 def _entries(payload: bytes) -> list[dict]:
     """A bundle's entries decoded for the JSON body (each as the codec reads it; an entry it
-    refuses, or a payload that is no bundle, gives ``message: null`` / no entries)."""
+    refuses, or a payload that is no bundle, gives ``message: null`` / no entries); a host's
+    reports message (:mod:`protocol.report_bundle`): its entries, then each report."""
+    if payload[:1] == REPORTS_HEAD:
+        try:
+            msg = unpack_reports(payload)
+        except Rejected:
+            return []
+        return [*_decoded(msg.entries), *({"name": r.sender, "message": fields(r)}
+                                          for r in msg.reports if not isinstance(r, Rejected))]
     try:
         entries = unpack_bundle(payload).entries
     except Rejected:
         return []
+    return _decoded(entries)
+
+
+def _decoded(entries: list[tuple[str, bytes]]) -> list[dict]:
+    """``(name, payload)`` entries each decoded (``message: null`` where the codec refuses)."""
     out = []
     for name, entry in entries:
         try:
@@ -220,7 +234,7 @@ class Bag:
         body = {"t": t, "key": key, "encoding": encoding,
                 "payload": base64.b64encode(payload).decode("ascii"),
                 "message": None if msg is None else fields(msg)}
-        if msg is None and payload[:1] == BUNDLE_HEAD:
+        if msg is None and payload[:1] in (BUNDLE_HEAD, REPORTS_HEAD):
             body["entries"] = _entries(payload)
         self._w.add_message(self._ch[key], ns, dumps(body).encode(), ns, sequence=self._seq)
         self.count += 1

@@ -20,6 +20,7 @@ import zenoh
 
 from sensornet.protocol.codec_format import VERSIONS
 from sensornet.protocol.keys import ROOT, WORLD
+from sensornet.protocol.report_bundle import REPORTS_HEAD
 
 META = "sensornet.bag"
 LIVELINESS = "@liveliness"
@@ -201,8 +202,9 @@ def _stamped(payload: bytes, now: float) -> bytes | None:
 
 BUNDLES = ("scans", "telemetries")
 """Channels whose messages are bundles (:mod:`protocol.bundle`, ``[k, [[name, message], ...]]``):
-the world's scans for a peer host, a host's peers' telemetry; a peer of its own process puts
-its tracks and report as one bundle on ``telemetry/<peer>`` (``0x92``, a message never is)."""
+the world's scans for a peer host, a host's peers' telemetry (now as :mod:`protocol.report_bundle`:
+its entries and send time restamped); a peer of its own process puts its tracks and report as
+one bundle on ``telemetry/<peer>`` (``0x92``, a message never is)."""
 
 
 def restamp(key: str, payload: bytes, now: float) -> bytes | None:
@@ -217,15 +219,18 @@ def restamp(key: str, payload: bytes, now: float) -> bytes | None:
             body = msgpack.unpackb(payload, raw=False)
         except Exception:  # as above
             return None
-        if (not isinstance(body, list) or len(body) != 2 or not isinstance(body[1], list)
+        reports = payload[:1] == REPORTS_HEAD  # a host's: [ts, entries, reports, vx, pf]
+        if (not isinstance(body, list) or len(body) != (5 if reports else 2)
+                or not isinstance(body[1], list)
                 or not all(isinstance(e, list) and len(e) == 2 for e in body[1])):
             return None
         entries = [_stamped(e[1], now) if isinstance(e[1], bytes) else None for e in body[1]]
         if any(e is None for e in entries):
             return None
-        return msgpack.packb([body[0], [[e[0], x] for e, x in zip(body[1], entries,
-                                                                  strict=True)]],
-                             use_bin_type=True)
+        body[1] = [[e[0], x] for e, x in zip(body[1], entries, strict=True)]
+        if reports:  # its reports' send time
+            body[0] = float(now)
+        return msgpack.packb(body, use_bin_type=True)
     return _stamped(payload, now)
 
 

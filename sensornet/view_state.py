@@ -43,6 +43,7 @@ from sensornet.protocol.messages import (
     Tracks,
     Truth,
 )
+from sensornet.protocol.report_bundle import REPORTS_HEAD, unpack_reports
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.view_columns import Batcher
 
@@ -145,6 +146,9 @@ class ViewState:
         if f"/{ROOT_SCANS}/" in key:
             channel, own = "scan", None
         elif f"/{ROOT_TELEMETRIES}/" in key:  # a host's peers' reports (HostReports)
+            if body[:1] == REPORTS_HEAD:  # split (protocol.report_bundle); else a bundle
+                self._host_reports(base, body)
+                return
             channel, own = "telemetry", None
         elif "/telemetry/" in key and body[:1] == BUNDLE_HEAD:  # one peer's reports
             channel, own = "telemetry", key.rsplit("/", 1)[-1]
@@ -161,6 +165,23 @@ class ViewState:
                 self.rejected += 1
             else:
                 self._one(f"{base}/{channel}/{name}", entry)
+
+    def _host_reports(self, base: str, body: bytes) -> None:
+        """A host's reports message: its entries each as if heard on the peer's report key,
+        its reports drawn as if each had come alone; a refused whole or report counted."""
+        try:
+            msg = unpack_reports(body)
+        except Rejected:
+            self.rejected += 1
+            return
+        for name, entry in msg.entries:
+            self._one(f"{base}/telemetry/{name}", entry)
+        for r in msg.reports:
+            if isinstance(r, Rejected):
+                self.rejected += 1
+            else:
+                self.handled += 1
+                self.message(r)
 
     def _one(self, key: str, payload: bytes) -> None:
         """One message (not a bundle: a bundle inside a bundle is refused)."""

@@ -33,6 +33,7 @@ from sensornet.peers.telemetry import Telemetry as PeerTelemetry
 from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
 from sensornet.protocol.messages import Estimate, Forward, Scan, ScanSet, Telemetry, Tracks, Truth
+from sensornet.protocol.report_bundle import unpack_reports
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
@@ -595,14 +596,14 @@ def test_a_host_sends_its_peers_reports_when_idle_or_crowded():
     assert bundles == [] and obs.pending == 1
     host._backlog[1].clear()
     host._report()
-    (entries,) = [unpack_bundle(b).entries for b in bundles]
-    assert [(n, decode(p).k) for n, p in entries] == [(names[0], 1)] and obs.pending == 0
+    (reports,) = [unpack_reports(b).reports for b in bundles]
+    assert [(r.sender, r.k) for r in reports] == [(names[0], 1)] and obs.pending == 0
     host._backlog[1].append((0.0, ("msg", "x", b"")))
     for k in range(2, 2 + PENDING_MAX):  # no tracks out: none complete
         obs.record(Record("local", k, {"n_components": 1}))
         host._report()
     newest = 1 + PENDING_MAX
-    sent = [decode(p).k for n, p in unpack_bundle(bundles[-1]).entries]
+    sent = [r.k for r in unpack_reports(bundles[-1]).reports]
     assert len(bundles) == 2 and sent == list(range(2, newest - 8 - WAIT_SCANS + 1))
     assert obs.pending == PENDING_MAX - len(sent) < PENDING_MAX
 

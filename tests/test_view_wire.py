@@ -20,6 +20,7 @@ from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Telemetry, Tracks
+from sensornet.protocol.report_bundle import unpack_reports
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.mixture import GaussianMixture
@@ -95,7 +96,7 @@ def _scan(obs: Observer, k: int, n: int) -> bytes:
 
 
 def test_a_scans_tracks_go_with_its_report_and_are_drawn_from_it():
-    """A hosted peer's tracks ride in its host's bundle beside its report, the very bytes
+    """A hosted peer's tracks ride in its host's message beside its report, the very bytes
     published (no copy, no encoding); a peer of its own process sends them with its report
     in one bundle on its own telemetry key: one put a scan, not two. The view draws both the
     same, as tracks of that peer."""
@@ -112,9 +113,9 @@ def test_a_scans_tracks_go_with_its_report_and_are_drawn_from_it():
         published[id(obs)] = _scan(obs, 4, 2)
         obs.flush(idle=True, host=True)
     reports.send()
-    (entries,) = [unpack_bundle(b).entries for b in bundles]
-    assert [n for n, _ in entries] == [name, name]
-    assert entries[0][1] == published[id(hosted)] and len(own) == 1  # one put
+    (msg,) = [unpack_reports(b) for b in bundles]
+    assert [n for n, _ in msg.entries] == [r.sender for r in msg.reports] == [name]
+    assert msg.entries[0][1] == published[id(hosted)] and len(own) == 1  # one put
     (alone_entries,) = [unpack_bundle(b).entries for b in own]
     assert [n for n, _ in alone_entries] == [name, name]
     assert alone_entries[0][1] == published[id(alone)]  # the bytes as published
