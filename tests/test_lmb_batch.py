@@ -164,6 +164,7 @@ def test_bad_problems_are_left_to_their_own_step():
 
 
 def test_a_problem_whose_association_raises_is_not_prepared_the_others_are(monkeypatch):
+    import sensornet.tracking.lmb as lmb
     import sensornet.tracking.lmb_batch as lmb_batch
 
     rng = np.random.default_rng(8)
@@ -186,6 +187,9 @@ def test_a_problem_whose_association_raises_is_not_prepared_the_others_are(monke
     assert got[1] is None
     for p in (0, 2):
         _same(got[p][0], twins[p].step(states[p], scans[p], 3))
+    # alone (not stacked: a group of one) it is not prepared either, and nothing raises
+    monkeypatch.setattr(lmb, "marginals", refuse)
+    assert step_many(filters[1:2], states[1:2], scans[1:2], [3]) == [None]
 
 
 def _estimators(rng, n: int) -> list[LmbEstimator]:

@@ -93,13 +93,16 @@ def step_many(filters: Sequence[LmbFilter], states: Sequence[LmbState],
     return out
 
 
-def _own(f: LmbFilter, state: LmbState, z: np.ndarray, k: int) -> tuple[LmbState, dict]:
-    """The filter's own step, its Generator put back (its state after the draws returned)."""
+def _own(f: LmbFilter, state: LmbState, z: np.ndarray, k: int) -> tuple[LmbState, dict] | None:
+    """The filter's own step, its Generator put back (its state after the draws returned);
+    None if it raises (the peer's own step meets the error)."""
     bg = f._rng.bit_generator
     before = bg.state
     try:
         post = f.step(state, z, k)
         return post, bg.state
+    except Exception:  # noqa: BLE001 - not prepared: the step raises it again, counted there
+        return None
     finally:
         bg.state = before
 
