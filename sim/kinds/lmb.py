@@ -81,6 +81,13 @@ def corroborate_scans(scn: Scenario) -> int:
     return n if n > 0 else (LMB_CORROBORATE_SCANS if scn.lmb.tentative_threshold > 0 else 1)
 
 
+def fused_extraction(scn: Scenario) -> str:
+    """The extraction rule of an LMB peer's fused tracks: ``lmb.fused_extraction``, or
+    ``filter.extraction`` when it is ``"filter"``."""
+    rule = scn.lmb.fused_extraction
+    return scn.filter.extraction if rule == "filter" else rule
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     shared = SHARED_ORIGIN if scn.network.birth_ids == "shared" else None
     origin = origin_of([s.name for s in scn.sensors], name) + (0 if shared is None else 1)
@@ -88,7 +95,7 @@ def build(scn: Scenario, name: str, run: int = 0):
     f = scn.fusion
     est = LmbEstimator(make_lmb_filter(scn, name, origin, shared), reducer,
                        f.level2_threshold if f.level2_pruning else None,
-                       scn.filter.extraction_threshold, scn.filter.extraction, origin=origin,
+                       scn.filter.extraction_threshold, fused_extraction(scn), origin=origin,
                        tentative_threshold=scn.lmb.tentative_threshold or None,
                        tentative_scans=scn.lmb.tentative_scans,
                        republish_gap=None if scn.lmb.republish_gap < 0 else scn.lmb.republish_gap,

@@ -27,6 +27,7 @@ from sensornet.sim.scenario.options import (
     option,
 )
 from sensornet.tracking.gci_product import CARDINALITY_RULES
+from sensornet.tracking.gmphd import EXTRACTION_RULES
 
 
 @dataclass(frozen=True)
@@ -291,3 +292,17 @@ class LmbSpec:
                                         "predicts to the tick; divides `scenario.scan_period`. "
                                         "0: every plot at its tick.", unit="s",
                                check=NONNEGATIVE)
+    fused_extraction: str = option("filter", doc="How an LMB peer reports tracks from its "
+                                                 "fused density: `\"filter\"` "
+                                                 "(`filter.extraction`), `\"round\"` (every "
+                                                 "fused track heavier than "
+                                                 "`filter.extraction_threshold`: an existence "
+                                                 "test per track, as the LMB's own rule) or "
+                                                 "`\"cardinality\"` (the `round` of the total "
+                                                 "mass heaviest). The hybrid's mass is the "
+                                                 "average of the peers' (AA), so when far "
+                                                 "peers hold fewer targets the total runs "
+                                                 "short and `\"cardinality\"` drops a target "
+                                                 "7 of 8 peers hold (issue 34, "
+                                                 "docs/real-traffic.md).",
+                                     choices=("filter", *EXTRACTION_RULES))
