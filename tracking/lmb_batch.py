@@ -8,18 +8,18 @@ track and component of every problem in one stack, each problem's survivors then
 (Reuter et al. 2014, eqs. 9-12), the likelihoods ``w_ik N(z_j; H m_ik, S_ik)`` of every
 component against its own problem's measurements in one ``(N, M)`` block (``M`` the most
 measurements of a problem; the columns beyond a problem's own are never read), and the
-Kalman-updated components and their weights (Reuter eqs. 20-21) in one pass. What stays per
-problem: the association marginals (:func:`tracking.lmb_association.marginals`, each with its
-filter's own Gibbs Generator, so the draws are the ones its own step makes) and
-:meth:`tracking.lmb.LmbFilter.settle` (pruning, confirmation, adaptive births).
+Kalman-updated components and their weights (Reuter eqs. 20-21) in one pass, then every
+track's mixture reduction, the pruning and the confirmation counts
+(:meth:`tracking.lmb.LmbFilter.finish`). What stays per problem: the association marginals
+(:func:`tracking.lmb_association.marginals`, each with its filter's own Gibbs Generator, so the
+draws are the ones its own step makes) and each adaptive birth existence's sum (Reuter eq. 31).
 
 Every number is the one the filter's own ``step`` computes, to the bit (tests/test_lmb_batch.py):
 each element goes through the same operations in the same order. The one operation whose order
 NumPy picks by shape, the quadratic form ``nu^T S^-1 nu`` (``einsum`` chooses its summation
 order from the operands' shapes and strides), is written out in the order it takes on most
 shapes, and recomputed with ``einsum`` on the problem's own arrays for the shapes where it takes
-another (:func:`_quad_in_order`). The reduction of every track's mixture is stacked too
-(:func:`_reduce`).
+another (:func:`_quad_in_order`).
 
 Stacked together: filters whose sensor picks two state entries (``selected``) and with the same
 motion model and motion steps, survival probability, gate and mixture reduction settings. ``Pd``,
@@ -35,9 +35,16 @@ import numpy as np
 from sensornet.tracking.gaussian import LOG_2PI, _lapack_inv, c_einsum, inv_det_spd, inv_det_sym4
 from sensornet.tracking.gmphd_batch import _interleave
 from sensornet.tracking.label_keys import new_labels
-from sensornet.tracking.lmb import LmbFilter, LmbState, check_scan
+from sensornet.tracking.lmb import (
+    LmbFilter,
+    LmbState,
+    _empty_mixture,
+    adaptive_birth_existence,
+    check_scan,
+)
 from sensornet.tracking.lmb_association import marginals
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def batch_key(filt: LmbFilter, steps: int) -> tuple | None:
@@ -109,8 +116,8 @@ def _own(f: LmbFilter, state: LmbState, z: np.ndarray, k: int) -> tuple[LmbState
 
 def _stacked(filters: list[LmbFilter], states: list[LmbState], scans: list[np.ndarray],
              ks: list[int]) -> list[LmbState | None]:
-    """Predict and update every problem together, the marginals and the rest one by one
-    (None for a problem whose marginals or finish raised: its own step meets the error)."""
+    """Predict, update, reduce and settle every problem together, the marginals one by one
+    (None for a problem whose marginals raised: its own step meets the error)."""
     f0 = filters[0]
     steps = ks[0] - states[0].k if states[0].k >= 0 else 1
     F, Q = f0.motion.transition(steps)
@@ -165,18 +172,55 @@ def _stacked(filters: list[LmbFilter], states: list[LmbState], scans: list[np.nd
     prob_t = np.repeat(np.arange(len(filters)), n_lens)
     w, mean, P, owner = _reduce(w, mean, P, owner, prob_t, len(filters), f0.component_prune,
                                 f0.merge_threshold, f0.max_components)
-    post = _split(labels, r, w, mean, P, owner, n_lens,
-                  np.bincount(prob_t[owner], minlength=len(filters)))
-    out: list = []
+    return _settle(filters, states, scans, ks, labels, r, w, mean, P, owner, hits, prob_t, r_u,
+                   failed)
+
+
+def _settle(filters, states, scans, ks, labels, r, w, mean, P, owner, hits, prob_t, r_u,
+            failed) -> list[LmbState | None]:
+    """:meth:`tracking.lmb.LmbFilter.settle` of every problem on its reduced posterior: the
+    tracks below ``existence_prune`` deleted and the confirmations counted in the stack; each
+    problem's adaptive births from its own ``r_U`` (its own sum, as its own step takes it)."""
+    n_prob = len(filters)
+    ep = np.array([f.existence_prune for f in filters])
+    ce = np.array([f.confirm_existence for f in filters])
+    keep = r >= ep[prob_t]
+    hits = (hits[keep] + (r[keep] >= ce[prob_t[keep]])).astype(np.int64)
+    comp = np.flatnonzero(keep[owner])
+    renumber = np.cumsum(keep) - 1
+    n_kept = np.bincount(prob_t[keep], minlength=n_prob)
+    tracks = _split(labels[keep], r[keep], w[comp], mean[comp], P[comp], renumber[owner[comp]],
+                    n_kept, np.bincount(prob_t[owner[comp]], minlength=n_prob))
+    d = mean.shape[1]
+    r_b, born_at, covs = [], [], []
+    for p, f in enumerate(filters):  # each problem's r_B (Reuter eq. 31) from its own sum
+        if f.adaptive_birth and len(scans[p]):
+            r_b.append(adaptive_birth_existence(r_u[p], f.birth_rate, f.birth_max_existence))
+            born_at.append(np.full(len(scans[p]), p))
+            covs.append(f._birth_cov)
+        else:
+            covs.append(np.zeros((d, d)))
+    pend = [_empty_mixture(d)] * n_prob
+    if r_b:
+        rb = np.concatenate(r_b)
+        pb = np.concatenate(born_at)
+        born = rb >= ep[pb]
+        nb = np.bincount(pb[born], minlength=n_prob)
+        cols = list(filters[0].sensor.model.selected)
+        means = np.zeros((int(nb.sum()), d))
+        means[:, cols] = np.concatenate([scans[p] for p in np.unique(pb).tolist()])[born]
+        bw, bP = rb[born], np.stack(covs)[pb[born]]
+        at = 0
+        for p in np.unique(pb).tolist():
+            pend[p] = GaussianMixture.trusted(bw[at:at + nb[p]], means[at:at + nb[p]],
+                                              bP[at:at + nb[p]])
+            at += nb[p]
     t0 = 0
-    for p, (f, k) in enumerate(zip(filters, ks, strict=True)):
-        t1 = t0 + int(n_lens[p])
-        pred = LmbState(post[p], hits[t0:t1], k, states[p].pending)  # settle reads hits, k
+    out: list = []
+    for p, k in enumerate(ks):
+        t1 = t0 + int(n_kept[p])
+        out.append(None if p in failed else LmbState(tracks[p], hits[t0:t1], k, pend[p]))
         t0 = t1
-        try:
-            out.append(None if p in failed else f.settle(pred, post[p], r_u[p], scans[p]))
-        except Exception:  # noqa: BLE001 - its own step meets the error
-            out.append(None)
     return out
 
 
