@@ -12,7 +12,7 @@ from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.tracking.gaussian import inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import SHARED_ORIGIN
-from sensornet.tracking.lmb import LmbFilter, LmbState
+from sensornet.tracking.lmb import EDGE_FLAG, LmbFilter, LmbState
 from sensornet.tracking.lmb_batch import (
     _own_quad,
     _quad,
@@ -151,6 +151,38 @@ def test_the_stacked_reduction_is_each_problems_own():
         np.testing.assert_array_equal(own[at:at + r] - t0, want.owner)
         at, t0 = at + r, t0 + n
     assert len(w) < len(owner)  # something pruned or merged
+
+
+def test_birth_labels_alike_in_cells_near_edges_and_two_in_a_cell():
+    """Pending births placed by hand: two plots in one 200 m cell (the likelier keeps the
+    cell's label), plots within the edge band, cells of two widths, shared and own origins
+    side by side: the stacked labels are each filter's own."""
+    rng = np.random.default_rng(12)
+    plots = np.array([[10.0, 10.0], [150.0, 30.0], [199.0, 50.0], [401.0, -3.0],
+                      [-250.0, 90.0], [-260.0, 95.0]])
+    filters, states = [], []
+    for p in range(6):
+        f = _filter(rng, p)
+        f.shared_origin = SHARED_ORIGIN if p != 2 else None
+        f.birth_edge, f.birth_cell = (15.0, 200.0) if p % 2 else (0.0, 100.0 if p == 4 else 200.0)
+        means = np.zeros((len(plots), 4))
+        means[:, [0, 2]] = plots + rng.normal(0, 0.5, plots.shape)
+        pend = GaussianMixture(rng.uniform(0.01, 0.1, len(plots)), means,
+                               np.tile(np.eye(4) * 100.0, (len(plots), 1, 1)))
+        filters.append(f)
+        states.append(LmbState(f.initial().tracks, np.zeros(0, np.int64), 4, pend))
+    scans = [_scan(rng, 5) for _ in filters]
+    twins = [copy.deepcopy(f) for f in filters]
+    got = step_many(filters, states, scans, [5] * len(filters))
+    labels = []
+    for t, s, z, g in zip(twins, states, scans, got, strict=True):
+        want = t.predict(s, 5).tracks.labels
+        _same(g[0], t.step(s, z, 5))
+        labels.append(want)
+    edge = np.concatenate(labels)[:, 2] >= EDGE_FLAG
+    assert edge.any() and not edge.all()  # some flagged
+    assert any((lab[:, 0] != SHARED_ORIGIN).any() and (lab[:, 0] == SHARED_ORIGIN).any()
+               for lab in labels)  # a cell's second plot took an own label
 
 
 def test_bad_problems_are_left_to_their_own_step():

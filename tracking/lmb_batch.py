@@ -34,8 +34,9 @@ from collections.abc import Sequence
 import numpy as np
 from sensornet.tracking.gaussian import LOG_2PI, _lapack_inv, c_einsum, inv_det_spd, inv_det_sym4
 from sensornet.tracking.gmphd_batch import _interleave
-from sensornet.tracking.label_keys import new_labels
+from sensornet.tracking.label_keys import cell_index
 from sensornet.tracking.lmb import (
+    EDGE_FLAG,
     LmbFilter,
     LmbState,
     _empty_mixture,
@@ -135,7 +136,7 @@ def _stacked(filters: list[LmbFilter], states: list[LmbState], scans: list[np.nd
     pend_covs = F @ np.concatenate([q.covs for q in pend]) @ F.T + Q
     b_w, b_m, b_P, b_lab, b_lens = [], [], [], [], []
     at = 0
-    for f, q, k in zip(filters, pend, ks, strict=True):
+    for f, q in zip(filters, pend, strict=True):
         nq = len(q)
         if f.birth is not None:
             b_w.append(np.clip(f.birth.weights, 0.0, 1.0))
@@ -146,13 +147,9 @@ def _stacked(filters: list[LmbFilter], states: list[LmbState], scans: list[np.nd
             b_m.append(pend_means[at:at + nq])
             b_P.append(pend_covs[at:at + nq])
         at += nq
-        nb = nq + (0 if f.birth is None else len(f.birth))
-        b_lens.append(nb)
-        if nb == 0:
-            continue
-        b_lab.append(f._shared_labels(q, k) if f.shared_origin is not None
-                     else new_labels(f.origin, k, nb))
+        b_lens.append(nq + (0 if f.birth is None else len(f.birth)))
     b_lens = np.array(b_lens)
+    b_lab = [_birth_labels(filters, pend, ks, b_lens)]
     t_idx = _interleave(s_tracks, b_lens)  # each problem's survivors, then its births
     c_idx = _interleave(s_comps, b_lens)
     nb_all = int(b_lens.sum())
@@ -221,6 +218,56 @@ def _settle(filters, states, scans, ks, labels, r, w, mean, P, owner, hits, prob
         t1 = t0 + int(n_kept[p])
         out.append(None if p in failed else LmbState(tracks[p], hits[t0:t1], k, pend[p]))
         t0 = t1
+    return out
+
+
+def _birth_labels(filters, pend, ks, b_lens) -> np.ndarray:
+    """The labels of every problem's births, problem by problem, as
+    :meth:`tracking.lmb.LmbFilter.predict` gives them: ``(origin, k, i)``, or with a
+    ``shared_origin`` the fixed births ``(shared, k, i)`` and the pending ones by the cell of
+    their plot (:func:`tracking.label_keys.shared_births`: two in one cell, the likelier keeps
+    it; near a cell edge flagged with :data:`tracking.lmb.EDGE_FLAG`)."""
+    n_prob, total = len(filters), int(b_lens.sum())
+    prob = np.repeat(np.arange(n_prob), b_lens)
+    local = np.arange(total) - np.repeat(np.cumsum(b_lens) - b_lens, b_lens)
+    k = np.array(ks, dtype=np.int64)
+    out = np.empty((total, 3), dtype=np.int64)
+    out[:, 0] = np.array([f.origin for f in filters], dtype=np.int64)[prob]
+    out[:, 1] = k[prob]
+    out[:, 2] = local
+    shared = [p for p, f in enumerate(filters) if f.shared_origin is not None and b_lens[p]]
+    if not shared:
+        return out
+    nf = np.array([0 if f.birth is None else len(f.birth) for f in filters])
+    so = np.array([-1 if f.shared_origin is None else f.shared_origin for f in filters],
+                  dtype=np.int64)
+    is_shared = so[prob] >= 0
+    out[is_shared & (local < nf[prob]), 0] = so[prob][is_shared & (local < nf[prob])]
+    rows = np.flatnonzero(is_shared & (local >= nf[prob]))  # pending births of shared problems
+    if not len(rows):
+        return out
+    sel = list(filters[0].sensor.model.selected)
+    plots = np.concatenate([pend[p].means for p in shared])[:, sel]
+    pp = prob[rows]
+    cell = np.array([f.birth_cell for f in filters])
+    index = np.empty(len(rows), dtype=np.int64)
+    for size in np.unique(cell[pp]).tolist():  # cell_index takes one size
+        at = cell[pp] == size
+        index[at] = cell_index(plots[at], size)
+    prio = np.concatenate([pend[p].weights for p in shared])
+    order = np.lexsort((-prio, index, pp))  # stable: ties, the first (shared_births per problem)
+    first = np.ones(len(rows), dtype=bool)
+    first[1:] = (index[order[1:]] != index[order[:-1]]) | (pp[order[1:]] != pp[order[:-1]])
+    keep = np.zeros(len(rows), dtype=bool)
+    keep[order] = first
+    out[rows[keep], 0] = so[pp[keep]]
+    out[rows[keep], 2] = index[keep]
+    edge = np.array([f.birth_edge for f in filters])[pp]
+    if (edge > 0).any():  # a plot near a cell edge: another peer's may be across it
+        c = cell[pp][:, None]
+        frac = plots / c - np.floor(plots / c)
+        near = (c * np.minimum(frac, 1.0 - frac) < edge[:, None]).any(axis=1) & (edge > 0)
+        out[rows[near & keep], 2] += EDGE_FLAG
     return out
 
 
