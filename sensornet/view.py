@@ -101,6 +101,8 @@ class LiveView:
         self.q: queue.Queue = queue.Queue(maxsize=QUEUE_MAX)
         self.dropped = 0
         self.skipped = 0
+        self.drawn = 0
+        """Messages drawn so far (``run``'s ``count``)."""
         self.flush_s = FLUSH_S
         self.say = say or (lambda s: print(s, file=sys.stderr, flush=True))
         self.stop = threading.Event()
@@ -179,6 +181,7 @@ class LiveView:
             self.skipped += 1
             return 0
         self.state.receive(key, payload)
+        self.drawn += 1
         return 1
 
     def waiting(self) -> None:
@@ -228,15 +231,17 @@ class LiveView:
             self._said, self._said_at = now, time.monotonic()
 
     def run(self, duration: float | None = None, until_end: bool = False,
-            grace: float = 3.0) -> None:
-        """Until :attr:`stop`, ``duration`` seconds, or (``until_end``) ``grace`` seconds
-        after the world's end message; flushes at the end."""
+            grace: float = 3.0, count: int | None = None) -> None:
+        """Until :attr:`stop`, ``duration`` seconds, ``count`` messages drawn, or
+        (``until_end``) ``grace`` seconds after the world's end message; flushes at the end."""
         t0 = time.monotonic()
         next_flush = t0 + self.flush_s
         ended_at = None
         while not self.stop.is_set():
             now = time.monotonic()
             if duration is not None and now - t0 >= duration:
+                break
+            if count is not None and self.drawn >= count:
                 break
             if until_end and self.state.ended:
                 ended_at = ended_at or now

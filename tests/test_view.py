@@ -9,6 +9,8 @@ import os
 import queue
 import subprocess
 import sys
+import threading
+import time
 
 import msgpack
 import numpy as np
@@ -363,6 +365,34 @@ def test_what_arrives_before_the_recording_opens_waits_and_is_drawn():
     assert rec.by_path()["world/truth"][0] == [1] and rec.by_path()["peers/s1/tracks"][0] == [1]
 
 
+def test_a_view_stops_after_count_messages_drawn():
+    """``--count N`` detaches once N messages are drawn, however long they take to come (a
+    test or a script waits on what the view saw, not on seconds); below N it keeps watching
+    until stopped."""
+    def watch(count):
+        rec = _Rec()
+        view = LiveView("net", lambda b: ViewState(b, ["s1"]), rr, rec)
+        for k in range(1, 6):
+            view.q.put(("sensornet/net/tracks/s1", encode(Tracks("s1", k, np.zeros((1, 4))))))
+        t = threading.Thread(target=view.run, kwargs={"count": count}, daemon=True)
+        t.start()
+        return view, t
+
+    view, t = watch(3)
+    t.join(60)
+    assert not t.is_alive() and view.drawn == view.state.handled == 5  # and drew them all
+    view, t = watch(10)
+    try:
+        deadline = time.monotonic() + 60
+        while view.drawn < 5 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert view.drawn == 5 and t.is_alive()  # 5 of 10 drawn: still watching
+    finally:
+        view.stop.set()
+        t.join(60)
+    assert not t.is_alive()
+
+
 def test_telemetry_round_trip_and_refusals():
     msg = Telemetry("s1", 4, {"ospa/fused": 3.5, "age": 2.0}, ("s2 left",),
                     {"particles": np.arange(6.0).reshape(3, 2)}, _mix(2))
@@ -612,25 +642,32 @@ def test_a_host_sends_its_peers_reports_when_idle_or_crowded():
 def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
     """``sensornet run`` (view on): world and peers write no .rrd, the view's recording holds
     truth, scans, tracks, local and fused marks and the health series. Then a view attached by
-    hand to a network started by someone else, detached after a few seconds: the peers handle
-    every scan all the same. The two runs go side by side (each its own network and ports):
-    one after the other their start-ups and pacing were the whole test."""
+    hand to a network started by someone else, detached after 60 messages drawn (an event, not
+    seconds): the peers handle every scan all the same. The two runs go side by side (each
+    its own network and ports): one after the other their start-ups and pacing were the whole
+    test."""
     ep = endpoint(free_port())
-    others = subprocess.Popen(
-        [sys.executable, "-m", "sensornet", "run", "--network", "byhand", "--listen", ep,
-         "--no-rerun", "--set", "scenario.num_scans=60", "--speed", "5",
-         "--out", str(tmp_path / "others")], cwd=tmp_path, env=env(),
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    view = None
+    rrd = tmp_path / "mine.rrd"
+    # the view by hand first, dialling the endpoint the others' world will listen on, and the
+    # others started once it has subscribed (its stderr says so): a view started after them
+    # could link after their short run had ended (a loaded machine: imports take seconds)
+    view = subprocess.Popen(
+        [sys.executable, "-m", "sensornet", "view", "byhand", "--connect", ep,
+         "--scenario", "seed000", "--count", "60", "--out", str(rrd)], cwd=tmp_path,
+        env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(view.stderr), daemon=True)
+    reader.start()
+    others = None
     try:
-        world_log = tmp_path / "others" / "logs" / "world.log"
-        wait_for(lambda: world_log.is_file() and "starting" in world_log.read_text(), 120,
-                 "the world's start")
-        rrd = tmp_path / "mine.rrd"
-        view = subprocess.Popen(
-            [sys.executable, "-m", "sensornet", "view", "byhand", "--connect", ep,
-             "--scenario", "seed000", "--duration", "3", "--out", str(rrd)], cwd=tmp_path,
-            env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for(lambda: any("view: network byhand" in x for x in lines) or view.poll() is not None,
+                 120, "the view's subscription")
+        assert view.poll() is None, "".join(lines)[-2000:]
+        others = subprocess.Popen(
+            [sys.executable, "-m", "sensornet", "run", "--network", "byhand", "--listen", ep,
+             "--no-rerun", "--set", "scenario.num_scans=60", "--speed", "5",
+             "--out", str(tmp_path / "others")], cwd=tmp_path, env=env(),
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
         out = tmp_path / "run"
         run = subprocess.run(
@@ -654,7 +691,9 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
             s = (out / f"peer-{name}.json").read_text()
             assert '"rerun"' not in s and '"telemetry"' in s  # the peers logged nothing
 
-        _, view_err = view.communicate(timeout=120)
+        view.wait(timeout=120)  # detached after 60 messages drawn
+        reader.join(60)
+        view_err = "".join(lines)
         assert view.returncode == 0, view_err[-2000:]
         assert "messages drawn" in view_err
         others.wait(timeout=240)
@@ -668,6 +707,7 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
             assert '"scans": 60' in s, name
     finally:
         stop_all([p for p in (view, others) if p is not None])
+        reader.join(10)
 
 
 def test_ellipses_lie_at_two_sigma_of_their_component():

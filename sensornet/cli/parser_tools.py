@@ -133,6 +133,9 @@ def add_view(sub) -> None:
     vw.add_argument("--duration", type=float, help="seconds to watch (default: until Ctrl-C)")
     vw.add_argument("--until-end", action="store_true",
                     help="stop a few seconds after the run's end message")
+    vw.add_argument("--count", type=int, metavar="N",
+                    help="stop after drawing this many messages (detach once it has seen "
+                         "enough, however long the network takes to send them)")
     vw.add_argument("--from-mcap", nargs="+", metavar="FILE",
                     help="rebuild the view offline from peers' recordings (run --record: "
                          "<run>/record/*.mcap) instead of joining a network")

@@ -82,6 +82,8 @@ def _check_args(args: argparse.Namespace) -> tuple[str | None, Path | None]:
                         "--listen endpoint, say)")
     if args.duration is not None and not args.duration > 0:
         raise UserError("--duration must be positive")
+    if args.count is not None and args.count < 1:
+        raise UserError("--count must be at least 1")
     viewer = None if args.viewer in (None, "none") else args.viewer
     out = Path(args.out) if args.out else None
     if out is None and viewer is None:
@@ -201,7 +203,7 @@ def _watch(args: argparse.Namespace, view: LiveView, out: Path | None,
           f"{out or ''}{' + ' if out and viewer else ''}{viewer or ''} (Ctrl-C to detach)",
           file=sys.stderr, flush=True)
     try:
-        view.run(args.duration, until_end=args.until_end)
+        view.run(args.duration, until_end=args.until_end, count=args.count)
     finally:
         view.close()
         sink.close()
