@@ -331,7 +331,8 @@ class Consensus(BatchedRounds):
                 self.hooks.adopt_labels(st.labels)
         elif labelling is not None:
             self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
-        return self._tracks(st.k, fused, now, st.labels, st.inputs)
+        return self._tracks(st.k, fused, now, st.labels, st.inputs,
+                            None if labelling is None else labelling.copies)
 
     def _label(self, st: ScanState, fused):
         """The labels of a round's fused density (peers.labelling.label_fused), from the
@@ -421,11 +422,13 @@ class Consensus(BatchedRounds):
                         labels=labels if self.labelled else None)
 
     def _tracks(self, k: int, fused: GaussianMixture, now: float,
-                labels: np.ndarray | None = None, inputs: FusionInput | None = None) -> list:
+                labels: np.ndarray | None = None, inputs: FusionInput | None = None,
+                copies: np.ndarray | None = None) -> list:
         """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
         with ids, covariances, existence and confirmation status (protocol 2). Fused tracks
         (``inputs``: the last round's) by the extraction rules of tracking.support when on:
-        young tracks' pooled existence (``existence_prior``), then :attr:`support`."""
+        young tracks' pooled existence (``existence_prior``; not of an AA fusion's
+        ``copies``, peers.labelling.copy_rows), then :attr:`support`."""
         self.stats.tracks_out += 1
         if labels is None or self.hooks.extract_tracks is None:
             states = self.estimator.extract(fused)
@@ -435,7 +438,8 @@ class Consensus(BatchedRounds):
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
             fused = GaussianMixture.trusted(  # for extraction only
                 pooled_weights(fused, labels, k, input_mass(fused.means, mixes),
-                               self.o.existence_prior, self.o.existence_young),
+                               self.o.existence_prior, self.o.existence_young,
+                               skip=copies),
                 fused.means, fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:

@@ -101,6 +101,10 @@ class FusedLabels:
     own: LabelMatch
     fresh: int
     """Fresh labels created (fused components paired with no input)."""
+    copies: np.ndarray | None = None
+    """``(n,)`` bool with ``copies`` (AA), else None: the rows that lost their label to a
+    heavier row within the gate, the same target's copies (:func:`copy_rows`); their fresh
+    label is no young target's (tracking.support.pooled_weights ``skip``)."""
 
 
 def _all_tracks(inputs: Sequence[tuple[GaussianMixture, np.ndarray]]
@@ -194,10 +198,12 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
-        return FusedLabels(none, LabelMatch(none, none.copy(), np.zeros(0)), 0)
+        return FusedLabels(none, LabelMatch(none, none.copy(), np.zeros(0)), 0,
+                           np.zeros(0, dtype=bool) if copies else None)
     t_lab, t_m, t_P, t_src = _all_tracks(inputs)
     labels = np.empty((n, 3), dtype=np.int64)
     won = np.zeros(n, dtype=bool)
+    copy = np.zeros(n, dtype=bool) if copies else None
     J = np.zeros(0, dtype=np.int64)
     if len(t_lab):
         J, t = _pairs(fused, t_m, t_P, t_src, gate)
@@ -239,11 +245,13 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         # targets held) releases it: it takes the row's fresh label (a RELEASE pair), else it
         # keeps the duplicated label and the row gets a new id every scan (docs/real-traffic.md)
         rel = release_rows(fused, J, (S == 0) & ~won[J], keeper, gate, copies)
+        if copies:
+            copy = copy_rows(fused, J, won, keeper, gate)
         if rel.any():
             match = LabelMatch(np.concatenate([match.own, L[rel]]),
                                np.concatenate([match.nbr, labels[J[rel]]]),
                                np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
-    return FusedLabels(labels, match, len(lost))
+    return FusedLabels(labels, match, len(lost), copy)
 
 
 def release_rows(fused: GaussianMixture, J: np.ndarray, rel: np.ndarray, keeper: np.ndarray,
@@ -259,12 +267,32 @@ def release_rows(fused: GaussianMixture, J: np.ndarray, rel: np.ndarray, keeper:
     if not copies or not rel.any():
         return rel
     r = np.flatnonzero(rel)
-    a, b = J[r], keeper[J[r]]
-    dm = fused.means[a] - fused.means[b]
-    d2 = np.einsum("pi,pi->p", dm, np.linalg.solve(fused.covs[a] + fused.covs[b],
-                                                  dm[..., None])[..., 0])
     out = rel.copy()
-    out[r[d2 <= gate]] = False
+    out[r[_distance2(fused, J[r], keeper[J[r]]) <= gate]] = False
+    return out
+
+
+def _distance2(fused: GaussianMixture, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(p,)`` the squared Mahalanobis distances of :func:`_pairs` between fused rows
+    ``a (p,)`` and ``b (p,)``."""
+    dm = fused.means[a] - fused.means[b]
+    return np.einsum("pi,pi->p", dm, np.linalg.solve(fused.covs[a] + fused.covs[b],
+                                                    dm[..., None])[..., 0])
+
+
+def copy_rows(fused: GaussianMixture, J: np.ndarray, won: np.ndarray, keeper: np.ndarray,
+              gate: float) -> np.ndarray:
+    """``(n,)`` bool: the fused rows paired with some input track (``J (p,)``) that lost
+    their label (``~won``) to a heavier row ``keeper`` within ``gate`` of them: under AA the
+    same target's copy (:func:`release_rows`). Such a row takes a fresh label every scan, so
+    it always looks young; pooling its inputs' existences (tracking.support.pooled_weights)
+    reported it, under that fresh label, instead of the target's labelled row (traced on
+    circ20 training run 100, docs/labelled-tracking.md "AA's copies were pooled as young
+    tracks")."""
+    out = np.zeros(len(won), dtype=bool)
+    rows = np.unique(J[~won[J]])
+    if len(rows):
+        out[rows[_distance2(fused, rows, keeper[rows]) <= gate]] = True
     return out
 
 
@@ -321,6 +349,6 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
     return out, LabelMatch(own[rest], nbr[rest], np.asarray(match.cost)[rest])
 
 
-__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "corroborated",
-           "input_tracks", "label_fused", "origin_of", "release_rows", "settle_scans",
-           "take_moves"]
+__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "copy_rows",
+           "corroborated", "input_tracks", "label_fused", "origin_of", "release_rows",
+           "settle_scans", "take_moves"]

@@ -75,7 +75,7 @@ def input_mass(means: np.ndarray, inputs: Sequence[GaussianMixture],
 
 def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.ndarray,
                    prior: float, young: int, gate: float = HYBRID_GATE,
-                   threshold: float = 0.5) -> np.ndarray:
+                   threshold: float = 0.5, skip: np.ndarray | None = None) -> np.ndarray:
     """``(n,)`` the weights of the fused components of ``mix`` for extraction. A component
     whose label ``labels (n, 3)`` is at most ``young`` scans old at scan ``k`` (its second
     column, the birth or first-publication scan) and that two inputs or more hold (``mass
@@ -84,7 +84,9 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
     a component heavier than ``threshold``, or a candidate of larger pooled existence, lies
     within ``gate`` of it (``(m_a - m_b)' (P_a + P_b)^-1 (m_a - m_b)``: it would be a second
     track of that target). So weak evidence of a new target at several peers adds up, as in
-    the centralised update, while the density stays the fused one."""
+    the centralised update, while the density stays the fused one. ``skip (n,)`` bool: rows
+    never pooled (an AA fusion's copies of a heavier row's target, young only by the fresh
+    label they get each scan: peers.labelling.copy_rows)."""
     labels = np.asarray(labels, dtype=np.int64).reshape(-1, 3)
     w = mix.weights
     n = len(w)
@@ -97,6 +99,8 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
     row, _ = np.nonzero(held)
     pooled = pool_existence(mass[held], row, n, prior)
     pick = (held.sum(axis=1) >= 2) & (k - labels[:, 1] <= young) & (pooled > w)
+    if skip is not None:
+        pick &= ~np.asarray(skip, dtype=bool).reshape(n)
     cand = np.flatnonzero(pick)
     strength = np.where(pick, pooled, w)
     other = np.flatnonzero(pick | (w > threshold))  # what a candidate could duplicate
