@@ -128,10 +128,11 @@ class SupportRule:
     2), or extracted (under the same label) in ``scans`` consecutive calls. One per peer; call
     :meth:`keep` once per scan with that scan's extracted tracks.
 
-    Why a majority (docs/labelled-tracking.md, "Fused false tracks need a majority"): on 20
-    peers of degree 4 (5 inputs) the false fused tracks that passed 2 were one-scan tracks
-    at a birth point, each held by two neighbours whose sensors had clutter there in the same
-    scan; a majority of 3 of 5 asks for a third, while on 3 peers (3 inputs) it stays 2."""
+    Why a majority (docs/labelled-tracking.md, "Fused false tracks need a majority of the
+    inputs"): on 20 peers of degree 4 (5 inputs) the false fused tracks that passed 2 were
+    one-scan tracks, 14 of 16 traced held by just two inputs (mostly two neighbours whose
+    sensors had clutter at a birth point in the same scan); 3 of 5 asks for a third, while
+    on 3 peers (3 inputs) it stays 2."""
 
     min_inputs: int = 2
     scans: int = 2
