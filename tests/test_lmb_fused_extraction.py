@@ -47,6 +47,15 @@ def test_every_target_most_peers_hold_is_reported():
     assert fused_count({"lmb.fused_extraction": "filter", "filter.extraction": "cardinality"}) == 3
 
 
+def test_the_real_traffic_scenarios_report_by_existence():
+    """paris, paris-8 and switzerland-8 set it (decided on the Paris training hour); a file
+    without the key keeps ``filter.extraction``."""
+    assert fused_count({}) == 4
+    for name in ("paris", "paris-8", "switzerland-8"):
+        assert load_scenario(name, LMB).lmb.fused_extraction == "round"
+    assert load_scenario("seed000", LMB).lmb.fused_extraction == "filter"
+
+
 def test_a_bad_rule_is_a_one_line_error():
     with pytest.raises(ScenarioError, match="fused_extraction") as e:
         load_scenario("seed000", {**LMB, "lmb.fused_extraction": "max"})
