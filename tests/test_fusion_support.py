@@ -71,12 +71,12 @@ def _fused(twin, name):
 
 
 def test_twin_support_removes_tracks_only():
-    """Seed 000 at Pd 0.9, run 100, 60 scans: with fusion.support = 2 (the default) every
+    """Seed 000 at Pd 0.9, run 100, 60 scans: with fusion.support = 2 (pinned) every
     peer's reported fused tracks are a subset of those without (``fusion.support = 0``, pinned:
     every extracted track), with the same ids and states, and some are gone."""
     over = {"sensors.*.detection_probability": 0.9, "scenario.num_scans": 60}
     base = run_twin(load_scenario("seed000", overrides={**over, "fusion.support": 0}), 100)
-    rule = run_twin(load_scenario("seed000", overrides=over), 100)
+    rule = run_twin(load_scenario("seed000", overrides={**over, "fusion.support": 2}), 100)
     removed = 0
     for name in ("s1", "s2", "s3"):
         a, b = _fused(base, name), _fused(rule, name)

@@ -1,13 +1,15 @@
 """The majority support rule (``fusion.support = -1``, tracking.support.MAJORITY): by hand, more
 than half of the round's inputs and at least 2; in a twin of 6 GM-PHD peers of degree 4 (5
 inputs a round) it reports a subset of the tracks ``fusion.support = 2`` reports, with the
-same ids and states, and fewer (tracks only two inputs held, on their first scan)."""
+same ids and states, and fewer (tracks only two inputs held, on their first scan); and the
+automatic default (-2) resolves as declared (sim.run.peers.support_inputs)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from sensornet.sim.campaign.runners import scenario_source
+from sensornet.sim.run.peers import SUPPORT_AUTO, consensus_options, support_inputs
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario
 from sensornet.sim.world.graphs import network_scenario
@@ -62,4 +64,23 @@ def test_twin_majority_removes_tracks_only():
             removed += len(ia) - len(ib)
     assert removed > 0
     with pytest.raises(ValueError, match="fusion.support"):
-        load_scenario(src, overrides={**over, "fusion.support": -2})
+        load_scenario(src, overrides={**over, "fusion.support": -3})
+
+
+@pytest.mark.parametrize(("name", "over", "want"), [
+    ("seed000", {}, MAJORITY),  # GM-PHD, fixed birth points, shared ids
+    ("seed000", {"network.birth_ids": "own"}, 2),
+    ("seed000", {"network.filter": "lmb"}, 2),
+    ("paris-8", {}, 2),  # GM-PHD measurement births (recorded traffic)
+    ("seed000", {"fusion.support": 2}, 2),  # an explicit value is kept
+    ("seed000", {"fusion.support": 0}, 0),
+    ("paris-8", {"fusion.support": -1}, MAJORITY),
+])
+def test_auto_support_resolves_as_declared(name, over, want):
+    """``fusion.support`` auto (-2, the default): the majority for GM-PHD peers whose births
+    are alike at every peer (fixed birth points, shared ids), 2 otherwise; explicit values
+    kept. What every peer's consensus gets (sim.run.peers.consensus_options)."""
+    scn = load_scenario(name, overrides=over)
+    assert scn.fusion.support == over.get("fusion.support", SUPPORT_AUTO)
+    assert support_inputs(scn) == want
+    assert {consensus_options(scn, p).support_inputs for p in scn.sensor_names} == {want}

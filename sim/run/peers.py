@@ -21,6 +21,7 @@ from sensornet.sim.run.lies import LyingCore, make_lie
 from sensornet.sim.scenario import Scenario, ScenarioError
 from sensornet.sim.world import generate_truth, truth_rng
 from sensornet.sim.world.build import adjacency, sweep_fraction
+from sensornet.tracking.support import MAJORITY
 
 
 def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
@@ -48,13 +49,30 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         trust=(trust_config(scn, [name, *(names[j] for j in nb)], kind.view.single_target)
                if scn.fusion.trust and kind.trust else None),
         confirm_settle=settle_scans(A, i),
-        support_inputs=scn.fusion.support,
+        support_inputs=support_inputs(scn),
         support_scans=scn.fusion.support_scans,
         existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
         label_support=net.label_support,
     )
     return replace(opts, **changes)
+
+
+SUPPORT_AUTO = -2
+"""``fusion.support`` "auto": resolved by :func:`support_inputs`."""
+
+
+def support_inputs(scn: Scenario) -> int:
+    """``fusion.support``, its automatic value (:data:`SUPPORT_AUTO`) resolved: the majority
+    (``tracking.support.MAJORITY``) for GM-PHD peers whose births are alike at every peer
+    (``network.birth_ids`` "shared", fixed birth points: the condition of
+    ``filter.corroborate_scans`` auto, sim.kinds.gmphd), else 2 (docs/labelled-tracking.md,
+    "Fused false tracks need a majority of the inputs")."""
+    s = scn.fusion.support
+    if s != SUPPORT_AUTO:
+        return s
+    shared = scn.network.birth_ids == "shared" and scn.birth.model != "measurements"
+    return MAJORITY if scn.network.filter == "gmphd" and shared else 2
 
 
 LMB_EXISTENCE_PRIOR = 0.01
