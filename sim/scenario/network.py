@@ -139,12 +139,14 @@ class NetworkSpec:
                       "(`birth.model` `\"measurements\"`) are always own.",
         choices=("shared", "own"))
     label_support: bool = option(
-        True, doc="Labelled peers with `birth_ids` `\"shared\"`: a tie between shared ids "
+        True, doc="LMB peers with `birth_ids` `\"shared\"`: a tie between shared ids "
                   "of one scan (a target's first plots in two birth cells) goes to the id "
                   "more peers stamped, not the lowest cell (`peers.label_support`: each "
                   "label's stamping peers as a bit mask, OR-ed over the neighbours'). On by "
                   "default since issue 33: 20 LMB peers' fused OSPA(2) 28.7 -> 25.4 and 44.1 "
-                  "-> 41.0 m on training runs (docs/labelled-tracking.md); false: lowest index.")
+                  "-> 41.0 m on training runs (docs/labelled-tracking.md); false: lowest index. "
+                  "Not for GM-PHD peers (their fixed births do not tie; the masks cost them "
+                  "CPU).")
     filter: str = option("gmphd", doc="The peers' kind (`sim.kinds`): `\"gmphd\"`, "
                                       "`\"et-gmphd\"` (`[extended]`), for one target "
                                       "`\"imm-pf\"`/`\"imm-ekf\"`, `\"flooding\"` (seed 004, "
