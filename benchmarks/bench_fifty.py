@@ -349,17 +349,19 @@ def part_gaps(sensors: int = 4) -> list[str]:
 
 
 def part_twin(kinds: list[str], repeats: int, n: int = 50, degree: int = 4,
-              scans: int = 100) -> list[str]:
+              scans: int = 100, sets: tuple[str, ...] = ()) -> list[str]:
     """The peers' logic alone: the twin (``sim.run.twin``, a virtual clock, no transport) of
     the same network, every peer decoding through one shared decode and the rounds ready at
     one instant fused together, as co-hosted peers do: process CPU per peer-scan and mean
     fused OSPA per kind, kinds interleaved ``repeats`` times; then LMB / GM-PHD (medians).
+    ``sets``: more scenario overrides (``--set``; ignored before 5 Dec, so earlier twin rows
+    ran the scenario's defaults).
     What a network that keeps up costs in its peers' logic, whatever the machine's load."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, degree, scans, rounds=2, speed=10.0))
         scns = {kind: load_scenario(str(path), overrides=parse_overrides(
-            [f"network.filter={kind}"])) for kind in kinds}
+            [f"network.filter={kind}", *sets])) for kind in kinds}
     rows = ["| kind | rep | logic CPU ms/peer-scan | fused OSPA | load avg |",
             "|---|---:|---:|---:|---:|"]
     print("\n".join(rows), flush=True)
@@ -471,8 +473,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.twin:
         print(f"## the twin of {args.peers} peers, degree {args.degree}, 2 rounds, {args.scans} "
-              f"scans; load average {load_average()}\n")
-        part_twin(args.kinds.split(","), args.repeats, args.peers, args.degree, args.scans)
+              f"scans{''.join(' --set ' + x for x in args.sets)}; load average "
+              f"{load_average()}\n")
+        part_twin(args.kinds.split(","), args.repeats, args.peers, args.degree, args.scans,
+                  tuple(args.sets))
         return 0
     if args.watched:
         print(f"## being watched on the twin of {args.peers} peers (2 hosts), degree "
