@@ -44,7 +44,7 @@ from sensornet.tracking.lmb import (
     check_scan,
 )
 from sensornet.tracking.lmb_association import marginals
-from sensornet.tracking.lmb_sets import LabelledBernoulliSet
+from sensornet.tracking.lmb_sets import LabelledBernoulliSet, merge_close
 from sensornet.tracking.mixture import GaussianMixture
 
 
@@ -407,21 +407,7 @@ def _merge(w, m, P, own, sizes, threshold, prob_t, n_prob) -> tuple:
     close = c_einsum("gi,gij,gj->g", diff, inv, diff) <= threshold
     if not close.any():
         return w, m, P, own
-    root = np.arange(c)
-    taken = np.zeros(c, dtype=bool)
-    for i, j in zip(member[close].tolist(), centre[close].tolist(), strict=True):
-        if taken[j] or taken[i]:  # sweep order: centres heaviest first, pairs sorted (j, i)
-            continue
-        root[i] = j
-        taken[i] = True
-    W = np.bincount(root, w, minlength=c)
-    centres = np.flatnonzero(root == idx)
-    Wm = np.zeros_like(m)
-    np.add.at(Wm, root, w[:, None] * m)
-    mean = Wm / np.where(W > 0, W, 1.0)[:, None]
-    diff = m - mean[root]
-    WP = np.zeros_like(P)
-    np.add.at(WP, root, w[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]))
+    W, mean, WP, centres = merge_close(w, m, P, member[close], centre[close])
     with np.errstate(divide="ignore", invalid="ignore"):  # rows of problems that keep theirs
         cov = WP[centres] / W[centres, None, None]
     merged = (np.bincount(pp[close], minlength=n_prob) > 0)[prob_t[own[centres]]]

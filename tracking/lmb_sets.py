@@ -198,23 +198,34 @@ def _merge_within(w, m, P, own, sizes, threshold):
     close = c_einsum("gi,gij,gj->g", diff, inv_spd(P[member]), diff) <= threshold
     if not close.any():
         return w, m, P, own
+    W, mean, WP, centres = merge_close(w, m, P, member[close], centre[close])
+    cov = WP[centres] / W[centres, None, None]
+    return W[centres], mean[centres], 0.5 * (cov + cov.swapaxes(1, 2)), own[centres]
+
+
+def merge_close(w: np.ndarray, m: np.ndarray, P: np.ndarray, member: np.ndarray,
+                centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each close pair's member merged into its centre (a greedy sweep, centres heaviest
+    first, pairs sorted (centre, member); a taken component joins no other): per root the
+    weight ``W (c,)``, mean ``(c, d)`` and the unnormalised moment sum ``WP (c, d, d)``, and
+    the roots ``centres``. Shared by one track set's reduction and a host's stacked one."""
+    c = len(w)
     root = np.arange(c)
     taken = np.zeros(c, dtype=bool)
-    for i, j in zip(member[close].tolist(), centre[close].tolist(), strict=True):
-        if taken[j] or taken[i]:  # sweep order: centres heaviest first, pairs sorted (j, i)
+    for i, j in zip(member.tolist(), centre.tolist(), strict=True):
+        if taken[j] or taken[i]:
             continue
         root[i] = j
         taken[i] = True
     W = np.bincount(root, w, minlength=c)
-    centres = np.flatnonzero(root == idx)
+    centres = np.flatnonzero(root == np.arange(c))
     Wm = np.zeros_like(m)
     np.add.at(Wm, root, w[:, None] * m)
     mean = Wm / np.where(W > 0, W, 1.0)[:, None]
     diff = m - mean[root]
     WP = np.zeros_like(P)
     np.add.at(WP, root, w[:, None, None] * (P + diff[:, :, None] * diff[:, None, :]))
-    cov = WP[centres] / W[centres, None, None]
-    return W[centres], mean[centres], 0.5 * (cov + cov.swapaxes(1, 2)), own[centres]
+    return W, mean, WP, centres
 
 
-__all__ = ["LabelledBernoulliSet", "reduce_components"]
+__all__ = ["LabelledBernoulliSet", "merge_close", "reduce_components"]
