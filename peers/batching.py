@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sensornet.peers.contracts import FusionInput
+from sensornet.peers.labelling_batch import label_fused_many
 from sensornet.peers.trust_batch import weigh_together
 
 
@@ -55,6 +56,14 @@ class FusionBatch:
     trust_together: bool = True
     """The jobs' trust tests together (:func:`peers.trust_batch.weigh_together`); False:
     each on its own (:meth:`peers.trust.Trust.weigh`, the same numbers: to compare)."""
+
+    label_together: bool = True
+    """The fused densities' labels of labelled peers together
+    (:func:`peers.labelling_batch.label_fused_many`); False: each in its own completion
+    (the same labels: to compare)."""
+
+    labelled: int = 0
+    """Rounds whose fused density was labelled together with another's (for tests)."""
 
     def add(self, job: FusionJob) -> None:
         self.jobs.append(job)
@@ -97,16 +106,44 @@ class FusionBatch:
                     results[id(j)] = (j.consensus.fuser.fuse(j.input), None)
                 except Exception as exc:  # the consensus counts it, as its own fusion would
                     results[id(j)] = (None, exc)
+        labelled = _label_together(jobs, results) if self.label_together else {}
+        self.labelled += len(labelled)
         done, seen = [], set()
         for j in jobs:  # in the order the rounds became ready
             if j.settled:  # a completion before settled it (cannot, but cheap to honour)
                 continue
             mix, exc = results[id(j)]
-            j.consensus.complete(j, mix, exc, now)
+            j.consensus.complete(j, mix, exc, now, labelled.get(id(j)))
             if id(j.consensus) not in seen:
                 seen.add(id(j.consensus))
                 done.append(j.consensus)
         return done
+
+
+def _label_together(jobs: list[FusionJob], results: dict) -> dict[int, object]:
+    """The labels of the fused densities of the jobs about to complete whose consensus
+    labels them (one job per consensus: each labels with its own state, untouched by the
+    others' completions), computed together: ``{id(job): FusedLabels}``; nothing if fewer
+    than two, or if the stacked computation raised (each then labels its own, as before)."""
+    todo, seen = [], set()
+    for j in jobs:
+        c = j.consensus
+        mix, exc = results[id(j)]
+        if exc is not None or not getattr(c, "labelled", False) or id(c) in seen:
+            continue
+        seen.add(id(c))
+        if not c.waiting(j):
+            continue
+        problem = c.label_problem(j.state, mix)
+        if problem is not None:
+            todo.append((j, problem))
+    if len(todo) < 2:
+        return {}
+    try:
+        got = label_fused_many([p for _, p in todo])
+    except Exception:  # noqa: BLE001 - each completion labels its own and meets its error
+        return {}
+    return {id(j): g for (j, _), g in zip(todo, got, strict=True)}
 
 
 def _alone(trust, args: list):

@@ -36,7 +36,8 @@ from sensornet.peers.contracts import (
 )
 from sensornet.peers.fusers import NoFuser
 from sensornet.peers.label_support import LabelSupport, decode, peer_bit
-from sensornet.peers.labelling import label_fused
+from sensornet.peers.labelling import FusedLabels
+from sensornet.peers.labelling_batch import LabelProblem
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
@@ -303,15 +304,16 @@ class Consensus(BatchedRounds):
         return []
 
     def _fused(self, st: ScanState, fused: GaussianMixture, senders: list[str],
-               now: float) -> list:
+               now: float, labelled: FusedLabels | None = None) -> list:
         """The rest of a round once fused: counts, records, the next round's estimate or
-        the tracks."""
+        the tracks. ``labelled``: the round's labels computed already (with other peers':
+        :meth:`label_problem`, peers.labelling_batch), else computed here."""
         self.stats.fusions += 1
         self.stats.fused_inputs += len(senders)
         for s in senders:
             self.stats.last_fused_from[s] = st.k
         ages = self.nale.ages(st.k) if st.round == 0 else {}
-        labelling = self._label(st, fused) if self.labelled else None
+        labelling = self._label(st, fused, labelled) if self.labelled else None
         st.round += 1
         st.current = fused
         st.labels = None if labelling is None else labelling.labels
@@ -334,8 +336,20 @@ class Consensus(BatchedRounds):
         return self._tracks(st.k, fused, now, st.labels, st.inputs,
                             None if labelling is None else labelling.copies)
 
-    def _label(self, st: ScanState, fused):
-        """The labels of a round's fused density (peers.labelling.label_fused), from the
+    def _label(self, st: ScanState, fused, done: FusedLabels | None = None):
+        """The labels of a round's fused density (peers.labelling.label_fused of
+        :meth:`label_problem`; ``done``: computed already). None if ``fused`` is no
+        mixture."""
+        if done is None:
+            problem = self.label_problem(st, fused)
+            if problem is None:
+                return None
+            done = problem.alone()
+        self._fresh += done.fresh
+        return done
+
+    def label_problem(self, st: ScanState, fused) -> LabelProblem | None:
+        """The arguments of the round's :func:`peers.labelling.label_fused`, from the
         round's labelled inputs: the own density's, then each neighbour's whose estimate
         carried labels for the very payload fused (round 0: the one the NALE buffer holds,
         maybe predicted: its labels fit its first rows). None if ``fused`` is no mixture."""
@@ -361,11 +375,9 @@ class Consensus(BatchedRounds):
         own_first = bool(pairs) and pairs[0][0] is st.current
         bump = self.hooks.fresh_stamps() if st.round == 0 and own_first else None
         # an AA fuser keeps each input's copy of a target (peers.fusers.AaFuser.copies)
-        out = label_fused(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
-                          copies=bool(getattr(self.fuser, "copies", False)),
-                          support=self.label_support)
-        self._fresh += out.fresh
-        return out
+        return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
+                            copies=bool(getattr(self.fuser, "copies", False)),
+                            support=self.label_support)
 
     def _trust_call(self, st: ScanState, inputs: dict, senders: list[str],
                     weights: list[float]) -> tuple | None:

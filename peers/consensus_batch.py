@@ -90,23 +90,30 @@ class BatchedRounds:
         return None
 
     def complete(self, job: FusionJob, fused: GaussianMixture | None,
-                 exc: Exception | None, now: float) -> None:
+                 exc: Exception | None, now: float, labelled=None) -> None:
         """The batch fused ``job`` (``fused``, or raised ``exc``): finish its round and go on
         as ``_advance`` would (a forced scan: its remaining rounds, queued again). The
-        messages wait for :meth:`take_completed`."""
+        messages wait for :meth:`take_completed`. ``labelled``: the round's labels, computed
+        with other jobs' (:meth:`waiting`, peers.labelling_batch), else None."""
         st = job.state
         job.settled = True
         if st.pending is not job or self._scan is not st:
             return  # settled or cancelled meanwhile
         st.pending = None
         out = self._failed(st, exc) if exc is not None else self._fused(st, fused,
-                                                                         job.senders, now)
+                                                                         job.senders, now,
+                                                                         labelled)
         if job.forced:
             while not st.done and st.pending is None:
                 out += self._fuse_round(st, now, forced=True)
         else:
             out += self._advance(now)
         self._completed.extend(out)
+
+    def waiting(self, job: FusionJob) -> bool:
+        """Whether :meth:`complete` would finish ``job`` (not settled or cancelled since)."""
+        st = job.state
+        return not job.settled and st.pending is job and self._scan is st
 
     def take_completed(self) -> list:
         """The messages of the rounds the batch completed since the last call."""
