@@ -51,6 +51,12 @@ def decode(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return clean, masks
 
 
+def _columns(keys: np.ndarray) -> np.ndarray:
+    """Label keys ``(n,)`` (:func:`tracking.label_keys.label_keys`) back as ``(n, 3)`` int64
+    rows (a view): compared row-wise in C, where a structured ``==`` costs a Python call."""
+    return keys.view(np.int64).reshape(-1, 3)
+
+
 def popcount(masks: np.ndarray) -> np.ndarray:
     """Bits set in each mask ``(n,)`` int64 -> ``(n,)`` int64."""
     return np.bitwise_count(np.asarray(masks, dtype=np.int64)).astype(np.int64)
@@ -74,6 +80,11 @@ class LabelSupport:
         ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
         if not ok.any():
             return
+        if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
+            pos = np.searchsorted(self.keys, label_keys(lab[ok])).clip(max=len(self.keys) - 1)
+            if (_columns(self.keys)[pos] == lab[ok]).all():
+                np.bitwise_or.at(self.masks, pos, m[ok])
+                return
         keys = np.concatenate([self.keys, label_keys(lab[ok])])
         allm = np.concatenate([self.masks, m[ok]])
         scans = np.concatenate([self.scans, lab[ok, 1]])
@@ -97,9 +108,8 @@ class LabelSupport:
         out = np.zeros(len(lab), dtype=np.int64)
         if not len(self.keys) or not len(lab):
             return out
-        keys = label_keys(lab)
-        pos = np.searchsorted(self.keys, keys).clip(max=len(self.keys) - 1)
-        hit = self.keys[pos] == keys
+        pos = np.searchsorted(self.keys, label_keys(lab)).clip(max=len(self.keys) - 1)
+        hit = (_columns(self.keys)[pos] == lab).all(axis=1)
         out[hit] = self.masks[pos[hit]]
         return out
 
