@@ -102,9 +102,11 @@ class Consensus(BatchedRounds):
         self._nale_labels: dict[str, tuple[object, np.ndarray]] = {}
         """sender -> (the NALE buffer's stored payload, its labels)."""
         self._fresh = 0  # fresh labels this peer's fusions created (their index offsets)
-        self.label_support = (LabelSupport(peer_bit(self.hooks.origin))
+        self.label_support = (LabelSupport(peer_bit(self.hooks.origin),
+                                           dict(options.label_reach) or None, self.rounds)
                               if self.labelled and options.label_support else None)
-        """Holder masks of shared labels (peers.label_support): same-scan ties by support."""
+        """Holder masks of shared labels (peers.label_support): same-scan ties by support;
+        a neighbour's masks cut to what it can vouch for (``label_reach``)."""
         self.support = (SupportRule(options.support_inputs, options.support_scans)
                         if self.fusing and options.support_inputs != 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
@@ -165,7 +167,7 @@ class Consensus(BatchedRounds):
         labels = getattr(est, "labels", None)
         if labels is not None and self.label_support is not None:  # the masks off the wire
             labels, masks = decode(labels)
-            self.label_support.add(labels, masks)
+            self.label_support.heard(est.sender, labels, masks, est.k, est.round)
         if labels is not None and (not self.labelled or len(labels) != len(payload)):
             labels = None  # not ours to use, or a receiver's bound cut its rows
         if est.round == 0 and est.kind == "posterior":

@@ -64,6 +64,9 @@ class ConsensusOptions:
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""
+    label_reach: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    """Per neighbour, the mask bits it can vouch for by hops (peers.label_support.reach_masks);
+    the rest of a received mask is dropped and counted; empty: masks taken unchecked."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:

@@ -325,7 +325,12 @@ class PeerCore(CoreReceive, CoreOutputs):
                                                         "round": msg.round})]
         if self.budget is not None and isinstance(msg, Estimate):
             msg = self.budget.bound_estimate(msg)  # at most J components on (peers.budget)
-        return out + self._wrap(c.on_estimate(msg, now))
+        sup = c.label_support
+        clipped = sup.clipped if sup is not None else 0
+        res = c.on_estimate(msg, now)
+        if sup is not None and sup.clipped > clipped:  # fused, the bits it cannot vouch for
+            out += self._reject("label-mask")  # dropped (peers.label_support)
+        return out + self._wrap(res)
 
     def _truth(self, msg: Truth) -> list[Output]:
         why = self._window(msg.k) if self.first_k is not None else None

@@ -16,11 +16,25 @@ column (a shared origin is 0; own origins are peer indices, far below ``2^24``),
 protocol 2 is unchanged; :meth:`LabelSupport.encode` and :func:`decode` are the two ends, at
 ``peers.consensus.Consensus``. Peers whose origin shares a bit modulo :data:`SUPPORT_BITS`
 count once (more than 39 peers: a lower bound of the holders).
+
+Masks are checked where they arrive (issue 33, hostile input; docs/security.md, "Label
+masks"): a member that lies could set every bit and win every same-scan tie. A receiver takes
+from a neighbour's mask only the bits that neighbour can vouch for (:func:`reach_masks`): its
+own; never the receiver's or another neighbour's (those peers' own estimates say whether they
+stamped the label: first-hand); and of the peers it does not hear itself, only those within
+the hops the label can have travelled to the sender since its scan (one hop a consensus round,
+plus a round's slack). Bits it drops that it did not already know are counted
+(:attr:`LabelSupport.clipped`; the peer's ``rejected["label-mask"]``). Honest masks never
+exceed this, so honest runs are unchanged.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import shortest_path
 from sensornet.tracking.label_keys import SHARED_ORIGIN, as_labels, label_keys
 
 SUPPORT_SHIFT = 24
@@ -37,6 +51,38 @@ def peer_bit(origin: int) -> int:
     """The mask bit of the peer with label ``origin`` (own origins start at 1 with shared
     births; bit ``(origin - 1) mod SUPPORT_BITS``)."""
     return 1 << ((max(int(origin), 1) - 1) % SUPPORT_BITS)
+
+
+def reach_masks(adjacency: np.ndarray, origins: Sequence[int], i: int) -> dict[int, np.ndarray]:
+    """What peer ``i`` takes from each neighbour's masks: for neighbour ``j`` (a row of
+    ``adjacency (n, n)``, nonzero = link), ``(H + 1,)`` int64 masks (``H``: the graph's
+    diameter), entry ``h`` the bits ``j`` can vouch for on a label whose stamps had ``h`` hops to
+    reach it: ``j``'s own and those of the peers ``i`` does not hear itself (not ``i``, not its
+    neighbours) within ``h`` hops of ``j``. ``origins (n,)``: each peer's label origin."""
+    A = np.asarray(adjacency) != 0
+    n = len(A)
+    hops = shortest_path(csr_matrix(A), unweighted=True) if n else np.zeros((0, 0))
+    bits = np.left_shift(1, (np.maximum(np.asarray(origins, dtype=np.int64), 1) - 1)
+                         % SUPPORT_BITS).astype(np.int64)
+    far = ~A[i]
+    far[i] = False
+    finite = hops[np.isfinite(hops)]
+    h = np.arange(int(finite.max()) + 1 if finite.size else 1)
+    out = {}
+    for j in np.flatnonzero(A[i]):  # per neighbour: a cumulative OR of the far bits by hops
+        d = np.where(far, hops[j], np.inf)
+        order = np.argsort(d, kind="stable")
+        cum = np.bitwise_or.accumulate(np.r_[np.int64(0), bits[order]])
+        out[int(j)] = cum[np.searchsorted(d[order], h, side="right")] | bits[j]
+    return out
+
+
+def reach_by_name(names: Sequence[str], adjacency: np.ndarray, origins: Sequence[int],
+                  i: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
+    """:func:`reach_masks` keyed by the neighbours' names ``names (n,)``, as
+    ``peers.consensus_types.ConsensusOptions.label_reach`` holds it."""
+    return tuple((names[j], tuple(int(m) for m in t))
+                 for j, t in reach_masks(adjacency, origins, i).items())
 
 
 def decode(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,11 +112,21 @@ class LabelSupport:
     """A peer's holder masks of shared labels: sorted label keys, their masks and birth
     scans. ``bit``: this peer's own bit (:func:`peer_bit`)."""
 
-    def __init__(self, bit: int) -> None:
+    def __init__(self, bit: int, reach: Mapping[str, Sequence[int]] | None = None,
+                 rounds: int = 1) -> None:
         self.bit = int(bit)
         self.keys = label_keys(np.zeros((0, 3), dtype=np.int64))
         self.masks = np.zeros(0, dtype=np.int64)
         self.scans = np.zeros(0, dtype=np.int64)
+        self.reach = (None if reach is None else
+                      {s: np.asarray(t, dtype=np.int64) for s, t in reach.items()})
+        """Per neighbour, the bits it can vouch for by hops (:func:`reach_masks`); None:
+        masks taken as received (unchecked)."""
+        self.rounds = max(int(rounds), 1)
+        """Consensus rounds a scan: hops a mask can travel a scan."""
+        self.clipped = 0
+        """Labels received whose mask named peers the sender cannot vouch for, bits not known
+        here otherwise (those bits dropped)."""
 
     def add(self, labels: np.ndarray, masks: np.ndarray | int) -> None:
         """OR ``masks`` (``(n,)`` or one for all) into the masks of ``labels (n, 3)``; only
@@ -95,6 +151,33 @@ class LabelSupport:
         starts = np.flatnonzero(first)
         self.keys, self.scans = keys[starts], scans[starts]
         self.masks = np.bitwise_or.reduceat(allm, starts)
+
+    def heard(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
+              rnd: int = 0) -> int:
+        """OR in the masks ``(n,)`` of decoded ``labels (n, 3)`` from neighbour ``sender``'s
+        estimate of scan ``k``, round ``rnd``, each cut to what it can vouch for: its
+        :attr:`reach` entry at ``(k - scan + 1) * rounds + rnd`` hops (one hop a round since
+        the label's scan, a round of slack for a peer a scan ahead); nothing on own labels;
+        labels older than :data:`KEEP_SCANS` (no longer kept) pass. Returns the labels that
+        lost bits not known here, also added to :attr:`clipped`."""
+        lab = as_labels(labels)
+        m = np.asarray(masks, dtype=np.int64)
+        if self.reach is None or not m.any():
+            self.add(lab, m)
+            return 0
+        table = self.reach.get(sender)
+        if table is None:  # not a neighbour we know: it vouches for nothing
+            allowed = np.zeros(len(lab), dtype=np.int64)
+        else:
+            h = (np.maximum(k - lab[:, 1], 0) + 1) * self.rounds + rnd
+            allowed = table[np.clip(h, 0, len(table) - 1)]
+        allowed = np.where(lab[:, 1] < k - KEEP_SCANS, np.int64(-1), allowed)
+        allowed[lab[:, 0] != SHARED_ORIGIN] = 0
+        kept = m & allowed
+        lost = int(((m & ~kept & ~self.mask_of(lab)) != 0).sum())
+        self.clipped += lost
+        self.add(lab, kept)
+        return lost
 
     def own(self, labels: np.ndarray, k: int) -> None:
         """Our published ``labels (n, 3)`` at scan ``k``: the shared ones of scan ``k`` (stamped
@@ -135,4 +218,4 @@ class LabelSupport:
 
 
 __all__ = ["KEEP_SCANS", "ORIGIN_MASK", "SUPPORT_BITS", "SUPPORT_SHIFT", "LabelSupport",
-           "decode", "peer_bit", "popcount"]
+           "decode", "peer_bit", "popcount", "reach_by_name", "reach_masks"]

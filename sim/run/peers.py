@@ -13,7 +13,8 @@ from dataclasses import replace
 import numpy as np
 from sensornet.peers.consensus import Consensus, ConsensusOptions
 from sensornet.peers.core import CoreConfig, PeerCore
-from sensornet.peers.labelling import settle_scans
+from sensornet.peers.label_support import reach_by_name
+from sensornet.peers.labelling import origin_of, settle_scans
 from sensornet.peers.scoring import Scorer
 from sensornet.peers.trust import TrustConfig
 from sensornet.sim.kinds import kind_of
@@ -57,8 +58,17 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
         # ~40 % of its CPU at 50 peers (docs/labelled-tracking.md)
         label_support=net.label_support and net.filter == "lmb",
+        label_reach=(reach_by_name(names, A, label_origins(scn, names), i)
+                     if net.label_support and net.filter == "lmb" else ()),
     )
     return replace(opts, **changes)
+
+
+def label_origins(scn: Scenario, names: list[str]) -> list[int]:
+    """The label origin of each of ``names`` as an LMB peer takes it (sim.kinds.lmb.build):
+    its index in the sorted sensor names, plus 1 with shared births."""
+    shift = 1 if scn.network.birth_ids == "shared" else 0
+    return [origin_of([s.name for s in scn.sensors], n) + shift for n in names]
 
 
 SUPPORT_AUTO = -2
