@@ -38,10 +38,11 @@ COLUMNS = ("ospa", "ospa2", "late+missed", "gap", "dup", "false+extra", "switche
            "switches_confirmed_max", "agreement_confirmed", "delay", "tuples")
 
 
-def fused_row(scn, run: int) -> dict[str, float]:
+def fused_row(scn, run: int, peers: dict | None = None) -> dict[str, float]:
     """One twin run's fused row: :func:`sim.studies.labelled.study.twin_row`'s guard
-    metrics and :mod:`sim.studies.labelled.ospa2_floor`'s parts (mean over peers)."""
-    twin = run_twin(scn, run)
+    metrics and :mod:`sim.studies.labelled.ospa2_floor`'s parts (mean over peers).
+    ``peers``: the twin's peer cores, if not the scenario's (e.g. one that lies)."""
+    twin = run_twin(scn, run, peers=peers)
     names = scn.sensor_names
     truth, _ = generate_run(scn, run)
     T = truth_table(truth)
