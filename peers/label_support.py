@@ -42,6 +42,9 @@ SUPPORT_SHIFT = 24
 SUPPORT_BITS = 39
 """Bits of the mask (``SUPPORT_SHIFT`` .. 62: the column stays a non-negative int64)."""
 ORIGIN_MASK = (1 << SUPPORT_SHIFT) - 1
+FIND_PAIRS = 4096
+"""Up to this many (label, stored label) pairs a lookup compares them all at once
+(:meth:`LabelSupport._find`), beyond it a binary search: the same answer, faster for small."""
 KEEP_SCANS = 64
 """Scans a label's mask is kept after its birth scan (ties are settled within the settle wait,
 eccentricity + 2 scans; then the mask is no longer asked for)."""
@@ -97,6 +100,10 @@ def decode(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return clean, masks
 
 
+_ROW = np.dtype((np.void, 24))
+"""A label row's three int64 as one unstructured value (equal iff every column is)."""
+
+
 def _columns(keys: np.ndarray) -> np.ndarray:
     """Label keys ``(n,)`` (:func:`tracking.label_keys.label_keys`) back as ``(n, 3)`` int64
     rows (a view): compared row-wise in C, where a structured ``==`` costs a Python call."""
@@ -132,18 +139,21 @@ class LabelSupport:
         """OR ``masks`` (``(n,)`` or one for all) into the masks of ``labels (n, 3)``; only
         shared labels (origin :data:`SHARED_ORIGIN`) with a nonzero mask are kept."""
         lab = as_labels(labels)
-        m = np.broadcast_to(np.asarray(masks, dtype=np.int64), (len(lab),))
+        m = np.asarray(masks, dtype=np.int64)
+        m = (np.full(len(lab), m) if m.ndim == 0 else m if m.shape == (len(lab),)
+             else np.broadcast_to(m, (len(lab),)))
         ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
         if not ok.any():
             return
+        lab, m = lab[ok], m[ok]
         if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
-            pos = np.searchsorted(self.keys, label_keys(lab[ok])).clip(max=len(self.keys) - 1)
-            if (_columns(self.keys)[pos] == lab[ok]).all():
-                np.bitwise_or.at(self.masks, pos, m[ok])
+            hit, pos = self._find(lab)
+            if hit.all():
+                np.bitwise_or.at(self.masks, pos, m)
                 return
-        keys = np.concatenate([self.keys, label_keys(lab[ok])])
-        allm = np.concatenate([self.masks, m[ok]])
-        scans = np.concatenate([self.scans, lab[ok, 1]])
+        keys = np.concatenate([self.keys, label_keys(lab)])
+        allm = np.concatenate([self.masks, m])
+        scans = np.concatenate([self.scans, lab[:, 1]])
         order = np.argsort(keys, kind="stable")
         keys, allm, scans = keys[order], allm[order], scans[order]
         first = np.ones(len(keys), dtype=bool)
@@ -191,10 +201,20 @@ class LabelSupport:
         out = np.zeros(len(lab), dtype=np.int64)
         if not len(self.keys) or not len(lab):
             return out
-        pos = np.searchsorted(self.keys, label_keys(lab)).clip(max=len(self.keys) - 1)
-        hit = (_columns(self.keys)[pos] == lab).all(axis=1)
+        hit, pos = self._find(lab)
         out[hit] = self.masks[pos[hit]]
         return out
+
+    def _find(self, lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whether each of ``lab (n, 3)`` is in the store (non-empty) and where: ``(n,)``
+        bool and index. Few rows against a small store: every pair compared at once (a
+        structured searchsorted costs more there); else a binary search."""
+        if len(lab) * len(self.keys) <= FIND_PAIRS:  # rows equal as 24 bytes: a C compare
+            eq = (np.ascontiguousarray(lab).view(_ROW).reshape(-1)[:, None]
+                  == self.keys.view(_ROW)[None, :])
+            return eq.any(axis=1), eq.argmax(axis=1)
+        pos = np.searchsorted(self.keys, label_keys(lab)).clip(max=len(self.keys) - 1)
+        return (_columns(self.keys)[pos] == lab).all(axis=1), pos
 
     def counts(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` holders known of each of ``labels (n, 3)`` (0: own labels)."""

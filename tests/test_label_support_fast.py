@@ -1,10 +1,13 @@
 """peers.label_support.LabelSupport's in-place path (every label added already known: its
 mask OR-ed where it is) keeps what the full merge it skips would keep, to the bit, over random
-sequences of adds, own stamps and prunes; mask_of's row-wise lookup as the structured one."""
+sequences of adds, own stamps and prunes; mask_of's row-wise lookups (all pairs at once, or a
+binary search) as the structured one."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
+from sensornet.peers import label_support
 from sensornet.peers.label_support import SHARED_ORIGIN, LabelSupport
 from sensornet.tracking.label_keys import label_keys
 
@@ -28,7 +31,9 @@ def merged_add(s: LabelSupport, labels: np.ndarray, masks) -> None:
     s.masks = np.bitwise_or.reduceat(allm, starts)
 
 
-def test_in_place_adds_keep_what_the_merge_keeps():
+@pytest.mark.parametrize("pairs", [0, 4096])  # lookups by binary search / all pairs at once
+def test_in_place_adds_keep_what_the_merge_keeps(pairs, monkeypatch):
+    monkeypatch.setattr(label_support, "FIND_PAIRS", pairs)
     rng = np.random.default_rng(38)
     fast_hits = 0
     for _ in range(40):
@@ -40,7 +45,9 @@ def test_in_place_adds_keep_what_the_merge_keeps():
             if rng.random() < 0.2:  # only labels known already: the in-place path
                 lab = np.asarray(a.keys.view(np.int64).reshape(-1, 3))[:n]
                 fast_hits += len(lab) > 0
-            masks = rng.integers(0, 1 << 12, len(lab)) if rng.random() < 0.8 else 1 << 5
+            r = rng.random()
+            masks = (rng.integers(0, 1 << 12, len(lab)) if r < 0.7 else 1 << 5 if r < 0.85
+                     else np.array([1 << 6]))  # one mask for all rows, as a scalar or (1,)
             if rng.random() < 0.3:
                 a.own(lab, k)
                 merged_add(b, lab[lab[:, 1] == k], b.bit)
