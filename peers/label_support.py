@@ -180,11 +180,12 @@ class LabelSupport:
             allowed = np.zeros(len(lab), dtype=np.int64)
         else:
             h = (np.maximum(k - lab[:, 1], 0) + 1) * self.rounds + rnd
-            allowed = table[np.clip(h, 0, len(table) - 1)]
+            allowed = table[np.minimum(np.maximum(h, 0), len(table) - 1)]  # np.clip's, cheaper
         allowed = np.where(lab[:, 1] < k - KEEP_SCANS, np.int64(-1), allowed)
         allowed[lab[:, 0] != SHARED_ORIGIN] = 0
         kept = m & allowed
-        lost = int(((m & ~kept & ~self.mask_of(lab)) != 0).sum())
+        cut = m & ~kept
+        lost = int(((cut & ~self.mask_of(lab)) != 0).sum()) if cut.any() else 0
         self.clipped += lost
         self.add(lab, kept)
         return lost
