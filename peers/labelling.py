@@ -32,6 +32,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
 from sensornet.peers.label_support import LabelSupport
+from sensornet.tracking.label_keys import keys_equal, keys_isin
 from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, new_labels, precedes
 from sensornet.tracking.mixture import GaussianMixture
@@ -221,7 +222,7 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         keys = label_keys(labels[wrows])
         by = np.lexsort((-fused.weights[wrows], keys))
         dup = np.zeros(len(by), dtype=bool)
-        dup[1:] = keys[by[1:]] == keys[by[:-1]]
+        dup[1:] = keys_equal(keys[by[1:]], keys[by[:-1]])
         won[wrows[by[dup]]] = False
         keeper = np.arange(n)  # the row that kept each won label (a lost row: its heavier row)
         keeper[wrows[by]] = wrows[by[np.maximum.accumulate(np.where(dup, 0, np.arange(len(by))))]]
@@ -230,7 +231,7 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         # own pairs whose winner is another label: what the own estimator adopts
         own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
-        change = label_keys(own_lab) != label_keys(win)
+        change = ~keys_equal(label_keys(own_lab), label_keys(win))
         cost = np.zeros(int(change.sum()))
         if support is not None:  # won by support, not by the order: the own track takes it
             o, w = own_lab[change], win[change]
@@ -311,13 +312,13 @@ def corroborated(labels: np.ndarray, won: np.ndarray, J: np.ndarray, S: np.ndarr
     other = np.zeros(len(labels), dtype=bool)
     other[J[S != 0]] = True
     rows = np.flatnonzero(won & ~other)
-    rows = rows[np.isin(label_keys(labels[rows]), label_keys(as_labels(bump)))
+    rows = rows[keys_isin(label_keys(labels[rows]), label_keys(as_labels(bump)))
                 & (labels[rows, 1] == k)]
     if not len(rows):
         return labels
     moved = labels[rows].copy()
     moved[:, 1] = k + 1
-    ok = ~np.isin(label_keys(moved), label_keys(labels[won]))
+    ok = ~keys_isin(label_keys(moved), label_keys(labels[won]))
     labels = labels.copy()
     labels[rows[ok]] = moved[ok]
     return labels
@@ -334,15 +335,15 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
     own, nbr = as_labels(match.own), as_labels(match.nbr)
     later = own.copy()
     later[:, 1] += 1
-    move = (np.isin(label_keys(own), label_keys(as_labels(fresh)))
-            & (label_keys(nbr) == label_keys(later)))
+    move = (keys_isin(label_keys(own), label_keys(as_labels(fresh)))
+            & keys_equal(label_keys(nbr), label_keys(later)))
     if not move.any():
         return labels, match
     keys = label_keys(labels)
     by = np.argsort(label_keys(own[move]))
     src, dst = label_keys(own[move])[by], nbr[move][by]
     pos = np.searchsorted(src, keys).clip(max=len(src) - 1)
-    hit = src[pos] == keys
+    hit = keys_equal(src[pos], keys)
     out = labels.copy()
     out[hit] = dst[pos[hit]]
     rest = ~move

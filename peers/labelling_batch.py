@@ -21,6 +21,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sensornet.peers.label_support import LabelSupport
 from sensornet.peers.labelling import FRESH_BASE, LABEL_GATE, FusedLabels, label_fused
+from sensornet.tracking.label_keys import keys_equal, keys_isin
 from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, precedes
 from sensornet.tracking.mixture import GaussianMixture
@@ -201,7 +202,7 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
         wp = prob_f[wrows]
         by = np.lexsort((-Fw[wrows], keys, wp))
         dup = np.zeros(len(by), dtype=bool)
-        dup[1:] = (keys[by[1:]] == keys[by[:-1]]) & (wp[by[1:]] == wp[by[:-1]])
+        dup[1:] = keys_equal(keys[by[1:]], keys[by[:-1]]) & (wp[by[1:]] == wp[by[:-1]])
         won[wrows[by[dup]]] = False
         keeper[wrows[by]] = wrows[by[np.maximum.accumulate(np.where(dup, 0, np.arange(len(by))))]]
         bumped = [(p, as_labels(pr.bump)) for p, pr in enumerate(probs)
@@ -210,7 +211,7 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
             labels = _corroborated(labels, won, J, S, prob_f, kk, bumped)
         own = (S == 0) & won[J]
         own_lab, win = L[own], labels[J[own]]
-        change = label_keys(own_lab) != label_keys(win)
+        change = ~keys_equal(label_keys(own_lab), label_keys(win))
         cost = np.zeros(int(change.sum()))
         o, w = own_lab[change], win[change]
         po = pl[own][change]
@@ -267,13 +268,13 @@ def _corroborated(labels, won, J, S, prob_f, kk, bumped):
     rows = np.flatnonzero(won & ~other & has[prob_f])
     bk = np.concatenate([_pkeys(np.full(len(b), p), b) for p, b in bumped])
     rp = prob_f[rows]
-    hit = np.isin(_pkeys(rp, labels[rows]), bk) & (labels[rows, 1] == kk[rp])
+    hit = keys_isin(_pkeys(rp, labels[rows]), bk) & (labels[rows, 1] == kk[rp])
     rows, rp = rows[hit], rp[hit]
     if not len(rows):
         return labels
     moved = labels[rows].copy()
     moved[:, 1] = kk[rp] + 1
-    ok = ~np.isin(_pkeys(rp, moved), _pkeys(prob_f[won], labels[won]))
+    ok = ~keys_isin(_pkeys(rp, moved), _pkeys(prob_f[won], labels[won]))
     labels = labels.copy()
     labels[rows[ok]] = moved[ok]
     return labels

@@ -31,6 +31,7 @@ from sensornet.peers.step_atomic import atomic
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
 from sensornet.tracking.label_confirmation import stamp_shared
+from sensornet.tracking.label_keys import keys_equal, keys_isin
 from sensornet.tracking.labels import (
     Confirmation,
     ExtractedTracks,
@@ -312,7 +313,7 @@ class LmbEstimator:
         if self.filter.extraction == "threshold":
             idx = np.flatnonzero(r >= self.filter.extraction_threshold)
         else:
-            idx = np.flatnonzero(np.isin(label_keys(t.labels), label_keys(tr.labels)))
+            idx = np.flatnonzero(keys_isin(label_keys(t.labels), label_keys(tr.labels)))
         rows = t.heaviest()[idx]
         return ExtractedTracks(tr.states, labels[rows], tr.covs, tr.existence, tr.status)
 
@@ -421,7 +422,7 @@ class LmbEstimator:
                                   self.state.hits, self.state.k, self.state.pending)
             was &= ~(new | shared_ok)
         if len(moving):  # moved last scan, still uncorroborated: offered to move again
-            again = pub & np.isin(label_keys(labels), label_keys(moving))
+            again = pub & keys_isin(label_keys(labels), label_keys(moving))
             self._stamped = np.concatenate([self._stamped, labels[again]])
         on = was | pub
         self._remember(label_keys(labels[on]), np.where(pub, k, last)[on],
@@ -441,7 +442,7 @@ class LmbEstimator:
             keys, prev = label_keys(old), label_keys(self._moving)
             by = np.argsort(prev)
             pos = np.searchsorted(prev[by], keys).clip(max=len(prev) - 1)
-            seen = prev[by][pos] == keys
+            seen = keys_equal(prev[by][pos], keys)
             first[seen] = self._moving_first[by[pos[seen]]]
         self._moving, self._moving_first = after[diff], first
 
@@ -462,7 +463,7 @@ class LmbEstimator:
             z = np.zeros(len(keys), dtype=bool)
             return z, np.zeros(len(keys), dtype=np.int64), z.copy()
         pos = np.searchsorted(self._published, keys).clip(max=len(self._published) - 1)
-        known = self._published[pos] == keys
+        known = keys_equal(self._published[pos], keys)
         return (known, np.where(known, self._last_pub[pos], 0),
                 known & self._strong[pos])
 
@@ -472,7 +473,7 @@ class LmbEstimator:
         order = np.lexsort((-last, keys))
         keys, last, strong = keys[order], last[order], strong[order]
         first = np.ones(len(keys), dtype=bool)
-        first[1:] = keys[1:] != keys[:-1]
+        first[1:] = ~keys_equal(keys[1:], keys[:-1])
         grp = np.cumsum(first) - 1
         anystrong = np.bincount(grp, weights=strong, minlength=int(first.sum())) > 0
         self._published, self._last_pub, self._strong = keys[first], last[first], anystrong
@@ -498,7 +499,7 @@ class LmbEstimator:
         mine = old.tracks.select(self._unpublished)
         tracks = lmb_from_mixture(fused, labels, self.filter.origin, self.k)
         if len(mine):  # a fused label equal to a kept one (it never went out): the fused goes
-            clash = np.isin(label_keys(tracks.labels), label_keys(mine.labels))
+            clash = keys_isin(label_keys(tracks.labels), label_keys(mine.labels))
             tracks = LabelledBernoulliSet.concatenate([tracks.select(~clash), mine])
         hits = np.zeros(len(tracks), dtype=np.int64)
         if len(old.tracks) and len(tracks):

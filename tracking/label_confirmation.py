@@ -14,8 +14,11 @@ from sensornet.tracking.label_keys import (
     PUBLISHED_BASE,
     LabelledMixture,
     as_labels,
+    keys_equal,
+    keys_isin,
     label_keys,
     new_labels,
+    unique_keys,
 )
 
 
@@ -63,12 +66,12 @@ class Confirmation:
             raise ValueError("Confirmation with settle > 0 needs the scan k of each observe")
         self._k = None if k is None else int(k)
         keys = label_keys(lm.labels)
-        present = np.unique(keys)
-        above = np.isin(present, keys[lm.mixture.weights > self.threshold])
+        present = unique_keys(keys)
+        above = keys_isin(present, keys[lm.mixture.weights > self.threshold])
         counts = above.astype(np.int64)
         if self._keys.size and present.size:
             pos = np.searchsorted(self._keys, present).clip(max=self._keys.size - 1)
-            seen = self._keys[pos] == present
+            seen = keys_equal(self._keys[pos], present)
             counts[seen] += self._counts[pos[seen]]
         self._keys, self._counts = present, counts
 
@@ -78,7 +81,7 @@ class Confirmation:
         if not self._keys.size:
             return np.zeros(keys.size, dtype=np.int64)
         pos = np.searchsorted(self._keys, keys).clip(max=self._keys.size - 1)
-        return np.where(self._keys[pos] == keys, self._counts[pos], 0)
+        return np.where(keys_equal(self._keys[pos], keys), self._counts[pos], 0)
 
     def status(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int8: 1 confirmed, 0 tentative (the ``Tracks.status`` codes)."""
@@ -107,7 +110,7 @@ def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: n
     winner = birth[by][np.flatnonzero(start)][np.cumsum(start) - 1]
     ok = np.zeros(len(rows), dtype=bool)
     ok[by] = birth[by] == winner
-    ok &= ~np.isin(label_keys(stamp), keys[~new])
+    ok &= ~keys_isin(label_keys(stamp), keys[~new])
     labels[rows[ok]] = stamp[ok]
     out = np.zeros(len(labels), dtype=bool)
     out[rows[ok]] = True

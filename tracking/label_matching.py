@@ -10,7 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from sensornet.tracking.label_keys import as_labels, label_keys, precedes, replace_labels
+from sensornet.tracking.label_keys import (
+    as_labels,
+    keys_equal,
+    keys_isin,
+    label_keys,
+    precedes,
+    replace_labels,
+)
 
 
 @dataclass(frozen=True)
@@ -105,10 +112,10 @@ def adopt_labels(labels: np.ndarray, match: LabelMatch) -> np.ndarray:
                                               np.asarray(match.cost)[~rel]))
         return _release(out, as_labels(match.own[rel]), as_labels(match.nbr[rel]))
     win = np.where(precedes(match.nbr, match.own)[:, None], match.nbr, match.own)
-    change = (label_keys(win) != label_keys(match.own))
+    change = ~keys_equal(label_keys(win), label_keys(match.own))
     own_keys, win_keys = label_keys(match.own)[change], label_keys(win)[change]
     keys = label_keys(labels)
-    clash = np.isin(win_keys, keys[~np.isin(keys, own_keys)])
+    clash = keys_isin(win_keys, keys[~keys_isin(keys, own_keys)])
     own_keys, win_keys = own_keys[~clash], win_keys[~clash]
     if own_keys.size == 0:
         return labels
@@ -119,7 +126,7 @@ def _release(labels: np.ndarray, own: np.ndarray, new: np.ndarray) -> np.ndarray
     """``labels (n, 3)`` with each of ``own (r, 3)`` replaced by its ``new (r, 3)`` on every
     row carrying it, except where the new label is already among ``labels``."""
     keys = label_keys(labels)
-    ok = ~np.isin(label_keys(new), keys)
+    ok = ~keys_isin(label_keys(new), keys)
     return replace_labels(labels, own[ok], new[ok])
 
 
