@@ -142,10 +142,15 @@ class LabelSupport:
         m = np.asarray(masks, dtype=np.int64)
         m = (np.full(len(lab), m) if m.ndim == 0 else m if m.shape == (len(lab),)
              else np.broadcast_to(m, (len(lab),)))
+        self._or_in(lab, m)
+
+    def _or_in(self, lab: np.ndarray, m: np.ndarray) -> None:
+        """:meth:`add` of checked ``lab (n, 3)`` int64 and ``m (n,)`` int64."""
         ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
         if not ok.any():
             return
-        lab, m = lab[ok], m[ok]
+        if not ok.all():
+            lab, m = lab[ok], m[ok]
         if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
             hit, pos = self._find(lab)
             if hit.all():
@@ -181,13 +186,15 @@ class LabelSupport:
         else:
             h = (np.maximum(k - lab[:, 1], 0) + 1) * self.rounds + rnd
             allowed = table[np.minimum(np.maximum(h, 0), len(table) - 1)]  # np.clip's, cheaper
-        allowed = np.where(lab[:, 1] < k - KEEP_SCANS, np.int64(-1), allowed)
+        old = lab[:, 1] < k - KEEP_SCANS
+        if old.any():
+            allowed = np.where(old, np.int64(-1), allowed)
         allowed[lab[:, 0] != SHARED_ORIGIN] = 0
         kept = m & allowed
         cut = m & ~kept
         lost = int(((cut & ~self.mask_of(lab)) != 0).sum()) if cut.any() else 0
         self.clipped += lost
-        self.add(lab, kept)
+        self._or_in(lab, kept)  # (n,): m & allowed
         return lost
 
     def own(self, labels: np.ndarray, k: int) -> None:
