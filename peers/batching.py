@@ -21,6 +21,7 @@ from typing import Any
 
 from sensornet.peers.contracts import FusionInput
 from sensornet.peers.labelling_batch import label_fused_many
+from sensornet.peers.tracks_batch import masses_many
 from sensornet.peers.trust_batch import weigh_together
 
 
@@ -64,6 +65,11 @@ class FusionBatch:
 
     labelled: int = 0
     """Rounds whose fused density was labelled together with another's (for tests)."""
+    tracks_together: bool = True
+    """The input masses of the last rounds' tracks together
+    (:func:`peers.tracks_batch.masses_many`); False: each peer's own (the same numbers)."""
+    extracted: int = 0
+    """Last rounds whose tracks' input masses were computed together (for tests)."""
 
     def add(self, job: FusionJob) -> None:
         self.jobs.append(job)
@@ -108,12 +114,14 @@ class FusionBatch:
                     results[id(j)] = (None, exc)
         labelled = _label_together(jobs, results) if self.label_together else {}
         self.labelled += len(labelled)
+        masses = _masses_together(jobs, results) if self.tracks_together else {}
+        self.extracted += len(masses)
         done, seen = [], set()
         for j in jobs:  # in the order the rounds became ready
             if j.settled:  # a completion before settled it (cannot, but cheap to honour)
                 continue
             mix, exc = results[id(j)]
-            j.consensus.complete(j, mix, exc, now, labelled.get(id(j)))
+            j.consensus.complete(j, mix, exc, now, labelled.get(id(j)), masses.get(id(j)))
             if id(j.consensus) not in seen:
                 seen.add(id(j.consensus))
                 done.append(j.consensus)
@@ -144,6 +152,31 @@ def _label_together(jobs: list[FusionJob], results: dict) -> dict[int, object]:
     except Exception:  # noqa: BLE001 - each completion labels its own and meets its error
         return {}
     return {id(j): g for (j, _), g in zip(todo, got, strict=True)}
+
+
+def _masses_together(jobs: list[FusionJob], results: dict) -> dict[int, tuple]:
+    """The input masses of the tracks the jobs about to complete will extract (one job per
+    consensus, each by its own state), computed together: ``{id(job): (masses, supports,
+    means)}``; nothing if fewer than two, or where the stacked computation declined."""
+    todo, seen = [], set()
+    for j in jobs:
+        c = j.consensus
+        mix, exc = results[id(j)]
+        if exc is not None or not getattr(c, "labelled", False) or id(c) in seen:
+            continue
+        seen.add(id(c))
+        if not c.waiting(j):
+            continue
+        problem = c.tracks_problem(j.state, mix)
+        if problem is not None:
+            todo.append((j, problem))
+    if len(todo) < 2:
+        return {}
+    try:
+        got = masses_many([p for _, p in todo])
+    except Exception:  # noqa: BLE001 - each peer computes its own and meets its error
+        return {}
+    return {id(j): (*g, p[0]) for (j, p), g in zip(todo, got, strict=True) if g is not None}
 
 
 def _alone(trust, args: list):

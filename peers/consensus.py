@@ -38,6 +38,7 @@ from sensornet.peers.fusers import NoFuser
 from sensornet.peers.label_support import LabelSupport, decode, peer_bit
 from sensornet.peers.labelling import FusedLabels
 from sensornet.peers.labelling_batch import LabelProblem
+from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
@@ -306,10 +307,12 @@ class Consensus(BatchedRounds):
         return []
 
     def _fused(self, st: ScanState, fused: GaussianMixture, senders: list[str],
-               now: float, labelled: FusedLabels | None = None) -> list:
+               now: float, labelled: FusedLabels | None = None,
+               masses: tuple | None = None) -> list:
         """The rest of a round once fused: counts, records, the next round's estimate or
         the tracks. ``labelled``: the round's labels computed already (with other peers':
-        :meth:`label_problem`, peers.labelling_batch), else computed here."""
+        :meth:`label_problem`, peers.labelling_batch), else computed here; ``masses``: the
+        input masses of its tracks likewise (:meth:`tracks_problem`, peers.tracks_batch)."""
         self.stats.fusions += 1
         self.stats.fused_inputs += len(senders)
         for s in senders:
@@ -336,7 +339,7 @@ class Consensus(BatchedRounds):
         elif labelling is not None:
             self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
         return self._tracks(st.k, fused, now, st.labels, st.inputs,
-                            None if labelling is None else labelling.copies)
+                            None if labelling is None else labelling.copies, masses)
 
     def _label(self, st: ScanState, fused, done: FusedLabels | None = None):
         """The labels of a round's fused density (peers.labelling.label_fused of
@@ -380,6 +383,17 @@ class Consensus(BatchedRounds):
         return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
                             copies=bool(getattr(self.fuser, "copies", False)),
                             support=self.label_support)
+
+    def tracks_problem(self, st: ScanState, fused) -> tuple | None:
+        """``(fused means, the round's input mixtures)`` if completing this round with
+        ``fused`` extracts tracks by the input masses (:meth:`_tracks`: the last round of a
+        labelled scan, with ``existence_prior`` or the support rule), else None."""
+        if (st.round + 1 < self.rounds or not self.labelled or not self.fusing
+                or self.hooks.extract_tracks is None or not isinstance(fused, GaussianMixture)
+                or not len(fused) or (self.support is None and self.o.existence_prior <= 0)):
+            return None
+        mixes = self._input_mixtures(st.inputs)
+        return None if mixes is None else (fused.means, mixes)
 
     def _trust_call(self, st: ScanState, inputs: dict, senders: list[str],
                     weights: list[float]) -> tuple | None:
@@ -437,12 +451,16 @@ class Consensus(BatchedRounds):
 
     def _tracks(self, k: int, fused: GaussianMixture, now: float,
                 labels: np.ndarray | None = None, inputs: FusionInput | None = None,
-                copies: np.ndarray | None = None) -> list:
+                copies: np.ndarray | None = None, masses: tuple | None = None) -> list:
         """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
         with ids, covariances, existence and confirmation status (protocol 2). Fused tracks
         (``inputs``: the last round's) by the extraction rules of tracking.support when on:
         young tracks' pooled existence (``existence_prior``; not of an AA fusion's
-        ``copies``, peers.labelling.copy_rows), then :attr:`support`."""
+        ``copies``, peers.labelling.copy_rows), then :attr:`support`. ``masses``: ``(input
+        masses, supports of the rows, the fused means they are of)`` computed with other peers'
+        (peers.tracks_batch.masses_many), else computed here."""
+        if masses is not None and masses[2] is not fused.means:
+            masses = None
         self.stats.tracks_out += 1
         if labels is None or self.hooks.extract_tracks is None:
             states = self.estimator.extract(fused)
@@ -451,13 +469,17 @@ class Consensus(BatchedRounds):
         mixes = self._input_mixtures(inputs)
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
             fused = GaussianMixture.trusted(  # for extraction only
-                pooled_weights(fused, labels, k, input_mass(fused.means, mixes),
+                pooled_weights(fused, labels, k, input_mass(fused.means, mixes)
+                               if masses is None else masses[0],
                                self.o.existence_prior, self.o.existence_young,
                                skip=copies),
                 fused.means, fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:
-            keep = self.support.keep(t.ids, input_support(t.states, mixes), len(mixes))
+            held = None if masses is None else rows_support(masses[1], masses[2], t.states)
+            if held is None:
+                held = input_support(t.states, mixes)
+            keep = self.support.keep(t.ids, held, len(mixes))
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])

@@ -90,11 +90,12 @@ class BatchedRounds:
         return None
 
     def complete(self, job: FusionJob, fused: GaussianMixture | None,
-                 exc: Exception | None, now: float, labelled=None) -> None:
+                 exc: Exception | None, now: float, labelled=None, masses=None) -> None:
         """The batch fused ``job`` (``fused``, or raised ``exc``): finish its round and go on
         as ``_advance`` would (a forced scan: its remaining rounds, queued again). The
         messages wait for :meth:`take_completed`. ``labelled``: the round's labels, computed
-        with other jobs' (:meth:`waiting`, peers.labelling_batch), else None."""
+        with other jobs' (:meth:`waiting`, peers.labelling_batch), else None; ``masses``: its
+        tracks' input masses likewise (peers.tracks_batch), else None."""
         st = job.state
         job.settled = True
         if st.pending is not job or self._scan is not st:
@@ -102,7 +103,7 @@ class BatchedRounds:
         st.pending = None
         out = self._failed(st, exc) if exc is not None else self._fused(st, fused,
                                                                          job.senders, now,
-                                                                         labelled)
+                                                                         labelled, masses)
         if job.forced:
             while not st.done and st.pending is None:
                 out += self._fuse_round(st, now, forced=True)
