@@ -31,7 +31,7 @@ from sensornet.peers.step_atomic import atomic
 from sensornet.tracking.gmphd import extract_index
 from sensornet.tracking.gmphd import predict as gm_predict
 from sensornet.tracking.label_confirmation import stamp_shared
-from sensornet.tracking.label_keys import keys_equal, keys_isin
+from sensornet.tracking.label_keys import keys_equal, keys_find, keys_isin
 from sensornet.tracking.labels import (
     Confirmation,
     ExtractedTracks,
@@ -462,8 +462,7 @@ class LmbEstimator:
         if not len(self._published):
             z = np.zeros(len(keys), dtype=bool)
             return z, np.zeros(len(keys), dtype=np.int64), z.copy()
-        pos = np.searchsorted(self._published, keys).clip(max=len(self._published) - 1)
-        known = keys_equal(self._published[pos], keys)
+        known, pos = keys_find(self._published, keys)
         return (known, np.where(known, self._last_pub[pos], 0),
                 known & self._strong[pos])
 

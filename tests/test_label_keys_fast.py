@@ -1,13 +1,19 @@
-"""tracking.label_keys.keys_isin / keys_equal / unique_keys give np.isin / == / np.unique's
-answers on label keys (and on other fixed-size keys) to the bit, both ways of keys_isin
-(all pairs at once, np.isin beyond KEY_PAIRS), with repeats, negatives and empty arrays."""
+"""tracking.label_keys.keys_isin / keys_equal / unique_keys / keys_find give np.isin / == /
+np.unique / searchsorted's answers on label keys to the bit, both ways (all pairs at once,
+NumPy's own beyond KEY_PAIRS), with repeats, negatives and empty arrays."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from sensornet.tracking import label_keys as lk
-from sensornet.tracking.label_keys import keys_equal, keys_isin, label_keys, unique_keys
+from sensornet.tracking.label_keys import (
+    keys_equal,
+    keys_find,
+    keys_isin,
+    label_keys,
+    unique_keys,
+)
 
 
 def _labels(rng, n):
@@ -30,3 +36,9 @@ def test_the_fast_key_ops_answer_as_numpy(pairs, monkeypatch):
         np.testing.assert_array_equal(keys_equal(a, c), a == c)
         if len(a) > 1:
             np.testing.assert_array_equal(keys_equal(a[1:], a[:-1]), a[1:] == a[:-1])
+        if len(u):  # a sorted table of unique keys: found where searchsorted finds them
+            hit, pos = keys_find(u, b)
+            want = np.searchsorted(u, b).clip(max=len(u) - 1)
+            np.testing.assert_array_equal(hit, u[want] == b)
+            np.testing.assert_array_equal(pos[hit], want[hit])
+            assert ((pos >= 0) & (pos < len(u))).all()

@@ -14,7 +14,7 @@ from sensornet.tracking.label_keys import (
     PUBLISHED_BASE,
     LabelledMixture,
     as_labels,
-    keys_equal,
+    keys_find,
     keys_isin,
     label_keys,
     new_labels,
@@ -70,8 +70,7 @@ class Confirmation:
         above = keys_isin(present, keys[lm.mixture.weights > self.threshold])
         counts = above.astype(np.int64)
         if self._keys.size and present.size:
-            pos = np.searchsorted(self._keys, present).clip(max=self._keys.size - 1)
-            seen = keys_equal(self._keys[pos], present)
+            seen, pos = keys_find(self._keys, present)
             counts[seen] += self._counts[pos[seen]]
         self._keys, self._counts = present, counts
 
@@ -80,8 +79,8 @@ class Confirmation:
         keys = label_keys(as_labels(labels))
         if not self._keys.size:
             return np.zeros(keys.size, dtype=np.int64)
-        pos = np.searchsorted(self._keys, keys).clip(max=self._keys.size - 1)
-        return np.where(keys_equal(self._keys[pos], keys), self._counts[pos], 0)
+        hit, pos = keys_find(self._keys, keys)
+        return np.where(hit, self._counts[pos], 0)
 
     def status(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int8: 1 confirmed, 0 tentative (the ``Tracks.status`` codes)."""

@@ -126,6 +126,18 @@ def keys_isin(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (_rows(a)[:, None] == _rows(b)[None, :]).any(axis=1)
 
 
+def keys_find(table: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of ``keys (n,)`` is in ``table (m,)`` (sorted, each once; m > 0): ``(n,)``
+    bool found and ``(n,)`` index (meaningful where found, always a valid index), as
+    ``np.searchsorted(table, keys).clip(max=m - 1)`` and an equality test of the keys there
+    give; few keys every pair compared at once (a structured binary search costs more)."""
+    if keys.size * table.size > KEY_PAIRS or keys.dtype != table.dtype:
+        pos = np.searchsorted(table, keys).clip(max=table.size - 1)
+        return keys_equal(table[pos], keys), pos
+    eq = _rows(keys)[:, None] == _rows(table)[None, :]
+    return eq.any(axis=1), eq.argmax(axis=1)
+
+
 def unique_keys(keys: np.ndarray) -> np.ndarray:
     """``np.unique(keys)`` for 1-D keys (e.g. :func:`label_keys`'s): sorted, each once; the
     same array (equal keys are equal bytes), without its Python compare of neighbours."""
@@ -190,5 +202,6 @@ class LabelledMixture:
 
 
 __all__ = ["CELL_BASE", "CELL_BITS", "LABEL_COLUMNS", "PUBLISHED_BASE", "SHARED_ORIGIN",
-           "LabelledMixture", "as_labels", "cell_index", "keys_equal", "keys_isin", "label_keys",
+           "LabelledMixture", "as_labels", "cell_index", "keys_equal", "keys_find", "keys_isin",
+           "label_keys",
            "new_labels", "precedes", "shared_births", "unique_keys"]
