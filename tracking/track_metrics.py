@@ -132,12 +132,78 @@ def ospa2_dense(E: np.ndarray, Y: np.ndarray, c: float = 200.0, p: float = 2.0,
     return out
 
 
+DENSE_LIMIT = 20_000_000
+"""Pair-scan cells ``T x n x m`` above which :func:`ospa2` works a chunk of scans at a time
+(a 3-hour run with thousands of track ids is tens of gigabytes dense)."""
+
+
 def ospa2(truth: TrackTable, est: TrackTable, c: float = 200.0, p: float = 2.0,
-          window: int | None = None, scans: np.ndarray | None = None) -> np.ndarray:
+          window: int | None = None, scans: np.ndarray | None = None,
+          limit: int = DENSE_LIMIT) -> np.ndarray:
     """:func:`ospa2_dense` on tables: per-scan curve ``(T,)`` over windows of ``window`` scans,
-    or the whole-run value as ``(1,)`` when ``window`` is None."""
+    or the whole-run value as ``(1,)`` when ``window`` is None. Dense up to ``limit`` pair-scan
+    cells; above it in chunks of scans, in memory that grows with the tracks present in a
+    chunk (equal to the dense value up to summation order)."""
     grid = _grid(truth, est, scans=scans)
-    return ospa2_dense(est.dense(grid)[1], truth.dense(grid)[1], c, p, window)
+    n, m = len(np.unique(est.id)), len(np.unique(truth.id))
+    if len(grid) * n * m <= limit:
+        return ospa2_dense(est.dense(grid)[1], truth.dense(grid)[1], c, p, window)
+    per = max(1, limit // max(n * m, 1))
+    if window is None:
+        return _ospa2_run_chunked(truth, est, grid, c, p, per)
+    return _ospa2_windows_chunked(truth, est, grid, c, p, window, per)
+
+
+def _between(t: TrackTable, lo: int, hi: int) -> TrackTable:
+    """The rows of ``t`` with ``lo <= scan <= hi``."""
+    keep = (t.scan >= lo) & (t.scan <= hi)
+    return TrackTable(t.scan[keep], t.id[keep], t.pos[keep])
+
+
+def _ospa2_windows_chunked(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float,
+                           p: float, window: int, per: int) -> np.ndarray:
+    """The windowed curve a chunk of scans at a time, each chunk with the ``window - 1``
+    scans before it (a window looks back no further); chunks of at least ``4 window``."""
+    chunk = max(per, 4 * window)
+    out = np.empty(len(grid))
+    for a in range(0, len(grid), chunk):
+        b = min(a + chunk, len(grid))
+        s = max(a - window + 1, 0)
+        sub = grid[s:b]
+        T, E = (_between(x, int(sub[0]), int(sub[-1])) for x in (truth, est))
+        out[a:b] = ospa2_dense(E.dense(sub)[1], T.dense(sub)[1], c, p, window)[a - s:]
+    return out
+
+
+def _ospa2_run_chunked(truth: TrackTable, est: TrackTable, grid: np.ndarray, c: float,
+                       p: float, per: int) -> np.ndarray:
+    """The whole-run value from per-pair sums gathered a chunk of scans at a time: over the
+    run, a pair's summed cost is ``sum_both min(d, c) + c (n_x + n_y - 2 n_both)`` and its
+    scans with either ``n_x + n_y - n_both`` (``n_x``, ``n_y``: scans present)."""
+    eids, tids = np.unique(est.id), np.unique(truth.id)
+    S = np.zeros((len(eids), len(tids)))  # sum of min(d, c) over scans with both
+    nb = np.zeros((len(eids), len(tids)))  # scans with both
+    for a in range(0, len(grid), per):
+        sub = grid[a:a + per]
+        T, E = (_between(x, int(sub[0]), int(sub[-1])) for x in (truth, est))
+        (ei, Ed), (ti, Yd) = E.dense(sub), T.dense(sub)
+        if not len(ei) or not len(ti):
+            continue
+        D = _pair_dist(Ed, Yd)  # (t, n, m), NaN unless both present
+        both = ~np.isnan(D)
+        blk = np.ix_(np.searchsorted(eids, ei), np.searchsorted(tids, ti))
+        S[blk] += np.where(both, np.minimum(D, c), 0.0).sum(axis=0)
+        nb[blk] += both.sum(axis=0)
+    nx = np.bincount(np.searchsorted(eids, est.id), minlength=len(eids)).astype(float)
+    ny = np.bincount(np.searchsorted(tids, truth.id), minlength=len(tids)).astype(float)
+    n, m = len(eids), len(tids)
+    if n == 0 or m == 0:
+        return np.array([0.0 if n == m else c])
+    cost = S + c * (nx[:, None] + ny[None, :] - 2 * nb)
+    base = cost / (nx[:, None] + ny[None, :] - nb)
+    B = base**p
+    r, q = linear_sum_assignment(B)
+    return np.array([((B[r, q].sum() + c**p * abs(n - m)) / max(n, m)) ** (1.0 / p)])
 
 
 # ---------------------------------------------------------------------------------------------
