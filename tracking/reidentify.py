@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from sensornet.tracking.label_keys import replace_labels
+from sensornet.tracking.label_keys import keys_equal, keys_find, keys_isin, replace_labels
 from sensornet.tracking.labels import PUBLISHED_BASE, as_labels, label_keys, new_labels
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
@@ -72,11 +72,23 @@ def _tracks(labels: np.ndarray, mix: GaussianMixture, on: np.ndarray
     mean and covariance: ``(t, 3)``, ``(t, d)``, ``(t, d, d)``."""
     idx = np.flatnonzero(on)
     keys = label_keys(labels[idx])
-    order = np.lexsort((-mix.weights[idx], keys))
+    order = np.lexsort((-mix.weights[idx], *_columns(labels[idx])))
     first = np.ones(len(order), dtype=bool)
-    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    first[1:] = ~keys_equal(keys[order[1:]], keys[order[:-1]])
     rows = idx[order[first]]
     return labels[rows], mix.means[rows], mix.covs[rows]
+
+
+def _columns(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The columns of ``labels (n, 3)`` as :func:`numpy.lexsort` keys, last one first: a
+    lexsort on them orders rows as :func:`label_keys` sort (by origin, birth, index), without
+    NumPy's Python compare of structured keys."""
+    return labels[:, 2], labels[:, 1], labels[:, 0]
+
+
+def _key_order(labels: np.ndarray) -> np.ndarray:
+    """``np.argsort(label_keys(labels))`` for labels each once (stable: the same order)."""
+    return np.lexsort(_columns(labels))
 
 
 @dataclass
@@ -116,7 +128,9 @@ class Reidentification:
         labels = as_labels(labels, len(mix))
         on = mix.weights > threshold
         lab, m, P = _tracks(labels, mix, on)
-        mine = np.isin(lab[:, 0], [o for o in (self.origin, self.shared) if o is not None])
+        mine = lab[:, 0] == self.origin
+        if self.shared is not None:
+            mine |= lab[:, 0] == self.shared
         new = mine & (lab[:, 1] == k) & (lab[:, 2] >= PUBLISHED_BASE)
         if self.jump is not None and self._last is not None and (~new).any():
             labels, lab, new = self._returns(labels, lab, m, P, new, k)
@@ -127,11 +141,8 @@ class Reidentification:
             self._remember(labels, lab, m, k)
         run = np.ones(len(lab), dtype=np.int64)
         if self._on is not None and self._on[0] == k - 1 and len(lab) and len(self._on[1]):
-            k0 = label_keys(self._on[1])
-            by = np.argsort(k0)
-            keys = label_keys(lab)
-            pos = np.searchsorted(k0[by], keys).clip(max=len(k0) - 1)
-            was = k0[by][pos] == keys
+            by = _key_order(self._on[1])
+            was, pos = keys_find(label_keys(self._on[1])[by], label_keys(lab))
             run[was] += self._on[4][by][pos[was]]
         self._on = (int(k), lab, m, P, run)
         return labels
@@ -146,8 +157,8 @@ class Reidentification:
         if not len(keys) or not len(lab):  # nothing published yet (or left): nothing returns
             return labels, lab, new
         own = label_keys(lab)
-        pos = np.searchsorted(keys, own).clip(max=len(keys) - 1)
-        known = ~new & (keys[pos] == own)
+        found, pos = keys_find(keys, own)
+        known = ~new & found
         rows = np.flatnonzero(known)
         if not len(rows):
             return labels, lab, new
@@ -155,7 +166,7 @@ class Reidentification:
         rows = rows[far]
         if len(rows) and self._on is not None and self._on[0] == k - 1:
             k0, lab0, m0, P0, _ = self._on
-            gone = np.flatnonzero(~np.isin(label_keys(lab0), own))
+            gone = np.flatnonzero(~keys_isin(label_keys(lab0), own))
             took = np.zeros(len(rows), dtype=bool)
             if len(gone):
                 took = (self._costs(m[rows], P[rows], lab0[gone], np.full(len(gone), k0),
@@ -177,12 +188,12 @@ class Reidentification:
         parts = [(lab, np.full(len(lab), k), m)]
         if self._last is not None:
             L, keys, K, M = self._last
-            keep = np.isin(keys, label_keys(labels)) & ~np.isin(keys, label_keys(lab))
+            keep = keys_isin(keys, label_keys(labels)) & ~keys_isin(keys, label_keys(lab))
             parts.append((L[keep], K[keep], M[keep]))
         L, K, M = (np.concatenate(x) for x in zip(*parts, strict=True))
-        keys = label_keys(L)
-        by = np.argsort(keys)
-        self._last = (L[by], keys[by], K[by], M[by])
+        by = _key_order(L)
+        L = L[by]
+        self._last = (L, label_keys(L), K[by], M[by])
 
     def _distance(self, m, K, M, k, pairs=True) -> np.ndarray:
         """Metres from tracks' positions ``m (n, d)`` to means ``M (l, d)`` last published at
@@ -203,7 +214,7 @@ class Reidentification:
         parts = [] if self._lost is None else [self._lost]
         if self._on is not None:
             k0, lab0, m0, P0, run0 = self._on
-            gone = ~np.isin(label_keys(lab0), label_keys(lab)) & (run0 >= self.age)
+            gone = ~keys_isin(label_keys(lab0), label_keys(lab)) & (run0 >= self.age)
             if gone.any() and len(m):
                 g = np.flatnonzero(gone)
                 gone[g[(self._costs(m, P, lab0[g], np.full(len(g), k0), m0[g], P0[g], k)
@@ -212,7 +223,7 @@ class Reidentification:
         if not parts:
             return
         L, K, M, C = (np.concatenate(x) for x in zip(*parts, strict=True))
-        keep = (k - K <= self.scans) & ~np.isin(label_keys(L), label_keys(lab))
+        keep = (k - K <= self.scans) & ~keys_isin(label_keys(L), label_keys(lab))
         self._lost = (L[keep], K[keep], M[keep], C[keep])
 
     def _costs(self, m, P, L, K, M, C, k) -> np.ndarray:
