@@ -14,6 +14,7 @@ from sensornet.tracking.label_keys import (
     PUBLISHED_BASE,
     LabelledMixture,
     as_labels,
+    keys_equal,
     keys_find,
     keys_isin,
     label_keys,
@@ -116,6 +117,19 @@ def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: n
     return out
 
 
+def _unique_first(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(label_keys(labels), return_index=True)`` (sorted keys, each once, and the
+    row of its first occurrence), by a stable lexsort of the columns and a byte compare of
+    neighbours instead of NumPy's Python compare of structured keys."""
+    keys = label_keys(labels)
+    if not keys.size:
+        return keys, np.zeros(0, dtype=np.intp)
+    order = np.lexsort((labels[:, 2], labels[:, 1], labels[:, 0]))
+    s = keys[order]
+    first = np.concatenate(([True], ~keys_equal(s[1:], s[:-1])))
+    return s[first], order[first]
+
+
 REPUBLISH_GAP = 3
 """Looks a published label may stay unpublished at a peer and keep its stamp
 (:class:`Publication`); longer, and it is stamped anew when it returns. A look is a scan, or a
@@ -179,8 +193,7 @@ class Publication:
         """Whether each key was published, and its last scan (``(n,)`` bool, int64)."""
         if not self._keys.size:
             return np.zeros(keys.size, dtype=bool), np.zeros(keys.size, dtype=np.int64)
-        pos = np.searchsorted(self._keys, keys).clip(max=self._keys.size - 1)
-        known = self._keys[pos] == keys
+        known, pos = keys_find(self._keys, keys)
         return known, np.where(known, self._last[pos], 0)
 
     def stamp(self, labels: np.ndarray, weights: np.ndarray, threshold: float,
@@ -189,7 +202,7 @@ class Publication:
         published stamped; remembers what is published (the present labels only)."""
         labels = as_labels(labels, len(weights))
         keys = label_keys(labels)
-        on = np.isin(keys, keys[np.asarray(weights) > threshold])
+        on = keys_isin(keys, keys[np.asarray(weights) > threshold])
         known, last = self._lookup(keys)
         unstamped = labels[:, 2] < PUBLISHED_BASE
         fresh = ~known & (labels[:, 0] == self.origin) & unstamped
@@ -214,14 +227,14 @@ class Publication:
             self.stamped = labels[np.flatnonzero(new)[first]]
         keep = on | known
         when = np.where(on, k, last)[keep]
-        self._keys, idx = np.unique(keys[keep], return_index=True)
+        self._keys, idx = _unique_first(labels[keep])
         self._last = when[idx] if self._keys.size else np.zeros(0, dtype=np.int64)
         self._k = int(k)
         return labels
 
     def adopt(self, labels: np.ndarray) -> None:
         """Labels the network gave us (a relabel's winners): published as of the last scan."""
-        keys = np.unique(label_keys(as_labels(labels)))
+        keys = unique_keys(label_keys(as_labels(labels)))
         if not keys.size:
             return
         known, _ = self._lookup(keys)
