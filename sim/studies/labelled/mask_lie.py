@@ -6,8 +6,9 @@ checked where they arrive (``peers.label_support.reach_masks``, the default) and
 Per cell and variant: :func:`sim.studies.labelled.design_check.fused_row`'s columns (mean over
 every peer, the liar's own fused tracks included: its filter and fusion are honest), the share
 of the honest peers' fused track rows whose id is a label the liar stamped (``liar_ids``, %:
-identities it took), and the estimates whose mask a receiver cut (``clipped``, summed over
-peers: ``rejected["label-mask"]``).
+identities it holds; its stamps: the shared labels of its round-0 estimates of their own
+scan), and the estimates whose mask a receiver cut (``clipped``, summed over peers:
+``rejected["label-mask"]``).
 
 ``python -m sensornet.sim.studies.labelled.mask_lie --runs 100 --graphs circ20 --pds 0.99``
 """
@@ -40,19 +41,28 @@ def all_bits(labels: np.ndarray) -> np.ndarray:
 
 
 class MaskLiarCore(PeerCore):
-    """A peer whose estimates carry every holder bit on each shared label (twin only; its
-    filter and fusion honest). ``lies_told``: estimates changed."""
+    """A peer that records the shared labels it stamps (those of its round-0 estimates of
+    their own scan: :attr:`stamps`) and, with ``lie``, sends every holder bit on each shared
+    label (twin only; its filter and fusion stay honest). ``lies_told``: estimates changed."""
 
-    def __init__(self, core: PeerCore) -> None:
+    def __init__(self, core: PeerCore, lie: bool = True) -> None:
         super().__init__(core.cfg, core.consensus, core.scorer)
+        self.lie = lie
+        self.stamps: set[tuple[int, int, int]] = set()
         self.lies_told = 0
 
     def _wrap(self, messages: list) -> list[Output]:
         told = []
         for m in messages:
             if type(m) is Estimate and m.labels is not None and len(m.labels):
-                m = replace(m, labels=all_bits(m.labels))
-                self.lies_told += 1
+                clean = np.array(m.labels, dtype=np.int64, copy=True)
+                clean[:, 0] &= ORIGIN_MASK
+                if m.round == 0:
+                    mine = clean[(clean[:, 0] == SHARED_ORIGIN) & (clean[:, 1] == m.k)]
+                    self.stamps.update(map(tuple, mine.tolist()))
+                if self.lie:
+                    m = replace(m, labels=all_bits(m.labels))
+                    self.lies_told += 1
             told.append(m)
         return super()._wrap(told)
 
@@ -76,28 +86,19 @@ def variant_row(scn, run: int, variant: str, liar: str) -> dict[str, float]:
     ``clipped``."""
     changes = {} if variant.endswith("-checked") else {"label_reach": ()}
     peers = {n: make_peer(scn, n, run, **changes) for n in scn.sensor_names}
-    lying = variant.startswith("liar")
-    if lying:
-        peers[liar] = MaskLiarCore(peers[liar])
+    peers[liar] = MaskLiarCore(peers[liar], lie=variant.startswith("liar"))
     row = fused_row(scn, run, peers)
-    row["liar_ids"] = liar_share(peers, liar, stamps_of(peers[liar]))
+    row["liar_ids"] = liar_share(peers, liar, peers[liar].stamps)
     row["clipped"] = float(sum(c.rejected["label-mask"] for c in peers.values()))
     return row
 
 
-def stamps_of(core: PeerCore) -> set:
-    """The shared labels a peer stamped: its local track ids of their own scan."""
-    t = core.scorer.results.table(core.cfg.name)
-    out = set()
-    for k, e, ids in zip(t["scan"], t["estimate"], t["track_ids"], strict=True):
-        if e == "local":
-            out.update(tuple(i) for i in ids if i[0] == SHARED_ORIGIN and i[1] == k)
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = cell_arguments("mask_lie", __doc__, "override of the twin's scenario", kinds="lmb")
-    ap.add_argument("--liar", default="p00", help="the peer that lies (default p00; s2 on full3)")
+    ap.add_argument("--liar", default="p00",
+                    help="the peer that lies (default p00; the last peer if absent)")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help=f"which of {', '.join(VARIANTS)}")
     a = ap.parse_args(argv)
     extra = _overrides(a.set)
     runs = [int(x) for x in a.runs.split(",")]
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
             for pd in (float(x) for x in a.pds.split(",")):
                 scn = scenario_of(GRAPHS[g], kind, pd, 10.0, a.scans, {**RULES[a.rule], **extra})
                 liar = a.liar if a.liar in scn.sensor_names else scn.sensor_names[-1]
-                for v in VARIANTS:
+                for v in a.variants.split(","):
                     rows = [variant_row(scn, r, v, liar) for r in runs]
                     r = {c: float(np.max([x[c] for x in rows]) if c.endswith("_max")
                                   else np.mean([x[c] for x in rows])) for c in cols}
