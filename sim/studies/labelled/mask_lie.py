@@ -30,22 +30,31 @@ from sensornet.tracking.label_keys import SHARED_ORIGIN
 
 ALL_BITS = ((1 << SUPPORT_BITS) - 1) << SUPPORT_SHIFT
 """Every holder bit, in the origin column."""
-VARIANTS = ("honest-checked", "honest-unchecked", "liar-unchecked", "liar-checked")
+VARIANTS = ("honest-checked", "honest-unchecked", "liar-unchecked", "liar-checked",
+            "forger-unchecked", "forger-checked")
+"""``liar``: every holder bit set; ``forger``: also each shared label it stamps moved to the
+next cell index, so that it ties with the label the other peers stamped and can win only by
+its mask (a higher index loses a tie of equal support)."""
 
 
-def all_bits(labels: np.ndarray) -> np.ndarray:
-    """Labels on the wire ``(n, 3)`` with every holder bit set on the shared rows."""
+def all_bits(labels: np.ndarray, k: int | None = None) -> np.ndarray:
+    """Labels on the wire ``(n, 3)`` with every holder bit set on the shared rows; with ``k``,
+    the shared rows of scan ``k`` (own stamps) also moved to the next index."""
     lab = np.array(labels, dtype=np.int64, copy=True)
-    lab[(lab[:, 0] & ORIGIN_MASK) == SHARED_ORIGIN, 0] |= ALL_BITS
+    shared = (lab[:, 0] & ORIGIN_MASK) == SHARED_ORIGIN
+    if k is not None:
+        lab[shared & (lab[:, 1] == k), 2] += 1
+    lab[shared, 0] |= ALL_BITS
     return lab
 
 
 class MaskLiarCore(PeerCore):
     """A peer that records the shared labels it stamps (those of its round-0 estimates of
-    their own scan: :attr:`stamps`) and, with ``lie``, sends every holder bit on each shared
-    label (twin only; its filter and fusion stay honest). ``lies_told``: estimates changed."""
+    their own scan: :attr:`stamps`) and with ``lie`` (:data:`VARIANTS`' ``liar`` or ``forger``)
+    sends every holder bit on each shared label (twin only; its filter and fusion stay
+    honest). ``lies_told``: estimates changed."""
 
-    def __init__(self, core: PeerCore, lie: bool = True) -> None:
+    def __init__(self, core: PeerCore, lie: str | None = "liar") -> None:
         super().__init__(core.cfg, core.consensus, core.scorer)
         self.lie = lie
         self.stamps: set[tuple[int, int, int]] = set()
@@ -61,7 +70,8 @@ class MaskLiarCore(PeerCore):
                     mine = clean[(clean[:, 0] == SHARED_ORIGIN) & (clean[:, 1] == m.k)]
                     self.stamps.update(map(tuple, mine.tolist()))
                 if self.lie:
-                    m = replace(m, labels=all_bits(m.labels))
+                    forge = m.k if self.lie == "forger" and m.round == 0 else None
+                    m = replace(m, labels=all_bits(m.labels, forge))
                     self.lies_told += 1
             told.append(m)
         return super()._wrap(told)
@@ -86,9 +96,13 @@ def variant_row(scn, run: int, variant: str, liar: str) -> dict[str, float]:
     ``clipped``."""
     changes = {} if variant.endswith("-checked") else {"label_reach": ()}
     peers = {n: make_peer(scn, n, run, **changes) for n in scn.sensor_names}
-    peers[liar] = MaskLiarCore(peers[liar], lie=variant.startswith("liar"))
+    lie = variant.split("-")[0]
+    peers[liar] = MaskLiarCore(peers[liar], None if lie == "honest" else lie)
     row = fused_row(scn, run, peers)
-    row["liar_ids"] = liar_share(peers, liar, peers[liar].stamps)
+    stamps = peers[liar].stamps
+    if lie == "forger":  # the labels it sent: its stamps moved
+        stamps = {(o, k, i + 1) for o, k, i in stamps}
+    row["liar_ids"] = liar_share(peers, liar, stamps)
     row["clipped"] = float(sum(c.rejected["label-mask"] for c in peers.values()))
     return row
 
