@@ -195,12 +195,23 @@ class Reidentification:
         L = L[by]
         self._last = (L, label_keys(L), K[by], M[by])
 
+    def _transitions(self, gaps: np.ndarray, which: int = 2) -> list[np.ndarray]:
+        """The CV transitions ``F (l, d, d)`` and (``which`` 2) ``Q (l, d, d)`` over ``gaps
+        (l,)`` scans (l > 0), as contiguous stacks of :meth:`ConstantVelocity.transition`'s;
+        one gap for all (the usual case: every track last published the scan before) without
+        np.unique."""
+        if (gaps == gaps[0]).all():
+            FQ = self.motion.transition(int(gaps[0]))
+            return [np.repeat(a[None], len(gaps), axis=0) for a in FQ[:which]]
+        steps, inv = np.unique(gaps, return_inverse=True)
+        FQ = [self.motion.transition(int(s)) for s in steps]  # <= scans + 1 distinct gaps
+        return [np.stack([fq[i] for fq in FQ])[inv] for i in range(which)]
+
     def _distance(self, m, K, M, k, pairs=True) -> np.ndarray:
         """Metres from tracks' positions ``m (n, d)`` to means ``M (l, d)`` last published at
         scans ``K (l,)`` predicted to ``k`` (CV): ``(n, l)``, or ``(n,)`` row by row if not
         ``pairs``."""
-        steps, inv = np.unique(k - K, return_inverse=True)
-        F = np.stack([self.motion.transition(int(s))[0] for s in steps])[inv]
+        (F,) = self._transitions(k - K, which=1)
         mp = np.einsum("lij,lj->li", F, M)[:, POSITION]
         x = m[:, POSITION]
         d = x[:, None, :] - mp[None] if pairs else x - mp
@@ -230,10 +241,7 @@ class Reidentification:
         """Squared Mahalanobis distances ``(n, l)`` of tracks ``m (n, d)``, ``P (n, d, d)`` at
         scan ``k`` to lost tracks (last published at scans ``K (l,)``, ``M``, ``C``)
         predicted to ``k``, in one stacked solve."""
-        steps, inv = np.unique(k - K, return_inverse=True)
-        FQ = [self.motion.transition(int(s)) for s in steps]  # <= scans + 1 distinct gaps
-        F = np.stack([f for f, _ in FQ])[inv]
-        Q = np.stack([q for _, q in FQ])[inv]
+        F, Q = self._transitions(k - K)
         mp = np.einsum("lij,lj->li", F, M)
         Pp = F @ C @ F.swapaxes(1, 2) + Q
         diff = m[:, None, :] - mp[None, :, :]  # (n, l, d)
