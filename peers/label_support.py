@@ -180,6 +180,9 @@ class LabelSupport:
         if self.reach is None or not m.any():
             self.add(lab, m)
             return 0
+        known = self.mask_of(lab)
+        if not (m & ~known).any():  # every bit known here already: nothing to add or count
+            return 0
         table = self.reach.get(sender)
         if table is None:  # not a neighbour we know: it vouches for nothing
             allowed = np.zeros(len(lab), dtype=np.int64)
@@ -192,7 +195,7 @@ class LabelSupport:
         allowed[lab[:, 0] != SHARED_ORIGIN] = 0
         kept = m & allowed
         cut = m & ~kept
-        lost = int(((cut & ~self.mask_of(lab)) != 0).sum()) if cut.any() else 0
+        lost = int(((cut & ~known) != 0).sum()) if cut.any() else 0
         self.clipped += lost
         self._or_in(lab, kept)  # (n,): m & allowed
         return lost
