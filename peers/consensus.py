@@ -41,6 +41,7 @@ from sensornet.peers.labelling_batch import LabelProblem
 from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
+from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
@@ -111,6 +112,8 @@ class Consensus(BatchedRounds):
         self.support = (SupportRule(options.support_inputs, options.support_scans)
                         if self.fusing and options.support_inputs != 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
+        self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
+        """Sorted keys of the fused tracks reported last scan (``existence_keep``)."""
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -468,11 +471,13 @@ class Consensus(BatchedRounds):
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         mixes = self._input_mixtures(inputs)
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
+            keep = (np.isin(label_keys(labels), self._reported) if self.o.existence_keep
+                    else None)
             fused = GaussianMixture.trusted(  # for extraction only
                 pooled_weights(fused, labels, k, input_mass(fused.means, mixes)
                                if masses is None else masses[0],
                                self.o.existence_prior, self.o.existence_young,
-                               skip=copies),
+                               skip=copies, keep=keep),
                 fused.means, fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:
@@ -483,6 +488,8 @@ class Consensus(BatchedRounds):
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])
+        if self.o.existence_keep:
+            self._reported = np.unique(label_keys(t.ids))
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
 

@@ -61,6 +61,10 @@ class ConsensusOptions:
     inputs or more hold weighs at least their pooled existence with this prior
     (tracking.support.pooled_weights; the fused density is unchanged); 0: off."""
     existence_young: int = 2
+    existence_keep: bool = False
+    """With :attr:`existence_prior`: a fused track reported the scan before is pooled at any
+    age and keeps its target against a new label beside it (tracking.support.pooled_weights
+    ``keep``)."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""

@@ -75,7 +75,8 @@ def input_mass(means: np.ndarray, inputs: Sequence[GaussianMixture],
 
 def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.ndarray,
                    prior: float, young: int, gate: float = HYBRID_GATE,
-                   threshold: float = 0.5, skip: np.ndarray | None = None) -> np.ndarray:
+                   threshold: float = 0.5, skip: np.ndarray | None = None,
+                   keep: np.ndarray | None = None) -> np.ndarray:
     """``(n,)`` the weights of the fused components of ``mix`` for extraction. A component
     whose label ``labels (n, 3)`` is at most ``young`` scans old at scan ``k`` (its second
     column, the birth or first-publication scan) and that two inputs or more hold (``mass
@@ -86,7 +87,11 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
     track of that target). So weak evidence of a new target at several peers adds up, as in
     the centralised update, while the density stays the fused one. ``skip (n,)`` bool: rows
     never pooled (an AA fusion's copies of a heavier row's target, young only by the fresh
-    label they get each scan: peers.labelling.copy_rows)."""
+    label they get each scan: peers.labelling.copy_rows). ``keep (n,)`` bool: rows pooled at
+    any age (their label was reported the scan before: a track born by pooling is not dropped
+    once older than ``young`` while fewer inputs than half the weight hold it), and put first
+    in the test for a second track of a target, so a new label beside it cannot take its
+    target (issue 34, docs/real-traffic.md "Fused births pooled across radars")."""
     labels = np.asarray(labels, dtype=np.int64).reshape(-1, 3)
     w = mix.weights
     n = len(w)
@@ -98,7 +103,8 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
     held = mass > 0
     row, _ = np.nonzero(held)
     pooled = pool_existence(mass[held], row, n, prior)
-    pick = (held.sum(axis=1) >= 2) & (k - labels[:, 1] <= young) & (pooled > w)
+    kept = np.zeros(n, dtype=bool) if keep is None else np.asarray(keep, bool).reshape(n)
+    pick = (held.sum(axis=1) >= 2) & ((k - labels[:, 1] <= young) | kept) & (pooled > w)
     if skip is not None:
         pick &= ~np.asarray(skip, dtype=bool).reshape(n)
     cand = np.flatnonzero(pick)
@@ -110,8 +116,10 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
         q = c_einsum("coj,cojk,cok->co", diff, Y, diff)
         # beside a track above the threshold, a stronger candidate, or an equal one before
         s_c, s_o = strength[cand][:, None], strength[other][None, :]
-        first = ((w[other] > threshold)[None, :] | (s_o > s_c)
-                 | ((s_o == s_c) & (other[None, :] < cand[:, None])))
+        k_c, k_o = kept[cand][:, None], kept[other][None, :]
+        first = ((w[other] > threshold)[None, :] | (k_o & ~k_c)
+                 | ((k_o == k_c) & ((s_o > s_c)
+                                    | ((s_o == s_c) & (other[None, :] < cand[:, None])))))
         beside = ((q <= gate) & first).any(axis=1)
         pick[cand[beside]] = False
     return np.where(pick, pooled, w)

@@ -54,6 +54,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         support_scans=scn.fusion.support_scans,
         existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
+        existence_keep=scn.fusion.existence_keep,
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
         # ~40 % of its CPU at 50 peers (docs/labelled-tracking.md)

@@ -89,6 +89,15 @@ class FusionSpec:
     existence_young: int = option(2, doc="With `existence_prior`: how many scans old (its "
                                          "label's scan) a fused track may be and still be "
                                          "pooled.", unit="scans", check=NONNEGATIVE)
+    existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
+                                             "the scan before is pooled at any age, and a "
+                                             "new label beside it cannot take its target "
+                                             "(`tracking.support.pooled_weights` `keep`), so "
+                                             "a track born by pooling stays while fewer "
+                                             "peers than half the weight hold it (issue 34: "
+                                             "far radars confirm aircraft late or never; "
+                                             "docs/real-traffic.md, \"Fused births pooled "
+                                             "across radars\").")
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
