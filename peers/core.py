@@ -19,6 +19,8 @@ Bounds (each rejection is counted under its reason in :meth:`snapshot`):
   scan numbering is still followed); ``stale``: before the scans still being fused;
 - ``not-neighbour``, ``incompatible`` (state dimension or estimate kind this peer cannot fuse),
   ``round`` (a consensus round this peer does not run);
+- ``label-mask``: an estimate whose shared labels' holder masks named peers its sender cannot
+  vouch for (``peers.label_support``; those bits dropped, the estimate still fused);
 - ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command);
 - secure mode, counted by the transport before anything is decoded (``protocol.envelope``):
   ``unauthenticated`` (no valid signature of the key's owner), ``replayed`` (a copy of a
