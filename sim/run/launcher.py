@@ -36,7 +36,12 @@ from sensornet.sim.run.process_faults import (  # noqa: F401  (the names other m
     fault_report,
     inject_process_faults,
 )
-from sensornet.sim.run.run_handle import ROUTER, ROUTER_GRACE, RunHandle  # noqa: F401
+from sensornet.sim.run.run_handle import (  # noqa: F401
+    ROUTER,
+    ROUTER_GRACE,
+    WORLD_STARTED,
+    RunHandle,
+)
 from sensornet.sim.run.run_summary import (  # noqa: F401  (the names other modules import from here)
     REALTIME_DEADLINE_SHARE,
     format_summary,
@@ -328,6 +333,16 @@ def _routed(handle: RunHandle, common: list[str], router_ep: str, names: list[st
                                                **{n: router_ep for n in names}}, connect
 
 
+def world_started(handle: RunHandle) -> bool:
+    """Whether the run's world has logged :data:`WORLD_STARTED` (False without a log)."""
+    path = handle.logs.get("world")
+    try:
+        with open(path, errors="replace") as f:
+            return any(line.startswith(WORLD_STARTED) for line in f)
+    except (OSError, TypeError):
+        return False
+
+
 def wait_run(handle: RunHandle, timeout: float,
              stop: threading.Event | None = None) -> dict[str, int]:
     """Wait for the world to finish and the peers to exit; returns every exit code.
@@ -336,17 +351,25 @@ def wait_run(handle: RunHandle, timeout: float,
     ``timeout`` (``handle.timed_out``), when ``stop`` is set (``handle.stopped``: the caller's
     SIGINT/SIGTERM handler), when the world fails, or when a peer exits with an error code (a
     crash or a bad flag; peers stopped by a signal, as process faults do, exit with a negative
-    code and do not count). Peers get 15 s after the world to finish.
+    code and do not count). Peers get 15 s after the world to finish. ``timeout`` counts
+    from the world's first scan (:data:`WORLD_STARTED` in its log), or from now until then:
+    a slow start-up (processes importing on a busy machine) does not eat a long run's slack.
     """
     end = time.monotonic() + timeout
     world = handle.procs["world"]
     peers_end = None
+    started, look = False, 0.0
     try:
         while True:
             if stop is not None and stop.is_set():
                 handle.stopped = True
                 break
             now = time.monotonic()
+            if not started and now >= look:
+                look = now + 0.5
+                started = world_started(handle)
+                if started:
+                    end = max(end, now + timeout)
             if now >= end or (peers_end is not None and now >= peers_end):
                 handle.timed_out = now >= end
                 break

@@ -20,6 +20,9 @@ ROUTER = "router"
 ROUTER_GRACE = 30.0
 """Seconds the peers of a routed run wait for the world to come back (``--world-grace``):
 while the router is down every liveliness token is gone, the world's too."""
+WORLD_STARTED = "world: starting "
+"""The line the world logs as its first scan goes out: a run's length counts from here
+(:func:`sim.run.launcher.wait_run`)."""
 
 
 @dataclass

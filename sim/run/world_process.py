@@ -33,6 +33,7 @@ from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Scan, Truth
 from sensornet.sim.kinds import kind_of
+from sensornet.sim.run.run_handle import WORLD_STARTED
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world import generate_run, plot_ages
 
@@ -275,7 +276,7 @@ class _World:
         """The start message, then scan ``k`` of every sensor at ``(k - 1)`` intervals, each
         scan's truth and logging :data:`TRUTH_DELAY` of an interval later."""
         scn, sink = self.scn, self.sink
-        self.say(f"world: starting {scn.num_scans} scans, one every {self.interval:g} s")
+        self.say(f"{WORLD_STARTED}{scn.num_scans} scans, one every {self.interval:g} s")
         self.ctl_pub.put(encode(Control("start", self.name, {"speed": self.speed},
                                         send_time=time.time())))
         sink.time(0, 0.0)
