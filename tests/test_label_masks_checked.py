@@ -188,3 +188,36 @@ def test_consensus_options_carry_each_neighbours_reach():
     off = consensus_options(load_scenario("seed000", overrides={"network.filter": "gmphd"}),
                             names[0])
     assert off.label_reach == ()
+
+
+def _twin_ids(forge: bool | None, checked: bool, scans: int = 30):
+    """seed 000's LMB twin (run 100, ``scans`` scans) with s3 honest (``forge`` None) or
+    forging (every holder bit, its stamps moved to the next cell index; ``False``: every bit
+    only); per honest peer its fused track ids by scan, and each peer's label-mask count."""
+    from sensornet.sim.run.peers import make_peer
+    from sensornet.sim.run.twin import run_twin
+    from sensornet.sim.studies.labelled.mask_lie import MaskLiarCore
+
+    scn = load_scenario("seed000", overrides={"network.filter": "lmb",
+                                              "scenario.num_scans": scans})
+    changes = {} if checked else {"label_reach": ()}
+    peers = {n: make_peer(scn, n, 100, **changes) for n in scn.sensor_names}
+    if forge is not None:
+        peers["s3"] = MaskLiarCore(peers["s3"], "forger" if forge else "liar")
+    run_twin(scn, 100, peers=peers)
+    ids = {}
+    for n in ("s1", "s2"):
+        t = peers[n].scorer.results.table(n)
+        ids[n] = [(k, [tuple(i) for i in tid]) for k, e, tid in
+                  zip(t["scan"], t["estimate"], t["track_ids"], strict=True) if e == "fused"]
+    return ids, {n: c.rejected["label-mask"] for n, c in peers.items()}
+
+
+def test_on_the_twin_a_forging_member_takes_ids_only_unchecked_and_is_counted():
+    honest, cut = _twin_ids(None, True)
+    assert set(cut.values()) == {0}
+    forged, _ = _twin_ids(True, False)
+    assert forged != honest  # unchecked, its mask moves the honest peers' ids
+    kept, cut = _twin_ids(True, True)
+    assert kept == honest  # checked, the honest peers' fused ids are the honest run's
+    assert cut["s1"] > 0 and cut["s2"] > 0  # (s3 counts its own forged labels coming back)
