@@ -233,6 +233,9 @@ class Reidentification:
             parts.append((lab0[gone], np.full(int(gone.sum()), k0), m0[gone], P0[gone]))
         if not parts:
             return
+        if not any(len(part[0]) for part in parts):  # nothing lost (the usual case)
+            self._lost = parts[-1]
+            return
         L, K, M, C = (np.concatenate(x) for x in zip(*parts, strict=True))
         keep = (k - K <= self.scans) & ~keys_isin(label_keys(L), label_keys(lab))
         self._lost = (L[keep], K[keep], M[keep], C[keep])

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sensornet.tracking.fusion_rules import HYBRID_GATE, pool_existence
 from sensornet.tracking.gaussian import c_einsum, inv_spd
-from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.label_keys import keys_find, label_keys
 from sensornet.tracking.mixture import GaussianMixture
 
 
@@ -175,8 +175,8 @@ class SupportRule:
         need = self.needed(inputs)
         keys = label_keys(labels)
         by = np.argsort(self._keys)
-        pos = np.searchsorted(self._keys[by], keys).clip(max=max(len(by) - 1, 0))
-        seen = (self._keys[by][pos] == keys) if len(by) else np.zeros(len(keys), bool)
+        seen, pos = (keys_find(self._keys[by], keys) if len(by)
+                     else (np.zeros(len(keys), bool), np.zeros(len(keys), np.intp)))
         streak = np.ones(len(keys), dtype=np.int64)
         streak[seen] += self._streak[by[pos[seen]]]
         self._keys, self._streak = keys, streak  # a label twice in a scan: either row's run
