@@ -43,6 +43,7 @@ from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
+from sensornet.tracking.mature_existence import MatureExistence
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
 from sensornet.tracking.support import SupportRule, input_mass, input_support, pooled_weights
@@ -112,6 +113,9 @@ class Consensus(BatchedRounds):
         self.support = (SupportRule(options.support_inputs, options.support_scans)
                         if self.fusing and options.support_inputs != 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
+        self.mature = (MatureExistence(options.existence_mature, options.existence_young)
+                       if self.fusing and options.existence_mature > 0 else None)
+        """Mature fused tracks' existence for extraction (tracking.mature_existence)."""
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Sorted keys of the fused tracks reported last scan (``existence_keep``)."""
 
@@ -470,6 +474,10 @@ class Consensus(BatchedRounds):
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         mixes = self._input_mixtures(inputs)
+        cap = None  # a mature track every input just missed (tracking.mature_existence)
+        if self.mature is not None and mixes is not None:
+            cap = self.mature.caps(fused.weights, labels, k, input_mass(fused.means, mixes)
+                                   if masses is None else masses[0])
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
             keep = (np.isin(label_keys(labels), self._reported) if self.o.existence_keep
                     else None)
@@ -479,6 +487,9 @@ class Consensus(BatchedRounds):
                                self.o.existence_prior, self.o.existence_young,
                                skip=copies, keep=keep),
                 fused.means, fused.covs)
+        if cap is not None and len(fused):
+            fused = GaussianMixture.trusted(np.minimum(fused.weights, cap), fused.means,
+                                            fused.covs)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:
             held = None if masses is None else rows_support(masses[1], masses[2], t.states)
@@ -496,7 +507,8 @@ class Consensus(BatchedRounds):
     def _input_mixtures(self, inputs: FusionInput | None) -> list[GaussianMixture] | None:
         """The last round's inputs (own density, then each neighbour's posterior) if the
         extraction rules need them and all are mixtures, else None."""
-        if inputs is None or (self.support is None and self.o.existence_prior <= 0):
+        if inputs is None or (self.support is None and self.o.existence_prior <= 0
+                              and self.mature is None):
             return None
         mixes = [inputs.own, *(inputs.neighbours[s].get("posterior")
                                for s in sorted(inputs.neighbours))]

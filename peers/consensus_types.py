@@ -61,6 +61,10 @@ class ConsensusOptions:
     inputs or more hold weighs at least their pooled existence with this prior
     (tracking.support.pooled_weights; the fused density is unchanged); 0: off."""
     existence_young: int = 2
+    existence_mature: float = 0.0
+    """Extraction of fused tracks: a track older than :attr:`existence_young` scans that two
+    inputs or more hold weighs at most their existences pooled about its fused weight of the
+    scan before times this survival probability (tracking.mature_existence); 0: off."""
     existence_keep: bool = False
     """With :attr:`existence_prior`: a fused track reported the scan before is pooled at any
     age and keeps its target against a new label beside it (tracking.support.pooled_weights
@@ -77,6 +81,8 @@ class ConsensusOptions:
             raise ValueError("consensus rounds must be at least 1")
         if self.name in self.neighbours:
             raise ValueError("a peer cannot be its own neighbour")
+        if not 0.0 <= self.existence_mature <= 1.0:
+            raise ValueError(f"existence_mature must be in [0, 1], got {self.existence_mature}")
         if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
             raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
                              f"got {self.existence_prior} and {self.existence_young}")

@@ -54,6 +54,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         support_scans=scn.fusion.support_scans,
         existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
+        existence_mature=existence_mature(scn),
         existence_keep=scn.fusion.existence_keep,
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
@@ -103,6 +104,15 @@ def existence_prior(scn: Scenario) -> float:
         return r0
     return (LMB_EXISTENCE_PRIOR if scn.network.filter == "lmb" and scn.lmb.tentative_threshold > 0
             else 0.0)
+
+
+def existence_mature(scn: Scenario) -> float:
+    """The survival probability of :class:`tracking.mature_existence.MatureExistence`'s prior,
+    0 (off) unless ``fusion.existence_mature`` is 1, or -1 (auto) with young tracks pooled
+    (:func:`existence_prior` on: LMB peers that publish tentative tracks; the real-traffic
+    scenarios and GM-PHD peers are unchanged)."""
+    on = scn.fusion.existence_mature
+    return scn.survival_probability if on == 1 or (on < 0 and existence_prior(scn) > 0) else 0.0
 
 
 SINGLE_TARGET_WARMUP = 10.0

@@ -89,6 +89,20 @@ class FusionSpec:
     existence_young: int = option(2, doc="With `existence_prior`: how many scans old (its "
                                          "label's scan) a fused track may be and still be "
                                          "pooled.", unit="scans", check=NONNEGATIVE)
+    existence_mature: int = option(-1, doc="Extraction of fused tracks (labelled peers): a "
+                                           "track older than `existence_young` scans that "
+                                           "two inputs or more hold weighs at most their "
+                                           "existences pooled about its fused weight of the "
+                                           "scan before times `Ps` "
+                                           "(`tracking.mature_existence`), so a target every "
+                                           "input just missed falls as in the centralised "
+                                           "filter, not as the inputs' mean; 1: on, 0: off, "
+                                           "-1 (auto): on with `existence_prior` on (LMB peers "
+                                           "that publish tentative tracks). Issue 33: 20 LMB "
+                                           "peers' fused tracks outlived their targets by a "
+                                           "scan or more (docs/labelled-tracking.md, \"Fused "
+                                           "tracks outlive their targets\").",
+                                   check=Bound(-1, 1))
     existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
                                              "the scan before is pooled at any age, and a "
                                              "new label beside it cannot take its target "
