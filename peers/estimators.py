@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sensornet.peers.contracts import LocalOutput
-from sensornet.peers.gmphd_own_times import check_filter, step_at_own_times
+from sensornet.peers.gmphd_own_times import WIDE_SD, check_filter, step_at_own_times
 from sensornet.peers.labelling import take_moves
 from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.peers.stamp_moves import MovingStamps
@@ -80,6 +80,9 @@ class GmphdEstimator:
         self.own_times = own_times
         """Plots with ages (:meth:`plot_ages`) taken at their own times within the tick
         (:mod:`peers.gmphd_own_times`); None: every plot at the tick."""
+        self.wide_sd: float | None = WIDE_SD
+        """At its own times, components wider than this (m of position sd) are dropped before
+        each slice's correction (:data:`peers.gmphd_own_times.WIDE_SD`); None: kept."""
         self._ages: np.ndarray | None = None
         self.filter = filt
         self.reducer = filt.reducer
@@ -213,7 +216,7 @@ class GmphdEstimator:
             return None
         return step_at_own_times(self.filter, self.mix, self.labels, z, ages,
                                  self.k * self.own_times.T, k, self.own_times, self.origin,
-                                 self.birth_origin)
+                                 self.birth_origin, self.wide_sd)
 
     def _step_labels(self, post: GaussianMixture, parents: np.ndarray, k: int) -> np.ndarray:
         """Labels of the posterior: each component its parent's (survivors keep theirs,

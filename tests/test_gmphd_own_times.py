@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from sensornet.peers.estimators import GmphdEstimator
-from sensornet.peers.gmphd_own_times import step_at_own_times
+from sensornet.peers.gmphd_own_times import WIDE_SD, step_at_own_times
 from sensornet.peers.lmb_own_times import OwnTimes
 from sensornet.sim.kinds.gmphd import build
 from sensornet.sim.run.twin import run_twin
@@ -132,6 +132,7 @@ def test_each_paris_peer_equals_the_async_reference_of_its_radar():
     for s, name in enumerate(scn.sensor_names):
         est, _ = build(scn, name)
         assert est.own_times is not None and est.labels is not None
+        est.wide_sd = None  # the reference keeps its wide components (WIDE_SD: tested below)
         ref = async_gmphd(scn, soft=True)
         lm = ref.initial()
         for k in range(1, scn.num_scans + 1):
@@ -226,3 +227,41 @@ def test_a_slice_that_does_not_divide_the_tick_or_fixed_births_are_refused():
         load_scenario("paris", overrides={**PARIS, "filter.time_slice": 0.3})
     with pytest.raises(ScenarioError, match="needs birth.model 'measurements'"):
         load_scenario("seed000", overrides={"filter.time_slice": 0.5})
+
+
+def _wide_case():
+    """Two aircraft tracks 21 km apart (labels 1 and 2) and an undetected birth that has
+    coasted for minutes (weight 0.05, 64 km sd, label 3), as at Orly on the Paris training
+    hour (tick 347, docs/real-traffic.md); a beam that sees nothing (no plots)."""
+    def track(x, y, w, sd, vsd):
+        return w, np.array([x, 0.0, y, 0.0]), np.diag([sd**2, vsd**2, sd**2, vsd**2])
+    rows = [track(0.0, 0.0, 1.05, 200.0, 20.0), track(15e3, 15e3, 1.0, 200.0, 20.0),
+            track(40e3, -40e3, 0.05, 64e3, 300.0)]
+    mix = GaussianMixture(np.array([r[0] for r in rows]), np.stack([r[1] for r in rows]),
+                          np.stack([r[2] for r in rows]))
+    labels = np.array([[1, 5, 0], [1, 6, 0], [1, 7, 0]], dtype=np.int64)
+    own = OwnTimes(SLICE, T, ElapsedMotion(T, SIGMA_W), 1.0, 1e-12,
+                   lambda a, b, m, P=None: np.zeros(len(m)))
+    return mix, labels, own
+
+
+def test_a_wide_coasting_component_no_longer_widens_an_aircraft_track():
+    """Vo & Ma's merge test takes the lighter member's covariance, so a birth that coasted
+    undetected for minutes (tens of km wide) merged into an aircraft's track far from it and
+    made the track kilometres wide (the step that then merged two aircraft's tracks and their
+    labels, docs/real-traffic.md). Components wider than WIDE_SD are dropped before each
+    slice's correction: the track keeps its own covariance and place."""
+    mix, labels, own = _wide_case()
+    f = gmphd_filter()
+    old, lab_old = step_at_own_times(f, mix, labels, np.zeros((0, 2)), np.zeros(0), 0.0, 1,
+                                     own, origin=1, wide_sd=None)
+    sd_old = np.sqrt(old.covs[:, 0, 0])
+    assert sd_old.max() > 5e3 and len(old) == 2  # without the bound: a track 5+ km wide
+    f = gmphd_filter()
+    new, lab_new = step_at_own_times(f, mix, labels, np.zeros((0, 2)), np.zeros(0), 0.0, 1,
+                                     own, origin=1)
+    assert WIDE_SD < 64e3 and len(new) == 2
+    np.testing.assert_array_equal(lab_new, labels[:2])
+    assert np.sqrt(new.covs[:, 0, 0]).max() < 300.0
+    np.testing.assert_allclose(new.means[:, [0, 2]], mix.means[:2][:, [0, 2]], atol=1e-6)
+    np.testing.assert_array_equal(new.weights, mix.weights[:2])  # nothing else changed
