@@ -102,11 +102,19 @@ KEY_PAIRS = 4096
 ``np.isin``."""
 
 
+_VOID: dict[int, np.dtype] = {}
+"""The unstructured byte dtype of each key size (:func:`_rows`: made once, not per call)."""
+
+
 def _rows(keys: np.ndarray) -> np.ndarray:
     """Keys ``(n,)`` of one fixed-size dtype as unstructured bytes (equal iff every field is):
     their ``==`` is one C compare, a structured ``==`` a Python call (numpy _promote_fields)."""
     keys = np.ascontiguousarray(keys)
-    return keys.view(np.dtype((np.void, keys.dtype.itemsize)))
+    size = keys.dtype.itemsize
+    void = _VOID.get(size)
+    if void is None:
+        void = _VOID[size] = np.dtype((np.void, size))
+    return keys.view(void)
 
 
 def keys_equal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
