@@ -21,6 +21,8 @@ Bounds (each rejection is counted under its reason in :meth:`snapshot`):
   ``round`` (a consensus round this peer does not run);
 - ``label-mask``: an estimate whose shared labels' holder masks named peers its sender cannot
   vouch for (``peers.label_support``; those bits dropped, the estimate still fused);
+  ``label-scan``: an estimate carrying a label older than any publication of it this peer
+  can vouch for (``LabelSupport.vouched``; the estimate fused without its labels);
 - ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command);
 - secure mode, counted by the transport before anything is decoded (``protocol.envelope``):
   ``unauthenticated`` (no valid signature of the key's owner), ``replayed`` (a copy of a
@@ -328,10 +330,12 @@ class PeerCore(CoreReceive, CoreOutputs):
         if self.budget is not None and isinstance(msg, Estimate):
             msg = self.budget.bound_estimate(msg)  # at most J components on (peers.budget)
         sup = c.label_support
-        clipped = sup.clipped if sup is not None else 0
+        clipped, backdated = (sup.clipped, sup.backdated) if sup is not None else (0, 0)
         res = c.on_estimate(msg, now)
         if sup is not None and sup.clipped > clipped:  # fused, the bits it cannot vouch for
             out += self._reject("label-mask")  # dropped (peers.label_support)
+        if sup is not None and sup.backdated > backdated:  # fused without its labels
+            out += self._reject("label-scan")  # a label older than its first publication
         return out + self._wrap(res)
 
     def _truth(self, msg: Truth) -> list[Output]:

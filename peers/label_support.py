@@ -26,6 +26,12 @@ the hops the label can have travelled to the sender since its scan (one hop a co
 plus a round's slack). Bits it drops that it did not already know are counted
 (:attr:`LabelSupport.clipped`; the peer's ``rejected["label-mask"]``). Honest masks never
 exceed this, so honest runs are unchanged.
+
+Birth scans are checked too (:meth:`LabelSupport.vouched`): the earliest scan wins whatever the
+support, so a member could stamp a label before the target's first plots. A label is first
+published by its birth scan; an older one is taken only if a stamper this peer hears itself
+published it so (or a far stamper within the sender's reach claims it); else the estimate's
+labels are refused (:attr:`LabelSupport.backdated`; ``rejected["label-scan"]``).
 """
 
 from __future__ import annotations
@@ -35,7 +41,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
-from sensornet.tracking.label_keys import SHARED_ORIGIN, as_labels, label_keys
+from sensornet.tracking.label_keys import (
+    PUBLISHED_BASE,
+    SHARED_ORIGIN,
+    as_labels,
+    keys_find,
+    label_keys,
+)
 
 SUPPORT_SHIFT = 24
 """First bit of the origin column that carries the holder mask on the wire."""
@@ -45,9 +57,22 @@ ORIGIN_MASK = (1 << SUPPORT_SHIFT) - 1
 FIND_PAIRS = 4096
 """Up to this many (label, stored label) pairs a lookup compares them all at once
 (:meth:`LabelSupport._find`), beyond it a binary search: the same answer, faster for small."""
+FRESH_INDEX = 1 << 32
+"""``peers.labelling.FRESH_BASE`` (not imported: labelling imports this module): own labels of
+a fusion's fresh components, ``(origin, k, FRESH_INDEX + i)`` below ``PUBLISHED_BASE``,
+first published as late as the next scan's local estimate (adopted by the estimator)."""
 KEEP_SCANS = 64
 """Scans a label's mask is kept after its birth scan (ties are settled within the settle wait,
 eccentricity + 2 scans; then the mask is no longer asked for)."""
+
+
+def _early(lab: np.ndarray, k: int) -> np.ndarray:
+    """``(n,)`` which of ``lab (n, 3)`` published at scan ``k`` are so by their birth scan: of
+    scan ``k`` or later, or a fused fresh own label of scan ``k - 1`` (:data:`FRESH_INDEX`)."""
+    early = lab[:, 1] >= k
+    fresh = ((lab[:, 1] == k - 1) & (lab[:, 0] != SHARED_ORIGIN) & (lab[:, 2] >= FRESH_INDEX)
+             & (lab[:, 2] < PUBLISHED_BASE))
+    return early | fresh
 
 
 def peer_bit(origin: int) -> int:
@@ -130,10 +155,20 @@ class LabelSupport:
         """Per neighbour, the bits it can vouch for by hops (:func:`reach_masks`); None:
         masks taken as received (unchecked)."""
         self.rounds = max(int(rounds), 1)
+        self._near = np.bitwise_or.reduce([self.bit, *(int(t[0]) for t in self.reach.values())]
+                                          if self.reach else [self.bit]).astype(np.int64)
+        """This peer's bit and its neighbours' (their publications are heard first-hand)."""
         """Consensus rounds a scan: hops a mask can travel a scan."""
         self.clipped = 0
         """Labels received whose mask named peers the sender cannot vouch for, bits not known
         here otherwise (those bits dropped)."""
+        self.backdated = 0
+        """Estimates refused labels by :meth:`vouched` (a label older than any first-hand
+        publication of it: the peer's ``rejected["label-scan"]``)."""
+        self._early = label_keys(np.zeros((0, 3), dtype=np.int64))
+        self._early_bits = np.zeros(0, dtype=np.int64)
+        """Sorted keys of labels (any origin) seen published at or before their birth scan,
+        and the bits of the peers seen so (first-hand: this peer's own and its neighbours')."""
 
     def add(self, labels: np.ndarray, masks: np.ndarray | int) -> None:
         """OR ``masks`` (``(n,)`` or one for all) into the masks of ``labels (n, 3)``; only
@@ -205,6 +240,73 @@ class LabelSupport:
         by us this scan, or moved to it) take our bit."""
         lab = as_labels(labels)
         self.add(lab[lab[:, 1] == k], self.bit)
+        if self.reach is not None:
+            self._saw_early(lab[_early(lab, k)], self.bit)
+
+    def vouched(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
+                rnd: int = 0) -> bool:
+        """Whether decoded ``labels (n, 3)`` (masks ``(n,)``) of neighbour ``sender``'s
+        estimate of scan ``k`` may be taken: a lying member could stamp a label earlier than
+        the target's first plots and win it everywhere (the earliest scan wins whatever the
+        support; docs/security.md "Label masks"). A label is first published at or before its
+        birth scan (a stamp at first publication, an edge cell's next scan; a fused fresh label
+        by the next scan: :func:`_early`), relays later; so an older one needs a stamper (its
+        origin, or a shared label's mask bits) that this peer saw publish it so (itself or a
+        neighbour: first-hand), or a far stamper within ``sender``'s reach at its age
+        (unverifiable without signatures), or is a stamp moved a scan later by its stamper
+        (``peers.labelling.corroborated``: ``(o, s - 1, i)`` seen so, ``(o, s, i)`` published
+        when its track is next published, maskless). False (counted in :attr:`backdated`):
+        none of the estimate's labels taken."""
+        if self.reach is None:
+            return True
+        table = self.reach.get(sender)
+        lab = as_labels(labels)
+        if table is None or not len(lab):
+            return True
+        early = _early(lab, k)
+        if early.any():
+            self._saw_early(lab[early], table[0])  # table[0]: the sender's own bit
+        old = ~early & (lab[:, 1] >= k - KEEP_SCANS)
+        if not old.any():
+            return True
+        lo = lab[old]
+        m = np.asarray(masks, dtype=np.int64)[old]
+        origin = lo[:, 0] & ORIGIN_MASK
+        shared = origin == SHARED_ORIGIN
+        claim = np.where(shared, m, np.left_shift(1, (np.maximum(origin, 1) - 1)
+                                                  % SUPPORT_BITS))
+        h = (k - lo[:, 1] + 1) * self.rounds + rnd
+        far = claim & table[np.minimum(np.maximum(h, 0), len(table) - 1)] & ~self._near
+        seen, moved = self._seen(lo), np.zeros(len(lo), dtype=np.int64)
+        ok = (far != 0) | ((claim & seen) != 0)
+        if not ok.all():  # a stamp moved a scan later (uncorroborated), published after that
+            moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0]))
+            ok |= moved != 0
+        if ok.all():
+            return True
+        self.backdated += 1
+        return False
+
+    def _seen(self, lab: np.ndarray) -> np.ndarray:
+        """``(n,)`` bits of the peers seen publishing each of ``lab (n, 3)`` by its scan."""
+        seen = np.zeros(len(lab), dtype=np.int64)
+        if len(self._early) and len(lab):
+            hit, pos = keys_find(self._early, label_keys(lab))
+            seen[hit] = self._early_bits[pos[hit]]
+        return seen
+
+    def _saw_early(self, lab: np.ndarray, bit: int) -> None:
+        """Record ``lab (n, 3)`` as published by the peer of ``bit`` at or before their scan."""
+        if not len(lab):
+            return
+        keys = np.concatenate([self._early, label_keys(lab)])
+        bits = np.concatenate([self._early_bits, np.full(len(lab), bit, dtype=np.int64)])
+        order = np.argsort(keys, kind="stable")
+        keys, bits = keys[order], bits[order]
+        first = np.ones(len(keys), dtype=bool)
+        first[1:] = keys[1:] != keys[:-1]
+        starts = np.flatnonzero(first)
+        self._early, self._early_bits = keys[starts], np.bitwise_or.reduceat(bits, starts)
 
     def mask_of(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int64 masks of ``labels (n, 3)`` (0: not known, or not shared)."""
@@ -246,6 +348,10 @@ class LabelSupport:
         ok = self.scans >= k - keep
         if not ok.all():
             self.keys, self.masks, self.scans = self.keys[ok], self.masks[ok], self.scans[ok]
+        if len(self._early):
+            ok = _columns(self._early)[:, 1] >= k - keep
+            if not ok.all():
+                self._early, self._early_bits = self._early[ok], self._early_bits[ok]
 
 
 __all__ = ["KEEP_SCANS", "ORIGIN_MASK", "SUPPORT_BITS", "SUPPORT_SHIFT", "LabelSupport",

@@ -7,8 +7,9 @@ Per cell and variant: :func:`sim.studies.labelled.design_check.fused_row`'s colu
 every peer, the liar's own fused tracks included: its filter and fusion are honest), the share
 of the honest peers' fused track rows whose id is a label the liar stamped (``liar_ids``, %:
 identities it holds; its stamps: the shared labels of its round-0 estimates of their own
-scan), and the estimates whose mask a receiver cut (``clipped``, summed over peers:
-``rejected["label-mask"]``).
+scan), the estimates whose mask a receiver cut (``clipped``, summed over peers:
+``rejected["label-mask"]``) and those refused their labels for a birth scan no first-hand
+publication vouches for (``backdated``: ``rejected["label-scan"]``).
 
 ``python -m sensornet.sim.studies.labelled.mask_lie --runs 100 --graphs circ20 --pds 0.99``
 """
@@ -31,10 +32,12 @@ from sensornet.tracking.label_keys import SHARED_ORIGIN
 ALL_BITS = ((1 << SUPPORT_BITS) - 1) << SUPPORT_SHIFT
 """Every holder bit, in the origin column."""
 VARIANTS = ("honest-checked", "honest-unchecked", "liar-unchecked", "liar-checked",
-            "forger-unchecked", "forger-checked")
+            "forger-unchecked", "forger-checked", "backdater-unchecked", "backdater-checked")
 """``liar``: every holder bit set; ``forger``: also each shared label it stamps moved to the
 next cell index, so that it ties with the label the other peers stamped and can win only by
-its mask (a higher index loses a tie of equal support)."""
+its mask (a higher index loses a tie of equal support); ``backdater``: every shared label it
+sends a scan earlier (masks as they are), which wins whatever the support unless the
+receivers check birth scans (``LabelSupport.vouched``). "checked": both checks on."""
 
 
 def all_bits(labels: np.ndarray, k: int | None = None) -> np.ndarray:
@@ -45,6 +48,13 @@ def all_bits(labels: np.ndarray, k: int | None = None) -> np.ndarray:
     if k is not None:
         lab[shared & (lab[:, 1] == k), 2] += 1
     lab[shared, 0] |= ALL_BITS
+    return lab
+
+
+def backdated(labels: np.ndarray, by: int = 1) -> np.ndarray:
+    """Labels on the wire ``(n, 3)`` with every shared row's birth scan ``by`` scans earlier."""
+    lab = np.array(labels, dtype=np.int64, copy=True)
+    lab[(lab[:, 0] & ORIGIN_MASK) == SHARED_ORIGIN, 1] -= by
     return lab
 
 
@@ -69,7 +79,10 @@ class MaskLiarCore(PeerCore):
                 if m.round == 0:
                     mine = clean[(clean[:, 0] == SHARED_ORIGIN) & (clean[:, 1] == m.k)]
                     self.stamps.update(map(tuple, mine.tolist()))
-                if self.lie:
+                if self.lie == "backdater":
+                    m = replace(m, labels=backdated(m.labels))
+                    self.lies_told += 1
+                elif self.lie:
                     forge = m.k if self.lie == "forger" and m.round == 0 else None
                     m = replace(m, labels=all_bits(m.labels, forge))
                     self.lies_told += 1
@@ -102,8 +115,11 @@ def variant_row(scn, run: int, variant: str, liar: str) -> dict[str, float]:
     stamps = peers[liar].stamps
     if lie == "forger":  # the labels it sent: its stamps moved
         stamps = {(o, k, i + 1) for o, k, i in stamps}
+    elif lie == "backdater":  # the labels it sent: its stamps a scan earlier
+        stamps = {(o, k - 1, i) for o, k, i in stamps}
     row["liar_ids"] = liar_share(peers, liar, stamps)
     row["clipped"] = float(sum(c.rejected["label-mask"] for c in peers.values()))
+    row["backdated"] = float(sum(c.rejected["label-scan"] for c in peers.values()))
     return row
 
 
@@ -116,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     extra = _overrides(a.set)
     runs = [int(x) for x in a.runs.split(",")]
-    cols = (*COLUMNS, "liar_ids", "clipped")
+    cols = (*COLUMNS, "liar_ids", "clipped", "backdated")
     t0 = time.perf_counter()
     print("| graph | kind | Pd | variant | " + " | ".join(cols) + " |")
     print("|---|---|---:|---|" + "---:|" * len(cols))
