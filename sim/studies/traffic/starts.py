@@ -128,13 +128,13 @@ def report(truth: TrackTable, fused: TrackTable, ref: TrackTable,
     lines.append("aircraft-ticks the reference holds, fused not, by local peers holding: "
                  + ", ".join(f"{j}: {cnt[j]}/{tot[j]}" for j in range(len(names) + 1)))
     worst = np.argsort(-st["lag"] * keep, kind="stable")[:10]
-    lines.append("largest lags (aircraft, start tick, lag, local/half/after, first ticks "
-                 "ref/fused/each peer):")
+    lines.append("largest lags (aircraft, start tick, lag, " + "/".join(STAGES)
+                 + ", first ticks ref/fused/each peer):")
     for i in worst:
         if st["lag"][i] == 0:
             break
         lines.append(f"  {f['aircraft'][i]} {f['start'][i]} {st['lag'][i]} "
-                     f"{st['local'][i]}/{st['half'][i]}/{st['after'][i]} "
+                     + "/".join(str(st[s][i]) for s in STAGES) + " "
                      f"{f['ref'][i]}/{f['fused'][i]}/" + ",".join(str(x) for x in L[i]))
     return "\n".join(lines)
 
