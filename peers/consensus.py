@@ -174,11 +174,10 @@ class Consensus(BatchedRounds):
             return []
         labels = getattr(est, "labels", None)
         if labels is not None and self.label_support is not None:  # the masks off the wire
-            labels, masks = decode(labels)
-            if self.label_support.vouched(est.sender, labels, masks, est.k, est.round):
-                self.label_support.heard(est.sender, labels, masks, est.k, est.round)
-            else:  # a label older than any first-hand publication of it: none taken
-                labels = None
+            labels, masks = decode(labels)  # a label older than any publication vouched for:
+            labels, masks = self.label_support.checked(  # re-stamped to this scan
+                est.sender, labels, masks, est.k, est.round)
+            self.label_support.heard(est.sender, labels, masks, est.k, est.round)
         if labels is not None and (not self.labelled or len(labels) != len(payload)):
             labels = None  # not ours to use, or a receiver's bound cut its rows
         if est.round == 0 and est.kind == "posterior":

@@ -22,7 +22,8 @@ Bounds (each rejection is counted under its reason in :meth:`snapshot`):
 - ``label-mask``: an estimate whose shared labels' holder masks named peers its sender cannot
   vouch for (``peers.label_support``; those bits dropped, the estimate still fused);
   ``label-scan``: an estimate carrying a label older than any publication of it this peer
-  can vouch for (``LabelSupport.vouched``; the estimate fused without its labels);
+  can vouch for (``LabelSupport.refused``; the estimate fused, those rows re-stamped to its
+  scan);
 - ``truth-mismatch``/``truth-conflict`` (``peers.scoring``); ``ctl`` (an unknown command);
 - secure mode, counted by the transport before anything is decoded (``protocol.envelope``):
   ``unauthenticated`` (no valid signature of the key's owner), ``replayed`` (a copy of a
@@ -334,7 +335,7 @@ class PeerCore(CoreReceive, CoreOutputs):
         res = c.on_estimate(msg, now)
         if sup is not None and sup.clipped > clipped:  # fused, the bits it cannot vouch for
             out += self._reject("label-mask")  # dropped (peers.label_support)
-        if sup is not None and sup.backdated > backdated:  # fused without its labels
+        if sup is not None and sup.backdated > backdated:  # fused, those labels re-stamped
             out += self._reject("label-scan")  # a label older than its first publication
         return out + self._wrap(res)
 

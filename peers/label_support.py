@@ -30,8 +30,8 @@ exceed this, so honest runs are unchanged.
 Birth scans are checked too (:meth:`LabelSupport.vouched`): the earliest scan wins whatever the
 support, so a member could stamp a label before the target's first plots. A label is first
 published by its birth scan; an older one is taken only if a stamper this peer hears itself
-published it so (or a far stamper within the sender's reach claims it); else the estimate's
-labels are refused (:attr:`LabelSupport.backdated`; ``rejected["label-scan"]``).
+published it so (or a far stamper within the sender's reach claims it); else the row is
+re-stamped to the estimate's scan (:attr:`LabelSupport.backdated`; ``rejected["label-scan"]``).
 """
 
 from __future__ import annotations
@@ -245,8 +245,26 @@ class LabelSupport:
 
     def vouched(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
                 rnd: int = 0) -> bool:
-        """Whether decoded ``labels (n, 3)`` (masks ``(n,)``) of neighbour ``sender``'s
-        estimate of scan ``k`` may be taken: a lying member could stamp a label earlier than
+        """Whether every label of the estimate passes :meth:`refused` (recorded and counted)."""
+        return self.refused(sender, labels, masks, k, rnd) is None
+
+    def checked(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
+                rnd: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """``labels (n, 3)`` and ``masks (n,)`` with the rows :meth:`refused` re-stamped to
+        scan ``k`` (a label that loses to every older one, so the row stays the same target's
+        copy, not a second track) and their masks dropped."""
+        bad = self.refused(sender, labels, masks, k, rnd)
+        if bad is None:
+            return labels, masks
+        lab, m = np.array(labels, dtype=np.int64, copy=True), np.array(masks, dtype=np.int64)
+        lab[bad, 1] = k
+        m[bad] = 0
+        return lab, m
+
+    def refused(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
+                rnd: int = 0) -> np.ndarray | None:
+        """Which of decoded ``labels (n, 3)`` (masks ``(n,)``) of neighbour ``sender``'s
+        estimate of scan ``k`` are refused: a lying member could stamp a label earlier than
         the target's first plots and win it everywhere (the earliest scan wins whatever the
         support; docs/security.md "Label masks"). A label is first published at or before its
         birth scan (a stamp at first publication, an edge cell's next scan; a fused fresh label
@@ -255,20 +273,20 @@ class LabelSupport:
         neighbour: first-hand), or a far stamper within ``sender``'s reach at its age
         (unverifiable without signatures), or is a stamp moved a scan later by its stamper
         (``peers.labelling.corroborated``: ``(o, s - 1, i)`` seen so, ``(o, s, i)`` published
-        when its track is next published, maskless). False (counted in :attr:`backdated`):
-        none of the estimate's labels taken."""
+        when its track is next published, maskless). ``(n,)`` bool, the rows refused (the
+        estimate counted in :attr:`backdated`), or None: every row taken."""
         if self.reach is None:
-            return True
+            return None
         table = self.reach.get(sender)
         lab = as_labels(labels)
         if table is None or not len(lab):
-            return True
+            return None
         early = _early(lab, k)
         if early.any():
             self._saw_early(lab[early], table[0])  # table[0]: the sender's own bit
         old = ~early & (lab[:, 1] >= k - KEEP_SCANS)
         if not old.any():
-            return True
+            return None
         lo = lab[old]
         m = np.asarray(masks, dtype=np.int64)[old]
         origin = lo[:, 0] & ORIGIN_MASK
@@ -283,9 +301,11 @@ class LabelSupport:
             moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0]))
             ok |= moved != 0
         if ok.all():
-            return True
+            return None
         self.backdated += 1
-        return False
+        bad = np.zeros(len(lab), dtype=bool)
+        bad[np.flatnonzero(old)[~ok]] = True
+        return bad
 
     def _seen(self, lab: np.ndarray) -> np.ndarray:
         """``(n,)`` bits of the peers seen publishing each of ``lab (n, 3)`` by its scan."""

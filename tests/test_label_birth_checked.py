@@ -4,7 +4,8 @@ the support, so a member could stamp a label earlier than the target's first plo
 the target's id everywhere. A label is first published at or before its birth scan; a receiver
 takes a label older than the estimate only if a stamper it can vouch for published it by then
 (itself or a neighbour: first-hand) or a far stamper within the sender's reach claims it
-(peers.label_support.LabelSupport.vouched), and counts the estimates it refuses."""
+(peers.label_support.LabelSupport.refused); a refused row is re-stamped to the estimate's scan
+(it loses to every older label: the same target's copy, not a new track), and counted."""
 
 from __future__ import annotations
 
@@ -112,3 +113,19 @@ def test_a_stamp_moved_a_scan_later_passes_and_only_that():
     assert not sup.vouched("c", np.array([[S, 7, PB + 7]], dtype=np.int64), np.array([0]), 9)
     assert not sup.vouched("c", np.array([[S, 4, PB + 7]], dtype=np.int64), np.array([b3]), 9)
     assert sup.backdated == 2
+
+
+def test_checked_restamps_only_the_refused_rows_and_drops_their_masks():
+    b1, b3 = peer_bit(1), peer_bit(3)
+    sup = _line_support()
+    good = np.array([[S, 5, PB + 7]], dtype=np.int64)
+    assert sup.vouched("c", good, np.array([b3]), 5)
+    lab = np.array([[S, 5, PB + 7], [S, 3, PB + 7]], dtype=np.int64)
+    m = np.array([b3, b1 | b3])
+    out, mo = sup.checked("a", lab, m, 7)
+    np.testing.assert_array_equal(out, [[S, 5, PB + 7], [S, 7, PB + 7]])
+    np.testing.assert_array_equal(mo, [b3, 0])
+    np.testing.assert_array_equal(lab[1], [S, 3, PB + 7])  # the input untouched
+    assert sup.backdated == 1
+    same, sm = sup.checked("a", good, np.array([b3]), 7)  # all vouched: as they came
+    assert same is good and sup.backdated == 1
