@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from sensornet.tracking.elapsed import ElapsedMotion, slice_of, slices_per_tick
 from sensornet.tracking.gmphd import SensorParams
-from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.label_keys import keys_isin, label_keys
 from sensornet.tracking.lmb import LmbFilter, LmbState, check_scan
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet
 
@@ -102,7 +102,7 @@ def _predict(f: LmbFilter, state: LmbState, k: int, dt: float, j: int,
     born = labels[n0:]  # a view: (origin, k, i) own, (shared, k, cell) alike at every peer
     if f.shared_origin is not None:  # a cell a track of this tick already holds: own label
         taken = born[:, 0] == f.shared_origin
-        taken &= np.isin(label_keys(born), label_keys(labels[:n0]))
+        taken &= keys_isin(label_keys(born), label_keys(labels[:n0]))
         born[taken, 0] = f.origin
         born[taken, 2] = np.flatnonzero(taken)
     own = born[:, 0] == f.origin
@@ -140,7 +140,7 @@ def step_at_own_times(filt: LmbFilter, state: LmbState, z: np.ndarray, ages: np.
               else own.sector_pd(a, a + s, tr.means[top], tr.covs[top]))
         f.sensor = SensorParams(model, pd, own.clutter_intensity)
         st = f.correct(pred, z[bounds[j]:bounds[j + 1]])
-        rows = np.isin(label_keys(tr.labels), label_keys(st.tracks.labels))
+        rows = keys_isin(label_keys(tr.labels), label_keys(st.tracks.labels))
         state = LmbState(st.tracks, pred.hits[rows], k, st.pending)  # hits: once, at t_k
     state = _predict(f, state, k, k * own.T - t, n, own)
     hits = state.hits + (state.tracks.existence >= f.confirm_existence)
