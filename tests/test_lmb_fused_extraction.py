@@ -49,11 +49,11 @@ def test_every_target_most_peers_hold_is_reported():
 
 def test_the_real_traffic_scenarios_report_by_existence():
     """paris, paris-8 and switzerland-8 set it (decided on the Paris training hour); a file
-    without the key keeps ``filter.extraction``."""
+    without the key takes the default, the same rule (issue 33, the synthetic LMB graphs)."""
     assert fused_count({}) == 4
     for name in ("paris", "paris-8", "switzerland-8"):
         assert load_scenario(name, LMB).lmb.fused_extraction == "round"
-    assert load_scenario("seed000", LMB).lmb.fused_extraction == "filter"
+    assert load_scenario("seed000", LMB).lmb.fused_extraction == "round"
 
 
 def test_a_bad_rule_is_a_one_line_error():

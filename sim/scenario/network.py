@@ -323,7 +323,7 @@ class LmbSpec:
                                         "predicts to the tick; divides `scenario.scan_period`. "
                                         "0: every plot at its tick.", unit="s",
                                check=NONNEGATIVE)
-    fused_extraction: str = option("filter", doc="How an LMB peer reports tracks from its "
+    fused_extraction: str = option("round", doc="How an LMB peer reports tracks from its "
                                                  "fused density: `\"filter\"` "
                                                  "(`filter.extraction`), `\"round\"` (every "
                                                  "fused track heavier than "
@@ -335,5 +335,7 @@ class LmbSpec:
                                                  "peers hold fewer targets the total runs "
                                                  "short and `\"cardinality\"` drops a target "
                                                  "7 of 8 peers hold (issue 34, "
-                                                 "docs/real-traffic.md).",
+                                                 "docs/real-traffic.md). Default `\"round\"` "
+                                                 "(issue 33, evaluated on the synthetic "
+                                                 "LMB graphs: docs/labelled-tracking.md).",
                                      choices=("filter", *EXTRACTION_RULES))
