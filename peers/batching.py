@@ -128,11 +128,11 @@ class FusionBatch:
         return done
 
 
-def _label_together(jobs: list[FusionJob], results: dict) -> dict[int, object]:
-    """The labels of the fused densities of the jobs about to complete whose consensus
-    labels them (one job per consensus: each labels with its own state, untouched by the
-    others' completions), computed together: ``{id(job): FusedLabels}``; nothing if fewer
-    than two, or if the stacked computation raised (each then labels its own, as before)."""
+def _problems(jobs: list[FusionJob], results: dict,
+              problem_of) -> list[tuple[FusionJob, object]]:
+    """``(job, problem)`` for the jobs about to complete whose consensus is labelled and
+    waits for them (one job per consensus: each works from its own state, untouched by the
+    others' completions), ``problem_of(consensus, state, mix)`` where it gives one."""
     todo, seen = [], set()
     for j in jobs:
         c = j.consensus
@@ -142,9 +142,18 @@ def _label_together(jobs: list[FusionJob], results: dict) -> dict[int, object]:
         seen.add(id(c))
         if not c.waiting(j):
             continue
-        problem = c.label_problem(j.state, mix)
+        problem = problem_of(c, j.state, mix)
         if problem is not None:
             todo.append((j, problem))
+    return todo
+
+
+def _label_together(jobs: list[FusionJob], results: dict) -> dict[int, object]:
+    """The labels of the fused densities of the jobs about to complete whose consensus
+    labels them (one job per consensus: each labels with its own state, untouched by the
+    others' completions), computed together: ``{id(job): FusedLabels}``; nothing if fewer
+    than two, or if the stacked computation raised (each then labels its own, as before)."""
+    todo = _problems(jobs, results, lambda c, state, mix: c.label_problem(state, mix))
     if len(todo) < 2:
         return {}
     try:
@@ -158,18 +167,7 @@ def _masses_together(jobs: list[FusionJob], results: dict) -> dict[int, tuple]:
     """The input masses of the tracks the jobs about to complete will extract (one job per
     consensus, each by its own state), computed together: ``{id(job): (masses, supports,
     means)}``; nothing if fewer than two, or where the stacked computation declined."""
-    todo, seen = [], set()
-    for j in jobs:
-        c = j.consensus
-        mix, exc = results[id(j)]
-        if exc is not None or not getattr(c, "labelled", False) or id(c) in seen:
-            continue
-        seen.add(id(c))
-        if not c.waiting(j):
-            continue
-        problem = c.tracks_problem(j.state, mix)
-        if problem is not None:
-            todo.append((j, problem))
+    todo = _problems(jobs, results, lambda c, state, mix: c.tracks_problem(state, mix))
     if len(todo) < 2:
         return {}
     try:
