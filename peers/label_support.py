@@ -364,12 +364,14 @@ class LabelSupport:
         return out
 
     def prune(self, k: int, keep: int = KEEP_SCANS) -> None:
-        """Forget the masks of labels born more than ``keep`` scans before scan ``k``."""
-        ok = self.scans >= k - keep
+        """Forget the masks of labels born more than ``keep`` scans before scan ``k``, or
+        after it: a neighbour's label of a far-future birth scan (no honest estimate has one)
+        would otherwise stay for the run, and a sender could grow the store without bound."""
+        ok = np.abs(self.scans - k) <= keep
         if not ok.all():
             self.keys, self.masks, self.scans = self.keys[ok], self.masks[ok], self.scans[ok]
         if len(self._early):
-            ok = _columns(self._early)[:, 1] >= k - keep
+            ok = np.abs(_columns(self._early)[:, 1] - k) <= keep
             if not ok.all():
                 self._early, self._early_bits = self._early[ok], self._early_bits[ok]
 

@@ -129,3 +129,17 @@ def test_checked_restamps_only_the_refused_rows_and_drops_their_masks():
     assert sup.backdated == 1
     same, sm = sup.checked("a", good, np.array([b3]), 7)  # all vouched: as they came
     assert same is good and sup.backdated == 1
+
+
+def test_labels_of_far_future_birth_scans_are_forgotten_at_the_next_prune():
+    # a neighbour's labels stamped 10^6 scans ahead are recorded as it sends them, and are
+    # gone after the next prune: what one sender can leave in the store is bounded in scans
+    sup = _line_support()
+    far = np.array([[S, 10**6 + i, PB + i] for i in range(50)], dtype=np.int64)
+    sup.vouched("c", far, np.full(50, peer_bit(3)), 5)
+    sup.heard("c", far, np.full(50, peer_bit(3)), 5)
+    assert len(sup._early) == 50 and len(sup.keys) == 50
+    near = np.array([[S, 6, PB + 1]], dtype=np.int64)  # a peer a scan ahead: kept
+    sup.vouched("c", near, np.array([peer_bit(3)]), 6)
+    sup.prune(6)
+    assert len(sup._early) == 1 and len(sup.keys) == 0
