@@ -20,6 +20,12 @@ reference, a visit's **lag** (ticks the reference held it first) is split in ord
 And the aircraft-ticks the reference holds and the fused tracks do not, over whole visits, by
 how many peers' local tracks hold them then.
 
+Why the other peers do not hold the aircraft in the ``half`` stage (:func:`waiting`): for each
+peer without a track on it there, its own sensor model's ``Pd`` at the aircraft (the range
+curve of the shared scenario, ``sim.world.birth.radar_pd``: could it see it at all?) and how
+many plots of the aircraft its radar had made in the visit by then (has it had the data to
+confirm?); and per peer, the ticks from its first plot of a visit to its first track on it.
+
 ``python -m sensornet.sim.studies.traffic.starts [SCENARIO] --file F --start S --minutes M
 [--set KEY=VALUE ...] [--peer NAME]``: LMB peers (their fused twin gives both the local and the
 fused tracks) against the asynchronous centralised LMB.
@@ -42,7 +48,9 @@ from sensornet.sim.studies.traffic.study import (
     scenario_of,
     window_scenario,
 )
+from sensornet.sim.traffic.recorded import tick_plots, truth_ids
 from sensornet.sim.world import generate_run
+from sensornet.sim.world.birth import radar_pd
 from sensornet.tracking.track_metrics import TrackTable
 
 STAGES = ("local", "second", "half", "after")
@@ -139,6 +147,77 @@ def report(truth: TrackTable, fused: TrackTable, ref: TrackTable,
     return "\n".join(lines)
 
 
+def plots_so_far(truth: TrackTable, visit: np.ndarray,
+                 plots: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """``(N, P)``: per row of ``truth`` and sensor, the plots of the row's aircraft that the
+    sensor made in the row's visit (``visit (N,)``) up to and including its tick; ``plots[j]``
+    is sensor ``j``'s ``(ticks (m,), aircraft ids (m,))`` (aircraft plots only)."""
+    N, base = len(truth.scan), int(max(truth.scan.max(initial=0),
+                                       *(t.max(initial=0) for t, _ in plots))) + 1
+    order = np.lexsort((truth.scan, visit))
+    vo = visit[order]
+    first = np.flatnonzero(np.r_[True, vo[1:] != vo[:-1]])
+    row_key = truth.id * base + truth.scan
+    out = np.zeros((N, len(plots)), np.int64)
+    for j, (ticks, ids) in enumerate(plots):  # one pass per sensor, vectorised over plots
+        u, cnt = np.unique(np.asarray(ids, np.int64) * base + np.asarray(ticks, np.int64),
+                           return_counts=True)
+        pos = np.searchsorted(u, row_key).clip(max=max(len(u) - 1, 0))
+        per = np.where(u[pos] == row_key, cnt[pos], 0) if len(u) else np.zeros(N, np.int64)
+        cs = np.cumsum(per[order])
+        out[order, j] = cs - np.repeat(cs[first] - per[order][first],
+                                       np.diff(np.r_[first, N]))
+    return out
+
+
+def waiting(truth: TrackTable, fused: TrackTable, ref: TrackTable,
+            local: dict[str, TrackTable], grid: np.ndarray, c: float,
+            plots: list[tuple[np.ndarray, np.ndarray]], pd: np.ndarray, min_scans: int = 0
+            ) -> str:
+    """Why peers lack the aircraft in the ``half`` stage (module docstring): over the
+    (aircraft-tick, peer) cells of that stage where the peer has no track on it, its ``pd (N,
+    P)`` (its own sensor model at each row's aircraft) and :func:`plots_so_far`; and per peer
+    the ticks from its first plot in a visit to its first track (``plots`` and ``pd`` in
+    ``local``'s order)."""
+    names = list(local)
+    f = first_held(truth, {"ref": ref, "fused": fused, **local}, grid, c)
+    v, keep = f["visit"], f["scans"] >= min_scans
+    L = np.stack([f[n] for n in names], axis=1)
+    st = lag_stages(f["ref"], f["fused"], L)
+    off = truth.scan - f["start"][v]
+    a = (f["ref"] + st["local"] + st["second"])[v]
+    rows = keep[v] & (off >= a) & (off < a + st["half"][v])
+    hold = np.stack([f["held"][n] for n in names], axis=1)
+    R, J = np.nonzero(rows[:, None] & ~hold)
+    n = plots_so_far(truth, v, plots)
+    cn, p = n[R, J], pd[R, J]
+    lost = L[v[R], J] < off[R]
+    lines = [f"half stage: {int(rows.sum())} aircraft-ticks, {len(R)} (tick, peer) cells "
+             f"without the peer's track"]
+    if len(R):
+        lines.append(f"  their own Pd at the aircraft: < 0.1 in {int((p < 0.1).sum())}, < 0.5 in "
+                     f"{int((p < 0.5).sum())}, median {np.median(p):.2f}, min {p.min():.2f}; "
+                     f"plots of it in the visit by then: 0 in {int((cn == 0).sum())}, 1 in "
+                     f"{int((cn == 1).sum())}, 2 or more in {int((cn >= 2).sum())}; held "
+                     f"earlier in the visit in {int(lost.sum())}")
+        lines.append("  by peer (cells, median plots by then, median Pd): " + "; ".join(
+            f"{nm} {int((J == j).sum())}, {np.median(cn[J == j]):.0f}, "
+            f"{np.median(p[J == j]):.2f}" for j, nm in enumerate(names) if (J == j).any()))
+    first_plot = np.full((len(f["start"]), len(names)), np.iinfo(np.int64).max)
+    r, j = np.nonzero(n > 0)
+    np.minimum.at(first_plot, (v[r], j), off[r])
+    ok = keep[:, None] & (first_plot <= L) & (L < f["scans"][:, None])
+    at = hold & (off[:, None] == L[v]) & keep[v][:, None]  # each peer's first-held row
+    parts = []
+    for j, nm in enumerate(names):
+        lat = (L - first_plot)[ok[:, j], j]
+        if len(lat):
+            parts.append(f"{nm} {np.median(lat):.0f} ({np.median(n[at[:, j], j]):.0f})")
+    lines.append("per peer, ticks from its first plot of a visit to its first track (plots by "
+                 "then), medians: " + "; ".join(parts))
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sensornet.sim.studies.traffic.starts",
                                  description=__doc__.split("\n\n")[0])
@@ -162,8 +241,14 @@ def main(argv: list[str] | None = None) -> int:
     fused = peer_tables(twin, [peer], "fused", {})[peer]
     ref = run_part(a.scenario, over, "lmb", "centralised", a.run, with_hota=False,
                    keep_tables=True).tables["central"]
-    print(report(truth_table(truth), fused, ref, local, np.arange(1, scn.num_scans + 1),
-                 scn.metrics.ospa_cutoff, MIN_SCANS))
+    T, grid = truth_table(truth), np.arange(1, scn.num_scans + 1)
+    print(report(T, fused, ref, local, grid, scn.metrics.ospa_cutoff, MIN_SCANS))
+    plots = [(p.tick[p.truth != ""], truth_ids(p.truth[p.truth != ""]))
+             for p in tick_plots(scn, a.run)]
+    sites = np.array([s.position[:2] for s in scn.sensors], float)
+    r = np.linalg.norm(T.pos[:, None, :] - sites[None], axis=-1)
+    pd = np.stack([radar_pd(s)(r[:, j]) for j, s in enumerate(scn.sensors)], axis=1)
+    print(waiting(T, fused, ref, local, grid, scn.metrics.ospa_cutoff, plots, pd, MIN_SCANS))
     return 0
 
 
