@@ -113,7 +113,8 @@ class Consensus(BatchedRounds):
         self.support = (SupportRule(options.support_inputs, options.support_scans)
                         if self.fusing and options.support_inputs != 0 else None)
         """Which extracted fused tracks are reported (tracking.support); None: all."""
-        self.mature = (MatureExistence(options.existence_mature, options.existence_young)
+        self.mature = (MatureExistence(options.existence_mature, options.existence_young,
+                                       options.existence_absent)
                        if self.fusing and options.existence_mature > 0 else None)
         """Mature fused tracks' existence for extraction (tracking.mature_existence)."""
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))

@@ -65,6 +65,10 @@ class ConsensusOptions:
     """Extraction of fused tracks: a track older than :attr:`existence_young` scans that two
     inputs or more hold weighs at most their existences pooled about its fused weight of the
     scan before times this survival probability (tracking.mature_existence); 0: off."""
+    existence_absent: float = 0.0
+    """With :attr:`existence_mature`: an input holding no mass of a mature track counts in its
+    pool at this existence, the inputs' publication threshold (tracking.mature_existence
+    ``absent``); 0: such inputs are left out."""
     existence_keep: bool = False
     """With :attr:`existence_prior`: a fused track reported the scan before is pooled at any
     age and keeps its target against a new label beside it (tracking.support.pooled_weights
@@ -83,6 +87,8 @@ class ConsensusOptions:
             raise ValueError("a peer cannot be its own neighbour")
         if not 0.0 <= self.existence_mature <= 1.0:
             raise ValueError(f"existence_mature must be in [0, 1], got {self.existence_mature}")
+        if not 0.0 <= self.existence_absent < 1.0:
+            raise ValueError(f"existence_absent must be in [0, 1), got {self.existence_absent}")
         if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
             raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
                              f"got {self.existence_prior} and {self.existence_young}")

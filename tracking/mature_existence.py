@@ -16,6 +16,13 @@ centralised existence. It only lowers (the minimum of that and the fused weight:
 mature tracks with a low prior raise dead targets, docs/labelled-tracking.md "Design B"), and
 only the weights extraction reads: the fused density, its labels and what is published are the
 fuser's.
+
+``absent`` (``fusion.existence_absent``): an input that gives the track no mass at all counts in
+the pool at that existence, the threshold it publishes tracks from (its own existence of the
+target is below it: a censored observation, taken at the bound most favourable to the track),
+instead of being left out. Why (docs/labelled-tracking.md "Inputs without the track count"): at
+a target's death two of a peer's five inputs often hold no component of it, and the three that
+missed once alone pooled to 0.6-0.99 about the fused prior, so dead targets were still reported.
 """
 
 from __future__ import annotations
@@ -38,6 +45,9 @@ class MatureExistence:
     young: int = 2
     """Labels at most this many scans old are young (``fusion.existence_young``: pooled up,
     :func:`tracking.support.pooled_weights`), not lowered here."""
+    absent: float = 0.0
+    """An input holding no mass of a mature track counts at this existence (the inputs'
+    publication threshold, module docstring), if below the prior; 0: such inputs left out."""
     _keys: np.ndarray = field(default_factory=lambda: label_keys(np.zeros((0, 3), np.int64)),
                               repr=False)
     _w: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -48,13 +58,16 @@ class MatureExistence:
             raise ValueError(f"survival must be in (0, 1], got {self.survival}")
         if self.young < 0:
             raise ValueError(f"young must be >= 0, got {self.young}")
+        if not 0.0 <= self.absent < 1.0:
+            raise ValueError(f"absent must be in [0, 1), got {self.absent}")
 
     def caps(self, fused: np.ndarray, labels: np.ndarray, k: int, mass: np.ndarray
              ) -> np.ndarray:
         """``(n,)`` upper bounds of the fused components' extraction weights: the pooled
         existence for the mature rows held by two inputs or more (``mass (n, I)``,
         :func:`tracking.support.input_mass`) whose label had a fused weight at the last call
-        (scan ``k - s``), ``inf`` for the others. Remembers this scan's fused weight of each
+        (scan ``k - s``), ``inf`` for the others; with :attr:`absent`, the inputs holding no
+        mass of the row count at that existence. Remembers this scan's fused weight of each
         label (``fused (n,)``, summed over its rows, at most 1)."""
         fused = np.asarray(fused, dtype=float).reshape(-1)
         n = len(fused)
@@ -75,7 +88,10 @@ class MatureExistence:
                              1.0 - POOL_CLIP)
                 lo = logit(r0)
                 r = logit(np.clip(mass[use], POOL_CLIP, 1.0 - POOL_CLIP))
-                out[use] = expit(lo + np.where(held[use], r - lo[:, None], 0.0).sum(axis=1))
+                gone = (np.minimum(logit(self.absent) - lo, 0.0) if self.absent > 0
+                        else np.zeros_like(lo))  # an absent input's term: only lowers
+                out[use] = expit(lo + np.where(held[use], r - lo[:, None],
+                                               gone[:, None]).sum(axis=1))
         u, inv = np.unique(keys, return_inverse=True)
         self._keys = u
         self._w = np.minimum(np.bincount(inv.reshape(-1), fused, minlength=len(u)), 1.0)

@@ -55,6 +55,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         existence_prior=existence_prior(scn),
         existence_young=scn.fusion.existence_young,
         existence_mature=existence_mature(scn),
+        existence_absent=existence_absent(scn),
         existence_keep=scn.fusion.existence_keep,
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
@@ -113,6 +114,19 @@ def existence_mature(scn: Scenario) -> float:
     scenarios and GM-PHD peers are unchanged)."""
     on = scn.fusion.existence_mature
     return scn.survival_probability if on == 1 or (on < 0 and existence_prior(scn) > 0) else 0.0
+
+
+def existence_absent(scn: Scenario) -> float:
+    """The existence at which an input without a mature track counts in its pool
+    (:class:`tracking.mature_existence.MatureExistence` ``absent``): ``fusion.existence_absent``
+    if positive; -1 (auto): the LMB's ``lmb.tentative_threshold`` (what its inputs publish
+    tracks from) when :func:`existence_mature` is on for LMB peers, else 0 (off)."""
+    v = scn.fusion.existence_absent
+    if existence_mature(scn) <= 0:
+        return 0.0
+    if v >= 0:
+        return v
+    return scn.lmb.tentative_threshold if scn.network.filter == "lmb" else 0.0
 
 
 SINGLE_TARGET_WARMUP = 10.0

@@ -103,6 +103,18 @@ class FusionSpec:
                                            "scan or more (docs/labelled-tracking.md, \"Fused "
                                            "tracks outlive their targets\").",
                                    check=Bound(-1, 1))
+    existence_absent: float = option(0.0, doc="With `existence_mature`: an input holding no "
+                                              "mass of a mature fused track counts in its pool "
+                                              "at this existence (its own is below the "
+                                              "threshold it publishes tracks from), instead of "
+                                              "being left out (`tracking.mature_existence`); 0: "
+                                              "off; -1 (auto): `lmb.tentative_threshold` for "
+                                              "LMB peers. Issue 33: at a target's death some "
+                                              "inputs hold it no more and the rest, each after "
+                                              "one miss, kept it reported "
+                                              "(docs/labelled-tracking.md, \"Inputs without the "
+                                              "track count\").",
+                                     check=Bound(-1, 1, high_open=True))
     existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
                                              "the scan before is pooled at any age, and a "
                                              "new label beside it cannot take its target "
