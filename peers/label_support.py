@@ -45,8 +45,10 @@ from sensornet.tracking.label_keys import (
     PUBLISHED_BASE,
     SHARED_ORIGIN,
     as_labels,
+    keys_equal,
     keys_find,
     label_keys,
+    unique_keys,
 )
 
 SUPPORT_SHIFT = 24
@@ -69,10 +71,14 @@ eccentricity + 2 scans; then the mask is no longer asked for)."""
 def _early(lab: np.ndarray, k: int) -> np.ndarray:
     """``(n,)`` which of ``lab (n, 3)`` published at scan ``k`` are so by their birth scan: of
     scan ``k`` or later, or a fused fresh own label of scan ``k - 1`` (:data:`FRESH_INDEX`)."""
-    early = lab[:, 1] >= k
-    fresh = ((lab[:, 1] == k - 1) & (lab[:, 0] != SHARED_ORIGIN) & (lab[:, 2] >= FRESH_INDEX)
-             & (lab[:, 2] < PUBLISHED_BASE))
-    return early | fresh
+    scan = lab[:, 1]
+    early = scan >= k
+    prev = scan == k - 1
+    if prev.any():  # the fresh test only where it can hold (most estimates have no such row)
+        index = lab[:, 2]
+        early |= (prev & (lab[:, 0] != SHARED_ORIGIN) & (index >= FRESH_INDEX)
+                  & (index < PUBLISHED_BASE))
+    return early
 
 
 def peer_bit(origin: int) -> int:
@@ -179,15 +185,19 @@ class LabelSupport:
              else np.broadcast_to(m, (len(lab),)))
         self._or_in(lab, m)
 
-    def _or_in(self, lab: np.ndarray, m: np.ndarray) -> None:
-        """:meth:`add` of checked ``lab (n, 3)`` int64 and ``m (n,)`` int64."""
+    def _or_in(self, lab: np.ndarray, m: np.ndarray,
+               found: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """:meth:`add` of checked ``lab (n, 3)`` int64 and ``m (n,)`` int64 (``found``:
+        :meth:`_find` of ``lab`` in the store as it is, if the caller has it)."""
         ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
         if not ok.any():
             return
         if not ok.all():
             lab, m = lab[ok], m[ok]
+            if found is not None:
+                found = found[0][ok], found[1][ok]
         if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
-            hit, pos = self._find(lab)
+            hit, pos = self._find(lab) if found is None else found
             if hit.all():
                 np.bitwise_or.at(self.masks, pos, m)
                 return
@@ -197,7 +207,7 @@ class LabelSupport:
         order = np.argsort(keys, kind="stable")
         keys, allm, scans = keys[order], allm[order], scans[order]
         first = np.ones(len(keys), dtype=bool)
-        first[1:] = keys[1:] != keys[:-1]
+        first[1:] = ~keys_equal(keys[1:], keys[:-1])  # a structured != costs a Python call
         starts = np.flatnonzero(first)
         self.keys, self.scans = keys[starts], scans[starts]
         self.masks = np.bitwise_or.reduceat(allm, starts)
@@ -215,7 +225,10 @@ class LabelSupport:
         if self.reach is None or not m.any():
             self.add(lab, m)
             return 0
-        known = self.mask_of(lab)
+        known = np.zeros(len(lab), dtype=np.int64)
+        found = self._find(lab) if len(self.keys) and len(lab) else None
+        if found is not None:  # mask_of's answer; the lookup serves _or_in below too
+            known[found[0]] = self.masks[found[1][found[0]]]
         if not (m & ~known).any():  # every bit known here already: nothing to add or count
             return 0
         table = self.reach.get(sender)
@@ -232,7 +245,7 @@ class LabelSupport:
         cut = m & ~kept
         lost = int(((cut & ~known) != 0).sum()) if cut.any() else 0
         self.clipped += lost
-        self._or_in(lab, kept)  # (n,): m & allowed
+        self._or_in(lab, kept, found)  # (n,): m & allowed
         return lost
 
     def own(self, labels: np.ndarray, k: int) -> None:
@@ -295,8 +308,12 @@ class LabelSupport:
                                                   % SUPPORT_BITS))
         h = (k - lo[:, 1] + 1) * self.rounds + rnd
         far = claim & table[np.minimum(np.maximum(h, 0), len(table) - 1)] & ~self._near
-        seen, moved = self._seen(lo), np.zeros(len(lo), dtype=np.int64)
-        ok = (far != 0) | ((claim & seen) != 0)
+        ok = far != 0  # vouched by a far stamper: not looked up
+        if ok.all():
+            return None
+        seen, moved = np.zeros(len(lo), dtype=np.int64), np.zeros(len(lo), dtype=np.int64)
+        seen[~ok] = self._seen(lo[~ok])
+        ok |= (claim & seen) != 0
         if not ok.all():  # a stamp moved a scan later (uncorroborated), published after that
             moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0]))
             ok |= moved != 0
@@ -319,14 +336,24 @@ class LabelSupport:
         """Record ``lab (n, 3)`` as published by the peer of ``bit`` at or before their scan."""
         if not len(lab):
             return
-        keys = np.concatenate([self._early, label_keys(lab)])
-        bits = np.concatenate([self._early_bits, np.full(len(lab), bit, dtype=np.int64)])
-        order = np.argsort(keys, kind="stable")
-        keys, bits = keys[order], bits[order]
-        first = np.ones(len(keys), dtype=bool)
-        first[1:] = keys[1:] != keys[:-1]
-        starts = np.flatnonzero(first)
-        self._early, self._early_bits = keys[starts], np.bitwise_or.reduceat(bits, starts)
+        keys = unique_keys(label_keys(lab))  # sorted, each once
+        if len(self._early):  # the known ones take the bit in place, the others go in at
+            hit, pos = keys_find(self._early, keys)  # their places (no re-sort of the store)
+            if hit.any():
+                self._early_bits[pos[hit]] |= np.int64(bit)
+                keys = keys[~hit]
+            if not len(keys):
+                return
+            at = np.searchsorted(self._early, keys) + np.arange(len(keys))  # in the result
+            rest = np.ones(len(self._early) + len(keys), dtype=bool)
+            rest[at] = False  # np.insert's arrays, without its Python-side checks
+            early = np.empty(len(rest), dtype=self._early.dtype)
+            early[at], early[rest] = keys, self._early
+            bits = np.empty(len(rest), dtype=np.int64)
+            bits[at], bits[rest] = bit, self._early_bits
+            self._early, self._early_bits = early, bits
+        else:
+            self._early, self._early_bits = keys, np.full(len(keys), bit, dtype=np.int64)
 
     def mask_of(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int64 masks of ``labels (n, 3)`` (0: not known, or not shared)."""
