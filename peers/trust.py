@@ -30,8 +30,6 @@ from sensornet.peers.trust_checks import (
     neighbour_statistics_steps,
     offset_information,
     run_alone,
-    shape_overlaps,
-    target_mass,
 )
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.peers.trust_record import (
@@ -47,7 +45,7 @@ from sensornet.peers.trust_record import (
     residual_passes,
 )
 from sensornet.peers.trust_scan import ScanTests
-from sensornet.tracking.divergence import cs_from_log_overlaps, log_overlaps
+from sensornet.tracking.divergence import cs_from_log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 __all__ = ["LOW", "MAX_LOG", "STATES", "NeighbourTrust", "Trust", "TrustConfig", "alarm_limits",
@@ -161,7 +159,7 @@ class Trust(ScanTests):
         self.fused_in = {}
         if cfg.repair:
             stats = self._repair(k, rnd, own, shown, wmap, stats, set(late))
-        tested = self._test_late(k, own, inputs, late, stats)
+        tested = yield from self._test_late(k, own, inputs, late, stats)
         if rnd == 0:
             self._repeat_test(tested, stats)
         raw = dict(stats)
@@ -235,18 +233,19 @@ class Trust(ScanTests):
 
     def _test_late(self, k: int, own: GaussianMixture, inputs: dict[str, GaussianMixture],
                    late: dict[str, tuple[int, GaussianMixture]], stats: dict[str, float]
-                   ) -> dict[str, tuple[int, GaussianMixture, GaussianMixture]]:
+                   ) -> Generator:
         """Each estimate tested once, against own of its scan (:attr:`TrustConfig.same_scan`):
         a ``late`` one's statistic (in ``stats``) against own's density of the scan it was
-        made at, or 0 if it was tested before. Returns the tested ones, ``{s: (scan, density,
-        reference)}``."""
+        made at, or 0 if it was tested before. A generator of requests (:meth:`_single_steps`:
+        a host computes its peers' late tests with their other divergences, not one by one);
+        its value the tested ones, ``{s: (scan, density, reference)}``."""
         tested = {s: (k, inputs[s], own) for s in sorted(inputs) if s not in late}
         for s, (a, mix) in late.items():
             ref = self.own_at.get(a)
             if a <= self.n[s].tested or ref is None:
                 stats[s] = 0.0  # no new evidence
             else:
-                stats[s] = self._single(ref, self.shift(s, mix, a))
+                stats[s] = yield from self._single_steps(ref, self.shift(s, mix, a))
                 tested[s] = (a, mix, ref)
         return tested
 
@@ -313,11 +312,18 @@ class Trust(ScanTests):
     def _single(self, ref: GaussianMixture, mix: GaussianMixture) -> float:
         """The divergence test of ``mix`` against ``ref`` alone (a late estimate against own's
         density of its scan)."""
-        L = log_overlaps([ref, mix])
-        L0 = shape_overlaps(self.cfg, [ref, mix])
-        w = self.cfg.repeat_weight
-        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], mix.mass, ref.mass,
-                               target_mass(mix, w), target_mass(ref, w),
+        return run_alone(self._single_steps(ref, mix))
+
+    def _single_steps(self, ref: GaussianMixture, mix: GaussianMixture) -> Generator:
+        """:meth:`_single` as requests: the overlaps (:func:`tracking.divergence.log_overlaps`,
+        centred too with :attr:`TrustConfig.location_only`, as :func:`peers.trust_checks.
+        shape_overlaps`) and masses computed with the host's other requests (the same
+        numbers: :func:`peers.trust_batch.run_together`)."""
+        L = yield ("overlaps", [ref, mix])
+        L0 = (yield ("overlaps", centred([ref, mix]))) if self.cfg.location_only else None
+        masses, targets = yield ("masses", [ref, mix], self.cfg.repeat_weight)
+        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], masses[1], masses[0],
+                               targets[1], targets[0],
                                shape=0.0 if L0 is None else max(0.0, float(
                                    cs_from_log_overlaps(L0[1, 0], L0[1, 1], L0[0, 0]))))
 

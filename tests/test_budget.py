@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sensornet.peers.trust as trust_mod
 import sensornet.peers.trust_checks as checks_mod
 import sensornet.tracking.divergence as divergence
 from scipy.stats import multivariate_normal
@@ -199,7 +198,6 @@ def runs():
 
         mp = pytest.MonkeyPatch()
         mp.setattr(checks_mod, "log_overlaps", counted)
-        mp.setattr(trust_mod, "log_overlaps", counted)
         try:
             peers = {n: make_peer(scn, n, 0) for n in scn.sensor_names}
             fused: list[int] = []

@@ -19,12 +19,22 @@ import pytest
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.trust import Trust, TrustConfig
 from sensornet.peers.trust_batch import TOGETHER, run_together, weigh_together
-from sensornet.peers.trust_checks import ALONE, neighbour_statistics_steps
+from sensornet.peers.trust_checks import (
+    ALONE,
+    centred,
+    divergence_test,
+    neighbour_statistics_steps,
+    target_mass,
+)
 from sensornet.peers.trust_record import NeighbourTrust, push_window, stacked_window
 from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
-from sensornet.tracking.divergence import log_overlaps, log_overlaps_many
+from sensornet.tracking.divergence import (
+    cs_from_log_overlaps,
+    log_overlaps,
+    log_overlaps_many,
+)
 from sensornet.tracking.mixture import GaussianMixture
 
 from benchmarks.bench_network import scenario_text
@@ -281,6 +291,45 @@ def test_rounds_weighed_together_are_each_peers_own(c):
             if ra.registered is not None:
                 assert np.array_equal(ra.registered, rb.registered)
     assert changes > 0  # the liars were caught: the states moved
+
+
+def test_a_late_estimates_test_goes_with_the_hosts_requests(monkeypatch):
+    """A late estimate with new evidence (made at a scan not tested before) is tested against
+    own of its scan through the batch's stacked overlaps, not alone, and its statistic is
+    the divergence test of the two computed directly (log overlaps, masses)."""
+    cfg = TrustConfig(detection_probability=0.9, location_only=True)
+    rng = np.random.default_rng(5)
+    trusts = [Trust(cfg, NAMES) for _ in range(3)]
+    for t in trusts:
+        t.history = []  # every round's raw statistic
+    own1, own2 = _mixture(rng, 3), _mixture(rng, 3)
+    late_b = GaussianMixture(own1.weights, own1.means + 40.0, own1.covs)
+    for t in trusts:  # scan 1 without b: b is never tested at scan 1
+        t.weigh(1, 0, own1, {s: own1 for s in NAMES if s != "b"}, [0.25] * 4)
+    pairs: list[int] = []
+    stacked = TOGETHER["overlaps"]
+
+    def counted(args):
+        pairs.extend(len(a[0]) == 2 for a in args)
+        return stacked(args)
+
+    monkeypatch.setitem(TOGETHER, "overlaps", counted)
+    alone = copy.deepcopy(trusts[0])
+    calls = [(t, 2, 0, own2, {s: own2 for s in NAMES} | {"b": late_b}, [0.2] * 5, False,
+              {"b": (1, late_b)}) for t in trusts]
+    got = weigh_together(calls)
+    assert got == [alone.weigh(*calls[0][1:])] * 3
+    assert sum(pairs) == 6  # each peer's late test: plain and centred overlaps, stacked
+    L, L0 = log_overlaps([own1, late_b]), log_overlaps(centred([own1, late_b]))
+    w = cfg.repeat_weight
+    want = divergence_test(cfg, L[1, 1], L[1, 0], L[0, 0], late_b.mass, own1.mass,
+                           target_mass(late_b, w), target_mass(own1, w),
+                           shape=max(0.0, float(cs_from_log_overlaps(L0[1, 0], L0[1, 1],
+                                                                     L0[0, 0]))))
+    assert want > 0
+    for t in trusts:
+        assert t.n["b"].tested == 1
+        assert [raw for k, s, raw, *_ in t.history if (k, s) == (2, "b")] == [want]
 
 
 def _drift(own_at: dict, k: int, rng: np.random.Generator) -> GaussianMixture:
