@@ -46,7 +46,13 @@ from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMix
 from sensornet.tracking.mature_existence import MatureExistence
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
-from sensornet.tracking.support import SupportRule, input_mass, input_support, pooled_weights
+from sensornet.tracking.support import (
+    SupportRule,
+    input_mass,
+    input_support,
+    pooled_weights,
+    revisit_weights,
+)
 
 
 class Consensus(BatchedRounds):
@@ -490,6 +496,14 @@ class Consensus(BatchedRounds):
                                self.o.existence_prior, self.o.existence_young,
                                skip=copies, keep=keep),
                 fused.means, fused.covs)
+        if self.o.existence_revisit and mixes is not None and len(fused):
+            spans = dict(self.o.existence_revisit)
+            names = [self.o.name, *sorted(inputs.neighbours)]
+            fused = GaussianMixture.trusted(  # for extraction only
+                revisit_weights(fused.weights, labels, k, input_mass(fused.means, mixes)
+                                if masses is None else masses[0], list(inputs.weights),
+                                [spans.get(n, 0.0) for n in names]),
+                fused.means, fused.covs)
         if cap is not None and len(fused):
             fused = GaussianMixture.trusted(np.minimum(fused.weights, cap), fused.means,
                                             fused.covs)
@@ -511,7 +525,7 @@ class Consensus(BatchedRounds):
         """The last round's inputs (own density, then each neighbour's posterior) if the
         extraction rules need them and all are mixtures, else None."""
         if inputs is None or (self.support is None and self.o.existence_prior <= 0
-                              and self.mature is None):
+                              and self.mature is None and not self.o.existence_revisit):
             return None
         mixes = [inputs.own, *(inputs.neighbours[s].get("posterior")
                                for s in sorted(inputs.neighbours))]

@@ -73,6 +73,11 @@ class ConsensusOptions:
     """With :attr:`existence_prior`: a fused track reported the scan before is pooled at any
     age and keeps its target against a new label beside it (tracking.support.pooled_weights
     ``keep``)."""
+    existence_revisit: tuple[tuple[str, float], ...] = ()
+    """Extraction of fused tracks: per input (own name and neighbours') its radar's revisit
+    in scans, from the shared scenario; a young track two inputs hold weighs its AA existence
+    over the inputs that could have confirmed it by its age (tracking.support.revisit_weights);
+    empty: off."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""

@@ -125,6 +125,38 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
     return np.where(pick, pooled, w)
 
 
+def revisit_weights(w: np.ndarray, labels: np.ndarray, k: int, mass: np.ndarray,
+                    omegas: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """``(n,)`` extraction weights of fused tracks whose AA existence ``w (n,)`` (``sum_i
+    omega_i r_i``, Li 2022) counts inputs that cannot have confirmed the target yet: a
+    rotating radar shows a measurement-born target after its second plot, its first look
+    falls within one revisit ``span_i`` (scans) of the target's appearance, so by ``a = k -
+    birth scan`` (``labels[:, 1]``) input ``i`` could hold it with probability ``q_i =
+    clip(a / span_i - 1, 0, 1)`` (1 where it holds it, ``mass (n, I)`` > 0, or ``span_i <=
+    0``). A track two inputs or more hold weighs ``min(1, w / sum_i omega_i q_i)``: the AA
+    over the inputs that had the data, so a radar not yet looked at twice is no evidence
+    against it (issue 34, docs/real-traffic.md "Why the far radars confirm late"). ``spans``
+    must come from the shared scenario, not the senders (a member claiming blindness would
+    raise the others' tracks)."""
+    w = np.asarray(w, dtype=float).reshape(-1)
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1, 3)
+    mass = np.asarray(mass, dtype=float)
+    omegas = np.asarray(omegas, dtype=float).reshape(-1)
+    spans = np.asarray(spans, dtype=float).reshape(-1)
+    n, I = len(w), len(omegas)
+    if labels.shape[0] != n or mass.shape != (n, I) or spans.shape != (I,):
+        raise ValueError(f"labels, mass and spans must be ({n}, 3), ({n}, {I}) and ({I},), "
+                         f"got {labels.shape}, {mass.shape} and {spans.shape}")
+    held = mass > 0
+    age = (k - labels[:, 1]).astype(float)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.where(spans > 0, np.clip(age / spans - 1.0, 0.0, 1.0), 1.0)
+    q = np.where(held, 1.0, q)
+    d = q @ omegas
+    ok = (held.sum(axis=1) >= 2) & (d > 0)
+    return np.where(ok, np.maximum(w, np.minimum(1.0, w / np.where(ok, d, 1.0))), w)
+
+
 MAJORITY = -1
 """:attr:`SupportRule.min_inputs` for more than half of the round's inputs, at least 2."""
 
@@ -183,4 +215,5 @@ class SupportRule:
         return (support >= need) | (streak >= self.scans)
 
 
-__all__ = ["MAJORITY", "SupportRule", "input_mass", "input_support", "pooled_weights"]
+__all__ = ["MAJORITY", "SupportRule", "input_mass", "input_support", "pooled_weights",
+           "revisit_weights"]

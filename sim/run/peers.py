@@ -57,6 +57,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         existence_mature=existence_mature(scn),
         existence_absent=existence_absent(scn),
         existence_keep=scn.fusion.existence_keep,
+        existence_revisit=existence_revisit(scn),
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
         # ~40 % of its CPU at 50 peers (docs/labelled-tracking.md)
@@ -127,6 +128,16 @@ def existence_absent(scn: Scenario) -> float:
     if v >= 0:
         return v
     return scn.lmb.tentative_threshold if scn.network.filter == "lmb" else 0.0
+
+
+def existence_revisit(scn: Scenario) -> tuple[tuple[str, float], ...]:
+    """Each rotating sensor's revisit in scans (``rotation_period / scan_period``) when
+    ``fusion.existence_revisit`` is on, else ``()``: from the shared scenario, so no member's
+    message sets how much its absence counts (tracking.support.revisit_weights)."""
+    if not scn.fusion.existence_revisit:
+        return ()
+    return tuple((s.name, float(s.rotation_period) / scn.scan_period) for s in scn.sensors
+                 if s.rotation_period is not None)
 
 
 SINGLE_TARGET_WARMUP = 10.0

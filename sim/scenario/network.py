@@ -124,6 +124,17 @@ class FusionSpec:
                                              "far radars confirm aircraft late or never; "
                                              "docs/real-traffic.md, \"Fused births pooled "
                                              "across radars\").")
+    existence_revisit: bool = option(False, doc="Extraction of fused tracks (labelled peers, "
+                                                "rotating radars): a young track two inputs "
+                                                "or more hold weighs its AA existence over "
+                                                "the inputs whose radar could have confirmed "
+                                                "it by its age (two looks: each radar's "
+                                                "`rotation_period` from the scenario, "
+                                                "`tracking.support.revisit_weights`), so a "
+                                                "slow radar not yet looked at twice is no "
+                                                "evidence against it (issue 34, "
+                                                "docs/real-traffic.md, \"Why the far radars "
+                                                "confirm late\").")
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
