@@ -154,6 +154,9 @@ def add_run(sub) -> None:
     add_run_flags(r)
     r.add_argument("--sim", action="store_true",
                    help="run the discrete-event twin instead of processes (fast, no network)")
+    r.add_argument("--twin-workers", type=POSITIVE_INT, default=1, metavar="N",
+                   help="with --sim: the twin's peers split over N worker processes "
+                        "(the same results; 2 uses both cores of a 2-core machine)")
 
 
 def add_demo(sub) -> None:

@@ -6,13 +6,15 @@ changes go through :meth:`~peers.core.PeerCore.liveliness`, and deadlines throug
 :meth:`~peers.core.PeerCore.tick`; so decoding, validation, bounds and departures are covered
 here too. Every estimate a peer publishes reaches each peer that fuses it after the link's
 delay (``None`` drops it). With zero delays and generous deadlines it computes what the real
-processes compute, which the tests check.
+processes compute, which the tests check. ``run_twin(..., workers=2)`` plays the same peers
+over two forked processes, instant by instant (:mod:`sim.run.twin_split`), to the same bits.
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
@@ -24,6 +26,7 @@ from sensornet.peers.session import MAX_MESSAGE_BYTES
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Control, Estimate, Scan, Truth
+from sensornet.sim.run import twin_split
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world import generate_run, plot_ages
@@ -77,6 +80,9 @@ class TwinResult:
     """Messages over the transport's size limit, dropped before they reached each peer."""
     ospa: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
     """``ospa[peer][which][k]``: the OSPA of each scan's ``"local"``/``"fused"`` estimate."""
+    split: dict | None = None
+    """Over worker processes (``run_twin(workers=N)``): the groups and the counts of
+    :func:`sim.run.twin_split.run_split`; None in one process."""
 
     def tally(self, peer: str, outputs: list) -> None:
         """Keep what ``peer``'s outputs say for the result: its stop, fusion ages (a scan's
@@ -145,7 +151,8 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
              peers: dict[str, PeerCore] | None = None,
              faults: FaultInjector | None = None, network: str = "twin",
              inject: Iterable[Inject] = (), events: Iterable[Liveliness] = (),
-             data=None, batch: bool = False, world: list[tuple] | None = None) -> TwinResult:
+             data=None, batch: bool = False, world: list[tuple] | None = None,
+             workers: int = 1) -> TwinResult:
     """One run of the scenario's network on the virtual clock.
 
     Link behaviour: ``faults`` (a :class:`~peers.faults.FaultInjector`: delays, loss,
@@ -159,6 +166,11 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     at that instant, as events after it). ``world``: the world's events ``(t, kind, target,
     *payload)`` (as :func:`world_events` gives them) instead of the scenario's, e.g. a bag's
     (:mod:`sensornet.bag_twin`); ``inject`` and ``events`` are then ignored.
+
+    ``workers``: 1 plays every peer here; N > 1 splits the peers over N forked worker
+    processes synchronised per virtual instant (:mod:`sim.run.twin_split`: the same tracks
+    and summaries, tested to the bit; ``delay`` must then be a function of its arguments,
+    ``result.peers`` are the workers' final cores, copied back, not the objects passed in).
     """
     truth, scans = (data if data is not None else (None, None) if world is not None
                     else generate_run(scn, run))
@@ -177,6 +189,10 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
     if world is None:
         world = world_events(scn, truth, scans, keys, interval, inject, events,
                              plot_ages(scn, run))
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if workers > 1:
+        return _run_split(clock, names, world, batch, workers)
     for t, kind, target, *payload in world:
         clock.push(t, kind, target, *payload)
     clock.run(names, FusionBatch() if batch else None)
@@ -231,43 +247,125 @@ class _Clock:
             self.scheduled[target] = due
             self.push(max(due, t), "tick", target)
 
+    def start(self, names: list[str], fusions: FusionBatch | None) -> None:
+        """Ready to play: ``fusions`` (a host's batching) set on the peers, the keys known."""
+        if fusions is not None:
+            for core in self.peers.values():
+                core.consensus.batch = fusions
+        self.fusions = fusions
+        self.name_of = {id(core.consensus): n for n, core in self.peers.items()}
+        self.truth_key = self.keys.truth()
+        self.scan_keys = {self.keys.scan(n) for n in names}
+        self.prepared_at: float | None = None
+
+    def dispatch(self, t: float, kind: str, target: str, payload: tuple) -> None:
+        """One event of the queue, handled by its peer (with ``fusions``, the instant's
+        scans get their local steps computed together first)."""
+        peers, result, queue, fusions = self.peers, self.result, self.queue, self.fusions
+        if target in result.stops:
+            pass
+        elif kind == "msg" and payload[0] == self.truth_key and not peers[target].wants_truth:
+            pass  # not subscribed (peers.transport): Zenoh does not deliver it
+        elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
+            result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
+            self.handle(t, target, peers[target], [])  # the transport drops it (peers.session)
+        elif kind == "msg":
+            scan_keys = self.scan_keys
+            if fusions is not None and self.prepared_at != t and payload[0] in scan_keys:
+                # as a host: the instant's scans, their local steps computed together first
+                self.prepared_at = t
+                prepare_local_steps([(peers[target], *payload)] + [
+                    (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
+                    and q[4][0] in scan_keys and q[3] not in result.stops])
+            self.handle(t, target, peers[target],
+                        peers[target].receive(payload[0], payload[1], t))
+        elif kind == "live":
+            self.handle(t, target, peers[target],
+                        peers[target].liveliness(payload[0], payload[1], t))
+        else:
+            self.scheduled.pop(target, None)
+            self.handle(t, target, peers[target], [])
+
+    def fuse(self, t: float) -> None:
+        """The instant's events are handled: its consensus rounds fused together."""
+        for c in self.fusions.run(t):
+            name = self.name_of[id(c)]
+            if name not in self.result.stops:
+                self.handle(t, name, self.peers[name], self.peers[name].completed(t))
+
     def run(self, names: list[str], fusions: FusionBatch | None) -> None:
         """Play the queue to its end; with ``fusions`` (a host's batching), an instant's scans
         get their local steps computed together and its consensus rounds fused together."""
-        peers, result, queue = self.peers, self.result, self.queue
-        if fusions is not None:
-            for core in peers.values():
-                core.consensus.batch = fusions
-        name_of = {id(core.consensus): n for n, core in peers.items()}
-        truth_key = self.keys.truth()
-        scan_keys = {self.keys.scan(n) for n in names}
-        prepared_at: float | None = None
+        self.start(names, fusions)
+        queue = self.queue
         while queue:
             t, _, kind, target, payload = heapq.heappop(queue)
-            if target in result.stops:
-                pass
-            elif kind == "msg" and payload[0] == truth_key and not peers[target].wants_truth:
-                pass  # not subscribed (peers.transport): Zenoh does not deliver it
-            elif kind == "msg" and len(payload[1]) > MAX_MESSAGE_BYTES:
-                result.transport_drops[target] = result.transport_drops.get(target, 0) + 1
-                self.handle(t, target, peers[target], [])  # the transport drops it (peers.session)
-            elif kind == "msg":
-                if fusions is not None and prepared_at != t and payload[0] in scan_keys:
-                    # as a host: the instant's scans, their local steps computed together first
-                    prepared_at = t
-                    prepare_local_steps([(peers[target], *payload)] + [
-                        (peers[q[3]], *q[4]) for q in queue if q[0] == t and q[2] == "msg"
-                        and q[4][0] in scan_keys and q[3] not in result.stops])
-                self.handle(t, target, peers[target],
-                            peers[target].receive(payload[0], payload[1], t))
-            elif kind == "live":
-                self.handle(t, target, peers[target],
-                            peers[target].liveliness(payload[0], payload[1], t))
-            else:
-                self.scheduled.pop(target, None)
-                self.handle(t, target, peers[target], [])
+            self.dispatch(t, kind, target, payload)
             while fusions is not None and fusions.jobs and (not queue or queue[0][0] != t):
-                for c in fusions.run(t):  # the instant's events are handled: its rounds fused
-                    name = name_of[id(c)]
-                    if name not in result.stops:
-                        self.handle(t, name, peers[name], peers[name].completed(t))
+                self.fuse(t)
+
+
+@dataclass
+class _WorkerClock(_Clock):
+    """A twin worker's clock (:mod:`sim.run.twin_split`): its peers' queue; what they
+    publish to another worker's peers goes to :attr:`outbox`."""
+
+    local: set[str] = field(default_factory=set)
+    outbox: list = field(default_factory=list)
+
+    def push(self, t: float, kind: str, target: str, *payload) -> None:
+        if target in self.local:
+            heapq.heappush(self.queue, (t, next(self.order), kind, target, payload))
+        else:
+            self.outbox.append((t, kind, target, *payload))
+
+    def wave(self, t: float, incoming: list) -> None:
+        """The messages from other workers queued, then every local event at ``t``."""
+        for m in incoming:
+            self.push(*m)
+        queue = self.queue
+        while queue and queue[0][0] == t:
+            t, _, kind, target, payload = heapq.heappop(queue)
+            self.dispatch(t, kind, target, payload)
+
+    def reply(self, cpu: float) -> tuple:
+        """What the parent needs after a command: the messages out, the queue's head,
+        whether rounds wait for the batch, and the command's CPU seconds."""
+        out, self.outbox = self.outbox, []
+        return ("ok", out, self.queue[0][0] if self.queue else None,
+                bool(self.fusions is not None and self.fusions.jobs), cpu)
+
+
+def _run_split(clock: _Clock, names: list[str], world: list[tuple], batch: bool,
+               workers: int) -> TwinResult:
+    """:func:`run_twin` over ``workers`` forked processes (:mod:`sim.run.twin_split`):
+    ``clock`` (its queue empty) split into a :class:`_WorkerClock` per group of peers, each
+    with its peers' world events in the one-process order; the results merged back."""
+    groups = twin_split.split_peers(names, clock.listeners, workers)
+    owner = {n: w for w, g in enumerate(groups) for n in g}
+    clocks = []
+    for g in groups:
+        local = {n: clock.peers[n] for n in g}
+        clocks.append(_WorkerClock(
+            peers=local, keys=clock.keys, listeners=clock.listeners, faults=clock.faults,
+            link_delay=clock.link_delay, local=set(g),
+            result=TwinResult(peers=local, tracks={n: {} for n in g}, faults=clock.faults)))
+    for t, kind, target, *payload in world:  # a target of no worker: worker 0's KeyError
+        c = clocks[owner.get(target, 0)]
+        heapq.heappush(c.queue, (t, next(c.order), kind, target, tuple(payload)))
+    parts, stats = twin_split.play(clocks, groups, names, batch)
+    got: dict = {k: {} for k in ("peers", "tracks", "stops", "ages", "transport_drops",
+                                 "ospa")}
+    for part in parts:
+        for k in got:
+            got[k].update(part[k])
+    r = TwinResult(peers={n: got["peers"][n] for n in names},
+                   tracks={n: got["tracks"][n] for n in names}, faults=clock.faults,
+                   split=stats, **{k: {n: got[k][n] for n in names if n in got[k]}
+                                   for k in ("stops", "ages", "transport_drops", "ospa")})
+    if clock.faults is not None:  # the same decisions (per link and message), by time
+        clock.faults.log[:] = sorted((rec for p in parts for rec in p["faults"][0]),
+                                     key=lambda rec: rec.t)
+        clock.faults._counts = sum((p["faults"][1] for p in parts), Counter())
+    return r
+

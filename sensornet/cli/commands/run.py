@@ -81,6 +81,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         refuse_real_only_flags(args)
         check_budget(scn, args)
         return _run_twin(scn, args)
+    if getattr(args, "twin_workers", 1) != 1:
+        raise UserError("--twin-workers is the twin's: add --sim")
     check_real_run(args, scn, hosts)
     refuse_used_out(args.out)
     out = _run_folder(args.out, "run")
@@ -270,7 +272,7 @@ def _run_twin(scn, args: argparse.Namespace) -> int:
         raise UserError("--fault (process faults) needs real processes; drop --sim")
     refuse_used_out(args.out)
     t0 = time.perf_counter()
-    result = run_twin(scn, args.run)
+    result = run_twin(scn, args.run, workers=args.twin_workers)
     summaries = {name: result.summary(name) for name in result.peers}
     run_summary.add_track_summary(
         summaries, {n: core.scorer.results.table(n) for n, core in result.peers.items()},

@@ -21,9 +21,9 @@ speed against real time.
 
 ``python -m sensornet.sim.studies.traffic.study [SCENARIO] [--file F] [--start S]
 [--minutes M] [--set KEY=VALUE ...] [--kinds gmphd,lmb] [--centralised async|tick]
-[--jobs 2] [--md FILE] [--csv FILE] [--plot DIR]``; another recording runs through the same
-command with only ``--file``, ``--start`` (window) and the sites (``--set
-sensors.NAME.site=[lat, lon]``) changed.
+[--jobs 2] [--twin-workers 2] [--md FILE] [--csv FILE] [--plot DIR]``; another recording
+runs through the same command with only ``--file``, ``--start`` (window) and the sites
+(``--set sensors.NAME.site=[lat, lon]``) changed.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import resource
 import sys
 import time
 from dataclasses import dataclass, field
@@ -125,15 +127,22 @@ def table_rows(truth: TrackTable, tables: dict[str, TrackTable], scn: Scenario,
     return rows, aircraft
 
 
+def _children_cpu() -> float:
+    """CPU seconds of this process's reaped children (the twin's workers)."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def run_part(source: str, overrides: dict, kind: str, estimate: str, run: int,
              with_hota: bool = True, keep_tables: bool = False,
-             reference: str = REFERENCES[0]) -> Part:
+             reference: str = REFERENCES[0], workers: int = 1) -> Part:
     """One kind's ``estimate``: run it, then score every peer's (or the reference's) tracks;
-    ``reference``: which centralised one (:data:`REFERENCES`)."""
+    ``reference``: which centralised one (:data:`REFERENCES`); ``workers``: the twin's
+    processes (:func:`sim.run.twin.run_twin`; the same tables, CPU counted over all)."""
     scn = scenario_of(source, overrides, kind, estimate)
     truth, scans = generate_run(scn, run)
     T = truth_table(truth)
-    w0, c0 = time.perf_counter(), time.process_time()
+    w0, c0 = time.perf_counter(), time.process_time() + _children_cpu()
     if estimate == "centralised" and reference == "async":
         tracks, _ = run_async(async_lmb(scn) if kind == "lmb" else async_gmphd(scn),
                               plot_batches(scn, run), scn.scan_period)
@@ -147,16 +156,23 @@ def run_part(source: str, overrides: dict, kind: str, estimate: str, run: int,
                                              c, p) for k, e in enumerate(tracks)]))}
         tables = {"central": central_table(tracks)}
     else:
-        twin = run_twin(scn, run)
+        twin = run_twin(scn, run, workers=workers)
         which = "local" if estimate == "local" else "fused"
         tables = peer_tables(twin, scn.sensor_names, which, {})
         om = {n: twin.mean_ospa(n, which) for n in scn.sensor_names}
-    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    wall, cpu = time.perf_counter() - w0, time.process_time() + _children_cpu() - c0
     rows, aircraft = table_rows(T, tables, scn, om, with_hota)
     for r in rows:
         r.update(kind=kind, estimate=estimate)
     return Part(kind, estimate, rows, aircraft, wall, cpu, scn.num_scans * scn.scan_period,
                 tables if keep_tables else {}, T if keep_tables else None)
+
+
+def default_twin_workers(sim_seconds: float) -> int:
+    """The study's twin processes: 2 (both cores of issue 34's 2-core machine) for a window
+    of an hour or more on a machine of 2 cores or more, else 1 (a short window's fork and
+    copy back are not worth it)."""
+    return 2 if sim_seconds >= 3600 and (os.cpu_count() or 1) >= 2 else 1
 
 
 def distribution(aircraft: dict[str, dict[str, np.ndarray]], min_scans: int) -> dict:
@@ -365,6 +381,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="ticks an aircraft must be present to be judged per aircraft")
     ap.add_argument("--no-hota", action="store_true")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--twin-workers", type=int,
+                    help="the twin's processes per kind (sim.run.twin_split: the same "
+                    "tables); default 2 on a machine of 2 cores or more for a window of an "
+                    "hour or more, else 1")
     ap.add_argument("--md", help="write the table and the targets here too")
     ap.add_argument("--json", help="write the summary here")
     ap.add_argument("--csv", help="write the per-peer rows here")
@@ -383,8 +403,13 @@ def main(argv: list[str] | None = None) -> int:
     except (ScenarioError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    calls = [(a.scenario, over, k, e, a.run, not a.no_hota, bool(a.plot), a.centralised)
-             for k in kinds for e in ests]
+    if a.twin_workers is None:
+        a.twin_workers = default_twin_workers(base.num_scans * base.scan_period)
+    if a.twin_workers < 1:
+        print(f"--twin-workers must be >= 1, got {a.twin_workers}", file=sys.stderr)
+        return 2
+    calls = [(a.scenario, over, k, e, a.run, not a.no_hota, bool(a.plot), a.centralised,
+              a.twin_workers) for k in kinds for e in ests]
     t0 = time.perf_counter()
     parts = map_runs(run_part, calls, a.jobs, "traffic study (kind x estimate)", not a.quiet)
     summary = summarise(parts, base.scan_period, a.min_scans)
@@ -395,7 +420,8 @@ def main(argv: list[str] | None = None) -> int:
             f"visits >= {a.min_scans} ticks ({summary[0]['aircraft']} judged, "
             f"{summary[0]['short']} shorter)\n\n" + format_markdown(summary)
             + "\nTargets:\n\n" + targets(summary)
-            + f"\n{time.perf_counter() - t0:.0f} s wall\n")
+            + f"\n{time.perf_counter() - t0:.0f} s wall (the twin in {a.twin_workers} "
+            f"process{'es' if a.twin_workers > 1 else ''})\n")
     print(text)
     if a.md:
         Path(a.md).write_text(text)
