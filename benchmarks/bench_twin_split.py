@@ -87,7 +87,10 @@ def main(argv: list[str] | None = None) -> int:
               f"slowest per wave summed {st['critical_cpu']:.1f} s, parent {pn:.1f} s: with a "
               f"free core per worker about {sim / crit:.1f} x real time on the wall "
               f"({c1 / crit:.2f} x the one process's CPU), groups {st['groups']}", flush=True)
-    print(f"load {os.getloadavg()[0]:.1f} at the end")
+    me, kid = (resource.getrusage(w).ru_maxrss / 1024 for w in (resource.RUSAGE_SELF,
+                                                                resource.RUSAGE_CHILDREN))
+    print(f"load {os.getloadavg()[0]:.1f} at the end; peak RSS {me:.0f} MB here, {kid:.0f} MB "
+          "the largest worker")
     return 0
 
 
