@@ -32,6 +32,24 @@ def test_four_terminal_radars_report_a_track_the_en_route_ones_cannot_have_confi
     assert w[0] < 0.5 < out[0]
 
 
+def test_a_tentative_bernoulli_is_not_holding():
+    """A 2 scans old, two terminal radars at 0.99 and the en-route radars' tentative
+    Bernoullis of one look (0.01, mass > 0): those count by their revisit (q = 0), not as
+    holders (q = 1), nor do the other terminal radars (q = 2 / 2.375 - 1 < 0), so A's AA
+    weight (2 x 0.99 + 4 x 0.01) / 8 is over 2 / 8 of the weight: 1 at most. B, one radar
+    at 0.99 and tentative ones, keeps its AA weight (one holder)."""
+    mass = np.zeros((2, 8))
+    mass[0, :2] = mass[1, 0] = 0.99
+    mass[:, 4:] = 0.01
+    w = mass.sum(axis=1) / 8
+    out = revisit_weights(w, np.array([[1, 98, 0], [1, 98, 1]]), 100, mass, OMEGA, SPANS)
+    np.testing.assert_allclose(out, [1.0, w[1]], rtol=1e-12)
+    held_any = revisit_weights(w, np.array([[1, 98, 0], [1, 98, 1]]), 100, mass, OMEGA, SPANS,
+                               held_above=0.0)  # tentative ones as holders: the AA over 6
+    np.testing.assert_allclose(held_any, [w[0] * 8 / 6, 0.99 / 8 * 8 / 5 + 0.04 / 5],
+                               rtol=1e-12)
+
+
 def test_one_input_or_no_rotation_changes_nothing():
     """A track one input holds (one member alone, or one radar's clutter) keeps its AA weight
     however young; inputs without a revisit (span 0) always count, so with none the weights

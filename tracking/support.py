@@ -126,14 +126,16 @@ def pooled_weights(mix: GaussianMixture, labels: np.ndarray, k: int, mass: np.nd
 
 
 def revisit_weights(w: np.ndarray, labels: np.ndarray, k: int, mass: np.ndarray,
-                    omegas: np.ndarray, spans: np.ndarray) -> np.ndarray:
+                    omegas: np.ndarray, spans: np.ndarray, held_above: float = 0.5
+                    ) -> np.ndarray:
     """``(n,)`` extraction weights of fused tracks whose AA existence ``w (n,)`` (``sum_i
     omega_i r_i``, Li 2022) counts inputs that cannot have confirmed the target yet: a
     rotating radar shows a measurement-born target after its second plot, its first look
     falls within one revisit ``span_i`` (scans) of the target's appearance, so by ``a = k -
     birth scan`` (``labels[:, 1]``) input ``i`` could hold it with probability ``q_i =
-    clip(a / span_i - 1, 0, 1)`` (1 where it holds it, ``mass (n, I)`` > 0, or ``span_i <=
-    0``). A track two inputs or more hold weighs ``min(1, w / sum_i omega_i q_i)``: the AA
+    clip(a / span_i - 1, 0, 1)`` (1 where it holds it, ``mass (n, I)`` above ``held_above``:
+    its own confirmation, not a tentative Bernoulli of one look; or ``span_i <= 0``). A
+    track two inputs or more hold weighs ``min(1, w / sum_i omega_i q_i)``: the AA
     over the inputs that had the data, so a radar not yet looked at twice is no evidence
     against it (issue 34, docs/real-traffic.md "Why the far radars confirm late"). ``spans``
     must come from the shared scenario, not the senders (a member claiming blindness would
@@ -147,7 +149,7 @@ def revisit_weights(w: np.ndarray, labels: np.ndarray, k: int, mass: np.ndarray,
     if labels.shape[0] != n or mass.shape != (n, I) or spans.shape != (I,):
         raise ValueError(f"labels, mass and spans must be ({n}, 3), ({n}, {I}) and ({I},), "
                          f"got {labels.shape}, {mass.shape} and {spans.shape}")
-    held = mass > 0
+    held = mass > held_above
     age = (k - labels[:, 1]).astype(float)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         q = np.where(spans > 0, np.clip(age / spans - 1.0, 0.0, 1.0), 1.0)
