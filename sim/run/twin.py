@@ -169,8 +169,9 @@ def run_twin(scn: Scenario, run: int = 0, delay: LinkDelay | None = None,
 
     ``workers``: 1 plays every peer here; N > 1 splits the peers over N forked worker
     processes synchronised per virtual instant (:mod:`sim.run.twin_split`: the same tracks
-    and summaries, tested to the bit; ``delay`` must then be a function of its arguments,
-    ``result.peers`` are the workers' final cores, copied back, not the objects passed in).
+    and summaries, tested to the bit; ``faults`` take the same decisions, being drawn per
+    link and message; ``delay`` must be a function of its arguments; ``result.peers`` are
+    the workers' final cores, copied back, not the objects passed in).
     """
     truth, scans = (data if data is not None else (None, None) if world is not None
                     else generate_run(scn, run))
