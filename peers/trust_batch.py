@@ -34,6 +34,7 @@ from sensornet.peers.trust_checks import (
     withheld_increments,
 )
 from sensornet.tracking.divergence import log_overlaps_many
+from sensornet.tracking.mixture import GaussianMixture
 
 
 def weigh_together(calls: list[tuple]) -> list[list[float] | BaseException]:
@@ -206,15 +207,29 @@ def _offsets(args: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
 def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
     pos, min_weight, gate, chi2 = group[0][2:]
     out = [[(np.zeros((2, 2)), np.zeros(2)) for _ in mixes] for _, mixes, *_ in group]
-    todo = []  # (request, its reference's target components, [(mixture, selection)])
+    # each mixture's components of at least min_weight, their positions and position
+    # blocks, once per mixture object: a neighbour's estimate is one object at all its
+    # co-hosted receivers (peers.host_parts.SharedDecode), so it is in several requests
+    picked: dict[int, tuple] = {}
+
+    def pick(M: GaussianMixture) -> tuple:
+        v = picked.get(id(M))  # the objects are held by the requests meanwhile
+        if v is None:
+            a = M.weights >= min_weight
+            c = int(np.count_nonzero(a))
+            v = picked[id(M)] = (c, M.means[a][:, pos], position_block(M.covs[a], pos)
+                                 if c else None)
+        return v
+
+    todo = []  # (request, its reference's target components, [(mixture, its pick)])
     for r, (ref, mixes, *_) in enumerate(group):
         if len(ref) == 0:
             continue
         b = ref.weights >= min_weight
         if not b.any():
             continue
-        sel = [(i, M.weights >= min_weight) for i, M in enumerate(mixes) if len(M)]
-        sel = [(i, a) for i, a in sel if a.any()]
+        sel = [(i, pick(M)) for i, M in enumerate(mixes) if len(M)]
+        sel = [(i, v) for i, v in sel if v[0]]
         if sel:
             todo.append((r, b, sel))
     if not todo:
@@ -228,11 +243,9 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
         m = int(b.sum())
         mb[g, :m] = ref.means[b][:, pos]
         Pb[g, :m] = position_block(ref.covs[b], pos)
-        rows += [g] * sum(int(a.sum()) for _, a in sel)
-    mixes = [group[r][1][i].means[a] for r, _, sel in todo for i, a in sel]
-    ma = np.concatenate(mixes)[:, pos]  # (n, 2)
-    Pa = position_block(np.concatenate([group[r][1][i].covs[a] for r, _, sel in todo
-                                        for i, a in sel]), pos)  # (n, 2, 2)
+        rows += [g] * sum(v[0] for _, v in sel)
+    ma = np.concatenate([v[1] for _, _, sel in todo for _, v in sel])  # (n, 2)
+    Pa = np.concatenate([v[2] for _, _, sel in todo for _, v in sel])  # (n, 2, 2)
     rows = np.asarray(rows)
     diff = ma[:, None, :] - mb[rows]  # (n, top, 2)
     nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
@@ -243,15 +256,17 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
         return out
     Si = np.zeros_like(Pa)
     Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
-    lo = 0
+    counts = [v[0] for _, _, sel in todo for _, v in sel]
+    hits = np.add.reduceat(ok, np.cumsum([0, *counts[:-1]])).tolist()  # gated per mixture
+    lo, n = 0, 0
     for r, _, sel in todo:
-        for i, a in sel:
-            hi = lo + int(a.sum())
-            k = ok[lo:hi]
-            if k.any():
+        for i, _ in sel:
+            hi = lo + counts[n]
+            if hits[n]:
+                k = ok[lo:hi]
                 S = Si[lo:hi][k]
                 out[r][i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
-            lo = hi
+            lo, n = hi, n + 1
     return out
 
 
