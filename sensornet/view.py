@@ -115,6 +115,8 @@ class LiveView:
         self._between = 0.0
         """Seconds of the flush under way spent handling messages (:meth:`waiting`)."""
         self.flushes = 0
+        self._reported = 0
+        """Peers of ``state.first_report`` said to be in the recording (:meth:`reporting`)."""
         self._empty_at = time.monotonic()
         """When the view last found its queue empty (:meth:`behind`)."""
         self.session = None
@@ -206,12 +208,30 @@ class LiveView:
         self._between = 0.0
         self.batcher.map_keep = MAP_KEEP if self.behind() else None
         self.flushes += 1
-        self.batcher.flush(between=self.waiting,
-                           hold=() if (self.flushes - 1) % SERIES_EVERY == 0 else ("scalar",))
+        hold = () if (self.flushes - 1) % SERIES_EVERY == 0 else ("scalar",)
+        heard = self._heard()  # drawn before this flush: all sent by it
+        self.batcher.flush(between=self.waiting, hold=hold)
         took = time.monotonic() - t0 - self._between
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:
             self.flush_s = min(FLUSH_MAX_S, 2 * self.flush_s)
         self.note()
+        if not hold:
+            self.reporting(heard)
+
+    def _heard(self) -> int:
+        """Peers whose first report is drawn (0 with nothing to draw into yet)."""
+        return len(getattr(self.state, "first_report", ()))
+
+    def reporting(self, heard: int) -> None:
+        """One line naming the peers whose first reports a flush has just sent to the
+        recording (the first ``heard`` of ``state.first_report``): the view's own word that it
+        hears and has drawn them, which a script or test can wait on (a view that starts late
+        on a busy machine links after a short run's first scans, or after its end)."""
+        if heard > self._reported:
+            new = list(self.state.first_report.items())[self._reported:heard]
+            self._reported = heard
+            self.say("view: drew the first reports of "
+                     + ", ".join(f"{n} (scan {k})" for n, k in new))
 
     def behind(self) -> bool:
         """Whether the view runs behind the network: more than :data:`BEHIND` / 4 messages
@@ -255,8 +275,10 @@ class LiveView:
             self.at_end()
         self.drain(0.5)
         self.finish()
+        heard = self._heard()
         self.batcher.flush()
         self.note(final=True)
+        self.reporting(heard)
 
     def finish(self) -> None:
         """The messages still waiting at the end (heard before the view stopped: a view that

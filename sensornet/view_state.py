@@ -121,6 +121,9 @@ class ViewState:
         view handling them (ms; same clock on one machine)."""
         self.ended = False
         self.newest_k = 0
+        self.first_report: dict[str, int] = {}
+        """Per peer, in the order heard, the scan of its first report drawn (the view says
+        whose came once they are in the recording: :meth:`LiveView.flush`)."""
         self._series: dict[str, dict[str, str]] = {}
         """Per peer: report value name -> its entity (made once, not per row)."""
 
@@ -269,6 +272,8 @@ class ViewState:
 
     def telemetry(self, msg: Telemetry) -> None:
         n, k, t = msg.sender, msg.k, self._t(msg.k)
+        if n not in self.first_report:
+            self.first_report[n] = k
         color = self.color(n)
         paths = self._series.get(n)
         if paths is None:

@@ -320,21 +320,29 @@ def test_loss_duplication_and_reordering(tmp_path):
 
 @pytest.mark.network
 def test_sigterm_leaves_summary_and_recording(tmp_path):
-    # 40 scans: s2 is stopped once it reached scan 20, and must not reach the end first
-    sets = ["birth.model=truth", "scenario.num_scans=40"]
+    """SIGTERM to a peer: a clean exit, its summary, and the view's recording holds what it
+    drew of the peer. The view runs in SCHED_IDLE and starts seconds after the peers on a busy
+    machine (its imports): at load 20 it linked after a 40-scan run's s2 had stopped, so s2 is
+    stopped only once the view says it has drawn s2's reports (an event, its log), and the
+    world then (the run's end message: the others end as at the end of a run)."""
+    # scans enough that s2 cannot reach its end while the view starts; the world ends it
+    sets = ["birth.model=truth", "scenario.num_scans=3000", "network.speed=2"]
     term = {}
 
     def terminate_s2(handle):
         # once s2 itself has published the tracks of scan 20 (however far behind the world
-        # a busy machine leaves it), SIGTERM it and wait for it to exit
+        # a busy machine leaves it) and the view has drawn s2's reports, SIGTERM s2 and wait
+        # for it to exit, then the world
         session = open_session(connect=list(handle.endpoints.values()))
         try:
             term["k"] = _when_tracks_reach(session, Keys(handle.network), "s2", 20)
         finally:
             session.close()
+        _when_view_drew(handle, "s2", timeout=240.0)
         proc = handle.procs["s2"]
         proc.send_signal(signal.SIGTERM)
         term["code"] = proc.wait(timeout=60)
+        handle.procs["world"].send_signal(signal.SIGTERM)
 
     scn, codes, summaries = _run("seed000", tmp_path, sets, during=terminate_s2)
     assert term["code"] == 0 and codes["s2"] == 0  # a clean exit on SIGTERM
@@ -351,7 +359,26 @@ def test_sigterm_leaves_summary_and_recording(tmp_path):
     assert verify.returncode == 0, verify.stderr[-2000:]
     text = subprocess.run([exe, "rrd", "print", str(rrd)], capture_output=True, text=True,
                           timeout=120, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
-    assert "/metrics/ospa/s2/fused" in text and "/peers/s2/fused/means" in text
+    # drawn, not only styled: the series' style (SeriesLines) is logged for every peer of the
+    # scenario at the start, its values (Scalars) only from the reports drawn
+    assert "/metrics/ospa/s2/fused - data columns: [Scalars:scalars]" in text
+    assert "/peers/s2/fused/means" in text
+
+
+def _when_view_drew(handle, peer: str, timeout: float) -> None:
+    """Until the run's view says it has drawn ``peer``'s first report into its recording
+    (``view: drew the first reports of ...``, :meth:`sensornet.view.LiveView.reporting`)."""
+    log = handle.out / "logs" / "view.log"
+    end = time.monotonic() + timeout
+    while True:
+        text = log.read_text(errors="replace") if log.is_file() else ""
+        if any(line.startswith("view: drew the first reports of ")
+               and f" {peer} (scan " in line for line in text.splitlines()):
+            return
+        view = handle.views.get("view")
+        assert view is None or view.poll() is None, text[-2000:]  # the view ended first
+        assert time.monotonic() < end, f"the view never drew {peer}'s reports: {text[-2000:]}"
+        time.sleep(0.05)
 
 
 @pytest.mark.parametrize("text", ["kill:s2", "boom:s2@3", "kill:s2@0", "kill@3"])

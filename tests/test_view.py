@@ -393,6 +393,35 @@ def test_a_view_stops_after_count_messages_drawn():
     assert not t.is_alive()
 
 
+def test_a_view_says_whose_first_reports_its_recording_has():
+    """After a flush, one line names the peers whose first reports that flush sent (a test
+    waits on it before stopping a peer: a view that starts late on a busy machine heard
+    nothing of a short run); a report drawn during the flush is named after the next one,
+    once its rows are sent, and a peer is named once."""
+    said: list[str] = []
+    rec = _Rec()
+    view = LiveView("net", lambda b: ViewState(b, ["s1", "s2"]), rr, rec, say=said.append)
+    for i in range(450):  # a flush in parts: what waits is handled after the first 200
+        view.batcher.scalar(f"metrics/m{i}/s1", 1, 0.1, 1.0)
+
+    def report(name: str, k: int) -> bytes:
+        return encode(Telemetry(name, k, {"ospa/fused": 2.0}, (), {}, _mix(1)))
+
+    view.state.receive("sensornet/net/telemetry/s1", report("s1", 3))
+    view.q.put(("sensornet/net/telemetry/s2", report("s2", 4)))
+    view.flush()
+    assert view.q.empty() and said == ["view: drew the first reports of s1 (scan 3)"]
+    assert {"metrics/ospa/s1/fused", "peers/s1/fused/means"} <= set(rec.by_path())
+    assert "peers/s2/fused/means" not in rec.by_path()  # drawn meanwhile: the next flush's
+    view.state.receive("sensornet/net/telemetry/s1", report("s1", 5))
+    view.flush()
+    assert said[1:] == ["view: drew the first reports of s2 (scan 4)"]
+    assert {"metrics/ospa/s2/fused", "peers/s2/fused/means"} <= set(rec.by_path())
+    view.state.receive("sensornet/net/telemetry/s2", report("s2", 6))
+    view.flush()
+    assert len(said) == 2  # nobody new
+
+
 def test_telemetry_round_trip_and_refusals():
     msg = Telemetry("s1", 4, {"ospa/fused": 3.5, "age": 2.0}, ("s2 left",),
                     {"particles": np.arange(6.0).reshape(3, 2)}, _mix(2))

@@ -54,6 +54,11 @@ from sensornet.sim.run.run_summary import (  # noqa: F401  (the names other modu
 from sensornet.sim.scenario import Scenario
 from sensornet.sim.world.build import adjacency
 
+VIEW_TERM_GRACE = 60.0
+"""Seconds a view has after SIGTERM to write its recording before SIGKILL: it draws what it
+had heard for up to 10 s (``sensornet.view.END_DRAIN_S``), flushes and closes the file. A view
+behind a 300-scan run took 17.8 s at load 16; with 10 s it was killed and its ``.rrd`` had no
+footer (``rerun rrd verify`` failed). Only a view behind at the end waits that long."""
 VIEW_NICE = 10
 """The view process's nice value where its threads may not be SCHED_IDLE (``--idle``, which
 it asks for): on a busy machine it falls behind, not the peers."""
@@ -395,9 +400,10 @@ def wait_run(handle: RunHandle, timeout: float,
 
 def stop_views(handle: RunHandle, wait: float = 15.0) -> None:
     """The view ends by itself a few seconds after the run's end message; given ``wait``
-    seconds for that, then SIGTERM (it writes its recording), then SIGKILL."""
+    seconds for that, then SIGTERM (it writes its recording: :data:`VIEW_TERM_GRACE`), then
+    SIGKILL."""
     for proc in getattr(handle, "views", {}).values():
-        for action, grace in ((None, wait), ("terminate", 10.0), ("kill", 5.0)):
+        for action, grace in ((None, wait), ("terminate", VIEW_TERM_GRACE), ("kill", 5.0)):
             if action is not None:
                 getattr(proc, action)()
             try:
