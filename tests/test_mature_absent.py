@@ -93,3 +93,13 @@ def test_scenario_value(kind, value, expected):
     scn = load_scenario("seed000", overrides={"network.filter": kind,
                                               "fusion.existence_absent": value})
     assert consensus_options(scn, scn.sensor_names[0]).existence_absent == expected
+
+
+def test_the_default_is_auto():
+    """On by default for LMB peers that pool young tracks (evaluated once, 5 Dec); off where
+    the mature pool is (the real-traffic scenarios publish no tentative tracks)."""
+    lmb = load_scenario("seed000", overrides={"network.filter": "lmb"})
+    assert consensus_options(lmb, lmb.sensor_names[0]).existence_absent == 0.15
+    off = load_scenario("seed000", overrides={"network.filter": "lmb",
+                                              "lmb.tentative_threshold": 0.0})
+    assert consensus_options(off, off.sensor_names[0]).existence_absent == 0.0

@@ -103,7 +103,7 @@ class FusionSpec:
                                            "scan or more (docs/labelled-tracking.md, \"Fused "
                                            "tracks outlive their targets\").",
                                    check=Bound(-1, 1))
-    existence_absent: float = option(0.0, doc="With `existence_mature`: an input holding no "
+    existence_absent: float = option(-1.0, doc="With `existence_mature`: an input holding no "
                                               "mass of a mature fused track counts in its pool "
                                               "at this existence (its own is below the "
                                               "threshold it publishes tracks from), instead of "
