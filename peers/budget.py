@@ -122,10 +122,12 @@ class EstimateBudget:
     def _bound(self, sender: str, mix: GaussianMixture, pruning: int,
                rnd: int) -> tuple[GaussianMixture, np.ndarray | None]:
         """:meth:`bound`, and the rows of ``mix`` kept (``(m,)``) when the result is a
-        selection of them (None when merged)."""
+        selection of them (None when merged; all of them, unmade, when nothing was cut:
+        the result is ``mix`` itself, every honest estimate)."""
         n = len(mix)
-        self.largest[sender] = max(self.largest[sender], n)
-        out, rows = mix, np.arange(n)
+        if self.largest.get(sender, -1) < n:  # max(largest[sender], n), as a Counter keeps it
+            self.largest[sender] = n
+        out, rows = mix, None
         if (pruning == 2 or rnd == 0) and self.level2 is not None and n:
             keep = mix.weights > self.level2
             if not keep.all():
@@ -133,6 +135,8 @@ class EstimateBudget:
                 out = mix.select(rows)
         J = self.max_components
         if len(out) > J:
+            if rows is None:
+                rows = np.arange(n)
             top = heaviest(out.weights, 2 * J)
             out, rows = out.select(top), rows[top]
             if self.reducer is not None:
