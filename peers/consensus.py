@@ -307,6 +307,8 @@ class Consensus(BatchedRounds):
             inputs, senders, weights = self._trusted(call, inputs, self.trust.weigh(*call))
         inp = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
         st.inputs = inp
+        if st.round == 0:
+            st.first_inputs = inp
         if self.batch is not None and self.batchable and not now_only:
             st.pending = FusionJob(self, st, inp, senders, forced)
             self.batch.add(st.pending)
@@ -354,7 +356,7 @@ class Consensus(BatchedRounds):
                 self.hooks.adopt_labels(st.labels)
         elif labelling is not None:
             self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
-        return self._tracks(st.k, fused, now, st.labels, st.inputs,
+        return self._tracks(st.k, fused, now, st.labels, st.first_inputs,
                             None if labelling is None else labelling.copies, masses)
 
     def _label(self, st: ScanState, fused, done: FusedLabels | None = None):
@@ -401,14 +403,14 @@ class Consensus(BatchedRounds):
                             support=self.label_support)
 
     def tracks_problem(self, st: ScanState, fused) -> tuple | None:
-        """``(fused means, the round's input mixtures)`` if completing this round with
+        """``(fused means, the scan's first-round input mixtures)`` if completing this round with
         ``fused`` extracts tracks by the input masses (:meth:`_tracks`: the last round of a
         labelled scan, with ``existence_prior`` or the support rule), else None."""
         if (st.round + 1 < self.rounds or not self.labelled or not self.fusing
                 or self.hooks.extract_tracks is None or not isinstance(fused, GaussianMixture)
                 or not len(fused) or (self.support is None and self.o.existence_prior <= 0)):
             return None
-        mixes = self._input_mixtures(st.inputs)
+        mixes = self._input_mixtures(st.first_inputs)
         return None if mixes is None else (fused.means, mixes)
 
     def _trust_call(self, st: ScanState, inputs: dict, senders: list[str],
@@ -470,7 +472,10 @@ class Consensus(BatchedRounds):
                 copies: np.ndarray | None = None, masses: tuple | None = None) -> list:
         """The published tracks of scan ``k``: states only, or (labelled) a Tracks message
         with ids, covariances, existence and confirmation status (protocol 2). Fused tracks
-        (``inputs``: the last round's) by the extraction rules of tracking.support when on:
+        (``inputs``: the scan's first round's, own and neighbours' own scans: independent
+        evidence, as the pooled existence assumes; a later round's inputs are fused densities
+        that all hold one peer's young clutter track, which with 2 rounds was pooled as a
+        confirmation by each, issue 33) by the extraction rules of tracking.support when on:
         young tracks' pooled existence (``existence_prior``; not of an AA fusion's
         ``copies``, peers.labelling.copy_rows), then :attr:`support`. ``masses``: ``(input
         masses, supports of the rows, the fused means they are of)`` computed with other peers'

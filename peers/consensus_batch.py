@@ -87,6 +87,8 @@ class BatchedRounds:
         st = job.state
         inputs, job.senders, weights = self._trusted(call, inputs, weights)
         job.input = st.inputs = FusionInput(st.k, st.round, st.current, inputs, weights, st.z)
+        if st.round == 0:
+            st.first_inputs = st.inputs
         return None
 
     def complete(self, job: FusionJob, fused: GaussianMixture | None,

@@ -141,6 +141,11 @@ class ScanState:
     """Labels of :attr:`local`."""
     inputs: object = None
     """The last round's :class:`~peers.contracts.FusionInput` (its labels are looked up)."""
+    first_inputs: object = None
+    """The first round's :class:`~peers.contracts.FusionInput`: own density and the
+    neighbours' own estimates, each of its peer's scans only, so their evidence is
+    independent; the fused tracks' extraction rules read these (:meth:`~peers.consensus.
+    Consensus._tracks`), not a later round's fused inputs, which share it."""
 
 
 def payload_tuples(payload: GaussianMixture | ScanSet | np.ndarray) -> int:
