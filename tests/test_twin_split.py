@@ -11,13 +11,14 @@ import math
 import multiprocessing
 import os
 import signal
-from pathlib import Path
 
 import numpy as np
 import pytest
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.run.twin_split import split_peers
 from sensornet.sim.scenario import load_scenario
+
+from tests.processes import children
 
 pytestmark = pytest.mark.network  # forks worker processes
 
@@ -62,20 +63,6 @@ def _compare(one, two, names: list[str], rtol: float = 0.0, skip: tuple = ()) ->
     _same(one.ages, two.ages, "ages")
     _same(one.stops, two.stops, "stops")
     _same(one.transport_drops, two.transport_drops, "drops")
-
-
-def _children() -> set[int]:
-    """This process's child processes (from /proc)."""
-    me, out = os.getpid(), set()
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                stat = (d / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == me:
-                out.add(int(d.name))
-    return out
 
 
 @pytest.mark.parametrize("kind", ["gmphd", "lmb"])
@@ -156,14 +143,14 @@ def test_a_failing_worker_is_one_line_and_no_process_is_left(how):
             os.kill(os.getpid(), signal.SIGKILL)
         return 0.0
 
-    before = _children()
+    before = set(children(os.getpid()))
     with pytest.raises(RuntimeError) as err:
         run_twin(scn, 0, delay=delay, workers=2)
     text = str(err.value)
     assert "\n" not in text and "twin worker" in text
     assert ("ValueError: link broke" in text) if how == "raise" else ("died" in text)
     assert multiprocessing.active_children() == []
-    assert _children() <= before
+    assert set(children(os.getpid())) <= before
 
 
 def test_cli_sim_twin_workers_prints_the_same_table(tmp_path, capsys):
