@@ -235,7 +235,8 @@ def test_demo_is_run_seed000_with_a_viewer():
     demo, run = vars(parser.parse_args(["demo"])), vars(parser.parse_args(["run", "seed000"]))
     assert demo.pop("viewer") == "spawn" and run.pop("viewer") is None
     for d in (demo, run):
-        d.pop("command"), d.pop("sim", None), d.pop("scenario", None)
+        # --sim and its --twin-workers are run's alone (the demo is processes and a viewer)
+        d.pop("command"), d.pop("sim", None), d.pop("twin_workers", None), d.pop("scenario", None)
     assert demo == run
     assert COMMANDS["demo"].split(":")[0] == COMMANDS["run"].split(":")[0]  # one module
     assert load_scenario("seed000").birth.model == "truth"  # chosen in the scenario file
