@@ -527,8 +527,9 @@ class Consensus(BatchedRounds):
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
 
     def _input_mixtures(self, inputs: FusionInput | None) -> list[GaussianMixture] | None:
-        """The last round's inputs (own density, then each neighbour's posterior) if the
-        extraction rules need them and all are mixtures, else None."""
+        """The inputs' mixtures (own density, then each neighbour's posterior) of ``inputs``
+        (the scan's first round's, :meth:`_tracks`) if the extraction rules need them and all
+        are mixtures, else None."""
         if inputs is None or (self.support is None and self.o.existence_prior <= 0
                               and self.mature is None and not self.o.existence_revisit):
             return None
