@@ -205,3 +205,14 @@ def test_another_recording_runs_with_only_file_window_and_sites_changed(tmp_path
 def test_bad_kind_is_refused(capsys):
     assert S.main(["paris", "--kinds", "imm"]) == 2
     assert "unknown kind or estimate: imm" in capsys.readouterr().err
+
+
+def test_targets_without_local_or_reference_say_not_run():
+    """A study of the fused estimate alone has no ratio to judge: the targets table says the
+    estimate was not run, not "nan **no**" (a user would read that as a failed target)."""
+    fused = {"kind": "lmb", "estimate": "fused", "ospa2": 195.6, "ospa2_by_peer": {"cdg": 195.6},
+             "cont_median": 0.98, "cont_p10": 0.96, "sw_per_hour": 0.24}
+    text = S.targets([fused])
+    assert "nan" not in text and text.count("– (not run)") == 2
+    local = {**fused, "estimate": "local", "ospa2": 300.0, "ospa2_by_peer": {"cdg": 300.0}}
+    assert "0.65 **no**" in S.targets([fused, local])

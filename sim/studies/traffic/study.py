@@ -260,6 +260,9 @@ def targets(summary: list[dict]) -> str:
 
     def mark(ok: bool) -> str:
         return "yes" if ok else "**no**"
+
+    def ratio(x: float, limit: float) -> str:  # an estimate not run: no ratio, not a "no"
+        return "– (not run)" if math.isnan(x) else f"{x:.2f} {mark(x <= limit)}"
     lines = ["| kind | fused / local OSPA(2), worst peer (<= 0.5) | fused / centralised "
              "(<= 1.2) | fused continuity median, p10 (>= 90 %) | fused switches / "
              "aircraft-hour (<= 0.5) |", "|---|---:|---:|---:|---:|"]
@@ -271,7 +274,7 @@ def targets(summary: list[dict]) -> str:
              if loc else math.nan)
         b = f["ospa2"] / cen["ospa2"] if cen else math.nan
         lines.append(
-            f"| {kind} | {a:.2f} {mark(a <= 0.5)} | {b:.2f} {mark(b <= 1.2)} | "
+            f"| {kind} | {ratio(a, 0.5)} | {ratio(b, 1.2)} | "
             f"{_pc(f['cont_median'])}, {_pc(f['cont_p10'])} {mark(f['cont_p10'] >= 0.9)} | "
             f"{_f(f['sw_per_hour'], 2)} {mark(f['sw_per_hour'] <= 0.5)} |")
     return "\n".join(lines) + "\n"
