@@ -400,7 +400,7 @@ class Consensus(BatchedRounds):
         # an AA fuser keeps each input's copy of a target (peers.fusers.AaFuser.copies)
         return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
                             copies=bool(getattr(self.fuser, "copies", False)),
-                            support=self.label_support)
+                            support=self.label_support, fallback=self.o.label_fallback)
 
     def tracks_problem(self, st: ScanState, fused) -> tuple | None:
         """``(fused means, the scan's first-round input mixtures)`` if completing this round with

@@ -84,6 +84,9 @@ class ConsensusOptions:
     label_reach: tuple[tuple[str, tuple[int, ...]], ...] = ()
     """Per neighbour, the mask bits it can vouch for by hops (peers.label_support.reach_masks);
     the rest of a received mask is dropped and counted; empty: masks taken unchecked."""
+    label_fallback: bool = False
+    """A fused row that loses the label it won to a heavier row takes the next label it was
+    paired with instead of a fresh one (peers.labelling.label_fused ``fallback``)."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:

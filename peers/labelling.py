@@ -174,7 +174,8 @@ def _pairs(fused: GaussianMixture, t_m: np.ndarray, t_P: np.ndarray, src: np.nda
 def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, np.ndarray]],
                 origin: int, k: int, fresh_start: int = 0,
                 gate: float = LABEL_GATE, bump: np.ndarray | None = None,
-                copies: bool = False, support: LabelSupport | None = None) -> FusedLabels:
+                copies: bool = False, support: LabelSupport | None = None,
+                fallback: bool = False) -> FusedLabels:
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
@@ -195,7 +196,11 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     among labels of one scan the one more peers stamped wins (order ``(birth_scan, -holders,
     origin, index)``), and an own label that loses so to a later-ordered one is handed the
     winner as a release pair (:func:`tracking.label_matching.adopt_labels` takes only earlier
-    labels otherwise)."""
+    labels otherwise).
+
+    ``fallback``: a row that lost the label it won to a heavier row (and, with ``copies``, lies
+    outside ``gate`` of it) takes the next label it was paired with in the same order that no
+    row holds (:func:`next_labels`) instead of a fresh one; its own track is released to it."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -228,8 +233,19 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         keeper[wrows[by]] = wrows[by[np.maximum.accumulate(np.where(dup, 0, np.arange(len(by))))]]
         if bump is not None and len(bump):
             labels = corroborated(labels, won, J, S, bump, k)
+        won0 = won
+        if fallback:
+            pend = np.zeros(n, dtype=bool)
+            pend[J] = True
+            pend &= ~won
+            r = np.flatnonzero(pend)
+            if copies and len(r):
+                pend[r[_distance2(fused, r, keeper[r]) <= gate]] = False
+            if pend.any():
+                labels, won = next_labels(labels, won, pend, Js, L[order], fused.weights,
+                                          np.zeros(n, dtype=np.int64))
         # own pairs whose winner is another label: what the own estimator adopts
-        own = (S == 0) & won[J]
+        own = (S == 0) & won0[J]
         own_lab, win = L[own], labels[J[own]]
         change = ~keys_equal(label_keys(own_lab), label_keys(win))
         cost = np.zeros(int(change.sum()))
@@ -245,14 +261,64 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
         # an own track paired with a row that lost its label to a heavier row (a label two
         # targets held) releases it: it takes the row's fresh label (a RELEASE pair), else it
         # keeps the duplicated label and the row gets a new id every scan (docs/real-traffic.md)
-        rel = release_rows(fused, J, (S == 0) & ~won[J], keeper, gate, copies)
+        rel = release_rows(fused, J, (S == 0) & ~won0[J], keeper, gate, copies)
         if copies:
-            copy = copy_rows(fused, J, won, keeper, gate)
+            copy = copy_rows(fused, J, won0, keeper, gate)
         if rel.any():
             match = LabelMatch(np.concatenate([match.own, L[rel]]),
                                np.concatenate([match.nbr, labels[J[rel]]]),
                                np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
     return FusedLabels(labels, match, len(lost), copy)
+
+
+def _row_keys(prob: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """``(n,)`` sortable keys of (problem, label) rows (one problem: ``prob`` all 0)."""
+    a = np.empty((len(labels), 4), dtype=np.int64)
+    a[:, 0] = prob
+    a[:, 1:] = labels
+    return a.view(_ROW_KEY).reshape(-1)
+
+
+_ROW_KEY = np.dtype([("p", "<i8"), ("origin", "<i8"), ("birth_scan", "<i8"), ("index", "<i8")])
+
+
+def next_labels(labels: np.ndarray, won: np.ndarray, pending: np.ndarray, Jo: np.ndarray,
+                Lo: np.ndarray, weights: np.ndarray, prob: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`label_fused` ``fallback``: each ``pending (n,)`` row takes the first label after
+    its winner in its pairs' precedence order (``Jo (p,)`` rows, ``Lo (p, 3)`` labels, sorted
+    by row then the network rule) that no row of its problem (``prob (n,)``) holds yet; rows
+    wanting one label in one pass: the heavier (``weights (n,)``). One pass per rank (at most
+    the inputs' number). Returns the labels and ``won`` with the rows that took one. Why
+    (docs/real-traffic.md, "The switches traced"): a young aircraft's row paired with a slow
+    radar's track that had moved onto it from its neighbour lost that label to the neighbour's
+    heavier row and took a fresh one, so the label three inputs held and it was reported under
+    gave way to a new id (a switch per peer); the next paired label is that id."""
+    labels, won, pending = labels.copy(), won.copy(), pending.copy()
+    if not len(Jo):
+        return labels, won
+    start = np.flatnonzero(np.r_[True, Jo[1:] != Jo[:-1]])
+    rank = np.arange(len(Jo)) - np.repeat(start, np.diff(np.r_[start, len(Jo)]))
+    taken = _row_keys(prob[won], labels[won])
+    for r in range(1, int(rank.max()) + 1):
+        sel = np.flatnonzero((rank == r) & pending[Jo])
+        if not len(sel):
+            continue
+        rows, lab = Jo[sel], Lo[sel]
+        keys = _row_keys(prob[rows], lab)
+        ok = ~keys_isin(keys, taken)
+        rows, lab, keys = rows[ok], lab[ok], keys[ok]
+        if not len(rows):
+            continue
+        by = np.lexsort((-weights[rows], lab[:, 2], lab[:, 1], lab[:, 0], prob[rows]))
+        first = np.ones(len(by), dtype=bool)
+        first[1:] = ~keys_equal(keys[by[1:]], keys[by[:-1]])
+        rows, lab, keys = rows[by[first]], lab[by[first]], keys[by[first]]
+        labels[rows] = lab
+        won[rows] = True
+        pending[rows] = False
+        taken = np.concatenate([taken, keys])
+    return labels, won
 
 
 def release_rows(fused: GaussianMixture, J: np.ndarray, rel: np.ndarray, keeper: np.ndarray,
@@ -351,5 +417,5 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
 
 
 __all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "copy_rows",
-           "corroborated", "input_tracks", "label_fused", "origin_of", "release_rows",
-           "settle_scans", "take_moves"]
+           "corroborated", "input_tracks", "label_fused", "next_labels", "origin_of",
+           "release_rows", "settle_scans", "take_moves"]

@@ -20,7 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sensornet.peers.label_support import LabelSupport
-from sensornet.peers.labelling import FRESH_BASE, LABEL_GATE, FusedLabels, label_fused
+from sensornet.peers.labelling import (
+    FRESH_BASE,
+    LABEL_GATE,
+    FusedLabels,
+    label_fused,
+    next_labels,
+)
 from sensornet.tracking.label_keys import keys_equal, keys_isin
 from sensornet.tracking.label_matching import RELEASE
 from sensornet.tracking.labels import LabelMatch, as_labels, label_keys, precedes
@@ -42,11 +48,12 @@ class LabelProblem:
     bump: np.ndarray | None = None
     copies: bool = False
     support: LabelSupport | None = None
+    fallback: bool = False
 
     def alone(self) -> FusedLabels:
         """This problem's own :func:`label_fused`."""
         return label_fused(self.fused, self.inputs, self.origin, self.k, self.fresh_start,
-                           self.gate, self.bump, self.copies, self.support)
+                           self.gate, self.bump, self.copies, self.support, self.fallback)
 
 
 def _pkeys(prob: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -209,7 +216,18 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
                   if pr.bump is not None and len(pr.bump)]
         if bumped:
             labels = _corroborated(labels, won, J, S, prob_f, kk, bumped)
-        own = (S == 0) & won[J]
+        won0 = won
+        fall = np.array([bool(pr.fallback) for pr in probs])
+        if fall.any():
+            pend = np.zeros(N, dtype=bool)
+            pend[J] = True
+            pend &= ~won & fall[prob_f]
+            r = np.flatnonzero(pend & copies[prob_f])
+            if len(r):
+                pend[r[_distance2(Fm, FP, r, keeper[r]) <= gate[prob_f[r]]]] = False
+            if pend.any():
+                labels, won = next_labels(labels, won, pend, Js, L[order], Fw, prob_f)
+        own = (S == 0) & won0[J]
         own_lab, win = L[own], labels[J[own]]
         change = ~keys_equal(label_keys(own_lab), label_keys(win))
         cost = np.zeros(int(change.sum()))
@@ -229,12 +247,12 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
     rel = np.zeros(len(J), dtype=bool)
     if len(J):
         # release_rows: an own track paired with a row that lost its label
-        rel = (S == 0) & ~won[J]
+        rel = (S == 0) & ~won0[J]
         r = np.flatnonzero(rel & copies[pl])
         if len(r):
             rel[r[_distance2(Fm, FP, J[r], keeper[J[r]]) <= gate[pl[r]]]] = False
         # copy_rows (problems with copies)
-        rows = np.unique(J[~won[J] & copies[pl]])
+        rows = np.unique(J[~won0[J] & copies[pl]])
         if len(rows):
             copy[rows[_distance2(Fm, FP, rows, keeper[rows]) <= gate[prob_f[rows]]]] = True
     none = np.zeros((0, 3), dtype=np.int64)

@@ -115,6 +115,18 @@ class FusionSpec:
                                               "(docs/labelled-tracking.md, \"Inputs without the "
                                               "track count\").",
                                      check=Bound(-1, 1, high_open=True))
+    label_fallback: bool = option(False, doc="Labels of fused tracks (labelled peers): a "
+                                             "fused row that loses the label it won to a "
+                                             "heavier row (two rows paired with one label; "
+                                             "with AA, outside the gate of it) takes the next "
+                                             "label it was paired with in the network rule's "
+                                             "order that no row holds, instead of a fresh "
+                                             "one, and its own track is released to it "
+                                             "(`peers.labelling.next_labels`). Issue 34: a "
+                                             "young aircraft's reported label gave way to a "
+                                             "fresh one when a slow radar's track of its "
+                                             "neighbour moved onto it (docs/real-traffic.md, "
+                                             "\"The switches traced\").")
     existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
                                              "the scan before is pooled at any age, and a "
                                              "new label beside it cannot take its target "

@@ -1,0 +1,132 @@
+"""peers.labelling.label_fused ``fallback`` (issue 34, docs/real-traffic.md "The switches
+traced"): a fused row that loses the label it won to a heavier row takes the next label it was
+paired with, not a fresh one, and its own track is released to that label; batched equals one
+by one to the bit."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from sensornet.peers.labelling import FRESH_BASE, label_fused, next_labels
+from sensornet.peers.labelling_batch import label_fused_many
+from sensornet.tracking.label_matching import RELEASE, adopt_labels
+from sensornet.tracking.mixture import GaussianMixture
+
+from tests.test_labelling_batch import _problem, _same
+
+COV = np.diag([100.0**2, 10.0**2, 100.0**2, 10.0**2])
+OLD, YOUNG = (0, 160, 3), (0, 200, 4)  # 3949f7's label, 506d8e's (CDG, Orly, Pontoise)
+
+
+def _mix(means, weights=None):
+    means = np.atleast_2d(np.asarray(means, dtype=float))
+    w = np.ones(len(means)) if weights is None else np.asarray(weights, dtype=float)
+    return GaussianMixture(w, means, np.repeat(COV[None], len(means), axis=0))
+
+
+A = [0.0, 0.0, 0.0, 0.0]  # the older aircraft (heavier fused row)
+B = [2200.0, 0.0, 0.0, 0.0]  # the young aircraft 2.2 km away
+
+
+def _scan(fallback: bool, own_labels: np.ndarray, k: int = 202):
+    """South's view at the incident: its own track OLD has moved onto B; three neighbours
+    hold A under OLD and B under YOUNG. Fused rows: A (heavier), B."""
+    fused = _mix([A, B], [0.99, 0.9])
+    own = (_mix([B]), own_labels)
+    nbrs = [(_mix([A, B]), np.array([OLD, YOUNG])) for _ in range(3)]
+    return label_fused(fused, [own, *nbrs], origin=7, k=k, fallback=fallback, copies=True)
+
+
+def test_a_row_that_loses_its_label_takes_the_next_paired_label_not_a_fresh_one():
+    before = _scan(False, np.array([OLD]))
+    assert tuple(before.labels[0]) == OLD
+    assert tuple(before.labels[1][:2]) == (7, 202) and before.labels[1][2] >= FRESH_BASE
+    assert before.fresh == 1
+    got = _scan(True, np.array([OLD]))
+    np.testing.assert_array_equal(got.labels, [OLD, YOUNG])
+    assert got.fresh == 0
+    # south's own track on B is released to YOUNG (it takes it though it is the later label)
+    assert len(got.own) == 1 and got.own.cost[0] == RELEASE
+    np.testing.assert_array_equal(got.own.own, [OLD])
+    np.testing.assert_array_equal(got.own.nbr, [YOUNG])
+    np.testing.assert_array_equal(adopt_labels(np.array([OLD]), got.own), [YOUNG])
+
+
+def test_the_reported_label_survives_the_sequence_and_peers_agree():
+    """Scans 200-204: the young row is reported under YOUNG from 200; at 202 south's track
+    OLD moves onto it. With the fallback every peer's fused label of B stays YOUNG; without
+    it, it changes to a fresh label at 202 (the switch of docs/real-traffic.md)."""
+    for fallback, want in ((True, {YOUNG}), (False, None)):
+        south = np.array([YOUNG])
+        seen = []
+        for k in range(200, 205):
+            if k == 202:
+                south = np.array([OLD])  # its track of A wandered onto B
+            got = _scan(fallback, south, k)
+            seen.append(tuple(got.labels[1]))
+            # a neighbour (CDG) fuses the same scan's densities, south's among them
+            cdg = label_fused(_mix([A, B], [0.99, 0.9]),
+                              [(_mix([A, B]), np.array([OLD, YOUNG])), (_mix([B]), south),
+                               (_mix([A, B]), np.array([OLD, YOUNG]))],
+                              origin=2, k=k, fallback=fallback, copies=True)
+            if fallback:
+                assert tuple(cdg.labels[1]) == seen[-1]
+            south = adopt_labels(south, got.own)
+        if want is not None:
+            assert set(seen) == want
+        else:
+            assert len(set(seen)) > 1 and seen[2][2] >= FRESH_BASE
+
+
+def test_copies_within_the_gate_keep_a_fresh_label():
+    """Under AA a row within the gate of the row that kept its label is the same target's
+    copy (peers.labelling.copy_rows): no fallback, it stays marked a copy."""
+    fused = _mix([A, [30.0, 0, 0, 0]], [0.99, 0.3])
+    inputs = [(_mix([[30.0, 0, 0, 0]]), np.array([OLD])),
+              (_mix([A, [30.0, 0, 0, 0]]), np.array([OLD, YOUNG]))]
+    got = label_fused(fused, inputs, 1, 5, fallback=True, copies=True)
+    assert got.labels[1][2] >= FRESH_BASE and got.copies[1]
+
+
+def test_next_labels_heavier_row_first_and_taken_labels_skipped():
+    labels = np.array([[0, 1, 0], [0, 1, 0], [0, 1, 0], [9, 9, 9]])
+    won = np.array([True, False, False, True])
+    pending = np.array([False, True, True, False])
+    # rows 1 and 2 both lost (0,1,0); next: row 1 -> (9,9,9) (taken) then (0,2,0);
+    # row 2 -> (0,2,0) too, heavier -> row 2 wins it at rank 1, row 1 at rank 2 gets (0,3,0)
+    Jo = np.array([1, 1, 1, 2, 2])
+    Lo = np.array([[0, 1, 0], [9, 9, 9], [0, 2, 0], [0, 1, 0], [0, 2, 0]])
+    Jo, Lo = np.r_[Jo, 1], np.r_[Lo, [[0, 3, 0]]]
+    by = np.argsort(Jo, kind="stable")
+    out, won2 = next_labels(labels, won, pending, Jo[by], Lo[by],
+                            np.array([1.0, 0.2, 0.5, 1.0]), np.zeros(4, dtype=np.int64))
+    np.testing.assert_array_equal(out[2], [0, 2, 0])
+    np.testing.assert_array_equal(out[1], [0, 3, 0])
+    assert won2.all()
+
+
+def test_batched_equals_one_by_one_with_the_fallback():
+    rng = np.random.default_rng(3403)
+    changed = 0
+    for _ in range(150):
+        problems = [dataclasses.replace(_problem(rng), fallback=bool(rng.random() < 0.7))
+                    for _ in range(int(rng.integers(1, 9)))]
+        for pr, g in zip(problems, label_fused_many(problems), strict=True):
+            ref = pr.alone()
+            _same(g, ref)
+            if pr.fallback:
+                plain = dataclasses.replace(pr, fallback=False).alone()
+                changed += int((ref.labels != plain.labels).any(axis=1).sum())
+    assert changed > 10  # the random cases do fall back
+
+
+def test_the_option_reaches_the_peers_from_the_scenario():
+    from sensornet.sim.run.peers import consensus_options
+    from sensornet.sim.scenario import load_scenario
+
+    scn = load_scenario("paris-8", overrides={"network.filter": "lmb"})
+    assert consensus_options(scn, "cdg").label_fallback is False
+    scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
+                                              "fusion.label_fallback": True})
+    assert consensus_options(scn, "cdg").label_fallback is True
