@@ -124,7 +124,8 @@ class Consensus(BatchedRounds):
                        if self.fusing and options.existence_mature > 0 else None)
         """Mature fused tracks' existence for extraction (tracking.mature_existence)."""
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
-        """Sorted keys of the fused tracks reported last scan (``existence_keep``)."""
+        """Sorted keys of the fused tracks reported last scan (``existence_keep``,
+        ``label_keep``)."""
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -400,7 +401,8 @@ class Consensus(BatchedRounds):
         # an AA fuser keeps each input's copy of a target (peers.fusers.AaFuser.copies)
         return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
                             copies=bool(getattr(self.fuser, "copies", False)),
-                            support=self.label_support, fallback=self.o.label_fallback)
+                            support=self.label_support, fallback=self.o.label_fallback,
+                            keep=self._reported if self.o.label_keep else None)
 
     def tracks_problem(self, st: ScanState, fused) -> tuple | None:
         """``(fused means, the scan's first-round input mixtures)`` if completing this round with
@@ -521,7 +523,7 @@ class Consensus(BatchedRounds):
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])
-        if self.o.existence_keep:
+        if self.o.existence_keep or self.o.label_keep:
             self._reported = np.unique(label_keys(t.ids))
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]

@@ -175,7 +175,7 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
                 origin: int, k: int, fresh_start: int = 0,
                 gate: float = LABEL_GATE, bump: np.ndarray | None = None,
                 copies: bool = False, support: LabelSupport | None = None,
-                fallback: bool = False) -> FusedLabels:
+                fallback: bool = False, keep: np.ndarray | None = None) -> FusedLabels:
     """Labels of the fused components from the labelled ``inputs`` (``[(mixture, labels)]``,
     the own density first; a label array may cover only the first rows). Fresh labels are
     ``(origin, k, FRESH_BASE + fresh_start + i)``, in fused order. Two fused components that
@@ -200,7 +200,11 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
 
     ``fallback``: a row that lost the label it won to a heavier row (and, with ``copies``, lies
     outside ``gate`` of it) takes the next label it was paired with in the same order that no
-    row holds (:func:`next_labels`) instead of a fresh one; its own track is released to it."""
+    row holds (:func:`next_labels`) instead of a fresh one; its own track is released to it.
+
+    ``keep``: sorted :func:`tracking.labels.label_keys` of the labels this peer reported the
+    scan before; a row paired with one of them takes it before any other label it was paired
+    with (:func:`kept_first`), so a reported track keeps its id while an input holds it."""
     n = len(fused)
     none = np.zeros((0, 3), dtype=np.int64)
     if n == 0:
@@ -216,7 +220,8 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
     if len(J):
         L, S = t_lab[t], t_src[t]
         held = np.zeros(len(L), dtype=np.int64) if support is None else support.counts(L)
-        order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], J))  # per row, the winner first
+        kept = kept_first(L, keep)
+        order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], kept, J))  # per row, winner first
         Js = J[order]
         first = np.ones(len(Js), dtype=bool)
         first[1:] = Js[1:] != Js[:-1]
@@ -269,6 +274,18 @@ def label_fused(fused: GaussianMixture, inputs: Sequence[tuple[GaussianMixture, 
                                np.concatenate([match.nbr, labels[J[rel]]]),
                                np.concatenate([match.cost, np.full(int(rel.sum()), RELEASE)]))
     return FusedLabels(labels, match, len(lost), copy)
+
+
+def kept_first(L: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
+    """``(p,)`` int sort key of paired labels ``L (p, 3)``: 0 for one of ``keep`` (reported the
+    scan before), 1 otherwise (all 1 without ``keep``). Why (docs/real-traffic.md, "The
+    switches traced"): a slow radar's track near a young aircraft, born earlier, is paired
+    with the aircraft's reported row and its label won by the earliest-birth rule (392af3 at
+    tick 528: a switch at every peer); a reported id is kept while some input holds it."""
+    out = np.ones(len(L), dtype=np.int64)
+    if keep is not None and len(keep) and len(L):
+        out[keys_isin(label_keys(L), keep)] = 0
+    return out
 
 
 def _row_keys(prob: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -417,5 +434,5 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
 
 
 __all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "copy_rows",
-           "corroborated", "input_tracks", "label_fused", "next_labels", "origin_of",
+           "corroborated", "input_tracks", "kept_first", "label_fused", "next_labels", "origin_of",
            "release_rows", "settle_scans", "take_moves"]

@@ -24,6 +24,7 @@ from sensornet.peers.labelling import (
     FRESH_BASE,
     LABEL_GATE,
     FusedLabels,
+    kept_first,
     label_fused,
     next_labels,
 )
@@ -49,11 +50,13 @@ class LabelProblem:
     copies: bool = False
     support: LabelSupport | None = None
     fallback: bool = False
+    keep: np.ndarray | None = None
 
     def alone(self) -> FusedLabels:
         """This problem's own :func:`label_fused`."""
         return label_fused(self.fused, self.inputs, self.origin, self.k, self.fresh_start,
-                           self.gate, self.bump, self.copies, self.support, self.fallback)
+                           self.gate, self.bump, self.copies, self.support, self.fallback,
+                           self.keep)
 
 
 def _pkeys(prob: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -194,10 +197,13 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
     edges = np.searchsorted(pl, np.arange(B + 1))
     if len(J):
         held = np.zeros(len(L), dtype=np.int64)
+        kept = np.ones(len(L), dtype=np.int64)
         for p, pr in enumerate(probs):
             if pr.support is not None and edges[p + 1] > edges[p]:
                 held[edges[p]:edges[p + 1]] = pr.support.counts(L[edges[p]:edges[p + 1]])
-        order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], J))  # per row, the winner first
+            if pr.keep is not None and edges[p + 1] > edges[p]:
+                kept[edges[p]:edges[p + 1]] = kept_first(L[edges[p]:edges[p + 1]], pr.keep)
+        order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], kept, J))  # per row, winner first
         Js = J[order]
         first = np.ones(len(Js), dtype=bool)
         first[1:] = Js[1:] != Js[:-1]

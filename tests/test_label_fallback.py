@@ -1,7 +1,8 @@
-"""peers.labelling.label_fused ``fallback`` (issue 34, docs/real-traffic.md "The switches
-traced"): a fused row that loses the label it won to a heavier row takes the next label it was
-paired with, not a fresh one, and its own track is released to that label; batched equals one
-by one to the bit."""
+"""peers.labelling.label_fused ``fallback`` and ``keep`` (issue 34, docs/real-traffic.md "The
+switches traced"): a fused row that loses the label it won to a heavier row takes the next
+label it was paired with, not a fresh one, and its own track is released to that label; a row
+paired with a label the peer reported the scan before keeps it against an earlier-born one;
+batched equals one by one to the bit."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from sensornet.peers.labelling import FRESH_BASE, label_fused, next_labels
 from sensornet.peers.labelling_batch import label_fused_many
 from sensornet.tracking.label_matching import RELEASE, adopt_labels
+from sensornet.tracking.labels import label_keys
 from sensornet.tracking.mixture import GaussianMixture
 
 from tests.test_labelling_batch import _problem, _same
@@ -106,19 +108,54 @@ def test_next_labels_heavier_row_first_and_taken_labels_skipped():
     assert won2.all()
 
 
-def test_batched_equals_one_by_one_with_the_fallback():
+def test_a_reported_label_is_kept_against_an_earlier_born_one():
+    """392af3 at tick 528: its row is reported under (0, 527) (two inputs hold it); north's
+    track (4, 524), born earlier, is paired with the row too. Without ``keep`` the earlier
+    birth wins (a switch); with (0, 527) reported the scan before, it stays; a label not
+    reported does not count."""
+    young, north = (0, 527, 1), (4, 524, 2)
+    fused = _mix([B])
+    inputs = [(_mix([B]), np.array([young])), (_mix([B]), np.array([young])),
+              (_mix([[B[0] + 150.0, 0, 0, 0]]), np.array([north]))]
+    assert tuple(label_fused(fused, inputs, 3, 528).labels[0]) == north
+    keep = np.unique(label_keys(np.array([young, (5, 1, 1)])))
+    got = label_fused(fused, inputs, 3, 528, keep=keep)
+    assert tuple(got.labels[0]) == young and len(got.own) == 0
+    other = np.unique(label_keys(np.array([(5, 1, 1)])))
+    assert tuple(label_fused(fused, inputs, 3, 528, keep=other).labels[0]) == north
+    # north itself (its own track first) reports young too: its own track keeps its label
+    # (the rule adopts only earlier labels), the fused row keeps the reported one
+    at_north = label_fused(fused, [inputs[2], *inputs[:2]], 4, 528, keep=keep)
+    assert tuple(at_north.labels[0]) == young
+    np.testing.assert_array_equal(adopt_labels(np.array([north]), at_north.own), [north])
+
+
+def test_batched_equals_one_by_one_with_the_fallback_and_keep():
     rng = np.random.default_rng(3403)
-    changed = 0
+    changed = kept = 0
     for _ in range(150):
-        problems = [dataclasses.replace(_problem(rng), fallback=bool(rng.random() < 0.7))
-                    for _ in range(int(rng.integers(1, 9)))]
+        problems = []
+        for _ in range(int(rng.integers(1, 9))):
+            pr = _problem(rng)
+            keep = None
+            if rng.random() < 0.5:
+                labs = [np.asarray(lab) for _, lab in pr.inputs if lab is not None and len(lab)]
+                if labs:
+                    pool = np.concatenate(labs)
+                    pick = pool[rng.random(len(pool)) < 0.3]
+                    keep = np.unique(label_keys(pick))
+            problems.append(dataclasses.replace(pr, fallback=bool(rng.random() < 0.7),
+                                                keep=keep))
         for pr, g in zip(problems, label_fused_many(problems), strict=True):
             ref = pr.alone()
             _same(g, ref)
             if pr.fallback:
                 plain = dataclasses.replace(pr, fallback=False).alone()
                 changed += int((ref.labels != plain.labels).any(axis=1).sum())
-    assert changed > 10  # the random cases do fall back
+            if pr.keep is not None:
+                plain = dataclasses.replace(pr, keep=None).alone()
+                kept += int((ref.labels != plain.labels).any(axis=1).sum())
+    assert changed > 10 and kept > 10  # the random cases do fall back and keep
 
 
 def test_the_option_reaches_the_peers_from_the_scenario():
@@ -130,3 +167,7 @@ def test_the_option_reaches_the_peers_from_the_scenario():
     scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
                                               "fusion.label_fallback": True})
     assert consensus_options(scn, "cdg").label_fallback is True
+    assert consensus_options(scn, "cdg").label_keep is False
+    scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
+                                              "fusion.label_keep": True})
+    assert consensus_options(scn, "cdg").label_keep is True

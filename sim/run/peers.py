@@ -65,6 +65,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         label_reach=(reach_by_name(names, A, label_origins(scn, names), i)
                      if net.label_support and net.filter == "lmb" else ()),
         label_fallback=scn.fusion.label_fallback,
+        label_keep=scn.fusion.label_keep,
     )
     return replace(opts, **changes)
 

@@ -127,6 +127,15 @@ class FusionSpec:
                                              "fresh one when a slow radar's track of its "
                                              "neighbour moved onto it (docs/real-traffic.md, "
                                              "\"The switches traced\").")
+    label_keep: bool = option(False, doc="Labels of fused tracks (labelled peers): a fused "
+                                         "row paired with a label this peer reported the "
+                                         "scan before takes it before any other label it "
+                                         "was paired with (`peers.labelling.kept_first`), "
+                                         "so a reported track keeps its id while an input "
+                                         "holds it. Issue 34: a slow radar's earlier-born "
+                                         "track beside a young aircraft took its reported "
+                                         "row by the earliest-birth rule "
+                                         "(docs/real-traffic.md, \"The switches traced\").")
     existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
                                              "the scan before is pooled at any age, and a "
                                              "new label beside it cannot take its target "
