@@ -26,11 +26,13 @@ from sensornet.peers.trust_checks import (
     _others,
     divergence_test,
     gated,
+    information_sums,
     offset_chi2_stacked,
     offset_cusums,
     pair_tests,
     position_block,
     target_mass,
+    unmatched_sums,
     withheld_increments,
 )
 from sensornet.tracking.divergence import log_overlaps_many
@@ -172,17 +174,18 @@ def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     live = [(r, C, e) for r, (C, e) in enumerate(zip(counts, ends, strict=True)) if C]
     a = np.concatenate([_square(C)[0] + (e - C) for _, C, e in live])
     b = np.concatenate([_square(C)[1] + (e - C) for _, C, e in live])
-    close = gated(X[a] - X[b], P[a], P[b], gate, chi2)  # near(), pair by pair
-    pairs = 0
-    for r, C, e in live:
-        n = len(lens[r])
-        G = np.zeros((C, n))
-        G[np.arange(C), owner[e - C:e]] = 1.0  # (C, n): which input a component is of
-        near_ = close[pairs:pairs + C * C].reshape(C, C)
-        pairs += C * C
-        hit = (near_.astype(float) @ G) > 0  # (C, n)
-        out[r] = G.T @ (w[e - C:e, None] * ~hit)
-    return out
+    dP = np.linalg.det(P) if chi2 is not None else None  # per component, not per pair
+    close = gated(X[a] - X[b], P[a], P[b], gate, chi2, *((dP[a], dP[b]) if chi2 is not None
+                                                          else ()))  # near(), pair by pair
+    n = max(len(z) for z in lens)
+    hit = np.zeros((len(keep), n), bool)  # (C, n): an input's target within the gate
+    hit[a[close], owner[b[close]]] = True
+    rows = req[keep] * n + owner  # each component's (request, input), in order
+    seg = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    U = np.zeros((len(group) * n, n))
+    U[rows[seg]] = unmatched_sums(w, hit, np.diff(np.r_[seg, len(rows)]).tolist())
+    U = U.reshape(len(group), n, n)
+    return [U[r, :len(z), :len(z)] for r, z in enumerate(lens)]
 
 
 @functools.lru_cache(maxsize=256)
@@ -254,19 +257,14 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
     ok = gated(d, Pa, Pn, gate, chi2)
     if not ok.any():
         return out
-    Si = np.zeros_like(Pa)
-    Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
     counts = [v[0] for _, _, sel in todo for _, v in sel]
     hits = np.add.reduceat(ok, np.cumsum([0, *counts[:-1]])).tolist()  # gated per mixture
-    lo, n = 0, 0
+    infos = iter(information_sums(Pa[ok] + Pn[ok], d[ok], hits))  # every mixture's at once
     for r, _, sel in todo:
         for i, _ in sel:
-            hi = lo + counts[n]
-            if hits[n]:
-                k = ok[lo:hi]
-                S = Si[lo:hi][k]
-                out[r][i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
-            lo, n = hi, n + 1
+            info = next(infos)
+            if info is not None:
+                out[r][i] = info
     return out
 
 

@@ -21,7 +21,6 @@ references and their calibration: docs/trust-calibration.md).
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from collections import deque
 from collections.abc import Generator
@@ -209,8 +208,20 @@ def unmatched_weights(mixes: list[GaussianMixture], pos: list[int], min_weight: 
     G[np.arange(len(owner)), owner] = 1.0  # (C, n): which input a component is of
     close = near(X, P, X, P, gate, chi2)  # (C, C)
     hit = (close.astype(float) @ G) > 0  # (C, n)
-    U = G.T @ (w[:, None] * ~hit)  # (n, n)
+    counts = np.bincount(owner, minlength=n)
+    U = np.zeros((n, n))
+    U[counts > 0] = unmatched_sums(w, hit, counts[counts > 0].tolist())
     return U, (hit, w, owner)
+
+
+def unmatched_sums(w: np.ndarray, hit: np.ndarray, counts: list[int]) -> np.ndarray:
+    """The rows of :func:`unmatched_weights`' ``U`` of the inputs with target components:
+    per input (``counts`` consecutive components, weights ``w``), the summed weight of its
+    components without a target of input ``b`` within the gate (``hit`` ``(C, n)``), in
+    component order (:func:`segment_sums`; ``G.T @ (w * ~hit)`` gives these numbers to the
+    bit on NumPy 2.4, tests/test_trust_exact.py). Several peers' inputs at once, the same
+    numbers (:mod:`peers.trust_batch`)."""
+    return segment_sums(w[:, None] * ~hit, counts)
 
 
 def target_mass(mix: GaussianMixture, min_weight: float) -> float:
@@ -231,7 +242,8 @@ def near(Xa: np.ndarray, Pa: np.ndarray, Xb: np.ndarray, Pb: np.ndarray, gate: f
 
 
 def gated(d: np.ndarray, Pa: np.ndarray, Pb: np.ndarray, gate: float,
-          chi2: float | None = None) -> np.ndarray:
+          chi2: float | None = None, det_a: np.ndarray | None = None,
+          det_b: np.ndarray | None = None) -> np.ndarray:
     """Whether position differences ``d (..., 2)`` between estimates with position
     covariances ``Pa``, ``Pb`` (``(..., 2, 2)``, broadcast) are one target: within ``gate``
     metres, or (``chi2`` not None) within the chi-square gate ``d' S^-1 d <= chi2`` of their
@@ -242,11 +254,15 @@ def gated(d: np.ndarray, Pa: np.ndarray, Pb: np.ndarray, gate: float,
     apart, where a fixed metric gate pairs 9 % of them (the chi-square gate at 99.9 %: 90 %;
     on seed 000 94-95 % of honest pairs are within either); the smaller covariance, so
     that a neighbour cannot widen the gate by claiming a wide one (an honest pair's
-    ``P_a + P_b`` gates the same share on both scenarios: training run 9000)."""
+    ``P_a + P_b`` gates the same share on both scenarios: training run 9000).
+
+    ``det_a``, ``det_b``: ``np.linalg.det`` of ``Pa``, ``Pb`` where the caller has them
+    (per component, gathered per pair: the same numbers, without a determinant per pair)."""
     close = np.einsum("...i,...i->...", d, d) <= gate * gate
     if chi2 is None or close.size == 0:
         return close
-    smaller = (np.linalg.det(Pa) <= np.linalg.det(Pb))[..., None, None]
+    smaller = ((np.linalg.det(Pa) if det_a is None else det_a)
+               <= (np.linalg.det(Pb) if det_b is None else det_b))[..., None, None]
     S = 2.0 * np.where(smaller, Pa, Pb)  # (..., 2, 2)
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
     x, y = d[..., 0], d[..., 1]
@@ -490,29 +506,9 @@ def offset_information(ref: GaussianMixture, mix: GaussianMixture, pos: list[int
     least ``min_weight`` and the nearest such component of ``ref`` if within the gate
     (:func:`near`: ``gate`` metres, or the ``chi2`` gate of their covariances; ``S_i``: the
     sum of the two position covariances): the generalised-least-squares estimate of a
-    common offset is ``I^-1 y``, its chi-square ``y' I^-1 y``."""
-    zero = (np.zeros((2, 2)), np.zeros(2))
-    if len(ref) == 0 or len(mix) == 0:
-        return zero
-    a = mix.weights >= min_weight
-    b = ref.weights >= min_weight
-    if not a.any() or not b.any():
-        return zero
-    ix = np.ix_(pos, pos)
-    ma, mb = mix.means[a][:, pos], ref.means[b][:, pos]  # (n, 2), (m, 2)
-    Pa = mix.covs[a][:, ix[0], ix[1]]  # (n, 2, 2)
-    Pb = ref.covs[b][:, ix[0], ix[1]]  # (m, 2, 2)
-    diff = ma[:, None, :] - mb[None, :, :]  # (n, m, 2)
-    dist = np.linalg.norm(diff, axis=2)
-    nearest = np.argmin(dist, axis=1)
-    rows = np.arange(len(ma))
-    ok = gated(diff[rows, nearest], Pa, Pb[nearest], gate, chi2)
-    if not ok.any():
-        return zero
-    d = diff[rows, nearest][ok]  # (p, 2)
-    S = Pa[ok] + Pb[nearest[ok]]  # (p, 2, 2)
-    Si = np.linalg.inv(S)
-    return Si.sum(axis=0), np.einsum("pij,pj->i", Si, d)
+    common offset is ``I^-1 y``, its chi-square ``y' I^-1 y``. One mixture of
+    :func:`offset_information_many` (one formula)."""
+    return offset_information_many(ref, [mix], pos, min_weight, gate, chi2)[0]
 
 
 def offset_information_many(ref: GaussianMixture, mixes: list[GaussianMixture],
@@ -542,15 +538,48 @@ def offset_information_many(ref: GaussianMixture, mixes: list[GaussianMixture],
     ok = gated(d, Pa, Pn, gate, chi2)
     if not ok.any():
         return out
-    Si = np.zeros_like(Pa)
-    Si[ok] = np.linalg.inv(Pa[ok] + Pn[ok])
-    ends = list(itertools.accumulate(int(a.sum()) for _, a in sel))
-    starts = [0, *ends[:-1]]
-    for (i, _), lo, hi in zip(sel, starts, ends, strict=True):
-        k = ok[lo:hi]
-        if k.any():
-            S = Si[lo:hi][k]
-            out[i] = (S.sum(axis=0), np.einsum("pij,pj->i", S, d[lo:hi][k]))
+    counts = np.add.reduceat(ok, np.cumsum([0, *(int(a.sum()) for _, a in sel[:-1])]))
+    for (i, _), info in zip(sel, information_sums(Pa[ok] + Pn[ok], d[ok], counts.tolist()),
+                            strict=True):
+        if info is not None:
+            out[i] = info
+    return out
+
+
+def information_sums(S: np.ndarray, d: np.ndarray, counts: list[int]
+                     ) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """Per segment of ``counts`` consecutive pairs (``S`` ``(p, 2, 2)``: their summed
+    position covariances, ``d`` ``(p, 2)``: their differences): ``(sum S_i^-1, sum S_i^-1
+    d_i)``, None for an empty segment; the sums of :func:`offset_information_many`, every
+    segment at once: the inverses in one batch, the products per pair, then each segment's
+    sums in order (:func:`segment_sums`; ``einsum("pij,pj->i")`` of a segment gives these
+    numbers to the bit on NumPy 2.4, tests/test_trust_batch.py)."""
+    if not len(S):
+        return [None] * len(counts)
+    Si = np.linalg.inv(S)
+    v = Si[:, :, 0] * d[:, None, 0] + Si[:, :, 1] * d[:, None, 1]  # (p, 2): S_i^-1 d_i
+    I, y = segment_sums(Si, counts), segment_sums(v, counts)
+    return [(I[n], y[n]) if c else None for n, c in enumerate(counts)]
+
+
+def segment_sums(X: np.ndarray, counts: list[int]) -> np.ndarray:
+    """Per segment of ``counts`` consecutive rows of ``X`` (``(N, ...)``): the sum of its rows,
+    ``(len(counts), ...)``, each ``X[segment].sum(axis=0)`` to the bit (NumPy adds the rows
+    of an outer axis one after the other; the shorter segments padded with ``-0.0``, which
+    added changes no number, not even a ``-0.0``); an empty segment's is ``-0.0``."""
+    m, top = len(counts), max(counts, default=0)
+    if m == 1 and top == len(X):
+        return X.sum(axis=0)[None]
+    pad = np.full((m, top, *X.shape[1:]), -0.0)
+    pad[np.repeat(np.arange(m), counts), _ranks(tuple(counts))] = X
+    return pad.sum(axis=1)
+
+
+@functools.lru_cache(maxsize=256)
+def _ranks(counts: tuple[int, ...]) -> np.ndarray:
+    """Each row's place in its segment of ``counts`` (:func:`segment_sums`; read-only)."""
+    out = np.concatenate([np.arange(c) for c in counts]) if counts else np.zeros(0, np.intp)
+    out.flags.writeable = False
     return out
 
 

@@ -23,7 +23,9 @@ from sensornet.peers.trust_checks import (
     ALONE,
     centred,
     divergence_test,
+    information_sums,
     neighbour_statistics_steps,
+    segment_sums,
     target_mass,
 )
 from sensornet.peers.trust_record import NeighbourTrust, push_window, stacked_window
@@ -415,3 +417,27 @@ def test_stacked_window_is_the_window_made_anew():
         assert np.array_equal(I, np.array([i for i, _ in rec.offsets]))
         assert np.array_equal(y, np.array([v for _, v in rec.offsets]))
     assert len(rec.offsets) == 16 and rebuilt == 2
+
+
+def test_segment_sums_are_each_segments_sum_to_the_bit():
+    """Every segment's sum at once (padded with -0.0) is ``X[segment].sum(axis=0)`` bit for
+    bit, ``-0.0`` sums kept; the per-pair products summed so are the old per-segment
+    ``einsum`` (what :func:`information_sums` replaced)."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        counts = rng.integers(1, 40, int(rng.integers(1, 9))).tolist()
+        X = rng.normal(0, 1, (sum(counts), 2, 2)) * 10.0 ** rng.uniform(-8, 4, (sum(counts), 1, 1))
+        if rng.random() < 0.2:
+            X[:, 0, 1] = -0.0  # diagonal covariances: an all -0.0 entry stays -0.0
+        d = rng.normal(0, 50, (sum(counts), 2))
+        got = segment_sums(X, counts)
+        infos = information_sums(X @ X.transpose(0, 2, 1) + np.eye(2), d, counts)
+        lo = 0
+        for n, c in enumerate(counts):
+            want = X[lo:lo + c].sum(axis=0)
+            assert np.array_equal(got[n], want)
+            assert np.array_equal(np.signbit(got[n]), np.signbit(want))
+            S = np.linalg.inv(X[lo:lo + c] @ X[lo:lo + c].transpose(0, 2, 1) + np.eye(2))
+            assert np.array_equal(infos[n][0], S.sum(axis=0))
+            assert np.array_equal(infos[n][1], np.einsum("pij,pj->i", S, d[lo:lo + c]))
+            lo += c

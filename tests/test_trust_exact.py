@@ -195,6 +195,8 @@ def test_offset_information_many_is_one_at_a_time(chi2):
         for m, (I, y) in zip(mixes, got, strict=True):
             I0, y0 = offset_information(ref, m, [0, 2], 0.3, gate, chi2)
             assert np.array_equal(I, I0) and np.array_equal(y, y0)
+            I1, y1 = trust_before.offset_information(ref, m, [0, 2], 0.3, gate, chi2)
+            assert np.array_equal(I, I1) and np.array_equal(y, y1)  # the per-mixture einsum's
             matched += bool(I.any())
     assert matched > 100  # most of them have pairs within the gate
 
