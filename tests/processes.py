@@ -4,14 +4,18 @@ started, waiting on an event, and stopping everything a test started whatever ha
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from sensornet.protocol.codec import decode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,6 +58,49 @@ def wait_for(predicate, timeout: float, what: str) -> None:
         if time.monotonic() > end:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.05)
+
+
+def when_view_drew(log: Path, peers: Iterable[str], running: Callable[[], bool],
+                   timeout: float) -> dict[str, int]:
+    """Until a view's log says it has drawn the first reports of every one of ``peers`` into
+    its recording (``view: drew the first reports of s1 (scan 3), ...``,
+    :meth:`sensornet.view.LiveView.reporting`): an event, where a view that starts late on a
+    busy machine (its imports) links after a short run's scans. Returns each peer's first scan
+    drawn; fails at once if ``running()`` turns false first (the view ended), else after
+    ``timeout`` seconds, with the log's end."""
+    want = set(peers)
+    end = time.monotonic() + timeout
+    while True:
+        up = running()  # before reading: a line written just before the view ended is seen
+        text = log.read_text(errors="replace") if log.is_file() else ""
+        drew = {n: int(k) for line in text.splitlines()
+                if line.startswith("view: drew the first reports of ")
+                for n, k in re.findall(r"(\S+) \(scan (\d+)\)", line)}
+        if want <= set(drew):
+            return drew
+        assert up, f"the view ended before it drew {sorted(want - set(drew))}: {text[-2000:]}"
+        assert time.monotonic() < end, (f"the view never drew {sorted(want - set(drew))} in "
+                                         f"{timeout:g} s: {text[-2000:]}")
+        time.sleep(0.05)
+
+
+def when_tracks_reach(session, keys, peer: str, k0: int, timeout: float = 60.0) -> int:
+    """Wait until ``peer`` has published the tracks of scan ``k0`` (heard on ``session``, a
+    Zenoh session linked to the network of ``keys``); the newest scan seen."""
+    seen = {"k": 0}
+    reached = threading.Event()
+
+    def on_tracks(sample) -> None:
+        seen["k"] = max(seen["k"], decode(sample.payload.to_bytes()).k)
+        if seen["k"] >= k0:
+            reached.set()
+
+    sub = session.declare_subscriber(keys.tracks(peer), on_tracks)
+    try:
+        assert reached.wait(timeout), f"{peer} never published the tracks of scan {k0} ({seen})"
+    finally:
+        sub.undeclare()
+    return seen["k"]
 
 
 def rerun_exe() -> str:

@@ -25,7 +25,7 @@ import pytest
 import zenoh
 from sensornet.peers.scan_results import read_part
 from sensornet.peers.session import open_session
-from sensornet.protocol.codec import VERSION, decode, encode, pack_mixture
+from sensornet.protocol.codec import VERSION, encode, pack_mixture
 from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate, Scan
 from sensornet.sim.run.launcher import (
@@ -38,6 +38,8 @@ from sensornet.sim.run.launcher import (
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides, scenario_text
 from sensornet.tracking.mixture import GaussianMixture
+
+from tests.processes import when_tracks_reach, when_view_drew
 
 FOUR = scenario_text("seed000") + """
 [[sensors]]
@@ -75,24 +77,6 @@ def _run(source: str, out: Path, sets: list[str], faults: list[str] = (), timeou
         if after is not None:
             after()
     return scn, codes, read_summaries(out, scn.sensor_names)
-
-
-def _when_tracks_reach(session, keys: Keys, peer: str, k0: int, timeout: float = 60.0) -> int:
-    """Wait until ``peer`` has published the tracks of scan ``k0``; the newest scan seen."""
-    seen = {"k": 0}
-    reached = threading.Event()
-
-    def on_tracks(sample) -> None:
-        seen["k"] = max(seen["k"], decode(sample.payload.to_bytes()).k)
-        if seen["k"] >= k0:
-            reached.set()
-
-    sub = session.declare_subscriber(keys.tracks(peer), on_tracks)
-    try:
-        assert reached.wait(timeout), f"{peer} never published the tracks of scan {k0} ({seen})"
-    finally:
-        sub.undeclare()
-    return seen["k"]
 
 
 DEADLINE_SHARE = 0.25
@@ -246,8 +230,8 @@ def test_ten_thousand_fuzzed_messages(tmp_path):
                 pub.put(payload)
                 sent["n"] += 1
             for peer in ("s2", "s3"):
-                now = _when_tracks_reach(session, keys, peer, 1)  # its next tracks
-                _when_tracks_reach(session, keys, peer, now + 20)
+                now = when_tracks_reach(session, keys, peer, 1)  # its next tracks
+                when_tracks_reach(session, keys, peer, now + 20)
             pub.undeclare()
         finally:
             session.close()
@@ -335,10 +319,12 @@ def test_sigterm_leaves_summary_and_recording(tmp_path):
         # for it to exit, then the world
         session = open_session(connect=list(handle.endpoints.values()))
         try:
-            term["k"] = _when_tracks_reach(session, Keys(handle.network), "s2", 20)
+            term["k"] = when_tracks_reach(session, Keys(handle.network), "s2", 20)
         finally:
             session.close()
-        _when_view_drew(handle, "s2", timeout=240.0)
+        view = handle.views["view"]
+        when_view_drew(handle.out / "logs" / "view.log", ["s2"], lambda: view.poll() is None,
+                       timeout=240.0)
         proc = handle.procs["s2"]
         proc.send_signal(signal.SIGTERM)
         term["code"] = proc.wait(timeout=60)
@@ -363,22 +349,6 @@ def test_sigterm_leaves_summary_and_recording(tmp_path):
     # scenario at the start, its values (Scalars) only from the reports drawn
     assert "/metrics/ospa/s2/fused - data columns: [Scalars:scalars]" in text
     assert "/peers/s2/fused/means" in text
-
-
-def _when_view_drew(handle, peer: str, timeout: float) -> None:
-    """Until the run's view says it has drawn ``peer``'s first report into its recording
-    (``view: drew the first reports of ...``, :meth:`sensornet.view.LiveView.reporting`)."""
-    log = handle.out / "logs" / "view.log"
-    end = time.monotonic() + timeout
-    while True:
-        text = log.read_text(errors="replace") if log.is_file() else ""
-        if any(line.startswith("view: drew the first reports of ")
-               and f" {peer} (scan " in line for line in text.splitlines()):
-            return
-        view = handle.views.get("view")
-        assert view is None or view.poll() is None, text[-2000:]  # the view ended first
-        assert time.monotonic() < end, f"the view never drew {peer}'s reports: {text[-2000:]}"
-        time.sleep(0.05)
 
 
 @pytest.mark.parametrize("text", ["kill:s2", "boom:s2@3", "kill:s2@0", "kill@3"])

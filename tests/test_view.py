@@ -7,10 +7,12 @@ from __future__ import annotations
 import json
 import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import numpy as np
@@ -30,15 +32,17 @@ from sensornet.peers.recording import Recorder
 from sensornet.peers.rerun_sink import color_of, ellipses, lighter
 from sensornet.peers.rerun_sink import dashed as dashed_lines
 from sensornet.peers.runtime import RuntimeOptions
-from sensornet.peers.session import endpoint, free_port
+from sensornet.peers.session import open_session
 from sensornet.peers.telemetry import Telemetry as PeerTelemetry
 from sensornet.protocol.bundle import pack_bundles, unpack_bundle
 from sensornet.protocol.codec import Rejected, decode, encode
+from sensornet.protocol.keys import Keys
 from sensornet.protocol.messages import Estimate, Forward, Scan, ScanSet, Telemetry, Tracks, Truth
 from sensornet.protocol.report_bundle import unpack_reports
 from sensornet.sim.run import twin
+from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.run.peers import make_peer
-from sensornet.sim.scenario import load_scenario
+from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.tracking.mixture import GaussianMixture
 
 from sensornet.cli import main
@@ -51,7 +55,14 @@ from sensornet.view import (
     later_round,
     replay_recordings,
 )
-from tests.processes import env, rerun_exe, stop_all, wait_for
+from tests.processes import (
+    env,
+    rerun_exe,
+    sensornet,
+    stop_all,
+    when_tracks_reach,
+    when_view_drew,
+)
 
 
 class _Rec:
@@ -670,40 +681,51 @@ def test_a_host_sends_its_peers_reports_when_idle_or_crowded():
 @pytest.mark.network
 def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
     """``sensornet run`` (view on): world and peers write no .rrd, the view's recording holds
-    truth, scans, tracks, local and fused marks and the health series. Then a view attached by
-    hand to a network started by someone else, detached after 60 messages drawn (an event, not
-    seconds): the peers handle every scan all the same. The two runs go side by side (each
-    its own network and ports): one after the other their start-ups and pacing were the whole
-    test."""
-    ep = endpoint(free_port())
-    rrd = tmp_path / "mine.rrd"
-    # the view by hand first, dialling the endpoint the others' world will listen on, and the
-    # others started once it has subscribed (its stderr says so): a view started after them
-    # could link after their short run had ended (a loaded machine: imports take seconds)
-    view = subprocess.Popen(
-        [sys.executable, "-m", "sensornet", "view", "byhand", "--connect", ep,
-         "--scenario", "seed000", "--count", "60", "--out", str(rrd)], cwd=tmp_path,
-        env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(view.stderr), daemon=True)
-    reader.start()
-    others = None
+    truth, scans, tracks, local and fused marks and the health series. Beside it, a view
+    attached by hand to a network someone else started and runs, detached by Ctrl-C: the
+    peers handle every scan all the same. Both runs last until the test ends them (their
+    world's SIGTERM: its end message ends the run), each only once its view says it drew
+    every peer (an event): a view imports for seconds longer than the peers on a busy
+    machine (20.7 against 12.5 s at load 15) and linked after a short run's end."""
+    sets = ["scenario.num_scans=3000"]  # at 2 scans/s: no run ends before the test ends it
+    scn = load_scenario("seed000", parse_overrides(sets))
+    names = scn.sensor_names
+    out = tmp_path / "run"
+    others = start_run(scn, "seed000", tmp_path / "others", network="byhand", overrides=sets,
+                       rerun=False, speed=2.0)  # started by someone else, no view of its own
+    view, log, session = None, tmp_path / "byhand.log", None
     try:
-        wait_for(lambda: any("view: network byhand" in x for x in lines) or view.poll() is not None,
-                 120, "the view's subscription")
-        assert view.poll() is None, "".join(lines)[-2000:]
-        others = subprocess.Popen(
-            [sys.executable, "-m", "sensornet", "run", "--network", "byhand", "--listen", ep,
-             "--no-rerun", "--set", "scenario.num_scans=60", "--speed", "5",
-             "--out", str(tmp_path / "others")], cwd=tmp_path, env=env(),
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        with sensornet(["run", "--viewer", "none", "--out", str(out), "--speed", "2",
+                        *(a for s in sets for a in ("--set", s))], tmp_path) as run:
+            # by hand: once the others' peers run, attach, and detach once it drew them all
+            session = open_session(connect=[others.endpoints["world"]])
+            keys = Keys("byhand")
+            when_tracks_reach(session, keys, names[0], 3, timeout=240.0)
+            with log.open("w") as fh:
+                view = subprocess.Popen(
+                    [sys.executable, "-m", "sensornet", "view", "byhand",
+                     "--connect", others.endpoints["world"], "--scenario", "seed000",
+                     "--out", str(tmp_path / "mine.rrd")],
+                    cwd=tmp_path, env=env(), stdout=subprocess.DEVNULL, stderr=fh)
+            when_view_drew(log, names, lambda: view.poll() is None, timeout=240.0)
+            view.send_signal(signal.SIGINT)  # Ctrl-C: it detaches
+            assert view.wait(timeout=120) == 0, log.read_text()[-2000:]
+            assert "messages drawn" in log.read_text()
+            for name in names:  # the peers go on without it
+                now = when_tracks_reach(session, keys, name, 1)
+                when_tracks_reach(session, keys, name, now + 5)
+            others.procs["world"].send_signal(signal.SIGTERM)
 
-        out = tmp_path / "run"
-        run = subprocess.run(
-            [sys.executable, "-m", "sensornet", "run", "--viewer", "none", "--out", str(out),
-             "--set", "scenario.num_scans=15", "--speed", "5"], cwd=tmp_path, env=env(),
-            capture_output=True, text=True, timeout=300)
-        assert run.returncode == 0, run.stderr[-2000:]
+            when_view_drew(out / "logs" / "view.log", names, lambda: run.proc.poll() is None,
+                           timeout=240.0)
+            world = [p for p in run.find_children() if _argv(p)[2:4] == ["sensornet", "world"]]
+            assert len(world) == 1, [_argv(p) for p in run.children]
+            os.kill(world[0], signal.SIGTERM)
+            _, err = run.proc.communicate(timeout=300)
+            assert run.proc.returncode == 0, err[-2000:]
+
+        codes = wait_run(others, timeout=120.0)
+        assert all(c == 0 for c in codes.values()), codes
         assert sorted(p.name for p in (out / "rerun").glob("*.rrd")) == ["view.rrd"]
         view_log = (out / "logs" / "view.log").read_text()
         assert "messages drawn" in view_log, view_log
@@ -716,27 +738,36 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
                 f"/metrics/{m}/s3/{w}" for m, w in (("ospa", "fused"), ("cardinality", "local"),
                                                    ("compute_ms", "fusion"))]:
             assert entity in text, entity
-        for name in ("s1", "s2", "s3"):
+        for name in names:
             s = (out / f"peer-{name}.json").read_text()
             assert '"rerun"' not in s and '"telemetry"' in s  # the peers logged nothing
 
-        view.wait(timeout=120)  # detached after 60 messages drawn
-        reader.join(60)
-        view_err = "".join(lines)
-        assert view.returncode == 0, view_err[-2000:]
-        assert "messages drawn" in view_err
-        others.wait(timeout=240)
-        assert others.returncode == 0
-        text = subprocess.run([rerun_exe(), "rrd", "print", str(rrd)], capture_output=True,
+        mine = tmp_path / "mine.rrd"
+        verify = subprocess.run([rerun_exe(), "rrd", "verify", str(mine)], capture_output=True,
+                                text=True, timeout=120, env=env())
+        assert verify.returncode == 0, verify.stderr[-2000:]
+        text = subprocess.run([rerun_exe(), "rrd", "print", str(mine)], capture_output=True,
                               text=True, timeout=120, env=env()).stdout
         assert "/world/truth" in text and "/peers/s1/tracks" in text
-        scn = load_scenario("seed000", {"scenario.num_scans": 60})
-        for name in scn.sensor_names:  # attached and detached: no scan lost
-            s = (tmp_path / "others" / f"peer-{name}.json").read_text()
-            assert '"scans": 60' in s, name
+        summaries = read_summaries(tmp_path / "others", names)
+        ended = {n: (s["stop_reason"], s["scans"], s["last_k"], s["scans_skipped_behind"])
+                 for n, s in summaries.items()}
+        last = summaries[names[0]]["last_k"]  # attached and detached: no scan lost
+        assert set(ended.values()) == {("end of run", last, last, 0)}, ended
+        assert last < scn.num_scans, ended
     finally:
-        stop_all([p for p in (view, others) if p is not None])
-        reader.join(10)
+        if session is not None:
+            session.close()
+        stop_all([view] if view is not None else [])
+        others.stop_all()
+
+
+def _argv(pid: int) -> list[str]:
+    """A process's command line ([] once it has gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")
+    except OSError:
+        return []
 
 
 def test_ellipses_lie_at_two_sigma_of_their_component():
