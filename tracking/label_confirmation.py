@@ -77,7 +77,10 @@ class Confirmation:
 
     def count(self, labels: np.ndarray) -> np.ndarray:
         """Scans above the threshold so far, per label row (0 if unknown): ``(n,)``."""
-        keys = label_keys(as_labels(labels))
+        return self._count(label_keys(as_labels(labels)))
+
+    def _count(self, keys: np.ndarray) -> np.ndarray:
+        """:meth:`count` of the labels' keys ``(n,)``."""
         if not self._keys.size:
             return np.zeros(keys.size, dtype=np.int64)
         hit, pos = keys_find(self._keys, keys)
@@ -86,7 +89,7 @@ class Confirmation:
     def status(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int8: 1 confirmed, 0 tentative (the ``Tracks.status`` codes)."""
         labels = as_labels(labels)
-        ok = self.count(labels) >= self.scans
+        ok = self._count(label_keys(labels)) >= self.scans
         if self.settle and self._k is not None:
             ok &= self._k - labels[:, 1] >= self.settle
         return ok.astype(np.int8)

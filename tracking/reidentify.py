@@ -71,8 +71,9 @@ def _tracks(labels: np.ndarray, mix: GaussianMixture, on: np.ndarray
     """The published labels (unique, sorted by key) with the heaviest published component's
     mean and covariance: ``(t, 3)``, ``(t, d)``, ``(t, d, d)``."""
     idx = np.flatnonzero(on)
-    keys = label_keys(labels[idx])
-    order = np.lexsort((-mix.weights[idx], *_columns(labels[idx])))
+    sub = labels[idx]
+    keys = label_keys(sub)
+    order = np.lexsort((-mix.weights[idx], *_columns(sub)))
     first = np.ones(len(order), dtype=bool)
     first[1:] = ~keys_equal(keys[order[1:]], keys[order[:-1]])
     rows = idx[order[first]]
@@ -109,7 +110,7 @@ class Reidentification:
     """Metres (module docstring, :data:`REID_JUMP`); None: no bound (the gate alone)."""
     _on: tuple = field(default=None, init=False, repr=False)
     """The last scan's published tracks: (scan, labels, means, covs, scans published in a
-    row)."""
+    row, the labels' keys)."""
     _lost: tuple = field(default=None, init=False, repr=False)
     """Lost tracks: (labels (l, 3), last published scan (l,), means, covs)."""
     _last: tuple = field(default=None, init=False, repr=False)
@@ -132,19 +133,23 @@ class Reidentification:
         if self.shared is not None:
             mine |= lab[:, 0] == self.shared
         new = mine & (lab[:, 1] == k) & (lab[:, 2] >= PUBLISHED_BASE)
-        if self.jump is not None and self._last is not None and (~new).any():
+        if self.jump is not None and self._last is not None and not new.all():
             labels, lab, new = self._returns(labels, lab, m, P, new, k)
-        self._forget(lab, m[~new], P[~new], k)
-        if self._lost is not None and len(self._lost[0]) and new.any():
-            labels, lab = self._match(labels, lab, m, P, new, k)
+        if new.any():
+            self._forget(lab, m[~new], P[~new], k)
+            if self._lost is not None and len(self._lost[0]):
+                labels, lab = self._match(labels, lab, m, P, new, k)
+        else:  # nothing stamped new (the usual case): every track is one of the others
+            self._forget(lab, m, P, k)
+        own = label_keys(lab)
         if self.jump is not None:
-            self._remember(labels, lab, m, k)
+            self._remember(labels, lab, own, m, k)
         run = np.ones(len(lab), dtype=np.int64)
         if self._on is not None and self._on[0] == k - 1 and len(lab) and len(self._on[1]):
             by = _key_order(self._on[1])
-            was, pos = keys_find(label_keys(self._on[1])[by], label_keys(lab))
+            was, pos = keys_find(self._on[5][by], own)
             run[was] += self._on[4][by][pos[was]]
-        self._on = (int(k), lab, m, P, run)
+        self._on = (int(k), lab, m, P, run, own)
         return labels
 
     def _returns(self, labels, lab, m, P, new, k):
@@ -162,15 +167,19 @@ class Reidentification:
         rows = np.flatnonzero(known)
         if not len(rows):
             return labels, lab, new
+        gone = None
+        if self._on is not None and self._on[0] == k - 1:
+            k0, lab0, m0, P0, _, keys0 = self._on
+            gone = np.flatnonzero(~keys_isin(keys0, own))
+            if not len(gone):  # no track of the last scan lost its label: only labels dark
+                rows = rows[K[pos[rows]] < k - 1]  # then may return far (the usual case:
+                if not len(rows):                  # none, and no distance to compute)
+                    return labels, lab, new
         far = self._distance(m[rows], K[pos[rows]], M[pos[rows]], k, pairs=False) > self.jump
         rows = rows[far]
-        if len(rows) and self._on is not None and self._on[0] == k - 1:
-            k0, lab0, m0, P0, _ = self._on
-            gone = np.flatnonzero(~keys_isin(label_keys(lab0), own))
-            took = np.zeros(len(rows), dtype=bool)
-            if len(gone):
-                took = (self._costs(m[rows], P[rows], lab0[gone], np.full(len(gone), k0),
-                                    m0[gone], P0[gone], k) <= self.gate).any(axis=1)
+        if len(rows) and gone is not None and len(gone):
+            took = (self._costs(m[rows], P[rows], lab0[gone], np.full(len(gone), k0),
+                                m0[gone], P0[gone], k) <= self.gate).any(axis=1)
             rows = rows[(K[pos[rows]] < k - 1) | took]
         if not len(rows):
             return labels, lab, new
@@ -182,15 +191,18 @@ class Reidentification:
         new[rows] = True
         return labels, lab, new
 
-    def _remember(self, labels: np.ndarray, lab: np.ndarray, m: np.ndarray, k: int) -> None:
-        """The last published scan and mean of each label: the published ones ``lab``, ``m``
-        at ``k``; the others as before while a component of ``labels`` still carries them."""
-        parts = [(lab, np.full(len(lab), k), m)]
+    def _remember(self, labels: np.ndarray, lab: np.ndarray, own: np.ndarray, m: np.ndarray,
+                  k: int) -> None:
+        """The last published scan and mean of each label: the published ones ``lab`` (their
+        keys ``own``), ``m`` at ``k``; the others as before while a component of ``labels``
+        still carries them."""
+        L, K, M = lab, np.full(len(lab), k), m
         if self._last is not None:
-            L, keys, K, M = self._last
-            keep = keys_isin(keys, label_keys(labels)) & ~keys_isin(keys, label_keys(lab))
-            parts.append((L[keep], K[keep], M[keep]))
-        L, K, M = (np.concatenate(x) for x in zip(*parts, strict=True))
+            L0, keys, K0, M0 = self._last
+            keep = keys_isin(keys, label_keys(labels)) & ~keys_isin(keys, own)
+            if keep.any():
+                L, K, M = (np.concatenate(x) for x in ((L, L0[keep]), (K, K0[keep]),
+                                                       (M, M0[keep])))
         by = _key_order(L)
         L = L[by]
         self._last = (L, label_keys(L), K[by], M[by])
@@ -224,8 +236,10 @@ class Reidentification:
         again or older than ``scans``."""
         parts = [] if self._lost is None else [self._lost]
         if self._on is not None:
-            k0, lab0, m0, P0, run0 = self._on
-            gone = ~keys_isin(label_keys(lab0), label_keys(lab)) & (run0 >= self.age)
+            k0, lab0, m0, P0, run0, keys0 = self._on
+            gone = run0 >= self.age
+            if gone.any():
+                gone &= ~keys_isin(keys0, label_keys(lab))
             if gone.any() and len(m):
                 g = np.flatnonzero(gone)
                 gone[g[(self._costs(m, P, lab0[g], np.full(len(g), k0), m0[g], P0[g], k)
