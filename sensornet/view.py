@@ -303,16 +303,23 @@ def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
     """Rebuild the picture offline from peers' MCAP recordings (``sensornet run --record``:
     what each peer received, and its own tracks), merged in time order; a message heard by
     several peers (a scan, the truth) is drawn once. No telemetry is recorded, so the health
-    series stay empty. Returns the messages drawn."""
+    series stay empty. Returns the messages drawn. A file that is not a whole recording is a
+    one-line ValueError naming it; a record of the wrong shape is counted in
+    ``state.rejected``, as an undecodable message is."""
     merged = []
     for path in paths:
-        meta, records = read_recording(Path(path))
+        try:
+            meta, records = read_recording(Path(path))
+        except (ValueError, KeyError, TypeError) as exc:  # not MCAP, cut short, bad records
+            raise ValueError(f"{path}: {exc}") from None
         peer, network = meta.get("peer", "?"), meta.get("network", "net")
         for topic, r in records:
-            if topic == "receive":
-                merged.append((r[0], r[1], r[2]))
+            if not _replayable(topic, r):
+                state.rejected += 1
+            elif topic == "receive":
+                merged.append((float(r[0]), r[1], bytes(r[2])))
             elif topic == "tracks":
-                merged.append((r[0], f"{ROOT}/{network}/tracks/{peer}", r[2]))
+                merged.append((float(r[0]), f"{ROOT}/{network}/tracks/{peer}", bytes(r[2])))
     merged.sort(key=lambda m: m[0])
     seen: set[bytes] = set()
     drawn = 0
@@ -324,6 +331,16 @@ def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
         state.receive(key, payload)
         drawn += 1
     return drawn
+
+
+def _replayable(topic: str, r) -> bool:
+    """Whether a recorded ``receive`` or ``tracks`` record (other topics are not drawn) has
+    the shape replay reads: a time, a key (or scan) and the message's bytes."""
+    if topic not in ("receive", "tracks"):
+        return True
+    return (isinstance(r, (list, tuple)) and len(r) >= 3 and isinstance(r[0], (int, float))
+            and not isinstance(r[0], bool) and isinstance(r[2], (bytes, bytearray))
+            and (topic == "tracks" or isinstance(r[1], str)))
 
 
 def nice_process(increment: int) -> int:

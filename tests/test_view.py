@@ -808,6 +808,53 @@ def test_the_view_rebuilds_offline_from_peers_mcap_recordings(tmp_path):
     assert {"peers/s1/tracks", "peers/s2/tracks"} <= set(got)
 
 
+@pytest.mark.network  # the command in a child process, and the rerun CLI
+def test_view_from_mcap_writes_a_recording_and_refuses_a_bad_file(tmp_path):
+    """``sensornet view NET --from-mcap FILE... --out F.rrd`` (the picture rebuilt offline):
+    a recording Rerun verifies, with the scenario's sensors and legend, the scans and truth
+    once and each peer's tracks; a record of the wrong shape counted as undecodable; a file
+    that is not a whole recording (garbage, cut short) a one-line error naming it."""
+    scan = encode(Scan("s1", 1, np.ones((3, 2))))
+    truth = encode(Truth(1, np.array([1]), np.zeros((1, 4))))
+    for i, peer in enumerate(("s1", "s2")):
+        rec = Recorder(tmp_path / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
+        rec.receive(10.0 + i, "sensornet/net/scan/s1", scan)
+        rec.receive(10.5 + i, "sensornet/net/truth", truth)
+        rec.tracks(10.6 + i, 1, encode(Tracks(peer, 1, np.ones((2, 4)))))
+        if peer == "s2":  # a key that is not a string
+            rec._log("receive", 10.7, {"t": 10.7, "key": 5, "payload": "AA==", "message": None})
+        rec.close()
+    files = [str(p) for p in sorted(tmp_path.glob("peer-*.mcap"))]
+    rrd = tmp_path / "offline.rrd"
+
+    def view(*paths: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "sensornet", "view", "net", "--scenario", "seed000",
+             "--from-mcap", *paths, "--out", str(rrd)], cwd=tmp_path, env=env(),
+            capture_output=True, text=True, timeout=120)
+
+    done = view(*files)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"view: 4 recorded messages drawn from 2 recordings (1 undecodable) -> {rrd}")
+    verify = subprocess.run([rerun_exe(), "rrd", "verify", str(rrd)], capture_output=True,
+                            text=True, timeout=120, env=env())
+    assert verify.returncode == 0, verify.stderr[-2000:]
+    text = subprocess.run([rerun_exe(), "rrd", "print", str(rrd)], capture_output=True,
+                          text=True, timeout=120, env=env()).stdout
+    for entity in ("/world/sensors", "/legend", "/world/scans/s1", "/world/truth",
+                   "/peers/s1/tracks", "/peers/s2/tracks"):
+        assert entity in text, entity
+    whole = Path(files[0]).read_bytes()
+    (tmp_path / "garbage.mcap").write_bytes(b"not a recording")
+    (tmp_path / "cut.mcap").write_bytes(whole[: len(whole) // 2])
+    for bad in ("garbage.mcap", "cut.mcap"):
+        done = view(files[0], str(tmp_path / bad))
+        err = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(err) == 1, done.stderr[-2000:]
+        assert err[0].startswith(f"sensornet: error: --from-mcap: {tmp_path / bad}: "), err
+
+
 def test_view_command_errors_are_one_line(capsys):
     with pytest.raises(SystemExit):
         main(["view", "bad/name"])

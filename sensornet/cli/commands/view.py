@@ -165,7 +165,11 @@ def _replay_offline(args: argparse.Namespace, sink: RerunSink,
         sink.close()
         raise UserError(f"--from-mcap: no such file {missing[0]}")
     offline = state(Batcher(sink.rr, sink.rr))
-    drawn = replay_recordings(offline, [Path(p) for p in args.from_mcap])
+    try:
+        drawn = replay_recordings(offline, [Path(p) for p in args.from_mcap])
+    except (ValueError, OSError) as exc:  # not a whole recording, unreadable
+        sink.close()
+        raise UserError(f"--from-mcap: {exc}") from None
     offline.b.flush()
     sink.close()
     print(f"view: {drawn} recorded messages drawn from {len(args.from_mcap)} recordings "
