@@ -244,7 +244,10 @@ class Reidentification:
                 g = np.flatnonzero(gone)
                 gone[g[(self._costs(m, P, lab0[g], np.full(len(g), k0), m0[g], P0[g], k)
                         <= self.gate).any(axis=0)]] = False
-            parts.append((lab0[gone], np.full(int(gone.sum()), k0), m0[gone], P0[gone]))
+            if gone.any():
+                parts.append((lab0[gone], np.full(int(gone.sum()), k0), m0[gone], P0[gone]))
+            elif self._lost is None:  # nothing lost yet: an empty set of the tracks' shapes
+                parts.append((lab0[gone], np.full(0, k0), m0[gone], P0[gone]))
         if not parts:
             return
         if not any(len(part[0]) for part in parts):  # nothing lost (the usual case)
