@@ -26,7 +26,6 @@ from collections.abc import Generator
 import numpy as np
 from sensornet.peers.trust_checks import (
     centred,
-    divergence_test,
     neighbour_statistics_steps,
     offset_information,
     run_alone,
@@ -45,7 +44,6 @@ from sensornet.peers.trust_record import (
     residual_passes,
 )
 from sensornet.peers.trust_scan import ScanTests
-from sensornet.tracking.divergence import cs_from_log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 __all__ = ["LOW", "MAX_LOG", "STATES", "NeighbourTrust", "Trust", "TrustConfig", "alarm_limits",
@@ -205,13 +203,8 @@ class Trust(ScanTests):
         L = yield ("overlaps", mixes)
         L0 = (yield ("overlaps", centred(mixes))) if cfg.location_only else None
         mass, targets = yield ("masses", mixes, cfg.repeat_weight)
-        for j in range(1, len(mixes)):
-            shape = 0.0 if L0 is None else max(0.0, float(
-                cs_from_log_overlaps(L0[j, 0], L0[j, j], L0[0, 0])))
-            if divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0],
-                               targets[j], targets[0], shape=shape) > cfg.drift:
-                return False
-        return True
+        tests = yield ("own_tests", cfg, L, L0, mass, targets)
+        return not any(t > cfg.drift for t in tests)
 
     def _reuse(self, k: int, rnd: int, names: list[str], weights: list[float]) -> list[float]:
         """A later round of a settled scan (:meth:`_settled`): each neighbour's round-1
@@ -322,10 +315,7 @@ class Trust(ScanTests):
         L = yield ("overlaps", [ref, mix])
         L0 = (yield ("overlaps", centred([ref, mix]))) if self.cfg.location_only else None
         masses, targets = yield ("masses", [ref, mix], self.cfg.repeat_weight)
-        return divergence_test(self.cfg, L[1, 1], L[1, 0], L[0, 0], masses[1], masses[0],
-                               targets[1], targets[0],
-                               shape=0.0 if L0 is None else max(0.0, float(
-                                   cs_from_log_overlaps(L0[1, 0], L0[1, 1], L0[0, 0]))))
+        return (yield ("own_tests", self.cfg, L, L0, masses, targets))[0]
 
     def shift(self, s: str, mix: GaussianMixture, k: int | None = None) -> GaussianMixture:
         """``mix`` of neighbour ``s`` (made at scan ``k``; None: the scan being fused) with

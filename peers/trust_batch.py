@@ -14,22 +14,18 @@ trust states are those of its own :meth:`Trust.weigh`.
 from __future__ import annotations
 
 import functools
-import itertools
-import math
 from collections.abc import Callable, Generator
 
 import numpy as np
 from sensornet.peers.trust_checks import (
     ALONE,
-    _cs_scalar,
-    _lse_rows,
     _others,
-    divergence_test,
     gated,
     information_sums,
+    neighbour_tests_many,
     offset_chi2_stacked,
     offset_cusums,
-    pair_tests,
+    own_tests_many,
     position_block,
     target_mass,
     unmatched_sums,
@@ -270,98 +266,24 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
 
 def _tests(args: list[tuple]) -> list[list[float]]:
     """``"tests"``: :func:`peers.trust_checks.neighbour_tests` of every request (the same
-    config and number of inputs) at once: the pair tests, leave-one-out weights and
-    log-sum-exps stacked (the same elementwise and per-row operations), the references'
-    masses by the same products (a stacked ``matmul`` of 1 x n by n x 1: each a dot), each
-    neighbour's divergence tests and medians on Python floats as there."""
-    return _by_key(args, lambda a: (a[0], len(a[6]), a[2] is None, a[5] is None),
-                   _tests_group)
+    config and number of inputs) at once: :func:`peers.trust_checks.neighbour_tests_many`
+    of them stacked (every peer's neighbours in one computation, the one formula)."""
+    def many(group: list[tuple]) -> list[list[float]]:
+        def stack(i: int) -> np.ndarray | None:
+            return None if group[0][i] is None else np.stack([a[i] for a in group])
+        return neighbour_tests_many(group[0][0], *(stack(i) for i in range(1, 7))).tolist()
+    return _by_key(args, lambda a: (a[0], len(a[6]), a[2] is None, a[5] is None), many)
 
 
-def _tests_group(group: list[tuple]) -> list[list[float]]:
-    cfg = group[0][0]
-    n = len(group[0][6])
-    J = n - 1
-    if J == 0:
-        return [[] for _ in group]
-    L = np.stack([a[1] for a in group])  # (g, n, n)
-    L0 = None if group[0][2] is None else np.stack([a[2] for a in group])
-    mass = np.stack([a[3] for a in group])  # (g, n)
-    tm = np.stack([a[4] for a in group])
-    U = None if group[0][5] is None else np.stack([a[5] for a in group])
-    w = np.stack([a[6] for a in group])
-    pair = pair_tests(cfg, L, mass, tm, U, L0).tolist() if cfg.majority else None
-    W = np.repeat(w[:, None, :], J, axis=1)  # (g, J, n): row i leaves out input i + 1
-    W[:, np.arange(J), np.arange(1, J + 1)] = 0.0
-    tot = W.sum(axis=2)
-    has = (tot > 0) & (np.count_nonzero(W, axis=2) > 1)  # the others besides own
-    W = W / np.where(has, tot, 1.0)[..., None]
-    with np.errstate(divide="ignore"):
-        LW = np.log(W)
-    loo = _loo_stacked(L, LW)
-    loo0 = _loo_stacked(L0, LW) if L0 is not None else None
-    ref_mass = np.matmul(W[:, :, None, :], np.repeat(mass[:, None, :, None], J, axis=1))
-    ref_tm = np.matmul(W[:, :, None, :], np.repeat(tm[:, None, :, None], J, axis=1))
-    Ls, ms, ts = L.tolist(), mass.tolist(), tm.tolist()
-    L0s = L0.tolist() if L0 is not None else None
-    loos = [v.tolist() for v in loo]
-    loo0s = [v.tolist() for v in loo0] if loo0 is not None else None
-    ref_ms, ref_ts = ref_mass[..., 0, 0].tolist(), ref_tm[..., 0, 0].tolist()
-    pos_w, has = (w > 0).tolist(), has.tolist()
-    out = []
-    for g in range(len(group)):
-        Lg, mg, tg = Ls[g], ms[g], ts[g]
-        values = []
-        for j in range(1, J + 1):
-            t_own = divergence_test(cfg, Lg[j][j], Lg[j][0], Lg[0][0], mg[j], mg[0], tg[j],
-                                    tg[0], shape=_cs_list(L0s[g], j, L0s[g][j][0],
-                                                          L0s[g][0][0])
-                                    if L0s is not None else 0.0)
-            if has[g][j - 1]:
-                t_loo = divergence_test(cfg, Lg[j][j], loos[0][g][j - 1], loos[1][g][j - 1],
-                                        mg[j], ref_ms[g][j - 1], tg[j], ref_ts[g][j - 1],
-                                        shape=_cs_list(L0s[g], j, loo0s[0][g][j - 1],
-                                                       loo0s[1][g][j - 1])
-                                        if loo0s is not None else 0.0)
-                value = min(t_own, t_loo)
-            else:
-                value = t_own
-            if pair is not None:
-                others = [i for i in range(n) if pos_w[g][i] and i != j]
-                if len(others) >= 3:  # own and at least two other trusted neighbours
-                    P = pair[g]
-                    sub = [P[a][b] for a, b in itertools.combinations(others, 2)]
-                    base = _median_list([P[j][i] for i in others]) if cfg.median_test \
-                        else value
-                    value = max(0.0, base - _median_list(sub))
-            values.append(value)
-        out.append(values)
-    return out
-
-
-def _loo_stacked(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`peers.trust_checks._loo_all` of several peers (``L (g, n, n)``,
-    ``LW (g, J, n)``): the same rows' log-sum-exps, ``(g, J)`` each."""
-    g, J, n = LW.shape
-    rows = np.arange(1, J + 1)
-    cross = _lse_rows((L[:, rows] + LW).reshape(g * J, n)).reshape(g, J)
-    square = _lse_rows((L[:, None] + LW[:, :, :, None] + LW[:, :, None, :]).reshape(
-        g * J, n * n)).reshape(g, J)
-    return cross, square
-
-
-def _cs_list(L0: list, j: int, l_jr: float, l_rr: float) -> float:
-    """:func:`peers.trust_checks._cs` of nested lists."""
-    v = _cs_scalar(float(l_jr), float(L0[j][j]), float(l_rr))
-    return v if math.isfinite(v) else 0.0
-
-
-def _median_list(v: list[float]) -> float:
-    """:func:`peers.trust_checks.median_small` of a list (the same operations)."""
-    v = sorted(v)
-    n = len(v)
-    h = n // 2
-    return v[h] if n % 2 else (v[h - 1] + v[h]) / 2.0
+def _own_tests(args: list[tuple]) -> list[list[float]]:
+    """``"own_tests"``: :func:`peers.trust_checks.own_tests_many` of every request (the same
+    config and number of inputs) stacked."""
+    def many(group: list[tuple]) -> list[list[float]]:
+        L0 = None if group[0][2] is None else np.stack([a[2] for a in group])
+        return own_tests_many(group[0][0], np.stack([a[1] for a in group]), L0,
+                              np.array([a[3] for a in group], float),
+                              np.array([a[4] for a in group], float)).tolist()
+    return _by_key(args, lambda a: (a[0], len(a[3]), a[2] is None), many)
 
 
 def _masses(args: list[tuple]) -> list[tuple[list[float], list[float]]]:
@@ -444,6 +366,7 @@ TOGETHER: dict[str, Callable[[list[tuple]], list]] = {
     "withheld": _withheld,
     "masses": _masses,
     "tests": _tests,
+    "own_tests": _own_tests,
     "overlaps": _overlaps,
     "unmatched": _unmatched,
     "offsets": _offsets,

@@ -89,44 +89,85 @@ def neighbour_tests(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass
     """The statistics of :func:`neighbour_statistics` (per input ``1..n-1``, ``(n-1)``
     floats) from its inputs' log overlaps ``L`` (``(n, n)``; ``L0``: centred, or None),
     masses ``mass``, target masses ``tm`` (``(n,)``), unmatched weights ``U`` (``(n, n)``
-    or None) and reference weights ``w`` (``(n,)``, 0 where left out of the references).
-    :func:`peers.trust_batch.neighbour_tests_many`: several peers' at once, the same
-    numbers."""
-    pair = pair_tests(cfg, L, mass, tm, U, L0) if cfg.majority else None
-    out = []
-    pos_w = w > 0
-    # every neighbour's leave-one-out weights at once: row i leaves out input i + 1
-    J = len(w) - 1
-    W = np.repeat(w[None, :], J, axis=0)
-    W[np.arange(J), np.arange(1, J + 1)] = 0.0
-    tot = W.sum(axis=1)
-    has = (tot > 0) & (np.count_nonzero(W, axis=1) > 1)  # the others besides own
-    W = W / np.where(has, tot, 1.0)[:, None]
+    or None) and reference weights ``w`` (``(n,)``, 0 where left out of the references):
+    one peer's :func:`neighbour_tests_many`."""
+    return neighbour_tests_many(cfg, L[None], None if L0 is None else L0[None], mass[None],
+                                tm[None], None if U is None else U[None], w[None])[0].tolist()
+
+
+def neighbour_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None,
+                         mass: np.ndarray, tm: np.ndarray, U: np.ndarray | None,
+                         w: np.ndarray) -> np.ndarray:
+    """:func:`neighbour_tests` of ``g`` peers' rounds of as many inputs at once (``L``,
+    ``L0``, ``U`` ``(g, n, n)``; ``mass``, ``tm``, ``w`` ``(g, n)``): ``(g, n - 1)``. Per
+    neighbour ``j`` the smaller of its :func:`divergence_tests` against own and against
+    the leave-one-out average of the other references (where there is one); with
+    :attr:`TrustConfig.majority` and own and at least two other references, its median
+    pair test against them (:attr:`TrustConfig.median_test`; else that statistic) less
+    the median of theirs among themselves (:func:`pair_tests`), at least 0. Every
+    (peer, neighbour) at once (a peer host's: :mod:`peers.trust_batch`)."""
+    g, n = w.shape
+    J = n - 1
+    if J == 0:
+        return np.zeros((g, 0))
+    value = own_tests_many(cfg, L, L0, mass, tm)  # (g, J)
+    W = np.repeat(w[:, None, :], J, axis=1)  # (g, J, n): row i leaves out input i + 1
+    W[:, np.arange(J), np.arange(1, J + 1)] = 0.0
+    tot = W.sum(axis=2)
+    has = (tot > 0) & (np.count_nonzero(W, axis=2) > 1)  # the others besides own
+    W = W / np.where(has, tot, 1.0)[..., None]
     LW = _log(W)
-    loo = _loo_all(L, LW)
-    loo0 = _loo_all(L0, LW) if L0 is not None else None
-    for j in range(1, J + 1):
-        t_own = divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
-                                shape=_cs(L0, j, L0[j, 0], L0[0, 0]) if L0 is not None else 0.0)
-        if has[j - 1]:
-            wo = W[j - 1]
-            t_loo = divergence_test(cfg, L[j, j], loo[0][j - 1], loo[1][j - 1], mass[j],
-                                    float(wo @ mass), tm[j], float(wo @ tm),
-                                    shape=_cs(L0, j, loo0[0][j - 1], loo0[1][j - 1])
-                                    if loo0 is not None else 0.0)
-            value = min(t_own, t_loo)
-        else:
-            value = t_own
-        if pair is not None:
-            keep = pos_w.copy()  # wo > 0: w > 0 but j (wo is w scaled by a positive sum)
-            keep[j] = False
-            others = np.flatnonzero(keep)
-            if len(others) >= 3:  # own and at least two other trusted neighbours
-                sub = pair[others][:, others][triu_indices(len(others))]
-                base = median_small(pair[j, others]) if cfg.median_test else value
-                value = max(0.0, base - median_small(sub))
-        out.append(value)
-    return out
+    cross, square = _loo_stacked(L, LW)
+    ref_mass = np.matmul(W[:, :, None, :], np.repeat(mass[:, None, :, None], J, axis=1))
+    ref_tm = np.matmul(W[:, :, None, :], np.repeat(tm[:, None, :, None], J, axis=1))
+    j = np.arange(1, J + 1)
+    if L0 is not None:
+        c0, s0 = _loo_stacked(L0, LW)
+        shape = _cs_arrays(c0, L0[:, j, j], s0, finite=True)
+    else:
+        shape = 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):  # rows without others: not used
+        t_loo = divergence_tests(cfg, L[:, j, j], cross, square, mass[:, j], ref_mass[..., 0, 0],
+                                 tm[:, j], ref_tm[..., 0, 0], shape=shape)
+    value = np.where(has & (t_loo < value), t_loo, value)  # min(t_own, t_loo)
+    if not cfg.majority:
+        return value
+    pair = pair_tests(cfg, L, mass, tm, U, L0)  # (g, n, n)
+    others = np.repeat((w > 0)[:, None, :], J, axis=1)  # (g, J, n): w > 0 but j
+    others[:, np.arange(J), j] = False
+    count = others.sum(axis=2)
+    rows, cols = triu_indices(n)
+    sub = _medians(pair[:, rows, cols][:, None, :], others[:, :, rows] & others[:, :, cols])
+    base = _medians(pair[:, j, :], others) if cfg.median_test else value
+    x = base - sub
+    return np.where(count >= 3, np.where(x > 0.0, x, 0.0), value)  # max(0, base - sub)
+
+
+def own_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass: np.ndarray,
+                   tm: np.ndarray) -> np.ndarray:
+    """Each input ``j >= 1``'s :func:`divergence_tests` against own (input 0) alone, of
+    ``g`` peers' rounds at once (``L``, ``L0`` ``(g, n, n)``; ``mass``, ``tm`` ``(g, n)``):
+    ``(g, n - 1)``; the first test of :func:`neighbour_tests_many`, and what
+    :attr:`TrustConfig.test_once`'s guard and a late estimate's test take."""
+    j = np.arange(1, L.shape[-1])
+    shape = (_cs_arrays(L0[:, j, 0], L0[:, j, j], L0[:, :1, 0], finite=True)
+             if L0 is not None else 0.0)
+    return divergence_tests(cfg, L[:, j, j], L[:, j, 0], L[:, :1, 0], mass[:, j], mass[:, :1],
+                            tm[:, j], tm[:, :1], shape=shape)
+
+
+def _medians(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per row of ``mask`` (``(..., m)`` bool; ``values`` broadcast to it): the median of
+    the values it marks, as :func:`median_small` (the middle of the sorted values, or
+    ``(a + b) / 2.0`` of the two middle ones); NaN where it marks none."""
+    V = np.sort(np.where(mask, values, np.inf), axis=-1)  # the marked first, in order
+    c = mask.sum(axis=-1)[..., None]
+    h = c // 2
+    hi = np.take_along_axis(V, np.minimum(h, V.shape[-1] - 1), axis=-1)
+    lo = np.take_along_axis(V, np.maximum(h - 1, 0), axis=-1)
+    with np.errstate(invalid="ignore"):
+        med = np.where(c % 2 == 1, hi, (lo + hi) / 2.0)
+    return np.where(c > 0, med, np.nan)[..., 0]
 
 
 @functools.lru_cache(maxsize=64)
@@ -292,31 +333,45 @@ def miss_cost(cfg: TrustConfig, m_j, m_r):
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
                     n_r: float, t_j: float | None = None, t_r: float | None = None,
                     unmatched: float | None = None, shape: float = 0.0) -> float:
+    """:func:`divergence_tests` of one density and reference, a float."""
+    return float(divergence_tests(cfg, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r, unmatched, shape))
+
+
+def divergence_tests(cfg: TrustConfig, l_jj, l_jr, l_rr, n_j, n_r, t_j=None, t_r=None,
+                     unmatched=None, shape=0.0) -> np.ndarray:
     """``T = W + kappa (N_j - N_R)^2 / (N_R + 1)``, capped at :attr:`TrustConfig.cap`, from
     the log overlaps of a density ``D_j`` and a reference ``R`` and their masses. ``W``,
     where the targets are: ``D_CS(D_j, R)`` less ``shape`` (the divergence of the two
     centred, :func:`shape_overlaps`; at least 0), :attr:`TrustConfig.empty_penalty` when one
     side is empty, at least ``unmatched_cost`` times the ``unmatched`` target weight on
     both sides (:func:`unmatched_weights`) and at most :func:`miss_cost` of their target
-    masses ``t_j``, ``t_r`` (each when given)."""
-    card = cfg.kappa * (n_j - n_r) ** 2 / (n_r + 1.0)
-    if n_j <= 1e-9 and n_r <= 1e-9:
-        where = 0.0
-    elif n_j <= 1e-9 or n_r <= 1e-9:  # one side empty: where cannot be compared
-        where = cfg.empty_penalty * min(1.0, max(n_j, n_r))
-    else:
-        where = _cs_scalar(float(l_jr), float(l_jj), float(l_rr))
-        if not math.isfinite(where):
-            where = cfg.cap
-        elif np.isfinite(shape):
-            where = max(0.0, where - shape)
+    masses ``t_j``, ``t_r`` (each when given). Elementwise over arrays (broadcast): every
+    (peer, neighbour) of a host at once. The square is C's ``pow`` (as Python's ``** 2``,
+    which differs from ``x * x`` in the last bit for some ``x``: NumPy squares where the
+    exponent is a scalar), ``min`` and ``max`` keep their first argument on ties and NaN
+    as Python's do (the numbers of the scalar code before, tests/test_trust_exact.py)."""
+    n_j, n_r = np.asarray(n_j, float), np.asarray(n_r, float)
+    with np.errstate(invalid="ignore", over="ignore"):  # as Python's floats: no warning
+        d = n_j - n_r
+        card = cfg.kappa * np.power(d, np.full(d.shape, 2.0)) / (n_r + 1.0)
+    ej, er = n_j <= 1e-9, n_r <= 1e-9
+    big = np.where(n_r > n_j, n_r, n_j)  # max(n_j, n_r)
+    one = cfg.empty_penalty * np.where(big < 1.0, big, 1.0)  # one side empty
+    cs = _cs_arrays(l_jr, l_jj, l_rr)
+    with np.errstate(invalid="ignore"):
+        x = cs - shape
+    where = np.where(~np.isfinite(cs), cfg.cap,
+                     np.where(np.isfinite(shape), np.where(x > 0.0, x, 0.0), cs))
+    where = np.where(ej & er, 0.0, np.where(ej | er, one, where))
     if unmatched is not None:
-        where = max(where, cfg.unmatched_cost * float(unmatched))
+        u = cfg.unmatched_cost * np.asarray(unmatched, float)
+        where = np.where(u > where, u, where)  # max(where, u)
     if t_j is not None and t_r is not None and cfg.detection_probability is not None:
-        # miss_cost of two scalars (the same operations; without it the bound is inf)
-        where = min(where, float(_miss_rate(cfg.detection_probability)
-                                 * (np.float64(t_j) + np.float64(t_r))))
-    return min(cfg.cap, where + card)
+        m = _miss_rate(cfg.detection_probability) * (np.asarray(t_j, float)
+                                                      + np.asarray(t_r, float))
+        where = np.where(m < where, m, where)  # min(where, miss_cost)
+    x = where + card
+    return np.where(x < cfg.cap, x, cfg.cap)  # min(cap, x)
 
 
 @functools.lru_cache(maxsize=16)
@@ -664,12 +719,14 @@ def _cs_matrix(L: np.ndarray) -> np.ndarray:
                                            np.broadcast_to(d[..., None, :], L.shape)))
 
 
-def _cs(L0: np.ndarray, j: int, l_jr: float, l_rr: float) -> float:
-    """``D_CS`` of input ``j`` and a reference from the centred log overlaps ``L0``
-    (``log int D_j R``: ``l_jr``, ``log int R^2``: ``l_rr``), 0 where it is not finite (the
-    ``shape`` of :func:`divergence_test`)."""
-    v = _cs_scalar(float(l_jr), float(L0[j, j]), float(l_rr))
-    return v if math.isfinite(v) else 0.0
+def _cs_arrays(lpq, lpp, lqq, finite: bool = False) -> np.ndarray:
+    """:func:`_cs_scalar` elementwise (broadcast), the same operations; ``finite``: 0 where
+    it is not finite (the ``shape`` of :func:`divergence_tests`)."""
+    lpq, lpp, lqq = (np.asarray(v, float) for v in (lpq, lpp, lqq))
+    with np.errstate(invalid="ignore"):
+        v = -lpq + 0.5 * lpp + 0.5 * lqq
+    v = np.where(np.isfinite(lpp) & np.isfinite(lqq), np.where(v < 0.0, 0.0, v), np.nan)
+    return np.where(np.isfinite(v), v, 0.0) if finite else v
 
 
 def _cs_scalar(lpq: float, lpp: float, lqq: float) -> float:
@@ -682,15 +739,16 @@ def _cs_scalar(lpq: float, lpp: float, lqq: float) -> float:
     return 0.0 if v < 0.0 else v
 
 
-def _loo_all(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``log int D_j R`` and ``log int R^2`` (``(J,)`` each) of every input ``j = i + 1``
-    and the leave-one-out average ``R`` of the inputs with the log weights ``LW[i]``
-    (``(J, n)``, ``-inf`` at ``j``), from the log overlaps ``L`` (``(n, n)``): all
-    neighbours at once (row-wise log-sum-exps, the same numbers as one at a time)."""
-    J, n = LW.shape
+def _loo_stacked(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``log int D_j R`` and ``log int R^2`` (``(g, J)`` each) of every input ``j = i + 1``
+    and the leave-one-out average ``R`` of the inputs with the log weights ``LW[:, i]``
+    (``(g, J, n)``, ``-inf`` at ``j``), from the log overlaps ``L`` (``(g, n, n)``): every
+    peer's neighbours at once (row-wise log-sum-exps)."""
+    g, J, n = LW.shape
     rows = np.arange(1, J + 1)
-    cross = _lse_rows(L[rows] + LW)
-    square = _lse_rows((L[None] + LW[:, :, None] + LW[:, None, :]).reshape(J, n * n))
+    cross = _lse_rows((L[:, rows] + LW).reshape(g * J, n)).reshape(g, J)
+    square = _lse_rows((L[:, None] + LW[:, :, :, None] + LW[:, :, None, :]).reshape(
+        g * J, n * n)).reshape(g, J)
     return cross, square
 
 
@@ -782,6 +840,9 @@ ALONE = {
     "chi2": lambda stacks, windows: offset_chi2_stacked(stacks, windows),
     "cusums": lambda *args: offset_cusums(*args),
     "tests": lambda *args: neighbour_tests(*args),
+    "own_tests": lambda cfg, L, L0, mass, tm: own_tests_many(
+        cfg, L[None], None if L0 is None else L0[None], np.asarray(mass, float)[None],
+        np.asarray(tm, float)[None])[0].tolist(),
     "withheld": lambda *args: withheld_increments(*args),
     "relative": lambda infos, among: relative_offsets(infos, among),
     "masses": lambda mixes, min_weight: ([D.mass for D in mixes],

@@ -23,6 +23,7 @@ from sensornet.peers.trust_checks import (
     ALONE,
     centred,
     divergence_test,
+    divergence_tests,
     information_sums,
     neighbour_statistics_steps,
     segment_sums,
@@ -39,6 +40,7 @@ from sensornet.tracking.divergence import (
 )
 from sensornet.tracking.mixture import GaussianMixture
 
+from benchmarks import trust_before
 from benchmarks.bench_network import scenario_text
 
 
@@ -128,7 +130,7 @@ def _requests(rng: np.random.Generator, op: str) -> list[tuple]:
     return out
 
 
-@pytest.mark.parametrize("op", sorted(set(TOGETHER) - {"tests"}))  # "tests": below
+@pytest.mark.parametrize("op", sorted(set(TOGETHER) - {"tests", "own_tests"}))  # below
 def test_each_stacked_request_equals_its_own_computation(op):
     rng = np.random.default_rng(len(op))
     for _ in range(30):
@@ -198,6 +200,61 @@ def test_neighbour_tests_together_are_each_ones_to_the_bit():
             assert got == want
             seen += sum(v > 0 for v in want)
     assert seen > 100
+
+
+def test_own_tests_together_are_each_ones_and_the_old_scalar_tests():
+    """The ``"own_tests"`` request (each input against own alone: the test-once guard and a
+    late estimate's test) of several peers at once is each one's, and each value the old
+    scalar :func:`divergence_test` with the guard's shape (``max(0, D_CS)`` of the centred
+    overlaps) to the bit."""
+    rng = np.random.default_rng(12)
+    seen = 0
+    for _ in range(40):
+        args = []
+        for _ in range(int(rng.integers(2, 20))):
+            cfg, L, L0, mass, tm, _, _ = _tests_request(
+                TEST_CONFIGS[int(rng.integers(0, len(TEST_CONFIGS)))], rng)
+            args.append((cfg, L, L0, mass.tolist(), tm.tolist()))
+        for (cfg, L, L0, mass, tm), got in zip(args, TOGETHER["own_tests"](args), strict=True):
+            assert got == ALONE["own_tests"](cfg, L, L0, mass, tm)
+            for j in range(1, len(mass)):
+                shape = 0.0 if L0 is None else max(0.0, float(
+                    cs_from_log_overlaps(L0[j, 0], L0[j, j], L0[0, 0])))
+                assert got[j - 1] == trust_before.divergence_test(
+                    cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
+                    shape=shape)
+                seen += got[j - 1] > 0
+    assert seen > 100
+
+
+def test_divergence_tests_are_the_old_scalar_tests_to_the_bit():
+    """:func:`divergence_tests` elementwise is the old scalar test on every branch: empty
+    sides, no overlap (``-inf``), empty mixtures (NaN), ``-0.0``, shapes, the unmatched and
+    miss bounds, and masses whose ``** 2`` is not ``x * x`` to the bit."""
+    rng = np.random.default_rng(13)
+    pick = [0.0, -0.0, 1e-10, 0.3, 1.0, 2.5, -np.inf, np.inf, np.nan]
+    n = 4000
+    def draw(spread):
+        v = rng.normal(0, spread, n)
+        special = rng.random(n) < 0.15
+        v[special] = rng.choice(pick, int(special.sum()))
+        return v
+    l_jj, l_jr, l_rr = draw(10), draw(10), draw(10)
+    n_j, n_r = np.abs(draw(3)), np.abs(draw(3))
+    n_j[: n // 4] = rng.uniform(0, 20, n // 4)  # x ** 2 != x * x for some of these
+    t_j, t_r, u = np.abs(draw(2)), np.abs(draw(2)), np.abs(draw(2))
+    shape = np.where(rng.random(n) < 0.5, 0.0, np.abs(draw(2)))
+    for cfg in (TrustConfig(), TrustConfig(detection_probability=0.9)):
+        for with_u in (False, True):
+            got = divergence_tests(cfg, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r,
+                                   u if with_u else None, shape)
+            for i in range(n):
+                want = trust_before.divergence_test(
+                    cfg, l_jj[i], l_jr[i], l_rr[i], float(n_j[i]), float(n_r[i]),
+                    float(t_j[i]), float(t_r[i]), float(u[i]) if with_u else None,
+                    float(shape[i]))
+                assert got[i] == want or (np.isnan(got[i]) and np.isnan(want)), (i, want)
+                assert np.signbit(got[i]) == np.signbit(want)
 
 
 NAMES = ("a", "b", "c", "d")
