@@ -177,7 +177,8 @@ def sensor_positions(scenario_text: str) -> dict[str, tuple[float, float]]:
 
 
 _FIELDS = {"receive": ("t", "key", "payload"), "liveliness": ("t", "name", "joined"),
-           "tick": ("t",), "finish": ("t",), "tracks": ("t", "k", "payload")}
+           "tick": ("t",), "finish": ("t",), "tracks": ("t", "k", "payload"),
+           "truth": ("t", "k", "ids", "states")}
 
 
 def _record(topic: str, encoding: str, data: bytes) -> list:
@@ -189,9 +190,11 @@ def _record(topic: str, encoding: str, data: bytes) -> list:
     return [base64.b64decode(body[f]) if f == "payload" else body[f] for f in _FIELDS[topic]]
 
 
-def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
-    """The metadata and the records ``(topic, record)`` of a recording, in order; a file that
-    is not a complete MCAP file is a one-line :class:`ValueError`."""
+def read(path: Path, topics: tuple[str, ...] = TOPICS) -> tuple[dict[str, str],
+                                                                list[tuple[str, list]]]:
+    """The metadata and the records ``(topic, record)`` of a recording, in order, of
+    ``topics`` (a replay's by default; ``"truth"`` too for the view's offline picture); a file
+    that is not a complete MCAP file is a one-line :class:`ValueError`."""
     # heavy dependency: mcap, as in Recorder
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
@@ -206,7 +209,7 @@ def read(path: Path) -> tuple[dict[str, str], list[tuple[str, list]]]:
             fh.seek(0)
             reader = make_reader(fh)
             records = [(ch.topic, _record(ch.topic, ch.message_encoding, msg.data))
-                       for _, ch, msg in reader.iter_messages(topics=list(TOPICS),
+                       for _, ch, msg in reader.iter_messages(topics=list(topics),
                                                               log_time_order=False)]
         except McapError as exc:
             raise ValueError(

@@ -28,11 +28,15 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
 import zenoh
 
+from sensornet.peers.recording import TOPICS as RECORDED
 from sensornet.peers.recording import read as read_recording
 from sensornet.peers.session import DIAL_SOON, SessionError, zenoh_config
+from sensornet.protocol.codec import Rejected, encode
 from sensornet.protocol.keys import ROOT, Keys
+from sensornet.protocol.messages import Truth
 from sensornet.view_columns import Batcher, strip_array
 from sensornet.view_state import TAIL, ViewState, id_color, id_labels, later_round
 
@@ -301,25 +305,25 @@ class LiveView:
 
 def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
     """Rebuild the picture offline from peers' MCAP recordings (``sensornet run --record``:
-    what each peer received, and its own tracks), merged in time order; a message heard by
-    several peers (a scan, the truth) is drawn once. No telemetry is recorded, so the health
-    series stay empty. Returns the messages drawn. A file that is not a whole recording is a
-    one-line ValueError naming it; a record of the wrong shape is counted in
-    ``state.rejected``, as an undecodable message is."""
+    what each peer received, its own tracks and the truth it scored against), merged in time
+    order; a message heard by several peers (a scan, the truth) is drawn once. No telemetry
+    is recorded, so the fused marks and the health series stay empty. Returns the messages
+    drawn. A file that is not a whole recording is a one-line ValueError naming it; a record
+    of the wrong shape is counted in ``state.rejected``, as an undecodable message is."""
     merged = []
     for path in paths:
         try:
-            meta, records = read_recording(Path(path))
+            meta, records = read_recording(Path(path), (*RECORDED, "truth"))
         except (ValueError, KeyError, TypeError) as exc:  # not MCAP, cut short, bad records
             raise ValueError(f"{path}: {exc}") from None
         peer, network = meta.get("peer", "?"), meta.get("network", "net")
         for topic, r in records:
-            if not _replayable(topic, r):
-                state.rejected += 1
-            elif topic == "receive":
-                merged.append((float(r[0]), r[1], bytes(r[2])))
-            elif topic == "tracks":
-                merged.append((float(r[0]), f"{ROOT}/{network}/tracks/{peer}", bytes(r[2])))
+            if topic in ("receive", "tracks", "truth"):
+                item = _drawable(topic, r, f"{ROOT}/{network}", peer)
+                if item is None:
+                    state.rejected += 1
+                else:
+                    merged.append(item)
     merged.sort(key=lambda m: m[0])
     seen: set[bytes] = set()
     drawn = 0
@@ -333,14 +337,28 @@ def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
     return drawn
 
 
-def _replayable(topic: str, r) -> bool:
-    """Whether a recorded ``receive`` or ``tracks`` record (other topics are not drawn) has
-    the shape replay reads: a time, a key (or scan) and the message's bytes."""
-    if topic not in ("receive", "tracks"):
-        return True
-    return (isinstance(r, (list, tuple)) and len(r) >= 3 and isinstance(r[0], (int, float))
-            and not isinstance(r[0], bool) and isinstance(r[2], (bytes, bytearray))
-            and (topic == "tracks" or isinstance(r[1], str)))
+def _drawable(topic: str, r, prefix: str, peer: str) -> tuple[float, str, bytes] | None:
+    """A recorded ``receive``, ``tracks`` or ``truth`` record as ``(time, key, message)`` for
+    the view, or None if it has not the shape the view reads (a time, a key or scan, the
+    message's bytes, or the truth's ids and states). Peers hear no truth message: the truth
+    their scorer had is recorded, and goes as the world's Truth message (the same bytes
+    from every peer: drawn once)."""
+    if not (isinstance(r, (list, tuple)) and len(r) >= 3 and isinstance(r[0], (int, float))
+            and not isinstance(r[0], bool)):
+        return None
+    if topic == "receive" and isinstance(r[1], str) and isinstance(r[2], (bytes, bytearray)):
+        return float(r[0]), r[1], bytes(r[2])
+    if topic == "tracks" and isinstance(r[2], (bytes, bytearray)):
+        return float(r[0]), f"{prefix}/tracks/{peer}", bytes(r[2])
+    if topic == "truth" and len(r) >= 4:
+        try:
+            ids = np.asarray(r[2], np.int64).reshape(-1)
+            states = np.asarray(r[3], float).reshape(len(ids), -1) if len(ids) else \
+                np.zeros((0, 2))  # none: the dimension was not kept, nor is it needed
+            return float(r[0]), f"{prefix}/truth", encode(Truth(int(r[1]), ids, states))
+        except (Rejected, ValueError, TypeError, OverflowError):  # no ids, ragged, ...
+            return None
+    return None
 
 
 def nice_process(increment: int) -> int:

@@ -808,6 +808,40 @@ def test_the_view_rebuilds_offline_from_peers_mcap_recordings(tmp_path):
     assert {"peers/s1/tracks", "peers/s2/tracks"} <= set(got)
 
 
+class _Scorer:
+    """What a recorder reads of a peer's scorer: the truth of scan k (one target at k = 1,
+    none at k = 2; ids None at k = 3: not drawable) and the position columns."""
+
+    pos = (0, 2)
+
+    def truth(self, k: int) -> np.ndarray:
+        return np.array([[5.0, 1, 6, 1]]) if k in (1, 3) else np.zeros((0, 4))
+
+    def truth_ids(self, k: int) -> np.ndarray | None:
+        return {1: np.array([7]), 2: np.zeros(0, np.int64)}.get(k)
+
+
+def test_the_offline_view_draws_the_truth_the_peers_scored_against(tmp_path):
+    """Peers of a run hear no truth message: their recordings hold the truth their scorers
+    had (``sensornet run --record``), which the offline view draws as the world's (once,
+    however many peers recorded it; a scan with no target too, which clears the map); one
+    without ids is counted as undecodable."""
+    for peer in ("s1", "s2"):
+        rec = Recorder(tmp_path / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
+        rec.attach(type("Core", (), {"scorer": _Scorer()})())
+        for k in (1, 2, 3):
+            rec.tracks(10.0 + k, k, encode(Tracks(peer, k, np.ones((1, 4)))))
+        rec.close()
+    calls = _Rec()
+    state = ViewState(Batcher(rr, calls), ["s1", "s2"])
+    drawn = replay_recordings(state, sorted(tmp_path.glob("*.mcap")))
+    state.b.flush()
+    assert drawn == 8 and state.rejected == 2  # 6 tracks, 2 truths; k = 3's truth per peer
+    got = calls.by_path()
+    assert got["world/truth"][0] == [1, 2]
+    assert got["metrics/cardinality/truth"][0] == [1, 2]
+
+
 @pytest.mark.network  # the command in a child process, and the rerun CLI
 def test_view_from_mcap_writes_a_recording_and_refuses_a_bad_file(tmp_path):
     """``sensornet view NET --from-mcap FILE... --out F.rrd`` (the picture rebuilt offline):
