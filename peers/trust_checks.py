@@ -382,8 +382,10 @@ def _miss_rate(detection_probability: float) -> np.float64:
 
 def is_repeat(prev: GaussianMixture | None, mix: GaussianMixture, min_weight: float) -> bool:
     """Whether ``mix`` repeats, bit for bit, the earlier density ``prev`` (another object,
-    non-empty, its heaviest component at least ``min_weight``: :attr:`TrustConfig.repeat`)."""
+    non-empty, its heaviest component at least ``min_weight``: :attr:`TrustConfig.repeat`).
+    A first weight that differs (or is NaN) answers at once: the arrays then differ."""
     return (prev is not None and prev is not mix and len(mix) > 0 and len(mix) == len(prev)
+            and float(mix.weights[0]) == float(prev.weights[0])
             and float(mix.weights.max()) >= min_weight
             and np.array_equal(mix.weights, prev.weights)
             and np.array_equal(mix.means, prev.means) and np.array_equal(mix.covs, prev.covs))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections import deque
+from collections import Counter, deque
 
 import numpy as np
 import pytest
@@ -21,6 +21,7 @@ from sensornet.peers.trust_checks import (
     cusum_directions,
     gls_offset,
     gls_offsets,
+    is_repeat,
     median_small,
     neighbour_statistics,
     offset_chi2,
@@ -366,3 +367,26 @@ def test_add_offsets_is_add_offset_per_neighbour():
             assert np.array_equal(batch[i].cusum, single[i].cusum)
             assert batch[i].last_offset_chi2 == single[i].last_offset_chi2
     assert max(max(c) for c in want) > 0
+
+
+def test_is_repeat_is_the_old_test():
+    """The first-weight shortcut answers as the three array comparisons did: copies, a
+    first weight changed (also to NaN or to -0.0 from 0.0), a later entry changed."""
+    rng = np.random.default_rng(21)
+    kinds = Counter()
+    for _ in range(400):
+        prev = _mixture(rng, int(rng.integers(0, 4)))
+        mix = GaussianMixture(prev.weights.copy(), prev.means.copy(), prev.covs.copy())
+        kind = int(rng.integers(0, 6))
+        if len(mix) and kind == 1:
+            mix.weights[0] = rng.choice([np.nan, mix.weights[0] * 1.5])
+        elif len(mix) and kind == 2:
+            prev.weights[0], mix.weights[0] = 0.0, -0.0
+        elif len(mix) and kind == 3:
+            mix.covs[-1, 2, 2] += 1e-9
+        elif len(mix) and kind == 4:
+            mix.weights[-1] = 0.1
+        got = is_repeat(prev, mix, 0.3)
+        assert got == trust_before.is_repeat(prev, mix, 0.3)
+        kinds[(kind, got)] += 1
+    assert kinds[(0, True)] > 20 and kinds[(2, True)] > 0  # equal ones found, -0.0 == 0.0
