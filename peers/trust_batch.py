@@ -20,6 +20,7 @@ import numpy as np
 from sensornet.peers.trust_checks import (
     ALONE,
     _others,
+    _ranks,
     gated,
     information_sums,
     neighbour_tests_many,
@@ -224,8 +225,8 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
     for r, (ref, mixes, *_) in enumerate(group):
         if len(ref) == 0:
             continue
-        b = ref.weights >= min_weight
-        if not b.any():
+        b = pick(ref)  # its target components (own's: one object per request)
+        if not b[0]:
             continue
         sel = [(i, pick(M)) for i, M in enumerate(mixes) if len(M)]
         sel = [(i, v) for i, v in sel if v[0]]
@@ -233,19 +234,15 @@ def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray
             todo.append((r, b, sel))
     if not todo:
         return out
-    top = max(int(b.sum()) for _, b, _ in todo)
-    mb = np.full((len(todo), top, 2), np.inf)  # (g, m, 2): padded at infinity
-    Pb = np.zeros((len(todo), top, 2, 2))
-    rows = []
-    for g, (r, b, sel) in enumerate(todo):
-        ref = group[r][0]
-        m = int(b.sum())
-        mb[g, :m] = ref.means[b][:, pos]
-        Pb[g, :m] = position_block(ref.covs[b], pos)
-        rows += [g] * sum(v[0] for _, v in sel)
+    sizes = [b[0] for _, b, _ in todo]
+    mb = np.full((len(todo), max(sizes), 2), np.inf)  # (g, m, 2): padded at infinity
+    Pb = np.zeros((len(todo), max(sizes), 2, 2))
+    at = np.repeat(np.arange(len(todo)), sizes), _ranks(tuple(sizes))
+    mb[at] = np.concatenate([b[1] for _, b, _ in todo])
+    Pb[at] = np.concatenate([b[2] for _, b, _ in todo])
+    rows = np.repeat(np.arange(len(todo)), [sum(v[0] for _, v in sel) for _, _, sel in todo])
     ma = np.concatenate([v[1] for _, _, sel in todo for _, v in sel])  # (n, 2)
     Pa = np.concatenate([v[2] for _, _, sel in todo for _, v in sel])  # (n, 2, 2)
-    rows = np.asarray(rows)
     diff = ma[:, None, :] - mb[rows]  # (n, top, 2)
     nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
     d = diff[np.arange(len(ma)), nearest]

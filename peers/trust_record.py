@@ -160,9 +160,10 @@ def add_offsets_steps(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[
         G = yield ("cusums", np.array([np.zeros(m) if rec.cusum is None else rec.cusum
                                        for rec in recs]), list(infos), cfg.bias_cusum_offset,
                    cusum_directions(m))
+        tops = np.max(G, axis=1).tolist()  # every chart's at once (float(g.max()) each)
         for i, (rec, g) in enumerate(zip(recs, G, strict=True)):
             rec.cusum = g
-            out[i] = (*out[i], float(g.max()))
+            out[i] = (*out[i], tops[i])
     for rec, chi2 in zip(recs, out, strict=True):
         rec.last_offset_chi2 = chi2
     return out
