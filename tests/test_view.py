@@ -56,6 +56,7 @@ from sensornet.view import (
     replay_recordings,
 )
 from tests.processes import (
+    end_once_view_drew,
     env,
     rerun_exe,
     sensornet,
@@ -716,11 +717,7 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
                 when_tracks_reach(session, keys, name, now + 5)
             others.procs["world"].send_signal(signal.SIGTERM)
 
-            when_view_drew(out / "logs" / "view.log", names, lambda: run.proc.poll() is None,
-                           timeout=240.0)
-            world = [p for p in run.find_children() if _argv(p)[2:4] == ["sensornet", "world"]]
-            assert len(world) == 1, [_argv(p) for p in run.children]
-            os.kill(world[0], signal.SIGTERM)
+            end_once_view_drew(run, out, names)
             _, err = run.proc.communicate(timeout=300)
             assert run.proc.returncode == 0, err[-2000:]
 
@@ -760,14 +757,6 @@ def test_a_run_records_through_the_view_and_a_view_attaches_by_hand(tmp_path):
             session.close()
         stop_all([view] if view is not None else [])
         others.stop_all()
-
-
-def _argv(pid: int) -> list[str]:
-    """A process's command line ([] once it has gone)."""
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")
-    except OSError:
-        return []
 
 
 def test_ellipses_lie_at_two_sigma_of_their_component():
