@@ -105,3 +105,18 @@ def test_transitions_are_the_stacked_model_transitions():
         F, Q = r._transitions(g)
         F1, Q1 = _transitions(r, g)
         assert F.flags.c_contiguous and np.array_equal(F, F1) and np.array_equal(Q, Q1)
+
+
+def test_present_above_is_numpy_unique_and_isin():
+    """Confirmation.observe's labels present and heavy: np.unique of the keys and np.isin of
+    them in the heavy rows' keys (ties of keys, empty mixtures, nothing heavy)."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        n = int(rng.integers(0, 25))
+        labels = rng.integers(0, 4, (n, 3)).astype(np.int64)
+        labels[:, 2] += rng.integers(0, 2, n) << 36
+        w = rng.uniform(0.0, 1.0, n)
+        keys, above = lc._present_above(labels, w, 0.5)
+        ref = np.unique(label_keys(labels))
+        assert keys.tobytes() == ref.tobytes()
+        assert np.array_equal(above, np.isin(ref, label_keys(labels)[w > 0.5]))

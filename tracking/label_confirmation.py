@@ -66,9 +66,7 @@ class Confirmation:
         if self.settle and k is None:
             raise ValueError("Confirmation with settle > 0 needs the scan k of each observe")
         self._k = None if k is None else int(k)
-        keys = label_keys(lm.labels)
-        present = unique_keys(keys)
-        above = keys_isin(present, keys[lm.mixture.weights > self.threshold])
+        present, above = _present_above(lm.labels, lm.mixture.weights, self.threshold)
         counts = above.astype(np.int64)
         if self._keys.size and present.size:
             seen, pos = keys_find(self._keys, present)
@@ -93,6 +91,23 @@ class Confirmation:
         if self.settle and self._k is not None:
             ok &= self._k - labels[:, 1] >= self.settle
         return ok.astype(np.int8)
+
+
+def _present_above(labels: np.ndarray, weights: np.ndarray, threshold: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The labels' keys, sorted and each once (``unique_keys(label_keys(labels))``), and for
+    each whether a row carrying it weighs more than ``threshold`` (``np.isin`` of those keys in
+    the heavy rows' keys): one column lexsort and a segment ``or``, not a structured sort and a
+    pairwise compare."""
+    keys = label_keys(labels)
+    if not keys.size:
+        return keys, np.zeros(0, dtype=bool)
+    order = np.lexsort((labels[:, 2], labels[:, 1], labels[:, 0]))
+    s = keys[order]
+    first = np.ones(len(s), dtype=bool)
+    first[1:] = ~keys_equal(s[1:], s[:-1])
+    starts = np.flatnonzero(first)
+    return s[starts], np.logical_or.reduceat(weights[order] > threshold, starts)
 
 
 def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
