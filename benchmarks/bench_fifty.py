@@ -31,7 +31,8 @@ against ``on``).
 
 ``--gaps`` measures one LMB peer alone (no network): its step's CPU and OSPA when it leaves
 scans out, as a host that fell behind does (``peers.runtime`` ``_catch_up``), with LBP on a
-step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every step.
+step after a gap (``LmbEstimator.filter_for``) and with Gibbs sampling on every step, each with
+Gibbs at any cluster size, and as it is (Gibbs up to ``lmb_association.GIBBS_TRACKS`` tracks).
 
     python benchmarks/bench_fifty.py                       # 2 kinds x view off/on, 2 repeats
     python benchmarks/bench_fifty.py --kinds lmb --views off --repeats 3
@@ -49,6 +50,7 @@ peer's fusions forced by the deadline, pooled p99 scan -> tracks under one scan 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import re
 import statistics
@@ -77,6 +79,7 @@ from sensornet.sim.run.peers import make_peer
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.scenario import load_scenario, parse_overrides
 from sensornet.sim.world import generate_run
+from sensornet.tracking import lmb_association
 from sensornet.tracking.metrics import ospa
 
 import benchmarks.bench_watched as bench_watched
@@ -311,40 +314,66 @@ GAP_PATTERNS = (("every scan", lambda k: 1), ("a gap of 5 every 10 scans",
 """Scan patterns of :func:`part_gaps`: the step from scan ``k`` to the next one taken."""
 
 
+GAP_DESIGNS = tuple(f"{where}, Gibbs {size}" for where in ("Gibbs on every step",
+                                                             "LBP after a gap")
+                    for size in ("at any size", f"<= {lmb_association.GIBBS_TRACKS} tracks"))
+"""Designs of :func:`part_gaps`: Gibbs sampling on every step (the design before b907a9f) or
+LBP on a step after a gap (``LmbEstimator.filter_for``), each with Gibbs on loopy clusters of
+any size (before the bound) or of at most ``lmb_association.GIBBS_TRACKS`` tracks; the last is
+the estimator as it is."""
+
+
 def part_gaps(sensors: int = 4) -> list[str]:
     """One LMB peer's step (``LmbEstimator.step``, thread CPU) on the 50-peer scenario's
-    scans of ``sensors`` sensors when it leaves scans out, as a host catching up does: the
-    estimator as it is (LBP on a step after a gap: ``filter_for``) against Gibbs sampling
-    on every step (the design before), with the OSPA (c = 100 m) of its tracks."""
+    scans of ``sensors`` sensors when it leaves scans out, as a host catching up does, per
+    design of :data:`GAP_DESIGNS`, with the OSPA (c = 100 m) of its tracks and the Gibbs
+    calls made: all, on clusters beyond ``GIBBS_TRACKS`` tracks (what the bound leaves to LBP)
+    and the largest cluster's tracks."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "gaps.toml"
         path.write_text(scenario_text(50, 4, 100, rounds=2, speed=10.0))
         scn = load_scenario(str(path), overrides=parse_overrides(["network.filter=lmb"]))
     truth, scans = generate_run(scn, 0)
-    rows = ["| scans stepped | design | step CPU ms: median / mean / p99 / max | OSPA (m) |",
-            "|---|---|---:|---:|"]
+    cap = lmb_association.GIBBS_TRACKS
+    rows = ["| scans stepped | design | step CPU ms: median / mean / p99 / max | OSPA (m) | "
+            f"Gibbs calls / on more than {cap} tracks / largest |", "|---|---|---:|---:|---:|"]
     print("\n".join(rows), flush=True)
-    for name, pattern in GAP_PATTERNS:
-        for design in ("Gibbs on every step", "LBP after a gap"):
-            ts, errs = [], []
-            for i in range(sensors):
-                est = LmbEstimator(make_lmb_filter(scn, scn.sensor_names[i], i))
-                if design.startswith("Gibbs"):
-                    est.filter_for = lambda k, e=est: e.filter
-                k, prev = 0, -1
-                while k < scn.num_scans:
-                    est.begin_scan(k)
-                    t0 = time.thread_time()
-                    out = est.step(max(1, k - prev), scans[i][k])
-                    ts.append(time.thread_time() - t0)
-                    X = est.extract(out.density)
-                    errs.append(ospa(X[:, [0, 2]], truth.states[k][:, [0, 2]], c=100.0))
-                    prev, k = k, k + pattern(k)
-            t = np.array(ts) * 1e3
-            rows.append(f"| {name} | {design} | {np.median(t):.2f} / {t.mean():.2f} / "
-                        f"{np.percentile(t, 99):.1f} / {t.max():.1f} | "
-                        f"{np.mean(errs):.1f} |")
-            print(rows[-1], flush=True)
+    sampled: list[int] = []
+    gibbs = lmb_association.marginals_gibbs
+
+    def counted(miss, detect, *args, **kwargs):
+        sampled.append(detect.shape[0])
+        return gibbs(miss, detect, *args, **kwargs)
+
+    lmb_association.marginals_gibbs = counted
+    try:
+        for name, pattern in GAP_PATTERNS:
+            for design in GAP_DESIGNS:
+                ts, errs = [], []
+                sampled.clear()
+                for i in range(sensors):
+                    est = LmbEstimator(make_lmb_filter(scn, scn.sensor_names[i], i))
+                    if design.endswith("at any size"):
+                        est.filter = dataclasses.replace(est.filter, gibbs_tracks=None)
+                    if design.startswith("Gibbs on every step"):
+                        est.filter_for = lambda k, e=est: e.filter
+                    k, prev = 0, -1
+                    while k < scn.num_scans:
+                        est.begin_scan(k)
+                        t0 = time.thread_time()
+                        out = est.step(max(1, k - prev), scans[i][k])
+                        ts.append(time.thread_time() - t0)
+                        X = est.extract(out.density)
+                        errs.append(ospa(X[:, [0, 2]], truth.states[k][:, [0, 2]], c=100.0))
+                        prev, k = k, k + pattern(k)
+                t = np.array(ts) * 1e3
+                rows.append(f"| {name} | {design} | {np.median(t):.2f} / {t.mean():.2f} / "
+                            f"{np.percentile(t, 99):.1f} / {t.max():.1f} | "
+                            f"{np.mean(errs):.1f} | {len(sampled)} / "
+                            f"{sum(x > cap for x in sampled)} / {max(sampled, default=0)} |")
+                print(rows[-1], flush=True)
+    finally:
+        lmb_association.marginals_gibbs = gibbs
     return rows
 
 

@@ -49,7 +49,8 @@ def _scans(rng: np.random.Generator, n_targets: int, clutter: float, scans: int,
 def _filters(**kw) -> tuple[LmbFilter, LmbFilter]:
     """The new filter and the before one with the same settings (so the same Gibbs seed)."""
     base = dict(motion=ConstantVelocity(1.0, 2.0),
-                sensor=SensorParams(LinearPosition(10.0), 0.9, 10.0 / 4e6))
+                sensor=SensorParams(LinearPosition(10.0), 0.9, 10.0 / 4e6),
+                gibbs_tracks=None)  # the step before samples every large cluster by Gibbs
     base.update(kw)
     return LmbFilter(**base), lmb_before.LmbFilterBefore(**base)
 

@@ -27,7 +27,13 @@ import numpy as np
 from sensornet.tracking.gaussian import LOG_2PI, c_einsum, inv_det_spd
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import cell_index, new_labels, shared_births
-from sensornet.tracking.lmb_association import EXACT_LIMIT, METHODS, SCALABLE, marginals
+from sensornet.tracking.lmb_association import (
+    EXACT_LIMIT,
+    GIBBS_TRACKS,
+    METHODS,
+    SCALABLE,
+    marginals,
+)
 from sensornet.tracking.lmb_sets import LabelledBernoulliSet, reduce_components
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import ConstantVelocity
@@ -53,8 +59,8 @@ def predict(tracks: LabelledBernoulliSet, motion: ConstantVelocity, survival_pro
 def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
            method: str = "auto", gate: float | None = None, min_weight: float = 0.0,
            exact_limit: int = EXACT_LIMIT, tol: float = 1e-9, scalable: str = "gibbs",
-           rng: np.random.Generator | None = None,
-           samples: int | None = None) -> tuple[LabelledBernoulliSet, np.ndarray]:
+           rng: np.random.Generator | None = None, samples: int | None = None,
+           gibbs_tracks: int | None = GIBBS_TRACKS) -> tuple[LabelledBernoulliSet, np.ndarray]:
     """The LMB posterior after scan ``Z (m, dz)`` (Reuter eqs. 20-21) and ``r_U (m,)``, each
     measurement's probability of belonging to a track (the adaptive birth's input, eq. 31).
 
@@ -65,8 +71,8 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     ``p_ij``), normalised by ``r_i'``. ``gate``: pairs with ``nu^T S^-1 nu`` above it get
     likelihood 0. ``min_weight``: detection components lighter than this within their track
     are not materialised (pruning them early). No reduction here: see :func:`reduce_components`.
-    ``method``, ``exact_limit``, ``tol``, ``scalable``, ``rng``, ``samples``: the association
-    (:func:`lmb_association.marginals`).
+    ``method``, ``exact_limit``, ``tol``, ``scalable``, ``rng``, ``samples``, ``gibbs_tracks``:
+    the association (:func:`lmb_association.marginals`).
     """
     Pd, kappa = sensor.detection_probability, sensor.clutter_intensity
     n, dz = len(tracks), sensor.model.dim
@@ -96,7 +102,8 @@ def update(tracks: LabelledBernoulliSet, scan: np.ndarray, sensor: SensorParams,
     starts = tracks.starts()
     eta = np.add.reduceat(wq, starts, axis=0)  # (n, m)
     p_miss, p = marginals(miss, (r * Pd)[:, None] * eta / kappa, method, exact_limit,
-                          tol, scalable=scalable, rng=rng, samples=samples)
+                          tol, scalable=scalable, rng=rng, samples=samples,
+                          gibbs_tracks=gibbs_tracks)
     exist_miss = p_miss * stay
     r_post = exist_miss + p.sum(axis=1)
     inv_r = np.divide(1.0, r_post, out=np.zeros(n), where=r_post > 0)
@@ -203,6 +210,9 @@ class LmbFilter:
     ``"gibbs"`` or ``"lbp"``."""
     gibbs_samples: int | None = None
     """Gibbs draws per such cluster (None: grows with its links)."""
+    gibbs_tracks: int | None = GIBBS_TRACKS
+    """Such a cluster of more tracks keeps LBP's marginals (None: Gibbs at any size;
+    :data:`lmb_association.GIBBS_TRACKS`)."""
     seed: int = 0
     """Seed of the filter's Generator (the Gibbs draws): one scan sequence, one result."""
     gate: float | None = None
@@ -246,6 +256,8 @@ class LmbFilter:
         if self.scalable not in SCALABLE:
             raise ValueError(f"unknown scalable association {self.scalable!r}; "
                              f"expected {SCALABLE}")
+        if self.gibbs_tracks is not None and self.gibbs_tracks < 0:
+            raise ValueError(f"gibbs_tracks must be >= 0 or None, got {self.gibbs_tracks}")
         self._rng = np.random.default_rng(self.seed)
         if self.extraction not in EXTRACTION_RULES:
             raise ValueError(f"unknown extraction {self.extraction!r}; "
@@ -349,7 +361,7 @@ class LmbFilter:
         scan = check_scan(scan, self.sensor.model.dim)
         post, r_u = update(state.tracks, scan, self.sensor, self.method, self.gate,
                            self.component_prune, self.exact_limit, self.lbp_tol, self.scalable,
-                           self._rng, self.gibbs_samples)
+                           self._rng, self.gibbs_samples, self.gibbs_tracks)
         return self.finish(state, post, r_u, scan)
 
     def finish(self, state: LmbState, post: LabelledBernoulliSet, r_u: np.ndarray,

@@ -53,6 +53,14 @@ GIBBS_SEED = 33
 EXACT_LIMIT = 20_000
 """Auto solves a cluster exactly up to this many hypotheses (6 tracks x 6 measurements is
 13,327; 7 x 7 is 130,922), else by LBP."""
+GIBBS_TRACKS = 12
+"""Auto samples a loopy cluster beyond ``exact_limit`` by Gibbs only up to this many tracks;
+a larger one keeps LBP's marginals (Williams & Lau 2014). Gibbs' CPU grows with tracks x
+draws (a Python sweep per track, draws per link), so clusters of 15-33 tracks, which a peer
+host that fell behind grew from spread tentative tracks, cost 70-190 ms a call and the host
+fell further behind; LBP costs ~0.2 ms there. No on-time training run reached it
+(docs/labelled-tracking.md, "A bound on the LMB step's association")."""
+
 LINK_EPS = 1e-12
 """Auto drops links with ``detect_ij < LINK_EPS * max(miss_i, detect_i.)`` when it forms
 clusters (their hypotheses change the marginals by about this relative amount)."""
@@ -61,7 +69,8 @@ clusters (their hypotheses change the marginals by about this relative amount)."
 def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
               exact_limit: int = EXACT_LIMIT, tol: float = 1e-9, max_iter: int = 1000,
               scalable: str = "gibbs", rng: np.random.Generator | None = None,
-              samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+              samples: int | None = None,
+              gibbs_tracks: int | None = GIBBS_TRACKS) -> tuple[np.ndarray, np.ndarray]:
     """Marginal association probabilities ``p_miss (n,)``, ``p (n, m)`` (rows sum to 1).
 
     ``"exact"``: every hypothesis of the whole problem; ``"lbp"``: :func:`marginals_lbp`;
@@ -73,11 +82,13 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     one, with ``scalable="gibbs"``, loses its weakest links (:func:`drop_weak_links`, error at
     most :data:`DROP_BUDGET`), which splits most such clusters (in benchmarks/bench_lmb.py,
     births linked to clutter) into trees and small ones, solved as above; what stays beyond
-    ``exact_limit`` goes to :func:`marginals_gibbs`. ``scalable="lbp"`` keeps LBP's answer on
-    large clusters. ``rng`` feeds the Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``,
-    so one input gives one answer); ``samples``: Gibbs draws per problem or cluster (None:
-    :func:`gibbs_sample_count`). Auto, like LBP and Gibbs, gives a track whose miss weight is
-    0 (``r = Pd = 1``) ``1e-10`` of its largest weight.
+    ``exact_limit`` goes to :func:`marginals_gibbs` if it has at most ``gibbs_tracks`` tracks
+    (None: any size), else keeps LBP's answer (:data:`GIBBS_TRACKS`: a bound on one step's
+    cost). ``scalable="lbp"`` keeps LBP's answer on every large cluster. ``rng`` feeds the
+    Gibbs draws (None: a fresh ``default_rng(GIBBS_SEED)``, so one input gives one answer);
+    ``samples``: Gibbs draws per problem or cluster (None: :func:`gibbs_sample_count`). Auto,
+    like LBP and Gibbs, gives a track whose miss weight is 0 (``r = Pd = 1``) ``1e-10`` of its
+    largest weight.
     """
     if method not in METHODS:
         raise ValueError(f"unknown association method {method!r}; expected one of {METHODS}")
@@ -97,7 +108,8 @@ def marginals(miss: np.ndarray, detect: np.ndarray, method: str = "auto",
     miss, detect = _row_scaled(miss, detect)
     miss = np.maximum(miss, 1e-10)  # r = Pd = 1: as LBP and Gibbs (else 0 / 0 when too few
     detect = np.where(detect > LINK_EPS, detect, 0.0)  # measurements are left for such tracks)
-    return _auto(miss, detect, exact_limit, tol, max_iter, scalable, rng, samples, DROP_BUDGET)
+    return _auto(miss, detect, exact_limit, tol, max_iter, scalable, rng, samples, DROP_BUDGET,
+                 gibbs_tracks)
 
 
 SPARSE_FROM = 500
@@ -127,11 +139,12 @@ def drop_weak_links(miss: np.ndarray, detect: np.ndarray, budget: float) -> np.n
 
 def _auto(miss: np.ndarray, detect: np.ndarray, exact_limit: int, tol: float, max_iter: int,
           scalable: str, rng: np.random.Generator, samples: int | None,
-          drop: float) -> tuple[np.ndarray, np.ndarray]:
+          drop: float, gibbs_tracks: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`marginals` ``"auto"`` on row-scaled weights (each row's largest exactly 1) with
     the misses floored at 1e-10 and whose zero links are absent (so LBP runs on ``detect /
     miss`` with no second scaling); a large loopy cluster is thinned by ``drop`` (which keeps
-    each row's largest) and solved again (``drop`` 0: Gibbs)."""
+    each row's largest) and solved again (``drop`` 0: Gibbs, on at most ``gibbs_tracks``
+    tracks)."""
     n, m = detect.shape
     link = detect > 0
     p_miss, p = lbp_scaled(detect / miss[:, None], tol, max_iter)  # = marginals_lbp's answer
@@ -182,7 +195,9 @@ def _auto(miss: np.ndarray, detect: np.ndarray, exact_limit: int, tol: float, ma
         sub = detect[np.ix_(rows, cols)]
         if drop > 0:
             pm, pd = _auto(miss[rows], drop_weak_links(miss[rows], sub, drop), exact_limit,
-                           tol, max_iter, scalable, rng, samples, 0.0)
+                           tol, max_iter, scalable, rng, samples, 0.0, gibbs_tracks)
+        elif gibbs_tracks is not None and len(rows) > gibbs_tracks:
+            continue  # LBP's answer stays: Gibbs' cost grows with the tracks (GIBBS_TRACKS)
         else:
             pm, pd = marginals_gibbs(miss[rows], sub, rng, samples)
         p_miss[rows] = pm
@@ -214,6 +229,6 @@ def _by_cluster(comp: np.ndarray, linked: np.ndarray,
 
 
 __all__ = ["DROP_BUDGET", "EXACT_LIMIT", "EXACT_MAX", "EXPAND_MAX", "GIBBS_CHAINS", "GIBBS_MAX",
-           "GIBBS_MIN", "GIBBS_PER_LINK", "METHODS", "SCALABLE", "best_hypothesis",
-           "drop_weak_links", "gibbs_sample_count", "hypotheses", "hypothesis_count", "marginals",
-           "marginals_exact", "marginals_gibbs", "marginals_lbp"]
+           "GIBBS_MIN", "GIBBS_PER_LINK", "GIBBS_TRACKS", "METHODS", "SCALABLE",
+           "best_hypothesis", "drop_weak_links", "gibbs_sample_count", "hypotheses",
+           "hypothesis_count", "marginals", "marginals_exact", "marginals_gibbs", "marginals_lbp"]

@@ -323,7 +323,7 @@ def _update(filters, labels, r, w, mean, P, owner, n_lens, c_lens, scans,
         try:
             pm, pq = marginals(miss[rows], np.ascontiguousarray(detect[rows, :m]), f.method,
                                f.exact_limit, f.lbp_tol, scalable=f.scalable, rng=f._rng,
-                               samples=f.gibbs_samples)
+                               samples=f.gibbs_samples, gibbs_tracks=f.gibbs_tracks)
         except Exception:  # noqa: BLE001 - its own step meets the error; the others go on
             failed.add(q)
             continue
