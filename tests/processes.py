@@ -144,8 +144,11 @@ class Launch:
         return self.children
 
     def stop(self) -> None:
-        """Kill the launcher and every remembered child still alive."""
+        """Kill the launcher and every child of it still alive: those remembered and those it
+        has now, found before it is killed (its children outlive a killed launcher: a test that
+        failed before it looked for them left a run's world and peers running)."""
         if self.proc.poll() is None:
+            self.children = sorted(set(self.children) | set(children(self.proc.pid)))
             self.proc.kill()
             self.proc.wait()
         for p in self.children:
