@@ -447,22 +447,26 @@ def test_a_killed_host_takes_its_peers_the_other_host_finishes(tmp_path, capsys)
 def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp_path):
     """SIGTERM to `sensornet run --per-process 2` (h1 = s1,s2; h2 = s3): both hosts end, each
     peer wrote its summary (SIGTERM), the view process its .rrd (the peers log nothing to
-    Rerun), and the recording merges and verifies."""
+    Rerun) with what it drew of every hosted peer, and the recording merges and verifies."""
     import signal
     import subprocess
     import time
 
-    from tests.processes import alive, env, rerun_exe, sensornet, wait_for
+    from tests.processes import alive, env, rerun_exe, sensornet, wait_for, when_view_drew
 
     out = tmp_path / "run"
+    # 3000 scans: the launcher's SIGTERM ends the run, once the world is past scan 20 and the
+    # view, which imports for seconds longer than the peers on a busy machine, drew them all
     with sensornet(["run", "--per-process", "2", "--viewer", "none", "--speed", "5",
-                    "--out", str(out)], tmp_path) as launch:
+                    "--set", "scenario.num_scans=3000", "--out", str(out)], tmp_path) as launch:
         launcher = launch.proc
         world_log = out / "logs" / "world.log"
         # the world's progress line past the 10 scans every peer must have processed: under
         # load a peer can be a scan behind the world (s3 was at 9 at the world's 10)
         wait_for(lambda: world_log.is_file() and "scan 20/" in world_log.read_text(), 90,
                  "the world's scan 20")
+        when_view_drew(out / "logs" / "view.log", ("s1", "s2", "s3"),
+                       lambda: launcher.poll() is None, 240.0)
         kids = launch.find_children()
         assert len(kids) == 4, kids  # the world, two hosts and the view
         launcher.send_signal(signal.SIGTERM)
@@ -483,8 +487,10 @@ def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp
         assert check.returncode == 0, check.stderr
         text = subprocess.run([rerun_exe(), "rrd", "print", str(out / "rerun" / "view.rrd")],
                               capture_output=True, text=True, timeout=120, env=env()).stdout
-        # every hosted peer's series, from its telemetry (h1 holds s1 and s2, h2 s3)
-        assert all(f"/metrics/ospa/{n}/fused" in text for n in ("s1", "s2", "s3"))
+        # every hosted peer's series values, from its telemetry (h1 holds s1 and s2, h2 s3;
+        # the series' style alone is logged for every peer of the scenario at the start)
+        assert all(f"/metrics/ospa/{n}/fused - data columns: [Scalars:scalars]" in text
+                   for n in ("s1", "s2", "s3")), text[-2000:]
 
 
 def test_hosts_are_grouped_to_cut_few_graph_edges():
