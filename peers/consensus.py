@@ -402,7 +402,8 @@ class Consensus(BatchedRounds):
         return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
                             copies=bool(getattr(self.fuser, "copies", False)),
                             support=self.label_support, fallback=self.o.label_fallback,
-                            keep=self._reported if self.o.label_keep else None)
+                            keep=self._reported if self.o.label_keep else None,
+                            settle=self.o.confirm_settle)
 
     def tracks_problem(self, st: ScanState, fused) -> tuple | None:
         """``(fused means, the scan's first-round input mixtures)`` if completing this round with

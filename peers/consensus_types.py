@@ -88,8 +88,8 @@ class ConsensusOptions:
     """A fused row that loses the label it won to a heavier row takes the next label it was
     paired with instead of a fresh one (peers.labelling.label_fused ``fallback``)."""
     label_keep: bool = False
-    """A fused row paired with a label this peer reported the scan before takes it before any
-    other label (peers.labelling.label_fused ``keep``)."""
+    """A fused row paired with a label this peer reported the scan before does not take a
+    label born :attr:`confirm_settle` scans or more before it (peers.labelling.kept_first)."""
 
     def __post_init__(self) -> None:
         if self.rounds < 1:

@@ -51,12 +51,13 @@ class LabelProblem:
     support: LabelSupport | None = None
     fallback: bool = False
     keep: np.ndarray | None = None
+    settle: int = 1
 
     def alone(self) -> FusedLabels:
         """This problem's own :func:`label_fused`."""
         return label_fused(self.fused, self.inputs, self.origin, self.k, self.fresh_start,
                            self.gate, self.bump, self.copies, self.support, self.fallback,
-                           self.keep)
+                           self.keep, self.settle)
 
 
 def _pkeys(prob: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -197,12 +198,14 @@ def label_fused_many(problems: Sequence[LabelProblem]) -> list[FusedLabels]:
     edges = np.searchsorted(pl, np.arange(B + 1))
     if len(J):
         held = np.zeros(len(L), dtype=np.int64)
-        kept = np.ones(len(L), dtype=np.int64)
+        kept = np.zeros(len(L), dtype=np.int64)
         for p, pr in enumerate(probs):
-            if pr.support is not None and edges[p + 1] > edges[p]:
-                held[edges[p]:edges[p + 1]] = pr.support.counts(L[edges[p]:edges[p + 1]])
-            if pr.keep is not None and edges[p + 1] > edges[p]:
-                kept[edges[p]:edges[p + 1]] = kept_first(L[edges[p]:edges[p + 1]], pr.keep)
+            e0, e1 = edges[p], edges[p + 1]
+            if pr.support is not None and e1 > e0:
+                held[e0:e1] = pr.support.counts(L[e0:e1])
+            if pr.keep is not None and e1 > e0:
+                kept[e0:e1] = kept_first(J[e0:e1] - f_off[p], L[e0:e1], int(n[p]), pr.keep,
+                                         np.full(e1 - e0, pr.settle))
         order = np.lexsort((L[:, 2], L[:, 0], -held, L[:, 1], kept, J))  # per row, winner first
         Js = J[order]
         first = np.ones(len(Js), dtype=bool)

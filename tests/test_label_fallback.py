@@ -108,19 +108,23 @@ def test_next_labels_heavier_row_first_and_taken_labels_skipped():
     assert won2.all()
 
 
-def test_a_reported_label_is_kept_against_an_earlier_born_one():
+def test_a_reported_label_is_kept_against_one_born_settle_scans_before_it():
     """392af3 at tick 528: its row is reported under (0, 527) (two inputs hold it); north's
-    track (4, 524), born earlier, is paired with the row too. Without ``keep`` the earlier
-    birth wins (a switch); with (0, 527) reported the scan before, it stays; a label not
-    reported does not count."""
+    track (4, 524), born 3 scans earlier, is paired with the row too. Without ``keep`` the
+    earlier birth wins (a switch); with (0, 527) reported the scan before and a settle of 1-3
+    scans, it stays; with a settle of 4 (a label born 3 scans before may still be the same
+    target's on its way) the earlier one wins as before; a label not reported does not
+    count."""
     young, north = (0, 527, 1), (4, 524, 2)
     fused = _mix([B])
     inputs = [(_mix([B]), np.array([young])), (_mix([B]), np.array([young])),
               (_mix([[B[0] + 150.0, 0, 0, 0]]), np.array([north]))]
     assert tuple(label_fused(fused, inputs, 3, 528).labels[0]) == north
     keep = np.unique(label_keys(np.array([young, (5, 1, 1)])))
-    got = label_fused(fused, inputs, 3, 528, keep=keep)
-    assert tuple(got.labels[0]) == young and len(got.own) == 0
+    for settle in (0, 1, 3):
+        got = label_fused(fused, inputs, 3, 528, keep=keep, settle=settle)
+        assert tuple(got.labels[0]) == young and len(got.own) == 0
+    assert tuple(label_fused(fused, inputs, 3, 528, keep=keep, settle=4).labels[0]) == north
     other = np.unique(label_keys(np.array([(5, 1, 1)])))
     assert tuple(label_fused(fused, inputs, 3, 528, keep=other).labels[0]) == north
     # north itself (its own track first) reports young too: its own track keeps its label
@@ -128,6 +132,17 @@ def test_a_reported_label_is_kept_against_an_earlier_born_one():
     at_north = label_fused(fused, [inputs[2], *inputs[:2]], 4, 528, keep=keep)
     assert tuple(at_north.labels[0]) == young
     np.testing.assert_array_equal(adopt_labels(np.array([north]), at_north.own), [north])
+
+
+def test_kept_first_vetoes_only_labels_born_settle_scans_before_the_earliest_kept():
+    from sensornet.peers.labelling import kept_first
+
+    J = np.array([0, 0, 0, 1, 1])
+    L = np.array([(1, 10, 0), (2, 7, 0), (3, 8, 0), (1, 10, 0), (2, 3, 0)])
+    keep = np.unique(label_keys(np.array([(1, 10, 0)])))
+    # row 0: kept birth 10, settle 3: 7 vetoed, 8 not; row 1: 3 vetoed
+    np.testing.assert_array_equal(kept_first(J, L, 2, keep, np.full(5, 3)), [0, 1, 0, 0, 1])
+    np.testing.assert_array_equal(kept_first(J, L, 2, None, np.full(5, 3)), [0] * 5)
 
 
 def test_batched_equals_one_by_one_with_the_fallback_and_keep():
@@ -145,7 +160,7 @@ def test_batched_equals_one_by_one_with_the_fallback_and_keep():
                     pick = pool[rng.random(len(pool)) < 0.3]
                     keep = np.unique(label_keys(pick))
             problems.append(dataclasses.replace(pr, fallback=bool(rng.random() < 0.7),
-                                                keep=keep))
+                                                keep=keep, settle=int(rng.integers(0, 3))))
         for pr, g in zip(problems, label_fused_many(problems), strict=True):
             ref = pr.alone()
             _same(g, ref)
