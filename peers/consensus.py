@@ -42,6 +42,7 @@ from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
 from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.label_twins import StampTwins
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
 from sensornet.tracking.mature_existence import MatureExistence
 from sensornet.tracking.mixture import GaussianMixture
@@ -123,6 +124,9 @@ class Consensus(BatchedRounds):
                                        options.existence_absent)
                        if self.fusing and options.existence_mature > 0 else None)
         """Mature fused tracks' existence for extraction (tracking.mature_existence)."""
+        self.twins = (StampTwins(options.stamp_twins, options.stamp_twins)
+                      if self.fusing and self.labelled and options.stamp_twins > 0 else None)
+        """Young fused rows held back while a moved stamp's first may come (label_twins)."""
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Sorted keys of the fused tracks reported last scan (``existence_keep``,
         ``label_keep``)."""
@@ -521,6 +525,12 @@ class Consensus(BatchedRounds):
             if held is None:
                 held = input_support(t.states, mixes)
             keep = self.support.keep(t.ids, held, len(mixes))
+            if not keep.all():
+                t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
+                                    t.existence[keep], t.status[keep])
+        if self.twins is not None:  # a moved stamp's row, while its first may still come
+            keep = ~self.twins.held(k, t.ids, t.states, t.covs, labels, fused.weights,
+                                    fused.means, fused.covs)
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])

@@ -78,6 +78,11 @@ class ConsensusOptions:
     in scans, from the shared scenario; a young track two inputs hold weighs its AA existence
     over the inputs that could have confirmed it by its age (tracking.support.revisit_weights);
     empty: off."""
+    stamp_twins: int = 0
+    """Fused extraction: a row whose label is at most this many scans old is held back while
+    the fused density holds, or held in the last as many scans, a label of the same origin and
+    index born up to as many scans earlier at the same place (a moved stamp whose first may
+    still come, tracking.label_twins); 0: off."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""
@@ -103,6 +108,8 @@ class ConsensusOptions:
         if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
             raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
                              f"got {self.existence_prior} and {self.existence_young}")
+        if self.stamp_twins < 0:
+            raise ValueError(f"stamp_twins must be >= 0 scans, got {self.stamp_twins}")
         if self.support_inputs < -1 or self.support_scans < 1:
             raise ValueError(f"support_inputs must be >= -1 and support_scans >= 1, got "
                              f"{self.support_inputs} and {self.support_scans}")

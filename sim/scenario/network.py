@@ -158,6 +158,18 @@ class FusionSpec:
                                                 "evidence against it (issue 34, "
                                                 "docs/real-traffic.md, \"Why the far radars "
                                                 "confirm late\").")
+    stamp_twins: int = option(0, doc="Extraction of fused tracks (labelled peers with a "
+                                     "peer 2 hops or more away): a row whose label is at "
+                                     "most this many scans old is not reported while the "
+                                     "peer's fused density holds, or held in the last as "
+                                     "many scans, a label of the same origin and index born "
+                                     "up to as many scans earlier within the hybrid gate of "
+                                     "it: a stamp moved a scan later for want of "
+                                     "corroboration, whose first may still come from a far "
+                                     "peer and take the id (`tracking.label_twins`; the fused "
+                                     "density and labels are unchanged); 0: off. Issue 33 "
+                                     "(docs/labelled-tracking.md, \"One target, two stamps "
+                                     "a scan apart\").", unit="scans", check=NONNEGATIVE)
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
