@@ -79,12 +79,18 @@ def test_a_peer_with_no_world_says_so_and_prints_no_nan(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_signal_to_the_launcher_stops_every_child_and_merges_the_recording(tmp_path, sig):
     out = tmp_path / "run"
-    with sensornet(["run", "--viewer", "none", "--speed", "5", "--out", str(out)],
-                   tmp_path) as launch:
+    # 3000 scans: the signal comes mid-run however long the view takes to start
+    with sensornet(["run", "--viewer", "none", "--speed", "5", "--out", str(out),
+                    "--set", "scenario.num_scans=3000"], tmp_path) as launch:
         launcher = launch.proc
         world_log = out / "logs" / "world.log"
         wait_for(lambda: world_log.is_file() and "scan 10/" in world_log.read_text(), 90,
                  "the world's scan 10")
+        # and the view has opened its recording (it imports for seconds longer than the
+        # peers on a busy machine: a view stopped in its imports leaves no .rrd to merge)
+        view_log = out / "logs" / "view.log"
+        wait_for(lambda: view_log.is_file() and "view: network " in view_log.read_text(), 240,
+                 "the view's recording to open")
         kids = launch.find_children()
         assert len(kids) == 5, kids  # the world, three peers and the view (sensornet view)
         launcher.send_signal(sig)
