@@ -70,13 +70,14 @@ def _tracks(labels: np.ndarray, mix: GaussianMixture, on: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The published labels (unique, sorted by key) with the heaviest published component's
     mean and covariance: ``(t, 3)``, ``(t, d)``, ``(t, d, d)``."""
-    idx = np.flatnonzero(on)
-    sub = labels[idx]
-    keys = label_keys(sub)
-    order = np.lexsort((-mix.weights[idx], *_columns(sub)))
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = ~keys_equal(keys[order[1:]], keys[order[:-1]])
-    rows = idx[order[first]]
+    rows = np.flatnonzero(on)
+    if len(rows) > 1:  # (one published component, the usual case: itself)
+        sub = labels[rows]
+        keys = label_keys(sub)
+        order = np.lexsort((-mix.weights[rows], *_columns(sub)))
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = ~keys_equal(keys[order[1:]], keys[order[:-1]])
+        rows = rows[order[first]]
     return labels[rows], mix.means[rows], mix.covs[rows]
 
 
@@ -203,9 +204,10 @@ class Reidentification:
             if keep.any():
                 L, K, M = (np.concatenate(x) for x in ((L, L0[keep]), (K, K0[keep]),
                                                        (M, M0[keep])))
-        by = _key_order(L)
-        L = L[by]
-        self._last = (L, label_keys(L), K[by], M[by])
+        if len(L) > 1:
+            by = _key_order(L)
+            L, K, M = L[by], K[by], M[by]
+        self._last = (L, label_keys(L), K, M)
 
     def _transitions(self, gaps: np.ndarray, which: int = 2) -> list[np.ndarray]:
         """The CV transitions ``F (l, d, d)`` and (``which`` 2) ``Q (l, d, d)`` over ``gaps
