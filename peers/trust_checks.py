@@ -90,9 +90,29 @@ def neighbour_tests(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass
     floats) from its inputs' log overlaps ``L`` (``(n, n)``; ``L0``: centred, or None),
     masses ``mass``, target masses ``tm`` (``(n,)``), unmatched weights ``U`` (``(n, n)``
     or None) and reference weights ``w`` (``(n,)``, 0 where left out of the references):
-    one peer's :func:`neighbour_tests_many`."""
-    return neighbour_tests_many(cfg, L[None], None if L0 is None else L0[None], mass[None],
-                                tm[None], None if U is None else U[None], w[None])[0].tolist()
+    one peer's :func:`neighbour_tests_many`, its divergence tests on floats (the same
+    formula, :func:`divergence_test`, without the arrays' per-call overhead: a peer alone)."""
+    L, mass, tm, w = L[None], mass[None], tm[None], w[None]
+    L0 = None if L0 is None else L0[None]
+    refs = _references(L, L0, mass, tm, w)
+    if refs is None:
+        return []
+    has, cross, square, ref_mass, ref_tm, shape = (v[0].tolist() if isinstance(v, np.ndarray)
+                                                   else v for v in refs)
+    Ls, ms, ts = L[0].tolist(), mass[0].tolist(), tm[0].tolist()
+    own = own_tests(cfg, L[0], None if L0 is None else L0[0], ms, ts)
+    value = []
+    for i, t_own in enumerate(own):
+        j = i + 1
+        if has[i]:
+            t_loo = divergence_test(cfg, Ls[j][j], cross[i], square[i], ms[j], ref_mass[i],
+                                    ts[j], ref_tm[i], shape=shape[i] if L0 is not None else 0.0)
+            t_own = t_loo if t_loo < t_own else t_own  # min(t_own, t_loo)
+        value.append(t_own)
+    if not cfg.majority:
+        return value
+    return _majority(cfg, L, L0, mass, tm, None if U is None else U[None], w,
+                     np.array([value]))[0].tolist()
 
 
 def neighbour_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None,
@@ -101,16 +121,31 @@ def neighbour_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None,
     """:func:`neighbour_tests` of ``g`` peers' rounds of as many inputs at once (``L``,
     ``L0``, ``U`` ``(g, n, n)``; ``mass``, ``tm``, ``w`` ``(g, n)``): ``(g, n - 1)``. Per
     neighbour ``j`` the smaller of its :func:`divergence_tests` against own and against
-    the leave-one-out average of the other references (where there is one); with
-    :attr:`TrustConfig.majority` and own and at least two other references, its median
-    pair test against them (:attr:`TrustConfig.median_test`; else that statistic) less
-    the median of theirs among themselves (:func:`pair_tests`), at least 0. Every
+    the leave-one-out average of the other references (where there is one,
+    :func:`_references`); with :attr:`TrustConfig.majority`, :func:`_majority`. Every
     (peer, neighbour) at once (a peer host's: :mod:`peers.trust_batch`)."""
+    refs = _references(L, L0, mass, tm, w)
+    if refs is None:
+        return np.zeros((len(w), 0))
+    has, cross, square, ref_mass, ref_tm, shape = refs
+    value = own_tests_many(cfg, L, L0, mass, tm)  # (g, J)
+    j = np.arange(1, w.shape[1])
+    t_loo = divergence_tests(cfg, L[:, j, j], cross, square, mass[:, j], ref_mass, tm[:, j],
+                             ref_tm, shape=shape)
+    value = np.where(has & (t_loo < value), t_loo, value)  # min(t_own, t_loo)
+    return _majority(cfg, L, L0, mass, tm, U, w, value) if cfg.majority else value
+
+
+def _references(L: np.ndarray, L0: np.ndarray | None, mass: np.ndarray, tm: np.ndarray,
+                w: np.ndarray) -> tuple | None:
+    """Each neighbour's leave-one-out reference (the other inputs of weight ``w`` but own
+    alone, renormalised): whether it has one (``has``), ``log int D_j R`` and ``log int
+    R^2``, its mass and target mass, and (``L0`` given) the centred divergence, each
+    ``(g, n - 1)`` (0.0 for no ``L0``); None with no neighbour."""
     g, n = w.shape
     J = n - 1
     if J == 0:
-        return np.zeros((g, 0))
-    value = own_tests_many(cfg, L, L0, mass, tm)  # (g, J)
+        return None
     W = np.repeat(w[:, None, :], J, axis=1)  # (g, J, n): row i leaves out input i + 1
     W[:, np.arange(J), np.arange(1, J + 1)] = 0.0
     tot = W.sum(axis=2)
@@ -120,18 +155,24 @@ def neighbour_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None,
     cross, square = _loo_stacked(L, LW)
     ref_mass = np.matmul(W[:, :, None, :], np.repeat(mass[:, None, :, None], J, axis=1))
     ref_tm = np.matmul(W[:, :, None, :], np.repeat(tm[:, None, :, None], J, axis=1))
-    j = np.arange(1, J + 1)
+    shape = 0.0
     if L0 is not None:
+        j = np.arange(1, J + 1)
         c0, s0 = _loo_stacked(L0, LW)
         shape = _cs_arrays(c0, L0[:, j, j], s0, finite=True)
-    else:
-        shape = 0.0
-    with np.errstate(divide="ignore", invalid="ignore"):  # rows without others: not used
-        t_loo = divergence_tests(cfg, L[:, j, j], cross, square, mass[:, j], ref_mass[..., 0, 0],
-                                 tm[:, j], ref_tm[..., 0, 0], shape=shape)
-    value = np.where(has & (t_loo < value), t_loo, value)  # min(t_own, t_loo)
-    if not cfg.majority:
-        return value
+    return has, cross, square, ref_mass[..., 0, 0], ref_tm[..., 0, 0], shape
+
+
+def _majority(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass: np.ndarray,
+              tm: np.ndarray, U: np.ndarray | None, w: np.ndarray, value: np.ndarray
+              ) -> np.ndarray:
+    """:attr:`TrustConfig.majority` over the statistics ``value`` (``(g, n - 1)``): where own
+    and at least two other references are, each neighbour's median pair test against them
+    (:attr:`TrustConfig.median_test`; else its statistic) less the median of theirs among
+    themselves (:func:`pair_tests`), at least 0."""
+    n = w.shape[1]
+    J = n - 1
+    j = np.arange(1, n)
     pair = pair_tests(cfg, L, mass, tm, U, L0)  # (g, n, n)
     others = np.repeat((w > 0)[:, None, :], J, axis=1)  # (g, J, n): w > 0 but j
     others[:, np.arange(J), j] = False
@@ -154,6 +195,17 @@ def own_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass:
              if L0 is not None else 0.0)
     return divergence_tests(cfg, L[:, j, j], L[:, j, 0], L[:, :1, 0], mass[:, j], mass[:, :1],
                             tm[:, j], tm[:, :1], shape=shape)
+
+
+def own_tests(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass: list[float],
+              tm: list[float]) -> list[float]:
+    """One peer's :func:`own_tests_many` (``L``, ``L0`` ``(n, n)``), element by element on
+    floats: the same formula (:func:`divergence_test`), without the arrays' per-call
+    overhead (a peer alone, or a host's round settled on the spot)."""
+    return [divergence_test(cfg, L[j, j], L[j, 0], L[0, 0], mass[j], mass[0], tm[j], tm[0],
+                            shape=0.0 if L0 is None else _cs_of(_Floats, L0[j, 0], L0[j, j],
+                                                                 L0[0, 0], True))
+            for j in range(1, len(mass))]
 
 
 def _medians(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -333,8 +385,9 @@ def miss_cost(cfg: TrustConfig, m_j, m_r):
 def divergence_test(cfg: TrustConfig, l_jj: float, l_jr: float, l_rr: float, n_j: float,
                     n_r: float, t_j: float | None = None, t_r: float | None = None,
                     unmatched: float | None = None, shape: float = 0.0) -> float:
-    """:func:`divergence_tests` of one density and reference, a float."""
-    return float(divergence_tests(cfg, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r, unmatched, shape))
+    """:func:`divergence_tests` of one density and reference, on Python floats (the same
+    formula, :func:`_divergence`, without NumPy's per-call overhead: a peer alone)."""
+    return _divergence(_Floats, cfg, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r, unmatched, shape)
 
 
 def divergence_tests(cfg: TrustConfig, l_jj, l_jr, l_rr, n_j, n_r, t_j=None, t_r=None,
@@ -346,32 +399,65 @@ def divergence_tests(cfg: TrustConfig, l_jj, l_jr, l_rr, n_j, n_r, t_j=None, t_r
     side is empty, at least ``unmatched_cost`` times the ``unmatched`` target weight on
     both sides (:func:`unmatched_weights`) and at most :func:`miss_cost` of their target
     masses ``t_j``, ``t_r`` (each when given). Elementwise over arrays (broadcast): every
-    (peer, neighbour) of a host at once. The square is C's ``pow`` (as Python's ``** 2``,
-    which differs from ``x * x`` in the last bit for some ``x``: NumPy squares where the
-    exponent is a scalar), ``min`` and ``max`` keep their first argument on ties and NaN
-    as Python's do (the numbers of the scalar code before, tests/test_trust_exact.py)."""
-    n_j, n_r = np.asarray(n_j, float), np.asarray(n_r, float)
-    with np.errstate(invalid="ignore", over="ignore"):  # as Python's floats: no warning
-        d = n_j - n_r
-        card = cfg.kappa * np.power(d, np.full(d.shape, 2.0)) / (n_r + 1.0)
+    (peer, neighbour) of a host at once; :func:`divergence_test` the same formula on floats
+    (:func:`_divergence`, to the bit: tests/test_trust_batch.py)."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # as floats: silent
+        return _divergence(_Arrays, cfg, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r, unmatched,
+                           shape)
+
+
+class _Floats:
+    """:func:`_divergence`'s operations on Python floats."""
+
+    num = float
+    isfinite = math.isfinite
+
+    def sel(c, a, b):  # noqa: N805 - a namespace of functions, never instantiated
+        return a if c else b
+
+    def square(x):  # noqa: N805
+        return x ** 2
+
+
+class _Arrays:
+    """:func:`_divergence`'s operations elementwise on arrays: the same results as
+    :class:`_Floats`' per element (``np.where`` for the conditional; C's ``pow`` for the
+    square as Python's ``** 2``, which differs from ``x * x`` in the last bit for some
+    ``x``: NumPy squares where the exponent is a scalar, so it is given as an array)."""
+
+    isfinite = np.isfinite
+    sel = np.where
+
+    def num(v):  # noqa: N805
+        return np.asarray(v, float)
+
+    def square(x):  # noqa: N805
+        return np.power(x, np.full(np.shape(x), 2.0))
+
+
+def _divergence(xp, cfg: TrustConfig, l_jj, l_jr, l_rr, n_j, n_r, t_j, t_r, unmatched,
+                shape):
+    """The divergence test (:func:`divergence_tests`) with the operations ``xp``
+    (:class:`_Floats` or :class:`_Arrays`): the one formula of both. ``sel(c, a, b)``
+    keeps Python's ``min`` / ``max`` choices (the first argument on ties and NaN)."""
+    n_j, n_r = xp.num(n_j), xp.num(n_r)
+    card = cfg.kappa * xp.square(n_j - n_r) / (n_r + 1.0)
     ej, er = n_j <= 1e-9, n_r <= 1e-9
-    big = np.where(n_r > n_j, n_r, n_j)  # max(n_j, n_r)
-    one = cfg.empty_penalty * np.where(big < 1.0, big, 1.0)  # one side empty
-    cs = _cs_arrays(l_jr, l_jj, l_rr)
-    with np.errstate(invalid="ignore"):
-        x = cs - shape
-    where = np.where(~np.isfinite(cs), cfg.cap,
-                     np.where(np.isfinite(shape), np.where(x > 0.0, x, 0.0), cs))
-    where = np.where(ej & er, 0.0, np.where(ej | er, one, where))
+    big = xp.sel(n_r > n_j, n_r, n_j)  # max(n_j, n_r)
+    one = cfg.empty_penalty * xp.sel(big < 1.0, big, 1.0)  # one side empty: min(1, big)
+    cs, shape = _cs_of(xp, l_jr, l_jj, l_rr), xp.num(shape)
+    x = cs - shape
+    where = xp.sel(xp.isfinite(cs), xp.sel(xp.isfinite(shape), xp.sel(x > 0.0, x, 0.0), cs),
+                   cfg.cap)
+    where = xp.sel(ej & er, 0.0, xp.sel(ej | er, one, where))
     if unmatched is not None:
-        u = cfg.unmatched_cost * np.asarray(unmatched, float)
-        where = np.where(u > where, u, where)  # max(where, u)
+        u = cfg.unmatched_cost * xp.num(unmatched)
+        where = xp.sel(u > where, u, where)  # max(where, u)
     if t_j is not None and t_r is not None and cfg.detection_probability is not None:
-        m = _miss_rate(cfg.detection_probability) * (np.asarray(t_j, float)
-                                                      + np.asarray(t_r, float))
-        where = np.where(m < where, m, where)  # min(where, miss_cost)
+        m = xp.num(_miss_rate(cfg.detection_probability) * (xp.num(t_j) + xp.num(t_r)))
+        where = xp.sel(m < where, m, where)  # min(where, miss_cost)
     x = where + card
-    return np.where(x < cfg.cap, x, cfg.cap)  # min(cap, x)
+    return xp.sel(x < cfg.cap, x, cfg.cap)  # min(cap, x)
 
 
 @functools.lru_cache(maxsize=16)
@@ -722,23 +808,26 @@ def _cs_matrix(L: np.ndarray) -> np.ndarray:
 
 
 def _cs_arrays(lpq, lpp, lqq, finite: bool = False) -> np.ndarray:
-    """:func:`_cs_scalar` elementwise (broadcast), the same operations; ``finite``: 0 where
-    it is not finite (the ``shape`` of :func:`divergence_tests`)."""
-    lpq, lpp, lqq = (np.asarray(v, float) for v in (lpq, lpp, lqq))
+    """:func:`_cs_scalar` elementwise (broadcast); ``finite``: 0 where it is not finite
+    (the ``shape`` of :func:`divergence_tests`)."""
     with np.errstate(invalid="ignore"):
-        v = -lpq + 0.5 * lpp + 0.5 * lqq
-    v = np.where(np.isfinite(lpp) & np.isfinite(lqq), np.where(v < 0.0, 0.0, v), np.nan)
-    return np.where(np.isfinite(v), v, 0.0) if finite else v
+        return _cs_of(_Arrays, lpq, lpp, lqq, finite)
 
 
 def _cs_scalar(lpq: float, lpp: float, lqq: float) -> float:
     """:func:`tracking.divergence.cs_from_log_overlaps` of three floats, the same operations
     in the same order (``max(-lpq + lpp / 2 + lqq / 2, 0)``, NaN where either side is empty)
     without its array overhead (``np.maximum``'s NaN kept: a NaN ``lpq`` stays NaN)."""
-    if not (math.isfinite(lpp) and math.isfinite(lqq)):
-        return math.nan
+    return _cs_of(_Floats, lpq, lpp, lqq)
+
+
+def _cs_of(xp, lpq, lpp, lqq, finite: bool = False):
+    """``D_CS`` from three log overlaps with the operations ``xp`` (:func:`_divergence`'s):
+    NaN where either side is empty, at least 0; ``finite``: 0 where not finite."""
+    lpq, lpp, lqq = xp.num(lpq), xp.num(lpp), xp.num(lqq)
     v = -lpq + 0.5 * lpp + 0.5 * lqq
-    return 0.0 if v < 0.0 else v
+    v = xp.sel(xp.isfinite(lpp) & xp.isfinite(lqq), xp.sel(v < 0.0, 0.0, v), math.nan)
+    return xp.sel(xp.isfinite(v), v, 0.0) if finite else v
 
 
 def _loo_stacked(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -842,9 +931,7 @@ ALONE = {
     "chi2": lambda stacks, windows: offset_chi2_stacked(stacks, windows),
     "cusums": lambda *args: offset_cusums(*args),
     "tests": lambda *args: neighbour_tests(*args),
-    "own_tests": lambda cfg, L, L0, mass, tm: own_tests_many(
-        cfg, L[None], None if L0 is None else L0[None], np.asarray(mass, float)[None],
-        np.asarray(tm, float)[None])[0].tolist(),
+    "own_tests": lambda *args: own_tests(*args),
     "withheld": lambda *args: withheld_increments(*args),
     "relative": lambda infos, among: relative_offsets(infos, among),
     "masses": lambda mixes, min_weight: ([D.mass for D in mixes],

@@ -228,7 +228,8 @@ def test_own_tests_together_are_each_ones_and_the_old_scalar_tests():
 
 
 def test_divergence_tests_are_the_old_scalar_tests_to_the_bit():
-    """:func:`divergence_tests` elementwise is the old scalar test on every branch: empty
+    """:func:`divergence_tests` elementwise, and :func:`divergence_test` on floats, are the old
+    scalar test on every branch: empty
     sides, no overlap (``-inf``), empty mixtures (NaN), ``-0.0``, shapes, the unmatched and
     miss bounds, and masses whose ``** 2`` is not ``x * x`` to the bit."""
     rng = np.random.default_rng(13)
@@ -255,6 +256,11 @@ def test_divergence_tests_are_the_old_scalar_tests_to_the_bit():
                     float(shape[i]))
                 assert got[i] == want or (np.isnan(got[i]) and np.isnan(want)), (i, want)
                 assert np.signbit(got[i]) == np.signbit(want)
+                one = divergence_test(  # the same formula on floats (a peer alone)
+                    cfg, l_jj[i], l_jr[i], l_rr[i], n_j[i], n_r[i], t_j[i], t_r[i],
+                    u[i] if with_u else None, shape[i])
+                assert one == want or (np.isnan(one) and np.isnan(want))
+                assert np.signbit(one) == np.signbit(want)
 
 
 NAMES = ("a", "b", "c", "d")
