@@ -260,8 +260,9 @@ class LmbEstimator:
         else:
             self.state = self._filter_step(k, z)
         self.k = k
+        pub = None
         if self.origin is not None and self.publish_threshold is not None:
-            self._stamp_first_publication(k)
+            pub = self._stamp_first_publication(k)
         mix, labels = phd_mixture(self.state)
         self._last = (mix, self.state)
         t = self.state.tracks
@@ -269,7 +270,7 @@ class LmbEstimator:
             pub, pub_labels = mix, labels
             self._unpublished = np.zeros(len(t), dtype=bool)
         else:
-            self._unpublished = ~self._publishing(k)
+            self._unpublished = ~(self._publishing(k) if pub is None else pub)
             keep = ~self._unpublished[t.owner]
             pub, pub_labels = mix.select(keep), labels[keep]
         labelled = self.origin is not None
@@ -307,15 +308,11 @@ class LmbEstimator:
             return extract_tracks(LabelledMixture(mix, labels), self.extraction_threshold,
                                   self.extraction, confirmation)
         labels = as_labels(labels, len(mix), "labels")
-        tr = self.filter.extract(own)
+        idx, rows = self.filter.extract_rows(own)  # the tracks and rows extract() reports
         t = own.tracks
-        r = t.existence
-        if self.filter.extraction == "threshold":
-            idx = np.flatnonzero(r >= self.filter.extraction_threshold)
-        else:
-            idx = np.flatnonzero(keys_isin(label_keys(t.labels), label_keys(tr.labels)))
-        rows = t.heaviest()[idx]
-        return ExtractedTracks(tr.states, labels[rows], tr.covs, tr.existence, tr.status)
+        status = (own.hits[idx] >= self.filter.confirm_scans).astype(np.int8)
+        return ExtractedTracks(t.means[rows], labels[rows], t.covs[rows], t.existence[idx],
+                               status)
 
     def adopt(self, fused: GaussianMixture) -> None:
         """Feedback (``network.feedback``; the consensus calls this only then): the fused PHD
@@ -376,7 +373,7 @@ class LmbEstimator:
             self._gap_filter = dataclasses.replace(f, scalable="lbp")
         return self._gap_filter
 
-    def _stamp_first_publication(self, k: int) -> None:
+    def _stamp_first_publication(self, k: int) -> np.ndarray | None:
         """An own-born track published for the first time takes the label ``(origin, k,
         PUBLISHED_BASE + i)``: the network rule's "earliest birth" then means earliest on the
         network, so a track that sat unpublished below the threshold while a neighbour's track
@@ -388,12 +385,14 @@ class LmbEstimator:
         label back after more than :attr:`republish_gap` (:attr:`tentative_gap` if it was only
         ever tentative) scans unpublished is stamped anew (own), so a track that went dark
         (nobody relays its label) cannot return with an early label later than the settle
-        wait allows (docs/labelled-tracking.md, issue 33)."""
+        wait allows (docs/labelled-tracking.md, issue 33). Returns :meth:`_publishing`'s mask
+        (None without tracks): a stamp keeps a published track published (its label's scan
+        becomes ``k`` or ``k + 1``, young), so the step need not compute it again."""
         t = self.state.tracks
         self._stamped = t.labels[:0]
         moving = self._still_moving(k)
         if len(t) == 0:
-            return
+            return None
         keys = label_keys(t.labels)
         was, last, strong = self._lookup(keys)
         pub = self._publishing(k)
@@ -427,6 +426,7 @@ class LmbEstimator:
         on = was | pub
         self._remember(label_keys(labels[on]), np.where(pub, k, last)[on],
                        ((strong & was) | (pub & high))[on])
+        return pub
 
     def _note_moves(self, before: np.ndarray, after: np.ndarray) -> None:
         """Remember the own labels :func:`peers.labelling.take_moves` moved (``before (n, 3)``
@@ -449,6 +449,8 @@ class LmbEstimator:
     def _still_moving(self, k: int) -> np.ndarray:
         """``(m, 3)`` the labels moved by the last relabel that may move again at scan ``k``:
         now of scan ``k`` and first stamped less than :attr:`corroborate_scans` scans before."""
+        if not len(self._moving):
+            return self._moving
         ok = (self._moving[:, 1] == k) & (k - self._moving_first < self.corroborate_scans)
         return self._moving[ok]
 

@@ -399,14 +399,20 @@ class LmbFilter:
         """Tracks with ``r >= extraction_threshold`` (or the MAP-cardinality most likely ones),
         each reported by its heaviest component, in label order."""
         t = state.tracks
+        idx, top = self.extract_rows(state)
+        status = (state.hits[idx] >= self.confirm_scans).astype(np.int8)
+        return LmbTracks(t.labels[idx], t.means[top], t.covs[top], t.existence[idx], status)
+
+    def extract_rows(self, state: LmbState) -> tuple[np.ndarray, np.ndarray]:
+        """The tracks :meth:`extract` reports ``(p,)`` (ascending) and each one's heaviest
+        component row ``(p,)`` (for callers that report rows of their own, once)."""
+        t = state.tracks
         r = t.existence
         if self.extraction == "threshold":
             idx = np.flatnonzero(r >= self.extraction_threshold)
         else:
             idx = np.sort(np.argsort(-r, kind="stable")[:map_cardinality(r)])
-        top = t.heaviest()[idx]
-        status = (state.hits[idx] >= self.confirm_scans).astype(np.int8)
-        return LmbTracks(t.labels[idx], t.means[top], t.covs[top], r[idx], status)
+        return idx, t.heaviest()[idx]
 
 
 def _empty_mixture(dim: int) -> GaussianMixture:
