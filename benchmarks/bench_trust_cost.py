@@ -19,6 +19,11 @@ found nothing); ``--every-round`` adds a host-batched run with it off.
     python benchmarks/bench_trust_cost.py --peers 20 --scans 30 --repeats 1 --lie p02:biased
     python benchmarks/bench_trust_cost.py --every-round   # also TrustConfig.test_once off
     python benchmarks/bench_trust_cost.py --filter gmphd  # GM-PHD peers (bench_fifty's kind)
+    python benchmarks/bench_trust_cost.py --filter gmphd --ops   # the host-batched tests split
+
+``--ops``: the host-batched runs' trust tests split by what a host computes stacked (each
+request kind of :data:`peers.trust_batch.TOGETHER`, thread CPU per peer-scan and calls) and
+the rest (the peers' generators and the lockstep between them: per-peer Python).
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import numpy as np
 if not __package__:  # `python benchmarks/bench_trust_cost.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sensornet.peers import batching
+from sensornet.peers import batching, trust_batch
 from sensornet.peers.batching import FusionBatch
 from sensornet.peers.host import SharedDecode
 from sensornet.peers.trust import Trust
@@ -88,6 +93,36 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
 
 WEIGH = Trust.weigh
 TESTS: list[float] = []
+OPS: dict[str, list[float]] = {}
+"""With ``--ops``: per request kind, its thread CPU (s) and calls in the last run."""
+
+
+def _count_ops() -> dict:
+    """:data:`peers.trust_batch.TOGETHER`'s computations wrapped to add their thread CPU
+    to :data:`OPS` (``trust_batch.TOGETHER`` is looked up per request); the originals."""
+    saved = dict(trust_batch.TOGETHER)
+    OPS.clear()
+    for op, f in saved.items():
+        def timed(args, f=f, op=op):
+            t0 = time.thread_time()
+            try:
+                return f(args)
+            finally:
+                v = OPS.setdefault(op, [0.0, 0])
+                v[0] += time.thread_time() - t0
+                v[1] += 1
+        trust_batch.TOGETHER[op] = timed
+    return saved
+
+
+def print_ops(n: int, scans: int) -> None:
+    """The last host-batched run's trust tests split (:data:`OPS`) in ms per peer-scan."""
+    total = sum(v[0] for v in OPS.values()) * 1e3 / n / scans
+    print("| request (host-batched) | ms/peer-scan | calls |\n|---|---:|---:|")
+    for op, (t, c) in sorted(OPS.items(), key=lambda kv: -kv[1][0]):
+        print(f"| {op} | {t * 1e3 / n / scans:.4f} | {c} |")
+    print(f"| all stacked requests | {total:.4f} | |\n| generators and lockstep (the rest) "
+          f"| {TESTS[-1] - total:.4f} | |", flush=True)
 """Per run: the CPU ms per peer-scan of the trust tests themselves (every
 :meth:`Trust.weigh` and :func:`peers.trust_batch.weigh_together`)."""
 
@@ -120,6 +155,8 @@ def main() -> None:
     p.add_argument("--every-round", action="store_true",
                    help="also trust on with TrustConfig.test_once off (every round tested "
                         "in full, as before 2026-12-05)")
+    p.add_argument("--ops", action="store_true",
+                   help="split the host-batched trust tests by stacked request kind")
     p.add_argument("--lie", default=None,
                    help="a lying peer (fusion.lie, e.g. p02:biased): the defence's decisions")
     args = p.parse_args()
@@ -141,11 +178,18 @@ def main() -> None:
             ms["on (per peer)"].append(v)
             tests.setdefault("per peer", []).append(TESTS[-1])
             print(f"| on (per peer) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |", flush=True)
-            v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind)
+            saved = _count_ops() if args.ops else None
+            try:
+                v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind)
+            finally:
+                if saved is not None:
+                    trust_batch.TOGETHER.update(saved)
             ms["on (host-batched)"].append(v)
             tests.setdefault("host-batched", []).append(TESTS[-1])
             print(f"| on (host-batched) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |",
                   flush=True)
+            if args.ops:
+                print_ops(n, scans)
             print(f"per peer vs host-batched: fused states identical: "
                   f"{same_tracks(tracks_one, tracks_new)}, trust summaries identical: "
                   f"{sum_one == sum_new} "
