@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sensornet.tracking.gaussian import inv_spd
-from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.label_keys import keys_isin, label_keys
 
 
 @dataclass
@@ -81,7 +81,7 @@ class StampTwins:
                              f"(n, 3), weights (n,), means (n, d), covs (n, d, d); got "
                              f"{ids.shape}, {X.shape}, {P.shape}, {labels.shape}, {w.shape}, "
                              f"{M.shape}, {F.shape}")
-        C_lab, C_m, C_P = self._candidates(k, labels, w, M, F)
+        C_lab, C_m, C_P, seen = self._candidates(k, labels, w, M, F)
         out = np.zeros(p, dtype=bool)
         rows = np.flatnonzero(k - ids[:, 1] <= self.young)
         if len(rows) and len(C_lab):
@@ -102,38 +102,38 @@ class StampTwins:
                 cost[ri, ci] = d2
                 r, q = linear_sum_assignment(cost)
                 out[r_[r[cost[r, q] <= self.gate]]] = True
-        self._remember(k, labels, w, M, F)
+        # remember the labels young enough to be a twin at the next scan (born at most 2
+        # young scans before it), each until memory scans after the density last held it
+        keep = (k + 1 - C_lab[:, 1] <= 2 * self.young) & (k + 1 - seen <= self.memory)
+        self.labels, self.seen = C_lab[keep], seen[keep]
+        self.means, self.covs = C_m[keep], C_P[keep]
         return out
 
     def _candidates(self, k: int, labels: np.ndarray, weights: np.ndarray, means: np.ndarray,
-                    covs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The labels a young row's twin at scan ``k`` may carry, each once: the density's (a
-        label of several components by its heaviest) and the remembered ones it no longer
-        holds, last held at most ``memory`` scans before ``k``."""
-        keys = label_keys(labels)
-        order = np.lexsort((-weights, keys)) if len(keys) else np.zeros(0, np.int64)
-        first = order[np.unique(keys[order], return_index=True)[1]] if len(keys) else order
-        lab, m, P = labels[first], means[first], covs[first]
-        if len(self.labels):
-            old = ~np.isin(label_keys(self.labels), keys) & (k - self.seen <= self.memory)
-            lab = np.concatenate([lab, self.labels[old]])
-            m = np.concatenate([m, self.means[old]])
-            P = np.concatenate([P, self.covs[old]])
-        return lab, m, P
-
-    def _remember(self, k: int, labels: np.ndarray, weights: np.ndarray, means: np.ndarray,
-                  covs: np.ndarray) -> None:
-        """Keep the labels young enough to be a twin (born at most ``2 young`` scans before the
-        next scan): the density's as of ``k``, the rest until ``memory`` scans after the
-        density last held them."""
-        lab, m, P = self._candidates(k, labels, weights, means, covs)
+                    covs: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The labels a young row's twin at scan ``k`` may carry, each once, born at most ``2
+        young`` scans before ``k``: the density's (a label of several components by its
+        heaviest) and the remembered ones it no longer holds, last held at most ``memory``
+        scans before ``k``; with their means, covariances and the scan last held."""
+        young = np.flatnonzero(k - labels[:, 1] <= 2 * self.young)
+        lab = labels[young]
+        if len(lab) > 1:  # by label (int columns), heaviest first; then each label's first
+            order = np.lexsort((-weights[young], lab[:, 2], lab[:, 1], lab[:, 0]))
+            s = lab[order]
+            first = np.concatenate(([True], (s[1:] != s[:-1]).any(axis=1)))
+            young = young[order[first]]
+            lab = labels[young]
+        m, P = means[young], covs[young]
         seen = np.full(len(lab), k, dtype=np.int64)
         if len(self.labels):
-            old = (~np.isin(label_keys(self.labels), label_keys(labels))
-                   & (k - self.seen <= self.memory))
-            seen[len(lab) - int(old.sum()):] = self.seen[old]
-        keep = (k + 1 - lab[:, 1] <= 2 * self.young) & (k + 1 - seen <= self.memory)
-        self.labels, self.seen, self.means, self.covs = lab[keep], seen[keep], m[keep], P[keep]
+            old = (k - self.seen <= self.memory) & ~keys_isin(label_keys(self.labels),
+                                                              label_keys(labels))
+            if old.any():
+                lab = np.concatenate([lab, self.labels[old]])
+                m = np.concatenate([m, self.means[old]])
+                P = np.concatenate([P, self.covs[old]])
+                seen = np.concatenate([seen, self.seen[old]])
+        return lab, m, P, seen
 
 
 __all__ = ["StampTwins"]
