@@ -25,6 +25,7 @@ from sensornet.peers.session import PEER_WAIT
 from sensornet.sim.bounds import MAX_ROUNDS
 from sensornet.sim.choices import FUSION_RULES, OMEGA_RULES, OOS_POLICIES
 from sensornet.sim.kinds import names as kind_names
+from sensornet.sim.run.run_handle import VIEW_WAIT
 
 
 def add_peer_flags(sp: argparse.ArgumentParser) -> None:
@@ -106,6 +107,10 @@ def add_world(sub) -> None:
     w.add_argument("--wait", type=POSITIVE_FLOAT, default=PEER_WAIT,
                    help=f"seconds to wait for the peers (default {PEER_WAIT:g}; the run starts "
                         "as soon as they are ready)")
+    w.add_argument("--view-wait", type=POSITIVE_FLOAT, metavar="SECONDS",
+                   help="before the first scan, wait up to SECONDS from the start for a "
+                        "subscriber on the truth (the run's view; sensornet run passes "
+                        f"{VIEW_WAIT:g} when it starts one); default: no wait")
     w.add_argument("--run", type=NONNEGATIVE_INT, default=0,
                    help="Monte Carlo run index (random draws)")
     w.add_argument("--bundle", action="append", metavar="HOST=S1,S2,...",

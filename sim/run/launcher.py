@@ -39,6 +39,7 @@ from sensornet.sim.run.process_faults import (  # noqa: F401  (the names other m
 from sensornet.sim.run.run_handle import (  # noqa: F401
     ROUTER,
     ROUTER_GRACE,
+    VIEW_WAIT,
     WORLD_STARTED,
     RunHandle,
 )
@@ -121,6 +122,9 @@ def start_run(scn: Scenario, source: str, out: Path, network: str | None = None,
         common, eps, extra_connect = _routed(handle, common, ep(free_port()),
                                              list(groups or names), extra_connect, recover)
         world_listen = []
+    # the world's first scan waits (bounded) for the view's subscription: a view still
+    # importing on a busy machine missed the run's first seconds (a caller's own flag wins)
+    world_args = [*(["--view-wait", f"{VIEW_WAIT:g}"] if watch else []), *(world_args or [])]
     world = _world_command(source, common, {} if router and recover else groups, world_listen,
                            extra_connect, names, run, world_args, speed)
     A = graph if sparse else None  # each peer links to the world and its graph neighbours only

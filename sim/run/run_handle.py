@@ -23,6 +23,14 @@ while the router is down every liveliness token is gone, the world's too."""
 WORLD_STARTED = "world: starting "
 """The line the world logs as its first scan goes out: a run's length counts from here
 (:func:`sim.run.launcher.wait_run`)."""
+VIEW_WAIT = 15.0
+"""Seconds from the world's start (its publishers declared) that it waits at most for a view
+to subscribe to the truth before its first scan, when asked to (``--view-wait``: ``sensornet
+run`` asks when it starts a view). In a simulated run no peer subscribes to the truth (each
+scores against its own truth function), so the truth publisher's matching status is the view:
+without the wait a view still importing (20 s at load 15) missed the run's first seconds. It
+counts from the world's start, overlapping the wait for the peers, so a ready peer waits at
+most this long for its first scan, within its 30 s ``--idle-timeout``."""
 
 
 @dataclass

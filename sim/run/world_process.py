@@ -10,6 +10,7 @@ at scan ``k``.
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 import time
 from collections import Counter
@@ -102,7 +103,7 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
               run_id: str | None = None, viewer: str | None = None,
               speed: float | None = None, progress=None, rerun: bool = True,
               say=None, security=None, data=None, recover: bool = False,
-              bundles: dict[str, list[str]] | None = None) -> dict:
+              bundles: dict[str, list[str]] | None = None, view_wait: float = 0.0) -> dict:
     """Play run ``run`` of the scenario; returns what was published.
 
     ``data``: the run's ``(truth, scans)`` (default :func:`sim.world.generate_run`'s).
@@ -112,7 +113,9 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     publisher (:func:`peers.transport.recovering_publisher`), so a peer that missed some (a
     router's outage) gets them from the world's cache. ``bundles``: peer host -> its sensors,
     whose scans go to the host in one message per scan (:mod:`protocol.bundle`) instead of
-    one per sensor (plain mode only: not with ``security`` or ``recover``).
+    one per sensor (plain mode only: not with ``security`` or ``recover``). ``view_wait``:
+    seconds from the start that the first scan waits at most for a subscriber on the truth
+    (the run's view, :data:`sim.run.run_handle.VIEW_WAIT`); 0, the default: no wait.
     """
     bundles = _checked_bundles(scn, bundles, security, recover)
     speed = speed or scn.network.speed
@@ -129,8 +132,11 @@ def run_world(scn: Scenario, network: str, run: int = 0, listen=(), connect=(),
     session = open_session(listen, connect, config_file, gossip=ANNOUNCE, security=security)
     try:
         world.declare(session, signer, recover)
+        declared = time.monotonic()
         if wait_for:
             world.wait_for_peers(wait_for, wait_timeout)
+        if view_wait > 0:
+            world.wait_for_view(declared + view_wait, view_wait)
         world.play()
         world.end()
     finally:
@@ -271,6 +277,22 @@ class _World:
         time.sleep(0.2)  # let the peers' subscriptions settle on every link
         _await_subscribers([*(self.probes[n] for n in wait_for if n in self.probes),
                             *self.bundle_pubs.values()], self.stop, 5.0)
+
+    def wait_for_view(self, deadline: float, view_wait: float) -> None:
+        """Until the truth has a subscriber (the run's view, ``--view-wait``) or ``deadline``
+        (monotonic); giving up is one line on stderr, and the run goes on without it."""
+        probe = getattr(self.truth_pub, "pub", self.truth_pub)
+        if probe.matching_status.matching:
+            return
+        t0 = time.monotonic()
+        self.say(f"world: waiting up to {max(0.0, deadline - t0):.1f} s for the view")
+        _await_subscribers([probe], self.stop, deadline - t0)
+        if probe.matching_status.matching:
+            self.say(f"world: the view subscribed after {time.monotonic() - t0:.1f} s")
+        elif not self.stop.is_set():
+            print(f"world: no view subscribed within {view_wait:g} s of the start: starting "
+                  f"without it (its recording misses the first scans)", file=sys.stderr,
+                  flush=True)
 
     def play(self) -> None:
         """The start message, then scan ``k`` of every sensor at ``(k - 1)`` intervals, each

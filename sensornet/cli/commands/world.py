@@ -35,7 +35,7 @@ def cmd_world(args: argparse.Namespace) -> int:
                          viewer=args.viewer, speed=args.speed, rerun=not args.no_rerun,
                          progress=progress, say=lambda line: print(line, flush=True),
                          security=member_security(args, "world", scn), recover=args.recover,
-                         bundles=_bundles(args.bundle))
+                         bundles=_bundles(args.bundle), view_wait=args.view_wait or 0.0)
     except WorldError as exc:
         raise UserError(str(exc)) from None
     print(f"world: published {sent['scans_published']} scans of {len(scn.sensors)} sensors "
