@@ -107,3 +107,14 @@ def test_option_reaches_peers_two_hops_from_another():
         scn = scenario_of(GRAPHS[graph], "lmb", 0.9, 10.0, 5,
                           {**RULES["hybrid"], "fusion.stamp_twins": 1})
         assert {consensus_options(scn, s).stamp_twins for s in scn.sensor_names} == {expect}
+
+
+def test_default_is_one_scan_for_lmb_peers_and_off_for_gmphd():
+    """The auto default (-1): 1 scan at LMB peers two hops from another, off at GM-PHD peers
+    (not evaluated there) and on a full graph; an explicit 0 turns it off for LMB."""
+    for kind, graph, sets, expect in [("lmb", "circ20", {}, 1), ("gmphd", "circ20", {}, 0),
+                                      ("lmb", "full3", {}, 0),
+                                      ("lmb", "circ20", {"fusion.stamp_twins": 0}, 0)]:
+        scn = scenario_of(GRAPHS[graph], kind, 0.9, 10.0, 5, {**RULES["hybrid"], **sets})
+        assert scn.fusion.stamp_twins == sets.get("fusion.stamp_twins", -1)
+        assert {consensus_options(scn, s).stamp_twins for s in scn.sensor_names} == {expect}

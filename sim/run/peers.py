@@ -59,7 +59,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         existence_keep=scn.fusion.existence_keep,
         existence_revisit=existence_revisit(scn),
         # a stamp from 2 hops or more can reach a peer after its neighbours' (label_twins)
-        stamp_twins=scn.fusion.stamp_twins if settle_scans(A, i) > 1 else 0,
+        stamp_twins=stamp_twins(scn) if settle_scans(A, i) > 1 else 0,
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it
         # ~40 % of its CPU at 50 peers (docs/labelled-tracking.md)
@@ -132,6 +132,16 @@ def existence_absent(scn: Scenario) -> float:
     if v >= 0:
         return v
     return scn.lmb.tentative_threshold if scn.network.filter == "lmb" else 0.0
+
+
+def stamp_twins(scn: Scenario) -> int:
+    """``fusion.stamp_twins`` if set, else (-1, auto) 1 scan for LMB peers and 0 (off) for the
+    others: evaluated once on the LMB cells only (docs/labelled-tracking.md, "One target, two
+    stamps a scan apart"); a peer with every other one hop away never holds a row (the caller)."""
+    v = scn.fusion.stamp_twins
+    if v >= 0:
+        return v
+    return 1 if scn.network.filter == "lmb" else 0
 
 
 def existence_revisit(scn: Scenario) -> tuple[tuple[str, float], ...]:

@@ -158,7 +158,7 @@ class FusionSpec:
                                                 "evidence against it (issue 34, "
                                                 "docs/real-traffic.md, \"Why the far radars "
                                                 "confirm late\").")
-    stamp_twins: int = option(0, doc="Extraction of fused tracks (labelled peers with a "
+    stamp_twins: int = option(-1, doc="Extraction of fused tracks (labelled peers with a "
                                      "peer 2 hops or more away): a row whose label is at "
                                      "most this many scans old is not reported while the "
                                      "peer's fused density holds, or held in the last as "
@@ -167,9 +167,11 @@ class FusionSpec:
                                      "it: a stamp moved a scan later for want of "
                                      "corroboration, whose first may still come from a far "
                                      "peer and take the id (`tracking.label_twins`; the fused "
-                                     "density and labels are unchanged); 0: off. Issue 33 "
+                                     "density and labels are unchanged); 0: off; -1 (auto): 1 "
+                                     "for LMB peers (chosen on training runs, evaluated "
+                                     "once), off for the others. Issue 33 "
                                      "(docs/labelled-tracking.md, \"One target, two stamps "
-                                     "a scan apart\").", unit="scans", check=NONNEGATIVE)
+                                     "a scan apart\").", unit="scans", check=at_least(-1))
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
