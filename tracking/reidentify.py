@@ -147,9 +147,12 @@ class Reidentification:
             self._remember(labels, lab, own, m, k)
         run = np.ones(len(lab), dtype=np.int64)
         if self._on is not None and self._on[0] == k - 1 and len(lab) and len(self._on[1]):
-            by = _key_order(self._on[1])
-            was, pos = keys_find(self._on[5][by], own)
-            run[was] += self._on[4][by][pos[was]]
+            keys0, run0 = self._on[5], self._on[4]
+            if len(keys0) > 1:  # (one track, the usual case: sorted as it is)
+                by = _key_order(self._on[1])
+                keys0, run0 = keys0[by], run0[by]
+            was, pos = keys_find(keys0, own)
+            run[was] += run0[pos[was]]
         self._on = (int(k), lab, m, P, run, own)
         return labels
 
