@@ -323,7 +323,7 @@ class PeerHost(HostDelivery, HostBatching):
         work waiting (never in the burst of a scan that sets its peers' latency; a host never
         idle sends them once a peer holds :data:`peers.observer.PENDING_MAX`); each peer's
         packing on its own CPU, the put split evenly between them ("telemetry" CPU)."""
-        if not self.reports.watched:
+        if not any(self.peers[i].observer.enabled for i in self._active):  # watched/recorded
             return
         busy = any(self._backlog[i] for i in self._active)
         crowded = busy and any(self.peers[i].observer.pending >= PENDING_MAX

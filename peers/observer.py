@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 from sensornet.peers.core import PeerCore, Publish, Record
@@ -103,6 +104,10 @@ class Observer:
         self.sent = 0
         self.reports: HostReports | None = None
         """A peer host's: reports go there, flushed when the host says (:meth:`flush`)."""
+        self.record_put: Callable[[bytes], None] | None = None
+        """A recorder's (``run --record``): every telemetry message also goes there, watched or
+        not, each peer's own (a hosted one's too), so an offline view draws what a live one
+        did (``sensornet view --from-mcap``)."""
         self.wants_flush = False
         """Whether a report may be complete (tracks or an OSPA came since the last flush): the
         driver calls :meth:`flush` only then (a wake-up without it costs nothing here)."""
@@ -114,8 +119,8 @@ class Observer:
 
     @property
     def enabled(self) -> bool:
-        """Open and watched: only then are records gathered and reports sent."""
-        return self._open and self.watched
+        """Open and watched (or recorded): only then are records gathered and reports made."""
+        return self._open and (self.watched or self.record_put is not None)
 
     def _matching(self, status) -> None:  # Zenoh's thread: a plain flag for the loop's
         self.watched = bool(status.matching)
@@ -335,16 +340,17 @@ class Observer:
                  for k in done]
         try:
             if self.reports is not None:  # into the host's message, marks made there
-                self.reports.items.extend(items)
+                if self.watched:
+                    self.reports.items.extend(items)
+                if self.record_put is not None:  # recorded as a peer of its own puts it
+                    for bundle in _bundles(items):
+                        self.record_put(bundle)
             else:  # a peer of its own process: its tracks and reports in one put
-                pack_marks([r for _, _, r in items])
-                entries: list[tuple[str, bytes]] = []
-                for name, tracks, r in items:
-                    if tracks is not None:
-                        entries.append((name, tracks))
-                    entries.append((name, encode(r)))
-                for bundle in pack_bundles(0, entries):
-                    self._put(bundle)
+                for bundle in _bundles(items):
+                    if self.watched:
+                        self._put(bundle)
+                    if self.record_put is not None:
+                        self.record_put(bundle)
             self.sent += len(done)
         except Exception:  # best effort: a view is never worth a peer's error
             pass
@@ -543,6 +549,18 @@ def heaviest_marginals_many(mixes: list[GaussianMixture], n: int) -> list[np.nda
         for t, e0, e1 in zip(idx, [0, *ends[:-1].tolist()], ends.tolist(), strict=True):
             out[t] = flat[e0:e1]
     return out
+
+
+def _bundles(items: list[tuple[str, bytes | None, Telemetry]]) -> list[bytes]:
+    """A peer's reports and the tracks beside them as the bundles it puts on
+    ``telemetry/<peer>`` (:mod:`protocol.bundle`), their map marks made first."""
+    pack_marks([r for _, _, r in items])
+    entries: list[tuple[str, bytes]] = []
+    for name, tracks, r in items:
+        if tracks is not None:
+            entries.append((name, tracks))
+        entries.append((name, encode(r)))
+    return pack_bundles(0, entries)
 
 
 def pack_marks(reports: list[Telemetry]) -> None:

@@ -34,8 +34,11 @@ from sensornet.protocol.json_fields import MESSAGE_SCHEMA, dumps, fields
 
 TOPICS = ("receive", "liveliness", "tick", "finish", "tracks")
 """The topics a replay feeds (the core's inputs and its published tracks)."""
-EXTRA = ("truth", "/scene")
-"""Topics for readers only (not fed by a replay): the truth scored against, the scene."""
+EXTRA = ("truth", "/scene", "telemetry")
+"""Topics for readers only (not fed by a replay): the truth scored against, the scene, and the
+peer's per-scan telemetry (its tracks and report, as put on ``telemetry/<peer>``: what the
+live view draws the fused marks, events and health series from; ``sensornet view
+--from-mcap``)."""
 META = "sensornet"
 _T = {"type": "number", "description": "the peer's clock (s since the epoch) at the call"}
 _BYTES = {"type": "string", "contentEncoding": "base64",
@@ -53,6 +56,9 @@ SCHEMAS = {
     "truth": {"t": _T, "k": {"type": "integer", "description": "scan index"},
               "ids": {"type": ["array", "null"], "description": "(m,) true target ids"},
               "states": {"type": "array", "description": "(m, d) true states"}},
+    "telemetry": {"t": _T, "payload": {
+        **_BYTES, "description": "one telemetry message's bytes as put on telemetry/<peer> (a "
+                                 "protocol.bundle of the scan's tracks and Telemetry report)"}},
 }
 """Each topic's record as a JSON Schema (MCAP ``jsonschema`` schemas over ``json`` messages:
 the mcap tools and Foxglove decode them without our code; floats are written by ``repr``,
@@ -141,6 +147,13 @@ class Recorder:
                                  truth_ids=truth_ids, sensors=self.sensors)
             self._log("/scene", now, scene)
 
+    def telemetry(self, now: float, payload: bytes) -> None:
+        """A telemetry message the peer made (peers.observer), recorded whether or not a view
+        heard it; bounded as the reports are (peers.observer: at most ``POOLED_SHOWN`` pooled,
+        ``PARTICLES_SHOWN`` particles and ``FUSED_SHOWN`` marks a mixture, per scan)."""
+        if self._fh is not None:
+            self._log("telemetry", now, {"t": now, "payload": _b64(payload)})
+
     def close(self) -> None:
         if self._fh is not None:
             self._w.finish()
@@ -178,7 +191,7 @@ def sensor_positions(scenario_text: str) -> dict[str, tuple[float, float]]:
 
 _FIELDS = {"receive": ("t", "key", "payload"), "liveliness": ("t", "name", "joined"),
            "tick": ("t",), "finish": ("t",), "tracks": ("t", "k", "payload"),
-           "truth": ("t", "k", "ids", "states")}
+           "truth": ("t", "k", "ids", "states"), "telemetry": ("t", "payload")}
 
 
 def _record(topic: str, encoding: str, data: bytes) -> list:

@@ -134,6 +134,9 @@ class PeerRuntime(RunOutputs):
                 meta = {**o.record, "peer": self.name, "network": self.core.cfg.network}
                 self.recorder = Recorder(o.out_dir / "record" / f"{self.stem}.mcap", meta)
                 self.recorder.attach(self.core)  # truth and the Foxglove scene too
+                # and the telemetry, watched or not: the offline view's fused marks, health
+                self.observer.record_put = lambda b, rec=self.recorder: rec.telemetry(
+                    time.time(), b)
             # live views' telemetry (secure: the access control lets p put telemetry/p)
             self.observer.open(self.transport.session, self.core.keys)
             if o.ros2 is not None:
@@ -151,6 +154,7 @@ class PeerRuntime(RunOutputs):
                 self.ros2.close()
                 self.ros2 = None
             self.observer.close()
+            self.observer.record_put = None  # the recorder closes next
             self.transport.close()
         finally:
             if self.recorder is not None:

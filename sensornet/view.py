@@ -305,20 +305,25 @@ class LiveView:
 
 def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
     """Rebuild the picture offline from peers' MCAP recordings (``sensornet run --record``:
-    what each peer received, its own tracks and the truth it scored against), merged in time
-    order; a message heard by several peers (a scan, the truth) is drawn once. No telemetry
-    is recorded, so the fused marks and the health series stay empty. Returns the messages
-    drawn. A file that is not a whole recording is a one-line ValueError naming it; a record
-    of the wrong shape is counted in ``state.rejected``, as an undecodable message is."""
+    what each peer received, its own tracks, the truth it scored against and its telemetry),
+    merged in time order; a message heard by several peers (a scan, the truth) is drawn once.
+    A recording with telemetry (its tracks and reports, as the live view hears them: fused
+    marks, events, health series) has its tracks drawn from it, as the live view does; an
+    older one's from its ``tracks`` records. Returns the messages drawn. A file that is not a
+    whole recording is a one-line ValueError naming it; a record of the wrong shape is
+    counted in ``state.rejected``, as an undecodable message is."""
     merged = []
     for path in paths:
         try:
-            meta, records = read_recording(Path(path), (*RECORDED, "truth"))
+            meta, records = read_recording(Path(path), (*RECORDED, "truth", "telemetry"))
         except (ValueError, KeyError, TypeError) as exc:  # not MCAP, cut short, bad records
             raise ValueError(f"{path}: {exc}") from None
         peer, network = meta.get("peer", "?"), meta.get("network", "net")
+        drawn_from = {"receive", "truth", "telemetry"}  # tracks within the telemetry
+        if not any(topic == "telemetry" for topic, _ in records):
+            drawn_from = {"receive", "truth", "tracks"}  # recorded before the telemetry was
         for topic, r in records:
-            if topic in ("receive", "tracks", "truth"):
+            if topic in drawn_from:
                 item = _drawable(topic, r, f"{ROOT}/{network}", peer)
                 if item is None:
                     state.rejected += 1
@@ -338,13 +343,17 @@ def replay_recordings(state: ViewState, paths: Sequence[Path]) -> int:
 
 
 def _drawable(topic: str, r, prefix: str, peer: str) -> tuple[float, str, bytes] | None:
-    """A recorded ``receive``, ``tracks`` or ``truth`` record as ``(time, key, message)`` for
-    the view, or None if it has not the shape the view reads (a time, a key or scan, the
-    message's bytes, or the truth's ids and states). Peers hear no truth message: the truth
-    their scorer had is recorded, and goes as the world's Truth message (the same bytes
-    from every peer: drawn once)."""
-    if not (isinstance(r, (list, tuple)) and len(r) >= 3 and isinstance(r[0], (int, float))
+    """A recorded ``receive``, ``tracks``, ``truth`` or ``telemetry`` record as ``(time, key,
+    message)`` for the view, or None if it has not the shape the view reads (a time, a key or
+    scan, the message's bytes, or the truth's ids and states). Peers hear no truth message:
+    the truth their scorer had is recorded, and goes as the world's Truth message (the same
+    bytes from every peer: drawn once)."""
+    if not (isinstance(r, (list, tuple)) and len(r) >= 2 and isinstance(r[0], (int, float))
             and not isinstance(r[0], bool)):
+        return None
+    if topic == "telemetry" and isinstance(r[1], (bytes, bytearray)):
+        return float(r[0]), f"{prefix}/telemetry/{peer}", bytes(r[1])
+    if len(r) < 3:
         return None
     if topic == "receive" and isinstance(r[1], str) and isinstance(r[2], (bytes, bytearray)):
         return float(r[0]), r[1], bytes(r[2])
