@@ -776,17 +776,25 @@ def test_ellipses_lie_at_two_sigma_of_their_component():
     np.testing.assert_allclose(np.abs(turn), 2 * np.pi, rtol=1e-9)
 
 
-def test_the_view_rebuilds_offline_from_peers_mcap_recordings(tmp_path):
-    """Two peers' recordings (what each received, and its own tracks): the scans and the truth
-    both heard are drawn once, each peer's tracks under its own name."""
+def _two_recordings(out, bad_key: bool = False) -> None:
+    """Two peers' recordings in ``out``: each heard s1's scan 1 and the truth and published its
+    tracks; with ``bad_key`` s2's also holds a received record whose key is not a string."""
     scan = encode(Scan("s1", 1, np.ones((3, 2))))
     truth = encode(Truth(1, np.array([1]), np.zeros((1, 4))))
     for i, peer in enumerate(("s1", "s2")):
-        rec = Recorder(tmp_path / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
+        rec = Recorder(out / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
         rec.receive(10.0 + i, "sensornet/net/scan/s1", scan)
         rec.receive(10.5 + i, "sensornet/net/truth", truth)
         rec.tracks(10.6 + i, 1, encode(Tracks(peer, 1, np.ones((2, 4)))))
+        if bad_key and peer == "s2":
+            rec._log("receive", 10.7, {"t": 10.7, "key": 5, "payload": "AA==", "message": None})
         rec.close()
+
+
+def test_the_view_rebuilds_offline_from_peers_mcap_recordings(tmp_path):
+    """Two peers' recordings (what each received, and its own tracks): the scans and the truth
+    both heard are drawn once, each peer's tracks under its own name."""
+    _two_recordings(tmp_path)
     calls = _Rec()
     state = ViewState(Batcher(rr, calls), ["s1", "s2"])
     drawn = replay_recordings(state, sorted(tmp_path.glob("*.mcap")))
@@ -837,16 +845,7 @@ def test_view_from_mcap_writes_a_recording_and_refuses_a_bad_file(tmp_path):
     a recording Rerun verifies, with the scenario's sensors and legend, the scans and truth
     once and each peer's tracks; a record of the wrong shape counted as undecodable; a file
     that is not a whole recording (garbage, cut short) a one-line error naming it."""
-    scan = encode(Scan("s1", 1, np.ones((3, 2))))
-    truth = encode(Truth(1, np.array([1]), np.zeros((1, 4))))
-    for i, peer in enumerate(("s1", "s2")):
-        rec = Recorder(tmp_path / f"peer-{peer}.mcap", {"peer": peer, "network": "net"})
-        rec.receive(10.0 + i, "sensornet/net/scan/s1", scan)
-        rec.receive(10.5 + i, "sensornet/net/truth", truth)
-        rec.tracks(10.6 + i, 1, encode(Tracks(peer, 1, np.ones((2, 4)))))
-        if peer == "s2":  # a key that is not a string
-            rec._log("receive", 10.7, {"t": 10.7, "key": 5, "payload": "AA==", "message": None})
-        rec.close()
+    _two_recordings(tmp_path, bad_key=True)
     files = [str(p) for p in sorted(tmp_path.glob("peer-*.mcap"))]
     rrd = tmp_path / "offline.rrd"
 
