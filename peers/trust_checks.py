@@ -721,7 +721,8 @@ def segment_sums(X: np.ndarray, counts: list[int]) -> np.ndarray:
 @functools.lru_cache(maxsize=256)
 def _ranks(counts: tuple[int, ...]) -> np.ndarray:
     """Each row's place in its segment of ``counts`` (:func:`segment_sums`; read-only)."""
-    out = np.concatenate([np.arange(c) for c in counts]) if counts else np.zeros(0, np.intp)
+    c = np.asarray(counts, dtype=np.intp)
+    out = np.arange(int(c.sum()), dtype=np.intp) - np.repeat(np.cumsum(c) - c, c)
     out.flags.writeable = False
     return out
 
