@@ -254,7 +254,7 @@ def pair_tests(cfg: TrustConfig, L: np.ndarray, mass: np.ndarray,
     ``targets`` (``(n,)``, :func:`target_mass`; None: no missed-detection bound),
     unmatched target weights ``unmatched`` (``(n, n)``, :func:`unmatched_weights`; None:
     not used) and the log overlaps of the inputs centred (``(n, n)``,
-    :func:`shape_overlaps`; None: the divergence as it is). Stacks too (``(..., n, n)``,
+    :func:`centred`; None: the divergence as it is). Stacks too (``(..., n, n)``,
     ``(..., n)``: several peers' at once, elementwise, so the same numbers)."""
     cs = _cs_matrix(L)
     if shape is not None:  # the location part (TrustConfig.location_only)
@@ -395,7 +395,7 @@ def divergence_tests(cfg: TrustConfig, l_jj, l_jr, l_rr, n_j, n_r, t_j=None, t_r
     """``T = W + kappa (N_j - N_R)^2 / (N_R + 1)``, capped at :attr:`TrustConfig.cap`, from
     the log overlaps of a density ``D_j`` and a reference ``R`` and their masses. ``W``,
     where the targets are: ``D_CS(D_j, R)`` less ``shape`` (the divergence of the two
-    centred, :func:`shape_overlaps`; at least 0), :attr:`TrustConfig.empty_penalty` when one
+    centred, :func:`centred`; at least 0), :attr:`TrustConfig.empty_penalty` when one
     side is empty, at least ``unmatched_cost`` times the ``unmatched`` target weight on
     both sides (:func:`unmatched_weights`) and at most :func:`miss_cost` of their target
     masses ``t_j``, ``t_r`` (each when given). Elementwise over arrays (broadcast): every
@@ -784,20 +784,13 @@ def _others(n: int) -> np.ndarray:
     return out
 
 
-def shape_overlaps(cfg: TrustConfig, mixes: list[GaussianMixture]) -> np.ndarray | None:
-    """With :attr:`TrustConfig.location_only`: the log overlaps (``(n, n)``,
-    :func:`tracking.divergence.log_overlaps`) of ``mixes`` with every component moved to
-    the origin, whose divergence is the part of ``D_CS`` that does not depend on where the
-    components are (for two Gaussians exactly ``1/2 log(|P_a + P_b| / (2^d |P_a P_b|^1/2))``,
-    so the rest is ``1/2`` the squared Mahalanobis distance of the means in ``P_a + P_b``);
-    None without it."""
-    if not cfg.location_only:
-        return None
-    return log_overlaps(centred(mixes))
-
-
 def centred(mixes: list[GaussianMixture]) -> list[GaussianMixture]:
-    """``mixes`` with every component moved to the origin (:func:`shape_overlaps`)."""
+    """``mixes`` with every component moved to the origin: with
+    :attr:`TrustConfig.location_only` their log overlaps are the ``shape`` of
+    :func:`pair_tests` and :func:`divergence_tests`, whose divergence is the part of
+    ``D_CS`` that does not depend on where the components are (for two Gaussians exactly
+    ``1/2 log(|P_a + P_b| / (2^d |P_a P_b|^1/2))``, so the rest is ``1/2`` the squared
+    Mahalanobis distance of the means in ``P_a + P_b``)."""
     return [GaussianMixture(D.weights, np.zeros_like(D.means), D.covs) for D in mixes]
 
 
