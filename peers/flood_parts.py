@@ -113,13 +113,17 @@ class ScanBound:
     high: tuple[float, float]
     max_returns: int
 
+    def __post_init__(self) -> None:
+        box = np.array([self.low, self.high], dtype=float)
+        box.flags.writeable = False
+        object.__setattr__(self, "_box", box)  # the bounds as one array, made once
+
     def refusal(self, z: np.ndarray) -> str | None:
         """None if ``z`` ``(m, 2)`` is plausible, else the reason: ``too_many_returns`` or
-        ``outside_field``."""
+        ``outside_field`` (a NaN fails both comparisons, so it is outside too)."""
         if len(z) > self.max_returns:
             return "too_many_returns"
-        if len(z) and (np.any(z < np.asarray(self.low)) or np.any(z > np.asarray(self.high))
-                       or not np.all(np.isfinite(z))):
+        if len(z) and not ((z >= self._box[0]) & (z <= self._box[1])).all():
             return "outside_field"
         return None
 

@@ -10,15 +10,16 @@ from collections import deque
 
 from sensornet.peers.runtime import PeerRuntime
 from sensornet.protocol.codec import decode
-from sensornet.protocol.messages import Estimate
+from sensornet.protocol.messages import Estimate, Forward
 
 
 class SharedDecode:
     """One decode of an estimate handed to several co-hosted neighbours: the hand-off gives
-    each the same bytes object, so the last :data:`SIZE` estimates' messages are kept by
-    payload (a bytes object caches its hash) with their arrays read-only (a receiver that
-    wrote into one would raise, not change its neighbours'). Anything else (a large payload
-    too), and every refusal, is decoded per receiver as before."""
+    each the same bytes object, so the last :data:`SIZE` estimates' messages (mixtures, and
+    flooding's forwarded scan sets) are kept by payload (a bytes object caches its hash)
+    with their arrays read-only (a receiver that wrote into one would raise, not change its
+    neighbours'). Anything else (a large payload too), and every refusal, is decoded per
+    receiver as before."""
 
     SIZE = 256
     LARGEST = 65536
@@ -35,8 +36,12 @@ class SharedDecode:
             self.hits += 1
             return msg
         msg = decode(payload, limits)
-        if type(msg) is Estimate and len(payload) <= self.LARGEST:
-            for a in (msg.mixture.weights, msg.mixture.means, msg.mixture.covs):
+        kind = type(msg)
+        if (kind is Estimate or kind is Forward) and len(payload) <= self.LARGEST:
+            # a Forward (flooding) reaches each co-hosted neighbour of its sender, as an
+            # estimate does: its scans were decoded once per receiver (issue 38)
+            for a in ((msg.mixture.weights, msg.mixture.means, msg.mixture.covs)
+                      if kind is Estimate else msg.scans.scans.values()):
                 a.flags.writeable = False
             if len(self._memo) >= self.SIZE:
                 del self._memo[next(iter(self._memo))]  # the oldest

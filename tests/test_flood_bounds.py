@@ -33,6 +33,9 @@ def test_bound_refuses_floods_and_points_outside_the_field():
     assert b.refusal(np.zeros((4, 2))) == "too_many_returns"
     assert b.refusal(np.array([[0.0, 0.0], [100.5, 0.0]])) == "outside_field"
     assert b.refusal(np.array([[0.0, -101.0]])) == "outside_field"
+    assert b.refusal(np.array([[100.0, -100.0]])) is None  # the box's edge is inside
+    for bad in (math.nan, math.inf, -math.inf):  # not a point of any field
+        assert b.refusal(np.array([[0.0, 0.0], [bad, 0.0]])) == "outside_field"
 
 
 def _inp(k, rnd, own, neighbours):

@@ -108,3 +108,28 @@ def test_without_scikit_learn_the_ftc_baseline_says_what_to_install(monkeypatch,
     assert main(["experiment", "seed004", "--runs", "1", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "sensornet[baselines]" in err[0], err
+
+
+def test_a_host_decodes_a_forward_once_for_its_receivers_read_only():
+    """peers.host_parts.SharedDecode: a forwarded scan set handed to several co-hosted
+    neighbours (the same bytes object) is decoded once, equal to a decode of its own, and no
+    receiver can write into the scans the others hold; a refusal is decoded each time."""
+    from sensornet.peers.host_parts import SharedDecode
+    from sensornet.protocol.codec import DEFAULT_LIMITS, Rejected, decode, encode
+    from sensornet.protocol.messages import Forward, ScanSet
+
+    scans = ScanSet({"s1": np.array([[1.0, 2.0], [3.0, 4.0]]), "s2": np.zeros((0, 2)),
+                     "s3": np.array([[-5.0, 6.5]])})
+    payload = encode(Forward("s2", 7, scans, round=1, seq=3, send_time=1.5))
+    shared, limits = SharedDecode(), DEFAULT_LIMITS
+    a, b = shared(payload, limits), shared(payload, limits)
+    assert a is b and shared.hits == 1
+    own = decode(payload, limits)
+    assert (a.sender, a.k, a.round, a.seq) == (own.sender, own.k, own.round, own.seq)
+    assert a.scans.scans.keys() == own.scans.scans.keys()
+    assert all(np.array_equal(a.scans.scans[o], own.scans.scans[o]) for o in own.scans.scans)
+    with pytest.raises(ValueError):
+        a.scans.scans["s1"][0, 0] = 0.0
+    with pytest.raises(Rejected):
+        shared(payload[:-2], limits)
+    assert shared.hits == 1
