@@ -28,11 +28,13 @@ from sensornet.peers.trust_checks import (
     offset_cusums,
     own_tests_many,
     position_block,
+    segment_sums,
     target_mass,
     unmatched_sums,
     withheld_increments,
 )
-from sensornet.tracking.divergence import log_overlaps_many
+from sensornet.tracking.divergence import BLOCK_PAIRS, log_overlaps_many
+from sensornet.tracking.gaussian import inv_det_spd, log_gaussian
 from sensornet.tracking.mixture import GaussianMixture
 
 
@@ -94,8 +96,115 @@ def run_together(steps: list[Generator]) -> list:
 
 
 def _overlaps(args: list[tuple]) -> list[np.ndarray]:
-    """``"overlaps"``: :func:`tracking.divergence.log_overlaps_many`."""
-    return log_overlaps_many([a[0] for a in args])
+    """``"overlaps"``: :func:`shared_log_overlaps`."""
+    return shared_log_overlaps([a[0] for a in args])
+
+
+def shared_log_overlaps(groups: list[list[GaussianMixture]]) -> list[np.ndarray]:
+    """:func:`tracking.divergence.log_overlaps` of each group of mixtures, the same numbers
+    to the bit, each two mixture objects' block computed once however many groups hold
+    both (a neighbour's estimate is one object at every co-hosted receiver:
+    :class:`peers.host_parts.SharedDecode`; on a ring of degree 4 about a third of a
+    host's blocks are shared). ``L[I, J]`` is the log-sum-exp of its block's pair terms
+    (:func:`tracking.divergence.pair_terms`: per pair, either order the same to the bit),
+    summed over ``I``'s components first, then ``J``'s, as there (``np.add.reduceat``
+    segments); so a block's value depends on its two mixtures alone. Groups with a mixture
+    of another dimension than the first non-empty one's, or beyond one block of pairs
+    (:data:`tracking.divergence.BLOCK_PAIRS`), by :func:`log_overlaps_many`."""
+    out: list = [None] * len(groups)
+    seen: dict[int, tuple[int, int]] = {}  # id -> (its index, or -1 empty, -2 other dim; size)
+    uniq: list[GaussianMixture] = []
+    by_n: dict[int, tuple[list[int], list[list[int]]]] = {}
+    rest, dim = [], None
+    for g, mixes in enumerate(groups):
+        us, C = [], 0
+        for D in mixes:
+            v = seen.get(id(D))  # the objects are held by the requests meanwhile
+            if v is None:
+                c = len(D.weights)
+                if c and dim is None:
+                    dim = D.means.shape[1]  # the first non-empty mixture's
+                if not c:
+                    v = (-1, 0)
+                elif D.means.shape[1] != dim:
+                    v = (-2, c)
+                else:
+                    v = (len(uniq), c)
+                    uniq.append(D)
+                seen[id(D)] = v
+            us.append(v[0])
+            C += v[1]
+        if C == 0 or C * C > BLOCK_PAIRS or -2 in us:
+            rest.append(g)
+            continue
+        gs, rows = by_n.setdefault(len(us), ([], []))
+        gs.append(g)
+        rows.append(us)
+    if rest:
+        for g, L in zip(rest, log_overlaps_many([groups[g] for g in rest]), strict=True):
+            out[g] = L
+    if not by_n:
+        return out
+    U = len(uniq)
+    size = np.array([len(D.weights) for D in uniq])
+    first = np.r_[0, np.cumsum(size)[:-1]]  # each mixture's first component
+    stacks = []
+    for n, (gs, rows) in by_n.items():
+        u = np.array(rows, dtype=np.intp).reshape(len(gs), n)
+        ok = (u[:, :, None] >= 0) & (u[:, None, :] >= 0)  # (g, n, n)
+        stacks.append((gs, ok, (u[:, :, None] * U + u[:, None, :])[ok]))
+    blocks, where = np.unique(np.concatenate([k for _, _, k in stacks]), return_inverse=True)
+    value = _block_values(uniq, size, first, blocks // U, blocks % U)  # (I inner, J outer)
+    lo = 0
+    for gs, ok, k in stacks:
+        L = np.full(ok.shape, -np.inf)  # empty mixtures: -inf rows and columns
+        L[ok] = value[where[lo:lo + len(k)]]
+        lo += len(k)
+        for g, Lg in zip(gs, L, strict=True):
+            out[g] = Lg
+    return out
+
+
+def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarray,
+                  I: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``log int D_I D_J`` of each ordered pair ``(I[o], J[o])`` of mixtures of ``uniq``
+    (``size``: their components, ``first``: where each one's start in the stacked
+    components): the pair terms of each unordered pair once, then per block the
+    log-sum-exp as :func:`tracking.divergence.log_overlaps` makes it (per component of
+    ``J``, the sum over ``I``'s; then over ``J``'s)."""
+    lw = np.concatenate([D.weights for D in uniq])
+    m = np.concatenate([D.means for D in uniq])
+    P = np.concatenate([D.covs for D in uniq])
+    with np.errstate(divide="ignore"):
+        lw = np.log(lw)
+    x, y = np.minimum(I, J), np.maximum(I, J)  # each unordered pair's terms once
+    U = len(uniq)
+    pairs, back = np.unique(x * U + y, return_inverse=True)
+    px, py = pairs // U, pairs % U
+    n = size[px] * size[py]  # its terms, x's component major
+    base = np.r_[0, np.cumsum(n)[:-1]]
+    t = np.arange(int(n.sum())) - np.repeat(base, n)
+    a = first[px].repeat(n) + t // size[py].repeat(n)
+    b = first[py].repeat(n) + t % size[py].repeat(n)
+    inv, det = inv_det_spd((P[a] + P[b])[None])
+    g = lw[a] + lw[b] + log_gaussian((m[a] - m[b])[None], inv, det)[0]
+    # each ordered block's terms, a row per component r of J, its columns I's components c
+    mI, mJ = size[I], size[J]
+    nb = mI * mJ
+    ob = np.r_[0, np.cumsum(nb)[:-1]]
+    t = np.arange(int(nb.sum())) - np.repeat(ob, nb)
+    r, c = t // mI.repeat(nb), t % mI.repeat(nb)
+    swap = (I > J).repeat(nb)  # stored as (J's component, I's): row-major already
+    idx = base[back].repeat(nb) + np.where(swap, r * mI.repeat(nb) + c,
+                                           c * mJ.repeat(nb) + r)
+    terms = g[idx]
+    top = np.maximum.reduceat(terms, ob)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    rows = np.r_[0, np.cumsum(mJ)[:-1]]  # each block's first row
+    starts = ob.repeat(mJ) + (np.arange(int(mJ.sum())) - rows.repeat(mJ)) * mI.repeat(mJ)
+    S = np.add.reduceat(np.add.reduceat(np.exp(terms - safe.repeat(nb)), starts), rows)
+    with np.errstate(divide="ignore"):
+        return np.where(np.isfinite(top), safe + np.log(S), -np.inf)
 
 
 def _by_key(args: list[tuple], key: Callable, many: Callable) -> list:
@@ -206,59 +315,78 @@ def _offsets(args: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
 
 def _offsets_group(group: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
     pos, min_weight, gate, chi2 = group[0][2:]
-    out = [[(np.zeros((2, 2)), np.zeros(2)) for _ in mixes] for _, mixes, *_ in group]
-    # each mixture's components of at least min_weight, their positions and position
-    # blocks, once per mixture object: a neighbour's estimate is one object at all its
-    # co-hosted receivers (peers.host_parts.SharedDecode), so it is in several requests
-    picked: dict[int, tuple] = {}
+    # each mixture object once (a neighbour's estimate is one object at all its co-hosted
+    # receivers, peers.host_parts.SharedDecode), its components of at least min_weight
+    # picked from all of them stacked: the same positions and position blocks
+    index: dict[int, int] = {}
+    uniq: list[GaussianMixture] = []
 
-    def pick(M: GaussianMixture) -> tuple:
-        v = picked.get(id(M))  # the objects are held by the requests meanwhile
-        if v is None:
-            a = M.weights >= min_weight
-            c = int(np.count_nonzero(a))
-            v = picked[id(M)] = (c, M.means[a][:, pos], position_block(M.covs[a], pos)
-                                 if c else None)
-        return v
+    def uid(M: GaussianMixture) -> int:
+        u = index.get(id(M))  # the objects are held by the requests meanwhile
+        if u is None:
+            u = index[id(M)] = len(uniq)
+            uniq.append(M)
+        return u
 
-    todo = []  # (request, its reference's target components, [(mixture, its pick)])
-    for r, (ref, mixes, *_) in enumerate(group):
-        if len(ref) == 0:
-            continue
-        b = pick(ref)  # its target components (own's: one object per request)
-        if not b[0]:
-            continue
-        sel = [(i, pick(M)) for i, M in enumerate(mixes) if len(M)]
-        sel = [(i, v) for i, v in sel if v[0]]
-        if sel:
-            todo.append((r, b, sel))
-    if not todo:
-        return out
-    sizes = [b[0] for _, b, _ in todo]
-    mb = np.full((len(todo), max(sizes), 2), np.inf)  # (g, m, 2): padded at infinity
-    Pb = np.zeros((len(todo), max(sizes), 2, 2))
-    at = np.repeat(np.arange(len(todo)), sizes), _ranks(tuple(sizes))
-    mb[at] = np.concatenate([b[1] for _, b, _ in todo])
-    Pb[at] = np.concatenate([b[2] for _, b, _ in todo])
-    rows = np.repeat(np.arange(len(todo)), [sum(v[0] for _, v in sel) for _, _, sel in todo])
-    ma = np.concatenate([v[1] for _, _, sel in todo for _, v in sel])  # (n, 2)
-    Pa = np.concatenate([v[2] for _, _, sel in todo for _, v in sel])  # (n, 2, 2)
+    refs = np.array([uid(ref) for ref, *_ in group], dtype=np.intp)
+    lists = [[uid(M) for M in mixes] for _, mixes, *_ in group]
+    out: list[list] = [[None] * len(x) for x in lists]
+    infos = _offsets_found(uniq, refs, lists, pos, min_weight, gate, chi2)
+    for r, i, info in infos:
+        out[r][i] = info
+    return [[(np.zeros((2, 2)), np.zeros(2)) if v is None else v for v in row] for row in out]
+
+
+def _offsets_found(uniq: list[GaussianMixture], refs: np.ndarray, lists: list[list[int]],
+                   pos: list[int], min_weight: float, gate: float, chi2: float | None
+                   ) -> list[tuple[int, int, tuple[np.ndarray, np.ndarray]]]:
+    """:func:`_offsets_group`'s ``(request, mixture, (I, y))`` of the mixtures whose
+    components matched their request's reference (``refs[r]``, ``lists[r]``: indices into
+    ``uniq``): every component's nearest reference component (the references padded at
+    their end with components at infinity, never nearest), gate and inverse at once, the
+    sums per mixture as :func:`peers.trust_checks.offset_information_many` makes them."""
+    sizes = np.array([len(M.weights) for M in uniq], dtype=np.intp)
+    if not sizes.any():
+        return []
+    full = [M for M in uniq if len(M.weights)]
+    keep = np.concatenate([M.weights for M in full]) >= min_weight
+    cnt = np.bincount(np.repeat(np.arange(len(uniq)), sizes)[keep], minlength=len(uniq))
+    kidx = np.flatnonzero(keep)  # the target components, mixture by mixture
+    kst = np.cumsum(cnt) - cnt  # each mixture's first in kidx
+    X = np.concatenate([M.means for M in full])[kidx][:, pos]
+    P = position_block(np.concatenate([M.covs for M in full])[kidx], pos)
+    lens = [len(x) for x in lists]
+    fu = np.array([u for x in lists for u in x], dtype=np.intp)
+    fr = np.repeat(np.arange(len(lists)), lens)
+    fi = np.arange(len(fu)) - np.repeat(np.cumsum(lens) - lens, lens)
+    c = cnt[fu]
+    valid = (c > 0) & (cnt[refs][fr] > 0)  # a reference with targets, a mixture with some
+    if not valid.any():
+        return []
+    su, sr, si, sc = fu[valid], fr[valid], fi[valid], c[valid]
+    req, t = np.unique(sr, return_inverse=True)  # the requests with work, in order
+    tb = cnt[refs[req]]
+    mb = np.full((len(req), int(tb.max()), 2), np.inf)  # (g, m, 2): padded at infinity
+    Pb = np.zeros((len(req), int(tb.max()), 2, 2))
+    at = np.repeat(np.arange(len(req)), tb), _ranks(tuple(tb.tolist()))
+    src = np.repeat(kst[refs[req]], tb) + at[1]
+    mb[at] = X[src]
+    Pb[at] = P[src]
+    counts = sc.tolist()
+    comp = np.repeat(kst[su], sc) + _ranks(tuple(counts))
+    rows = np.repeat(t, sc)
+    ma, Pa = X[comp], P[comp]  # (n, 2), (n, 2, 2)
     diff = ma[:, None, :] - mb[rows]  # (n, top, 2)
     nearest = np.argmin(np.linalg.norm(diff, axis=2), axis=1)
     d = diff[np.arange(len(ma)), nearest]
     Pn = Pb[rows, nearest]
     ok = gated(d, Pa, Pn, gate, chi2)
     if not ok.any():
-        return out
-    counts = [v[0] for _, _, sel in todo for _, v in sel]
+        return []
     hits = np.add.reduceat(ok, np.cumsum([0, *counts[:-1]])).tolist()  # gated per mixture
-    infos = iter(information_sums(Pa[ok] + Pn[ok], d[ok], hits))  # every mixture's at once
-    for r, _, sel in todo:
-        for i, _ in sel:
-            info = next(infos)
-            if info is not None:
-                out[r][i] = info
-    return out
+    infos = information_sums(Pa[ok] + Pn[ok], d[ok], hits)  # every mixture's at once
+    return [(r, i, info) for r, i, info in zip(sr.tolist(), si.tolist(), infos, strict=True)
+            if info is not None]
 
 
 def _tests(args: list[tuple]) -> list[list[float]]:
@@ -286,19 +414,55 @@ def _own_tests(args: list[tuple]) -> list[list[float]]:
 def _masses(args: list[tuple]) -> list[tuple[list[float], list[float]]]:
     """``"masses"``: each mixture's mass and target mass, computed once per mixture object
     however many peers' requests hold it (a neighbour's estimate is one object at every
-    co-hosted receiver: :class:`peers.host_parts.SharedDecode`), by the same functions."""
-    seen: dict[tuple[int, float], tuple[float, float]] = {}
-    out = []
+    co-hosted receiver: :class:`peers.host_parts.SharedDecode`), the sums of the mixtures
+    of 1 to :data:`SHORT` components in two stacked sums (:func:`_mass_values`), the others
+    by the same functions one by one."""
+    seen: dict[tuple[int, float], int] = {}
+    uniq: list[tuple[GaussianMixture, float]] = []
+    rows = []
     for mixes, min_weight in args:
-        masses, targets = [], []
+        row = []
         for D in mixes:
             key = (id(D), min_weight)  # the objects are held by the requests meanwhile
-            v = seen.get(key)
-            if v is None:
-                v = seen[key] = (D.mass, target_mass(D, min_weight))
-            masses.append(v[0])
-            targets.append(v[1])
-        out.append((masses, targets))
+            u = seen.get(key)
+            if u is None:
+                u = seen[key] = len(uniq)
+                uniq.append((D, min_weight))
+            row.append(u)
+        rows.append(row)
+    values = _mass_values(uniq)
+    return [([values[u][0] for u in row], [values[u][1] for u in row]) for row in rows]
+
+
+SHORT = 7
+"""Mixtures of at most this many components have their masses summed stacked
+(:func:`_mass_values`): NumPy sums fewer than 8 numbers one after the other (``a.sum()``
+is then ``((a_0 + a_1) + a_2) + ...``), which :func:`peers.trust_checks.segment_sums`
+does (padded with ``-0.0``, which added changes no number); 8 or more it sums pairwise."""
+
+
+def _mass_values(uniq: list[tuple[GaussianMixture, float]]) -> list[tuple[float, float]]:
+    """Each ``(mixture, min_weight)``'s ``(mass, target_mass)`` (``D.mass``,
+    :func:`peers.trust_checks.target_mass`, to the bit): those of 1 to :data:`SHORT`
+    components together (the weights concatenated; the masses by segments, the target
+    masses by segments of the weights kept), the others one by one."""
+    out: list = [None] * len(uniq)
+    short = []
+    for u, (D, min_weight) in enumerate(uniq):
+        if 0 < len(D.weights) <= SHORT:
+            short.append(u)
+        else:
+            out[u] = (D.mass, target_mass(D, min_weight))
+    if not short:
+        return out
+    sizes = [len(uniq[u][0].weights) for u in short]
+    W = np.concatenate([uniq[u][0].weights for u in short])
+    keep = W >= np.repeat([uniq[u][1] for u in short], sizes)
+    kept = np.add.reduceat(keep, np.cumsum([0, *sizes[:-1]]), dtype=np.intp).tolist()
+    mass = segment_sums(W, sizes).tolist()
+    tops = segment_sums(W[keep], kept).tolist() if any(kept) else [0.0] * len(short)
+    for n, u in enumerate(short):  # an empty segment's sum is -0.0, target_mass's 0.0
+        out[u] = (mass[n], tops[n] if kept[n] else 0.0)
     return out
 
 
