@@ -75,6 +75,25 @@ def test_seed000_split_equals_one_process_to_the_bit(kind):
         two.peers["s1"].scorer.truth_fn(1)  # a closure: not copied back
 
 
+def test_each_worker_runs_one_blas_thread_the_parent_keeps_its_own():
+    """A forked worker limits its BLAS libraries to one thread each
+    (:func:`sim.run.twin_split.one_blas_thread`: two workers with a thread per core each
+    oversubscribe two cores); the parent's two stay two."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+
+    def blas() -> list[int]:
+        return [i["num_threads"] for i in threadpoolctl.threadpool_info()
+                if i["user_api"] == "blas"]
+
+    scn = load_scenario("seed000", overrides={"scenario.num_scans": 3})
+    with threadpoolctl.threadpool_limits(2, user_api="blas"):  # what a worker inherits
+        parent = blas()
+        res = run_twin(scn, 0, workers=2)
+        assert blas() == parent and parent
+        assert set(parent) == {2} or (os.cpu_count() or 1) < 2  # OpenBLAS caps at the cores
+    assert res.split["blas_threads"] == [[1] * len(parent)] * 2
+
+
 @pytest.mark.parametrize("kind", ["gmphd", "lmb"])
 def test_link_faults_split_equal_with_the_same_decisions(kind):
     scn = load_scenario("seed000", overrides={

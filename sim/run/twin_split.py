@@ -37,6 +37,11 @@ import types
 
 from sensornet.peers.batching import FusionBatch
 
+try:  # optional (scikit-learn's dependency): without it a worker keeps BLAS's threads
+    from threadpoolctl import threadpool_info, threadpool_limits
+except ImportError:
+    threadpool_info = threadpool_limits = None
+
 EXHAUSTIVE = 16
 """Up to this many peers the two-way split is searched over every balanced partition."""
 
@@ -98,11 +103,26 @@ def _dumps(obj) -> bytes:
     return buf.getvalue()
 
 
-def _results(clock) -> bytes:
+def _results(clock, blas: list[int] | None) -> bytes:
     r, f = clock.result, clock.faults
     return _dumps({"peers": clock.peers, "tracks": r.tracks, "stops": r.stops, "ages": r.ages,
                    "transport_drops": r.transport_drops, "ospa": r.ospa,
-                   "faults": (f.log, f._counts) if f is not None else None})
+                   "faults": (f.log, f._counts) if f is not None else None,
+                   "blas_threads": blas})
+
+
+def one_blas_thread() -> list[int] | None:
+    """Limit this process's BLAS libraries (NumPy's and SciPy's OpenBLAS) to one thread each;
+    their thread counts after, or None without threadpoolctl. Why: N workers each with a
+    thread per core oversubscribe the cores, and the twin's matrices are small (4x4 to 6x6):
+    the spare threads only spin (paris-8 traffic twin, 5 min, two workers, 3 runs each way
+    alternated: 0.89x the CPU with one thread (GM-PHD), 0.91x (LMB), the same tracks). A
+    forked worker has NumPy loaded already, so ``OPENBLAS_NUM_THREADS`` would come too late:
+    threadpoolctl sets it in the library."""
+    if threadpool_limits is None:
+        return None
+    threadpool_limits(1, user_api="blas")
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 
 
 def _worker(conn, others: list, clock, names: list[str], batch: bool) -> None:
@@ -112,12 +132,13 @@ def _worker(conn, others: list, clock, names: list[str], batch: bool) -> None:
     for c in others:
         c.close()
     try:
+        blas = one_blas_thread()
         clock.start(names, FusionBatch() if batch else None)
         while True:
             cmd = conn.recv()
             c0 = time.process_time()
             if cmd[0] == "end":
-                conn.send_bytes(b"R" + _results(clock))
+                conn.send_bytes(b"R" + _results(clock, blas))
                 return
             if cmd[0] == "wave":
                 clock.wave(cmd[1], cmd[2])
@@ -139,7 +160,8 @@ def play(clocks: list, groups: list[list[str]], names: list[str],
          batch: bool) -> tuple[list[dict], dict]:
     """Run each of ``clocks`` (a :class:`sim.run.twin._WorkerClock` per group of peers, its
     queue filled) in a forked worker, instant by instant (module docstring); returns each
-    worker's results (:func:`_results`, unpickled) and the counts of :func:`_play`. Raises
+    worker's results (:func:`_results`, unpickled) and the counts of :func:`_play` with each
+    worker's BLAS threads (:func:`one_blas_thread`, each library's; None: not limited). Raises
     RuntimeError (one line) if a worker fails or dies; the workers are always reaped."""
     owner = {n: w for w, g in enumerate(groups) for n in g}
     ctx = multiprocessing.get_context("fork")
@@ -167,7 +189,9 @@ def play(clocks: list, groups: list[list[str]], names: list[str],
             if p.is_alive():
                 p.kill()
                 p.join()
-    return [_Unpickler(io.BytesIO(b)).load() for b in parts], {"groups": groups, **stats}
+    results = [_Unpickler(io.BytesIO(b)).load() for b in parts]
+    return results, {"groups": groups, **stats,
+                     "blas_threads": [r["blas_threads"] for r in results]}
 
 
 def _receive(conn, proc, group: list[str], raw: bool = False):
