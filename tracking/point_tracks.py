@@ -112,17 +112,20 @@ class PointTracker:
         self.hits[ti] += 1
         # unassigned points: new tracks, (origin, k, i) in order of x then y, so peers that
         # extract nearly the same points number their births alike whatever the points' order
-        new = np.setdiff1d(np.arange(len(P)), pi)
-        new = new[np.lexsort((P[new, 1], P[new, 0]))]
-        born = np.column_stack([np.full(len(new), self.origin), np.full(len(new), k),
-                                np.arange(len(new))]).astype(np.int64)
-        self.ids = np.concatenate([self.ids, born])
-        self.pos = np.concatenate([self.pos, P[new]])
-        self.vel = np.concatenate([self.vel, np.zeros((len(new), 2))])
-        self.seen = np.concatenate([self.seen, np.full(len(new), k, dtype=np.int64)])
-        self.hits = np.concatenate([self.hits, np.ones(len(new), dtype=np.int64)])
-        self.window = np.concatenate([self.window, np.ones(len(new), dtype=np.int64)])
-        self.confirmed = np.concatenate([self.confirmed, np.zeros(len(new), dtype=bool)])
+        free = np.ones(len(P), dtype=bool)
+        free[pi] = False
+        new = np.flatnonzero(free)  # ascending, as setdiff1d gave: one mask, no sort
+        if len(new):  # most scans bear nothing: their arrays stay as they are
+            new = new[np.lexsort((P[new, 1], P[new, 0]))]
+            born = np.empty((len(new), 3), dtype=np.int64)
+            born[:, 0], born[:, 1], born[:, 2] = self.origin, k, np.arange(len(new))
+            self.ids = np.concatenate([self.ids, born])
+            self.pos = np.concatenate([self.pos, P[new]])
+            self.vel = np.concatenate([self.vel, np.zeros((len(new), 2))])
+            self.seen = np.concatenate([self.seen, np.full(len(new), k, dtype=np.int64)])
+            self.hits = np.concatenate([self.hits, np.ones(len(new), dtype=np.int64)])
+            self.window = np.concatenate([self.window, np.ones(len(new), dtype=np.int64)])
+            self.confirmed = np.concatenate([self.confirmed, np.zeros(len(new), dtype=bool)])
         self.confirmed |= _popcount(self.window) >= cfg.m
         self.k = k
         row = np.empty(len(P), dtype=np.int64)  # each point's track row
@@ -134,6 +137,8 @@ class PointTracker:
         """Delete the tracks whose last hit is more than ``max_missed`` scans before the
         scan before ``k`` (they would have missed ``k - 1 - seen`` scans by now)."""
         keep = (k - 1 - self.seen) <= self.cfg.max_missed
+        if keep.all():  # the usual scan: nothing to delete, no copies
+            return
         self.deleted += int((~keep).sum())
         for name in ("ids", "pos", "vel", "seen", "hits", "window", "confirmed"):
             setattr(self, name, getattr(self, name)[keep])
