@@ -68,13 +68,23 @@ def test_one_input_or_no_rotation_changes_nothing():
 
 
 def test_the_option_reaches_the_peers_from_the_scenario():
-    """Off by default; on, every peer gets every radar's revisit from the shared scenario
-    (rotation period / scan period), its own and its neighbours'."""
-    scn = load_scenario("paris-8", overrides={"network.filter": "lmb"})
-    assert scn.fusion.existence_revisit is False
+    """Auto (-1, the default): on for LMB peers, off for GM-PHD peers; 0 turns it off for LMB
+    peers and 1 on for GM-PHD peers. On, every peer gets every radar's revisit from the shared
+    scenario (rotation period / scan period), its own and its neighbours'; without rotating
+    radars it holds none."""
+    scn = load_scenario("paris-8", overrides={"network.filter": "gmphd"})
+    assert scn.fusion.existence_revisit == -1
     assert consensus_options(scn, "cdg").existence_revisit == ()
     scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
-                                              "fusion.existence_revisit": True})
+                                              "fusion.existence_revisit": 0})
+    assert consensus_options(scn, "cdg").existence_revisit == ()
+    scn = load_scenario("seed000", overrides={"network.filter": "lmb"})
+    assert consensus_options(scn, scn.sensor_names[0]).existence_revisit == ()
+    spans = {"cdg": 2.35, "orly": 2.4, "bourget": 2.375, "pontoise": 2.36, "north": 5.0,
+             "south": 6.0, "east": 5.5, "west": 5.25}
+    scn = load_scenario("paris-8", overrides={"network.filter": "gmphd",
+                                              "fusion.existence_revisit": 1})
+    assert dict(consensus_options(scn, "cdg").existence_revisit) == pytest.approx(spans)
+    scn = load_scenario("paris-8", overrides={"network.filter": "lmb"})
     got = dict(consensus_options(scn, "west").existence_revisit)
-    assert got == pytest.approx({"cdg": 2.35, "orly": 2.4, "bourget": 2.375, "pontoise": 2.36,
-                                 "north": 5.0, "south": 6.0, "east": 5.5, "west": 5.25})
+    assert got == pytest.approx(spans)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from sensornet.peers.labelling import FRESH_BASE, label_fused, next_labels
 from sensornet.peers.labelling_batch import label_fused_many
 from sensornet.tracking.label_matching import RELEASE, adopt_labels
@@ -173,16 +174,41 @@ def test_batched_equals_one_by_one_with_the_fallback_and_keep():
     assert changed > 10 and kept > 10  # the random cases do fall back and keep
 
 
-def test_the_option_reaches_the_peers_from_the_scenario():
+def test_the_options_default_per_peer_kind():
+    """Auto (-1, the default) resolves per kind where the peers are built
+    (``sim.run.peers.consensus_options``): on for LMB peers, off for GM-PHD peers (whose
+    switches rose on real traffic); an explicit 0 turns each off for LMB peers, 1 on for
+    GM-PHD peers, each key on its own."""
     from sensornet.sim.run.peers import consensus_options
     from sensornet.sim.scenario import load_scenario
 
-    scn = load_scenario("paris-8", overrides={"network.filter": "lmb"})
-    assert consensus_options(scn, "cdg").label_fallback is False
-    scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
-                                              "fusion.label_fallback": True})
-    assert consensus_options(scn, "cdg").label_fallback is True
-    assert consensus_options(scn, "cdg").label_keep is False
-    scn = load_scenario("paris-8", overrides={"network.filter": "lmb",
-                                              "fusion.label_keep": True})
-    assert consensus_options(scn, "cdg").label_keep is True
+    def got(**sets):
+        scn = load_scenario("paris-8", overrides={f"network.{k}" if k == "filter"
+                                                  else f"fusion.{k}": v
+                                                  for k, v in sets.items()})
+        o = consensus_options(scn, "cdg")
+        return o.label_fallback, o.label_keep
+
+    assert load_scenario("paris-8").fusion.label_fallback == -1
+    assert load_scenario("paris-8").fusion.label_keep == -1
+    assert got(filter="lmb") == (True, True)
+    assert got(filter="gmphd") == (False, False)
+    assert got(filter="lmb", label_fallback=0) == (False, True)
+    assert got(filter="lmb", label_keep=0) == (True, False)
+    assert got(filter="gmphd", label_fallback=1) == (True, False)
+    assert got(filter="gmphd", label_keep=1) == (False, True)
+    assert got(filter="lmb", label_fallback=1, label_keep=1) == (True, True)
+
+
+def test_true_false_and_out_of_range_are_one_line_errors():
+    """The keys are integers now (-1 auto, 0 off, 1 on): ``--set fusion.label_keep=true`` (the
+    old boolean form) and a value outside [-1, 1] fail at load in one line naming the key."""
+    from sensornet.sim.scenario import ScenarioError, load_scenario
+    from sensornet.sim.scenario.overrides import parse_overrides
+
+    for item in ("fusion.label_keep=true", "fusion.label_fallback=false",
+                 "fusion.existence_revisit=true", "fusion.label_keep=2"):
+        key = item.partition("=")[0]
+        with pytest.raises(ScenarioError, match=key.replace(".", r"\.")) as err:
+            load_scenario("paris-8", overrides=parse_overrides([item]))
+        assert "\n" not in str(err.value)

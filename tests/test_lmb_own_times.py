@@ -215,9 +215,12 @@ TODAY = {"none": {"cdg": (369.8607512170714, 369.8607512170714),
 
 @pytest.mark.parametrize("rule", ["none", "hybrid"])
 def test_option_off_gives_todays_twin_to_1e12(rule):
+    # issue 34's three fused-label keys off: on by default for LMB peers since (after ab8228d)
     scn = load_scenario("paris", overrides={"network.filter": "lmb", "scenario.num_scans": 40,
                                             "fusion.rule": rule, "lmb.time_slice": 0.0,
-                                            "lmb.fused_extraction": "filter"})
+                                            "lmb.fused_extraction": "filter",
+                                            "fusion.existence_revisit": 0,
+                                            "fusion.label_fallback": 0, "fusion.label_keep": 0})
     assert scn.lmb.time_slice == 0 and plot_ages(scn, 0) is None
     twin = run_twin(scn, 0)
     for name, (local, fused) in TODAY[rule].items():

@@ -66,8 +66,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         label_support=net.label_support and net.filter == "lmb",
         label_reach=(reach_by_name(names, A, label_origins(scn, names), i)
                      if net.label_support and net.filter == "lmb" else ()),
-        label_fallback=scn.fusion.label_fallback,
-        label_keep=scn.fusion.label_keep,
+        label_fallback=lmb_auto(scn, scn.fusion.label_fallback),
+        label_keep=lmb_auto(scn, scn.fusion.label_keep),
     )
     return replace(opts, **changes)
 
@@ -144,11 +144,22 @@ def stamp_twins(scn: Scenario) -> int:
     return 1 if scn.network.filter == "lmb" else 0
 
 
+def lmb_auto(scn: Scenario, value: int) -> bool:
+    """A tri-state key of issue 34's fused labels and extraction (``fusion.label_fallback``,
+    ``label_keep``, ``existence_revisit``) resolved: 1 on, 0 off, -1 (auto) on for LMB peers
+    only: on real traffic they cut the fused LMB's OSPA(2) and switches, the GM-PHD's
+    switches rose 0.00 -> 0.72 per aircraft-hour (docs/real-traffic.md, "Young fused tracks
+    keep their labels"); the synthetic LMB cells' training runs were unchanged but for noise
+    (docs/labelled-tracking.md, "Issue 34's label keys on by default for LMB peers")."""
+    return value == 1 or (value < 0 and scn.network.filter == "lmb")
+
+
 def existence_revisit(scn: Scenario) -> tuple[tuple[str, float], ...]:
     """Each rotating sensor's revisit in scans (``rotation_period / scan_period``) when
-    ``fusion.existence_revisit`` is on, else ``()``: from the shared scenario, so no member's
-    message sets how much its absence counts (tracking.support.revisit_weights)."""
-    if not scn.fusion.existence_revisit:
+    ``fusion.existence_revisit`` is on (:func:`lmb_auto`), else ``()``: from the shared
+    scenario, so no member's message sets how much its absence counts
+    (tracking.support.revisit_weights); without rotating radars it is ``()`` either way."""
+    if not lmb_auto(scn, scn.fusion.existence_revisit):
         return ()
     return tuple((s.name, float(s.rotation_period) / scn.scan_period) for s in scn.sensors
                  if s.rotation_period is not None)
