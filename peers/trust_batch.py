@@ -13,7 +13,6 @@ trust states are those of its own :meth:`Trust.weigh`.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Generator
 
 import numpy as np
@@ -258,32 +257,49 @@ def _unmatched(args: list[tuple]) -> list[np.ndarray]:
 
 def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     pos, min_weight, gate, chi2 = group[0][1:]
-    lens = [[len(D) for D in mixes] for mixes, *_ in group]
-    full = [D for (mixes, *_), z in zip(group, lens, strict=True)
-            for D, c in zip(mixes, z, strict=True) if c]
-    out = [np.zeros((len(z), len(z))) for z in lens]
-    if not full:
+    index: dict[int, int] = {}  # each mixture object once (shared by co-hosted receivers)
+    uniq: list[GaussianMixture] = []
+    lists = []
+    for mixes, *_ in group:
+        row = []
+        for D in mixes:
+            u = index.get(id(D))  # the objects are held by the requests meanwhile
+            if u is None:
+                u = index[id(D)] = len(uniq)
+                uniq.append(D)
+            row.append(u)
+        lists.append(row)
+    lens = [len(x) for x in lists]
+    out = [np.zeros((z, z)) for z in lens]
+    usize = np.array([len(D.weights) for D in uniq], dtype=np.intp)
+    fu = np.array([u for x in lists for u in x], dtype=np.intp)  # every (request, input)
+    sizes = usize[fu]
+    if not sizes.any():
         return out
-    sizes = [c for z in lens for c in z if c]
-    req = np.repeat([r for r, z in enumerate(lens) for c in z if c], sizes)  # per component
-    inp = np.repeat([i for z in lens for i, c in enumerate(z) if c], sizes)
-    keep = np.flatnonzero(np.concatenate([D.weights for D in full]) >= min_weight)
+    full = [D for D in uniq if len(D.weights)]
+    ufirst = np.cumsum(usize) - usize  # each object's first component
+    comp = np.repeat(ufirst[fu], sizes) + _ranks(tuple(sizes.tolist()))  # request-major
+    req = np.repeat(np.repeat(np.arange(len(group)), lens), sizes)  # per component
+    inp = np.repeat(np.arange(len(fu)) - np.repeat(np.cumsum(lens) - lens, lens), sizes)
+    W = np.concatenate([D.weights for D in full])[comp]
+    keep = np.flatnonzero(W >= min_weight)
     if not len(keep):
         return out
-    w = np.concatenate([D.weights for D in full])[keep]
-    X = np.concatenate([D.means for D in full])[keep][:, pos]
-    P = (position_block(np.concatenate([D.covs for D in full])[keep], pos)
+    w = W[keep]
+    ck = comp[keep]
+    X = np.concatenate([D.means for D in full])[ck][:, pos]
+    P = (position_block(np.concatenate([D.covs for D in full])[ck], pos)
          if chi2 is not None else np.zeros((len(keep), 2, 2)))
-    counts = np.bincount(req[keep], minlength=len(group)).tolist()
+    counts = np.bincount(req[keep], minlength=len(group))
     owner = inp[keep]
-    ends = np.cumsum(counts).tolist()
-    live = [(r, C, e) for r, (C, e) in enumerate(zip(counts, ends, strict=True)) if C]
-    a = np.concatenate([_square(C)[0] + (e - C) for _, C, e in live])
-    b = np.concatenate([_square(C)[1] + (e - C) for _, C, e in live])
+    C = counts[counts > 0]  # each request with targets: its (C, C) pairs, row-major
+    t = np.arange(int((C * C).sum())) - np.repeat(np.cumsum(C * C) - C * C, C * C)
+    first = np.repeat(np.cumsum(C) - C, C * C)
+    a, b = first + t // np.repeat(C, C * C), first + t % np.repeat(C, C * C)
     dP = np.linalg.det(P) if chi2 is not None else None  # per component, not per pair
     close = gated(X[a] - X[b], P[a], P[b], gate, chi2, *((dP[a], dP[b]) if chi2 is not None
                                                           else ()))  # near(), pair by pair
-    n = max(len(z) for z in lens)
+    n = max(lens)
     hit = np.zeros((len(keep), n), bool)  # (C, n): an input's target within the gate
     hit[a[close], owner[b[close]]] = True
     rows = req[keep] * n + owner  # each component's (request, input), in order
@@ -291,17 +307,7 @@ def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     U = np.zeros((len(group) * n, n))
     U[rows[seg]] = unmatched_sums(w, hit, np.diff(np.r_[seg, len(rows)]).tolist())
     U = U.reshape(len(group), n, n)
-    return [U[r, :len(z), :len(z)] for r, z in enumerate(lens)]
-
-
-@functools.lru_cache(maxsize=256)
-def _square(C: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column of every entry of a ``(C, C)`` matrix, row-major (made once per ``C``,
-    read-only)."""
-    out = np.repeat(np.arange(C), C), np.tile(np.arange(C), C)
-    for x in out:
-        x.flags.writeable = False
-    return out
+    return [U[r, :z, :z] for r, z in enumerate(lens)]
 
 
 def _offsets(args: list[tuple]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
@@ -389,6 +395,28 @@ def _offsets_found(uniq: list[GaussianMixture], refs: np.ndarray, lists: list[li
             if info is not None]
 
 
+_CONFIGS: dict = {}
+"""Each distinct :class:`TrustConfig` value seen, to its number (:func:`_config_key`)."""
+_CONFIG_OF: dict[int, tuple] = {}
+"""``id(cfg)`` to ``(cfg, its number)``: a frozen dataclass hashes and compares all its
+fields each time (some 50), which a host's requests did per request."""
+
+
+def _config_key(cfg) -> int:
+    """A number equal for equal configs (grouping the requests that stack together), looked
+    up by the object's identity after its first time (the object kept, so its id is not
+    reused while it is here; a host has one config object a peer)."""
+    v = _CONFIG_OF.get(id(cfg))
+    if v is not None and v[0] is cfg:
+        return v[1]
+    if len(_CONFIG_OF) > 4096:  # many short-lived configs (tests): start again
+        _CONFIG_OF.clear()
+        _CONFIGS.clear()
+    n = _CONFIGS.setdefault(cfg, len(_CONFIGS))
+    _CONFIG_OF[id(cfg)] = (cfg, n)
+    return n
+
+
 def _tests(args: list[tuple]) -> list[list[float]]:
     """``"tests"``: :func:`peers.trust_checks.neighbour_tests` of every request (the same
     config and number of inputs) at once: :func:`peers.trust_checks.neighbour_tests_many`
@@ -397,7 +425,8 @@ def _tests(args: list[tuple]) -> list[list[float]]:
         def stack(i: int) -> np.ndarray | None:
             return None if group[0][i] is None else np.stack([a[i] for a in group])
         return neighbour_tests_many(group[0][0], *(stack(i) for i in range(1, 7))).tolist()
-    return _by_key(args, lambda a: (a[0], len(a[6]), a[2] is None, a[5] is None), many)
+    return _by_key(args, lambda a: (_config_key(a[0]), len(a[6]), a[2] is None, a[5] is None),
+                   many)
 
 
 def _own_tests(args: list[tuple]) -> list[list[float]]:
@@ -408,7 +437,7 @@ def _own_tests(args: list[tuple]) -> list[list[float]]:
         return own_tests_many(group[0][0], np.stack([a[1] for a in group]), L0,
                               np.array([a[3] for a in group], float),
                               np.array([a[4] for a in group], float)).tolist()
-    return _by_key(args, lambda a: (a[0], len(a[3]), a[2] is None), many)
+    return _by_key(args, lambda a: (_config_key(a[0]), len(a[3]), a[2] is None), many)
 
 
 def _masses(args: list[tuple]) -> list[tuple[list[float], list[float]]]:

@@ -86,10 +86,11 @@ def test_shared_log_overlaps_are_each_groups_log_overlaps_to_the_bit():
     assert checked > 1000
 
 
-@pytest.mark.parametrize("op", ["offsets", "masses", "overlaps"])
+@pytest.mark.parametrize("op", ["offsets", "masses", "overlaps", "unmatched"])
 def test_stacked_requests_over_shared_mixtures_are_each_ones_own(op):
     """The offsets (each request's reference its own object, the neighbours shared), the
-    masses and the overlaps requests of a host, against each request's own computation."""
+    masses, overlaps and unmatched-weights requests of a host, against each request's own
+    computation."""
     rng = np.random.default_rng(len(op) + 20)
     with np.errstate(all="ignore"):
         for _ in range(200):
@@ -99,6 +100,9 @@ def test_stacked_requests_over_shared_mixtures_are_each_ones_own(op):
                 args = [(g[0], g[1:], [0, 2], 0.5, 60.0, chi2) for g in groups]
             elif op == "masses":
                 args = [(g, float(rng.choice([0.3, 0.5]))) for g in groups]
+            elif op == "unmatched":
+                chi2 = [None, 13.8][int(rng.integers(0, 2))]
+                args = [(g, [0, 2], 0.5, 50.0, chi2) for g in groups]
             else:
                 args = [(g,) for g in groups]
             if len(args) < 2:
