@@ -44,8 +44,9 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
       sees every message as coming from the router's certificate, so the router is where the
       per-member rules are enforced (at its ingress, by the client's certificate name);
     - an observer (``observers``, read-only): subscribes to the scans, truth, control,
-      estimates, tracks and telemetry of every member; puts, declares and queries nothing, so
-      every member refuses anything it sends but its subscriptions.
+      estimates, tracks and telemetry of every member, and to liveliness ``alive/*`` (a run's
+      view waits for the peers); puts, declares and queries nothing else, so every member
+      refuses anything it sends but its subscriptions.
     """
     k = Keys(network)
     rules = [*_world_rules(k, world), *_shared_rules(k)]
@@ -67,10 +68,13 @@ def acl_rules(network: str, peers: Sequence[str], world: str = WORLD,
         rules.append(_rule("observe", ["declare_subscriber"],
                            [k.scan("*"), k.scans("*"), k.truth(), k.ctl(), k.estimate("*"),
                             k.tracks("*"), k.telemetry("*")]))
+        # who is up: a run's view waits for the peers' tokens before the truth (sensornet.view)
+        rules.append(_rule("observe-live", ["declare_liveliness_subscriber", "liveliness_query"],
+                           [k.alive("*")]))
         for o in observers:
             check_name(o, "observer name")
             subjects.append({"id": f"m-{o}", "cert_common_names": [o]})
-        policies.append({"rules": ["observe", _REPLIES, _SEND],
+        policies.append({"rules": ["observe", "observe-live", _REPLIES, _SEND],
                          "subjects": [f"m-{o}" for o in observers]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}

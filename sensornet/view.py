@@ -70,6 +70,13 @@ map goes every flush). At 50 peers ~1,500 of the view's ~2,000 entities are seri
 (``bench_view.py --series-every 1,4``: 22.2 against 24.0 ms a scan, 12 s of the twin's
 traffic in real time, load 12): the flush period, which doubles while flushes are long,
 already gathers more rows per call. Kept at every flush: the plots as fresh as the map."""
+PEERS_WAIT_S = 5.0
+"""Seconds a run's view (``sensornet view --until-end --scenario``: it knows the peers) waits
+at most for every peer's liveliness token before it subscribes to the truth
+(:meth:`LiveView.open`). A peer's token here says the peer is linked to the view, so it has
+the view's telemetry subscription and reports from its first scan; the run's world holds its
+first scan until the truth has a subscriber (``--view-wait``). Bounded: a peer that does not
+come (a view attached to a network without it) costs the view this much, once."""
 QUEUE_MAX = 20_000
 """Messages waiting for the view; more are dropped on arrival (counted)."""
 BEHIND = 2_000
@@ -83,7 +90,8 @@ class LiveView:
 
     def __init__(self, network: str, state_factory, rr, rec, connect: Sequence[str] = (),
                  config: str | None = None, say: Callable[[str], None] | None = None,
-                 estimates: bool = False, security=None, discard: bool = False) -> None:
+                 estimates: bool = False, security=None, discard: bool = False,
+                 peers: Sequence[str] = ()) -> None:
         """``estimates``: hear the peers' estimates too (the local marks of peers that send
         no telemetry); by default not: the local estimate rides in each peer's telemetry,
         and every peer would send the view a copy of each of its heaviest messages (+5 %
@@ -92,8 +100,11 @@ class LiveView:
         network (mutual TLS; the network's access control lets it subscribe, not put).
         ``discard`` (a diagnostic): subscribe as usual but drop every message on arrival but
         the world's control (its end), counted in :attr:`discarded`: what a subscriber's mere
-        presence costs the peers, without the view's drawing."""
+        presence costs the peers, without the view's drawing. ``peers``: the run's peers, whose
+        liveliness tokens :meth:`open` waits for (:data:`PEERS_WAIT_S`) before it subscribes
+        to the truth; none: no wait."""
         self.network = network
+        self.peers = list(peers)
         self.discard = discard
         self.discarded = 0
         self.estimates = estimates
@@ -144,9 +155,42 @@ class LiveView:
                                f"{exc}") from None
         k = Keys(self.network)  # each channel by name: what an observer may subscribe to
         # no tracks/<peer>: each peer's tracks come with its reports (peers.observer)
-        exprs = [k.scan(), k.scans(), k.truth(), k.ctl(), k.telemetry(), k.telemetries(),
+        exprs = [k.scan(), k.scans(), k.ctl(), k.telemetry(), k.telemetries(),
                  *([k.estimate()] if self.estimates else [])]
         self._subs = [self.session.declare_subscriber(e, self._on_sample) for e in exprs]
+        if self.peers:
+            self._await_peers(k)
+        # the truth last: a run's world holds its first scan until the truth has a subscriber
+        # (--view-wait), by when every peer has the view's telemetry subscription
+        self._subs.append(self.session.declare_subscriber(k.truth(), self._on_sample))
+
+    def _await_peers(self, k: Keys) -> None:
+        """Until every peer of :attr:`peers` has its liveliness token here (linked to the
+        view: it heard the view's subscriptions), a stop, or :data:`PEERS_WAIT_S` (then one
+        line naming those missing: their first reports may not be drawn)."""
+        want, seen, cond = set(self.peers), set(), threading.Condition()
+
+        def on_live(sample) -> None:  # Zenoh's thread
+            if sample.kind == zenoh.SampleKind.PUT:
+                with cond:
+                    seen.add(Keys.last(str(sample.key_expr)))
+                    cond.notify_all()
+
+        sub = self.session.liveliness().declare_subscriber(k.alive("*"), on_live,
+                                                           history=True)
+        end = time.monotonic() + PEERS_WAIT_S
+        try:
+            with cond:
+                while not want <= seen and not self.stop.is_set():
+                    left = end - time.monotonic()
+                    if left <= 0:
+                        self.say(f"view: peers {', '.join(sorted(want - seen))} not linked "
+                                 f"within {PEERS_WAIT_S:g} s: their first reports may be "
+                                 "missed")
+                        break
+                    cond.wait(min(left, 0.2))  # a stop (signal) is seen within 0.2 s
+        finally:
+            sub.undeclare()
 
     def _on_sample(self, sample) -> None:
         if self.discard and not str(sample.key_expr).endswith("/ctl"):

@@ -42,8 +42,11 @@ def test_the_observer_may_subscribe_and_put_nothing():
     rules = {r["id"]: r for r in acl["rules"]}
     mine = _policy(acl, OBSERVER)
     ingress = [rules[r] for r in mine if "ingress" in rules[r]["flows"]]
-    # what others accept from it: its subscriptions (and replies to queries it never makes)
-    assert {m for r in ingress for m in r["messages"]} == {"declare_subscriber", "reply"}
+    # what others accept from it: its subscriptions, to liveliness too (a run's view waits
+    # for the peers' tokens), and replies to queries
+    assert {m for r in ingress for m in r["messages"]} == {
+        "declare_subscriber", "declare_liveliness_subscriber", "liveliness_query", "reply"}
+    assert rules["observe-live"]["key_exprs"] == [Keys(NETWORK).alive("*")]
     k = Keys(NETWORK)
     assert set(rules["observe"]["key_exprs"]) == {
         k.scan("*"), k.scans("*"), k.truth(), k.ctl(), k.estimate("*"), k.tracks("*"),

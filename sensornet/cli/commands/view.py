@@ -61,9 +61,11 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.from_mcap:  # offline: the peers' recordings instead of the network
         sink, state = _open_sink(args, out, viewer)
         return _replay_offline(args, sink, state, out or viewer)
+    scn = _scenario(args) if args.until_end else None  # a run's view: it knows the peers
     view = LiveView(args.network, None, None, None, args.connect or [], args.config,
                     estimates=args.estimates, security=security,
-                    discard=getattr(args, "discard", False))
+                    discard=getattr(args, "discard", False),
+                    peers=scn[0].sensor_names if scn is not None else ())
     cpu = _watch(args, view, out, viewer)
     _print_stats(view, cpu)
     return 0
