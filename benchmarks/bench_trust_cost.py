@@ -20,10 +20,17 @@ found nothing); ``--every-round`` adds a host-batched run with it off.
     python benchmarks/bench_trust_cost.py --every-round   # also TrustConfig.test_once off
     python benchmarks/bench_trust_cost.py --filter gmphd  # GM-PHD peers (bench_fifty's kind)
     python benchmarks/bench_trust_cost.py --filter gmphd --ops   # the host-batched tests split
+    python benchmarks/bench_trust_cost.py --filter gmphd --against 5d4d6eb --repeats 4
 
 ``--ops``: the host-batched runs' trust tests split by what a host computes stacked (each
 request kind of :data:`peers.trust_batch.TOGETHER`, thread CPU per peer-scan and calls) and
 the rest (the peers' generators and the lockstep between them: per-peer Python).
+
+``--against REV``: instead, per repeat trust off, then the host-batched run with REV's stacked
+requests (``peers/trust_batch.py``'s :data:`TOGETHER` at REV, the rest of the tree as now) and
+with today's, in alternating order in this one process; per run the CPU and the trust tests'
+own CPU per peer-scan, whether the two published the same fused states and trust summaries,
+then the medians and the ratios today / REV.
 """
 
 from __future__ import annotations
@@ -31,9 +38,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +59,7 @@ from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 
-from benchmarks.bench_network import scenario_text
+from benchmarks.bench_network import load_average, scenario_text
 
 
 def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None,
@@ -145,6 +154,55 @@ def same_tracks(a: dict, b: dict) -> bool:
         for q in a)
 
 
+def together_at(rev: str) -> dict:
+    """:data:`peers.trust_batch.TOGETHER` of ``peers/trust_batch.py`` at git revision ``rev``
+    (imported under another name; what it imports, as now)."""
+    root = Path(__file__).resolve().parents[1]
+    text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:peers/trust_batch.py"],
+                          capture_output=True, text=True, check=True).stdout
+    module = types.ModuleType("_trust_batch_at_rev")
+    sys.modules[module.__name__] = module
+    exec(compile(text, f"{rev}:peers/trust_batch.py", "exec"), module.__dict__)
+    return dict(module.TOGETHER)
+
+
+def against(path: Path, rev: str, n: int, scans: int, repeats: int, lie: str | None,
+            kind: str) -> None:
+    """``--against REV``: trust off, REV's stacked requests and today's, alternated."""
+    now, old = dict(trust_batch.TOGETHER), together_at(rev)
+    ms: dict[str, list[float]] = {"off": [], rev: [], "now": []}
+    tests: dict[str, list[float]] = {rev: [], "now": []}
+    print("| run | rep | CPU ms/peer-scan | of which trust tests |\n|---|---:|---:|---:|",
+          flush=True)
+    try:
+        for rep in range(repeats):
+            v, _, _ = one_run(path, False, n, scans, lie, kind=kind)
+            ms["off"].append(v)
+            print(f"| off | {rep + 1} | {v:.3f} | |", flush=True)
+            got = {}
+            for side in ((rev, "now") if rep % 2 == 0 else ("now", rev)):
+                trust_batch.TOGETHER.clear()
+                trust_batch.TOGETHER.update(old if side == rev else now)
+                v, tracks, summ = one_run(path, True, n, scans, lie, kind=kind)
+                got[side] = (tracks, summ)
+                ms[side].append(v)
+                tests[side].append(TESTS[-1])
+                print(f"| on, {side} | {rep + 1} | {v:.3f} | {TESTS[-1]:.3f} |", flush=True)
+            print(f"{rev} vs now: fused states identical: "
+                  f"{same_tracks(got[rev][0], got['now'][0])}, trust summaries identical: "
+                  f"{got[rev][1] == got['now'][1]}", flush=True)
+    finally:
+        trust_batch.TOGETHER.clear()
+        trust_batch.TOGETHER.update(now)
+    med = {k: statistics.median(v) for k, v in ms.items()}
+    t = {k: statistics.median(v) for k, v in tests.items()}
+    print(f"\nmedians: off {med['off']:.3f}, on {rev} {med[rev]:.3f}, on now {med['now']:.3f} "
+          f"ms/peer-scan (now / {rev} {med['now'] / med[rev]:.3f}); the defence (on - off): "
+          f"{rev} {med[rev] - med['off']:.3f}, now {med['now'] - med['off']:.3f}; trust tests "
+          f"themselves: {rev} {t[rev]:.3f}, now {t['now']:.3f} ms/peer-scan (now / {rev} "
+          f"{t['now'] / t[rev]:.3f}); load average {load_average()} at the end")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--peers", type=int, default=50)
@@ -159,11 +217,26 @@ def main() -> None:
                    help="split the host-batched trust tests by stacked request kind")
     p.add_argument("--lie", default=None,
                    help="a lying peer (fusion.lie, e.g. p02:biased): the defence's decisions")
+    p.add_argument("--against", metavar="REV", default=None,
+                   help="only trust off, REV's host-batched stacked requests and today's, "
+                        "alternated in this process")
     args = p.parse_args()
     n, scans, kind = args.peers, args.scans, args.filter
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
+        if args.against:
+            try:
+                subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]),
+                                "rev-parse", "--verify", f"{args.against}^{{commit}}"],
+                               capture_output=True, check=True)
+            except subprocess.CalledProcessError:
+                p.error(f"--against {args.against}: not a revision of this repository")
+            print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans: trust "
+                  f"off, {args.against}'s stacked trust requests and today's; load average "
+                  f"{load_average()}")
+            against(path, args.against, n, scans, args.repeats, args.lie, kind)
+            return
         ms: dict[str, list[float]] = {"off": [], "on (per peer)": [], "on (host-batched)": []}
         print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans")
         print("| run | rep | CPU ms/peer-scan | of which trust tests |\n|---|---:|---:|---:|",
