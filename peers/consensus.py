@@ -47,6 +47,7 @@ from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMix
 from sensornet.tracking.mature_existence import MatureExistence
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
+from sensornet.tracking.own_scan import own_scan_ratio, own_scan_weights
 from sensornet.tracking.support import (
     SupportRule,
     input_mass,
@@ -502,12 +503,18 @@ class Consensus(BatchedRounds):
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
             keep = (np.isin(label_keys(labels), self._reported) if self.o.existence_keep
                     else None)
+            mass = input_mass(fused.means, mixes) if masses is None else masses[0]
+            w0 = fused.weights
             fused = GaussianMixture.trusted(  # for extraction only
-                pooled_weights(fused, labels, k, input_mass(fused.means, mixes)
-                               if masses is None else masses[0],
-                               self.o.existence_prior, self.o.existence_young,
-                               skip=copies, keep=keep),
+                pooled_weights(fused, labels, k, mass, self.o.existence_prior,
+                               self.o.existence_young, skip=copies, keep=keep),
                 fused.means, fused.covs)
+            if self.o.existence_own and self._scan is not None and self._scan.k == k:
+                ratio = own_scan_ratio(fused.means, fused.covs, self._scan.z,
+                                       *self.o.existence_own)
+                fused = GaussianMixture.trusted(  # the own scan, where its tracks hold none
+                    own_scan_weights(fused.weights, w0, labels, k, mass[:, 0],
+                                     self.o.existence_young, ratio), fused.means, fused.covs)
         if self.o.existence_revisit and mixes is not None and len(fused):
             spans = dict(self.o.existence_revisit)
             names = [self.o.name, *sorted(inputs.neighbours)]

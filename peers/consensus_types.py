@@ -69,6 +69,10 @@ class ConsensusOptions:
     """With :attr:`existence_mature`: an input holding no mass of a mature track counts in its
     pool at this existence, the inputs' publication threshold (tracking.mature_existence
     ``absent``); 0: such inputs are left out."""
+    existence_own: tuple[float, float, float] = ()
+    """Extraction of fused tracks, with :attr:`existence_prior`: ``(Pd, clutter intensity per
+    m^2, plot noise in m)`` of this peer's own x-y sensor; a young row the pool raised and its
+    own input holds none of weighs the own scan too (tracking.own_scan); empty: off."""
     existence_keep: bool = False
     """With :attr:`existence_prior`: a fused track reported the scan before is pooled at any
     age and keeps its target against a new label beside it (tracking.support.pooled_weights

@@ -21,7 +21,7 @@ from sensornet.sim.kinds import kind_of
 from sensornet.sim.run.lies import LyingCore, make_lie
 from sensornet.sim.scenario import Scenario, ScenarioError
 from sensornet.sim.world import generate_truth, truth_rng
-from sensornet.sim.world.build import adjacency, sweep_fraction
+from sensornet.sim.world.build import adjacency, clutter_intensity, sweep_fraction
 from sensornet.tracking.support import MAJORITY
 
 
@@ -57,6 +57,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         existence_mature=existence_mature(scn),
         existence_absent=existence_absent(scn),
         existence_keep=scn.fusion.existence_keep,
+        existence_own=existence_own(scn, name),
         existence_revisit=existence_revisit(scn),
         # a stamp from 2 hops or more can reach a peer after its neighbours' (label_twins)
         stamp_twins=stamp_twins(scn) if settle_scans(A, i) > 1 else 0,
@@ -119,6 +120,20 @@ def existence_mature(scn: Scenario) -> float:
     scenarios and GM-PHD peers are unchanged)."""
     on = scn.fusion.existence_mature
     return scn.survival_probability if on == 1 or (on < 0 and existence_prior(scn) > 0) else 0.0
+
+
+def existence_own(scn: Scenario, name: str) -> tuple[float, float, float] | tuple[()]:
+    """``(Pd, kappa, sigma)`` of peer ``name``'s own sensor for the own-scan term of young
+    fused tracks (``fusion.existence_own``, :mod:`tracking.own_scan`): LMB peers that pool
+    young tracks, with an x-y ``linear`` sensor scanning the whole region every scan; else
+    ``()``, off."""
+    spec = scn.sensor(name)
+    if (not scn.fusion.existence_own or scn.network.filter != "lmb"
+            or existence_prior(scn) <= 0 or spec.kind != "linear"
+            or spec.rotation_period is not None):
+        return ()
+    return (float(spec.detection_probability), float(clutter_intensity(scn, spec)),
+            float(spec.plot_sigma or spec.sigma_r))
 
 
 def existence_absent(scn: Scenario) -> float:

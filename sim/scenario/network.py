@@ -145,6 +145,17 @@ class FusionSpec:
                                      "(docs/real-traffic.md, \"The switches traced\"); 1: "
                                      "on, 0: off, -1 (auto): on for LMB peers, off for the "
                                      "others.", check=Bound(-1, 1))
+    existence_own: int = option(0, doc="Extraction of fused tracks (LMB peers with "
+                                       "`existence_prior` on and an x-y `linear` sensor "
+                                       "without rotation): a young track the pool raised "
+                                       "and the peer's own tracks hold none of also weighs "
+                                       "the peer's own scan, `1 - Pd + Pd sum_z N(z; Hm, "
+                                       "HPH' + R) / kappa` on its existence odds "
+                                       "(`tracking.own_scan`), so two neighbours' clutter "
+                                       "tracks at one place meet the own sensor's miss, as "
+                                       "in the centralised update; 1: on, 0: off. Issue 33 "
+                                       "(docs/labelled-tracking.md, \"Young fused tracks "
+                                       "and the peer's own scan\").", check=Bound(0, 1))
     existence_keep: bool = option(False, doc="With `existence_prior`: a fused track reported "
                                              "the scan before is pooled at any age, and a "
                                              "new label beside it cannot take its target "
