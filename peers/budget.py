@@ -159,8 +159,11 @@ class EstimateBudget:
         labels = getattr(msg, "labels", None)
         if labels is None:
             return replace(msg, mixture=mix)
-        return replace(msg, mixture=mix, labels=None if rows is None or len(labels) != len(
-            msg.mixture) else labels[rows])
+        if rows is None or len(labels) != len(msg.mixture):
+            return replace(msg, mixture=mix, labels=None, label_masks=None)
+        masks = getattr(msg, "label_masks", None)
+        return replace(msg, mixture=mix, labels=labels[rows],
+                       label_masks=None if masks is None else masks[rows])
 
     def counts(self) -> dict:
         """Per sender: estimates reduced, components removed, the largest estimate seen."""

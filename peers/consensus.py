@@ -187,7 +187,10 @@ class Consensus(BatchedRounds):
             return []
         labels = getattr(est, "labels", None)
         if labels is not None and self.label_support is not None:  # the masks off the wire
-            labels, masks = decode(labels)  # a label older than any publication vouched for:
+            extra = getattr(est, "label_masks", None)  # words 1.. (more than 39 peers)
+            if extra is not None and len(extra) != len(labels):
+                extra = None  # rows cut or padded on the way: word 0 alone
+            labels, masks = decode(labels, extra)  # a label older than any publication vouched:
             labels, masks = self.label_support.checked(  # re-stamped to this scan
                 est.sender, labels, masks, est.k, est.round)
             self.label_support.heard(est.sender, labels, masks, est.k, est.round)
@@ -469,11 +472,15 @@ class Consensus(BatchedRounds):
             return Forward(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
         if isinstance(mix, np.ndarray):
             return Returns(self.o.name, k, mix, round=rnd, seq=self._next_seq(), send_time=now)
+        extra = None
         if labels is not None and self.label_support is not None:  # the masks on the wire
-            labels = self.label_support.encode(labels)
+            if rnd > 0:  # a later round's fresh own labels: published by us at their scan
+                self.label_support.sent(labels, k)
+            labels, extra = self.label_support.encode(labels)
         return Estimate(self.o.name, k, mix, round=rnd, seq=self._next_seq(),
                         send_time=now, pruning=2 if rnd == 0 else 1, kind=kind,
-                        labels=labels if self.labelled else None)
+                        labels=labels if self.labelled else None,
+                        label_masks=extra if self.labelled else None)
 
     def _tracks(self, k: int, fused: GaussianMixture, now: float,
                 labels: np.ndarray | None = None, inputs: FusionInput | None = None,

@@ -11,11 +11,15 @@ stamped the label at its scan, a bit mask per label (a peer's bit: its origin) O
 the neighbours report, so it only grows and every peer ends with the same masks (OR is
 idempotent and commutative; a label's mask travels with the label, one hop a scan).
 
-On the wire the mask rides in bits :data:`SUPPORT_SHIFT` and up of a shared label's origin
-column (a shared origin is 0; own origins are peer indices, far below ``2^24``), so Estimate
-protocol 2 is unchanged; :meth:`LabelSupport.encode` and :func:`decode` are the two ends, at
-``peers.consensus.Consensus``. Peers whose origin shares a bit modulo :data:`SUPPORT_BITS`
-count once (more than 39 peers: a lower bound of the holders).
+A mask is a bit per peer (origin ``o``: bit ``o - 1``, any number of peers), held as words of
+:data:`SUPPORT_BITS` bits, ``(n, W)`` int64 (:func:`as_words`; a Python int at the API's edge,
+:func:`peer_bit`, :func:`mask_ints`). On the wire word 0 rides in bits :data:`SUPPORT_SHIFT` and
+up of a shared label's origin column (a shared origin is 0; own origins are peer indices, far
+below ``2^24``), so up to 39 peers Estimate protocol 2 is unchanged, byte for byte; words 1 and
+up (peers 40 and beyond) travel in the Estimate's ``label_masks`` (protocol 3).
+:meth:`LabelSupport.encode` and :func:`decode` are the two ends, at ``peers.consensus.Consensus``.
+(Until 5 Dec the mask was one 39-bit word, peers sharing a bit modulo 39: above 39 peers a far
+stamper's bit could alias a near peer's and its honest label fail the birth check.)
 
 Masks are checked where they arrive (issue 33, hostile input; docs/security.md, "Label
 masks"): a member that lies could set every bit and win every same-scan tie. A receiver takes
@@ -54,7 +58,9 @@ from sensornet.tracking.label_keys import (
 SUPPORT_SHIFT = 24
 """First bit of the origin column that carries the holder mask on the wire."""
 SUPPORT_BITS = 39
-"""Bits of the mask (``SUPPORT_SHIFT`` .. 62: the column stays a non-negative int64)."""
+"""Bits of a mask word: word 0 fills the origin column's ``SUPPORT_SHIFT`` .. 62 (the column
+stays a non-negative int64); every word has as many, so word ``w`` holds peers ``39 w + 1 ..``."""
+WORD = (1 << SUPPORT_BITS) - 1
 ORIGIN_MASK = (1 << SUPPORT_SHIFT) - 1
 FIND_PAIRS = 4096
 """Up to this many (label, stored label) pairs a lookup compares them all at once
@@ -82,22 +88,79 @@ def _early(lab: np.ndarray, k: int) -> np.ndarray:
 
 
 def peer_bit(origin: int) -> int:
-    """The mask bit of the peer with label ``origin`` (own origins start at 1 with shared
-    births; bit ``(origin - 1) mod SUPPORT_BITS``)."""
-    return 1 << ((max(int(origin), 1) - 1) % SUPPORT_BITS)
+    """The mask of the peer with label ``origin`` as a Python int (own origins start at 1 with
+    shared births; bit ``origin - 1``, exact for any number of peers)."""
+    return 1 << (max(int(origin), 1) - 1)
+
+
+def words_for(bits: int) -> int:
+    """Mask words that hold ``bits`` bits (at least one)."""
+    return max(-(-int(bits) // SUPPORT_BITS), 1)
+
+
+def as_words(masks, width: int | None = None) -> np.ndarray:
+    """Masks as words: a Python int -> ``(W,)``; ``(n,)`` int64 (each a mask of bits 0..62,
+    as before words) -> ``(n, W)``; ``(n, W)`` words as they are. ``width``: pad with zero
+    words or cut to it."""
+    if isinstance(masks, int | np.integer):
+        x = int(masks)
+        if x < 0:
+            raise ValueError(f"a holder mask is negative: {x}")
+        w = [(x >> (SUPPORT_BITS * i)) & WORD for i in range(words_for(x.bit_length()))]
+        out = np.array(w, dtype=np.int64)
+    else:
+        out = np.asarray(masks, dtype=np.int64)
+        if out.ndim == 0:
+            return as_words(int(out), width)
+        if out.ndim == 1:  # one int64 a row: at most two words
+            high = out >> SUPPORT_BITS
+            out = (np.stack([out & WORD, high], axis=1) if high.any()
+                   else out.reshape(-1, 1) & WORD)
+    return out if width is None else _fit(out, width)
+
+
+def _fit(m: np.ndarray, width: int) -> np.ndarray:
+    """Words ``(..., W)`` padded with zero words or cut to ``width``."""
+    w = m.shape[-1]
+    if w == width:
+        return m
+    if w > width:
+        return m[..., :width]
+    pad = np.zeros((*m.shape[:-1], width - w), dtype=np.int64)
+    return np.concatenate([m, pad], axis=-1)
+
+
+def mask_ints(words: np.ndarray) -> list:
+    """Words ``(W,)`` or ``(n, W)`` back as Python ints (one, or a list of ``n``)."""
+    w = np.asarray(words, dtype=np.int64)
+    if w.ndim == 1:
+        return sum(int(x) << (SUPPORT_BITS * i) for i, x in enumerate(w.tolist()))
+    return [mask_ints(r) for r in w]
+
+
+def origin_words(origins: np.ndarray, width: int) -> np.ndarray:
+    """``(n, width)`` words of each origin's bit (:func:`peer_bit`; none if beyond ``width``
+    words)."""
+    o = np.maximum(np.asarray(origins, dtype=np.int64), 1) - 1
+    out = np.zeros((len(o), width), dtype=np.int64)
+    word = o // SUPPORT_BITS
+    ok = word < width
+    out[np.flatnonzero(ok), word[ok]] = np.left_shift(1, o[ok] % SUPPORT_BITS)
+    return out
 
 
 def reach_masks(adjacency: np.ndarray, origins: Sequence[int], i: int) -> dict[int, np.ndarray]:
     """What peer ``i`` takes from each neighbour's masks: for neighbour ``j`` (a row of
-    ``adjacency (n, n)``, nonzero = link), ``(H + 1,)`` int64 masks (``H``: the graph's
-    diameter), entry ``h`` the bits ``j`` can vouch for on a label whose stamps had ``h`` hops to
-    reach it: ``j``'s own and those of the peers ``i`` does not hear itself (not ``i``, not its
-    neighbours) within ``h`` hops of ``j``. ``origins (n,)``: each peer's label origin."""
+    ``adjacency (n, n)``, nonzero = link), ``(H + 1, W)`` mask words (``H``: the graph's
+    diameter, ``W``: words of the largest origin), entry ``h`` the bits ``j`` can vouch for on
+    a label whose stamps had ``h`` hops to reach it: ``j``'s own and those of the peers ``i``
+    does not hear itself (not ``i``, not its neighbours) within ``h`` hops of ``j``.
+    ``origins (n,)``: each peer's label origin."""
     A = np.asarray(adjacency) != 0
     n = len(A)
     hops = shortest_path(csr_matrix(A), unweighted=True) if n else np.zeros((0, 0))
-    bits = np.left_shift(1, (np.maximum(np.asarray(origins, dtype=np.int64), 1) - 1)
-                         % SUPPORT_BITS).astype(np.int64)
+    o = np.asarray(origins, dtype=np.int64)
+    bits = origin_words(o, words_for(int(o.max()) if len(o) else 1))
     far = ~A[i]
     far[i] = False
     finite = hops[np.isfinite(hops)]
@@ -106,7 +169,8 @@ def reach_masks(adjacency: np.ndarray, origins: Sequence[int], i: int) -> dict[i
     for j in np.flatnonzero(A[i]):  # per neighbour: a cumulative OR of the far bits by hops
         d = np.where(far, hops[j], np.inf)
         order = np.argsort(d, kind="stable")
-        cum = np.bitwise_or.accumulate(np.r_[np.int64(0), bits[order]])
+        cum = np.bitwise_or.accumulate(
+            np.concatenate([np.zeros((1, bits.shape[1]), dtype=np.int64), bits[order]]), axis=0)
         out[int(j)] = cum[np.searchsorted(d[order], h, side="right")] | bits[j]
     return out
 
@@ -115,16 +179,20 @@ def reach_by_name(names: Sequence[str], adjacency: np.ndarray, origins: Sequence
                   i: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
     """:func:`reach_masks` keyed by the neighbours' names ``names (n,)``, as
     ``peers.consensus_types.ConsensusOptions.label_reach`` holds it."""
-    return tuple((names[j], tuple(int(m) for m in t))
+    return tuple((names[j], tuple(mask_ints(t)))
                  for j, t in reach_masks(adjacency, origins, i).items())
 
 
-def decode(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Labels received ``(n, 3)`` -> the labels without masks ``(n, 3)`` and each row's mask
-    ``(n,)`` int64 (0: none)."""
+def decode(labels: np.ndarray, extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Labels received ``(n, 3)`` (and the Estimate's ``label_masks``, words 1 and up, ``(n,
+    W - 1)``, or None) -> the labels without masks ``(n, 3)`` and each row's mask words
+    ``(n, W)`` int64 (0: none)."""
     lab = as_labels(labels)
-    masks = lab[:, 0] >> SUPPORT_SHIFT
-    if not masks.any():
+    masks = (lab[:, 0] >> SUPPORT_SHIFT)[:, None]
+    if extra is not None and np.size(extra):
+        masks = np.concatenate([masks, np.asarray(extra, dtype=np.int64).reshape(len(lab), -1)
+                                & WORD], axis=1)
+    if not masks[:, 0].any():
         return lab, masks
     clean = lab.copy()
     clean[:, 0] &= ORIGIN_MASK
@@ -142,29 +210,43 @@ def _columns(keys: np.ndarray) -> np.ndarray:
 
 
 def popcount(masks: np.ndarray) -> np.ndarray:
-    """Bits set in each mask ``(n,)`` int64 -> ``(n,)`` int64."""
-    return np.bitwise_count(np.asarray(masks, dtype=np.int64)).astype(np.int64)
+    """Bits set in each mask, ``(n, W)`` words (or ``(n,)`` int64) -> ``(n,)`` int64."""
+    m = np.asarray(masks, dtype=np.int64)
+    c = np.bitwise_count(m).astype(np.int64)
+    return c.sum(axis=1) if m.ndim == 2 else c
 
 
 class LabelSupport:
-    """A peer's holder masks of shared labels: sorted label keys, their masks and birth
-    scans. ``bit``: this peer's own bit (:func:`peer_bit`)."""
+    """A peer's holder masks of shared labels: sorted label keys, their mask words and birth
+    scans. ``bit``: this peer's own mask (:func:`peer_bit`, a Python int); ``words``: at least
+    this many mask words (more if ``bit`` or ``reach`` need them; unchecked, the store widens
+    to what it is given)."""
 
     def __init__(self, bit: int, reach: Mapping[str, Sequence[int]] | None = None,
-                 rounds: int = 1) -> None:
-        self.bit = int(bit)
+                 rounds: int = 1, words: int = 1) -> None:
+        tables = ({} if reach is None else
+                  {s: [as_words(int(x)) for x in t] for s, t in reach.items()})
+        width = max([int(words), len(as_words(int(bit)))]
+                    + [len(w) for t in tables.values() for w in t])
+        self.words = width
+        """Mask words of :attr:`bit`, the reach tables and the first-hand records."""
+        self.bit = as_words(int(bit), width)
         self.keys = label_keys(np.zeros((0, 3), dtype=np.int64))
-        self.masks = np.zeros(0, dtype=np.int64)
+        self.masks = np.zeros((0, width), dtype=np.int64)
         self.scans = np.zeros(0, dtype=np.int64)
         self.reach = (None if reach is None else
-                      {s: np.asarray(t, dtype=np.int64) for s, t in reach.items()})
-        """Per neighbour, the bits it can vouch for by hops (:func:`reach_masks`); None:
-        masks taken as received (unchecked)."""
+                      {s: np.array([_fit(w, width) for w in t], dtype=np.int64
+                                   ).reshape(-1, width) for s, t in tables.items()})
+        """Per neighbour, the bits it can vouch for by hops (:func:`reach_masks`), ``(H + 1,
+        W)`` words; None: masks taken as received (unchecked)."""
         self.rounds = max(int(rounds), 1)
-        self._near = np.bitwise_or.reduce([self.bit, *(int(t[0]) for t in self.reach.values())]
-                                          if self.reach else [self.bit]).astype(np.int64)
-        """This peer's bit and its neighbours' (their publications are heard first-hand)."""
         """Consensus rounds a scan: hops a mask can travel a scan."""
+        near = self.bit.copy()
+        for t in (self.reach or {}).values():
+            if len(t):
+                near |= t[0]
+        self._near = near
+        """This peer's bit and its neighbours' (their publications are heard first-hand)."""
         self.clipped = 0
         """Labels received whose mask named peers the sender cannot vouch for, bits not known
         here otherwise (those bits dropped)."""
@@ -172,30 +254,42 @@ class LabelSupport:
         """Estimates refused labels by :meth:`vouched` (a label older than any first-hand
         publication of it: the peer's ``rejected["label-scan"]``)."""
         self._early = label_keys(np.zeros((0, 3), dtype=np.int64))
-        self._early_bits = np.zeros(0, dtype=np.int64)
+        self._early_bits = np.zeros((0, width), dtype=np.int64)
         """Sorted keys of labels (any origin) seen published at or before their birth scan,
         and the bits of the peers seen so (first-hand: this peer's own and its neighbours')."""
 
-    def add(self, labels: np.ndarray, masks: np.ndarray | int) -> None:
-        """OR ``masks`` (``(n,)`` or one for all) into the masks of ``labels (n, 3)``; only
-        shared labels (origin :data:`SHARED_ORIGIN`) with a nonzero mask are kept."""
+    def add(self, labels: np.ndarray, masks) -> None:
+        """OR ``masks`` into the masks of ``labels (n, 3)``: one for all (a Python int, or
+        ``(1,)``) or one a row, ``(n,)`` int64 (bits 0..62) or words ``(n, W)``; only shared
+        labels (origin :data:`SHARED_ORIGIN`) with a nonzero mask are kept."""
         lab = as_labels(labels)
-        m = np.asarray(masks, dtype=np.int64)
-        m = (np.full(len(lab), m) if m.ndim == 0 else m if m.shape == (len(lab),)
-             else np.broadcast_to(m, (len(lab),)))
-        self._or_in(lab, m)
+        m = as_words(masks)
+        if m.ndim == 1:
+            m = m[None, :]
+        self._or_in(lab, np.broadcast_to(m, (len(lab), m.shape[1])))
+
+    def _widen(self, width: int) -> None:
+        """Store masks of at least ``width`` words (unchecked stores take any peer's bits)."""
+        if width > self.masks.shape[1]:
+            self.masks = _fit(self.masks, width)
 
     def _or_in(self, lab: np.ndarray, m: np.ndarray,
                found: tuple[np.ndarray, np.ndarray] | None = None) -> None:
-        """:meth:`add` of checked ``lab (n, 3)`` int64 and ``m (n,)`` int64 (``found``:
-        :meth:`_find` of ``lab`` in the store as it is, if the caller has it)."""
-        ok = (lab[:, 0] == SHARED_ORIGIN) & (m != 0)
+        """:meth:`add` of checked ``lab (n, 3)`` int64 and mask words ``m (n, W)`` int64
+        (``found``: :meth:`_find` of ``lab`` in the store as it is, if the caller has it)."""
+        nz = m != 0
+        ok = (lab[:, 0] == SHARED_ORIGIN) & (nz[:, 0] if m.shape[1] == 1 else nz.any(axis=1))
         if not ok.any():
             return
         if not ok.all():
             lab, m = lab[ok], m[ok]
             if found is not None:
                 found = found[0][ok], found[1][ok]
+        width = self.masks.shape[1]
+        if m.shape[1] != width:
+            used = np.flatnonzero(m.any(axis=0))
+            self._widen(int(used[-1]) + 1 if len(used) else 1)
+            m = _fit(m, self.masks.shape[1])
         if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
             hit, pos = self._find(lab) if found is None else found
             if hit.all():
@@ -210,51 +304,70 @@ class LabelSupport:
         first[1:] = ~keys_equal(keys[1:], keys[:-1])  # a structured != costs a Python call
         starts = np.flatnonzero(first)
         self.keys, self.scans = keys[starts], scans[starts]
-        self.masks = np.bitwise_or.reduceat(allm, starts)
+        self.masks = np.bitwise_or.reduceat(allm, starts, axis=0)
 
     def heard(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
               rnd: int = 0) -> int:
-        """OR in the masks ``(n,)`` of decoded ``labels (n, 3)`` from neighbour ``sender``'s
-        estimate of scan ``k``, round ``rnd``, each cut to what it can vouch for: its
-        :attr:`reach` entry at ``(k - scan + 1) * rounds + rnd`` hops (one hop a round since
-        the label's scan, a round of slack for a peer a scan ahead); nothing on own labels;
-        labels older than :data:`KEEP_SCANS` (no longer kept) pass. Returns the labels that
-        lost bits not known here, also added to :attr:`clipped`."""
+        """OR in the masks (``(n, W)`` words, or ``(n,)`` int64) of decoded ``labels (n, 3)``
+        from neighbour ``sender``'s estimate of scan ``k``, round ``rnd``, each cut to what it
+        can vouch for: its :attr:`reach` entry at ``(k - scan + 1) * rounds + rnd`` hops (one
+        hop a round since the label's scan, a round of slack for a peer a scan ahead); nothing
+        on own labels; labels older than :data:`KEEP_SCANS` (no longer kept) pass, within the
+        network's words. Returns the labels that lost bits not known here, also added to
+        :attr:`clipped`."""
         lab = as_labels(labels)
-        m = np.asarray(masks, dtype=np.int64)
+        m = as_words(masks)
         if self.reach is None or not m.any():
             self.add(lab, m)
             return 0
-        known = np.zeros(len(lab), dtype=np.int64)
+        words = self.words  # checked: the store is as wide as the reach tables
+        width = max(m.shape[1], self.masks.shape[1])
+        m = _fit(m, width)
+        known = np.zeros((len(lab), width), dtype=np.int64)
         found = self._find(lab) if len(self.keys) and len(lab) else None
         if found is not None:  # mask_of's answer; the lookup serves _or_in below too
-            known[found[0]] = self.masks[found[1][found[0]]]
+            known[found[0], :self.masks.shape[1]] = self.masks[found[1][found[0]]]
         if not (m & ~known).any():  # every bit known here already: nothing to add or count
             return 0
         table = self.reach.get(sender)
         if table is None:  # not a neighbour we know: it vouches for nothing
-            allowed = np.zeros(len(lab), dtype=np.int64)
+            allowed = np.zeros((len(lab), width), dtype=np.int64)
         else:
             h = (np.maximum(k - lab[:, 1], 0) + 1) * self.rounds + rnd
-            allowed = table[np.minimum(np.maximum(h, 0), len(table) - 1)]  # np.clip's, cheaper
+            allowed = _fit(table[np.minimum(np.maximum(h, 0), len(table) - 1)], width)
         old = lab[:, 1] < k - KEEP_SCANS
         if old.any():
-            allowed = np.where(old, np.int64(-1), allowed)
+            allowed = np.where(old[:, None], _fit(np.full((1, words), -1, dtype=np.int64),
+                                                  width), allowed)
         allowed[lab[:, 0] != SHARED_ORIGIN] = 0
         kept = m & allowed
         cut = m & ~kept
-        lost = int(((cut & ~known) != 0).sum()) if cut.any() else 0
+        lost = int(((cut & ~known) != 0).any(axis=1).sum()) if cut.any() else 0
         self.clipped += lost
-        self._or_in(lab, kept, found)  # (n,): m & allowed
+        self._or_in(lab, kept, found)  # (n, width): m & allowed
         return lost
 
     def own(self, labels: np.ndarray, k: int) -> None:
         """Our published ``labels (n, 3)`` at scan ``k``: the shared ones of scan ``k`` (stamped
         by us this scan, or moved to it) take our bit."""
         lab = as_labels(labels)
-        self.add(lab[lab[:, 1] == k], self.bit)
+        mine = lab[lab[:, 1] == k]
+        self._or_in(mine, np.broadcast_to(self.bit, (len(mine), self.words)))
         if self.reach is not None:
             self._saw_early(lab[_early(lab, k)], self.bit)
+
+    def sent(self, labels: np.ndarray, k: int) -> None:
+        """Our estimate's ``labels (n, 3)`` of scan ``k`` in a later round: those published by
+        their birth scan (a fused fresh own label of this scan) are recorded as published by
+        us, first-hand, as :meth:`own` records the local estimate's; else a neighbour relaying
+        it later was refused it as backdated (its stamper: us, never seen publishing it).
+        Masks unchanged."""
+        if self.reach is None:
+            return
+        lab = as_labels(labels)
+        early = _early(lab, k)
+        if early.any():
+            self._saw_early(lab[early], self.bit)
 
     def vouched(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
                 rnd: int = 0) -> bool:
@@ -263,9 +376,9 @@ class LabelSupport:
 
     def checked(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
                 rnd: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """``labels (n, 3)`` and ``masks (n,)`` with the rows :meth:`refused` re-stamped to
-        scan ``k`` (a label that loses to every older one, so the row stays the same target's
-        copy, not a second track) and their masks dropped."""
+        """``labels (n, 3)`` and ``masks`` (``(n, W)`` words or ``(n,)``) with the rows
+        :meth:`refused` re-stamped to scan ``k`` (a label that loses to every older one, so the
+        row stays the same target's copy, not a second track) and their masks dropped."""
         bad = self.refused(sender, labels, masks, k, rnd)
         if bad is None:
             return labels, masks
@@ -301,22 +414,24 @@ class LabelSupport:
         if not old.any():
             return None
         lo = lab[old]
-        m = np.asarray(masks, dtype=np.int64)[old]
+        words = self.words
+        m = _fit(as_words(masks)[old], words)  # bits beyond the network's: no stamper
         origin = lo[:, 0] & ORIGIN_MASK
         shared = origin == SHARED_ORIGIN
-        claim = np.where(shared, m, np.left_shift(1, (np.maximum(origin, 1) - 1)
-                                                  % SUPPORT_BITS))
+        claim = (m if shared.all() else
+                 np.where(shared[:, None], m, origin_words(origin, words)))
         h = (k - lo[:, 1] + 1) * self.rounds + rnd
         far = claim & table[np.minimum(np.maximum(h, 0), len(table) - 1)] & ~self._near
-        ok = far != 0  # vouched by a far stamper: not looked up
+        ok = far.any(axis=1)  # vouched by a far stamper: not looked up
         if ok.all():
             return None
-        seen, moved = np.zeros(len(lo), dtype=np.int64), np.zeros(len(lo), dtype=np.int64)
+        seen = np.zeros((len(lo), words), dtype=np.int64)
         seen[~ok] = self._seen(lo[~ok])
-        ok |= (claim & seen) != 0
+        ok |= (claim & seen).any(axis=1)
         if not ok.all():  # a stamp moved a scan later (uncorroborated), published after that
-            moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0]))
-            ok |= moved != 0
+            moved = np.zeros(len(lo), dtype=bool)
+            moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0])).any(axis=1)
+            ok |= moved
         if ok.all():
             return None
         self.backdated += 1
@@ -325,22 +440,23 @@ class LabelSupport:
         return bad
 
     def _seen(self, lab: np.ndarray) -> np.ndarray:
-        """``(n,)`` bits of the peers seen publishing each of ``lab (n, 3)`` by its scan."""
-        seen = np.zeros(len(lab), dtype=np.int64)
+        """``(n, W)`` bits of the peers seen publishing each of ``lab (n, 3)`` by its scan."""
+        seen = np.zeros((len(lab), self.words), dtype=np.int64)
         if len(self._early) and len(lab):
             hit, pos = keys_find(self._early, label_keys(lab))
             seen[hit] = self._early_bits[pos[hit]]
         return seen
 
-    def _saw_early(self, lab: np.ndarray, bit: int) -> None:
-        """Record ``lab (n, 3)`` as published by the peer of ``bit`` at or before their scan."""
+    def _saw_early(self, lab: np.ndarray, bit: np.ndarray) -> None:
+        """Record ``lab (n, 3)`` as published by the peer of ``bit`` (``(W,)`` words) at or
+        before their scan."""
         if not len(lab):
             return
         keys = unique_keys(label_keys(lab))  # sorted, each once
         if len(self._early):  # the known ones take the bit in place, the others go in at
             hit, pos = keys_find(self._early, keys)  # their places (no re-sort of the store)
             if hit.any():
-                self._early_bits[pos[hit]] |= np.int64(bit)
+                self._early_bits[pos[hit]] |= bit
                 keys = keys[~hit]
             if not len(keys):
                 return
@@ -349,16 +465,16 @@ class LabelSupport:
             rest[at] = False  # np.insert's arrays, without its Python-side checks
             early = np.empty(len(rest), dtype=self._early.dtype)
             early[at], early[rest] = keys, self._early
-            bits = np.empty(len(rest), dtype=np.int64)
+            bits = np.empty((len(rest), self.words), dtype=np.int64)
             bits[at], bits[rest] = bit, self._early_bits
             self._early, self._early_bits = early, bits
         else:
-            self._early, self._early_bits = keys, np.full(len(keys), bit, dtype=np.int64)
+            self._early, self._early_bits = keys, np.tile(bit, (len(keys), 1))
 
     def mask_of(self, labels: np.ndarray) -> np.ndarray:
-        """``(n,)`` int64 masks of ``labels (n, 3)`` (0: not known, or not shared)."""
+        """``(n, W)`` mask words of ``labels (n, 3)`` (0: not known, or not shared)."""
         lab = as_labels(labels)
-        out = np.zeros(len(lab), dtype=np.int64)
+        out = np.zeros((len(lab), self.masks.shape[1]), dtype=np.int64)
         if not len(self.keys) or not len(lab):
             return out
         hit, pos = self._find(lab)
@@ -380,15 +496,20 @@ class LabelSupport:
         """``(n,)`` holders known of each of ``labels (n, 3)`` (0: own labels)."""
         return popcount(self.mask_of(labels))
 
-    def encode(self, labels: np.ndarray) -> np.ndarray:
-        """``labels (n, 3)`` for the wire: each shared row's origin carries its mask."""
+    def encode(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """``labels (n, 3)`` for the wire: each shared row's origin carries its mask's word 0;
+        and words 1 and up ``(n, W - 1)`` for the Estimate's ``label_masks`` (None: all zero,
+        the usual case up to 39 peers: protocol 2 as before)."""
         lab = as_labels(labels)
-        m = self.mask_of(lab) & ((1 << SUPPORT_BITS) - 1)
+        m = self.mask_of(lab)
         if not m.any():
-            return lab
-        out = lab.copy()
-        out[:, 0] |= m << SUPPORT_SHIFT
-        return out
+            return lab, None
+        out = lab
+        if m[:, 0].any():
+            out = lab.copy()
+            out[:, 0] |= (m[:, 0] & WORD) << SUPPORT_SHIFT
+        extra = m[:, 1:] if m.shape[1] > 1 and m[:, 1:].any() else None
+        return out, extra
 
     def prune(self, k: int, keep: int = KEEP_SCANS) -> None:
         """Forget the masks of labels born more than ``keep`` scans before scan ``k``, or
@@ -403,5 +524,6 @@ class LabelSupport:
                 self._early, self._early_bits = self._early[ok], self._early_bits[ok]
 
 
-__all__ = ["KEEP_SCANS", "ORIGIN_MASK", "SUPPORT_BITS", "SUPPORT_SHIFT", "LabelSupport",
-           "decode", "peer_bit", "popcount", "reach_by_name", "reach_masks"]
+__all__ = ["KEEP_SCANS", "ORIGIN_MASK", "SUPPORT_BITS", "SUPPORT_SHIFT", "WORD", "LabelSupport",
+           "as_words", "decode", "mask_ints", "origin_words", "peer_bit", "popcount",
+           "reach_by_name", "reach_masks", "words_for"]

@@ -23,6 +23,7 @@ from sensornet.protocol.codec_format import (
     _FIELDS_V2,
     DEFAULT_LIMITS,
     LABELS_VERSION,
+    MASKS_VERSION,
     REASONS,
     TRACKS_VERSION,
     VERSION,
@@ -61,6 +62,7 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
         raise Rejected("field", f"{type(exc).__name__}: {exc}") from None
 
 
-__all__ = ["DEFAULT_LIMITS", "LABELS_VERSION", "REASONS", "TRACKS_VERSION", "VERSION",
+__all__ = ["DEFAULT_LIMITS", "LABELS_VERSION", "MASKS_VERSION", "REASONS", "TRACKS_VERSION",
+           "VERSION",
            "VERSIONS", "Limits", "Rejected", "_FIELDS", "_FIELDS_V2", "decode", "encode",
            "pack_mixture", "unpack_mixture"]

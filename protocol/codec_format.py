@@ -31,6 +31,10 @@ Estimate (``"E"``) with component labels and Scan (``"S"``) with its plots' ages
 without them is still written (and read) as protocol 1, byte for byte."""
 LABELS_VERSION = TRACKS_VERSION
 """The protocol of a labelled Estimate."""
+MASKS_VERSION = 3
+"""Protocol 3 exists for an Estimate whose labels' holder masks need more words than the
+origin column's (more than 39 peers: peers.label_support): protocol 2's fields and ``"m"``;
+an Estimate without them is written as protocol 2 (or 1), byte for byte."""
 _F8 = np.dtype("<f8")
 _F4 = np.dtype("<f4")
 _I8 = np.dtype("<i8")
@@ -139,7 +143,11 @@ _FIELDS_V2 = {
     # bytes of "px"); a report whose points do not fit float32 is still protocol 1
     "Y": ("s", "k", "ts", "vn", "vx", "ev", "pn", "pc", "pf", "d", "x"),
 }
-VERSIONS = {VERSION: _FIELDS, TRACKS_VERSION: _FIELDS_V2}
+_FIELDS_V3 = {
+    # Estimate with labels and holder-mask words 1.. "m" (n, W) int64 bytes (W >= 1)
+    "E": ("s", "k", "r", "q", "ts", "p", "o", "d", "i", "m", "x"),
+}
+VERSIONS = {VERSION: _FIELDS, TRACKS_VERSION: _FIELDS_V2, MASKS_VERSION: _FIELDS_V3}
 """Protocol version -> the message types it has -> their field names in wire order."""
 
 def _rows(blob: bytes, width: int, limit: int, what: str, size: int = 8) -> int:

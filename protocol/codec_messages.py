@@ -19,6 +19,7 @@ from sensornet.protocol.codec_format import (
     _I8,
     _KINDS,
     LABELS_VERSION,
+    MASKS_VERSION,
     TRACKS_VERSION,
     Limits,
     Rejected,
@@ -53,7 +54,8 @@ from sensornet.protocol.messages import (
 
 # -- encoding: message -> body by field name ------------------------------------------------
 def _encode_estimate(msg: Estimate) -> dict:
-    """Protocol 1 without labels (byte for byte as always), protocol 2 with them."""
+    """Protocol 1 without labels (byte for byte as always), protocol 2 with them, protocol 3
+    with holder-mask words beyond the labels' origin column (``label_masks``)."""
     body = {"s": msg.sender, "k": int(msg.k), "r": int(msg.round), "q": int(msg.seq),
             "ts": float(msg.send_time), "p": int(msg.pruning), "o": _KINDS.index(msg.kind),
             "d": msg.mixture.dim, "x": pack_mixture(msg.mixture)}
@@ -65,6 +67,14 @@ def _encode_estimate(msg: Estimate) -> dict:
                              f"{lab.dtype}")
         body["v"] = LABELS_VERSION
         body["i"] = np.ascontiguousarray(lab, dtype=_I8).tobytes()
+        if msg.label_masks is not None:
+            m = np.asarray(msg.label_masks)
+            if (m.ndim != 2 or len(m) != n or m.shape[1] < 1
+                    or (m.size and (m.dtype.kind not in "iu" or m.min() < 0))):
+                raise ValueError(f"Estimate.label_masks must be ({n}, W >= 1) non-negative "
+                                 f"integers, got {m.shape} {m.dtype}")
+            body["v"] = MASKS_VERSION
+            body["m"] = np.ascontiguousarray(m, dtype=_I8).tobytes()
     return body
 
 
@@ -188,8 +198,8 @@ def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
         raise Rejected("field", "dimension must be at least 1")
     blob = _get(body, "x", bytes)
     n = _rows(blob, 1 + d + d * (d + 1) // 2, limits.max_components, "components")
-    labels = None
-    if version == LABELS_VERSION:  # checked before the mixture is decoded
+    labels = masks = None
+    if version in (LABELS_VERSION, MASKS_VERSION):  # checked before the mixture is decoded
         ib = _get(body, "i", bytes)
         if len(ib) != 24 * n:
             raise Rejected("shape", f"{len(ib)} bytes of labels for {n} components "
@@ -197,6 +207,14 @@ def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
         labels = np.frombuffer(ib, dtype=_I8).reshape(n, 3).astype(np.int64)
         if n and labels.min() < 0:
             raise Rejected("field", "a component label is negative")
+    if version == MASKS_VERSION:
+        mb = _get(body, "m", bytes)
+        if (len(mb) % (8 * n) if n else len(mb)) or (n and not mb):
+            raise Rejected("shape", f"{len(mb)} bytes of label masks for {n} components "
+                                    "(a whole number of words, at least one, a component)")
+        masks = np.frombuffer(mb, dtype=_I8).reshape(n, -1 if n else 1).astype(np.int64)
+        if n and masks.min() < 0:
+            raise Rejected("field", "a label mask word is negative")
     mix = unpack_mixture(blob, n, d)
     pruning = _get(body, "p", int)
     kind_i = _get(body, "o", int)
@@ -205,7 +223,7 @@ def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
     return Estimate(sender=_name(body, "s", limits), k=_index(body, "k"),
                     mixture=mix, round=_index(body, "r"), seq=_index(body, "q"),
                     send_time=_time(body), pruning=pruning, kind=_KINDS[kind_i],
-                    labels=labels)
+                    labels=labels, label_masks=masks)
 
 
 def _decode_scan(body: dict, limits: Limits, version: int) -> Scan:

@@ -47,6 +47,8 @@ MESSAGE_SCHEMA: dict = {
         "mixture": {"type": ["object", "null"],
                     "description": "Gaussian mixture: weights (n,), means (n, d), covs (n, d, d)"},
         "labels": {"type": ["array", "null"], "description": "(n, 3) component labels"},
+        "label_masks": {"type": ["array", "null"],
+                        "description": "Estimate: (n, W) holder-mask words 1.. of its labels"},
         "scans": {"type": "object", "description": "Forward: origin sensor -> (m, 2) returns"},
     },
     "required": ["type"],

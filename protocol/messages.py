@@ -46,6 +46,10 @@ class Estimate:
     labels: np.ndarray | None = None
     """``(n, 3)`` int64 component labels ``(origin, birth_scan, index)`` of a labelled
     estimator (tracking.labels), one per mixture row; None: unlabelled (protocol 1)."""
+    label_masks: np.ndarray | None = None
+    """``(n, W)`` int64 holder-mask words 1 and up of the labels' rows (peers.label_support:
+    word 0 rides in the origin column; these name peers 40 and beyond), with ``labels``
+    only; None: none (protocol 2 or 1, byte for byte as before)."""
 
 
 @dataclass(frozen=True)

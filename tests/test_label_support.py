@@ -54,7 +54,8 @@ def _run(bias: list[float], links: list[tuple[int, int]], support: bool,
                 seen[i].append(tuple(lab[0].tolist()))
             if sup[i] is not None:
                 sup[i].own(lab, k)
-                lab = sup[i].encode(lab)
+                lab, extra = sup[i].encode(lab)
+                assert extra is None  # up to 39 peers: the origin column alone
             wire.append((out.published["posterior"], lab))
         for i, e in enumerate(peers):
             own = (outs[i].published["posterior"], outs[i].labels["posterior"])
@@ -104,11 +105,12 @@ def test_masks_on_the_wire_and_back():
     lab = np.array([[S, 4, PB + HIGH], [5, 4, PB + 1], [S, 4, PB + LOW]], dtype=np.int64)
     sup.own(lab, 4)
     sup.add(lab[:1], np.int64(0b1011))
-    wire = sup.encode(lab)
+    wire, extra = sup.encode(lab)
+    assert extra is None
     assert wire.min() >= 0 and wire[1, 0] == 5  # own labels travel as they are
     back, masks = decode(wire)
     np.testing.assert_array_equal(back, lab)
-    np.testing.assert_array_equal(masks, [0b1111, 0, 0b100])
+    np.testing.assert_array_equal(masks, [[0b1111], [0], [0b100]])
     np.testing.assert_array_equal(sup.counts(lab), [4, 0, 1])
     assert wire[0, 0] == 0b1111 << SUPPORT_SHIFT
     sup.prune(4 + 100)
@@ -119,5 +121,5 @@ def test_a_mixture_without_rows_and_unlabelled_masks():
     sup = LabelSupport(peer_bit(1))
     none = np.zeros((0, 3), dtype=np.int64)
     sup.add(none, np.zeros(0, dtype=np.int64))
-    assert sup.encode(none).shape == (0, 3)
+    assert sup.encode(none)[0].shape == (0, 3)
     assert len(label_fused(GaussianMixture.empty(4), [], 1, 1, support=sup).labels) == 0

@@ -130,7 +130,8 @@ class LyingCore(PeerCore):
         for m in messages:
             if type(m) is Estimate:
                 told_mix = self.lie(m.mixture, m.k)
-                m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)))
+                m = replace(m, mixture=told_mix, labels=told_labels(m.labels, len(told_mix)),
+                            label_masks=None)  # holder words 1.. (past 39 peers) not told
                 self.lies_told += 1
             told.append(m)
         return super()._wrap(told)
