@@ -1,6 +1,6 @@
 """A world paced by the peers, not by the clock (process tests that check a twin's every
 number): scan ``k + 1`` goes out once every peer has published its tracks of scan ``k`` (each
-peer closed the scan, so every copy of it arrived), then the truth of ``k``. The peers' own
+peer closed the scan, so every copy of it arrived) and the truth of ``k`` has gone. The peers' own
 deadlines stay a fallback that a test sets far off (their ``--speed``): at any load the rounds
 run on arrivals, as in the twin, however long a process waits for a core.
 
