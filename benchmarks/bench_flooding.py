@@ -9,6 +9,10 @@ peer holds every scan in >= 99 % of scans, in real time, 4 iterations per scan):
 - the scan-to-track latency (median, p99) against the scan interval;
 - tuples and bytes per peer per scan (counted by the peers), CPU per peer per scan;
 - the fused OSPA (IDPC on the pooled scans) and the twin's on the same draws;
+- per host, its peers in the order its loop serves them, each with its median and p99
+  scan-to-track latency and its median world -> peer transit, and the worst peer's p99 after
+  the first second (issue 38: a host runs its peers one after another, so the tail is the peer
+  whose tracks come last); the CPU per peer-scan by part (``cpu_ms_breakdown``);
 - the load average before and after (the machine is shared: read the numbers with it).
 
     nice -n 10 python benchmarks/bench_flooding.py [--runs 1] [--scans 60] [--speed 10]
@@ -63,6 +67,7 @@ def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
     if len(s) < len(scn.sensor_names):
         return {"failed": True, "codes": codes, "logs": logs, "load": (load0, load1)}
     n_peers = len(s)
+    first = round(speed / scn.scan_period)  # the samples of the first second: start-up
     fl = [v["fuser"] for v in s.values()]
     closed = sum(f.get("scans_closed", 0) for f in fl)
     lat = sorted(x for v in s.values() for x in v["latency_ms_samples"])
@@ -89,7 +94,36 @@ def one_run(scans: int, speed: float, run: int, sparse: bool, extra: list[str],
                                    for v in s.values()),
         "ospa": statistics.fmean(v["mean_ospa_fused"] for v in s.values()),
         "ospa_twin": statistics.fmean(twin.mean_ospa(n) for n in scn.sensor_names),
+        "hosts": serving_order(s),
+        "worst_p99_ms": max(percentile(sorted(v["latency_ms_samples"][first:]), 0.99) or 0.0
+                            for v in s.values()),
+        "cpu_parts": {k: sum((v.get("cpu_ms_breakdown") or {}).get(k, 0.0) for v in s.values())
+                      / max(1, sum(v["scans"] for v in s.values())) for k in CPU_PARTS},
     }
+
+
+CPU_PARTS = ("scan", "estimate", "tick", "publish", "telemetry", "loop", "transport")
+"""Columns of ``cpu_ms_breakdown`` printed (core steps by channel, then the host's rest)."""
+
+
+def serving_order(summaries: dict) -> dict[str, list[tuple[str, float, float, float]]]:
+    """Per host, ``(peer, median, p99, transit median)`` ms in the order its loop serves its
+    peers (the host's list: a scan bundle reaches them at once and they step in that order);
+    a process per peer: one entry ``"-"`` by peer name."""
+    out: dict[str, list[tuple[str, float, float, float]]] = {}
+    for name, v in summaries.items():
+        host = v.get("host") or {}
+        lat = sorted(v["latency_ms_samples"])
+        transit = (v.get("latency_breakdown_ms_median") or {}).get("transit")
+        row = (name, statistics.median(lat) if lat else float("nan"),
+               percentile(lat, 0.99) or float("nan"),
+               float("nan") if transit is None else transit)
+        out.setdefault(host.get("name", "-"), []).append(row)
+    for h, rows in out.items():
+        order = next((v["host"]["peers"] for v in summaries.values()
+                      if (v.get("host") or {}).get("name") == h), None)
+        rows.sort(key=lambda r, order=order: order.index(r[0]) if order else r[0])
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -135,6 +169,13 @@ def main(argv: list[str] | None = None) -> int:
               f"neighbours, {r['cpu_ms']:.2f} ms CPU (process, from its loop's start to the "
               f"run's end)")
         print(f"  mean fused OSPA {r['ospa']:.2f} m (twin on the same draws {r['ospa_twin']:.2f})")
+        print("  CPU ms per peer-scan by part: " + ", ".join(
+            f"{k} {v:.2f}" for k, v in r["cpu_parts"].items()))
+        print(f"  worst peer's p99 after the first second {r['worst_p99_ms']:.0f} ms; per host, "
+              f"in serving order, peer median / p99 / transit (ms):")
+        for h, rows in sorted(r["hosts"].items()):
+            print(f"    {h}: " + ", ".join(f"{p} {m:.0f}/{q:.0f}/{t:.0f}"
+                                            for p, m, q, t in rows))
         ok = ok and r["complete"] >= 0.99 and r["scans_handled"] == r["scans"]
     return 0 if ok else 1
 
