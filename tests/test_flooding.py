@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.sparse.csgraph import shortest_path
@@ -133,3 +135,23 @@ def test_a_host_decodes_a_forward_once_for_its_receivers_read_only():
     with pytest.raises(Rejected):
         shared(payload[:-2], limits)
     assert shared.hits == 1
+
+
+def test_bench_flooding_lists_each_hosts_peers_in_serving_order():
+    """benchmarks/bench_flooding.py's per-host rows: the host's own peer order (not by name),
+    each peer's median and p99 (sample floor(0.99 n)) and its median transit."""
+    from benchmarks.bench_flooding import serving_order
+
+    def summary(host, peers, lat, transit):
+        return {"host": {"name": host, "peers": peers}, "latency_ms_samples": lat,
+                "latency_breakdown_ms_median": {"transit": transit}}
+
+    h1 = ["s9", "s10", "s2"]
+    s = {"s2": summary("h1", h1, [30.0, 10.0, 20.0], 7.0),
+         "s9": summary("h1", h1, [1.0, 3.0], 1.0),
+         "s10": summary("h1", h1, [5.0], 4.0),
+         "s1": {"latency_ms_samples": [2.0]}}  # a peer of its own process
+    out = serving_order(s)
+    assert [r[0] for r in out["h1"]] == h1
+    assert out["h1"][2][1:] == (20.0, 30.0, 7.0) and out["h1"][0][1:] == (2.0, 3.0, 1.0)
+    assert out["-"][0][0] == "s1" and math.isnan(out["-"][0][3])
