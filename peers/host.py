@@ -286,6 +286,9 @@ class PeerHost(HostDelivery, HostBatching):
                 if w is not None:
                     wait = min(wait, w)
                     wakes[i] = mono + w
+            left = self._gather_left(mono)  # rounds gathering: fused by then
+            if left is not None:
+                wait = min(wait, left)
             gap = 0.0 if busy or not q.empty() or any(  # between scans, not between rounds
                 self.peers[i].core.consensus.busy() for i in self._active) else min(
                 wait, scan_at + interval - mono)
@@ -310,7 +313,7 @@ class PeerHost(HostDelivery, HostBatching):
                         scan_at = time.monotonic()
             self.counts["wakes"] += 1
             self._work(time.time(), time.monotonic(), wakes)
-            self._fuse()
+            self._fuse_gathered()
             self._score()
             self._report()
             if time.monotonic() >= idle_check:  # idle timeouts are seconds: look 4 times a second

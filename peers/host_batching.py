@@ -6,6 +6,7 @@ scan, and the consensus rounds that became ready in a pass fused together at its
 from __future__ import annotations
 
 import itertools
+import os
 import time
 from collections import deque
 
@@ -13,6 +14,13 @@ from sensornet.peers.admission import peek
 from sensornet.peers.batching import prepare_local_steps
 from sensornet.peers.inbound import Delivered
 from sensornet.peers.runtime import BATCH, PeerRuntime
+
+GATHER_MS = float(os.environ.get("SENSORNET_HOST_GATHER_MS", "0") or 0.0)
+"""How long the rounds that became ready wait for more before the host fuses them, ms
+(``SENSORNET_HOST_GATHER_MS``; 0, the default: at the end of every pass, as before). A
+host's stacked trust tests, fusions and labels cost mostly per call, so a pass that holds
+12 rounds costs each peer more than one of 25 (:meth:`HostBatching._fuse_gathered`); opt-in
+until measured as processes (docs/security.md)."""
 
 
 class HostBatching:
@@ -92,6 +100,36 @@ class HostBatching:
                     continue
             closed = c.close(time.time()) or closed
         return closed
+
+    _gather_from: float | None = None
+    """When the oldest round waiting for :data:`GATHER_MS` was first seen (monotonic s)."""
+
+    def _fuse_gathered(self) -> None:
+        """The end of a pass: :meth:`_fuse`, or (:data:`GATHER_MS`) nothing yet while the
+        rounds waiting are fewer than the batched peers, none forced by its deadline, the
+        host not stopping and the first of them has waited less than :data:`GATHER_MS`
+        (the loop comes back by then: :meth:`_gather_left`)."""
+        batch = self.batch
+        if batch is None or not batch.jobs:
+            self._gather_from = None
+            return
+        if GATHER_MS > 0 and not self._stop:
+            mono = time.monotonic()
+            if self._gather_from is None:
+                self._gather_from = mono
+            jobs = [j for j in batch.jobs if not j.settled]
+            if (jobs and len(jobs) < len(self._batched) and not any(j.forced for j in jobs)
+                    and (mono - self._gather_from) * 1e3 < GATHER_MS):
+                return
+        self._gather_from = None
+        self._fuse()
+
+    def _gather_left(self, mono: float) -> float | None:
+        """Seconds until the rounds gathering (:meth:`_fuse_gathered`) are fused anyway,
+        None if none are."""
+        if self._gather_from is None:
+            return None
+        return max(0.0, self._gather_from + GATHER_MS / 1e3 - mono)
 
     def _fuse(self) -> None:
         """The rounds that became ready in this pass, fused together; each peer then
