@@ -20,6 +20,15 @@ from sensornet.protocol.messages import ScanSet
 from sensornet.tracking.idpc import ClusterParams, dbscan_class, ftc, idpc, polar_to_cartesian
 from sensornet.tracking.models import RangeBearing
 
+CLUSTERED_KEPT = 32
+"""Pooled scan sets whose clustering a process keeps (:data:`_CLUSTERED`)."""
+_CLUSTERED: dict[tuple, np.ndarray] = {}
+"""The last :data:`CLUSTERED_KEPT` pooled sets' cluster centres, by everything they depend on
+(method, ``S``, parameters, seed and the points' bytes): once flooding is complete every peer
+pools the same points, so in a host of ten (or the twin's one process) one of them clusters
+and the others read the same centres (issue 38); a set that differs by a bit is clustered
+afresh. Read-only; each caller copies them into its own estimate rows."""
+
 
 class FloodEstimator:
     """The local part of a flooding peer: its scan is the payload, its estimate a clustering.
@@ -88,9 +97,22 @@ class FloodEstimator:
         return points
 
     def extract(self, scans: ScanSet) -> np.ndarray:
+        """Estimate rows ``(k, 4)`` of the clustered points; a pooled set's centres are kept
+        by content (:data:`_CLUSTERED`): the co-hosted peers that hold the same scans cluster
+        them once."""
         S = len(self.roster) if self.assumed_scans == "all" else len(scans)
-        cluster = ftc if self.method == "ftc" else idpc
-        c = cluster(self.plane(scans), S, self.params, np.random.default_rng(self.seed)).centres
+        points = self.plane(scans)
+        key = ((self.method, S, self.params, self.seed, points.shape, points.tobytes())
+               if len(scans) > 1 else None)  # an own scan alone is no other peer's
+        c = None if key is None else _CLUSTERED.get(key)
+        if c is None:
+            cluster = ftc if self.method == "ftc" else idpc
+            c = cluster(points, S, self.params, np.random.default_rng(self.seed)).centres
+            if key is not None:
+                c.flags.writeable = False
+                if len(_CLUSTERED) >= CLUSTERED_KEPT:
+                    del _CLUSTERED[next(iter(_CLUSTERED))]  # the oldest
+                _CLUSTERED[key] = c
         out = np.zeros((len(c), 4))
         out[:, [0, 2]] = c
         return out

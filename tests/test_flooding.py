@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import shortest_path
 from sensornet.peers.flooding import Flooder, flood, flooding_tuples
+from sensornet.tracking.idpc import idpc
 
 
 def _geometric(seed=3, n=20, radius=800.0):
@@ -155,3 +156,41 @@ def test_bench_flooding_lists_each_hosts_peers_in_serving_order():
     assert [r[0] for r in out["h1"]] == h1
     assert out["h1"][2][1:] == (20.0, 30.0, 7.0) and out["h1"][0][1:] == (2.0, 3.0, 1.0)
     assert out["-"][0][0] == "s1" and math.isnan(out["-"][0][3])
+
+
+def test_peers_pooling_the_same_points_cluster_them_once(monkeypatch):
+    """peers.flood_parts._CLUSTERED: a second peer's extract of an equal pooled set (other
+    array objects, the same numbers) reads the first one's centres, the same rows as its own
+    clustering gives; a set one ulp apart, or an own scan alone, is clustered afresh."""
+    import sensornet.peers.flood_parts as fp
+    from sensornet.protocol.messages import ScanSet
+
+    monkeypatch.setattr(fp, "_CLUSTERED", {})
+    calls = []
+
+    def counted(points, S, params, rng):
+        calls.append(len(points))
+        return idpc(points, S, params, rng)
+
+    monkeypatch.setattr(fp, "idpc", counted)
+    roster = dict.fromkeys(("a", "b", "c"))
+    rng = np.random.default_rng(3)
+    target = np.array([[100.0, -200.0], [400.0, 350.0]])
+    raw = {o: np.vstack([target + rng.normal(0, 3, (2, 2)), rng.uniform(-900, 900, (4, 2))])
+           for o in roster}
+
+    def pooled():
+        return ScanSet({o: z.copy() for o, z in raw.items()})
+
+    a, b = (fp.FloodEstimator(n, roster, seed=7) for n in ("a", "b"))
+    first, second = a.extract(pooled()), b.extract(pooled())
+    assert len(calls) == 1 and np.array_equal(first, second) and len(first) == 2
+    monkeypatch.setattr(fp, "_CLUSTERED", {})
+    assert np.array_equal(b.extract(pooled()), first) and len(calls) == 2  # its own: equal
+    moved = pooled()
+    moved.scans["c"][0, 0] = np.nextafter(moved.scans["c"][0, 0], np.inf)
+    b.extract(moved)
+    assert len(calls) == 3
+    a.extract(ScanSet({"a": raw["a"]}))
+    b.extract(ScanSet({"a": raw["a"].copy()}))
+    assert len(calls) == 5 and len(fp._CLUSTERED) == 2  # own scans: never kept
