@@ -18,6 +18,10 @@ peer holds every scan in >= 99 % of scans, in real time, 4 iterations per scan):
     nice -n 10 python benchmarks/bench_flooding.py [--runs 1] [--scans 60] [--speed 10]
         [--per-process auto|N]
 
+``--twin-memo N``: instead, the twin's CPU per peer-scan with the pooled-clustering memo
+(``peers.flood_parts._CLUSTERED``: peers pooling the same points cluster them once) on and off,
+alternated ``N`` pairs in one process, and each pair's ratio.
+
 ``--per-process``: peers per process as ``sensornet run`` packs them (``auto``, the default:
 :func:`sensornet.sim.run.packing.choose`, two hosts of 10 on 2 cores), or ``1`` for a process per
 peer.
@@ -126,6 +130,36 @@ def serving_order(summaries: dict) -> dict[str, list[tuple[str, float, float, fl
     return out
 
 
+def twin_memo(pairs: int, scans: int) -> list[float]:
+    """The seed-004 twin's process CPU per peer-scan (ms) with the pooled-clustering memo off,
+    then on, ``pairs`` times in this process (one warm-up run first); prints each run and
+    returns each pair's on/off ratio."""
+    import sensornet.peers.flood_parts as fp
+
+    class Off(dict):  # the memo never keeps anything: every peer clusters its own set
+        def __setitem__(self, key, value) -> None:
+            pass
+
+    scn = load_scenario("seed004", overrides=parse_overrides([f"scenario.num_scans={scans}"]))
+    kept = fp._CLUSTERED
+    run_twin(scn, 0)
+    ratios = []
+    try:
+        for i in range(pairs):
+            cpu = {}
+            for mode in ("off", "on"):
+                fp._CLUSTERED = Off() if mode == "off" else {}
+                t0 = time.process_time()
+                run_twin(scn, 0)
+                cpu[mode] = (time.process_time() - t0) * 1e3 / (len(scn.sensors) * scans)
+            ratios.append(cpu["on"] / cpu["off"])
+            print(f"pair {i + 1}: memo off {cpu['off']:.3f}, on {cpu['on']:.3f} ms per peer-scan "
+                  f"(on/off {ratios[-1]:.3f}), load {os.getloadavg()[0]:.1f}", flush=True)
+    finally:
+        fp._CLUSTERED = kept
+    return ratios
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1)
@@ -138,7 +172,13 @@ def main(argv: list[str] | None = None) -> int:
                          f"{PEER_WAIT:g}, as sensornet run; more on a busy machine)")
     ap.add_argument("--per-process", default="auto",
                     help="peers per process: auto (as sensornet run packs them) or a number")
+    ap.add_argument("--twin-memo", type=int, default=0, metavar="N",
+                    help="instead: N pairs of twin runs, the pooled-clustering memo off / on")
     a = ap.parse_args(argv)
+    if a.twin_memo:
+        ratios = twin_memo(a.twin_memo, a.scans)
+        print(f"on/off median {statistics.median(ratios):.3f}")
+        return 0
     ok = True
     for run in range(a.runs):
         r = one_run(a.scans, a.speed, run, not a.full_mesh, a.set, a.startup, a.per_process)
