@@ -146,7 +146,7 @@ def shared_log_overlaps(groups: list[list[GaussianMixture]]) -> list[np.ndarray]
         return out
     U = len(uniq)
     size = np.array([len(D.weights) for D in uniq])
-    first = np.r_[0, np.cumsum(size)[:-1]]  # each mixture's first component
+    first = np.cumsum(size) - size  # each mixture's first component
     stacks = []
     for n, (gs, rows) in by_n.items():
         u = np.array(rows, dtype=np.intp).reshape(len(gs), n)
@@ -181,7 +181,7 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     pairs, back = np.unique(x * U + y, return_inverse=True)
     px, py = pairs // U, pairs % U
     n = size[px] * size[py]  # its terms, x's component major
-    base = np.r_[0, np.cumsum(n)[:-1]]
+    base = np.cumsum(n) - n
     t = np.arange(int(n.sum())) - np.repeat(base, n)
     a = first[px].repeat(n) + t // size[py].repeat(n)
     b = first[py].repeat(n) + t % size[py].repeat(n)
@@ -190,7 +190,7 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     # each ordered block's terms, a row per component r of J, its columns I's components c
     mI, mJ = size[I], size[J]
     nb = mI * mJ
-    ob = np.r_[0, np.cumsum(nb)[:-1]]
+    ob = np.cumsum(nb) - nb
     t = np.arange(int(nb.sum())) - np.repeat(ob, nb)
     r, c = t // mI.repeat(nb), t % mI.repeat(nb)
     swap = (I > J).repeat(nb)  # stored as (J's component, I's): row-major already
@@ -199,7 +199,7 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     terms = g[idx]
     top = np.maximum.reduceat(terms, ob)
     safe = np.where(np.isfinite(top), top, 0.0)
-    rows = np.r_[0, np.cumsum(mJ)[:-1]]  # each block's first row
+    rows = np.cumsum(mJ) - mJ  # each block's first row
     starts = ob.repeat(mJ) + (np.arange(int(mJ.sum())) - rows.repeat(mJ)) * mI.repeat(mJ)
     S = np.add.reduceat(np.add.reduceat(np.exp(terms - safe.repeat(nb)), starts), rows)
     with np.errstate(divide="ignore"):
@@ -303,9 +303,9 @@ def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     hit = np.zeros((len(keep), n), bool)  # (C, n): an input's target within the gate
     hit[a[close], owner[b[close]]] = True
     rows = req[keep] * n + owner  # each component's (request, input), in order
-    seg = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    seg = np.flatnonzero(np.concatenate(([True], rows[1:] != rows[:-1])))
     U = np.zeros((len(group) * n, n))
-    U[rows[seg]] = unmatched_sums(w, hit, np.diff(np.r_[seg, len(rows)]).tolist())
+    U[rows[seg]] = unmatched_sums(w, hit, np.diff(np.append(seg, len(rows))).tolist())
     U = U.reshape(len(group), n, n)
     return [U[r, :z, :z] for r, z in enumerate(lens)]
 
