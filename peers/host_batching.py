@@ -106,9 +106,9 @@ class HostBatching:
 
     def _fuse_gathered(self) -> None:
         """The end of a pass: :meth:`_fuse`, or (:data:`GATHER_MS`) nothing yet while the
-        rounds waiting are fewer than the batched peers, none forced by its deadline, the
-        host not stopping and the first of them has waited less than :data:`GATHER_MS`
-        (the loop comes back by then: :meth:`_gather_left`)."""
+        rounds waiting are fewer than the batched peers still running, none forced by its
+        deadline, the host not stopping and the first of them has waited less than
+        :data:`GATHER_MS` (the loop comes back by then: :meth:`_gather_left`)."""
         batch = self.batch
         if batch is None or not batch.jobs:
             self._gather_from = None
@@ -118,7 +118,8 @@ class HostBatching:
             if self._gather_from is None:
                 self._gather_from = mono
             jobs = [j for j in batch.jobs if not j.settled]
-            if (jobs and len(jobs) < len(self._batched) and not any(j.forced for j in jobs)
+            peers = sum(1 for i in self._active if i in self._batched)  # still running
+            if (jobs and len(jobs) < peers and not any(j.forced for j in jobs)
                     and (mono - self._gather_from) * 1e3 < GATHER_MS):
                 return
         self._gather_from = None

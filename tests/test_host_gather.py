@@ -20,6 +20,7 @@ class Host(HostBatching):
     def __init__(self, peers: int, jobs: list) -> None:
         self.batch = SimpleNamespace(jobs=jobs)
         self._batched = frozenset(range(peers))
+        self._active = list(range(peers))
         self._stop = False
         self.fused = 0
 
@@ -67,6 +68,15 @@ def test_on_fuses_at_once_when_no_more_can_come_or_one_must_go(monkeypatch, cloc
     monkeypatch.setattr(host_batching, "GATHER_MS", 5.0)
     h = Host(4, _jobs(4) if case == "every peer" else _jobs(2, forced=case == "forced"))
     h._stop = case == "stopping"
+    h._fuse_gathered()
+    assert h.fused == 1
+
+
+def test_peers_that_ended_are_not_waited_for(monkeypatch, clock):
+    """Two rounds queued, four batched peers of which two ended: nothing more can come."""
+    monkeypatch.setattr(host_batching, "GATHER_MS", 5.0)
+    h = Host(4, _jobs(2))
+    h._active = [0, 2]
     h._fuse_gathered()
     assert h.fused == 1
 
