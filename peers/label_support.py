@@ -50,7 +50,6 @@ from sensornet.tracking.label_keys import (
     SHARED_ORIGIN,
     as_labels,
     keys_equal,
-    keys_find,
     label_keys,
     unique_keys,
 )
@@ -72,6 +71,16 @@ first published as late as the next scan's local estimate (adopted by the estima
 KEEP_SCANS = 64
 """Scans a label's mask is kept after its birth scan (ties are settled within the settle wait,
 eccentricity + 2 scans; then the mask is no longer asked for)."""
+_nz = np.count_nonzero
+"""Nonzero entries, a C call: ``ndarray.any()``/``all()`` go through a Python wrapper that costs
+about four times as much on the few rows of one estimate (2.5 on average at 50 peers)."""
+
+
+def _any_rows(m: np.ndarray) -> np.ndarray:
+    """``(n,)`` which rows of mask words ``m (n, W)`` have a bit set."""
+    w = m.shape[1]
+    return (m[:, 0] != 0 if w == 1 else np.logical_or(m[:, 0], m[:, 1]) if w == 2
+            else np.logical_or.reduce(m, axis=1))
 
 
 def _early(lab: np.ndarray, k: int) -> np.ndarray:
@@ -80,7 +89,7 @@ def _early(lab: np.ndarray, k: int) -> np.ndarray:
     scan = lab[:, 1]
     early = scan >= k
     prev = scan == k - 1
-    if prev.any():  # the fresh test only where it can hold (most estimates have no such row)
+    if _nz(prev):  # the fresh test only where it can hold (most estimates have no such row)
         index = lab[:, 2]
         early |= (prev & (lab[:, 0] != SHARED_ORIGIN) & (index >= FRESH_INDEX)
                   & (index < PUBLISHED_BASE))
@@ -188,11 +197,12 @@ def decode(labels: np.ndarray, extra: np.ndarray | None = None) -> tuple[np.ndar
     W - 1)``, or None) -> the labels without masks ``(n, 3)`` and each row's mask words
     ``(n, W)`` int64 (0: none)."""
     lab = as_labels(labels)
-    masks = (lab[:, 0] >> SUPPORT_SHIFT)[:, None]
+    word0 = lab[:, 0] >> SUPPORT_SHIFT
+    masks = word0[:, None]
     if extra is not None and np.size(extra):
         masks = np.concatenate([masks, np.asarray(extra, dtype=np.int64).reshape(len(lab), -1)
                                 & WORD], axis=1)
-    if not masks[:, 0].any():
+    if not _nz(word0):
         return lab, masks
     clean = lab.copy()
     clean[:, 0] &= ORIGIN_MASK
@@ -207,6 +217,21 @@ def _columns(keys: np.ndarray) -> np.ndarray:
     """Label keys ``(n,)`` (:func:`tracking.label_keys.label_keys`) back as ``(n, 3)`` int64
     rows (a view): compared row-wise in C, where a structured ``==`` costs a Python call."""
     return keys.view(np.int64).reshape(-1, 3)
+
+
+def _find_rows(keys: np.ndarray, lab: np.ndarray, rows: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Whether each of ``lab (n, 3)`` int64 is in sorted unique ``keys`` (non-empty) and where:
+    ``(n,)`` bool and index (``rows``: ``keys`` as :data:`_ROW` values, if the caller keeps
+    them). Few rows against a small store: every pair compared at once (a structured
+    searchsorted costs more there); else a binary search."""
+    if len(lab) * len(keys) <= FIND_PAIRS:  # rows equal as 24 bytes: a C compare
+        if rows is None:
+            rows = keys.view(_ROW)
+        eq = np.ascontiguousarray(lab).view(_ROW).reshape(-1)[:, None] == rows[None, :]
+        return np.logical_or.reduce(eq, axis=1), eq.argmax(axis=1)
+    pos = np.searchsorted(keys, label_keys(lab)).clip(max=len(keys) - 1)
+    return (_columns(keys)[pos] == lab).all(axis=1), pos
 
 
 def popcount(masks: np.ndarray) -> np.ndarray:
@@ -247,6 +272,11 @@ class LabelSupport:
                 near |= t[0]
         self._near = near
         """This peer's bit and its neighbours' (their publications are heard first-hand)."""
+        self._far = {s: t & ~near for s, t in (self.reach or {}).items()}
+        self._views: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        """Per store (``"keys"``, ``"early"``), its keys array and their :data:`_ROW` view, kept
+        while the store's array is the same object (a view costs a Python-side check)."""
+        """:attr:`reach` without :attr:`_near`'s bits: what a far stamper can vouch for."""
         self.clipped = 0
         """Labels received whose mask named peers the sender cannot vouch for, bits not known
         here otherwise (those bits dropped)."""
@@ -277,11 +307,11 @@ class LabelSupport:
                found: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """:meth:`add` of checked ``lab (n, 3)`` int64 and mask words ``m (n, W)`` int64
         (``found``: :meth:`_find` of ``lab`` in the store as it is, if the caller has it)."""
-        nz = m != 0
-        ok = (lab[:, 0] == SHARED_ORIGIN) & (nz[:, 0] if m.shape[1] == 1 else nz.any(axis=1))
-        if not ok.any():
+        ok = (lab[:, 0] == SHARED_ORIGIN) & _any_rows(m)
+        n = _nz(ok)
+        if not n:
             return
-        if not ok.all():
+        if n < len(ok):
             lab, m = lab[ok], m[ok]
             if found is not None:
                 found = found[0][ok], found[1][ok]
@@ -292,7 +322,7 @@ class LabelSupport:
             m = _fit(m, self.masks.shape[1])
         if len(self.keys):  # every label known (the usual case): OR in place, no re-sort
             hit, pos = self._find(lab) if found is None else found
-            if hit.all():
+            if _nz(hit) == len(hit):
                 np.bitwise_or.at(self.masks, pos, m)
                 return
         keys = np.concatenate([self.keys, label_keys(lab)])
@@ -317,17 +347,22 @@ class LabelSupport:
         :attr:`clipped`."""
         lab = as_labels(labels)
         m = as_words(masks)
-        if self.reach is None or not m.any():
+        if self.reach is None or not _nz(m):
             self.add(lab, m)
             return 0
         words = self.words  # checked: the store is as wide as the reach tables
         width = max(m.shape[1], self.masks.shape[1])
         m = _fit(m, width)
-        known = np.zeros((len(lab), width), dtype=np.int64)
         found = self._find(lab) if len(self.keys) and len(lab) else None
-        if found is not None:  # mask_of's answer; the lookup serves _or_in below too
-            known[found[0], :self.masks.shape[1]] = self.masks[found[1][found[0]]]
-        if not (m & ~known).any():  # every bit known here already: nothing to add or count
+        if found is not None and self.masks.shape[1] == width:  # mask_of's answer; the
+            known = self.masks[found[1]]  # lookup serves _or_in below too
+            if _nz(found[0]) < len(lab):
+                known[~found[0]] = 0
+        else:
+            known = np.zeros((len(lab), width), dtype=np.int64)
+            if found is not None:
+                known[found[0], :self.masks.shape[1]] = self.masks[found[1][found[0]]]
+        if not _nz(m & ~known):  # every bit known here already: nothing to add or count
             return 0
         table = self.reach.get(sender)
         if table is None:  # not a neighbour we know: it vouches for nothing
@@ -336,13 +371,13 @@ class LabelSupport:
             h = (np.maximum(k - lab[:, 1], 0) + 1) * self.rounds + rnd
             allowed = _fit(table[np.minimum(np.maximum(h, 0), len(table) - 1)], width)
         old = lab[:, 1] < k - KEEP_SCANS
-        if old.any():
+        if _nz(old):
             allowed = np.where(old[:, None], _fit(np.full((1, words), -1, dtype=np.int64),
                                                   width), allowed)
         allowed[lab[:, 0] != SHARED_ORIGIN] = 0
         kept = m & allowed
         cut = m & ~kept
-        lost = int(((cut & ~known) != 0).any(axis=1).sum()) if cut.any() else 0
+        lost = int(_nz(_any_rows(cut & ~known))) if _nz(cut) else 0
         self.clipped += lost
         self._or_in(lab, kept, found)  # (n, width): m & allowed
         return lost
@@ -354,7 +389,9 @@ class LabelSupport:
         mine = lab[lab[:, 1] == k]
         self._or_in(mine, np.broadcast_to(self.bit, (len(mine), self.words)))
         if self.reach is not None:
-            self._saw_early(lab[_early(lab, k)], self.bit)
+            early = _early(lab, k)
+            if _nz(early):
+                self._saw_early(lab[early], self.bit)
 
     def sent(self, labels: np.ndarray, k: int) -> None:
         """Our estimate's ``labels (n, 3)`` of scan ``k`` in a later round: those published by
@@ -366,7 +403,7 @@ class LabelSupport:
             return
         lab = as_labels(labels)
         early = _early(lab, k)
-        if early.any():
+        if _nz(early):
             self._saw_early(lab[early], self.bit)
 
     def vouched(self, sender: str, labels: np.ndarray, masks: np.ndarray, k: int,
@@ -404,35 +441,46 @@ class LabelSupport:
         if self.reach is None:
             return None
         table = self.reach.get(sender)
+        if table is None:
+            return None
         lab = as_labels(labels)
-        if table is None or not len(lab):
+        n = len(lab)
+        if not n:
             return None
         early = _early(lab, k)
-        if early.any():
-            self._saw_early(lab[early], table[0])  # table[0]: the sender's own bit
+        n_early = _nz(early)
+        if n_early:
+            self._saw_early(lab if n_early == n else lab[early], table[0])  # the sender's bit
+            if n_early == n:
+                return None
         old = ~early & (lab[:, 1] >= k - KEEP_SCANS)
-        if not old.any():
+        n_old = _nz(old)
+        if not n_old:
             return None
-        lo = lab[old]
         words = self.words
-        m = _fit(as_words(masks)[old], words)  # bits beyond the network's: no stamper
+        m = as_words(masks)
+        lo, m = (lab, m) if n_old == n else (lab[old], m[old])
+        m = _fit(m, words)  # bits beyond the network's: no stamper
         origin = lo[:, 0] & ORIGIN_MASK
         shared = origin == SHARED_ORIGIN
-        claim = (m if shared.all() else
+        claim = (m if _nz(shared) == n_old else
                  np.where(shared[:, None], m, origin_words(origin, words)))
-        h = (k - lo[:, 1] + 1) * self.rounds + rnd
-        far = claim & table[np.minimum(np.maximum(h, 0), len(table) - 1)] & ~self._near
-        ok = far.any(axis=1)  # vouched by a far stamper: not looked up
-        if ok.all():
+        # hops since the label's scan: (k - scan + 1) rounds + rnd, at least 2 for these rows
+        h = (k + 1 + rnd) - lo[:, 1] if self.rounds == 1 else (k - lo[:, 1] + 1) * self.rounds + rnd
+        if rnd < 0:
+            h = np.maximum(h, 0)
+        far = claim & self._far[sender][np.minimum(h, len(table) - 1)]
+        ok = _any_rows(far)  # vouched by a far stamper: not looked up
+        if _nz(ok) == n_old:
             return None
-        seen = np.zeros((len(lo), words), dtype=np.int64)
+        seen = np.zeros((n_old, words), dtype=np.int64)
         seen[~ok] = self._seen(lo[~ok])
-        ok |= (claim & seen).any(axis=1)
-        if not ok.all():  # a stamp moved a scan later (uncorroborated), published after that
-            moved = np.zeros(len(lo), dtype=bool)
-            moved[~ok] = self._seen(lo[~ok] - np.array([0, 1, 0])).any(axis=1)
+        ok |= _any_rows(claim & seen)
+        if _nz(ok) < n_old:  # a stamp moved a scan later (uncorroborated), published after that
+            moved = np.zeros(n_old, dtype=bool)
+            moved[~ok] = _any_rows(self._seen(lo[~ok] - np.array([0, 1, 0])))
             ok |= moved
-        if ok.all():
+        if _nz(ok) == n_old:
             return None
         self.backdated += 1
         bad = np.zeros(len(lab), dtype=bool)
@@ -443,7 +491,7 @@ class LabelSupport:
         """``(n, W)`` bits of the peers seen publishing each of ``lab (n, 3)`` by its scan."""
         seen = np.zeros((len(lab), self.words), dtype=np.int64)
         if len(self._early) and len(lab):
-            hit, pos = keys_find(self._early, label_keys(lab))
+            hit, pos = _find_rows(self._early, lab, self._rows("early", self._early))
             seen[hit] = self._early_bits[pos[hit]]
         return seen
 
@@ -452,14 +500,16 @@ class LabelSupport:
         before their scan."""
         if not len(lab):
             return
-        keys = unique_keys(label_keys(lab))  # sorted, each once
-        if len(self._early):  # the known ones take the bit in place, the others go in at
-            hit, pos = keys_find(self._early, keys)  # their places (no re-sort of the store)
-            if hit.any():
+        if len(self._early):  # the known ones take the bit in place (a row twice: the same
+            # OR), the others go in at their places (no re-sort of the store)
+            hit, pos = _find_rows(self._early, lab, self._rows("early", self._early))
+            n_hit = _nz(hit)
+            if n_hit:
                 self._early_bits[pos[hit]] |= bit
-                keys = keys[~hit]
-            if not len(keys):
-                return
+                if n_hit == len(lab):
+                    return
+                lab = lab[~hit]
+            keys = unique_keys(label_keys(lab)) if len(lab) > 1 else label_keys(lab)
             at = np.searchsorted(self._early, keys) + np.arange(len(keys))  # in the result
             rest = np.ones(len(self._early) + len(keys), dtype=bool)
             rest[at] = False  # np.insert's arrays, without its Python-side checks
@@ -469,6 +519,7 @@ class LabelSupport:
             bits[at], bits[rest] = bit, self._early_bits
             self._early, self._early_bits = early, bits
         else:
+            keys = unique_keys(label_keys(lab))  # sorted, each once
             self._early, self._early_bits = keys, np.tile(bit, (len(keys), 1))
 
     def mask_of(self, labels: np.ndarray) -> np.ndarray:
@@ -483,14 +534,15 @@ class LabelSupport:
 
     def _find(self, lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each of ``lab (n, 3)`` is in the store (non-empty) and where: ``(n,)``
-        bool and index. Few rows against a small store: every pair compared at once (a
-        structured searchsorted costs more there); else a binary search."""
-        if len(lab) * len(self.keys) <= FIND_PAIRS:  # rows equal as 24 bytes: a C compare
-            eq = (np.ascontiguousarray(lab).view(_ROW).reshape(-1)[:, None]
-                  == self.keys.view(_ROW)[None, :])
-            return eq.any(axis=1), eq.argmax(axis=1)
-        pos = np.searchsorted(self.keys, label_keys(lab)).clip(max=len(self.keys) - 1)
-        return (_columns(self.keys)[pos] == lab).all(axis=1), pos
+        bool and index (:func:`_find_rows`)."""
+        return _find_rows(self.keys, lab, self._rows("keys", self.keys))
+
+    def _rows(self, store: str, keys: np.ndarray) -> np.ndarray:
+        """``keys`` of ``store`` as :data:`_ROW` values, made once per array (:attr:`_views`)."""
+        got = self._views.get(store)
+        if got is None or got[0] is not keys:
+            got = self._views[store] = (keys, keys.view(_ROW))
+        return got[1]
 
     def counts(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` holders known of each of ``labels (n, 3)`` (0: own labels)."""
@@ -502,13 +554,13 @@ class LabelSupport:
         the usual case up to 39 peers: protocol 2 as before)."""
         lab = as_labels(labels)
         m = self.mask_of(lab)
-        if not m.any():
+        if not _nz(m):
             return lab, None
         out = lab
-        if m[:, 0].any():
+        if _nz(m[:, 0]):
             out = lab.copy()
             out[:, 0] |= (m[:, 0] & WORD) << SUPPORT_SHIFT
-        extra = m[:, 1:] if m.shape[1] > 1 and m[:, 1:].any() else None
+        extra = m[:, 1:] if m.shape[1] > 1 and _nz(m[:, 1:]) else None
         return out, extra
 
     def prune(self, k: int, keep: int = KEEP_SCANS) -> None:
@@ -516,11 +568,11 @@ class LabelSupport:
         after it: a neighbour's label of a far-future birth scan (no honest estimate has one)
         would otherwise stay for the run, and a sender could grow the store without bound."""
         ok = np.abs(self.scans - k) <= keep
-        if not ok.all():
+        if _nz(ok) < len(ok):
             self.keys, self.masks, self.scans = self.keys[ok], self.masks[ok], self.scans[ok]
         if len(self._early):
             ok = np.abs(_columns(self._early)[:, 1] - k) <= keep
-            if not ok.all():
+            if _nz(ok) < len(ok):
                 self._early, self._early_bits = self._early[ok], self._early_bits[ok]
 
 
