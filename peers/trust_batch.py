@@ -422,8 +422,8 @@ def _tests(args: list[tuple]) -> list[list[float]]:
     config and number of inputs) at once: :func:`peers.trust_checks.neighbour_tests_many`
     of them stacked (every peer's neighbours in one computation, the one formula)."""
     def many(group: list[tuple]) -> list[list[float]]:
-        def stack(i: int) -> np.ndarray | None:
-            return None if group[0][i] is None else np.stack([a[i] for a in group])
+        def stack(i: int) -> np.ndarray | None:  # np.array: np.stack's values, less setup
+            return None if group[0][i] is None else np.array([a[i] for a in group], float)
         return neighbour_tests_many(group[0][0], *(stack(i) for i in range(1, 7))).tolist()
     return _by_key(args, lambda a: (_config_key(a[0]), len(a[6]), a[2] is None, a[5] is None),
                    many)

@@ -128,10 +128,23 @@ def neighbour_tests_many(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None,
     if refs is None:
         return np.zeros((len(w), 0))
     has, cross, square, ref_mass, ref_tm, shape = refs
-    value = own_tests_many(cfg, L, L0, mass, tm)  # (g, J)
-    j = np.arange(1, w.shape[1])
-    t_loo = divergence_tests(cfg, L[:, j, j], cross, square, mass[:, j], ref_mass, tm[:, j],
-                             ref_tm, shape=shape)
+    # the tests against own (own_tests_many's) and against the leave-one-out references in
+    # one elementwise computation, stacked on a first axis: the same numbers, half the calls
+    j = _after_first(w.shape[1])
+    g, J = cross.shape
+
+    def two(own: np.ndarray, loo: np.ndarray) -> np.ndarray:
+        out = np.empty((2, g, J))
+        out[0] = own
+        out[1] = loo
+        return out
+
+    if L0 is not None:
+        shape = two(_cs_arrays(L0[:, j, 0], L0[:, j, j], L0[:, :1, 0], finite=True), shape)
+    t = divergence_tests(cfg, L[:, j, j], two(L[:, j, 0], cross), two(L[:, :1, 0], square),
+                         mass[:, j], two(mass[:, :1], ref_mass), tm[:, j], two(tm[:, :1], ref_tm),
+                         shape=shape)
+    value, t_loo = t[0], t[1]
     value = np.where(has & (t_loo < value), t_loo, value)  # min(t_own, t_loo)
     return _majority(cfg, L, L0, mass, tm, U, w, value) if cfg.majority else value
 
@@ -215,11 +228,30 @@ def _medians(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
     V = np.sort(np.where(mask, values, np.inf), axis=-1)  # the marked first, in order
     c = mask.sum(axis=-1)[..., None]
     h = c // 2
-    hi = np.take_along_axis(V, np.minimum(h, V.shape[-1] - 1), axis=-1)
-    lo = np.take_along_axis(V, np.maximum(h - 1, 0), axis=-1)
+    m = V.shape[-1]
+    flat, at = V.reshape(-1), _row_starts(V.size // m if m else 0, m).reshape(c.shape)
+    hi = flat[at + np.minimum(h, m - 1)]  # np.take_along_axis's, without its Python setup
+    lo = flat[at + np.maximum(h - 1, 0)]
     with np.errstate(invalid="ignore"):
         med = np.where(c % 2 == 1, hi, (lo + hi) / 2.0)
     return np.where(c > 0, med, np.nan)[..., 0]
+
+
+@functools.lru_cache(maxsize=256)
+def _row_starts(rows: int, m: int) -> np.ndarray:
+    """``m * arange(rows)`` (read-only, made once per shape): where each row of ``m`` starts
+    in a flattened ``(rows, m)`` array (:func:`_medians`' picks)."""
+    out = np.arange(rows, dtype=np.intp) * m
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _after_first(n: int) -> np.ndarray:
+    """``np.arange(1, n)`` (read-only, made once per ``n``): the neighbours' indices."""
+    out = np.arange(1, n)
+    out.flags.writeable = False
+    return out
 
 
 @functools.lru_cache(maxsize=64)
