@@ -21,16 +21,22 @@ found nothing); ``--every-round`` adds a host-batched run with it off.
     python benchmarks/bench_trust_cost.py --filter gmphd  # GM-PHD peers (bench_fifty's kind)
     python benchmarks/bench_trust_cost.py --filter gmphd --ops   # the host-batched tests split
     python benchmarks/bench_trust_cost.py --filter gmphd --against 5d4d6eb --repeats 4
+    python benchmarks/bench_trust_cost.py --filter gmphd --against 3f0c1a2 --batch 12
 
 ``--ops``: the host-batched runs' trust tests split by what a host computes stacked (each
 request kind of :data:`peers.trust_batch.TOGETHER`, thread CPU per peer-scan and calls) and
 the rest (the peers' generators and the lockstep between them: per-peer Python).
 
 ``--against REV``: instead, per repeat trust off, then the host-batched run with REV's stacked
-requests (``peers/trust_batch.py``'s :data:`TOGETHER` at REV, the rest of the tree as now) and
-with today's, in alternating order in this one process; per run the CPU and the trust tests'
-own CPU per peer-scan, whether the two published the same fused states and trust summaries,
-then the medians and the ratios today / REV.
+requests (``peers/trust_batch.py``'s :data:`TOGETHER` at REV with ``peers/trust_checks.py``
+at REV, the rest of the tree as now) and with today's, in alternating order in this one
+process; per run the CPU and the trust tests' own CPU per peer-scan, whether the two
+published the same fused states and trust summaries, then the medians and the ratios
+today / REV.
+
+``--batch N``: a host-batched pass tests at most ``N`` rounds together (the twin's pass holds
+every peer's rounds; a real host of 25 peers batches 12-15 a pass), the rest in further
+calls of ``N``: where the stacked requests' fixed cost a call shows.
 """
 
 from __future__ import annotations
@@ -63,11 +69,13 @@ from benchmarks.bench_network import load_average, scenario_text
 
 
 def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = None,
-            once: bool | None = None, together: bool = True, kind: str = "lmb"):
+            once: bool | None = None, together: bool = True, kind: str = "lmb",
+            batch: int | None = None):
     """One twin run (``lie``: ``fusion.lie``, e.g. ``p02:biased``; ``once``: the peers'
     :attr:`TrustConfig.test_once`, None: the default; ``together``: the rounds' trust
-    tests host-batched, else each on its own; ``kind``: ``network.filter``): CPU ms per
-    peer-scan, the fused states and the trust summaries."""
+    tests host-batched, else each on its own; ``kind``: ``network.filter``; ``batch``: at
+    most this many rounds a :func:`weigh_together` call): CPU ms per peer-scan, the fused
+    states and the trust summaries."""
     over = {"network.filter": kind, "fusion.trust": trust_on}
     if lie:
         over["fusion.lie"] = lie
@@ -81,7 +89,7 @@ def one_run(path: Path, trust_on: bool, n: int, scans: int, lie: str | None = No
                                                            test_once=once)
     twin.FusionBatch = lambda: FusionBatch(trust_together=together)  # the twin's batch
     spent = [0.0]
-    batching.weigh_together = _timed(weigh_together, spent)
+    batching.weigh_together = _timed(_chunked(weigh_together, batch), spent)
     Trust.weigh = _timed(WEIGH, spent)
     try:
         t0 = time.process_time()
@@ -136,6 +144,15 @@ def print_ops(n: int, scans: int) -> None:
 :meth:`Trust.weigh` and :func:`peers.trust_batch.weigh_together`)."""
 
 
+def _chunked(f, batch: int | None):
+    """``f`` (:func:`weigh_together`) called on at most ``batch`` rounds at a time (None:
+    all at once), the results in order."""
+    if batch is None:
+        return f
+    return lambda calls: [w for lo in range(0, len(calls), batch)
+                          for w in f(calls[lo:lo + batch])]
+
+
 def _timed(f, spent: list[float]):
     """``f`` with its process CPU time added to ``spent[0]`` (a handful of calls a scan)."""
     def timed(*args, **kwargs):
@@ -156,18 +173,32 @@ def same_tracks(a: dict, b: dict) -> bool:
 
 def together_at(rev: str) -> dict:
     """:data:`peers.trust_batch.TOGETHER` of ``peers/trust_batch.py`` at git revision ``rev``
-    (imported under another name; what it imports, as now)."""
+    with the stacked computations of ``peers/trust_checks.py`` at ``rev`` (both imported
+    under other names; what they import, as now)."""
     root = Path(__file__).resolve().parents[1]
+    checks = _module_at(root, rev, "peers/trust_checks.py", "_trust_checks_at_rev")
     text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:peers/trust_batch.py"],
                           capture_output=True, text=True, check=True).stdout
+    text = text.replace("from sensornet.peers.trust_checks import",
+                        f"from {checks.__name__} import")
     module = types.ModuleType("_trust_batch_at_rev")
     sys.modules[module.__name__] = module
     exec(compile(text, f"{rev}:peers/trust_batch.py", "exec"), module.__dict__)
     return dict(module.TOGETHER)
 
 
+def _module_at(root: Path, rev: str, path: str, name: str) -> types.ModuleType:
+    """``path`` at git revision ``rev``, imported as module ``name``."""
+    text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{path}"],
+                          capture_output=True, text=True, check=True).stdout
+    module = types.ModuleType(name)
+    sys.modules[name] = module
+    exec(compile(text, f"{rev}:{path}", "exec"), module.__dict__)
+    return module
+
+
 def against(path: Path, rev: str, n: int, scans: int, repeats: int, lie: str | None,
-            kind: str) -> None:
+            kind: str, batch: int | None = None) -> None:
     """``--against REV``: trust off, REV's stacked requests and today's, alternated."""
     now, old = dict(trust_batch.TOGETHER), together_at(rev)
     ms: dict[str, list[float]] = {"off": [], rev: [], "now": []}
@@ -176,14 +207,14 @@ def against(path: Path, rev: str, n: int, scans: int, repeats: int, lie: str | N
           flush=True)
     try:
         for rep in range(repeats):
-            v, _, _ = one_run(path, False, n, scans, lie, kind=kind)
+            v, _, _ = one_run(path, False, n, scans, lie, kind=kind, batch=batch)
             ms["off"].append(v)
             print(f"| off | {rep + 1} | {v:.3f} | |", flush=True)
             got = {}
             for side in ((rev, "now") if rep % 2 == 0 else ("now", rev)):
                 trust_batch.TOGETHER.clear()
                 trust_batch.TOGETHER.update(old if side == rev else now)
-                v, tracks, summ = one_run(path, True, n, scans, lie, kind=kind)
+                v, tracks, summ = one_run(path, True, n, scans, lie, kind=kind, batch=batch)
                 got[side] = (tracks, summ)
                 ms[side].append(v)
                 tests[side].append(TESTS[-1])
@@ -220,7 +251,12 @@ def main() -> None:
     p.add_argument("--against", metavar="REV", default=None,
                    help="only trust off, REV's host-batched stacked requests and today's, "
                         "alternated in this process")
+    p.add_argument("--batch", type=int, default=None, metavar="N",
+                   help="at most N rounds tested together a call (a host of 25 peers: "
+                        "12-15 a pass); default all of a pass")
     args = p.parse_args()
+    if args.batch is not None and args.batch < 1:
+        p.error("--batch must be at least 1")
     n, scans, kind = args.peers, args.scans, args.filter
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
@@ -233,17 +269,19 @@ def main() -> None:
             except subprocess.CalledProcessError:
                 p.error(f"--against {args.against}: not a revision of this repository")
             print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans: trust "
-                  f"off, {args.against}'s stacked trust requests and today's; load average "
-                  f"{load_average()}")
-            against(path, args.against, n, scans, args.repeats, args.lie, kind)
+                  f"off, {args.against}'s stacked trust requests and today's"
+                  + (f", at most {args.batch} rounds a call" if args.batch else "")
+                  + f"; load average {load_average()}")
+            against(path, args.against, n, scans, args.repeats, args.lie, kind, args.batch)
             return
         ms: dict[str, list[float]] = {"off": [], "on (per peer)": [], "on (host-batched)": []}
-        print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans")
+        print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans"
+              + (f", at most {args.batch} rounds a call" if args.batch else ""))
         print("| run | rep | CPU ms/peer-scan | of which trust tests |\n|---|---:|---:|---:|",
               flush=True)
         tests: dict[str, list[float]] = {}
         for rep in range(args.repeats):
-            v, _, _ = one_run(path, False, n, scans, args.lie, kind=kind)
+            v, _, _ = one_run(path, False, n, scans, args.lie, kind=kind, batch=args.batch)
             ms["off"].append(v)
             print(f"| off | {rep + 1} | {v:.2f} | |", flush=True)
             v, tracks_one, sum_one = one_run(path, True, n, scans, args.lie, together=False,
@@ -253,7 +291,8 @@ def main() -> None:
             print(f"| on (per peer) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |", flush=True)
             saved = _count_ops() if args.ops else None
             try:
-                v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind)
+                v, tracks_new, sum_new = one_run(path, True, n, scans, args.lie, kind=kind,
+                                                 batch=args.batch)
             finally:
                 if saved is not None:
                     trust_batch.TOGETHER.update(saved)
@@ -269,7 +308,8 @@ def main() -> None:
                   f"({sum(len(v['changes']) for v in sum_new.values())} state changes)",
                   flush=True)
             if args.every_round:
-                v, _, sum_all = one_run(path, True, n, scans, args.lie, once=False, kind=kind)
+                v, _, sum_all = one_run(path, True, n, scans, args.lie, once=False, kind=kind,
+                                        batch=args.batch)
                 ms.setdefault("on (every round)", []).append(v)
                 print(f"| on (every round) | {rep + 1} | {v:.2f} | {TESTS[-1]:.3f} |",
                       flush=True)
