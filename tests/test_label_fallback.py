@@ -176,18 +176,22 @@ def test_batched_equals_one_by_one_with_the_fallback_and_keep():
 
 def test_the_options_default_per_peer_kind():
     """Auto (-1, the default) resolves per kind where the peers are built
-    (``sim.run.peers.consensus_options``): on for LMB peers, off for GM-PHD peers (whose
-    switches rose on real traffic); an explicit 0 turns each off for LMB peers, 1 on for
-    GM-PHD peers, each key on its own."""
+    (``sim.run.peers.consensus_options``): on for LMB peers with rotating radars (paris-8),
+    off for GM-PHD peers (whose switches rose on real traffic) and for LMB peers of a
+    synchronous scenario (seed 000: label agreement fell on an evaluation run); an explicit
+    0 turns each off for LMB peers, 1 on for the others, each key on its own."""
     from sensornet.sim.run.peers import consensus_options
     from sensornet.sim.scenario import load_scenario
 
-    def got(**sets):
-        scn = load_scenario("paris-8", overrides={f"network.{k}" if k == "filter"
-                                                  else f"fusion.{k}": v
-                                                  for k, v in sets.items()})
-        o = consensus_options(scn, "cdg")
+    def got(scenario="paris-8", **sets):
+        scn = load_scenario(scenario, overrides={f"network.{k}" if k == "filter"
+                                                 else f"fusion.{k}": v
+                                                 for k, v in sets.items()})
+        o = consensus_options(scn, scn.sensor_names[0])
         return o.label_fallback, o.label_keep
+
+    assert got("seed000", filter="lmb") == (False, False)
+    assert got("seed000", filter="lmb", label_fallback=1, label_keep=1) == (True, True)
 
     assert load_scenario("paris-8").fusion.label_fallback == -1
     assert load_scenario("paris-8").fusion.label_keep == -1

@@ -127,10 +127,12 @@ class FusionSpec:
                                          "fresh one when a slow radar's track of its "
                                          "neighbour moved onto it (docs/real-traffic.md, "
                                          "\"The switches traced\"); 1: on, 0: off, -1 "
-                                         "(auto): on for LMB peers, off for the others "
-                                         "(the GM-PHD peers' switches rose on real "
-                                         "traffic: docs/real-traffic.md, \"Young fused "
-                                         "tracks keep their labels\").",
+                                         "(auto): on for LMB peers with rotating radars "
+                                         "(a `rotation_period`), off for the others (the "
+                                         "GM-PHD peers' switches rose on real traffic, "
+                                         "docs/real-traffic.md, \"Young fused tracks keep "
+                                         "their labels\"; synchronous LMB cells: "
+                                         "docs/labelled-tracking.md).",
                                  check=Bound(-1, 1))
     label_keep: int = option(-1, doc="Labels of fused tracks (labelled peers): a fused "
                                      "row paired with a label this peer reported the "
@@ -143,8 +145,9 @@ class FusionSpec:
                                      "radar's earlier-born track beside a young aircraft "
                                      "took its reported row by the earliest-birth rule "
                                      "(docs/real-traffic.md, \"The switches traced\"); 1: "
-                                     "on, 0: off, -1 (auto): on for LMB peers, off for the "
-                                     "others.", check=Bound(-1, 1))
+                                     "on, 0: off, -1 (auto): on for LMB peers with rotating "
+                                     "radars, off for the others (as `label_fallback`).",
+                             check=Bound(-1, 1))
     existence_own: int = option(0, doc="Extraction of fused tracks (LMB peers with "
                                        "`existence_prior` on and an x-y `linear` sensor "
                                        "without rotation): a young track the pool raised "
@@ -176,7 +179,8 @@ class FusionSpec:
                                             "evidence against it (issue 34, "
                                             "docs/real-traffic.md, \"Why the far radars "
                                             "confirm late\"); 1: on, 0: off, -1 (auto): on "
-                                            "for LMB peers, off for the others; it acts "
+                                            "for LMB peers with rotating radars, off for "
+                                            "the others (as `label_fallback`); it acts "
                                             "only on sensors with a `rotation_period`.",
                                     check=Bound(-1, 1))
     stamp_twins: int = option(-1, doc="Extraction of fused tracks (labelled peers with a "
