@@ -68,10 +68,10 @@ def test_one_input_or_no_rotation_changes_nothing():
 
 
 def test_the_option_reaches_the_peers_from_the_scenario():
-    """Auto (-1, the default): on for LMB peers, off for GM-PHD peers; 0 turns it off for LMB
-    peers and 1 on for GM-PHD peers. On, every peer gets every radar's revisit from the shared
-    scenario (rotation period / scan period), its own and its neighbours'; without rotating
-    radars it holds none."""
+    """Auto (-1, the default): on for LMB peers with rotating radars, off for GM-PHD peers; 0
+    turns it off for LMB peers and 1 on for GM-PHD peers. On, every peer gets every radar's
+    revisit from the shared scenario (rotation period / scan period), its own and its
+    neighbours'; without rotating radars it holds none."""
     scn = load_scenario("paris-8", overrides={"network.filter": "gmphd"})
     assert scn.fusion.existence_revisit == -1
     assert consensus_options(scn, "cdg").existence_revisit == ()
