@@ -159,10 +159,9 @@ def _references(L: np.ndarray, L0: np.ndarray | None, mass: np.ndarray, tm: np.n
     J = n - 1
     if J == 0:
         return None
-    W = np.repeat(w[:, None, :], J, axis=1)  # (g, J, n): row i leaves out input i + 1
-    W[:, np.arange(J), np.arange(1, J + 1)] = 0.0
+    W = np.where(_leave_out(n), w[:, None, :], 0.0)  # (g, J, n): row i leaves out input i + 1
     tot = W.sum(axis=2)
-    has = (tot > 0) & (np.count_nonzero(W, axis=2) > 1)  # the others besides own
+    has = (tot > 0) & ((W != 0).sum(axis=2) > 1)  # the others besides own (count_nonzero)
     W = W / np.where(has, tot, 1.0)[..., None]
     LW = _log(W)
     cross, square = _loo_stacked(L, LW)
@@ -184,11 +183,9 @@ def _majority(cfg: TrustConfig, L: np.ndarray, L0: np.ndarray | None, mass: np.n
     (:attr:`TrustConfig.median_test`; else its statistic) less the median of theirs among
     themselves (:func:`pair_tests`), at least 0."""
     n = w.shape[1]
-    J = n - 1
-    j = np.arange(1, n)
+    j = _after_first(n)
     pair = pair_tests(cfg, L, mass, tm, U, L0)  # (g, n, n)
-    others = np.repeat((w > 0)[:, None, :], J, axis=1)  # (g, J, n): w > 0 but j
-    others[:, np.arange(J), j] = False
+    others = (w > 0)[:, None, :] & _leave_out(n)  # (g, J, n): w > 0 but j
     count = others.sum(axis=2)
     rows, cols = triu_indices(n)
     sub = _medians(pair[:, rows, cols][:, None, :], others[:, :, rows] & others[:, :, cols])
@@ -242,6 +239,16 @@ def _row_starts(rows: int, m: int) -> np.ndarray:
     """``m * arange(rows)`` (read-only, made once per shape): where each row of ``m`` starts
     in a flattened ``(rows, m)`` array (:func:`_medians`' picks)."""
     out = np.arange(rows, dtype=np.intp) * m
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _leave_out(n: int) -> np.ndarray:
+    """``(n - 1, n)`` bool (read-only, made once per ``n``): row ``i`` all but input
+    ``i + 1`` (each neighbour's leave-one-out row)."""
+    out = np.ones((n - 1, n), bool)
+    out[np.arange(n - 1), np.arange(1, n)] = False
     out.flags.writeable = False
     return out
 
