@@ -37,12 +37,20 @@ today / REV.
 ``--batch N``: a host-batched pass tests at most ``N`` rounds together (the twin's pass holds
 every peer's rounds; a real host of 25 peers batches 12-15 a pass), the rest in further
 calls of ``N``: where the stacked requests' fixed cost a call shows.
+
+``--young N``: instead, trust on and host-batched, with CPython's generation-0 collection
+threshold and with ``N`` (a host's :data:`peers.host.YOUNG_GC`), alternated in this one
+process, the heap frozen first as a host does (``gc.freeze()``): per run the CPU and the time
+inside collections (``gc.callbacks``) per peer-scan and the process RSS, then the medians.
+
+    python benchmarks/bench_trust_cost.py --filter gmphd --young 10000 --repeats 4
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import gc
 import statistics
 import subprocess
 import sys
@@ -234,6 +242,61 @@ def against(path: Path, rev: str, n: int, scans: int, repeats: int, lie: str | N
           f"{t['now'] / t[rev]:.3f}); load average {load_average()} at the end")
 
 
+def young(path: Path, size: int, n: int, scans: int, repeats: int, lie: str | None,
+          kind: str, batch: int | None) -> None:
+    """``--young N``: CPython's generation-0 threshold and ``size``, alternated."""
+    base = gc.get_threshold()
+    spent = [0.0, 0, 0.0]  # seconds in collections, collections, the current one's start
+
+    def count(phase: str, info: dict) -> None:
+        if phase == "start":
+            spent[2] = time.thread_time()
+        else:
+            spent[0] += time.thread_time() - spent[2]
+            spent[1] += 1
+
+    ms: dict[int, list[float]] = {base[0]: [], size: []}
+    in_gc: dict[int, list[float]] = {base[0]: [], size: []}
+    print("| gen-0 threshold | rep | CPU ms/peer-scan | in collections | collections | RSS MiB |"
+          "\n|---:|---:|---:|---:|---:|---:|", flush=True)
+    gc.callbacks.append(count)
+    try:
+        for rep in range(repeats):
+            for t0 in ((base[0], size) if rep % 2 == 0 else (size, base[0])):
+                gc.collect()
+                gc.freeze()
+                gc.set_threshold(t0, *base[1:])
+                spent[:2] = [0.0, 0]
+                try:
+                    v, _, _ = one_run(path, True, n, scans, lie, kind=kind, batch=batch)
+                finally:
+                    gc.set_threshold(*base)
+                    gc.unfreeze()
+                g = spent[0] * 1e3 / n / scans
+                ms[t0].append(v)
+                in_gc[t0].append(g)
+                print(f"| {t0} | {rep + 1} | {v:.3f} | {g:.4f} | {spent[1]} | {_rss_mib():.0f} |",
+                      flush=True)
+    finally:
+        gc.callbacks.remove(count)
+    a, b = base[0], size
+    med = {k: statistics.median(v) for k, v in ms.items()}
+    g = {k: statistics.median(v) for k, v in in_gc.items()}
+    print(f"\nmedians: {a} {med[a]:.3f} ms/peer-scan ({g[a]:.4f} in collections), {b} "
+          f"{med[b]:.3f} ({g[b]:.4f}); {b} / {a} {med[b] / med[a]:.3f}, pairs "
+          f"{[round(y / x, 3) for x, y in zip(ms[a], ms[b], strict=True)]}; load average "
+          f"{load_average()} at the end")
+
+
+def _rss_mib() -> float:
+    """This process's resident memory (Linux ``/proc/self/statm``; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * 4096 / 2**20
+    except OSError:
+        return float("nan")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--peers", type=int, default=50)
@@ -254,13 +317,24 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=None, metavar="N",
                    help="at most N rounds tested together a call (a host of 25 peers: "
                         "12-15 a pass); default all of a pass")
+    p.add_argument("--young", type=int, default=None, metavar="N",
+                   help="only trust on, CPython's generation-0 collection threshold and N "
+                        "alternated (a host's peers.host.YOUNG_GC)")
     args = p.parse_args()
     if args.batch is not None and args.batch < 1:
         p.error("--batch must be at least 1")
+    if args.young is not None and args.young < 1:
+        p.error("--young must be at least 1")
     n, scans, kind = args.peers, args.scans, args.filter
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
+        if args.young:
+            print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans, trust on, "
+                  f"host-batched: generation-0 threshold {gc.get_threshold()[0]} and "
+                  f"{args.young}; load average {load_average()}")
+            young(path, args.young, n, scans, args.repeats, args.lie, kind, args.batch)
+            return
         if args.against:
             try:
                 subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]),
