@@ -70,9 +70,10 @@ together (:meth:`PeerHost._prepare_scans`; default), or each in its peer's step
 YOUNG_GC = 10_000
 """The host's generation-0 collection threshold (CPython's 700): a host of many peers
 allocates many short-lived containers a scan, most dead before a larger threshold is
-reached; on the 50-peer GM-PHD twin (4 alternated pairs, load 6-11) collections took
-0.058 -> 0.013 ms a peer-scan and the whole run 0.955 x; a 200-scan run's RSS peaked at
-149 MiB either way (full collections: still :mod:`peers.idle_gc`'s, counted in young ones)."""
+reached. On the 50-peer GM-PHD twin (``bench_trust_cost.py --filter gmphd --young 10000``)
+collections took 0.045-0.058 -> 0.012-0.013 ms a peer-scan (262 -> 8 a run), the whole run
+within the noise (0.955 x and 0.993 x in two runs of 4 pairs); a 200-scan run's RSS peaked
+at 149 MiB either way (full collections: still :mod:`peers.idle_gc`'s)."""
 
 CONTROL = -1
 """The slot of the host's own items on its queue (commands, a signal's wake-up)."""
