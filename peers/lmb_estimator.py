@@ -414,7 +414,10 @@ class LmbEstimator:
                 shared_ok = stamp_shared(labels, keys, alike, new | alike, k)
                 labels[edge & shared_ok, 1] += 1  # its plot near a cell edge: the next scan
                 new |= alike & ~shared_ok
-            labels[new] = new_labels(self.origin, k, int(new.sum()), PUBLISHED_BASE)
+            held = labels[~new & (labels[:, 0] == self.origin) & (labels[:, 1] == k)
+                          & (labels[:, 2] >= PUBLISHED_BASE), 2]  # moved here (take_moves)
+            first = PUBLISHED_BASE if not len(held) else max(PUBLISHED_BASE, held.max() + 1)
+            labels[new] = new_labels(self.origin, k, int(new.sum()), first)
             self._stamped = labels[new | shared_ok]
             self.state = LmbState(LabelledBernoulliSet.trusted(labels, t.existence, t.weights,
                                                                t.means, t.covs, t.owner),
