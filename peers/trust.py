@@ -310,7 +310,7 @@ class Trust(ScanTests):
     def _single_steps(self, ref: GaussianMixture, mix: GaussianMixture) -> Generator:
         """:meth:`_single` as requests: the overlaps (:func:`tracking.divergence.log_overlaps`,
         centred too with :attr:`TrustConfig.location_only`, as :func:`peers.trust_checks.
-        shape_overlaps`) and masses computed with the host's other requests (the same
+        centred`) and masses computed with the host's other requests (the same
         numbers: :func:`peers.trust_batch.run_together`)."""
         L = yield ("overlaps", [ref, mix])
         L0 = (yield ("overlaps", centred([ref, mix]))) if self.cfg.location_only else None

@@ -18,7 +18,7 @@ class TrustConfig:
     track died a scan before the others') cannot quarantine on its own; a lie keeps it up."""
     location_only: bool = False
     """The divergence test's ``D_CS`` less the divergence of the same two densities with
-    every component moved to the origin (:func:`peers.trust_checks.shape_overlaps`): for
+    every component moved to the origin (:func:`peers.trust_checks.centred`): for
     two Gaussians that leaves half the squared Mahalanobis distance of their means in the
     sum of their covariances, whose honest mean is half the dimension whatever the
     covariances' shapes. The shape part is not evidence of a lie: two honest radars that
