@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import pickle
 import statistics
 import subprocess
 import sys
@@ -77,32 +78,37 @@ def use(methods: dict[type, dict[str, object]], other: dict[type, dict[str, obje
             setattr(c, k, f)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def add_arguments(p: argparse.ArgumentParser, pairs: int) -> None:
+    """The options both label benchmarks take (this one and bench_label_support.py)."""
     p.add_argument("--against", metavar="REV", required=True, help="the git revision to compare")
-    p.add_argument("--pairs", type=int, default=4, help="alternated pairs (default 4)")
+    p.add_argument("--pairs", type=int, default=pairs, help=f"alternated pairs (default {pairs})")
     p.add_argument("--scans", type=int, default=100, help="scans per run (default 100)")
     p.add_argument("--peers", type=int, default=50)
     p.add_argument("--degree", type=int, default=4)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="a scenario override (repeatable), e.g. fusion.trust=false")
-    args = p.parse_args(argv)
-    try:
-        sides = method_sets(args.against)
-    except subprocess.CalledProcessError as exc:
-        p.error(f"--against {args.against}: {exc.stderr.strip() or 'not a revision'}")
+
+
+def twin_world(args: argparse.Namespace, kind: str) -> tuple[object, object]:
+    """The 50-peer twin's scenario (degree ``--degree``, L = 2, ``kind`` peers) and its run 0,
+    generated once outside the timed part."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(args.peers, args.degree, args.scans, rounds=2, speed=10.0))
         scn = load_scenario(str(path), overrides=parse_overrides(
-            ["network.filter=gmphd", *args.sets]))
-    data = generate_run(scn, 0)
+            [f"network.filter={kind}", *args.sets]))
+    return scn, generate_run(scn, 0)
+
+
+def alternate(args: argparse.Namespace, scn, data, sides: dict,
+              tables: bool = False) -> tuple[dict[str, list[float]], dict[str, float], dict]:
+    """``--pairs`` twin runs of each side (REV's methods swapped in, then this tree's, the order
+    alternated a pair), each pair's CPU ms per peer-scan printed: ``(ms, mean fused OSPA, every
+    peer's pickled results tables if tables)`` per side."""
     n = args.peers
-    print(f"## label memory and confirmation, this tree against {args.against}: {n} peers, "
-          f"degree {args.degree}, 2 rounds, {args.scans} scans"
-          f"{''.join(' --set ' + x for x in args.sets)}; load average {load_average()}\n")
     ms: dict[str, list[float]] = {"rev": [], "now": []}
     ospa: dict[str, float] = {}
+    kept: dict[str, bytes] = {}
     try:
         for rep in range(args.pairs):
             for side in ("rev", "now") if rep % 2 == 0 else ("now", "rev"):
@@ -115,14 +121,38 @@ def main(argv: list[str] | None = None) -> int:
                 result = run_twin(scn, 0, peers=peers, batch=True, data=data)
                 ms[side].append((time.process_time() - t0) * 1e3 / n / args.scans)
                 ospa[side] = statistics.fmean(result.mean_ospa(q) for q in scn.sensor_names)
+                if tables:
+                    kept[side] = pickle.dumps([core.scorer.results.table(q)
+                                               for q, core in sorted(peers.items())])
             print(f"pair {rep + 1}: {args.against} {ms['rev'][-1]:.3f}, now {ms['now'][-1]:.3f} "
                   f"ms/peer-scan (load {os.getloadavg()[0]:.1f})", flush=True)
     finally:
         use(sides["now"], sides["rev"])
+    return ms, ospa, kept
+
+
+def summary(args: argparse.Namespace, ms: dict[str, list[float]], ospa: dict[str, float]) -> str:
+    """The medians, the pairs' ratios and both sides' mean fused OSPA in one line."""
     a, b = statistics.median(ms["rev"]), statistics.median(ms["now"])
     ratios = ", ".join(f"{y / x:.3f}" for x, y in zip(ms["rev"], ms["now"], strict=True))
-    print(f"\nmedian {args.against} {a:.3f}, now {b:.3f} ms/peer-scan: now/{args.against} "
-          f"{b / a:.3f} (pairs {ratios}); fused OSPA {ospa['rev']:.6f} / {ospa['now']:.6f}")
+    return (f"\nmedian {args.against} {a:.3f}, now {b:.3f} ms/peer-scan: now/{args.against} "
+            f"{b / a:.3f} (pairs {ratios}); fused OSPA {ospa['rev']:.6f} / {ospa['now']:.6f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    add_arguments(p, pairs=4)
+    args = p.parse_args(argv)
+    try:
+        sides = method_sets(args.against)
+    except subprocess.CalledProcessError as exc:
+        p.error(f"--against {args.against}: {exc.stderr.strip() or 'not a revision'}")
+    scn, data = twin_world(args, "gmphd")
+    print(f"## label memory and confirmation, this tree against {args.against}: {args.peers} "
+          f"peers, degree {args.degree}, 2 rounds, {args.scans} scans"
+          f"{''.join(' --set ' + x for x in args.sets)}; load average {load_average()}\n")
+    ms, ospa, _ = alternate(args, scn, data, sides)
+    print(summary(args, ms, ospa))
     return 0
 
 
