@@ -73,6 +73,10 @@ class Limits:
     max_name: int = 64
     max_entries: int = 256
     """Scans (origins) in one flooding forward."""
+    max_mask_words: int = 64
+    """Label holder-mask words a component (Estimate protocol 3; 39 peers a word, so 2,496
+    peers): without it one component's words could fill the message, and every label a
+    receiver stores would take that width."""
 
 
 DEFAULT_LIMITS = Limits()

@@ -212,6 +212,9 @@ def _decode_estimate(body: dict, limits: Limits, version: int) -> Estimate:
         if (len(mb) % (8 * n) if n else len(mb)) or (n and not mb):
             raise Rejected("shape", f"{len(mb)} bytes of label masks for {n} components "
                                     "(a whole number of words, at least one, a component)")
+        if n and len(mb) // (8 * n) > limits.max_mask_words:
+            raise Rejected("too-many", f"{len(mb) // (8 * n)} label mask words a component > "
+                                       f"{limits.max_mask_words}")
         masks = np.frombuffer(mb, dtype=_I8).reshape(n, -1 if n else 1).astype(np.int64)
         if n and masks.min() < 0:
             raise Rejected("field", "a label mask word is negative")

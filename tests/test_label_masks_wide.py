@@ -163,3 +163,20 @@ def test_a_fresh_own_label_sent_in_a_later_round_is_ours_first_hand():
     assert untold.refused("p1", fresh, none, 9) is not None and untold.backdated == 1
     # what sent records is first-hand publication only: no mask bit is added
     assert not told.mask_of(fresh).any()
+
+
+def test_mask_words_beyond_the_limit_are_refused_before_they_are_read():
+    """One component's words could fill the message (and widen every label a receiver stores):
+    more than ``Limits.max_mask_words`` a component is refused as ``too-many``; at the limit
+    it decodes."""
+    from sensornet.protocol.codec import DEFAULT_LIMITS
+    lab = np.zeros((2, 3), dtype=np.int64)
+    cap = DEFAULT_LIMITS.max_mask_words
+    at = wire_encode(Estimate("s1", 4, _mixture(2), labels=lab,
+                              label_masks=np.ones((2, cap), dtype=np.int64)))
+    assert wire_decode(at).label_masks.shape == (2, cap)
+    over = wire_encode(Estimate("s1", 4, _mixture(2), labels=lab,
+                                label_masks=np.ones((2, cap + 1), dtype=np.int64)))
+    with pytest.raises(Rejected) as e:
+        wire_decode(over)
+    assert e.value.reason == "too-many"
