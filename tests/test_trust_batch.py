@@ -30,7 +30,6 @@ from sensornet.peers.trust_checks import (
     target_mass,
 )
 from sensornet.peers.trust_record import NeighbourTrust, push_window, stacked_window
-from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.divergence import (
@@ -42,6 +41,7 @@ from sensornet.tracking.mixture import GaussianMixture
 
 from benchmarks import trust_before
 from benchmarks.bench_network import scenario_text
+from tests.trust_twin import run_with_batch
 
 
 def _mixture(rng: np.random.Generator, size: int, d: int = 4,
@@ -437,16 +437,7 @@ def twin_runs():
                 made.append(FusionBatch(trust_together=together))
                 return made[-1]
 
-            saved = twin.FusionBatch
-            twin.FusionBatch = batch
-            try:
-                res = twin.run_twin(scn, 0, peers=peers, batch=True)
-            finally:
-                twin.FusionBatch = saved
-            summaries = {}
-            for q, core in peers.items():
-                core.consensus.trust.finish()
-                summaries[q] = core.consensus.trust.summary()
+            res, summaries = run_with_batch(scn, peers, batch)
             out[together] = (res, summaries, made[0])
     return out
 

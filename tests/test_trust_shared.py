@@ -20,13 +20,13 @@ from sensornet.peers.batching import FusionBatch
 from sensornet.peers.host import SharedDecode
 from sensornet.peers.trust_batch import TOGETHER, shared_log_overlaps
 from sensornet.peers.trust_checks import ALONE
-from sensornet.sim.run import twin
 from sensornet.sim.run.peers import make_peer
 from sensornet.sim.scenario import load_scenario
 from sensornet.tracking.divergence import log_overlaps
 from sensornet.tracking.mixture import GaussianMixture
 
 from benchmarks.bench_network import scenario_text
+from tests.trust_twin import run_with_batch
 
 
 def _mixture(rng: np.random.Generator, size: int, d: int = 4, side: float = 400.0,
@@ -144,16 +144,7 @@ def _twin(lie: str | None, together: bool, n: int = 10, scans: int = 14):
             records[q].extend(out)
             return out
         tr.drain_records = kept
-    saved = twin.FusionBatch
-    twin.FusionBatch = lambda: FusionBatch(trust_together=together)
-    try:
-        res = twin.run_twin(scn, 0, peers=peers, batch=True)
-    finally:
-        twin.FusionBatch = saved
-    summaries = {}
-    for q, core in peers.items():
-        core.consensus.trust.finish()
-        summaries[q] = core.consensus.trust.summary()
+    res, summaries = run_with_batch(scn, peers, lambda: FusionBatch(trust_together=together))
     return res.tracks, records, summaries
 
 
