@@ -15,7 +15,21 @@ from sensornet.peers.batching import prepare_local_steps
 from sensornet.peers.inbound import Delivered
 from sensornet.peers.runtime import BATCH, PeerRuntime
 
-GATHER_MS = float(os.environ.get("SENSORNET_HOST_GATHER_MS", "0") or 0.0)
+
+def gather_ms(text: str | None) -> float:
+    """``SENSORNET_HOST_GATHER_MS`` read: unset or empty is 0; anything but a finite number
+    of ms in [0, 1000] a one-line error, not a host that waits forever or never."""
+    try:
+        ms = float(text or 0.0)
+    except ValueError:
+        ms = float("nan")
+    if not 0.0 <= ms <= 1000.0:
+        raise ValueError(f"SENSORNET_HOST_GATHER_MS must be a number of ms in [0, 1000], "
+                         f"got {text!r}")
+    return ms
+
+
+GATHER_MS = gather_ms(os.environ.get("SENSORNET_HOST_GATHER_MS"))
 """How long the rounds that became ready wait for more before the host fuses them, ms
 (``SENSORNET_HOST_GATHER_MS``; 0, the default: at the end of every pass, as before). A
 host's stacked trust tests, fusions and labels cost mostly per call, so a pass that holds

@@ -88,3 +88,11 @@ def test_settled_rounds_do_not_count(monkeypatch, clock):
     h = Host(4, _jobs(4, settled=2))
     h._fuse_gathered()
     assert h.fused == 0
+
+
+def test_the_setting_is_read_or_refused_in_one_line():
+    assert host_batching.gather_ms(None) == 0.0 and host_batching.gather_ms("") == 0.0
+    assert host_batching.gather_ms("5") == 5.0
+    for bad in ("abc", "-1", "nan", "inf", "1e9"):
+        with pytest.raises(ValueError, match="SENSORNET_HOST_GATHER_MS"):
+            host_batching.gather_ms(bad)
