@@ -92,3 +92,66 @@ def test_short_cuts_give_the_rule_as_stated():
                 if x is not None:
                     assert all(p.tobytes() == q.tobytes() for p, q in zip(x, y, strict=True))
     assert hits["restamped"] > 20 and hits["reidentified"] > 20, hits  # both paths ran
+
+
+class General(Reidentification):
+    """:meth:`Reidentification.apply` without the unchanged-tracks short cut."""
+
+    def _unchanged(self, lab, new, k):
+        return False
+
+
+def _steady(rng, n_scans=60, n_tracks=4):
+    """Labelled mixtures whose published set mostly stays as it was (the usual scan), now and
+    then a track going dark for a few scans, coming back, or stamped new; light remnants
+    carrying dark labels, so the memory holds more than the published tracks."""
+    x = np.column_stack([rng.uniform(-3e3, 3e3, n_tracks), rng.normal(0, 20, n_tracks),
+                         rng.uniform(-3e3, 3e3, n_tracks), rng.normal(0, 20, n_tracks)])
+    lab = np.array([[OWN, 0, PUBLISHED_BASE + i] for i in range(n_tracks)], dtype=np.int64)
+    dark = np.zeros(n_tracks, dtype=int)
+    for k in range(1, n_scans):
+        x = x @ CV.F.T
+        if rng.random() < 0.1:
+            dark[rng.integers(n_tracks)] = rng.integers(1, 6)  # dark for a few scans
+        if rng.random() < 0.05:
+            i = rng.integers(n_tracks)
+            lab[i] = new_labels(OWN, k, 1, PUBLISHED_BASE)[0]
+        w = np.where(dark > 0, rng.uniform(0.0, 0.4, n_tracks), rng.uniform(0.6, 1.0, n_tracks))
+        dark = np.maximum(dark - 1, 0)
+        covs = np.tile(np.eye(4) * 400.0, (n_tracks, 1, 1))
+        yield k, lab.copy(), GaussianMixture(w, x.copy(), covs)
+
+
+class Counted(Reidentification):
+    """:class:`Reidentification`, counting the scans that took the short cut."""
+
+    taken = 0
+
+    def _same_tracks(self, *args):
+        self.taken += 1
+        return super()._same_tracks(*args)
+
+
+def test_unchanged_tracks_short_cut_gives_the_general_path():
+    """The unchanged-tracks short cut (``_same_tracks``, taken on most scans of a 50-peer
+    network) against the general path: the same labels and memory (published tracks and
+    their runs, lost and last-published sets) to the bit, on steady sequences and on the
+    random ones above; the short cut taken on most steady scans."""
+    taken = scans = 0
+    for seed in range(30):
+        for gen in (_steady, _scans):
+            fast, ref = Counted(CV, OWN, scans=4), General(CV, OWN, scans=4)
+            for k, lab, mix in gen(np.random.default_rng(seed)):
+                a, b = fast.apply(lab, mix, 0.5, k), ref.apply(lab, mix, 0.5, k)
+                assert a.tobytes() == b.tobytes(), (seed, gen.__name__, k)
+                for f in ("_on", "_lost", "_last"):
+                    x, y = getattr(fast, f), getattr(ref, f)
+                    assert (x is None) == (y is None)
+                    if x is not None:
+                        assert all(np.asarray(p).tobytes() == np.asarray(q).tobytes()
+                                   and np.asarray(p).dtype == np.asarray(q).dtype
+                                   for p, q in zip(x, y, strict=True)), (seed, k, f)
+                scans += gen is _steady
+            if gen is _steady:
+                taken += fast.taken
+    assert taken > scans // 2, (taken, scans)

@@ -134,6 +134,8 @@ class Reidentification:
         if self.shared is not None:
             mine |= lab[:, 0] == self.shared
         new = mine & (lab[:, 1] == k) & (lab[:, 2] >= PUBLISHED_BASE)
+        if self._unchanged(lab, new, k):
+            return self._same_tracks(labels, lab, m, P, k)
         if self.jump is not None and self._last is not None and not new.all():
             labels, lab, new = self._returns(labels, lab, m, P, new, k)
         if new.any():
@@ -154,6 +156,28 @@ class Reidentification:
             was, pos = keys_find(keys0, own)
             run[was] += run0[pos[was]]
         self._on = (int(k), lab, m, P, run, own)
+        return labels
+
+    def _unchanged(self, lab: np.ndarray, new: np.ndarray, k: int) -> bool:
+        """Whether the published labels ``lab`` (sorted by key, :func:`_tracks`) are the
+        last scan's, none stamped new: :meth:`_same_tracks` applies."""
+        on0 = self._on
+        return (on0 is not None and on0[0] == k - 1 and lab.shape == on0[1].shape
+                and not new.any() and np.array_equal(lab, on0[1]))
+
+    def _same_tracks(self, labels: np.ndarray, lab: np.ndarray, m: np.ndarray,
+                     P: np.ndarray, k: int) -> np.ndarray:
+        """:meth:`apply` when the published labels ``lab`` are the last scan's, none stamped
+        new (the usual scan of a 50-peer network; issue 33): nothing returns (each label was
+        published at ``k - 1``), no track is lost, so :meth:`_returns`, the lost set's
+        update when it is empty and the run's key lookup are skipped; the same labels and
+        memory as the general path, to the bit (tests/test_reid_fast_paths.py)."""
+        if self._lost is None or len(self._lost[0]):  # (empty: _forget keeps it as it is)
+            self._forget(lab, m, P, k)
+        own = label_keys(lab)
+        if self.jump is not None:
+            self._remember(labels, lab, own, m, k)
+        self._on = (int(k), lab, m, P, self._on[4] + 1, own)
         return labels
 
     def _returns(self, labels, lab, m, P, new, k):
