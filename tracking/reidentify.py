@@ -170,12 +170,16 @@ class Reidentification:
         """:meth:`apply` when the published labels ``lab`` are the last scan's, none stamped
         new (the usual scan of a 50-peer network; issue 33): nothing returns (each label was
         published at ``k - 1``), no track is lost, so :meth:`_returns`, the lost set's
-        update when it is empty and the run's key lookup are skipped; the same labels and
-        memory as the general path, to the bit (tests/test_reid_fast_paths.py)."""
+        update when it is empty and the run's key lookup are skipped, and with no dark label
+        remembered the last-published memory is the published tracks as they are (sorted
+        already); the same labels and memory as the general path, to the bit
+        (tests/test_reid_fast_paths.py)."""
         if self._lost is None or len(self._lost[0]):  # (empty: _forget keeps it as it is)
             self._forget(lab, m, P, k)
         own = label_keys(lab)
-        if self.jump is not None:
+        if self.jump is not None and len(self._last[0]) == len(lab):  # no dark label held:
+            self._last = (lab, own, np.full(len(lab), k), m)  # the published ones (sorted)
+        elif self.jump is not None:
             self._remember(labels, lab, own, m, k)
         self._on = (int(k), lab, m, P, self._on[4] + 1, own)
         return labels
