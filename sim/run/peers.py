@@ -117,9 +117,13 @@ def existence_mature(scn: Scenario) -> float:
     """The survival probability of :class:`tracking.mature_existence.MatureExistence`'s prior,
     0 (off) unless ``fusion.existence_mature`` is 1, or -1 (auto) with young tracks pooled
     (:func:`existence_prior` on: LMB peers that publish tentative tracks; the real-traffic
-    scenarios and GM-PHD peers are unchanged)."""
+    scenarios and GM-PHD peers are unchanged) and a rule other than GCI: its fused weights
+    are a PHD's, not existences (a target's component above 1, which the pooled cap of at most
+    1 cut, so the cardinality rule dropped a target: docs/labelled-tracking.md, "The GCI and AA
+    rules under the LMB defaults")."""
     on = scn.fusion.existence_mature
-    return scn.survival_probability if on == 1 or (on < 0 and existence_prior(scn) > 0) else 0.0
+    auto = on < 0 and existence_prior(scn) > 0 and scn.fusion.rule != "gci"
+    return scn.survival_probability if on == 1 or auto else 0.0
 
 
 def existence_own(scn: Scenario, name: str) -> tuple[float, float, float] | tuple[()]:

@@ -98,7 +98,9 @@ class FusionSpec:
                                            "input just missed falls as in the centralised "
                                            "filter, not as the inputs' mean; 1: on, 0: off, "
                                            "-1 (auto): on with `existence_prior` on (LMB peers "
-                                           "that publish tentative tracks). Issue 33: 20 LMB "
+                                           "that publish tentative tracks) and a `rule` other "
+                                           "than `\"gci\"` (its fused weights are a PHD's, not "
+                                           "existences). Issue 33: 20 LMB "
                                            "peers' fused tracks outlived their targets by a "
                                            "scan or more (docs/labelled-tracking.md, \"Fused "
                                            "tracks outlive their targets\").",
@@ -408,7 +410,7 @@ class LmbSpec:
                                         "predicts to the tick; divides `scenario.scan_period`. "
                                         "0: every plot at its tick.", unit="s",
                                check=NONNEGATIVE)
-    fused_extraction: str = option("round", doc="How an LMB peer reports tracks from its "
+    fused_extraction: str = option("auto", doc="How an LMB peer reports tracks from its "
                                                  "fused density: `\"filter\"` "
                                                  "(`filter.extraction`), `\"round\"` (every "
                                                  "fused track heavier than "
@@ -420,7 +422,12 @@ class LmbSpec:
                                                  "peers hold fewer targets the total runs "
                                                  "short and `\"cardinality\"` drops a target "
                                                  "7 of 8 peers hold (issue 34, "
-                                                 "docs/real-traffic.md). Default `\"round\"` "
-                                                 "(issue 33, evaluated on the synthetic "
-                                                 "LMB graphs: docs/labelled-tracking.md).",
-                                     choices=("filter", *EXTRACTION_RULES))
+                                                 "docs/real-traffic.md). `\"auto\"` "
+                                                 "(default): `\"round\"` (issue 33, evaluated "
+                                                 "on the synthetic LMB graphs: "
+                                                 "docs/labelled-tracking.md), `\"filter\"` under "
+                                                 "`fusion.rule` `\"gci\"`, whose fused weights "
+                                                 "are a PHD's, a target's mass split over "
+                                                 "components (docs/labelled-tracking.md, \"The "
+                                                 "GCI and AA rules under the LMB defaults\").",
+                                     choices=("auto", "filter", *EXTRACTION_RULES))
