@@ -192,16 +192,44 @@ def reach_by_name(names: Sequence[str], adjacency: np.ndarray, origins: Sequence
                  for j, t in reach_masks(adjacency, origins, i).items())
 
 
+DECODED = 256
+"""Estimates' decoded labels kept (:func:`decode`): an estimate reaches each co-hosted
+neighbour of its sender (4 on a ring of degree 4), which decode and check the same rows."""
+_decoded: dict[tuple, tuple[np.ndarray, np.ndarray, dict]] = {}
+"""(label bytes, mask-word bytes) -> (labels, masks, :func:`_parts` by scan and round): read-only
+arrays, shared by every receiver of those rows (none writes into them: checked() copies)."""
+_by_id: dict[int, tuple[np.ndarray, np.ndarray, dict]] = {}
+"""The same entries by ``id`` of their labels array (held by the entry, so the id stays its)."""
+
+
 def decode(labels: np.ndarray, extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Labels received ``(n, 3)`` (and the Estimate's ``label_masks``, words 1 and up, ``(n,
     W - 1)``, or None) -> the labels without masks ``(n, 3)`` and each row's mask words
-    ``(n, W)`` int64 (0: none)."""
+    ``(n, W)`` int64 (0: none), read-only: the same rows decode once for every co-hosted
+    receiver (by their bytes, :data:`DECODED` kept; a pure function of them)."""
     lab = as_labels(labels)
+    ext = None if extra is None or not np.size(extra) else np.asarray(extra, dtype=np.int64)
+    key = (lab.tobytes(), None if ext is None else ext.tobytes())
+    got = _decoded.get(key)
+    if got is not None:
+        return got[0], got[1]
+    clean, masks = _decode(lab, ext)
+    if clean is lab:
+        clean = lab.copy()
+    clean.flags.writeable = masks.flags.writeable = False
+    entry = (clean, masks, {})
+    if len(_decoded) >= DECODED:
+        _by_id.pop(id(_decoded.pop(next(iter(_decoded)))[0]), None)  # the oldest
+    _decoded[key] = _by_id[id(clean)] = entry
+    return clean, masks
+
+
+def _decode(lab: np.ndarray, extra: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`decode` of checked rows ``lab (n, 3)`` int64 and words 1.. (or None)."""
     word0 = lab[:, 0] >> SUPPORT_SHIFT
     masks = word0[:, None]
-    if extra is not None and np.size(extra):
-        masks = np.concatenate([masks, np.asarray(extra, dtype=np.int64).reshape(len(lab), -1)
-                                & WORD], axis=1)
+    if extra is not None:
+        masks = np.concatenate([masks, extra.reshape(len(lab), -1) & WORD], axis=1)
     if not _nz(word0):
         return lab, masks
     clean = lab.copy()
@@ -239,6 +267,52 @@ def popcount(masks: np.ndarray) -> np.ndarray:
     m = np.asarray(masks, dtype=np.int64)
     c = np.bitwise_count(m).astype(np.int64)
     return c.sum(axis=1) if m.ndim == 2 else c
+
+
+def _parts(labels: np.ndarray, masks: np.ndarray, k: int, rnd: int, words: int, rounds: int,
+           hops: int) -> tuple | None:
+    """What :meth:`LabelSupport.refused` asks of an estimate's rows whatever the receiver:
+    ``(lab, early rows, their count, old (n,) bool, its count, old rows, their claimed stampers
+    (n_old, words), hops since their scan capped at hops - 1)``, None: no rows. Kept with
+    :func:`decode`'s entry of ``labels`` and ``masks`` (every co-hosted receiver of an
+    estimate asks the same), else computed."""
+    entry = _by_id.get(id(labels))
+    if entry is not None and entry[0] is labels and entry[1] is masks:
+        key = (k, rnd, words, rounds, hops)
+        got = entry[2].get(key, entry)
+        if got is entry:
+            got = entry[2][key] = _parts_of(labels, masks, k, rnd, words, rounds, hops)
+        return got
+    return _parts_of(as_labels(labels), masks, k, rnd, words, rounds, hops)
+
+
+def _parts_of(lab: np.ndarray, masks: np.ndarray, k: int, rnd: int, words: int, rounds: int,
+              hops: int) -> tuple | None:
+    """:func:`_parts`, computed."""
+    n = len(lab)
+    if not n:
+        return None
+    early = _early(lab, k)
+    n_early = _nz(early)
+    rows = lab if n_early == n else lab[early]
+    if n_early == n:
+        return lab, rows, n_early, None, 0, None, None, None
+    old = ~early & (lab[:, 1] >= k - KEEP_SCANS)
+    n_old = _nz(old)
+    if not n_old:
+        return lab, rows, n_early, old, 0, None, None, None
+    m = as_words(masks)
+    lo, m = (lab, m) if n_old == n else (lab[old], m[old])
+    m = _fit(m, words)  # bits beyond the network's: no stamper
+    origin = lo[:, 0] & ORIGIN_MASK
+    shared = origin == SHARED_ORIGIN
+    claim = (m if _nz(shared) == n_old else
+             np.where(shared[:, None], m, origin_words(origin, words)))
+    # hops since the label's scan: (k - scan + 1) rounds + rnd, at least 2 for these rows
+    h = (k + 1 + rnd) - lo[:, 1] if rounds == 1 else (k - lo[:, 1] + 1) * rounds + rnd
+    if rnd < 0:
+        h = np.maximum(h, 0)
+    return lab, rows, n_early, old, n_old, lo, claim, np.minimum(h, hops - 1)
 
 
 class LabelSupport:
@@ -443,37 +517,19 @@ class LabelSupport:
         table = self.reach.get(sender)
         if table is None:
             return None
-        lab = as_labels(labels)
-        n = len(lab)
-        if not n:
+        parts = _parts(labels, masks, k, rnd, self.words, self.rounds, len(table))
+        if parts is None:
             return None
-        early = _early(lab, k)
-        n_early = _nz(early)
+        lab, early, n_early, old, n_old, lo, claim, h = parts
         if n_early:
-            self._saw_early(lab if n_early == n else lab[early], table[0])  # the sender's bit
-            if n_early == n:
-                return None
-        old = ~early & (lab[:, 1] >= k - KEEP_SCANS)
-        n_old = _nz(old)
+            self._saw_early(early, table[0])  # the sender's bit
         if not n_old:
             return None
-        words = self.words
-        m = as_words(masks)
-        lo, m = (lab, m) if n_old == n else (lab[old], m[old])
-        m = _fit(m, words)  # bits beyond the network's: no stamper
-        origin = lo[:, 0] & ORIGIN_MASK
-        shared = origin == SHARED_ORIGIN
-        claim = (m if _nz(shared) == n_old else
-                 np.where(shared[:, None], m, origin_words(origin, words)))
-        # hops since the label's scan: (k - scan + 1) rounds + rnd, at least 2 for these rows
-        h = (k + 1 + rnd) - lo[:, 1] if self.rounds == 1 else (k - lo[:, 1] + 1) * self.rounds + rnd
-        if rnd < 0:
-            h = np.maximum(h, 0)
-        far = claim & self._far[sender][np.minimum(h, len(table) - 1)]
+        far = claim & self._far[sender][h]
         ok = _any_rows(far)  # vouched by a far stamper: not looked up
         if _nz(ok) == n_old:
             return None
-        seen = np.zeros((n_old, words), dtype=np.int64)
+        seen = np.zeros((n_old, self.words), dtype=np.int64)
         seen[~ok] = self._seen(lo[~ok])
         ok |= _any_rows(claim & seen)
         if _nz(ok) < n_old:  # a stamp moved a scan later (uncorroborated), published after that
