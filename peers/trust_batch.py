@@ -146,7 +146,7 @@ def shared_log_overlaps(groups: list[list[GaussianMixture]]) -> list[np.ndarray]
         return out
     U = len(uniq)
     size = np.array([len(D.weights) for D in uniq])
-    first = np.cumsum(size) - size  # each mixture's first component
+    first = size.cumsum() - size  # each mixture's first component
     stacks = []
     for n, (gs, rows) in by_n.items():
         u = np.array(rows, dtype=np.intp).reshape(len(gs), n)
@@ -181,8 +181,8 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     pairs, back = np.unique(x * U + y, return_inverse=True)
     px, py = pairs // U, pairs % U
     n = size[px] * size[py]  # its terms, x's component major
-    base = np.cumsum(n) - n
-    t = np.arange(int(n.sum())) - np.repeat(base, n)
+    base = n.cumsum() - n
+    t = np.arange(int(n.sum())) - base.repeat(n)
     a = first[px].repeat(n) + t // size[py].repeat(n)
     b = first[py].repeat(n) + t % size[py].repeat(n)
     inv, det = inv_det_spd((P[a] + P[b])[None])
@@ -190,8 +190,8 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     # each ordered block's terms, a row per component r of J, its columns I's components c
     mI, mJ = size[I], size[J]
     nb = mI * mJ
-    ob = np.cumsum(nb) - nb
-    t = np.arange(int(nb.sum())) - np.repeat(ob, nb)
+    ob = nb.cumsum() - nb
+    t = np.arange(int(nb.sum())) - ob.repeat(nb)
     r, c = t // mI.repeat(nb), t % mI.repeat(nb)
     swap = (I > J).repeat(nb)  # stored as (J's component, I's): row-major already
     idx = base[back].repeat(nb) + np.where(swap, r * mI.repeat(nb) + c,
@@ -199,7 +199,7 @@ def _block_values(uniq: list[GaussianMixture], size: np.ndarray, first: np.ndarr
     terms = g[idx]
     top = np.maximum.reduceat(terms, ob)
     safe = np.where(np.isfinite(top), top, 0.0)
-    rows = np.cumsum(mJ) - mJ  # each block's first row
+    rows = mJ.cumsum() - mJ  # each block's first row
     starts = ob.repeat(mJ) + (np.arange(int(mJ.sum())) - rows.repeat(mJ)) * mI.repeat(mJ)
     S = np.add.reduceat(np.add.reduceat(np.exp(terms - safe.repeat(nb)), starts), rows)
     with np.errstate(divide="ignore"):
@@ -277,7 +277,7 @@ def _unmatched_group(group: list[tuple]) -> list[np.ndarray]:
     if not sizes.any():
         return out
     full = [D for D in uniq if len(D.weights)]
-    ufirst = np.cumsum(usize) - usize  # each object's first component
+    ufirst = usize.cumsum() - usize  # each object's first component
     comp = np.repeat(ufirst[fu], sizes) + _ranks(tuple(sizes.tolist()))  # request-major
     req = np.repeat(np.repeat(np.arange(len(group)), lens), sizes)  # per component
     inp = np.repeat(np.arange(len(fu)) - np.repeat(np.cumsum(lens) - lens, lens), sizes)
@@ -358,7 +358,7 @@ def _offsets_found(uniq: list[GaussianMixture], refs: np.ndarray, lists: list[li
     keep = np.concatenate([M.weights for M in full]) >= min_weight
     cnt = np.bincount(np.repeat(np.arange(len(uniq)), sizes)[keep], minlength=len(uniq))
     kidx = np.flatnonzero(keep)  # the target components, mixture by mixture
-    kst = np.cumsum(cnt) - cnt  # each mixture's first in kidx
+    kst = cnt.cumsum() - cnt  # each mixture's first in kidx
     X = np.concatenate([M.means for M in full])[kidx][:, pos]
     P = position_block(np.concatenate([M.covs for M in full])[kidx], pos)
     lens = [len(x) for x in lists]

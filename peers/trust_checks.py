@@ -551,19 +551,18 @@ def offset_chi2_stacked(stacks: list[tuple[np.ndarray, np.ndarray]], windows: tu
         return []
     lengths = [len(i) for i, _ in stacks]
     top = max(lengths)
-    if all(n == top for n in lengths):
-        I = np.stack([i for i, _ in stacks])  # (r, top, 2, 2): newest first
-        Y = np.stack([v for _, v in stacks])  # (r, top, 2)
+    if all(n == top for n in lengths):  # np.array: np.stack's values, less setup
+        I = np.array([i for i, _ in stacks])  # (r, top, 2, 2): newest first
+        Y = np.array([v for _, v in stacks])  # (r, top, 2)
     else:
         I, Y = np.zeros((len(stacks), top, 2, 2)), np.zeros((len(stacks), top, 2))
         for k, (i, v) in enumerate(stacks):
             I[k, :len(i)] = i
             Y[k, :len(v)] = v
-    I = np.cumsum(I, axis=1)
-    Y = np.cumsum(Y, axis=1)
-    last = [[min(w, n) - 1 for w in windows] for n in lengths]  # (r, w)
-    rows = np.repeat(np.arange(len(stacks)), len(windows))
-    cols = np.ravel(last)
+    I = I.cumsum(axis=1)
+    Y = Y.cumsum(axis=1)
+    cols = (np.minimum(np.array(lengths)[:, None], windows) - 1).ravel()  # (r w,)
+    rows = np.arange(len(stacks)).repeat(len(windows))
     info, y = I[rows, cols], Y[rows, cols]  # (r w, 2, 2), (r w, 2)
     ok = np.linalg.det(info) > 1e-12
     chi2 = np.zeros(len(info))
@@ -761,7 +760,7 @@ def segment_sums(X: np.ndarray, counts: list[int]) -> np.ndarray:
 def _ranks(counts: tuple[int, ...]) -> np.ndarray:
     """Each row's place in its segment of ``counts`` (:func:`segment_sums`; read-only)."""
     c = np.asarray(counts, dtype=np.intp)
-    out = np.arange(int(c.sum()), dtype=np.intp) - np.repeat(np.cumsum(c) - c, c)
+    out = np.arange(int(c.sum()), dtype=np.intp) - (c.cumsum() - c).repeat(c)
     out.flags.writeable = False
     return out
 
@@ -879,7 +878,7 @@ def _loo_stacked(L: np.ndarray, LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 def _lse_rows(X: np.ndarray) -> np.ndarray:
     """``log sum exp`` of every row of ``X`` (``(J, m)``) from its maximum: ``(J,)``,
     ``-inf`` for a row without a finite maximum."""
-    top = np.max(X, axis=1) if X.shape[1] else np.full(len(X), -np.inf)
+    top = X.max(axis=1) if X.shape[1] else np.full(len(X), -np.inf)
     ok = np.isfinite(top)
     safe = np.where(ok, top, 0.0)
     with np.errstate(invalid="ignore", over="ignore"):

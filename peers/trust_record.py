@@ -160,7 +160,7 @@ def add_offsets_steps(cfg: TrustConfig, recs: list[NeighbourTrust], infos: list[
         G = yield ("cusums", np.array([np.zeros(m) if rec.cusum is None else rec.cusum
                                        for rec in recs]), list(infos), cfg.bias_cusum_offset,
                    cusum_directions(m))
-        tops = np.max(G, axis=1).tolist()  # every chart's at once (float(g.max()) each)
+        tops = G.max(axis=1).tolist()  # every chart's at once (float(g.max()) each)
         for i, (rec, g) in enumerate(zip(recs, G, strict=True)):
             rec.cusum = g
             out[i] = (*out[i], tops[i])
@@ -178,9 +178,10 @@ def stacked_window(rec: NeighbourTrust) -> tuple[np.ndarray, np.ndarray]:
     w = rec.offsets
     kept = rec.stacked
     if kept is not None and len(w) >= 2 and kept[2] is w[1]:
-        I, y = np.asarray(w[0][0])[None], np.asarray(w[0][1])[None]
-        I = np.concatenate([I, kept[0][:len(w) - 1]])
-        y = np.concatenate([y, kept[1][:len(w) - 1]])
+        n = len(w)  # the newest in front of the kept ones (np.concatenate's values)
+        I, y = np.empty((n, 2, 2)), np.empty((n, 2))
+        I[0], y[0] = w[0]
+        I[1:], y[1:] = kept[0][:n - 1], kept[1][:n - 1]
     else:
         I, y = np.array([i for i, _ in w]), np.array([v for _, v in w])
     rec.stacked = (I, y, w[0])

@@ -8,6 +8,7 @@ its methods use the state :class:`Trust` keeps (``cfg``, ``n``, ``pos``, ``fused
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Generator
 
 import numpy as np
@@ -177,7 +178,7 @@ class ScanTests:
                                      cfg.gate_chi2)
             tm = np.array([target_mass(m, cfg.repeat_weight) for m in mixes])
         ok = np.array([True] + [self.n[s].state != "quarantined" for s in fresh])
-        refs = ok[None, :] & ~np.eye(len(mixes), dtype=bool)
+        refs = ok[None, :] & _off_diagonal(len(mixes))
         inc = yield ("withheld", U, tm, refs, cfg.detection_probability,
                      cfg.withhold_alternative, cfg.withhold_cap)
         for s, v in zip(fresh, inc[1:], strict=True):
@@ -193,6 +194,15 @@ class ScanTests:
                     self.losses["compared"] += 1
                     self.losses["lost"] += int(lost)
         return [s for s in fresh if self.n[s].withheld > cfg.withhold_threshold]
+
+
+@functools.lru_cache(maxsize=64)
+def _off_diagonal(n: int) -> np.ndarray:
+    """``~np.eye(n, dtype=bool)`` (read-only, made once per ``n``): each input's references
+    all but itself (:meth:`ScanTests._withheld`, per peer and scan)."""
+    out = ~np.eye(n, dtype=bool)
+    out.flags.writeable = False
+    return out
 
 
 def _raw(info: tuple[np.ndarray, np.ndarray], offset: np.ndarray | None, sign: float = 1.0

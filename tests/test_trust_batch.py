@@ -462,14 +462,20 @@ def test_stacked_window_is_the_window_made_anew():
     rebuilt = 0
     for k in range(40):
         B = rng.normal(0, 1, (2, 2))
-        push_window(rec.offsets, (B @ B.T, rng.normal(0, 3, 2)), 16)
+        y = rng.normal(0, 3, 2)
+        if k % 7 == 3:
+            y[k % 2] = np.nan if k % 14 == 3 else -0.0  # kept as they are, sign too
+        push_window(rec.offsets, (B @ B.T, y), 16)
         if k in (5, 20):
             push_window(rec.offsets, (np.eye(2), np.zeros(2)), 16)
         before = rec.stacked
         I, y = stacked_window(rec)
         rebuilt += before is not None and before[2] is not rec.offsets[1]
         assert np.array_equal(I, np.array([i for i, _ in rec.offsets]))
-        assert np.array_equal(y, np.array([v for _, v in rec.offsets]))
+        want = np.array([v for _, v in rec.offsets])
+        assert np.array_equal(y, want, equal_nan=True)
+        assert np.array_equal(np.signbit(y), np.signbit(want))
+        assert I.dtype == y.dtype == np.float64
     assert len(rec.offsets) == 16 and rebuilt == 2
 
 

@@ -279,6 +279,37 @@ def test_offset_chi2_many_is_one_at_a_time():
     assert offset_chi2_many([], windows) == []
 
 
+
+def test_offset_chi2_of_full_windows_is_one_at_a_time_nan_and_signed_zeros_too():
+    """A host's steady state: every window as long as the longest (stacked by ``np.array``,
+    one index per window), with NaN and ``-0.0`` offsets and singular scans: each window's
+    chi-squares are :func:`offset_chi2`'s to the bit (NaN where it gives NaN)."""
+    rng = np.random.default_rng(32)
+    windows = (3, 16)
+    for _ in range(60):
+        n = int(rng.integers(1, 20))
+        offsets = []
+        for _ in range(int(rng.integers(1, 13))):
+            d = deque()
+            for _ in range(n):
+                A = rng.normal(0, 0.1, (2, 2))
+                I, y = A @ A.T + 1e-3 * np.eye(2), rng.normal(0, 1, 2)
+                r = rng.random()
+                if r < 0.1:
+                    I, y = np.zeros((2, 2)), np.zeros(2)
+                elif r < 0.15:
+                    y[0] = np.nan
+                elif r < 0.25:
+                    y[rng.integers(0, 2)] = -0.0
+                    I[0, 1] = I[1, 0] = -0.0
+                d.append((I, y))
+            offsets.append(d)
+        got = offset_chi2_many(offsets, windows)
+        want = [offset_chi2(d, windows) for d in offsets]
+        assert np.array_equal(np.array(got), np.array(want), equal_nan=True)
+        assert all(type(c) is float for g in got for c in g)
+
+
 def test_gls_offsets_is_one_at_a_time():
     rng = np.random.default_rng(41)
     for n in range(0, 7):
