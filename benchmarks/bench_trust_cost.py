@@ -44,6 +44,15 @@ process, the heap frozen first as a host does (``gc.freeze()``): per run the CPU
 inside collections (``gc.callbacks``) per peer-scan and the process RSS, then the medians.
 
     python benchmarks/bench_trust_cost.py --filter gmphd --young 10000 --repeats 4
+
+``--batches N,M,..``: instead, trust on and host-batched with at most ``N``, ``M``, .. rounds a
+call, alternated in this one process: per run and round (0: the full test with the
+once-a-scan tests; 1: mostly :attr:`TrustConfig.test_once`'s guard) the trust tests' thread
+CPU per round and per call, then the fit ``per round = variable + fixed / batch`` over the
+sizes (least squares on the medians): what a call costs whatever its size (the stacked
+requests' and the lockstep's fixed part) and what each round adds.
+
+    python benchmarks/bench_trust_cost.py --filter gmphd --batches 12,25,50 --repeats 2
 """
 
 from __future__ import annotations
@@ -242,6 +251,57 @@ def against(path: Path, rev: str, n: int, scans: int, repeats: int, lie: str | N
           f"{t['now'] / t[rev]:.3f}); load average {load_average()} at the end")
 
 
+def batches(path: Path, sizes: list[int], n: int, scans: int, repeats: int, lie: str | None,
+            kind: str) -> None:
+    """``--batches``: trust on, host-batched, at most each of ``sizes`` rounds a call,
+    alternated; the trust tests' thread CPU split by round, and the fixed / variable fit."""
+    spent: dict[int, list[float]] = {}  # round -> [thread seconds, calls, rounds]
+
+    def by_round(calls):
+        t0 = time.thread_time()
+        try:
+            return trust_batch.weigh_together(calls)
+        finally:
+            v = spent.setdefault(calls[0][2], [0.0, 0, 0])
+            v[0] += time.thread_time() - t0
+            v[1] += 1
+            v[2] += len(calls)
+
+    per: dict[tuple[int, int], list[float]] = {}
+    print("| batch | rep | CPU ms/peer-scan | trust tests | round | us a round | us a call "
+          "| calls |\n|---:|---:|---:|---:|---:|---:|---:|---:|", flush=True)
+    global weigh_together
+    saved = weigh_together
+    try:
+        for rep in range(repeats):
+            for b in (sizes if rep % 2 == 0 else sizes[::-1]):
+                spent.clear()
+                weigh_together = by_round  # what one_run chunks (_chunked looks it up)
+                try:
+                    v, _, _ = one_run(path, True, n, scans, lie, kind=kind, batch=b)
+                finally:
+                    weigh_together = saved
+                for rnd, (t, calls, rounds) in sorted(spent.items()):
+                    per.setdefault((b, rnd), []).append(t * 1e6 / rounds)
+                    print(f"| {b} | {rep + 1} | {v:.3f} | {TESTS[-1]:.3f} | {rnd} | "
+                          f"{t * 1e6 / rounds:.1f} | {t * 1e6 / calls:.0f} | {calls} |",
+                          flush=True)
+    finally:
+        weigh_together = saved
+        batching.weigh_together = saved  # one_run put back the wrapper it found
+    print()
+    for rnd in sorted({r for _, r in per}):
+        xs = [1.0 / b for b in sizes if (b, rnd) in per]
+        ys = [statistics.median(per[(b, rnd)]) for b in sizes if (b, rnd) in per]
+        if len(xs) < 2:
+            continue
+        fixed, variable = np.polyfit(xs, ys, 1)
+        print(f"round {rnd}: medians " + ", ".join(f"{b} {y:.1f}" for b, y in
+                                                   zip(sizes, ys, strict=False))
+              + f" us a round; fit: {variable:.1f} us a round + {fixed:.0f} us a call")
+    print(f"load average {load_average()} at the end")
+
+
 def young(path: Path, size: int, n: int, scans: int, repeats: int, lie: str | None,
           kind: str, batch: int | None) -> None:
     """``--young N``: CPython's generation-0 threshold and ``size``, alternated."""
@@ -317,6 +377,9 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=None, metavar="N",
                    help="at most N rounds tested together a call (a host of 25 peers: "
                         "12-15 a pass); default all of a pass")
+    p.add_argument("--batches", default=None, metavar="N,M,..",
+                   help="only trust on, host-batched at most N, M, .. rounds a call, "
+                        "alternated: the trust tests split by round, fixed and per round")
     p.add_argument("--young", type=int, default=None, metavar="N",
                    help="only trust on, CPython's generation-0 collection threshold and N "
                         "alternated (a host's peers.host.YOUNG_GC)")
@@ -326,9 +389,23 @@ def main() -> None:
     if args.young is not None and args.young < 1:
         p.error("--young must be at least 1")
     n, scans, kind = args.peers, args.scans, args.filter
+    sizes = None
+    if args.batches is not None:
+        try:
+            sizes = [int(x) for x in args.batches.split(",")]
+        except ValueError:
+            sizes = []
+        if not sizes or min(sizes) < 1:
+            p.error("--batches takes rounds a call, e.g. 12,25,50 (each at least 1)")
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "twin.toml"
         path.write_text(scenario_text(n, 4, scans, rounds=2, speed=10.0))
+        if sizes:
+            print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans, trust on, "
+                  f"host-batched at most {args.batches} rounds a call; load average "
+                  f"{load_average()}")
+            batches(path, sizes, n, scans, args.repeats, args.lie, kind)
+            return
         if args.young:
             print(f"## twin of {n} {kind} peers, degree 4, 2 rounds, {scans} scans, trust on, "
                   f"host-batched: generation-0 threshold {gc.get_threshold()[0]} and "
