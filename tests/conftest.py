@@ -6,9 +6,9 @@ module-level ``pytestmark``). When the marker is deselected (``python -m pytest 
 network"``, the fast tests), a test that still starts a subprocess, a multiprocessing worker or
 a Zenoh session fails at once with a message naming the missing marker, so the fast run stays
 free of processes and sessions (and fast) as tests are added. Under pytest-xdist the marked
-tests form one group on one worker (:func:`pytest_collection_modifyitems`), and each holds the
-session's process slot while it runs (``tests/process_guard.py``): a second one starting at
-the same moment fails, saying which test holds it.
+tests form a group per lane, each on one worker (:func:`pytest_collection_modifyitems`), and
+each holds its lane's process slot while it runs (``tests/process_guard.py``): a second one of
+the lane starting at the same moment fails, saying which test holds it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.process_guard import SlotTaken, lock_path, process_slot
+from tests.process_guard import SlotTaken, group_of, lock_path, process_slot
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -46,8 +46,9 @@ def _network_deselected(config: pytest.Config) -> bool:
 def _no_processes_unless_marked(request, monkeypatch):
     if request.node.get_closest_marker("network") is not None:
         taken = None
-        try:  # one process test at a moment (SlotTaken comes only from taking the slot)
-            with process_slot(lock_path(request.config), request.node.nodeid):
+        try:  # one process test of a lane at a moment (SlotTaken only from taking the slot)
+            with process_slot(lock_path(request.config, request.node.nodeid),
+                              request.node.nodeid):
                 yield
         except SlotTaken as exc:
             taken = str(exc)
@@ -90,26 +91,27 @@ def _group_suffix(item: pytest.Item, group: str) -> None:
 @pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]):
     """Under pytest-xdist (``-n 2 --dist loadgroup``, pyproject's default options) the tests
-    that start processes form one group, run one after another on one worker, so two process
-    runs never compete for the machine's two cores; the fast tests go to whichever worker is
-    free, and their CPU work overlaps the process tests' waiting (scans come at 10 a second).
+    that start processes form a group per lane (``tests.process_guard.group_of``: by module),
+    each run one after another on one worker, so at most two process runs share the machine's
+    two cores; the fast tests go to whichever worker is free after, and their CPU work overlaps
+    the process tests' waiting (scans come at 10 a second).
 
-    A worker's xdist plugin turns each item's ``xdist_group`` marks into an ``@processes``
+    A worker's xdist plugin turns each item's ``xdist_group`` marks into an ``@processesK``
     suffix of its node id in its own ``pytest_collection_modifyitems``, and the scheduler groups
     by that suffix: the marks are added before every plain implementation runs (this wrapper's
     first half), and the suffix checked after them all (its second half): added here where
-    xdist's did not take (:func:`_group_suffix`). Before both, two process tests ran at once on
-    two workers; the process slot (``tests/process_guard.py``) now fails such a test."""
+    xdist's did not take (:func:`_group_suffix`). Before both, process tests ran on both workers
+    in no order; a lane's slot (``tests/process_guard.py``) now fails two of one lane at once."""
     for item in items:
         if item.get_closest_marker("network") is not None:
-            item.add_marker(pytest.mark.xdist_group("processes"))
+            item.add_marker(pytest.mark.xdist_group(group_of(item.nodeid)))
     result = yield
     if getattr(config.option, "loadgroup", False):  # set on an xdist worker under loadgroup
         for item in items:
             if "@" in item.nodeid.rsplit("]", 1)[-1]:
                 continue
             if item.get_closest_marker("network") is not None:
-                _group_suffix(item, "processes")
+                _group_suffix(item, group_of(item.nodeid))
             elif marks := list(item.iter_markers("xdist_group")):
                 # a fast module's own group, so its module fixture is computed on one worker,
                 # not once on each (xdist's way of naming: the marks' names sorted, joined)

@@ -1,10 +1,11 @@
-"""The suite's own rule, checked: process tests (marked ``network``) run one at a time.
+"""The suite's own rule, checked: process tests (marked ``network``) run one per lane at a time.
 
-``tests/process_guard.py`` holds a lock while a process test runs; a second holder at the same
-moment fails. Tested here with two threads racing for it (fast), and with inner pytest
-sessions using this repository's ``tests/conftest.py``: under ``-n 2 --dist loadgroup`` every
-process test carries the ``@processes`` group in its node id and runs on one worker, and a
-process test that starts while the slot is held fails, naming the holder.
+``tests/process_guard.py`` holds a lane's lock while a process test of the lane runs; a second
+holder at the same moment fails. Tested here with two threads racing for it (fast), and with
+inner pytest sessions using this repository's ``tests/conftest.py``: under ``-n 2 --dist
+loadgroup`` every process test carries its lane's ``@processesK`` group in its node id, a
+module's tests run on one worker, and a process test that starts while its lane's slot is held
+fails, naming the holder.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.process_guard import SlotTaken, process_slot
+from tests.process_guard import LANES, SlotTaken, group_of, lane_of, process_slot
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,6 +55,23 @@ def test_a_second_holder_fails_while_the_first_holds_the_slot(tmp_path):
     assert lock.read_text() == ""
 
 
+def test_lanes_split_the_suites_process_modules_and_hold_apart(tmp_path):
+    """Every lane gets some of this suite's process modules (by name: the same split on every
+    machine), a module's tests one lane; two lanes' slots are held at once, one lane's not."""
+    modules = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "tests").glob("test_*.py")
+                     if "mark.network" in p.read_text())
+    lanes = {m: lane_of(f"{m}::test_x") for m in modules}
+    assert set(lanes.values()) == set(range(LANES)), lanes
+    assert all(lane_of(f"{m}::test_y[p]@{group_of(m)}") == k for m, k in lanes.items())
+    a, b = (next(m for m, k in lanes.items() if k == lane) for lane in (0, 1))
+    with process_slot(tmp_path / f"{lane_of(a)}.lock", f"{a}::t"):
+        with process_slot(tmp_path / f"{lane_of(b)}.lock", f"{b}::t"):  # the other lane: free
+            pass
+        with pytest.raises(SlotTaken):
+            with process_slot(tmp_path / f"{lane_of(a)}.lock", f"{a}::u"):
+                pass
+
+
 def test_the_slot_is_free_after_a_holder_raised(tmp_path):
     lock = tmp_path / "slot.lock"
     with pytest.raises(KeyError):
@@ -70,11 +88,11 @@ from tests.process_guard import lock_path
 
 @pytest.mark.network
 def test_one(request):
-    assert lock_path(request.config).read_text() == request.node.nodeid
+    assert lock_path(request.config, request.node.nodeid).read_text() == request.node.nodeid
 
 @pytest.mark.network
 def test_two(request):
-    assert lock_path(request.config).read_text() == request.node.nodeid
+    assert lock_path(request.config, request.node.nodeid).read_text() == request.node.nodeid
 '''
 
 HELD = '''
@@ -85,7 +103,7 @@ from tests.process_guard import lock_path
 KEEP = []
 
 def test_hold_the_slot_as_another_worker_would(request):
-    fd = os.open(lock_path(request.config), os.O_RDWR | os.O_CREAT)
+    fd = os.open(lock_path(request.config, request.node.nodeid), os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     os.write(fd, b"elsewhere::test_running")
     KEEP.append(fd)
@@ -123,10 +141,11 @@ def test_process_tests_form_one_group_and_a_held_slot_fails_the_next(tmp_path):
         r"test_inner\.py::(test_\w+)(@\w+)? *\n?\[(gw\d)\][^\n]*PASSED", p.stdout)]
     got = {t: (w, g) for w, t, g in ran}
     assert set(got) == {"test_one", "test_two"}, p.stdout[-3000:]
-    assert {g for _, g in got.values()} == {"@processes"}, got
+    assert {g for _, g in got.values()} == {"@" + group_of("test_inner.py::test_one")}, got
     assert len({w for w, _ in got.values()}) == 1, got  # one worker, one after another
     p = _inner(tmp_path, "held", HELD, "-n", "0")
     assert p.returncode == 1, p.stdout[-3000:]
     assert "1 passed, 1 error" in p.stdout, p.stdout[-3000:]  # fails at its setup
     assert re.search(r"test_a_process_test_meanwhile started while elsewhere::test_running was "
-                     r"running: two process tests at one moment", p.stdout), p.stdout[-3000:]
+                     r"running: two process tests of one lane at one moment", p.stdout), \
+        p.stdout[-3000:]
