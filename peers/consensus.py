@@ -48,6 +48,7 @@ from sensornet.tracking.mature_existence import MatureExistence
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.nale import NaleBuffer
 from sensornet.tracking.own_scan import own_scan_ratio, own_scan_weights
+from sensornet.tracking.stamp_blocks import block_ids
 from sensornet.tracking.support import (
     SupportRule,
     input_mass,
@@ -550,8 +551,9 @@ class Consensus(BatchedRounds):
                                     t.existence[keep], t.status[keep])
         if self.o.existence_keep or self.o.label_keep:
             self._reported = np.unique(label_keys(t.ids))
+        ids = block_ids(t.ids, self.o.id_blocks) if self.o.id_blocks else t.ids  # stamp_blocks
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
-                       ids=t.ids, covs=t.covs, existence=t.existence, status=t.status)]
+                       ids=ids, covs=t.covs, existence=t.existence, status=t.status)]
 
     def _input_mixtures(self, inputs: FusionInput | None) -> list[GaussianMixture] | None:
         """The inputs' mixtures (own density, then each neighbour's posterior) of ``inputs``

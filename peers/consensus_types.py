@@ -87,6 +87,9 @@ class ConsensusOptions:
     the fused density holds, or held in the last as many scans, a label of the same origin and
     index born up to as many scans earlier at the same place (a moved stamp whose first may
     still come, tracking.label_twins); 0: off."""
+    id_blocks: int = 0
+    """Fused tracks' reported ids: shared labels by blocks of this many scans and cells
+    (tracking.stamp_blocks); 0: the labels."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""

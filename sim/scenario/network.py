@@ -199,6 +199,16 @@ class FusionSpec:
                                      "once), off for the others. Issue 33 "
                                      "(docs/labelled-tracking.md, \"One target, two stamps "
                                      "a scan apart\").", unit="scans", check=at_least(-1))
+    id_blocks: int = option(0, doc="Reported ids of fused tracks (labelled peers): a shared "
+                                   "label is reported as its block, its scan rounded down to a "
+                                   "multiple of this many scans and its birth cell's numbers "
+                                   "to multiples of as many cells, so the stamps one target "
+                                   "gets a scan apart or in neighbouring cells, which the "
+                                   "network rule settles a hop a scan, show one id "
+                                   "(`tracking.stamp_blocks`; the fused density, its labels "
+                                   "and what peers send are unchanged); 0: off. Issue 33 "
+                                   "(docs/labelled-tracking.md, \"One id for a target's "
+                                   "first stamps\").", unit="scans", check=NONNEGATIVE)
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
