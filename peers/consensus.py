@@ -41,6 +41,7 @@ from sensornet.peers.labelling_batch import LabelProblem
 from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
+from sensornet.tracking.held_ids import HeldIds
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.label_twins import StampTwins
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
@@ -129,6 +130,9 @@ class Consensus(BatchedRounds):
         self.twins = (StampTwins(options.stamp_twins, options.stamp_twins)
                       if self.fusing and self.labelled and options.stamp_twins > 0 else None)
         """Young fused rows held back while a moved stamp's first may come (label_twins)."""
+        self.held = (HeldIds(options.label_hold, options.existence_young)
+                     if self.fusing and self.labelled and options.label_hold > 0 else None)
+        """Young reported rows take an id reported just before beside them (held_ids)."""
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Sorted keys of the fused tracks reported last scan (``existence_keep``,
         ``label_keep``)."""
@@ -549,6 +553,10 @@ class Consensus(BatchedRounds):
             if not keep.all():
                 t = ExtractedTracks(t.states[keep], t.ids[keep], t.covs[keep],
                                     t.existence[keep], t.status[keep])
+        if self.held is not None:  # a young label does not replace an id just reported
+            t = ExtractedTracks(t.states, self.held.ids(k, t.ids, t.states, t.covs, labels,
+                                                        fused.means, fused.covs),
+                                t.covs, t.existence, t.status)
         if self.o.existence_keep or self.o.label_keep:
             self._reported = np.unique(label_keys(t.ids))
         ids = block_ids(t.ids, self.o.id_blocks) if self.o.id_blocks else t.ids  # stamp_blocks

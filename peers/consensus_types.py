@@ -90,6 +90,9 @@ class ConsensusOptions:
     id_blocks: int = 0
     """Fused tracks' reported ids: shared labels by blocks of this many scans and cells
     (tracking.stamp_blocks); 0: the labels."""
+    label_hold: int = 0
+    """Fused extraction: a young reported row takes an earlier id this peer reported in the
+    last this many scans whose fused row lies beside it (tracking.held_ids); 0: off."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""
@@ -115,6 +118,8 @@ class ConsensusOptions:
         if not 0.0 <= self.existence_prior < 1.0 or self.existence_young < 0:
             raise ValueError(f"existence_prior must be in [0, 1) and existence_young >= 0, "
                              f"got {self.existence_prior} and {self.existence_young}")
+        if self.label_hold < 0:
+            raise ValueError(f"label_hold must be >= 0 scans, got {self.label_hold}")
         if self.stamp_twins < 0:
             raise ValueError(f"stamp_twins must be >= 0 scans, got {self.stamp_twins}")
         if self.support_inputs < -1 or self.support_scans < 1:

@@ -61,6 +61,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         existence_revisit=existence_revisit(scn),
         # a stamp from 2 hops or more can reach a peer after its neighbours' (label_twins)
         stamp_twins=stamp_twins(scn) if settle_scans(A, i) > 1 else 0,
+        label_hold=scn.fusion.label_hold,
         id_blocks=scn.fusion.id_blocks,
         # LMB peers only: their adaptive births tie between neighbouring cells; a GM-PHD's
         # fixed births do not (its numbers were equal to the digit) and the masks cost it

@@ -209,6 +209,17 @@ class FusionSpec:
                                    "and what peers send are unchanged); 0: off. Issue 33 "
                                    "(docs/labelled-tracking.md, \"One id for a target's "
                                    "first stamps\").", unit="scans", check=NONNEGATIVE)
+    label_hold: int = option(0, doc="Fused extraction (labelled peers): a reported row whose "
+                                    "label is at most `existence_young` scans old and that the "
+                                    "peer did not report in the last this many scans is "
+                                    "reported under an earlier-born label it did report then, "
+                                    "not reported now, whose fused row lies within the label "
+                                    "gate of it (`tracking.held_ids`; the fused density and "
+                                    "labels are unchanged); 0: off. Issue 34: with "
+                                    "`lmb.tentative_threshold` a row pooled from two radars' "
+                                    "one-plot tracks replaced an aircraft's id "
+                                    "(docs/real-traffic.md, \"The tentative route's switches "
+                                    "traced\").", unit="scans", check=NONNEGATIVE)
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
