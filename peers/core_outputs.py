@@ -9,7 +9,7 @@ from collections import Counter
 from sensornet.peers.consensus import Consensus
 from sensornet.peers.core_types import Output, Publish, Record
 from sensornet.peers.scoring import Scorer
-from sensornet.protocol.codec import encode, encode_fields
+from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Estimate, Forward, Returns, Tracks
 
 
@@ -24,19 +24,12 @@ class CoreOutputs:
     _cost_mark: tuple[int, int, int]
     _pending_fused: list[Tracks]
     _pending_local: list[int]
-    decode: object
 
     def _wrap(self, messages: list) -> list[Output]:
         out: list[Output] = []
-        seed = getattr(self.decode, "seed", None)  # a host's shared decode (peers.host_parts)
         for m in messages:
             if isinstance(m, Estimate | Forward | Returns):
-                if seed is not None and type(m) is Estimate:  # its co-hosted receivers
-                    payload, *packed = encode_fields(m)       # decode what it packed
-                    seed(payload, *packed)
-                else:
-                    payload = encode(m)
-                out.append(Publish("estimate", m.k, payload, m))
+                out.append(Publish("estimate", m.k, encode(m), m))
                 self.sent_bytes["estimate"] += len(out[-1].payload)
             elif isinstance(m, Tracks):
                 ids = self.consensus.hooks.point_tracks  # a kind without labels: point ids

@@ -9,7 +9,7 @@ import time
 from collections import deque
 
 from sensornet.peers.runtime import PeerRuntime
-from sensornet.protocol.codec import decode, decode_fields
+from sensornet.protocol.codec import decode
 from sensornet.protocol.messages import Estimate, Forward
 
 
@@ -19,9 +19,7 @@ class SharedDecode:
     flooding's forwarded scan sets) are kept by payload (a bytes object caches its hash)
     with their arrays read-only (a receiver that wrote into one would raise, not change its
     neighbours'). Anything else (a large payload too), and every refusal, is decoded per
-    receiver as before. An estimate a co-hosted peer packed (:meth:`seed`) is decoded from
-    the fields it packed, not unpacked again (:func:`protocol.codec.decode_fields`: the same
-    message or refusal)."""
+    receiver as before."""
 
     SIZE = 256
     LARGEST = 65536
@@ -29,18 +27,7 @@ class SharedDecode:
 
     def __init__(self) -> None:
         self._memo: dict[tuple[bytes, object], Estimate] = {}
-        self._seeds: dict[bytes, tuple] = {}
         self.hits = 0
-        self.seeded = 0
-        """Decodes made from a co-hosted peer's packed fields (for tests)."""
-
-    def seed(self, payload: bytes, version: int, kind: str, fields: tuple) -> None:
-        """What a co-hosted peer packed into ``payload`` (:func:`protocol.codec.encode_fields`),
-        for its first receiver's decode (the last :data:`SIZE` kept)."""
-        if len(payload) <= self.LARGEST:
-            if len(self._seeds) >= self.SIZE:
-                del self._seeds[next(iter(self._seeds))]  # the oldest
-            self._seeds[payload] = (version, kind, fields)
 
     def __call__(self, payload: bytes, limits):
         memo_key = (payload, limits)
@@ -48,12 +35,7 @@ class SharedDecode:
         if msg is not None:
             self.hits += 1
             return msg
-        seeded = self._seeds.pop(payload, None)
-        msg = None if seeded is None else decode_fields(payload, *seeded, limits)
-        if msg is None:
-            msg = decode(payload, limits)
-        else:
-            self.seeded += 1
+        msg = decode(payload, limits)
         kind = type(msg)
         if (kind is Estimate or kind is Forward) and len(payload) <= self.LARGEST:
             # a Forward (flooding) reaches each co-hosted neighbour of its sender, as an

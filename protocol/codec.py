@@ -40,45 +40,13 @@ from sensornet.protocol.messages import Message
 
 def encode(msg: Message) -> bytes:
     """Serialise a message: a msgpack array ``[version, type, fields...]`` (see ``_FIELDS``)."""
-    return encode_fields(msg)[0]
-
-
-def encode_fields(msg: Message) -> tuple[bytes, int, str, tuple]:
-    """:func:`encode`'s bytes and what they pack: ``(bytes, version, type, fields)``, so that
-    a receiver in the same process can skip unpacking them (:func:`decode_fields`)."""
     entry = next((ENCODERS[c] for c in type(msg).__mro__ if c in ENCODERS), None)
     if entry is None:
         raise TypeError(f"cannot encode {type(msg).__name__}")
     t, body = entry[0], entry[1](msg)
     version = body.get("v", VERSION)
-    fields = tuple(body[f] for f in VERSIONS[version][t])
-    return msgpack.packb([version, t, *fields], use_bin_type=True), version, t, fields
-
-
-_PLAIN = frozenset((str, int, float, bytes, type(None)))
-"""Field types msgpack gives back as they were packed (``bool`` is not ``int`` here)."""
-
-
-def decode_fields(data: bytes, version: int, kind: str, fields: tuple,
-                  limits: Limits = DEFAULT_LIMITS) -> Message | None:
-    """``decode(data, limits)`` of an estimate's bytes that :func:`encode_fields` packed from
-    ``(version, kind, fields)``, without unpacking them: the header's checks hold by
-    construction (the version, type and field count encode wrote), the type's decoder gets the
-    values msgpack would give back, so the same message, or the same :class:`Rejected`, comes
-    out. None where that is not plain (not an estimate, a field of another type, a long
-    string, bytes over the limit): decode the bytes instead. Why: a peer host's co-hosted
-    receivers of an estimate decoded the bytes their neighbour had just packed (issue 33)."""
-    if (kind != "E" or len(data) > limits.max_bytes
-            or not all(type(v) in _PLAIN for v in fields)
-            or any(type(v) is str and len(v) > 1024 for v in fields)):  # msgpack: 4096 bytes
-        return None
-    body = dict(zip(VERSIONS[version][kind], fields, strict=True))
-    try:
-        return DECODERS[kind](body, limits, version)
-    except Rejected:
-        raise
-    except (ValueError, TypeError, OverflowError) as exc:
-        raise Rejected("field", f"{type(exc).__name__}: {exc}") from None
+    return msgpack.packb([version, t, *(body[f] for f in VERSIONS[version][t])],
+                         use_bin_type=True)
 
 
 def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
@@ -96,6 +64,5 @@ def decode(data: bytes, limits: Limits = DEFAULT_LIMITS) -> Message:
 
 __all__ = ["DEFAULT_LIMITS", "LABELS_VERSION", "MASKS_VERSION", "REASONS", "TRACKS_VERSION",
            "VERSION",
-           "VERSIONS", "Limits", "Rejected", "_FIELDS", "_FIELDS_V2", "decode", "decode_fields",
-           "encode", "encode_fields",
+           "VERSIONS", "Limits", "Rejected", "_FIELDS", "_FIELDS_V2", "decode", "encode",
            "pack_mixture", "unpack_mixture"]
