@@ -65,13 +65,17 @@ def test_published_tracks_are_protocol_2_with_ids(labelled_run):
     assert all(isinstance(m, Tracks) and m.ids is not None and m.status is not None
                and m.covs is not None and m.existence is not None for m in msgs)
     assert sum(len(m.ids) for m in msgs) > SCANS
-    # one id per target everywhere: a scan's id sets agree between the peers nearly always
+    # one id per target everywhere: a scan's confirmed id sets agree between the peers nearly
+    # always (tentative tracks are each peer's own until confirmed: a clutter birth at one
+    # peer, a young track stamped a scan apart; on a loaded machine 5 of 40 scans differed so)
     by = {}
     for m in msgs:
-        by.setdefault(m.k, {})[m.sender] = {tuple(i) for i in m.ids.tolist()}
+        confirmed = m.status == Tracks.CONFIRMED
+        by.setdefault(m.k, {})[m.sender] = {tuple(i) for i in m.ids[confirmed].tolist()}
     full = [v for v in by.values() if len(v) == 3]
     same = sum(1 for v in full if v["s1"] == v["s2"] == v["s3"])
     assert len(full) >= SCANS // 2 and same >= 0.9 * len(full), (same, len(full))
+    assert sum(1 for v in full if v["s1"]) >= 0.75 * len(full), full  # not agreeing on nothing
 
 
 def test_results_table_has_the_id_columns(labelled_run):
