@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from sensornet.tracking.gaussian import inv_spd
 from sensornet.tracking.label_keys import keys_find, keys_isin, label_keys
+from sensornet.tracking.label_twins import check_hold
 
 
 @dataclass
@@ -52,11 +53,7 @@ class HeldIds:
                                repr=False)
 
     def __post_init__(self) -> None:
-        if self.memory < 1 or self.young < 0:
-            raise ValueError(f"memory must be >= 1 and young >= 0 scans, got {self.memory} "
-                             f"and {self.young}")
-        if not 0 < self.gate < np.inf:
-            raise ValueError(f"gate must be positive and finite, got {self.gate}")
+        check_hold(self.gate, memory=(self.memory, 1), young=(self.young, 0))
 
     def ids(self, k: int, ids: np.ndarray, means: np.ndarray, covs: np.ndarray,
             labels: np.ndarray, f_means: np.ndarray, f_covs: np.ndarray) -> np.ndarray:

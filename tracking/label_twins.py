@@ -35,6 +35,18 @@ from sensornet.tracking.gaussian import inv_spd
 from sensornet.tracking.label_keys import keys_isin, label_keys
 
 
+def check_hold(gate: float, **scans: tuple[int, int]) -> None:
+    """A one-line ValueError for a hold rule's options (this module's and
+    :mod:`tracking.held_ids`): each of ``scans`` ``name=(value, least)`` a number of scans at
+    least its least, ``gate`` (a squared Mahalanobis distance) positive and finite."""
+    bad = {name: (v, least) for name, (v, least) in scans.items() if v < least}
+    if bad:
+        raise ValueError(" and ".join(f"{n} must be >= {least}" for n, (_, least) in bad.items())
+                         + " scans, got " + " and ".join(str(v) for v, _ in bad.values()))
+    if not 0 < gate < np.inf:
+        raise ValueError(f"gate must be positive and finite, got {gate}")
+
+
 @dataclass
 class StampTwins:
     """A peer's memory of young fused labels and the hold rule of the module docstring. One
@@ -53,11 +65,7 @@ class StampTwins:
     covs: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        if self.young < 1 or self.memory < 0:
-            raise ValueError(f"young must be >= 1 and memory >= 0 scans, got {self.young} and "
-                             f"{self.memory}")
-        if not 0 < self.gate < np.inf:
-            raise ValueError(f"gate must be positive and finite, got {self.gate}")
+        check_hold(self.gate, young=(self.young, 1), memory=(self.memory, 0))
 
     def held(self, k: int, ids: np.ndarray, states: np.ndarray, covs: np.ndarray,
              labels: np.ndarray, weights: np.ndarray, means: np.ndarray, fcovs: np.ndarray
