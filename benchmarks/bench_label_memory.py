@@ -139,20 +139,31 @@ def summary(args: argparse.Namespace, ms: dict[str, list[float]], ospa: dict[str
             f"{b / a:.3f} (pairs {ratios}); fused OSPA {ospa['rev']:.6f} / {ospa['now']:.6f}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    add_arguments(p, pairs=4)
+def run_against(argv: list[str] | None, doc: str, sets_of, kind: str, what: str, pairs: int,
+                tables: bool = False) -> tuple[argparse.Namespace, str, dict]:
+    """The command of a bench of this kind: its arguments (``doc``'s first line the help),
+    ``sets_of(REV)``'s method sets (an unknown REV a one-line error), the ``kind`` twin world,
+    a header naming ``what`` is compared, the alternated pairs; the summary line and the
+    results tables (``tables``)."""
+    p = argparse.ArgumentParser(description=doc.split("\n")[0])
+    add_arguments(p, pairs=pairs)
     args = p.parse_args(argv)
     try:
-        sides = method_sets(args.against)
+        sides = sets_of(args.against)
     except subprocess.CalledProcessError as exc:
         p.error(f"--against {args.against}: {exc.stderr.strip() or 'not a revision'}")
-    scn, data = twin_world(args, "gmphd")
-    print(f"## label memory and confirmation, this tree against {args.against}: {args.peers} "
-          f"peers, degree {args.degree}, 2 rounds, {args.scans} scans"
+    scn, data = twin_world(args, kind)
+    print(f"## {what}, this tree against {args.against}: {args.peers} {kind} peers, degree "
+          f"{args.degree}, 2 rounds, {args.scans} scans"
           f"{''.join(' --set ' + x for x in args.sets)}; load average {load_average()}\n")
-    ms, ospa, _ = alternate(args, scn, data, sides)
-    print(summary(args, ms, ospa))
+    ms, ospa, got = alternate(args, scn, data, sides, tables=tables)
+    return args, summary(args, ms, ospa), got
+
+
+def main(argv: list[str] | None = None) -> int:
+    _, line, _ = run_against(argv, __doc__, method_sets, "gmphd",
+                             "label memory and confirmation", pairs=4)
+    print(line)
     return 0
 
 

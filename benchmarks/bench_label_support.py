@@ -16,8 +16,6 @@ imports and the machine's minutes.
 
 from __future__ import annotations
 
-import argparse
-import subprocess
 import sys
 import types
 from pathlib import Path
@@ -28,8 +26,7 @@ if not __package__:  # `python benchmarks/bench_label_support.py`: the repositor
 import sensornet.peers.consensus as consensus
 from sensornet.peers.label_support import LabelSupport
 
-from benchmarks.bench_label_memory import add_arguments, alternate, module_at, summary, twin_world
-from benchmarks.bench_network import load_average
+from benchmarks.bench_label_memory import module_at, run_against
 
 
 def method_sets(rev: str) -> dict[str, dict[object, dict[str, object]]]:
@@ -44,20 +41,9 @@ def method_sets(rev: str) -> dict[str, dict[object, dict[str, object]]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    add_arguments(p, pairs=2)
-    args = p.parse_args(argv)
-    try:
-        sides = method_sets(args.against)
-    except subprocess.CalledProcessError as exc:
-        p.error(f"--against {args.against}: {exc.stderr.strip() or 'not a revision'}")
-    scn, data = twin_world(args, "lmb")
-    print(f"## label holder masks, this tree against {args.against}: {args.peers} LMB peers, "
-          f"degree {args.degree}, 2 rounds, {args.scans} scans"
-          f"{''.join(' --set ' + x for x in args.sets)}; load average {load_average()}\n")
-    ms, ospa, tables = alternate(args, scn, data, sides, tables=True)
-    print(f"{summary(args, ms, ospa)}; every peer's results table the same: "
-          f"{tables['rev'] == tables['now']}")
+    _, line, tables = run_against(argv, __doc__, method_sets, "lmb", "label holder masks",
+                                  pairs=2, tables=True)
+    print(f"{line}; every peer's results table the same: {tables['rev'] == tables['now']}")
     return 0
 
 
