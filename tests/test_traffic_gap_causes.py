@@ -14,19 +14,15 @@ from sensornet.sim.studies.traffic.gap_causes import (
 )
 from sensornet.tracking.track_metrics import TrackTable, ospa2_dense
 
+from tests.dense_tracks import random_dense
+
 C, P, W = 1000.0, 2.0, 10
-
-
-def _random_dense(rng, T, n, frac):
-    X = rng.normal(0.0, 600.0, (T, n, 2))
-    X[rng.random((T, n)) < frac] = np.nan
-    return X
 
 
 @pytest.mark.parametrize("seed", range(4))
 def test_causes_add_up_to_ospa2_squared(seed):
     rng = np.random.default_rng(seed)
-    E, Y = _random_dense(rng, 30, 6, 0.3), _random_dense(rng, 30, 4, 0.2)
+    E, Y = random_dense(rng, 30, 6, 0.3), random_dense(rng, 30, 4, 0.2)
     per_t, per_e, tot = attribute(E, Y, truth_rows(Y, E, C), C, P, W)
     ref = ospa2_dense(E, Y, C, P, W)
     np.testing.assert_allclose(tot, ref**2, rtol=1e-9, atol=1e-6)

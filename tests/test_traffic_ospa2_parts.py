@@ -6,17 +6,13 @@ import pytest
 from sensornet.sim.studies.traffic.ospa2_parts import ospa2_parts, ospa2_parts_dense, summary
 from sensornet.tracking.track_metrics import TrackTable, ospa2_dense
 
-
-def _random_dense(rng, T, n, frac):
-    X = rng.normal(0.0, 600.0, (T, n, 2))
-    X[rng.random((T, n)) < frac] = np.nan
-    return X
+from tests.dense_tracks import random_dense
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_parts_add_up_to_ospa2_of_the_reference(seed):
     rng = np.random.default_rng(seed)
-    E, Y = _random_dense(rng, 30, 5, 0.3), _random_dense(rng, 30, 4, 0.2)
+    E, Y = random_dense(rng, 30, 5, 0.3), random_dense(rng, 30, 4, 0.2)
     parts = ospa2_parts_dense(E, Y, 1000.0, 2.0, 10)
     ref = ospa2_dense(E, Y, 1000.0, 2.0, 10)
     np.testing.assert_allclose(parts[:, 4], ref, rtol=1e-9, atol=1e-9)
