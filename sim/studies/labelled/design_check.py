@@ -40,9 +40,12 @@ COLUMNS = ("ospa", "ospa2", "late+missed", "gap", "dup", "false+extra", "switche
 
 def fused_row(scn, run: int, peers: dict | None = None) -> dict[str, float]:
     """One twin run's fused row: :func:`sim.studies.labelled.study.twin_row`'s guard
-    metrics and :mod:`sim.studies.labelled.ospa2_floor`'s parts (mean over peers).
+    metrics and :mod:`sim.studies.labelled.ospa2_floor`'s parts (mean over peers), and the
+    twin's CPU ms per peer-scan (``cpu_ms``, as ``twin_row``'s: what more rounds cost).
     ``peers``: the twin's peer cores, if not the scenario's (e.g. one that lies)."""
+    c0 = time.process_time()
     twin = run_twin(scn, run, peers=peers)
+    cpu = time.process_time() - c0
     names = scn.sensor_names
     truth, _ = generate_run(scn, run)
     T = truth_table(truth)
@@ -59,7 +62,8 @@ def fused_row(scn, run: int, peers: dict | None = None) -> dict[str, float]:
             "dup": part["dup"], "false+extra": part["false"] + part["extra"],
             "agreement_confirmed": label_agreement(conf, T, gate=c)["agreement"],
             "tuples": cost_columns([q.cost() for q in twin.peers.values()])[
-                "tuples_per_peer_scan"]}
+                "tuples_per_peer_scan"],
+            "cpu_ms": 1e3 * cpu / (len(names) * scn.num_scans)}
 
 
 def check(graph: str, kind: str, pd: float, runs: list[int], rule: str, extra: dict,

@@ -1,10 +1,11 @@
 """Several fused-track design variants against one baseline (issue 33, docs/labelled-tracking.md,
 "Why the LMB's fused OSPA(2) is not <= 0.5 x its local"): per cell (graph, kind, Pd) each
 variant's fused row of :func:`sim.studies.labelled.design_check.fused_row` (OSPA(2), its parts,
-all-track and confirmed switches per 1,000 true target-scans, mean and worst peer), with its
-ratio to the local and the centralised OSPA(2) (:func:`sim.studies.labelled.ospa2_floor.cell`,
-computed once per cell), mean over runs (worst: over runs too). The baseline is computed once
-per cell, not once per variant as ``design_check`` does.
+all-track and confirmed switches per 1,000 true target-scans, mean and worst peer; tuples and
+the twin's CPU ms per peer-scan), with its ratio to the local and the centralised OSPA(2)
+(:func:`sim.studies.labelled.ospa2_floor.cell`, computed once per cell), mean over runs (worst:
+over runs too). The baseline is computed once per cell, not once per variant as
+``design_check`` does. ``--variant "L2=network.rounds=2"``: two consensus rounds a scan.
 
 ``python -m sensornet.sim.studies.labelled.pool_check --runs 100,101 --kinds lmb
 --variant "B=fusion.existence_prior=0.01;lmb.tentative_threshold=0.1" [--jobs 2]``
@@ -21,7 +22,8 @@ from sensornet.sim.studies.labelled.ospa2_floor import GRAPHS, _overrides, cell,
 from sensornet.sim.studies.labelled.study import RULES, scenario_of
 
 COLUMNS = ("ospa2", "late+missed", "dup", "false+extra", "switches", "switches_max",
-           "switches_confirmed", "switches_confirmed_max", "agreement_confirmed", "tuples")
+           "switches_confirmed", "switches_confirmed_max", "agreement_confirmed", "tuples",
+           "cpu_ms")
 
 
 def parse_variant(text: str) -> tuple[str, dict]:

@@ -21,8 +21,8 @@ delay (scans from a target's first scan to its first matched track, confirmed an
 peer-scan (``PeerCore.cost``); CPU per peer-scan (the twin's process time over peers x scans:
 local step, fusion, codec; centralised: the filter's CPU per scan for all sensors).
 
-``python -m sensornet.sim.studies.labelled.study [--runs3 8] [--runs20 3] [--jobs 1]
-[--md FILE]``; progress on stderr.
+``python -m sensornet.sim.studies.labelled.study [--runs3 8] [--runs20 3] [--rounds20 1]
+[--jobs 1] [--md FILE]``; progress on stderr.
 """
 
 from __future__ import annotations
@@ -73,7 +73,8 @@ METRICS = ("ospa", "ospa2", "tgospa", "switches", "switches_max", "switches_conf
 class Graph:
     name: str
     scenario: str
-    """A shipped scenario name or ``circulant:N:D``."""
+    """A shipped scenario name or ``circulant:N:D[:L]`` (``L`` consensus rounds a scan,
+    default 1: :func:`sim.world.graphs.network_scenario`)."""
     runs: int
 
 
@@ -85,11 +86,21 @@ def scenario_of(graph: Graph, kind: str, pd: float, clutter: float, scans: int |
     if scans is not None:
         over["scenario.num_scans"] = scans
     if graph.scenario.startswith("circulant:"):
-        _, n, d = graph.scenario.split(":")
-        src = scenario_source(f"circulant-{n}-{d}.toml", network_scenario(int(n), int(d)))
+        n, d, *rounds = (int(x) for x in graph.scenario.split(":")[1:])
+        L = rounds[0] if rounds else 1
+        src = scenario_source(f"circulant-{n}-{d}{f'-{L}' if L != 1 else ''}.toml",
+                              network_scenario(n, d, rounds=L))
     else:
         src = graph.scenario
     return load_scenario(src, overrides=over)
+
+
+def circ20(runs: int, rounds: int = 1) -> Graph:
+    """The study's 20 peers of degree 4 with ``rounds`` consensus rounds a scan (named
+    ``circ4-20`` at the default 1, ``circ4-20 L=rounds`` otherwise)."""
+    if rounds == 1:
+        return Graph("circ4-20", "circulant:20:4", runs)
+    return Graph(f"circ4-20 L={rounds}", f"circulant:20:4:{rounds}", runs)
 
 
 def truth_table(truth: Truth, pos=(0, 2)) -> TrackTable:
@@ -319,6 +330,8 @@ def main(argv: list[str] | None = None) -> int:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs3", type=int, default=8, help="runs on seed 000's 3 peers")
     ap.add_argument("--runs20", type=int, default=3, help="runs on 20 peers of degree 4")
+    ap.add_argument("--rounds20", type=int, default=1,
+                    help="consensus rounds a scan on the 20 peers (network.rounds; default 1)")
     ap.add_argument("--first-run", type=int, default=0,
                     help="first run index (evaluation: 0..; the training runs were 100, 101)")
     ap.add_argument("--scans", type=int, help="scans per run (default: the scenario's)")
@@ -334,8 +347,11 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"unknown rule or kind: {', '.join(bad)}", file=sys.stderr)
         return 2
+    if a.rounds20 < 1:
+        print(f"--rounds20 must be >= 1, got {a.rounds20}", file=sys.stderr)
+        return 2
     graphs = [g for g in (Graph("full-3 (seed 000)", "seed000", a.runs3),
-                          Graph("circ4-20", "circulant:20:4", a.runs20)) if g.runs > 0]
+                          circ20(a.runs20, a.rounds20)) if g.runs > 0]
     t0 = time.perf_counter()
     rows = run_study(graphs, a.first_run, rules, tuple(a.kinds.split(",")), scans=a.scans,
                      jobs=a.jobs, with_tgospa=not a.no_tgospa)
