@@ -41,7 +41,7 @@ from sensornet.peers.labelling_batch import LabelProblem
 from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
-from sensornet.tracking.held_ids import HeldIds
+from sensornet.tracking.held_ids import HeldIds, ReportedIds
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.label_twins import StampTwins
 from sensornet.tracking.labels import Confirmation, ExtractedTracks, LabelledMixture
@@ -136,6 +136,9 @@ class Consensus(BatchedRounds):
         self._reported = label_keys(np.zeros((0, 3), dtype=np.int64))
         """Sorted keys of the fused tracks reported last scan (``existence_keep``,
         ``label_keep``)."""
+        self.kept_ids = (ReportedIds(options.label_keep_scans) if self.fusing and self.labelled
+                         and options.label_keep and options.label_keep_scans > 0 else None)
+        """Ids reported in the last ``label_keep_scans`` scans, kept too (held_ids)."""
 
     # -- inputs -----------------------------------------------------------------------------
     def busy(self) -> bool:
@@ -415,7 +418,9 @@ class Consensus(BatchedRounds):
         return LabelProblem(fused, pairs, self.hooks.origin, st.k, self._fresh, bump=bump,
                             copies=bool(getattr(self.fuser, "copies", False)),
                             support=self.label_support, fallback=self.o.label_fallback,
-                            keep=self._reported if self.o.label_keep else None,
+                            keep=(None if not self.o.label_keep else self._reported
+                                  if self.kept_ids is None  # label_keep_scans: held_ids
+                                  else self.kept_ids.union(st.k, self._reported)),
                             settle=self.o.confirm_settle)
 
     def tracks_problem(self, st: ScanState, fused) -> tuple | None:
@@ -559,6 +564,8 @@ class Consensus(BatchedRounds):
                                 t.covs, t.existence, t.status)
         if self.o.existence_keep or self.o.label_keep:
             self._reported = np.unique(label_keys(t.ids))
+        if self.kept_ids is not None:
+            self.kept_ids.remember(k, t.ids)
         ids = block_ids(t.ids, self.o.id_blocks) if self.o.id_blocks else t.ids  # stamp_blocks
         return [Tracks(self.o.name, k, t.states, seq=self._next_seq(), send_time=now,
                        ids=ids, covs=t.covs, existence=t.existence, status=t.status)]

@@ -93,6 +93,9 @@ class ConsensusOptions:
     label_hold: int = 0
     """Fused extraction: a young reported row takes an earlier id this peer reported in the
     last this many scans whose fused row lies beside it (tracking.held_ids); 0: off."""
+    label_keep_scans: int = 0
+    """With :attr:`label_keep`: keep the labels reported in the last this many scans, not
+    only the scan before (tracking.held_ids.ReportedIds); 0: the scan before only."""
     label_support: bool = False
     """Break a tie between shared labels of one scan by how many peers stamped each
     (peers.label_support; the masks ride on the labels' origin column); False: lowest index."""
@@ -120,6 +123,8 @@ class ConsensusOptions:
                              f"got {self.existence_prior} and {self.existence_young}")
         if self.label_hold < 0:
             raise ValueError(f"label_hold must be >= 0 scans, got {self.label_hold}")
+        if self.label_keep_scans < 0:
+            raise ValueError(f"label_keep_scans must be >= 0 scans, got {self.label_keep_scans}")
         if self.stamp_twins < 0:
             raise ValueError(f"stamp_twins must be >= 0 scans, got {self.stamp_twins}")
         if self.support_inputs < -1 or self.support_scans < 1:

@@ -20,6 +20,14 @@ track-to-track correlation problem", IEEE TAC 26(2), 1981, without the cross-cov
 The id a peer shows is then the one it showed; the next scan's label rule pairs the row with
 that label (``peers.labelling.label_fused``, with ``fusion.label_keep`` the reported label
 first) and the earlier label wins it by the network rule, at this peer and its neighbours.
+
+:class:`ReportedIds` is the memory of the ids a peer reported in its last few scans, which
+:class:`HeldIds` looks up and which ``fusion.label_keep_scans`` gives ``fusion.label_keep``'s
+veto (``peers.labelling.kept_first``): traced on paris-8's training hour (aircraft 392af3 at
+tick 774), a mature row every radar but one held was pooled below 0.5 and not reported for one
+scan; with only the scan before's ids to keep, the next scan an en-route radar's remnant of
+another aircraft's label, born 289 scans earlier, won the row by the earliest-birth rule (a
+switch at every peer). Kept over the last N scans the reported label survives a one-scan drop.
 """
 
 from __future__ import annotations
@@ -34,6 +42,47 @@ from sensornet.tracking.label_twins import check_hold
 
 
 @dataclass
+class ReportedIds:
+    """The ids a peer reported at each of its last ``scans`` scans (sorted label keys and the
+    scan each was last reported at): :meth:`remember` once per scan, :meth:`recent` the keys
+    reported at scans ``j`` with ``k - j <= scans``, for a scan ``k`` after them."""
+
+    scans: int = 3
+    keys: np.ndarray = field(default_factory=lambda: label_keys(np.zeros((0, 3), np.int64)),
+                             repr=False)
+    last: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.scans, bool) or not isinstance(self.scans, (int, np.integer)) \
+                or self.scans < 1:
+            raise ValueError(f"reported ids' memory must be an integer >= 1 scans, got "
+                             f"{self.scans!r}")
+
+    def recent(self, k: int) -> np.ndarray:
+        """Sorted keys of the ids reported at scans ``k - scans .. k`` (at most ``scans`` ago)."""
+        return self.keys[k - self.last <= self.scans] if len(self.keys) else self.keys
+
+    def union(self, k: int, keys: np.ndarray) -> np.ndarray:
+        """Sorted unique keys of ``keys`` (e.g. the last scan's, whenever it was) and
+        :meth:`recent` at ``k``: what ``fusion.label_keep`` keeps with ``label_keep_scans``."""
+        return np.union1d(keys, self.recent(k))
+
+    def remember(self, k: int, ids: np.ndarray) -> None:
+        """Keep ``ids (r, 3)`` as reported at ``k``; forget ids not reported for ``scans``
+        scans (they are no longer recent at ``k + 1``)."""
+        new = np.unique(label_keys(np.asarray(ids, dtype=np.int64).reshape(-1, 3)))
+        keep = (k - self.last < self.scans) if len(self.keys) else np.zeros(0, dtype=bool)
+        keys, last = self.keys[keep], self.last[keep]
+        if len(keys) and len(new):
+            seen, _ = keys_find(new, keys)
+            keys, last = keys[~seen], last[~seen]
+        keys = np.concatenate([keys, new])
+        last = np.concatenate([last, np.full(len(new), k, dtype=np.int64)])
+        order = np.argsort(keys)
+        self.keys, self.last = keys[order], last[order]
+
+
+@dataclass
 class HeldIds:
     """A peer's memory of the ids it reported and the rule of the module docstring. One per
     peer; call :meth:`ids` once per scan with the scan's extracted rows and fused density.
@@ -44,9 +93,6 @@ class HeldIds:
     memory: int = 3
     young: int = 2
     gate: float = 26.0
-    keys: np.ndarray = field(default_factory=lambda: label_keys(np.zeros((0, 3), np.int64)),
-                             repr=False)
-    last: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
     sub_from: np.ndarray = field(default_factory=lambda: label_keys(np.zeros((0, 3), np.int64)),
                                  repr=False)
     sub_to: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64),
@@ -54,6 +100,8 @@ class HeldIds:
 
     def __post_init__(self) -> None:
         check_hold(self.gate, memory=(self.memory, 1), young=(self.young, 0))
+        self.reported = ReportedIds(self.memory)
+        """The ids this peer reported in its last ``memory`` scans."""
 
     def ids(self, k: int, ids: np.ndarray, means: np.ndarray, covs: np.ndarray,
             labels: np.ndarray, f_means: np.ndarray, f_covs: np.ndarray) -> np.ndarray:
@@ -71,7 +119,7 @@ class HeldIds:
             to = self.sub_to[pos]
             done = found & ~keys_isin(label_keys(to), rk)
             out[done] = to[done]
-        recent = self.keys[k - self.last <= self.memory] if len(self.keys) else self.keys
+        recent = self.reported.recent(k)
         if len(ids) and len(recent) and len(labels):
             lk = label_keys(np.asarray(labels, dtype=np.int64))
             row = np.flatnonzero((k - ids[:, 1] <= self.young) & ~keys_isin(rk, recent)
@@ -85,7 +133,7 @@ class HeldIds:
                 done |= new
         order = np.argsort(rk[done])
         self.sub_from, self.sub_to = rk[done][order], out[done][order]
-        self._remember(k, out)
+        self.reported.remember(k, out)
         return out
 
     def _pair(self, ids, means, covs, row, labels, f_means, f_covs, col) -> np.ndarray:
@@ -103,18 +151,5 @@ class HeldIds:
         out[row[r[hit]]] = labels[col[c[hit]]]
         return out
 
-    def _remember(self, k: int, ids: np.ndarray) -> None:
-        """Keep ``ids`` as reported at ``k``; forget ids not reported for ``memory`` scans."""
-        new = np.unique(label_keys(ids))
-        keep = (k - self.last < self.memory) if len(self.keys) else np.zeros(0, dtype=bool)
-        keys, last = self.keys[keep], self.last[keep]
-        if len(keys) and len(new):
-            seen, _ = keys_find(new, keys)
-            keys, last = keys[~seen], last[~seen]
-        keys = np.concatenate([keys, new])
-        last = np.concatenate([last, np.full(len(new), k, dtype=np.int64)])
-        order = np.argsort(keys)
-        self.keys, self.last = keys[order], last[order]
 
-
-__all__ = ["HeldIds"]
+__all__ = ["HeldIds", "ReportedIds"]

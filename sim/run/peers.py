@@ -71,6 +71,7 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
                      if net.label_support and net.filter == "lmb" else ()),
         label_fallback=lmb_auto(scn, scn.fusion.label_fallback),
         label_keep=lmb_auto(scn, scn.fusion.label_keep),
+        label_keep_scans=scn.fusion.label_keep_scans,
     )
     return replace(opts, **changes)
 

@@ -220,6 +220,18 @@ class FusionSpec:
                                     "one-plot tracks replaced an aircraft's id "
                                     "(docs/real-traffic.md, \"The tentative route's switches "
                                     "traced\").", unit="scans", check=NONNEGATIVE)
+    label_keep_scans: int = option(0, doc="With `label_keep`: the labels it keeps are those "
+                                          "this peer reported in the last this many scans "
+                                          "(and the last scan it reported), not only the "
+                                          "scan before, so a reported track not extracted "
+                                          "for a scan keeps its veto (`tracking.held_ids."
+                                          "ReportedIds`; the fused density is unchanged); 0: "
+                                          "off (the scan before only). Issue 34: a mature "
+                                          "aircraft's row pooled below 0.5 for one scan lost "
+                                          "its label to a far radar's remnant of another "
+                                          "aircraft's (docs/real-traffic.md, \"The tentative "
+                                          "route's switches traced\").", unit="scans",
+                                   check=NONNEGATIVE)
     trust: bool = option(True, doc="Test each neighbour's density before fusing it and "
                                    "down-weight or quarantine the inconsistent ones "
                                    "(`peers.trust`; on by default since issue 36 item 5: "
