@@ -36,11 +36,12 @@ from sensornet.peers.contracts import (
 )
 from sensornet.peers.fusers import NoFuser
 from sensornet.peers.label_support import LabelSupport, decode, peer_bit
-from sensornet.peers.labelling import FusedLabels
+from sensornet.peers.labelling import FusedLabels, copy_keepers
 from sensornet.peers.labelling_batch import LabelProblem
 from sensornet.peers.tracks_batch import rows_support
 from sensornet.peers.trust import Trust
 from sensornet.protocol.messages import Estimate, Forward, Returns, ScanSet, Tracks
+from sensornet.tracking.fusion_rules import aa_label_density
 from sensornet.tracking.held_ids import HeldIds, ReportedIds
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.label_twins import StampTwins
@@ -502,7 +503,10 @@ class Consensus(BatchedRounds):
         that all hold one peer's young clutter track, which with 2 rounds was pooled as a
         confirmation by each, issue 33) by the extraction rules of tracking.support when on:
         young tracks' pooled existence (``existence_prior``; not of an AA fusion's
-        ``copies``, peers.labelling.copy_rows), then :attr:`support`. ``masses``: ``(input
+        ``copies``, peers.labelling.copy_rows), then :attr:`support`; an AA fuser's ``label_state``
+        first sums each label's copies' existence (tracking.fusion_rules.aa_label_density, Li
+        2022's per-label AA), so a target three inputs hold at 0.9 is not three rows at 0.3, each
+        under the existence test (issue 33). ``masses``: ``(input
         masses, supports of the rows, the fused means they are of)`` computed with other peers'
         (peers.tracks_batch.masses_many), else computed here."""
         if masses is not None and masses[2] is not fused.means:
@@ -513,6 +517,11 @@ class Consensus(BatchedRounds):
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         mixes = self._input_mixtures(inputs)
+        state, moments = getattr(self.fuser, "label_state", None), None
+        if state is not None and copies is not None and copies.any():  # AA copies per label
+            w, *moments = aa_label_density(fused.weights, fused.means, fused.covs,
+                                           copy_keepers(fused, copies), state)
+            fused = GaussianMixture.trusted(w, fused.means, fused.covs)  # means: masses' rows
         cap = None  # a mature track every input just missed (tracking.mature_existence)
         if self.mature is not None and mixes is not None:
             cap = self.mature.caps(fused.weights, labels, k, input_mass(fused.means, mixes)
@@ -543,6 +552,8 @@ class Consensus(BatchedRounds):
         if cap is not None and len(fused):
             fused = GaussianMixture.trusted(np.minimum(fused.weights, cap), fused.means,
                                             fused.covs)
+        if moments is not None:  # the labels' states (aa_label_density), for extraction
+            fused = GaussianMixture.trusted(fused.weights, *moments)
         t = self.hooks.extract_tracks(fused, labels, self.confirm_fused)
         if self.support is not None and mixes is not None:
             held = None if masses is None else rows_support(masses[1], masses[2], t.states)

@@ -75,6 +75,10 @@ class AaFuser(_MixtureFuser):
     """Its fused density keeps every input's component of a target (at reduced weight) unless
     the reducer merged them, so the labelling releases no label won by two nearby copies
     (peers.labelling.label_fused ``copies``)."""
+    label_state: str | None = None
+    """Per-label existence at extraction (``lmb.aa_label_existence``; peers.consensus
+    ``_tracks``, tracking.fusion_rules.aa_label_density): ``"mean"`` or ``"heaviest"``, the
+    state a label's copies are reported at once; None: each row by its own weight."""
 
 
 class HybridFuser(_MixtureFuser):

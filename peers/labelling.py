@@ -395,6 +395,40 @@ def copy_rows(fused: GaussianMixture, J: np.ndarray, won: np.ndarray, keeper: np
     return out
 
 
+def copy_keepers(fused: GaussianMixture, copies: np.ndarray, gate: float = LABEL_GATE
+                 ) -> np.ndarray:
+    """``(n,)`` int: each fused row's label row for the AA rule's per-label existence
+    (tracking.fusion_rules.aa_label_density): a row not in ``copies (n,)`` (``FusedLabels.
+    copies``, :func:`copy_rows`) is its own; a copy goes to the nearest (the squared
+    Mahalanobis distance of :func:`_pairs`) row at least as heavy that is no copy, within
+    ``gate``, else stays its own. Why the nearest and not the row that kept its label: a copy
+    lost its label to a heavier row within ``gate`` (so that row qualifies), and which one it
+    was is not kept past :func:`label_fused`; two labelled rows both within the gate of a copy
+    are two targets closer than the label gate, whose copies either could hold."""
+    n = len(fused)
+    copies = np.asarray(copies, dtype=bool)
+    if copies.shape != (n,):
+        raise ValueError(f"copies has shape {copies.shape}, expected ({n},)")
+    out = np.arange(n)
+    c, q = np.flatnonzero(copies), np.flatnonzero(~copies)
+    if not len(c) or not len(q):
+        return out
+    w = fused.weights
+    diff = fused.means[c][:, None, :] - fused.means[q][None, :, :]  # (nc, nq, d)
+    trace = (np.trace(fused.covs[c], axis1=1, axis2=2)[:, None]
+             + np.trace(fused.covs[q], axis1=1, axis2=2)[None, :])
+    near = (np.einsum("abi,abi->ab", diff, diff) <= gate * trace) & (w[q][None, :] >= w[c][:, None])
+    ii, jj = np.nonzero(near)
+    if not len(ii):
+        return out
+    d2 = np.full(near.shape, np.inf)
+    d2[ii, jj] = _distance2(fused, c[ii], q[jj])
+    best = np.argmin(d2, axis=1)
+    ok = d2[np.arange(len(c)), best] <= gate
+    out[c[ok]] = q[best[ok]]
+    return out
+
+
 def corroborated(labels: np.ndarray, won: np.ndarray, J: np.ndarray, S: np.ndarray,
                  bump: np.ndarray, k: int) -> np.ndarray:
     """A label's network scan is its first *corroborated* one: ``labels (n, 3)`` of the fused
@@ -448,6 +482,6 @@ def take_moves(labels: np.ndarray, match: LabelMatch, fresh: np.ndarray | None
     return out, LabelMatch(own[rest], nbr[rest], np.asarray(match.cost)[rest])
 
 
-__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "copy_rows",
+__all__ = ["FRESH_BASE", "LABEL_GATE", "SETTLE_MARGIN", "FusedLabels", "copy_keepers", "copy_rows",
            "corroborated", "input_tracks", "kept_first", "label_fused", "next_labels", "origin_of",
            "release_rows", "settle_scans", "take_moves"]

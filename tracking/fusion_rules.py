@@ -34,6 +34,62 @@ def aa_fuse(
     return reduce(fused) if reduce is not None else fused
 
 
+AA_LABEL_STATES = ("mean", "heaviest")
+"""State rules of :func:`aa_label_density`."""
+
+
+def aa_label_density(weights: np.ndarray, means: np.ndarray, covs: np.ndarray,
+                     group: np.ndarray, state: str = "mean"
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The AA fusion of LMB densities per label (Li 2022, "Arithmetic average density fusion,
+    part II", arXiv 2209.10433, the LMB case): label ``l``'s fused existence is ``r(l) =
+    sum_i w_i r_i(l)`` and its spatial density the ``w_i r_i(l)``-weighted mixture of the
+    inputs' densities of ``l``. An AA-fused PHD mixture (:func:`aa_fuse`) holds each input's
+    component of a target as its own row at weight ``w_i r_i(l)`` (a copy), so a target every
+    input holds at 0.9 is three rows at 0.3, each under an existence test's 0.5.
+
+    ``group (n,)``: each row's label row (a row of its own label: itself; a copy: the row that
+    kept the label, :func:`peers.labelling.copy_keepers`), never a row that is itself a copy.
+    Returns ``(weights, means, covs)`` of the same ``n`` rows: a label row's weight is its
+    group's sum capped at 1 (``r(l)``), a copy's 0 (so extraction reports a label once); its
+    state, ``"mean"``, is the moments of the group's weighted mixture (mean ``sum w m / r``,
+    covariance ``sum w (P + (m - mean)(m - mean)^T) / r``, the fused label density's), or,
+    ``"heaviest"``, the label row's own (the row whose label the peers agree on). ValueError on
+    bad input."""
+    w = np.asarray(weights, dtype=float)
+    m = np.asarray(means, dtype=float)
+    P = np.asarray(covs, dtype=float)
+    g = np.asarray(group)
+    n = len(w)
+    if state not in AA_LABEL_STATES:
+        raise ValueError(f"AA label state must be one of {AA_LABEL_STATES}, got {state!r}")
+    if g.shape != (n,) or len(m) != n or len(P) != n:
+        raise ValueError(f"group {g.shape}, means {m.shape} and covs {P.shape} must have "
+                         f"the {n} rows of the weights")
+    if n == 0:
+        return w.copy(), m.copy(), P.copy()
+    if not np.issubdtype(g.dtype, np.integer) or g.min() < 0 or g.max() >= n \
+            or (g[g] != g).any():
+        raise ValueError("group must index rows in [0, n) that are their own group")
+    total = np.bincount(g, weights=w, minlength=n)
+    out_w = np.where(g == np.arange(n), np.minimum(total, 1.0), 0.0)
+    if state == "heaviest" or (g == np.arange(n)).all():
+        return out_w, m.copy(), P.copy()
+    safe = np.where(total > 0, total, 1.0)
+    mean = np.zeros_like(m)
+    np.add.at(mean, g, w[:, None] * m)
+    mean /= safe[:, None]
+    d = m - mean[g]
+    cov = np.zeros_like(P)
+    np.add.at(cov, g, w[:, None, None] * (P + d[:, :, None] * d[:, None, :]))
+    cov /= safe[:, None, None]
+    roots = g == np.arange(n)
+    use = roots & (total > 0)  # a group of zero weight keeps its row's own state
+    out_m, out_P = m.copy(), P.copy()
+    out_m[use], out_P[use] = mean[use], cov[use]
+    return out_w, out_m, out_P
+
+
 HYBRID_GATE = 26.0
 """Default association gate of :func:`hybrid_fuse`: ``(m_i - m_j)' P_i^-1 (m_i - m_j)``. Two
 consistent estimates of one target differ by about ``2 P``, so the form is about twice a

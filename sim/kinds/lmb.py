@@ -16,6 +16,7 @@ of their plot; own origins from 1). The LMB's other settings (association, per-t
 from __future__ import annotations
 
 import numpy as np
+from sensornet.peers.fusers import AaFuser
 from sensornet.peers.labelling import origin_of
 from sensornet.peers.lmb_estimator import LmbEstimator
 from sensornet.sim.choices import MIXTURE_RULES
@@ -93,6 +94,13 @@ def fused_extraction(scn: Scenario) -> str:
     return scn.filter.extraction if rule == "filter" else rule
 
 
+def aa_label_existence(scn: Scenario) -> str | None:
+    """The state rule of the AA fuser's per-label existence (``lmb.aa_label_existence``,
+    :attr:`peers.fusers.AaFuser.label_state`), None for off; ``"auto"`` is off."""
+    rule = scn.lmb.aa_label_existence
+    return None if rule in ("auto", "off") else rule
+
+
 def build(scn: Scenario, name: str, run: int = 0):
     shared = SHARED_ORIGIN if scn.network.birth_ids == "shared" else None
     origin = origin_of([s.name for s in scn.sensors], name) + (0 if shared is None else 1)
@@ -107,7 +115,10 @@ def build(scn: Scenario, name: str, run: int = 0):
                        tentative_gap=None if scn.lmb.tentative_gap < 0 else scn.lmb.tentative_gap,
                        corroborate_scans=corroborate_scans(scn),
                        own_times=own_times(scn, name, scn.lmb.time_slice))
-    return est, mixture_fuser(scn, reducer)
+    fuser = mixture_fuser(scn, reducer)
+    if isinstance(fuser, AaFuser):
+        fuser.label_state = aa_label_existence(scn)
+    return est, fuser
 
 
 def check(scn: Scenario) -> tuple[str, str] | None:

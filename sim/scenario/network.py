@@ -464,3 +464,19 @@ class LmbSpec:
                                                  "components (docs/labelled-tracking.md, \"The "
                                                  "GCI and AA rules under the LMB defaults\").",
                                      choices=("auto", "filter", *EXTRACTION_RULES))
+    aa_label_existence: str = option("auto", doc="Under `fusion.rule` `\"aa\"`, how an "
+                                                   "LMB peer's fused extraction treats each "
+                                                   "input's copy of a target (kept at weight "
+                                                   "`w_i r_i`, so three inputs' 0.9 are three "
+                                                   "rows at 0.3): `\"mean\"` reports a label "
+                                                   "once at its copies' summed existence "
+                                                   "(capped at 1; Li 2022's per-label AA) and "
+                                                   "their weighted mean state, `\"heaviest\"` "
+                                                   "the same existence at the labelled row's "
+                                                   "state, `\"off\"` each row by its own "
+                                                   "weight. Extraction only: the fused "
+                                                   "density and messages are unchanged. "
+                                                   "`\"auto\"` (default): `\"off\"` (issue "
+                                                   "33, docs/labelled-tracking.md, \"Per-label "
+                                                   "existence over the AA copies\").",
+                                     choices=("auto", "off", "mean", "heaviest"))
