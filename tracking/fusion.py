@@ -33,7 +33,13 @@ from sensornet.tracking.gaussian import (
     sym4_inverse_into,
     symmetrise,
 )
-from sensornet.tracking.gci_product import CARDINALITY_RULES, MIN_OVERLAP, gci_product
+from sensornet.tracking.gci_product import (
+    CARDINALITY_RULES,
+    MIN_OVERLAP,
+    gci_product,
+    gci_step,
+    inverses,
+)
 from sensornet.tracking.mixture import GaussianMixture
 
 Reduce = Callable[[GaussianMixture], GaussianMixture]
@@ -281,9 +287,13 @@ def gci_fuse(
     reduced once; beyond, by sequential pairing, reducing after each step (the pair count
     multiplies): step ``i`` fuses the running result (weight ``s = omega_0 + ... +
     omega_(i-1)``) with the newcomer at ``omega = omega_i / (s + omega_i)``. Before any
-    reduction both give the same mixture. ``normalise`` gives a unit-mass result
-    (single-target densities; with one Gaussian each this is covariance intersection).
-    ``cardinality``: see :func:`gci_combine`.
+    reduction both give the same mixture. With a reducer a step is the two-density
+    :func:`gci_product`, gated (:func:`gci_step`: the pairs of far-apart components, below
+    1e-14 of the mass together, which a pruning reducer drops, are not formed; equal to
+    :func:`gci_combine` then reduced, to round-off), with the newcomers' inverses computed in
+    one batched call; without, :func:`gci_combine` (every pair). ``normalise`` gives a
+    unit-mass result (single-target densities; with one Gaussian each this is covariance
+    intersection). ``cardinality``: see :func:`gci_combine`.
     """
     densities, weights = check_weights(densities, weights)
     used = [(D, w) for D, w in zip(densities, weights, strict=True) if w > 0.0]
@@ -293,12 +303,17 @@ def gci_fuse(
         if reduce is not None:
             acc = reduce(acc)
     else:
+        newcomers = inverses([D for D, _ in used[1:]]) if reduce is not None else None
         acc, s = None, 0.0
-        for D, w in used:
+        for k, (D, w) in enumerate(used):
             if acc is None:
                 acc, s = D, w
                 continue
-            acc = gci_combine(acc, D, w / (s + w), cardinality)
+            omega = w / (s + w)
+            if newcomers is not None and 0.0 < omega < 1.0:
+                acc = gci_step(acc, D, omega, cardinality, newcomers[k - 1])
+            else:  # omega rounded to 0 or 1 is the running result or the newcomer itself
+                acc = gci_combine(acc, D, omega, cardinality)
             s += w
             if reduce is not None:
                 acc = reduce(acc)

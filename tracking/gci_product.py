@@ -11,11 +11,18 @@ from collections.abc import Sequence
 
 import numpy as np
 from sensornet.tracking.gaussian import (
+    _generic_inverse,
+    c_einsum,
     inv_det_spd,
     inv_spd,
     quad_form,
 )
 from sensornet.tracking.mixture import GaussianMixture
+
+try:  # the ufunc LAPACK calls behind np.linalg.inv / det (NumPy 1.x and 2.x)
+    from numpy.linalg import _umath_linalg as _lapack
+except ImportError:  # pragma: no cover
+    _lapack = None
 
 CARDINALITY_RULES = ("emd", "separate")
 MIN_OVERLAP = 1e-12
@@ -23,7 +30,8 @@ MIN_OVERLAP = 1e-12
 
 
 def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
-                cardinality: str = "emd", gate: bool = False) -> GaussianMixture:
+                cardinality: str = "emd", gate: bool = False,
+                inverses: Sequence[Inverse | None] | None = None) -> GaussianMixture:
     """``prod_i D_i^(omega_i)`` (``sum omega_i = 1``) in one step: a component per combination.
 
     The power of a mixture drops cross terms (§3; seed 000 eq. 14-17), so the product is, over
@@ -39,6 +47,8 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
     with the first density's component slowest. ``cardinality``: ``"emd"`` or ``"separate"`` (see
     :func:`gci_combine`). ``gate``: leave out the combinations that two far-apart components
     make negligible (:func:`_gated_rows`; for a reduced result: a pruning reducer drops them).
+    ``inverses``: per density, its ``(P^-1, det P)`` if the caller has it (:func:`inverses`:
+    the same numbers), else None.
     """
     if cardinality not in CARDINALITY_RULES:
         raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
@@ -52,8 +62,8 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
         if np.any(masses <= 0):
             return GaussianMixture.empty(d)
         densities = [D.scaled(1.0 / N) for D, N in zip(densities, masses, strict=True)]
-    log_w, means, covs = _centred_terms(densities, omegas, gate)
-    fused = GaussianMixture(np.exp(log_w), means, covs)
+    log_w, means, covs = _centred_terms(_Components(densities, omegas, inverses), gate)
+    fused = GaussianMixture.trusted(np.exp(log_w), means, covs)
     if cardinality == "emd":
         return fused
     c = fused.mass
@@ -62,15 +72,104 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
     return fused.scaled(float(np.prod(masses ** omegas)) / c)
 
 
+Inverse = tuple[np.ndarray, np.ndarray]
+"""A density's ``(P^-1 (N, d, d), det P (N,))``, as :func:`inverses` gives them."""
+
+
+def inverses(densities: Sequence[GaussianMixture]) -> list[Inverse]:
+    """Each density's :data:`Inverse`, in one batched call (per matrix the numbers
+    :class:`_Components` computes itself): for a caller that uses a density in several
+    products (the newcomers of :func:`tracking.fusion.gci_fuse`'s sequential steps)."""
+    if not densities:
+        return []
+    Y, det = _inv_det(np.concatenate([D.covs for D in densities]))
+    cut = np.cumsum([len(D) for D in densities])[:-1]
+    return list(zip(np.split(Y, cut), np.split(det, cut), strict=True))
+
+
+def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinality: str,
+             new_inverse: Inverse) -> GaussianMixture:
+    """``gci_product([acc, new], [1 - omega, omega], cardinality, gate=True)`` (``0 < omega <
+    1``) with the fewest NumPy calls: one step of :func:`tracking.fusion.gci_fuse`'s sequential
+    fusion, whose reducer prunes what the gate leaves out. ``new_inverse``: ``new``'s
+    :data:`Inverse`.
+
+    The gate is the marginal bound of :func:`_gated_rows` alone: pair ``(a, b)`` is left out
+    when ``max_k (m_a - m_b)_k^2 / (P_a,kk / (1-omega) + P_b,kk / omega) > _GATE`` (a lower
+    bound of its pair term), so its weight is below ``1e-20 w_a^(1-omega) w_b^omega``; if all
+    of them together could carry more than :data:`_GATE_TOLERANCE` of the kept mass, every
+    pair is formed. The kept pairs go through the same formula (:func:`_centred_rows`), in the
+    same order (``acc``'s component slowest). Issue 33: the 8 steps of own + 8 neighbours of
+    10 tracks form about 11 of each step's 110 pairs, with two small LAPACK calls each.
+    """
+    if cardinality not in CARDINALITY_RULES:
+        raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
+    na, nb = len(acc), len(new)
+    if na == 0 or nb == 0:
+        return GaussianMixture.empty(acc.dim)
+    wa, wb, oa = acc.weights, new.weights, 1.0 - omega
+    if cardinality == "separate":
+        Na, Nb = float(wa.sum()), float(wb.sum())
+        if Na <= 0 or Nb <= 0:
+            return GaussianMixture.empty(acc.dim)
+        wa, wb = wa / Na, wb / Nb
+    diag_a = np.diagonal(acc.covs, axis1=1, axis2=2) / oa
+    diag_b = np.diagonal(new.covs, axis1=1, axis2=2) / omega
+    diff = new.means[None, :, :] - acc.means[:, None, :]  # (na, nb, d): u of the pairs
+    bound = (np.square(diff) / (diag_a[:, None] + diag_b[None])).max(axis=-1)
+    ia, ib = np.nonzero(bound <= _GATE)
+    Ya, det_a = _inv_det(acc.covs)
+    Yb, det_b = new_inverse
+    with np.errstate(divide="ignore", invalid="ignore"):  # zero weights: zero-weight pairs
+        wc = np.concatenate((oa * (np.log(wa) - 0.5 * np.log(det_a)),
+                             omega * (np.log(wb) - 0.5 * np.log(det_b))))
+        log_wmax = oa * np.log(wa.max()) + omega * np.log(wb.max())
+    wY = np.concatenate((oa * Ya, omega * Yb))
+    log_w, means, covs = _centred_rows(wY, wc, np.concatenate((acc.means, new.means)),
+                                       np.array((ia, ib + na)))
+    weights = np.exp(log_w)
+    left_out = (na * nb - len(ia)) * math.exp(min(700.0, log_wmax - 0.5 * _GATE))
+    if not left_out <= _GATE_TOLERANCE * weights.sum():  # might matter: every pair
+        return gci_product([acc, new], [oa, omega], cardinality,
+                           inverses=[None, new_inverse])
+    if cardinality == "separate":
+        c = weights.sum()
+        if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
+            return GaussianMixture.empty(acc.dim)
+        weights *= Na**oa * Nb**omega / c
+    return GaussianMixture.trusted(weights, means, covs)
+
+
+def _inv_det(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`tracking.gaussian.inv_det_spd` (the same LAPACK calls, so the same numbers)
+    without the Python wrappers, which cost more than inverting ten 4x4 matrices; closed-form
+    sizes, other dtypes and singular or non-finite stacks go through it (and its errors)."""
+    if _lapack is None or P.dtype != np.float64 or not _generic_inverse(P):
+        return inv_det_spd(P)
+    with np.errstate(all="ignore"):
+        inv = _lapack.inv(P, signature="d->d")
+        det = _lapack.det(P, signature="d->d")
+    if not np.isfinite(inv).all():
+        return inv_det_spd(P)
+    return 0.5 * (inv + inv.swapaxes(-1, -2)), det
+
+
 class _Components:
     """Per-component inputs of :func:`gci_product`, all densities' components concatenated:
     ``wY = omega_i Y_i (K, d, d)``, ``wc = omega_i (log w_i - 1/2 log det P_i) (K,)``, means
-    ``(K, d)``, and ``start[i]`` (density ``i``'s first row)."""
+    ``(K, d)``, and ``start[i]`` (density ``i``'s first row). ``given``: the densities'
+    :data:`Inverse` where known (a scaled density has its unscaled one's), else None."""
 
-    def __init__(self, densities: list[GaussianMixture], omegas: np.ndarray) -> None:
+    def __init__(self, densities: list[GaussianMixture], omegas: np.ndarray,
+                 given: Sequence[Inverse | None] | None = None) -> None:
         self.sizes = [len(D) for D in densities]
         self.start = np.cumsum(self.sizes) - self.sizes
-        Yall, det_all = inv_det_spd(np.concatenate([D.covs for D in densities]))
+        given = [None] * len(densities) if given is None else list(given)
+        missing = [i for i, g in enumerate(given) if g is None]
+        for i, inv in zip(missing, inverses([densities[i] for i in missing]), strict=True):
+            given[i] = inv
+        Yall = np.concatenate([Y for Y, _ in given])
+        det_all = np.concatenate([det for _, det in given])
         om = np.repeat(omegas, self.sizes)
         with np.errstate(divide="ignore", invalid="ignore"):  # zero weights: zero-weight combos
             self.wc = om * (np.log(np.concatenate([D.weights for D in densities]))
@@ -84,7 +183,7 @@ class _Components:
         return slice(self.start[i], self.start[i] + self.sizes[i])
 
 
-def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray, gate: bool = False
+def _centred_terms(comps: _Components, gate: bool = False
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`gci_product`'s ``log w (C,)``, means ``(C, d)`` and covariances ``(C, d, d)``.
 
@@ -100,7 +199,6 @@ def _centred_terms(densities: list[GaussianMixture], omegas: np.ndarray, gate: b
     with ``gate`` only those :func:`_gated_rows` keeps, gathered, when what it leaves out carries
     at most :data:`_GATE_TOLERANCE` of the kept mass.
     """
-    comps = _Components(densities, omegas)
     if math.prod(comps.sizes) <= _SMALL_COMBINATIONS:
         return _centred_gathered(comps)
     if gate:
@@ -135,19 +233,27 @@ def _gated_rows(comps: _Components) -> tuple[np.ndarray, float] | None:
     ``b``: ``(m_a - m_b)' (P_a / omega_1 + P_b / omega_i)^-1 (m_a - m_b)``; and its determinant
     factor is at most 1 (log det is concave), so its weight is at most ``prod_i w_ic^(omega_i)
     exp(-pair / 2)``. Combinations with a pair term above :data:`_GATE` are left out, densities
-    added one at a time (a PHD's components for different targets never combine).
+    added one at a time (a PHD's components for different targets never combine). The pair
+    term is formed only where a cheap lower bound, one coordinate's marginal ``x' S^-1 x >=
+    x_k^2 / S_kk`` (widened by 1e-6, far above round-off), is within the gate: far-apart
+    targets' pairs cost no inverse (the same rows as forming every pair term, but for a pair
+    term within round-off of the gate).
     """
     sizes, start, n = comps.sizes, comps.start, len(comps.sizes)
     om = np.repeat(comps.omegas, sizes)
     S = np.concatenate([D.covs for D in comps.densities]) / om[:, None, None]  # P / omega
-    first = comps.part(0)
-    # pair terms of each first-density component with every other component: (N_1, K)
-    diff = comps.means[None, :, :] - comps.means[first, None, :]
-    pair = quad_form(diff, inv_spd(S[first, None] + S[None, :]))
-    rows = np.arange(sizes[0])[:, None] + start[0]  # (M, i) kept partial combinations
+    n1 = sizes[0]
+    # pair terms of each first-density component with every later component: (N_1, K - N_1)
+    diff = comps.means[None, n1:, :] - comps.means[:n1, None, :]
+    Sd = np.diagonal(S, axis1=1, axis2=2)
+    bound = (np.square(diff) / (Sd[:n1, None] + Sd[None, n1:])).max(axis=-1, initial=0.0)
+    fi, kj = np.nonzero(bound <= _GATE * (1.0 + 1e-6))
+    pair = np.full(bound.shape, np.inf)
+    pair[fi, kj] = quad_form(diff[fi, kj], inv_spd(S[fi] + S[n1 + kj]))
+    rows = np.arange(n1)[:, None] + start[0]  # (M, i) kept partial combinations
     for i in range(1, n):
         new = np.arange(sizes[i]) + start[i]
-        mi, ni = np.nonzero(pair[rows[:, 0]][:, new] <= _GATE)
+        mi, ni = np.nonzero(pair[rows[:, 0]][:, new - n1] <= _GATE)
         rows = np.concatenate([rows[mi], new[ni, None]], axis=1)
     if not len(rows):
         return None
@@ -164,15 +270,23 @@ def _centred_gathered(comps: _Components, idx: np.ndarray | None = None
     n, sizes = len(comps.sizes), comps.sizes
     if idx is None:
         idx = np.indices(sizes).reshape(n, -1) + comps.start[:, None]  # (n, C) component rows
-    wY = comps.wY[idx]  # (n, C, d, d)
-    ref = comps.means[idx[0]]  # (C, d)
-    u = comps.means[idx] - ref  # (n, C, d)
-    g = np.einsum("ncjk,nck->cj", wY, u)
-    P, det_y = inv_det_spd(wY.sum(axis=0))
-    delta = np.einsum("cij,cj->ci", P, g)
+    return _centred_rows(comps.wY, comps.wc, comps.means, idx)
+
+
+def _centred_rows(wY: np.ndarray, wc: np.ndarray, means: np.ndarray, idx: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The GCI formula of :func:`_centred_terms` for the combinations ``idx (n, C)`` (rows of
+    the component arrays ``wY (K, d, d)``, ``wc (K,)``, ``means (K, d)``; see
+    :class:`_Components`). Returns ``log w (C,)``, means ``(C, d)``, covs ``(C, d, d)``."""
+    wY = wY[idx]  # (n, C, d, d)
+    ref = means[idx[0]]  # (C, d)
+    u = means[idx] - ref  # (n, C, d)
+    g = c_einsum("ncjk,nck->cj", wY, u)
+    P, det_y = _inv_det(wY.sum(axis=0))
+    delta = c_einsum("cij,cj->ci", P, g)
     e = u - delta  # m_ic - m
-    quad = np.einsum("ncj,ncjk,nck->c", e, wY, e)
-    log_w = comps.wc[idx].sum(axis=0) - 0.5 * (np.log(det_y) + quad)
+    quad = c_einsum("ncj,ncjk,nck->c", e, wY, e)
+    log_w = wc[idx].sum(axis=0) - 0.5 * (np.log(det_y) + quad)
     return log_w, ref + delta, P
 
 
