@@ -22,7 +22,8 @@ neighbours' (10 tracks each, labels beside the rows) go through the labelled pee
 Times are this thread's CPU time by default (``--clock wall`` for elapsed time): on a shared
 machine the wall clock also counts the time other processes had the core.
 
-Run from the repository root: ``python benchmarks/bench_lmb.py [--quick] [--scans N]``.
+Run from the repository root: ``python benchmarks/bench_lmb.py [--quick] [--scans N]
+[--fusion-only]``.
 """
 
 from __future__ import annotations
@@ -110,10 +111,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2014)
     ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu",
                     help="cpu: this thread's CPU time (default); wall: elapsed time")
+    ap.add_argument("--fusion-only", action="store_true",
+                    help="only the labelled-fusion rows, their inputs drawn from --seed directly "
+                         "(other inputs than after the filter rows)")
     args = ap.parse_args(argv)
     scans = 40 if args.quick else args.scans
     warmup = min(20, scans // 2)
     rng = np.random.default_rng(args.seed)
+    if args.fusion_only:
+        print(f"load average {os.getloadavg()[0]:.2f}; times are {args.clock} ms")
+        fusion_rows(rng, 20 if args.quick else 200, CLOCKS[args.clock])
+        return 0
     print(f"load average {os.getloadavg()[0]:.2f}; {scans} scans, first {warmup} not timed; "
           f"times are {args.clock} ms")
     print("| targets | clutter | GM-PHD ms | LMB ms | LMB / GM-PHD | LMB (LBP large) ms "
