@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 import msgpack
 import numpy as np
 
-from sensornet.peers.observer import unpack_gate, unpack_marginals
+from sensornet.peers.observer import unpack_gate
 from sensornet.peers.rerun_layout import cell_marks
 from sensornet.peers.rerun_sink import (
     TRUTH_COLOR,
@@ -86,6 +86,48 @@ def id_labels(ids: np.ndarray) -> list[str]:
     return [f"{a}.{b}.{c}" for a, b, c in np.asarray(ids).reshape(-1, 3).tolist()]
 
 
+ID_MARKS_KEEP = 50_000
+"""Track ids whose colour and label :class:`IdMarks` keeps (then it starts afresh)."""
+
+
+class IdMarks:
+    """:func:`id_color` and :func:`id_labels` of track ids, each id's made once: at 50 peers
+    every peer reports the same targets' ids every scan (~500 a second), each a BLAKE2 hash
+    and a label string in Python."""
+
+    def __init__(self) -> None:
+        self._marks: dict[tuple[int, int, int], tuple[np.ndarray, str]] = {}
+
+    def __call__(self, ids: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """``(colours (n, 3) uint8, labels)`` of ``ids (n, 3)``, as the two functions give."""
+        rows = [tuple(r) for r in np.asarray(ids, dtype=np.int64).reshape(-1, 3).tolist()]
+        marks = self._marks
+        new = [r for r in dict.fromkeys(rows) if r not in marks]
+        if new:
+            if len(marks) + len(new) > ID_MARKS_KEEP:
+                marks.clear()
+            arr = np.array(new, dtype=np.int64).reshape(-1, 3)
+            marks.update(zip(new, zip(id_color(arr), id_labels(arr), strict=True), strict=True))
+        got = [marks[r] for r in rows]
+        colors = np.array([c for c, _ in got], np.uint8).reshape(-1, 3)
+        return colors, [label for _, label in got]
+
+
+def marginal_marks(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A report's packed position marginals (:func:`peers.observer.pack_marginals`) as what
+    the map draws of them: means ``(n, 2)``, and 4-D means and covariances whose position
+    entries are the marginals' (all :func:`peers.rerun_layout.ellipses` reads; the rest 0),
+    without the :class:`GaussianMixture` :func:`peers.observer.unpack_marginals` makes."""
+    r = np.asarray(points, float).reshape(-1, 3, 2)
+    n = len(r)
+    means = np.zeros((n, 4))
+    means[:, 0], means[:, 2] = r[:, 0, 0], r[:, 0, 1]
+    covs = np.zeros((n, 4, 4))
+    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (r[:, 1, 0], r[:, 1, 1],
+                                                                  r[:, 1, 1], r[:, 2, 0])
+    return r[:, 0], means, covs
+
+
 class ViewState:
     """What the network's messages look like on the map and the plots: turns each decoded
     message into rows of a :class:`Batcher` (no I/O of its own; tests feed it messages).
@@ -126,6 +168,11 @@ class ViewState:
         whose came once they are in the recording: :meth:`LiveView.flush`)."""
         self._series: dict[str, dict[str, str]] = {}
         """Per peer: report value name -> its entity (made once, not per row)."""
+        self._paths: dict[tuple, tuple[str, ...]] = {}
+        """Per peer and tuple of report value names: their entities (a peer's reports name
+        the same values scan after scan)."""
+        self._lighter: dict[tuple, tuple[int, int, int]] = {}
+        self.id_marks = IdMarks()
 
     def color(self, name: str) -> tuple[int, int, int]:
         i = self.index.get(name)
@@ -257,7 +304,7 @@ class ViewState:
         X = np.asarray(msg.states, float)
         xy = X[:, position_columns(X.shape[1])] if len(X) else np.zeros((0, 2))
         if msg.ids is not None:  # labelled tracks: one colour and label per id, everywhere
-            colors, labels = id_color(msg.ids), id_labels(msg.ids)
+            colors, labels = self.id_marks(msg.ids)
         else:  # display numbers by association (for the eye, not scored)
             gate = self.labels.setdefault(n, TrackLabels(self.label_gate))
             colors, labels = color, [f"{n}/{i}" for i in gate.assign(xy)]
@@ -275,11 +322,13 @@ class ViewState:
         if n not in self.first_report:
             self.first_report[n] = k
         color = self.color(n)
-        paths = self._series.get(n)
+        names = tuple(msg.values)
+        paths = self._paths.get((n, names))
         if paths is None:
-            paths = self._series[n] = {}
-        self.b.scalars(k, t, [(paths.get(name) or self._series_path(paths, n, name), value)
-                              for name, value in msg.values.items()])
+            per = self._series.setdefault(n, {})
+            paths = self._paths[n, names] = tuple(per.get(name) or self._series_path(per, n, name)
+                                                  for name in names)
+        self.b.series(k, t, paths, msg.values.values())
         for line in msg.events:
             level, text = ("WARN", line[5:]) if line.startswith("WARN ") else ("INFO", line)
             self.b.text(f"peers/{n}/events", k, t, text, level)
@@ -291,7 +340,7 @@ class ViewState:
                 self.b.strips(f"peers/{n}/cells/extents", k, t, extents,
                               np.asarray(ecolors, np.uint8).reshape(-1, 3), 1.5)
             elif name in ("local/mixture", "fused/mixture"):  # position marginals
-                self.mixture(f"peers/{n}", name[:-8], k, unpack_marginals(z), color)
+                self.marginals(f"peers/{n}", name[:-8], k, z, color)
             elif name.startswith("pda/"):  # a PDA peer's validation gate of one sensor
                 self.gate(f"peers/{n}/{name}", k, z, color)
             elif name != "cells/labels":
@@ -331,10 +380,24 @@ class ViewState:
     def mixture(self, base: str, which: str, k: int, mix: GaussianMixture, color) -> None:
         """Component means (radius by weight) and 2-sigma ellipses: local dashed and lighter,
         fused solid."""
+        xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
+        self._marks(base, which, k, xy, mix.means, mix.covs, color)
+
+    def marginals(self, base: str, which: str, k: int, points: np.ndarray, color) -> None:
+        """:meth:`mixture` of a report's packed position marginals (the same marks as of
+        :func:`peers.observer.unpack_marginals`' mixture, made without it)."""
+        xy, means, covs = marginal_marks(points)
+        self._marks(base, which, k, xy, means, covs, color)
+
+    def _marks(self, base: str, which: str, k: int, xy: np.ndarray, means: np.ndarray,
+               covs: np.ndarray, color) -> None:
         t = self._t(k)
         local = which == "local"
-        shown = lighter(color) if local else color
-        xy = mix.means[:, position_columns(mix.dim)] if len(mix) else np.zeros((0, 2))
+        shown = color
+        if local:
+            shown = self._lighter.get(color)
+            if shown is None:
+                shown = self._lighter[color] = lighter(color)
         self.b.points(f"{base}/{which}/means", k, t, xy, shown, 2.0)
-        self.b.ellipses(f"{base}/{which}/ellipses", k, t, mix.means, mix.covs, shown,
+        self.b.ellipses(f"{base}/{which}/ellipses", k, t, means, covs, shown,
                         1.0 if local else 1.5, dashed=local)
