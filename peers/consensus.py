@@ -517,15 +517,15 @@ class Consensus(BatchedRounds):
             return [Tracks(self.o.name, k, states, seq=self._next_seq(), send_time=now)]
         self.confirm_fused.observe(LabelledMixture(fused, labels), k)
         mixes = self._input_mixtures(inputs)
-        state, moments = getattr(self.fuser, "label_state", None), None
-        if state is not None and copies is not None and copies.any():  # AA copies per label
-            w, *moments = aa_label_density(fused.weights, fused.means, fused.covs,
-                                           copy_keepers(fused, copies), state)
-            fused = GaussianMixture.trusted(w, fused.means, fused.covs)  # means: masses' rows
         cap = None  # a mature track every input just missed (tracking.mature_existence)
         if self.mature is not None and mixes is not None:
             cap = self.mature.caps(fused.weights, labels, k, input_mass(fused.means, mixes)
                                    if masses is None else masses[0])
+        state, moments = getattr(self.fuser, "label_state", None), None
+        if state is not None and copies is not None and copies.any():  # AA copies per label
+            w, *moments = aa_label_density(fused.weights, fused.means, fused.covs,  # after the
+                                           copy_keepers(fused, copies), state)  # cap's prior
+            fused = GaussianMixture.trusted(w, fused.means, fused.covs)  # means: masses' rows
         if self.o.existence_prior > 0 and mixes is not None and len(fused):
             keep = (np.isin(label_keys(labels), self._reported) if self.o.existence_keep
                     else None)
