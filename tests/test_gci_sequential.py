@@ -141,3 +141,37 @@ def test_step_edge_cases():
     assert len(gci_step(a, zero, 0.5, "separate", inverses([zero])[0])) == 0
     with pytest.raises(ValueError, match="cardinality"):
         gci_step(a, b, 0.5, "bogus", inverses([b])[0])
+
+
+@pytest.mark.parametrize("cardinality", ["emd", "separate"])
+def test_step_components_are_the_powered_products_integrated_on_a_grid(cardinality):
+    """1-D brute force: each component ``gci_step`` forms is ``w_a^(1-omega) w_b^omega
+    N_a(x)^(1-omega) N_b(x)^omega`` (the powered mixtures' cross terms dropped, §3), so its
+    weight, mean and variance are that function's mass and moments, integrated numerically on
+    a fine grid (trapezoid: spectrally accurate for a Gaussian); ``separate`` scales the
+    weights to ``N_a^(1-omega) N_b^omega`` in total. Far-apart pairs are not formed."""
+    a = GaussianMixture(np.array([0.9, 0.4, 0.7]), np.array([[0.0], [300.0], [-500.0]]),
+                        np.array([[[40.0]], [[90.0]], [[25.0]]]))
+    b = GaussianMixture(np.array([0.8, 0.6, 0.3]), np.array([[6.0], [290.0], [800.0]]),
+                        np.array([[[60.0]], [[30.0]], [[50.0]]]))
+    omega = 0.35
+    step = gci_step(a, b, omega, cardinality, inverses([b])[0])
+    assert len(step) == 2  # (0, 0) and (1, 1); the others are hundreds of sigmas apart
+    x = np.linspace(-200.0, 500.0, 200_001)
+    pdf = lambda m, P: np.exp(-0.5 * (x - m) ** 2 / P) / np.sqrt(2 * np.pi * P)  # noqa: E731
+    mass, mean, var = [], [], []
+    for i in (0, 1):
+        f = (a.weights[i] ** (1 - omega) * b.weights[i] ** omega
+             * pdf(a.means[i, 0], a.covs[i, 0, 0]) ** (1 - omega)
+             * pdf(b.means[i, 0], b.covs[i, 0, 0]) ** omega)
+        w = np.trapezoid(f, x)
+        m = np.trapezoid(x * f, x) / w
+        mass.append(w)
+        mean.append(m)
+        var.append(np.trapezoid((x - m) ** 2 * f, x) / w)
+    mass = np.array(mass)
+    if cardinality == "separate":
+        mass *= a.mass ** (1 - omega) * b.mass**omega / mass.sum()
+    np.testing.assert_allclose(step.weights, mass, rtol=1e-9)
+    np.testing.assert_allclose(step.means[:, 0], mean, rtol=1e-9)
+    np.testing.assert_allclose(step.covs[:, 0, 0], var, rtol=1e-9)
