@@ -32,6 +32,7 @@ import inspect
 import os
 import pickle
 import pstats
+import re
 import statistics
 import subprocess
 import sys
@@ -147,15 +148,17 @@ def by_second(heard: list[tuple[float, str, bytes]]) -> list[list[tuple[str, byt
 
 
 def realtime(names: list[str], period: float, heard: list[tuple[float, str, bytes]],
-             out: Path, kinds: tuple[type, type] = (Batcher, ViewState), skip: float = 2.0) -> dict:
+             out: Path, kinds: tuple = (Batcher, ViewState, LiveView), skip: float = 2.0) -> dict:
     """The traffic replayed at its pace into the view process's loop (:class:`LiveView`: its
     queue, drain, flushes that lengthen while they are long, decimation), this thread
     feeding the queue: the process CPU per scan after the first ``skip`` seconds, how late
     the view handled what it heard (ms after it was due: median, p99, max), its flush period
-    at the end and what it left out (``kinds``: the ``(Batcher, ViewState)`` classes)."""
+    at the end and what it left out (``kinds``: the ``(Batcher, ViewState, LiveView)``
+    classes, the loop's too)."""
     rec = rr.RecordingStream("sensornet-bench", recording_id="bench-view-realtime")
     rec.set_sinks(rr.FileSink(str(out)))
-    view = LiveView("twin", None, rr, rec, say=lambda s: None)
+    view = (kinds[2] if len(kinds) > 2 else LiveView)("twin", None, rr, rec,
+                                                      say=lambda s: None)
     view.rr, view.rec, view.batcher = rr, rec, kinds[0](rr, rec)
     view.state = kinds[1](view.batcher, names, period)
     params = inspect.signature(view.batcher.flush).parameters
@@ -201,30 +204,32 @@ def realtime(names: list[str], period: float, heard: list[tuple[float, str, byte
             "decimated": view.batcher.decimated}
 
 
-VIEW_MODULES = ("view_columns", "view_state")
-"""The drawing's modules (``sensornet/<name>.py``), loaded from a git revision by
-:func:`modules_at` to compare the drawing then and now on the same traffic."""
+VIEW_MODULES = ("view_columns", "view_state", "view")
+"""The view's modules (``sensornet/<name>.py``), loaded from a git revision by
+:func:`modules_at` to compare the drawing and the loop then and now on the same traffic."""
 
 
-def modules_at(rev: str) -> tuple[type, type]:
-    """``(Batcher, ViewState)`` of the view's modules at git revision ``rev`` (imported under
-    other names, each importing the other's old version; the rest of the package as now)."""
+def modules_at(rev: str) -> tuple[type, type, type]:
+    """``(Batcher, ViewState, LiveView)`` of the view's modules at git revision ``rev``
+    (imported under other names, each importing the others' old versions; the rest of the
+    package as now)."""
     root = Path(__file__).resolve().parents[1]
     loaded = {}
     for name in VIEW_MODULES:
         text = subprocess.run(["git", "-C", str(root), "show", f"{rev}:sensornet/{name}.py"],
                               capture_output=True, text=True, check=True).stdout
         for other in VIEW_MODULES:
-            text = text.replace(f"sensornet.{other}", f"_at_rev_{other}")
+            text = re.sub(rf"\bsensornet\.{other}\b", f"_at_rev_{other}", text)
         module = types.ModuleType(f"_at_rev_{name}")
         sys.modules[module.__name__] = module
         exec(compile(text, f"{rev}:sensornet/{name}.py", "exec"), module.__dict__)
         loaded[name] = module
-    return loaded["view_columns"].Batcher, loaded["view_state"].ViewState
+    return (loaded["view_columns"].Batcher, loaded["view_state"].ViewState,
+            loaded["view"].LiveView)
 
 
 def draw(names: list[str], period: float, seconds: list[list[tuple[str, bytes]]], out: Path,
-         every: int = 1, profile: int = 0, kinds: tuple[type, type] = (Batcher, ViewState),
+         every: int = 1, profile: int = 0, kinds: tuple = (Batcher, ViewState),
          skip: int = 0) -> tuple[float, Batcher, ViewState]:
     """Process CPU (s) of drawing ``seconds`` of traffic into a ``.rrd`` at ``out``, flushed
     every ``every`` seconds (``profile``: print the most costly functions; ``kinds``: the
@@ -300,7 +305,7 @@ def main_twin(args) -> int:
     n_bytes = sum(len(p) for s in seconds for _, p in s)
     skip = args.skip
     counted = sum(1 for s in seconds[skip:] for k, _ in s if k.endswith("/truth"))
-    sides = [("now", (Batcher, ViewState))]
+    sides = [("now", (Batcher, ViewState, LiveView))]
     if args.against:
         sides.insert(0, (args.against, modules_at(args.against)))
     cpu: dict[tuple[str, int], list[float]] = {}

@@ -63,13 +63,16 @@ CPU must catch up sooner."""
 END_DRAIN_S = 10.0
 """Seconds the view spends at its end on the messages still waiting (those heard before it
 stopped); what is left after is counted as dropped and said."""
-SERIES_EVERY = 1
-"""Flushes from one sending of the health series to the next (the first flush sends them, the
-map goes every flush). At 50 peers ~1,500 of the view's ~2,000 entities are series, one
-``send_columns`` each a flush, but sending them every 4th flush saved no CPU measurably
-(``bench_view.py --series-every 1,4``: 22.2 against 24.0 ms a scan, 12 s of the twin's
-traffic in real time, load 12): the flush period, which doubles while flushes are long,
-already gathers more rows per call. Kept at every flush: the plots as fresh as the map."""
+SERIES_EVERY = 4
+"""The health series go at the first flush, then once :data:`FLUSH_S` x this many seconds of
+flush periods have passed (every 4th flush at 1 s, every 2nd at 2 s, every flush from 4 s);
+the map, and a new entity's first rows, go every flush. At 50 peers ~1,500 of the view's
+~1,950 entities a flush are series, each a chunk Rerun encodes (~90 us an entity with the
+view's own part): held back, their rows go in fewer, longer chunks. Every flush they cost
+29.1 ms of CPU a scan against 26.4 every 4 s (medians of 3, lower in each pair;
+``bench_view.py --series-every 1,4 --repeats 3``, 12 s of the twin's traffic in real time
+through the view's loop, flush period 2 s, load 4.4-5.8, 131992c; 22.2 against 24.0 before
+it, when flushes took long enough to double the period to 4-8 s anyway)."""
 PEERS_WAIT_S = 5.0
 """Seconds a run's view (``sensornet view --until-end --scenario``: it knows the peers) waits
 at most for every peer's liveliness token before it subscribes to the truth
@@ -130,6 +133,8 @@ class LiveView:
         self._between = 0.0
         """Seconds of the flush under way spent handling messages (:meth:`waiting`)."""
         self.flushes = 0
+        self._series_s = 0.0
+        """Seconds of flush periods since the health series last went (:meth:`flush`)."""
         self._reported = 0
         """Peers of ``state.first_report`` said to be in the recording (:meth:`reporting`)."""
         self._empty_at = time.monotonic()
@@ -250,21 +255,23 @@ class LiveView:
 
     def flush(self) -> None:
         """The batcher's rows to Rerun, handling what arrives meanwhile, the health series'
-        every :data:`SERIES_EVERY` flushes; the period doubles while a flush (its own part)
-        takes more than :data:`FLUSH_SHARE` of it."""
+        when :data:`SERIES_EVERY` periods of :data:`FLUSH_S` have passed; the period doubles
+        while a flush (its own part) takes more than :data:`FLUSH_SHARE` of it."""
         t0 = time.monotonic()
         self._between = 0.0
         self.batcher.map_keep = MAP_KEEP if self.behind() else None
         self.flushes += 1
-        hold = () if (self.flushes - 1) % SERIES_EVERY == 0 else ("scalar",)
+        self._series_s += self.flush_s
+        hold = ("scalar",)
+        if self.flushes == 1 or self._series_s >= SERIES_EVERY * FLUSH_S - 1e-9:
+            hold, self._series_s = (), 0.0
         heard = self._heard()  # drawn before this flush: all sent by it
         self.batcher.flush(between=self.waiting, hold=hold)
         took = time.monotonic() - t0 - self._between
         if took > FLUSH_SHARE * self.flush_s and self.flush_s < FLUSH_MAX_S:
             self.flush_s = min(FLUSH_MAX_S, 2 * self.flush_s)
         self.note()
-        if not hold:
-            self.reporting(heard)
+        self.reporting(heard)  # a first report's series are new: never held
 
     def _heard(self) -> int:
         """Peers whose first report is drawn (0 with nothing to draw into yet)."""

@@ -52,6 +52,8 @@ class Batcher:
         self.calls = 0
         self.rows_sent = 0
         self._indexes: dict = {}
+        self._sent: set[str] = set()
+        """Entities sent so far (:meth:`flush`'s ``hold`` keeps back only those)."""
         self.errors = 0
         """Entities Rerun refused (the first said in one warning)."""
         self._native, self._recording = _native_send(rr, rec)
@@ -145,11 +147,14 @@ class Batcher:
         ``between()`` called after each ``every`` entities (the view handles what arrived
         meanwhile: rows it adds go to the next flush), so that a long flush does not hold
         back the messages waiting. Entities of the kinds in ``hold`` keep their rows for a
-        later flush (the view sends its many health series less often than its map)."""
+        later flush (the view sends its many health series less often than its map), once
+        their first rows have gone: a new entity (a peer's first report) goes at once."""
         rows, self._rows = self._rows, {}
         if hold:  # kept back first: rows added meanwhile join them
-            self._rows = {p: r for p, r in rows.items() if r.kind in hold}
-            rows = {p: r for p, r in rows.items() if r.kind not in hold}
+            sent = self._sent
+            self._rows = {p: r for p, r in rows.items() if r.kind in hold and p in sent}
+            rows = {p: r for p, r in rows.items() if p not in self._rows}
+        self._sent.update(rows)
         self._indexes = {}
         grouped = type(self)._send is Batcher._send  # a subclass's own _send: row by row
         kinds: dict[str, list] = {}
