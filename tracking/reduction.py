@@ -150,7 +150,10 @@ def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
     ci, cj = _close_pairs(w, m, P, threshold, rule)
     if ci.size == 0:
         return GaussianMixture.trusted(w, m, P), None
-    centres, members = _greedy_groups(ci, cj)
+    if ci.size == 1:  # one close pair (the usual case): its group, without the sweep
+        centres, members = cj.tolist(), [ci.tolist()]
+    else:
+        centres, members = _greedy_groups(ci, cj)
     out_w, out_m, out_P = w.copy(), m.copy(), P.copy()
     _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P)
     keep = np.ones(n, dtype=bool)
@@ -283,7 +286,11 @@ def _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P) -> None
     n, d = m.shape
     idx = np.array(small).T  # (3, k): member t of each of k groups
     gw = w[idx]
-    gw[2, idx[2] == idx[0]] = 0.0  # the padding of groups of two
+    pads = sum(c == g2 for c, _, g2 in small)
+    if pads == len(small):  # only groups of two: the same zeros without the mask
+        gw[2] = 0.0
+    elif pads:
+        gw[2, idx[2] == idx[0]] = 0.0  # the padding of groups of two
     X = np.concatenate((m, P.reshape(n, d * d)), axis=1)[idx]  # (3, k, d + d*d)
     wX = gw[:, :, None] * X
     # np.add.reduce over the first axis adds the rows in order: (x0 + x1) + x2
@@ -386,12 +393,16 @@ class Reducer:
                 src = kept[msrc[ci]]
         else:  # prune then merge, with one gather: the kept indices in merge's order
             w = mix.weights
-            kept = np.flatnonzero(w >= self.prune_threshold)
+            above = w >= self.prune_threshold
+            if above.all() and len(w) > 1:  # nothing pruned: the same order, fewer calls
+                kept = order = (-w).argsort(kind="stable")
+            else:
+                kept = np.flatnonzero(above)
+                order = kept[(-w[kept]).argsort(kind="stable")] if len(kept) > 1 else kept
             if len(kept) <= 1:
                 reduced = mix.select(kept)
                 src = kept
             else:
-                order = kept[(-w[kept]).argsort(kind="stable")]
                 reduced, rows = _merge_in_order(mix, order, self.merge_threshold,
                                                 self.merge_rule)
                 if sources:
