@@ -31,7 +31,8 @@ MIN_OVERLAP = 1e-12
 
 def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
                 cardinality: str = "emd", gate: bool = False,
-                inverses: Sequence[Inverse | None] | None = None) -> GaussianMixture:
+                inverses: Sequence[Inverse | None] | None = None,
+                limit: int | None = None) -> GaussianMixture:
     """``prod_i D_i^(omega_i)`` (``sum omega_i = 1``) in one step: a component per combination.
 
     The power of a mixture drops cross terms (§3; seed 000 eq. 14-17), so the product is, over
@@ -48,7 +49,9 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
     :func:`gci_combine`). ``gate``: leave out the combinations that two far-apart components
     make negligible (:func:`_gated_rows`; for a reduced result: a pruning reducer drops them).
     ``inverses``: per density, its ``(P^-1, det P)`` if the caller has it (:func:`inverses`:
-    the same numbers), else None.
+    the same numbers), else None. ``limit``: most combinations formed (default
+    :data:`MAX_COMBINATIONS`); beyond, a ValueError naming the count instead of arrays that
+    may not fit in memory (the gate keeps them all when the components overlap).
     """
     if cardinality not in CARDINALITY_RULES:
         raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
@@ -62,7 +65,8 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
         if np.any(masses <= 0):
             return GaussianMixture.empty(d)
         densities = [D.scaled(1.0 / N) for D, N in zip(densities, masses, strict=True)]
-    log_w, means, covs = _centred_terms(_Components(densities, omegas, inverses), gate)
+    limit = MAX_COMBINATIONS if limit is None else limit
+    log_w, means, covs = _centred_terms(_Components(densities, omegas, inverses), gate, limit)
     fused = GaussianMixture.trusted(np.exp(log_w), means, covs)
     if cardinality == "emd":
         return fused
@@ -70,6 +74,19 @@ def gci_product(densities: Sequence[GaussianMixture], weights: Sequence[float],
     if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
         return GaussianMixture.empty(d)
     return fused.scaled(float(np.prod(masses ** omegas)) / c)
+
+
+MAX_COMBINATIONS = 1 << 18
+"""Most combinations :func:`gci_product` forms by default (262,144: at ``d = 4`` each
+``(C, d, d)`` array is 34 MB, and several are live at once). :func:`tracking.fusion.gci_fuse`
+calls it with at most ``NARY_MAX_COMBINATIONS`` (4096) and fuses larger products in steps."""
+
+
+def _too_many(what: str, sizes: list[int], limit: int) -> ValueError:
+    """The one-line error of :func:`gci_product` beyond ``limit`` combinations."""
+    return ValueError(f"gci_product: {what} (densities of {sizes} components), more than the "
+                      f"limit {limit:,}; reduce the densities or fuse them in steps "
+                      f"(tracking.fusion.gci_fuse with a reducer)")
 
 
 Inverse = tuple[np.ndarray, np.ndarray]
@@ -130,8 +147,8 @@ def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinali
     weights = np.exp(log_w)
     left_out = (na * nb - len(ia)) * math.exp(min(700.0, log_wmax - 0.5 * _GATE))
     if not left_out <= _GATE_TOLERANCE * weights.sum():  # might matter: every pair
-        return gci_product([acc, new], [oa, omega], cardinality,
-                           inverses=[None, new_inverse])
+        return gci_product([acc, new], [oa, omega], cardinality,  # (as gci_combine forms)
+                           inverses=[None, new_inverse], limit=na * nb)
     if cardinality == "separate":
         c = weights.sum()
         if not c > MIN_OVERLAP:  # the densities do not overlap: no common target to scale up
@@ -183,7 +200,7 @@ class _Components:
         return slice(self.start[i], self.start[i] + self.sizes[i])
 
 
-def _centred_terms(comps: _Components, gate: bool = False
+def _centred_terms(comps: _Components, gate: bool = False, limit: int = MAX_COMBINATIONS
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`gci_product`'s ``log w (C,)``, means ``(C, d)`` and covariances ``(C, d, d)``.
 
@@ -197,17 +214,21 @@ def _centred_terms(comps: _Components, gate: bool = False
     Up to :data:`_SMALL_COMBINATIONS` combinations are gathered into flat arrays (fewest NumPy
     calls); more are summed on the ``(*sizes)`` grid by broadcasting (least memory traffic), or
     with ``gate`` only those :func:`_gated_rows` keeps, gathered, when what it leaves out carries
-    at most :data:`_GATE_TOLERANCE` of the kept mass.
+    at most :data:`_GATE_TOLERANCE` of the kept mass. More than ``limit`` combinations to form
+    (all of them, or those the gate keeps): a ValueError (:func:`gci_product`).
     """
-    if math.prod(comps.sizes) <= _SMALL_COMBINATIONS:
+    total = math.prod(comps.sizes)
+    if total <= _SMALL_COMBINATIONS:
         return _centred_gathered(comps)
     if gate:
-        gated = _gated_rows(comps)
+        gated = _gated_rows(comps, limit)
         if gated is not None:
             rows, left_out = gated
             terms = _centred_gathered(comps, rows)
             if left_out <= _GATE_TOLERANCE * np.exp(terms[0]).sum():
                 return terms  # else what was left out might matter: form every combination
+    if total > limit:
+        raise _too_many(f"{total:,} combinations to form", comps.sizes, limit)
     return _centred_on_grid(comps)
 
 
@@ -224,7 +245,8 @@ _GATE_TOLERANCE = 1e-14
 """Largest share of the fused mass the combinations left out may carry (else: all of them)."""
 
 
-def _gated_rows(comps: _Components) -> tuple[np.ndarray, float] | None:
+def _gated_rows(comps: _Components, limit: int = MAX_COMBINATIONS
+                ) -> tuple[np.ndarray, float] | None:
     """The combinations worth forming, as ``(n, C_kept)`` component rows, and a bound on the
     mass of those left out; None if none is kept.
 
@@ -254,6 +276,9 @@ def _gated_rows(comps: _Components) -> tuple[np.ndarray, float] | None:
     for i in range(1, n):
         new = np.arange(sizes[i]) + start[i]
         mi, ni = np.nonzero(pair[rows[:, 0]][:, new - n1] <= _GATE)
+        if len(mi) > limit:  # checked before the rows are gathered
+            kept = f"the gate keeps {len(mi):,} combinations of the first {i + 1} densities"
+            raise _too_many(kept, sizes, limit)
         rows = np.concatenate([rows[mi], new[ni, None]], axis=1)
     if not len(rows):
         return None
