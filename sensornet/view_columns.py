@@ -387,16 +387,18 @@ def _group_of(kind: str, data: list):
 
 
 def _native_send(rr, rec) -> tuple:
-    """Rerun's native ``send_arrow_chunk`` and ``rec``'s native handle when ``rec`` is one of
-    ``rr``'s recording streams (the binding :func:`rerun.send_columns` calls itself, pinned
-    with ``rerun-sdk`` 0.41); ``(None, None)`` otherwise (a test's recorder, another Rerun)."""
+    """Rerun's native ``send_arrow_chunk`` (the binding :func:`rerun.send_columns` calls
+    itself, pinned with ``rerun-sdk`` 0.41) and the recording to pass it: ``rec``'s native
+    handle when ``rec`` is one of ``rr``'s recording streams, None (the global recording, as
+    ``rr.send_columns`` passes) when ``rec`` is the ``rr`` module itself (``sensornet view``'s
+    sink); ``(None, None)`` otherwise (a test's recorder, another Rerun): ``rec.send_columns``."""
     stream = getattr(rr, "RecordingStream", None)
-    if stream is None or not isinstance(rec, stream):
+    if stream is None or not (rec is rr or isinstance(rec, stream)):
         return None, None
     try:
         import rerun_bindings
         send = rerun_bindings.send_arrow_chunk
-        return send, rec.to_native()
+        return send, (None if rec is rr else rec.to_native())
     except (ImportError, AttributeError):
         return None, None
 
