@@ -100,8 +100,12 @@ def inverses(densities: Sequence[GaussianMixture]) -> list[Inverse]:
     if not densities:
         return []
     Y, det = _inv_det(np.concatenate([D.covs for D in densities]))
-    cut = np.cumsum([len(D) for D in densities])[:-1]
-    return list(zip(np.split(Y, cut), np.split(det, cut), strict=True))
+    out, start = [], 0
+    for D in densities:  # views, by slices (np.split's Python costs ~40 us for 8 densities)
+        end = start + len(D)
+        out.append((Y[start:end], det[start:end]))
+        start = end
+    return out
 
 
 def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinality: str,
