@@ -1,0 +1,103 @@
+"""The view's flush at 50 peers (issue 38): columns built once for all the entities of a kind
+and sent through Rerun's native call write the same recording as an entity at a time through
+``send_columns``; the native call is taken only for Rerun's own recordings."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from sensornet.view_columns import Batcher, _native_send
+
+
+class _Wrapper:
+    """A recorder that is not a ``RecordingStream``: the batcher goes through its
+    ``send_columns`` (Rerun's Python wrapper), an entity at a time."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+
+    def send_columns(self, path, indexes, columns):
+        self.stream.send_columns(path, indexes=indexes, columns=columns)
+
+
+class _OneByOne(Batcher):
+    """Every entity's columns built on its own (a subclass's ``_send``: no grouping)."""
+
+    def _send(self, path, kind, ks, ts, data):
+        super()._send(path, kind, ks, ts, data)
+
+
+def _rows(path) -> dict[str, list]:
+    """Entity -> its rows (time and data columns, row ids apart), sorted."""
+    out: dict[str, list] = defaultdict(list)
+    reader = RrdReader(str(path))
+    (store,) = reader.recordings()
+    for chunk in reader.stream(store=store):
+        if chunk.entity_path == "/__properties":
+            continue
+        batch = chunk.to_record_batch()
+        names = [f.name for f in batch.schema
+                 if (f.metadata or {}).get(b"rerun:kind") != b"control"]
+        cols = {n: batch.column(n).to_pylist() for n in names}
+        for i in range(batch.num_rows):
+            out[chunk.entity_path].append(tuple(sorted((n, repr(cols[n][i])) for n in names)))
+    return {e: sorted(r) for e, r in out.items()}
+
+
+def _draw(b: Batcher) -> None:
+    rng = np.random.default_rng(3)
+    for flush in range(3):
+        for k in range(10 * flush + 1, 10 * flush + 11):
+            t = 0.1 * k
+            for p in range(4):
+                b.series(k, t, (f"m/a/{p}", f"m/b/{p}"), (float(k), np.nan if k % 7 else 1.0))
+                n = int(rng.integers(0, 4))
+                b.points(f"p/{p}/tracks", k, t, rng.normal(size=(n, 2)), (1, 2, 3), 5.0,
+                         labels=[f"{p}/{i}" for i in range(n)] if k % 3 else None)
+                b.points(f"p/{p}/scan", k, t, rng.normal(size=(n + 1, 2)),
+                         rng.integers(0, 256, (n + 1, 3)), 2.0)
+                A = rng.normal(size=(n, 4, 4))
+                b.ellipses(f"p/{p}/local", k, t, rng.normal(size=(n, 4)) * 100,
+                           A @ A.transpose(0, 2, 1) + np.eye(4), (9, 8, 7), 1.0, dashed=True)
+                b.ellipses(f"p/{p}/fused", k, t, rng.normal(size=(n, 4)) * 100,
+                           A @ A.transpose(0, 2, 1) + np.eye(4), (9, 8, 7), 1.5)
+            b.text("events", k, t, f"scan {k}")
+        b.flush()
+
+
+def test_grouped_native_flush_writes_what_one_entity_at_a_time_wrote(tmp_path):
+    """The same rows (series with values left out, labelled and unlabelled points, dashed
+    and solid ellipses, a text log) drawn by the batcher as the view uses it and by one
+    building each entity alone and sending it through ``send_columns``: the two ``.rrd``
+    files hold the same entities, each with the same rows."""
+    written = {}
+    for side in ("grouped", "one-by-one"):
+        rec = rr.RecordingStream("sensornet-test", recording_id=f"native-{side}")
+        rec.set_sinks(rr.FileSink(str(tmp_path / f"{side}.rrd")))
+        b = Batcher(rr, rec) if side == "grouped" else _OneByOne(rr, _Wrapper(rec))
+        assert (b._native is not None) == (side == "grouped")
+        _draw(b)
+        rec.flush()
+        rec.disconnect()
+        assert b.errors == 0
+        written[side] = _rows(tmp_path / f"{side}.rrd")
+    grouped, alone = written["grouped"], written["one-by-one"]
+    assert len(grouped) == 4 * 6 + 1 and set(grouped) == set(alone)
+    assert "/m/b/0" in grouped and len(grouped["/m/b/0"]) == 3 * 10 // 7  # finite rows only
+    for entity in alone:
+        assert grouped[entity] == alone[entity], entity
+
+
+def test_the_native_call_only_for_rerun_s_own_recordings():
+    """A ``RecordingStream``: its native handle; the ``rerun`` module itself (the view's
+    global recording): None, as ``rr.send_columns`` passes; anything else: no native call."""
+    stream = rr.RecordingStream("sensornet-test", recording_id="native-kinds")
+    send, handle = _native_send(rr, stream)
+    assert send is not None and handle is not None
+    send, handle = _native_send(rr, rr)
+    assert send is not None and handle is None
+    assert _native_send(rr, _Wrapper(stream)) == (None, None)
