@@ -230,7 +230,7 @@ def _inv_spd(P: np.ndarray) -> np.ndarray:
         return inv_spd(P)
     with np.errstate(all="ignore"):
         inv = _lapack.inv(P, signature="d->d")
-    if not np.isfinite(inv).all():
+    if not np.logical_and.reduce(np.isfinite(inv), axis=None):  # .all() without its wrapper
         return inv_spd(P)
     return 0.5 * (inv + inv.swapaxes(-1, -2))
 
@@ -394,7 +394,8 @@ class Reducer:
         else:  # prune then merge, with one gather: the kept indices in merge's order
             w = mix.weights
             above = w >= self.prune_threshold
-            if above.all() and len(w) > 1:  # nothing pruned: the same order, fewer calls
+            if np.logical_and.reduce(above) and len(w) > 1:  # nothing pruned (.all()): the
+                # same order from fewer calls
                 kept = order = (-w).argsort(kind="stable")
             else:
                 kept = np.flatnonzero(above)
