@@ -128,7 +128,7 @@ def test_hybrid_and_gci_are_unchanged(fuser):
 
 
 def test_the_option_reaches_the_aa_fuser():
-    for value, want in (("auto", None), ("off", None), ("mean", "mean"),
+    for value, want in (("auto", "mean"), ("off", None), ("mean", "mean"),
                         ("heaviest", "heaviest")):
         scn = load_scenario("seed000", {**LMB, "fusion.rule": "aa",
                                         "lmb.aa_label_existence": value})

@@ -94,11 +94,18 @@ def fused_extraction(scn: Scenario) -> str:
     return scn.filter.extraction if rule == "filter" else rule
 
 
+AA_LABEL_STATE = "mean"
+"""``lmb.aa_label_existence`` "auto": the copies' weighted mean (chosen over ``"heaviest"`` and
+off on training runs 100-102 of full3 and circ20, evaluated once on runs 0-7 / 0-2:
+docs/labelled-tracking.md "Per-label existence over the AA copies")."""
+
+
 def aa_label_existence(scn: Scenario) -> str | None:
     """The state rule of the AA fuser's per-label existence (``lmb.aa_label_existence``,
-    :attr:`peers.fusers.AaFuser.label_state`), None for off; ``"auto"`` is off."""
+    :attr:`peers.fusers.AaFuser.label_state`), None for off; ``"auto"``:
+    :data:`AA_LABEL_STATE`."""
     rule = scn.lmb.aa_label_existence
-    return None if rule in ("auto", "off") else rule
+    return AA_LABEL_STATE if rule == "auto" else None if rule == "off" else rule
 
 
 def build(scn: Scenario, name: str, run: int = 0):

@@ -476,7 +476,9 @@ class LmbSpec:
                                                    "state, `\"off\"` each row by its own "
                                                    "weight. Extraction only: the fused "
                                                    "density and messages are unchanged. "
-                                                   "`\"auto\"` (default): `\"off\"` (issue "
-                                                   "33, docs/labelled-tracking.md, \"Per-label "
-                                                   "existence over the AA copies\").",
+                                                   "`\"auto\"` (default): `\"mean\"` "
+                                                   "(issue 33, chosen on training runs, "
+                                                   "evaluated once: docs/labelled-tracking.md, "
+                                                   "\"Per-label existence over the AA "
+                                                   "copies\").",
                                      choices=("auto", "off", "mean", "heaviest"))
