@@ -16,6 +16,7 @@ from itertools import chain
 
 import numpy as np
 import pyarrow as pa
+import rerun_bindings
 from rerun.components import LineStrip2DBatch
 
 from sensornet.peers.rerun_layout import dashed, ellipses
@@ -395,12 +396,10 @@ def _native_send(rr, rec) -> tuple:
     stream = getattr(rr, "RecordingStream", None)
     if stream is None or not (rec is rr or isinstance(rec, stream)):
         return None, None
-    try:
-        import rerun_bindings
-        send = rerun_bindings.send_arrow_chunk
-        return send, (None if rec is rr else rec.to_native())
-    except (ImportError, AttributeError):
+    send = getattr(rerun_bindings, "send_arrow_chunk", None)
+    if send is None:
         return None, None
+    return send, (None if rec is rr else rec.to_native())
 
 
 def ellipse_strips(data: list) -> list:
