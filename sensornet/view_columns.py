@@ -74,23 +74,10 @@ class Batcher:
         if value is not None and math.isfinite(value):
             self._add(path, "scalar", k, t, float(value))
 
-    def scalars(self, k: int, t: float, values: Iterable[tuple[str, float]]) -> None:
-        """Many series' rows of one scan at once (a peer's report: ~30 values); those not
-        finite are left out, as :meth:`scalar` does."""
-        rows, k, t = self._rows, int(k), float(t)
-        for path, value in values:
-            if value is None or not math.isfinite(value):
-                continue
-            r = rows.get(path)
-            if r is None:
-                r = rows[path] = _Rows("scalar")
-            r.ks.append(k)
-            r.ts.append(t)
-            r.rows.append(float(value))
-
     def series(self, k: int, t: float, paths: Sequence[str], values: Iterable) -> None:
-        """:meth:`scalars` of ``paths`` and ``values`` given apart (a report's names' entities,
-        made once per peer by the caller)."""
+        """Many series' rows of one scan at once (a peer's report: ~30 values; ``paths`` its
+        names' entities, made once per peer by the caller); those not finite are left out, as
+        :meth:`scalar` does."""
         rows, k, t = self._rows, int(k), float(t)
         for path, value in zip(paths, values, strict=True):
             if value is None or not math.isfinite(value):
