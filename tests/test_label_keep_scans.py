@@ -13,7 +13,7 @@ from sensornet.peers.consensus import Consensus, ConsensusOptions
 from sensornet.peers.fusers import HybridFuser
 from sensornet.peers.labelling import label_fused
 from sensornet.sim.run.peers import consensus_options
-from sensornet.sim.scenario import load_scenario
+from sensornet.sim.scenario import ScenarioError, load_scenario
 from sensornet.tracking.held_ids import ReportedIds
 from sensornet.tracking.label_keys import label_keys
 from sensornet.tracking.mixture import GaussianMixture
@@ -116,3 +116,12 @@ def test_the_option_reaches_the_peers_and_their_consensus():
 
     assert kept(0, True, 3).scans == 3
     assert kept(0, True, 0) is None and kept(0, False, 3) is None and kept(None, True, 3) is None
+
+
+@pytest.mark.parametrize("bad", [-1, "abc", 1.5, True])
+def test_bad_scenario_values_are_one_line_errors(bad):
+    """``--set fusion.label_keep_scans=...``: a negative, a string, a fraction or a boolean is
+    refused when the scenario loads, in one line naming the key."""
+    with pytest.raises(ScenarioError, match="label_keep_scans") as e:
+        load_scenario("paris-8", overrides={"fusion.label_keep_scans": bad})
+    assert "\n" not in str(e.value)
