@@ -10,7 +10,9 @@ import numpy as np
 import rerun as rr
 from rerun.chunk import RrdReader
 
+from sensornet.view import FLUSH_S, SERIES_EVERY, LiveView
 from sensornet.view_columns import Batcher, _native_send
+from sensornet.view_state import ViewState
 
 
 class _Wrapper:
@@ -22,6 +24,16 @@ class _Wrapper:
 
     def send_columns(self, path, indexes, columns):
         self.stream.send_columns(path, indexes=indexes, columns=columns)
+
+
+class _Calls:
+    """A recorder that keeps each call's entity and scans."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, list[int]]] = []
+
+    def send_columns(self, path, indexes, columns):
+        self.calls.append((path, indexes[0].as_arrow_array().to_pylist()))
 
 
 class _OneByOne(Batcher):
@@ -101,3 +113,29 @@ def test_the_native_call_only_for_rerun_s_own_recordings():
     send, handle = _native_send(rr, rr)
     assert send is not None and handle is None
     assert _native_send(rr, _Wrapper(stream)) == (None, None)
+
+
+def test_the_health_series_go_once_their_flush_periods_add_up_to_series_every():
+    """The view's flush (``SERIES_EVERY`` periods of ``FLUSH_S``): at a 1 s period a series
+    already sent keeps its rows for 3 flushes and sends them all with the 4th, at 2 s with the
+    2nd; the map goes every flush; a new series (a peer's first report) goes at once. No row
+    is lost or sent twice."""
+    assert SERIES_EVERY == 4
+    for period, sent_at in ((FLUSH_S, (1, 5, 9)), (2 * FLUSH_S, (1, 3, 5, 7, 9))):
+        rec = _Calls()
+        view = LiveView("net", lambda b: ViewState(b, ["s1"]), rr, rec, say=lambda s: None)
+        for k in range(1, 10):
+            b = view.batcher
+            b.scalar("metrics/old", k, 0.1 * k, float(k))
+            if k == 2:
+                b.scalar("metrics/new", k, 0.1 * k, 1.0)
+            b.points("peers/s1/tracks", k, 0.1 * k, np.zeros((1, 2)), (1, 2, 3), 5.0)
+            view.flush_s = period  # as the loop left it (a slow flush doubles it)
+            view.flush()
+        by = defaultdict(list)
+        for path, scans in rec.calls:
+            by[path].append(scans)
+        assert by["peers/s1/tracks"] == [[k] for k in range(1, 10)]
+        assert [s[-1] for s in by["metrics/old"]] == list(sent_at)
+        assert [k for s in by["metrics/old"] for k in s] == list(range(1, 10))
+        assert by["metrics/new"][0] == [2]  # new: at once, though series were held
