@@ -7,15 +7,18 @@ the store's memory, and the option's wiring."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from sensornet.peers.consensus import Consensus, ConsensusOptions
 from sensornet.peers.fusers import HybridFuser
 from sensornet.peers.labelling import label_fused
+from sensornet.sim.kinds import kind
 from sensornet.sim.run.peers import consensus_options
 from sensornet.sim.scenario import ScenarioError, load_scenario
 from sensornet.tracking.held_ids import ReportedIds
-from sensornet.tracking.label_keys import label_keys
+from sensornet.tracking.label_keys import keys_isin, label_keys
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.reduction import Reducer
 
@@ -125,3 +128,27 @@ def test_bad_scenario_values_are_one_line_errors(bad):
     with pytest.raises(ScenarioError, match="label_keep_scans") as e:
         load_scenario("paris-8", overrides={"fusion.label_keep_scans": bad})
     assert "\n" not in str(e.value)
+
+
+def test_a_peer_s_label_problem_keeps_what_it_reported_in_its_last_n_scans():
+    """Through the peer: an LMB consensus reports AIRCRAFT and OTHER at 773, OTHER only at 774;
+    its label problem at 775 keeps AIRCRAFT with ``label_keep_scans = 3`` (the store its
+    extraction fed), not with 0 (the scan before's only)."""
+    def mix(xs):
+        m = np.zeros((len(xs), 4))
+        m[:, 0] = xs
+        return GaussianMixture(np.full(len(xs), 0.9), m,
+                               np.tile(np.eye(4) * 100.0, (len(xs), 1, 1)))
+
+    both = np.array([AIRCRAFT, OTHER])
+    for scans, kept in ((0, [False, True]), (3, [True, True])):
+        est, _ = kind("lmb").build(load_scenario("seed000", {"network.filter": "lmb"}), "s1", 0)
+        peer = Consensus(ConsensusOptions("s1", ("s2",), (("s1", 1), ("s2", 1)), label_keep=True,
+                                          label_keep_scans=scans), est, HybridFuser(Reducer()))
+        (m1,) = peer._tracks(773, mix([0.0, 5000.0]), 0.0, both)
+        (m2,) = peer._tracks(774, mix([5000.0]), 0.0, np.array([OTHER]))
+        assert len(m1.ids) == 2 and m2.ids.tolist() == [list(OTHER)]
+        fused = mix([0.0, 5000.0])
+        st = SimpleNamespace(inputs=None, current=fused, labels=both, k=775, round=0)
+        keep = peer.label_problem(st, fused).keep
+        assert keys_isin(label_keys(both), keep).tolist() == kept
