@@ -10,19 +10,15 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from sensornet.tracking.gaussian import (
+from sensornet.tracking.gaussian import (  # _lapack: the ufuncs behind np.linalg.inv / det
     _generic_inverse,
+    _lapack,
     c_einsum,
     inv_det_spd,
     inv_spd,
     quad_form,
 )
 from sensornet.tracking.mixture import GaussianMixture
-
-try:  # the ufunc LAPACK calls behind np.linalg.inv / det (NumPy 1.x and 2.x)
-    from numpy.linalg import _umath_linalg as _lapack
-except ImportError:  # pragma: no cover
-    _lapack = None
 
 CARDINALITY_RULES = ("emd", "separate")
 _sum, _max, _all = np.add.reduce, np.maximum.reduce, np.logical_and.reduce
