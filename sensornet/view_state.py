@@ -88,6 +88,9 @@ def id_labels(ids: np.ndarray) -> list[str]:
 
 ID_MARKS_KEEP = 50_000
 """Track ids whose colour and label :class:`IdMarks` keeps (then it starts afresh)."""
+PATHS_KEEP = 4_096
+"""Tuples of a report's value names whose entities :class:`ViewState` keeps (then it starts
+afresh): a report leaves out values that are not finite, so the tuples a peer sends vary."""
 
 
 class IdMarks:
@@ -170,7 +173,7 @@ class ViewState:
         """Per peer: report value name -> its entity (made once, not per row)."""
         self._paths: dict[tuple, tuple[str, ...]] = {}
         """Per peer and tuple of report value names: their entities (a peer's reports name
-        the same values scan after scan)."""
+        mostly the same values scan after scan; at most :data:`PATHS_KEEP` tuples kept)."""
         self._lighter: dict[tuple, tuple[int, int, int]] = {}
         self.id_marks = IdMarks()
 
@@ -325,6 +328,8 @@ class ViewState:
         names = tuple(msg.values)
         paths = self._paths.get((n, names))
         if paths is None:
+            if len(self._paths) >= PATHS_KEEP:
+                self._paths.clear()
             per = self._series.setdefault(n, {})
             paths = self._paths[n, names] = tuple(per.get(name) or self._series_path(per, n, name)
                                                   for name in names)

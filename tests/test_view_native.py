@@ -9,7 +9,9 @@ from collections import defaultdict
 import numpy as np
 import rerun as rr
 from rerun.chunk import RrdReader
+from sensornet.protocol.messages import Telemetry
 
+from sensornet import view_state
 from sensornet.view import FLUSH_S, SERIES_EVERY, LiveView
 from sensornet.view_columns import Batcher, _native_send
 from sensornet.view_state import ViewState
@@ -139,3 +141,21 @@ def test_the_health_series_go_once_their_flush_periods_add_up_to_series_every():
         assert [s[-1] for s in by["metrics/old"]] == list(sent_at)
         assert [k for s in by["metrics/old"] for k in s] == list(range(1, 10))
         assert by["metrics/new"][0] == [2]  # new: at once, though series were held
+
+
+def test_the_report_names_cache_is_bounded(monkeypatch):
+    """A report leaves out values that are not finite, so a peer's tuples of value names vary
+    scan to scan: the view keeps at most PATHS_KEEP of them, and every row still goes to its
+    own series."""
+    monkeypatch.setattr(view_state, "PATHS_KEEP", 2)
+    rec = _Calls()
+    state = ViewState(Batcher(rr, rec), ["s1"])
+    names = ("ospa/fused", "age", "trust/s2/weight")
+    for k in range(1, 9):  # every scan another subset of the names
+        values = {x: float(k) for i, x in enumerate(names) if (k >> i) & 1 or i == 0}
+        state.telemetry(Telemetry("s1", k, values, (), {}, None))
+        assert len(state._paths) <= 2
+    state.b.flush()
+    scans = {path: s for path, s in rec.calls if path.startswith("metrics/")}
+    assert sorted(scans["metrics/ospa/s1/fused"]) == list(range(1, 9))
+    assert len(scans) == 3 and sorted(len(s) for s in scans.values()) == [4, 4, 8]
