@@ -47,7 +47,8 @@ __all__ = ["BEHIND", "BEHIND_S", "END_DRAIN_S", "FLUSH_MAX_S", "FLUSH_S", "FLUSH
            "strip_array", "thread_policies"]
 
 FLUSH_S = 1.0
-"""Seconds of rows gathered per entity before one ``send_columns`` (doubled, up to
+"""Seconds of rows gathered per entity before one send (Rerun's native call behind
+``send_columns``, :meth:`sensornet.view_columns.Batcher.flush`; doubled, up to
 :data:`FLUSH_MAX_S`, while a flush takes more than :data:`FLUSH_SHARE` of its period)."""
 FLUSH_MAX_S = 8.0
 FLUSH_SHARE = 0.25
