@@ -107,8 +107,9 @@ class IdMarks:
         marks = self._marks
         new = [r for r in dict.fromkeys(rows) if r not in marks]
         if new:
-            if len(marks) + len(new) > ID_MARKS_KEEP:
+            if len(marks) + len(new) > ID_MARKS_KEEP:  # afresh: this call's ids all made anew
                 marks.clear()
+                new = list(dict.fromkeys(rows))
             arr = np.array(new, dtype=np.int64).reshape(-1, 3)
             marks.update(zip(new, zip(id_color(arr), id_labels(arr), strict=True), strict=True))
         got = [marks[r] for r in rows]

@@ -159,3 +159,16 @@ def test_the_report_names_cache_is_bounded(monkeypatch):
     scans = {path: s for path, s in rec.calls if path.startswith("metrics/")}
     assert sorted(scans["metrics/ospa/s1/fused"]) == list(range(1, 9))
     assert len(scans) == 3 and sorted(len(s) for s in scans.values()) == [4, 4, 8]
+
+
+def test_id_marks_start_afresh_with_every_id_of_the_call(monkeypatch):
+    """Past ID_MARKS_KEEP ids the cache is cleared; the ids of that call it held before are
+    made again (they were looked up after the clear: a KeyError, the view's end)."""
+    monkeypatch.setattr(view_state, "ID_MARKS_KEEP", 3)
+    marks = view_state.IdMarks()
+    marks(np.array([[0, 1, 1], [0, 1, 2]]))
+    ids = np.array([[0, 1, 1], [0, 1, 3], [0, 1, 4]])
+    colors, labels = marks(ids)
+    np.testing.assert_array_equal(colors, view_state.id_color(ids))
+    assert labels == view_state.id_labels(ids) == ["0.1.1", "0.1.3", "0.1.4"]
+    assert len(marks._marks) == 3
