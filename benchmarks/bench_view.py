@@ -17,11 +17,13 @@ per scan against the 100 ms a scan lasts at 10 scans/s. Two sources:
     python benchmarks/bench_view.py                          # twin traffic, 50 peers
     python benchmarks/bench_view.py --peers 100 --scans 60 --cache /tmp/v100.pkl
     python benchmarks/bench_view.py --source synthetic --peers 100 --scans 80
-    python benchmarks/bench_view.py --series-every 1,4 --repeats 3   # series every flush or 4th
+    python benchmarks/bench_view.py --series-every 1,4 --repeats 3   # series every 1 s or 4 s
 
 ``--series-every N,M``: only the real-time replay through the view's loop, with the health
-series sent every N-th flush, then every M-th (:data:`sensornet.view.SERIES_EVERY`),
-interleaved ``--repeats`` times: the view's CPU per scan and how late it handled messages.
+series sent once N, then M, :data:`sensornet.view.FLUSH_S` periods of flushes have passed
+(:data:`sensornet.view.SERIES_EVERY`: at a 1 s flush period every N-th flush; since 967728f
+counted in seconds, not flushes), interleaved ``--repeats`` times: the view's CPU per scan and
+how late it handled messages.
 """
 
 from __future__ import annotations
@@ -408,8 +410,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip", type=int, default=2,
                    help="twin: seconds not counted at the start (the entities' first flushes)")
     p.add_argument("--series-every", default=None, metavar="N,M",
-                   help="twin: only the real-time replay, the health series sent every N-th "
-                        "flush against every M-th, interleaved")
+                   help="twin: only the real-time replay, the health series sent every N "
+                        "against every M flush periods of FLUSH_S (SERIES_EVERY), interleaved")
     args = p.parse_args(argv)
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     if args.source == "twin":
