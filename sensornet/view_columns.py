@@ -177,23 +177,8 @@ class Batcher:
             cols = [_Column(_descriptor(rr, "Scalars", "scalars"),
                             _rows(pa.array(data, pa.float64())))]
         elif kind == "points":
-            lengths = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
-            xy = np.concatenate([d[0] for d in data]) if data else np.zeros((0, 2))
-            colors = repeat_colors([d[1] for d in data], lengths)
-            radii = np.repeat(np.fromiter((d[2] for d in data), np.float32, len(data)), lengths)
-            off = offsets_of(lengths)
-            cols = [_Column(_descriptor(rr, "Points2D", "positions"),
-                            list_array(xy, off, _datatype(rr, "Points2D", "positions"),
-                                       np.float32)),
-                    _Column(_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), off)),
-                    _Column(_descriptor(rr, "Points2D", "colors"),
-                            _rows(pa.array(packed_colors(colors)), off))]
-            if any(d[3] is not None for d in data):  # labels always shown
-                labels = [s for d in data for s in (d[3] or [""] * len(d[0]))]
-                cols += [_Column(_descriptor(rr, "Points2D", "labels"),
-                                 _rows(pa.array(labels, pa.string()), off)),
-                         _Column(_descriptor(rr, "Points2D", "show_labels"),
-                                 _rows(pa.array(np.ones(len(data), bool))))]
+            cols, lengths = self._point_columns(data)
+            cols += self._label_columns(data, lengths) or []
         elif kind == "ellipses":
             cols = self._ellipse_columns(data)
         elif kind == "strips":
@@ -260,51 +245,47 @@ class Batcher:
                 entity += extra[j]
             yield path, index, entity, n
 
-    def _points_all(self, data: list, items: list, starts: np.ndarray) -> tuple[list, list]:
-        """Points2D columns of all rows (positions, radii, colours) and per entity its label
-        columns (None: no row of it labelled, no label columns, as :meth:`_send`)."""
+    def _point_columns(self, data: list) -> tuple[list, np.ndarray]:
+        """Points2D columns (positions, radii, colours) of these rows, one entity's or many's,
+        and each row's number of points."""
         rr = self.rr
         lengths = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
         xy = np.concatenate([d[0] for d in data]) if data else np.zeros((0, 2))
         colors = repeat_colors([d[1] for d in data], lengths)
         radii = np.repeat(np.fromiter((d[2] for d in data), np.float32, len(data)), lengths)
         off = offsets_of(lengths)
-        cols = [(_descriptor(rr, "Points2D", "positions"),
-                 list_array(xy, off, _datatype(rr, "Points2D", "positions"), np.float32)),
-                (_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), off)),
-                (_descriptor(rr, "Points2D", "colors"),
-                 _rows(pa.array(packed_colors(colors)), off))]
-        extra: list = [None] * len(items)
-        for j in range(len(items)):
-            rows = data[starts[j]:starts[j + 1]]
-            if any(d[3] is not None for d in rows):  # labels always shown
-                n = len(rows)
-                labels = [s for d in rows for s in (d[3] or [""] * len(d[0]))]
-                extra[j] = [_Column(_descriptor(rr, "Points2D", "labels"),
-                                    _rows(pa.array(labels, pa.string()),
-                                          offsets_of(lengths[starts[j]:starts[j + 1]]))),
-                            _Column(_descriptor(rr, "Points2D", "show_labels"),
-                                    _rows(pa.array(np.ones(n, bool))))]
-        return cols, extra
+        return [_Column(_descriptor(rr, "Points2D", "positions"),
+                        list_array(xy, off, _datatype(rr, "Points2D", "positions"),
+                                   np.float32)),
+                _Column(_descriptor(rr, "Points2D", "radii"), _rows(pa.array(radii), off)),
+                _Column(_descriptor(rr, "Points2D", "colors"),
+                        _rows(pa.array(packed_colors(colors)), off))], lengths
+
+    def _label_columns(self, rows: list, lengths: np.ndarray) -> list | None:
+        """One entity's Points2D label columns (``lengths``: its rows' points), always shown;
+        None if no row of it is labelled (no label columns then)."""
+        if not any(d[3] is not None for d in rows):
+            return None
+        rr = self.rr
+        labels = [s for d in rows for s in (d[3] or [""] * len(d[0]))]
+        return [_Column(_descriptor(rr, "Points2D", "labels"),
+                        _rows(pa.array(labels, pa.string()), offsets_of(lengths))),
+                _Column(_descriptor(rr, "Points2D", "show_labels"),
+                        _rows(pa.array(np.ones(len(rows), bool))))]
+
+    def _points_all(self, data: list, items: list, starts: np.ndarray) -> tuple[list, list]:
+        """Points2D columns of all rows (:meth:`_point_columns`) and per entity its label
+        columns (:meth:`_label_columns`, None: none)."""
+        cols, lengths = self._point_columns(data)
+        extra = [self._label_columns(data[starts[j]:starts[j + 1]],
+                                     lengths[starts[j]:starts[j + 1]])
+                 for j in range(len(items))]
+        return [(c.descriptor, c.array) for c in cols], extra
 
     def _ellipses_all(self, data: list, dash: bool) -> list:
         """LineStrips2D columns of rows of :meth:`ellipses` alike (one state dimension, all
-        dashed or none) of many entities: their ellipses drawn (and dashed) in one call, as
-        :meth:`_ellipse_columns` does for one entity's."""
-        counts = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
-        lines = north_up(ellipses(np.concatenate([np.asarray(d[0], float) for d in data]),
-                                  np.concatenate([np.asarray(d[1], float) for d in data])))
-        if dash:
-            lines = dashed(lines)  # (N * 16, 2, 2): each ellipse's 16 dashes, in order
-        per_ellipse = len(lines) // max(1, counts.sum()) if len(lines) else 0
-        per_row = counts * per_ellipse
-        colors = np.repeat(np.stack([np.asarray(d[2], np.uint8).reshape(3) for d in data]),
-                           per_row, axis=0)
-        cols = self._strip_columns(lines.reshape(-1, 2),
-                                   np.full(len(lines), lines.shape[1], np.int64), per_row,
-                                   colors, np.fromiter((d[3] for d in data), np.float32,
-                                                       len(data)))
-        return [(c.descriptor, c.array) for c in cols]
+        dashed or none) of many entities: :meth:`_alike_ellipse_columns`."""
+        return [(c.descriptor, c.array) for c in self._alike_ellipse_columns(data, dash)]
 
     def _strip_columns(self, points: np.ndarray, per_strip: np.ndarray, per_row: np.ndarray,
                        colors: np.ndarray, radii: np.ndarray) -> list:
@@ -332,10 +313,15 @@ class Batcher:
                 np.concatenate([r[0] for r in rows]), np.concatenate([r[1] for r in rows]),
                 lengths, repeat_colors([r[2] for r in rows], lengths),
                 np.fromiter((r[3] for r in rows), np.float32, len(rows)))
+        return self._alike_ellipse_columns(data, dash.pop())
+
+    def _alike_ellipse_columns(self, data: list, dash: bool) -> list:
+        """LineStrips2D columns of rows of :meth:`ellipses` alike (one state dimension, all
+        dashed or none): every row's ellipses (and dashes) computed in one call."""
         counts = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
         lines = north_up(ellipses(np.concatenate([np.asarray(d[0], float) for d in data]),
                                   np.concatenate([np.asarray(d[1], float) for d in data])))
-        if dash.pop():
+        if dash:
             lines = dashed(lines)  # (N * 16, 2, 2): each ellipse's 16 dashes, in order
         per_ellipse = len(lines) // max(1, counts.sum()) if len(lines) else 0
         per_row = counts * per_ellipse
