@@ -10,9 +10,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from sensornet.tracking.gaussian import (  # _lapack: the ufuncs behind np.linalg.inv / det
-    _generic_inverse,
-    _lapack,
+from sensornet.tracking.gaussian import (
     c_einsum,
     inv_det_spd,
     inv_spd,
@@ -98,7 +96,7 @@ def inverses(densities: Sequence[GaussianMixture]) -> list[Inverse]:
     products (the newcomers of :func:`tracking.fusion.gci_fuse`'s sequential steps)."""
     if not densities:
         return []
-    Y, det = _inv_det(np.concatenate([D.covs for D in densities]))
+    Y, det = inv_det_spd(np.concatenate([D.covs for D in densities]))
     out, start = [], 0
     for D in densities:  # views, by slices (np.split's Python costs ~40 us for 8 densities)
         end = start + len(D)
@@ -138,7 +136,7 @@ def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinali
     diff = new.means[None, :, :] - acc.means[:, None, :]  # (na, nb, d): u of the pairs
     bound = _max(np.square(diff) / (diag_a[:, None] + diag_b[None]), axis=-1)
     ia, ib = np.nonzero(bound <= _GATE)
-    Ya, det_a = _inv_det(acc.covs)
+    Ya, det_a = inv_det_spd(acc.covs)
     Yb, det_b = new_inverse
     with np.errstate(divide="ignore", invalid="ignore"):  # zero weights: zero-weight pairs
         wc = np.concatenate((oa * (np.log(wa) - 0.5 * np.log(det_a)),
@@ -158,20 +156,6 @@ def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinali
             return GaussianMixture.empty(acc.dim)
         weights *= Na**oa * Nb**omega / c
     return GaussianMixture.trusted(weights, means, covs)
-
-
-def _inv_det(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`tracking.gaussian.inv_det_spd` (the same LAPACK calls, so the same numbers)
-    without the Python wrappers, which cost more than inverting ten 4x4 matrices; closed-form
-    sizes, other dtypes and singular or non-finite stacks go through it (and its errors)."""
-    if _lapack is None or P.dtype != np.float64 or not _generic_inverse(P):
-        return inv_det_spd(P)
-    with np.errstate(all="ignore"):
-        inv = _lapack.inv(P, signature="d->d")
-        det = _lapack.det(P, signature="d->d")
-    if not _all(np.isfinite(inv), axis=None):
-        return inv_det_spd(P)
-    return 0.5 * (inv + inv.swapaxes(-1, -2)), det
 
 
 class _Components:
@@ -310,7 +294,7 @@ def _centred_rows(wY: np.ndarray, wc: np.ndarray, means: np.ndarray, idx: np.nda
     ref = means[idx[0]]  # (C, d)
     u = means[idx] - ref  # (n, C, d)
     g = c_einsum("ncjk,nck->cj", wY, u)
-    P, det_y = _inv_det(_sum(wY, axis=0))
+    P, det_y = inv_det_spd(_sum(wY, axis=0))
     delta = c_einsum("cij,cj->ci", P, g)
     e = u - delta  # m_ic - m
     quad = c_einsum("ncj,ncjk,nck->c", e, wY, e)

@@ -21,14 +21,9 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
-from sensornet.tracking.gaussian import _generic_inverse, inv_det_spd, inv_spd, log_gaussian
 from sensornet.tracking.gaussian import c_einsum as _c_einsum
+from sensornet.tracking.gaussian import inv_det_spd, inv_spd, log_gaussian
 from sensornet.tracking.mixture import GaussianMixture
-
-try:  # the ufunc np.linalg.inv calls (NumPy 1.x and 2.x)
-    from numpy.linalg import _umath_linalg as _lapack
-except ImportError:  # pragma: no cover
-    _lapack = None
 
 MERGE_RULES = ("vo-ma", "weighted")
 
@@ -182,7 +177,7 @@ def _close_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, threshold: float,
         if ci.size == 0:
             return ci, cj
     if inv is None:
-        inv = _inv_spd(P)
+        inv = inv_spd(P)
     diff = m[ci] - m[cj]
     if rule == "vo-ma":
         close = _c_einsum("gi,gij,gj->g", diff, inv[ci], diff) <= threshold
@@ -220,19 +215,6 @@ def _candidate_pairs(w: np.ndarray, m: np.ndarray, P: np.ndarray, lim: float,
         ci, cj = np.nonzero(near)
         ok = cj < ci
     return ci[ok], cj[ok]
-
-
-def _inv_spd(P: np.ndarray) -> np.ndarray:
-    """:func:`tracking.gaussian.inv_spd` (the same numbers: the same LAPACK call) without
-    ``np.linalg.inv``'s Python wrapper, which costs more than inverting a few 4x4 matrices; a
-    singular or non-finite stack goes through ``inv_spd`` (and its errors) unchanged."""
-    if _lapack is None or not _generic_inverse(P) or P.dtype != np.float64:
-        return inv_spd(P)
-    with np.errstate(all="ignore"):
-        inv = _lapack.inv(P, signature="d->d")
-    if not np.logical_and.reduce(np.isfinite(inv), axis=None):  # .all() without its wrapper
-        return inv_spd(P)
-    return 0.5 * (inv + inv.swapaxes(-1, -2))
 
 
 _ALL_PAIRS_UP_TO = 48
