@@ -280,7 +280,8 @@ def _tracks_v2(body: dict, limits: Limits) -> Tracks:
             raise Rejected("field", "an existence probability is outside [0, 1]")
     if ub is not None:
         status = np.frombuffer(ub, dtype=np.int8).copy()
-        if n and not np.isin(status, (Tracks.TENTATIVE, Tracks.CONFIRMED)).all():
+        # two comparisons, not np.isin (~60 us a call, most of a tracks message's decoding)
+        if n and not ((status == Tracks.TENTATIVE) | (status == Tracks.CONFIRMED)).all():
             raise Rejected("field", "a track status is not 0 (tentative) or 1 (confirmed)")
     return Tracks(sender=sender, k=k, states=states, seq=seq, send_time=ts, ids=ids, covs=covs,
                   existence=existence, status=status)
