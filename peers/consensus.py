@@ -292,8 +292,11 @@ class Consensus(BatchedRounds):
     def _ready(self, k: int, rnd: int) -> bool:
         if not self.fusing:
             return True
-        return all(n in self._inbox.get((k, rnd, kind), {})
-                   for n in self.alive for kind in self.kinds)
+        for kind in self.kinds:  # every live neighbour's estimate of each kind in (a
+            box = self._inbox.get((k, rnd, kind))  # set compare, not a generator per call)
+            if not (box.keys() >= self.alive if box is not None else not self.alive):
+                return False
+        return True
 
     def _advance(self, now: float) -> list:
         out: list = []

@@ -12,6 +12,9 @@ from sensornet.peers.scoring import Scorer
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Estimate, Forward, Returns, Tracks
 
+_ESTIMATES = (Estimate, Forward, Returns)
+"""The messages published as estimates (a tuple: ``A | B | C`` built a union per message)."""
+
 
 class CoreOutputs:
     """The output side of :class:`peers.core.PeerCore` (its base: subclasses such as the lying
@@ -28,7 +31,7 @@ class CoreOutputs:
     def _wrap(self, messages: list) -> list[Output]:
         out: list[Output] = []
         for m in messages:
-            if isinstance(m, Estimate | Forward | Returns):
+            if isinstance(m, _ESTIMATES):
                 out.append(Publish("estimate", m.k, encode(m), m))
                 self.sent_bytes["estimate"] += len(out[-1].payload)
             elif isinstance(m, Tracks):

@@ -69,8 +69,11 @@ class Confirmation:
         present, above = _present_above(lm.labels, lm.mixture.weights, self.threshold)
         counts = above.astype(np.int64)
         if self._keys.size and present.size:
-            seen, pos = keys_find(self._keys, present)
-            counts[seen] += self._counts[pos[seen]]
+            if present.size == self._keys.size and keys_equal(present, self._keys).all():
+                counts += self._counts  # the same labels as last scan (the usual scan)
+            else:
+                seen, pos = keys_find(self._keys, present)
+                counts[seen] += self._counts[pos[seen]]
         self._keys, self._counts = present, counts
 
     def count(self, labels: np.ndarray) -> np.ndarray:
@@ -104,10 +107,12 @@ def _present_above(labels: np.ndarray, weights: np.ndarray, threshold: float
         return keys, np.zeros(0, dtype=bool)
     order = np.lexsort((labels[:, 2], labels[:, 1], labels[:, 0]))
     s = keys[order]
-    first = np.ones(len(s), dtype=bool)
-    first[1:] = ~keys_equal(s[1:], s[:-1])
-    starts = np.flatnonzero(first)
-    return s[starts], np.logical_or.reduceat(weights[order] > threshold, starts)
+    heavy = weights[order] > threshold
+    dup = keys_equal(s[1:], s[:-1])
+    if not dup.any():  # each label on one row (the usual mixture): its own row's test
+        return s, heavy
+    starts = np.concatenate(([True], ~dup)).nonzero()[0]
+    return s[starts], np.logical_or.reduceat(heavy, starts)
 
 
 def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,
@@ -209,10 +214,16 @@ class Publication:
 
     def _lookup(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each key was published, and its last scan (``(n,)`` bool, int64)."""
+        return self._find(keys)[:2]
+
+    def _find(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """:meth:`_lookup` and each key's row in :attr:`_keys` (meaningful where known;
+        None with nothing published)."""
         if not self._keys.size:
-            return np.zeros(keys.size, dtype=bool), np.zeros(keys.size, dtype=np.int64)
+            return (np.zeros(keys.size, dtype=bool), np.zeros(keys.size, dtype=np.int64),
+                    None)
         known, pos = keys_find(self._keys, keys)
-        return known, np.where(known, self._last[pos], 0)
+        return known, np.where(known, self._last[pos], 0), pos
 
     def stamp(self, labels: np.ndarray, weights: np.ndarray, threshold: float,
               k: int) -> np.ndarray:
@@ -221,7 +232,7 @@ class Publication:
         labels = as_labels(labels, len(weights))
         keys = label_keys(labels)
         on = keys_isin(keys, keys[np.asarray(weights) > threshold])
-        known, last = self._lookup(keys)
+        known, last, pos = self._find(keys)
         unstamped = labels[:, 2] < PUBLISHED_BASE
         fresh = ~known & (labels[:, 0] == self.origin) & unstamped
         alike = np.zeros(len(labels), dtype=bool)
@@ -243,12 +254,27 @@ class Publication:
             known[new] = False
             _, first = np.unique(keys[new], return_index=True)
             self.stamped = labels[np.flatnonzero(new)[first]]
-        keep = on | known
-        when = np.where(on, k, last)[keep]
-        self._keys, idx = _unique_first(labels[keep])
-        self._last = when[idx] if self._keys.size else np.zeros(0, dtype=np.int64)
+        if not self.stamped.size and pos is not None and not (on & ~known).any():
+            self._keep_known(pos, known, on, k)  # every published row's label known
+        else:
+            keep = on | known
+            when = np.where(on, k, last)[keep]
+            self._keys, idx = _unique_first(labels[keep])
+            self._last = when[idx] if self._keys.size else np.zeros(0, dtype=np.int64)
         self._k = int(k)
         return labels
+
+    def _keep_known(self, pos: np.ndarray, known: np.ndarray, on: np.ndarray, k: int) -> None:
+        """:meth:`stamp`'s memory when nothing was stamped and every row published now is a
+        known label (the usual scan): the known labels still carried, in their sorted order,
+        those published now at scan ``k``; what ``_unique_first`` of the kept rows gives (a
+        label's rows share ``on``, :func:`keys_isin` of the keys), without its sort."""
+        held = np.zeros(self._keys.size, dtype=bool)
+        held[pos[known]] = True
+        now = np.zeros(self._keys.size, dtype=bool)
+        now[pos[on]] = True
+        self._keys = self._keys[held]
+        self._last = np.where(now, k, self._last)[held]
 
     def adopt(self, labels: np.ndarray) -> None:
         """Labels the network gave us (a relabel's winners): published as of the last scan."""

@@ -98,7 +98,7 @@ def split_duplicates(lm: LabelledMixture, threshold: float, origin: int, k: int,
     ``threshold``: the heaviest keeps it, each other gets ``(origin, k, start + i)`` in order
     of decreasing weight. Components at or below ``threshold`` keep their labels."""
     w = lm.mixture.weights
-    above = np.flatnonzero(w > threshold)
+    above = (w > threshold).nonzero()[0]
     if above.size <= 1:
         return lm
     lab = lm.labels[above]

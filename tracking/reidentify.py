@@ -70,7 +70,7 @@ def _tracks(labels: np.ndarray, mix: GaussianMixture, on: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The published labels (unique, sorted by key) with the heaviest published component's
     mean and covariance: ``(t, 3)``, ``(t, d)``, ``(t, d, d)``."""
-    rows = np.flatnonzero(on)
+    rows = on.nonzero()[0]
     if len(rows) > 1:  # (one published component, the usual case: itself)
         sub = labels[rows]
         keys = label_keys(sub)
