@@ -50,6 +50,7 @@ import rerun as rr
 if not __package__:  # `python benchmarks/bench_view.py`: the repository root importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from sensornet.peers.rerun_sink import north_up
 from sensornet.protocol.bundle import pack_bundles
 from sensornet.protocol.codec import encode
 from sensornet.protocol.keys import Keys
@@ -360,7 +361,7 @@ class _PerRow(Batcher):
             if kind == "scalar":
                 rec.log(path, rr.Scalars(d))
             elif kind == "points":
-                rec.log(path, rr.Points2D(d[0], colors=d[1], radii=d[2], labels=d[3],
+                rec.log(path, rr.Points2D(north_up(d[0]), colors=d[1], radii=d[2], labels=d[3],
                                           show_labels=d[3] is not None or None))
             elif kind == "strips":  # flat points, points per strip, colours, radius
                 strips = np.split(d[0], np.cumsum(d[1])[:-1]) if len(d[1]) else []

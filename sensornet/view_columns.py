@@ -100,9 +100,10 @@ class Batcher:
 
     def points(self, path: str, k: int, t: float, xy, colors, radius: float,
                labels: list[str] | None = None) -> None:
-        """Points (map coordinates ``(n, 2)``); ``colors`` one ``(3,)`` or ``(n, 3)`` (one is
-        repeated when flushed, with the other rows' in one call)."""
-        xy = north_up(np.asarray(xy, float).reshape(-1, 2))
+        """Points (map coordinates ``(n, 2)``, kept as given until a flush turns all rows
+        north-up in one call); ``colors`` one ``(3,)`` or ``(n, 3)`` (one is repeated when
+        flushed, with the other rows' in one call)."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
         self._add(path, "points", k, t, (xy, _colors(colors, len(xy), path), -abs(radius),
                                          labels))
 
@@ -246,11 +247,12 @@ class Batcher:
             yield path, index, entity, n
 
     def _point_columns(self, data: list) -> tuple[list, np.ndarray]:
-        """Points2D columns (positions, radii, colours) of these rows, one entity's or many's,
-        and each row's number of points."""
+        """Points2D columns (positions, north-up, radii, colours) of these rows, one entity's
+        or many's, and each row's number of points."""
         rr = self.rr
         lengths = np.fromiter((len(d[0]) for d in data), np.int64, len(data))
         xy = np.concatenate([d[0] for d in data]) if data else np.zeros((0, 2))
+        xy[:, 1] *= -1.0  # north_up of every row at once (the concatenation is a copy)
         colors = repeat_colors([d[1] for d in data], lengths)
         radii = np.repeat(np.fromiter((d[2] for d in data), np.float32, len(data)), lengths)
         off = offsets_of(lengths)
@@ -401,11 +403,23 @@ def ellipse_strips(data: list) -> list:
     return out
 
 
+_ONE_COLOR: dict[tuple, np.ndarray] = {}
+"""A colour given as a tuple (a peer's: tens of thousands of rows a second at 50 peers) ->
+its ``(1, 3)`` array, made once (read-only: rows share it; at most 4,096 kept)."""
+
+
 def _colors(colors, n: int, path: str) -> np.ndarray:
     """``colors`` as ``(1, 3)`` or ``(n, 3)`` uint8 (one for all ``n`` marks, or one each)."""
+    if type(colors) is tuple:
+        c = _ONE_COLOR.get(colors)
+        if c is not None:
+            return c
     c = np.asarray(colors, np.uint8).reshape(-1, 3)
     if len(c) not in (1, n):
         raise ValueError(f"{path}: {len(c)} colours for {n} marks (give one, or one each)")
+    if type(colors) is tuple and len(c) == 1 and len(_ONE_COLOR) < 4096:
+        c.flags.writeable = False
+        _ONE_COLOR[colors] = c
     return c
 
 

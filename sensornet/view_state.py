@@ -122,14 +122,18 @@ def marginal_marks(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     the map draws of them: means ``(n, 2)``, and 4-D means and covariances whose position
     entries are the marginals' (all :func:`peers.rerun_layout.ellipses` reads; the rest 0),
     without the :class:`GaussianMixture` :func:`peers.observer.unpack_marginals` makes."""
-    r = np.asarray(points, float).reshape(-1, 3, 2)
+    r = np.asarray(points, float).reshape(-1, 6)  # [x, y, a, b, d, -] a marginal
     n = len(r)
-    means = np.zeros((n, 4))
-    means[:, 0], means[:, 2] = r[:, 0, 0], r[:, 0, 1]
-    covs = np.zeros((n, 4, 4))
-    covs[:, 0, 0], covs[:, 0, 2], covs[:, 2, 0], covs[:, 2, 2] = (r[:, 1, 0], r[:, 1, 1],
-                                                                  r[:, 1, 1], r[:, 2, 0])
-    return r[:, 0], means, covs
+    ext = np.zeros((n, 7))  # its entries, then a 0 that the other entries take
+    ext[:, :6] = r
+    return (r[:, :2].reshape(n, 2), ext.take(_MEANS_OF, axis=1),
+            ext.take(_COVS_OF, axis=1).reshape(n, 4, 4))
+
+
+_MEANS_OF = np.array([0, 6, 1, 6])
+"""Columns of a marginal's entries (and a trailing 0) that make its 4-D mean ..."""
+_COVS_OF = np.array([2, 6, 3, 6, 6, 6, 6, 6, 3, 6, 4, 6, 6, 6, 6, 6])
+"""... and its 4x4 covariance (position entries (0, 0), (0, 2), (2, 0), (2, 2))."""
 
 
 class ViewState:
@@ -156,7 +160,9 @@ class ViewState:
         self.on_new_peer = on_new_peer
         self.label_gate = label_gate
         self.labels: dict[str, TrackLabels] = {}
-        self.tails: dict[str, deque] = {}
+        self.tails: dict[str, tuple[np.ndarray, deque]] = {}
+        """Per peer: its trail's points end to end and each scan's count (the newest
+        :data:`TAIL` scans): a scan's trail is one concatenation of two arrays, not of 20."""
         self.truth_paths = TruthPaths()
         self.handled = 0
         self.rejected = 0
@@ -313,9 +319,12 @@ class ViewState:
             gate = self.labels.setdefault(n, TrackLabels(self.label_gate))
             colors, labels = color, [f"{n}/{i}" for i in gate.assign(xy)]
         self.b.points(f"peers/{n}/tracks", k, t, xy, colors, 5.0, labels=labels)
-        tail = self.tails.setdefault(n, deque(maxlen=TAIL))
-        tail.append(xy)
-        self.b.points(f"peers/{n}/tail", k, t, np.concatenate(list(tail)), color, 1.5)
+        trail, counts = self.tails.get(n) or (np.zeros((0, 2)), deque())
+        drop = counts.popleft() if len(counts) == TAIL else 0
+        counts.append(len(xy))
+        trail = np.concatenate((trail[drop:], xy))  # a new array: rows already kept are not
+        self.tails[n] = trail, counts
+        self.b.points(f"peers/{n}/tail", k, t, trail, color, 1.5)
         self.b.scalar(f"metrics/cardinality/{n}/fused", k, t, len(X))
         if msg.covs is not None and len(X):  # the tracks' own 2-sigma ellipses
             self.b.ellipses(f"peers/{n}/tracks/ellipses", k, t, X, np.asarray(msg.covs, float),

@@ -29,7 +29,7 @@ from sensornet.peers.observer import (
     unpack_marginals,
 )
 from sensornet.peers.recording import Recorder
-from sensornet.peers.rerun_sink import color_of, ellipses, lighter
+from sensornet.peers.rerun_sink import color_of, ellipses, lighter, north_up
 from sensornet.peers.rerun_sink import dashed as dashed_lines
 from sensornet.peers.runtime import RuntimeOptions
 from sensornet.peers.session import open_session
@@ -129,7 +129,7 @@ class _RerunColumns(Batcher):
         elif kind == "points":
             lengths = [len(d[0]) for d in data]
             cols = [*rr.Points2D.columns(
-                positions=np.concatenate([d[0] for d in data]),
+                positions=north_up(np.concatenate([d[0] for d in data])),  # rows: map coords
                 colors=np.concatenate([np.broadcast_to(d[1], (len(d[0]), 3)) for d in data]),
                 radii=np.repeat([d[2] for d in data], lengths)).partition(lengths)]
             if any(d[3] is not None for d in data):
