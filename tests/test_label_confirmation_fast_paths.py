@@ -2,7 +2,8 @@
 
 :meth:`Publication.stamp`'s memory when nothing is stamped and every published row's label is
 known (:meth:`Publication._keep_known`), :meth:`Confirmation.observe` when the labels are last
-scan's, and ``_present_above`` when each label is on one row: each against the general path on
+scan's, ``_present_above`` when each label is on one row, and :meth:`Confirmation.status_rows`
+of the labels just observed (their rows' counts kept): each against the general path on
 random label sequences that hit both (labels kept, dropped, re-published, duplicated rows)."""
 
 from __future__ import annotations
@@ -90,6 +91,11 @@ def test_observe_and_present_above_equal_the_general_path():
             np.testing.assert_array_equal(a._keys, b._keys)
             np.testing.assert_array_equal(a._counts, b._counts)
             np.testing.assert_array_equal(a.status(pool), b.status(pool))
+            rows = rng.integers(0, max(1, len(labels)), rng.integers(0, 5)) if len(labels) \
+                else np.zeros(0, dtype=np.intp)
+            for arr in (lm.labels, lm.labels.copy()):  # the rows kept at observe; a lookup
+                np.testing.assert_array_equal(a.status_rows(arr, rows), b.status(arr[rows]))
+                assert a.status_rows(arr, rows).dtype == np.int8
             keys, above = _present_above(labels, w, 0.5)
             ref, inv = np.unique(label_keys(labels), return_inverse=True)
             heavy = np.zeros(len(ref), dtype=bool)

@@ -53,6 +53,9 @@ class Confirmation:
     """Their counts of scans above the threshold."""
     _k: int | None = field(default=None, init=False, repr=False)
     """The scan of the last :meth:`observe` (None: not given)."""
+    _seen: tuple | None = field(default=None, init=False, repr=False, compare=False)
+    """``(labels, each row's count)`` of the last :meth:`observe`: :meth:`status_rows` of
+    those very labels without a lookup."""
 
     def __post_init__(self) -> None:
         if self.scans < 1:
@@ -66,7 +69,7 @@ class Confirmation:
         if self.settle and k is None:
             raise ValueError("Confirmation with settle > 0 needs the scan k of each observe")
         self._k = None if k is None else int(k)
-        present, above = _present_above(lm.labels, lm.mixture.weights, self.threshold)
+        present, above, at = _present_rows(lm.labels, lm.mixture.weights, self.threshold)
         counts = above.astype(np.int64)
         if self._keys.size and present.size:
             if present.size == self._keys.size and keys_equal(present, self._keys).all():
@@ -75,6 +78,7 @@ class Confirmation:
                 seen, pos = keys_find(self._keys, present)
                 counts[seen] += self._counts[pos[seen]]
         self._keys, self._counts = present, counts
+        self._seen = (lm.labels, counts[at])
 
     def count(self, labels: np.ndarray) -> np.ndarray:
         """Scans above the threshold so far, per label row (0 if unknown): ``(n,)``."""
@@ -86,6 +90,18 @@ class Confirmation:
             return np.zeros(keys.size, dtype=np.int64)
         hit, pos = keys_find(self._keys, keys)
         return np.where(hit, self._counts[pos], 0)
+
+    def status_rows(self, labels: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """:meth:`status` of ``labels[rows]``; of the labels last observed (the very array: a
+        track extraction right after its :meth:`observe`) from their rows' counts kept then,
+        not a lookup of their keys."""
+        seen = self._seen
+        if seen is None or seen[0] is not labels:
+            return self.status(labels[rows])
+        ok = seen[1][rows] >= self.scans
+        if self.settle and self._k is not None:
+            ok &= self._k - labels[rows, 1] >= self.settle
+        return ok.astype(np.int8)
 
     def status(self, labels: np.ndarray) -> np.ndarray:
         """``(n,)`` int8: 1 confirmed, 0 tentative (the ``Tracks.status`` codes)."""
@@ -102,17 +118,27 @@ def _present_above(labels: np.ndarray, weights: np.ndarray, threshold: float
     each whether a row carrying it weighs more than ``threshold`` (``np.isin`` of those keys in
     the heavy rows' keys): one column lexsort and a segment ``or``, not a structured sort and a
     pairwise compare."""
+    return _present_rows(labels, weights, threshold)[:2]
+
+
+def _present_rows(labels: np.ndarray, weights: np.ndarray, threshold: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_present_above` and each row's place among the keys ``(n,)``."""
     keys = label_keys(labels)
     if not keys.size:
-        return keys, np.zeros(0, dtype=bool)
+        return keys, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.intp)
     order = np.lexsort((labels[:, 2], labels[:, 1], labels[:, 0]))
     s = keys[order]
     heavy = weights[order] > threshold
     dup = keys_equal(s[1:], s[:-1])
+    at = np.empty(len(s), dtype=np.intp)
     if not dup.any():  # each label on one row (the usual mixture): its own row's test
-        return s, heavy
-    starts = np.concatenate(([True], ~dup)).nonzero()[0]
-    return s[starts], np.logical_or.reduceat(heavy, starts)
+        at[order] = np.arange(len(s))
+        return s, heavy, at
+    first = np.concatenate(([True], ~dup))
+    starts = first.nonzero()[0]
+    at[order] = np.cumsum(first) - 1
+    return s[starts], np.logical_or.reduceat(heavy, starts), at
 
 
 def stamp_shared(labels: np.ndarray, keys: np.ndarray, alike: np.ndarray, new: np.ndarray,

@@ -143,7 +143,7 @@ def extract_tracks(lm: LabelledMixture, threshold: float = 0.5, rule: str = "car
     idx = extract_index(lm.mixture, threshold, rule)
     ids = lm.labels[idx]
     status = (np.zeros(len(idx), dtype=np.int8) if confirmation is None
-              else confirmation.status(ids))
+              else confirmation.status_rows(lm.labels, idx))
     return ExtractedTracks(lm.mixture.means[idx], ids, lm.mixture.covs[idx],
                            np.clip(lm.mixture.weights[idx], 0.0, 1.0), status)
 
