@@ -53,6 +53,7 @@ class ScanResults:
     def __init__(self, cutoff: float, order: float, position_index: tuple[int, int]) -> None:
         self.c, self.p = float(cutoff), float(order)
         self.pos = list(position_index)
+        self._columns = np.asarray(self.pos, dtype=np.intp)  # xy's take: no list converted
         self.rows: list[tuple] = []
         self.dropped = 0
         self._gospa_sum: dict[str, float] = {}
@@ -83,7 +84,7 @@ class ScanResults:
 
     def xy(self, states: np.ndarray) -> np.ndarray:
         """``(n, 2)`` positions of state rows ``(n, d)`` (empty-safe)."""
-        return states[:, self.pos] if len(states) else np.zeros((0, 2))
+        return states.take(self._columns, axis=1) if len(states) else np.zeros((0, 2))
 
     def _add(self, k: int, which: str, scored: bool, value: float, est: np.ndarray,
              true: np.ndarray, states: np.ndarray | None, truth: np.ndarray,
