@@ -89,12 +89,13 @@ def test_sequential_fusion_equals_every_pair_then_reduced(d, cardinality, sequen
 
 def test_bench_lmb_fusion_inputs_equal_the_reference():
     """``bench_lmb``'s labelled fusion row (own + 8 neighbours of 10 tracks, Metropolis weights
-    1/9, the GciFuser's ``separate`` cardinality and default reducer): the same 10 tracks."""
+    1/9, the GciFuser's ``separate`` cardinality and default reducer), in steps (``gci_fuse``
+    forms this product at once now: tests/test_gci_at_once.py): the same 10 tracks."""
     from benchmarks.bench_lmb import labelled_inputs
 
     dens = [mix for mix, _ in labelled_inputs(9, 10, np.random.default_rng(2014))]
     omegas = [1 / 9] * 9
-    got = gci_fuse(dens, omegas, Reducer(), cardinality="separate")
+    got = gci_fuse(dens, omegas, Reducer(), cardinality="separate", sequential=True)
     ref = reference_sequential(dens, omegas, Reducer(), "separate")
     assert len(ref) == 10
     assert_equal_mixtures(got, ref)
