@@ -17,7 +17,9 @@ Then the labelled fusion of one peer-round (target: <= 2 ms for 8 neighbours of 
 targets on their own scans (clutter 10) for 15 scans; the own published density and its 8
 neighbours' (10 tracks each, labels beside the rows) go through the labelled peers' fuser
 (hybrid, the scenario default; also GCI and AA) and :func:`peers.labelling.label_fused`, as
-:class:`peers.consensus` does a round. Medians over repeated calls, fuse and labels apart.
+:class:`peers.consensus` does a round. Medians over repeated calls, fuse and labels apart. The
+row ``gci-steps`` is the GCI fuser on :func:`tracking.fusion.gci_fuse`'s sequential path (8
+pairwise steps, each reduced; the default before the product at once, issue 33).
 
 Times are this thread's CPU time by default (``--clock wall`` for elapsed time): on a shared
 machine the wall clock also counts the time other processes had the core.
@@ -38,6 +40,7 @@ from sensornet.peers.contracts import FusionInput
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser
 from sensornet.peers.labelling import label_fused
 from sensornet.peers.lmb_estimator import LmbEstimator
+from sensornet.tracking.fusion import gci_fuse
 from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
 from sensornet.tracking.lmb import LmbFilter
 from sensornet.tracking.mixture import GaussianMixture
@@ -163,6 +166,16 @@ def labelled_inputs(peers: int, n: int, rng: np.random.Generator
     return out
 
 
+class GciStepsFuser(GciFuser):
+    """:class:`peers.fusers.GciFuser` on ``gci_fuse``'s sequential path (``sequential=True``):
+    the reference the product at once is timed against."""
+
+    def fuse(self, inp: FusionInput) -> GaussianMixture:
+        densities = [inp.own] + [inp.neighbours[s]["posterior"] for s in sorted(inp.neighbours)]
+        return gci_fuse(densities, list(inp.weights), self.reducer,
+                        cardinality=self.cardinality, sequential=True)
+
+
 def fusion_rows(rng: np.random.Generator, repeats: int, clock=time.thread_time) -> None:
     """The labelled fusion of own + 8 neighbours of 10 tracks each, per fuser: fuse ms,
     :func:`label_fused` ms, their sum against the 2 ms target."""
@@ -179,7 +192,7 @@ def fusion_rows(rng: np.random.Generator, repeats: int, clock=time.thread_time) 
           "| target | verdict |")
     print("|---|---|---|---|---|---|---|---|")
     for name, fuser in (("hybrid", HybridFuser(reducer)), ("gci", GciFuser(reducer)),
-                        ("aa", AaFuser(reducer))):
+                        ("gci-steps", GciStepsFuser(reducer)), ("aa", AaFuser(reducer))):
         t_fuse, t_label = np.zeros(repeats), np.zeros(repeats)
         for r in range(repeats):
             t0 = clock()
