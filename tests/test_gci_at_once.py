@@ -201,3 +201,18 @@ def test_bad_inputs(cardinality):
     assert "\n" not in str(err.value)
     with pytest.raises(ValueError, match="one weight per density"):
         gci_product_gated(dens, omegas[:-1])
+
+
+def test_more_combinations_than_a_float_holds():
+    """310 densities of 10 far-apart tracks: 10^310 combinations (beyond a float's range; the
+    count is only taken as a log), 10 kept, each track's weight the geometric mean of its
+    inputs' (``separate``: ``prod N_i^omega_i`` = 9 in total)."""
+    rng = np.random.default_rng(0)
+    targets = rng.uniform(-1e4, 1e4, size=(10, 4))
+    n = 310
+    dens = [GaussianMixture(np.full(10, 0.9), targets + rng.normal(size=(10, 4)),
+                            np.tile(np.eye(4) * 25.0, (10, 1, 1))) for _ in range(n)]
+    out = gci_fuse(dens, [1 / n] * n, Reducer(), cardinality="separate")
+    assert len(out) == 10
+    assert out.mass == pytest.approx(9.0, rel=1e-12)
+    np.testing.assert_allclose(np.sort(out.means[:, 0]), np.sort(targets[:, 0]), atol=1.0)

@@ -210,8 +210,8 @@ def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[fl
         if log_mass is not None:
             log_w_in = log_w_in - np.repeat(log_mass, sizes)
         log_wmax = float(omegas @ np.maximum.reduceat(log_w_in, start))
-    total = math.prod(sizes)
-    gate = _GATE + 2.0 * max(0.0, math.log(total / _GATE_COUNT))
+    total = math.prod(sizes)  # an int, maybe beyond a float: only its log is taken
+    gate = _GATE + 2.0 * max(0.0, math.log(total) - math.log(_GATE_COUNT))
     # the marginal bound of each component of r (first now) against every later component, in
     # coordinate-major (d, K) rows: the max over coordinates is then elementwise (4x faster)
     n1 = sizes[0]
@@ -246,7 +246,8 @@ def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[fl
     log_w, m, P = _centred_rows(om[:, None, None] * Y, wc, means, rows)
     w = np.exp(log_w)
     c = _sum(w)
-    left_out = (total - kept) * math.exp(min(700.0, log_wmax - 0.5 * gate))
+    left_out = (math.exp(min(700.0, math.log(total - kept) + log_wmax - 0.5 * gate))
+                if total > kept else 0.0)
     if not left_out <= _GATE_TOLERANCE * c:  # what was left out might matter (or no mass)
         return None
     if log_mass is not None:
