@@ -27,7 +27,7 @@ from __future__ import annotations
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import msgpack
@@ -62,6 +62,12 @@ class Route:
 
     channel: str
     name: str
+    tag: str = field(init=False, repr=False, compare=False)
+    """``channel/name``: the sender's entry in the per-sender counters (made once a route,
+    not once a message: :func:`parse_key` keeps its routes)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "tag", f"{self.channel}/{self.name}")
 
 
 def parse_key(key: str, network: str) -> Route | None:
@@ -207,6 +213,7 @@ class Admission:
                       frozenset(ESTIMATE_KINDS.index(k) for k in kinds if k in ESTIMATE_KINDS))
         self._lock = threading.Lock()  # Zenoh calls back on several threads
         self._queued: Counter = Counter()  # (channel, name) -> messages in the inbox
+        self._bounds: dict[str, int] = {}  # channel -> _inbox_bound(channel), kept
         self.queued_total = 0
         self.queued_bytes = 0
         self.inbox_peak = 0
@@ -275,6 +282,25 @@ class Admission:
             self.queued_total -= 1
             self.queued_bytes -= size
 
+    def taken_all(self, routes_sizes) -> None:
+        """:meth:`taken` of several messages (``(route, size)`` each, the route parsed
+        already, None for a key that is not one of ours): one lock for a step's items."""
+        with self._lock:
+            queued = self._queued
+            for route, size in routes_sizes:
+                if route is None:
+                    continue
+                name = (route.channel, route.name)
+                n = queued.get(name, 0)
+                if n <= 0:
+                    continue  # not one arrive() counted (a driver feeding its own queue)
+                if n == 1:
+                    del queued[name]
+                else:
+                    queued[name] = n - 1
+                self.queued_total -= 1
+                self.queued_bytes -= size
+
     def shrink(self, n: int) -> None:
         """A message in the inbox became ``n`` bytes shorter (its signature trailer removed)."""
         with self._lock:
@@ -285,43 +311,51 @@ class Admission:
         if route is None:
             self.rejected["wrong-key"] += 1
             return False
-        if self.window is None or route.channel == "ctl":
+        channel = route.channel
+        if self.window is None or channel == "ctl":
             head = None
         elif head is None:
             head = peek(payload)
         slot = self._slot(route, head) if head is not None else None
         if slot is False:
             return False
-        name = (route.channel, route.name)
+        name = (channel, route.name)
+        size = len(payload)
         if inbox:
-            if self._queued.get(name, 0) >= self._inbox_bound(route.channel):
+            bound = self._bounds.get(channel)
+            if bound is None:
+                bound = self._bounds[channel] = self._inbox_bound(channel)
+            if self._queued.get(name, 0) >= bound:
                 self.rejected["inbox"] += 1
                 return False
-            if (self.queued_total >= INBOX_TOTAL
-                    or self.queued_bytes + len(payload) > INBOX_BYTES):
+            if self.queued_total >= INBOX_TOTAL or self.queued_bytes + size > INBOX_BYTES:
                 self.rejected["inbox-total"] += 1
                 return False
-        budget = self._budget(route, head, payload)
+        budget = (self._budget(route, head, payload)
+                  if channel == "estimate" and self.estimate_bytes is not None else None)
         if budget is not None and not budget.open(now):
             self.rejected["bytes"] += 1
-            self.over_budget[f"{route.channel}/{route.name}"] += 1
-            self.over_budget_bytes[f"{route.channel}/{route.name}"] += len(payload)
+            self.over_budget[route.tag] += 1
+            self.over_budget_bytes[route.tag] += size
             return False
-        b = self._bucket(route)
+        b = self._buckets.get(name)
+        if b is None:
+            b = self._bucket(route)
         if b is None or not b.take(now):
             self.rejected["rate"] += 1
             return False
         if budget is not None:
-            budget.charge(len(payload))
+            budget.charge(size)
         if slot is not None:
             slots, key = slot
             slots[key] = slots.get(key, 0) + 1
-        self.admitted[f"{route.channel}/{route.name}"] += 1
+        self.admitted[route.tag] += 1
         if inbox:
             self._queued[name] += 1
             self.queued_total += 1
-            self.queued_bytes += len(payload)
-            self.inbox_peak = max(self.inbox_peak, self.queued_total)
+            self.queued_bytes += size
+            if self.queued_total > self.inbox_peak:
+                self.inbox_peak = self.queued_total
         return True
 
     def _budget(self, route: Route, head: tuple | None, payload: bytes) -> ByteBudget | None:

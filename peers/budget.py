@@ -45,6 +45,10 @@ MESSAGE_OVERHEAD = 256
 """Bytes of an estimate besides its components (header, names, signature trailer)."""
 
 
+_FEW = 32
+"""Up to this many components, whether level-2 pruning keeps them all is found in Python."""
+
+
 def row_bytes(dim: int) -> int:
     """Bytes of one packed component of dimension ``dim`` on the wire (protocol.codec:
     weight, mean, upper triangle of the covariance, float64)."""
@@ -124,12 +128,16 @@ class EstimateBudget:
         """:meth:`bound`, and the rows of ``mix`` kept (``(m,)``) when the result is a
         selection of them (None when merged; all of them, unmade, when nothing was cut:
         the result is ``mix`` itself, every honest estimate)."""
-        n = len(mix)
+        w = mix.weights
+        n = w.shape[0]
         if self.largest.get(sender, -1) < n:  # max(largest[sender], n), as a Counter keeps it
             self.largest[sender] = n
         out, rows = mix, None
-        if (pruning == 2 or rnd == 0) and self.level2 is not None and n:
-            keep = mix.weights > self.level2
+        if (pruning == 2 or rnd == 0) and self.level2 is not None and n and (
+                # whether an estimate's few weights are all above W0 (an honest one's
+                # are) in Python: no NumPy call for the usual answer (NaN is not above)
+                n > _FEW or not all(map(float(self.level2).__lt__, w.tolist()))):
+            keep = w > self.level2
             if not keep.all():
                 rows = np.flatnonzero(keep)
                 out = mix.select(rows)

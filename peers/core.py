@@ -304,9 +304,14 @@ class PeerCore(CoreReceive, CoreOutputs):
         return last - max(2, (age if age is not None else 0) + 1), last + h
 
     def _window(self, k: int) -> str | None:
-        """Why an estimate/truth stamped ``k`` is outside what this peer keeps, or None."""
-        lo, hi = self.window_for("estimate")
-        return "future" if k > hi else "stale" if k < lo else None
+        """Why an estimate/truth stamped ``k`` is outside what this peer keeps, or None
+        (:meth:`window_for` of ``"estimate"``, written out: once a received estimate)."""
+        c = self.consensus
+        last = c.last_k
+        if k > last + self.cfg.horizon:
+            return "future"
+        age = c.o.max_age
+        return "stale" if k < last - max(2, (age if age is not None else 0) + 1) else None
 
     def _estimate(self, route: Route, msg: Estimate, now: float) -> list[Output]:
         c = self.consensus
@@ -337,7 +342,7 @@ class PeerCore(CoreReceive, CoreOutputs):
             out += self._reject("label-mask")  # dropped (peers.label_support)
         if sup is not None and sup.backdated > backdated:  # fused, those labels re-stamped
             out += self._reject("label-scan")  # a label older than its first publication
-        return out + self._wrap(res)
+        return out + self._wrap(res) if res else out
 
     def _truth(self, msg: Truth) -> list[Output]:
         why = self._window(msg.k) if self.first_k is not None else None

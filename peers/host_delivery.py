@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import time
 
-from sensornet.peers.admission import peek
+from sensornet.peers.admission import parse_key, peek
+from sensornet.peers.inbound import Delivered
 from sensornet.protocol.bundle import unpack_bundle
 from sensornet.protocol.codec import Rejected
 
@@ -85,11 +86,16 @@ class HostDelivery:
         self._deliver(subs, key, payload, backlog=True)
 
     def _deliver(self, subs: tuple[int, ...], key: str, payload: bytes, backlog: bool) -> None:
-        """``payload`` to each of the peers ``subs`` still running, its header read once for
-        all of them; each admits it on its own (``backlog``: into the peer's backlog, from
-        the loop's thread; else onto the host's queue)."""
+        """``payload`` to each of the peers ``subs`` still running, its header read and its
+        key parsed once for all of them (one :class:`peers.inbound.Delivered`, immutable,
+        shared); each admits it on its own (``backlog``: into the peer's backlog, from the
+        loop's thread; else onto the host's queue)."""
         active, head = self._active, peek(payload)
+        item = network = None
         for j in subs:
             if j in active:
-                self.peers[j].transport.deliver(key, payload, head,
-                                                self._inboxes[j] if backlog else None)
+                t = self.peers[j].transport
+                if t.keys.network != network:  # (a host's peers share one network)
+                    network = t.keys.network
+                    item = Delivered(key, payload, parse_key(key, network))
+                t.deliver_item(item, head, self._inboxes[j] if backlog else None)

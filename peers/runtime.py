@@ -204,10 +204,8 @@ class PeerRuntime(RunOutputs):
         try:
             network = self.core.cfg.network
             items = [delivered(item, network) for item in items]
-            taken = self.core.admission.taken
-            for item in items:  # out of the inbox (handled or skipped below)
-                if item[0] == "msg":
-                    taken(item[1], len(item[2]), item.route)
+            self.core.admission.taken_all(  # out of the inbox (handled or skipped below)
+                [(item.route, len(item[2])) for item in items if item[0] == "msg"])
             for item in self._catch_up(items):
                 if self._stop:
                     break
@@ -292,8 +290,10 @@ class PeerRuntime(RunOutputs):
         outputs = step(now)
         t1 = time.thread_time()
         cpu[channel] = cpu.get(channel, 0.0) + (t1 - t0) * 1e3
+        if not outputs:  # (most ticks): nothing to measure, publish or record
+            return
         leave = time.time()
-        if channel in ("scan", "estimate", "tick") and outputs:
+        if channel in ("scan", "estimate", "tick"):
             self.telemetry.handled(channel, now, leave, outputs)
         scan_ms = (leave - now) * 1e3 if channel == "scan" else None
         # a live view watching: the observer gathers telemetry from the records it reads

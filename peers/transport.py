@@ -180,6 +180,16 @@ class Transport:
                 self.admission.shrink(size - len(payload))  # the trailer stays here
             (self.q if inbox is None else inbox).put(Delivered(key, payload, route))
 
+    def deliver_item(self, item: Delivered, head: tuple | None, inbox=None) -> None:
+        """:meth:`deliver` of an item whose key the caller parsed already (a host hands one
+        :class:`peers.inbound.Delivered` to every co-hosted receiver of an estimate): the
+        same admission, the item itself put on (it is immutable); signed messages (secure
+        mode, never in a host) go through :meth:`deliver`."""
+        if self.verifier is not None:
+            self.deliver(item[1], item[2], head, inbox)
+        elif self.admission.arrive(item.route, time.monotonic(), item[2], head):
+            (self.q if inbox is None else inbox).put(item)
+
     def _missed(self, channel: str, n: int) -> None:
         self.unrecovered[channel] += n
 
