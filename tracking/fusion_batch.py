@@ -206,10 +206,9 @@ def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
     ``sources``: each problem's ``(mixture, src)`` instead, ``src (k,)`` for each output
     component the index (inside its problem's block) of the heaviest member of its merge
     group, as :meth:`Reducer.with_sources` (the same numbers; tag propagation reads it)."""
-    parts = _split(w, m, P, prob, n_problems)
     own = reduce.with_sources if sources else reduce
     if reduce.refit:
-        return [own(mix) for mix in parts]
+        return [own(mix) for mix in _split(w, m, P, prob, n_problems)]
     keep = np.flatnonzero(w >= reduce.prune_threshold)
     kp = prob[keep]
     counts = np.bincount(kp, minlength=n_problems)
@@ -219,7 +218,7 @@ def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
         sel = small[prob]
         rest = reduce_many(reduce, w[sel], m[sel], P[sel],
                            np.cumsum(small)[prob[sel]] - 1, int(small.sum()), sources)
-        it = iter(rest)
+        it, parts = iter(rest), _split(w, m, P, prob, n_problems)
         return [own(parts[p]) if big[p] else next(it) for p in range(n_problems)]
     order = keep[np.lexsort((-w[keep], kp))]  # kept, by problem, heaviest first
     wo, mo, Po, po = w[order], m[order], P[order], prob[order]
@@ -228,7 +227,7 @@ def reduce_many(reduce: Reducer, w: np.ndarray, m: np.ndarray, P: np.ndarray,
     if ci.size:
         inv = _inv_exact(Po)
         if inv is None:
-            return [own(mix) for mix in parts]
+            return [own(mix) for mix in _split(w, m, P, prob, n_problems)]
         diff = mo[ci] - mo[cj]
         if reduce.merge_rule == "vo-ma":
             close = c_einsum("gi,gij,gj->g", diff, inv[ci], diff) <= reduce.merge_threshold
