@@ -179,8 +179,8 @@ def test_too_many_kept_falls_back_to_the_steps():
 @pytest.mark.parametrize("cardinality", ["emd", "separate"])
 def test_bad_inputs(cardinality):
     """An empty density or one with no mass: an empty result, as the steps give; a NaN mean:
-    that component combines with nothing, the rest is fused (finite); a bad cardinality or
-    weights that do not match the densities: one-line errors."""
+    that component combines with nothing, the rest is fused (finite); one density: itself; a
+    bad cardinality or weights that do not match the densities: one-line errors."""
     dens = bench_inputs()
     omegas = [1 / 9] * 9
     reducer = Reducer()
@@ -196,6 +196,7 @@ def test_bad_inputs(cardinality):
     nan = [GaussianMixture(dens[0].weights, means, dens[0].covs)] + dens[1:]
     out = gci_fuse(nan, omegas, reducer, cardinality=cardinality)
     assert 0 < len(out) and np.isfinite(out.means).all() and np.isfinite(out.weights).all()
+    assert gci_product_gated(dens[:1], [1.0], cardinality) is dens[0]
     with pytest.raises(ValueError, match="cardinality") as err:
         gci_product_gated(dens, omegas, "bogus")
     assert "\n" not in str(err.value)

@@ -187,6 +187,8 @@ def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[fl
         raise ValueError(f"gci_product_gated: need one weight per density ({len(densities)} "
                          f"vs {len(omegas)})")
     d = densities[0].dim
+    if len(densities) == 1:  # prod of one: the density itself (separate: N p = D)
+        return densities[0]
     ref = int(np.argmax(omegas))  # the gate's reference density: the heaviest omega gates most
     if ref:
         perm = [ref, *range(ref), *range(ref + 1, len(densities))]
