@@ -1,6 +1,7 @@
 """When fused LMB tracks start, against the local and centralised ones, and what each peer's
 inputs held while its fused extraction had no track of a target the centralised filter had
-(issue 33, docs/labelled-tracking.md "Where the fused LMB's latency is (6 Dec)").
+(issue 33, docs/labelled-tracking.md "Where the fused LMB's latency is, and what did not
+close it").
 
 One twin run per cell with every peer's fused extraction recorded
 (:func:`sim.studies.labelled.gap_trace.record`), then:
