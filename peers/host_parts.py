@@ -26,15 +26,17 @@ class SharedDecode:
     """Bytes of the largest payload kept (at most SIZE x LARGEST = 16 MiB held)."""
 
     def __init__(self) -> None:
-        self._memo: dict[tuple[bytes, object], Estimate] = {}
+        self._memo: dict[bytes, tuple[object, Estimate]] = {}
+        """payload -> (the limits it was decoded with, the message): looked up by the bytes
+        alone (their hash is cached), the limits compared by identity first (a host's peers
+        share one), not hashed a call."""
         self.hits = 0
 
     def __call__(self, payload: bytes, limits):
-        memo_key = (payload, limits)
-        msg = self._memo.get(memo_key)
-        if msg is not None:
+        kept = self._memo.get(payload)
+        if kept is not None and (kept[0] is limits or kept[0] == limits):
             self.hits += 1
-            return msg
+            return kept[1]
         msg = decode(payload, limits)
         kind = type(msg)
         if (kind is Estimate or kind is Forward) and len(payload) <= self.LARGEST:
@@ -43,9 +45,9 @@ class SharedDecode:
             for a in ((msg.mixture.weights, msg.mixture.means, msg.mixture.covs)
                       if kind is Estimate else msg.scans.scans.values()):
                 a.flags.writeable = False
-            if len(self._memo) >= self.SIZE:
+            if payload not in self._memo and len(self._memo) >= self.SIZE:
                 del self._memo[next(iter(self._memo))]  # the oldest
-            self._memo[memo_key] = msg
+            self._memo[payload] = (limits, msg)  # (other limits: the last decode's)
         return msg
 
 

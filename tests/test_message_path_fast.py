@@ -134,3 +134,20 @@ def test_taken_all_frees_the_inbox_as_taken_does():
     assert many.admitted == one.admitted
     assert parse_key(keys[0], "net").tag == "estimate/a"
     assert DEFAULT_LIMITS.max_dim == 6  # the dimension bound the refusals above rely on
+
+
+def test_a_shared_decode_is_reused_only_under_the_same_limits():
+    from dataclasses import replace
+
+    from sensornet.peers.host_parts import SharedDecode
+
+    shared, payload = SharedDecode(), encode(_estimate(n=3))
+    first = shared(payload, DEFAULT_LIMITS)
+    assert shared(payload, DEFAULT_LIMITS) is first  # the co-hosted receivers' one decode
+    assert shared(payload, replace(DEFAULT_LIMITS)) is first  # equal limits: the same
+    assert shared.hits == 2
+    with pytest.raises(Rejected) as exc:  # tighter limits decode again, and refuse
+        shared(payload, replace(DEFAULT_LIMITS, max_components=2))
+    assert exc.value.reason == "too-many"
+    assert shared(payload, DEFAULT_LIMITS) is first and shared.hits == 3
+    assert not first.mixture.weights.flags.writeable  # shared read-only
