@@ -18,6 +18,8 @@ per scan against the 100 ms a scan lasts at 10 scans/s. Two sources:
     python benchmarks/bench_view.py --peers 100 --scans 60 --cache /tmp/v100.pkl
     python benchmarks/bench_view.py --source synthetic --peers 100 --scans 80
     python benchmarks/bench_view.py --series-every 1,4 --repeats 3   # series every 1 s or 4 s
+    python benchmarks/bench_view.py --against c578138 --handling  # + decoding and rows alone
+    python benchmarks/bench_view.py --against c578138 --same      # the same .rrd rows?
 
 ``--series-every N,M``: only the real-time replay through the view's loop, with the health
 series sent once N, then M, :data:`sensornet.view.FLUSH_S` periods of flushes have passed
@@ -264,6 +266,80 @@ def draw(names: list[str], period: float, seconds: list[list[tuple[str, bytes]]]
     return cpu, b, state
 
 
+class _Nowhere:
+    """A recorder that keeps nothing (:func:`handling`: the batcher's rows are never sent)."""
+
+    def send_columns(self, path, indexes, columns) -> None:
+        pass
+
+
+def handling(names: list[str], period: float, heard: list[tuple[float, str, bytes]],
+             kinds: tuple) -> float:
+    """Thread CPU (s) of handling every message heard (decoding, :class:`ViewState`'s rows),
+    nothing flushed: the part of the view's work a message costs, apart from Rerun."""
+    state = kinds[1](kinds[0](rr, _Nowhere()), names, period)
+    t0 = time.thread_time()
+    for _, key, payload in heard:
+        state.receive(key, payload)
+    return time.thread_time() - t0
+
+
+def rrd_rows(path: Path) -> dict[str, list]:
+    """Entity -> its rows in a ``.rrd`` (time and data columns, row ids apart; sorted), the
+    recording's properties left out: what two drawings must share to show the same picture."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, list] = {}
+    reader = RrdReader(str(path))
+    (store,) = reader.recordings()
+    for chunk in reader.stream(store=store):
+        if chunk.entity_path == "/__properties":
+            continue
+        batch = chunk.to_record_batch()
+        names = [f.name for f in batch.schema
+                 if (f.metadata or {}).get(b"rerun:kind") != b"control"]
+        cols = {n: batch.column(n).to_pylist() for n in names}
+        out.setdefault(chunk.entity_path, []).extend(
+            tuple(sorted((n, repr(cols[n][i])) for n in names)) for i in range(batch.num_rows))
+    return {e: sorted(r) for e, r in out.items()}
+
+
+def same_picture(names: list[str], period: float, seconds: list, sides: list) -> int:
+    """``--same``: each side's drawing of the traffic through its :meth:`LiveView.flush` (the
+    health series held as live), flushed every 1 and every 2 s, into a ``.rrd``, read back:
+    the same entities, each with the same rows. Returns 0 if so, else 1 (the differing
+    entities said)."""
+    status = 0
+    with tempfile.TemporaryDirectory(prefix="sensornet-view-") as tmp:
+        for every in (1, 2):
+            got = {}
+            for side, kinds in sides:
+                out = Path(tmp) / f"{every}.rrd"
+                rec = rr.RecordingStream("sensornet-bench", recording_id="bench-view-same")
+                rec.set_sinks(rr.FileSink(str(out)))
+                view = kinds[2]("twin", None, rr, rec, say=lambda s: None)
+                view.rr, view.rec, view.batcher = rr, rec, kinds[0](rr, rec)
+                view.state = kinds[1](view.batcher, names, period)
+                for i, second in enumerate(seconds, start=1):
+                    for key, payload in second:
+                        view._take(key, payload)
+                    if i % every == 0:
+                        view.flush_s = every * FLUSH_S  # as at this period throughout
+                        view.flush()
+                view.batcher.flush()
+                rec.flush()
+                rec.disconnect()
+                got[side] = rrd_rows(out)
+            (a, ra), (b, rb) = got.items()
+            differ = sorted(e for e in set(ra) | set(rb) if ra.get(e) != rb.get(e))
+            print(f"flushed every {every * FLUSH_S:g} s: {a} {len(ra)} entities, "
+                  f"{sum(map(len, ra.values()))} rows; {b} {len(rb)}, "
+                  f"{sum(map(len, rb.values()))}; entities whose rows differ: {len(differ)}"
+                  + (f" ({', '.join(differ[:5])})" if differ else ""), flush=True)
+            status |= bool(differ)
+    return status
+
+
 def series_every(names: list[str], period: float, heard: list[tuple[float, str, bytes]],
                  args) -> int:
     """``--series-every``: the real-time replay with :data:`sensornet.view.SERIES_EVERY` at
@@ -303,6 +379,11 @@ def main_twin(args) -> int:
     if args.series_every:
         return series_every(names, period, heard, args)
     seconds = by_second(heard)
+    if args.same:
+        if not args.against:
+            raise SystemExit("--same needs --against REV")
+        return same_picture(names, period, seconds, [
+            (args.against, modules_at(args.against)), ("now", (Batcher, ViewState, LiveView))])
     scans = max(1, sum(1 for s in seconds for k, _ in s if k.endswith("/truth")))
     n_msgs = sum(map(len, seconds))
     n_bytes = sum(len(p) for s in seconds for _, p in s)
@@ -324,6 +405,11 @@ def main_twin(args) -> int:
                                           kinds=kinds, skip=skip)
                     cpu.setdefault((side, every), []).append(1e3 * used / counted)
                     assert state.rejected == 0, state.rejected
+        handled: dict[str, list[float]] = {}
+        for _ in range(args.repeats if args.handling else 0):
+            for side, kinds in sides:
+                handled.setdefault(side, []).append(
+                    1e3 * handling(names, period, heard, kinds) / scans)
         live = {side: realtime(names, period, heard, Path(tmp) / "live.rrd", kinds,
                                skip * FLUSH_S)
                 for side, kinds in sides} if args.realtime else {}
@@ -335,6 +421,11 @@ def main_twin(args) -> int:
         lines.append(f"| flushed every {every * FLUSH_S:g} s | " + " | ".join(
             f"{min(cpu[side, every]):.1f} / {statistics.median(cpu[side, every]):.1f}"
             for side, _ in sides) + " |")
+    if handled:
+        lines.append(f"| handling the messages alone (thread CPU, all {scans} scans) | "
+                     + " | ".join(f"{min(handled[side]):.2f} / "
+                                  f"{statistics.median(handled[side]):.2f}"
+                                  for side, _ in sides) + " |")
     for side, r in live.items():
         lines += ["", f"{side}: in real time through the view's loop (LiveView; "
                   f"{len(heard) / (heard[-1][0] or 1):.0f} messages/s): CPU "
@@ -408,6 +499,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="twin: draws of each side")
     p.add_argument("--realtime", action="store_true",
                    help="twin: also replay the traffic at its pace through the view's loop")
+    p.add_argument("--same", action="store_true",
+                   help="twin: only whether REV's drawing (--against) and today's write the "
+                        "same entities and rows (flushes of 1 and 2 s, series held as live)")
+    p.add_argument("--handling", action="store_true",
+                   help="twin: also the messages' handling alone (decoding and rows, no "
+                        "flush), --repeats times interleaved")
     p.add_argument("--skip", type=int, default=2,
                    help="twin: seconds not counted at the start (the entities' first flushes)")
     p.add_argument("--series-every", default=None, metavar="N,M",
