@@ -11,7 +11,7 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from sensornet.protocol.messages import Telemetry
 
-from sensornet import view_state
+from sensornet import view_columns, view_state
 from sensornet.view import FLUSH_S, SERIES_EVERY, LiveView
 from sensornet.view_columns import Batcher, _native_send
 from sensornet.view_state import ViewState
@@ -172,3 +172,23 @@ def test_id_marks_start_afresh_with_every_id_of_the_call(monkeypatch):
     np.testing.assert_array_equal(colors, view_state.id_color(ids))
     assert labels == view_state.id_labels(ids) == ["0.1.1", "0.1.3", "0.1.4"]
     assert len(marks._marks) == 3
+
+
+def test_the_series_numbers_cache_is_bounded(monkeypatch):
+    """The batcher keeps the entity numbers of at most SERIES_KEEP tuples of series (a
+    peer's report names vary scan to scan); past it, it starts afresh and every row still
+    goes to its own series, in the order it came, values not finite (NaN, None) left out."""
+    monkeypatch.setattr(view_columns, "SERIES_KEEP", 2)
+    rec = _Calls()
+    b = Batcher(rr, rec)
+    names = ("m/a", "m/b", "m/c")
+    for k in range(1, 9):  # every scan another subset of the names
+        paths = tuple(x for i, x in enumerate(names) if (k >> i) & 1 or i == 0)
+        b.series(k, 0.1 * k, paths, [float(k)] * (len(paths) - 1) + [None if k == 5 else 1.0])
+        assert len(b._numbers) <= 2
+    b.scalar("m/a", 9, 0.9, float("nan"))
+    assert b.pending() == 16 - 1  # 16 values, one None
+    b.flush()
+    scans = dict(rec.calls)
+    assert len(rec.calls) == 3 and scans["m/a"] == list(range(1, 9))
+    assert scans["m/b"] == [2, 3, 6, 7] and scans["m/c"] == [4, 6, 7]  # 5: None
