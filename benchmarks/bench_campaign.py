@@ -31,6 +31,9 @@ import tempfile
 import time
 from pathlib import Path
 
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 TARGET = 1.8
 
 

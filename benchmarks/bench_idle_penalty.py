@@ -16,6 +16,10 @@ import argparse
 import statistics
 import sys
 import time
+from pathlib import Path
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sensornet.sim.run.peers import make_parts
 from sensornet.sim.scenario import load_scenario, parse_overrides

@@ -34,8 +34,13 @@ import argparse
 import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.peers.contracts import FusionInput
 from sensornet.peers.fusers import AaFuser, GciFuser, HybridFuser
 from sensornet.peers.labelling import label_fused

@@ -48,6 +48,9 @@ import tempfile
 import time
 from pathlib import Path
 
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.peers.telemetry import percentile
 from sensornet.sim.run.launcher import read_summaries, start_run, wait_run
 from sensornet.sim.scenario import load_scenario

@@ -14,6 +14,8 @@ root: ``python benchmarks/bench_partition.py [--runs R]``.
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -22,6 +24,10 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.sim.studies.seed002.montecarlo import (  # noqa: E402
     CLUTTER_LEVELS,
     PAPER_PARTITION_TIME,

@@ -26,6 +26,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 TARGETS = {"latency_ratio": 1.05, "size_mb": 20.0}
 
 

@@ -39,6 +39,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.peers import ros2
 from sensornet.peers.session import open_session
 from sensornet.protocol.messages import Tracks

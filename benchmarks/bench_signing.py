@@ -19,9 +19,14 @@ import argparse
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.protocol.codec import decode, encode
 from sensornet.protocol.envelope import Signer, Verifier
 from sensornet.protocol.keys import Keys

@@ -22,8 +22,13 @@ import os
 import resource
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.sim.run.twin import run_twin
 from sensornet.sim.studies.traffic.study import (
     add_window_arguments,

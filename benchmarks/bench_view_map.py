@@ -22,6 +22,10 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.protocol.codec import encode
 from sensornet.protocol.messages import Tracks, Truth
 from sensornet.sim.scenario import load_scenario

@@ -5,10 +5,16 @@ one run are what count) and checks that both give the same numbers."""
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.tracking.gaussian import LOG_2PI, inv_det_2x2, symmetrise
 from sensornet.tracking.imm import (
     IMMEKF,

@@ -7,7 +7,14 @@ numbers to the bit): :class:`LmbFilterBefore` is an :class:`LmbFilter` whose ``p
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.tracking.gaussian import LOG_2PI, inv_det_spd, inv_spd
 from sensornet.tracking.gmphd import SensorParams
 from sensornet.tracking.label_keys import CELL_BASE, CELL_BITS, new_labels

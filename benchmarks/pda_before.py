@@ -4,7 +4,14 @@ is shared, so the ratio of the two, timed interleaved in one process, is what co
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.tracking.imm import mixing
 from sensornet.tracking.pda import ImmPda, LinearSensor, _quadratic_form
 

@@ -20,9 +20,15 @@ references and their calibration: docs/trust-calibration.md).
 
 from __future__ import annotations
 
+import sys
 from collections import deque
+from pathlib import Path
 
 import numpy as np
+
+if not __package__:  # run as a script: this checkout's code, not the installed one
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sensornet.peers.trust_config import TrustConfig
 from sensornet.tracking import divergence
 from sensornet.tracking.divergence import cs_from_log_overlaps
