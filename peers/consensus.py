@@ -375,7 +375,8 @@ class Consensus(BatchedRounds):
             self.estimator.adopt(fused)
             if st.labels is not None:
                 self.hooks.adopt_labels(st.labels)
-        elif labelling is not None:
+        if labelling is not None and (not self.o.feedback or getattr(  # an LMB that keeps its
+                self.estimator, "relabel_on_feedback", False)):  # tracks (lmb.adopt_states)
             self.hooks.relabel(labelling.own)  # the winners of our own labels, kept locally
         return self._tracks(st.k, fused, now, st.labels, st.first_inputs,
                             None if labelling is None else labelling.copies, masses)

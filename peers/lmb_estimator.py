@@ -111,7 +111,7 @@ class LmbEstimator:
                  tentative_threshold: float | None = None, tentative_scans: int = 2,
                  republish_gap: int | None = None, tentative_gap: int | None = None,
                  corroborate_scans: int = 1,
-                 own_times: OwnTimes | None = None) -> None:
+                 own_times: OwnTimes | None = None, adopt_states: int = 0) -> None:
         if origin is not None and (not isinstance(origin, int | np.integer) or origin < 0):
             raise ValueError(f"origin must be a non-negative integer, got {origin!r}")
         if publish_threshold is not None and not 0.0 <= publish_threshold <= 1.0:
@@ -122,6 +122,8 @@ class LmbEstimator:
             raise ValueError(f"tentative_scans must be >= 0, got {tentative_scans}")
         if corroborate_scans < 1:
             raise ValueError(f"corroborate_scans must be >= 1, got {corroborate_scans}")
+        if not isinstance(adopt_states, int | np.integer) or adopt_states < 0:
+            raise ValueError(f"adopt_states must be a non-negative integer, got {adopt_states!r}")
         for name, gap in (("republish_gap", republish_gap), ("tentative_gap", tentative_gap)):
             if gap is not None and gap < 0:
                 raise ValueError(f"{name} must be >= 0 or None, got {gap}")
@@ -150,6 +152,12 @@ class LmbEstimator:
         only in the scan of its first publication, as GM-PHD peers' labels."""
         self.extraction_threshold = extraction_threshold
         self.extraction = extraction
+        self.adopt_states = int(adopt_states)
+        """Feedback of states only (:meth:`_take_states`): 0, the whole fused density
+        (:meth:`_take_adopted`); n, only the fused states of our tracks whose label is more
+        than n scans old."""
+        self.relabel_on_feedback = self.adopt_states > 0
+        """Whether the consensus still relabels our tracks under feedback (we keep them)."""
         self.own_times = own_times
         """Plots with ages (:meth:`plot_ages`) taken at their own times within the tick
         (:mod:`peers.lmb_own_times`); None: every plot at the tick."""
@@ -253,7 +261,7 @@ class LmbEstimator:
         self._next_k = None
         ages, self._ages = self._ages, None
         if self._adopted is not None:
-            self._take_adopted()
+            self._take_states() if self.adopt_states else self._take_adopted()
         if self.own_times is not None and ages is not None:
             self.state = step_at_own_times(self.filter_for(k), self.state, z, ages, k,
                                            self.own_times)
@@ -491,6 +499,41 @@ class LmbEstimator:
         """The state behind ``mix`` if it is our last step's density, else None."""
         last = self._last
         return last[1] if last is not None and mix is last[0] else None
+
+    def _take_states(self) -> None:
+        """Feedback of states only (``adopt_states`` n > 0): each of our tracks whose label is
+        more than n scans old and that the fused density holds under its label takes those
+        fused rows (weights renormalised) as its density; its existence, confirmation count
+        and every other track stay ours. The diffusion of a covariance-intersection estimate
+        (Hu, Xie & Zhang, "Diffusion Kalman filtering based on covariance intersection",
+        IEEE TSP 60(2), 2012): the hybrid's CI states spread hop by hop without
+        overconfidence, while young tracks stay independent evidence for the fusion's
+        existence pool (tracking.fusion_rules.pool_existence), and the fused density's
+        clutter rows never become our prior (docs/labelled-tracking.md, issue 33)."""
+        fused, labels = self._adopted, self._adopted_labels
+        self._adopted = self._adopted_labels = None
+        old, t = self.state, self.state.tracks
+        if labels is None or not len(t) or not len(fused):
+            return
+        kt, kf = label_keys(t.labels), label_keys(labels)
+        use = (keys_isin(kf, kt) & (fused.weights > 0)
+               & (self.k - labels[:, 1] > self.adopt_states))
+        if not use.any():
+            return
+        by = np.argsort(kt, kind="stable")
+        own_of = by[np.searchsorted(kt[by], kf[use])]  # the track of each fused row taken
+        taken = np.zeros(len(t), dtype=bool)
+        taken[own_of] = True
+        keep = ~taken[t.owner]
+        w = fused.weights[use]
+        rel = w / np.bincount(own_of, w, minlength=len(t))[own_of]
+        owner = np.concatenate([t.owner[keep], own_of])
+        order = np.argsort(owner, kind="stable")
+        self.state = LmbState(LabelledBernoulliSet.trusted(
+            t.labels, t.existence, np.concatenate([t.weights[keep], rel])[order],
+            np.concatenate([t.means[keep], fused.means[use]])[order],
+            np.concatenate([t.covs[keep], fused.covs[use]])[order],
+            owner[order].astype(np.int64)), old.hits, old.k, old.pending)
 
     def _take_adopted(self) -> None:
         """The adopted fused density as the LMB state, plus our own tracks that were not

@@ -18,6 +18,7 @@ from sensornet.peers.labelling import origin_of, settle_scans
 from sensornet.peers.scoring import Scorer
 from sensornet.peers.trust import TrustConfig
 from sensornet.sim.kinds import kind_of
+from sensornet.sim.kinds.lmb import adopt_states as lmb_adopt_states
 from sensornet.sim.run.lies import LyingCore, make_lie
 from sensornet.sim.scenario import Scenario, ScenarioError
 from sensornet.sim.world import generate_truth, truth_rng
@@ -45,7 +46,8 @@ def consensus_options(scn: Scenario, name: str, **changes) -> ConsensusOptions:
         omega=net.omega if net.omega in ("metropolis", "uniform") else "metropolis",
         max_age=0 if single else net.max_age,
         policy="drop-late" if single else net.policy,
-        feedback=net.feedback and not single,
+        feedback=(net.feedback or (net.filter == "lmb" and lmb_adopt_states(scn, name) > 0))
+        and not single,  # an LMB peer's feedback of states (sim.kinds.lmb.adopt_states)
         round_deadlines=kind.round_deadlines,
         trust=(trust_config(scn, [name, *(names[j] for j in nb)], kind.view.single_target)
                if scn.fusion.trust and kind.trust else None),

@@ -483,3 +483,22 @@ class LmbSpec:
                                                    "\"Per-label existence over the AA "
                                                    "copies\").",
                                      choices=("auto", "off", "mean", "heaviest"))
+    adopt_states: int = option(-1, doc="What an LMB peer takes from its fused density as "
+                                       "the next prior (feedback). With `network.feedback`, "
+                                       "0: all of it (the fused density becomes its LMB); "
+                                       "n > 0 (feedback on): only the fused states of its "
+                                       "own tracks whose label is more than n scans old, "
+                                       "their existence, its young and other tracks staying "
+                                       "its own, and its labels relabelled as without "
+                                       "feedback (diffusion of the hybrid's "
+                                       "covariance-intersection states, Hu, Xie & Zhang "
+                                       "2012; `peers.lmb_estimator`); -1 (auto): "
+                                       "`fusion.existence_young` (young tracks stay "
+                                       "independent evidence for the pool) for peers with a "
+                                       "peer 2 hops or more away (with every peer a "
+                                       "neighbour one round already fuses every input) under "
+                                       "the `\"hybrid\"` rule with sensors that scan every "
+                                       "tick (no `rotation_period`, no `lmb.time_slice`), "
+                                       "else 0. Issue 33 (docs/labelled-tracking.md, \"Where "
+                                       "the fused LMB's latency is, and what did not close "
+                                       "it\").", unit="scans", check=at_least(-1))
