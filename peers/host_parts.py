@@ -42,9 +42,10 @@ class SharedDecode:
         if (kind is Estimate or kind is Forward) and len(payload) <= self.LARGEST:
             # a Forward (flooding) reaches each co-hosted neighbour of its sender, as an
             # estimate does: its scans were decoded once per receiver (issue 38)
-            for a in ((msg.mixture.weights, msg.mixture.means, msg.mixture.covs)
-                      if kind is Estimate else msg.scans.scans.values()):
-                a.flags.writeable = False
+            for a in ((msg.mixture.weights, msg.mixture.means, msg.mixture.covs, msg.labels,
+                       msg.label_masks) if kind is Estimate else msg.scans.scans.values()):
+                if a is not None:  # labels and masks too (protocol 2/3): shared as well
+                    a.flags.writeable = False
             if payload not in self._memo and len(self._memo) >= self.SIZE:
                 del self._memo[next(iter(self._memo))]  # the oldest
             self._memo[payload] = (limits, msg)  # (other limits: the last decode's)

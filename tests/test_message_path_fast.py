@@ -151,3 +151,4 @@ def test_a_shared_decode_is_reused_only_under_the_same_limits():
     assert exc.value.reason == "too-many"
     assert shared(payload, DEFAULT_LIMITS) is first and shared.hits == 3
     assert not first.mixture.weights.flags.writeable  # shared read-only
+    assert not first.labels.flags.writeable  # its labels too: every receiver gets this array
