@@ -18,7 +18,7 @@ from sensornet.tracking import gci_product as product_module
 from sensornet.tracking.fusion import NARY_MAX_COMBINATIONS, gci_fuse
 from sensornet.tracking.gci_product import gci_product, gci_product_gated
 from sensornet.tracking.mixture import GaussianMixture
-from sensornet.tracking.reduction import Reducer
+from sensornet.tracking.reduction import Reducer, merge_many
 
 from tests.test_gci_sequential import spread
 
@@ -137,19 +137,26 @@ def test_order_of_the_densities_does_not_matter(cardinality):
 
 @pytest.mark.parametrize("cardinality", ["emd", "separate"])
 def test_bench_fusion_is_one_product_reduced_once(cardinality):
-    """``gci_fuse`` on ``bench_lmb``'s own + 8 neighbours: exactly the gated product reduced
-    once; against the sequential path (eight products, eight reductions) the same 10 tracks,
-    means within 1 m and covariances within 1 % (measured: 0.58 m, 0.74 %); the weights of
-    the tracks some input holds as two rows differ (measured up to 0.22: the steps merge those
-    rows on the way, so their later powers are of one Gaussian), ``separate``'s total not
-    (both are prod N_i^omega_i)."""
+    """``gci_fuse`` on ``bench_lmb``'s own + 8 neighbours: exactly the gated product of the
+    pre-merged inputs (each density's rows within ``U / omega_i`` of each other merged; some
+    inputs lose a row) reduced once; against the sequential path (eight products, eight
+    reductions) the same 10 tracks, means within 1 m, covariances within 6 % of the largest
+    entry (measured 0.42 m, 4.8 %: the merged rows are wider; against the exact integral's
+    moments the pre-merged product is within 4.7 % on every track, the steps 5.1 %); the
+    weights of the tracks some input holds as two rows differ (measured emd 0.13, separate
+    0.31; without the pre-merge 0.15, 0.22: the steps still power the newcomers' rows apart
+    and over-count those tracks, which ``separate``'s normalisation takes from the others),
+    ``separate``'s total not (both prod N_i^omega_i)."""
     dens = bench_inputs()
     omegas = [1 / 9] * 9
     reducer = Reducer()
     got = gci_fuse(dens, omegas, reducer, cardinality=cardinality)
-    ref = reducer(gci_product_gated(dens, omegas, cardinality, NARY_MAX_COMBINATIONS))
+    ref = reducer(gci_product_gated(dens, omegas, cardinality, NARY_MAX_COMBINATIONS,
+                                    premerge=(reducer.merge_threshold, reducer.merge_rule)))
     np.testing.assert_array_equal(got.weights, ref.weights)
     np.testing.assert_array_equal(got.means, ref.means)
+    merged = merge_many(dens, reducer.merge_threshold * 9, reducer.merge_rule)
+    assert sum(map(len, merged)) < sum(map(len, dens))
     steps = gci_fuse(dens, omegas, reducer, cardinality=cardinality, sequential=True)
     assert len(got) == len(steps) == 10
     idx = np.linalg.norm(got.means[:, None, [0, 2]] - steps.means[None, :, [0, 2]],
@@ -157,19 +164,28 @@ def test_bench_fusion_is_one_product_reduced_once(cardinality):
     assert sorted(idx.tolist()) == list(range(10))
     assert np.abs(got.means - steps.means[idx]).max() <= 1.0
     rel = np.abs(got.covs - steps.covs[idx]).max(axis=(1, 2)) / np.abs(steps.covs).max()
-    assert rel.max() <= 0.01
-    assert np.abs(got.weights - steps.weights[idx]).max() <= 0.25
+    assert rel.max() <= 0.06
+    assert np.abs(got.weights - steps.weights[idx]).max() <= (0.15 if cardinality == "emd"
+                                                              else 0.35)
     if cardinality == "separate":
         assert got.mass == pytest.approx(steps.mass, rel=1e-6)
 
 
 def test_too_many_kept_falls_back_to_the_steps():
-    """Nine overlapping densities (10^9 combinations, all within the gate): no product at
-    once (None), and ``gci_fuse`` gives the sequential path's result to the bit."""
+    """Nine overlapping densities (10^9 combinations, all within the gate; each density's
+    components 8 sigma apart on a grid, beyond the pre-merge's ``U / omega = 45``): no product
+    at once (None), and ``gci_fuse`` gives the sequential path's result to the bit."""
     rng = np.random.default_rng(3)
-    dens = [GaussianMixture(rng.uniform(0.5, 1.0, 10), rng.normal(size=(10, 4)),
-                            np.tile(np.eye(4) * 100.0, (10, 1, 1))) for _ in range(9)]
-    assert gci_product_gated(dens, [1 / 9] * 9, "separate", NARY_MAX_COMBINATIONS) is None
+    grid = np.stack(np.meshgrid(np.arange(4.0), np.arange(3.0)), -1).reshape(-1, 2)[:10] * 80.0
+    dens = []
+    for _ in range(9):
+        means = np.zeros((10, 4))
+        means[:, [0, 2]] = grid + rng.normal(size=(10, 2))
+        dens.append(GaussianMixture(rng.uniform(0.5, 1.0, 10), means,
+                                    np.tile(np.eye(4) * 100.0, (10, 1, 1))))
+    assert [len(D) for D in merge_many(dens, 45.0)] == [10] * 9
+    assert gci_product_gated(dens, [1 / 9] * 9, "separate", NARY_MAX_COMBINATIONS,
+                             premerge=(5.0, "vo-ma")) is None
     got = gci_fuse(dens, [1 / 9] * 9, Reducer(), cardinality="separate")
     steps = gci_fuse(dens, [1 / 9] * 9, Reducer(), cardinality="separate", sequential=True)
     np.testing.assert_array_equal(got.weights, steps.weights)
@@ -220,25 +236,29 @@ def test_more_combinations_than_a_float_holds():
 
 
 def test_weights_against_the_exact_gci_integral():
-    """What the product at once gives up (issue 33's trade, recorded): the exact GCI mass of a
-    track, ``int prod_i D_i(x)^(omega_i) dx`` over the inputs' whole mixtures (importance
-    sampling, 30,000 draws from the fused Gaussian widened 4x, ~1 % standard error), against
-    ``emd`` weights. Where each input holds the track as one row, both paths give the exact
-    mass (within 3 %); where an input holds it as two or three rows, dropping the cross terms
-    over-counts it, the product at once (every combination powered apart) more than the steps
-    (merged after each step, then powered): at once >= steps >= 0.95 x exact. Measured (400,000
-    draws) on 5 of the 10 tracks: at once 0.38-0.53, steps 0.25-0.41, exact 0.25-0.39 (track
-    by track .53/.41/.39, .46/.35/.34, .52/.37/.31, .45/.39/.26, .38/.25/.25)."""
+    """The product at once against the exact GCI mass of each track, ``int prod_i D_i(x)^
+    (omega_i) dx`` over the inputs' whole mixtures (importance sampling, 30,000 draws from the
+    fused Gaussian widened 4x, ~1 % standard error), ``emd`` weights. Dropping the cross terms
+    over-counts a track an input holds as two or three close rows when they are powered apart:
+    without the pre-merge the product at once gives 0.38-0.53 where the exact mass is
+    0.24-0.39 (5 of 10 tracks, up to +75 %), the steps (newcomers' rows powered apart, merged
+    after) 0.25-0.41 (up to +50 %); with each input's rows within ``U / omega`` merged first,
+    every track is within 6 % of exact (measured with 400,000 draws: max 3.2 %, mean 0.6 %;
+    on the split tracks 3.2 % / 0.8 %; those numbers are this test's inputs, evaluated once;
+    the rule was chosen on bench_lmb's inputs of seeds 100-104: max 4.6 %, mean 1.4 % over 48
+    tracks, none 77 % / 12 %). The steps stay the reference path, over-counting at least as
+    much where they differ by more than 1 %."""
     from sensornet.tracking.gaussian import gaussian_pdf_points
 
     dens = bench_inputs()
     omegas = np.full(9, 1 / 9)
     once = gci_fuse(dens, list(omegas), Reducer(), cardinality="emd")
     steps = gci_fuse(dens, list(omegas), Reducer(), cardinality="emd", sequential=True)
-    idx = np.linalg.norm(once.means[:, None, [0, 2]] - steps.means[None, :, [0, 2]],
-                         axis=-1).argmin(axis=1)
+    apart = Reducer()(gci_product_gated(dens, omegas, "emd", NARY_MAX_COMBINATIONS))
+    near = lambda mix, m: np.linalg.norm(  # noqa: E731
+        mix.means[:, [0, 2]] - m[[0, 2]], axis=1).argmin()
     rng = np.random.default_rng(0)
-    split = 0
+    split, worst_apart = 0, 0.0
     for k in range(len(once)):
         m, P = once.means[k], 4.0 * once.covs[k]
         x = m + rng.standard_normal((30_000, 4)) @ np.linalg.cholesky(P).T
@@ -246,10 +266,46 @@ def test_weights_against_the_exact_gci_integral():
         log_f = sum(o * np.log(np.maximum(gaussian_pdf_points(x, D.means, D.covs) @ D.weights,
                                           1e-300)) for D, o in zip(dens, omegas, strict=True))
         exact = float(np.mean(np.exp(log_f - log_q)))
-        a, s = once.weights[k], steps.weights[idx[k]]
-        if abs(a - s) <= 1e-9 * a:
-            assert a == pytest.approx(exact, rel=0.03)
-        else:
+        a, s = once.weights[k], steps.weights[near(steps, m)]
+        assert a == pytest.approx(exact, rel=0.06)
+        worst_apart = max(worst_apart, apart.weights[near(apart, m)] / exact)
+        if abs(a - s) > 0.01 * a:  # the steps power some rows apart: they over-count
             split += 1
-            assert a >= s >= 0.95 * exact
-    assert split >= 3
+            assert s >= a
+    assert split >= 3 and worst_apart >= 1.5
+
+
+@pytest.mark.parametrize("rule", ["vo-ma", "weighted"])
+def test_premerge_is_merge_of_each_density(rule):
+    """``merge_many`` (the pre-merge's stacked sweep, one call for all densities) gives each
+    density what :func:`merge` gives it at its own threshold, to the bit, its rows in input
+    order; on random cases (0-13 components, 1-5 targets, tight to wide spreads) where many
+    rows merge. Zero-weight rows and a NaN row merge with nothing; a bad rule: one-line error."""
+    from sensornet.tracking.reduction import merge
+
+    merged = 0
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        n, d = int(rng.integers(1, 9)), int(rng.choice([2, 4]))
+        dens = spread(rng, rng.integers(0, 14, n), d, int(rng.integers(1, 6)), 300.0,
+                      float(rng.choice([2.0, 8.0, 20.0])))
+        thresholds = rng.uniform(1.0, 60.0, n) / (20.0 if rule == "weighted" else 1.0)
+        for D, t, got in zip(dens, thresholds, merge_many(dens, thresholds, rule), strict=True):
+            ref = merge(D, float(t), rule)
+            assert len(got) == len(ref)
+            merged += len(D) - len(got)
+            if len(ref):
+                idx = matches(ref, got)
+                assert sorted(idx.tolist()) == list(range(len(got)))
+                np.testing.assert_array_equal(got.weights[idx], ref.weights)
+                np.testing.assert_array_equal(got.means[idx], ref.means)
+                np.testing.assert_array_equal(got.covs[idx], ref.covs)
+    assert merged > 500
+    a = GaussianMixture(np.array([0.0, 0.0, 1.0]), np.zeros((3, 2)), np.tile(np.eye(2), (3, 1, 1)))
+    means = np.array([[0.0, 0.0], [np.nan, 0.0], [0.1, 0.0]])
+    b = GaussianMixture(np.ones(3), means, np.tile(np.eye(2), (3, 1, 1)))
+    out = merge_many([a, b], 5.0, rule)
+    assert len(out[0]) == 3 and len(out[1]) == 2 and np.isnan(out[1].means).any()
+    with pytest.raises(ValueError, match="merge rule") as err:
+        merge_many([a], 5.0, "bogus")
+    assert "\n" not in str(err.value)

@@ -17,6 +17,7 @@ from sensornet.tracking.gaussian import (
     quad_form,
 )
 from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.reduction import merge_stacked
 
 CARDINALITY_RULES = ("emd", "separate")
 _sum, _max, _all = np.add.reduce, np.maximum.reduce, np.logical_and.reduce
@@ -159,7 +160,8 @@ def gci_step(acc: GaussianMixture, new: GaussianMixture, omega: float, cardinali
 
 
 def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[float],
-                      cardinality: str = "emd", limit: int = 4096) -> GaussianMixture | None:
+                      cardinality: str = "emd", limit: int = 4096,
+                      premerge: tuple[float, str] | None = None) -> GaussianMixture | None:
     """``gci_product(densities, weights, cardinality, gate=True)`` for many densities at once,
     or None when that is not cheap: more than ``limit`` combinations kept, or the gate cannot
     certify what it leaves out (the caller then fuses in steps). Issue 33: own + 8 neighbours
@@ -178,6 +180,13 @@ def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[fl
     :func:`gci_product`'s order (the first density's component slowest); their numbers are
     :func:`_centred_rows`'. ``separate`` normalises through the log weights. 11^9
     combinations of ``bench_lmb``: about 26 kept (tests/test_gci_at_once.py).
+
+    ``premerge = (U, rule)``: first merge each density's close components, density ``i`` by
+    ``rule`` at ``U / omega_i`` (:func:`tracking.reduction.merge_stacked`, all densities in one
+    call): the merge test applied to the powered components ``N(m, P)^omega ~ N(m, P/omega)``,
+    which the product's ``(sum_j w_j N_j)^omega ~ sum_j w_j^omega N_j^omega`` (Battistelli et
+    al. 2013; Wang et al. 2017) needs well apart; close rows powered apart over-count a track
+    (issue 33: bench_lmb's split tracks, tests/test_gci_at_once.py).
     """
     if cardinality not in CARDINALITY_RULES:
         raise ValueError(f"unknown cardinality rule {cardinality!r}; expected {CARDINALITY_RULES}")
@@ -196,10 +205,14 @@ def gci_product_gated(densities: Sequence[GaussianMixture], weights: Sequence[fl
     sizes = [len(D) for D in densities]
     if min(sizes) == 0:
         return GaussianMixture.empty(d)
-    start = np.cumsum(sizes) - sizes
     w_all = np.concatenate([D.weights for D in densities])
     means = np.concatenate([D.means for D in densities])
     covs = np.concatenate([D.covs for D in densities])
+    if premerge is not None:
+        w_all, means, covs, merged = merge_stacked(w_all, means, covs, np.array(sizes),
+                                                   premerge[0] / omegas, premerge[1])
+        sizes = merged.tolist()
+    start = np.cumsum(sizes) - sizes
     om = np.repeat(omegas, sizes)
     log_mass = None
     if cardinality == "separate":

@@ -16,6 +16,7 @@ a Python loop over the close pairs only, then the moment matching of all small g
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -133,6 +134,98 @@ def sweep_labels(mix: GaussianMixture, threshold: float, rule: str = "vo-ma",
     labels = np.empty(n, dtype=np.intp)
     labels[order] = labels_sorted
     return labels
+
+
+def merge_many(mixtures: Sequence[GaussianMixture], thresholds, rule: str = "vo-ma"
+               ) -> list[GaussianMixture]:
+    """``[merge(D, t, rule) for D, t in zip(mixtures, thresholds)]`` in one stacked call
+    (:func:`merge_stacked`): the same components, each mixture's rows in its input order (a
+    group's row where its heaviest member was) instead of :func:`merge`'s sweep order."""
+    mixtures = list(mixtures)
+    if not mixtures:
+        return []
+    sizes = np.array([len(D) for D in mixtures], dtype=np.intp)
+    w, m, P, out_sizes = merge_stacked(np.concatenate([D.weights for D in mixtures]),
+                                       np.concatenate([D.means for D in mixtures]),
+                                       np.concatenate([D.covs for D in mixtures]),
+                                       sizes, thresholds, rule)
+    if out_sizes is sizes:  # nothing merged
+        return mixtures
+    ends = np.cumsum(out_sizes).tolist()
+    return [GaussianMixture.trusted(w[e - k:e], m[e - k:e], P[e - k:e])
+            for e, k in zip(ends, out_sizes.tolist(), strict=True)]
+
+
+def merge_stacked(w: np.ndarray, m: np.ndarray, P: np.ndarray, sizes: np.ndarray, thresholds,
+                  rule: str = "vo-ma"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`merge` of many mixtures laid end to end (mixture ``i`` the next ``sizes[i]`` rows
+    of ``w (K,)``, ``m (K, d)``, ``P (K, d, d)``), mixture ``i`` at ``thresholds[i]`` (or one
+    threshold for all), in one stacked sweep: the same groups and moment-matched numbers, each
+    group's row where its heaviest member was, the rest in input order. Returns ``(w, m, P,
+    sizes)``, the inputs themselves (``sizes`` the same object) when nothing merges.
+
+    The pairs inside each mixture are tested at once, first by :func:`_close_pairs`' marginal
+    bound (widened by 0.1 %), then exactly, with inverses only of the rows a candidate pair
+    needs; the groups by :func:`_greedy_groups` in each mixture's sweep order (heaviest first,
+    ties by index; a Python loop over the close pairs only); :func:`_moment_match_groups`.
+    Rows of zero weight merge with nothing (a moment match of no mass is undefined); a row
+    with a NaN fails every test. Issue 33: the inputs of the GCI product at once."""
+    if rule not in MERGE_RULES:
+        raise ValueError(f"unknown merge rule {rule!r}; expected one of {MERGE_RULES}")
+    sizes = np.asarray(sizes, dtype=np.intp)
+    K = len(w)
+    t = np.broadcast_to(np.asarray(thresholds, dtype=float), sizes.shape)
+    first = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    cnt = np.arange(K) - first  # row r pairs with the earlier rows of its mixture
+    hi = np.repeat(np.arange(K), cnt)  # (pairs,): the later row of the pair
+    lo = np.arange(hi.size) - np.repeat(np.cumsum(cnt) - cnt, cnt) + np.repeat(first, cnt)
+    if not hi.size:
+        return w, m, P, sizes
+    # the sweep's centre j is the heavier row (ties: the earlier), the member i the other
+    hi_first = w[hi] > w[lo]
+    j = np.where(hi_first, hi, lo)
+    i = np.where(hi_first, lo, hi)
+    diff = m[i] - m[j]
+    thr = np.repeat(t, sizes * (sizes - 1) // 2)
+    Pd = np.diagonal(P, axis1=1, axis2=2)
+    lim = thr * (1.0 + 1e-3)
+    with np.errstate(invalid="ignore", divide="ignore"):  # NaN rows, zero weights: no pair
+        if rule == "vo-ma":
+            near = np.logical_and.reduce(np.square(diff) <= lim[:, None] * Pd[i], axis=1)
+        else:
+            f = w[i] * w[j] / (w[i] + w[j])
+            near = np.logical_and.reduce(np.square(diff) * f[:, None] <= lim[:, None] * Pd[j],
+                                         axis=1)
+        near &= w[i] > 0  # w[j] >= w[i]: both rows carry mass
+        cand = np.flatnonzero(near)
+        if not cand.size:
+            return w, m, P, sizes
+        i, j, diff, thr = i[cand], j[cand], diff[cand], thr[cand]
+        if rule == "vo-ma":
+            close = _c_einsum("gi,gij,gj->g", diff, inv_spd(P[i]), diff) <= thr
+        else:
+            d2 = np.einsum("gi,gij,gj->g", diff, inv_spd(P[j]), diff)
+            close = (w[i] * w[j] / (w[i] + w[j])) * d2 < thr
+    if not close.any():
+        return w, m, P, sizes
+    i, j = i[close], j[close]
+    # sweep order: by mixture, heaviest first, ties by index; pairs sorted by (centre, member)
+    mix_of = np.repeat(np.arange(len(sizes)), sizes)
+    order = np.lexsort((-w, mix_of))
+    rank = np.empty(K, dtype=np.intp)
+    rank[order] = np.arange(K)
+    ri, rj = rank[i], rank[j]
+    by_centre = np.lexsort((ri, rj))
+    centres, members = _greedy_groups(ri[by_centre], rj[by_centre])
+    centres = order[centres].tolist()
+    members = [order[g].tolist() for g in members]
+    out_w, out_m, out_P = w.copy(), m.copy(), P.copy()
+    _moment_match_groups(w, m, P, centres, members, out_w, out_m, out_P)
+    keep = np.ones(K, dtype=bool)
+    keep[np.concatenate(members)] = False
+    return (out_w[keep], out_m[keep], out_P[keep],
+            np.bincount(mix_of[keep], minlength=len(sizes)).astype(np.intp))
 
 
 def _merge_in_order(mix: GaussianMixture, order: np.ndarray, threshold: float,
@@ -408,6 +501,8 @@ __all__ = [
     "ise_refit",
     "keep_above",
     "merge",
+    "merge_many",
+    "merge_stacked",
     "merge_sources",
     "moment_match",
     "prune",
