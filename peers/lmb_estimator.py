@@ -205,8 +205,12 @@ class LmbEstimator:
         at once (:func:`tracking.lmb_batch.step_many`: a peer host's co-hosted peers); each
         :meth:`step` takes its result only if it makes exactly that step from the same state
         with the same filter (else it computes its own: a prepared step never changes what a
-        step gives, only where its arithmetic is done). Not prepared: an estimator with an
-        adopted density to take first, or whose plots may come with ages (:attr:`own_times`)."""
+        step gives, only where its arithmetic is done). Fed-back states (``adopt_states``) are
+        taken first, as the step would. Not prepared: an estimator with a whole adopted density
+        to take first, or whose plots may come with ages (:attr:`own_times`)."""
+        for e in estimators:  # states only (adopt_states): taken now, as the step would first
+            if e._adopted is not None and e.adopt_states:
+                e._take_states()
         todo = [(e, e.k + int(s), z) for e, s, z in zip(estimators, steps, scans, strict=True)
                 if e._adopted is None and e.own_times is None and int(s) >= 1]
         for e in estimators:

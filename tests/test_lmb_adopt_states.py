@@ -132,3 +132,26 @@ def test_auto_diffuses_states_only_where_a_peer_is_two_hops_away(graph, kind, ru
     fixed = scenario_of(GRAPHS[graph], kind, 0.9, 10.0, 5, {"fusion.rule": rule,
                                                             "lmb.adopt_states": 0})
     assert consensus_options(fixed, name).feedback is False
+
+
+def test_fed_back_states_do_not_stop_a_prepared_step():
+    """Co-hosted steps (prepare_many) are still prepared for a peer with fed-back states: the
+    states are taken first, as the step would, and the step is the unprepared one's."""
+    rng = np.random.default_rng(3)
+    z = rng.normal(0.0, 20.0, (4, 2))
+    fused = GaussianMixture(np.array([0.8]), np.array([[5.0, 1, 4, 0]]), np.eye(4)[None] * 4)
+    got = []
+    for prepared in (False, True):
+        e = _estimator(2)
+        _with_tracks(e, 10)
+        e.adopt(fused)
+        e.adopt_labels(np.array([[1, 2, 1]]))
+        if prepared:
+            LmbEstimator.prepare_many([e], [1], [z])
+            assert e._adopted is None and e._prepared is not None
+        e.step(1, z)
+        assert e.prepared_hits == int(prepared)
+        got.append(e.state.tracks)
+    np.testing.assert_array_equal(got[0].labels, got[1].labels)
+    np.testing.assert_array_equal(got[0].existence, got[1].existence)
+    np.testing.assert_array_equal(got[0].means, got[1].means)
