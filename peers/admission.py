@@ -265,26 +265,15 @@ class Admission:
 
     def taken(self, key: str, size: int, route: Route | None = None) -> None:
         """A message :meth:`arrive` let in has left the inbox (handled, skipped or refused;
-        ``route``: its key parsed already, as the inbox item carries it)."""
-        if route is None:
-            route = parse_key(key, self.network)
-        if route is None:
-            return
-        with self._lock:
-            name = (route.channel, route.name)
-            n = self._queued.get(name, 0)
-            if n <= 0:
-                return  # not one arrive() counted (a driver feeding its own queue)
-            if n == 1:
-                del self._queued[name]
-            else:
-                self._queued[name] = n - 1
-            self.queued_total -= 1
-            self.queued_bytes -= size
+        ``route``: its key parsed already, as the inbox item carries it): :meth:`taken_all`
+        of one."""
+        self.taken_all(((parse_key(key, self.network) if route is None else route, size),))
 
     def taken_all(self, routes_sizes) -> None:
-        """:meth:`taken` of several messages (``(route, size)`` each, the route parsed
-        already, None for a key that is not one of ours): one lock for a step's items."""
+        """Messages :meth:`arrive` let in have left the inbox (``(route, size)`` each, the
+        route parsed already, None for a key that is not one of ours): one lock for a step's
+        items; a message no :meth:`arrive` counted (a driver feeding its own queue) is
+        skipped."""
         with self._lock:
             queued = self._queued
             for route, size in routes_sizes:
