@@ -55,3 +55,16 @@ def test_late_cases_are_split_by_the_inputs_holding_the_target_and_its_age():
     # scan 2: two inputs hold it, the heaviest 0.7; scan 3: one input at 0.3; scan 4: fused has it
     assert by_held == {(2, True): 1, (1, False): 1}
     assert by_age == {1: 1, 2: 1}
+
+
+def test_a_target_never_reached_has_no_lag_even_when_born_late():
+    """A target born at scan 5 of 10 that no estimate ever reaches is NaN ("never"), not the
+    scans left in the run (5 < the run's length, which once counted it as reached)."""
+    T = TrackTable([1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 5, 6, 7, 8, 9, 10],
+                   [0] * 10 + [1] * 6, [[0, 0]] * 10 + [[5000, 5000]] * 6)
+    near_first = TrackTable([2, 3], [7, 7], [[0, 0]] * 2)
+    rec = dict(T=T, central=near_first, local={"a": near_first}, fused={"a": near_first},
+               names=["a"], calls={"a": []})
+    got = lags(rec)
+    assert got["central"][0] == 1 and np.isnan(got["central"][1])
+    assert got["fused"][0, 0] == 1 and np.isnan(got["fused"][0, 1])

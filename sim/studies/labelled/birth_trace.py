@@ -32,12 +32,17 @@ from sensornet.sim.studies.labelled.study import RULES, scenario_of
 
 def lags(rec: dict) -> dict[str, np.ndarray]:
     """First-track lags (scans after birth; module docstring) of ``"central"`` ``(m,)``,
-    ``"local"`` and ``"fused"`` ``(peers, m)``; a target never reached: a lag past the run."""
+    ``"local"`` and ``"fused"`` ``(peers, m)``; a target never reached: NaN (not a lag counted
+    from the run's end, which a late-born target would keep below the run's length)."""
     grid = np.unique(rec["T"].scan)
     Y = rec["T"].dense(grid)[1]
     born = (~np.isnan(Y).any(-1)).argmax(0)
-    return {"central": first_near(rec["central"], Y, grid) - born,
-            **{w: np.array([first_near(rec[w][p], Y, grid) for p in rec["names"]]) - born
+
+    def lag(first: np.ndarray) -> np.ndarray:
+        return np.where(first < len(grid), first - born, np.nan)
+
+    return {"central": lag(first_near(rec["central"], Y, grid)),
+            **{w: lag(np.array([first_near(rec[w][p], Y, grid) for p in rec["names"]]))
                for w in ("local", "fused")}}
 
 
@@ -104,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
             text = []
             for w, v in got.items():
                 v = np.concatenate(v)
-                ok = v < scn.num_scans
+                ok = ~np.isnan(v)
                 text.append(f"{w} {v[ok].mean():.2f} ({(~ok).sum()} never)")
             print(f"{g} Pd {pd} runs {a.runs}: first-track lag after birth, scans: "
                   + ", ".join(text))
