@@ -384,7 +384,10 @@ def test_two_hosts_of_three_equal_the_twin(tmp_path):
     assert set(summaries) == set(SIX)
     for name, s in summaries.items():
         assert s["host"]["name"] == ("h1" if name in SIX[:3] else "h2"), s["host"]
-        assert s["scans"] == scn.num_scans and s["internal_errors"] == {}
+        # a scan left out to catch up (PeerRuntime._catch_up: 5 scans behind, ~1 s stalled)
+        # is the machine's, not the code's: say so when it happens
+        assert s["scans"] == scn.num_scans and s["internal_errors"] == {}, (
+            name, s["scans"], "skipped behind", s["stats"].get("scans_skipped_behind"))
         assert s["host"]["bundles"] == {"received": scn.num_scans, "rejected": 0,
                                         "unknown_sensor": 0, "why": {}}, s["host"]
         assert s["admitted_by_sender"][f"scan/{name}"] == scn.num_scans
