@@ -27,6 +27,7 @@ from sensornet.tracking.labels import (
     extract_tracks,
     new_labels,
     split_duplicates,
+    step_labels_many,
 )
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.models import RangeBearing
@@ -124,9 +125,12 @@ class GmphdEstimator:
         """The scan of the last step (births are stamped with it)."""
         self._next_k: int | None = None
         self._prepared: tuple | None = None
-        """``(prior, steps, z, posterior, parents)`` from :meth:`prepare_many`."""
+        """``(prior, steps, z, posterior, parents, labels)`` from :meth:`prepare_many`;
+        ``labels``: None, or ``(prior labels, scan, births, posterior labels)``."""
         self.prepared_hits = 0
         """Steps that used a prepared posterior (for the summary and tests)."""
+        self.prepared_label_hits = 0
+        """Steps that used prepared posterior labels (:meth:`_prepare_labels`; tests)."""
 
     @staticmethod
     def prepare_many(estimators: Sequence[GmphdEstimator], steps: Sequence[int],
@@ -147,7 +151,31 @@ class GmphdEstimator:
         posts = step_many([e.filter for e in estimators], [e.mix for e in estimators],
                           steps, scans, parents=True)  # raises before any is touched
         for e, s, z, (post, par) in zip(estimators, steps, scans, posts, strict=True):
-            e._prepared = (e.mix, int(s), z, post, par)
+            e._prepared = (e.mix, int(s), z, post, par, None)
+        GmphdEstimator._prepare_labels(estimators, steps, posts)
+
+    @staticmethod
+    def _prepare_labels(estimators: Sequence[GmphdEstimator], steps: Sequence[int],
+                        posts: list) -> None:
+        """The posterior labels of the prepared steps of the labelled ``estimators`` (what
+        :meth:`_step_labels` gives), all in one :func:`tracking.labels.step_labels_many`,
+        for the scan ``k + steps``; kept beside the posterior with the prior's labels, that
+        scan and the birth count, and taken only if the step is that one (:meth:`step`)."""
+        use = [i for i, e in enumerate(estimators) if e.labels is not None]
+        if len(use) < 2:  # one peer: its own step is as cheap
+            return
+        es = [estimators[i] for i in use]
+        ks = [e.k + int(steps[i]) for e, i in zip(es, use, strict=True)]
+        nbs = [0 if e.filter.birth is None else len(e.filter.birth) for e in es]
+        try:
+            out = step_labels_many([e.labels for e in es], [posts[i][1] for i in use],
+                                   [posts[i][0].weights for i in use], nbs,
+                                   [e.birth_origin for e in es], [e.origin for e in es], ks,
+                                   [e.filter.extraction_threshold for e in es])
+        except Exception:  # noqa: BLE001 - not prepared: each step labels its own
+            return
+        for e, k, nb, lab in zip(es, ks, nbs, out, strict=True):
+            e._prepared = e._prepared[:5] + ((e.labels, k, nb, lab),)
 
     def begin_scan(self, k: int) -> None:
         """The scan index of the next :meth:`step` (a consensus calls it first; without it
@@ -170,19 +198,26 @@ class GmphdEstimator:
         prep, self._prepared = self._prepared, None
         k = self.k + steps if self._next_k is None else self._next_k
         self._next_k = None
-        par, own = None, self._own_times_step(z, k)
+        par, ready, own = None, None, self._own_times_step(z, k)
         if own is not None:
             post = own[0]
         elif (prep is not None and prep[0] is self.mix and prep[1] == steps
                 and (prep[2] is z or np.array_equal(prep[2], z))):
-            post, par = prep[3], prep[4]
+            post, par, ready = prep[3], prep[4], prep[5]
             self.prepared_hits += 1
         elif self.labels is None:
             post = self.filter.correct(self.filter.predict(self.mix, steps), [z])
         else:
             post, par = correct_parents(self.filter, self.filter.predict(self.mix, steps), [z])
         if self.labels is not None:
-            self.labels = own[1] if own is not None else self._step_labels(post, par, k)
+            if own is not None:
+                self.labels = own[1]
+            elif (ready is not None and ready[0] is self.labels and ready[1] == k
+                    and ready[2] == (0 if self.filter.birth is None else len(self.filter.birth))):
+                self.labels = ready[3]  # the prepared labels: _step_labels' to the bit
+                self.prepared_label_hits += 1
+            else:
+                self.labels = self._step_labels(post, par, k)
             pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
             self.labels = self.reid.apply(self.labels, post, pub_at, k)

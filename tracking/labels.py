@@ -115,6 +115,59 @@ def split_duplicates(lm: LabelledMixture, threshold: float, origin: int, k: int,
     return LabelledMixture(lm.mixture, labels)
 
 
+def step_labels_many(labels: Sequence[np.ndarray], parents: Sequence[np.ndarray],
+                     weights: Sequence[np.ndarray], births: Sequence[int],
+                     birth_origins: Sequence[int], origins: Sequence[int],
+                     ks: Sequence[int], thresholds: Sequence[float]) -> list[np.ndarray]:
+    """The posterior labels of many labelled GM-PHD steps at once (a peer host's co-hosted
+    peers): for problem ``p``, the prior's ``labels[p] (n, 3)`` and ``births[p]`` birth labels
+    ``(birth_origins[p], ks[p], 0 ..)`` gathered by ``parents[p]`` (tag propagation, Panta,
+    Clark & Vo 2009 §IV), then :func:`split_duplicates` with ``weights[p]``,
+    ``thresholds[p]``, ``origins[p]``, ``ks[p]``, start ``births[p]``. Why: the per-peer
+    rule is ~15 small NumPy calls paid per peer and scan; here every problem's rows are one
+    array, the sort keyed by the problem first, so each result is its own rule's to the bit
+    (tests/test_step_labels_many.py)."""
+    P = len(labels)
+    if P == 0:
+        return []
+    n_prior = np.array([len(x) for x in labels], dtype=np.int64)
+    nb = np.asarray(births, dtype=np.int64)
+    n_pred = n_prior + nb
+    pred_off = np.concatenate(([0], np.cumsum(n_pred)[:-1]))
+    birth_p = np.repeat(np.arange(P), nb)
+    birth = np.empty((int(nb.sum()), 3), dtype=np.int64)
+    birth[:, 0] = np.asarray(birth_origins, dtype=np.int64)[birth_p]
+    birth[:, 1] = np.asarray(ks, dtype=np.int64)[birth_p]
+    birth[:, 2] = np.arange(len(birth)) - np.repeat(np.cumsum(nb) - nb, nb)
+    b_end = np.cumsum(nb).tolist()
+    parts: list[np.ndarray] = []
+    for p in range(P):  # (per problem, not per row: the prior's rows, then its births)
+        parts += [labels[p], birth[b_end[p] - births[p]:b_end[p]]]
+    pred = np.concatenate(parts).astype(np.int64, copy=False)
+    n_post = np.array([len(x) for x in parents], dtype=np.int64)
+    prob = np.repeat(np.arange(P), n_post)
+    par = np.concatenate(parents).astype(np.int64, copy=False) + pred_off[prob]
+    out = pred[par]
+    w = np.concatenate(weights)
+    above = np.flatnonzero(w > np.asarray(thresholds, dtype=float)[prob])
+    if above.size > 1:
+        lab, pa = out[above], prob[above]
+        by = np.lexsort((-w[above], lab[:, 2], lab[:, 1], lab[:, 0], pa))
+        s, sp = lab[by], pa[by]
+        dup = np.zeros(above.size, dtype=bool)
+        dup[1:] = (s[1:] == s[:-1]).all(axis=1) & (sp[1:] == sp[:-1])
+        if dup.any():
+            rows = above[by[dup]]
+            rows = rows[np.lexsort((-w[rows], prob[rows]))]  # per problem, heaviest first
+            rp = prob[rows]
+            first = np.flatnonzero(np.r_[True, rp[1:] != rp[:-1]])
+            rank = np.arange(len(rows)) - np.repeat(first, np.diff(np.r_[first, len(rows)]))
+            out[rows, 0] = np.asarray(origins, dtype=np.int64)[rp]
+            out[rows, 1] = np.asarray(ks, dtype=np.int64)[rp]
+            out[rows, 2] = nb[rp] + rank
+    return np.split(out, np.cumsum(n_post)[:-1])
+
+
 def extract_labelled(lm: LabelledMixture, threshold: float = 0.5,
                      rule: str = "cardinality") -> tuple[np.ndarray, np.ndarray]:
     """:func:`tracking.gmphd.extract` (the same states ``(p, d)``) and their labels

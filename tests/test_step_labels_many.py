@@ -1,0 +1,118 @@
+"""The batched local label step (tracking.labels.step_labels_many, issues 33/38): every
+problem's posterior labels are its own tag propagation and duplicate rule's, to the bit, on
+random label sequences; and co-hosted GM-PHD peers whose steps were prepared together take
+them only when the step is the one prepared (the same labels as peers stepping alone)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sensornet.peers.estimators import GmphdEstimator
+from sensornet.tracking.gmphd import GMPHDFilter, SensorParams
+from sensornet.tracking.labels import (
+    LabelledMixture,
+    new_labels,
+    split_duplicates,
+    step_labels_many,
+)
+from sensornet.tracking.mixture import GaussianMixture
+from sensornet.tracking.models import ConstantVelocity, LinearPosition
+from sensornet.tracking.reduction import Reducer
+
+
+def _alone(lab, par, w, nb, bo, o, k, thr):
+    pred = np.concatenate((lab, new_labels(bo, k, nb)))
+    mix = GaussianMixture(w, np.zeros((len(w), 4)), np.tile(np.eye(4), (len(w), 1, 1)))
+    return split_duplicates(LabelledMixture(mix, pred[par]), thr, o, k, nb).labels
+
+
+def test_step_labels_many_equals_each_problem_on_random_label_sequences():
+    rng = np.random.default_rng(31)
+    split = 0
+    for _ in range(200):
+        P = int(rng.integers(1, 7))
+        args = []
+        for _p in range(P):
+            n, nb = int(rng.integers(0, 9)), int(rng.integers(0, 4))
+            lab = rng.integers(0, 3, (n, 3)).astype(np.int64)  # few labels: many shared
+            m = int(rng.integers(0, 14)) if n + nb else 0
+            par = rng.integers(0, max(n + nb, 1), m)
+            w = rng.choice([0.2, 0.5, 0.7, 0.9, 1.3], m)  # ties and the threshold itself
+            args.append((lab, par, w, nb, int(rng.integers(0, 3)), int(rng.integers(0, 3)),
+                         int(rng.integers(1, 50)), float(rng.choice([0.5, 0.8]))))
+        got = step_labels_many(*(list(x) for x in zip(*args, strict=True)))
+        assert len(got) == P
+        for g, a in zip(got, args, strict=True):
+            want = _alone(*a)
+            assert g.dtype == np.int64 and g.shape == want.shape
+            np.testing.assert_array_equal(g, want)
+            split += int((want[:, 2] >= a[3]).sum() and (a[2] > a[7]).sum() > 1)
+    assert split > 20  # the duplicate rule had work to do
+    assert step_labels_many([], [], [], [], [], [], [], []) == []
+
+
+def _peers(rng, n: int, centres: np.ndarray) -> list[GmphdEstimator]:
+    motion, reducer = ConstantVelocity(1.0, 2.0), Reducer(merge_threshold=4.0)
+    birth = GaussianMixture(np.full(len(centres), 0.2), centres, np.tile(np.eye(4) * 400.0,
+                                                                         (len(centres), 1, 1)))
+    sensor = SensorParams(LinearPosition(10.0), 0.95, 1e-6)
+    return [GmphdEstimator(GMPHDFilter(motion, [sensor], birth, 0.99, reducer), origin=o,
+                           shared_births=bool(o % 2)) for o in range(1, n + 1)]
+
+
+def test_prepared_labels_are_the_steps_own_and_used_only_for_that_step():
+    rng = np.random.default_rng(8)
+    centres = np.array([[0.0, 5.0, 0.0, 3.0], [400.0, -4.0, 100.0, 2.0], [10.0, 0, 30.0, 0]])
+    ests, plain = _peers(rng, 4, centres), _peers(rng, 4, centres)
+    for k in range(1, 12):
+        zs = [centres[:, [0, 2]] + k * centres[:, [1, 3]] + rng.normal(0, 8, (3, 2))
+              for _ in ests]
+        zs[3] = zs[3][rng.random(3) < 0.7]  # misses
+        GmphdEstimator.prepare_many(ests, [1] * 4, zs)
+        for i, (e, q, z) in enumerate(zip(ests, plain, zs, strict=True)):
+            kk = k + 1 if (i == 2 and k == 5) else k  # peer 2 at scan 5: another scan index
+            e.begin_scan(kk)
+            q.begin_scan(kk)
+            a, b = e.step(1, z), q.step(1, z)
+            np.testing.assert_array_equal(e.labels, q.labels)
+            np.testing.assert_array_equal(a.labels["posterior"], b.labels["posterior"])
+            np.testing.assert_array_equal(e.fresh_stamps(), q.fresh_stamps())
+        if k == 5:  # peers 2's scan index moved on: keep the plain twin in step
+            ests[2].k = plain[2].k = k
+    assert [e.prepared_hits for e in ests] == [11] * 4
+    assert [e.prepared_label_hits for e in ests] == [11, 11, 10, 11]
+    assert len(np.unique(ests[0].labels, axis=0)) > 1
+
+
+def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
+    """A step that raises after taking the prepared labels leaves the estimator as before
+    (peers.step_atomic); the next step, unprepared, gives what a peer that never failed gives."""
+    import sensornet.tracking.reidentify as reidentify
+
+    rng = np.random.default_rng(4)
+    centres = np.array([[0.0, 5.0, 0.0, 3.0], [400.0, -4.0, 100.0, 2.0]])
+    ests, plain = _peers(rng, 2, centres), _peers(rng, 2, centres)
+    for k in range(1, 5):
+        zs = [centres[:, [0, 2]] + k * centres[:, [1, 3]] for _ in ests]
+        GmphdEstimator.prepare_many(ests, [1, 1], zs)
+        for e, q, z in zip(ests, plain, zs, strict=True):
+            e.step(1, z)
+            q.step(1, z)
+    zs = [centres[:, [0, 2]] + 5 * centres[:, [1, 3]] for _ in ests]
+    GmphdEstimator.prepare_many(ests, [1, 1], zs)
+    e = ests[0]
+    before = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.prepared_label_hits)
+
+    def broken(self, *args):
+        raise IndexError("reid")
+
+    with monkeypatch.context() as m:
+        m.setattr(reidentify.Reidentification, "apply", broken)
+        with pytest.raises(IndexError):
+            e.step(1, zs[0])
+    after = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.prepared_label_hits)
+    assert all(x is y for x, y in zip(before[:5], after[:5], strict=True))
+    assert after[5] == before[5]
+    e.step(1, zs[0])  # unprepared now (taken by the failed step): its own labels
+    plain[0].step(1, zs[0])
+    np.testing.assert_array_equal(e.labels, plain[0].labels)
