@@ -53,7 +53,7 @@ from sensornet.protocol.messages import (
     Tracks,
     Truth,
 )
-from sensornet.protocol.report_bundle import REPORTS_HEAD, unpack_reports
+from sensornet.protocol.report_bundle import REPORTS_HEAD, unpack_reports_together
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.view_columns import Batcher
 
@@ -311,9 +311,10 @@ class ViewState:
 
     def _host_reports(self, base: str, body: bytes) -> None:
         """A host's reports message: its entries each as if heard on the peer's report key,
-        its reports drawn as if each had come alone; a refused whole or report counted."""
+        its reports drawn as if each had come alone; a refused whole or report counted (the
+        reports' checks made together: :func:`protocol.report_bundle.unpack_reports_together`)."""
         try:
-            msg = unpack_reports(body)
+            msg = unpack_reports_together(body)
         except Rejected:
             self.rejected += 1
             return
