@@ -387,7 +387,7 @@ def test_two_hosts_of_three_equal_the_twin(tmp_path):
         # a scan left out to catch up (PeerRuntime._catch_up: 5 scans behind, ~1 s stalled)
         # is the machine's, not the code's: say so when it happens
         assert s["scans"] == scn.num_scans and s["internal_errors"] == {}, (
-            name, s["scans"], "skipped behind", s["stats"].get("scans_skipped_behind"))
+            name, s["scans"], "skipped behind", s["scans_skipped_behind"])
         assert s["host"]["bundles"] == {"received": scn.num_scans, "rejected": 0,
                                         "unknown_sensor": 0, "why": {}}, s["host"]
         assert s["admitted_by_sender"][f"scan/{name}"] == scn.num_scans
@@ -482,7 +482,11 @@ def test_sigterm_to_the_launcher_stops_the_hosts_and_keeps_every_peers_files(tmp
         assert "hosts: h1 = s1,s2; h2 = s3" in stdout
         for name in ("s1", "s2", "s3"):
             s = json.loads((out / f"peer-{name}.json").read_text())
-            assert s["stop_reason"] == "SIGTERM" and s["scans"] >= 10, (name, s["stop_reason"])
+            # every scan to the world's 10th handled, or left out to catch up and counted
+            # (PeerRuntime._catch_up: a host stalled on a busy machine; seen in CI: s2 at 9)
+            done = s["scans"] + s["scans_skipped_behind"]
+            assert s["stop_reason"] == "SIGTERM" and s["scans"] >= 1 and done >= 10, (
+                name, s["stop_reason"], s["scans"], s["scans_skipped_behind"])
             assert not (out / "rerun" / f"peer-{name}.rrd").exists()
         rec = out / "recording.rrd"
         check = subprocess.run([rerun_exe(), "rrd", "verify", str(rec)], capture_output=True,
