@@ -15,6 +15,7 @@ from sensornet.peers.step_atomic import atomic
 from sensornet.tracking.gmphd import GMPHDFilter
 from sensornet.tracking.gmphd_batch import correct_parents, step_many
 from sensornet.tracking.imm import IMMEKF, IMMParams, radar_log_likelihood
+from sensornet.tracking.label_confirmation import stamp_known_many
 from sensornet.tracking.labels import (
     SHARED_ORIGIN,
     Confirmation,
@@ -126,11 +127,15 @@ class GmphdEstimator:
         self._next_k: int | None = None
         self._prepared: tuple | None = None
         """``(prior, steps, z, posterior, parents, labels)`` from :meth:`prepare_many`;
-        ``labels``: None, or ``(prior labels, scan, births, posterior labels)``."""
+        ``labels``: None, or ``(prior labels, scan, births, posterior labels, publication
+        memory (keys, last), publication threshold, stamp_known_many's memory or None)``."""
         self.prepared_hits = 0
         """Steps that used a prepared posterior (for the summary and tests)."""
         self.prepared_label_hits = 0
         """Steps that used prepared posterior labels (:meth:`_prepare_labels`; tests)."""
+        self.prepared_stamp_hits = 0
+        """Steps whose stamp was prepared with nothing to stamp (tracking.label_confirmation
+        .stamp_known_many; tests)."""
 
     @staticmethod
     def prepare_many(estimators: Sequence[GmphdEstimator], steps: Sequence[int],
@@ -160,7 +165,10 @@ class GmphdEstimator:
         """The posterior labels of the prepared steps of the labelled ``estimators`` (what
         :meth:`_step_labels` gives), all in one :func:`tracking.labels.step_labels_many`,
         for the scan ``k + steps``; kept beside the posterior with the prior's labels, that
-        scan and the birth count, and taken only if the step is that one (:meth:`step`)."""
+        scan and the birth count, and taken only if the step is that one (:meth:`step`).
+        Their stamps too where nothing is to be stamped (the usual scan:
+        :func:`tracking.label_confirmation.stamp_known_many`), taken only if the publication
+        memory is still the one they were computed from."""
         use = [i for i, e in enumerate(estimators) if e.labels is not None]
         if len(use) < 2:  # one peer: its own step is as cheap
             return
@@ -174,8 +182,15 @@ class GmphdEstimator:
                                    [e.filter.extraction_threshold for e in es])
         except Exception:  # noqa: BLE001 - not prepared: each step labels its own
             return
-        for e, k, nb, lab in zip(es, ks, nbs, out, strict=True):
-            e._prepared = e._prepared[:5] + ((e.labels, k, nb, lab),)
+        pub_at = [e.level2_threshold if e.level2 else e.filter.extraction_threshold for e in es]
+        try:
+            known = stamp_known_many([e.publication for e in es], out,
+                                     [posts[i][0].weights for i in use], pub_at, ks)
+        except Exception:  # noqa: BLE001 - each step stamps its own
+            known = [None] * len(es)
+        for e, k, nb, lab, at, kn in zip(es, ks, nbs, out, pub_at, known, strict=True):
+            e._prepared = e._prepared[:5] + ((e.labels, k, nb, lab, e.publication._keys,
+                                              e.publication._last, at, kn),)
 
     def begin_scan(self, k: int) -> None:
         """The scan index of the next :meth:`step` (a consensus calls it first; without it
@@ -210,6 +225,7 @@ class GmphdEstimator:
         else:
             post, par = correct_parents(self.filter, self.filter.predict(self.mix, steps), [z])
         if self.labels is not None:
+            pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             if own is not None:
                 self.labels = own[1]
             elif (ready is not None and ready[0] is self.labels and ready[1] == k
@@ -217,9 +233,14 @@ class GmphdEstimator:
                 self.labels = ready[3]  # the prepared labels: _step_labels' to the bit
                 self.prepared_label_hits += 1
             else:
-                self.labels = self._step_labels(post, par, k)
-            pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
-            self.labels = self.publication.stamp(self.labels, post.weights, pub_at, k)
+                self.labels, ready = self._step_labels(post, par, k), None
+            pb = self.publication
+            if (ready is not None and ready[7] is not None and ready[4] is pb._keys
+                    and ready[5] is pb._last and ready[6] == pub_at):
+                pb.take_known(ready[7], k)  # nothing to stamp: stamp's memory, prepared
+                self.prepared_stamp_hits += 1
+            else:
+                self.labels = pb.stamp(self.labels, post.weights, pub_at, k)
             self.labels = self.reid.apply(self.labels, post, pub_at, k)
             on = post.weights > pub_at
             self.labels, anew = self.moving.returning(self.labels, on, self.origin, k)

@@ -116,3 +116,77 @@ def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
     e.step(1, zs[0])  # unprepared now (taken by the failed step): its own labels
     plain[0].step(1, zs[0])
     np.testing.assert_array_equal(e.labels, plain[0].labels)
+
+
+def _pub_twins(rng, P):
+    from sensornet.tracking.label_confirmation import Publication
+    pubs, twins = [], []
+    for p in range(P):
+        kw = dict(origin=p % 3, gap=None if p % 5 == 4 else int(rng.integers(0, 3)),
+                  revisit=int(rng.integers(1, 3)), shared=0 if p % 2 else None)
+        pubs.append(Publication(**kw))
+        twins.append(Publication(**kw))
+    return pubs, twins
+
+
+def test_stamp_known_many_equals_each_stamp_where_nothing_is_stamped():
+    """On random label sequences of several peers over scans: where the batch prepares a
+    stamp, the stamp itself stamps nothing and leaves that memory, to the bit; where the batch
+    gives None, the peer's own stamp runs (both peers then equal)."""
+    from sensornet.tracking.label_confirmation import stamp_known_many
+
+    rng = np.random.default_rng(12)
+    prepared = fell_back = 0
+    for _trial in range(30):
+        P = int(rng.integers(1, 6))
+        pubs, twins = _pub_twins(rng, P)
+        pool = [rng.integers(0, 3, (6, 3)).astype(np.int64) for _ in range(P)]
+        for k in range(1, 14):
+            labels, weights = [], []
+            for p in range(P):
+                n = int(rng.integers(0, 7))
+                lab = pool[p][rng.integers(0, 6, n)]
+                if rng.random() < 0.15:  # a label now and then new
+                    pool[p][rng.integers(0, 6)] = [p % 3, k, int(rng.integers(0, 4))]
+                labels.append(lab)
+                weights.append(rng.choice([0.1, 0.5, 0.6, 0.9], n))
+            thr = [0.5] * P
+            got = stamp_known_many(pubs, labels, weights, thr, [k] * P)
+            for pub, twin, lab, w, g in zip(pubs, twins, labels, weights, got, strict=True):
+                want = twin.stamp(lab, w, 0.5, k)
+                if g is None:
+                    fell_back += 1
+                    out = pub.stamp(lab, w, 0.5, k)
+                    np.testing.assert_array_equal(out, want)
+                else:
+                    prepared += 1
+                    assert not twin.stamped.size
+                    np.testing.assert_array_equal(want, lab)  # nothing stamped
+                    pub.take_known(g, k)
+                assert pub._keys.dtype == twin._keys.dtype
+                np.testing.assert_array_equal(pub._keys, twin._keys)
+                np.testing.assert_array_equal(pub._last, twin._last)
+                assert pub._last.dtype == twin._last.dtype and pub._k == twin._k
+                np.testing.assert_array_equal(pub.stamped, twin.stamped)
+    assert prepared > 200 and fell_back > 200
+
+
+def test_prepared_stamps_are_taken_on_the_usual_scan():
+    rng = np.random.default_rng(3)
+    centres = np.array([[0.0, 5.0, 0.0, 3.0], [400.0, -4.0, 100.0, 2.0]])
+    ests, plain = _peers(rng, 3, centres), _peers(rng, 3, centres)
+    for k in range(1, 10):
+        zs = [centres[:, [0, 2]] + k * centres[:, [1, 3]] + rng.normal(0, 5, (2, 2))
+              for _ in ests]
+        GmphdEstimator.prepare_many(ests, [1] * 3, zs)
+        if k == 6:  # the memory changed after the preparation: its own stamp
+            ests[1].publication.adopt(np.array([[9, 1, 1]]))
+            plain[1].publication.adopt(np.array([[9, 1, 1]]))
+        for e, q, z in zip(ests, plain, zs, strict=True):
+            e.step(1, z)
+            q.step(1, z)
+            np.testing.assert_array_equal(e.labels, q.labels)
+            np.testing.assert_array_equal(e.publication._keys, q.publication._keys)
+            np.testing.assert_array_equal(e.publication._last, q.publication._last)
+    hits = [e.prepared_stamp_hits for e in ests]
+    assert min(hits) >= 5 and hits[1] < hits[0]
