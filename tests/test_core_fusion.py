@@ -307,7 +307,7 @@ def test_gci_fuse_skips_zero_weights_and_reduces():
         return Reducer(prune_threshold=0.0, merge_threshold=4.0)(m)
 
     gci_fuse(dens, [0.3, 0.3, 0.4], reduce=reduce)
-    assert calls == [27]  # 3 x 3 x 3 combinations formed at once, reduced once
+    assert calls == [18]  # 3 x 2 x 3 (density 1's two close rows pre-merged, gci_fuse), once
     calls.clear()
     with sequential_fusion():
         gci_fuse(dens, [0.3, 0.3, 0.4], reduce=reduce)
