@@ -56,6 +56,28 @@ class SingleTargetConfig:
     """Added to summary covariance diagonals before GCI/ratio (CV acceleration variance 0)."""
 
 
+@dataclass(frozen=True)
+class _Ready:
+    """A prepared step's label stage (:meth:`GmphdEstimator._prepare_labels`): the prior's
+    labels, scan and birth count it assumed, the posterior labels; the publication threshold,
+    the stamp's memory where nothing is stamped (None: stamp runs) and the memory it was
+    computed from; re-identification's memory where it only keeps the same tracks (None:
+    apply runs) and the memory it was computed from."""
+
+    prior: np.ndarray
+    k: int
+    births: int
+    labels: np.ndarray
+    pub_at: float
+    known: tuple | None
+    pub_keys: np.ndarray
+    pub_last: np.ndarray
+    same: tuple | None
+    reid_on: tuple | None
+    reid_lost: tuple | None
+    reid_last: tuple | None
+
+
 class GmphdEstimator:
     """A GM-PHD filter on one sensor (seed 000); publishes the level-2 pruned posterior.
 
@@ -127,8 +149,7 @@ class GmphdEstimator:
         self._next_k: int | None = None
         self._prepared: tuple | None = None
         """``(prior, steps, z, posterior, parents, labels)`` from :meth:`prepare_many`;
-        ``labels``: None, or ``(prior labels, scan, births, posterior labels, publication
-        memory (keys, last), publication threshold, stamp_known_many's memory or None)``."""
+        ``labels``: None or a :class:`_Ready`."""
         self.prepared_hits = 0
         """Steps that used a prepared posterior (for the summary and tests)."""
         self.prepared_label_hits = 0
@@ -136,6 +157,8 @@ class GmphdEstimator:
         self.prepared_stamp_hits = 0
         """Steps whose stamp was prepared with nothing to stamp (tracking.label_confirmation
         .stamp_known_many; tests)."""
+        self.prepared_reid_hits = 0
+        """Steps whose re-identification was prepared (Reidentification.same_many; tests)."""
 
     @staticmethod
     def prepare_many(estimators: Sequence[GmphdEstimator], steps: Sequence[int],
@@ -166,9 +189,10 @@ class GmphdEstimator:
         :meth:`_step_labels` gives), all in one :func:`tracking.labels.step_labels_many`,
         for the scan ``k + steps``; kept beside the posterior with the prior's labels, that
         scan and the birth count, and taken only if the step is that one (:meth:`step`).
-        Their stamps too where nothing is to be stamped (the usual scan:
-        :func:`tracking.label_confirmation.stamp_known_many`), taken only if the publication
-        memory is still the one they were computed from."""
+        Their stamps and re-identification too where these only keep their memory (the usual
+        scan: :func:`tracking.label_confirmation.stamp_known_many`,
+        :meth:`tracking.reidentify.Reidentification.same_many`), taken only if that memory is
+        still the one they were computed from."""
         use = [i for i, e in enumerate(estimators) if e.labels is not None]
         if len(use) < 2:  # one peer: its own step is as cheap
             return
@@ -186,11 +210,16 @@ class GmphdEstimator:
         try:
             known = stamp_known_many([e.publication for e in es], out,
                                      [posts[i][0].weights for i in use], pub_at, ks)
-        except Exception:  # noqa: BLE001 - each step stamps its own
-            known = [None] * len(es)
-        for e, k, nb, lab, at, kn in zip(es, ks, nbs, out, pub_at, known, strict=True):
-            e._prepared = e._prepared[:5] + ((e.labels, k, nb, lab, e.publication._keys,
-                                              e.publication._last, at, kn),)
+            same = Reidentification.same_many([e.reid for e in es], out,
+                                              [posts[i][0] for i in use], pub_at, ks)
+        except Exception:  # noqa: BLE001 - each step stamps and re-identifies its own
+            known = same = [None] * len(es)
+        for e, k, nb, lab, at, kn, sm in zip(es, ks, nbs, out, pub_at, known, same,
+                                              strict=True):
+            pb, rd = e.publication, e.reid
+            e._prepared = e._prepared[:5] + (_Ready(e.labels, k, nb, lab, at, kn, pb._keys,
+                                                    pb._last, sm, rd._on, rd._lost,
+                                                    rd._last),)
 
     def begin_scan(self, k: int) -> None:
         """The scan index of the next :meth:`step` (a consensus calls it first; without it
@@ -228,20 +257,27 @@ class GmphdEstimator:
             pub_at = self.level2_threshold if self.level2 else self.filter.extraction_threshold
             if own is not None:
                 self.labels = own[1]
-            elif (ready is not None and ready[0] is self.labels and ready[1] == k
-                    and ready[2] == (0 if self.filter.birth is None else len(self.filter.birth))):
-                self.labels = ready[3]  # the prepared labels: _step_labels' to the bit
+            elif (ready is not None and ready.prior is self.labels and ready.k == k
+                    and ready.births == (0 if self.filter.birth is None
+                                         else len(self.filter.birth))):
+                self.labels = ready.labels  # the prepared labels: _step_labels' to the bit
                 self.prepared_label_hits += 1
             else:
                 self.labels, ready = self._step_labels(post, par, k), None
-            pb = self.publication
-            if (ready is not None and ready[7] is not None and ready[4] is pb._keys
-                    and ready[5] is pb._last and ready[6] == pub_at):
-                pb.take_known(ready[7], k)  # nothing to stamp: stamp's memory, prepared
+            pb, rd = self.publication, self.reid
+            if (ready is not None and ready.known is not None and ready.pub_keys is pb._keys
+                    and ready.pub_last is pb._last and ready.pub_at == pub_at):
+                pb.take_known(ready.known, k)  # nothing to stamp: stamp's memory, prepared
                 self.prepared_stamp_hits += 1
+                if (ready.same is not None and ready.reid_on is rd._on
+                        and ready.reid_lost is rd._lost and ready.reid_last is rd._last):
+                    rd.take_same(ready.same)  # the same tracks: apply's memory, prepared
+                    self.prepared_reid_hits += 1
+                else:
+                    self.labels = rd.apply(self.labels, post, pub_at, k)
             else:
                 self.labels = pb.stamp(self.labels, post.weights, pub_at, k)
-            self.labels = self.reid.apply(self.labels, post, pub_at, k)
+                self.labels = rd.apply(self.labels, post, pub_at, k)
             on = post.weights > pub_at
             self.labels, anew = self.moving.returning(self.labels, on, self.origin, k)
             self.publication.adopt(anew)

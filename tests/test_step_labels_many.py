@@ -87,7 +87,7 @@ def test_prepared_labels_are_the_steps_own_and_used_only_for_that_step():
 def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
     """A step that raises after taking the prepared labels leaves the estimator as before
     (peers.step_atomic); the next step, unprepared, gives what a peer that never failed gives."""
-    import sensornet.tracking.reidentify as reidentify
+    from sensornet.peers.stamp_moves import MovingStamps
 
     rng = np.random.default_rng(4)
     centres = np.array([[0.0, 5.0, 0.0, 3.0], [400.0, -4.0, 100.0, 2.0]])
@@ -101,18 +101,25 @@ def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
     zs = [centres[:, [0, 2]] + 5 * centres[:, [1, 3]] for _ in ests]
     GmphdEstimator.prepare_many(ests, [1, 1], zs)
     e = ests[0]
-    before = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.prepared_label_hits)
+    before = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.reid._last,
+              e.publication._last, e.prepared_label_hits)
+
+    reached = []
 
     def broken(self, *args):
-        raise IndexError("reid")
+        reached.append((e.prepared_stamp_hits, e.prepared_reid_hits))
+        raise IndexError("offer")
 
-    with monkeypatch.context() as m:
-        m.setattr(reidentify.Reidentification, "apply", broken)
+    with monkeypatch.context() as m:  # the step's last call: after the prepared stages
+        m.setattr(MovingStamps, "offer", broken)
         with pytest.raises(IndexError):
             e.step(1, zs[0])
-    after = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.prepared_label_hits)
-    assert all(x is y for x, y in zip(before[:5], after[:5], strict=True))
-    assert after[5] == before[5]
+    after = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.reid._last,
+             e.publication._last, e.prepared_label_hits)
+    assert all(x is y for x, y in zip(before[:7], after[:7], strict=True))
+    assert after[7] == before[7]
+    assert reached == [(3 + 1, 2 + 1)]  # the failed step had taken both prepared memories
+    assert (e.prepared_stamp_hits, e.prepared_reid_hits) == (3, 2)  # rolled back too
     e.step(1, zs[0])  # unprepared now (taken by the failed step): its own labels
     plain[0].step(1, zs[0])
     np.testing.assert_array_equal(e.labels, plain[0].labels)
@@ -171,6 +178,14 @@ def test_stamp_known_many_equals_each_stamp_where_nothing_is_stamped():
     assert prepared > 200 and fell_back > 200
 
 
+def _same(a, b) -> None:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.dtype.kind == "f":
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
 def test_prepared_stamps_are_taken_on_the_usual_scan():
     rng = np.random.default_rng(3)
     centres = np.array([[0.0, 5.0, 0.0, 3.0], [400.0, -4.0, 100.0, 2.0]])
@@ -188,5 +203,53 @@ def test_prepared_stamps_are_taken_on_the_usual_scan():
             np.testing.assert_array_equal(e.labels, q.labels)
             np.testing.assert_array_equal(e.publication._keys, q.publication._keys)
             np.testing.assert_array_equal(e.publication._last, q.publication._last)
+            for a, b in zip(e.reid._on + e.reid._last, q.reid._on + q.reid._last, strict=True):
+                _same(a, b)  # (the stacked posterior: equal to round-off, gmphd_batch)
+    assert min(e.prepared_reid_hits for e in ests) >= 4
     hits = [e.prepared_stamp_hits for e in ests]
     assert min(hits) >= 5 and hits[1] < hits[0]
+
+
+def test_same_many_equals_apply_where_it_prepares():
+    """On random published label sequences of several peers: where same_many prepares the
+    memory, apply would keep the labels and leave that memory; elsewhere apply runs (then
+    both peers are equal again)."""
+    from sensornet.tracking.reidentify import Reidentification
+
+    rng = np.random.default_rng(17)
+    motion = ConstantVelocity(1.0, 2.0)
+    prepared = ran = 0
+    for _trial in range(25):
+        P = int(rng.integers(1, 5))
+        kw = [dict(origin=p % 3, shared=0 if p % 2 else None,
+                   jump=None if p % 4 == 3 else 3000.0) for p in range(P)]
+        reids = [Reidentification(motion, **a) for a in kw]
+        twins = [Reidentification(motion, **a) for a in kw]
+        pool = [np.array([[p % 3, 0, 7], [9, 1, 2], [p % 3, 2, 1 << 30]]) for p in range(P)]
+        for k in range(1, 16):
+            labels, mixes = [], []
+            for p in range(P):
+                if rng.random() < 0.15:  # a label now and then replaced, or stamped new
+                    pool[p][rng.integers(0, 3)] = [p % 3, k, (1 << 30) + int(rng.integers(3))]
+                n = int(rng.integers(0, 6)) if rng.random() < 0.2 else 4
+                lab = pool[p][rng.integers(0, 3, n)] if n != 4 else pool[p][[0, 1, 2, 0]]
+                w = rng.choice([0.2, 0.6, 0.9], n) if n != 4 else np.array([0.9, 0.8, 0.7, .1])
+                mean = rng.normal(0, 30, (n, 4)) + 100 * lab[:, [2, 1, 2, 1]] % 977
+                labels.append(lab)
+                mixes.append(GaussianMixture(w, mean, np.tile(np.eye(4) * 50.0, (n, 1, 1))))
+            got = Reidentification.same_many(reids, labels, mixes, [0.5] * P, [k] * P)
+            for r, t, lab, mx, g in zip(reids, twins, labels, mixes, got, strict=True):
+                want = t.apply(lab, mx, 0.5, k)
+                if g is None:
+                    ran += 1
+                    np.testing.assert_array_equal(r.apply(lab, mx, 0.5, k), want)
+                else:
+                    prepared += 1
+                    np.testing.assert_array_equal(want, lab)
+                    r.take_same(g)
+                for name in ("_on", "_last", "_lost"):
+                    a, b = getattr(r, name), getattr(t, name)
+                    assert (a is None) == (b is None)
+                    for x, y in zip(a or (), b or (), strict=True):
+                        np.testing.assert_array_equal(x, y)
+    assert prepared > 100 and ran > 100

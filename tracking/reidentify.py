@@ -184,6 +184,60 @@ class Reidentification:
         self._on = (int(k), lab, m, P, self._on[4] + 1, own)
         return labels
 
+    @staticmethod
+    def same_many(reids: list[Reidentification], labels: list[np.ndarray],
+                  mixes: list[GaussianMixture], thresholds: list[float],
+                  ks: list[int]) -> list[tuple | None]:
+        """:meth:`apply` of many peers' steps at once where it takes :meth:`_same_tracks`
+        and that changes only the memory of the tracks (the usual scan: the published labels
+        the last scan's, none stamped new, nothing lost, no dark label held): per problem the
+        memory ``(_on, _last)`` apply leaves (the same arrays' values), for
+        :meth:`take_same`; None where apply must run. The published tracks of every problem
+        (:func:`_tracks`) come from one sort keyed by the problem first (issues 33/38)."""
+        P = len(reids)
+        out: list[tuple | None] = [None] * P
+        if not P:
+            return out
+        w = np.concatenate([mx.weights for mx in mixes])
+        n = np.array([len(mx) for mx in mixes], dtype=np.int64)
+        prob = np.repeat(np.arange(P), n)
+        lab = np.concatenate(labels).astype(np.int64, copy=False)
+        rows = np.flatnonzero(w > np.asarray(thresholds, dtype=float)[prob])
+        pr, sub = prob[rows], lab[rows]
+        order = np.lexsort((-w[rows], sub[:, 2], sub[:, 1], sub[:, 0], pr))
+        s, sp = sub[order], pr[order]
+        first = np.ones(len(rows), dtype=bool)
+        first[1:] = (s[1:] != s[:-1]).any(axis=1) | (sp[1:] != sp[:-1])
+        rows, tp = rows[order[first]], sp[first]
+        means = np.concatenate([mx.means for mx in mixes])[rows]
+        covs = np.concatenate([mx.covs for mx in mixes])[rows]
+        tl = lab[rows]
+        cut = np.searchsorted(tp, np.arange(P + 1))
+        for i, r in enumerate(reids):
+            on0, k = r._on, int(ks[i])
+            a, b = cut[i], cut[i + 1]
+            li = tl[a:b]
+            if (on0 is None or on0[0] != k - 1 or r._lost is None or len(r._lost[0])
+                    or li.shape != on0[1].shape
+                    or (r.jump is not None and len(r._last[0]) != len(li))):
+                continue
+            mine = li[:, 0] == r.origin
+            if r.shared is not None:
+                mine |= li[:, 0] == r.shared
+            if (mine & (li[:, 1] == k) & (li[:, 2] >= PUBLISHED_BASE)).any():
+                continue
+            if not np.array_equal(li, on0[1]):
+                continue
+            own = label_keys(li)
+            m, C = means[a:b], covs[a:b]
+            last = r._last if r.jump is None else (li, own, np.full(len(li), k), m)
+            out[i] = ((k, li, m, C, on0[4] + 1, own), last)
+        return out
+
+    def take_same(self, state: tuple) -> None:
+        """:meth:`apply` where :meth:`same_many` prepared its memory ``state``."""
+        self._on, self._last = state
+
     def _returns(self, labels, lab, m, P, new, k):
         """Published tracks (not stamped new) more than ``jump`` from their label's last
         published position predicted to ``k`` (means ``m``, covariances ``P``), where the label
