@@ -120,3 +120,41 @@ def test_a_host_s_tracks_drawn_together_as_alone():
         state.b.flush()
         kept[side] = {p: r for p, r in rows.items() if p.startswith("peers/")}
     assert kept["host"] == kept["alone"] and len(kept["host"]) >= 4 * 2
+
+
+def test_a_host_s_marginals_drawn_together_as_alone():
+    """Reports with local and fused position marginals (0-5 each) and other point sets, in
+    one host message: the rows each peer's own report would draw (the marks made in one call,
+    :func:`view_state.marginal_marks_many`); a set not of whole marginals (4 points) counted
+    as refused, not drawn and not raised, on either path."""
+    rng = np.random.default_rng(9)
+    reports = []
+    for i in range(6):
+        points = {"local/mixture": rng.normal(size=(3 * (i % 4), 2)) * 50,
+                  "particles": rng.normal(size=(i, 2)),
+                  "fused/mixture": np.abs(rng.normal(size=(3 * (5 - i), 2)))}
+        if i == 2:
+            points["fused/mixture"] = np.ones((4, 2))
+        reports.append(Telemetry(f"p{i}", 4, {"age": float(i)}, (), points))
+    kept = {}
+    for side in ("host", "alone"):
+        rows: dict[str, list] = {}
+
+        class Keep:
+            def send_columns(self, path, indexes, columns, rows=rows):
+                rows[path] = [c.as_arrow_array().to_pylist() for c in columns]
+
+        state = ViewState(Batcher(rr, Keep()), [r.sender for r in reports])
+        if side == "host":
+            (message,) = pack_reports([(r.sender, None, r) for r in reports], 1.0)
+            state.receive("sensornet/net/telemetries/h1", message)
+        else:
+            for r in reports:
+                state.receive(f"sensornet/net/telemetry/{r.sender}", encode(r))
+        state.b.flush()
+        assert (state.handled, state.rejected) == (6, 1)
+        kept[side] = {p: r for p, r in rows.items() if p.startswith("peers/")}
+    assert kept["host"] == kept["alone"]
+    assert {"peers/p3/local/means", "peers/p3/local/ellipses", "peers/p0/fused/ellipses",
+            "peers/p1/particles"} <= set(kept["host"]) and "peers/p2/fused/means" not in kept[
+                "host"]
