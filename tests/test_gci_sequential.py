@@ -60,6 +60,17 @@ def spread(rng, sizes, d, n_targets, sep, sigma):
     return dens
 
 
+def random_cases(d: int):
+    """The random overlapping cases (seeds 0-11): 2-8 densities of 3-13 components near 2-7
+    targets, tight to wide spreads, and their Dirichlet weights, ``(dens, omegas)``."""
+    for seed in range(12):
+        rng = np.random.default_rng([d, seed])
+        n = int(rng.integers(2, 9))
+        dens = spread(rng, rng.integers(3, 14, n), d, int(rng.integers(2, 8)), 300.0,
+                      float(rng.choice([2.0, 8.0, 20.0])))
+        yield dens, list(rng.dirichlet(np.ones(n)))
+
+
 @pytest.fixture
 def sequential(monkeypatch):
     """Make :func:`gci_fuse` take its sequential path whatever the sizes."""
@@ -72,12 +83,7 @@ def test_sequential_fusion_equals_every_pair_then_reduced(d, cardinality, sequen
     """Random cases (2-8 densities of 3-13 components, 2-7 targets, tight to wide spreads,
     four reducers): the same mixture as the reference, and the gate did leave pairs out."""
     left_out = 0
-    for seed in range(12):
-        rng = np.random.default_rng([d, seed])
-        n = int(rng.integers(2, 9))
-        dens = spread(rng, rng.integers(3, 14, n), d, int(rng.integers(2, 8)), 300.0,
-                      float(rng.choice([2.0, 8.0, 20.0])))
-        omegas = list(rng.dirichlet(np.ones(n)))
+    for dens, omegas in random_cases(d):
         for reduce in REDUCERS:
             got = gci_fuse(dens, omegas, reduce, cardinality=cardinality)
             assert_equal_mixtures(got, reference_sequential(dens, omegas, reduce, cardinality))
@@ -187,12 +193,7 @@ def test_product_at_once_keeps_near_the_hoelder_bound():
     0.24-136x the bound)."""
     ratios, steps_ratios = [], []
     for d in (2, 4):
-        for seed in range(12):
-            rng = np.random.default_rng([d, seed])
-            n = int(rng.integers(2, 9))
-            dens = spread(rng, rng.integers(3, 14, n), d, int(rng.integers(2, 8)), 300.0,
-                          float(rng.choice([2.0, 8.0, 20.0])))
-            omegas = list(rng.dirichlet(np.ones(n)))
+        for dens, omegas in random_cases(d):
             if np.prod([len(D) for D in dens]) <= fusion.NARY_MAX_COMBINATIONS:
                 continue
             if product_module.gci_product_gated(dens, omegas, "emd", fusion.NARY_MAX_COMBINATIONS,

@@ -20,7 +20,7 @@ from sensornet.tracking.gci_product import gci_product
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.tracking.reduction import Reducer, merge_many
 
-from tests.test_gci_sequential import REDUCERS, spread
+from tests.test_gci_sequential import REDUCERS, random_cases, spread
 
 
 def exact_mass(dens, omegas, rng, draws=40_000):
@@ -43,12 +43,7 @@ def small_cases():
     """test_gci_sequential's random overlapping cases (``d`` 2 and 4, seeds 0-11: 2-8
     densities of 3-13 components near 2-7 targets, tight to wide) at most 4,096 combinations."""
     for d in (2, 4):
-        for seed in range(12):
-            rng = np.random.default_rng([d, seed])
-            n = int(rng.integers(2, 9))
-            dens = spread(rng, rng.integers(3, 14, n), d, int(rng.integers(2, 8)), 300.0,
-                          float(rng.choice([2.0, 8.0, 20.0])))
-            omegas = list(rng.dirichlet(np.ones(n)))
+        for dens, omegas in random_cases(d):
             if np.prod([len(D) for D in dens]) <= fusion.NARY_MAX_COMBINATIONS:
                 yield dens, omegas
 

@@ -8,9 +8,9 @@ from collections import defaultdict
 
 import numpy as np
 import rerun as rr
-from rerun.chunk import RrdReader
 from sensornet.protocol.messages import Telemetry
 
+from benchmarks.bench_view import rrd_rows as _rows  # entity -> its rows, sorted
 from sensornet import view_columns, view_state
 from sensornet.view import FLUSH_S, SERIES_EVERY, LiveView
 from sensornet.view_columns import Batcher, _native_send
@@ -43,23 +43,6 @@ class _OneByOne(Batcher):
 
     def _send(self, path, kind, ks, ts, data):
         super()._send(path, kind, ks, ts, data)
-
-
-def _rows(path) -> dict[str, list]:
-    """Entity -> its rows (time and data columns, row ids apart), sorted."""
-    out: dict[str, list] = defaultdict(list)
-    reader = RrdReader(str(path))
-    (store,) = reader.recordings()
-    for chunk in reader.stream(store=store):
-        if chunk.entity_path == "/__properties":
-            continue
-        batch = chunk.to_record_batch()
-        names = [f.name for f in batch.schema
-                 if (f.metadata or {}).get(b"rerun:kind") != b"control"]
-        cols = {n: batch.column(n).to_pylist() for n in names}
-        for i in range(batch.num_rows):
-            out[chunk.entity_path].append(tuple(sorted((n, repr(cols[n][i])) for n in names)))
-    return {e: sorted(r) for e, r in out.items()}
 
 
 def _draw(b: Batcher) -> None:
