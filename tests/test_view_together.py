@@ -92,6 +92,17 @@ def test_one_unlike_or_refused_leaves_each_alone(odd):
                      {"p0", "p1", "p2", "p3"} if odd != "telemetry" else {"p0", "p1", "p3"})
 
 
+def _kept_state(names: list[str]) -> tuple[ViewState, dict[str, list]]:
+    """A view state whose flushes land in the returned dict: entity path -> its columns."""
+    rows: dict[str, list] = {}
+
+    class Keep:
+        def send_columns(self, path, indexes, columns):
+            rows[path] = [c.as_arrow_array().to_pylist() for c in columns]
+
+    return ViewState(Batcher(rr, Keep()), names), rows
+
+
 def test_a_host_s_tracks_drawn_together_as_alone():
     """A host's reports with every tracks entry alike: the view draws the same rows as from
     the same tracks heard one by one on each peer's report key; an entry naming another peer
@@ -100,13 +111,7 @@ def test_a_host_s_tracks_drawn_together_as_alone():
     tracks = [_tracks(f"p{i}", 4, i % 3, rng) for i in range(5)]
     kept = {}
     for side in ("host", "alone"):
-        rows: dict[str, list] = {}
-
-        class Keep:
-            def send_columns(self, path, indexes, columns, rows=rows):
-                rows[path] = [c.as_arrow_array().to_pylist() for c in columns]
-
-        state = ViewState(Batcher(rr, Keep()), [t.sender for t in tracks])
+        state, rows = _kept_state([t.sender for t in tracks])
         if side == "host":
             items = [(t.sender, encode(t), Telemetry(t.sender, 4, {}, (), {}, None))
                      for t in tracks]
@@ -138,13 +143,7 @@ def test_a_host_s_marginals_drawn_together_as_alone():
         reports.append(Telemetry(f"p{i}", 4, {"age": float(i)}, (), points))
     kept = {}
     for side in ("host", "alone"):
-        rows: dict[str, list] = {}
-
-        class Keep:
-            def send_columns(self, path, indexes, columns, rows=rows):
-                rows[path] = [c.as_arrow_array().to_pylist() for c in columns]
-
-        state = ViewState(Batcher(rr, Keep()), [r.sender for r in reports])
+        state, rows = _kept_state([r.sender for r in reports])
         if side == "host":
             (message,) = pack_reports([(r.sender, None, r) for r in reports], 1.0)
             state.receive("sensornet/net/telemetries/h1", message)
