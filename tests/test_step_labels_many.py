@@ -102,7 +102,7 @@ def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
     GmphdEstimator.prepare_many(ests, [1, 1], zs)
     e = ests[0]
     before = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.reid._last,
-              e.publication._last, e.prepared_label_hits)
+              e.publication._last, e.reid._lost, e.prepared_label_hits)
 
     reached = []
 
@@ -115,11 +115,11 @@ def test_a_failed_prepared_step_rolls_back_labels_and_bookkeeping(monkeypatch):
         with pytest.raises(IndexError):
             e.step(1, zs[0])
     after = (e.mix, e.labels, e.k, e.publication._keys, e.reid._on, e.reid._last,
-             e.publication._last, e.prepared_label_hits)
-    assert all(x is y for x, y in zip(before[:7], after[:7], strict=True))
-    assert after[7] == before[7]
-    assert reached == [(3 + 1, 2 + 1)]  # the failed step had taken both prepared memories
-    assert (e.prepared_stamp_hits, e.prepared_reid_hits) == (3, 2)  # rolled back too
+             e.publication._last, e.reid._lost, e.prepared_label_hits)
+    assert all(x is y for x, y in zip(before[:8], after[:8], strict=True))
+    assert after[8] == before[8]
+    assert reached == [(3 + 1, 3 + 1)]  # the failed step had taken both prepared memories
+    assert (e.prepared_stamp_hits, e.prepared_reid_hits) == (3, 3)  # rolled back too
     e.step(1, zs[0])  # unprepared now (taken by the failed step): its own labels
     plain[0].step(1, zs[0])
     np.testing.assert_array_equal(e.labels, plain[0].labels)
@@ -212,13 +212,14 @@ def test_prepared_stamps_are_taken_on_the_usual_scan():
 
 def test_same_many_equals_apply_where_it_prepares():
     """On random published label sequences of several peers: where same_many prepares the
-    memory, apply would keep the labels and leave that memory; elsewhere apply runs (then
-    both peers are equal again)."""
+    memory, apply would keep the labels and leave that memory (a lost set kept from before,
+    none yet, dark labels held); elsewhere apply runs (then both peers are equal again)."""
     from sensornet.tracking.reidentify import Reidentification
 
     rng = np.random.default_rng(17)
     motion = ConstantVelocity(1.0, 2.0)
     prepared = ran = 0
+    cases = {"lost": 0, "dark": 0, "no lost set": 0}  # what same_many keeps as apply would
     for _trial in range(25):
         P = int(rng.integers(1, 5))
         kw = [dict(origin=p % 3, shared=0 if p % 2 else None,
@@ -226,14 +227,17 @@ def test_same_many_equals_apply_where_it_prepares():
         reids = [Reidentification(motion, **a) for a in kw]
         twins = [Reidentification(motion, **a) for a in kw]
         pool = [np.array([[p % 3, 0, 7], [9, 1, 2], [p % 3, 2, 1 << 30]]) for p in range(P)]
+        dark = np.zeros(P, dtype=bool)  # a peer's third label on a light row only, for scans
         for k in range(1, 16):
             labels, mixes = [], []
+            dark ^= rng.random(P) < 0.2
             for p in range(P):
                 if rng.random() < 0.15:  # a label now and then replaced, or stamped new
                     pool[p][rng.integers(0, 3)] = [p % 3, k, (1 << 30) + int(rng.integers(3))]
                 n = int(rng.integers(0, 6)) if rng.random() < 0.2 else 4
                 lab = pool[p][rng.integers(0, 3, n)] if n != 4 else pool[p][[0, 1, 2, 0]]
-                w = rng.choice([0.2, 0.6, 0.9], n) if n != 4 else np.array([0.9, 0.8, 0.7, .1])
+                w = (rng.choice([0.2, 0.6, 0.9], n) if n != 4
+                     else np.array([0.9, 0.8, 0.1 if dark[p] else 0.7, 0.1]))
                 mean = rng.normal(0, 30, (n, 4)) + 100 * lab[:, [2, 1, 2, 1]] % 977
                 labels.append(lab)
                 mixes.append(GaussianMixture(w, mean, np.tile(np.eye(4) * 50.0, (n, 1, 1))))
@@ -245,6 +249,9 @@ def test_same_many_equals_apply_where_it_prepares():
                     np.testing.assert_array_equal(r.apply(lab, mx, 0.5, k), want)
                 else:
                     prepared += 1
+                    cases["no lost set"] += r._lost is None
+                    cases["lost"] += r._lost is not None and len(r._lost[0]) > 0
+                    cases["dark"] += r.jump is not None and len(r._last[0]) > len(r._on[1])
                     np.testing.assert_array_equal(want, lab)
                     r.take_same(g)
                 for name in ("_on", "_last", "_lost"):
@@ -252,4 +259,4 @@ def test_same_many_equals_apply_where_it_prepares():
                     assert (a is None) == (b is None)
                     for x, y in zip(a or (), b or (), strict=True):
                         np.testing.assert_array_equal(x, y)
-    assert prepared > 100 and ran > 100
+    assert prepared > 100 and ran > 100 and min(cases.values()) > 20, (prepared, ran, cases)

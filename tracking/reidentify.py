@@ -190,9 +190,10 @@ class Reidentification:
                   ks: list[int]) -> list[tuple | None]:
         """:meth:`apply` of many peers' steps at once where it takes :meth:`_same_tracks`
         and that changes only the memory of the tracks (the usual scan: the published labels
-        the last scan's, none stamped new, nothing lost, no dark label held): per problem the
-        memory ``(_on, _last)`` apply leaves (the same arrays' values), for
-        :meth:`take_same`; None where apply must run. The published tracks of every problem
+        the last scan's, none stamped new; the lost set and dark labels kept as
+        :meth:`_forget` and :meth:`_remember` keep them): per problem the memory ``(_on,
+        _last, _lost)`` apply leaves (the same arrays' values), for :meth:`take_same`; None
+        where apply must run. The published tracks of every problem
         (:func:`_tracks`) come from one sort keyed by the problem first (issues 33/38)."""
         P = len(reids)
         out: list[tuple | None] = [None] * P
@@ -201,6 +202,7 @@ class Reidentification:
         w = np.concatenate([mx.weights for mx in mixes])
         n = np.array([len(mx) for mx in mixes], dtype=np.int64)
         prob = np.repeat(np.arange(P), n)
+        starts = np.concatenate(([0], np.cumsum(n)))
         lab = np.concatenate(labels).astype(np.int64, copy=False)
         rows = np.flatnonzero(w > np.asarray(thresholds, dtype=float)[prob])
         pr, sub = prob[rows], lab[rows]
@@ -217,9 +219,7 @@ class Reidentification:
             on0, k = r._on, int(ks[i])
             a, b = cut[i], cut[i + 1]
             li = tl[a:b]
-            if (on0 is None or on0[0] != k - 1 or r._lost is None or len(r._lost[0])
-                    or li.shape != on0[1].shape
-                    or (r.jump is not None and len(r._last[0]) != len(li))):
+            if on0 is None or on0[0] != k - 1 or li.shape != on0[1].shape:
                 continue
             mine = li[:, 0] == r.origin
             if r.shared is not None:
@@ -230,13 +230,25 @@ class Reidentification:
                 continue
             own = label_keys(li)
             m, C = means[a:b], covs[a:b]
-            last = r._last if r.jump is None else (li, own, np.full(len(li), k), m)
-            out[i] = ((k, li, m, C, on0[4] + 1, own), last)
+            if r.jump is None:
+                last = r._last
+            elif len(r._last[0]) == len(li):  # no dark label held: the published ones
+                last = (li, own, np.full(len(li), k), m)
+            else:  # dark labels held: those still carried kept (_remember)
+                last = r._remembered(lab[starts[i]:starts[i + 1]], li, own, m, k)
+            lost = r._lost  # _forget's: none of the last scan's tracks lost (the same ones
+            if lost is None:  # published), an empty set of their shapes, or old ones dropped
+                none = np.zeros(len(on0[1]), dtype=bool)
+                lost = (on0[1][none], np.full(0, on0[0]), on0[2][none], on0[3][none])
+            elif len(lost[0]):
+                keep = (k - lost[1] <= r.scans) & ~keys_isin(label_keys(lost[0]), own)
+                lost = tuple(x[keep] for x in lost)
+            out[i] = ((k, li, m, C, on0[4] + 1, own), last, lost)
         return out
 
     def take_same(self, state: tuple) -> None:
         """:meth:`apply` where :meth:`same_many` prepared its memory ``state``."""
-        self._on, self._last = state
+        self._on, self._last, self._lost = state
 
     def _returns(self, labels, lab, m, P, new, k):
         """Published tracks (not stamped new) more than ``jump`` from their label's last
@@ -282,6 +294,11 @@ class Reidentification:
         """The last published scan and mean of each label: the published ones ``lab`` (their
         keys ``own``), ``m`` at ``k``; the others as before while a component of ``labels``
         still carries them."""
+        self._last = self._remembered(labels, lab, own, m, k)
+
+    def _remembered(self, labels: np.ndarray, lab: np.ndarray, own: np.ndarray,
+                    m: np.ndarray, k: int) -> tuple:
+        """The memory :meth:`_remember` leaves (without setting it: :meth:`same_many`)."""
         L, K, M = lab, np.full(len(lab), k), m
         if self._last is not None:
             L0, keys, K0, M0 = self._last
@@ -292,7 +309,7 @@ class Reidentification:
         if len(L) > 1:
             by = _key_order(L)
             L, K, M = L[by], K[by], M[by]
-        self._last = (L, label_keys(L), K, M)
+        return L, label_keys(L), K, M
 
     def _transitions(self, gaps: np.ndarray, which: int = 2) -> list[np.ndarray]:
         """The CV transitions ``F (l, d, d)`` and (``which`` 2) ``Q (l, d, d)`` over ``gaps
