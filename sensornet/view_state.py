@@ -56,6 +56,7 @@ from sensornet.protocol.messages import (
 from sensornet.protocol.report_bundle import REPORTS_HEAD, unpack_reports_together
 from sensornet.tracking.mixture import GaussianMixture
 from sensornet.view_columns import Batcher
+from sensornet.view_scans import scans_together
 
 TAIL = 20
 """Scans of each peer's fused tracks kept as its trail."""
@@ -326,11 +327,28 @@ class ViewState:
         except Rejected:
             self.rejected += 1
             return
+        if channel == "scan" and len(entries) > 1 and self._scans(base, entries):
+            return
         for name, entry in entries:
             if own is not None and name != own:  # a peer's key carries its own reports only
                 self.rejected += 1
             else:
                 self._one(f"{base}/{channel}/{name}", entry)
+
+    def _scans(self, base: str, entries: list[tuple[str, bytes]]) -> bool:
+        """A scan bundle's entries decoded together and drawn as each alone would be
+        (:func:`sensornet.view_scans.scans_together`); False (nothing done) when any is not
+        a good scan or its key would be read otherwise: the caller then takes each alone."""
+        where = f"{base}/scan/"
+        if "/estimate/" in where or "/telemetry/" in where:  # _one reads such keys apart
+            return False
+        scans = scans_together([inner(e) if is_sealed(e) else e for _, e in entries])
+        if scans is None:
+            return False
+        self.handled += len(scans)
+        for msg in scans:
+            self.scan(msg)
+        return True
 
     def _host_reports(self, base: str, body: bytes) -> None:
         """A host's reports message: its entries each as if heard on the peer's report key,
