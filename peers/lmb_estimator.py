@@ -122,7 +122,8 @@ class LmbEstimator:
             raise ValueError(f"tentative_scans must be >= 0, got {tentative_scans}")
         if corroborate_scans < 1:
             raise ValueError(f"corroborate_scans must be >= 1, got {corroborate_scans}")
-        if not isinstance(adopt_states, int | np.integer) or adopt_states < 0:
+        if (isinstance(adopt_states, bool) or not isinstance(adopt_states, int | np.integer)
+                or adopt_states < 0):  # a bool is an int to Python, not a scan count
             raise ValueError(f"adopt_states must be a non-negative integer, got {adopt_states!r}")
         for name, gap in (("republish_gap", republish_gap), ("tentative_gap", tentative_gap)):
             if gap is not None and gap < 0:
